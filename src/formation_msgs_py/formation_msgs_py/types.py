@@ -1,0 +1,42 @@
+"""ROS-free message payloads exchanged by agents and the simulator.
+
+These are what the algorithm core consumes and produces; `formation_msgs_py.codec` maps them
+onto standard Jazzy interface types for transport and recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Vector = tuple[float, ...]
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class TriggerInfo:
+    """Triggering information agent `sender` broadcasts to neighbour `receiver` at its trigger.
+
+    ETA-1: {t^i_k, u_i(t^i_k), x_i(t^i_k) - x_j(t^i_k)}; ETA-2 adds q_i(t^i_k) - q_j(t^i_k) and
+    carries u^d_i(t^i_k) as `control` (paper, Sections 3 and 4).
+    """
+
+    sender: int
+    receiver: int
+    stamp: float
+    control: Vector
+    rel_position: Vector
+    rel_velocity: Vector | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class SensedState:
+    """What agent `agent` senses at its triggering time `stamp`.
+
+    `rel_positions[j]` is x_i - x_j; for double integrators also `rel_velocities[j]` = q_i - q_j
+    and the agent's own velocity q_i.
+    """
+
+    agent: int
+    stamp: float
+    rel_positions: dict[int, Vector]
+    rel_velocities: dict[int, Vector] | None = None
+    velocity: Vector | None = None
