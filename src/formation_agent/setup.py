@@ -1,0 +1,27 @@
+"""Packaging for formation_agent: a pip-installable and ament_python package."""
+
+from setuptools import setup
+
+package_name = 'formation_agent'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    description='Event-triggered formation agent (Yi et al. 2017): ROS-free ETA core and its node',
+    license='Apache-2.0',
+    python_requires='>=3.11',
+    packages=[package_name],
+    # What ament expects of an ament_python package: the index marker and package.xml in share/.
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
+        (f'share/{package_name}', ['package.xml']),
+    ],
+    # formation_msgs_py and the ROS packages come from the workspace (package.xml), not from PyPI.
+    install_requires=['setuptools', 'numpy', 'scipy'],
+    zip_safe=True,
+    entry_points={
+        'console_scripts': [
+            'formation_agent = formation_agent.node:main',
+        ],
+    },
+)

@@ -1,0 +1,22 @@
+"""Packaging for formation_msgs_py: a pip-installable and ament_python package."""
+
+from setuptools import setup
+
+package_name = 'formation_msgs_py'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    description='ROS-free formation message dataclasses and their encoding over standard Jazzy types',
+    license='Apache-2.0',
+    python_requires='>=3.11',
+    packages=[package_name],
+    # What ament expects of an ament_python package: the index marker and package.xml in share/.
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
+        (f'share/{package_name}', ['package.xml']),
+    ],
+    # ROS message packages come from ROS (package.xml), not from this list.
+    install_requires=['setuptools'],
+    zip_safe=True,
+)

@@ -1,0 +1,31 @@
+"""Packaging for formation_sim: a pip-installable and ament_python package."""
+
+from setuptools import setup
+
+package_name = 'formation_sim'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    description='Scenarios, exact world, engine, simulator node and recorder for formation control',
+    license='Apache-2.0',
+    python_requires='>=3.11',
+    packages=[package_name],
+    package_data={package_name: ['scenarios/*.yaml']},
+    # What ament expects of an ament_python package: the index marker and package.xml in share/.
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
+        (f'share/{package_name}', ['package.xml']),
+    ],
+    # formation_agent, formation_msgs_py and the ROS packages come from the workspace
+    # (package.xml), not from PyPI.
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'matplotlib', 'mcap', 'rosbags'],
+    zip_safe=False,
+    entry_points={
+        'console_scripts': [
+            'formation = formation_sim.cli:main',
+            'formation_sim = formation_sim.sim_node:main',
+            'formation_recorder = formation_sim.recorder:main',
+        ],
+    },
+)
