@@ -1,0 +1,466 @@
+"""Versioned encodings of the formation messages over standard Jazzy interface types.
+
+Only standard types are used (std_msgs/Float64MultiArray, std_srvs/Trigger, geometry_msgs), so
+any Jazzy installation can echo and record the traffic without building anything.  The layout of
+every array is documented in docs/MESSAGES.md; the labels of `layout.dim` name the fields so that
+`ros2 topic echo` is readable.  Floats travel as IEEE float64 (arrays) or as Python's shortest
+round-trip repr (JSON), so every value is reproduced bit for bit.
+
+ROS message classes are imported lazily: the module can be imported without ROS.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from formation_msgs_py.lockstep import Status, Step, WorldState
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+LAYOUT_VERSION = 1
+"""Version of every array layout and of the sensing JSON; bumped on any incompatible change."""
+
+KIND_ETA1 = 1
+KIND_ETA2 = 2
+
+_MAX_ID = 2**31 - 1
+_MAX_COUNT = 2**53  # float64 holds every integer up to here exactly
+
+
+class MessageError(ValueError):
+    """A message that does not follow its documented layout."""
+
+
+# --------------------------------------------------------------------------------------------
+# Field helpers
+
+
+def _check_finite(name: str, values: Sequence[float]) -> None:
+    for k, value in enumerate(values):
+        if not math.isfinite(value):
+            raise MessageError(f'{name}[{k}] must be finite, got {value!r}')
+
+
+def _as_int(name: str, value: float, *, low: int, high: int) -> int:
+    if not (math.isfinite(value) and float(value).is_integer()):
+        raise MessageError(f'{name} must be an integer, got {value!r}')
+    number = int(value)
+    if not low <= number <= high:
+        raise MessageError(f'{name} must lie in [{low}, {high}], got {number}')
+    return number
+
+
+def _check_version(what: str, value: float) -> None:
+    if value != LAYOUT_VERSION:
+        raise MessageError(f'{what}: layout version {value!r} is not supported (expected {LAYOUT_VERSION})')
+
+
+def _float_array(fields: Sequence[tuple[str, Sequence[float]]]):
+    """Float64MultiArray whose layout.dim has one labelled entry per field (size = its length)."""
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+
+    data: list[float] = []
+    dims = []
+    for label, values in fields:
+        data.extend(float(v) for v in values)
+        dims.append(MultiArrayDimension(label=label, size=len(values), stride=len(values)))
+    return Float64MultiArray(layout=MultiArrayLayout(dim=dims, data_offset=0), data=data)
+
+
+def _data(what: str, msg) -> list[float]:
+    data = getattr(msg, 'data', None)
+    if data is None:
+        raise MessageError(f'{what}: expected std_msgs/Float64MultiArray, got {type(msg).__name__}')
+    return [float(v) for v in data]
+
+
+# --------------------------------------------------------------------------------------------
+# TriggerInfo  <->  std_msgs/Float64MultiArray
+#   [version, kind, sender, receiver, stamp, p, control(p), rel_position(p), rel_velocity(p)?]
+
+_TRIGGER_HEADER = 6
+
+
+def encode_trigger_info(info: TriggerInfo):
+    """std_msgs/Float64MultiArray carrying `info` (kind 2 = ETA-2 when rel_velocity is set)."""
+    p = len(info.control)
+    vectors = [('control', info.control), ('rel_position', info.rel_position)]
+    if info.rel_velocity is not None:
+        vectors.append(('rel_velocity', info.rel_velocity))
+    for name, values in vectors:
+        if len(values) != p:
+            raise MessageError(
+                f'trigger info {info.sender}->{info.receiver}: {name} has {len(values)} components, '
+                f'control has {p}'
+            )
+        _check_finite(f'trigger info {info.sender}->{info.receiver} {name}', values)
+    if p < 1:
+        raise MessageError(f'trigger info {info.sender}->{info.receiver}: empty control')
+    _check_finite(f'trigger info {info.sender}->{info.receiver} stamp', [info.stamp])
+    kind = KIND_ETA1 if info.rel_velocity is None else KIND_ETA2
+    header = [
+        ('version', [LAYOUT_VERSION]),
+        ('kind', [kind]),
+        ('sender', [info.sender]),
+        ('receiver', [info.receiver]),
+        ('stamp', [info.stamp]),
+        ('p', [p]),
+    ]
+    return _float_array(header + vectors)
+
+
+def decode_trigger_info(msg) -> TriggerInfo:
+    """TriggerInfo from a Float64MultiArray; MessageError if it breaks the layout."""
+    data = _data('trigger info', msg)
+    if len(data) < _TRIGGER_HEADER:
+        raise MessageError(f'trigger info: {len(data)} values, the header alone has {_TRIGGER_HEADER}')
+    _check_version('trigger info', data[0])
+    _check_finite('trigger info', data)
+    kind = _as_int('trigger info kind', data[1], low=KIND_ETA1, high=KIND_ETA2)
+    sender = _as_int('trigger info sender', data[2], low=0, high=_MAX_ID)
+    receiver = _as_int('trigger info receiver', data[3], low=0, high=_MAX_ID)
+    if sender == receiver:
+        raise MessageError(f'trigger info: sender and receiver are both agent {sender}')
+    p = _as_int('trigger info p', data[5], low=1, high=len(data))
+    vectors = 2 if kind == KIND_ETA1 else 3
+    expected = _TRIGGER_HEADER + vectors * p
+    if len(data) != expected:
+        raise MessageError(
+            f'trigger info {sender}->{receiver}: kind {kind} with p={p} needs {expected} values, '
+            f'got {len(data)}'
+        )
+    body = data[_TRIGGER_HEADER:]
+    return TriggerInfo(
+        sender=sender,
+        receiver=receiver,
+        stamp=data[4],
+        control=tuple(body[0:p]),
+        rel_position=tuple(body[p : 2 * p]),
+        rel_velocity=tuple(body[2 * p : 3 * p]) if kind == KIND_ETA2 else None,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# SensedState  <->  std_srvs/Trigger response (success, message = compact JSON)
+
+
+def _vector_json(name: str, values: Sequence[float]) -> list[float]:
+    vector = [float(v) for v in values]
+    _check_finite(name, vector)
+    return vector
+
+
+def encode_sensed_state(state: SensedState):
+    """std_srvs/Trigger.Response with success=True and the state as compact JSON."""
+    from std_srvs.srv import Trigger
+
+    body: dict = {
+        'version': LAYOUT_VERSION,
+        'agent': int(state.agent),
+        'stamp': _vector_json(f'sensed state of agent {state.agent} stamp', [state.stamp])[0],
+        'rel_positions': {
+            str(j): _vector_json(f'sensed x_{state.agent} - x_{j}', v) for j, v in state.rel_positions.items()
+        },
+    }
+    if state.rel_velocities is not None:
+        body['rel_velocities'] = {
+            str(j): _vector_json(f'sensed q_{state.agent} - q_{j}', v) for j, v in state.rel_velocities.items()
+        }
+    if state.velocity is not None:
+        body['velocity'] = _vector_json(f'sensed q_{state.agent}', state.velocity)
+    # repr floats: json writes the shortest string that reads back to the same double.
+    text = json.dumps(body, separators=(',', ':'), allow_nan=False)
+    return Trigger.Response(success=True, message=text)
+
+
+def sensing_refusal(reason: str):
+    """std_srvs/Trigger.Response telling the agent why it cannot sense."""
+    from std_srvs.srv import Trigger
+
+    return Trigger.Response(success=False, message=reason)
+
+
+def _json_number(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise MessageError(f'{name} must be a number, got {value!r}')
+    number = float(value)
+    if not math.isfinite(number):
+        raise MessageError(f'{name} must be finite, got {value!r}')
+    return number
+
+
+def _json_vector(name: str, values, p: int | None) -> tuple[float, ...]:
+    if not isinstance(values, list):
+        raise MessageError(f'{name} must be a list of numbers, got {values!r}')
+    vector = tuple(_json_number(f'{name}[{k}]', v) for k, v in enumerate(values))
+    if not vector or (p is not None and len(vector) != p):
+        raise MessageError(f'{name} has {len(vector)} components, expected {p if p else "at least 1"}')
+    return vector
+
+
+def _json_vectors(name: str, table, p: int | None) -> dict[int, tuple[float, ...]]:
+    if not isinstance(table, dict):
+        raise MessageError(f'{name} must map neighbour ids to vectors, got {table!r}')
+    result = {}
+    for key, values in table.items():
+        try:
+            j = int(key)
+        except ValueError:
+            raise MessageError(f'{name}: neighbour id {key!r} is not an integer') from None
+        if str(j) != key:
+            raise MessageError(f'{name}: neighbour id {key!r} is not written canonically')
+        result[j] = _json_vector(f'{name}[{j}]', values, p)
+        p = len(result[j])
+    return result
+
+
+def decode_sensed_state(response) -> SensedState:
+    """SensedState from a std_srvs/Trigger response; MessageError if refused or malformed."""
+    if not response.success:
+        raise MessageError(f'sensing refused: {response.message}')
+    try:
+        body = json.loads(response.message)
+    except json.JSONDecodeError as error:
+        raise MessageError(f'sensed state is not JSON ({error}): {response.message[:80]!r}') from None
+    if not isinstance(body, dict):
+        raise MessageError(f'sensed state must be a JSON object, got {response.message[:80]!r}')
+    if body.get('version') != LAYOUT_VERSION:
+        raise MessageError(f'sensed state: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})')
+    unknown = set(body) - {'version', 'agent', 'stamp', 'rel_positions', 'rel_velocities', 'velocity'}
+    if unknown:
+        raise MessageError(f'sensed state: unknown fields {sorted(unknown)}')
+    for key in ('agent', 'stamp', 'rel_positions'):
+        if key not in body:
+            raise MessageError(f'sensed state: missing field {key!r}')
+    agent = body['agent']
+    if isinstance(agent, bool) or not isinstance(agent, int) or not 0 <= agent <= _MAX_ID:
+        raise MessageError(f'sensed state: agent must be an integer id, got {agent!r}')
+    stamp = _json_number(f'sensed state of agent {agent} stamp', body['stamp'])
+    rel_positions = _json_vectors(f'sensed state of agent {agent} rel_positions', body['rel_positions'], None)
+    p = len(next(iter(rel_positions.values()))) if rel_positions else None
+    rel_velocities = velocity = None
+    if ('rel_velocities' in body) != ('velocity' in body):
+        raise MessageError(f'sensed state of agent {agent}: rel_velocities and velocity come together')
+    if 'velocity' in body:
+        velocity = _json_vector(f'sensed state of agent {agent} velocity', body['velocity'], p)
+        rel_velocities = _json_vectors(
+            f'sensed state of agent {agent} rel_velocities', body['rel_velocities'], len(velocity)
+        )
+        if set(rel_velocities) != set(rel_positions):
+            raise MessageError(
+                f'sensed state of agent {agent}: rel_velocities for {sorted(rel_velocities)} but '
+                f'rel_positions for {sorted(rel_positions)}'
+            )
+    return SensedState(
+        agent=agent,
+        stamp=stamp,
+        rel_positions=rel_positions,
+        rel_velocities=rel_velocities,
+        velocity=velocity,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Lock-step: Step [version, step_index, time, flags]
+
+
+def encode_step(step: Step):
+    _check_finite(f'step {step.index} time', [step.time])
+    return _float_array(
+        [('version', [LAYOUT_VERSION]), ('step_index', [step.index]), ('time', [step.time]), ('flags', [step.flags])]
+    )
+
+
+def decode_step(msg) -> Step:
+    data = _data('step', msg)
+    if len(data) != 4:
+        raise MessageError(f'step: expected 4 values [version, step_index, time, flags], got {len(data)}')
+    _check_version('step', data[0])
+    _check_finite('step', data)
+    return Step(
+        index=_as_int('step index', data[1], low=0, high=_MAX_COUNT),
+        time=data[2],
+        flags=_as_int('step flags', data[3], low=0, high=_MAX_ID),
+    )
+
+
+# Status [version, agent, step_index, next_time, info_sent, info_received, commands_sent,
+#         triggers, ready]
+
+_STATUS_LABELS = (
+    'version',
+    'agent',
+    'step_index',
+    'next_time',
+    'info_sent_total',
+    'info_received_total',
+    'commands_sent_total',
+    'triggers_total',
+    'ready',
+)
+
+
+def encode_status(status: Status):
+    values = [
+        LAYOUT_VERSION,
+        status.agent,
+        status.step_index,
+        status.next_time,
+        status.info_sent,
+        status.info_received,
+        status.commands_sent,
+        status.triggers,
+        1.0 if status.ready else 0.0,
+    ]
+    return _float_array([(label, [value]) for label, value in zip(_STATUS_LABELS, values)])
+
+
+def decode_status(msg) -> Status:
+    data = _data('status', msg)
+    if len(data) != len(_STATUS_LABELS):
+        raise MessageError(f'status: expected {len(_STATUS_LABELS)} values {list(_STATUS_LABELS)}, got {len(data)}')
+    _check_version('status', data[0])
+    agent = _as_int('status agent', data[1], low=0, high=_MAX_ID)
+    next_time = data[3]
+    if math.isnan(next_time) or next_time == -math.inf:
+        raise MessageError(f'status of agent {agent}: next_time must be a time or +inf, got {next_time!r}')
+    counters = [
+        _as_int(f'status of agent {agent} {label}', value, low=0, high=_MAX_COUNT)
+        for label, value in zip(_STATUS_LABELS[4:8], data[4:8])
+    ]
+    ready = data[8]
+    if ready not in (0.0, 1.0):
+        raise MessageError(f'status of agent {agent}: ready must be 0 or 1, got {ready!r}')
+    return Status(
+        agent=agent,
+        step_index=_as_int(f'status of agent {agent} step_index', data[2], low=-1, high=_MAX_COUNT),
+        next_time=next_time,
+        info_sent=counters[0],
+        info_received=counters[1],
+        commands_sent=counters[2],
+        triggers=counters[3],
+        ready=ready == 1.0,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# WorldState [version, time, n, p, double, agent_ids(n), positions(n*p), velocities(n*p)?]
+
+
+def encode_world_state(state: WorldState):
+    positions = np.asarray(state.positions, dtype=float)
+    n = len(state.agent_ids)
+    if positions.ndim != 2 or positions.shape[0] != n:
+        raise MessageError(f'world state: positions {positions.shape} do not match {n} agents')
+    fields = [
+        ('version', [LAYOUT_VERSION]),
+        ('time', [state.time]),
+        ('n', [n]),
+        ('p', [positions.shape[1]]),
+        ('double', [0 if state.velocities is None else 1]),
+        ('agent_ids', list(state.agent_ids)),
+        ('positions', positions.ravel().tolist()),
+    ]
+    if state.velocities is not None:
+        velocities = np.asarray(state.velocities, dtype=float)
+        if velocities.shape != positions.shape:
+            raise MessageError(f'world state: velocities {velocities.shape} do not match positions {positions.shape}')
+        fields.append(('velocities', velocities.ravel().tolist()))
+    return _float_array(fields)
+
+
+def decode_world_state(msg) -> WorldState:
+    data = _data('world state', msg)
+    if len(data) < 5:
+        raise MessageError(f'world state: {len(data)} values, the header alone has 5')
+    _check_version('world state', data[0])
+    _check_finite('world state', data)
+    n = _as_int('world state n', data[2], low=1, high=len(data))
+    p = _as_int('world state p', data[3], low=1, high=len(data))
+    double = _as_int('world state double', data[4], low=0, high=1)
+    expected = 5 + n + (1 + double) * n * p
+    if len(data) != expected:
+        raise MessageError(f'world state: n={n}, p={p}, double={double} needs {expected} values, got {len(data)}')
+    ids = tuple(_as_int(f'world state agent_ids[{k}]', v, low=0, high=_MAX_ID) for k, v in enumerate(data[5 : 5 + n]))
+    start = 5 + n
+    positions = np.array(data[start : start + n * p]).reshape(n, p)
+    velocities = np.array(data[start + n * p :]).reshape(n, p) if double else None
+    return WorldState(time=data[1], agent_ids=ids, positions=positions, velocities=velocities)
+
+
+# --------------------------------------------------------------------------------------------
+# Commands: u_i on geometry_msgs/Twist (single), u^d_i on geometry_msgs/Accel (double)
+
+_AXES = ('x', 'y', 'z')
+
+
+def _vector3(what: str, values: Sequence[float]):
+    from geometry_msgs.msg import Vector3
+
+    vector = [float(v) for v in values]
+    if not 1 <= len(vector) <= 3:
+        raise MessageError(f'{what}: geometry_msgs carries 1 to 3 components, got {len(vector)}')
+    _check_finite(what, vector)
+    vector += [0.0] * (3 - len(vector))
+    return Vector3(x=vector[0], y=vector[1], z=vector[2])
+
+
+def encode_velocity_command(control: Sequence[float]):
+    """geometry_msgs/Twist with linear = u_i (eq. uxsingle), angular = 0."""
+    from geometry_msgs.msg import Twist
+
+    return Twist(linear=_vector3('velocity command', control))
+
+
+def encode_acceleration_command(control: Sequence[float]):
+    """geometry_msgs/Accel with linear = u^d_i, the event-triggered part of (uxdouble)."""
+    from geometry_msgs.msg import Accel
+
+    return Accel(linear=_vector3('acceleration command', control))
+
+
+def decode_command(msg, dimension: int) -> tuple[float, ...]:
+    """The first `dimension` linear components of a Twist/Accel; the others must be zero."""
+    if not 1 <= dimension <= 3:
+        raise MessageError(f'command: dimension must be 1 to 3, got {dimension}')
+    linear = [float(getattr(msg.linear, axis)) for axis in _AXES]
+    angular = [float(getattr(msg.angular, axis)) for axis in _AXES]
+    _check_finite('command linear', linear)
+    if any(linear[dimension:]) or any(angular):
+        raise MessageError(
+            f'command: only the first {dimension} linear components may be set, got linear={linear} '
+            f'angular={angular}'
+        )
+    return tuple(linear[:dimension])
+
+
+# --------------------------------------------------------------------------------------------
+# Time for tools (/clock, headers): rounded to the nanosecond; never used by the algorithm.
+
+
+def ros_time(seconds: float):
+    """builtin_interfaces/Time nearest to `seconds` (>= 0)."""
+    from builtin_interfaces.msg import Time
+
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        raise MessageError(f'ROS time must be finite and >= 0, got {seconds!r}')
+    nanoseconds = round(seconds * 1e9)
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def encode_pose_array(state: WorldState, *, frame_id: str = 'world'):
+    """geometry_msgs/PoseArray of agent positions (p <= 3; missing axes 0) for visualisation."""
+    from geometry_msgs.msg import Point, Pose, PoseArray
+    from std_msgs.msg import Header
+
+    positions = np.asarray(state.positions, dtype=float)
+    if positions.shape[1] > 3:
+        raise MessageError(f'PoseArray holds positions of dimension <= 3, got {positions.shape[1]}')
+    poses = []
+    for row in positions.tolist():
+        row = row + [0.0] * (3 - len(row))
+        poses.append(Pose(position=Point(x=row[0], y=row[1], z=row[2])))
+    return PoseArray(header=Header(stamp=ros_time(state.time), frame_id=frame_id), poses=poses)

@@ -1,0 +1,59 @@
+"""ROS-free payloads of the lock-step protocol between the simulator and the agent nodes.
+
+The simulator publishes a `Step` for every event time; every agent answers with `Status`
+messages carrying cumulative counters, from which the simulator decides that all messages of
+the step have been delivered (see docs/MESSAGES.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+STEP_FLAG_FINAL = 1
+"""Step flag: the run is over (the horizon is reached); agents leave."""
+
+DISCOVERY_STEP = -1
+"""`Status.step_index` of an agent that is connected and waits for step 0."""
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Step:
+    """The simulator's announcement that simulated time is now `time` (exact float)."""
+
+    index: int
+    time: float
+    flags: int = 0
+
+    @property
+    def final(self) -> bool:
+        return bool(self.flags & STEP_FLAG_FINAL)
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Status:
+    """An agent's report after it handled everything it knows of for step `step_index`.
+
+    Counters are totals since the start, so they only grow and a later report supersedes an
+    earlier one.  `next_time` is the agent's next triggering time (inf: none before the horizon).
+    """
+
+    agent: int
+    step_index: int
+    next_time: float
+    info_sent: int
+    info_received: int
+    commands_sent: int
+    triggers: int
+    ready: bool
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class WorldState:
+    """Exact true state of all agents at `time` (rows in the order of `agent_ids`)."""
+
+    time: float
+    agent_ids: tuple[int, ...]
+    positions: np.ndarray
+    velocities: np.ndarray | None = None

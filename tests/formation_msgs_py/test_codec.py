@@ -1,0 +1,316 @@
+"""Encodings of the formation messages over standard Jazzy types: bit-exact round trips, clear errors."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from formation_msgs_py.codec import (
+    LAYOUT_VERSION,
+    MessageError,
+    decode_command,
+    decode_sensed_state,
+    decode_status,
+    decode_step,
+    decode_trigger_info,
+    decode_world_state,
+    encode_acceleration_command,
+    encode_pose_array,
+    encode_sensed_state,
+    encode_status,
+    encode_step,
+    encode_trigger_info,
+    encode_velocity_command,
+    encode_world_state,
+    ros_time,
+    sensing_refusal,
+)
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Status, Step, WorldState
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+pytestmark = pytest.mark.ros
+
+# Values whose bits are easy to lose: negative zero, the smallest denormal, a long mantissa,
+# the largest double, and a value that is not a short decimal.
+AWKWARD = (-0.0, 5e-324, -2.2250738585072014e-308, 0.1 + 0.2, 1.7976931348623157e308, -1 / 3)
+
+
+def bits(values) -> list[bytes]:
+    return [struct.pack('<d', float(v)) for v in values]
+
+
+def through_wire(msg):
+    """Serialize and deserialize with rclpy's CDR, as the middleware does."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    return deserialize_message(serialize_message(msg), type(msg))
+
+
+def eta2_info() -> TriggerInfo:
+    return TriggerInfo(
+        sender=3,
+        receiver=1,
+        stamp=0.30000000000000004,
+        control=AWKWARD[:3],
+        rel_position=AWKWARD[3:],
+        rel_velocity=(math.pi, -math.e, 2.0**-1074),
+    )
+
+
+@pytest.mark.parametrize('with_velocity', [False, True])
+def test_trigger_info_round_trips_bit_for_bit_over_cdr(with_velocity):
+    info = eta2_info()
+    if not with_velocity:
+        info = TriggerInfo(
+            sender=info.sender,
+            receiver=info.receiver,
+            stamp=info.stamp,
+            control=info.control,
+            rel_position=info.rel_position,
+        )
+    msg = through_wire(encode_trigger_info(info))
+    back = decode_trigger_info(msg)
+    assert back == info
+    for field in ('control', 'rel_position', 'rel_velocity'):
+        original = getattr(info, field)
+        if original is None:
+            assert getattr(back, field) is None
+        else:
+            assert bits(getattr(back, field)) == bits(original)
+    assert bits([back.stamp]) == bits([info.stamp])
+
+
+def test_trigger_info_layout_labels_name_the_fields():
+    msg = encode_trigger_info(eta2_info())
+    labels = [(dim.label, dim.size) for dim in msg.layout.dim]
+    assert labels == [
+        ('version', 1),
+        ('kind', 1),
+        ('sender', 1),
+        ('receiver', 1),
+        ('stamp', 1),
+        ('p', 1),
+        ('control', 3),
+        ('rel_position', 3),
+        ('rel_velocity', 3),
+    ]
+    assert sum(size for _, size in labels) == len(msg.data)
+    assert list(msg.data[:6]) == [LAYOUT_VERSION, 2, 3, 1, 0.30000000000000004, 3]
+
+
+def _array(values):
+    from std_msgs.msg import Float64MultiArray
+
+    return Float64MultiArray(data=[float(v) for v in values])
+
+
+@pytest.mark.parametrize(
+    ('values', 'complaint'),
+    [
+        ([2, 1, 1, 2, 0.0, 1, 0.0, 0.0], 'layout version 2.0 is not supported'),
+        ([1, 1, 1, 2, 0.0, 2, 0.0, 0.0, 0.0], 'kind 1 with p=2 needs 10 values, got 9'),
+        ([1, 2, 1, 2, 0.0, 1, 0.0, 0.0], 'kind 2 with p=1 needs 9 values, got 8'),
+        ([1, 3, 1, 2, 0.0, 1, 0.0, 0.0], 'kind must lie in [1, 2], got 3'),
+        ([1, 1, 1.5, 2, 0.0, 1, 0.0, 0.0], 'sender must be an integer, got 1.5'),
+        ([1, 1, 2, 2, 0.0, 1, 0.0, 0.0], 'sender and receiver are both agent 2'),
+        ([1, 1, -1, 2, 0.0, 1, 0.0, 0.0], 'sender must lie in [0, 2147483647], got -1'),
+        ([1, 1, 1, 2, 0.0, 1, math.nan, 0.0], 'must be finite, got nan'),
+        ([1, 1, 1, 2, math.inf, 1, 0.0, 0.0], 'must be finite, got inf'),
+        ([1, 1, 1, 2, 0.0], 'the header alone has 6'),
+        ([1, 1, 1, 2, 0.0, 0, 0.0, 0.0], 'p must lie in [1, 8], got 0'),
+    ],
+)
+def test_malformed_trigger_info_is_rejected_with_the_rule_broken(values, complaint):
+    with pytest.raises(MessageError) as error:
+        decode_trigger_info(_array(values))
+    assert complaint in str(error.value)
+
+
+def test_trigger_info_with_mismatched_vectors_cannot_be_encoded():
+    info = TriggerInfo(sender=1, receiver=2, stamp=0.0, control=(1.0, 2.0), rel_position=(1.0,))
+    with pytest.raises(MessageError, match=r'1->2: rel_position has 1 components, control has 2'):
+        encode_trigger_info(info)
+    bad = TriggerInfo(sender=1, receiver=2, stamp=0.0, control=(math.inf,), rel_position=(1.0,))
+    with pytest.raises(MessageError, match='control.*must be finite'):
+        encode_trigger_info(bad)
+
+
+def test_message_error_is_a_value_error():
+    assert issubclass(MessageError, ValueError)
+
+
+def double_state() -> SensedState:
+    return SensedState(
+        agent=2,
+        stamp=1.0000000000000002,
+        rel_positions={1: (-0.0, 5e-324), 3: (0.1 + 0.2, -1 / 3)},
+        rel_velocities={1: (2.2250738585072014e-308, -0.0), 3: (1e308, -4.9e-324)},
+        velocity=(math.pi, -0.0),
+    )
+
+
+@pytest.mark.parametrize('double', [False, True])
+def test_sensed_state_round_trips_bit_for_bit_over_cdr(double):
+    state = double_state()
+    if not double:
+        state = SensedState(agent=state.agent, stamp=state.stamp, rel_positions=state.rel_positions)
+    response = through_wire(encode_sensed_state(state))
+    assert response.success
+    back = decode_sensed_state(response)
+    assert back == state
+    for j, vector in state.rel_positions.items():
+        assert bits(back.rel_positions[j]) == bits(vector)
+    if double:
+        for j, vector in state.rel_velocities.items():
+            assert bits(back.rel_velocities[j]) == bits(vector)
+        assert bits(back.velocity) == bits(state.velocity)
+    assert bits([back.stamp]) == bits([state.stamp])
+
+
+def test_sensed_state_json_is_compact_and_versioned():
+    import json
+
+    text = encode_sensed_state(double_state()).message
+    assert ' ' not in text
+    assert json.loads(text)['version'] == LAYOUT_VERSION
+
+
+def _response(text: str, success: bool = True):
+    from std_srvs.srv import Trigger
+
+    return Trigger.Response(success=success, message=text)
+
+
+@pytest.mark.parametrize(
+    ('text', 'complaint'),
+    [
+        ('not json', 'sensed state is not JSON'),
+        ('[1]', 'must be a JSON object'),
+        ('{"version":2,"agent":1,"stamp":0.0,"rel_positions":{}}', 'version 2 is not supported'),
+        ('{"version":1,"agent":1,"rel_positions":{}}', "missing field 'stamp'"),
+        ('{"version":1,"agent":true,"stamp":0.0,"rel_positions":{}}', 'agent must be an integer id'),
+        ('{"version":1,"agent":1,"stamp":NaN,"rel_positions":{}}', 'stamp must be finite'),
+        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"x":[1.0]}}', "neighbour id 'x' is not an integer"),
+        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0],"3":[1.0,2.0]}}', 'rel_positions[3] has 2 components, expected 1'),
+        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":["a"]}}', 'rel_positions[2][0] must be a number'),
+        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0]},"velocity":[0.0]}', 'rel_velocities and velocity come together'),
+        (
+            '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0]},"rel_velocities":{"3":[0.0]},"velocity":[0.0]}',
+            'rel_velocities for [3] but rel_positions for [2]',
+        ),
+        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{},"extra":1}', "unknown fields ['extra']"),
+    ],
+)
+def test_malformed_sensed_state_is_rejected_with_the_rule_broken(text, complaint):
+    with pytest.raises(MessageError) as error:
+        decode_sensed_state(_response(text))
+    assert complaint in str(error.value)
+
+
+def test_refused_sensing_carries_the_reason():
+    with pytest.raises(MessageError, match='sensing refused: agent 7 is unknown'):
+        decode_sensed_state(through_wire(sensing_refusal('agent 7 is unknown')))
+
+
+def test_non_finite_sensed_values_cannot_be_encoded():
+    state = SensedState(agent=1, stamp=0.0, rel_positions={2: (math.nan,)})
+    with pytest.raises(MessageError, match=r'sensed x_1 - x_2\[0\] must be finite'):
+        encode_sensed_state(state)
+
+
+def test_step_and_status_round_trip_including_infinite_next_time():
+    step = Step(index=12, time=0.1 + 0.2, flags=STEP_FLAG_FINAL)
+    back = decode_step(through_wire(encode_step(step)))
+    assert back == step and back.final
+    assert bits([back.time]) == bits([step.time])
+    for next_time in (math.inf, 5e-324, 7.123456789012345):
+        status = Status(
+            agent=4,
+            step_index=-1,
+            next_time=next_time,
+            info_sent=2**40,
+            info_received=3,
+            commands_sent=5,
+            triggers=5,
+            ready=True,
+        )
+        assert decode_status(through_wire(encode_status(status))) == status
+
+
+@pytest.mark.parametrize(
+    ('values', 'complaint'),
+    [
+        ([1, 0, 0.0, 0, 0, 0, 0, 0], 'expected 9 values'),
+        ([1, 0, 0, math.nan, 0, 0, 0, 0, 1], 'next_time must be a time or +inf, got nan'),
+        ([1, 0, 0, -math.inf, 0, 0, 0, 0, 1], 'next_time must be a time or +inf, got -inf'),
+        ([1, 0, 0, 1.0, -1, 0, 0, 0, 1], 'info_sent_total must lie in'),
+        ([1, 0, 0, 1.0, 0, 0.5, 0, 0, 1], 'info_received_total must be an integer, got 0.5'),
+        ([1, 0, 0, 1.0, 0, 0, 0, 0, 2], 'ready must be 0 or 1, got 2.0'),
+        ([1, 0, -2, 1.0, 0, 0, 0, 0, 1], 'step_index must lie in [-1,'),
+    ],
+)
+def test_malformed_status_is_rejected(values, complaint):
+    with pytest.raises(MessageError) as error:
+        decode_status(_array(values))
+    assert complaint in str(error.value)
+
+
+def test_malformed_step_is_rejected():
+    with pytest.raises(MessageError, match='expected 4 values'):
+        decode_step(_array([1, 0, 0.0]))
+    with pytest.raises(MessageError, match='must be finite'):
+        decode_step(_array([1, 0, math.inf, 0]))
+    with pytest.raises(MessageError, match='step index must lie in'):
+        decode_step(_array([1, -1, 0.0, 0]))
+
+
+@pytest.mark.parametrize('double', [False, True])
+def test_world_state_round_trips_bit_for_bit(double):
+    rng = np.random.default_rng(7)
+    positions = rng.normal(size=(3, 2))
+    positions[0, 0] = -0.0
+    velocities = rng.normal(size=(3, 2)) if double else None
+    state = WorldState(time=9.999999999999998, agent_ids=(1, 2, 5), positions=positions, velocities=velocities)
+    back = decode_world_state(through_wire(encode_world_state(state)))
+    assert back.agent_ids == state.agent_ids
+    assert bits(back.positions.ravel()) == bits(positions.ravel())
+    assert bits([back.time]) == bits([state.time])
+    if double:
+        assert bits(back.velocities.ravel()) == bits(velocities.ravel())
+    else:
+        assert back.velocities is None
+
+
+def test_world_state_length_is_checked():
+    with pytest.raises(MessageError, match=r'n=2, p=2, double=0 needs 11 values, got 10'):
+        decode_world_state(_array([1, 0.0, 2, 2, 0, 1, 2, 0.0, 0.0, 0.0]))
+
+
+def test_commands_carry_the_first_p_linear_components_exactly():
+    control = (0.1 + 0.2, -0.0)
+    twist = through_wire(encode_velocity_command(control))
+    assert bits(decode_command(twist, 2)) == bits(control)
+    accel = through_wire(encode_acceleration_command((5e-324,)))
+    assert bits(decode_command(accel, 1)) == bits((5e-324,))
+    with pytest.raises(MessageError, match='only the first 2 linear components may be set'):
+        decode_command(encode_velocity_command((1.0, 2.0, 3.0)), 2)
+    with pytest.raises(MessageError, match='geometry_msgs carries 1 to 3 components, got 4'):
+        encode_velocity_command((0.0,) * 4)
+
+
+def test_ros_time_rounds_to_the_nanosecond():
+    stamp = ros_time(1.9999999996)
+    assert (stamp.sec, stamp.nanosec) == (2, 0)
+    stamp = ros_time(3.0000000014)
+    assert (stamp.sec, stamp.nanosec) == (3, 1)
+    with pytest.raises(MessageError, match='finite and >= 0'):
+        ros_time(-1.0)
+
+
+def test_pose_array_pads_missing_axes():
+    state = WorldState(time=0.5, agent_ids=(1, 2), positions=np.array([[1.0, 2.0], [3.0, 4.0]]))
+    poses = encode_pose_array(state).poses
+    assert [(p.position.x, p.position.y, p.position.z) for p in poses] == [(1.0, 2.0, 0.0), (3.0, 4.0, 0.0)]
