@@ -13,36 +13,38 @@ computed without cancellation for small z.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 
-def one_minus_exp(z: float) -> float:
-    """1 - e^{-z}, accurate for small z."""
-    return -math.expm1(-z)
+def one_minus_exp(z):
+    """1 - e^{-z}, accurate for small z (scalar or array)."""
+    return -np.expm1(-np.asarray(z, dtype=float))
 
 
-def z_minus_one_plus_exp(z: float) -> float:
-    """z - 1 + e^{-z}, accurate for small z (it behaves as z^2/2 there)."""
-    if abs(z) < 0.1:
-        # Taylor series sum_{k>=2} (-z)^k / k!; 12 terms reach double precision for |z| < 0.1.
-        term = z * z / 2.0
-        total = term
-        for k in range(3, 16):
-            term *= -z / k
-            total += term
-        return total
-    return z + math.expm1(-z)
+def z_minus_one_plus_exp(z):
+    """z - 1 + e^{-z}, accurate for small z, where it behaves as z^2/2 (scalar or array)."""
+    z = np.asarray(z, dtype=float)
+    direct = z + np.expm1(-z)
+    # Taylor series sum_{k>=2} (-z)^k / k! for |z| < 0.1: 14 terms reach double precision.
+    term = z * z / 2.0
+    series = term
+    for k in range(3, 17):
+        term = term * (-z) / k
+        series = series + term
+    return np.where(np.abs(z) < 0.1, series, direct)
 
 
-def advance_double(
-    x: np.ndarray, q: np.ndarray, u: np.ndarray, k3: float, tau: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """State (x, q) after `tau` seconds of q' = u - k3 q (eqs. statexixjd, stateqiqj)."""
-    z = k3 * tau
+def advance_double(x, q, u, k3: float, tau):
+    """State (x, q) after `tau` seconds of q' = u - k3 q (eqs. statexixjd, stateqiqj).
+
+    `tau` may be a scalar or one value per row of x, q, u.
+    """
+    z = k3 * np.asarray(tau, dtype=float)
     a = one_minus_exp(z)
     b = z_minus_one_plus_exp(z)
+    if a.ndim:
+        a = a[..., None]
+        b = b[..., None]
     q_new = (1.0 - a) * q + (a / k3) * u
     x_new = x + (a / k3) * q + (b / (k3 * k3)) * u
     return x_new, q_new
