@@ -8,8 +8,9 @@ STAMP := $(VENV)/.installed
 PACKAGES := src/formation_msgs_py src/formation_agent src/formation_sim
 PACKAGING := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.xml)
 
-# xdist workers (per-test timeout: pytest.ini); override e.g. `make test PYTEST_ARGS='-n 0 -k recorder'`.
-PYTEST_ARGS ?= -n auto
+# xdist workers; loadgroup keeps tests marked xdist_group(name) on one worker (per-test timeout:
+# pytest.ini). Override e.g. `make test PYTEST_ARGS='-n 0 -k recorder'`.
+PYTEST_ARGS ?= -n auto --dist loadgroup
 
 DEMO_CMD = $(VENV)/bin/formation simulate paper_single --horizon 10 --out runs/demo
 

@@ -1,6 +1,6 @@
 """Packaging for formation_agent: a pip-installable and ament_python package."""
 
-from setuptools import setup
+from setuptools import find_namespace_packages, setup
 
 package_name = 'formation_agent'
 
@@ -10,7 +10,10 @@ setup(
     description='Event-triggered formation agent (Yi et al. 2017): ROS-free ETA core and its node',
     license='Apache-2.0',
     python_requires='>=3.11',
-    packages=[package_name],
+    # Namespace search: a subpackage is shipped whether or not it has an __init__.py.
+    packages=find_namespace_packages(
+        include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']
+    ),
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
