@@ -115,11 +115,13 @@ def simulate(
     tolerance: float = 1e-12,
     period: float | None = None,
     progress: Callable[[float, int], None] | None = None,
+    on_event: Callable[[float, World, list[int]], None] | None = None,
 ) -> RunRecord:
     """Run ETA-1/ETA-2 (or periodic sampling with `period`) exactly up to `horizon`.
 
     With `period`, every agent samples and broadcasts at k * period instead of at its own
-    triggering times (the periodic baseline); everything else is the same.
+    triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
+    due)` is called at every event time before the due agents trigger (for checkers).
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -139,6 +141,8 @@ def simulate(
     steps = 0
     while True:
         sampler.event()
+        if on_event is not None:
+            on_event(t, world, due)
         outbox = []
         for i in due:
             agent = agents[i]
