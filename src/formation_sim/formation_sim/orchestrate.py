@@ -1,0 +1,420 @@
+"""Start, watch and stop a distributed formation run: simulator, agents and recorder processes.
+
+```python
+from formation_sim.orchestrate import FormationRun
+
+result = FormationRun('paper_single', out_dir='runs/demo', horizon=10.0).run()
+print(result.summary, result.bag)
+```
+
+Every child runs in its own process group and session, in a private ROS domain limited to this
+machine; the run ends when the simulator reaches the horizon, when any child dies, or on Ctrl-C.
+Children are then stopped by PID (SIGINT, then SIGTERM, then SIGKILL after timeouts), and the
+Fast DDS shared-memory files of any child killed hard are removed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import importlib.util
+import math
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from formation_sim.scenario import Scenario, dump_scenario, load_scenario
+
+DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
+MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
+SCENARIO_FILE = 'scenario.yaml'
+SUMMARY_FILE = 'summary.json'
+BAG_DIR = 'bag'
+LOG_DIR = 'logs'
+PROGRESS_PREFIX = 'progress '
+
+
+class RunError(RuntimeError):
+    """The run could not be set up (bad arguments, no free ROS domain, existing output)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChildExit:
+    name: str
+    pid: int
+    returncode: int | None  # None: did not exit by itself and had to be stopped
+    signal_used: str | None  # the last signal sent to stop it, if any
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunResult:
+    """What a run left behind and how it ended."""
+
+    out_dir: Path
+    summary: Path | None  # DIR/summary.json, None if the run did not complete
+    bag: Path | None  # DIR/bag, None if not recorded or not finalized
+    exit_status: int  # 0 success; 1 a child failed; 130 interrupted
+    domain_id: int
+    wall_time: float
+    children: tuple[ChildExit, ...] = ()
+    message: str = ''
+
+    @property
+    def ok(self) -> bool:
+        return self.exit_status == 0
+
+
+# -- ROS domain -------------------------------------------------------------------------------
+
+
+def _domain_ports(domain_id: int) -> tuple[int, int]:
+    """Fast DDS unicast ports of participant 0 in `domain_id` (RTPS port mapping)."""
+    base = 7400 + 250 * domain_id
+    return base + 10, base + 11
+
+
+def _ports_free(domain_id: int) -> bool:
+    for port in _domain_ports(domain_id):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('', port))
+            except OSError:
+                return False
+    return True
+
+
+@contextlib.contextmanager
+def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None) -> Iterator[int]:
+    """Hold a ROS domain id for the duration of the block (a lock file; the ports unused).
+
+    With `domain_id` the caller pins the id; it is still locked against other runs.
+    """
+    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    low, high = DOMAIN_RANGE
+    if domain_id is not None:
+        if not 0 <= domain_id <= high:
+            raise RunError(f'domain id must lie in [0, {high}], got {domain_id}')
+        candidates = [domain_id]
+    else:
+        candidates = list(range(low, high + 1))
+        start = random.randrange(len(candidates))
+        candidates = candidates[start:] + candidates[:start]
+    for candidate in candidates:
+        handle = open(lock_dir / f'{candidate}.lock', 'w')  # noqa: SIM115 - held while running
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        if domain_id is None and not _ports_free(candidate):
+            handle.close()
+            continue
+        try:
+            yield candidate
+        finally:
+            handle.close()
+        return
+    if domain_id is not None:
+        raise RunError(f'ROS domain {domain_id} is held by another formation run')
+    raise RunError(f'no free ROS domain in {low}-{high}')
+
+
+# -- processes --------------------------------------------------------------------------------
+
+
+@dataclass
+class _Child:
+    name: str
+    process: subprocess.Popen
+    log: Path
+    expected_exit: bool  # leaves by itself when the run completes
+    signal_used: str | None = None
+    shm_files: set[str] = field(default_factory=set)
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+
+def _mapped_shm_files(pid: int) -> set[str]:
+    """Fast DDS shared-memory files mapped by process `pid`."""
+    try:
+        maps = Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return set()
+    return {line.split()[-1] for line in maps.splitlines() if '/dev/shm/fastrtps_' in line or '/dev/shm/sem.fastrtps_' in line}
+
+
+def _mapped_by_anyone(paths: set[str]) -> set[str]:
+    """Those of `paths` still mapped by some live process."""
+    in_use = set()
+    for proc in Path('/proc').iterdir():
+        if proc.name.isdigit():
+            in_use |= _mapped_shm_files(int(proc.name)) & paths
+    return in_use
+
+
+class FormationRun:
+    """One distributed run of a scenario: simulator, agent processes and recorder."""
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path,
+        *,
+        out_dir: str | Path,
+        horizon: float | None = None,
+        domain_id: int | None = None,
+        agents_per_process: int = 1,
+        record: bool = True,
+        localhost_only: bool = True,
+        progress: bool = True,
+        sample_period: float = 0.01,
+        timeout: float | None = None,
+        stop_timeouts: tuple[float, float] = (5.0, 3.0),
+    ) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        self.out_dir = Path(out_dir)
+        self.horizon = float(self.scenario.horizon if horizon is None else horizon)
+        if not (math.isfinite(self.horizon) and self.horizon > 0.0):
+            raise RunError(f'horizon must be a finite number > 0, got {self.horizon!r}')
+        if agents_per_process < 1:
+            raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
+        if self.scenario.dimension > 3:
+            raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
+        self.domain_id = domain_id
+        self.agents_per_process = agents_per_process
+        self.record = record
+        self.localhost_only = localhost_only
+        self.progress = progress
+        self.sample_period = sample_period
+        self.timeout = timeout
+        self.stop_timeouts = stop_timeouts
+        self._children: list[_Child] = []
+        self._interrupted = threading.Event()
+        self._last_progress = ''
+
+    # -- files ---------------------------------------------------------------------------------
+
+    def _agent_groups(self) -> list[list[int]]:
+        ids = list(self.scenario.agent_ids)
+        k = self.agents_per_process
+        return [ids[start : start + k] for start in range(0, len(ids), k)]
+
+    def _write_inputs(self) -> dict[str, Path]:
+        from formation_agent.node import NODE_NAME, agent_namespace
+        from formation_sim.sim_node import agent_parameters, formation_topics
+
+        out = self.out_dir
+        (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        scenario_path = out / SCENARIO_FILE
+        dump_scenario(self.scenario, scenario_path)  # every float kept bit for bit
+        extra = 1 if self.record else 0
+        agents = {
+            f'{agent_namespace(i)}/{NODE_NAME}': {
+                'ros__parameters': agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra)
+            }
+            for i in self.scenario.agent_ids
+        }
+        agents_path = out / 'agents.params.yaml'
+        agents_path.write_text(yaml.safe_dump(agents, sort_keys=False), encoding='utf-8')
+        paths = {'scenario': scenario_path, 'agents': agents_path}
+        if self.record:
+            recorder = {
+                '/formation_recorder': {
+                    'ros__parameters': {
+                        'output': str((out / BAG_DIR).resolve()),
+                        'topics': [f'{name}:{msgtype}' for name, msgtype in formation_topics(self.scenario)],
+                    }
+                }
+            }
+            paths['recorder'] = out / 'recorder.params.yaml'
+            paths['recorder'].write_text(yaml.safe_dump(recorder, sort_keys=False), encoding='utf-8')
+        return paths
+
+    def _environment(self, domain_id: int, processes: int) -> dict[str, str]:
+        env = dict(os.environ)
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+        env['ROS_LOG_DIR'] = str((self.out_dir / LOG_DIR / 'ros').resolve())
+        env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
+        env['PYTHONUNBUFFERED'] = '1'
+        if self.localhost_only:
+            env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        if processes > MANY_PROCESSES:
+            env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        # Children find these packages the way this process did.
+        here = [
+            str(Path(next(iter(importlib.util.find_spec(name).submodule_search_locations))).resolve().parent)
+            for name in ('formation_msgs_py', 'formation_agent', 'formation_sim')
+        ]
+        env['PYTHONPATH'] = os.pathsep.join(dict.fromkeys(here + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]))
+        return env
+
+    def _start(self, name: str, args: list[str], env: dict[str, str], *, expected_exit: bool, pipe: bool = False) -> _Child:
+        log = self.out_dir / LOG_DIR / f'{name}.log'
+        handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
+        process = subprocess.Popen(
+            [sys.executable, *args],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if pipe else handle,
+            stderr=handle,
+            start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
+            text=True,
+        )
+        child = _Child(name=name, process=process, log=log, expected_exit=expected_exit)
+        if pipe:
+            threading.Thread(target=self._pump, args=(child, handle), daemon=True).start()
+        self._children.append(child)
+        return child
+
+    def _pump(self, child: _Child, handle) -> None:
+        """Copy the simulator's stdout into its log; keep its progress lines for the terminal."""
+        for line in child.process.stdout:
+            handle.write(line)
+            handle.flush()
+            if line.startswith(PROGRESS_PREFIX):
+                self._last_progress = line[len(PROGRESS_PREFIX) :].strip()
+
+    # -- running -------------------------------------------------------------------------------
+
+    def run(self) -> RunResult:
+        if self.record and (self.out_dir / BAG_DIR).exists():
+            raise RunError(f'{self.out_dir / BAG_DIR} exists; the recorder never overwrites a bag')
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        (self.out_dir / SUMMARY_FILE).unlink(missing_ok=True)
+        started = time.monotonic()
+        with reserve_domain(self.domain_id) as domain_id, self._sigint_trapped():
+            paths = self._write_inputs()
+            groups = self._agent_groups()
+            env = self._environment(domain_id, len(groups) + 1 + int(self.record))
+            try:
+                status, message = self._launch_and_watch(paths, groups, env)
+            finally:
+                self._stop_all()
+        summary = self.out_dir / SUMMARY_FILE
+        bag = self.out_dir / BAG_DIR
+        if status == 0 and not summary.is_file():
+            status, message = 1, f'the simulator exited without writing {summary}'
+        result = RunResult(
+            out_dir=self.out_dir,
+            summary=summary if summary.is_file() else None,
+            bag=bag if (bag / 'metadata.yaml').is_file() else None,
+            exit_status=status,
+            domain_id=domain_id,
+            wall_time=time.monotonic() - started,
+            children=tuple(
+                ChildExit(name=c.name, pid=c.pid, returncode=c.process.returncode, signal_used=c.signal_used)
+                for c in self._children
+            ),
+            message=message,
+        )
+        if self.progress:
+            self._say(f'{"done" if result.ok else "FAILED"} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
+        return result
+
+    @contextlib.contextmanager
+    def _sigint_trapped(self) -> Iterator[None]:
+        """Ctrl-C asks the run to stop cleanly (only possible from the main thread)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: self._interrupted.set())
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+    def interrupt(self) -> None:
+        """Stop the run as Ctrl-C would (for callers on another thread)."""
+        self._interrupted.set()
+
+    def _launch_and_watch(self, paths: dict[str, Path], groups: list[list[int]], env: dict[str, str]) -> tuple[int, str]:
+        if self.record:
+            self._start('recorder', ['-m', 'formation_sim.recorder', '--ros-args', '--params-file', str(paths['recorder'])], env, expected_exit=False)
+        sim_args = [
+            '-m', 'formation_sim.sim_node', '--ros-args',
+            '-p', f'scenario:={paths["scenario"].resolve()}',
+            '-p', f'horizon:={self.horizon!r}',
+            '-p', f'out_dir:={self.out_dir.resolve()}',
+            '-p', f'sample_period:={float(self.sample_period)!r}',
+            '-p', f'extra_subscribers:={1 if self.record else 0}',
+        ]  # fmt: skip
+        simulator = self._start('simulator', sim_args, env, expected_exit=True, pipe=True)
+        for group in groups:
+            ids = ','.join(map(str, group))
+            name = f'agent_{group[0]}' if len(group) == 1 else f'agents_{group[0]}-{group[-1]}'
+            self._start(name, ['-m', 'formation_agent.node', '--agents', ids, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
+        deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        shown = ''
+        while True:
+            if self._interrupted.is_set():
+                return 130, 'interrupted'
+            if deadline is not None and time.monotonic() > deadline:
+                return 1, f'timed out after {self.timeout} s'
+            if self.progress and self._last_progress != shown:
+                shown = self._last_progress
+                self._say(shown)
+            code = simulator.process.poll()
+            if code is not None:
+                if code != 0:
+                    return 1, f'simulator exited with status {code}; see {simulator.log}'
+                return self._finish(), ''
+            for child in self._children:
+                if child is not simulator and not child.alive() and (child.process.returncode != 0 or not child.expected_exit):
+                    return 1, f'{child.name} (pid {child.pid}) exited with status {child.process.returncode}; see {child.log}'
+            time.sleep(0.05)
+
+    def _finish(self) -> int:
+        """After the simulator's success: let the agents leave, then close the bag."""
+        limit = time.monotonic() + self.stop_timeouts[0]
+        agents = [c for c in self._children if c.expected_exit and c.name != 'simulator']
+        while any(c.alive() for c in agents) and time.monotonic() < limit:
+            time.sleep(0.05)
+        failed = [c for c in agents if not c.alive() and c.process.returncode != 0]
+        return 1 if failed else 0
+
+    def _stop_all(self) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive."""
+        first, second = self.stop_timeouts
+        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
+            alive = [c for c in self._children if c.alive()]
+            if not alive:
+                break
+            for child in alive:
+                if sig == signal.SIGKILL:
+                    child.shm_files = _mapped_shm_files(child.pid)
+                child.signal_used = sig.name
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
+            limit = time.monotonic() + wait
+            while any(c.alive() for c in alive) and time.monotonic() < limit:
+                time.sleep(0.05)
+        for child in self._children:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.process.wait(timeout=1.0)
+        killed = set().union(*(c.shm_files for c in self._children if c.signal_used == 'SIGKILL'))
+        for path in killed - _mapped_by_anyone(killed):
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+
+    def _say(self, text: str, *, end: bool = False) -> None:
+        stream = sys.stderr
+        if stream.isatty():
+            stream.write(f'\r\033[K[formation run] {text}' + ('\n' if end else ''))
+        else:
+            stream.write(f'[formation run] {text}\n')
+        stream.flush()

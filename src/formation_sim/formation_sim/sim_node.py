@@ -1,0 +1,458 @@
+"""The simulator node: the physical world of a distributed run, and the lock-step time keeper.
+
+It holds the exact `World`, serves every agent's sensing service `/agent_<i>/sense`, applies the
+commands agents publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
+only), the exact state `/formation/state` and `/formation/ground_truth` at a sample period (pure
+evaluations, the world itself only advances from event to event), and `/formation/sensing_log`.
+
+Lock-step protocol (docs/MESSAGES.md): after discovery the simulator publishes Step 0 at t = 0;
+every agent due at a step senses, commands, broadcasts and reports a Status; agents that receive
+triggering information report again.  A step is settled when every due agent has reported its
+trigger, every command sent has been applied and every triggering-information message sent has
+been received (cumulative counters, so equality cannot be transient).  Then the world advances to
+the smallest next time reported (the exact float, carried by the next Step) and the agents that
+reported exactly that time trigger.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Accel, PoseArray, Twist
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
+
+from formation_agent.node import (
+    PROTOCOL_QOS,
+    STATUS_TOPIC,
+    STEP_TOPIC,
+    command_topic,
+    sense_service,
+    trigger_info_topic,
+)
+from formation_msgs_py.codec import (
+    decode_command,
+    decode_status,
+    encode_pose_array,
+    encode_sensed_state,
+    encode_step,
+    encode_world_state,
+    ros_time,
+    sensing_refusal,
+)
+from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, Status, Step, WorldState
+from formation_sim.scenario import Scenario, load_scenario
+from formation_sim.world import World
+
+STATE_TOPIC = '/formation/state'
+GROUND_TRUTH_TOPIC = '/formation/ground_truth'
+SENSING_LOG_TOPIC = '/formation/sensing_log'
+CLOCK_TOPIC = '/clock'
+GRAPH_FILE = 'graph.json'
+
+
+class SimulatorError(RuntimeError):
+    """The distributed run cannot go on: a protocol violation, a stall, or a dead peer."""
+
+
+def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
+    """Every topic of a run of `scenario` with its type, as a recorder wants them."""
+    array = 'std_msgs/msg/Float64MultiArray'
+    double = scenario.dynamics == 'double'
+    command_type = 'geometry_msgs/msg/Accel' if double else 'geometry_msgs/msg/Twist'
+    topics = [
+        (STEP_TOPIC, array),
+        (STATUS_TOPIC, array),
+        (STATE_TOPIC, array),
+        (GROUND_TRUTH_TOPIC, 'geometry_msgs/msg/PoseArray'),
+        (SENSING_LOG_TOPIC, 'std_msgs/msg/String'),
+        (CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock'),
+    ]
+    for i in scenario.agent_ids:
+        topics.append((command_topic(i, double=double), command_type))
+        for j in scenario.neighbours(i):
+            topics.append((trigger_info_topic(i, j), array))
+    return topics
+
+
+def agent_parameters(scenario: Scenario, agent_id: int, *, horizon: float, extra_subscribers: int = 0) -> dict:
+    """ROS parameters of agent `agent_id`'s node (what that agent knows of the scenario)."""
+    neighbours = scenario.neighbours(agent_id)
+    gains = scenario.gains
+    params = {
+        'agent_id': int(agent_id),
+        'neighbour_ids': [int(j) for j in neighbours],
+        'neighbour_offsets': [float(v) for d in neighbours.values() for v in d],
+        'dimension': scenario.dimension,
+        'delta': float(scenario.delta),
+        'horizon': float(horizon),
+        'extra_subscribers': int(extra_subscribers),
+    }
+    if scenario.dynamics == 'single':
+        params.update(algorithm='eta1', alpha=float(gains.alpha), beta=float(gains.beta))
+    else:
+        params.update(
+            algorithm='eta2',
+            alpha_d=float(gains.alpha_d),
+            beta_d=float(gains.beta_d),
+            k1=float(gains.k1),
+            k2=float(gains.k2),
+            k3=float(gains.k3),
+        )
+    return params
+
+
+@dataclass
+class _AgentBook:
+    """What the simulator knows of one agent: its latest status and what it received from it."""
+
+    neighbours: tuple[int, ...]
+    status: Status | None = None
+    expected_triggers: int = 0
+    commands_received: int = 0
+    sensed_at_step: int = -1
+    trigger_times: list[float] = field(default_factory=list)
+
+
+class FormationSimulatorNode(Node):
+    """World, sensing services and lock-step clock of a distributed formation run."""
+
+    def __init__(self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None) -> None:
+        super().__init__('formation_simulator', parameter_overrides=parameter_overrides or [])
+        source = self.declare_parameter('scenario', '').value
+        horizon = float(self.declare_parameter('horizon', 0.0).value)
+        self.out_dir = str(self.declare_parameter('out_dir', '').value)
+        self.sample_period = float(self.declare_parameter('sample_period', 0.01).value)
+        self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
+        self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
+        self.stall_timeout = float(self.declare_parameter('stall_timeout', 60.0).value)
+        self.discovery_timeout = float(self.declare_parameter('discovery_timeout', 120.0).value)
+        if scenario is None:
+            if not source:
+                raise SimulatorError("parameter 'scenario' is required (a built-in name or a YAML path)")
+            scenario = load_scenario(source)
+        self.scenario = scenario
+        self.horizon = scenario.horizon if horizon <= 0.0 else horizon
+        if not math.isfinite(self.horizon):
+            raise SimulatorError(f'horizon must be finite, got {self.horizon!r}')
+        if not (math.isfinite(self.sample_period) and self.sample_period >= 0.0):
+            raise SimulatorError(f'sample_period must be >= 0 (0: events only), got {self.sample_period!r}')
+        if scenario.dimension > 3:
+            raise SimulatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+        self.world = World.from_scenario(scenario)
+        self.double = scenario.dynamics == 'double'
+        self.agents = {i: _AgentBook(neighbours=tuple(scenario.neighbours(i))) for i in scenario.agent_ids}
+
+        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, PROTOCOL_QOS)
+        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
+        self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, PROTOCOL_QOS)
+        self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, PROTOCOL_QOS)
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, PROTOCOL_QOS)
+        command_type = Accel if self.double else Twist
+        self._command_subs = {
+            i: self.create_subscription(
+                command_type,
+                command_topic(i, double=self.double),
+                lambda msg, agent=i: self._on_command(msg, agent),
+                PROTOCOL_QOS,
+            )
+            for i in self.agents
+        }
+        self._services = [
+            self.create_service(Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent))
+            for i in self.agents
+        ]
+
+        self.step: Step | None = None
+        self.finished = False
+        self.failure: Exception | None = None
+        self.sensing_calls = 0
+        self.steps = 0
+        self._due: set[int] = set()
+        self._samples_t: list[float] = []
+        self._samples_x: list[np.ndarray] = []
+        self._samples_q: list[np.ndarray] = []
+        self._next_grid = 1
+        self._created = time.monotonic()
+        self._started: float | None = None
+        self._last_progress = self._created
+        self._last_advance = self._created
+        self.graph: dict = {}
+        self._timer = self.create_timer(0.1, self._tick)
+
+    # -- discovery ------------------------------------------------------------------------------
+
+    def _connected(self) -> bool:
+        extra = self.extra_subscribers
+        return (
+            self._step_pub.get_subscription_count() >= len(self.agents) + extra
+            and all(pub.get_subscription_count() >= extra for pub in (self._state_pub, self._truth_pub, self._log_pub, self._clock_pub))
+            and self._status_sub.get_publisher_count() >= len(self.agents)
+            and all(sub.get_publisher_count() >= 1 for sub in self._command_subs.values())
+            and all(
+                book.status is not None and book.status.step_index == DISCOVERY_STEP and book.status.ready
+                for book in self.agents.values()
+            )
+        )
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if self.step is None:
+            if self._connected():
+                self._start()
+            elif now - self._created > self.discovery_timeout:
+                missing = [i for i, book in self.agents.items() if book.status is None or not book.status.ready]
+                raise SimulatorError(
+                    f'discovery did not complete within {self.discovery_timeout} s; agents not ready: {missing}'
+                )
+            return
+        if self.finished:
+            return
+        if now - self._last_advance > self.stall_timeout:
+            raise SimulatorError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
+        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
+            self._last_progress = now
+            self._print_progress()
+
+    def _print_progress(self) -> None:
+        events = sum(len(book.trigger_times) for book in self.agents.values())
+        print(
+            f'progress t={self.world.time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+            f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+            flush=True,
+        )
+
+    def _describe_wait(self) -> str:
+        lines = [f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)})']
+        for i, book in self.agents.items():
+            lines.append(f'agent {i}: status {book.status}, expected triggers {book.expected_triggers}, commands received {book.commands_received}')
+        return '; '.join(lines)
+
+    def _start(self) -> None:
+        self._started = time.monotonic()
+        self.graph = self.snapshot_graph()
+        self._sample_event()
+        self._publish_step(Step(index=0, time=0.0), due=set(self.agents))  # t^i_1 = 0
+
+    # -- lock-step ------------------------------------------------------------------------------
+
+    def _publish_step(self, step: Step, *, due: set[int]) -> None:
+        self.step = step
+        self._due = due
+        for i in due:
+            self.agents[i].expected_triggers += 1
+            self.agents[i].trigger_times.append(step.time)
+        self._last_advance = time.monotonic()
+        self._step_pub.publish(encode_step(step))
+
+    def _on_status(self, msg: Float64MultiArray) -> None:
+        status = decode_status(msg)
+        book = self.agents.get(status.agent)
+        if book is None:
+            raise SimulatorError(f'status from agent {status.agent}, which is not in the scenario {sorted(self.agents)}')
+        previous = book.status
+        if previous is not None and (
+            status.step_index < previous.step_index
+            or status.info_sent < previous.info_sent
+            or status.info_received < previous.info_received
+            or status.triggers < previous.triggers
+        ):
+            raise SimulatorError(f'agent {status.agent}: status went backwards from {previous} to {status}')
+        if status.triggers > book.expected_triggers:
+            raise SimulatorError(
+                f'agent {status.agent} reports {status.triggers} triggers, but was due {book.expected_triggers} times'
+            )
+        book.status = status
+        self._advance_if_settled()
+
+    def _on_command(self, msg, agent: int) -> None:
+        book = self.agents[agent]
+        if self.step is None or agent not in self._due or book.commands_received >= book.expected_triggers:
+            raise SimulatorError(
+                f'agent {agent} sent a command outside its triggering time '
+                f'(step {None if self.step is None else self.step.index}, due {sorted(self._due)})'
+            )
+        # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
+        self.world.set_control(agent, decode_command(msg, self.scenario.dimension))
+        book.commands_received += 1
+        self._advance_if_settled()
+
+    def _on_sense(self, agent: int):
+        book = self.agents[agent]
+        index = -1 if self.step is None else self.step.index
+        if self.step is None or agent not in self._due or book.sensed_at_step == index:
+            reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(self._due)})'
+            self.failure = SimulatorError(reason)
+            return sensing_refusal(reason)
+        book.sensed_at_step = index
+        self.sensing_calls += 1
+        sensed = self.world.sense(agent, book.neighbours)
+        log = {'version': 1, 'agent': agent, 'step': index, 'time': self.world.time}
+        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        return encode_sensed_state(sensed)
+
+    def _settled(self) -> bool:
+        sent = received = 0
+        for i, book in self.agents.items():
+            status = book.status
+            if status is None or not status.ready or status.triggers != book.expected_triggers:
+                return False
+            if i in self._due and status.step_index != self.step.index:
+                return False
+            if status.commands_sent != book.commands_received:
+                return False
+            sent += status.info_sent
+            received += status.info_received
+        if received > sent:
+            raise SimulatorError(f'agents report {received} messages received but only {sent} sent')
+        return sent == received
+
+    def _advance_if_settled(self) -> None:
+        if self.step is None or self.finished or not self._settled():
+            return
+        t = self.step.time
+        t_next = min(book.status.next_time for book in self.agents.values())
+        if not t_next > t:
+            laggards = [i for i, book in self.agents.items() if book.status.next_time <= t]
+            raise SimulatorError(f'agents {laggards} ask to trigger at t={t_next!r}, not after the current t={t!r}')
+        self.steps += 1
+        if t_next > self.horizon:
+            self._sample_grid(self.horizon)
+            self.world.advance(self.horizon)
+            self._sample_event()
+            self.graph = self.snapshot_graph()
+            self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL), due=set())
+            self.finished = True
+            return
+        self._sample_grid(t_next)
+        self.world.advance(t_next)
+        self._sample_event()
+        due = {i for i, book in self.agents.items() if book.status.next_time == t_next}
+        self._publish_step(Step(index=self.step.index + 1, time=t_next), due=due)
+
+    # -- samples (pure evaluations; they never move the world) --------------------------------
+
+    def _sample_grid(self, t_end: float) -> None:
+        if not self.sample_period:
+            return
+        while True:
+            tg = self._next_grid * self.sample_period
+            if tg >= t_end:
+                return
+            self._next_grid += 1
+            if tg > self.world.time:
+                x, q = self.world.state_at(tg)
+                self._add_sample(tg, x, q)
+
+    def _sample_event(self) -> None:
+        if self._samples_t and self._samples_t[-1] == self.world.time:
+            return
+        self._add_sample(self.world.time, self.world.positions, self.world.velocities)
+
+    def _add_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
+        self._samples_t.append(t)
+        self._samples_x.append(x)
+        if q is not None:
+            self._samples_q.append(q)
+        state = WorldState(time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=q)
+        self._clock_pub.publish(Clock(clock=ros_time(t)))
+        self._state_pub.publish(encode_world_state(state))
+        self._truth_pub.publish(encode_pose_array(state))
+
+    # -- results --------------------------------------------------------------------------------
+
+    def snapshot_graph(self) -> dict:
+        """Publishers, subscriptions, services and clients of every node in the graph."""
+        graph = {}
+        for name, namespace in self.get_node_names_and_namespaces():
+            key = f'{namespace.rstrip("/")}/{name}'
+            graph[key] = {
+                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
+                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
+                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
+                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
+            }
+        return graph
+
+    def record(self):
+        """The run as a `RunRecord` (the same schema as the in-process engine's)."""
+        from formation_sim.engine import RunRecord
+
+        statuses = {i: book.status for i, book in self.agents.items()}
+        return RunRecord(
+            scenario=self.scenario,
+            horizon=self.horizon,
+            mode='distributed',
+            trigger_times={i: list(book.trigger_times) for i, book in self.agents.items()},
+            sample_times=np.array(self._samples_t),
+            sample_positions=np.array(self._samples_x),
+            sample_velocities=np.array(self._samples_q) if self._samples_q else None,
+            messages_sent=sum(s.info_sent for s in statuses.values()),
+            sensing_calls=self.sensing_calls,
+            wall_time=time.monotonic() - (self._started or self._created),
+            extra={
+                'clock': 'lockstep',
+                'steps': self.steps,
+                'discovery_wall_time': (self._started or self._created) - self._created,
+            },
+        )
+
+    def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
+        for pub in (self._step_pub, self._state_pub, self._truth_pub, self._log_pub, self._clock_pub):
+            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+
+
+def write_results(node: FormationSimulatorNode) -> None:
+    """summary.json (through formation_sim.summary) and graph.json into the node's out_dir."""
+    from formation_sim.summary import write_summary
+
+    out = Path(node.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_summary(node.record(), out)
+    (out / GRAPH_FILE).write_text(json.dumps(node.graph, indent=1, sort_keys=True) + '\n', encoding='utf-8')
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        node = FormationSimulatorNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not node.finished:
+            executor.spin_once(timeout_sec=0.5)
+            if node.failure is not None:
+                raise node.failure
+        node.wait_for_delivery()
+        if node.progress_period > 0.0:
+            node._print_progress()
+        if node.out_dir:
+            write_results(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        status = 130
+    except (SimulatorError, ValueError) as error:
+        print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+        status = 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())
