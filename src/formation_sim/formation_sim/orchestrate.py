@@ -338,6 +338,11 @@ class FormationRun:
         finally:
             signal.signal(signal.SIGINT, previous)
 
+    @property
+    def last_progress(self) -> str:
+        """The simulator's latest progress line ('' before the first step)."""
+        return self._last_progress
+
     def interrupt(self) -> None:
         """Stop the run as Ctrl-C would (for callers on another thread)."""
         self._interrupted.set()

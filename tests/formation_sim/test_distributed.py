@@ -1,0 +1,174 @@
+"""Distributed runs (real processes, private ROS domains 110-119) against the in-process engine."""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+from formation_sim.engine import simulate
+from formation_sim.scenario import load_scenario
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+TOLERANCE = 1e-9
+
+
+def _run(scenario, tmp_path: Path, *, domain_id: int, horizon: float, **options):
+    from formation_sim.orchestrate import FormationRun
+
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0, **options)
+    return run.run()
+
+
+def _assert_same_events(summary: dict, reference) -> None:
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert len(got) == len(times), f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        worst = max(abs(a - b) for a, b in zip(got, times))
+        assert worst <= TOLERANCE, f'agent {agent}: triggering times differ by up to {worst}'
+    assert summary['total_events'] == reference.total_events
+    assert summary['messages_sent'] == reference.messages_sent
+    assert summary['sensing_calls'] == reference.total_events
+
+
+def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.codec import decode_trigger_info
+    from formation_sim.recorder import read_bag
+
+    counts: dict[str, int] = defaultdict(int)
+    stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
+    for message in read_bag(bag):
+        counts[message.topic] += 1
+        if '/trigger_info/' in message.topic:
+            info = decode_trigger_info(deserialize_message(message.rawdata, Float64MultiArray))
+            assert message.topic == f'/agent_{info.sender}/trigger_info/to_{info.receiver}'
+            stamps[(info.sender, info.receiver)].append(info.stamp)
+    return counts, stamps
+
+
+def _assert_agents_isolated(graph: dict, scenario) -> None:
+    """No agent subscribes to ground truth or state, or uses another agent's sensing."""
+    for i in scenario.agent_ids:
+        node = graph[f'/agent_{i}/formation_agent']
+        allowed = {'/formation/step'} | {f'/agent_{j}/trigger_info/to_{i}' for j in scenario.neighbours(i)}
+        assert set(node['subscriptions']) == allowed, f'agent {i} subscribes to {node["subscriptions"]}'
+        assert node['clients'] == [f'/agent_{i}/sense'], f'agent {i} has clients {node["clients"]}'
+        for forbidden in ('/formation/state', '/formation/ground_truth', '/formation/sensing_log', '/clock'):
+            assert forbidden not in node['subscriptions']
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize(
+    ('name', 'horizon', 'domain_id'),
+    [('paper_single', 10.0, 110), ('paper_double', 8.0, 111)],
+)
+def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, domain_id):
+    scenario = load_scenario(name)
+    reference = simulate(scenario, horizon=horizon)
+    result = _run(scenario, tmp_path, domain_id=domain_id, horizon=horizon)
+    assert result.ok, result.message
+    assert result.domain_id == domain_id
+    summary = json.loads(result.summary.read_text())
+    assert summary['mode'] == 'distributed'
+    _assert_same_events(summary, reference)
+
+    # The bag: every topic of the run, one TriggerInfo per trigger and neighbour, stamped with
+    # the sender's triggering times.
+    from formation_sim.sim_node import formation_topics
+
+    counts, stamps = _bag_trigger_stamps(result.bag)
+    assert set(counts) == {topic for topic, _ in formation_topics(scenario)}
+    for i in scenario.agent_ids:
+        for j in scenario.neighbours(i):
+            sent = stamps[(i, j)]
+            assert len(sent) == len(reference.trigger_times[i]), f'edge {i}->{j}'
+            assert max(abs(a - b) for a, b in zip(sent, reference.trigger_times[i])) <= TOLERANCE
+    assert counts['/formation/sensing_log'] == reference.total_events
+    command = 'cmd_accel' if scenario.dynamics == 'double' else 'cmd_vel'
+    for i in scenario.agent_ids:
+        assert counts[f'/agent_{i}/{command}'] == len(reference.trigger_times[i])
+
+    _assert_agents_isolated(json.loads((result.out_dir / 'graph.json').read_text()), scenario)
+    assert all(child.returncode == 0 for child in result.children), result.children
+
+
+@pytest.mark.timeout(300)
+def test_agents_packed_in_one_process_give_the_same_run(tmp_path):
+    scenario = load_scenario('paper_single')
+    horizon = 3.0
+    reference = simulate(scenario, horizon=horizon)
+    result = _run(scenario, tmp_path, domain_id=112, horizon=horizon, agents_per_process=3, record=False)
+    assert result.ok, result.message
+    assert result.bag is None
+    assert [child.name for child in result.children] == ['simulator', 'agents_1-3']
+    _assert_same_events(json.loads(result.summary.read_text()), reference)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie is dead but not yet reaped by its parent.
+    try:
+        return Path(f'/proc/{pid}/stat').read_text().split()[2] != 'Z'
+    except OSError:
+        return False
+
+
+def _wait_for_stepping(run, limit: float = 120.0) -> None:
+    deadline = time.monotonic() + limit
+    while not run.last_progress and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert run.last_progress, 'the run never reported progress'
+
+
+@pytest.mark.timeout(300)
+def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path):
+    from formation_sim.orchestrate import FormationRun
+
+    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=113, progress=False, timeout=240.0)
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()))
+    worker.start()
+    _wait_for_stepping(run)
+    run.interrupt()
+    worker.join(timeout=60.0)
+    assert not worker.is_alive()
+    (result,) = results
+    assert result.exit_status == 130 and result.message == 'interrupted'
+    assert result.summary is None
+    assert result.bag is not None  # the recorder was stopped by SIGINT and closed its bag
+    assert not [child for child in result.children if _alive(child.pid)]
+
+
+@pytest.mark.timeout(300)
+def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path):
+    import signal
+
+    from formation_sim.orchestrate import FormationRun, _mapped_by_anyone, _mapped_shm_files
+
+    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=114, progress=False, record=False, timeout=240.0)
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()))
+    worker.start()
+    _wait_for_stepping(run)
+    victim = next(child for child in run._children if child.name == 'agent_2')
+    leftovers = _mapped_shm_files(victim.pid)
+    os.kill(victim.pid, signal.SIGKILL)
+    worker.join(timeout=60.0)
+    for path in leftovers - _mapped_by_anyone(leftovers):  # what the victim could not remove
+        Path(path).unlink(missing_ok=True)
+    (result,) = results
+    assert result.exit_status == 1
+    assert f'agent_2 (pid {victim.pid}) exited with status -9' in result.message
+    assert not [child for child in result.children if _alive(child.pid)]
