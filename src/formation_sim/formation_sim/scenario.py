@@ -586,7 +586,11 @@ def _parse_yaml(text: str, source: str) -> Any:
         mark = error.problem_mark or error.context_mark
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'unknown position'
         problem = error.problem or error.context or 'malformed YAML'
-        raise ScenarioError(f'{source}: malformed YAML at {where}: {problem}') from None
+        context = ''
+        if error.context and error.context_mark and error.context_mark is not mark:
+            start = error.context_mark
+            context = f' ({error.context} started at line {start.line + 1}, column {start.column + 1})'
+        raise ScenarioError(f'{source}: malformed YAML at {where}: {problem}{context}') from None
     except yaml.YAMLError as error:
         raise ScenarioError(f'{source}: malformed YAML: {error}') from None
 

@@ -1,0 +1,1 @@
+"""Subcommands of the `formation` command line (see formation_sim.cli)."""
