@@ -84,7 +84,7 @@ class _EventTriggeredAgent:
         for j, c in zip(self.neighbour_ids, self.capacity):
             if c <= 0.0:
                 raise AgentError(
-                    f'edge ({agent_id},{j}): ||d_ij|| = {self.delta - c!r} is not below Δ = {self.delta!r} '
+                    f'edge ({agent_id},{j}): ||d_ij|| = {float(self.delta - c)!r} is not below Δ = {self.delta!r} '
                     '(Assumption 1)'
                 )
         self.dimension = offsets.shape[1]
@@ -141,7 +141,7 @@ class _EventTriggeredAgent:
         if stamp < self._anchor_time[k] or (self.last_trigger is not None and stamp < self.last_trigger):
             raise AgentError(
                 f'agent {self.agent_id}: information from agent {info.sender} goes back in time '
-                f'(t={stamp!r}, edge last updated at t={self._anchor_time[k]!r})'
+                f'(t={stamp!r}, edge last updated at t={float(self._anchor_time[k])!r})'
             )
         # The message carries x_j - x_i; this agent's edge state is x_i - x_j - d_ij.
         rel = self._vector(info.rel_position, f'rel_position from agent {info.sender}')
@@ -175,7 +175,7 @@ class _EventTriggeredAgent:
             k = int(broken[0])
             raise AgentError(
                 f'agent {self.agent_id}: edge to agent {self.neighbour_ids[k]} is out of its range: '
-                f'||x_i-x_j-d_ij|| = {length[k]!r} >= Δ-||d_ij|| = {self.capacity[k]!r}'
+                f'||x_i-x_j-d_ij|| = {float(length[k])!r} >= Δ-||d_ij|| = {float(self.capacity[k])!r}'
             )
         extra = self._sensed_extra(sensed)  # validated before anything changes
         self._anchor_time[:] = t
@@ -423,7 +423,7 @@ def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> 
         k = int(np.flatnonzero(room <= 0.0)[0])
         raise AgentError(
             f'agent {agent_id}: predicted edge to agent {neighbour_ids[k]} left its range '
-            f'(||y_ij|| = {r[k]!r} >= Δ-||d_ij|| = {capacity[k]!r})'
+            f'(||y_ij|| = {float(r[k])!r} >= Δ-||d_ij|| = {float(capacity[k])!r})'
         )
     moving = speed > 0.0
     if np.any(moving):

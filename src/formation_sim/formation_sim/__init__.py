@@ -1,0 +1,1 @@
+"""Scenarios, validation, the exact in-process engine, the simulator node and run orchestration."""

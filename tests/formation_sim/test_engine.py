@@ -1,0 +1,227 @@
+"""The in-process engine against the paper's guarantees, checked on the true trajectory.
+
+The checker here recomputes e_i(t) (resp. E_i(t)) from its definition in Theorem 1 (resp. 2)
+out of the true world states, with its own formulas, independently of the agents' predictions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formation_sim import theory
+from formation_sim.engine import EngineError, simulate
+from formation_sim.generate import random_scenario
+from formation_sim.scenario import load_scenario
+
+REL = 1e-9
+
+
+def _omega(r, c):
+    # ω_ij (paper, Section 3), written out again on purpose: the checker shares no code with agents.
+    return (2 * c - r) / (c - r) ** 2
+
+
+def _propagate(x, q, u, k3, tau):
+    if q is None:
+        return x + tau * u, None
+    decay = np.exp(-k3 * tau)
+    q_t = decay * q + (1 - decay) * u / k3
+    x_t = x + (1 - decay) * q / k3 + (k3 * tau - (1 - decay)) * u / k3**2
+    return x_t, q_t
+
+
+class Trace:
+    """Snapshots of the true world at every event, before the due agents trigger."""
+
+    def __init__(self, scenario):
+        self.scenario = scenario
+        self.snaps = []
+
+    def __call__(self, t, world, due):
+        self.snaps.append((t, world.positions, world.velocities, world.controls, list(due)))
+
+
+def _edge_sums(scenario, i, x, q):
+    """sum_j ω_ij y_ij and sum_j ω_ij q_ij for agent i at state (x, q)."""
+    index = {a: k for k, a in enumerate(scenario.agent_ids)}
+    c_y = np.zeros(x.shape[1])
+    c_q = np.zeros(x.shape[1])
+    for j, d in scenario.neighbours(i).items():
+        y = x[index[i]] - x[index[j]] - d
+        w = _omega(np.linalg.norm(y), scenario.delta - np.linalg.norm(d))
+        c_y += w * y
+        if q is not None:
+            c_q += w * (q[index[i]] - q[index[j]])
+    return c_y, c_q
+
+
+def _trigger_error(scenario, i, state, anchor):
+    """e_i(t) of Theorem 1, or E_i(t) = k1 e_i + k2 e_qi of Theorem 2, from true states."""
+    y_now, q_now = _edge_sums(scenario, i, *state)
+    y_then, q_then = _edge_sums(scenario, i, *anchor)
+    if scenario.dynamics == 'single':
+        return y_now - y_then
+    g = scenario.gains
+    return g.k1 * (y_now - y_then) + g.k2 * (q_now - q_then)
+
+
+def check_triggering(scenario, trace, horizon, *, dense=40):
+    """Every trigger sits on the threshold; between triggers the error stays below it."""
+    g = scenario.gains
+    alpha, beta = (g.alpha, g.beta) if scenario.dynamics == 'single' else (g.alpha_d, g.beta_d)
+    k3 = None if scenario.dynamics == 'single' else g.k3
+    snaps = trace.snaps
+    anchors = {}  # agent -> (x, q) at its last trigger
+    worst_inside = 0.0
+    on_threshold = []
+    for k, (t, x, q, _, due) in enumerate(snaps):
+        for i in due:
+            if i in anchors:
+                e = np.linalg.norm(_trigger_error(scenario, i, (x, q), anchors[i]))
+                on_threshold.append(abs(e / (alpha * math.exp(-beta * t)) - 1.0))
+        for i in due:
+            anchors[i] = (x, q)
+        t_end = snaps[k + 1][0] if k + 1 < len(snaps) else horizon
+        controls = snaps[k + 1][3] if k + 1 < len(snaps) else None
+        if controls is None:
+            break
+        for s in np.linspace(t, t_end, dense + 2)[1:-1]:
+            state = _propagate(x, q, controls, k3, s - t)
+            for i in scenario.agent_ids:
+                e = np.linalg.norm(_trigger_error(scenario, i, state, anchors[i]))
+                worst_inside = max(worst_inside, e / (alpha * math.exp(-beta * s)))
+    return np.array(on_threshold), worst_inside
+
+
+def _edge_lengths(scenario, positions):
+    index = {a: k for k, a in enumerate(scenario.agent_ids)}
+    return np.array(
+        [np.linalg.norm(positions[:, index[e.i]] - positions[:, index[e.j]], axis=-1) for e in scenario.edges]
+    )
+
+
+@pytest.fixture(scope='module')
+def paper_single_run():
+    scenario = load_scenario('paper_single')
+    trace = Trace(scenario)
+    record = simulate(scenario, horizon=10.0, sample_dt=0.01, on_event=trace)
+    return scenario, trace, record
+
+
+@pytest.fixture(scope='module')
+def paper_double_run():
+    scenario = load_scenario('paper_double')
+    trace = Trace(scenario)
+    record = simulate(scenario, horizon=10.0, sample_dt=0.01, on_event=trace)
+    return scenario, trace, record
+
+
+@pytest.mark.parametrize('run', ['paper_single_run', 'paper_double_run'])
+def test_paper_triggers_sit_on_threshold_and_error_stays_below(run, request):
+    scenario, trace, record = request.getfixturevalue(run)
+    on_threshold, worst_inside = check_triggering(scenario, trace, record.horizon)
+    assert len(on_threshold) == record.total_events - scenario.n  # all but t_1 = 0
+    assert on_threshold.max() < REL
+    assert worst_inside <= 1.0 + REL
+
+
+@pytest.mark.parametrize('run', ['paper_single_run', 'paper_double_run'])
+def test_paper_connectivity_is_preserved(run, request):
+    scenario, _, record = request.getfixturevalue(run)
+    assert _edge_lengths(scenario, record.sample_positions).max() < scenario.delta
+
+
+def test_paper_single_inter_event_times_respect_xi(paper_single_run):
+    scenario, _, record = paper_single_run
+    xi = theory.theorem_constants(scenario).xi
+    for agent, times in record.trigger_times.items():
+        assert np.diff(times).min() >= xi[agent]
+
+
+def test_paper_single_starts_with_sub_microsecond_bursts(paper_single_run):
+    # Edge 2-3 starts with slack 0.054 of Δ-||d_23||, so its weight is large and the first
+    # inter-event times of agents 2 and 3 are of the order of 5e-7 s.
+    _, _, record = paper_single_run
+    first_gaps = [record.trigger_times[a][1] for a in (2, 3)]
+    assert all(1e-7 < gap < 1e-6 for gap in first_gaps)
+
+
+def test_paper_single_formation_error_decays_at_rate_beta(paper_single_run):
+    scenario, _, record = paper_single_run
+    constants = theory.theorem_constants(scenario)
+    beta = scenario.gains.beta
+    v = np.array([theory.lyapunov(scenario, x) for x in record.sample_positions])
+    # (betaV): V(t) < k_V e^{-2βt}, hence ||y_i - y_j|| < 2 sqrt(k_V) e^{-βt} (lengthysV).
+    assert np.all(v <= constants.k_V * np.exp(-2 * beta * record.sample_times))
+    errors = np.array([theory.formation_error(scenario, x) for x in record.sample_positions])
+    assert np.all(errors <= 2 * math.sqrt(constants.k_V) * np.exp(-beta * record.sample_times))
+
+
+def test_periodic_baseline_samples_on_the_grid():
+    scenario = load_scenario('paper_single')
+    record = simulate(scenario, horizon=1e-3, period=2.5e-4, sample_dt=None)
+    for times in record.trigger_times.values():
+        assert np.allclose(times, [0.0, 2.5e-4, 5e-4, 7.5e-4, 1e-3], rtol=0, atol=1e-15)
+
+
+def test_periodic_sampling_too_slow_for_the_paper_example_loses_the_edge():
+    # Edge 2-3 starts 0.054 from its range limit with |u| in the hundreds: sampling every
+    # 0.25 s lets it leave its range, which event triggering never does.
+    with pytest.raises(EngineError, match='out of its range'):
+        simulate(load_scenario('paper_single'), horizon=1.0, period=0.25, sample_dt=None)
+
+
+@pytest.mark.parametrize('tolerance', [1e-10, 1e-13])
+def test_internal_tolerance_does_not_move_triggering_times(tolerance, paper_single_run):
+    scenario, _, reference = paper_single_run
+    record = simulate(scenario, horizon=10.0, sample_dt=None, tolerance=tolerance)
+    for agent, times in reference.trigger_times.items():
+        assert len(record.trigger_times[agent]) == len(times)
+        assert np.max(np.abs(np.subtract(record.trigger_times[agent], times))) < 1e-9
+
+
+def test_bad_horizon_is_refused():
+    with pytest.raises(EngineError, match='horizon'):
+        simulate(load_scenario('paper_single'), horizon=-1.0)
+
+
+def _random_cases():
+    cases = []
+    for seed in range(50):
+        rng = np.random.default_rng(1000 + seed)
+        cases.append(
+            dict(
+                seed=seed,
+                n=int(rng.integers(3, 9)),
+                dimension=int(rng.integers(1, 4)),
+                dynamics='single' if seed % 3 else 'double',
+                slack=float(rng.uniform(0.05, 0.9)),
+            )
+        )
+    return cases
+
+
+@pytest.mark.parametrize('case', _random_cases(), ids=lambda c: f"seed{c['seed']}-{c['dynamics']}-n{c['n']}-p{c['dimension']}")
+def test_random_scenarios_keep_every_guarantee(case):
+    scenario = random_scenario(
+        n=case['n'], seed=case['seed'], dynamics=case['dynamics'], dimension=case['dimension'], slack=case['slack']
+    )
+    horizon = 2.0
+    trace = Trace(scenario)
+    record = simulate(scenario, horizon=horizon, sample_dt=0.02, on_event=trace)
+    on_threshold, worst_inside = check_triggering(scenario, trace, horizon, dense=10)
+    if len(on_threshold):
+        assert on_threshold.max() < REL
+    assert worst_inside <= 1.0 + REL
+    assert _edge_lengths(scenario, record.sample_positions).max() < scenario.delta
+    constants = theory.theorem_constants(scenario)
+    if constants.xi is not None:
+        for agent, times in record.trigger_times.items():
+            if len(times) > 1:
+                assert np.diff(times).min() >= constants.xi[agent]
+    if scenario.dynamics == 'single':
+        v = np.array([theory.lyapunov(scenario, x) for x in record.sample_positions])
+        assert np.all(v <= constants.k_V * np.exp(-2 * scenario.gains.beta * record.sample_times))
