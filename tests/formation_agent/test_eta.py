@@ -1,0 +1,203 @@
+"""ETA-1 / ETA-2 agents alone: inputs, predictions, next triggering times, and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formation_agent.eta import AgentError, Eta1Agent, Eta2Agent
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+D12 = np.array([0.0, -2.0])
+D13 = np.array([-2.0, 0.0])
+
+
+def _eta1(**overrides):
+    kwargs = dict(agent_id=1, neighbours={2: D12, 3: D13}, delta=4.0, alpha=10.0, beta=1.0)
+    kwargs.update(overrides)
+    return Eta1Agent(**kwargs)
+
+
+def _omega(r, c):
+    return (2 * c - r) / (c - r) ** 2
+
+
+def _sensed(agent, rel, t=0.0, **extra):
+    return SensedState(agent=agent, stamp=t, rel_positions=rel, **extra)
+
+
+def _info(sender, receiver, t, control, rel, rel_velocity=None):
+    return TriggerInfo(
+        sender=sender, receiver=receiver, stamp=t, control=tuple(control), rel_position=tuple(rel), rel_velocity=rel_velocity
+    )
+
+
+def test_eta1_input_is_the_weighted_sum_of_edge_errors():
+    agent = _eta1()
+    rel = {2: (-1.5, -3.0), 3: (-2.5, -1.5)}  # x_1 - x_j of the paper's example
+    out = agent.trigger(0.0, _sensed(1, rel))
+    expected = np.zeros(2)
+    for j, d in ((2, D12), (3, D13)):
+        y = np.array(rel[j]) - d
+        expected -= _omega(np.linalg.norm(y), 4.0 - np.linalg.norm(d)) * y  # (uxsingle)
+    assert np.allclose(out.control, expected, rtol=1e-15)
+    assert [info.receiver for info in out.infos] == [2, 3]
+    assert all(info.rel_position == rel[info.receiver] for info in out.infos)
+
+
+def test_eta1_next_time_is_where_predicted_error_meets_threshold():
+    agent = _eta1()
+    agent.trigger(0.0, _sensed(1, {2: (-1.5, -3.0), 3: (-2.5, -1.5)}))
+    agent.receive(_info(2, 1, 0.0, (0.3, -0.2), (1.5, 3.0)))
+    agent.receive(_info(3, 1, 0.0, (-0.1, 0.4), (2.5, 1.5)))
+    t = agent.next_trigger_time(10.0)
+    assert 0.0 < t < 10.0
+    # Independently: positions move linearly (statexixj), e_1 from its definition in Theorem 1.
+    u1 = agent.control
+
+    def error(s):
+        total = np.zeros(2)
+        for j, d, u_j, rel in ((2, D12, (0.3, -0.2), (-1.5, -3.0)), (3, D13, (-0.1, 0.4), (-2.5, -1.5))):
+            y0 = np.array(rel) - d
+            y = y0 + s * (u1 - np.array(u_j))
+            c = 4.0 - np.linalg.norm(d)
+            total += _omega(np.linalg.norm(y), c) * y - _omega(np.linalg.norm(y0), c) * y0
+        return np.linalg.norm(total)
+
+    assert error(t) == pytest.approx(10.0 * math.exp(-t), rel=1e-12)
+    grid = np.linspace(0.0, t, 20001)[:-1]
+    assert all(error(s) < 10.0 * math.exp(-s) for s in grid)
+
+
+def test_neighbour_information_in_any_order_gives_the_same_plan():
+    plans = []
+    for order in ((2, 3), (3, 2)):
+        agent = _eta1()
+        agent.trigger(0.0, _sensed(1, {2: (-1.5, -3.0), 3: (-2.5, -1.5)}))
+        infos = {2: _info(2, 1, 0.0, (0.3, -0.2), (1.5, 3.0)), 3: _info(3, 1, 0.0, (-0.1, 0.4), (2.5, 1.5))}
+        for j in order:
+            agent.receive(infos[j])
+            if agent.ready:
+                agent.next_trigger_time(10.0)
+        plans.append(agent.next_trigger_time(10.0))
+    assert plans[0] == plans[1]
+
+
+def _two_agents_near_range_limit(slack):
+    agent = Eta1Agent(agent_id=1, neighbours={2: (0.0,)}, delta=1.0, alpha=1.0, beta=0.5)
+    rel = (1.0 - slack,)
+    out = agent.trigger(0.0, _sensed(1, {2: rel}))
+    agent.receive(_info(2, 1, 0.0, (-out.control[0],), (-rel[0],)))
+    return agent, out
+
+
+def test_large_weight_near_range_limit_still_triggers_on_the_threshold():
+    # Edge error 1e-2 short of its range Δ - ||d|| = 1: ω ~ 2e4 and dω/dr ~ 2e6.
+    agent, out = _two_agents_near_range_limit(1e-2)
+    assert out.control[0] < -9e3
+    t = agent.next_trigger_time(1.0)
+    assert 0.0 < t < 1e-6
+    assert np.linalg.norm(agent.error(t)) == pytest.approx(agent.threshold(t), rel=1e-9)
+
+
+def test_weight_beyond_double_resolution_triggers_at_first_visible_change():
+    # 1e-6 short of the range: e_i moves by g_ij(r) ulp(r) ~ 200 x the threshold per ulp of r,
+    # so the crossing is only resolvable as the first instant the rounded edge state changes.
+    agent, _ = _two_agents_near_range_limit(1e-6)
+    t = agent.next_trigger_time(1.0)
+    assert 0.0 < t < 1e-25
+    assert np.linalg.norm(agent.error(t)) >= agent.threshold(t)
+
+
+def test_eta2_prediction_matches_closed_form_of_double_integrators():
+    agent = Eta2Agent(
+        agent_id=1, neighbours={2: D12}, delta=4.0, alpha_d=10.0, beta_d=0.1, k1=1.1547, k2=1.4502, k3=0.6
+    )
+    rel_x, rel_q = (-1.5, -3.0), (2.0, 4.0)
+    out = agent.trigger(0.0, _sensed(1, {2: rel_x}, rel_velocities={2: rel_q}, velocity=(1.0, 2.0)))
+    ud2 = np.array([0.5, -0.25])
+    agent.receive(_info(2, 1, 0.0, ud2, (1.5, 3.0), rel_velocity=(-2.0, -4.0)))
+    # Integrate the relative dynamics x' = q, q' = Δu - k3 q with scipy as an independent check.
+    from scipy.integrate import solve_ivp
+
+    du = out.control - ud2
+
+    def rhs(_, z):
+        return np.concatenate([z[2:], du - 0.6 * z[2:]])
+
+    sol = solve_ivp(rhs, (0.0, 3.0), np.array(rel_x + rel_q), rtol=1e-12, atol=1e-12, dense_output=True)
+    y, q, _ = agent._state(3.0)
+    assert np.allclose(y[0] + D12, sol.y[:2, -1], rtol=1e-9, atol=1e-10)
+    assert np.allclose(q[0], sol.y[2:, -1], rtol=1e-9, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    ('info', 'message'),
+    [
+        (_info(4, 1, 0.0, (0.0, 0.0), (1.0, 1.0)), 'not a neighbour'),
+        (_info(2, 3, 0.0, (0.0, 0.0), (1.0, 1.0)), 'addressed to agent 3'),
+        (_info(2, 1, math.nan, (0.0, 0.0), (1.0, 1.0)), 'non-finite time'),
+        (_info(2, 1, 0.5, (math.nan, 0.0), (1.0, 1.0)), 'not finite'),
+        (_info(2, 1, 0.5, (0.0, 0.0, 0.0), (1.0, 1.0)), 'shape'),
+    ],
+)
+def test_bad_information_is_rejected_and_changes_nothing(info, message):
+    agent = _eta1()
+    agent.trigger(0.5, _sensed(1, {2: (-1.5, -3.0), 3: (-2.5, -1.5)}, t=0.5))
+    before = (agent._anchor_time.copy(), agent._anchor_y.copy(), agent._neighbour_control.copy())
+    with pytest.raises(AgentError, match=message):
+        agent.receive(info)
+    after = (agent._anchor_time, agent._anchor_y, agent._neighbour_control)
+    assert all(np.array_equal(a, b) for a, b in zip(before, after))
+
+
+def test_information_from_the_past_is_rejected():
+    agent = _eta1()
+    agent.trigger(0.5, _sensed(1, {2: (-1.5, -3.0), 3: (-2.5, -1.5)}, t=0.5))
+    with pytest.raises(AgentError, match='goes back in time'):
+        agent.receive(_info(2, 1, 0.25, (0.0, 0.0), (1.5, 3.0)))
+
+
+def test_sensing_out_of_range_names_the_edge():
+    agent = _eta1()
+    with pytest.raises(AgentError, match='edge to agent 3 is out of its range'):
+        agent.trigger(0.0, _sensed(1, {2: (-1.5, -3.0), 3: (-4.5, 0.0)}))
+
+
+def test_sensing_must_cover_exactly_the_neighbours():
+    agent = _eta1()
+    with pytest.raises(AgentError, match=r'exactly its neighbours \[2, 3\]'):
+        agent.trigger(0.0, _sensed(1, {2: (-1.5, -3.0)}))
+
+
+@pytest.mark.parametrize(
+    ('overrides', 'message'),
+    [
+        (dict(alpha=0.0), 'alpha must be'),
+        (dict(beta=-1.0), 'beta must be'),
+        (dict(delta=math.inf), 'delta'),
+        (dict(neighbours={}), 'no neighbours'),
+        (dict(neighbours={1: D12}), 'self-loop'),
+        (dict(neighbours={2: (0.0, 5.0)}), 'Assumption 1'),
+    ],
+)
+def test_bad_parameters_are_named(overrides, message):
+    with pytest.raises(AgentError, match=message):
+        _eta1(**overrides)
+
+
+def test_eta2_information_without_relative_velocity_is_rejected():
+    agent = Eta2Agent(agent_id=1, neighbours={2: D12}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=1.0, k2=1.0, k3=0.5)
+    with pytest.raises(AgentError, match='lacks rel_velocity'):
+        agent.receive(_info(2, 1, 0.0, (0.0, 0.0), (1.5, 3.0)))
+
+
+def test_planning_before_hearing_every_neighbour_is_an_error():
+    agent = _eta1()
+    assert agent.next_trigger_time() == 0.0  # t_1 = 0
+    agent.trigger(0.0, _sensed(1, {2: (-1.5, -3.0), 3: (-2.5, -1.5)}))
+    agent.receive(_info(2, 1, 0.0, (0.0, 0.0), (1.5, 3.0)))
+    with pytest.raises(AgentError, match=r'not heard from neighbours \[3\]'):
+        agent.next_trigger_time()
