@@ -222,10 +222,10 @@ def test_non_finite_sensed_values_cannot_be_encoded():
 
 
 def test_step_and_status_round_trip_including_infinite_next_time():
-    step = Step(index=12, time=0.1 + 0.2, flags=STEP_FLAG_FINAL)
+    step = Step(index=12, time=0.1 + 0.2, flags=STEP_FLAG_FINAL, epoch=1795311615.054476)
     back = decode_step(through_wire(encode_step(step)))
-    assert back == step and back.final
-    assert bits([back.time]) == bits([step.time])
+    assert back == step and back.final and not back.realtime
+    assert bits([back.time, back.epoch]) == bits([step.time, step.epoch])
     for next_time in (math.inf, 5e-324, 7.123456789012345):
         status = Status(
             agent=4,
@@ -259,12 +259,14 @@ def test_malformed_status_is_rejected(values, complaint):
 
 
 def test_malformed_step_is_rejected():
-    with pytest.raises(MessageError, match='expected 4 values'):
+    with pytest.raises(MessageError, match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\], got 3"):
         decode_step(_array([1, 0, 0.0]))
     with pytest.raises(MessageError, match='must be finite'):
-        decode_step(_array([1, 0, math.inf, 0]))
+        decode_step(_array([1, 0, math.inf, 0, 0.0]))
     with pytest.raises(MessageError, match='step index must lie in'):
-        decode_step(_array([1, -1, 0.0, 0]))
+        decode_step(_array([1, -1, 0.0, 0, 0.0]))
+    with pytest.raises(MessageError, match='step flags must be an integer, got 0.5'):
+        decode_step(_array([1, 0, 0.0, 0.5, 0.0]))
 
 
 @pytest.mark.parametrize('double', [False, True])

@@ -12,6 +12,11 @@ An agent node touches only what a real robot would have:
   `/agent_<i>/trigger_info/to_<j>` and subscribes `/agent_<j>/trigger_info/to_<i>`;
 * the lock-step topics `/formation/step` (in) and `/formation/status` (out), see docs/MESSAGES.md.
 
+Two clocks: in lock-step sim time (default) the simulator's Step messages say when it is the
+agent's turn, and the run reproduces the in-process engine bit for bit.  In wall-clock mode
+(Step 0 flagged realtime) the agent keeps its own timer on wall time since the Step's epoch, as a
+robot would, and triggers at once when its triggering time has already passed.
+
 It never sees ground truth or another agent's sensing. All algorithmic decisions are taken by the
 core object (`formation_agent.eta`); this module only moves messages.
 """
@@ -21,6 +26,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from collections.abc import Sequence
 
 import rclpy
@@ -172,6 +178,10 @@ class FormationAgentNode(Node):
         self._dirty = False
         self._next_time = 0.0  # t^i_1 = 0
         self._last_trigger = -math.inf
+        self._epoch: float | None = None  # wall-clock mode: Unix time of t = 0
+        self._sensed = None  # the last SensedState, to re-base late information
+        self._due_timer = None
+        self.late_infos = 0
         self.failure: Exception | None = None
         self._discovery = self.create_timer(0.1, self._announce)
 
@@ -248,6 +258,11 @@ class FormationAgentNode(Node):
         self.step = step
         if step.final:
             self.finished = True
+            self._cancel_due_timer()
+            return
+        if step.realtime:
+            self._epoch = step.epoch
+            self._sense_now()  # t^i_1 = 0
             return
         if step.time > self._next_time:
             raise AgentNodeError(
@@ -255,11 +270,22 @@ class FormationAgentNode(Node):
                 f'{self._next_time!r}'
             )
         if step.time == self._next_time:  # the exact float this agent reported
-            self._sensing = True
-            future = self._sense.call_async(Trigger.Request())
-            future.add_done_callback(self._on_sensed)
+            self._sense_now()
         else:
             self._publish_status(step_index=step.index, ready=True)
+
+    def _sense_now(self) -> None:
+        """Ask for this agent's sensing; the trigger completes when the answer arrives."""
+        self._cancel_due_timer()
+        if self._sensing or self.finished:
+            return
+        self._sensing = True
+        self._sense.call_async(Trigger.Request()).add_done_callback(self._on_sensed)
+
+    def _cancel_due_timer(self) -> None:
+        if self._due_timer is not None:
+            self.destroy_timer(self._due_timer)
+            self._due_timer = None
 
     def _on_sensed(self, future) -> None:
         # rclpy runs a client future's done callbacks outside the executor and only warns about
@@ -276,7 +302,11 @@ class FormationAgentNode(Node):
 
     def _trigger(self, future) -> None:
         sensed = decode_sensed_state(future.result())
-        t = self.step.time
+        if self.finished:  # wall-clock mode: the horizon passed while sensing
+            self._sensing = False
+            return
+        # Lock-step: the step's exact time; wall clock: when the world was actually sensed.
+        t = self.step.time if self._epoch is None else sensed.stamp
         if sensed.agent != self.agent_id or sensed.stamp != t:
             raise AgentNodeError(
                 f'agent {self.agent_id} asked to sense at t={t!r} and got the state of agent '
@@ -284,6 +314,7 @@ class FormationAgentNode(Node):
             )
         out = self.core.trigger(t, sensed)
         self._sensing = False
+        self._sensed = sensed
         self._last_trigger = t
         self.triggers += 1
         self.trigger_times.append(t)
@@ -295,7 +326,10 @@ class FormationAgentNode(Node):
         held, self._held = self._held, []
         for info in held:
             self._receive(info)
-        self._publish_status(step_index=self.step.index, ready=True)
+        if self._epoch is None:
+            self._publish_status(step_index=self.step.index, ready=True)
+        else:
+            self._replan()
 
     def _on_info(self, msg: Float64MultiArray, sender: int) -> None:
         info = decode_trigger_info(msg)
@@ -304,7 +338,7 @@ class FormationAgentNode(Node):
                 f'agent {self.agent_id}: topic {trigger_info_topic(sender, self.agent_id)} carried '
                 f'information from agent {info.sender} to agent {info.receiver}'
             )
-        due = self._next_time > self._last_trigger  # reported time not yet triggered at
+        due = self._epoch is None and self._next_time > self._last_trigger  # not yet triggered at
         if self._sensing or (due and info.stamp >= self._next_time):
             # This agent triggers at that instant itself: its own sensing comes first, then the
             # neighbours' information (DESIGN.md, "Time and exactness"); and its status must not
@@ -316,12 +350,53 @@ class FormationAgentNode(Node):
         self._flush.trigger()
 
     def _receive(self, info: TriggerInfo) -> None:
+        if info.stamp < self._last_trigger:  # only on the wall clock: it crossed our trigger
+            info = self._rebased(info)
+            self.late_infos += 1
         self.core.receive(info)
         self.info_received += 1
 
+    def _rebased(self, info: TriggerInfo) -> TriggerInfo:
+        """Late information re-anchored at this agent's own last trigger.
+
+        The neighbour's new input has acted since info.stamp, but what it did is already in what
+        this agent sensed at its trigger (exact); from then on both inputs are constant. So the
+        edge is anchored at the trigger with the sensed relative state and the neighbour's new
+        input, which is exactly what a prediction from that instant needs.
+        """
+        sensed = self._sensed
+        j = info.sender
+        rel_velocity = None
+        if sensed.rel_velocities is not None:
+            rel_velocity = tuple(-v for v in sensed.rel_velocities[j])
+        return TriggerInfo(
+            sender=j,
+            receiver=self.agent_id,
+            stamp=self._last_trigger,
+            control=info.control,
+            rel_position=tuple(-v for v in sensed.rel_positions[j]),  # x_j - x_i, exact negation
+            rel_velocity=rel_velocity,
+        )
+
     def _publish_status_if_dirty(self) -> None:
-        if self._dirty and not self._sensing and not self.finished:
+        if not self._dirty or self._sensing or self.finished:
+            return
+        if self._epoch is not None:
+            self._replan()
+        else:
             self._publish_status(step_index=DISCOVERY_STEP if self.step is None else self.step.index, ready=True)
+
+    def _replan(self) -> None:
+        """Wall clock: report the next triggering time and set a timer for it (or trigger now)."""
+        self._publish_status(step_index=self.step.index, ready=True)
+        self._cancel_due_timer()
+        if not self.core.ready or self.finished or math.isinf(self._next_time):
+            return
+        delay = self._epoch + self._next_time - time.time()
+        if delay <= 0.0:
+            self._sense_now()  # already due: trigger at once
+        else:
+            self._due_timer = self.create_timer(delay, self._sense_now)
 
     def _publish_status(self, *, step_index: int, ready: bool) -> None:
         self._dirty = False

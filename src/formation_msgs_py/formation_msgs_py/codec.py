@@ -264,26 +264,28 @@ def decode_sensed_state(response) -> SensedState:
 
 
 # --------------------------------------------------------------------------------------------
-# Lock-step: Step [version, step_index, time, flags]
+# Lock-step: Step [version, step_index, time, flags, epoch]
+
+_STEP_LABELS = ('version', 'step_index', 'time', 'flags', 'epoch')
 
 
 def encode_step(step: Step):
-    _check_finite(f'step {step.index} time', [step.time])
-    return _float_array(
-        [('version', [LAYOUT_VERSION]), ('step_index', [step.index]), ('time', [step.time]), ('flags', [step.flags])]
-    )
+    _check_finite(f'step {step.index} time and epoch', [step.time, step.epoch])
+    values = [LAYOUT_VERSION, step.index, step.time, step.flags, step.epoch]
+    return _float_array([(label, [value]) for label, value in zip(_STEP_LABELS, values)])
 
 
 def decode_step(msg) -> Step:
     data = _data('step', msg)
-    if len(data) != 4:
-        raise MessageError(f'step: expected 4 values [version, step_index, time, flags], got {len(data)}')
+    if len(data) != len(_STEP_LABELS):
+        raise MessageError(f'step: expected {len(_STEP_LABELS)} values {list(_STEP_LABELS)}, got {len(data)}')
     _check_version('step', data[0])
     _check_finite('step', data)
     return Step(
         index=_as_int('step index', data[1], low=0, high=_MAX_COUNT),
         time=data[2],
         flags=_as_int('step flags', data[3], low=0, high=_MAX_ID),
+        epoch=data[4],
     )
 
 

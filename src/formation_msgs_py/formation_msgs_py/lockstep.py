@@ -14,21 +14,33 @@ import numpy as np
 STEP_FLAG_FINAL = 1
 """Step flag: the run is over (the horizon is reached); agents leave."""
 
+STEP_FLAG_REALTIME = 2
+"""Step flag: wall-clock mode; sim time t is wall time minus `Step.epoch` (Unix seconds)."""
+
 DISCOVERY_STEP = -1
 """`Status.step_index` of an agent that is connected and waits for step 0."""
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Step:
-    """The simulator's announcement that simulated time is now `time` (exact float)."""
+    """The simulator's announcement that simulated time is now `time` (exact float).
+
+    In wall-clock mode only step 0 (and the final step) exist; `epoch` is the Unix time at
+    which sim time 0 began.
+    """
 
     index: int
     time: float
     flags: int = 0
+    epoch: float = 0.0
 
     @property
     def final(self) -> bool:
         return bool(self.flags & STEP_FLAG_FINAL)
+
+    @property
+    def realtime(self) -> bool:
+        return bool(self.flags & STEP_FLAG_REALTIME)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

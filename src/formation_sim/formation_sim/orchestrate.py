@@ -184,6 +184,7 @@ class FormationRun:
         progress: bool = True,
         sample_period: float = 0.01,
         timeout: float | None = None,
+        clock: str = 'lockstep',
         stop_timeouts: tuple[float, float] = (5.0, 3.0),
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -195,6 +196,9 @@ class FormationRun:
             raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
         if self.scenario.dimension > 3:
             raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
+        if clock not in ('lockstep', 'realtime'):
+            raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
+        self.clock = clock
         self.domain_id = domain_id
         self.agents_per_process = agents_per_process
         self.record = record
@@ -357,6 +361,7 @@ class FormationRun:
             '-p', f'out_dir:={self.out_dir.resolve()}',
             '-p', f'sample_period:={float(self.sample_period)!r}',
             '-p', f'extra_subscribers:={1 if self.record else 0}',
+            '-p', f'clock_mode:={self.clock}',
         ]  # fmt: skip
         simulator = self._start('simulator', sim_args, env, expected_exit=True, pipe=True)
         for group in groups:

@@ -12,6 +12,11 @@ trigger, every command sent has been applied and every triggering-information me
 been received (cumulative counters, so equality cannot be transient).  Then the world advances to
 the smallest next time reported (the exact float, carried by the next Step) and the agents that
 reported exactly that time trigger.
+
+Wall-clock mode (`clock_mode:=realtime`, as on robots): Step 0 carries the wall-clock epoch of
+t = 0 and agents keep their own timers.  The world then advances to the wall-clock time of each
+sensing request and each command as it arrives (still only event to event), and the run reports
+how late every trigger was against the time its agent had planned.
 """
 
 from __future__ import annotations
@@ -52,7 +57,14 @@ from formation_msgs_py.codec import (
     ros_time,
     sensing_refusal,
 )
-from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, Status, Step, WorldState
+from formation_msgs_py.lockstep import (
+    DISCOVERY_STEP,
+    STEP_FLAG_FINAL,
+    STEP_FLAG_REALTIME,
+    Status,
+    Step,
+    WorldState,
+)
 from formation_sim.scenario import Scenario, load_scenario
 from formation_sim.world import World
 
@@ -61,6 +73,7 @@ GROUND_TRUTH_TOPIC = '/formation/ground_truth'
 SENSING_LOG_TOPIC = '/formation/sensing_log'
 CLOCK_TOPIC = '/clock'
 GRAPH_FILE = 'graph.json'
+CLOCK_MODES = ('lockstep', 'realtime')
 
 
 class SimulatorError(RuntimeError):
@@ -124,6 +137,7 @@ class _AgentBook:
     commands_received: int = 0
     sensed_at_step: int = -1
     trigger_times: list[float] = field(default_factory=list)
+    lateness: list[float] = field(default_factory=list)  # wall clock: trigger time - planned time
 
 
 class FormationSimulatorNode(Node):
@@ -139,6 +153,10 @@ class FormationSimulatorNode(Node):
         self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
         self.stall_timeout = float(self.declare_parameter('stall_timeout', 60.0).value)
         self.discovery_timeout = float(self.declare_parameter('discovery_timeout', 120.0).value)
+        self.clock_mode = str(self.declare_parameter('clock_mode', 'lockstep').value)
+        if self.clock_mode not in CLOCK_MODES:
+            raise SimulatorError(f'clock_mode must be one of {CLOCK_MODES}, got {self.clock_mode!r}')
+        self.realtime = self.clock_mode == 'realtime'
         if scenario is None:
             if not source:
                 raise SimulatorError("parameter 'scenario' is required (a built-in name or a YAML path)")
@@ -190,6 +208,8 @@ class FormationSimulatorNode(Node):
         self._started: float | None = None
         self._last_progress = self._created
         self._last_advance = self._created
+        self._epoch = 0.0
+        self._finished_at: float | None = None
         self.graph: dict = {}
         self._timer = self.create_timer(0.1, self._tick)
 
@@ -221,7 +241,9 @@ class FormationSimulatorNode(Node):
             return
         if self.finished:
             return
-        if now - self._last_advance > self.stall_timeout:
+        if self.realtime:
+            self._realtime_tick()
+        elif now - self._last_advance > self.stall_timeout:
             raise SimulatorError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
         if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
             self._last_progress = now
@@ -245,7 +267,56 @@ class FormationSimulatorNode(Node):
         self._started = time.monotonic()
         self.graph = self.snapshot_graph()
         self._sample_event()
+        if self.realtime:
+            self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
+            self._timer = self.create_timer(min(0.1, self.sample_period or 0.1), self._tick)
+            self._epoch = time.time()
+            self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
+            self._due = set(self.agents)
+            self._step_pub.publish(encode_step(self.step))
+            return
         self._publish_step(Step(index=0, time=0.0), due=set(self.agents))  # t^i_1 = 0
+
+    # -- wall clock -----------------------------------------------------------------------------
+
+    def _wall_time(self) -> float:
+        """Sim time now on the wall clock, never before the world's time nor after the horizon."""
+        return min(self.horizon, max(self.world.time, time.time() - self._epoch))
+
+    def _realtime_event(self) -> float:
+        """Advance the world to now (an event: a sensing or a command arrives)."""
+        t = self._wall_time()
+        self._sample_grid(t)
+        self.world.advance(t)
+        self._sample_event()
+        self.steps += 1
+        return t
+
+    def _realtime_tick(self) -> None:
+        t = self._wall_time()
+        self._sample_grid(t)
+        if t >= self.horizon:
+            self.world.advance(self.horizon)
+            self._sample_event()
+            self.graph = self.snapshot_graph()
+            self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
+            self._step_pub.publish(encode_step(self.step))
+            self.finished = True
+            self._finished_at = time.monotonic()
+
+    def _sense_realtime(self, agent: int):
+        book = self.agents[agent]
+        if self.finished:  # asked after the horizon: the final state, not counted
+            return encode_sensed_state(self.world.sense(agent, book.neighbours))
+        t = self._realtime_event()
+        planned = 0.0 if book.status is None or book.status.step_index == DISCOVERY_STEP else book.status.next_time
+        book.trigger_times.append(t)
+        book.lateness.append(t - planned)
+        book.expected_triggers += 1
+        self.sensing_calls += 1
+        log = {'version': 1, 'agent': agent, 'step': 0, 'time': t, 'planned': planned}
+        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        return encode_sensed_state(self.world.sense(agent, book.neighbours))
 
     # -- lock-step ------------------------------------------------------------------------------
 
@@ -280,6 +351,13 @@ class FormationSimulatorNode(Node):
 
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
+        if self.realtime and self.step is not None:
+            if not self.finished:
+                control = decode_command(msg, self.scenario.dimension)
+                self._realtime_event()  # the command acts from its arrival on
+                self.world.set_control(agent, control)
+                book.commands_received += 1
+            return
         if self.step is None or agent not in self._due or book.commands_received >= book.expected_triggers:
             raise SimulatorError(
                 f'agent {agent} sent a command outside its triggering time '
@@ -292,6 +370,8 @@ class FormationSimulatorNode(Node):
 
     def _on_sense(self, agent: int):
         book = self.agents[agent]
+        if self.realtime and self.step is not None:
+            return self._sense_realtime(agent)
         index = -1 if self.step is None else self.step.index
         if self.step is None or agent not in self._due or book.sensed_at_step == index:
             reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(self._due)})'
@@ -321,7 +401,7 @@ class FormationSimulatorNode(Node):
         return sent == received
 
     def _advance_if_settled(self) -> None:
-        if self.step is None or self.finished or not self._settled():
+        if self.realtime or self.step is None or self.finished or not self._settled():
             return
         t = self.step.time
         t_next = min(book.status.next_time for book in self.agents.values())
@@ -336,6 +416,7 @@ class FormationSimulatorNode(Node):
             self.graph = self.snapshot_graph()
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL), due=set())
             self.finished = True
+            self._finished_at = time.monotonic()
             return
         self._sample_grid(t_next)
         self.world.advance(t_next)
@@ -402,13 +483,26 @@ class FormationSimulatorNode(Node):
             sample_velocities=np.array(self._samples_q) if self._samples_q else None,
             messages_sent=sum(s.info_sent for s in statuses.values()),
             sensing_calls=self.sensing_calls,
-            wall_time=time.monotonic() - (self._started or self._created),
+            wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
-                'clock': 'lockstep',
+                'clock': self.clock_mode,
                 'steps': self.steps,
                 'discovery_wall_time': (self._started or self._created) - self._created,
+                **(self._lateness() if self.realtime else {}),
             },
         )
+
+    def _lateness(self) -> dict:
+        """Wall clock: how late triggers came against the times agents had planned them."""
+        per_agent = {
+            str(i): {'max': max(book.lateness), 'mean': float(np.mean(book.lateness))}
+            for i, book in self.agents.items()
+            if book.lateness
+        }
+        return {
+            'lateness': per_agent,
+            'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0),
+        }
 
     def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
         for pub in (self._step_pub, self._state_pub, self._truth_pub, self._log_pub, self._clock_pub):

@@ -26,6 +26,12 @@ def register(subparsers) -> None:
     parser.add_argument('--domain-id', type=int, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
     parser.add_argument('--sample-dt', type=float, default=0.01, help='spacing of the published state samples [s] (default 0.01)')
+    parser.add_argument(
+        '--real-time',
+        action='store_true',
+        help='wall-clock mode, as on robots: agents keep their own timers; triggers come late by the '
+        'processing delays, which the summary reports (default: lock-step sim time, exact)',
+    )
     parser.add_argument('--timeout', type=float, default=None, help='give up after this many wall-clock seconds')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -49,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             sample_period=args.sample_dt,
             timeout=args.timeout,
+            clock='realtime' if args.real_time else 'lockstep',
         ).run()
     except RunError as error:
         print(f'formation run: error: {error}', file=sys.stderr)
