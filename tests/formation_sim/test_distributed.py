@@ -9,6 +9,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from formation_sim.engine import simulate
@@ -172,3 +173,44 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path):
     assert result.exit_status == 1
     assert f'agent_2 (pid {victim.pid}) exited with status -9' in result.message
     assert not [child for child in result.children if _alive(child.pid)]
+
+
+GENTLE = """\
+name: gentle_single
+dynamics: single
+communication_radius: 4.0
+horizon: 4.0
+agents:
+  1: {position: [0.0, 0.0]}
+  2: {position: [0.3, -2.2]}
+  3: {position: [-2.1, 0.2]}
+edges:
+  - {i: 1, j: 2, d: [0.0, 2.0]}
+  - {i: 1, j: 3, d: [2.0, 0.0]}
+  - {i: 2, j: 3, d: [2.0, -2.0]}
+gains: {alpha: 0.5, beta: 0.3}
+"""
+
+
+@pytest.mark.timeout(300)
+def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tmp_path):
+    """Wall clock: events depend on delays, but each agent triggers in order and the run completes."""
+    path = tmp_path / 'gentle.yaml'
+    path.write_text(GENTLE)
+    scenario = load_scenario(path)
+    result = _run(path, tmp_path, domain_id=115, horizon=scenario.horizon, record=False, clock='realtime')
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    assert summary['extra']['clock'] == 'realtime'
+    for agent in scenario.agent_ids:
+        times = summary['trigger_times'][str(agent)]
+        assert times and 0.0 <= times[0] < scenario.horizon
+        assert all(a < b for a, b in zip(times, times[1:])), f'agent {agent}: {times}'
+    assert set(summary['extra']['lateness']) == {str(agent) for agent in scenario.agent_ids}
+    # Delays of milliseconds do not break this formation: connectivity is kept and the error shrinks.
+    assert summary['max_edge_length'] < scenario.delta
+    initial_error = max(
+        float(np.linalg.norm(scenario.positions[scenario.index(e.i)] - scenario.positions[scenario.index(e.j)] - e.d))
+        for e in scenario.edges
+    )
+    assert summary['final_formation_error'] < initial_error

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 
 import rclpy
 from geometry_msgs.msg import Accel, Twist
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -124,6 +125,7 @@ class FormationAgentNode(Node):
         start_parameter_services: bool = True,
         parameter_overrides: list[Parameter] | None = None,
         core=None,
+        context=None,
     ) -> None:
         """Parameters come from ROS (command line, params file) or `parameter_overrides`.
 
@@ -135,6 +137,7 @@ class FormationAgentNode(Node):
             namespace=namespace,
             start_parameter_services=start_parameter_services,
             parameter_overrides=parameter_overrides or [],
+            context=context,
         )
         self._read_parameters()
         self.core = core if core is not None else build_core(
@@ -190,9 +193,12 @@ class FormationAgentNode(Node):
     def _param(self, name: str, kind: Parameter.Type):
         if not self.has_parameter(name):
             self.declare_parameter(name, kind)
-        parameter = self.get_parameter(name)
-        if parameter.type_ == Parameter.Type.NOT_SET:
-            raise AgentNodeError(f'{self.get_fully_qualified_name()}: parameter {name!r} is required')
+        try:
+            parameter = self.get_parameter(name)
+        except ParameterUninitializedException:
+            parameter = None
+        if parameter is None or parameter.type_ == Parameter.Type.NOT_SET:
+            raise AgentNodeError(f'{self.get_fully_qualified_name()}: parameter {name!r} ({kind.name}) is required')
         return parameter.value
 
     def _read_parameters(self) -> None:
