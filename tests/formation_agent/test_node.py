@@ -66,6 +66,7 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         ({'neighbour_ids': [2, 2]}, 'neighbour_ids repeat an id: [2, 2]'),
         ({'horizon': float('inf')}, 'horizon must be a finite number > 0, got inf'),
         ({'algorithm': 'eta2'}, "parameter 'alpha_d' (DOUBLE) is required"),
+        ({'agent_id': 7}, 'agent 7 must run in namespace /agent_7'),
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):

@@ -15,7 +15,8 @@ import pytest
 from formation_sim.engine import simulate
 from formation_sim.scenario import load_scenario
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+# Each run starts 4-5 ROS processes: one run at a time on this suite's worker.
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_distributed')]
 
 TOLERANCE = 1e-9
 

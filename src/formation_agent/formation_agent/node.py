@@ -40,7 +40,6 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from formation_msgs_py.codec import (
-    MessageError,
     decode_sensed_state,
     decode_step,
     decode_trigger_info,
@@ -99,7 +98,9 @@ def build_core(
     from formation_agent.eta import Eta1Agent, Eta2Agent
 
     if algorithm == 'eta1':
-        return Eta1Agent(agent_id=agent_id, neighbours=neighbours, delta=delta, alpha=gains['alpha'], beta=gains['beta'])
+        return Eta1Agent(
+            agent_id=agent_id, neighbours=neighbours, delta=delta, alpha=gains['alpha'], beta=gains['beta']
+        )
     return Eta2Agent(
         agent_id=agent_id,
         neighbours=neighbours,
@@ -149,10 +150,13 @@ class FormationAgentNode(Node):
         )
         double = self.algorithm == 'eta2'
         self._encode_command = encode_acceleration_command if double else encode_velocity_command
-        self._command_pub = self.create_publisher(Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS)
+        self._command_pub = self.create_publisher(
+            Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS
+        )
         self._sense = self.create_client(Trigger, 'sense')
         self._info_pubs = {
-            j: self.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS) for j in self.neighbour_ids
+            j: self.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS)
+            for j in self.neighbour_ids
         }
         self._info_subs = [
             self.create_subscription(
@@ -227,12 +231,18 @@ class FormationAgentNode(Node):
         self.horizon = float(self._param('horizon', Parameter.Type.DOUBLE))
         if not (math.isfinite(self.horizon) and self.horizon > 0.0):
             raise AgentNodeError(f'{name}: horizon must be a finite number > 0, got {self.horizon!r}')
-        self.gains = {gain: float(self._param(gain, Parameter.Type.DOUBLE)) for gain in _GAINS[self.algorithm]}
+        self.gains = {
+            gain: float(self._param(gain, Parameter.Type.DOUBLE)) for gain in _GAINS[self.algorithm]
+        }
         # Listeners besides the protocol peers (a recorder) that must be matched before step 0.
         self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
         expected = agent_namespace(self.agent_id)
-        if self.get_namespace() not in ('/', expected):
-            raise AgentNodeError(f'{name}: agent {self.agent_id} must run in namespace {expected}')
+        if self.get_namespace() != expected:
+            # Its relative names (sense, cmd_vel, trigger_info/to_<j>) must resolve under it.
+            raise AgentNodeError(
+                f'{name}: agent {self.agent_id} must run in namespace {expected} '
+                f'(e.g. --ros-args -r __ns:={expected}, or formation_agent --agents {self.agent_id})'
+            )
 
     # -- discovery ------------------------------------------------------------------------------
 
