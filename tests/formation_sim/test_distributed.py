@@ -215,3 +215,34 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
         for e in scenario.edges
     )
     assert summary['final_formation_error'] < initial_error
+
+
+@pytest.mark.timeout(300)
+def test_children_killed_hard_leave_no_shared_memory_files(tmp_path):
+    from formation_sim.orchestrate import FormationRun
+
+    # No grace period: every child still alive right after SIGINT is killed with SIGKILL.
+    run = FormationRun(
+        'paper_single',
+        out_dir=tmp_path / 'run',
+        horizon=1000.0,
+        domain_id=117,
+        progress=False,
+        record=False,
+        timeout=240.0,
+        stop_timeouts=(0.0, 0.0),
+    )
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()))
+    worker.start()
+    _wait_for_stepping(run)
+    run.interrupt()
+    worker.join(timeout=60.0)
+    (result,) = results
+    assert result.exit_status == 130
+    killed = [child for child in run._children if child.process.returncode == -9]
+    assert killed, [child.process.returncode for child in run._children]
+    files = set().union(*(child.shm_files for child in killed))
+    assert files, 'the killed children mapped no Fast DDS shared-memory file'
+    assert not [path for path in files if Path(path).exists()]
+    assert not [child for child in result.children if _alive(child.pid)]

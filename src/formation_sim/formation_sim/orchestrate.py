@@ -208,6 +208,7 @@ class FormationRun:
         self.timeout = timeout
         self.stop_timeouts = stop_timeouts
         self._children: list[_Child] = []
+        self.removed_shm_files: list[str] = []
         self._interrupted = threading.Event()
         self._last_progress = ''
 
@@ -398,15 +399,18 @@ class FormationRun:
         return 1 if failed else 0
 
     def _stop_all(self) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive."""
+        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.
+
+        A child that dies by a signal cannot unlink its Fast DDS shared-memory files; those it had
+        mapped when it was signalled are removed once no live process maps them any more.
+        """
         first, second = self.stop_timeouts
         for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
             alive = [c for c in self._children if c.alive()]
             if not alive:
                 break
             for child in alive:
-                if sig == signal.SIGKILL:
-                    child.shm_files = _mapped_shm_files(child.pid)
+                child.shm_files |= _mapped_shm_files(child.pid)
                 child.signal_used = sig.name
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(child.pid, sig)  # the group we created for it, nothing else
@@ -416,10 +420,12 @@ class FormationRun:
         for child in self._children:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 child.process.wait(timeout=1.0)
-        killed = set().union(*(c.shm_files for c in self._children if c.signal_used == 'SIGKILL'))
-        for path in killed - _mapped_by_anyone(killed):
+        orphaned = set().union(*(c.shm_files for c in self._children if (c.process.returncode or 0) < 0))
+        removable = orphaned - _mapped_by_anyone(orphaned)
+        for path in removable:
             with contextlib.suppress(OSError):
                 os.unlink(path)
+        self.removed_shm_files = sorted(removable)
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr
