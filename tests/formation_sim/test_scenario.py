@@ -126,6 +126,16 @@ def test_scenario_from_dict_equals_the_builtin():
     assert s == load_scenario('paper_single').replace(name='typed_in')
 
 
+def test_json_style_string_agent_ids_are_read_as_integers():
+    data = single_dict()
+    data['agents'] = {str(k): v for k, v in data['agents'].items()}
+    assert scenario_from_dict(data) == scenario_from_dict(single_dict())
+    data['agents']['1'] = {'position': [0.0, 0.0]}
+    data['agents'][1] = {'position': [0.0, 0.0]}
+    with pytest.raises(ScenarioError, match='agent 1 is listed twice'):
+        scenario_from_dict(data)
+
+
 def test_name_falls_back_to_the_keyword():
     data = single_dict()
     del data['name']

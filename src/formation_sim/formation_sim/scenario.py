@@ -413,7 +413,9 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     dimension: int | None = None
     first_agent: int | None = None
     for raw_id, entry in agents.items():
-        agent = _agent_id(raw_id, f'agents.{raw_id}')
+        # JSON has only string keys: accept "12" for agent 12, so summary.json copies load too.
+        key = int(raw_id) if isinstance(raw_id, str) and raw_id.isascii() and raw_id.isdigit() else raw_id
+        agent = _agent_id(key, f'agents.{raw_id}')
         if agent in entries:
             raise ScenarioError(f'agents.{raw_id}: agent {agent} is listed twice')
         where = f'agents.{agent}'

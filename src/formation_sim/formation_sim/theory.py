@@ -435,7 +435,8 @@ def _require(condition: bool, rule: str, message: str) -> None:
 
 
 def _edge_bound(k_nu_scaled: float, margins: np.ndarray) -> np.ndarray:
-    # (kij) / (kijd): the positive root of l² + 2K l - 2K c = 0 from ν_ij <= 2K.
+    # (kij) / (kijd): the positive root of l² + 2K l - 2K c = 0 from ν_ij <= 2K. The paper's
+    # ν_ij <= 2ν is loose (ν sums each edge once, so ν_ij <= ν) but valid; kept as printed.
     return -k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * margins)
 
 
@@ -489,7 +490,8 @@ def theorem_constants(
         k_nu = nu0 + n * alpha * alpha / (8.0 * a * beta)  # (kν)
         k_edge = _edge_bound(k_nu, margins)  # (kij)
         V0 = lyapunov(scenario, scenario.positions, tau=feasibility.tau)
-        k_V = V0 + n * alpha * alpha / (8.0 * b0 * (b0 - beta))  # (kV)
+        # (kV); the (betaV) line before it should read [e^{-2βt} - e^{-2β0 t}], not [e^{-2βt} - 1].
+        k_V = V0 + n * alpha * alpha / (8.0 * b0 * (b0 - beta))
         f = f_ij(k_edge, margin=margins)
         g = g_ij(k_edge, margin=margins)
         F = _per_agent_sum(n, heads, tails, f)  # Σ_{l∈N_i} f_il(k_il)
@@ -548,10 +550,14 @@ def theorem_constants(
                 reading=reading, rate_bound=rate_bound, z_gain=z_gain, holds=False,
                 k_V=None, c_q=None, c=None, xi=None,
             )
-        k_V = V0 + n * alpha_d * alpha_d / (8.0 * beta1 * (rate_bound - beta_d))  # (kVd)
-        s = 2.0 * math.sqrt(z_gain * k_V)  # ||y_i-y_j||, ||q_i-q_j|| < s e^{-β_d t} (yiyj)
-        c_q = 2.0 * alpha_d + ((k1 + k2) * (F[heads] + F[tails]) + k3) * s  # (cijq)
-        per_edge = k1 * g * s + k2 * h * s * s + k2 * f * c_q  # terms of c^d_i
+        # (kVd) with γ = rate_bound in place of (2-k4)ρ2(P); corrected: γ = (2-k4)/λmax(P).
+        k_V = V0 + n * alpha_d * alpha_d / (8.0 * beta1 * (rate_bound - beta_d))
+        # (yiyj): ||z_i-z_j||² <= 4 z_gain V_d; printed z_gain = 1, corrected 1/λmin(P).
+        s = 2.0 * math.sqrt(z_gain * k_V)  # ||y_i-y_j||, ||q_i-q_j|| < s e^{-β_d t}
+        # (cijq), bounding ||q_i' - q_j'|| < c^q_ij e^{-β_d t} (the garbled (dotqie)-(dotqi)).
+        c_q = 2.0 * alpha_d + ((k1 + k2) * (F[heads] + F[tails]) + k3) * s
+        # c^d_i from (doteq): e^{-2β_d t} <= e^{-β_d t} bounds the ||q_i-q_j||² term.
+        per_edge = k1 * g * s + k2 * h * s * s + k2 * f * c_q
         c = _per_agent_sum(n, heads, tails, per_edge)
         xi = alpha_d / (c + alpha_d * beta_d)  # (xid)
         return Theorem2Chain(
