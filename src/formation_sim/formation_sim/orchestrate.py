@@ -369,6 +369,11 @@ class FormationRun:
             ids = ','.join(map(str, group))
             name = f'agent_{group[0]}' if len(group) == 1 else f'agents_{group[0]}-{group[-1]}'
             self._start(name, ['-m', 'formation_agent.node', '--agents', ids, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
+        if self.progress:
+            self._say(
+                f'ROS domain {env["ROS_DOMAIN_ID"]}: simulator, {len(groups)} agent process(es)'
+                f'{", recorder" if self.record else ""} started; waiting for discovery'
+            )
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''
         while True:

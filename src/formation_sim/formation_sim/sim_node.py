@@ -265,6 +265,8 @@ class FormationSimulatorNode(Node):
 
     def _start(self) -> None:
         self._started = time.monotonic()
+        if self.progress_period > 0.0:
+            print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
         self._sample_event()
         if self.realtime:
