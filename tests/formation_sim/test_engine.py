@@ -44,55 +44,65 @@ class Trace:
         self.snaps.append((t, world.positions, world.velocities, world.controls, list(due)))
 
 
-def _edge_sums(scenario, i, x, q):
-    """sum_j ω_ij y_ij and sum_j ω_ij q_ij for agent i at state (x, q)."""
-    index = {a: k for k, a in enumerate(scenario.agent_ids)}
-    c_y = np.zeros(x.shape[1])
-    c_q = np.zeros(x.shape[1])
-    for j, d in scenario.neighbours(i).items():
-        y = x[index[i]] - x[index[j]] - d
-        w = _omega(np.linalg.norm(y), scenario.delta - np.linalg.norm(d))
-        c_y += w * y
-        if q is not None:
-            c_q += w * (q[index[i]] - q[index[j]])
-    return c_y, c_q
+class EdgeSums:
+    """sum_j ω_ij y_ij and sum_j ω_ij q_ij for every agent i at a state (x, q), over edge arrays."""
 
+    def __init__(self, scenario):
+        index = {a: k for k, a in enumerate(scenario.agent_ids)}
+        self.n = scenario.n
+        self.heads = np.array([index[e.i] for e in scenario.edges])
+        self.tails = np.array([index[e.j] for e in scenario.edges])
+        self.d = np.array([e.d for e in scenario.edges])
+        self.c = scenario.delta - np.linalg.norm(self.d, axis=1)
 
-def _trigger_error(scenario, i, state, anchor):
-    """e_i(t) of Theorem 1, or E_i(t) = k1 e_i + k2 e_qi of Theorem 2, from true states."""
-    y_now, q_now = _edge_sums(scenario, i, *state)
-    y_then, q_then = _edge_sums(scenario, i, *anchor)
-    if scenario.dynamics == 'single':
-        return y_now - y_then
-    g = scenario.gains
-    return g.k1 * (y_now - y_then) + g.k2 * (q_now - q_then)
+    def __call__(self, x, q):
+        y = x[self.heads] - x[self.tails] - self.d
+        w = _omega(np.linalg.norm(y, axis=1), self.c)[:, None]
+        return self._accumulate(w * y), None if q is None else self._accumulate(w * (q[self.heads] - q[self.tails]))
+
+    def _accumulate(self, per_edge):
+        # Edge (i, j) contributes +ω y_ij to agent i and +ω y_ji = -ω y_ij to agent j.
+        total = np.zeros((self.n, per_edge.shape[1]))
+        np.add.at(total, self.heads, per_edge)
+        np.add.at(total, self.tails, -per_edge)
+        return total
 
 
 def check_triggering(scenario, trace, horizon, *, dense=40):
-    """Every trigger sits on the threshold; between triggers the error stays below it."""
+    """Every trigger sits on the threshold; between triggers the error stays below it.
+
+    e_i(t) of Theorem 1 is sum_j ω_ij y_ij at t minus the same at agent i's last trigger; E_i of
+    Theorem 2 is k1 e_i + k2 e_qi with e_qi built the same way from q_i - q_j.
+    """
     g = scenario.gains
-    alpha, beta = (g.alpha, g.beta) if scenario.dynamics == 'single' else (g.alpha_d, g.beta_d)
-    k3 = None if scenario.dynamics == 'single' else g.k3
+    single = scenario.dynamics == 'single'
+    alpha, beta = (g.alpha, g.beta) if single else (g.alpha_d, g.beta_d)
+    k3 = None if single else g.k3
+    sums = EdgeSums(scenario)
+    row = {a: k for k, a in enumerate(scenario.agent_ids)}
+
+    def combined(x, q):
+        s_y, s_q = sums(x, q)
+        return s_y if single else g.k1 * s_y + g.k2 * s_q
+
     snaps = trace.snaps
-    anchors = {}  # agent -> (x, q) at its last trigger
+    anchor = np.zeros((scenario.n, scenario.dimension))  # combined sums at each agent's last trigger
     worst_inside = 0.0
     on_threshold = []
     for k, (t, x, q, _, due) in enumerate(snaps):
-        for i in due:
-            if i in anchors:
-                e = np.linalg.norm(_trigger_error(scenario, i, (x, q), anchors[i]))
+        now = combined(x, q)
+        if k:
+            for i in due:
+                e = np.linalg.norm(now[row[i]] - anchor[row[i]])
                 on_threshold.append(abs(e / (alpha * math.exp(-beta * t)) - 1.0))
         for i in due:
-            anchors[i] = (x, q)
-        t_end = snaps[k + 1][0] if k + 1 < len(snaps) else horizon
-        controls = snaps[k + 1][3] if k + 1 < len(snaps) else None
-        if controls is None:
+            anchor[row[i]] = now[row[i]]
+        if k + 1 == len(snaps):
             break
+        t_end, controls = snaps[k + 1][0], snaps[k + 1][3]
         for s in np.linspace(t, t_end, dense + 2)[1:-1]:
-            state = _propagate(x, q, controls, k3, s - t)
-            for i in scenario.agent_ids:
-                e = np.linalg.norm(_trigger_error(scenario, i, state, anchors[i]))
-                worst_inside = max(worst_inside, e / (alpha * math.exp(-beta * s)))
+            e = np.linalg.norm(combined(*_propagate(x, q, controls, k3, s - t)) - anchor, axis=1)
+            worst_inside = max(worst_inside, float(e.max()) / (alpha * math.exp(-beta * s)))
     return np.array(on_threshold), worst_inside
 
 
@@ -153,7 +163,8 @@ def test_paper_single_formation_error_decays_at_rate_beta(paper_single_run):
     scenario, _, record = paper_single_run
     constants = theory.theorem_constants(scenario)
     beta = scenario.gains.beta
-    v = np.array([theory.lyapunov(scenario, x) for x in record.sample_positions])
+    tau = theory.formation_feasibility(scenario).tau
+    v = np.array([theory.lyapunov(scenario, x, tau=tau) for x in record.sample_positions])
     # (betaV): V(t) < k_V e^{-2βt}, hence ||y_i - y_j|| < 2 sqrt(k_V) e^{-βt} (lengthysV).
     assert np.all(v <= constants.k_V * np.exp(-2 * beta * record.sample_times))
     errors = np.array([theory.formation_error(scenario, x) for x in record.sample_positions])
@@ -223,5 +234,6 @@ def test_random_scenarios_keep_every_guarantee(case):
             if len(times) > 1:
                 assert np.diff(times).min() >= constants.xi[agent]
     if scenario.dynamics == 'single':
-        v = np.array([theory.lyapunov(scenario, x) for x in record.sample_positions])
+        tau = theory.formation_feasibility(scenario).tau
+        v = np.array([theory.lyapunov(scenario, x, tau=tau) for x in record.sample_positions])
         assert np.all(v <= constants.k_V * np.exp(-2 * scenario.gains.beta * record.sample_times))

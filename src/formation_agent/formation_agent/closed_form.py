@@ -13,6 +13,8 @@ computed without cancellation for small z.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -21,17 +23,23 @@ def one_minus_exp(z):
     return -np.expm1(-np.asarray(z, dtype=float))
 
 
+# Coefficients 1/(k+2)! of z - 1 + e^{-z} = z^2 sum_k (-z)^k / (k+2)!, enough for |z| < 0.1.
+_SERIES = tuple(1.0 / math.factorial(k + 2) for k in range(14))
+
+
 def z_minus_one_plus_exp(z):
     """z - 1 + e^{-z}, accurate for small z, where it behaves as z^2/2 (scalar or array)."""
     z = np.asarray(z, dtype=float)
-    direct = z + np.expm1(-z)
-    # Taylor series sum_{k>=2} (-z)^k / k! for |z| < 0.1: 14 terms reach double precision.
-    term = z * z / 2.0
-    series = term
-    for k in range(3, 17):
-        term = term * (-z) / k
-        series = series + term
-    return np.where(np.abs(z) < 0.1, series, direct)
+    out = z + np.expm1(-z)
+    small = np.abs(z) < 0.1
+    if small.any():
+        zs = z[small]
+        acc = np.full_like(zs, _SERIES[-1])
+        for coefficient in _SERIES[-2::-1]:
+            acc = coefficient - zs * acc
+        out = np.array(out)  # writable even for a 0-d input
+        out[small] = zs * zs * acc
+    return out
 
 
 def advance_double(x, q, u, k3: float, tau):

@@ -357,9 +357,14 @@ class Eta2Agent(_EventTriggeredAgent):
 
     def _state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Predicted y_ij(t), q_ij(t) (eqs. statexixjd with x_ij(s) restored, stateqiqj) and u^d_i - u^d_j."""
-        du = self.control - self._neighbour_control
-        y, q = advance_double(self._anchor_y, self._anchor_q, du, self.k3, t - self._anchor_time)
-        return y, q, du
+        key = (t, self.triggers, self.infos_received)  # the prediction changes only with these
+        if self._cached_key != key:
+            du = self.control - self._neighbour_control
+            y, q = advance_double(self._anchor_y, self._anchor_q, du, self.k3, t - self._anchor_time)
+            self._cached_key, self._cached_state = key, (y, q, du)
+        return self._cached_state
+
+    _cached_key = None
 
     def error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         # E_i(t) = k1 e_i + k2 e_qi = sum_j ω_ij(t) (k1 y_ij + k2 q_ij)(t) + u^d_i  (eq. triggerdouble)

@@ -170,7 +170,13 @@ def simulate(
             heapq.heappop(heap)
         t_next = heap[0][0] if heap else math.inf
         if t_next <= t and period is None:
-            raise EngineError(f'agent {heap[0][1]} asked to trigger again at t={t_next!r} <= {t!r}')
+            agent = heap[0][1]
+            raise EngineError(
+                f'agent {agent} reached its threshold again at the instant it last planned from '
+                f'(t={t!r}, threshold {agents[agent].threshold(t):.3g}): the threshold has fallen to the '
+                'rounding level of the relative states, or the gains are outside what the theorem '
+                'guarantees (see `formation validate`); shorten the horizon or lower beta'
+            )
         steps += 1
         if progress is not None and steps % 1000 == 0:
             progress(t, sum(map(len, trigger_times.values())))
