@@ -236,6 +236,7 @@ def test_step_and_status_round_trip_including_infinite_next_time():
             commands_sent=5,
             triggers=5,
             ready=True,
+            last_planned=0.30000000000000004,
         )
         assert decode_status(through_wire(encode_status(status))) == status
 
@@ -243,13 +244,14 @@ def test_step_and_status_round_trip_including_infinite_next_time():
 @pytest.mark.parametrize(
     ('values', 'complaint'),
     [
-        ([1, 0, 0.0, 0, 0, 0, 0, 0], 'expected 9 values'),
-        ([1, 0, 0, math.nan, 0, 0, 0, 0, 1], 'next_time must be a time or +inf, got nan'),
-        ([1, 0, 0, -math.inf, 0, 0, 0, 0, 1], 'next_time must be a time or +inf, got -inf'),
-        ([1, 0, 0, 1.0, -1, 0, 0, 0, 1], 'info_sent_total must lie in'),
-        ([1, 0, 0, 1.0, 0, 0.5, 0, 0, 1], 'info_received_total must be an integer, got 0.5'),
-        ([1, 0, 0, 1.0, 0, 0, 0, 0, 2], 'ready must be 0 or 1, got 2.0'),
-        ([1, 0, -2, 1.0, 0, 0, 0, 0, 1], 'step_index must lie in [-1,'),
+        ([1, 0, 0.0, 0, 0, 0, 0, 0, 1], 'expected 10 values'),
+        ([1, 0, 0, math.nan, 0, 0, 0, 0, 1, 0.0], 'next_time must be a time or +inf, got nan'),
+        ([1, 0, 0, -math.inf, 0, 0, 0, 0, 1, 0.0], 'next_time must be a time or +inf, got -inf'),
+        ([1, 0, 0, 1.0, -1, 0, 0, 0, 1, 0.0], 'info_sent_total must lie in'),
+        ([1, 0, 0, 1.0, 0, 0.5, 0, 0, 1, 0.0], 'info_received_total must be an integer, got 0.5'),
+        ([1, 0, 0, 1.0, 0, 0, 0, 0, 2, 0.0], 'ready must be 0 or 1, got 2.0'),
+        ([1, 0, -2, 1.0, 0, 0, 0, 0, 1, 0.0], 'step_index must lie in [-1,'),
+        ([1, 0, 0, 1.0, 0, 0, 0, 0, 1, math.inf], 'last_planned[0] must be finite, got inf'),
     ],
 )
 def test_malformed_status_is_rejected(values, complaint):

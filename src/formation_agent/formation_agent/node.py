@@ -27,6 +27,7 @@ import argparse
 import math
 import sys
 import time
+import traceback
 from collections.abc import Sequence
 
 import rclpy
@@ -185,6 +186,7 @@ class FormationAgentNode(Node):
         self._dirty = False
         self._next_time = 0.0  # t^i_1 = 0
         self._last_trigger = -math.inf
+        self._planned = 0.0  # the time the trigger in progress (or the last one) was planned for
         self._epoch: float | None = None  # wall-clock mode: Unix time of t = 0
         self._sensed = None  # the last SensedState, to re-base late information
         self._due_timer = None
@@ -296,6 +298,7 @@ class FormationAgentNode(Node):
         if self._sensing or self.finished:
             return
         self._sensing = True
+        self._planned = self._next_time
         self._sense.call_async(Trigger.Request()).add_done_callback(self._on_sensed)
 
     def _cancel_due_timer(self) -> None:
@@ -430,6 +433,7 @@ class FormationAgentNode(Node):
             commands_sent=self.commands_sent,
             triggers=self.triggers,
             ready=ready,
+            last_planned=self._planned,
         )
         self._status_pub.publish(encode_status(status))
 
@@ -487,8 +491,9 @@ def main(args: Sequence[str] | None = None) -> int:
             node.wait_for_delivery()
     except (KeyboardInterrupt, ExternalShutdownException):
         status = 130
-    except ValueError as error:  # AgentNodeError, MessageError, AgentError: bad input, named
+    except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
         print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+        traceback.print_exc(file=sys.stderr)
         status = 1
     finally:
         for node in nodes:

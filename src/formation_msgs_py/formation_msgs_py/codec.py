@@ -290,7 +290,7 @@ def decode_step(msg) -> Step:
 
 
 # Status [version, agent, step_index, next_time, info_sent, info_received, commands_sent,
-#         triggers, ready]
+#         triggers, ready, last_planned]
 
 _STATUS_LABELS = (
     'version',
@@ -302,6 +302,7 @@ _STATUS_LABELS = (
     'commands_sent_total',
     'triggers_total',
     'ready',
+    'last_planned',
 )
 
 
@@ -316,6 +317,7 @@ def encode_status(status: Status):
         status.commands_sent,
         status.triggers,
         1.0 if status.ready else 0.0,
+        status.last_planned,
     ]
     return _float_array([(label, [value]) for label, value in zip(_STATUS_LABELS, values)])
 
@@ -336,6 +338,7 @@ def decode_status(msg) -> Status:
     ready = data[8]
     if ready not in (0.0, 1.0):
         raise MessageError(f'status of agent {agent}: ready must be 0 or 1, got {ready!r}')
+    _check_finite(f'status of agent {agent} last_planned', [data[9]])
     return Status(
         agent=agent,
         step_index=_as_int(f'status of agent {agent} step_index', data[2], low=-1, high=_MAX_COUNT),
@@ -345,6 +348,7 @@ def decode_status(msg) -> Status:
         commands_sent=counters[2],
         triggers=counters[3],
         ready=ready == 1.0,
+        last_planned=data[9],
     )
 
 

@@ -48,7 +48,8 @@ class Status:
     """An agent's report after it handled everything it knows of for step `step_index`.
 
     Counters are totals since the start, so they only grow and a later report supersedes an
-    earlier one.  `next_time` is the agent's next triggering time (inf: none before the horizon).
+    earlier one.  `next_time` is the agent's next triggering time (inf: none before the horizon);
+    `last_planned` the time its latest trigger had been planned for (0 before any: t^i_1 = 0).
     """
 
     agent: int
@@ -59,6 +60,7 @@ class Status:
     commands_sent: int
     triggers: int
     ready: bool
+    last_planned: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -25,6 +25,7 @@ import json
 import math
 import sys
 import time
+import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -311,12 +312,10 @@ class FormationSimulatorNode(Node):
         if self.finished:  # asked after the horizon: the final state, not counted
             return encode_sensed_state(self.world.sense(agent, book.neighbours))
         t = self._realtime_event()
-        planned = 0.0 if book.status is None or book.status.step_index == DISCOVERY_STEP else book.status.next_time
         book.trigger_times.append(t)
-        book.lateness.append(t - planned)
         book.expected_triggers += 1
         self.sensing_calls += 1
-        log = {'version': 1, 'agent': agent, 'step': 0, 'time': t, 'planned': planned}
+        log = {'version': 1, 'agent': agent, 'step': 0, 'time': t}
         self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
         return encode_sensed_state(self.world.sense(agent, book.neighbours))
 
@@ -348,8 +347,22 @@ class FormationSimulatorNode(Node):
             raise SimulatorError(
                 f'agent {status.agent} reports {status.triggers} triggers, but was due {book.expected_triggers} times'
             )
+        if previous is None or status.triggers > previous.triggers:
+            self._check_planned(status, book)
         book.status = status
         self._advance_if_settled()
+
+    def _check_planned(self, status: Status, book: _AgentBook) -> None:
+        """A new trigger: lock-step, it must be the step's time; wall clock, how late it came."""
+        if status.triggers == 0:
+            return
+        t = book.trigger_times[status.triggers - 1]
+        if self.realtime:
+            book.lateness.append(t - status.last_planned)
+        elif status.last_planned != t:
+            raise SimulatorError(
+                f'agent {status.agent} triggered for t={status.last_planned!r} at step time t={t!r}'
+            )
 
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
@@ -540,8 +553,9 @@ def main(args: Sequence[str] | None = None) -> int:
             write_results(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         status = 130
-    except (SimulatorError, ValueError) as error:
+    except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
         print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+        traceback.print_exc(file=sys.stderr)
         status = 1
     finally:
         if node is not None:
