@@ -328,7 +328,8 @@ class FormationRun:
             message=message,
         )
         if self.progress:
-            self._say(f'{"done" if result.ok else "FAILED"} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
+            outcome = 'done' if result.ok else 'stopped' if status == 130 else 'FAILED'
+            self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
         return result
 
     @contextlib.contextmanager
