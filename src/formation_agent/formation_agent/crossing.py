@@ -122,6 +122,8 @@ def _polish(model: ErrorModel, a: float, phi: float, phi_rate: float, *, alpha: 
     def margin(t: float) -> float:
         return math.exp(-beta * (t - a)) - scale * float(np.linalg.norm(model.error(t)))
 
+    if margin(a) <= 0.0:
+        return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
     width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
     b = a + width
     if margin(b) >= 0.0:
