@@ -12,7 +12,7 @@ PACKAGING := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.x
 # pytest.ini). Override e.g. `make test PYTEST_ARGS='-n 0 -k recorder'`.
 PYTEST_ARGS ?= -n auto --dist loadgroup
 
-DEMO_CMD = $(VENV)/bin/formation simulate paper_single --horizon 10 --out runs/demo
+DEMO_CMD = $(VENV)/bin/formation run paper_single --horizon 10 --out runs/demo
 
 .PHONY: venv test demo bench clean distclean
 

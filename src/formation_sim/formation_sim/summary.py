@@ -135,3 +135,35 @@ def load_summary(path) -> dict:
     if data.get('schema') != SCHEMA:
         raise ValueError(f'{path}: not a {SCHEMA} file (schema={data.get("schema")!r})')
     return data
+
+
+def load_record(run_dir, scenario=None):
+    """Rebuild the `RunRecord` of a run folder from `summary.json` and `trajectory.npz`.
+
+    The scenario is read from the folder's `scenario.yaml` (written by `formation run`) unless
+    given. Counters and triggering times come from the summary, samples from the trajectory.
+    """
+    from formation_sim.engine import RunRecord
+    from formation_sim.scenario import load_scenario
+
+    run_dir = Path(run_dir)
+    summary = load_summary(run_dir)
+    if scenario is None:
+        scenario = load_scenario(run_dir / 'scenario.yaml')
+    with np.load(run_dir / TRAJECTORY_FILE) as data:
+        times, positions = data['times'], data['positions']
+        velocities = data['velocities'] if 'velocities' in data else None
+    return RunRecord(
+        scenario=scenario,
+        horizon=summary['horizon'],
+        mode=summary['mode'],
+        trigger_times={int(a): list(t) for a, t in summary['trigger_times'].items()},
+        sample_times=times,
+        sample_positions=positions,
+        sample_velocities=velocities,
+        messages_sent=summary['messages_sent'],
+        sensing_calls=summary['sensing_calls'],
+        wall_time=summary['wall_time'],
+        extra=summary.get('extra', {}),
+    )
+

@@ -33,6 +33,7 @@ def register(subparsers) -> None:
         'processing delays, which the summary reports (default: lock-step sim time, exact)',
     )
     parser.add_argument('--timeout', type=float, default=None, help='give up after this many wall-clock seconds')
+    parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
 
@@ -60,11 +61,19 @@ def run(args: argparse.Namespace) -> int:
     except RunError as error:
         print(f'formation run: error: {error}', file=sys.stderr)
         return 2
+    figure = None
+    if result.ok and not args.no_plot:
+        from formation_sim.plots import plot_run
+        from formation_sim.summary import load_record
+
+        figure = plot_run(load_record(out, scenario), out)
     if args.quiet:
         print(out)
     else:
         print(f'summary: {result.summary}')
         print(f'bag:     {result.bag}')
+        if figure is not None:
+            print(f'figure:  {figure}')
         print(f'logs:    {Path(out) / "logs"}')
     if not result.ok:
         print(f'formation run: {result.message}', file=sys.stderr)
