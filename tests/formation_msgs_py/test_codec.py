@@ -11,6 +11,7 @@ import pytest
 from formation_msgs_py.codec import (
     LAYOUT_VERSION,
     MessageError,
+    decode_agent_report,
     decode_command,
     decode_sensed_state,
     decode_status,
@@ -18,6 +19,7 @@ from formation_msgs_py.codec import (
     decode_trigger_info,
     decode_world_state,
     encode_acceleration_command,
+    encode_agent_report,
     encode_pose_array,
     encode_sensed_state,
     encode_status,
@@ -28,7 +30,7 @@ from formation_msgs_py.codec import (
     ros_time,
     sensing_refusal,
 )
-from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Status, Step, WorldState
+from formation_msgs_py.lockstep import LAYOUT_REASONS, REJECT_REASONS, STEP_FLAG_FINAL, AgentReport, Status, Step, WorldState
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 pytestmark = pytest.mark.ros
@@ -108,25 +110,27 @@ def _array(values):
 
 
 @pytest.mark.parametrize(
-    ('values', 'complaint'),
+    ('values', 'complaint', 'reason'),
     [
-        ([2, 1, 1, 2, 0.0, 1, 0.0, 0.0], 'layout version 2.0 is not supported'),
-        ([1, 1, 1, 2, 0.0, 2, 0.0, 0.0, 0.0], 'kind 1 with p=2 needs 10 values, got 9'),
-        ([1, 2, 1, 2, 0.0, 1, 0.0, 0.0], 'kind 2 with p=1 needs 9 values, got 8'),
-        ([1, 3, 1, 2, 0.0, 1, 0.0, 0.0], 'kind must lie in [1, 2], got 3'),
-        ([1, 1, 1.5, 2, 0.0, 1, 0.0, 0.0], 'sender must be an integer, got 1.5'),
-        ([1, 1, 2, 2, 0.0, 1, 0.0, 0.0], 'sender and receiver are both agent 2'),
-        ([1, 1, -1, 2, 0.0, 1, 0.0, 0.0], 'sender must lie in [0, 2147483647], got -1'),
-        ([1, 1, 1, 2, 0.0, 1, math.nan, 0.0], 'must be finite, got nan'),
-        ([1, 1, 1, 2, math.inf, 1, 0.0, 0.0], 'must be finite, got inf'),
-        ([1, 1, 1, 2, 0.0], 'the header alone has 6'),
-        ([1, 1, 1, 2, 0.0, 0, 0.0, 0.0], 'p must lie in [1, 8], got 0'),
+        ([2, 1, 1, 2, 0.0, 1, 0.0, 0.0], 'layout version 2.0 is not supported', 'version'),
+        ([1, 1, 1, 2, 0.0, 2, 0.0, 0.0, 0.0], 'kind 1 with p=2 needs 10 values, got 9', 'length'),
+        ([1, 2, 1, 2, 0.0, 1, 0.0, 0.0], 'kind 2 with p=1 needs 9 values, got 8', 'length'),
+        ([1, 3, 1, 2, 0.0, 1, 0.0, 0.0], 'kind must lie in [1, 2], got 3', 'field'),
+        ([1, 1, 1.5, 2, 0.0, 1, 0.0, 0.0], 'sender must be an integer, got 1.5', 'field'),
+        ([1, 1, 2, 2, 0.0, 1, 0.0, 0.0], 'sender and receiver are both agent 2', 'field'),
+        ([1, 1, -1, 2, 0.0, 1, 0.0, 0.0], 'sender must lie in [0, 2147483647], got -1', 'field'),
+        ([1, 1, 1, 2, 0.0, 1, math.nan, 0.0], 'must be finite, got nan', 'non_finite'),
+        ([1, 1, 1, 2, math.inf, 1, 0.0, 0.0], 'must be finite, got inf', 'non_finite'),
+        ([1, 1, 1, 2, 0.0], 'the header alone has 6', 'length'),
+        ([1, 1, 1, 2, 0.0, 0, 0.0, 0.0], 'p must lie in [1, 8], got 0', 'field'),
     ],
 )
-def test_malformed_trigger_info_is_rejected_with_the_rule_broken(values, complaint):
+def test_malformed_trigger_info_is_rejected_with_the_rule_broken(values, complaint, reason):
     with pytest.raises(MessageError) as error:
         decode_trigger_info(_array(values))
     assert complaint in str(error.value)
+    assert error.value.reason == reason
+    assert reason in LAYOUT_REASONS
 
 
 def test_trigger_info_with_mismatched_vectors_cannot_be_encoded():
@@ -269,6 +273,36 @@ def test_malformed_step_is_rejected():
         decode_step(_array([1, -1, 0.0, 0, 0.0]))
     with pytest.raises(MessageError, match='step flags must be an integer, got 0.5'):
         decode_step(_array([1, 0, 0.0, 0.5, 0.0]))
+
+
+def test_agent_report_round_trips_and_omits_zero_counts():
+    report = AgentReport(agent=4, final=True, rejected={'sender': 2, 'time_backwards': 1}, dropped=7, delayed=30, late=1)
+    msg = through_wire(encode_agent_report(report))
+    assert '"rejected":{"sender":2,"time_backwards":1}' in msg.data
+    assert decode_agent_report(msg) == report
+    assert report.rejected_total == 3
+    quiet = AgentReport(agent=1, final=False, rejected={'length': 0})
+    assert decode_agent_report(encode_agent_report(quiet)).rejected == {}
+    assert set(LAYOUT_REASONS) < set(REJECT_REASONS)
+
+
+@pytest.mark.parametrize(
+    ('text', 'complaint'),
+    [
+        ('[1]', 'must be a JSON object'),
+        ('{"version":2}', 'version 2 is not supported'),
+        ('{"version":1,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0}', "missing fields ['late']"),
+        ('{"version":1,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0}', 'dropped must be a count'),
+        ('{"version":1,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0}', "rejected['x'] must be a count"),
+        ('{"version":1,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,"z":1}', "unknown fields ['z']"),
+    ],
+)
+def test_malformed_agent_report_is_rejected(text, complaint):
+    from std_msgs.msg import String
+
+    with pytest.raises(MessageError) as error:
+        decode_agent_report(String(data=text))
+    assert complaint in str(error.value)
 
 
 @pytest.mark.parametrize('double', [False, True])

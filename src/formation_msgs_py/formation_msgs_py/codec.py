@@ -17,7 +17,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from formation_msgs_py.lockstep import Status, Step, WorldState
+from formation_msgs_py.lockstep import (
+    REJECT_FIELD,
+    REJECT_LENGTH,
+    REJECT_NON_FINITE,
+    REJECT_VERSION,
+    AgentReport,
+    Status,
+    Step,
+    WorldState,
+)
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 LAYOUT_VERSION = 1
@@ -31,7 +40,16 @@ _MAX_COUNT = 2**53  # float64 holds every integer up to here exactly
 
 
 class MessageError(ValueError):
-    """A message that does not follow its documented layout."""
+    """A message that does not follow its documented layout.
+
+    `reason` says which kind of rule it broke (`formation_msgs_py.lockstep.LAYOUT_REASONS`): an
+    unsupported layout version, a length that does not match its header, a NaN or infinite
+    value, or a field out of its range (ids, counts, kinds, flags).
+    """
+
+    def __init__(self, message: str, *, reason: str = REJECT_FIELD) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 # --------------------------------------------------------------------------------------------
@@ -41,7 +59,7 @@ class MessageError(ValueError):
 def _check_finite(name: str, values: Sequence[float]) -> None:
     for k, value in enumerate(values):
         if not math.isfinite(value):
-            raise MessageError(f'{name}[{k}] must be finite, got {value!r}')
+            raise MessageError(f'{name}[{k}] must be finite, got {value!r}', reason=REJECT_NON_FINITE)
 
 
 def _as_int(name: str, value: float, *, low: int, high: int) -> int:
@@ -55,7 +73,9 @@ def _as_int(name: str, value: float, *, low: int, high: int) -> int:
 
 def _check_version(what: str, value: float) -> None:
     if value != LAYOUT_VERSION:
-        raise MessageError(f'{what}: layout version {value!r} is not supported (expected {LAYOUT_VERSION})')
+        raise MessageError(
+            f'{what}: layout version {value!r} is not supported (expected {LAYOUT_VERSION})', reason=REJECT_VERSION
+        )
 
 
 def _float_array(fields: Sequence[tuple[str, Sequence[float]]]):
@@ -116,7 +136,9 @@ def decode_trigger_info(msg) -> TriggerInfo:
     """TriggerInfo from a Float64MultiArray; MessageError if it breaks the layout."""
     data = _data('trigger info', msg)
     if len(data) < _TRIGGER_HEADER:
-        raise MessageError(f'trigger info: {len(data)} values, the header alone has {_TRIGGER_HEADER}')
+        raise MessageError(
+            f'trigger info: {len(data)} values, the header alone has {_TRIGGER_HEADER}', reason=REJECT_LENGTH
+        )
     _check_version('trigger info', data[0])
     _check_finite('trigger info', data)
     kind = _as_int('trigger info kind', data[1], low=KIND_ETA1, high=KIND_ETA2)
@@ -130,7 +152,8 @@ def decode_trigger_info(msg) -> TriggerInfo:
     if len(data) != expected:
         raise MessageError(
             f'trigger info {sender}->{receiver}: kind {kind} with p={p} needs {expected} values, '
-            f'got {len(data)}'
+            f'got {len(data)}',
+            reason=REJECT_LENGTH,
         )
     body = data[_TRIGGER_HEADER:]
     return TriggerInfo(
@@ -278,7 +301,9 @@ def encode_step(step: Step):
 def decode_step(msg) -> Step:
     data = _data('step', msg)
     if len(data) != len(_STEP_LABELS):
-        raise MessageError(f'step: expected {len(_STEP_LABELS)} values {list(_STEP_LABELS)}, got {len(data)}')
+        raise MessageError(
+            f'step: expected {len(_STEP_LABELS)} values {list(_STEP_LABELS)}, got {len(data)}', reason=REJECT_LENGTH
+        )
     _check_version('step', data[0])
     _check_finite('step', data)
     return Step(
@@ -325,12 +350,17 @@ def encode_status(status: Status):
 def decode_status(msg) -> Status:
     data = _data('status', msg)
     if len(data) != len(_STATUS_LABELS):
-        raise MessageError(f'status: expected {len(_STATUS_LABELS)} values {list(_STATUS_LABELS)}, got {len(data)}')
+        raise MessageError(
+            f'status: expected {len(_STATUS_LABELS)} values {list(_STATUS_LABELS)}, got {len(data)}',
+            reason=REJECT_LENGTH,
+        )
     _check_version('status', data[0])
     agent = _as_int('status agent', data[1], low=0, high=_MAX_ID)
     next_time = data[3]
     if math.isnan(next_time) or next_time == -math.inf:
-        raise MessageError(f'status of agent {agent}: next_time must be a time or +inf, got {next_time!r}')
+        raise MessageError(
+            f'status of agent {agent}: next_time must be a time or +inf, got {next_time!r}', reason=REJECT_NON_FINITE
+        )
     counters = [
         _as_int(f'status of agent {agent} {label}', value, low=0, high=_MAX_COUNT)
         for label, value in zip(_STATUS_LABELS[4:8], data[4:8])
@@ -349,6 +379,67 @@ def decode_status(msg) -> Status:
         triggers=counters[3],
         ready=ready == 1.0,
         last_planned=data[9],
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# AgentReport  <->  std_msgs/String (compact JSON)
+#   {"version":1,"agent":i,"final":false,"rejected":{"sender":2},"dropped":0,"delayed":0,"late":0}
+
+_REPORT_COUNTERS = ('dropped', 'delayed', 'late')
+
+
+def encode_agent_report(report: AgentReport):
+    from std_msgs.msg import String
+
+    body = {
+        'version': LAYOUT_VERSION,
+        'agent': int(report.agent),
+        'final': bool(report.final),
+        'rejected': {reason: int(n) for reason, n in sorted(report.rejected.items()) if n},
+        **{name: int(getattr(report, name)) for name in _REPORT_COUNTERS},
+    }
+    return String(data=json.dumps(body, separators=(',', ':')))
+
+
+def _json_count(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= _MAX_COUNT:
+        raise MessageError(f'{name} must be a count (integer >= 0), got {value!r}')
+    return value
+
+
+def decode_agent_report(msg) -> AgentReport:
+    text = getattr(msg, 'data', None)
+    if not isinstance(text, str):
+        raise MessageError(f'agent report: expected std_msgs/String, got {type(msg).__name__}')
+    try:
+        body = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise MessageError(f'agent report is not JSON ({error}): {text[:80]!r}') from None
+    if not isinstance(body, dict):
+        raise MessageError(f'agent report must be a JSON object, got {text[:80]!r}')
+    if body.get('version') != LAYOUT_VERSION:
+        raise MessageError(
+            f'agent report: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})',
+            reason=REJECT_VERSION,
+        )
+    known = {'version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS}
+    if unknown := set(body) - known:
+        raise MessageError(f'agent report: unknown fields {sorted(unknown)}')
+    if missing := known - set(body):
+        raise MessageError(f'agent report: missing fields {sorted(missing)}')
+    agent = _json_count('agent report agent', body['agent'])
+    if agent > _MAX_ID or not isinstance(body['final'], bool) or not isinstance(body['rejected'], dict):
+        raise MessageError(f'agent report: agent, final or rejected malformed: {text[:120]!r}')
+    rejected = {
+        str(reason): _json_count(f'agent report of agent {agent} rejected[{reason!r}]', n)
+        for reason, n in body['rejected'].items()
+    }
+    return AgentReport(
+        agent=agent,
+        final=body['final'],
+        rejected=rejected,
+        **{name: _json_count(f'agent report of agent {agent} {name}', body[name]) for name in _REPORT_COUNTERS},
     )
 
 
@@ -381,7 +472,7 @@ def encode_world_state(state: WorldState):
 def decode_world_state(msg) -> WorldState:
     data = _data('world state', msg)
     if len(data) < 5:
-        raise MessageError(f'world state: {len(data)} values, the header alone has 5')
+        raise MessageError(f'world state: {len(data)} values, the header alone has 5', reason=REJECT_LENGTH)
     _check_version('world state', data[0])
     _check_finite('world state', data)
     n = _as_int('world state n', data[2], low=1, high=len(data))
@@ -389,7 +480,9 @@ def decode_world_state(msg) -> WorldState:
     double = _as_int('world state double', data[4], low=0, high=1)
     expected = 5 + n + (1 + double) * n * p
     if len(data) != expected:
-        raise MessageError(f'world state: n={n}, p={p}, double={double} needs {expected} values, got {len(data)}')
+        raise MessageError(
+            f'world state: n={n}, p={p}, double={double} needs {expected} values, got {len(data)}', reason=REJECT_LENGTH
+        )
     ids = tuple(_as_int(f'world state agent_ids[{k}]', v, low=0, high=_MAX_ID) for k, v in enumerate(data[5 : 5 + n]))
     start = 5 + n
     positions = np.array(data[start : start + n * p]).reshape(n, p)

@@ -20,6 +20,26 @@ STEP_FLAG_REALTIME = 2
 DISCOVERY_STEP = -1
 """`Status.step_index` of an agent that is connected and waits for step 0."""
 
+# Why an agent rejected a triggering-information message (docs/MESSAGES.md, "Bad messages").
+REJECT_VERSION = 'version'  # unsupported layout version
+REJECT_LENGTH = 'length'  # length does not match the header
+REJECT_NON_FINITE = 'non_finite'  # NaN or infinite value
+REJECT_FIELD = 'field'  # an id, kind or dimension out of range
+REJECT_SENDER = 'sender'  # the sender is not the agent whose topic carried it
+REJECT_RECEIVER = 'receiver'  # addressed to another agent
+REJECT_DIMENSION = 'dimension'  # p differs from the receiver's, or ETA-1/ETA-2 mixed up
+REJECT_TIME_BACKWARDS = 'time_backwards'  # stamped before t = 0 or before the sender's previous one
+REJECT_DUPLICATE = 'duplicate'  # stamped at the very time of the sender's previous one
+LAYOUT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_NON_FINITE, REJECT_FIELD)
+REJECT_REASONS = (
+    *LAYOUT_REASONS,
+    REJECT_SENDER,
+    REJECT_RECEIVER,
+    REJECT_DIMENSION,
+    REJECT_TIME_BACKWARDS,
+    REJECT_DUPLICATE,
+)
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Step:
@@ -71,3 +91,23 @@ class WorldState:
     agent_ids: tuple[int, ...]
     positions: np.ndarray
     velocities: np.ndarray | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class AgentReport:
+    """What an agent node counted besides the protocol: rejected and fault-injected messages.
+
+    Totals since the start (a later report supersedes an earlier one); `final` marks the report
+    an agent sends when it leaves at the final step.
+    """
+
+    agent: int
+    final: bool
+    rejected: dict[str, int]  # reason (REJECT_REASONS) -> messages rejected; zero counts omitted
+    dropped: int = 0  # fault injection: messages dropped on arrival
+    delayed: int = 0  # fault injection: messages handed on after a delay
+    late: int = 0  # wall clock: information that arrived after the receiver's own later trigger
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
