@@ -19,12 +19,22 @@ robot would, and triggers at once when its triggering time has already passed.
 
 It never sees ground truth or another agent's sensing. All algorithmic decisions are taken by the
 core object (`formation_agent.eta`); this module only moves messages.
+
+Robustness (README, "Reliability"): a triggering-information or Step message that breaks its layout
+or cannot be true (wrong sender for its topic, another receiver, the wrong dimension, time going
+backwards, a duplicate) is rejected before the core sees it, logged, and counted per reason in the
+agent's reports on `/formation/agent_report`; the node keeps running.  Every protocol topic has a
+DDS liveliness lease (`LIVELINESS_LEASE`): an agent whose simulator dies leaves with exit status 3
+instead of waiting forever.  For experiments, `inject_loss` / `inject_delay_ms` drop or delay
+triggering information on arrival (a test facility, seeded by `inject_seed`).
 """
 
 from __future__ import annotations
 
 import argparse
+import heapq
 import math
+import random
 import sys
 import time
 import traceback
@@ -32,43 +42,114 @@ from collections.abc import Sequence
 
 import rclpy
 from geometry_msgs.msg import Accel, Twist
+from rclpy.duration import Duration
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float64MultiArray
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from formation_msgs_py.codec import (
+    MessageError,
     decode_sensed_state,
     decode_step,
     decode_trigger_info,
     encode_acceleration_command,
+    encode_agent_report,
     encode_status,
     encode_trigger_info,
     encode_velocity_command,
 )
-from formation_msgs_py.lockstep import DISCOVERY_STEP, Status, Step
+from formation_msgs_py.lockstep import (
+    DISCOVERY_STEP,
+    REJECT_DIMENSION,
+    REJECT_DUPLICATE,
+    REJECT_RECEIVER,
+    REJECT_SENDER,
+    REJECT_TIME_BACKWARDS,
+    AgentReport,
+    Status,
+    Step,
+)
 from formation_msgs_py.types import TriggerInfo
 
 NODE_NAME = 'formation_agent'
 STEP_TOPIC = '/formation/step'
 STATUS_TOPIC = '/formation/status'
+REPORT_TOPIC = '/formation/agent_report'
+
+LIVELINESS_LEASE = 1.0
+"""Seconds without a sign of life after which DDS declares a writer of the protocol lost.
+
+Liveliness is asserted by DDS itself (AUTOMATIC), not by Python code, so a busy agent stays alive
+and only a dead process, or a network that no longer reaches it, is declared lost.  Every node of
+a run must use the same lease: a reader asking for a shorter lease than its writer offers does
+not match it.
+"""
+
+LOST_GRACE = 0.5
+"""Seconds a node waits after a peer is declared lost before acting, so that what the peer sent
+before it left (already delivered, not yet taken) is handled first."""
 
 # Every message of the protocol matters, and a reader that matches a writer late must still get
 # what was written before: reliable + transient local.  Depth bounds what may be outstanding; the
-# lock-step never has more than one message per edge and step in flight.
+# lock-step never has more than one message per edge and step in flight.  Reasons per topic:
+# docs/MESSAGES.md, "Quality of service".
 PROTOCOL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=32,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    liveliness=LivelinessPolicy.AUTOMATIC,
+    liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
 )
 
 
 class AgentNodeError(ValueError):
     """Bad agent parameters or a violation of the lock-step protocol seen by an agent."""
+
+
+class PeerLostError(RuntimeError):
+    """A peer the agent depends on (the simulator) stopped showing signs of life."""
+
+
+class FaultInjection:
+    """Test facility: drop or delay triggering information on arrival, as a bad network would.
+
+    Each message is dropped with probability `loss`; a kept one is handed on after `delay_ms` plus
+    a uniform extra in [0, `jitter_ms`].  Messages of one edge stay in order (a reliable DDS writer
+    never reorders).  The random stream is seeded per agent, so a run's drop pattern depends only
+    on (seed, agent, arrival order).
+    """
+
+    def __init__(self, *, agent_id: int, loss: float, delay_ms: float, jitter_ms: float, seed: int) -> None:
+        if not (math.isfinite(loss) and 0.0 <= loss <= 1.0):
+            raise AgentNodeError(f'agent {agent_id}: inject_loss must be a probability in [0, 1], got {loss!r}')
+        for name, value in (('inject_delay_ms', delay_ms), ('inject_jitter_ms', jitter_ms)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise AgentNodeError(f'agent {agent_id}: {name} must be a finite number >= 0, got {value!r}')
+        self.loss = loss
+        self.delay = delay_ms / 1000.0
+        self.jitter = jitter_ms / 1000.0
+        self._random = random.Random(f'formation-inject:{seed}:{agent_id}')
+        self._last_due: dict[int, float] = {}
+
+    @property
+    def active(self) -> bool:
+        return self.loss > 0.0 or self.delay > 0.0 or self.jitter > 0.0
+
+    def drop(self) -> bool:
+        return self.loss > 0.0 and self._random.random() < self.loss
+
+    def due(self, sender: int, now: float) -> float:
+        """When a message of edge sender -> this agent arriving at `now` is handed on."""
+        extra = self._random.uniform(0.0, self.jitter) if self.jitter > 0.0 else 0.0
+        due = max(now + self.delay + extra, self._last_due.get(sender, -math.inf))
+        self._last_due[sender] = due
+        return due
 
 
 def agent_namespace(agent_id: int) -> str:
@@ -163,13 +244,20 @@ class FormationAgentNode(Node):
             self.create_subscription(
                 Float64MultiArray,
                 trigger_info_topic(j, self.agent_id),
-                lambda msg, sender=j: self._on_info(msg, sender),
+                lambda msg, sender=j: self._on_arrival(msg, sender),
                 PROTOCOL_QOS,
             )
             for j in self.neighbour_ids
         ]
         self._status_pub = self.create_publisher(Float64MultiArray, STATUS_TOPIC, PROTOCOL_QOS)
-        self._step_sub = self.create_subscription(Float64MultiArray, STEP_TOPIC, self._on_step, PROTOCOL_QOS)
+        self._report_pub = self.create_publisher(String, REPORT_TOPIC, PROTOCOL_QOS)
+        self._step_sub = self.create_subscription(
+            Float64MultiArray,
+            STEP_TOPIC,
+            self._on_step,
+            PROTOCOL_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_simulator_liveliness),
+        )
         # Statuses are published once per burst of delivered messages: the guard condition runs
         # after the executor has handled what was ready together.
         self._flush = self.create_guard_condition(self._publish_status_if_dirty)
@@ -192,6 +280,18 @@ class FormationAgentNode(Node):
         self._due_timer = None
         self.late_infos = 0
         self.failure: Exception | None = None
+        # Bad messages and injected faults, reported on REPORT_TOPIC.
+        self.rejected: dict[str, int] = {}
+        self.dropped = 0
+        self.delayed = 0
+        self._last_stamp: dict[int, float] = {}  # sender -> stamp of its last accepted information
+        self._report_dirty = False
+        self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
+        self._delay_line: list[tuple[float, int, int, Float64MultiArray]] = []  # (due, seq, sender, msg)
+        self._delay_seq = 0
+        self._delay_timer = None
+        self._simulator_seen = False
+        self._simulator_lost_at: float | None = None
         self._discovery = self.create_timer(0.1, self._announce)
 
     # -- parameters -------------------------------------------------------------------------
@@ -238,6 +338,14 @@ class FormationAgentNode(Node):
         }
         # Listeners besides the protocol peers (a recorder) that must be matched before step 0.
         self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
+        # Test facility (README, "Reliability"): faults injected on arriving triggering information.
+        self.injection = FaultInjection(
+            agent_id=self.agent_id,
+            loss=float(self.declare_parameter('inject_loss', 0.0).value),
+            delay_ms=float(self.declare_parameter('inject_delay_ms', 0.0).value),
+            jitter_ms=float(self.declare_parameter('inject_jitter_ms', 0.0).value),
+            seed=int(self.declare_parameter('inject_seed', 0).value),
+        )
         expected = agent_namespace(self.agent_id)
         if self.get_namespace() != expected:
             # Its relative names (sense, cmd_vel, trigger_info/to_<j>) must resolve under it.
@@ -257,6 +365,7 @@ class FormationAgentNode(Node):
             and self._sense.service_is_ready()
             and self._command_pub.get_subscription_count() >= listeners
             and self._status_pub.get_subscription_count() >= listeners
+            and self._report_pub.get_subscription_count() >= listeners
             and self._step_sub.get_publisher_count() >= 1
         )
 
@@ -267,7 +376,11 @@ class FormationAgentNode(Node):
     # -- lock-step ------------------------------------------------------------------------------
 
     def _on_step(self, msg: Float64MultiArray) -> None:
-        step = decode_step(msg)
+        try:
+            step = decode_step(msg)
+        except MessageError as error:
+            self._reject(STEP_TOPIC, error.reason, str(error))
+            return
         if self.step is not None and step.index <= self.step.index:
             return  # a repeat of a step already handled
         if self._discovery is not None:
@@ -277,11 +390,18 @@ class FormationAgentNode(Node):
         if step.final:
             self.finished = True
             self._cancel_due_timer()
+            self._publish_report(final=True)
             return
         if step.realtime:
             self._epoch = step.epoch
             self._sense_now()  # t^i_1 = 0
             return
+        if self.injection.loss > 0.0:
+            # Lock-step counts every message: one dropped on purpose would stall the run.
+            raise AgentNodeError(
+                f'agent {self.agent_id}: inject_loss={self.injection.loss!r} needs wall-clock mode '
+                '(lock-step waits for every message sent; a dropped one stalls the run)'
+            )
         if step.time > self._next_time:
             raise AgentNodeError(
                 f'agent {self.agent_id}: step {step.index} at t={step.time!r} skips its triggering time '
@@ -318,6 +438,20 @@ class FormationAgentNode(Node):
         """Raise what went wrong outside the executor's reach."""
         if self.failure is not None:
             raise self.failure
+        lost = self._simulator_lost_at
+        if lost is not None and not self.finished and time.monotonic() - lost > LOST_GRACE:
+            where = 'during discovery' if self.step is None else f'after step {self.step.index} (t={self.step.time!r})'
+            raise PeerLostError(
+                f'agent {self.agent_id}: the simulator (writer of {STEP_TOPIC}) is lost {where}: '
+                f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)'
+            )
+
+    def _on_simulator_liveliness(self, info) -> None:
+        if info.alive_count > 0:
+            self._simulator_seen = True
+            self._simulator_lost_at = None
+        elif self._simulator_seen and self._simulator_lost_at is None:
+            self._simulator_lost_at = time.monotonic()
 
     def _trigger(self, future) -> None:
         sensed = decode_sensed_state(future.result())
@@ -350,13 +484,82 @@ class FormationAgentNode(Node):
         else:
             self._replan()
 
-    def _on_info(self, msg: Float64MultiArray, sender: int) -> None:
-        info = decode_trigger_info(msg)
-        if info.sender != sender or info.receiver != self.agent_id:
-            raise AgentNodeError(
-                f'agent {self.agent_id}: topic {trigger_info_topic(sender, self.agent_id)} carried '
-                f'information from agent {info.sender} to agent {info.receiver}'
+    # -- arriving triggering information ---------------------------------------------------------
+
+    def _on_arrival(self, msg: Float64MultiArray, sender: int) -> None:
+        """The network's side: injected faults act here, before the message is even read."""
+        if not self.injection.active:
+            self._on_info(msg, sender)
+            return
+        if self.injection.drop():
+            self.dropped += 1
+            self._report_dirty = True
+            return
+        if self.injection.delay == 0.0 and self.injection.jitter == 0.0:
+            self._on_info(msg, sender)
+            return
+        now = time.monotonic()
+        due = self.injection.due(sender, now)
+        self._delay_seq += 1
+        heapq.heappush(self._delay_line, (due, self._delay_seq, sender, msg))
+        self._arm_delay_timer(now)
+
+    def _arm_delay_timer(self, now: float) -> None:
+        if self._delay_timer is not None:
+            self.destroy_timer(self._delay_timer)
+            self._delay_timer = None
+        if self._delay_line:
+            self._delay_timer = self.create_timer(max(self._delay_line[0][0] - now, 0.0), self._release_delayed)
+
+    def _release_delayed(self) -> None:
+        now = time.monotonic()
+        while self._delay_line and self._delay_line[0][0] <= now:
+            _, _, sender, msg = heapq.heappop(self._delay_line)
+            self.delayed += 1
+            self._report_dirty = True
+            if not self.finished:
+                self._on_info(msg, sender)
+        self._arm_delay_timer(now)
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        """Count and log a message that cannot be used; the node carries on without it."""
+        count = self.rejected.get(reason, 0) + 1
+        self.rejected[reason] = count
+        self._report_dirty = True
+        if count <= 3 or count % 100 == 0:  # the first few of each kind, then a trickle
+            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+    def _implausible(self, info: TriggerInfo, sender: int) -> tuple[str, str] | None:
+        """Why `info`, well formed, cannot be the next information of `sender` for this agent."""
+        if info.sender != sender:
+            return REJECT_SENDER, f'information from agent {info.sender} on the topic of agent {sender}'
+        if info.receiver != self.agent_id:
+            return REJECT_RECEIVER, f'information for agent {info.receiver}, not {self.agent_id}'
+        kind_ok = (info.rel_velocity is None) == (self.algorithm == 'eta1')
+        if len(info.control) != self.dimension or not kind_ok:
+            return REJECT_DIMENSION, (
+                f'{"ETA-1" if info.rel_velocity is None else "ETA-2"} information of dimension '
+                f'{len(info.control)}; this agent runs {self.algorithm.upper()} with p = {self.dimension}'
             )
+        last = self._last_stamp.get(sender)
+        if info.stamp < 0.0 or (last is not None and info.stamp < last):
+            previous = 't = 0' if last is None else f'its previous one at t={last!r}'
+            return REJECT_TIME_BACKWARDS, f'agent {sender} stamped t={info.stamp!r}, before {previous}'
+        if info.stamp == last:
+            return REJECT_DUPLICATE, f'agent {sender} already sent information stamped t={last!r}'
+        return None
+
+    def _on_info(self, msg: Float64MultiArray, sender: int) -> None:
+        topic = trigger_info_topic(sender, self.agent_id)
+        try:
+            info = decode_trigger_info(msg)
+        except MessageError as error:
+            self._reject(topic, error.reason, str(error))
+            return
+        if (problem := self._implausible(info, sender)) is not None:
+            self._reject(topic, *problem)
+            return
+        self._last_stamp[sender] = info.stamp
         due = self._epoch is None and self._next_time > self._last_trigger  # not yet triggered at
         if self._sensing or (due and info.stamp >= self._next_time):
             # This agent triggers at that instant itself: its own sensing comes first, then the
@@ -372,6 +575,7 @@ class FormationAgentNode(Node):
         if info.stamp < self._last_trigger:  # only on the wall clock: it crossed our trigger
             info = self._rebased(info)
             self.late_infos += 1
+            self._report_dirty = True
         self.core.receive(info)
         self.info_received += 1
 
@@ -437,13 +641,36 @@ class FormationAgentNode(Node):
         )
         self._status_pub.publish(encode_status(status))
 
+    # -- reports ----------------------------------------------------------------------------------
+
+    def report(self, *, final: bool = False) -> AgentReport:
+        return AgentReport(
+            agent=self.agent_id,
+            final=final,
+            rejected=dict(self.rejected),
+            dropped=self.dropped,
+            delayed=self.delayed,
+            late=self.late_infos,
+        )
+
+    def _publish_report(self, *, final: bool = False) -> None:
+        self._report_dirty = False
+        self._report_pub.publish(encode_agent_report(self.report(final=final)))
+
+    def _publish_report_if_dirty(self) -> None:
+        if self._report_dirty and not self.finished:
+            self._publish_report()
+
     def wait_for_delivery(self, timeout_sec: float = 2.0) -> None:
         """Let reliable writers hand over what they still hold before the node goes away."""
-        for pub in (self._status_pub, self._command_pub, *self._info_pubs.values()):
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+        for pub in (self._status_pub, self._report_pub, self._command_pub, *self._info_pubs.values()):
+            pub.wait_for_all_acked(Duration(seconds=timeout_sec))
 
 
 # -- entry point ------------------------------------------------------------------------------
+
+EXIT_PEER_LOST = 3
+"""Exit status of a node that left because a peer it depends on was lost."""
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
@@ -491,6 +718,9 @@ def main(args: Sequence[str] | None = None) -> int:
             node.wait_for_delivery()
     except (KeyboardInterrupt, ExternalShutdownException):
         status = 130
+    except PeerLostError as error:
+        print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+        status = EXIT_PEER_LOST
     except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
         print(f'formation_agent: {error}', file=sys.stderr, flush=True)
         traceback.print_exc(file=sys.stderr)
