@@ -8,16 +8,27 @@ print(result.summary, result.bag)
 ```
 
 Every child runs in its own process group and session, in a private ROS domain limited to this
-machine; the run ends when the simulator reaches the horizon, when any child dies, or on Ctrl-C.
-Children are then stopped by PID (SIGINT, then SIGTERM, then SIGKILL after timeouts), and the
-Fast DDS shared-memory files of any child killed hard are removed.
+machine (unless `localhost_only=False`); the run ends when the simulator reaches the horizon, when
+any child dies, or on Ctrl-C/SIGTERM.  Children are then stopped by PID (SIGINT, then SIGTERM,
+then SIGKILL after timeouts), and the Fast DDS shared-memory files of any child killed hard are
+removed.  If the orchestrator itself is killed, the kernel sends every child SIGTERM
+(PR_SET_PDEATHSIG), so nothing is left running.
+
+Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
+nothing (`formation_sim.validate.ValidationError`).  A child that dies stops the run: the
+simulator detects a lost agent itself within the DDS liveliness lease and stops with a partial
+summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
+`LOST_DETECTION` s to do so, then stops the rest.  The summary's `extra.failure` names what failed
+and when; a bag left unfinished by a dead recorder is recovered with `recorder.reindex`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import fcntl
 import importlib.util
+import json
 import math
 import os
 import random
@@ -27,13 +38,14 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
 from formation_sim.scenario import Scenario, dump_scenario, load_scenario
+from formation_sim.validate import require_valid
 
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
@@ -42,6 +54,19 @@ SUMMARY_FILE = 'summary.json'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 PROGRESS_PREFIX = 'progress '
+POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+
+# Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_LOST = 3  # a process of the run died or an agent was lost
+EXIT_INTERRUPTED = 130
+
+INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+
+# How long the simulator may take to notice a lost agent by itself: the DDS liveliness lease, its
+# grace, one 0.1 s tick, and margin for a loaded machine (formation_agent.node.LIVELINESS_LEASE).
+LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
 
 
 class RunError(RuntimeError):
@@ -61,13 +86,15 @@ class RunResult:
     """What a run left behind and how it ended."""
 
     out_dir: Path
-    summary: Path | None  # DIR/summary.json, None if the run did not complete
-    bag: Path | None  # DIR/bag, None if not recorded or not finalized
-    exit_status: int  # 0 success; 1 a child failed; 130 interrupted
+    summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
+    bag: Path | None  # DIR/bag, None if not recorded or not readable
+    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 130 interrupted
     domain_id: int
     wall_time: float
     children: tuple[ChildExit, ...] = ()
     message: str = ''
+    failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
+    bag_recovered: bool = False  # the recorder died and its bag was rebuilt by recorder.reindex
 
     @property
     def ok(self) -> bool:
@@ -133,6 +160,28 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 # -- processes --------------------------------------------------------------------------------
 
 
+try:  # looked up here, not in the forked child (a child before exec must take no lock)
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # pragma: no cover - not Linux
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the orchestrator dies, even by SIGKILL (Linux)."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+
+
+def describe_exit(returncode: int | None) -> str:
+    if returncode is None:
+        return 'still running'
+    if returncode < 0:
+        with contextlib.suppress(ValueError):
+            return f'killed by {signal.Signals(-returncode).name}'
+    return f'exited with status {returncode}'
+
+
 @dataclass
 class _Child:
     name: str
@@ -141,6 +190,7 @@ class _Child:
     expected_exit: bool  # leaves by itself when the run completes
     signal_used: str | None = None
     shm_files: set[str] = field(default_factory=set)
+    exited_at: float | None = None  # monotonic time its exit was seen
 
     @property
     def pid(self) -> int:
@@ -186,8 +236,24 @@ class FormationRun:
         timeout: float | None = None,
         clock: str = 'lockstep',
         stop_timeouts: tuple[float, float] = (5.0, 3.0),
+        validate: bool = True,
+        inject: dict[str, float] | None = None,
+        launch_prefix: Callable[[str], Sequence[str]] | None = None,
+        extra_env: dict[str, str] | None = None,
     ) -> None:
+        """Check everything that can be checked before any process starts.
+
+        `validate`: refuse a scenario that breaks the theorems' hypotheses (ValidationError);
+        False only for experiments on purpose outside them.  `inject`: fault injection on the
+        agents' arriving triggering information, keys `loss` (probability), `delay_ms`,
+        `jitter_ms`, `seed` (a test facility; loss needs clock='realtime').  `launch_prefix`:
+        child name ('simulator', 'recorder', 'agent_<i>' or 'agents_<i>-<j>') -> command put
+        before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
+        stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
+        """
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        if validate:
+            require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
         self.out_dir = Path(out_dir)
         self.horizon = float(self.scenario.horizon if horizon is None else horizon)
         if not (math.isfinite(self.horizon) and self.horizon > 0.0):
@@ -199,6 +265,21 @@ class FormationRun:
         if clock not in ('lockstep', 'realtime'):
             raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
         self.clock = clock
+        self.inject = dict(inject or {})
+        if unknown := set(self.inject) - set(INJECT_KEYS):
+            raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
+        for key, value in self.inject.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise RunError(f'inject: {key} must be a finite number >= 0, got {value!r}')
+        if self.inject.get('loss', 0.0) > 1.0:
+            raise RunError(f'inject: loss is a probability in [0, 1], got {self.inject["loss"]!r}')
+        if self.inject.get('loss', 0.0) > 0.0 and clock != 'realtime':
+            raise RunError(
+                'inject: loss needs the wall clock (clock=realtime, --real-time): lock-step waits for '
+                'every message sent, so a dropped one stalls the run'
+            )
+        self.launch_prefix = launch_prefix
+        self.extra_env = dict(extra_env or {})
         self.domain_id = domain_id
         self.agents_per_process = agents_per_process
         self.record = record
@@ -211,6 +292,7 @@ class FormationRun:
         self.removed_shm_files: list[str] = []
         self._interrupted = threading.Event()
         self._last_progress = ''
+        self._started_at = 0.0
 
     # -- files ---------------------------------------------------------------------------------
 
@@ -228,9 +310,15 @@ class FormationRun:
         scenario_path = out / SCENARIO_FILE
         dump_scenario(self.scenario, scenario_path)  # every float kept bit for bit
         extra = 1 if self.record else 0
+        injected = {
+            f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()
+        }
         agents = {
             f'{agent_namespace(i)}/{NODE_NAME}': {
-                'ros__parameters': agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra)
+                'ros__parameters': {
+                    **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
+                    **injected,
+                }
             }
             for i in self.scenario.agent_ids
         }
@@ -258,8 +346,11 @@ class FormationRun:
         env['PYTHONUNBUFFERED'] = '1'
         if self.localhost_only:
             env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        else:
+            env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
         if processes > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.update(self.extra_env)
         # Children find these packages the way this process did.
         here = [
             str(Path(next(iter(importlib.util.find_spec(name).submodule_search_locations))).resolve().parent)
@@ -271,13 +362,15 @@ class FormationRun:
     def _start(self, name: str, args: list[str], env: dict[str, str], *, expected_exit: bool, pipe: bool = False) -> _Child:
         log = self.out_dir / LOG_DIR / f'{name}.log'
         handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
+        prefix = list(self.launch_prefix(name)) if self.launch_prefix is not None else []
         process = subprocess.Popen(
-            [sys.executable, *args],
+            [*prefix, sys.executable, *args],
             env=env,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE if pipe else handle,
             stderr=handle,
             start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
+            preexec_fn=_die_with_parent,  # noqa: PLW1509 - only prctl, no locks taken
             text=True,
         )
         child = _Child(name=name, process=process, log=log, expected_exit=expected_exit)
@@ -301,19 +394,26 @@ class FormationRun:
             raise RunError(f'{self.out_dir / BAG_DIR} exists; the recorder never overwrites a bag')
         self.out_dir.mkdir(parents=True, exist_ok=True)
         (self.out_dir / SUMMARY_FILE).unlink(missing_ok=True)
-        started = time.monotonic()
-        with reserve_domain(self.domain_id) as domain_id, self._sigint_trapped():
+        started = self._started_at = time.monotonic()
+        lost: _Child | None = None
+        with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
             paths = self._write_inputs()
             groups = self._agent_groups()
             env = self._environment(domain_id, len(groups) + 1 + int(self.record))
             try:
-                status, message = self._launch_and_watch(paths, groups, env)
+                status, message, lost = self._launch_and_watch(paths, groups, env)
             finally:
                 self._stop_all()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        if status == 0 and not summary.is_file():
-            status, message = 1, f'the simulator exited without writing {summary}'
+        recovered = self._recover_bag(bag) if self.record else None
+        failure = self._annotate_summary(summary, lost, status, message)
+        if status == EXIT_OK and not summary.is_file():
+            status, message = EXIT_FAILED, f'the simulator exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED:
+            message = failure['message'] + (f'; {message}' if message and message not in failure['message'] else '')
+        if recovered:
+            message += f'; the recorder died: its bag was recovered ({recovered})'
         result = RunResult(
             out_dir=self.out_dir,
             summary=summary if summary.is_file() else None,
@@ -326,23 +426,71 @@ class FormationRun:
                 for c in self._children
             ),
             message=message,
+            failure=failure,
+            bag_recovered=bool(recovered),
         )
         if self.progress:
-            outcome = 'done' if result.ok else 'stopped' if status == 130 else 'FAILED'
+            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
         return result
 
+    def _recover_bag(self, bag: Path) -> str | None:
+        """A bag left without metadata.yaml (its recorder died) is rebuilt from its MCAP file."""
+        if not bag.is_dir() or (bag / 'metadata.yaml').is_file():
+            return None
+        from formation_sim.recorder import RecorderError, reindex
+
+        try:
+            recovery = reindex(bag)
+        except (RecorderError, OSError) as error:
+            return f'recovery failed: {error}'
+        return f'{recovery.message_count} messages kept'
+
+    def _annotate_summary(self, summary: Path, lost: _Child | None, status: int, message: str) -> dict | None:
+        """Add the orchestrator's view of a failure to summary.json's extra.failure; return it."""
+        if not summary.is_file():
+            return None
+        data = json.loads(summary.read_text())
+        extra = data.setdefault('extra', {})
+        failure = extra.get('failure')
+        if failure is None and status == EXIT_OK:
+            return None
+        if failure is None:  # the simulator completed, but a child failed
+            failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
+        if lost is not None:
+            failure['process'] = {
+                'name': lost.name,
+                'pid': lost.pid,
+                'returncode': lost.process.returncode,
+                'exit': describe_exit(lost.process.returncode),
+                'seconds_after_launch': (lost.exited_at or time.monotonic()) - self._started_at,
+            }
+            if failure['kind'] == 'interrupted':  # stopped by us because of that child
+                failure['kind'] = 'process_lost'
+                failure['message'] = f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}'
+            if 'orchestrator' not in failure['detected_by']:
+                failure['detected_by'] += ', orchestrator'
+        extra['failure'] = failure
+        staging = summary.with_name(summary.name + '.tmp')
+        staging.write_text(json.dumps(data, indent=1, allow_nan=False) + '\n')
+        staging.replace(summary)
+        return failure
+
     @contextlib.contextmanager
-    def _sigint_trapped(self) -> Iterator[None]:
-        """Ctrl-C asks the run to stop cleanly (only possible from the main thread)."""
+    def _signals_trapped(self) -> Iterator[None]:
+        """Ctrl-C and SIGTERM ask the run to stop cleanly (only possible from the main thread)."""
         if threading.current_thread() is not threading.main_thread():
             yield
             return
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: self._interrupted.set())
+        previous = {
+            sig: signal.signal(sig, lambda signum, frame: self._interrupted.set())
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
         try:
             yield
         finally:
-            signal.signal(signal.SIGINT, previous)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
 
     @property
     def last_progress(self) -> str:
@@ -353,7 +501,10 @@ class FormationRun:
         """Stop the run as Ctrl-C would (for callers on another thread)."""
         self._interrupted.set()
 
-    def _launch_and_watch(self, paths: dict[str, Path], groups: list[list[int]], env: dict[str, str]) -> tuple[int, str]:
+    def _launch_and_watch(
+        self, paths: dict[str, Path], groups: list[list[int]], env: dict[str, str]
+    ) -> tuple[int, str, _Child | None]:
+        """Start the children and watch them: (exit status, message, the child that was lost)."""
         if self.record:
             self._start('recorder', ['-m', 'formation_sim.recorder', '--ros-args', '--params-file', str(paths['recorder'])], env, expected_exit=False)
         sim_args = [
@@ -377,32 +528,50 @@ class FormationRun:
             )
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''
+        lost: _Child | None = None
         while True:
             if self._interrupted.is_set():
-                return 130, 'interrupted'
-            if deadline is not None and time.monotonic() > deadline:
-                return 1, f'timed out after {self.timeout} s'
+                return EXIT_INTERRUPTED, 'interrupted', lost
+            now = time.monotonic()
+            if deadline is not None and now > deadline:
+                return EXIT_FAILED, f'timed out after {self.timeout} s', lost
             if self.progress and self._last_progress != shown:
                 shown = self._last_progress
                 self._say(shown)
+            for child in self._children:
+                if child.exited_at is None and not child.alive():
+                    child.exited_at = now
             code = simulator.process.poll()
             if code is not None:
-                if code != 0:
-                    return 1, f'simulator exited with status {code}; see {simulator.log}'
-                return self._finish(), ''
-            for child in self._children:
-                if child is not simulator and not child.alive() and (child.process.returncode != 0 or not child.expected_exit):
-                    return 1, f'{child.name} (pid {child.pid}) exited with status {child.process.returncode}; see {child.log}'
-            time.sleep(0.05)
+                if code == 0:
+                    return self._finish(), '', lost
+                status = EXIT_LOST if code == EXIT_LOST or lost is not None or code < 0 else EXIT_FAILED
+                return status, f'simulator {describe_exit(code)}; see {simulator.log}', lost
+            if lost is None:
+                lost = next(
+                    (
+                        c
+                        for c in self._children
+                        if c is not simulator and c.exited_at is not None
+                        and (c.process.returncode != 0 or not c.expected_exit)
+                    ),
+                    None,
+                )
+                if lost is not None and self.progress:
+                    self._say(f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; stopping the run')
+            if lost is not None and (lost.name == 'recorder' or now - lost.exited_at > LOST_DETECTION):
+                # An agent: the simulator has had the time to detect it and stop by itself.
+                return EXIT_LOST, f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; see {lost.log}', lost
+            time.sleep(POLL_PERIOD)
 
     def _finish(self) -> int:
         """After the simulator's success: let the agents leave, then close the bag."""
         limit = time.monotonic() + self.stop_timeouts[0]
         agents = [c for c in self._children if c.expected_exit and c.name != 'simulator']
         while any(c.alive() for c in agents) and time.monotonic() < limit:
-            time.sleep(0.05)
+            time.sleep(POLL_PERIOD)
         failed = [c for c in agents if not c.alive() and c.process.returncode != 0]
-        return 1 if failed else 0
+        return EXIT_FAILED if failed else EXIT_OK
 
     def _stop_all(self) -> None:
         """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.

@@ -17,6 +17,13 @@ Wall-clock mode (`clock_mode:=realtime`, as on robots): Step 0 carries the wall-
 t = 0 and agents keep their own timers.  The world then advances to the wall-clock time of each
 sensing request and each command as it arrives (still only event to event), and the run reports
 how late every trigger was against the time its agent had planned.
+
+Faults (README, "Reliability"): an agent whose command writer loses DDS liveliness (its process
+died, or the network no longer reaches it) is declared lost after `LIVELINESS_LEASE` +
+`LOST_GRACE` s; the run then stops.  Whenever a run stops early, after step 0 (an agent lost, a
+protocol violation, a stall, SIGINT/SIGTERM), the simulator still writes summary.json with what
+happened up to then and `extra.failure` saying what went wrong, where and when.  Exit status: 0
+done, 1 failed, 3 an agent lost, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from geometry_msgs.msg import Accel, PoseArray, Twist
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -41,7 +49,11 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from formation_agent.node import (
+    EXIT_PEER_LOST,
+    LIVELINESS_LEASE,
+    LOST_GRACE,
     PROTOCOL_QOS,
+    REPORT_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
     command_topic,
@@ -49,6 +61,8 @@ from formation_agent.node import (
     trigger_info_topic,
 )
 from formation_msgs_py.codec import (
+    MessageError,
+    decode_agent_report,
     decode_command,
     decode_status,
     encode_pose_array,
@@ -62,6 +76,7 @@ from formation_msgs_py.lockstep import (
     DISCOVERY_STEP,
     STEP_FLAG_FINAL,
     STEP_FLAG_REALTIME,
+    AgentReport,
     Status,
     Step,
     WorldState,
@@ -77,8 +92,37 @@ GRAPH_FILE = 'graph.json'
 CLOCK_MODES = ('lockstep', 'realtime')
 
 
+EXIT_FAILED = 1
+EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
+EXIT_INTERRUPTED = 130
+
+
 class SimulatorError(RuntimeError):
     """The distributed run cannot go on: a protocol violation, a stall, or a dead peer."""
+
+    kind = 'protocol'  # extra.failure.kind in summary.json
+
+
+class StallError(SimulatorError):
+    """No step settled within the stall timeout."""
+
+    kind = 'stall'
+
+
+class DiscoveryError(SimulatorError):
+    """The agents did not all connect within the discovery timeout."""
+
+    kind = 'discovery'
+
+
+class AgentLostError(SimulatorError):
+    """One or more agents stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'agent_lost'
+
+    def __init__(self, message: str, *, agents: list[int]) -> None:
+        super().__init__(message)
+        self.agents = agents
 
 
 def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
@@ -93,6 +137,7 @@ def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
         (GROUND_TRUTH_TOPIC, 'geometry_msgs/msg/PoseArray'),
         (SENSING_LOG_TOPIC, 'std_msgs/msg/String'),
         (CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock'),
+        (REPORT_TOPIC, 'std_msgs/msg/String'),
     ]
     for i in scenario.agent_ids:
         topics.append((command_topic(i, double=double), command_type))
@@ -139,6 +184,9 @@ class _AgentBook:
     sensed_at_step: int = -1
     trigger_times: list[float] = field(default_factory=list)
     lateness: list[float] = field(default_factory=list)  # wall clock: trigger time - planned time
+    report: AgentReport | None = None  # its latest report (rejected and injected messages)
+    alive: bool = False  # its command writer is matched and alive (DDS liveliness)
+    lost: tuple[float, str] | None = None  # (monotonic time, how) once its command writer went away
 
 
 class FormationSimulatorNode(Node):
@@ -180,13 +228,18 @@ class FormationSimulatorNode(Node):
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, PROTOCOL_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, PROTOCOL_QOS)
         self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, PROTOCOL_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, PROTOCOL_QOS)
         command_type = Accel if self.double else Twist
+        # One command writer per agent: its DDS liveliness is the agent's sign of life.
         self._command_subs = {
             i: self.create_subscription(
                 command_type,
                 command_topic(i, double=self.double),
                 lambda msg, agent=i: self._on_command(msg, agent),
                 PROTOCOL_QOS,
+                event_callbacks=SubscriptionEventCallbacks(
+                    liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
+                ),
             )
             for i in self.agents
         }
@@ -212,6 +265,8 @@ class FormationSimulatorNode(Node):
         self._epoch = 0.0
         self._finished_at: float | None = None
         self.graph: dict = {}
+        self.rejected: dict[str, int] = {}  # malformed messages the simulator itself refused
+        self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
         self._timer = self.create_timer(0.1, self._tick)
 
     # -- discovery ------------------------------------------------------------------------------
@@ -222,6 +277,7 @@ class FormationSimulatorNode(Node):
             self._step_pub.get_subscription_count() >= len(self.agents) + extra
             and all(pub.get_subscription_count() >= extra for pub in (self._state_pub, self._truth_pub, self._log_pub, self._clock_pub))
             and self._status_sub.get_publisher_count() >= len(self.agents)
+            and self._report_sub.get_publisher_count() >= len(self.agents)
             and all(sub.get_publisher_count() >= 1 for sub in self._command_subs.values())
             and all(
                 book.status is not None and book.status.step_index == DISCOVERY_STEP and book.status.ready
@@ -231,12 +287,14 @@ class FormationSimulatorNode(Node):
 
     def _tick(self) -> None:
         now = time.monotonic()
+        if not self.finished:
+            self._check_lost(now)
         if self.step is None:
             if self._connected():
                 self._start()
             elif now - self._created > self.discovery_timeout:
                 missing = [i for i, book in self.agents.items() if book.status is None or not book.status.ready]
-                raise SimulatorError(
+                raise DiscoveryError(
                     f'discovery did not complete within {self.discovery_timeout} s; agents not ready: {missing}'
                 )
             return
@@ -245,10 +303,82 @@ class FormationSimulatorNode(Node):
         if self.realtime:
             self._realtime_tick()
         elif now - self._last_advance > self.stall_timeout:
-            raise SimulatorError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
+            raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
         if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
             self._last_progress = now
             self._print_progress()
+
+    # -- faults -----------------------------------------------------------------------------------
+
+    def _on_agent_liveliness(self, agent: int, info) -> None:
+        book = self.agents[agent]
+        if info.alive_count > 0:
+            book.alive = True
+            book.lost = None
+        elif book.alive and book.lost is None and not self.finished:
+            # A lease that expired: the process died or the network lost it.  A writer deleted:
+            # the agent left (its process exited) before the end of the run.
+            how = (
+                f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)'
+                if info.not_alive_count_change > 0
+                else 'its node left the graph'
+            )
+            book.lost = (time.monotonic(), how)
+
+    def _check_lost(self, now: float) -> None:
+        lost = {i: book.lost for i, book in self.agents.items() if book.lost is not None}
+        # After a short grace, so that what a lost agent sent before it went is handled first,
+        # and agents lost together (one process) are named together.
+        if not lost or now - min(at for at, _ in lost.values()) <= LOST_GRACE:
+            return
+        where = 'during discovery' if self.step is None else f'at t={self.world.time!r} (step {self.step.index})'
+        agents = sorted(lost)
+        names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {", ".join(map(str, agents))}'
+        hows = '; '.join(sorted({how for _, how in lost.values()}))
+        raise AgentLostError(f'{names} lost {where}: {hows}; the run stops', agents=agents)
+
+    def _on_report(self, msg: String) -> None:
+        try:
+            report = decode_agent_report(msg)
+        except MessageError as error:
+            self._reject(REPORT_TOPIC, error.reason, str(error))
+            return
+        book = self.agents.get(report.agent)
+        if book is None:
+            self._reject(REPORT_TOPIC, 'field', f'report of agent {report.agent}, not in the scenario')
+            return
+        if book.report is None or not book.report.final:
+            book.report = report
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        count = self.rejected.get(reason, 0) + 1
+        self.rejected[reason] = count
+        if count <= 3 or count % 100 == 0:
+            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+    def final_reports_in(self) -> bool:
+        """Every agent still alive has sent its final report."""
+        return all(book.report is not None and book.report.final for book in self.agents.values() if book.lost is None)
+
+    def fail(self, error: BaseException) -> None:
+        """Note why the run stops early (extra.failure of the summary)."""
+        if self.failure_info is not None:
+            return
+        if isinstance(error, SimulatorError):
+            kind = error.kind
+        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
+            kind = 'interrupted'
+        else:
+            kind = 'error'
+        self.failure_info = {
+            'kind': kind,
+            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+            'agents': list(getattr(error, 'agents', [])),
+            'time': self.world.time,
+            'step': None if self.step is None else self.step.index,
+            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
+            'detected_by': 'simulator',
+        }
 
     def _print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
@@ -331,7 +461,11 @@ class FormationSimulatorNode(Node):
         self._step_pub.publish(encode_step(step))
 
     def _on_status(self, msg: Float64MultiArray) -> None:
-        status = decode_status(msg)
+        try:
+            status = decode_status(msg)
+        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
+            self._reject(STATUS_TOPIC, error.reason, str(error))
+            return
         book = self.agents.get(status.agent)
         if book is None:
             raise SimulatorError(f'status from agent {status.agent}, which is not in the scenario {sorted(self.agents)}')
@@ -492,20 +626,49 @@ class FormationSimulatorNode(Node):
             scenario=self.scenario,
             horizon=self.horizon,
             mode='distributed',
-            trigger_times={i: list(book.trigger_times) for i, book in self.agents.items()},
+            # A trigger counts once its command has acted on the world (a run stopped early may
+            # have sensed for a trigger that never completed).
+            trigger_times={i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()},
             sample_times=np.array(self._samples_t),
             sample_positions=np.array(self._samples_x),
             sample_velocities=np.array(self._samples_q) if self._samples_q else None,
-            messages_sent=sum(s.info_sent for s in statuses.values()),
+            messages_sent=sum(s.info_sent for s in statuses.values() if s is not None),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
                 'clock': self.clock_mode,
                 'steps': self.steps,
                 'discovery_wall_time': (self._started or self._created) - self._created,
+                'reached_time': self.world.time,
+                'failure': self.failure_info,
+                **self._message_counts(),
                 **(self._lateness() if self.realtime else {}),
             },
         )
+
+    def _message_counts(self) -> dict:
+        """Rejected messages per reason and agent, and faults injected, from the agents' reports."""
+        by_agent = {str(i): dict(book.report.rejected) for i, book in self.agents.items() if book.report and book.report.rejected}
+        by_reason: dict[str, int] = {}
+        for counts in (*by_agent.values(), self.rejected):
+            for reason, n in counts.items():
+                by_reason[reason] = by_reason.get(reason, 0) + n
+        reports = [book.report for book in self.agents.values() if book.report is not None]
+        return {
+            'rejected_messages': {
+                'total': sum(by_reason.values()),
+                'by_reason': dict(sorted(by_reason.items())),
+                'by_agent': by_agent,
+                'simulator': dict(self.rejected),
+            },
+            'injected_faults': {
+                'dropped': sum(r.dropped for r in reports),
+                'delayed': sum(r.delayed for r in reports),
+                'by_agent': {str(r.agent): {'dropped': r.dropped, 'delayed': r.delayed} for r in reports if r.dropped or r.delayed},
+            },
+            'late_information': sum(r.late for r in reports),
+            'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
+        }
 
     def _lateness(self) -> dict:
         """Wall clock: how late triggers came against the times agents had planned them."""
@@ -522,6 +685,12 @@ class FormationSimulatorNode(Node):
     def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
         for pub in (self._step_pub, self._state_pub, self._truth_pub, self._log_pub, self._clock_pub):
             pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+
+    def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
+        """After the final step: wait (bounded) for every live agent's last report."""
+        deadline = time.monotonic() + timeout_sec
+        while not self.final_reports_in() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
 
 
 def write_results(node: FormationSimulatorNode) -> None:
@@ -546,22 +715,37 @@ def main(args: Sequence[str] | None = None) -> int:
             executor.spin_once(timeout_sec=0.5)
             if node.failure is not None:
                 raise node.failure
+        node.collect_final_reports(executor)
         node.wait_for_delivery()
         if node.progress_period > 0.0:
             node._print_progress()
         if node.out_dir:
             write_results(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        status = 130
+    except (KeyboardInterrupt, ExternalShutdownException) as error:
+        status = EXIT_INTERRUPTED
+        _write_partial(node, error)
     except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
         print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-        traceback.print_exc(file=sys.stderr)
-        status = 1
+        if not isinstance(error, AgentLostError):
+            traceback.print_exc(file=sys.stderr)
+        status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
+        _write_partial(node, error)
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+def _write_partial(node: FormationSimulatorNode | None, error: BaseException) -> None:
+    """A run stopped early after step 0: the summary of what happened, and why it stopped."""
+    if node is None or node.step is None or not node.out_dir:
+        return
+    node.fail(error)
+    try:
+        write_results(node)
+    except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+        print(f'formation_sim: could not write the partial results: {problem}', file=sys.stderr, flush=True)
 
 
 if __name__ == '__main__':

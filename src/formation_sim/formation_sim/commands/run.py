@@ -18,6 +18,9 @@ def register(subparsers) -> None:
         'sensing services, every agent is its own node talking only to its neighbours, and time '
         'advances in lock-step from event to event. Writes summary.json (same schema as '
         '`formation simulate`) and the rosbag2 bag (MCAP) into --out.',
+        epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started); 3 a process or '
+        'an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
+        'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     parser.add_argument('scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})')
     parser.add_argument('--horizon', type=float, default=None, help="final time in seconds (default: the scenario's)")
@@ -33,6 +36,12 @@ def register(subparsers) -> None:
         'processing delays, which the summary reports (default: lock-step sim time, exact)',
     )
     parser.add_argument('--timeout', type=float, default=None, help='give up after this many wall-clock seconds')
+    parser.add_argument(
+        '--network',
+        action='store_true',
+        help='let DDS discovery reach the local network (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) for agents on '
+        'other machines; default: this machine only (LOCALHOST)',
+    )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -57,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
             sample_period=args.sample_dt,
             timeout=args.timeout,
             clock='realtime' if args.real_time else 'lockstep',
+            localhost_only=not args.network,
         ).run()
     except RunError as error:
         print(f'formation run: error: {error}', file=sys.stderr)
