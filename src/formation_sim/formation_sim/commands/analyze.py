@@ -1,0 +1,120 @@
+"""`formation analyze RUN_DIR_OR_BAG`: recompute a run's metrics from its bag; report, figures, animation.
+
+Exit codes: 0 every check holds (and the bag agrees with summary.json), 1 a check fails or the
+bag differs from summary.json (the report says where), 2 the run cannot be analysed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+EXIT_OK = 0
+EXIT_FINDINGS = 1
+EXIT_UNREADABLE = 2
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'analyze',
+        help='recompute every metric of a run from its bag; report, figures, animation',
+        description='Rebuild a run from its rosbag2 bag alone (triggering times from the TriggerInfo '
+        'messages, trajectories from /formation/state) and recompute every metric of summary.json, '
+        'check them against Theorems 1/2, and write analysis.md, analysis.json, the figures (the '
+        "paper's Fig. 1/2 style, edge lengths, formation error, inter-event times, energy) and an "
+        'animation. Differences from the run\'s summary.json are listed. Exit 0: all checks hold; '
+        '1: a check fails or the bag differs from summary.json; 2: cannot analyse.',
+    )
+    parser.add_argument('run', metavar='RUN_DIR_OR_BAG', type=Path, help='run folder (with bag/), bag folder or .mcap file')
+    parser.add_argument('--out', type=Path, default=None, help='output folder (default: RUN_DIR/analysis, or <bag>_analysis)')
+    parser.add_argument(
+        '--scenario',
+        default=None,
+        metavar='NAME_OR_YAML',
+        help='the run\'s scenario, used only if neither the bag (/formation/scenario) nor its run folder (scenario.yaml) holds it',
+    )
+    parser.add_argument('--markers', action='store_true', help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove')
+    parser.add_argument('--no-figures', action='store_true', help='report only')
+    parser.add_argument('--no-animation', action='store_true', help='skip the GIF (the slowest part)')
+    parser.add_argument('--frames', type=int, default=100, help='animation frames (default 100)')
+    parser.add_argument('--fps', type=int, default=12, help='animation frames per second (default 12)')
+    parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
+    parser.set_defaults(func=run)
+
+
+def default_out_dir(location) -> Path:
+    if location.run_dir is not None:
+        return location.run_dir / 'analysis'
+    return location.bag.parent / f'{location.bag.name}_analysis'
+
+
+def run(args: argparse.Namespace) -> int:
+    from formation_sim import analyze, figures, theory
+    from formation_sim.markers import MarkerError, write_bag_with_markers
+    from formation_sim.progress import Progress
+    from formation_sim.recorder import RecorderError
+
+    show = not args.quiet
+    try:
+        location = analyze.locate(args.run)
+        if location.bag is None:
+            raise analyze.AnalysisError(f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)')
+        reading = Progress(f'reading {location.bag}', enabled=show)
+        bag_run = analyze.load_bag_run(location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading)
+        reading.close()
+    except analyze.AnalysisError as error:
+        print(f'formation analyze: error: {error}', file=sys.stderr)
+        return EXIT_UNREADABLE
+    record = bag_run.record
+    out = args.out or default_out_dir(location)
+    out.mkdir(parents=True, exist_ok=True)
+    series = analyze.run_series(record, progress=Progress('evaluating ν and V', enabled=show))
+    try:
+        bounds, bounds_error = analyze.theory_bounds(record.scenario), None
+    except theory.TheoryError as error:
+        bounds, bounds_error = None, str(error)
+    written: dict[str, str] = {}
+    if not args.no_figures:
+        written.update(figures.write_figures(record, series, bounds, out))
+        if not args.no_animation:
+            frames = Progress('animation frames', enabled=show)
+            figures.animate(record, out / 'animation.gif', frames=args.frames, fps=args.fps, progress=frames)
+            frames.close()
+            written['animation'] = 'animation.gif'
+    if args.markers:
+        target = out / 'bag_markers'
+        copying = Progress(f'writing {target}', enabled=show)
+        try:
+            marked = write_bag_with_markers(location.bag, target, record.scenario, progress=copying)
+        except (RecorderError, MarkerError) as error:
+            print(f'formation analyze: error: {error}', file=sys.stderr)
+            return EXIT_UNREADABLE
+        copying.close()
+        written['bag with /formation/markers'] = target.name
+        if marked.skipped_topics:
+            print(f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}', file=sys.stderr)
+    report = analyze.build_report(bag_run, series=series, bounds=bounds, bounds_error=bounds_error, summary_path=location.summary, figures=written)
+    markdown, data = analyze.write_report(report, out)
+    failed = [check['name'] for check in report['bag_checks'] + report['theorem_checks'] if not check['ok']]
+    differs = report['summary_json'] is not None and not report['summary_json']['equal']
+    if args.quiet:
+        print(markdown)
+    else:
+        summary = report['summary']
+        print(
+            f'{record.scenario.name}: {summary["total_events"]} events, {summary["messages_sent"]} messages, '
+            f'max edge length {summary["max_edge_length"]:.6g} (Δ = {record.scenario.delta:g}), '
+            f'final formation error {summary["final_formation_error"]:.3g}',
+            file=sys.stderr,
+        )
+        if report['summary_json'] is not None:
+            state = 'equals the bag' if not differs else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
+            print(f'summary.json {state}', file=sys.stderr)
+        for name in failed:
+            print(f'check failed: {name}', file=sys.stderr)
+        print(f'report:  {markdown}')
+        print(f'json:    {data}')
+        for title, name in written.items():
+            print(f'{title}: {out / name}')
+    return EXIT_FINDINGS if failed or differs else EXIT_OK
