@@ -1,0 +1,89 @@
+"""`formation compare RUN_A RUN_B`: events, messages, trajectories and triggering times of two runs.
+
+Exit codes: 0 compared (with --tolerance: and the runs agree within it), 1 they do not agree
+within --tolerance, 2 a run cannot be read or the runs are of different agents.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'compare',
+        help='compare two runs: events, messages, trajectories, triggering times',
+        description='Compare two runs of a scenario (run folders, bags or summary.json files), e.g. '
+        'distributed against in-process, or event-triggered against `formation simulate --period`. '
+        'Triggering times are matched per agent index by index (count mismatches are listed); '
+        'trajectories are interpolated on the common times. Writes compare.md, compare.json and '
+        'overlay figures.',
+    )
+    parser.add_argument('run_a', metavar='RUN_A', type=Path, help='run folder, bag or summary.json')
+    parser.add_argument('run_b', metavar='RUN_B', type=Path, help='run folder, bag or summary.json')
+    parser.add_argument('--out', type=Path, default=None, help='output folder (default: RUN_A/compare-<name of RUN_B>)')
+    parser.add_argument('--scenario', default=None, metavar='NAME_OR_YAML', help="scenario for bags that do not hold it (see formation analyze)")
+    parser.add_argument('--label-a', default=None, help='name of run A in the report (default: its mode)')
+    parser.add_argument('--label-b', default=None, help='name of run B in the report (default: its mode)')
+    parser.add_argument('--tolerance', type=float, default=None, metavar='T', help='exit 1 unless event counts are equal and every deviation is <= T')
+    parser.add_argument('--no-figures', action='store_true', help='report only')
+    parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
+    parser.set_defaults(func=run)
+
+
+def _default_out(a: Path, b: Path) -> Path:
+    base = a if a.is_dir() else a.parent
+    return base / f'compare-{b.resolve().name if b.is_dir() else b.resolve().parent.name}'
+
+
+def run(args: argparse.Namespace) -> int:
+    from formation_sim.compare import CompareError, compare_runs, load_run, overlay_figures, within, write_comparison
+    from formation_sim.progress import Progress
+
+    if args.tolerance is not None and not (math.isfinite(args.tolerance) and args.tolerance >= 0.0):
+        print(f'formation compare: error: --tolerance must be a finite number >= 0, got {args.tolerance!r}', file=sys.stderr)
+        return 2
+    show = not args.quiet
+    try:
+        runs = []
+        for path, label in ((args.run_a, args.label_a), (args.run_b, args.label_b)):
+            progress = Progress(f'reading {path}', enabled=show)
+            loaded = load_run(path, label=label or '', scenario=args.scenario, progress=progress)
+            progress.close()
+            loaded.label = label or loaded.mode
+            runs.append(loaded)
+        a, b = runs
+        if a.label == b.label:
+            a.label, b.label = f'{a.label} (A)', f'{b.label} (B)'
+        report = compare_runs(a, b)
+    except CompareError as error:
+        print(f'formation compare: error: {error}', file=sys.stderr)
+        return 2
+    out = args.out or _default_out(args.run_a, args.run_b)
+    figures = None if args.no_figures else overlay_figures(a, b, out)
+    markdown, data = write_comparison(report, out, figures)
+    agree = args.tolerance is None or within(report, args.tolerance)
+    if args.quiet:
+        print(markdown)
+    else:
+        deviation = report['max_trigger_deviation']
+        trajectory = report['trajectory']
+        print(
+            f'events A {a.total_events} / B {b.total_events}; messages A {a.messages_sent} / B {b.messages_sent}; '
+            f'max triggering-time deviation {deviation if deviation is not None else "—"}; '
+            f'max trajectory deviation {trajectory["max_deviation"] if trajectory else "—"}',
+            file=sys.stderr,
+        )
+        for line in report['count_mismatches']:
+            print(f'event count mismatch: {line}', file=sys.stderr)
+        print(f'report: {markdown}')
+        print(f'json:   {data}')
+        for title, (name, _) in (figures or {}).items():
+            print(f'{title}: {out / name}')
+    if not agree:
+        print(f'formation compare: the runs differ by more than {args.tolerance}', file=sys.stderr)
+        return 1
+    return 0
