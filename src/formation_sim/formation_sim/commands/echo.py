@@ -1,0 +1,79 @@
+"""`formation echo TOPIC`: print a live topic's messages readably (formation payloads decoded)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from formation_sim.commands.topics import add_domain_argument, check_domain
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'echo',
+        help='print the messages of a live topic (formation layouts decoded)',
+        description='Like `ros2 topic echo`, for machines without ros2cli: TriggerInfo, Step, Status '
+        'and WorldState (Float64MultiArray layouts of docs/MESSAGES.md) are decoded into their '
+        'fields; every other type is printed field by field. Messages are separated by ---.',
+    )
+    parser.add_argument('topic', metavar='TOPIC')
+    add_domain_argument(parser)
+    parser.add_argument('--count', type=int, default=None, metavar='K', help='exit after K messages')
+    parser.add_argument('--timeout', type=float, default=None, metavar='S', help='exit 1 if fewer than --count messages (or none) came within S seconds')
+    parser.add_argument('--wait', type=float, default=10.0, metavar='S', help='wait up to S seconds for a publisher of TOPIC (default 10)')
+    parser.add_argument('--raw', action='store_true', help='do not decode formation layouts')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not check_domain('echo', args.domain_id):
+        return 2
+    if args.count is not None and args.count < 1:
+        print(f'formation echo: error: --count must be >= 1, got {args.count}', file=sys.stderr)
+        return 2
+    import os
+    import time
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from formation_sim.recorder import UnknownMessageTypeError, import_message_class
+    from formation_sim.ros_inspect import InspectError, echo_qos, format_message, to_yaml, wait_for_topic
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=args.domain_id)
+    node = None
+    received = 0
+    try:
+        node = Node(f'formation_echo_{os.getpid()}', context=context, start_parameter_services=False, enable_rosout=False)
+        try:
+            msgtype = wait_for_topic(node, args.topic, timeout=args.wait)
+            msg_class = import_message_class(msgtype)
+        except (InspectError, UnknownMessageTypeError) as error:
+            print(f'formation echo: error: {error}', file=sys.stderr)
+            return 1
+
+        def show(msg) -> None:
+            nonlocal received
+            received += 1
+            text = to_yaml(msg) if args.raw else format_message(args.topic, msgtype, msg)
+            sys.stdout.write(text + '---\n')
+            sys.stdout.flush()
+
+        node.create_subscription(msg_class, args.topic, show, echo_qos(node, args.topic))
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = None if args.timeout is None else time.monotonic() + args.timeout
+        while args.count is None or received < args.count:
+            if deadline is not None and time.monotonic() > deadline:
+                print(f'formation echo: {received} message(s) on {args.topic} within {args.timeout} s', file=sys.stderr)
+                return 1
+            executor.spin_once(timeout_sec=0.1)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return 0
