@@ -11,7 +11,7 @@ import importlib
 import sys
 
 # One entry per subcommand module, in help order.
-COMMANDS: tuple[str, ...] = ('validate', 'simulate', 'run', 'recover')
+COMMANDS: tuple[str, ...] = ('validate', 'simulate', 'run', 'recover', 'analyze', 'compare', 'replay', 'topics', 'echo')
 
 
 def build_parser() -> argparse.ArgumentParser:
