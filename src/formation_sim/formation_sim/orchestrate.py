@@ -546,7 +546,8 @@ class FormationRun:
                 if code == 0:
                     return self._finish(), '', lost
                 status = EXIT_LOST if code == EXIT_LOST or lost is not None or code < 0 else EXIT_FAILED
-                return status, f'simulator {describe_exit(code)}; see {simulator.log}', lost
+                seen = '' if lost is None else f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; '
+                return status, f'{seen}simulator {describe_exit(code)}; see {simulator.log}', lost
             if lost is None:
                 lost = next(
                     (

@@ -28,6 +28,7 @@ done, 1 failed, 3 an agent lost, 130 interrupted.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -382,11 +383,14 @@ class FormationSimulatorNode(Node):
 
     def _print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
-        print(
-            f'progress t={self.world.time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
-            f'wall={time.monotonic() - (self._started or self._created):.1f}s',
-            flush=True,
-        )
+        try:
+            print(
+                f'progress t={self.world.time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+                flush=True,
+            )
+        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
+            self.progress_period = 0.0
 
     def _describe_wait(self) -> str:
         lines = [f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)})']
@@ -397,7 +401,8 @@ class FormationSimulatorNode(Node):
     def _start(self) -> None:
         self._started = time.monotonic()
         if self.progress_period > 0.0:
-            print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
+            with contextlib.suppress(OSError):
+                print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
         self._sample_event()
         if self.realtime:

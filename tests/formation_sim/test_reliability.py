@@ -1,0 +1,189 @@
+"""Faults a robot team meets: bad messages, dead processes, signals, lossy links, shared networks.
+
+Real processes in private ROS domains 70-79 (each test its own). Every run starts 2-5 processes;
+the tests share the distributed tests' xdist group, so one run at a time on its worker.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+from formation_sim.engine import simulate
+from formation_sim.scenario import load_scenario
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_distributed')]
+
+ROOT = Path(__file__).resolve().parents[2]
+GENTLE = ROOT / 'benchmarks' / 'gentle_square.yaml'
+TOLERANCE = 1e-9
+
+
+# -- helpers ----------------------------------------------------------------------------------
+
+
+def _assert_same_events(summary: dict, reference) -> None:
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert len(got) == len(times), f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        assert max(abs(a - b) for a, b in zip(got, times)) <= TOLERANCE, f'agent {agent}'
+    assert summary['total_events'] == reference.total_events
+    assert summary['messages_sent'] == reference.messages_sent
+
+
+def _in_background(run):
+    results: list = []
+    worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
+    worker.start()
+    return worker, results
+
+
+def _wait_for_stepping(run, limit: float = 120.0) -> None:
+    deadline = time.monotonic() + limit
+    while not run.last_progress and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert run.last_progress, 'the run never started stepping'
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    """Live (not zombie) processes whose command line contains `text`."""
+    found = []
+    for proc in Path('/proc').iterdir():
+        if not proc.name.isdigit() or int(proc.name) == os.getpid():
+            continue
+        try:
+            cmdline = (proc / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+            state = (proc / 'stat').read_text().rsplit(')', 1)[1].split()[0]
+        except OSError:
+            continue
+        if text in cmdline and state != 'Z':
+            found.append(int(proc.name))
+    return found
+
+
+def _wait_until_gone(text: str, limit: float = 30.0) -> list[int]:
+    deadline = time.monotonic() + limit
+    while (left := _processes_mentioning(text)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return left
+
+
+def _bag_info_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.codec import decode_trigger_info
+    from formation_sim.recorder import read_bag
+
+    counts: dict[str, int] = defaultdict(int)
+    stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
+    for message in read_bag(bag):
+        counts[message.topic] += 1
+        if '/trigger_info/' in message.topic:
+            info = decode_trigger_info(deserialize_message(message.rawdata, Float64MultiArray))
+            stamps[(info.sender, info.receiver)].append(info.stamp)
+    return counts, stamps
+
+
+@pytest.fixture
+def ros_env(tmp_path, monkeypatch):
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+
+
+# -- bad messages -------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, ros_env):
+    """Malformed and implausible triggering information on agent 1's topic from agent 2, injected
+    while the lock-step run goes on (through a 2 ms injected delay): the run still equals the
+    in-process engine, and summary.json counts each rejection under its reason."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_agent.node import PROTOCOL_QOS, STEP_TOPIC, trigger_info_topic
+    from formation_msgs_py.codec import decode_step, encode_trigger_info
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.orchestrate import FormationRun
+
+    domain_id = 70
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    reference = simulate(scenario, horizon=horizon)
+    # Inject once every agent has received agent 2's second trigger (all steps before a step
+    # are settled when it is published): a stamp of 0 is then going backwards for sure.
+    events = sorted({t for times in reference.trigger_times.values() for t in times})
+    inject_at = events.index(reference.trigger_times[2][1]) + 1
+    assert inject_at < len(events) - 10
+
+    def raw(values):
+        return Float64MultiArray(data=[float(v) for v in values])
+
+    def info(**fields):
+        values = {'sender': 2, 'receiver': 1, 'stamp': 0.0, 'control': (0.5, -0.5), 'rel_position': (1.0, 2.0)}
+        return encode_trigger_info(TriggerInfo(**{**values, **fields}))
+
+    bad = [
+        (raw([2, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0, 2.0]), 'version'),
+        (raw([1, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0]), 'length'),
+        (raw([1, 1, 2, 1, 1.0, 2, math.nan, -0.5, 1.0, 2.0]), 'non_finite'),
+        (info(sender=3, stamp=1.0), 'sender'),
+        (info(stamp=0.0), 'time_backwards'),
+    ]
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('bad_message_injector', context=context)
+    try:
+        publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
+        seen = []
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
+        run = FormationRun(
+            scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
+            inject={'delay_ms': 2.0},
+        )
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        worker, results = _in_background(run)
+        injected = False
+        while worker.is_alive():
+            executor.spin_once(timeout_sec=0.05)
+            if not injected and seen and max(seen) >= inject_at:
+                for msg, _ in bad:
+                    publisher.publish(msg)
+                injected = True
+        worker.join()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    (result,) = results
+    assert injected, f'the run ended before step {inject_at}'
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    expected = {reason: 1 for _, reason in bad}
+    assert summary['extra']['rejected_messages'] == {
+        'total': len(bad),
+        'by_reason': expected,
+        'by_agent': {'1': expected},
+        'simulator': {},
+    }
+    assert summary['extra']['failure'] is None
+    # Every message that reached an agent's topic went through the injected delay.
+    assert summary['extra']['injected_faults']['delayed'] == summary['messages_sent'] + len(bad)
+    assert summary['extra']['injected_faults']['dropped'] == 0
+    log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
+    assert f'rejected a message on {trigger_info_topic(2, 1)} (sender, 1 so far)' in log
+    assert 'information from agent 3 on the topic of agent 2' in log
