@@ -62,9 +62,10 @@ BAG_DIR = 'bag'
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
 COMMAND_TOPIC = re.compile(r'^/agent_(\d+)/(cmd_vel|cmd_accel)$')
 
-# summary.json keys a bag cannot give back (wall-clock measurements of the live run; the
-# simulator's count of wall-clock events).
-NOT_IN_BAG = ('wall_time', 'extra.discovery_wall_time', 'extra.steps')
+# summary.json keys a bag cannot give back: wall-clock measurements of the live run. Besides
+# these, `extra` holds implementation-specific details (summary.py); those of its keys the bag
+# does not give (e.g. the simulator's own rejection counts) are listed as not recomputed.
+NOT_IN_BAG = ('wall_time',)
 
 ProgressCallback = Callable[[int, int | None], None]
 
@@ -375,6 +376,9 @@ def load_bag_run(
         extra['clock'] = 'realtime' if realtime else 'lockstep'
         if final and not realtime:
             extra['steps'] = final[-1].index  # lock-step: one Step per advance of the world
+        extra['reached_time'] = times[-1]  # the simulator samples the world where it stops
+        if final:
+            extra['failure'] = None  # the final Step goes out only when the horizon is reached
     if got.statuses:
         last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
         wrong = [
@@ -476,6 +480,10 @@ class TheoryBounds:
     edge_bounds: dict[tuple[int, int], float]  # ||x_i - x_j|| <= k_ij + ||d_ij|| < Δ
     xi: dict[int, float] | None  # (xi) / (xid): t_{k+1} - t_k >= ξ_i
     note: str
+    # Theorem 2 only: k^d_V and the error gain of the chain as printed (rate (2-k4)ρ2(P)), drawn
+    # for comparison; docs/THEOREM2.md shows where the paper's example leaves them.
+    printed_k_V: float | None = None
+    printed_error_gain: float | None = None
 
 
 def theory_bounds(scenario: Scenario) -> TheoryBounds:
@@ -496,6 +504,8 @@ def theory_bounds(scenario: Scenario) -> TheoryBounds:
         )
     chain = constants.corrected_chain
     gain = None if chain.k_V is None else 2.0 * math.sqrt(chain.z_gain * chain.k_V)  # (yiyj), corrected
+    printed = constants.paper_chain
+    printed_gain = None if printed.k_V is None else 2.0 * math.sqrt(printed.z_gain * printed.k_V)
     return TheoryBounds(
         theorem=2,
         rate=scenario.gains.beta_d,
@@ -505,7 +515,23 @@ def theory_bounds(scenario: Scenario) -> TheoryBounds:
         edge_bounds=edge_bounds,
         xi=chain.xi,
         note='Theorem 2, corrected chain (docs/THEOREM2.md)' + ('' if chain.holds else ': β_d is not below (2-k4)/λmax(P), no decay bound'),
+        printed_k_V=printed.k_V,
+        printed_error_gain=printed_gain,
     )
+
+
+def printed_chain_ratios(series: Series, bounds: TheoryBounds) -> dict[str, Any] | None:
+    """Theorem 2: the largest V_d / (printed k^d_V e^{-2β_d t}) and the first time it reaches 1."""
+    if bounds.printed_k_V is None:
+        return None
+    ratio = series.lyapunov / (bounds.printed_k_V * np.exp(-2.0 * bounds.rate * series.times))
+    worst = int(np.argmax(ratio))
+    above = np.flatnonzero(ratio >= 1.0)
+    return {
+        'max_ratio': float(ratio[worst]),
+        'at_time': float(series.times[worst]),
+        'first_time_above': float(series.times[above[0]]) if above.size else None,
+    }
 
 
 def theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | None) -> list[Check]:
@@ -583,7 +609,7 @@ def diff_summaries(from_bag: dict, from_file: dict) -> tuple[list[Difference], l
     skipped: list[str] = []
 
     def walk(a: Any, b: Any, key: str) -> None:
-        if key in NOT_IN_BAG and (a is _MISSING or a is None):
+        if (key in NOT_IN_BAG and (a is _MISSING or a is None)) or (key.startswith('extra.') and a is _MISSING):
             skipped.append(key)
             return
         if isinstance(a, dict) and isinstance(b, dict):
@@ -688,6 +714,9 @@ def build_report(
                 'k_V': bounds.k_V,
                 'error_gain': bounds.error_gain,
                 'xi': bounds.xi,
+                'printed_chain': None
+                if bounds.printed_k_V is None
+                else {'k_V': bounds.printed_k_V, 'error_gain': bounds.printed_error_gain, **printed_chain_ratios(series, bounds)},
             },
             'theory_error': bounds_error,
             'inter_event_times': inter_event_stats(record, None if bounds is None else bounds.xi),
@@ -755,6 +784,14 @@ def render_markdown(report: dict[str, Any]) -> str:
             f'{theory_info["note"]}: rate {_fmt(theory_info["rate"])}, k_ν = {_fmt(theory_info["k_nu"])}, '
             f'k_V = {_fmt(theory_info["k_V"])}, error bound gain {_fmt(theory_info["error_gain"])}.'
         )
+        printed = theory_info.get('printed_chain')
+        if printed:
+            above = printed['first_time_above']
+            lines.append(
+                f'For comparison, the chain as printed (rate (2-k4)ρ2(P)): k_V = {_fmt(printed["k_V"])}; '
+                f'V_d reaches {_fmt(printed["max_ratio"])} × its bound k_V e^{{-2β_d t}} (at t = {_fmt(printed["at_time"])} s)'
+                + (f', above it from t = {_fmt(above)} s on (docs/THEOREM2.md).' if above is not None else '; below it throughout.')
+            )
         lines.append('')
     elif report['theory_error']:
         lines += [f'No proof constants: {report["theory_error"]}', '']
@@ -771,13 +808,14 @@ def render_markdown(report: dict[str, Any]) -> str:
     elif comparison['equal']:
         lines.append(
             f'`{comparison["path"]}`: every metric recomputed from the bag equals the file '
-            f'(floats compared exactly). Not in a bag: {", ".join(comparison["not_in_bag"]) or "—"}.'
+            f'(floats compared exactly). Not recomputed from the bag (wall-clock measurements, runtime '
+            f'details): {", ".join(comparison["not_in_bag"]) or "—"}.'
         )
     else:
         differences = comparison['differences']
         lines += [
             f'`{comparison["path"]}` differs from the bag in {len(differences)} value(s) '
-            f'(not in a bag, not compared: {", ".join(comparison["not_in_bag"]) or "—"}):',
+            f'(not recomputed from the bag, not compared: {", ".join(comparison["not_in_bag"]) or "—"}):',
             '',
             '| key | from the bag | summary.json |',
             '|---|---|---|',

@@ -172,6 +172,8 @@ def plot_formation_error(ax: Axes, series: Series, bounds: TheoryBounds | None, 
         (lines['envelope'],) = ax.semilogy(t, series.formation_error[0] * np.exp(-rate * t), 'b--', lw=1.0, label=f'$e(0)\\,e^{{-{rate:g}t}}$')
     if bounds is not None and bounds.error_gain is not None:
         (lines['bound'],) = ax.semilogy(t, bounds.error_gain * np.exp(-bounds.rate * t), 'r:', lw=1.2, label='$2\\sqrt{k_V}\\,e^{-\\beta t}$ (theorem)')
+    if bounds is not None and bounds.printed_error_gain is not None:
+        (lines['printed bound'],) = ax.semilogy(t, bounds.printed_error_gain * np.exp(-bounds.rate * t), 'm-.', lw=1.0, label='bound of the proof as printed')
     ax.set_xlabel('t [s]')
     ax.set_ylabel('formation error')
     ax.set_title('formation error (log scale) against the exponential envelope', fontsize=9)
@@ -225,6 +227,8 @@ def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: 
         lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k_\\nu$ (kν)')
         if bounds.k_V is not None:
             (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.k_V * np.exp(-2.0 * bounds.rate * t), 'r:', lw=1.2, label='$k_V e^{-2\\beta t}$ (kV)')
+        if bounds.printed_k_V is not None:
+            (lines['printed k_V'],) = ax_lyapunov.semilogy(t, bounds.printed_k_V * np.exp(-2.0 * bounds.rate * t), 'm-.', lw=1.0, label='$k^d_V e^{-2\\beta_d t}$ as printed (kVd)')
     ax_tension.set_title(f'tension energy {name_nu}', fontsize=9)
     ax_lyapunov.set_title(f'Lyapunov function {name_v}', fontsize=9)
     for ax in (ax_tension, ax_lyapunov):

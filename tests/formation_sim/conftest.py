@@ -1,0 +1,121 @@
+"""Shared runs for the analysis, comparison, replay and inspection tests.
+
+- `paper_single_record`: the in-process engine's paper_single run up to t = 1 (no ROS).
+- `write_run_bag`: writes what a distributed run records (docs/MESSAGES.md) for a `RunRecord`,
+  through the real codec encoders, into a bag (no ROS process: rclpy only serializes).
+- `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 170) and the
+  in-process run of the same scenario, shared by every test that asks for it in a session.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from formation_sim.engine import RunRecord, simulate
+from formation_sim.scenario import load_scenario
+
+DISTRIBUTED_DOMAIN = 170
+
+
+@pytest.fixture(scope='session')
+def paper_single_record() -> RunRecord:
+    return simulate(load_scenario('paper_single'), horizon=1.0)
+
+
+def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None) -> Path:
+    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger)."""
+    import yaml
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Twist
+    from rclpy.serialization import serialize_message
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    from formation_msgs_py.codec import encode_step, encode_trigger_info, encode_world_state
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Step, WorldState
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.recorder import BagWriter
+    from formation_sim.scenario import scenario_to_dict
+
+    scenario = record.scenario
+    p = scenario.dimension
+    messages: list[tuple[float, int, str, str, bytes]] = []  # (time, order, topic, type, data)
+    order = 0
+
+    def add(t: float, topic: str, msgtype: str, msg) -> None:
+        nonlocal order
+        messages.append((t, order, topic, msgtype, serialize_message(msg)))
+        order += 1
+
+    array = 'std_msgs/msg/Float64MultiArray'
+    if scenario_topic:
+        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(scenario), sort_keys=False)))
+    events = sorted({t for times in record.trigger_times.values() for t in times})
+    for index, t in enumerate(events):
+        add(t, '/formation/step', array, encode_step(Step(index=index, time=t)))
+    add(record.horizon, '/formation/step', array, encode_step(Step(index=len(events), time=record.horizon, flags=STEP_FLAG_FINAL)))
+    for agent, times in record.trigger_times.items():
+        for k, t in enumerate(times):
+            log = json.dumps({'version': 1, 'agent': agent, 'step': events.index(t), 'time': t}, separators=(',', ':'))
+            add(t, '/formation/sensing_log', 'std_msgs/msg/String', String(data=log))
+            add(t, f'/agent_{agent}/cmd_vel', 'geometry_msgs/msg/Twist', Twist())
+            for j in scenario.neighbours(agent):
+                if drop and (agent, j, k) in drop:
+                    continue
+                info = TriggerInfo(sender=agent, receiver=j, stamp=t, control=(0.0,) * p, rel_position=(0.0,) * p)
+                add(t, f'/agent_{agent}/trigger_info/to_{j}', array, encode_trigger_info(info))
+    velocities = record.sample_velocities
+    for k, t in enumerate(record.sample_times):
+        state = WorldState(time=float(t), agent_ids=scenario.agent_ids, positions=record.sample_positions[k], velocities=None if velocities is None else velocities[k])
+        add(float(t), '/formation/state', array, encode_world_state(state))
+        seconds = round(float(t) * 1e9)
+        add(float(t), '/clock', 'rosgraph_msgs/msg/Clock', Clock(clock=Time(sec=seconds // 10**9, nanosec=seconds % 10**9)))
+    messages.sort(key=lambda m: (m[0], m[1]))
+    with BagWriter(path) as bag:
+        for _, _, topic, msgtype, _ in messages:
+            bag.add_topic(topic, msgtype)
+        for t, _, topic, _, data in messages:
+            bag.write(topic, round(t * 1e9), data)
+    return path
+
+
+@pytest.fixture(scope='session')
+def write_run_bag():
+    """write_run_bag(record, path, *, scenario_topic=False, drop=None) -> path."""
+    return _write_run_bag
+
+
+@dataclass(frozen=True)
+class DistributedRun:
+    out_dir: Path
+    bag: Path
+    summary: dict
+    reference: RunRecord  # the in-process engine's run of the same scenario and horizon
+    reference_dir: Path  # its summary.json and trajectory.npz
+
+
+@pytest.fixture(scope='session')
+def distributed_single_run(tmp_path_factory) -> DistributedRun:
+    """paper_single, horizon 2, run once per session as ROS processes in domain 170."""
+    from formation_sim.orchestrate import FormationRun
+    from formation_sim.summary import write_summary
+
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    root = tmp_path_factory.mktemp('distributed_single')
+    result = FormationRun(scenario, out_dir=root / 'run', horizon=horizon, domain_id=DISTRIBUTED_DOMAIN, progress=False, timeout=240.0).run()
+    assert result.ok, result.message
+    assert result.bag is not None
+    reference = simulate(scenario, horizon=horizon)
+    write_summary(reference, root / 'in_process')
+    return DistributedRun(
+        out_dir=result.out_dir,
+        bag=result.bag,
+        summary=json.loads(result.summary.read_text()),
+        reference=reference,
+        reference_dir=root / 'in_process',
+    )
