@@ -187,3 +187,129 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
     assert f'rejected a message on {trigger_info_topic(2, 1)} (sender, 1 so far)' in log
     assert 'information from agent 3 on the topic of agent 2' in log
+
+
+# -- node faults --------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env):
+    from formation_sim.orchestrate import EXIT_LOST, FormationRun
+
+    scenario = load_scenario('paper_single')
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=1000.0, domain_id=71, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    _wait_for_stepping(run)
+    time.sleep(0.5)  # well into the run
+    victim = next(child for child in run._children if child.name == 'agent_2')
+    os.kill(victim.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST == 3
+    assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
+    assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
+    assert not _wait_until_gone(str(result.out_dir))
+
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure == result.failure
+    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2]
+    assert failure['detected_by'] == 'simulator, orchestrator'
+    assert failure['process']['name'] == 'agent_2' and failure['process']['returncode'] == -signal.SIGKILL
+    t_fail = failure['time']
+    assert 0.0 < t_fail == summary['extra']['reached_time'] < 1000.0
+
+    # Up to the failure, the run is the engine's: every trigger that completed, at its time.
+    reference = simulate(scenario, horizon=t_fail)
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert got == times[: len(got)] and len(got) >= len([t for t in times if t < t_fail]), f'agent {agent}'
+
+    # The bag was finalised and holds every triggering-information message sent before the
+    # failing step, each exactly once and in order.
+    assert result.bag is not None and not result.bag_recovered
+    counts, stamps = _bag_info_stamps(result.bag)
+    for i in scenario.agent_ids:
+        for j in scenario.neighbours(i):
+            before = [t for t in reference.trigger_times[i] if t < t_fail]
+            sent = stamps[(i, j)]
+            assert [t for t in sent if t < t_fail] == before, f'edge {i}->{j}'
+            assert all(t <= t_fail for t in sent) and sent == sorted(set(sent)), f'edge {i}->{j}'
+    assert counts['/formation/sensing_log'] >= sum(len([t for t in ts if t < t_fail]) for ts in reference.trigger_times.values())
+
+
+@pytest.mark.timeout(300)
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env):
+    from formation_sim.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.recorder import read_bag
+
+    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=72, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    _wait_for_stepping(run)
+    time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
+    recorder = next(child for child in run._children if child.name == 'recorder')
+    os.kill(recorder.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST
+    assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
+    assert 'its bag was recovered' in result.message
+    assert result.bag_recovered and result.bag is not None
+    assert not _wait_until_gone(str(result.out_dir))
+    messages = list(read_bag(result.bag))
+    assert {m.topic for m in messages} >= {'/formation/step', '/agent_1/trigger_info/to_2', '/formation/status'}
+    assert all(a.timestamp_ns <= b.timestamp_ns for a, b in zip(messages, messages[1:]))
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'process_lost' and failure['process']['name'] == 'recorder'
+    assert summary['total_events'] > 0
+
+
+def _start_cli_run(out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'formation_sim.cli', 'run', 'paper_single', '--horizon', '1000', '--out', str(out),
+         '--domain-id', str(domain_id), '--no-plot', *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    log = out / 'logs' / 'simulator.log'
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline:
+        if log.is_file() and 'progress t=' in log.read_text():
+            return process
+        assert process.poll() is None, process.communicate()
+        time.sleep(0.1)
+    process.kill()
+    raise AssertionError('the run never started stepping')
+
+
+@pytest.mark.timeout(300)
+def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_path, ros_env):
+    from formation_sim.recorder import read_bag
+
+    out = tmp_path / 'run'
+    process = _start_cli_run(out, 73)
+    process.send_signal(signal.SIGINT)  # what a terminal's Ctrl-C sends (children have their own sessions)
+    _, err = process.communicate(timeout=120.0)
+    assert process.returncode == 130, err
+    assert 'interrupted' in err
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    assert (out / 'bag' / 'metadata.yaml').is_file()
+    assert sum(1 for _ in read_bag(out / 'bag')) > 0
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['failure']['kind'] == 'interrupted' and summary['total_events'] > 0
+
+
+@pytest.mark.timeout(300)
+def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env):
+    """SIGKILL cannot be caught: the kernel's parent-death signal stops the children instead."""
+    from formation_sim.recorder import read_bag
+
+    out = tmp_path / 'run'
+    process = _start_cli_run(out, 74)
+    process.kill()
+    process.communicate(timeout=60.0)
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    assert (out / 'bag' / 'metadata.yaml').is_file()  # the recorder got SIGTERM and closed its bag
+    assert sum(1 for _ in read_bag(out / 'bag')) > 0
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['failure']['kind'] == 'interrupted'

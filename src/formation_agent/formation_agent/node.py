@@ -722,6 +722,8 @@ def main(args: Sequence[str] | None = None) -> int:
         print(f'formation_agent: {error}', file=sys.stderr, flush=True)
         status = EXIT_PEER_LOST
     except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+        if not rclpy.ok():  # SIGINT/SIGTERM shut the context down between two spins
+            return 130
         print(f'formation_agent: {error}', file=sys.stderr, flush=True)
         traceback.print_exc(file=sys.stderr)
         status = 1

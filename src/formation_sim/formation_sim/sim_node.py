@@ -730,6 +730,10 @@ def main(args: Sequence[str] | None = None) -> int:
         status = EXIT_INTERRUPTED
         _write_partial(node, error)
     except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+        if not rclpy.ok():  # SIGINT/SIGTERM shut the context down between two spins
+            status = EXIT_INTERRUPTED
+            _write_partial(node, KeyboardInterrupt())
+            return status
         print(f'formation_sim: {error}', file=sys.stderr, flush=True)
         if not isinstance(error, AgentLostError):
             traceback.print_exc(file=sys.stderr)
