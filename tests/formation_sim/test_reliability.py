@@ -194,7 +194,7 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
 
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env):
-    from formation_sim.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
 
     scenario = load_scenario('paper_single')
     run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=1000.0, domain_id=71, progress=False, timeout=240.0)
@@ -202,10 +202,12 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     _wait_for_stepping(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
+    shm_files = _mapped_shm_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=120.0)
     (result,) = results
     assert result.exit_status == EXIT_LOST == 3
+    assert shm_files and not [path for path in shm_files - _mapped_by_anyone(shm_files) if Path(path).exists()]
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
     assert not _wait_until_gone(str(result.out_dir))

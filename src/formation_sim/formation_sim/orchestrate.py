@@ -529,6 +529,7 @@ class FormationRun:
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''
         lost: _Child | None = None
+        next_snapshot = time.monotonic() + 1.0
         while True:
             if self._interrupted.is_set():
                 return EXIT_INTERRUPTED, 'interrupted', lost
@@ -541,6 +542,13 @@ class FormationRun:
             for child in self._children:
                 if child.exited_at is None and not child.alive():
                     child.exited_at = now
+            if now >= next_snapshot:
+                # A child killed by a signal cannot remove its Fast DDS shared-memory files, and
+                # once it is gone nobody can tell which were its own: note them while it lives.
+                for child in self._children:
+                    if child.exited_at is None:
+                        child.shm_files |= _mapped_shm_files(child.pid)
+                next_snapshot = now + 1.0
             code = simulator.process.poll()
             if code is not None:
                 if code == 0:
