@@ -2,7 +2,8 @@
 
 A publisher per topic is created with the rclpy class of the stored type (imported by name, as
 the recorder does) and the stored CDR bytes are published raw (`Publisher.publish(bytes)`), so
-nothing is deserialized or re-encoded. Message k is published at wall time
+nothing is deserialized or re-encoded (readers get the same bytes, which the DDS transport pads
+with zeros to a multiple of 4). Message k is published at wall time
 start + (stamp_k - stamp_0) / rate; rate 0 publishes as fast as possible.
 
 QoS: reliable and transient local, like the formation protocol, so the formation's own nodes
