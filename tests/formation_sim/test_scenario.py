@@ -262,6 +262,10 @@ BROKEN_SINGLE = [
     ('gains unknown', _set(('gains', 'alpha_d'), 1.0), ["unknown key 'alpha_d'", "'single'"]),
     ('gains missing', _delete(('gains', 'beta')), ['gains', "missing key 'beta'"]),
     ('gain text', _set(('gains', 'alpha'), 'ten'), ['gains.alpha', "'ten'"]),
+    ('gain nan', _set(('gains', 'beta'), float('nan')), ['gains.beta', 'finite', 'nan']),
+    ('horizon negative', _set(('horizon',), -1.0), ['horizon', 'must be > 0', '-1.0']),
+    ('horizon infinite', _set(('horizon',), float('inf')), ['horizon', 'finite', 'inf']),
+    ('d_ji disagreeing with d_ij', _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'd_ji = -d_ij']),
 ]
 
 
