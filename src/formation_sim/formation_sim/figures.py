@@ -224,7 +224,7 @@ def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: 
     (lines['tension'],) = ax_tension.semilogy(t, series.tension, 'k', lw=1.2, label=name_nu)
     (lines['lyapunov'],) = ax_lyapunov.semilogy(t, series.lyapunov, 'k', lw=1.2, label=name_v)
     if bounds is not None:
-        lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k_\\nu$ (kν)')
+        lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k^d_\\nu$' if double else '$k_\\nu$ (kν)')
         if bounds.k_V is not None:
             (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.k_V * np.exp(-2.0 * bounds.rate * t), 'r:', lw=1.2, label='$k_V e^{-2\\beta t}$ (kV)')
         if bounds.printed_k_V is not None:
