@@ -380,11 +380,15 @@ def load_bag_run(
         if final:
             extra['failure'] = None  # the final Step goes out only when the horizon is reached
     if got.statuses:
+        sent: dict[int, int] = defaultdict(int)
+        for (sender, _), receivers in got.infos.items():
+            sent[sender] += len(receivers)
+        # Counters only grow: the largest are the agent's final report.
         last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
         wrong = [
-            f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {len(trigger_times[agent])} / {sum(len(r) for (s, _), r in got.infos.items() if s == agent)}'
+            f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {len(trigger_times[agent])} / {sent[agent]}'
             for agent, status in last.items()
-            if agent in trigger_times and (status.triggers != len(trigger_times[agent]) or status.info_sent != sum(len(r) for (s, _), r in got.infos.items() if s == agent))
+            if agent in trigger_times and (status.triggers != len(trigger_times[agent]) or status.info_sent != sent[agent])
         ]
         checks.append(Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or 'every agent\'s last Status counts what the bag holds'))
         if realtime:

@@ -35,8 +35,14 @@ def register(subparsers) -> None:
 
 
 def _default_out(a: Path, b: Path) -> Path:
-    base = a if a.is_dir() else a.parent
-    return base / f'compare-{b.resolve().name if b.is_dir() else b.resolve().parent.name}'
+    """RUN_A's run folder (never inside a bag), named after RUN_B's folder."""
+    from formation_sim.analyze import locate
+
+    location = locate(a)
+    base = location.run_dir or (location.bag.parent if location.bag is not None else location.summary.parent)
+    other = locate(b)
+    name = (other.run_dir or (other.bag if other.bag is not None else other.summary.parent)).resolve().name
+    return base / f'compare-{name}'
 
 
 def run(args: argparse.Namespace) -> int:
