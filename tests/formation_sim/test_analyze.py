@@ -345,3 +345,19 @@ def test_analysing_a_distributed_bag_reproduces_what_the_run_reported(distribute
     assert 'wall_time' in skipped
     # and the same events as the in-process engine
     assert rebuilt.record.total_events == run.reference.total_events
+
+
+def test_a_wall_clock_trigger_at_the_horizon_is_explained(paper_single_record, tmp_path):
+    from formation_sim.analyze import BagRun, build_report
+
+    reported = dataclasses.replace(paper_single_record, extra={'clock': 'realtime'})
+    summary = tmp_path / 'summary.json'
+    summary.write_text(json.dumps(bag_summary(reported)))
+    times = {agent: list(t) for agent, t in reported.trigger_times.items()}
+    times[2].append(reported.horizon)  # sensed at the horizon; its command came after the end
+    recorded = dataclasses.replace(reported, trigger_times=times)
+    run = BagRun(bag=tmp_path / 'bag', record=recorded, scenario_source='test', topics={}, counts={})
+    report = build_report(run, series=run_series(recorded), bounds=None, summary_path=summary)
+    assert {d['key'] for d in report['summary_json']['differences']} == {'trigger_times.2 (length)', 'event_counts.2', 'total_events'}
+    (note,) = report['summary_json']['notes']
+    assert note.startswith('agents [2] triggered at the horizon t = 1.0 (wall clock)')

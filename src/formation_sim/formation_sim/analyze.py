@@ -688,6 +688,7 @@ def build_report(
             'equal': not differences,
             'differences': [difference.to_dict() for difference in differences],
             'not_in_bag': skipped,
+            'notes': _difference_notes(record) if differences else [],
         }
     t = series.times
     return json_safe(
@@ -735,6 +736,19 @@ def build_report(
             'figures': figures or {},
         }
     )
+
+
+def _difference_notes(record: RunRecord) -> list[str]:
+    """Known reasons for a bag to differ from its summary.json."""
+    notes = []
+    if record.extra.get('clock') == 'realtime':
+        at_end = [agent for agent, times in record.trigger_times.items() if times and times[-1] >= record.horizon]
+        if at_end:
+            notes.append(
+                f'agents {at_end} triggered at the horizon t = {record.horizon!r} (wall clock): summary.json counts '
+                'a trigger only once its command has acted on the world before the run ended, which a bag cannot show'
+            )
+    return notes
 
 
 def _fmt(value: Any) -> str:
@@ -829,6 +843,8 @@ def render_markdown(report: dict[str, Any]) -> str:
             lines.append(f'| `{difference["key"]}` | {_short(difference["bag"])} | {_short(difference["summary"])} |')
         if len(differences) > limit:
             lines.append(f'| … {len(differences) - limit} more (see the JSON report) | | |')
+        for note in comparison.get('notes', []):
+            lines += ['', f'Note: {note}.']
     if report['figures']:
         lines += ['', '## Figures', '']
         for title, name in report['figures'].items():
