@@ -258,6 +258,9 @@ _NUMPY_TYPES = {
 }  # fmt: skip
 
 
+_DEFAULTS: dict[tuple[int, str], tuple[Any, Any]] = {}
+
+
 def _default_base(name: str):
     if name == 'string' or name == 'wstring':
         return ''
@@ -279,7 +282,12 @@ def _build(store, descriptor, value):
     if kind == Nodetype.NAME:
         if value is not None and not isinstance(value, dict):
             return value  # already a message object
-        return build_message(store, detail, value or {})
+        if not value:  # an all-default message: built once per store and type, then shared
+            key = (id(store), detail)
+            if key not in _DEFAULTS:  # the store is kept with it, so its id cannot be reused
+                _DEFAULTS[key] = (store, build_message(store, detail, {}))
+            return _DEFAULTS[key][1]
+        return build_message(store, detail, value)
     element, length = detail
     items = list(value) if value is not None else []
     if kind == Nodetype.ARRAY and value is None:
@@ -316,7 +324,11 @@ def _store_with(connections) -> tuple[Any, list[str]]:
     """A Jazzy typestore that also knows the source's non-standard types (from their stored definitions)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    store = get_typestore(Stores.ROS2_JAZZY)
+    from formation_sim.recorder import jazzy_typestore
+
+    if all(connection.msgtype in jazzy_typestore().fielddefs for connection in connections):
+        return jazzy_typestore(), []
+    store = get_typestore(Stores.ROS2_JAZZY)  # a copy: the shared store stays standard
     unknown = []
     for connection in connections:
         if connection.msgtype in store.fielddefs:
