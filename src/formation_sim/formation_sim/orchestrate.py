@@ -182,6 +182,11 @@ def describe_exit(returncode: int | None) -> str:
     return f'exited with status {returncode}'
 
 
+def _lost_or_failed(child: _Child) -> int:
+    """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
+    return EXIT_FAILED if (child.process.returncode or 0) > 0 else EXIT_LOST
+
+
 @dataclass
 class _Child:
     name: str
@@ -198,6 +203,23 @@ class _Child:
 
     def alive(self) -> bool:
         return self.process.poll() is None
+
+    def error_line(self) -> str:
+        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
+        try:
+            with self.log.open('rb') as handle:
+                handle.seek(max(0, self.log.stat().st_size - 65536))
+                lines = handle.read().decode(errors='replace').splitlines()
+        except OSError:
+            return ''
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: '))]
+        return named[-1].split(': ', 1)[1] if named else ''
+
+    def describe(self) -> str:
+        """'agent_2 (pid 123) killed by SIGKILL', with the error it named if it gave one."""
+        text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
+        error = self.error_line() if self.process.returncode not in (None, 0) else ''
+        return f'{text}: {error}' if error else text
 
 
 def _mapped_shm_files(pid: int) -> set[str]:
@@ -464,10 +486,15 @@ class FormationRun:
                 'returncode': lost.process.returncode,
                 'exit': describe_exit(lost.process.returncode),
                 'seconds_after_launch': (lost.exited_at or time.monotonic()) - self._started_at,
+                'error': lost.error_line(),
             }
+            failed_itself = (lost.process.returncode or 0) > 0  # it named an error and left
             if failure['kind'] == 'interrupted':  # stopped by us because of that child
-                failure['kind'] = 'process_lost'
-                failure['message'] = f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}'
+                failure['kind'] = 'process_failed' if failed_itself else 'process_lost'
+                failure['message'] = lost.describe()
+            elif failure['kind'] == 'agent_lost' and failed_itself:
+                failure['kind'] = 'agent_failed'
+                failure['message'] = f'{lost.describe()}; {failure["message"]}'
             if 'orchestrator' not in failure['detected_by']:
                 failure['detected_by'] += ', orchestrator'
         extra['failure'] = failure
@@ -553,8 +580,8 @@ class FormationRun:
             if code is not None:
                 if code == 0:
                     return self._finish(), '', lost
-                status = EXIT_LOST if code == EXIT_LOST or lost is not None or code < 0 else EXIT_FAILED
-                seen = '' if lost is None else f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; '
+                status = _lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
+                seen = '' if lost is None else f'{lost.describe()}; '
                 return status, f'{seen}simulator {describe_exit(code)}; see {simulator.log}', lost
             if lost is None:
                 lost = next(
@@ -567,10 +594,10 @@ class FormationRun:
                     None,
                 )
                 if lost is not None and self.progress:
-                    self._say(f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; stopping the run')
+                    self._say(f'{lost.describe()}; stopping the run')
             if lost is not None and (lost.name == 'recorder' or now - lost.exited_at > LOST_DETECTION):
                 # An agent: the simulator has had the time to detect it and stop by itself.
-                return EXIT_LOST, f'{lost.name} (pid {lost.pid}) {describe_exit(lost.process.returncode)}; see {lost.log}', lost
+                return _lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
             time.sleep(POLL_PERIOD)
 
     def _finish(self) -> int:
