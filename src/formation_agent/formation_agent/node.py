@@ -32,6 +32,7 @@ triggering information on arrival (a test facility, seeded by `inject_seed`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import heapq
 import math
 import random
@@ -286,6 +287,7 @@ class FormationAgentNode(Node):
         self.delayed = 0
         self._last_stamp: dict[int, float] = {}  # sender -> stamp of its last accepted information
         self._report_dirty = False
+        self._final_report_sent = False
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self._delay_line: list[tuple[float, int, int, Float64MultiArray]] = []  # (due, seq, sender, msg)
         self._delay_seq = 0
@@ -655,7 +657,14 @@ class FormationAgentNode(Node):
 
     def _publish_report(self, *, final: bool = False) -> None:
         self._report_dirty = False
+        self._final_report_sent = final
         self._report_pub.publish(encode_agent_report(self.report(final=final)))
+
+    def leave(self) -> None:
+        """On the way out, whatever the reason: the final report, if not yet sent, and its delivery."""
+        if not self._final_report_sent and rclpy.ok(context=self.context):
+            self._publish_report(final=True)
+            self._report_pub.wait_for_all_acked(Duration(seconds=1.0))
 
     def _publish_report_if_dirty(self) -> None:
         if self._report_dirty and not self.finished:
@@ -729,6 +738,8 @@ def main(args: Sequence[str] | None = None) -> int:
         status = 1
     finally:
         for node in nodes:
+            with contextlib.suppress(Exception):  # a context shut down by a signal cannot publish
+                node.leave()
             node.destroy_node()
         rclpy.try_shutdown()
     return status

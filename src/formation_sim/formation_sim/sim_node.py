@@ -116,6 +116,18 @@ class DiscoveryError(SimulatorError):
     kind = 'discovery'
 
 
+class ConnectivityLostError(SimulatorError):
+    """An edge of the graph reached the communication radius Δ in the true world."""
+
+    kind = 'connectivity_lost'
+
+    def __init__(self, message: str, *, time: float, edge: tuple[int, int], length: float) -> None:
+        super().__init__(message)
+        self.time = time
+        self.edge = edge
+        self.length = length
+
+
 class AgentLostError(SimulatorError):
     """One or more agents stopped showing signs of life (or left) before the end of the run."""
 
@@ -221,6 +233,12 @@ class FormationSimulatorNode(Node):
             raise SimulatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
         self.world = World.from_scenario(scenario)
         self.double = scenario.dynamics == 'double'
+        # Ground truth of connectivity: every sample checks ||x_i - x_j|| < Δ on every edge.
+        index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+        self._edge_rows = (
+            np.array([index[e.i] for e in scenario.edges], dtype=int),
+            np.array([index[e.j] for e in scenario.edges], dtype=int),
+        )
         self.agents = {i: _AgentBook(neighbours=tuple(scenario.neighbours(i))) for i in scenario.agent_ids}
 
         self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
@@ -374,12 +392,14 @@ class FormationSimulatorNode(Node):
         self.failure_info = {
             'kind': kind,
             'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-            'agents': list(getattr(error, 'agents', [])),
-            'time': self.world.time,
+            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
+            'time': getattr(error, 'time', self.world.time),
             'step': None if self.step is None else self.step.index,
             'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
             'detected_by': 'simulator',
         }
+        if isinstance(error, ConnectivityLostError):
+            self.failure_info.update(edge=list(error.edge), length=error.length)
 
     def _print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
@@ -505,6 +525,8 @@ class FormationSimulatorNode(Node):
 
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
+        if self.finished:
+            return  # the run is over (or failed): the world no longer moves
         if self.realtime and self.step is not None:
             if not self.finished:
                 control = decode_command(msg, self.scenario.dimension)
@@ -524,6 +546,8 @@ class FormationSimulatorNode(Node):
 
     def _on_sense(self, agent: int):
         book = self.agents[agent]
+        if self.finished:  # asked after the end: the final state, not counted
+            return encode_sensed_state(self.world.sense(agent, book.neighbours))
         if self.realtime and self.step is not None:
             return self._sense_realtime(agent)
         index = -1 if self.step is None else self.step.index
@@ -606,6 +630,22 @@ class FormationSimulatorNode(Node):
         self._clock_pub.publish(Clock(clock=ros_time(t)))
         self._state_pub.publish(encode_world_state(state))
         self._truth_pub.publish(encode_pose_array(state))
+        self._check_connectivity(t, x)
+
+    def _check_connectivity(self, t: float, x: np.ndarray) -> None:
+        """Theorems 1 (i) and 2 (i): every edge stays shorter than Δ. Stop at the first that does not."""
+        rows_i, rows_j = self._edge_rows
+        lengths = np.linalg.norm(x[rows_i] - x[rows_j], axis=1)
+        worst = int(np.argmax(lengths))
+        if lengths[worst] >= self.scenario.delta:
+            edge = self.scenario.edges[worst]
+            raise ConnectivityLostError(
+                f'edge ({edge.i}, {edge.j}) reached the communication radius at t={t!r}: '
+                f'||x_{edge.i} - x_{edge.j}|| = {lengths[worst]:.6g} >= Δ = {self.scenario.delta:g}',
+                time=t,
+                edge=(edge.i, edge.j),
+                length=float(lengths[worst]),
+            )
 
     # -- results --------------------------------------------------------------------------------
 
@@ -691,6 +731,16 @@ class FormationSimulatorNode(Node):
         for pub in (self._step_pub, self._state_pub, self._truth_pub, self._log_pub, self._clock_pub):
             pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
 
+    def stop_agents(self, executor) -> None:
+        """The run failed: a final Step sends the agents home, with their final reports."""
+        if self.step is None or not rclpy.ok():
+            return
+        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
+        self.finished = True
+        self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
+        self.collect_final_reports(executor)
+        self.wait_for_delivery(timeout_sec=1.0)
+
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
         deadline = time.monotonic() + timeout_sec
@@ -711,6 +761,7 @@ def write_results(node: FormationSimulatorNode) -> None:
 def main(args: Sequence[str] | None = None) -> int:
     rclpy.init(args=args)
     node = None
+    executor = None
     status = 0
     try:
         node = FormationSimulatorNode()
@@ -735,9 +786,15 @@ def main(args: Sequence[str] | None = None) -> int:
             _write_partial(node, KeyboardInterrupt())
             return status
         print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-        if not isinstance(error, AgentLostError):
+        if not isinstance(error, (AgentLostError, ConnectivityLostError)):
             traceback.print_exc(file=sys.stderr)
         status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
+        if node is not None:
+            node.fail(error)
+            try:
+                node.stop_agents(executor)
+            except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+                print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
         _write_partial(node, error)
     finally:
         if node is not None:
