@@ -7,7 +7,13 @@ from decimal import Decimal, getcontext
 import numpy as np
 import pytest
 
-from formation_agent.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp
+from formation_agent.closed_form import (
+    SERIES_LIMIT,
+    advance_double,
+    one_minus_exp,
+    z_minus_one_plus_exp,
+    z_minus_one_plus_exp_float,
+)
 
 getcontext().prec = 50
 
@@ -36,3 +42,11 @@ def test_advance_solves_the_damped_double_integrator():
     (xp, qp), (xm, qm), (x0, q0) = (advance_double(x, q, u, k3, t + s) for s in (h, -h, 0.0))
     assert (qp - qm) / (2 * h) == pytest.approx(u - k3 * q0, rel=1e-8)
     assert (xp - xm) / (2 * h) == pytest.approx(q0, rel=1e-8)
+
+
+@pytest.mark.parametrize('z', [0.0, 1e-300, 1e-12, 3.7e-9, 1e-6, 2.5e-4, 0.0123, 0.05, 0.0999, -0.0999, -1e-7])
+def test_scalar_series_is_accurate_to_an_ulp(z):
+    # The agents' plain-float path uses a shorter, unrolled series below SERIES_LIMIT.
+    assert abs(z) < SERIES_LIMIT
+    exact = Decimal(z) - 1 + (-Decimal(z)).exp()
+    assert z_minus_one_plus_exp_float(z) == pytest.approx(float(exact), rel=2.5e-16, abs=0.0)

@@ -87,3 +87,32 @@ def test_limit_bounds_the_search():
 def test_already_above_threshold_is_due_at_start():
     model = Bump(height=0.0, centre=0.0, width=1.0, ramp=1.0)
     assert first_crossing(model, start=3.0, alpha=1.0, beta=0.0, limit=20.0) == 3.0
+
+
+@pytest.mark.parametrize('pieces', [1, 3, 17, 200])
+def test_search_advanced_in_pieces_gives_the_same_float(pieces):
+    # The engine advances each agent's search only as far as the team needs; the steps, and so
+    # the answer, must be those of one uninterrupted search.
+    from formation_agent.crossing import CrossingSearch
+
+    model = Bump(height=1.001, centre=1.0, width=1e-4, ramp=0.1)
+    whole = first_crossing(model, start=0.0, alpha=1.1, beta=0.0, limit=100.0)
+    search = CrossingSearch(model, start=0.0, alpha=1.1, beta=0.0, limit=100.0)
+    frontiers = [search.frontier]
+    for until in np.linspace(0.0, 1.0, pieces):
+        if search.advance(float(until)) is not None:
+            break
+        assert search.frontier > until  # stopped only once past `until`
+        frontiers.append(search.frontier)
+    assert search.run() == whole
+    assert all(a <= b for a, b in zip(frontiers, frontiers[1:]))
+    assert frontiers[-1] <= whole  # the frontier is a lower bound on the crossing
+
+
+def test_search_reports_no_crossing_up_to_its_limit():
+    from formation_agent.crossing import CrossingSearch
+
+    search = CrossingSearch(Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1), start=0.0, alpha=1.0, beta=0.0, limit=5.0)
+    assert search.advance(2.0) is None
+    assert search.frontier > 2.0
+    assert search.run() == math.inf

@@ -201,3 +201,173 @@ def test_planning_before_hearing_every_neighbour_is_an_error():
     agent.receive(_info(2, 1, 0.0, (0.0, 0.0), (1.5, 3.0)))
     with pytest.raises(AgentError, match=r'not heard from neighbours \[3\]'):
         agent.next_trigger_time()
+
+
+# -- the plain-float evaluation (p <= 3) against formulas written out here ----------------------
+#
+# The agent state is built through the public API (one trigger, then one message per neighbour at
+# its own time); these helpers keep the same knowledge and evaluate e_i (ETA-1) or E_i (ETA-2) and
+# their rates from the paper's definitions, with 50-digit closed-form factors for ETA-2.
+
+
+def _exact_factors(k3, tau):
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 50
+    z = Decimal(k3) * Decimal(tau)
+    decay = 1 - (-z).exp()
+    return float(decay), float(z - decay)  # 1 - e^{-z}, z - 1 + e^{-z}
+
+
+def _reference(kind, t, knowledge):
+    """(e, de/dt) at t from the anchors: eqs. statexixj / statexixjd, stateqiqj, dotei, doteidouble."""
+    u_i = knowledge['control']
+    e, rate = u_i.copy(), np.zeros_like(u_i)
+    for t0, y0, q0, u_j, c in knowledge['edges']:
+        if kind == 'eta1':
+            v = u_i - u_j
+            y, dy = y0 + (t - t0) * v, v
+            mix, dmix = y, dy
+        else:
+            k1, k2, k3 = knowledge['gains']
+            du = u_i - u_j
+            a, b = _exact_factors(k3, t - t0)
+            y = y0 + a / k3 * q0 + b / k3**2 * du
+            q = (1 - a) * q0 + a / k3 * du
+            dy = q
+            mix, dmix = k1 * y + k2 * q, k1 * q + k2 * (du - k3 * q)
+        r = np.linalg.norm(y)
+        w, w_prime = (2 * c - r) / (c - r) ** 2, (3 * c - r) / (c - r) ** 3
+        e += w * mix
+        rate += w_prime * (y @ dy / r) * mix + w * dmix
+    return e, rate
+
+
+def _agent_with_knowledge(kind, seed, p, alpha=0.5):
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, 6))
+    d = rng.uniform(-1.0, 1.0, (m, p))
+    ids = list(range(2, 2 + m))
+    delta = 4.0
+    caps = delta - np.linalg.norm(d, axis=1)
+    common = dict(agent_id=1, neighbours={j: d[k] for k, j in enumerate(ids)}, delta=delta)
+    if kind == 'eta1':
+        agent = Eta1Agent(**common, alpha=alpha, beta=0.7)
+        gains = None
+    else:
+        gains = (1.2, 1.5, 0.8)
+        agent = Eta2Agent(**common, alpha_d=alpha, beta_d=0.3, k1=gains[0], k2=gains[1], k3=gains[2])
+
+    def small(count):  # edge errors up to 0.15 of the capacity
+        direction = rng.standard_normal((count, p))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        return direction * (0.15 * caps * rng.uniform(0.2, 1.0, count))[:, None]
+
+    y = small(m)
+    rel = {j: tuple(y[k] + d[k]) for k, j in enumerate(ids)}
+    extra = {}
+    if kind == 'eta2':
+        qs = rng.uniform(-0.3, 0.3, (m, p))
+        extra = dict(rel_velocities={j: tuple(qs[k]) for k, j in enumerate(ids)}, velocity=tuple(rng.uniform(-0.3, 0.3, p)))
+    out = agent.trigger(0.0, _sensed(1, rel, **extra))
+    edges = []
+    y_msg = small(m)
+    for k, j in enumerate(ids):
+        stamp = float(rng.choice([0.0, rng.uniform(0.0, 0.2)]))
+        u_j = rng.uniform(-0.5, 0.5, p)
+        q_j = rng.uniform(-0.3, 0.3, p)
+        rel_j = -(y_msg[k] + d[k])  # x_j - x_i as the message carries it
+        agent.receive(
+            _info(j, 1, stamp, u_j, rel_j, rel_velocity=None if kind == 'eta1' else tuple(-q_j))
+        )
+        edges.append((stamp, y_msg[k], q_j, u_j, caps[k]))
+    knowledge = dict(control=np.array(out.control), edges=edges, gains=gains)
+    return agent, knowledge
+
+
+CASES = [(kind, seed, p) for kind in ('eta1', 'eta2') for p in (1, 2, 3) for seed in range(4)]
+
+
+@pytest.mark.parametrize(('kind', 'seed', 'p'), CASES)
+def test_fast_prediction_matches_the_paper_formulas(kind, seed, p):
+    agent, knowledge = _agent_with_knowledge(kind, seed, p)
+    for t in (0.2, 0.31, 0.5, 0.9):
+        e, rate = agent.error_and_rate(t)
+        e_ref, rate_ref = _reference(kind, t, knowledge)
+        scale = 1.0 + float(np.abs(e_ref).max()) + float(np.abs(rate_ref).max())
+        assert np.abs(e - e_ref).max() <= 1e-13 * scale
+        assert np.abs(rate - rate_ref).max() <= 1e-13 * scale
+        size_sq, size_rate = agent.error_terms(t)
+        assert size_sq == pytest.approx(float(e @ e), rel=1e-15)
+        assert size_rate == pytest.approx(float(e @ rate), rel=1e-13, abs=1e-15 * scale**2)
+        assert agent.error_norm(t) == pytest.approx(float(np.linalg.norm(e)), rel=1e-15)
+
+
+@pytest.mark.parametrize(('kind', 'seed', 'p'), CASES)
+def test_fast_bounds_hold_over_their_span(kind, seed, p):
+    # E >= ||e||, E1 >= ||de/dt|| on [a, a+H], and E2 >= ||d²e/dt²|| (by centred differences).
+    agent, knowledge = _agent_with_knowledge(kind, seed, p)
+    for a, span in ((0.2, 0.05), (0.3, 0.4), (0.5, 1.0)):
+        size = float(np.linalg.norm(agent.error(a)))
+        h_span, bound_e, bound_rate, bound_curv = agent.bounds(a, span, size)
+        assert 0.0 < h_span <= span
+        grid = np.linspace(a, a + h_span, 101)
+        values = [_reference(kind, s, knowledge) for s in grid]
+        assert max(np.linalg.norm(e) for e, _ in values) <= bound_e * (1 + 1e-12)
+        assert max(np.linalg.norm(r) for _, r in values) <= bound_rate * (1 + 1e-12)
+        if math.isfinite(bound_curv):
+            h = h_span / 400
+            for s in grid[1:-1:10]:
+                second = (_reference(kind, s + h, knowledge)[1] - _reference(kind, s - h, knowledge)[1]) / (2 * h)
+                assert np.linalg.norm(second) <= bound_curv * (1 + 1e-6) + 1e-9
+
+
+@pytest.mark.parametrize(('kind', 'seed', 'p'), CASES)
+def test_fast_and_numpy_paths_find_the_same_crossing(kind, seed, p):
+    agent, knowledge = _agent_with_knowledge(kind, seed, p)
+    # A threshold 1.5 times the error where the search starts, so that it has a way to go.
+    size = float(np.linalg.norm(_reference(kind, agent.last_event, knowledge)[0]))
+    alpha = 1.5 * size * math.exp((0.7 if kind == 'eta1' else 0.3) * agent.last_event)
+    agent, knowledge = _agent_with_knowledge(kind, seed, p, alpha=alpha)
+    fast = agent.next_trigger_time(50.0)
+    agent._fast = False  # the numpy evaluation, which agents of dimension p > 3 use
+    agent._search = None
+    vector = agent.next_trigger_time(50.0)
+    assert math.isfinite(fast)
+    assert fast == pytest.approx(vector, rel=1e-12)
+    # On the threshold by the formulas above, and below it before (dense check).
+    e_ref, _ = _reference(kind, fast, knowledge)
+    assert np.linalg.norm(e_ref) / agent.threshold(fast) == pytest.approx(1.0, rel=1e-9)
+    start = agent.last_event
+    for s in np.linspace(start, fast, 401)[:-1]:
+        assert np.linalg.norm(_reference(kind, s, knowledge)[0]) < agent.threshold(s) * (1 + 1e-12)
+
+
+def test_four_dimensional_agents_use_numpy_and_trigger_on_the_threshold():
+    d = {2: (1.0, 0.0, 0.0, 0.5), 3: (0.0, -1.0, 0.5, 0.0)}
+    agent = Eta1Agent(agent_id=1, neighbours=d, delta=4.0, alpha=0.5, beta=1.0)
+    rel = {2: (1.3, 0.1, -0.2, 0.6), 3: (-0.1, -1.2, 0.4, 0.3)}
+    out = agent.trigger(0.0, _sensed(1, rel))
+    agent.receive(_info(2, 1, 0.0, (0.2, 0.0, 0.1, 0.0), tuple(-np.array(rel[2]))))
+    agent.receive(_info(3, 1, 0.0, (0.0, -0.3, 0.0, 0.1), tuple(-np.array(rel[3]))))
+    assert not agent._fast
+    t = agent.next_trigger_time(20.0)
+    knowledge = dict(
+        control=np.array(out.control),
+        edges=[
+            (0.0, np.array(rel[2]) - d[2], None, np.array((0.2, 0.0, 0.1, 0.0)), 4.0 - np.linalg.norm(d[2])),
+            (0.0, np.array(rel[3]) - d[3], None, np.array((0.0, -0.3, 0.0, 0.1)), 4.0 - np.linalg.norm(d[3])),
+        ],
+        gains=None,
+    )
+    assert np.linalg.norm(_reference('eta1', t, knowledge)[0]) / agent.threshold(t) == pytest.approx(1.0, rel=1e-9)
+
+
+def test_first_span_follows_the_last_inter_event_time():
+    # The search's first trial span is the agent's own last inter-event time (at least 1e-3):
+    # knowledge only, so a robot and the simulator step alike.
+    agent, _ = _agent_with_knowledge('eta1', 0, 2)
+    assert agent.trigger_search(10.0)._span == 1e-3
+    rel = {j: tuple(agent.offsets[k]) for k, j in enumerate(agent.neighbour_ids)}  # in formation
+    agent.trigger(0.25, _sensed(1, rel, t=0.25))
+    assert agent.trigger_search(10.0)._span == 0.25

@@ -23,15 +23,27 @@ def one_minus_exp(z):
     return -np.expm1(-np.asarray(z, dtype=float))
 
 
+# Below this |z| the series replaces z + expm1(-z), which loses digits to cancellation.
+SERIES_LIMIT = 0.1
 # Coefficients 1/(k+2)! of z - 1 + e^{-z} = z^2 sum_k (-z)^k / (k+2)!, enough for |z| < 0.1.
 _SERIES = tuple(1.0 / math.factorial(k + 2) for k in range(14))
+# For one float, eleven terms already reach double precision at |z| < 0.1: the first term left
+# out, z^13 / 13!, is below 2^-60 of the sum, about z^2 / 2.
+_C = _SERIES[:11]
+
+
+def z_minus_one_plus_exp_float(z: float) -> float:
+    """z - 1 + e^{-z} for one float with |z| < SERIES_LIMIT, by the series (Horner, unrolled)."""
+    c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10 = _C
+    acc = c8 - z * (c9 - z * c10)
+    return z * z * (c0 - z * (c1 - z * (c2 - z * (c3 - z * (c4 - z * (c5 - z * (c6 - z * (c7 - z * acc))))))))
 
 
 def z_minus_one_plus_exp(z):
     """z - 1 + e^{-z}, accurate for small z, where it behaves as z^2/2 (scalar or array)."""
     z = np.asarray(z, dtype=float)
     out = z + np.expm1(-z)
-    small = np.abs(z) < 0.1
+    small = np.abs(z) < SERIES_LIMIT
     if small.any():
         zs = z[small]
         acc = np.full_like(zs, _SERIES[-1])

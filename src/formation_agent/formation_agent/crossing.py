@@ -15,6 +15,12 @@ quadratic bound makes the steps converge quadratically (a certified Newton itera
 tangential touch they shrink like sqrt(φ/M) and pass it. The first-order bound serves where e is
 only Lipschitz (ETA-2 when a relative position passes through its desired value). Once the margin
 is below `tolerance`, the root is polished by Brent's method inside a bracket of width ~φ/|φ'|.
+
+The search is resumable (`CrossingSearch`): at any moment its `frontier` is a certified lower
+bound on the answer (no crossing in [start, frontier)), so a simulator of many agents can advance
+each agent's search only as far as the earliest event of the team requires (`advance(until=...)`)
+and drop it unfinished when new information makes it obsolete. Advancing in pieces performs the
+very same steps as running to the end (`first_crossing`), so the answer is the same float.
 """
 
 from __future__ import annotations
@@ -31,7 +37,11 @@ class CrossingError(RuntimeError):
 
 
 class ErrorModel(Protocol):
-    """Closed-form triggering error e(t) of one agent between two events."""
+    """Closed-form triggering error e(t) of one agent between two events.
+
+    A model may also offer the plain-float methods `error_terms(t) -> (||e||², e·ė)` and
+    `error_norm(t) -> ||e||`, which the search then uses instead of the two vector methods.
+    """
 
     def error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """e(t) and de/dt at t."""
@@ -51,6 +61,125 @@ class ErrorModel(Protocol):
 # Steps never grow by more than this factor, so that bounds stay tight around the current point.
 _GROWTH = 4.0
 _MAX_STEPS = 200_000
+_RTOL = 4.0 * float(np.finfo(float).eps)
+
+
+class CrossingSearch:
+    """The certified search for the smallest t >= start with ||e(t)|| >= α e^{-βt}, resumable.
+
+    `frontier` is the next point the search will examine; no crossing lies in [start, frontier).
+    `result` is None until the search is done, then the crossing time (inf: none up to `limit`).
+    """
+
+    __slots__ = ('model', 'start', 'alpha', 'beta', 'limit', 'tolerance', 'frontier', 'result', 'steps', '_span', '_terms', '_norm')
+
+    def __init__(
+        self,
+        model: ErrorModel,
+        *,
+        start: float,
+        alpha: float,
+        beta: float,
+        limit: float,
+        tolerance: float = 1e-12,
+        initial_step: float = 1e-3,
+    ) -> None:
+        self.model = model
+        self.start = float(start)
+        self.alpha = float(alpha)
+        self.beta = float(beta)
+        self.limit = float(limit)
+        self.tolerance = float(tolerance)
+        self.frontier = self.start
+        self.result: float | None = None
+        self.steps = 0
+        self._span = float(initial_step)
+        self._terms = getattr(model, 'error_terms', None) or _vector_terms(model)
+        self._norm = getattr(model, 'error_norm', None) or _vector_norm(model)
+
+    @property
+    def done(self) -> bool:
+        return self.result is not None
+
+    def run(self) -> float:
+        """Search to the end; the crossing time, or inf if there is none up to `limit`."""
+        self.advance(math.inf)
+        return self.result
+
+    def advance(self, until: float) -> float | None:
+        """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
+        a = self.frontier
+        beta, alpha, tolerance = self.beta, self.alpha, self.tolerance
+        terms, bounds = self._terms, self.model.bounds
+        span = self._span
+        while self.result is None and a <= until:
+            if a > self.limit:
+                self.result = math.inf
+                break
+            if self.steps >= _MAX_STEPS:
+                raise CrossingError(f'no convergence after {_MAX_STEPS} certified steps (t={a!r})')
+            self.steps += 1
+            size_sq, size_rate = terms(a)
+            scale = math.exp(beta * a) / alpha
+            s2 = scale * scale
+            phi = 1.0 - s2 * size_sq
+            phi_rate = -2.0 * beta - 2.0 * s2 * size_rate
+            if not (math.isfinite(phi) and math.isfinite(phi_rate)):
+                raise CrossingError(
+                    f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, e.de/dt = {size_rate!r}'
+                )
+            size = math.sqrt(size_sq)
+            if phi <= tolerance:
+                self.result = self._polish(a, phi, phi_rate, size)
+                break
+            span_eff, bound_e, bound_rate, bound_curv = bounds(a, span, size)
+            lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate
+            step = phi / lipschitz if lipschitz > 0.0 else math.inf
+            curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv)
+            if curvature < math.inf:  # finite (a NaN bound never certifies a longer step)
+                step = max(step, _quadratic_step(phi, phi_rate, curvature))
+            if step >= span_eff:
+                step = span_eff
+                span = span_eff * _GROWTH
+            else:
+                span = max(step * _GROWTH, 1e-300)
+            nxt = a + step
+            if nxt <= a:
+                # The certified step is below the resolution of t: we sit on the crossing.
+                self.result = self._polish(a, phi, phi_rate, size)
+                break
+            a = nxt
+        self.frontier = a
+        self._span = span
+        return self.result
+
+    def _polish(self, a: float, phi: float, phi_rate: float, size: float) -> float:
+        """Refine a point whose margin is within tolerance to where ||e|| = α e^{-βt}.
+
+        `size` is ||e(a)||, so the margin at a costs no evaluation; the margins at both ends of
+        the bracket are remembered, since Brent's method starts by asking for them again.
+        """
+        if phi <= 0.0 or phi_rate >= 0.0:
+            return a
+        beta = self.beta
+        scale = math.exp(beta * a) / self.alpha
+        norm = self._norm
+        known = {a: 1.0 - scale * size}  # e^{-β(a - a)} = 1
+
+        def margin(t: float) -> float:
+            value = known.get(t)
+            if value is None:
+                value = math.exp(-beta * (t - a)) - scale * norm(t)
+            return value
+
+        if known[a] <= 0.0:
+            return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
+        width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
+        b = a + width
+        known[b] = margin(b)
+        if known[b] >= 0.0:
+            return a  # a touch, or a crossing closer than the resolution: trigger here
+        return brentq(margin, a, b, xtol=1e-300, rtol=_RTOL, maxiter=200)
 
 
 def first_crossing(
@@ -68,39 +197,24 @@ def first_crossing(
     `tolerance` is the relative margin 1 - ||e||² / (α e^{-βt})² below which a point counts as
     reached; the result is then refined to double precision by bracketing.
     """
-    a = float(start)
-    span = float(initial_step)
-    for _ in range(_MAX_STEPS):
-        if a > limit:
-            return math.inf
-        e, e_rate = model.error_and_rate(a)
-        scale = math.exp(beta * a) / alpha
-        se = scale * e
-        phi = 1.0 - float(se @ se)
-        phi_rate = -2.0 * beta - 2.0 * scale * float(se @ e_rate)
-        if not (math.isfinite(phi) and math.isfinite(phi_rate)):
-            raise CrossingError(f'triggering error is not finite at t={a!r}: {e.tolist()}')
-        if phi <= tolerance:
-            return _polish(model, a, phi, phi_rate, alpha=alpha, beta=beta)
+    return CrossingSearch(
+        model, start=start, alpha=alpha, beta=beta, limit=limit, tolerance=tolerance, initial_step=initial_step
+    ).run()
 
-        span_eff, bound_e, bound_rate, bound_curv = model.bounds(a, span, math.sqrt(float(e @ e)))
-        s2 = scale * scale
-        lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate
-        step = phi / lipschitz if lipschitz > 0.0 else math.inf
-        curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv)
-        if math.isfinite(curvature):
-            step = max(step, _quadratic_step(phi, phi_rate, curvature))
-        if step >= span_eff:
-            step = span_eff
-            span = span_eff * _GROWTH
-        else:
-            span = max(step * _GROWTH, 1e-300)
-        nxt = a + step
-        if nxt <= a:
-            # The certified step is below the resolution of t: we sit on the crossing.
-            return _polish(model, a, phi, phi_rate, alpha=alpha, beta=beta)
-        a = nxt
-    raise CrossingError(f'no convergence after {_MAX_STEPS} certified steps (t={a!r})')
+
+def _vector_terms(model: ErrorModel):
+    def terms(t: float) -> tuple[float, float]:
+        e, e_rate = model.error_and_rate(t)
+        return float(e @ e), float(e @ e_rate)
+
+    return terms
+
+
+def _vector_norm(model: ErrorModel):
+    def norm(t: float) -> float:
+        return float(np.linalg.norm(model.error(t)))
+
+    return norm
 
 
 def _quadratic_step(phi: float, phi_rate: float, curvature: float) -> float:
@@ -111,21 +225,3 @@ def _quadratic_step(phi: float, phi_rate: float, curvature: float) -> float:
     if phi_rate > 0.0:
         return (phi_rate + root) / curvature
     return 2.0 * phi / (root - phi_rate)
-
-
-def _polish(model: ErrorModel, a: float, phi: float, phi_rate: float, *, alpha: float, beta: float) -> float:
-    """Refine a point whose margin is within tolerance to where ||e|| = α e^{-βt}."""
-    if phi <= 0.0 or phi_rate >= 0.0:
-        return a
-    scale = math.exp(beta * a) / alpha
-
-    def margin(t: float) -> float:
-        return math.exp(-beta * (t - a)) - scale * float(np.linalg.norm(model.error(t)))
-
-    if margin(a) <= 0.0:
-        return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
-    width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
-    b = a + width
-    if margin(b) >= 0.0:
-        return a  # a touch, or a crossing closer than the resolution: trigger here
-    return brentq(margin, a, b, xtol=1e-300, rtol=4.0 * np.finfo(float).eps, maxiter=200)

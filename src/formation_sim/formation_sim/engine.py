@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from formation_agent.crossing import CrossingSearch
 from formation_agent.eta import Eta1Agent, Eta2Agent
 from formation_sim.world import World
 
@@ -107,6 +108,33 @@ class _Sampler:
             self.velocities.append(q)
 
 
+def _next_event_time(heap, serial, searches, horizon: float) -> float:
+    """The earliest planned time of the team, advancing unfinished searches only as needed.
+
+    A search whose frontier is at or before the earliest known time might still cross there or
+    earlier, so it takes certified steps until its frontier passes the next entry; ties put
+    searches first (kind 0), so a planned time on top is the team's minimum. The steps are those
+    `next_trigger_time` would take, so the times are the same floats, but a search overtaken by
+    new information before it finishes costs only the steps up to that moment.
+    """
+    while heap:
+        key, kind, i, number = heap[0]
+        if serial[i] != number:
+            heapq.heappop(heap)
+            continue
+        if kind == 1 or key > horizon:
+            return key
+        heapq.heappop(heap)
+        search = searches[i]
+        until = heap[0][0] if heap else math.inf
+        result = search.advance(min(until, horizon))
+        if result is None:
+            heapq.heappush(heap, (search.frontier, 0, i, number))
+        elif result <= horizon:
+            heapq.heappush(heap, (result, 1, i, number))
+    return math.inf
+
+
 def simulate(
     scenario,
     *,
@@ -129,13 +157,19 @@ def simulate(
     if period is not None and not (math.isfinite(period) and period > 0.0):
         raise EngineError(f'period must be a finite number > 0, got {period!r}')
     started = time.perf_counter()
+    planned_period: dict[int, float] = {}
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
     sampler = _Sampler(world, sample_dt)
     messages = 0
-    heap: list[tuple[float, int]] = []
-    planned: dict[int, float] = {}
+    # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
+    # frontier of a search still under way (a certified lower bound on the agent's time). Only
+    # the entry with the agent's latest serial is live; older ones are skipped when they surface.
+    heap: list[tuple[float, int, int, int]] = []
+    serial: dict[int, int] = {}
+    searches: dict[int, CrossingSearch] = {}
+    counter = 0
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
     t = 0.0
     steps = 0
@@ -158,19 +192,21 @@ def simulate(
             agents[info.receiver].receive(info)
             changed.add(info.receiver)
         messages += len(outbox)
-        for i in changed:
+        for i in sorted(changed):
+            counter += 1
+            serial[i] = counter
             if period is None:
-                nxt = agents[i].next_trigger_time(horizon)
+                # Searched lazily below: only as far as the team's next event needs.
+                search = agents[i].trigger_search(horizon)
+                searches[i] = search
+                heapq.heappush(heap, (search.frontier, 0, i, counter))
             else:
-                nxt = (round(t / period) + 1) * period if i in due else planned[i]
-            planned[i] = nxt
-            heapq.heappush(heap, (nxt, i))
-        # Drop stale heap entries (an agent re-planned since it was pushed).
-        while heap and planned[heap[0][1]] != heap[0][0]:
-            heapq.heappop(heap)
-        t_next = heap[0][0] if heap else math.inf
+                nxt = (round(t / period) + 1) * period if i in due else planned_period[i]
+                planned_period[i] = nxt
+                heapq.heappush(heap, (nxt, 1, i, counter))
+        t_next = _next_event_time(heap, serial, searches, horizon)
         if t_next <= t and period is None:
-            agent = heap[0][1]
+            agent = heap[0][2]
             raise EngineError(
                 f'agent {agent} reached its threshold again at the instant it last planned from '
                 f'(t={t!r}, threshold {agents[agent].threshold(t):.3g}): the threshold has fallen to the '
@@ -190,8 +226,8 @@ def simulate(
         t = t_next
         due = []
         while heap and heap[0][0] == t_next:
-            _, i = heapq.heappop(heap)
-            if planned[i] == t_next and i not in due:
+            _, kind, i, number = heapq.heappop(heap)
+            if kind == 1 and serial[i] == number:
                 due.append(i)
         due.sort()
     return RunRecord(
