@@ -23,7 +23,13 @@ def register(subparsers) -> None:
     parser.add_argument('--horizon', type=float, default=None, help='final time in seconds (default: the scenario\'s)')
     parser.add_argument('--out', type=Path, default=None, help='output folder (default: runs/<scenario>-simulate-<time>)')
     parser.add_argument('--sample-dt', type=float, default=0.01, help='spacing of the dense trajectory samples [s] (default 0.01)')
-    parser.add_argument('--period', type=float, default=None, help='baseline: periodic sampling with this period instead of event triggering')
+    baseline = parser.add_mutually_exclusive_group()
+    baseline.add_argument('--period', type=float, default=None, help='baseline: periodic sampling with this period instead of event triggering')
+    baseline.add_argument(
+        '--continuous',
+        action='store_true',
+        help='baseline: the continuous controller (weights and states at every instant), integrated by scipy (DOP853, rtol 1e-10)',
+    )
     parser.add_argument('--tolerance', type=float, default=1e-12, help='relative margin at which a crossing counts as reached (default 1e-12)')
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
@@ -66,14 +72,19 @@ def run(args: argparse.Namespace) -> int:
             print(f'\r  t = {t:9.4f} s   events = {events}', end='', file=sys.stderr, flush=True)
 
     try:
-        record = simulate(
-            scenario,
-            horizon=args.horizon,
-            sample_dt=args.sample_dt,
-            tolerance=args.tolerance,
-            period=args.period,
-            progress=progress,
-        )
+        if args.continuous:
+            from formation_sim.baselines import simulate_continuous
+
+            record = simulate_continuous(scenario, horizon=args.horizon, sample_dt=args.sample_dt)
+        else:
+            record = simulate(
+                scenario,
+                horizon=args.horizon,
+                sample_dt=args.sample_dt,
+                tolerance=args.tolerance,
+                period=args.period,
+                progress=progress,
+            )
     except (EngineError, ValueError) as error:
         print(f'\nformation simulate: error: {error}', file=sys.stderr)
         return 1
@@ -82,11 +93,12 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet:
         print(out)
         return 0
-    print(
-        f'\r{scenario.name}: {record.total_events} events up to t = {record.horizon:g} s '
-        f'in {record.wall_time:.2f} s wall time',
-        file=sys.stderr,
+    what = (
+        f'continuous controller, {record.extra["rhs_evaluations"]} evaluations'
+        if args.continuous
+        else f'{record.total_events} events'
     )
+    print(f'\r{scenario.name}: {what} up to t = {record.horizon:g} s in {record.wall_time:.2f} s wall time', file=sys.stderr)
     print(f'summary:    {summary_path}')
     print(f'trajectory: {Path(out) / "trajectory.npz"}')
     if figure is not None:
