@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
 import pytest
 
@@ -215,3 +216,35 @@ def test_injected_faults_are_reproducible_per_seed_and_keep_each_edge_in_order()
     assert 900 < sum(drops) < 1100  # 10 % of 10 000 (binomial sd 30)
     assert all(a <= b for a, b in zip(dues, dues[1:])), 'a later message overtook an earlier one'
     assert all(due >= 0.001 * k + 0.005 for k, due in enumerate(dues))
+
+
+def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_agent.node import PROTOCOL_QOS, STEP_TOPIC, PeerLostError
+
+    node = live_node()
+    # Another participant, as the simulator's own process would be.
+    other = rclpy.Context()
+    rclpy.init(context=other, domain_id=DOMAIN_ID)
+    simulator = rclpy.create_node('fake_simulator', context=other)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        step_writer = simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        deadline = time.monotonic() + 20.0
+        while not node._simulator_seen and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert node._simulator_seen, 'the step writer never matched'
+        node.check()  # alive: nothing to report
+        simulator.destroy_publisher(step_writer)  # as its process would on the way out
+        with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery'):
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+                node.check()
+    finally:
+        executor.remove_node(node)
+        simulator.destroy_node()
+        rclpy.shutdown(context=other)

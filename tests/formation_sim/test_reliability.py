@@ -315,3 +315,156 @@ def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env)
     assert sum(1 for _ in read_bag(out / 'bag')) > 0
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['extra']['failure']['kind'] == 'interrupted'
+
+
+# -- communication faults (wall clock) ----------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_injected_loss_and_delay_happen_and_are_counted(tmp_path, ros_env):
+    """A test facility, not a result (the experiment's numbers are in the README). On the wall
+    clock the outcome may vary: a run either reaches the horizon or stops with the reason."""
+    from formation_sim.orchestrate import FormationRun
+
+    scenario = load_scenario(GENTLE)
+    run = FormationRun(
+        scenario, out_dir=tmp_path / 'run', horizon=3.0, domain_id=75, progress=False, timeout=240.0, record=False,
+        agents_per_process=4, clock='realtime', inject={'loss': 0.1, 'delay_ms': 5.0, 'jitter_ms': 5.0, 'seed': 1},
+    )  # fmt: skip
+    result = run.run()
+    summary = json.loads(result.summary.read_text())
+    if not result.ok:  # an honest failure, named: not a crash
+        assert summary['extra']['failure']['kind'] in ('connectivity_lost', 'agent_failed'), result.message
+    injected = summary['extra']['injected_faults']
+    assert injected['dropped'] > 0 and injected['delayed'] > 0
+    assert injected['dropped'] + injected['delayed'] <= summary['messages_sent']  # each arrival once
+    assert set(injected['by_agent']) <= {str(i) for i in scenario.agent_ids}
+    assert sum(entry['dropped'] for entry in injected['by_agent'].values()) == injected['dropped']
+    assert summary['extra']['rejected_messages']['total'] == 0  # delays keep each edge in order
+    assert summary['extra']['reports_missing'] == []
+    params = (result.out_dir / 'agents.params.yaml').read_text()
+    assert 'inject_loss: 0.1' in params and 'inject_delay_ms: 5.0' in params and 'inject_seed: 1' in params
+
+
+# -- isolation ----------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_two_runs_side_by_side_on_different_domains_do_not_see_each_other(tmp_path, ros_env):
+    from formation_sim.orchestrate import FormationRun
+
+    scenario = load_scenario('paper_single')
+    reference = simulate(scenario, horizon=1.0)
+    runs = [
+        FormationRun(scenario, out_dir=tmp_path / f'run{domain_id}', horizon=1.0, domain_id=domain_id, progress=False,
+                     timeout=240.0, record=False, agents_per_process=3)
+        for domain_id in (76, 77)
+    ]  # fmt: skip
+    started = [_in_background(run) for run in runs]
+    for worker, _ in started:
+        worker.join(timeout=240.0)
+    own = {'/formation_simulator', *(f'/agent_{i}/formation_agent' for i in scenario.agent_ids)}
+    for (_, (result,)), domain_id in zip(started, (76, 77)):
+        assert result.ok, result.message
+        assert result.domain_id == domain_id
+        graph = json.loads((result.out_dir / 'graph.json').read_text())
+        assert set(graph) == own, f'domain {domain_id} sees {sorted(graph)}'
+        _assert_same_events(json.loads(result.summary.read_text()), reference)
+
+
+# -- several hosts ------------------------------------------------------------------------------
+
+SUBNET = '10.231.0'  # private addresses, only on links inside the namespaces made here
+
+
+class _Hosts:
+    """Network namespaces acting as hosts, joined by a bridge in a namespace of its own.
+
+    Nothing is added to the machine's own network stack: every link is created inside the
+    namespaces, and deleting them (`close`) removes everything.
+    """
+
+    def __init__(self, tag: str, names: list[str]) -> None:
+        self.tag = tag
+        self.created: list[str] = []
+        self.switch = f'{tag}sw'
+        self.namespaces = {name: f'{tag}{name}' for name in names}
+
+    def _ip(self, *args: str) -> None:
+        done = subprocess.run(['ip', *args], capture_output=True, text=True, check=False, timeout=30)
+        if done.returncode != 0:
+            raise OSError(f'ip {" ".join(args)}: {done.stderr.strip()}')
+
+    def open(self) -> None:
+        self._ip('netns', 'add', self.switch)
+        self.created.append(self.switch)
+        self._ip('-n', self.switch, 'link', 'add', 'br0', 'type', 'bridge')
+        self._ip('-n', self.switch, 'link', 'set', 'br0', 'up')
+        for k, namespace in enumerate(self.namespaces.values(), start=1):
+            self._ip('netns', 'add', namespace)
+            self.created.append(namespace)
+            self._ip('link', 'add', 'name', 'eth0', 'netns', namespace, 'type', 'veth', 'peer', 'name', f'port{k}', 'netns', self.switch)
+            self._ip('-n', self.switch, 'link', 'set', f'port{k}', 'master', 'br0', 'up')
+            self._ip('-n', namespace, 'addr', 'add', f'{SUBNET}.{k}/24', 'dev', 'eth0')
+            self._ip('-n', namespace, 'link', 'set', 'eth0', 'up')
+            self._ip('-n', namespace, 'link', 'set', 'lo', 'up')
+            # DDS discovery multicasts to 239.255.0.1: route it onto the link.
+            self._ip('-n', namespace, 'route', 'add', '224.0.0.0/4', 'dev', 'eth0')
+
+    def close(self) -> None:
+        for namespace in reversed(self.created):
+            subprocess.run(['ip', 'netns', 'del', namespace], capture_output=True, check=False, timeout=30)
+        self.created.clear()
+
+
+@pytest.fixture
+def hosts():
+    import shutil
+
+    if os.geteuid() != 0:
+        pytest.skip('network namespaces need root (CI runs as root)')
+    if shutil.which('ip') is None:
+        pytest.skip('iproute2 is not installed (apt-get install -y iproute2)')
+    made = _Hosts(f'fm{os.getpid() % 100000}', ['h0', 'h1', 'h2', 'h3'])
+    try:
+        made.open()
+    except OSError as error:
+        made.close()
+        if 'Operation not permitted' in str(error) or 'Permission denied' in str(error):
+            pytest.skip(f'network namespaces are not permitted here: {error}')
+        raise
+    try:
+        yield made
+    finally:
+        made.close()
+
+
+@pytest.mark.timeout(300)
+def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts):
+    """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
+    memory), discovery by multicast on the hosts' subnet."""
+    from formation_sim.orchestrate import FormationRun
+
+    place = {'simulator': 'h0', 'recorder': 'h0', 'agent_1': 'h1', 'agent_2': 'h2', 'agent_3': 'h3'}
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    reference = simulate(scenario, horizon=horizon)
+    run = FormationRun(
+        scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=78, progress=False, timeout=240.0,
+        localhost_only=False, extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
+        launch_prefix=lambda name: ['ip', 'netns', 'exec', hosts.namespaces[place[name]]],
+    )  # fmt: skip
+    worker, results = _in_background(run)
+    _wait_for_stepping(run)
+    # Which network stack each child lives on (read while they run: the run lasts seconds more).
+    stacks = {child.name: os.readlink(f'/proc/{child.pid}/ns/net') for child in run._children}
+    worker.join(timeout=240.0)
+    (result,) = results
+    assert result.ok, result.message
+    assert os.readlink('/proc/self/ns/net') not in stacks.values()
+    assert stacks['recorder'] == stacks['simulator']
+    assert len({stacks[name] for name in ('simulator', 'agent_1', 'agent_2', 'agent_3')}) == 4
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    counts, _ = _bag_info_stamps(result.bag)
+    assert counts['/agent_1/trigger_info/to_2'] == len(reference.trigger_times[1])

@@ -639,9 +639,20 @@ class FormationSimulatorNode(Node):
         worst = int(np.argmax(lengths))
         if lengths[worst] >= self.scenario.delta:
             edge = self.scenario.edges[worst]
+            # After t = 0, an agent not ready never heard from some neighbour: its information was
+            # lost (it triggers only at events, so nothing repeats it), and the agent waits.
+            waiting = [
+                i for i, book in self.agents.items()
+                if book.status is not None and book.status.step_index >= 0 and not book.status.ready
+            ]  # fmt: skip
+            hint = (
+                f'; agents {waiting} are still waiting for a neighbour\'s triggering information (lost?)'
+                if waiting
+                else ''
+            )
             raise ConnectivityLostError(
                 f'edge ({edge.i}, {edge.j}) reached the communication radius at t={t!r}: '
-                f'||x_{edge.i} - x_{edge.j}|| = {lengths[worst]:.6g} >= Δ = {self.scenario.delta:g}',
+                f'||x_{edge.i} - x_{edge.j}|| = {lengths[worst]:.6g} >= Δ = {self.scenario.delta:g}{hint}',
                 time=t,
                 edge=(edge.i, edge.j),
                 length=float(lengths[worst]),
