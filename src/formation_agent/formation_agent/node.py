@@ -456,10 +456,10 @@ class FormationAgentNode(Node):
             self._simulator_lost_at = time.monotonic()
 
     def _trigger(self, future) -> None:
-        sensed = decode_sensed_state(future.result())
-        if self.finished:  # wall-clock mode: the horizon passed while sensing
+        if self.finished:  # the final step came while sensing (the horizon, or a failed run)
             self._sensing = False
             return
+        sensed = decode_sensed_state(future.result())
         # Lock-step: the step's exact time; wall clock: when the world was actually sensed.
         t = self.step.time if self._epoch is None else sensed.stamp
         if sensed.agent != self.agent_id or sensed.stamp != t:
@@ -670,7 +670,7 @@ class FormationAgentNode(Node):
         if self._report_dirty and not self.finished:
             self._publish_report()
 
-    def wait_for_delivery(self, timeout_sec: float = 2.0) -> None:
+    def wait_for_delivery(self, timeout_sec: float = 1.0) -> None:
         """Let reliable writers hand over what they still hold before the node goes away."""
         for pub in (self._status_pub, self._report_pub, self._command_pub, *self._info_pubs.values()):
             pub.wait_for_all_acked(Duration(seconds=timeout_sec))

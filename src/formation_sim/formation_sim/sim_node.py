@@ -750,7 +750,13 @@ class FormationSimulatorNode(Node):
         self.finished = True
         self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
         self.collect_final_reports(executor)
-        self.wait_for_delivery(timeout_sec=1.0)
+        # A live agent's final report says it got the final Step; a lost agent is still matched
+        # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
+        publishers = (self._state_pub, self._truth_pub, self._log_pub, self._clock_pub)
+        if not self.final_reports_in():
+            publishers = (self._step_pub, *publishers)
+        for pub in publishers:
+            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=1.0))
 
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
