@@ -205,8 +205,10 @@ class _AgentBook:
 class FormationSimulatorNode(Node):
     """World, sensing services and lock-step clock of a distributed formation run."""
 
-    def __init__(self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None) -> None:
-        super().__init__('formation_simulator', parameter_overrides=parameter_overrides or [])
+    def __init__(
+        self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None, context=None
+    ) -> None:
+        super().__init__('formation_simulator', parameter_overrides=parameter_overrides or [], context=context)
         source = self.declare_parameter('scenario', '').value
         horizon = float(self.declare_parameter('horizon', 0.0).value)
         self.out_dir = str(self.declare_parameter('out_dir', '').value)
