@@ -277,3 +277,14 @@ def test_lazy_searches_give_the_eager_event_chain_float_for_float(dynamics, n, s
     reference = _eager_reference(scenario, horizon)
     assert record.trigger_times == reference
     assert record.total_events > 3 * n
+
+
+def test_without_event_samples_only_the_grid_and_the_ends_are_kept():
+    scenario = load_scenario('paper_single')
+    full = simulate(scenario, horizon=1.0, sample_dt=0.25)
+    lean = simulate(scenario, horizon=1.0, sample_dt=0.25, sample_events=False)
+    assert lean.trigger_times == full.trigger_times
+    assert lean.sample_times.tolist() == [0.0, 0.25, 0.5, 0.75, 1.0]
+    grid = np.isin(full.sample_times, lean.sample_times)
+    assert grid.sum() == 5 and len(full.sample_times) > 5 + 10
+    assert np.array_equal(full.sample_positions[grid], lean.sample_positions)

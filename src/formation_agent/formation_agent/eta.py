@@ -139,22 +139,24 @@ class _EventTriggeredAgent:
             raise AgentError(f'agent {self.agent_id}: {what} is not finite: {array.tolist()}')
         return array
 
-    def _floats(self, value, what: str) -> tuple[float, ...]:
-        """`value` as a tuple of p finite floats (the checks of `_vector`, without numpy)."""
+    def _floats(self, value, what: str, *args) -> tuple[float, ...]:
+        """`value` as a tuple of p finite floats (the checks of `_vector`, without numpy).
+
+        `what` names the value, as a format template filled with `args` only on error (this runs
+        for every message).
+        """
         try:
             floats = tuple(map(float, value))
         except (TypeError, ValueError):
             floats = None
-        if floats is None or len(floats) != self.dimension:
-            return tuple(self._vector(value, what).tolist())  # raises the shape error
-        if not all(map(math.isfinite, floats)):
-            raise AgentError(f'agent {self.agent_id}: {what} is not finite: {list(floats)}')
-        return floats
+        if floats is not None and len(floats) == self.dimension and all(map(math.isfinite, floats)):
+            return floats
+        return tuple(self._vector(value, what.format(*args)).tolist())  # raises the error naming the rule
 
-    def _check_time(self, stamp: float, what: str) -> float:
+    def _check_time(self, stamp: float, what: str, *args) -> float:
         stamp = float(stamp)
         if not math.isfinite(stamp):
-            raise AgentError(f'agent {self.agent_id}: {what} has a non-finite time {stamp!r}')
+            raise AgentError(f'agent {self.agent_id}: {what.format(*args)} has a non-finite time {stamp!r}')
         return stamp
 
     def _relative_rows(self, values: Mapping[int, object] | None, what: str) -> list[tuple[float, ...]]:
@@ -163,7 +165,8 @@ class _EventTriggeredAgent:
             raise AgentError(
                 f'agent {self.agent_id}: {what} must cover exactly its neighbours {sorted(self.neighbour_ids)}, got {got}'
             )
-        return [self._floats(values[j], f'{what}[{j}]') for j in self.neighbour_ids]
+        template = what + '[{}]'
+        return [self._floats(values[j], template, j) for j in self.neighbour_ids]
 
     def receive(self, info: TriggerInfo) -> None:
         """Take a neighbour's triggering information (ETA step 6: re-predict from its time)."""
@@ -175,15 +178,15 @@ class _EventTriggeredAgent:
                 f'agent {self.agent_id} got information from agent {info.sender}, '
                 f'which is not a neighbour {sorted(self.neighbour_ids)}'
             )
-        stamp = self._check_time(info.stamp, f'information from agent {info.sender}')
+        stamp = self._check_time(info.stamp, 'information from agent {}', info.sender)
         if stamp < self._edge_time[k] or (self.last_trigger is not None and stamp < self.last_trigger):
             raise AgentError(
                 f'agent {self.agent_id}: information from agent {info.sender} goes back in time '
                 f'(t={stamp!r}, edge last updated at t={self._edge_time[k]!r})'
             )
         # The message carries x_j - x_i; this agent's edge state is x_i - x_j - d_ij.
-        rel = self._floats(info.rel_position, f'rel_position from agent {info.sender}')
-        control = self._floats(info.control, f'control from agent {info.sender}')
+        rel = self._floats(info.rel_position, 'rel_position from agent {}', info.sender)
+        control = self._floats(info.control, 'control from agent {}', info.sender)
         self._receive_extra(k, info)
         y = tuple(-r - d for r, d in zip(rel, self._offsets3[k]))
         self._anchor_time[k] = stamp
@@ -553,7 +556,7 @@ class Eta2Agent(_EventTriggeredAgent):
     def _receive_extra(self, k: int, info: TriggerInfo) -> None:
         if info.rel_velocity is None:
             raise AgentError(f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity')
-        q = tuple(-v for v in self._floats(info.rel_velocity, f'rel_velocity from agent {info.sender}'))
+        q = tuple(-v for v in self._floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
         self._anchor_q[k] = q
         self._edge_q[k] = self._pad(q)
 

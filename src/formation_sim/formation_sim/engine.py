@@ -75,29 +75,30 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Age
 class _Sampler:
     """Collects the state at every event and on a regular grid, by pure evaluation."""
 
-    def __init__(self, world: World, sample_dt: float | None) -> None:
+    def __init__(self, world: World, sample_dt: float | None, *, events: bool = True) -> None:
         self.world = world
         self.dt = sample_dt
+        self.events = events
         self.times: list[float] = []
         self.positions: list[np.ndarray] = []
         self.velocities: list[np.ndarray] = []
         self._next_grid = 1
 
     def grid_until(self, t_end: float) -> None:
-        """Sample grid points strictly between the world's time and t_end."""
+        """Sample grid points after the world's time and before t_end (at t_end too without event samples)."""
         if not self.dt:
             return
         while True:
             tg = self._next_grid * self.dt
-            if tg >= t_end:
+            if tg > t_end or (tg == t_end and self.events):
                 return
             self._next_grid += 1
             if tg > self.world.time:
                 x, q = self.world.state_at(tg)
                 self._add(tg, x, q)
 
-    def event(self) -> None:
-        if self.times and self.times[-1] == self.world.time:
+    def event(self, *, force: bool = False) -> None:
+        if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
             return
         self._add(self.world.time, self.world.positions, self.world.velocities)
 
@@ -142,6 +143,7 @@ def simulate(
     sample_dt: float | None = 0.01,
     tolerance: float = 1e-12,
     period: float | None = None,
+    sample_events: bool = True,
     progress: Callable[[float, int], None] | None = None,
     on_event: Callable[[float, World, list[int]], None] | None = None,
 ) -> RunRecord:
@@ -150,6 +152,11 @@ def simulate(
     With `period`, every agent samples and broadcasts at k * period instead of at its own
     triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
     due)` is called at every event time before the due agents trigger (for checkers).
+
+    The record samples the state at every event time and every `sample_dt`; that is
+    O(events x agents) memory, so large teams may pass `sample_events=False` (then only the grid,
+    t = 0 and the horizon are sampled; `summary.json`'s maximum edge lengths are then taken over
+    those samples only).
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -161,7 +168,7 @@ def simulate(
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
-    sampler = _Sampler(world, sample_dt)
+    sampler = _Sampler(world, sample_dt, events=sample_events)
     messages = 0
     # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
     # frontier of a search still under way (a certified lower bound on the agent's time). Only
@@ -173,6 +180,7 @@ def simulate(
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
     t = 0.0
     steps = 0
+    sampler.event(force=True)  # t = 0
     while True:
         sampler.event()
         if on_event is not None:
@@ -219,7 +227,7 @@ def simulate(
         if t_next > horizon:
             sampler.grid_until(horizon)
             world.advance(horizon)
-            sampler.event()
+            sampler.event(force=True)
             break
         sampler.grid_until(t_next)
         world.advance(t_next)

@@ -87,7 +87,7 @@ class World:
             raise WorldError(
                 f'control of agent {agent} has shape {value.shape}, expected ({self.dimension},)'
             )
-        if not np.all(np.isfinite(value)):
+        if not np.isfinite(value).all():
             raise WorldError(f'control of agent {agent} is not finite: {value.tolist()}')
         self._u[self.index(agent)] = value
 
@@ -115,10 +115,13 @@ class World:
     def sense(self, agent: int, neighbours) -> SensedState:
         """What `agent` senses now: x_i - x_j (and q_i - q_j, q_i) for each neighbour j."""
         i = self.index(agent)
-        rel_pos = {j: tuple((self._x[i] - self._x[self.index(j)]).tolist()) for j in neighbours}
+        neighbours = tuple(neighbours)
+        rows = [self.index(j) for j in neighbours]
+        # One vectorised difference per quantity; rows of it are the exact x_i - x_j.
+        rel_pos = dict(zip(neighbours, map(tuple, (self._x[i] - self._x[rows]).tolist())))
         if self._q is None:
             return SensedState(agent=agent, stamp=self.time, rel_positions=rel_pos)
-        rel_vel = {j: tuple((self._q[i] - self._q[self.index(j)]).tolist()) for j in neighbours}
+        rel_vel = dict(zip(neighbours, map(tuple, (self._q[i] - self._q[rows]).tolist())))
         return SensedState(
             agent=agent,
             stamp=self.time,
