@@ -75,12 +75,18 @@ from formation_msgs_py.lockstep import (
     Status,
     Step,
 )
+from formation_msgs_py.topics import (  # noqa: F401 - re-exported for the node's users
+    REPORT_TOPIC,
+    STATUS_TOPIC,
+    STEP_TOPIC,
+    agent_namespace,
+    command_topic,
+    sense_service,
+    trigger_info_topic,
+)
 from formation_msgs_py.types import TriggerInfo
 
 NODE_NAME = 'formation_agent'
-STEP_TOPIC = '/formation/step'
-STATUS_TOPIC = '/formation/status'
-REPORT_TOPIC = '/formation/agent_report'
 
 LIVELINESS_LEASE = 1.0
 """Seconds without a sign of life after which DDS declares a writer of the protocol lost.
@@ -151,22 +157,6 @@ class FaultInjection:
         due = max(now + self.delay + extra, self._last_due.get(sender, -math.inf))
         self._last_due[sender] = due
         return due
-
-
-def agent_namespace(agent_id: int) -> str:
-    return f'/agent_{agent_id}'
-
-
-def trigger_info_topic(sender: int, receiver: int) -> str:
-    return f'{agent_namespace(sender)}/trigger_info/to_{receiver}'
-
-
-def sense_service(agent_id: int) -> str:
-    return f'{agent_namespace(agent_id)}/sense'
-
-
-def command_topic(agent_id: int, *, double: bool) -> str:
-    return f'{agent_namespace(agent_id)}/{"cmd_accel" if double else "cmd_vel"}'
 
 
 def build_core(

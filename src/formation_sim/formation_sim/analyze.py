@@ -46,17 +46,13 @@ from formation_msgs_py.codec import (
     decode_world_state,
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
+from formation_msgs_py.topics import SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim import theory
 from formation_sim.engine import RunRecord
 from formation_sim.recorder import RecorderError, decode, read_bag
 from formation_sim.scenario import Scenario, ScenarioError, load_scenario
 from formation_sim.summary import SUMMARY_FILE, build_summary
 
-SCENARIO_TOPIC = '/formation/scenario'
-STATE_TOPIC = '/formation/state'
-STEP_TOPIC = '/formation/step'
-STATUS_TOPIC = '/formation/status'
-SENSING_LOG_TOPIC = '/formation/sensing_log'
 SCENARIO_FILE = 'scenario.yaml'
 BAG_DIR = 'bag'
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')

@@ -31,7 +31,7 @@ from formation_sim import theory
 if TYPE_CHECKING:
     from formation_sim.scenario import Scenario
 
-MARKERS_TOPIC = '/formation/markers'
+from formation_msgs_py.topics import MARKERS_TOPIC, STATE_TOPIC
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 DEFAULT_FRAME = 'world'
 
@@ -345,7 +345,7 @@ def write_bag_with_markers(
     target: str | Path,
     scenario: Scenario,
     *,
-    state_topic: str = '/formation/state',
+    state_topic: str = STATE_TOPIC,
     progress=None,
 ) -> MarkedBag:
     """Copy the bag `source` into the new bag `target`, adding a MarkerArray on MARKERS_TOPIC

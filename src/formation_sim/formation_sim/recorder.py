@@ -43,6 +43,8 @@ from mcap.writer import Writer as McapFileWriter
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from formation_msgs_py.topics import STEP_TOPIC
+
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
     from rosbags.typesys.store import Typestore
@@ -59,7 +61,7 @@ else:
                 raise ImportError(msg)
 
 BAG_VERSION = 9
-DEFAULT_CLOCK_TOPIC = '/formation/step'
+DEFAULT_CLOCK_TOPIC = STEP_TOPIC
 # /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time].
 _STEP_TIME_INDEX = 2
 _NS_PER_S = 1_000_000_000

@@ -23,13 +23,14 @@ import numpy as np
 import yaml
 
 from formation_msgs_py.codec import MessageError, decode_status, decode_step, decode_trigger_info, decode_world_state
+from formation_msgs_py.topics import STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
 
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
 FLOAT_ARRAY = 'std_msgs/msg/Float64MultiArray'
 DECODERS: dict[str, tuple[str, Callable]] = {
-    '/formation/step': ('Step', decode_step),
-    '/formation/status': ('Status', decode_status),
-    '/formation/state': ('WorldState', decode_world_state),
+    STEP_TOPIC: ('Step', decode_step),
+    STATUS_TOPIC: ('Status', decode_status),
+    STATE_TOPIC: ('WorldState', decode_world_state),
 }
 
 

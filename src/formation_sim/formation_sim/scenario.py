@@ -643,9 +643,11 @@ def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
 _Dumper.add_representer(list, _represent_list)
 
 
+def dump_scenario_text(scenario: Scenario) -> str:
+    """`scenario` as YAML text that reads back exactly (floats keep every bit)."""
+    return yaml.dump(scenario_to_dict(scenario), Dumper=_Dumper, sort_keys=False, allow_unicode=True)
+
+
 def dump_scenario(scenario: Scenario, path: str | Path) -> None:
     """Write `scenario` as YAML; load_scenario(path) == scenario exactly (floats keep every bit)."""
-    text = yaml.dump(
-        scenario_to_dict(scenario), Dumper=_Dumper, sort_keys=False, allow_unicode=True
-    )
-    Path(path).write_text(text, encoding='utf-8')
+    Path(path).write_text(dump_scenario_text(scenario), encoding='utf-8')

@@ -48,6 +48,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
 from formation_agent.node import (
     EXIT_PEER_LOST,
@@ -82,13 +83,18 @@ from formation_msgs_py.lockstep import (
     Step,
     WorldState,
 )
-from formation_sim.scenario import Scenario, load_scenario
+from formation_msgs_py.topics import (
+    CLOCK_TOPIC,
+    GROUND_TRUTH_TOPIC,
+    MARKERS_TOPIC,
+    SCENARIO_TOPIC,
+    SENSING_LOG_TOPIC,
+    STATE_TOPIC,
+)
+from formation_sim.markers import MARKERS_TYPE, FormationMarkers
+from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.world import World
 
-STATE_TOPIC = '/formation/state'
-GROUND_TRUTH_TOPIC = '/formation/ground_truth'
-SENSING_LOG_TOPIC = '/formation/sensing_log'
-CLOCK_TOPIC = '/clock'
 GRAPH_FILE = 'graph.json'
 CLOCK_MODES = ('lockstep', 'realtime')
 
@@ -151,6 +157,8 @@ def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
         (SENSING_LOG_TOPIC, 'std_msgs/msg/String'),
         (CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock'),
         (REPORT_TOPIC, 'std_msgs/msg/String'),
+        (SCENARIO_TOPIC, 'std_msgs/msg/String'),
+        (MARKERS_TOPIC, MARKERS_TYPE),
     ]
     for i in scenario.agent_ids:
         topics.append((command_topic(i, double=double), command_type))
@@ -248,6 +256,18 @@ class FormationSimulatorNode(Node):
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, PROTOCOL_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, PROTOCOL_QOS)
+        # For tools: the scenario once (so a bag is self-contained), a Foxglove view per sample.
+        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, PROTOCOL_QOS)
+        self._markers = FormationMarkers(scenario)
+        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
+        self._tool_publishers = (
+            self._state_pub,
+            self._truth_pub,
+            self._log_pub,
+            self._clock_pub,
+            self._scenario_pub,
+            self._markers_pub,
+        )
         self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, PROTOCOL_QOS)
         self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, PROTOCOL_QOS)
         command_type = Accel if self.double else Twist
@@ -296,7 +316,7 @@ class FormationSimulatorNode(Node):
         extra = self.extra_subscribers
         return (
             self._step_pub.get_subscription_count() >= len(self.agents) + extra
-            and all(pub.get_subscription_count() >= extra for pub in (self._state_pub, self._truth_pub, self._log_pub, self._clock_pub))
+            and all(pub.get_subscription_count() >= extra for pub in self._tool_publishers)
             and self._status_sub.get_publisher_count() >= len(self.agents)
             and self._report_sub.get_publisher_count() >= len(self.agents)
             and all(sub.get_publisher_count() >= 1 for sub in self._command_subs.values())
@@ -426,6 +446,7 @@ class FormationSimulatorNode(Node):
             with contextlib.suppress(OSError):
                 print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
+        self._scenario_pub.publish(String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._sample_event()
         if self.realtime:
             self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
@@ -632,6 +653,7 @@ class FormationSimulatorNode(Node):
         self._clock_pub.publish(Clock(clock=ros_time(t)))
         self._state_pub.publish(encode_world_state(state))
         self._truth_pub.publish(encode_pose_array(state))
+        self._markers_pub.publish(self._markers.to_ros(self._markers.markers(x), time=t))
         self._check_connectivity(t, x)
 
     def _check_connectivity(self, t: float, x: np.ndarray) -> None:
@@ -741,7 +763,7 @@ class FormationSimulatorNode(Node):
         }
 
     def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
-        for pub in (self._step_pub, self._state_pub, self._truth_pub, self._log_pub, self._clock_pub):
+        for pub in (self._step_pub, *self._tool_publishers):
             pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
 
     def stop_agents(self, executor) -> None:
@@ -754,7 +776,7 @@ class FormationSimulatorNode(Node):
         self.collect_final_reports(executor)
         # A live agent's final report says it got the final Step; a lost agent is still matched
         # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
-        publishers = (self._state_pub, self._truth_pub, self._log_pub, self._clock_pub)
+        publishers = self._tool_publishers
         if not self.final_reports_in():
             publishers = (self._step_pub, *publishers)
         for pub in publishers:

@@ -1,0 +1,34 @@
+"""Names of every topic and service of a run: the one place they are spelled (ROS-free).
+
+Agent-side names are absolute defaults; the agent node resolves them in its own namespace
+`/agent_<i>`, so a robot integration can remap them (docs/MESSAGES.md).
+"""
+
+from __future__ import annotations
+
+STEP_TOPIC = '/formation/step'  # lock-step: simulator -> agents
+STATUS_TOPIC = '/formation/status'  # lock-step: agents -> simulator
+REPORT_TOPIC = '/formation/agent_report'  # agents' rejected/injected counts
+STATE_TOPIC = '/formation/state'  # exact world state (tools only)
+GROUND_TRUTH_TOPIC = '/formation/ground_truth'  # PoseArray (tools only)
+SENSING_LOG_TOPIC = '/formation/sensing_log'  # one record per sensing call (tools only)
+SCENARIO_TOPIC = '/formation/scenario'  # the run's scenario YAML, once (tools only)
+MARKERS_TOPIC = '/formation/markers'  # Foxglove view (tools only)
+CLOCK_TOPIC = '/clock'
+
+
+def agent_namespace(agent_id: int) -> str:
+    return f'/agent_{agent_id}'
+
+
+def trigger_info_topic(sender: int, receiver: int) -> str:
+    """The per-edge topic on which `sender` broadcasts its triggering information to `receiver`."""
+    return f'{agent_namespace(sender)}/trigger_info/to_{receiver}'
+
+
+def sense_service(agent_id: int) -> str:
+    return f'{agent_namespace(agent_id)}/sense'
+
+
+def command_topic(agent_id: int, *, double: bool) -> str:
+    return f'{agent_namespace(agent_id)}/{"cmd_accel" if double else "cmd_vel"}'
