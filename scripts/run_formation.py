@@ -9,7 +9,7 @@ Copy and adapt: everything is the public API of formation_sim.orchestrate.
 import argparse
 import sys
 
-from formation_sim.orchestrate import FormationRun
+from formation_sim.orchestrate import FormationRun, RunError
 
 
 def main() -> int:
@@ -19,8 +19,12 @@ def main() -> int:
     parser.add_argument('--out', required=True)
     args = parser.parse_args()
 
-    run = FormationRun(args.scenario, out_dir=args.out, horizon=args.horizon)
-    result = run.run()  # Ctrl-C stops every process cleanly
+    try:
+        run = FormationRun(args.scenario, out_dir=args.out, horizon=args.horizon)
+        result = run.run()  # Ctrl-C stops every process cleanly
+    except (RunError, ValueError) as error:  # ValueError: unreadable or invalid scenario (names the rule)
+        print(f'error: {error}', file=sys.stderr)
+        return 2
 
     print(f'exit status {result.exit_status} after {result.wall_time:.1f} s (ROS domain {result.domain_id})')
     print(f'summary: {result.summary}')
