@@ -253,7 +253,7 @@ BROKEN_SINGLE = [
     ('edge to nobody', _append_edge({'i': 1, 'j': 7, 'd': [0.0, 0.0]}), ['edges[3] (1, 7)', 'j=7 is not an agent']),
     ('self loop', _append_edge({'i': 2, 'j': 2, 'd': [0.0, 0.0]}), ['edges[3] (2, 2)', 'self-loop']),
     ('duplicate edge', _append_edge({'i': 1, 'j': 2, 'd': [0.0, -2.0]}), ['edges[3] (1, 2)', 'duplicates edges[0] (1, 2)']),
-    ('reversed duplicate', _append_edge({'i': 2, 'j': 1, 'd': [0.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'd_ji = -d_ij']),
+    ('reversed duplicate', _append_edge({'i': 2, 'j': 1, 'd': [0.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2), they agree', 'd_ji = -d_ij']),
     ('edge d size', _set(('edges', 1, 'd'), [1.0]), ['edges[1] (1, 3).d', '1 components', 'expected 2']),
     ('edge d nan', _set(('edges', 2, 'd'), [float('nan'), 0.0]), ['edges[2] (2, 3).d[0]', 'finite']),
     ('edge missing d', _delete(('edges', 0, 'd')), ['edges[0]', "missing key 'd'"]),
@@ -265,7 +265,7 @@ BROKEN_SINGLE = [
     ('gain nan', _set(('gains', 'beta'), float('nan')), ['gains.beta', 'finite', 'nan']),
     ('horizon negative', _set(('horizon',), -1.0), ['horizon', 'must be > 0', '-1.0']),
     ('horizon infinite', _set(('horizon',), float('inf')), ['horizon', 'finite', 'inf']),
-    ('d_ji disagreeing with d_ij', _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'd_ji = -d_ij']),
+    ('d_ji disagreeing with d_ij', _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'they disagree: d = [0.0, -2.0] there, [-1.0, -2.0] here', 'd_ji = -d_ij']),
 ]
 
 

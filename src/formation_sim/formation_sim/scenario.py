@@ -278,9 +278,16 @@ class Scenario:
             seen = first_seen.setdefault(key, k)
             if seen != k:
                 other = edges[seen]
+                # Seen from the first listing's orientation, the second one asks for this d.
+                implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
+                agreement = (
+                    'they agree'
+                    if np.array_equal(implied, other.d)
+                    else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
+                )
                 raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}); list '
-                    f'each undirected edge once (d_ji = -d_ij is implied)'
+                    f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
+                    f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
                 )
         object.__setattr__(self, 'edges', edges)
         object.__setattr__(self, '_index', index)
