@@ -116,3 +116,19 @@ def test_search_reports_no_crossing_up_to_its_limit():
     assert search.advance(2.0) is None
     assert search.frontier > 2.0
     assert search.run() == math.inf
+
+
+@pytest.mark.parametrize(
+    ('f', 'a', 'b', 'root'),
+    [
+        (lambda x: math.cos(x) - x, 0.0, 1.0, 0.7390851332151607),  # the Dottie number
+        (lambda x: math.exp(-x) - x * x, 0.0, 2.0, 0.7034674224983917),
+        (lambda x: 1e-3 - (x - 5.0) ** 3, 0.0, 10.0, 5.1),  # flat near its root
+        (lambda x: 1.0 - x * 1e12, 0.0, 1e-11, 1e-12),  # a bracket of sub-ulp size in seconds
+    ],
+)
+def test_polishing_root_finder_reaches_a_few_ulps(f, a, b, root):
+    from formation_agent.crossing import _root_in_bracket
+
+    x = _root_in_bracket(f, a, f(a), b, f(b))
+    assert abs(x - root) <= 8 * math.ulp(root)

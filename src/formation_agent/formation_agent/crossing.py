@@ -14,7 +14,8 @@ The largest h keeping either lower bound positive is crossing-free. Near a simpl
 quadratic bound makes the steps converge quadratically (a certified Newton iteration); near a
 tangential touch they shrink like sqrt(φ/M) and pass it. The first-order bound serves where e is
 only Lipschitz (ETA-2 when a relative position passes through its desired value). Once the margin
-is below `tolerance`, the root is polished by Brent's method inside a bracket of width ~φ/|φ'|.
+is below `tolerance`, the root is polished inside a bracket of width ~φ/|φ'| (Illinois regula falsi,
+in plain Python: the agents need no scipy, which halves an agent process's start-up).
 
 The search is resumable (`CrossingSearch`): at any moment its `frontier` is a certified lower
 bound on the answer (no crossing in [start, frontier)), so a simulator of many agents can advance
@@ -29,7 +30,6 @@ import math
 from typing import Protocol
 
 import numpy as np
-from scipy.optimize import brentq
 
 
 class CrossingError(RuntimeError):
@@ -61,7 +61,7 @@ class ErrorModel(Protocol):
 # Steps never grow by more than this factor, so that bounds stay tight around the current point.
 _GROWTH = 4.0
 _MAX_STEPS = 200_000
-_RTOL = 4.0 * float(np.finfo(float).eps)
+_RTOL = 4.0 * 2.0**-52  # 4 ulps relative
 
 
 class CrossingSearch:
@@ -156,30 +156,26 @@ class CrossingSearch:
     def _polish(self, a: float, phi: float, phi_rate: float, size: float) -> float:
         """Refine a point whose margin is within tolerance to where ||e|| = α e^{-βt}.
 
-        `size` is ||e(a)||, so the margin at a costs no evaluation; the margins at both ends of
-        the bracket are remembered, since Brent's method starts by asking for them again.
+        `size` is ||e(a)||, so the margin at a costs no evaluation.
         """
         if phi <= 0.0 or phi_rate >= 0.0:
             return a
         beta = self.beta
         scale = math.exp(beta * a) / self.alpha
         norm = self._norm
-        known = {a: 1.0 - scale * size}  # e^{-β(a - a)} = 1
 
         def margin(t: float) -> float:
-            value = known.get(t)
-            if value is None:
-                value = math.exp(-beta * (t - a)) - scale * norm(t)
-            return value
+            return math.exp(-beta * (t - a)) - scale * norm(t)
 
-        if known[a] <= 0.0:
+        margin_a = 1.0 - scale * size  # e^{-β(a - a)} = 1
+        if margin_a <= 0.0:
             return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
         width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
         b = a + width
-        known[b] = margin(b)
-        if known[b] >= 0.0:
+        margin_b = margin(b)
+        if margin_b >= 0.0:
             return a  # a touch, or a crossing closer than the resolution: trigger here
-        return brentq(margin, a, b, xtol=1e-300, rtol=_RTOL, maxiter=200)
+        return _root_in_bracket(margin, a, margin_a, b, margin_b)
 
 
 def first_crossing(
@@ -200,6 +196,42 @@ def first_crossing(
     return CrossingSearch(
         model, start=start, alpha=alpha, beta=beta, limit=limit, tolerance=tolerance, initial_step=initial_step
     ).run()
+
+
+def _root_in_bracket(f, a: float, fa: float, b: float, fb: float, *, max_iterations: int = 200) -> float:
+    """A root of f in [a, b], where fa = f(a) and fb = f(b) have opposite signs (fa > 0 > fb here).
+
+    Regula falsi with the Illinois modification (the value kept at an end that survives twice in
+    a row is halved, so both ends converge), superlinear on a smooth f; a point the interpolation
+    puts outside (a, b) is replaced by the midpoint. It stops when the bracket or the last move is
+    within `_RTOL` (4 ulps) of the root, or on an exact zero.
+    """
+    kept = 0  # which end survived the last iteration: -1 a, +1 b
+    weight_a, weight_b = fa, fb  # the values interpolated with (Illinois halves them)
+    x = a
+    for _ in range(max_iterations):
+        if b - a <= _RTOL * max(abs(a), abs(b), 1e-300):
+            break
+        previous = x
+        x = b - weight_b * ((b - a) / (weight_b - weight_a))
+        if not a < x < b:
+            x = a + 0.5 * (b - a)
+        fx = f(x)
+        if fx == 0.0:
+            return x
+        if (fx > 0.0) == (fa > 0.0):
+            a, fa, weight_a = x, fx, fx
+            if kept == 1:
+                weight_b *= 0.5
+            kept = 1
+        else:
+            b, fb, weight_b = x, fx, fx
+            if kept == -1:
+                weight_a *= 0.5
+            kept = -1
+        if abs(x - previous) <= _RTOL * abs(x):
+            break
+    return a if abs(fa) <= abs(fb) else b
 
 
 def _vector_terms(model: ErrorModel):
