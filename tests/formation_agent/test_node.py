@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 
 import pytest
@@ -23,20 +22,6 @@ GOOD = {
     'alpha': 10.0,
     'beta': 1.0,
 }
-
-
-@pytest.fixture(scope='module')
-def ros(tmp_path_factory):
-    import rclpy
-
-    os.environ.setdefault('ROS_LOG_DIR', str(tmp_path_factory.mktemp('ros_log')))
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    try:
-        yield context
-    finally:
-        rclpy.shutdown(context=context)
 
 
 def make_node(ros, **changes):
@@ -223,7 +208,8 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
 
-    from formation_agent.node import PROTOCOL_QOS, STEP_TOPIC, PeerLostError
+    from formation_agent.node import PROTOCOL_QOS, PeerLostError
+    from formation_msgs_py.topics import STEP_TOPIC
 
     node = live_node()
     # Another participant, as the simulator's own process would be.

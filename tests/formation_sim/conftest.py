@@ -3,6 +3,8 @@
 - `paper_single_record`: the in-process engine's paper_single run up to t = 1 (no ROS).
 - `write_run_bag`: writes what a distributed run records (docs/MESSAGES.md) for a `RunRecord`,
   through the real codec encoders, into a bag (no ROS process: rclpy only serializes).
+- `wait_for_stepping`: waits until a FormationRun's simulator reports sim time past 0.
+- `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
 - `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 170) and the
   in-process run of the same scenario, shared by every test that asks for it in a session.
 """
@@ -10,6 +12,9 @@
 from __future__ import annotations
 
 import json
+import re
+import time
+from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +24,51 @@ from formation_sim.engine import RunRecord, simulate
 from formation_sim.scenario import load_scenario
 
 DISTRIBUTED_DOMAIN = 170
+
+
+def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
+    """Messages per topic of a bag, and the TriggerInfo stamps per (sender, receiver) edge."""
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.codec import decode_trigger_info
+    from formation_sim.recorder import read_bag
+
+    counts: dict[str, int] = defaultdict(int)
+    stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
+    for message in read_bag(bag):
+        counts[message.topic] += 1
+        if '/trigger_info/' in message.topic:
+            info = decode_trigger_info(deserialize_message(message.rawdata, Float64MultiArray))
+            assert message.topic == f'/agent_{info.sender}/trigger_info/to_{info.receiver}'
+            stamps[(info.sender, info.receiver)].append(info.stamp)
+    return counts, stamps
+
+
+def _wait_for_stepping(run, limit: float = 120.0) -> None:
+    """Wait until the simulator reports sim time past 0 (on a loaded machine that can take a while)."""
+    deadline = time.monotonic() + limit
+
+    def reached() -> float:
+        found = re.search(r'\bt=([0-9.eE+-]+)', run.last_progress)
+        return float(found.group(1)) if found else 0.0
+
+    while reached() <= 0.0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert reached() > 0.0, f'the run never stepped past t = 0 (last progress: {run.last_progress!r})'
+
+
+
+@pytest.fixture
+def wait_for_stepping():
+    """`wait_for_stepping(run)`: block until a FormationRun's simulator reports sim time past 0."""
+    return _wait_for_stepping
+
+
+@pytest.fixture
+def bag_trigger_stamps():
+    """`bag_trigger_stamps(bag) -> (messages per topic, TriggerInfo stamps per directed edge)`."""
+    return _bag_trigger_stamps
 
 
 @pytest.fixture(scope='session')

@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 import os
 import threading
-import time
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -39,24 +37,6 @@ def _assert_same_events(summary: dict, reference) -> None:
     assert summary['sensing_calls'] == reference.total_events
 
 
-def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
-    from rclpy.serialization import deserialize_message
-    from std_msgs.msg import Float64MultiArray
-
-    from formation_msgs_py.codec import decode_trigger_info
-    from formation_sim.recorder import read_bag
-
-    counts: dict[str, int] = defaultdict(int)
-    stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
-    for message in read_bag(bag):
-        counts[message.topic] += 1
-        if '/trigger_info/' in message.topic:
-            info = decode_trigger_info(deserialize_message(message.rawdata, Float64MultiArray))
-            assert message.topic == f'/agent_{info.sender}/trigger_info/to_{info.receiver}'
-            stamps[(info.sender, info.receiver)].append(info.stamp)
-    return counts, stamps
-
-
 def _assert_agents_isolated(graph: dict, scenario) -> None:
     """No agent subscribes to ground truth or state, or uses another agent's sensing."""
     for i in scenario.agent_ids:
@@ -73,7 +53,7 @@ def _assert_agents_isolated(graph: dict, scenario) -> None:
     ('name', 'horizon', 'domain_id'),
     [('paper_single', 10.0, 110), ('paper_double', 8.0, 111)],
 )
-def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, domain_id):
+def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, domain_id, bag_trigger_stamps):
     scenario = load_scenario(name)
     reference = simulate(scenario, horizon=horizon)
     result = _run(scenario, tmp_path, domain_id=domain_id, horizon=horizon)
@@ -87,7 +67,7 @@ def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, 
     # the sender's triggering times.
     from formation_sim.sim_node import formation_topics
 
-    counts, stamps = _bag_trigger_stamps(result.bag)
+    counts, stamps = bag_trigger_stamps(result.bag)
     assert set(counts) == {topic for topic, _ in formation_topics(scenario)}
     for i in scenario.agent_ids:
         for j in scenario.neighbours(i):
@@ -127,22 +107,15 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _wait_for_stepping(run, limit: float = 120.0) -> None:
-    deadline = time.monotonic() + limit
-    while not run.last_progress and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert run.last_progress, 'the run never reported progress'
-
-
 @pytest.mark.timeout(300)
-def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path):
+def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_for_stepping):
     from formation_sim.orchestrate import FormationRun
 
     run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=113, progress=False, timeout=240.0)
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     run.interrupt()
     worker.join(timeout=60.0)
     assert not worker.is_alive()
@@ -159,7 +132,7 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path):
 
 
 @pytest.mark.timeout(300)
-def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path):
+def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping):
     import signal
 
     from formation_sim.orchestrate import FormationRun, _mapped_by_anyone, _mapped_shm_files
@@ -168,7 +141,7 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path):
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     victim = next(child for child in run._children if child.name == 'agent_2')
     leftovers = _mapped_shm_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
@@ -224,7 +197,7 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_no_shared_memory_files(tmp_path):
+def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping):
     from formation_sim.orchestrate import FormationRun
 
     # No grace period: every child still alive right after SIGINT is killed with SIGKILL.
@@ -241,7 +214,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path):
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     run.interrupt()
     worker.join(timeout=60.0)
     (result,) = results

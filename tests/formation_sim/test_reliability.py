@@ -14,7 +14,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections import defaultdict
 from pathlib import Path
 
 import pytest
@@ -48,13 +47,6 @@ def _in_background(run):
     return worker, results
 
 
-def _wait_for_stepping(run, limit: float = 120.0) -> None:
-    deadline = time.monotonic() + limit
-    while not run.last_progress and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert run.last_progress, 'the run never started stepping'
-
-
 def _processes_mentioning(text: str) -> list[int]:
     """Live (not zombie) processes whose command line contains `text`."""
     found = []
@@ -78,23 +70,6 @@ def _wait_until_gone(text: str, limit: float = 30.0) -> list[int]:
     return left
 
 
-def _bag_info_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
-    from rclpy.serialization import deserialize_message
-    from std_msgs.msg import Float64MultiArray
-
-    from formation_msgs_py.codec import decode_trigger_info
-    from formation_sim.recorder import read_bag
-
-    counts: dict[str, int] = defaultdict(int)
-    stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
-    for message in read_bag(bag):
-        counts[message.topic] += 1
-        if '/trigger_info/' in message.topic:
-            info = decode_trigger_info(deserialize_message(message.rawdata, Float64MultiArray))
-            stamps[(info.sender, info.receiver)].append(info.stamp)
-    return counts, stamps
-
-
 @pytest.fixture
 def ros_env(tmp_path, monkeypatch):
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -113,7 +88,8 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
 
-    from formation_agent.node import PROTOCOL_QOS, STEP_TOPIC, trigger_info_topic
+    from formation_agent.node import PROTOCOL_QOS
+    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
     from formation_msgs_py.codec import decode_step, encode_trigger_info
     from formation_msgs_py.types import TriggerInfo
     from formation_sim.orchestrate import FormationRun
@@ -193,13 +169,13 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
 
 
 @pytest.mark.timeout(300)
-def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env):
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping):
     from formation_sim.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
 
     scenario = load_scenario('paper_single')
     run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=1000.0, domain_id=71, progress=False, timeout=240.0)
     worker, results = _in_background(run)
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
     shm_files = _mapped_shm_files(victim.pid)
@@ -230,7 +206,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     # The bag was finalised and holds every triggering-information message sent before the
     # failing step, each exactly once and in order.
     assert result.bag is not None and not result.bag_recovered
-    counts, stamps = _bag_info_stamps(result.bag)
+    counts, stamps = bag_trigger_stamps(result.bag)
     for i in scenario.agent_ids:
         for j in scenario.neighbours(i):
             before = [t for t in reference.trigger_times[i] if t < t_fail]
@@ -241,13 +217,13 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 
 
 @pytest.mark.timeout(300)
-def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env):
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, wait_for_stepping):
     from formation_sim.orchestrate import EXIT_LOST, FormationRun
     from formation_sim.recorder import read_bag
 
     run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=72, progress=False, timeout=240.0)
     worker, results = _in_background(run)
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
     recorder = next(child for child in run._children if child.name == 'recorder')
     os.kill(recorder.pid, signal.SIGKILL)
@@ -440,7 +416,7 @@ def hosts():
 
 
 @pytest.mark.timeout(300)
-def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts):
+def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts, bag_trigger_stamps, wait_for_stepping):
     """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
     memory), discovery by multicast on the hosts' subnet."""
     from formation_sim.orchestrate import FormationRun
@@ -455,7 +431,7 @@ def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_eng
         launch_prefix=lambda name: ['ip', 'netns', 'exec', hosts.namespaces[place[name]]],
     )  # fmt: skip
     worker, results = _in_background(run)
-    _wait_for_stepping(run)
+    wait_for_stepping(run)
     # Which network stack each child lives on (read while they run: the run lasts seconds more).
     stacks = {child.name: os.readlink(f'/proc/{child.pid}/ns/net') for child in run._children}
     worker.join(timeout=240.0)
@@ -466,5 +442,5 @@ def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_eng
     assert len({stacks[name] for name in ('simulator', 'agent_1', 'agent_2', 'agent_3')}) == 4
     summary = json.loads(result.summary.read_text())
     _assert_same_events(summary, reference)
-    counts, _ = _bag_info_stamps(result.bag)
+    counts, _ = bag_trigger_stamps(result.bag)
     assert counts['/agent_1/trigger_info/to_2'] == len(reference.trigger_times[1])

@@ -3,7 +3,6 @@ and what a run that stops early reports (no other process is started)."""
 
 from __future__ import annotations
 
-import os
 
 import numpy as np
 import pytest
@@ -13,20 +12,6 @@ from formation_sim.scenario import load_scenario
 pytestmark = pytest.mark.ros
 
 DOMAIN_ID = 97
-
-
-@pytest.fixture(scope='module')
-def ros(tmp_path_factory):
-    import rclpy
-
-    os.environ.setdefault('ROS_LOG_DIR', str(tmp_path_factory.mktemp('ros_log')))
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    try:
-        yield context
-    finally:
-        rclpy.shutdown(context=context)
 
 
 @pytest.fixture

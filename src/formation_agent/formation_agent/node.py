@@ -75,13 +75,11 @@ from formation_msgs_py.lockstep import (
     Status,
     Step,
 )
-from formation_msgs_py.topics import (  # noqa: F401 - re-exported for the node's users
+from formation_msgs_py.topics import (
     REPORT_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
     agent_namespace,
-    command_topic,
-    sense_service,
     trigger_info_topic,
 )
 from formation_msgs_py.types import TriggerInfo

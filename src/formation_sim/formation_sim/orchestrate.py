@@ -324,7 +324,8 @@ class FormationRun:
         return [ids[start : start + k] for start in range(0, len(ids), k)]
 
     def _write_inputs(self) -> dict[str, Path]:
-        from formation_agent.node import NODE_NAME, agent_namespace
+        from formation_agent.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
         from formation_sim.sim_node import agent_parameters, formation_topics
 
         out = self.out_dir

@@ -55,12 +55,6 @@ from formation_agent.node import (
     LIVELINESS_LEASE,
     LOST_GRACE,
     PROTOCOL_QOS,
-    REPORT_TOPIC,
-    STATUS_TOPIC,
-    STEP_TOPIC,
-    command_topic,
-    sense_service,
-    trigger_info_topic,
 )
 from formation_msgs_py.codec import (
     MessageError,
@@ -87,9 +81,15 @@ from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
     MARKERS_TOPIC,
+    REPORT_TOPIC,
     SCENARIO_TOPIC,
     SENSING_LOG_TOPIC,
     STATE_TOPIC,
+    STATUS_TOPIC,
+    STEP_TOPIC,
+    command_topic,
+    sense_service,
+    trigger_info_topic,
 )
 from formation_sim.markers import MARKERS_TYPE, FormationMarkers
 from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
