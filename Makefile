@@ -12,7 +12,7 @@ PACKAGING := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.x
 # pytest.ini). Override e.g. `make test PYTEST_ARGS='-n 0 -k recorder'`.
 PYTEST_ARGS ?= -n auto --dist loadgroup
 
-DEMO_CMD = $(VENV)/bin/formation run paper_single --horizon 10 --out runs/demo
+DEMO_DIR = runs/demo
 
 .PHONY: venv test demo bench clean distclean
 
@@ -32,8 +32,11 @@ test: venv
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests (exit 5)"; rc=0; fi; \
 	exit $$rc
 
+# The paper's single-integrator example distributed over ROS 2 nodes and recorded, then the
+# figures and the report recomputed from the bag alone.
 demo: venv
-	$(DEMO_CMD)
+	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR)
+	$(VENV)/bin/formation analyze $(DEMO_DIR)
 
 bench: venv
 	@if [ -f benchmarks/run.py ]; then $(PY) benchmarks/run.py; else echo "no benchmarks yet (benchmarks/run.py is missing)"; fi
