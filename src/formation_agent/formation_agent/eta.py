@@ -768,6 +768,33 @@ _FAST_DIMENSION = 3
 # least value (the search's former fixed choice).
 _FIRST_SPAN = 1e-3
 
+ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
+    'eta1': ('alpha', 'beta'),
+    'eta2': ('alpha_d', 'beta_d', 'k1', 'k2', 'k3'),
+}
+"""The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
+
+
+def make_agent(
+    *,
+    algorithm: str,
+    agent_id: int,
+    neighbours: Mapping[int, object],
+    delta: float,
+    gains: Mapping[str, float],
+    tolerance: float = 1e-12,
+) -> Eta1Agent | Eta2Agent:
+    """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored)."""
+    if algorithm not in ALGORITHM_GAINS:
+        raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
+    missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
+    if missing:
+        raise AgentError(f'agent {agent_id}: {algorithm} needs the gains {missing}')
+    kind = Eta1Agent if algorithm == 'eta1' else Eta2Agent
+    chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
+    return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
+
+
 # A step may use at most this fraction of an edge's remaining room, so that the bounds, which
 # are evaluated at the far end of the step, stay within a small factor of the local values.
 _ROOM_FRACTION = 0.125

@@ -53,6 +53,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProf
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
+from formation_agent.eta import ALGORITHM_GAINS, make_agent
 from formation_msgs_py.codec import (
     MessageError,
     decode_sensed_state,
@@ -157,36 +158,6 @@ class FaultInjection:
         return due
 
 
-def build_core(
-    *,
-    agent_id: int,
-    neighbours: dict,
-    delta: float,
-    algorithm: str,
-    gains: dict[str, float],
-):
-    """The ROS-free agent object (imported here so that tests may pass their own core)."""
-    from formation_agent.eta import Eta1Agent, Eta2Agent
-
-    if algorithm == 'eta1':
-        return Eta1Agent(
-            agent_id=agent_id, neighbours=neighbours, delta=delta, alpha=gains['alpha'], beta=gains['beta']
-        )
-    return Eta2Agent(
-        agent_id=agent_id,
-        neighbours=neighbours,
-        delta=delta,
-        alpha_d=gains['alpha_d'],
-        beta_d=gains['beta_d'],
-        k1=gains['k1'],
-        k2=gains['k2'],
-        k3=gains['k3'],
-    )
-
-
-_GAINS = {'eta1': ('alpha', 'beta'), 'eta2': ('alpha_d', 'beta_d', 'k1', 'k2', 'k3')}
-
-
 class FormationAgentNode(Node):
     """One agent: senses, commands and broadcasts at its triggering times, listens to neighbours."""
 
@@ -212,7 +183,7 @@ class FormationAgentNode(Node):
             context=context,
         )
         self._read_parameters()
-        self.core = core if core is not None else build_core(
+        self.core = core if core is not None else make_agent(
             agent_id=self.agent_id,
             neighbours=self.neighbours,
             delta=self.delta,
@@ -301,8 +272,8 @@ class FormationAgentNode(Node):
         name = self.get_fully_qualified_name()
         self.agent_id = int(self._param('agent_id', Parameter.Type.INTEGER))
         self.algorithm = self._param('algorithm', Parameter.Type.STRING)
-        if self.algorithm not in _GAINS:
-            raise AgentNodeError(f'{name}: algorithm must be one of {sorted(_GAINS)}, got {self.algorithm!r}')
+        if self.algorithm not in ALGORITHM_GAINS:
+            raise AgentNodeError(f'{name}: algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {self.algorithm!r}')
         self.dimension = int(self._param('dimension', Parameter.Type.INTEGER))
         if not 1 <= self.dimension <= 3:
             raise AgentNodeError(
@@ -324,7 +295,7 @@ class FormationAgentNode(Node):
         if not (math.isfinite(self.horizon) and self.horizon > 0.0):
             raise AgentNodeError(f'{name}: horizon must be a finite number > 0, got {self.horizon!r}')
         self.gains = {
-            gain: float(self._param(gain, Parameter.Type.DOUBLE)) for gain in _GAINS[self.algorithm]
+            gain: float(self._param(gain, Parameter.Type.DOUBLE)) for gain in ALGORITHM_GAINS[self.algorithm]
         }
         # Listeners besides the protocol peers (a recorder) that must be matched before step 0.
         self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)

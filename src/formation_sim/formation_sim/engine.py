@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from formation_agent.crossing import CrossingSearch
-from formation_agent.eta import Eta1Agent, Eta2Agent
+from formation_agent.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.world import World
 
 
@@ -48,26 +48,14 @@ class RunRecord:
 
 def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Agent | Eta2Agent:
     """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
-    gains = scenario.gains
-    neighbours = scenario.neighbours(agent_id)
-    if scenario.dynamics == 'single':
-        return Eta1Agent(
-            agent_id=agent_id,
-            neighbours=neighbours,
-            delta=scenario.delta,
-            alpha=gains.alpha,
-            beta=gains.beta,
-            tolerance=tolerance,
-        )
-    return Eta2Agent(
+    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
+    gains = {name: getattr(scenario.gains, name) for name in ALGORITHM_GAINS[algorithm]}
+    return make_agent(
+        algorithm=algorithm,
         agent_id=agent_id,
-        neighbours=neighbours,
+        neighbours=scenario.neighbours(agent_id),
         delta=scenario.delta,
-        alpha_d=gains.alpha_d,
-        beta_d=gains.beta_d,
-        k1=gains.k1,
-        k2=gains.k2,
-        k3=gains.k3,
+        gains=gains,
         tolerance=tolerance,
     )
 
