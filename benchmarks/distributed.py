@@ -1,0 +1,169 @@
+"""Distributed runs (`formation_sim.orchestrate.FormationRun`) measured from outside.
+
+`measure_run` runs one scenario in lock-step and reports: events and steps per wall second while
+stepping (t = 0 to the horizon), start-up time (spawn and discovery: the simulator's
+`discovery_wall_time`, and everything the orchestrator spent outside stepping), the peak resident
+memory of every child process (VmHWM, sampled from /proc while the run goes on), and, when the
+run is recorded, the messages of every topic per event (counted in the bag).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+ROLES = (('formation_sim.sim_node', 'simulator'), ('formation_agent.node', 'agents'), ('formation_sim.recorder', 'recorder'))
+
+
+def _children() -> dict[int, str]:
+    """Processes whose parent is this process, with their role."""
+    me = os.getpid()
+    found = {}
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            parent = int(stat.rsplit(')', 1)[1].split()[1])
+            if parent != me:
+                continue
+            command = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+        except (OSError, ValueError, IndexError):
+            continue
+        for marker, role in ROLES:
+            if marker in command:
+                found[int(entry.name)] = role
+    return found
+
+
+def _peak_rss_kib(pid: int) -> int | None:
+    try:
+        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('VmHWM:'):
+                return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+class _MemoryWatch(threading.Thread):
+    """Peak RSS per child process, sampled every `period` seconds until stopped."""
+
+    def __init__(self, period: float = 0.2) -> None:
+        super().__init__(daemon=True)
+        self.period = period
+        self.peaks: dict[int, int] = {}
+        self.roles: dict[int, str] = {}
+        self._halt = threading.Event()
+
+    def run(self) -> None:
+        while not self._halt.is_set():
+            for pid, role in _children().items():
+                peak = _peak_rss_kib(pid)
+                if peak is not None:
+                    self.roles[pid] = role
+                    self.peaks[pid] = max(peak, self.peaks.get(pid, 0))
+            self._halt.wait(self.period)
+
+    def stop(self) -> dict[str, list[int]]:
+        self._halt.set()
+        self.join()
+        by_role: dict[str, list[int]] = {}
+        for pid, peak in self.peaks.items():
+            by_role.setdefault(self.roles[pid], []).append(peak)
+        return by_role
+
+
+def _bag_counts(bag: Path) -> Counter:
+    from formation_sim.recorder import read_bag
+
+    return Counter(topic for topic, *_ in read_bag(bag))
+
+
+def measure_run(
+    scenario,
+    *,
+    out_dir: Path,
+    horizon: float,
+    domain_id: int,
+    agents_per_process: int = 1,
+    record: bool = False,
+    sample_period: float = 0.01,
+    timeout: float = 600.0,
+) -> dict:
+    """One lock-step run; the measurements described in the module docstring."""
+    from formation_sim.orchestrate import FormationRun
+
+    watch = _MemoryWatch()
+    watch.start()
+    started = time.monotonic()
+    try:
+        result = FormationRun(
+            scenario,
+            out_dir=out_dir,
+            horizon=horizon,
+            domain_id=domain_id,
+            agents_per_process=agents_per_process,
+            record=record,
+            sample_period=sample_period,
+            progress=False,
+            timeout=timeout,
+        ).run()
+    finally:
+        memory = watch.stop()
+    total = time.monotonic() - started
+    row: dict = {
+        'scenario': scenario.name,
+        'n': len(scenario.agent_ids),
+        'edges': len(scenario.edges),
+        'horizon': horizon,
+        'agents_per_process': agents_per_process,
+        'processes': -(-len(scenario.agent_ids) // agents_per_process),
+        'record': record,
+        'sample_period': sample_period,
+        'ok': result.ok,
+        'message': result.message,
+        'total_wall_s': total,
+    }
+    agents_kib = memory.get('agents', [])
+    row['memory'] = {
+        'agent_process_peak_mib_median': statistics.median(agents_kib) / 1024 if agents_kib else None,
+        'agents_total_peak_mib': sum(agents_kib) / 1024,
+        'per_agent_mib': sum(agents_kib) / 1024 / len(scenario.agent_ids) if agents_kib else None,
+        'simulator_peak_mib': max(memory.get('simulator', [0])) / 1024,
+        'recorder_peak_mib': max(memory.get('recorder', [0])) / 1024 if 'recorder' in memory else None,
+    }
+    if not result.ok or result.summary is None:
+        return row
+    summary = json.loads(Path(result.summary).read_text())
+    extra = summary['extra']
+    stepping = summary['wall_time']
+    events = summary['total_events']
+    row.update(
+        events=events,
+        steps=extra['steps'],
+        messages_sent=summary['messages_sent'],
+        stepping_wall_s=stepping,
+        events_per_s=events / stepping,
+        steps_per_s=extra['steps'] / stepping,
+        discovery_s=extra['discovery_wall_time'],
+        outside_stepping_s=total - stepping,
+    )
+    if record and result.bag is not None:
+        counts = _bag_counts(result.bag)
+        grouped: Counter = Counter()
+        for topic, count in counts.items():
+            if '/trigger_info/' in topic:
+                grouped['trigger_info'] += count
+            elif topic.endswith(('/cmd_vel', '/cmd_accel')):
+                grouped['command'] += count
+            else:
+                grouped[topic] += count
+        row['messages_per_event'] = {key: value / events for key, value in sorted(grouped.items())}
+        row['messages_per_step'] = {key: value / extra['steps'] for key, value in sorted(grouped.items())}
+    return row

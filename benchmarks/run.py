@@ -1,0 +1,444 @@
+"""Benchmarks of the exact engine and the distributed runtime (`make bench`).
+
+    python benchmarks/run.py                      # everything (about an hour on 2 cores)
+    python benchmarks/run.py --only engine naive  # some sections
+    python benchmarks/run.py --quick              # small cases only, one repeat
+
+Sections: `engine` (in-process speed, ETA-1/ETA-2, paper examples and random teams, against the
+implementation before the speed work, measured in the same run), `naive` (a fixed-step
+simulation of the same controllers, dt = 1e-4: speed and accuracy), `comm` (messages and
+sensing: event-triggered, periodic, continuous), `distributed` (lock-step throughput, start-up,
+memory, messages per event, against a bare rclpy round trip), `long` (peak memory of long
+distributed runs). Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the
+repository root holds the tables of a full run with the machine they came from.
+
+Timing: wall-clock and process CPU time; each engine case is repeated and the median reported.
+The machine is shared, so ratios against baselines measured in the same run are the numbers to
+compare, and the load average is recorded before and after each section.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from cases import build_scenario, builtin, label, random  # noqa: E402
+
+# The implementation before the speed work (its parent commit), for the speed-up columns.
+BASELINE_REV = 'fe95009^'
+DOMAINS = iter(range(204, 233))  # ROS_DOMAIN_ID range of the benchmarks (ping-pong uses 201)
+
+
+def machine() -> dict:
+    import numpy
+    import scipy
+
+    cpu = next((line.split(':', 1)[1].strip() for line in Path('/proc/cpuinfo').read_text().splitlines() if line.startswith('model name')), '?')
+    try:
+        from importlib.metadata import version
+
+        rclpy_version = version('rclpy')
+    except Exception:  # noqa: BLE001 - informative only
+        rclpy_version = '?'
+    rev = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    return {
+        'date': dt.datetime.now(dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'nproc': os.cpu_count(),
+        'cpu': cpu,
+        'python': platform.python_version(),
+        'numpy': numpy.__version__,
+        'scipy': scipy.__version__,
+        'rclpy': rclpy_version,
+        'git': rev,
+        'memory_gib': round(os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30, 1),
+    }
+
+
+def load() -> float:
+    return os.getloadavg()[0]
+
+
+def _degree(scenario) -> float:
+    return 2.0 * len(scenario.edges) / len(scenario.agent_ids)
+
+
+# -- engine -----------------------------------------------------------------------------------
+
+
+def engine_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [
+            {**builtin('paper_single'), 'horizon': 10.0, 'repeats': 1, 'baseline': True},
+            {**random(100), 'horizon': 2.0, 'repeats': 1, 'baseline': True},
+        ]
+    return [
+        {**builtin('paper_single'), 'horizon': 10.0, 'repeats': 5, 'baseline': True},
+        {**builtin('paper_double'), 'horizon': 10.0, 'repeats': 5, 'baseline': True},
+        {**random(10), 'horizon': 2.0, 'repeats': 5, 'baseline': True},
+        {**random(100), 'horizon': 2.0, 'repeats': 3, 'baseline': True},
+        {**random(1000), 'horizon': 2.0, 'repeats': 3, 'baseline': False},
+        {**random(1000), 'horizon': 0.5, 'repeats': 1, 'baseline': True},
+        {**random(10000), 'horizon': 0.2, 'repeats': 1, 'baseline': False},
+        {**random(10, 'double'), 'horizon': 2.0, 'repeats': 3, 'baseline': True},
+        {**random(100, 'double'), 'horizon': 0.01, 'repeats': 3, 'baseline': True},
+        {**random(1000, 'double'), 'horizon': 1e-6, 'repeats': 1, 'baseline': False},
+        {**random(10000, 'double'), 'horizon': 1e-8, 'repeats': 1, 'baseline': False},
+    ]
+
+
+def run_engine(case: dict) -> dict:
+    from formation_sim.engine import simulate
+
+    scenario = build_scenario(case)
+    walls, cpus = [], []
+    for _ in range(case['repeats']):
+        cpu = time.process_time()
+        record = simulate(scenario, horizon=case['horizon'], sample_dt=None, sample_events=False)
+        cpus.append(time.process_time() - cpu)
+        walls.append(record.wall_time)
+    wall, cpu = statistics.median(walls), statistics.median(cpus)
+    row = {
+        'case': label(case),
+        'n': scenario.n,
+        'mean_degree': _degree(scenario),
+        'horizon': case['horizon'],
+        'events': record.total_events,
+        'wall_s': wall,
+        'cpu_s': cpu,
+        'walls': walls,
+        'events_per_s': record.total_events / wall,
+        'us_per_event': 1e6 * wall / record.total_events,
+        'us_per_event_degree': 1e6 * wall / (record.total_events * (1.0 + _degree(scenario))),
+    }
+    if case.get('baseline'):
+        out = subprocess.run(
+            [sys.executable, str(HERE / 'engine_baseline.py'), BASELINE_REV, json.dumps(case)],
+            capture_output=True, text=True, timeout=3600, check=True,
+        )  # fmt: skip
+        base = json.loads(out.stdout.strip().splitlines()[-1])
+        row['baseline'] = base
+        row['speedup'] = base['wall_s'] / wall
+    return row
+
+
+def engine_recording_cost() -> dict:
+    """The default record (state at every event and every 0.01 s) against trigger times only."""
+    from formation_sim.engine import simulate
+
+    scenario = build_scenario(random(1000))
+    lean = simulate(scenario, horizon=0.5, sample_dt=None, sample_events=False)
+    full = simulate(scenario, horizon=0.5)
+    return {
+        'case': 'random ETA-1 n=1000, T=0.5',
+        'lean_wall_s': lean.wall_time,
+        'full_wall_s': full.wall_time,
+        'full_samples': len(full.sample_times),
+        'full_sample_mib': full.sample_positions.nbytes / 2**20,
+    }
+
+
+# -- naive ------------------------------------------------------------------------------------
+
+
+def naive_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [{**random(100), 'horizon': 2.0}]
+    return [
+        {**builtin('paper_single'), 'horizon': 10.0},
+        {**builtin('paper_double'), 'horizon': 10.0},
+        {**random(10), 'horizon': 2.0},
+        {**random(100), 'horizon': 2.0},
+        {**random(1000), 'horizon': 2.0},
+        {**random(10000), 'horizon': 0.2},
+        {**random(10, 'double'), 'horizon': 2.0},
+        {**random(100, 'double'), 'horizon': 0.01},
+    ]
+
+
+def run_naive(case: dict, dt_step: float = 1e-4) -> dict:
+    import numpy as np
+
+    from formation_sim.engine import simulate
+    from naive import simulate_fixed_step
+
+    scenario = build_scenario(case)
+    exact = simulate(scenario, horizon=case['horizon'], sample_dt=None, sample_events=False)
+    naive = simulate_fixed_step(scenario, horizon=case['horizon'], dt=dt_step)
+    overshoot = np.array(naive.overshoot) if naive.overshoot else np.zeros(1)
+    return {
+        'case': label(case),
+        'horizon': case['horizon'],
+        'dt': dt_step,
+        'exact_events': exact.total_events,
+        'exact_wall_s': exact.wall_time,
+        'naive_events': naive.total_events,
+        'naive_wall_s': naive.wall_time,
+        'naive_over_exact_time': naive.wall_time / exact.wall_time,
+        'overshoot_max': float(overshoot.max()),
+        'overshoot_median': float(np.median(overshoot)),
+        'connectivity_lost': naive.connectivity_lost,
+        'reached': naive.reached,
+    }
+
+
+# -- comm -------------------------------------------------------------------------------------
+
+
+def comm_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [{**random(10), 'horizon': 10.0}]
+    return [
+        {**builtin('paper_single'), 'horizon': 10.0},
+        {**builtin('paper_double'), 'horizon': 10.0},
+        {**random(10), 'horizon': 10.0},
+        {**random(100), 'horizon': 10.0},
+        {**random(10, 'double'), 'horizon': 10.0},
+    ]
+
+
+def run_comm(case: dict) -> dict:
+    from comm import compare
+
+    row = compare(build_scenario(case), horizon=case['horizon'])
+    row['case'] = label(case)
+    return row
+
+
+# -- distributed ------------------------------------------------------------------------------
+
+
+def distributed_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [{**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}]
+    return [
+        {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1},
+        {**random(10), 'horizon': 2.0, 'per_process': 1},
+        {**random(30), 'horizon': 1.0, 'per_process': 1},
+        {**random(100), 'horizon': 0.5, 'per_process': 25},
+        {**random(300), 'horizon': 0.2, 'per_process': 50},
+    ]
+
+
+def run_distributed(case: dict, out: Path, *, record: bool = False, sample_period: float = 0.01) -> dict:
+    from distributed import measure_run
+
+    scenario = build_scenario(case)
+    row = measure_run(
+        scenario, out_dir=out, horizon=case['horizon'], domain_id=next(DOMAINS),
+        agents_per_process=case['per_process'], record=record, sample_period=sample_period,
+    )  # fmt: skip
+    row['case'] = label(case)
+    return row
+
+
+def run_pingpong(count: int) -> dict:
+    from pingpong import measure
+
+    return measure(domain_id=201, count=count)
+
+
+# -- report -----------------------------------------------------------------------------------
+
+
+def _fmt(value, digits: int = 3) -> str:
+    if value is None:
+        return '–'
+    if isinstance(value, float):
+        if math.isinf(value):
+            return '∞'
+        return f'{value:.{digits}g}'
+    return str(value)
+
+
+def markdown(results: dict) -> str:
+    lines: list[str] = []
+    info = results['machine']
+    lines += [
+        f'Machine: {info["nproc"]} cores, {info["cpu"]}, {info["memory_gib"]} GiB; Python {info["python"]}, '
+        f'numpy {info["numpy"]}, scipy {info["scipy"]}, rclpy {info["rclpy"]}; commit {info["git"]}; {info["date"]}.',
+        '',
+    ]
+    if 'engine' in results:
+        lines += [
+            '| case | n | mean degree | T [s] | events | wall [s] (median) | events/s | µs/event | µs/(event·(1+d̄)) | before [s] | speed-up |',
+            '|---|---|---|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['engine']:
+            base = r.get('baseline')
+            speedup = f'{r["speedup"]:.1f}×' if base else '–'
+            lines.append(
+                f'| {r["case"]} | {r["n"]} | {r["mean_degree"]:.1f} | {_fmt(r["horizon"])} | {r["events"]} | {r["wall_s"]:.3g} | '
+                f'{r["events_per_s"]:.0f} | {r["us_per_event"]:.0f} | {r["us_per_event_degree"]:.0f} | '
+                f'{_fmt(base["wall_s"]) if base else "–"} | {speedup} |'
+            )
+        lines.append('')
+        if 'engine_recording' in results:
+            rec = results['engine_recording']
+            lines += [
+                f'Recording cost ({rec["case"]}): trigger times only {rec["lean_wall_s"]:.2f} s; default record (state at every '
+                f'event and every 0.01 s: {rec["full_samples"]} samples, {rec["full_sample_mib"]:.0f} MiB) {rec["full_wall_s"]:.2f} s.',
+                '',
+            ]
+    if 'naive' in results:
+        lines += [
+            '| case | T [s] | exact events | exact wall [s] | fixed-step events | fixed-step wall [s] | time ratio | max overshoot | median overshoot | connectivity |',
+            '|---|---|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['naive']:
+            lines.append(
+                f'| {r["case"]} | {_fmt(r["horizon"])} | {r["exact_events"]} | {r["exact_wall_s"]:.3g} | {r["naive_events"]} | '
+                f'{r["naive_wall_s"]:.3g} | {r["naive_over_exact_time"]:.1f}× | {r["overshoot_max"]:.3g} | {r["overshoot_median"]:.2g} | '
+                f'{r["connectivity_lost"] or "kept"} |'
+            )
+        lines.append('')
+    if 'comm' in results:
+        lines += [
+            '| case | T [s] | controller | period [s] | messages | sensing calls | final formation error | converged (< 1e-3) at [s] |',
+            '|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['comm']:
+            for name, row in r['rows'].items():
+                if name == 'periodic' and row.get('period') is None:
+                    lines.append(f'| {r["case"]} | {_fmt(r["horizon"])} | periodic | none ≥ 1e-5 works | | | | |')
+                    continue
+                sensing = row['sensing_calls'] if name != 'continuous' else f'continuous ({row["rhs_evaluations"]} evaluations)'
+                lines.append(
+                    f'| {r["case"]} | {_fmt(r["horizon"])} | {name} | {_fmt(row.get("period"))} | {row["messages"]} | {sensing} | '
+                    f'{_fmt(row["final_error"])} | {_fmt(row["convergence_time"])} |'
+                )
+        lines.append('')
+    if 'pingpong' in results:
+        p = results['pingpong']
+        lines += [
+            f'Bare rclpy round trip between two processes (PROTOCOL_QOS, {p["count"]} each, median / p90): topic '
+            f'{1e3 * p["topic"]["median_s"]:.2f} / {1e3 * p["topic"]["p90_s"]:.2f} ms, service '
+            f'{1e3 * p["service"]["median_s"]:.2f} / {1e3 * p["service"]["p90_s"]:.2f} ms.',
+            '',
+        ]
+    if 'distributed' in results:
+        bound = results.get('step_bound_s')
+        lines += [
+            '| case | agents/process | processes | T [s] | events | steps | stepping wall [s] | events/s | steps/s | ms/step | × bound | discovery [s] | outside stepping [s] | RSS/agent [MiB] | simulator RSS [MiB] |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['distributed']:
+            if not r.get('events'):
+                lines.append(f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | failed: {r["message"][:80]} |')
+                continue
+            ms = 1e3 / r['steps_per_s']
+            lines.append(
+                f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | {r["events"]} | {r["steps"]} | '
+                f'{r["stepping_wall_s"]:.3g} | {r["events_per_s"]:.1f} | {r["steps_per_s"]:.1f} | {ms:.1f} | '
+                f'{_fmt(ms / 1e3 / bound if bound else None, 2)} | {r["discovery_s"]:.2f} | {r["outside_stepping_s"]:.1f} | '
+                f'{_fmt(r["memory"]["per_agent_mib"])} | {_fmt(r["memory"]["simulator_peak_mib"])} |'
+            )
+        lines.append('')
+        if 'messages' in results:
+            per_step = results['messages']['messages_per_step']
+            lines += ['Messages per lock-step step (3 agents, recorded run, counted in the bag): '
+                      + ', '.join(f'{k} {v:.2f}' for k, v in per_step.items()) + '.', '']
+    if 'long' in results:
+        lines += ['| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |', '|---|---|---|---|---|---|---|']
+        for r in results['long']:
+            lines.append(
+                f'| {r["case"]} | {_fmt(r["horizon"])} | {"yes" if r["ok"] else r["message"][:90]} | {r.get("events", "–")} | '
+                f'{_fmt(r.get("stepping_wall_s"))} | {_fmt(r["memory"]["agent_process_peak_mib_median"])} | {_fmt(r["memory"]["simulator_peak_mib"])} |'
+            )
+        lines.append('')
+    return '\n'.join(lines)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description='Benchmarks (see BENCHMARKS.md).')
+    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long'), default=None)
+    parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
+    parser.add_argument('--out', type=Path, default=HERE / 'results')
+    args = parser.parse_args()
+    sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long']
+    results: dict = {'machine': machine(), 'sections': sections, 'load': {}}
+    args.out.mkdir(parents=True, exist_ok=True)
+    stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
+    runs = Path(tempfile.mkdtemp(prefix=f'formation-bench-{stamp}-'))  # run folders (bags, logs): not kept
+
+    def progress(text: str) -> None:
+        print(f'[bench {time.strftime("%H:%M:%S")} load {load():.1f}] {text}', file=sys.stderr, flush=True)
+
+    def save() -> None:
+        (args.out / f'{stamp}.json').write_text(json.dumps(results, indent=1, default=str))
+        (args.out / f'{stamp}.md').write_text(markdown(results) + '\n')
+
+    if 'engine' in sections:
+        results['load']['engine'] = [load()]
+        results['engine'] = []
+        for case in engine_cases(args.quick):
+            progress(f'engine {label(case)} T={case["horizon"]}')
+            results['engine'].append(run_engine(case))
+            save()
+        if not args.quick:
+            progress('engine recording cost')
+            results['engine_recording'] = engine_recording_cost()
+        results['load']['engine'].append(load())
+        save()
+    if 'naive' in sections:
+        results['naive'] = []
+        for case in naive_cases(args.quick):
+            progress(f'naive {label(case)} T={case["horizon"]}')
+            results['naive'].append(run_naive(case))
+            save()
+    if 'comm' in sections:
+        results['comm'] = []
+        for case in comm_cases(args.quick):
+            progress(f'comm {label(case)} T={case["horizon"]}')
+            results['comm'].append(run_comm(case))
+            save()
+    if 'distributed' in sections:
+        progress('ping-pong')
+        results['pingpong'] = run_pingpong(300 if args.quick else 2000)
+        p = results['pingpong']
+        # Critical path of one lock-step step (docs/MESSAGES.md): Step out, the due agent's
+        # sensing call (a service round trip), its TriggerInfo to a neighbour, that neighbour's
+        # Status back: 1.5 topic round trips and one service round trip.
+        results['step_bound_s'] = 1.5 * p['topic']['median_s'] + p['service']['median_s']
+        results['distributed'] = []
+        for case in distributed_cases(args.quick):
+            progress(f'distributed {label(case)} T={case["horizon"]} ({case["per_process"]} per process)')
+            results['distributed'].append(run_distributed(case, runs / f'dist-{len(results["distributed"])}'))
+            save()
+        progress('distributed, recorded (messages per step)')
+        recorded = run_distributed({**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}, runs / 'recorded', record=True)
+        results['messages'] = {k: recorded.get(k) for k in ('messages_per_event', 'messages_per_step', 'events', 'steps')}
+        save()
+    if 'long' in sections:
+        results['long'] = []
+        long_cases = [
+            {**builtin('paper_single'), 'horizon': 20.0, 'per_process': 1},
+            {**builtin('paper_single'), 'horizon': 40.0, 'per_process': 1},
+            {**builtin('paper_single', beta=0.05), 'horizon': 20.0, 'per_process': 1},
+            {**builtin('paper_single', beta=0.05), 'horizon': 200.0, 'per_process': 1},
+        ]
+        for case in long_cases[:1] if args.quick else long_cases:
+            progress(f'long {label(case)} T={case["horizon"]}')
+            results['long'].append(run_distributed(case, runs / f'long-{len(results["long"])}'))
+            save()
+    save()
+    print(markdown(results))
+    print(f'\nresults: {args.out / stamp}.json, .md', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
