@@ -4,6 +4,12 @@ The engine is only a router and a physical world: the agents are the same `forma
 objects a robot would run. It moves the world from event to event in closed form; there is no
 time step anywhere. At each event time it lets every due agent sense and trigger, delivers all
 triggering information, and asks every agent whose knowledge changed for its next time once.
+
+Speed (BENCHMARKS.md): that question is answered lazily. Each agent's certified search
+(`Eta1Agent/Eta2Agent.trigger_search`) only advances while its frontier, a certified lower bound on
+the agent's time, is at or before the team's earliest known next event; a search overtaken by new
+information is dropped after the steps that were needed. The steps are those of an uninterrupted
+search, so the triggering times are the floats `next_trigger_time` gives, as in the agent nodes.
 """
 
 from __future__ import annotations
