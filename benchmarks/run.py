@@ -245,10 +245,10 @@ def run_distributed(case: dict, out: Path, *, record: bool = False, sample_perio
     return row
 
 
-def run_pingpong(count: int) -> dict:
+def run_pingpong(count: int, executor: str = 'single') -> dict:
     from pingpong import measure
 
-    return measure(domain_id=201, count=count)
+    return measure(domain_id=201, count=count, executor=executor)
 
 
 # -- report -----------------------------------------------------------------------------------
@@ -329,6 +329,13 @@ def markdown(results: dict) -> str:
             f'{1e3 * p["service"]["median_s"]:.2f} / {1e3 * p["service"]["p90_s"]:.2f} ms.',
             '',
         ]
+        if 'pingpong_events_executor' in results:
+            e = results['pingpong_events_executor']
+            lines += [
+                f'The same with rclpy.experimental.EventsExecutor: topic {1e3 * e["topic"]["median_s"]:.2f} / '
+                f'{1e3 * e["topic"]["p90_s"]:.2f} ms, service {1e3 * e["service"]["median_s"]:.2f} / {1e3 * e["service"]["p90_s"]:.2f} ms.',
+                '',
+            ]
     if 'distributed' in results:
         bound = results.get('step_bound_s')
         lines += [
@@ -408,6 +415,7 @@ def main() -> int:
     if 'distributed' in sections:
         progress('ping-pong')
         results['pingpong'] = run_pingpong(300 if args.quick else 2000)
+        results['pingpong_events_executor'] = run_pingpong(300 if args.quick else 2000, 'events')
         p = results['pingpong']
         # Critical path of one lock-step step (docs/MESSAGES.md): Step out, the due agent's
         # sensing call (a service round trip), its TriggerInfo to a neighbour, that neighbour's
