@@ -113,6 +113,17 @@ PROTOCOL_QOS = QoSProfile(
     liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
 )
 
+# A reader shared by every agent (the simulator's Status and report readers) gets up to n
+# messages per step: a depth of 32 across all writers drops some with 30+ agents and the step
+# never settles.  Keep everything; history is not part of QoS matching, so writers are unchanged.
+FAN_IN_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    reliability=PROTOCOL_QOS.reliability,
+    durability=PROTOCOL_QOS.durability,
+    liveliness=PROTOCOL_QOS.liveliness,
+    liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
+)
+
 
 class AgentNodeError(ValueError):
     """Bad agent parameters or a violation of the lock-step protocol seen by an agent."""

@@ -54,6 +54,7 @@ from formation_agent.node import (
     EXIT_PEER_LOST,
     LIVELINESS_LEASE,
     LOST_GRACE,
+    FAN_IN_QOS,
     PROTOCOL_QOS,
 )
 from formation_msgs_py.codec import (
@@ -268,8 +269,8 @@ class FormationSimulatorNode(Node):
             self._scenario_pub,
             self._markers_pub,
         )
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, PROTOCOL_QOS)
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, PROTOCOL_QOS)
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, FAN_IN_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, FAN_IN_QOS)
         command_type = Accel if self.double else Twist
         # One command writer per agent: its DDS liveliness is the agent's sign of life.
         self._command_subs = {
