@@ -5,13 +5,14 @@
   through the real codec encoders, into a bag (no ROS process: rclpy only serializes).
 - `wait_for_stepping`: waits until a FormationRun's simulator reports sim time past 0.
 - `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
-- `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 170) and the
+- `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker index) and the
   in-process run of the same scenario, shared by every test that asks for it in a session.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import time
 from collections import defaultdict
@@ -23,7 +24,8 @@ import pytest
 from formation_sim.engine import RunRecord, simulate
 from formation_sim.scenario import load_scenario
 
-DISTRIBUTED_DOMAIN = 170
+# Session fixtures run once per xdist worker: each worker needs its own domain (gw0 -> 180, ...).
+DISTRIBUTED_DOMAIN = 180 + int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0').removeprefix('gw') or 0)
 
 
 def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int], list[float]]]:
@@ -150,7 +152,7 @@ class DistributedRun:
 
 @pytest.fixture(scope='session')
 def distributed_single_run(tmp_path_factory) -> DistributedRun:
-    """paper_single, horizon 2, run once per session as ROS processes in domain 170."""
+    """paper_single, horizon 2, run once per session (per xdist worker) as ROS processes in domain DISTRIBUTED_DOMAIN."""
     from formation_sim.orchestrate import FormationRun
     from formation_sim.summary import write_summary
 
