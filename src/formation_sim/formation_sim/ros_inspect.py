@@ -136,8 +136,13 @@ def _node_name_of(node) -> str:
     return f'{node.get_namespace().rstrip("/")}/{node.get_name()}'
 
 
+# DDS can announce an endpoint before the name of the node that owns it; rmw then reports it.
+UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+
+
 def discover_topics(node, *, wait: float, settle: float = 0.5) -> list[TopicInfo]:
-    """Topics after discovery: polls until nothing changed for `settle` s, at most `wait` s."""
+    """Topics after discovery: polls until nothing changed for `settle` s and every endpoint's
+    node is named, at most `wait` s."""
     deadline = time.monotonic() + wait
     last, stable_since = None, time.monotonic()
     while True:
@@ -145,7 +150,8 @@ def discover_topics(node, *, wait: float, settle: float = 0.5) -> list[TopicInfo
         now = time.monotonic()
         if current != last:
             last, stable_since = current, now
-        if now >= deadline or (current and now - stable_since >= settle):
+        named = not any(UNKNOWN_NODE in name for info in current for name in info.publishers + info.subscribers)
+        if now >= deadline or (current and named and now - stable_since >= settle):
             return current
         time.sleep(0.05)
 
