@@ -108,13 +108,15 @@ def test_topics_and_echo_see_a_live_graph(tmp_path, monkeypatch):
         node.create_subscription(Twist, 'cmd_vel', lambda msg: None, PROTOCOL_QOS)
         info_pub.publish(encode_trigger_info(INFO))  # transient local: echo joins later and still gets it
 
-        # Discovery is asynchronous: on a loaded machine a 3 s look may not see every endpoint yet,
-        # so look again (at most 5 times) until both of the fixture's endpoints are listed.
+        # Discovery is asynchronous: on a loaded machine the tool's look (it stops early once the
+        # graph is stable and named) may not see both endpoints, or their node's name, yet (DDS can
+        # announce an endpoint before its node's name), so look again, at most 5 times.
         for _ in range(5):
-            listed = _formation(tmp_path, 'topics', '--domain-id', str(INSPECT_DOMAIN), '--verbose')
+            listed = _formation(tmp_path, 'topics', '--domain-id', str(INSPECT_DOMAIN), '--verbose', '--wait', '10')
             assert listed.returncode == 0, listed.stderr
             lines = listed.stdout.splitlines()
-            if sum(line.startswith(('/agent_1/trigger_info/to_2 ', '/agent_1/cmd_vel ')) for line in lines) == 2:
+            both_listed = sum(line.startswith(('/agent_1/trigger_info/to_2 ', '/agent_1/cmd_vel ')) for line in lines) == 2
+            if both_listed and '_NODE_NAME_UNKNOWN_' not in listed.stdout:
                 break
         row = next(line for line in lines if line.startswith('/agent_1/trigger_info/to_2 '))
         assert row.split(None, 1)[1] == f'[{ARRAY}]  publishers: 1  subscribers: 0'
