@@ -2,9 +2,50 @@
 
 from __future__ import annotations
 
+import copy
 import os
 
 import pytest
+
+# Section 5 of the paper, typed in from the text (not from the built-in YAML, so tests can compare).
+_PAPER_SINGLE = {
+    'name': 'typed_in',
+    'dynamics': 'single',
+    'communication_radius': 4.0,
+    'horizon': 10.0,
+    'agents': {1: {'position': [2.0, 4.0]}, 2: {'position': [3.5, 7.0]}, 3: {'position': [4.5, 5.5]}},
+    'edges': [
+        {'i': 1, 'j': 2, 'd': [0.0, -2.0]},
+        {'i': 1, 'j': 3, 'd': [-2.0, 0.0]},
+        {'i': 2, 'j': 3, 'd': [-2.0, 2.0]},
+    ],
+    'gains': {'alpha': 10.0, 'beta': 1.0},
+}
+_PAPER_VELOCITIES = {1: [1.0, 2.0], 2: [-1.0, -2.0], 3: [-1.0, -1.0]}
+_PAPER_DOUBLE_GAINS = {'alpha_d': 10.0, 'beta_d': 1.0, 'beta1': 1.5, 'k3': 0.6}
+
+
+def _paper_scenario_dict(dynamics: str = 'single', **gains: float) -> dict:
+    """The paper's example as a fresh scenario dict; `gains` override single entries of its gains."""
+    data = copy.deepcopy(_PAPER_SINGLE)
+    if dynamics == 'double':
+        data['dynamics'] = 'double'
+        for agent, q in _PAPER_VELOCITIES.items():
+            data['agents'][agent]['velocity'] = list(q)
+        data['gains'] = dict(_PAPER_DOUBLE_GAINS)
+    elif dynamics != 'single':
+        raise ValueError(f"dynamics must be 'single' or 'double', got {dynamics!r}")
+    data['gains'].update(gains)
+    return data
+
+
+@pytest.fixture(scope='session')
+def paper_scenario_dict():
+    """`paper_scenario_dict(dynamics='single', **gains) -> dict`: Section 5's example, a new copy each call.
+
+    Double integrators get the paper's velocities and α_d = 10, β_d = 1, β1 = 1.5, k3 = 0.6.
+    """
+    return _paper_scenario_dict
 
 
 @pytest.fixture(scope='module')

@@ -113,20 +113,22 @@ def _edge_lengths(scenario, positions):
     )
 
 
-@pytest.fixture(scope='module')
-def paper_single_run():
-    scenario = load_scenario('paper_single')
+def _traced_paper_run(name: str):
+    """(scenario, trace, record) of a built-in example up to t = 10, every event traced."""
+    scenario = load_scenario(name)
     trace = Trace(scenario)
     record = simulate(scenario, horizon=10.0, sample_dt=0.01, on_event=trace)
     return scenario, trace, record
+
+
+@pytest.fixture(scope='module')
+def paper_single_run():
+    return _traced_paper_run('paper_single')
 
 
 @pytest.fixture(scope='module')
 def paper_double_run():
-    scenario = load_scenario('paper_double')
-    trace = Trace(scenario)
-    record = simulate(scenario, horizon=10.0, sample_dt=0.01, on_event=trace)
-    return scenario, trace, record
+    return _traced_paper_run('paper_double')
 
 
 @pytest.mark.parametrize('run', ['paper_single_run', 'paper_double_run'])

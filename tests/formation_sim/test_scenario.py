@@ -24,32 +24,6 @@ from formation_sim.scenario import (
 )
 
 
-def single_dict() -> dict:
-    """Section 5, first example, typed in from the paper."""
-    return {
-        'name': 'typed_in',
-        'dynamics': 'single',
-        'communication_radius': 4.0,
-        'horizon': 10.0,
-        'agents': {1: {'position': [2.0, 4.0]}, 2: {'position': [3.5, 7.0]}, 3: {'position': [4.5, 5.5]}},
-        'edges': [
-            {'i': 1, 'j': 2, 'd': [0.0, -2.0]},
-            {'i': 1, 'j': 3, 'd': [-2.0, 0.0]},
-            {'i': 2, 'j': 3, 'd': [-2.0, 2.0]},
-        ],
-        'gains': {'alpha': 10.0, 'beta': 1.0},
-    }
-
-
-def double_dict() -> dict:
-    data = single_dict()
-    data['dynamics'] = 'double'
-    for agent, q in zip((1, 2, 3), ([1.0, 2.0], [-1.0, -2.0], [-1.0, -1.0])):
-        data['agents'][agent]['velocity'] = q
-    data['gains'] = {'alpha_d': 10.0, 'beta_d': 1.0, 'beta1': 1.5, 'k3': 0.6}
-    return data
-
-
 # --------------------------------------------------------------------------- the paper's examples
 
 
@@ -121,23 +95,23 @@ def test_arrays_are_read_only_and_replace_checks_again():
         s.replace(horizon=-1.0)
 
 
-def test_scenario_from_dict_equals_the_builtin():
-    s = scenario_from_dict(single_dict())
+def test_scenario_from_dict_equals_the_builtin(paper_scenario_dict):
+    s = scenario_from_dict(paper_scenario_dict('single'))
     assert s == load_scenario('paper_single').replace(name='typed_in')
 
 
-def test_json_style_string_agent_ids_are_read_as_integers():
-    data = single_dict()
+def test_json_style_string_agent_ids_are_read_as_integers(paper_scenario_dict):
+    data = paper_scenario_dict('single')
     data['agents'] = {str(k): v for k, v in data['agents'].items()}
-    assert scenario_from_dict(data) == scenario_from_dict(single_dict())
+    assert scenario_from_dict(data) == scenario_from_dict(paper_scenario_dict('single'))
     data['agents']['1'] = {'position': [0.0, 0.0]}
     data['agents'][1] = {'position': [0.0, 0.0]}
     with pytest.raises(ScenarioError, match='agent 1 is listed twice'):
         scenario_from_dict(data)
 
 
-def test_name_falls_back_to_the_keyword():
-    data = single_dict()
+def test_name_falls_back_to_the_keyword(paper_scenario_dict):
+    data = paper_scenario_dict('single')
     del data['name']
     assert scenario_from_dict(data, name='fallback').name == 'fallback'
 
@@ -182,8 +156,8 @@ def test_dict_and_yaml_round_trips_are_exact(make, tmp_path):
     np.testing.assert_array_equal(loaded.positions.view(np.int64), s.positions.view(np.int64))  # bit for bit
 
 
-def test_dict_round_trip_keeps_explicit_riccati_gains():
-    data = double_dict()
+def test_dict_round_trip_keeps_explicit_riccati_gains(paper_scenario_dict):
+    data = paper_scenario_dict('double')
     data['gains'].update(k1=1.2, k2=1.5)
     s = scenario_from_dict(data)
     assert (s.gains.k1, s.gains.k2) == (1.2, 1.5)
@@ -268,17 +242,6 @@ BROKEN_SINGLE = [
     ('d_ji disagreeing with d_ij', _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'they disagree: d = [0.0, -2.0] there, [-1.0, -2.0] here', 'd_ji = -d_ij']),
 ]
 
-
-@pytest.mark.parametrize('label, mutate, fragments', BROKEN_SINGLE, ids=[b[0] for b in BROKEN_SINGLE])
-def test_broken_single_scenarios_name_key_and_value(label, mutate, fragments):
-    data = single_dict()
-    mutate(data)
-    with pytest.raises(ScenarioError) as caught:
-        scenario_from_dict(data)
-    for fragment in fragments:
-        assert fragment in str(caught.value), (label, str(caught.value))
-
-
 BROKEN_DOUBLE = [
     ('velocity missing', _delete(('agents', 2, 'velocity')), ['agents.2', 'velocity missing', "'double'"]),
     ('velocity size', _set(('agents', 3, 'velocity'), [1.0]), ['agents.3.velocity', 'expected 2']),
@@ -289,10 +252,12 @@ BROKEN_DOUBLE = [
     ('k3 word', _set(('gains', 'k3'), 'large'), ['gains.k3', "'large'"]),
 ]
 
+BROKEN = [('single', *case) for case in BROKEN_SINGLE] + [('double', *case) for case in BROKEN_DOUBLE]
 
-@pytest.mark.parametrize('label, mutate, fragments', BROKEN_DOUBLE, ids=[b[0] for b in BROKEN_DOUBLE])
-def test_broken_double_scenarios_name_key_and_value(label, mutate, fragments):
-    data = double_dict()
+
+@pytest.mark.parametrize('dynamics, label, mutate, fragments', BROKEN, ids=[f'{b[0]}: {b[1]}' for b in BROKEN])
+def test_broken_scenarios_name_key_and_value(dynamics, label, mutate, fragments, paper_scenario_dict):
+    data = paper_scenario_dict(dynamics)
     mutate(data)
     with pytest.raises(ScenarioError) as caught:
         scenario_from_dict(data)
@@ -300,8 +265,8 @@ def test_broken_double_scenarios_name_key_and_value(label, mutate, fragments):
         assert fragment in str(caught.value), (label, str(caught.value))
 
 
-def test_k3_paper_keyword():
-    data = double_dict()
+def test_k3_paper_keyword(paper_scenario_dict):
+    data = paper_scenario_dict('double')
     data['gains']['k3'] = 'paper'
     g = scenario_from_dict(data).gains
     assert g.k3 == 2.0 / (g.k2 + math.sqrt(g.k1**2 + g.k2**2))
@@ -379,8 +344,8 @@ def test_missing_file_and_unknown_name():
         load_scenario('paper_triple')
 
 
-def test_inputs_are_not_modified():
-    data = double_dict()
+def test_inputs_are_not_modified(paper_scenario_dict):
+    data = paper_scenario_dict('double')
     before = copy.deepcopy(data)
     scenario_from_dict(data)
     assert data == before

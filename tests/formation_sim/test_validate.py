@@ -11,30 +11,8 @@ from formation_sim.scenario import DoubleGains, Edge, SingleGains, load_scenario
 from formation_sim.validate import ValidationError, require_valid, validate_scenario
 
 
-def single_dict() -> dict:
-    return {
-        'name': 'case',
-        'dynamics': 'single',
-        'communication_radius': 4.0,
-        'horizon': 10.0,
-        'agents': {1: {'position': [2.0, 4.0]}, 2: {'position': [3.5, 7.0]}, 3: {'position': [4.5, 5.5]}},
-        'edges': [
-            {'i': 1, 'j': 2, 'd': [0.0, -2.0]},
-            {'i': 1, 'j': 3, 'd': [-2.0, 0.0]},
-            {'i': 2, 'j': 3, 'd': [-2.0, 2.0]},
-        ],
-        'gains': {'alpha': 10.0, 'beta': 1.0},
-    }
-
-
-def double_dict() -> dict:
-    data = single_dict()
-    data['dynamics'] = 'double'
-    for agent, q in zip((1, 2, 3), ([1.0, 2.0], [-1.0, -2.0], [-1.0, -1.0])):
-        data['agents'][agent]['velocity'] = q
-    # k3 = 0.6 (k4 ≈ 0.99), β_d = 0.1: below both the printed and the corrected bound.
-    data['gains'] = {'alpha_d': 10.0, 'beta_d': 0.1, 'beta1': 1.5, 'k3': 0.6}
-    return data
+# k3 = 0.6 (k4 ≈ 0.99), β_d = 0.1: below both the printed and the corrected bound.
+BELOW_BOTH_BOUNDS = {'beta_d': 0.1}
 
 
 def rules(findings):
@@ -65,14 +43,15 @@ def test_paper_double_warns_about_the_corrected_beta_d_bound():
     assert 'P = [[5.0237, 1.1547], [1.1547, 1.45022]]' in report.format()
 
 
-def test_double_below_both_bounds_has_no_beta_d_warning():
-    report = validate_scenario(scenario_from_dict(double_dict()))
+def test_double_below_both_bounds_has_no_beta_d_warning(paper_scenario_dict):
+    report = validate_scenario(scenario_from_dict(paper_scenario_dict('double', **BELOW_BOTH_BOUNDS)))
     assert report.ok
     assert not {w.rule for w in report.warnings} & {'beta_d', 'beta_d_corrected', 'k3'}
 
 
-def _edit(dynamics, change):
-    data = single_dict() if dynamics == 'single' else double_dict()
+def _edit(paper_scenario_dict, dynamics, change):
+    """The paper's example (double integrators below both β_d bounds), changed by `change`."""
+    data = paper_scenario_dict(dynamics, **(BELOW_BOTH_BOUNDS if dynamics == 'double' else {}))
     change(data)
     return scenario_from_dict(data)
 
@@ -113,15 +92,15 @@ BROKEN = [
 
 
 @pytest.mark.parametrize('label, dynamics, change, rule, subject, fragments', BROKEN, ids=[b[0] for b in BROKEN])
-def test_broken_hypotheses_give_named_errors(label, dynamics, change, rule, subject, fragments):
-    report = validate_scenario(_edit(dynamics, change))
+def test_broken_hypotheses_give_named_errors(label, dynamics, change, rule, subject, fragments, paper_scenario_dict):
+    report = validate_scenario(_edit(paper_scenario_dict, dynamics, change))
     assert not report.ok
     matching = [f for f in report.errors if f.rule == rule and f.subject == subject]
     assert matching, (label, [f.format() for f in report.errors])
     for fragment in fragments:
         assert any(fragment in f.message for f in matching), (label, fragment, matching[0].message)
     with pytest.raises(ValidationError) as caught:
-        require_valid(_edit(dynamics, change))
+        require_valid(_edit(paper_scenario_dict, dynamics, change))
     assert caught.value.report.errors == report.errors
     assert f'[{report.errors[0].rule}]' in str(caught.value)
     json.dumps(report.to_dict(), allow_nan=False)
@@ -136,11 +115,11 @@ NEAR_EDGE = [
 
 
 @pytest.mark.parametrize('label, dynamics, change, rule', NEAR_EDGE, ids=[n[0] for n in NEAR_EDGE])
-def test_near_edge_conditions_warn_but_pass(label, dynamics, change, rule):
-    report = validate_scenario(_edit(dynamics, change))
+def test_near_edge_conditions_warn_but_pass(label, dynamics, change, rule, paper_scenario_dict):
+    report = validate_scenario(_edit(paper_scenario_dict, dynamics, change))
     assert report.ok, [f.format() for f in report.errors]
     assert rule in {w.rule for w in report.warnings}
-    assert require_valid(_edit(dynamics, change)).ok
+    assert require_valid(_edit(paper_scenario_dict, dynamics, change)).ok
 
 
 def test_generous_slack_gives_no_initial_warning():

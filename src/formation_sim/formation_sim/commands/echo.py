@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from formation_sim.commands.topics import add_domain_argument, check_domain
+from formation_sim.commands.common import add_domain_argument, check_domain, inspection_node
 
 
 def register(subparsers) -> None:
@@ -31,49 +31,44 @@ def run(args: argparse.Namespace) -> int:
     if args.count is not None and args.count < 1:
         print(f'formation echo: error: --count must be >= 1, got {args.count}', file=sys.stderr)
         return 2
-    import os
+    try:
+        with inspection_node('echo', args.domain_id) as node:
+            return _echo(node, args)
+    except KeyboardInterrupt:
+        return 130
+
+
+def _echo(node, args: argparse.Namespace) -> int:
+    """Print the messages of args.topic until --count of them came (0) or --timeout passed (1)."""
     import time
 
-    import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
 
     from formation_sim.recorder import UnknownMessageTypeError, import_message_class
     from formation_sim.ros_inspect import InspectError, echo_qos, format_message, to_yaml, wait_for_topic
 
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=args.domain_id)
-    node = None
-    received = 0
     try:
-        node = Node(f'formation_echo_{os.getpid()}', context=context, start_parameter_services=False, enable_rosout=False)
-        try:
-            msgtype = wait_for_topic(node, args.topic, timeout=args.wait)
-            msg_class = import_message_class(msgtype)
-        except (InspectError, UnknownMessageTypeError) as error:
-            print(f'formation echo: error: {error}', file=sys.stderr)
+        msgtype = wait_for_topic(node, args.topic, timeout=args.wait)
+        msg_class = import_message_class(msgtype)
+    except (InspectError, UnknownMessageTypeError) as error:
+        print(f'formation echo: error: {error}', file=sys.stderr)
+        return 1
+    received = 0
+
+    def show(msg) -> None:
+        nonlocal received
+        received += 1
+        text = to_yaml(msg) if args.raw else format_message(args.topic, msgtype, msg)
+        sys.stdout.write(text + '---\n')
+        sys.stdout.flush()
+
+    node.create_subscription(msg_class, args.topic, show, echo_qos(node, args.topic))
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    deadline = None if args.timeout is None else time.monotonic() + args.timeout
+    while args.count is None or received < args.count:
+        if deadline is not None and time.monotonic() > deadline:
+            print(f'formation echo: {received} message(s) on {args.topic} within {args.timeout} s', file=sys.stderr)
             return 1
-
-        def show(msg) -> None:
-            nonlocal received
-            received += 1
-            text = to_yaml(msg) if args.raw else format_message(args.topic, msgtype, msg)
-            sys.stdout.write(text + '---\n')
-            sys.stdout.flush()
-
-        node.create_subscription(msg_class, args.topic, show, echo_qos(node, args.topic))
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        deadline = None if args.timeout is None else time.monotonic() + args.timeout
-        while args.count is None or received < args.count:
-            if deadline is not None and time.monotonic() > deadline:
-                print(f'formation echo: {received} message(s) on {args.topic} within {args.timeout} s', file=sys.stderr)
-                return 1
-            executor.spin_once(timeout_sec=0.1)
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        executor.spin_once(timeout_sec=0.1)
     return 0

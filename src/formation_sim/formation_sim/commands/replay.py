@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from formation_sim.commands.common import add_domain_argument, check_domain
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -19,7 +21,7 @@ def register(subparsers) -> None:
     parser.add_argument('bag', metavar='BAG', type=Path, help='bag folder (or its .mcap file)')
     parser.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1; 0 = as fast as possible)')
     parser.add_argument('--as-fast-as-possible', action='store_true', help='same as --rate 0')
-    parser.add_argument('--domain-id', type=int, default=None, metavar='N', help='ROS_DOMAIN_ID (default: the environment\'s)')
+    add_domain_argument(parser)
     parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='replay only these topics')
     parser.add_argument('--no-clock', action='store_true', help='do not publish /clock')
     parser.add_argument('--depth', type=int, default=None, help='keep-last history of this depth instead of keep-all (may drop messages for slow readers)')
@@ -41,8 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.replay import ReplayError, main_replay
 
     rate = 0.0 if args.as_fast_as_possible else args.rate
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        print(f'formation replay: error: --domain-id must lie in [0, 232], got {args.domain_id}', file=sys.stderr)
+    if not check_domain('replay', args.domain_id):
         return 2
     progress = Progress(f'replaying {args.bag}', enabled=not args.quiet)
     try:

@@ -6,8 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.simulate import default_out_dir, load_valid_scenario
-from formation_sim.scenario import builtin_scenarios
+from formation_sim.commands.common import add_run_arguments, default_out_dir, load_valid_scenario
 
 
 def register(subparsers) -> None:
@@ -22,9 +21,7 @@ def register(subparsers) -> None:
         'an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
         'stopped early still writes summary.json up to that moment and a readable bag.',
     )
-    parser.add_argument('scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})')
-    parser.add_argument('--horizon', type=float, default=None, help="final time in seconds (default: the scenario's)")
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: runs/<scenario>-run-<time>)')
+    add_run_arguments(parser, kind='run')
     parser.add_argument('--agents-per-process', type=int, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
     parser.add_argument('--domain-id', type=int, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')

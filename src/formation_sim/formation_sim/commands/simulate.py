@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
-from formation_sim.scenario import ScenarioError, builtin_scenarios, load_scenario
-from formation_sim.validate import validate_scenario
+from formation_sim.commands.common import add_run_arguments, default_out_dir, load_valid_scenario
 
 
 def register(subparsers) -> None:
@@ -19,9 +17,7 @@ def register(subparsers) -> None:
         'as the ROS agent node; the world moves in closed form from event to event. Writes '
         'summary.json, trajectory.npz and formation.png into --out.',
     )
-    parser.add_argument('scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})')
-    parser.add_argument('--horizon', type=float, default=None, help='final time in seconds (default: the scenario\'s)')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: runs/<scenario>-simulate-<time>)')
+    add_run_arguments(parser, kind='simulate')
     parser.add_argument('--sample-dt', type=float, default=0.01, help='spacing of the dense trajectory samples [s] (default 0.01)')
     baseline = parser.add_mutually_exclusive_group()
     baseline.add_argument('--period', type=float, default=None, help='baseline: periodic sampling with this period instead of event triggering')
@@ -34,27 +30,6 @@ def register(subparsers) -> None:
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
     parser.set_defaults(func=run)
-
-
-def default_out_dir(scenario_name: str, kind: str) -> Path:
-    return Path('runs') / f'{scenario_name}-{kind}-{time.strftime("%Y%m%d-%H%M%S")}'
-
-
-def load_valid_scenario(name: str, command: str):
-    """The scenario, or None after printing why it cannot be run (nothing is started then)."""
-    try:
-        scenario = load_scenario(name)
-    except ScenarioError as error:
-        print(f'formation {command}: error: {error}', file=sys.stderr)
-        return None
-    report = validate_scenario(scenario)
-    if not report.ok:
-        print(f'formation {command}: the scenario breaks the theorems\' hypotheses; nothing was run.', file=sys.stderr)
-        print(report.format(), file=sys.stderr)
-        return None
-    for warning in report.warnings:
-        print(f'warning: {warning.message}', file=sys.stderr)
-    return scenario
 
 
 def run(args: argparse.Namespace) -> int:

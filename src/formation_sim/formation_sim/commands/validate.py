@@ -9,7 +9,8 @@ import argparse
 import json
 import sys
 
-from formation_sim.scenario import ScenarioError, builtin_scenarios, load_scenario
+from formation_sim.commands.common import add_scenario_argument
+from formation_sim.scenario import ScenarioError, load_scenario
 from formation_sim.validate import validate_scenario
 
 EXIT_VALID = 0
@@ -25,11 +26,7 @@ def register(subparsers) -> None:
         'Theorem 2 (double integrators) and print every number involved. Exit 0 if valid '
         '(warnings allowed), 1 if a hypothesis is broken, 2 if the scenario cannot be read.',
     )
-    parser.add_argument(
-        'scenario',
-        metavar='SCENARIO',
-        help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})',
-    )
+    add_scenario_argument(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.set_defaults(func=run)
 
