@@ -228,8 +228,10 @@ def test_non_finite_sensed_values_cannot_be_encoded():
 def test_step_and_status_round_trip_including_infinite_next_time():
     step = Step(index=12, time=0.1 + 0.2, flags=STEP_FLAG_FINAL, epoch=1795311615.054476)
     back = decode_step(through_wire(encode_step(step)))
-    assert back == step and back.final and not back.realtime
+    assert back == step and back.final and not back.realtime and back.due == ()
     assert bits([back.time, back.epoch]) == bits([step.time, step.epoch])
+    due = Step(index=3, time=2.5, due=(1, 7, 2**31 - 1))
+    assert decode_step(through_wire(encode_step(due))) == due
     for next_time in (math.inf, 5e-324, 7.123456789012345):
         status = Status(
             agent=4,
@@ -265,7 +267,7 @@ def test_malformed_status_is_rejected(values, complaint):
 
 
 def test_malformed_step_is_rejected():
-    with pytest.raises(MessageError, match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\], got 3"):
+    with pytest.raises(MessageError, match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\] and the due agent ids, got 3"):
         decode_step(_array([1, 0, 0.0]))
     with pytest.raises(MessageError, match='must be finite'):
         decode_step(_array([1, 0, math.inf, 0, 0.0]))
@@ -273,6 +275,10 @@ def test_malformed_step_is_rejected():
         decode_step(_array([1, -1, 0.0, 0, 0.0]))
     with pytest.raises(MessageError, match='step flags must be an integer, got 0.5'):
         decode_step(_array([1, 0, 0.0, 0.5, 0.0]))
+    with pytest.raises(MessageError, match='step 4 due agent must be an integer, got 2.5'):
+        decode_step(_array([1, 4, 0.0, 0, 0.0, 1, 2.5]))
+    with pytest.raises(MessageError, match=r'step 4: due agent ids must be sorted and distinct, got \[3, 3\]'):
+        decode_step(_array([1, 4, 0.0, 0, 0.0, 3, 3]))
 
 
 def test_agent_report_round_trips_and_omits_zero_counts():

@@ -38,7 +38,7 @@ def test_trigger_info_is_decoded_and_floats_read_back_exactly():
 
 def test_lock_step_payloads_are_decoded_on_their_topics():
     step = yaml.safe_load(format_message('/formation/step', ARRAY, encode_step(Step(index=7, time=0.25, flags=1))))
-    assert step == {'index': 7, 'time': 0.25, 'flags': 1, 'epoch': 0.0}
+    assert step == {'index': 7, 'time': 0.25, 'flags': 1, 'epoch': 0.0, 'due': []}
     status = Status(agent=2, step_index=3, next_time=math.inf, info_sent=4, info_received=3, commands_sent=2, triggers=2, ready=True, last_planned=0.125)
     decoded = yaml.safe_load(format_message('/formation/status', ARRAY, encode_status(status)))
     assert decoded['next_time'] == math.inf and decoded['last_planned'] == 0.125 and decoded['ready'] is True

@@ -46,13 +46,16 @@ class Step:
     """The simulator's announcement that simulated time is now `time` (exact float).
 
     In wall-clock mode only step 0 (and the final step) exist; `epoch` is the Unix time at
-    which sim time 0 began.
+    which sim time 0 began, and `due` is empty (agents keep their own timers).
     """
 
     index: int
     time: float
     flags: int = 0
     epoch: float = 0.0
+    # Lock-step: the agents due at `time` (sorted ids).  A receiving agent reports once it has
+    # the information of each of its neighbours in here, so it reports once per step.
+    due: tuple[int, ...] = ()
 
     @property
     def final(self) -> bool:
