@@ -17,6 +17,7 @@ from formation_sim.markers import (
     SPHERE_LIST,
     TEXT_VIEW_FACING,
     FormationMarkers,
+    LiveMarkerArray,
     MarkerError,
     edge_colour,
     write_bag_with_markers,
@@ -123,3 +124,17 @@ def test_a_copy_of_a_bag_gets_one_marker_array_per_state(paper_single_record, wr
     assert 'formation_markers' in metadata['custom_data']
     with pytest.raises(RecorderError, match='never overwrites'):
         write_bag_with_markers(source, tmp_path / 'marked', paper_single_record.scenario)
+
+
+def test_a_live_marker_array_updated_in_place_serialises_like_a_new_one():
+    from rclpy.serialization import serialize_message
+
+    scenario = load_scenario('paper_single')
+    view = FormationMarkers(scenario)
+    live = LiveMarkerArray(view)
+    first = live.update(view.markers(scenario.positions), time=0.5)
+    moved = scenario.positions + np.array([[0.25, -1.0], [3.5, 0.125], [-2.0, 1.0]])  # edge colours change too
+    specs = view.markers(moved)
+    again = live.update(specs, time=2.000000003)
+    assert again is first  # reused, not rebuilt
+    assert serialize_message(again) == serialize_message(view.to_ros(specs, time=2.000000003))
