@@ -125,6 +125,27 @@ FAN_IN_QOS = QoSProfile(
 )
 
 
+EXECUTORS = ('events', 'single')
+"""Executors a node process can spin: rclpy's EventsExecutor (default) or SingleThreadedExecutor.
+
+The SingleThreadedExecutor rebuilds its wait set in Python on every spin; on a 2-core machine
+that was most of the simulator's time per lock-step step (BENCHMARKS.md).  The EventsExecutor
+(rclpy.experimental, C++) dispatches each message as it comes.  It has no guard conditions, so
+the nodes use none.
+"""
+
+
+def make_executor(kind: str, *, context=None):
+    """The executor `kind` (one of EXECUTORS)."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
+
+
 class AgentNodeError(ValueError):
     """Bad agent parameters or a violation of the lock-step protocol seen by an agent."""
 
@@ -229,10 +250,6 @@ class FormationAgentNode(Node):
             PROTOCOL_QOS,
             event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_simulator_liveliness),
         )
-        # Statuses are published once per burst of delivered messages: the guard condition runs
-        # after the executor has handled what was ready together.
-        self._flush = self.create_guard_condition(self._publish_status_if_dirty)
-
         self.step: Step | None = None
         self.finished = False
         self.info_sent = 0
@@ -242,7 +259,8 @@ class FormationAgentNode(Node):
         self.trigger_times: list[float] = []
         self._sensing = False  # a sensing request is in flight
         self._held: list[TriggerInfo] = []  # information stamped at a time this agent is due
-        self._dirty = False
+        self._dirty = False  # knowledge changed since the last Status
+        self._due_neighbours: tuple[int, ...] = ()  # lock-step: neighbours due at the current step
         self._next_time = 0.0  # t^i_1 = 0
         self._last_trigger = -math.inf
         self._planned = 0.0  # the time the trigger in progress (or the last one) was planned for
@@ -379,10 +397,17 @@ class FormationAgentNode(Node):
                 f'agent {self.agent_id}: step {step.index} at t={step.time!r} skips its triggering time '
                 f'{self._next_time!r}'
             )
-        if step.time == self._next_time:  # the exact float this agent reported
+        due = step.time == self._next_time  # the exact float this agent reported
+        if due != (self.agent_id in step.due):
+            raise AgentNodeError(
+                f'agent {self.agent_id}: step {step.index} at t={step.time!r} lists due agents {list(step.due)}, '
+                f'but this agent reported its next triggering time {self._next_time!r}'
+            )
+        self._due_neighbours = tuple(j for j in step.due if j in self._info_pubs)
+        if due:
             self._sense_now()
         else:
-            self._publish_status(step_index=step.index, ready=True)
+            self._report_if_complete()
 
     def _sense_now(self) -> None:
         """Ask for this agent's sensing; the trigger completes when the answer arrives."""
@@ -451,8 +476,9 @@ class FormationAgentNode(Node):
         held, self._held = self._held, []
         for info in held:
             self._receive(info)
+        self._dirty = True
         if self._epoch is None:
-            self._publish_status(step_index=self.step.index, ready=True)
+            self._report_if_complete()
         else:
             self._replan()
 
@@ -541,7 +567,10 @@ class FormationAgentNode(Node):
             return
         self._receive(info)
         self._dirty = True
-        self._flush.trigger()
+        if self._epoch is None:
+            self._report_if_complete()
+        else:
+            self._replan()  # as on a robot: every piece of news re-plans at once
 
     def _receive(self, info: TriggerInfo) -> None:
         if info.stamp < self._last_trigger:  # only on the wall clock: it crossed our trigger
@@ -573,13 +602,25 @@ class FormationAgentNode(Node):
             rel_velocity=rel_velocity,
         )
 
-    def _publish_status_if_dirty(self) -> None:
-        if not self._dirty or self._sensing or self.finished:
+    def _report_if_complete(self) -> None:
+        """Lock-step: one Status per step, once the agent has all it will get at the step.
+
+        That is its own trigger if it is due, and the information of every neighbour the Step
+        lists as due (which may arrive before the Step itself).  Information stamped at a later
+        step waits for that Step.  An agent whose knowledge did not change stays silent: its
+        last Status still holds.
+        """
+        step = self.step
+        if step is None or self.finished or self._sensing or not self._dirty:
             return
-        if self._epoch is not None:
-            self._replan()
-        else:
-            self._publish_status(step_index=DISCOVERY_STEP if self.step is None else self.step.index, ready=True)
+        if step.time == self._next_time and self._last_trigger < step.time:
+            return  # due: its own trigger comes first
+        stamps = self._last_stamp
+        if any(stamps.get(j) != step.time for j in self._due_neighbours):
+            return
+        if any(stamp > step.time for stamp in stamps.values()):
+            return
+        self._publish_status(step_index=step.index, ready=True)
 
     def _replan(self) -> None:
         """Wall clock: report the next triggering time and set a timer for it (or trigger now)."""
@@ -660,6 +701,12 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
         'keyed by node name /agent_<i>/formation_agent.',
     )
     parser.add_argument(
+        '--executor',
+        choices=EXECUTORS,
+        default='events',
+        help='rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single (SingleThreadedExecutor)',
+    )
+    parser.add_argument(
         '--agents',
         help='comma-separated agent ids to run in this process, each in namespace /agent_<i> '
         '(default: one node whose namespace and parameters come from the ROS arguments)',
@@ -686,7 +733,7 @@ def main(args: Sequence[str] | None = None) -> int:
                 )
         else:
             nodes.append(FormationAgentNode())
-        executor = SingleThreadedExecutor()
+        executor = make_executor(options.executor)
         for node in nodes:
             executor.add_node(node)
         while not all(node.finished for node in nodes):

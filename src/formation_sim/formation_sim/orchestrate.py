@@ -257,6 +257,7 @@ class FormationRun:
         sample_period: float = 0.01,
         timeout: float | None = None,
         clock: str = 'lockstep',
+        executor: str = 'events',
         stop_timeouts: tuple[float, float] = (5.0, 3.0),
         validate: bool = True,
         inject: dict[str, float] | None = None,
@@ -272,6 +273,8 @@ class FormationRun:
         child name ('simulator', 'recorder', 'agent_<i>' or 'agents_<i>-<j>') -> command put
         before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
         stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
+        `executor`: the rclpy executor of the simulator and agent processes, 'events'
+        (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
         """
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
@@ -287,6 +290,11 @@ class FormationRun:
         if clock not in ('lockstep', 'realtime'):
             raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
         self.clock = clock
+        from formation_agent.node import EXECUTORS
+
+        if executor not in EXECUTORS:
+            raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
+        self.executor = executor
         self.inject = dict(inject or {})
         if unknown := set(self.inject) - set(INJECT_KEYS):
             raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
@@ -543,12 +551,13 @@ class FormationRun:
             '-p', f'sample_period:={float(self.sample_period)!r}',
             '-p', f'extra_subscribers:={1 if self.record else 0}',
             '-p', f'clock_mode:={self.clock}',
+            '-p', f'executor:={self.executor}',
         ]  # fmt: skip
         simulator = self._start('simulator', sim_args, env, expected_exit=True, pipe=True)
         for group in groups:
             ids = ','.join(map(str, group))
             name = f'agent_{group[0]}' if len(group) == 1 else f'agents_{group[0]}-{group[-1]}'
-            self._start(name, ['-m', 'formation_agent.node', '--agents', ids, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
+            self._start(name, ['-m', 'formation_agent.node', '--agents', ids, '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
         if self.progress:
             self._say(
                 f'ROS domain {env["ROS_DOMAIN_ID"]}: simulator, {len(groups)} agent process(es)'

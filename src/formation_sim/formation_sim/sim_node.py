@@ -42,7 +42,7 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import Accel, PoseArray, Twist
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -51,11 +51,13 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from formation_agent.node import (
+    EXECUTORS,
     EXIT_PEER_LOST,
     LIVELINESS_LEASE,
     LOST_GRACE,
     FAN_IN_QOS,
     PROTOCOL_QOS,
+    make_executor,
 )
 from formation_msgs_py.codec import (
     MessageError,
@@ -92,7 +94,7 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
-from formation_sim.markers import MARKERS_TYPE, FormationMarkers
+from formation_sim.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.world import World
 
@@ -222,6 +224,7 @@ class FormationSimulatorNode(Node):
         horizon = float(self.declare_parameter('horizon', 0.0).value)
         self.out_dir = str(self.declare_parameter('out_dir', '').value)
         self.sample_period = float(self.declare_parameter('sample_period', 0.01).value)
+        self.viz_period = float(self.declare_parameter('viz_period', 0.04).value)
         self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
         self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
         self.stall_timeout = float(self.declare_parameter('stall_timeout', 60.0).value)
@@ -230,6 +233,9 @@ class FormationSimulatorNode(Node):
         if self.clock_mode not in CLOCK_MODES:
             raise SimulatorError(f'clock_mode must be one of {CLOCK_MODES}, got {self.clock_mode!r}')
         self.realtime = self.clock_mode == 'realtime'
+        self.executor_kind = str(self.declare_parameter('executor', 'events').value)
+        if self.executor_kind not in EXECUTORS:
+            raise SimulatorError(f'executor must be one of {EXECUTORS}, got {self.executor_kind!r}')
         if scenario is None:
             if not source:
                 raise SimulatorError("parameter 'scenario' is required (a built-in name or a YAML path)")
@@ -240,6 +246,8 @@ class FormationSimulatorNode(Node):
             raise SimulatorError(f'horizon must be finite, got {self.horizon!r}')
         if not (math.isfinite(self.sample_period) and self.sample_period >= 0.0):
             raise SimulatorError(f'sample_period must be >= 0 (0: events only), got {self.sample_period!r}')
+        if not (math.isfinite(self.viz_period) and self.viz_period >= 0.0):
+            raise SimulatorError(f'viz_period must be >= 0 (0: every sample), got {self.viz_period!r}')
         if scenario.dimension > 3:
             raise SimulatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
         self.world = World.from_scenario(scenario)
@@ -260,6 +268,7 @@ class FormationSimulatorNode(Node):
         # For tools: the scenario once (so a bag is self-contained), a Foxglove view per sample.
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, PROTOCOL_QOS)
         self._markers = FormationMarkers(scenario)
+        self._marker_array = LiveMarkerArray(self._markers)
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
         self._tool_publishers = (
             self._state_pub,
@@ -299,6 +308,8 @@ class FormationSimulatorNode(Node):
         self._samples_t: list[float] = []
         self._samples_x: list[np.ndarray] = []
         self._samples_q: list[np.ndarray] = []
+        self._unpublished = 0  # samples at the end of the record not yet published for tools
+        self._next_viz = 0.0  # sim time of the next ground truth and marker view
         self._next_grid = 1
         self._created = time.monotonic()
         self._started: float | None = None
@@ -456,8 +467,9 @@ class FormationSimulatorNode(Node):
             self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
             self._due = set(self.agents)
             self._step_pub.publish(encode_step(self.step))
+            self.publish_samples()
             return
-        self._publish_step(Step(index=0, time=0.0), due=set(self.agents))  # t^i_1 = 0
+        self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
 
     # -- wall clock -----------------------------------------------------------------------------
 
@@ -471,6 +483,7 @@ class FormationSimulatorNode(Node):
         self._sample_grid(t)
         self.world.advance(t)
         self._sample_event()
+        self.publish_samples()
         self.steps += 1
         return t
 
@@ -485,6 +498,7 @@ class FormationSimulatorNode(Node):
             self._step_pub.publish(encode_step(self.step))
             self.finished = True
             self._finished_at = time.monotonic()
+        self.publish_samples()
 
     def _sense_realtime(self, agent: int):
         book = self.agents[agent]
@@ -500,10 +514,10 @@ class FormationSimulatorNode(Node):
 
     # -- lock-step ------------------------------------------------------------------------------
 
-    def _publish_step(self, step: Step, *, due: set[int]) -> None:
+    def _publish_step(self, step: Step) -> None:
         self.step = step
-        self._due = due
-        for i in due:
+        self._due = set(step.due)
+        for i in step.due:
             self.agents[i].expected_triggers += 1
             self.agents[i].trigger_times.append(step.time)
         self._last_advance = time.monotonic()
@@ -566,6 +580,9 @@ class FormationSimulatorNode(Node):
         # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
         self.world.set_control(agent, decode_command(msg, self.scenario.dimension))
         book.commands_received += 1
+        # The tools' samples up to this step go out now, while the agents plan (the simulator
+        # would otherwise keep a sensing request of the step waiting).
+        self.publish_samples()
         self._advance_if_settled()
 
     def _on_sense(self, agent: int):
@@ -616,15 +633,16 @@ class FormationSimulatorNode(Node):
             self.world.advance(self.horizon)
             self._sample_event()
             self.graph = self.snapshot_graph()
-            self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL), due=set())
             self.finished = True
             self._finished_at = time.monotonic()
+            self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
+            self.publish_samples()
             return
         self._sample_grid(t_next)
         self.world.advance(t_next)
         self._sample_event()
-        due = {i for i, book in self.agents.items() if book.status.next_time == t_next}
-        self._publish_step(Step(index=self.step.index + 1, time=t_next), due=due)
+        due = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
+        self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
 
     # -- samples (pure evaluations; they never move the world) --------------------------------
 
@@ -650,12 +668,24 @@ class FormationSimulatorNode(Node):
         self._samples_x.append(x)
         if q is not None:
             self._samples_q.append(q)
-        state = WorldState(time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=q)
-        self._clock_pub.publish(Clock(clock=ros_time(t)))
-        self._state_pub.publish(encode_world_state(state))
-        self._truth_pub.publish(encode_pose_array(state))
-        self._markers_pub.publish(self._markers.to_ros(self._markers.markers(x), time=t))
+        self._unpublished += 1
         self._check_connectivity(t, x)
+
+    def publish_samples(self) -> None:
+        """For tools: /clock and the exact state at every sample not yet published; ground truth
+        and the marker view at most every `viz_period` of sim time (they cost ~1 ms a sample)."""
+        count, self._unpublished = self._unpublished, 0
+        for k in range(len(self._samples_t) - count, len(self._samples_t)):
+            t, x = self._samples_t[k], self._samples_x[k]
+            state = WorldState(
+                time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=self._samples_q[k] if self.double else None
+            )
+            self._clock_pub.publish(Clock(clock=ros_time(t)))
+            self._state_pub.publish(encode_world_state(state))
+            if t >= self._next_viz or (self.finished and k == len(self._samples_t) - 1):
+                self._next_viz = t + self.viz_period
+                self._truth_pub.publish(encode_pose_array(state))
+                self._markers_pub.publish(self._marker_array.update(self._markers.markers(x), time=t))
 
     def _check_connectivity(self, t: float, x: np.ndarray) -> None:
         """Theorems 1 (i) and 2 (i): every edge stays shorter than Δ. Stop at the first that does not."""
@@ -764,6 +794,7 @@ class FormationSimulatorNode(Node):
         }
 
     def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
+        self.publish_samples()
         for pub in (self._step_pub, *self._tool_publishers):
             pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
 
@@ -774,6 +805,7 @@ class FormationSimulatorNode(Node):
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self.finished = True
         self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
+        self.publish_samples()
         self.collect_final_reports(executor)
         # A live agent's final report says it got the final Step; a lost agent is still matched
         # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
@@ -807,7 +839,7 @@ def main(args: Sequence[str] | None = None) -> int:
     status = 0
     try:
         node = FormationSimulatorNode()
-        executor = SingleThreadedExecutor()
+        executor = make_executor(node.executor_kind)
         executor.add_node(node)
         while not node.finished:
             executor.spin_once(timeout_sec=0.5)
