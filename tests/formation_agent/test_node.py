@@ -226,7 +226,7 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         assert node._simulator_seen, 'the step writer never matched'
         node.check()  # alive: nothing to report
         simulator.destroy_publisher(step_writer)  # as its process would on the way out
-        with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery'):
+        with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph'):
             while time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)
                 node.check()

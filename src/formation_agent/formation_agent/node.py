@@ -282,6 +282,7 @@ class FormationAgentNode(Node):
         self._delay_timer = None
         self._simulator_seen = False
         self._simulator_lost_at: float | None = None
+        self._simulator_lease_expired = False
         self._discovery = self.create_timer(0.1, self._announce)
 
     # -- parameters -------------------------------------------------------------------------
@@ -436,12 +437,13 @@ class FormationAgentNode(Node):
         if self.failure is not None:
             raise self.failure
         lost = self._simulator_lost_at
-        if lost is not None and not self.finished and time.monotonic() - lost > LOST_GRACE:
+        # During discovery a lease may expire on a machine busy starting many processes: keep
+        # waiting for step 0 (a simulator that left deletes its writer, which does count).
+        waiting = self.step is None and self._simulator_lease_expired
+        if lost is not None and not self.finished and not waiting and time.monotonic() - lost > LOST_GRACE:
             where = 'during discovery' if self.step is None else f'after step {self.step.index} (t={self.step.time!r})'
-            raise PeerLostError(
-                f'agent {self.agent_id}: the simulator (writer of {STEP_TOPIC}) is lost {where}: '
-                f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)'
-            )
+            how = f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)' if self._simulator_lease_expired else 'it left the graph'
+            raise PeerLostError(f'agent {self.agent_id}: the simulator (writer of {STEP_TOPIC}) is lost {where}: {how}')
 
     def _on_simulator_liveliness(self, info) -> None:
         if info.alive_count > 0:
@@ -449,6 +451,7 @@ class FormationAgentNode(Node):
             self._simulator_lost_at = None
         elif self._simulator_seen and self._simulator_lost_at is None:
             self._simulator_lost_at = time.monotonic()
+            self._simulator_lease_expired = info.not_alive_count_change > 0  # else: writer deleted
 
     def _trigger(self, future) -> None:
         if self.finished:  # the final step came while sensing (the horizon, or a failed run)

@@ -211,6 +211,7 @@ class _AgentBook:
     report: AgentReport | None = None  # its latest report (rejected and injected messages)
     alive: bool = False  # its command writer is matched and alive (DDS liveliness)
     lost: tuple[float, str] | None = None  # (monotonic time, how) once its command writer went away
+    lease_expired: bool = False  # how it went: its lease expired (else its writer was deleted)
 
 
 class FormationSimulatorNode(Node):
@@ -332,6 +333,7 @@ class FormationSimulatorNode(Node):
             and self._status_sub.get_publisher_count() >= len(self.agents)
             and self._report_sub.get_publisher_count() >= len(self.agents)
             and all(sub.get_publisher_count() >= 1 for sub in self._command_subs.values())
+            and all(book.lost is None for book in self.agents.values())
             and all(
                 book.status is not None and book.status.step_index == DISCOVERY_STEP and book.status.ready
                 for book in self.agents.values()
@@ -371,15 +373,18 @@ class FormationSimulatorNode(Node):
         elif book.alive and book.lost is None and not self.finished:
             # A lease that expired: the process died or the network lost it.  A writer deleted:
             # the agent left (its process exited) before the end of the run.
-            how = (
-                f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)'
-                if info.not_alive_count_change > 0
-                else 'its node left the graph'
-            )
+            book.lease_expired = info.not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)' if book.lease_expired else 'its node left the graph'
             book.lost = (time.monotonic(), how)
 
     def _check_lost(self, now: float) -> None:
-        lost = {i: book.lost for i, book in self.agents.items() if book.lost is not None}
+        # During discovery a lease may expire while a busy machine starts many processes: discovery
+        # waits for the agent to come back (bounded by its timeout); an agent that left counts.
+        lost = {
+            i: book.lost
+            for i, book in self.agents.items()
+            if book.lost is not None and not (self.step is None and book.lease_expired)
+        }
         # After a short grace, so that what a lost agent sent before it went is handled first,
         # and agents lost together (one process) are named together.
         if not lost or now - min(at for at, _ in lost.values()) <= LOST_GRACE:
