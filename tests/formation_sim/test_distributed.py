@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import threading
 from pathlib import Path
@@ -225,3 +226,24 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_st
     assert files, 'the killed children mapped no Fast DDS shared-memory file'
     assert not [path for path in files if Path(path).exists()]
     assert not [child for child in result.children if _alive(child.pid)]
+
+
+@pytest.mark.timeout(300)
+def test_lockstep_run_takes_same_instant_rounds_and_stops_where_the_engine_stops(tmp_path):
+    # paper_single to t = 200: the engine stops where the threshold reaches the rounding of the
+    # states (after an instant with a second round of triggers); the distributed run must take the
+    # same rounds and stop at the same event with the same message.
+    from formation_sim.engine import EngineError
+
+    scenario = load_scenario('paper_single')
+    with pytest.raises(EngineError) as stop:
+        simulate(scenario, horizon=200.0, sample_dt=None)
+    result = _run(scenario, tmp_path, domain_id=116, horizon=200.0, record=False)
+    assert not result.ok
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['message'] == str(stop.value)
+    reference = simulate(scenario, horizon=math.nextafter(failure['time'], 0.0), sample_dt=None)
+    _assert_same_events(summary, reference)
+    instants = [t for times in reference.trigger_times.values() for t in times if t > 0.0]
+    assert len(instants) > len(set(instants)), 'no second round at one instant before the stop'

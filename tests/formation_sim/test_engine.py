@@ -290,3 +290,41 @@ def test_without_event_samples_only_the_grid_and_the_ends_are_kept():
     grid = np.isin(full.sample_times, lean.sample_times)
     assert grid.sum() == 5 and len(full.sample_times) > 5 + 10
     assert np.array_equal(full.sample_positions[grid], lean.sample_positions)
+
+
+def test_news_that_puts_an_agent_on_its_threshold_makes_it_trigger_at_that_instant():
+    # Late in paper_single the threshold is a few thousand ulps of the positions: an agent given a
+    # neighbour's exact relative state at the neighbour's trigger can already be on its own
+    # threshold (it would have crossed within rounding). It then triggers at that very instant,
+    # in a further round, exactly as the plain event loop (every agent re-planned, the minimum
+    # taken, the world advanced by zero) does.
+    scenario = load_scenario('paper_single')
+    horizon = 30.0
+    trace = Trace(scenario)
+    record = simulate(scenario, horizon=horizon, sample_dt=0.01, on_event=trace)
+    assert record.trigger_times == _eager_reference(scenario, horizon)
+    rounds = [(snap[0], snap[4]) for snap in trace.snaps]
+    repeated = [(t, first, second) for (t, first), (t2, second) in zip(rounds, rounds[1:]) if t == t2]
+    assert repeated, 'no instant with a second round: the test no longer covers it'
+    for _, first, second in repeated:
+        assert not set(first) & set(second), 'an agent triggered twice at one instant'
+    # Every trigger on its threshold, to 1e-9 of it or, where the threshold is down to a few
+    # thousand ulps, to the rounding of the positions (recomputed from the true states).
+    on_threshold, _ = check_triggering(scenario, trace, horizon, dense=2)
+    times = np.array([t for t, due in rounds[1:] for _ in due])
+    threshold = scenario.gains.alpha * np.exp(-scenario.gains.beta * times)
+    rounding = 16 * np.spacing(np.abs(record.sample_positions).max())
+    assert np.all(on_threshold * threshold <= 1e-9 * threshold + rounding)
+
+
+def test_the_run_stops_once_rounding_decides_the_events():
+    scenario = load_scenario('paper_single')
+    with pytest.raises(EngineError, match='from here on rounding, not the dynamics, decides the events') as stop:
+        simulate(scenario, horizon=200.0, sample_dt=None)
+    t = float(str(stop.value).split('at t=')[1].split()[0])
+    # The rule, recomputed: the threshold is below 8 ulps of the largest |x| at the stop, and the
+    # run up to just before it ends normally.
+    before = simulate(scenario, horizon=math.nextafter(t, 0.0), sample_dt=None)
+    largest = np.abs(before.sample_positions[-1]).max()
+    assert scenario.gains.alpha * math.exp(-scenario.gains.beta * t) < 8 * np.spacing(largest)
+    assert before.sample_times[-1] == math.nextafter(t, 0.0)

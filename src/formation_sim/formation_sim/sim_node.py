@@ -94,6 +94,7 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
+from formation_sim.engine import build_agent, rounding_floor
 from formation_sim.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.world import World
@@ -252,6 +253,8 @@ class FormationSimulatorNode(Node):
         if scenario.dimension > 3:
             raise SimulatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
         self.world = World.from_scenario(scenario)
+        # The agents' threshold, the very same floats, to stop where the engine stops.
+        self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
         self.double = scenario.dynamics == 'double'
         # Ground truth of connectivity: every sample checks ||x_i - x_j|| < Δ on every edge.
         index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
@@ -629,9 +632,22 @@ class FormationSimulatorNode(Node):
             return
         t = self.step.time
         t_next = min(book.status.next_time for book in self.agents.values())
-        if not t_next > t:
-            laggards = [i for i, book in self.agents.items() if book.status.next_time <= t]
-            raise SimulatorError(f'agents {laggards} ask to trigger at t={t_next!r}, not after the current t={t!r}')
+        if t_next < t:
+            laggards = [i for i, book in self.agents.items() if book.status.next_time < t]
+            raise SimulatorError(f'agents {laggards} ask to trigger at t={t_next!r}, before the current t={t!r}')
+        if t_next == t:
+            # News at this instant put agents on their threshold already: they trigger at this
+            # very instant, in a further step (as the in-process engine does).
+            again = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t))
+            twice = [i for i in again if self.agents[i].trigger_times and self.agents[i].trigger_times[-1] == t]
+            if twice:
+                raise SimulatorError(
+                    f'agent {twice[0]} reached its threshold again at t={t!r}, the instant it has just triggered at: '
+                    'the threshold has fallen to the rounding level of the relative states'
+                )
+            self.steps += 1
+            self._publish_step(Step(index=self.step.index + 1, time=t, due=again))
+            return
         self.steps += 1
         if t_next > self.horizon:
             self._sample_grid(self.horizon)
@@ -646,6 +662,8 @@ class FormationSimulatorNode(Node):
         self._sample_grid(t_next)
         self.world.advance(t_next)
         self._sample_event()
+        if (problem := rounding_floor(self._threshold_model, self.world)) is not None:
+            raise SimulatorError(problem)
         due = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
         self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
 
