@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import random
 import signal
 import subprocess
@@ -430,3 +431,128 @@ def test_live_prefix_discovery_with_node_clock(
     assert stamps == sorted(stamps)
     assert started_ns <= stamps[0]
     assert stamps[-1] <= stopped_ns
+
+
+# --------------------------------------------------------------------------- draining on stop
+
+
+def publish_steps(publisher, first: int, count: int) -> list[bytes]:
+    """Publish steps first .. first + count - 1 serialized; return the bytes sent."""
+    sent = [step_bytes(k) for k in range(first, first + count)]
+    for data in sent:
+        publisher.publish(data)
+    return sent
+
+
+def finish(process: subprocess.Popen, tmp_path: Path) -> float:
+    """Wait for a signalled recorder to exit by itself (status 0); return the seconds waited."""
+    started = time.monotonic()
+    try:
+        process.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'the recorder did not finish draining: {recorder_log(tmp_path)}')
+    assert process.returncode == 0, recorder_log(tmp_path)
+    return time.monotonic() - started
+
+
+@pytest.mark.ros
+def test_drain_keeps_messages_that_arrive_after_a_lull(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A burst right before SIGINT and one 0.3 s after it (a loaded publisher's late messages)."""
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    # A quiet period well above the lull, so a loaded test machine cannot make this flaky.
+    with (ros_domain(tmp_path, monkeypatch, 140) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=2.0') as process):
+        node = rclpy.create_node('drain_lull_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 200)
+        process.send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        assert process.poll() is None, recorder_log(tmp_path)
+        published += publish_steps(publisher, 200, 100)
+        assert publisher.wait_for_all_acked(Duration(seconds=30)), recorder_log(tmp_path)
+        assert finish(process, tmp_path) < 30.0
+        node.destroy_node()
+
+    assert [m.rawdata for m in read_bag(bag) if m.topic == STEP] == published
+    assert metadata(bag)['message_count'] == len(published)
+    assert 'drained' in recorder_log(tmp_path)
+
+
+@pytest.mark.ros
+def test_drain_ends_at_its_limit_while_messages_keep_coming(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rclpy  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 141) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=0.5', 'drain_limit:=1.5') as process):
+        node = rclpy.create_node('drain_limit_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 10)
+        process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        # Never quiet for 0.5 s: a step every 0.05 s until the recorder gives up.
+        deadline = signalled + 60
+        while process.poll() is None and time.monotonic() < deadline:
+            published += publish_steps(publisher, len(published), 1)
+            time.sleep(0.05)
+        waited = time.monotonic() - signalled
+        finish(process, tmp_path)
+        node.destroy_node()
+
+    assert 1.5 <= waited < 30.0
+    assert 'drain limit reached' in recorder_log(tmp_path)
+    recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
+    assert len(recorded) >= 10 + 1.5 / 0.05 / 2  # the steps of the drain are kept
+    assert recorded == published[: len(recorded)]  # in order, no gap
+
+
+@pytest.mark.ros
+def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 142) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=60.0', 'drain_limit:=120.0') as process):
+        node = rclpy.create_node('drain_interrupt_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 100)
+        assert publisher.wait_for_all_acked(Duration(seconds=30))
+        process.send_signal(signal.SIGINT)
+        time.sleep(0.5)
+        assert process.poll() is None, recorder_log(tmp_path)  # draining, 60 s quiet to go
+        process.send_signal(signal.SIGTERM)
+        assert finish(process, tmp_path) < 30.0
+        node.destroy_node()
+
+    assert 'drain cut short by a second stop signal' in recorder_log(tmp_path)
+    assert [m.rawdata for m in read_bag(bag) if m.topic == STEP] == published
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('parameter', ['drain_quiet:=0.0', 'drain_limit:=-1.0', 'drain_quiet:=.nan'])
+def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> None:
+    bag = tmp_path / 'bag'
+    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+           'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', parameter],
+                         capture_output=True, text=True, env=env, timeout=120)
+    name = parameter.split(':=')[0]
+    assert run.returncode != 0
+    assert f"parameter '{name}' must be a positive number of seconds" in run.stderr
+    assert not bag.exists()

@@ -12,7 +12,9 @@ Three layers:
 
 What survives the end of a recorder:
 
-- SIGINT or SIGTERM: `main()` stops spinning, takes the messages still queued, closes the MCAP
+- SIGINT or SIGTERM: `main()` stops its timers and drains: it keeps taking messages until none
+  has come for ``drain_quiet`` seconds (messages still in flight from loaded publishers arrive
+  late), for at most ``drain_limit`` seconds, or until a second signal. Then it closes the MCAP
   file (summary, footer) and writes ``metadata.yaml``: a complete bag.
 - SIGKILL (or a crash of the interpreter): nothing is finalized. The bag directory holds an MCAP
   file without summary and footer, and no ``metadata.yaml``; rosbags and ros2 bag refuse it.
@@ -28,7 +30,8 @@ import math
 import signal
 import struct
 import threading
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType, TracebackType
@@ -49,6 +52,7 @@ if TYPE_CHECKING:
     from rosbags.interfaces import Connection
     from rosbags.typesys.store import Typestore
 
+    from rclpy.executors import Executor
     from rclpy.node import Node
 else:
     try:  # The node needs rclpy; BagWriter, read_bag and reindex do not.
@@ -500,6 +504,9 @@ class RecorderNode(Node):
       step), so bag order follows the simulation. '' stamps with the node's clock instead.
     - ``flush_period`` (double, s): how often written messages are pushed to the file, which
       bounds what a SIGKILL loses.
+    - ``drain_quiet`` (double, s): on stopping, `drain` takes messages until none came for this
+      long.
+    - ``drain_limit`` (double, s): `drain` ends after this long even if messages keep coming.
     """
 
     def __init__(
@@ -511,6 +518,8 @@ class RecorderNode(Node):
         clock_topic: str = DEFAULT_CLOCK_TOPIC,
         discovery_period: float = 1.0,
         flush_period: float = 0.5,
+        drain_quiet: float = 0.5,
+        drain_limit: float = 10.0,
         node_name: str = 'formation_recorder',
     ) -> None:
         """Declare the parameters (the arguments are their defaults) and open the bag."""
@@ -528,11 +537,18 @@ class RecorderNode(Node):
             self.declare_parameter('discovery_period', float(discovery_period)).value
         )
         flush_period = float(self.declare_parameter('flush_period', float(flush_period)).value)
+        self._drain_quiet = float(self.declare_parameter('drain_quiet', float(drain_quiet)).value)
+        self._drain_limit = float(self.declare_parameter('drain_limit', float(drain_limit)).value)
 
         if not output:
             msg = "parameter 'output' is required: the bag directory to create"
             raise RecorderConfigError(msg)
-        for name, period in (('discovery_period', discovery_period), ('flush_period', flush_period)):
+        for name, period in (
+            ('discovery_period', discovery_period),
+            ('flush_period', flush_period),
+            ('drain_quiet', self._drain_quiet),
+            ('drain_limit', self._drain_limit),
+        ):
             if not (math.isfinite(period) and period > 0):
                 msg = f'parameter {name!r} must be a positive number of seconds, got {period}'
                 raise RecorderConfigError(msg)
@@ -643,6 +659,58 @@ class RecorderNode(Node):
             self.destroy_timer(timer)
         self._timers.clear()
 
+    def drain(self, executor: Executor, *, interrupted: Callable[[], bool] = lambda: False) -> float:
+        """Take the messages still in flight; return the seconds spent.
+
+        Spins until no message came for ``drain_quiet`` s: under load, messages the publishers
+        sent before they stopped can arrive well after the queue first looks empty. Ends anyway
+        after ``drain_limit`` s (a publisher that never stops), or once `interrupted()` is true;
+        even then it takes the messages already queued.
+        """
+        started = time.monotonic()
+        last_arrival = started
+        seen = first = self.received_count
+        ending = ''
+        while not ending:
+            now = time.monotonic()
+            quiet_left = self._drain_quiet - (now - last_arrival)
+            limit_left = self._drain_limit - (now - started)
+            if quiet_left <= 0:
+                ending = 'quiet'
+            elif limit_left <= 0:
+                ending = 'limit'
+            elif interrupted():
+                ending = 'interrupted'
+            else:
+                # At most 0.1 s per wait, so that a second signal ends the drain promptly.
+                executor.spin_once(timeout_sec=min(quiet_left, limit_left, 0.1))
+                if self.received_count != seen:
+                    seen = self.received_count
+                    last_arrival = time.monotonic()
+        if ending == 'interrupted':  # still take what is queued already (bounded by the limit)
+            while time.monotonic() - started < self._drain_limit:
+                before = self.received_count
+                executor.spin_once(timeout_sec=0.0)
+                if self.received_count == before:
+                    break
+        drained = time.monotonic() - started
+        taken = self.received_count - first
+        logger = self.get_logger()
+        if ending == 'quiet':
+            logger.info(
+                f'drained {taken} messages in {drained:.2f} s (then none for {self._drain_quiet:g} s)'
+            )
+        elif ending == 'limit':
+            logger.warning(
+                f'drain limit reached: drained {taken} messages in {drained:.2f} s and messages were'
+                f' still arriving (drain_limit {self._drain_limit:g} s)'
+            )
+        else:
+            logger.warning(
+                f'drain cut short by a second stop signal after {drained:.2f} s ({taken} messages)'
+            )
+        return drained
+
     def close(self) -> None:
         """Finalize the bag (MCAP summary and ``metadata.yaml``)."""
         self.stop_timers()
@@ -656,8 +724,11 @@ def main(args: Sequence[str] | None = None) -> int:
     from rclpy.signals import SignalHandlerOptions
 
     stop = threading.Event()
+    requests = 0  # the first stop signal starts the drain, a second one ends it
 
     def request_stop(signum: int, frame: FrameType | None) -> None:
+        nonlocal requests
+        requests += 1
         stop.set()
 
     # Own handlers instead of rclpy's: rclpy's would shut the context down before the messages
@@ -673,12 +744,7 @@ def main(args: Sequence[str] | None = None) -> int:
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
         node.stop_timers()
-        # Take what is already queued: stop when one wait brings no message.
-        while True:
-            before = node.received_count
-            executor.spin_once(timeout_sec=0.05)
-            if node.received_count == before:
-                break
+        node.drain(executor, interrupted=lambda: requests > 1)
         node.get_logger().info(f'stopping: {node.message_count} messages in {node.bag.path}')
     finally:
         if node is not None:
