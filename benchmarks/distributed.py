@@ -94,6 +94,7 @@ def measure_run(
     agents_per_process: int = 1,
     record: bool = False,
     sample_period: float = 0.01,
+    executor: str = 'events',
     timeout: float = 600.0,
 ) -> dict:
     """One lock-step run; the measurements described in the module docstring."""
@@ -111,6 +112,7 @@ def measure_run(
             agents_per_process=agents_per_process,
             record=record,
             sample_period=sample_period,
+            executor=executor,
             progress=False,
             timeout=timeout,
         ).run()
@@ -126,6 +128,7 @@ def measure_run(
         'processes': -(-len(scenario.agent_ids) // agents_per_process),
         'record': record,
         'sample_period': sample_period,
+        'executor': executor,
         'ok': result.ok,
         'message': result.message,
         'total_wall_s': total,

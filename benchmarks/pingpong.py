@@ -26,13 +26,9 @@ PING, PONG, SERVICE = '/bench/ping', '/bench/pong', '/bench/sense'
 
 
 def _executor(kind: str):
-    if kind == 'events':
-        from rclpy.experimental import EventsExecutor
+    from formation_agent.node import make_executor  # the nodes' own choice of executors
 
-        return EventsExecutor()
-    from rclpy.executors import SingleThreadedExecutor
-
-    return SingleThreadedExecutor()
+    return make_executor(kind)
 
 
 def _qos():

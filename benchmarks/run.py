@@ -226,6 +226,10 @@ def distributed_cases(quick: bool) -> list[dict]:
         return [{**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}]
     return [
         {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1},
+        # The same with rclpy's SingleThreadedExecutor (the runtime before the EventsExecutor),
+        # and without the tools' state samples (the protocol alone).
+        {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1, 'executor': 'single'},
+        {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1, 'sample_period': 0.0},
         {**random(10), 'horizon': 2.0, 'per_process': 1},
         {**random(30), 'horizon': 1.0, 'per_process': 1},
         {**random(100), 'horizon': 0.5, 'per_process': 25},
@@ -233,15 +237,18 @@ def distributed_cases(quick: bool) -> list[dict]:
     ]
 
 
-def run_distributed(case: dict, out: Path, *, record: bool = False, sample_period: float = 0.01) -> dict:
+def run_distributed(case: dict, out: Path, *, record: bool = False) -> dict:
     from distributed import measure_run
 
     scenario = build_scenario(case)
     row = measure_run(
         scenario, out_dir=out, horizon=case['horizon'], domain_id=next(DOMAINS),
-        agents_per_process=case['per_process'], record=record, sample_period=sample_period,
+        agents_per_process=case['per_process'], record=record, sample_period=case.get('sample_period', 0.01),
+        executor=case.get('executor', 'events'),
     )  # fmt: skip
-    row['case'] = label(case)
+    row['case'] = label(case) + ''.join(
+        note for key, note in (('executor', ' (SingleThreadedExecutor)'), ('sample_period', ' (events only, no samples)')) if key in case
+    )
     return row
 
 
@@ -338,9 +345,16 @@ def markdown(results: dict) -> str:
             ]
     if 'distributed' in results:
         bound = results.get('step_bound_s')
+        bound_events = results.get('step_bound_events_s')
+        if bound:
+            lines += [
+                f'Lower bound per lock-step step (1.5 topic + 1 service round trip): {1e3 * bound:.2f} ms with the '
+                f'SingleThreadedExecutor, {1e3 * bound_events:.2f} ms with the EventsExecutor.',
+                '',
+            ]
         lines += [
-            '| case | agents/process | processes | T [s] | events | steps | stepping wall [s] | events/s | steps/s | ms/step | × bound | discovery [s] | outside stepping [s] | RSS/agent [MiB] | simulator RSS [MiB] |',
-            '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+            '| case | agents/process | processes | T [s] | events | steps | stepping wall [s] | events/s | steps/s | ms/step | × bound (single) | × bound (events) | discovery [s] | outside stepping [s] | RSS/agent [MiB] | simulator RSS [MiB] |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['distributed']:
             if not r.get('events'):
@@ -350,7 +364,7 @@ def markdown(results: dict) -> str:
             lines.append(
                 f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | {r["events"]} | {r["steps"]} | '
                 f'{r["stepping_wall_s"]:.3g} | {r["events_per_s"]:.1f} | {r["steps_per_s"]:.1f} | {ms:.1f} | '
-                f'{_fmt(ms / 1e3 / bound if bound else None, 2)} | {r["discovery_s"]:.2f} | {r["outside_stepping_s"]:.1f} | '
+                f'{_fmt(ms / 1e3 / bound if bound else None, 2)} | {_fmt(ms / 1e3 / bound_events if bound_events else None, 2)} | {r["discovery_s"]:.2f} | {r["outside_stepping_s"]:.1f} | '
                 f'{_fmt(r["memory"]["per_agent_mib"])} | {_fmt(r["memory"]["simulator_peak_mib"])} |'
             )
         lines.append('')
@@ -421,6 +435,8 @@ def main() -> int:
         # sensing call (a service round trip), its TriggerInfo to a neighbour, that neighbour's
         # Status back: 1.5 topic round trips and one service round trip.
         results['step_bound_s'] = 1.5 * p['topic']['median_s'] + p['service']['median_s']
+        e = results['pingpong_events_executor']
+        results['step_bound_events_s'] = 1.5 * e['topic']['median_s'] + e['service']['median_s']
         results['distributed'] = []
         for case in distributed_cases(args.quick):
             progress(f'distributed {label(case)} T={case["horizon"]} ({case["per_process"]} per process)')
