@@ -21,6 +21,13 @@ def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, arg
     assert not (tmp_path / 'run' / 'logs').exists()  # nothing was started
 
 
+def test_an_unknown_executor_is_refused_by_the_api(tmp_path):
+    from formation_sim.orchestrate import FormationRun, RunError
+
+    with pytest.raises(RunError, match=r"executor must be one of \('events', 'single'\), got 'multi'"):
+        FormationRun('paper_single', out_dir=tmp_path / 'run', executor='multi')
+
+
 def test_an_existing_bag_is_never_overwritten(tmp_path, capsys):
     (tmp_path / 'run' / 'bag').mkdir(parents=True)
     assert main(['run', 'paper_single', '--out', str(tmp_path / 'run'), '--quiet']) == 2

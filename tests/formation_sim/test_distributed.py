@@ -86,10 +86,11 @@ def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, 
 
 @pytest.mark.timeout(300)
 def test_agents_packed_in_one_process_give_the_same_run(tmp_path):
+    # Also the fallback executor (rclpy's SingleThreadedExecutor) in every process.
     scenario = load_scenario('paper_single')
     horizon = 3.0
     reference = simulate(scenario, horizon=horizon)
-    result = _run(scenario, tmp_path, domain_id=112, horizon=horizon, agents_per_process=3, record=False)
+    result = _run(scenario, tmp_path, domain_id=112, horizon=horizon, agents_per_process=3, record=False, executor='single')
     assert result.ok, result.message
     assert result.bag is None
     assert [child.name for child in result.children] == ['simulator', 'agents_1-3']

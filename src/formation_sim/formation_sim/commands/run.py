@@ -34,6 +34,13 @@ def register(subparsers) -> None:
     )
     parser.add_argument('--timeout', type=float, default=None, help='give up after this many wall-clock seconds')
     parser.add_argument(
+        '--executor',
+        choices=('events', 'single'),
+        default='events',
+        help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
+        '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
+    )
+    parser.add_argument(
         '--network',
         action='store_true',
         help='let DDS discovery reach the local network (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) for agents on '
@@ -64,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
             timeout=args.timeout,
             clock='realtime' if args.real_time else 'lockstep',
             localhost_only=not args.network,
+            executor=args.executor,
         ).run()
     except RunError as error:
         print(f'formation run: error: {error}', file=sys.stderr)
