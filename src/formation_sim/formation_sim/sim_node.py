@@ -695,18 +695,18 @@ class FormationSimulatorNode(Node):
         self._check_connectivity(t, x)
 
     def publish_samples(self) -> None:
-        """For tools: /clock and the exact state at every sample not yet published; ground truth
-        and the marker view at most every `viz_period` of sim time (they cost ~1 ms a sample)."""
+        """For tools: the exact state at every sample not yet published; /clock, ground truth and
+        the marker view at most every `viz_period` of sim time (a view costs ~1 ms)."""
         count, self._unpublished = self._unpublished, 0
         for k in range(len(self._samples_t) - count, len(self._samples_t)):
             t, x = self._samples_t[k], self._samples_x[k]
             state = WorldState(
                 time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=self._samples_q[k] if self.double else None
             )
-            self._clock_pub.publish(Clock(clock=ros_time(t)))
             self._state_pub.publish(encode_world_state(state))
             if t >= self._next_viz or (self.finished and k == len(self._samples_t) - 1):
                 self._next_viz = t + self.viz_period
+                self._clock_pub.publish(Clock(clock=ros_time(t)))
                 self._truth_pub.publish(encode_pose_array(state))
                 self._markers_pub.publish(self._marker_array.update(self._markers.markers(x), time=t))
 
