@@ -95,3 +95,21 @@ def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator)
     record = node.record()
     assert record.trigger_times == {1: [0.0, 0.5], 2: [0.0], 3: [0.0, 0.5]}
     assert record.extra['failure']['kind'] == 'agent_lost' and record.extra['failure']['agents'] == [2]
+
+
+def test_discovery_says_what_it_still_waits_for(simulator):
+    from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
+
+    node = simulator()  # alone in its domain: no agent has matched anything
+    gaps = node._discovery_gaps()
+    assert '/formation/step readers 0/3' in gaps
+    assert '/formation/status writers 0/3' in gaps
+    assert 'agents whose command writer is not matched: 1, 2, 3' in gaps
+    assert 'agents not ready (their own endpoints unmatched): 1, 2, 3' in gaps
+    ready = dict(step_index=DISCOVERY_STEP, next_time=0.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
+    node.agents[2].status = Status(agent=2, **ready)
+    node.agents[3].lost = (0.0, 'no sign of life')
+    gaps = node._discovery_gaps()
+    assert 'agents not ready (their own endpoints unmatched): 1, 3' in gaps
+    assert 'agents whose liveliness lease expired: 3' in gaps
+    assert not node._connected()

@@ -552,6 +552,8 @@ class FormationRun:
             '-p', f'extra_subscribers:={1 if self.record else 0}',
             '-p', f'clock_mode:={self.clock}',
             '-p', f'executor:={self.executor}',
+            # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
+            '-p', f'discovery_timeout:={max(120.0, float(len(self.scenario.agent_ids)))!r}',
         ]  # fmt: skip
         simulator = self._start('simulator', sim_args, env, expected_exit=True, pipe=True)
         for group in groups:

@@ -148,6 +148,12 @@ class AgentLostError(SimulatorError):
         self.agents = agents
 
 
+def _ids(agents: list[int], *, most: int = 20) -> str:
+    """Agent ids for a message, the first `most` of a long list."""
+    shown = ', '.join(map(str, agents[:most]))
+    return shown + (f', … ({len(agents)} in all)' if len(agents) > most else '')
+
+
 def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
     """Every topic of a run of `scenario` with its type, as a recorder wants them."""
     array = 'std_msgs/msg/Float64MultiArray'
@@ -329,19 +335,36 @@ class FormationSimulatorNode(Node):
     # -- discovery ------------------------------------------------------------------------------
 
     def _connected(self) -> bool:
-        extra = self.extra_subscribers
-        return (
-            self._step_pub.get_subscription_count() >= len(self.agents) + extra
-            and all(pub.get_subscription_count() >= extra for pub in self._tool_publishers)
-            and self._status_sub.get_publisher_count() >= len(self.agents)
-            and self._report_sub.get_publisher_count() >= len(self.agents)
-            and all(sub.get_publisher_count() >= 1 for sub in self._command_subs.values())
-            and all(book.lost is None for book in self.agents.values())
-            and all(
-                book.status is not None and book.status.step_index == DISCOVERY_STEP and book.status.ready
-                for book in self.agents.values()
-            )
-        )
+        return not self._discovery_gaps()
+
+    def _discovery_gaps(self) -> list[str]:
+        """What discovery still waits for (empty: step 0 can go)."""
+        n, extra = len(self.agents), self.extra_subscribers
+        gaps = []
+
+        def count(what: str, have: int, want: int) -> None:
+            if have < want:
+                gaps.append(f'{what} {have}/{want}')
+
+        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra)
+        for pub in self._tool_publishers:
+            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
+        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
+        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        unmatched = [i for i, sub in self._command_subs.items() if sub.get_publisher_count() < 1]
+        expired = [i for i, book in self.agents.items() if book.lost is not None]
+        not_ready = [
+            i for i, book in self.agents.items()
+            if book.status is None or book.status.step_index != DISCOVERY_STEP or not book.status.ready
+        ]  # fmt: skip
+        for what, agents in (
+            ('agents whose command writer is not matched', unmatched),
+            ('agents whose liveliness lease expired', expired),
+            ('agents not ready (their own endpoints unmatched)', not_ready),
+        ):
+            if agents:
+                gaps.append(f'{what}: {_ids(agents)}')
+        return gaps
 
     def _tick(self) -> None:
         now = time.monotonic()
@@ -351,9 +374,9 @@ class FormationSimulatorNode(Node):
             if self._connected():
                 self._start()
             elif now - self._created > self.discovery_timeout:
-                missing = [i for i, book in self.agents.items() if book.status is None or not book.status.ready]
                 raise DiscoveryError(
-                    f'discovery did not complete within {self.discovery_timeout} s; agents not ready: {missing}'
+                    f'discovery did not complete within {self.discovery_timeout} s; still missing: '
+                    + '; '.join(self._discovery_gaps())
                 )
             return
         if self.finished:
