@@ -80,9 +80,17 @@ class _MemoryWatch(threading.Thread):
 
 
 def _bag_counts(bag: Path) -> Counter:
-    from formation_sim.recorder import read_bag
+    """Messages per topic; Status messages of discovery (step_index -1) counted apart."""
+    from formation_msgs_py.codec import decode_status
+    from formation_msgs_py.topics import STATUS_TOPIC
+    from formation_sim.recorder import decode, read_bag
 
-    return Counter(topic for topic, *_ in read_bag(bag))
+    counts: Counter = Counter()
+    for topic, msgtype, _, rawdata in read_bag(bag):
+        if topic == STATUS_TOPIC and decode_status(decode(rawdata, msgtype)).step_index < 0:
+            topic += ' (discovery)'
+        counts[topic] += 1
+    return counts
 
 
 def measure_run(

@@ -221,15 +221,20 @@ def run_comm(case: dict) -> dict:
 # -- distributed ------------------------------------------------------------------------------
 
 
-def distributed_cases(quick: bool) -> list[dict]:
+def distributed_cases(quick: bool, *, three_agents: bool = False) -> list[dict]:
     if quick:
         return [{**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}]
-    return [
+    small = [
         {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1},
         # The same with rclpy's SingleThreadedExecutor (the runtime before the EventsExecutor),
         # and without the tools' state samples (the protocol alone).
         {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1, 'executor': 'single'},
         {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1, 'sample_period': 0.0},
+    ]
+    if three_agents:
+        return small
+    return [
+        *small,
         {**random(10), 'horizon': 2.0, 'per_process': 1},
         {**random(30), 'horizon': 1.0, 'per_process': 1},
         {**random(100), 'horizon': 0.5, 'per_process': 25},
@@ -250,6 +255,25 @@ def run_distributed(case: dict, out: Path, *, record: bool = False) -> dict:
         note for key, note in (('executor', ' (SingleThreadedExecutor)'), ('sample_period', ' (events only, no samples)')) if key in case
     )
     return row
+
+
+PROTOCOL_TOPICS = ('trigger_info', 'command', '/formation/step', '/formation/status')
+
+
+def issue_bound(results: dict) -> dict:
+    """The issue's lower bound per event: a bare round trip times the messages an event needs.
+
+    Messages of the protocol per event, counted in the recorded 3-agent run (triggering
+    information, commands, Steps, Statuses after discovery: topic round trips; sensing calls:
+    service round trips), times the round trips measured in the same run, for both executors.
+    """
+    per_event = results['messages']['messages_per_event']
+    topic_messages = sum(per_event.get(name, 0.0) for name in PROTOCOL_TOPICS)
+    calls = per_event.get('/formation/sensing_log', 0.0)
+    bound = {'topic_messages_per_event': topic_messages, 'sensing_calls_per_event': calls}
+    for key, pingpong in (('single', results['pingpong']), ('events', results['pingpong_events_executor'])):
+        bound[f'{key}_s'] = topic_messages * pingpong['topic']['median_s'] + calls * pingpong['service']['median_s']
+    return bound
 
 
 def run_pingpong(count: int, executor: str = 'single') -> dict:
@@ -372,6 +396,17 @@ def markdown(results: dict) -> str:
             per_step = results['messages']['messages_per_step']
             lines += ['Messages per lock-step step (3 agents, recorded run, counted in the bag): '
                       + ', '.join(f'{k} {v:.2f}' for k, v in per_step.items()) + '.', '']
+        if 'issue_bound' in results:
+            b = results['issue_bound']
+            first = next(r for r in results['distributed'] if r.get('events'))
+            ms_event = 1e3 * first['stepping_wall_s'] / first['events']
+            lines += [
+                f'The issue\'s bound (round trip × messages per event: {b["topic_messages_per_event"]:.2f} topic messages and '
+                f'{b["sensing_calls_per_event"]:.2f} sensing calls per event): {1e3 * b["single_s"]:.2f} ms (SingleThreadedExecutor), '
+                f'{1e3 * b["events_s"]:.2f} ms (EventsExecutor); {first["case"]}: {ms_event:.2f} ms per event = '
+                f'{ms_event / 1e3 / b["single_s"]:.2f}× / {ms_event / 1e3 / b["events_s"]:.2f}×.',
+                '',
+            ]
     if 'long' in results:
         lines += ['| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |', '|---|---|---|---|---|---|---|']
         for r in results['long']:
@@ -387,6 +422,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description='Benchmarks (see BENCHMARKS.md).')
     parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long'), default=None)
     parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
+    parser.add_argument('--three-agents', action='store_true', help='distributed: only the 3-agent cases (the lock-step target)')
     parser.add_argument('--out', type=Path, default=HERE / 'results')
     args = parser.parse_args()
     sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long']
@@ -438,13 +474,14 @@ def main() -> int:
         e = results['pingpong_events_executor']
         results['step_bound_events_s'] = 1.5 * e['topic']['median_s'] + e['service']['median_s']
         results['distributed'] = []
-        for case in distributed_cases(args.quick):
+        for case in distributed_cases(args.quick, three_agents=args.three_agents):
             progress(f'distributed {label(case)} T={case["horizon"]} ({case["per_process"]} per process)')
             results['distributed'].append(run_distributed(case, runs / f'dist-{len(results["distributed"])}'))
             save()
         progress('distributed, recorded (messages per step)')
         recorded = run_distributed({**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}, runs / 'recorded', record=True)
         results['messages'] = {k: recorded.get(k) for k in ('messages_per_event', 'messages_per_step', 'events', 'steps')}
+        results['issue_bound'] = issue_bound(results)
         save()
     if 'long' in sections:
         results['long'] = []
