@@ -66,13 +66,25 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Age
     )
 
 
-class _Sampler:
-    """Collects the state at every event and on a regular grid, by pure evaluation."""
+class Sampler:
+    """Collects the state at every event and on a regular grid, by pure evaluation.
 
-    def __init__(self, world: World, sample_dt: float | None, *, events: bool = True) -> None:
+    Shared by the engine and the simulator node; `on_sample(t, x, q)` is called after each
+    sample is added (the simulator checks connectivity and queues it for its tools there).
+    """
+
+    def __init__(
+        self,
+        world: World,
+        sample_dt: float | None,
+        *,
+        events: bool = True,
+        on_sample: Callable[[float, np.ndarray, np.ndarray | None], None] | None = None,
+    ) -> None:
         self.world = world
         self.dt = sample_dt
         self.events = events
+        self.on_sample = on_sample
         self.times: list[float] = []
         self.positions: list[np.ndarray] = []
         self.velocities: list[np.ndarray] = []
@@ -101,6 +113,8 @@ class _Sampler:
         self.positions.append(x)
         if q is not None:
             self.velocities.append(q)
+        if self.on_sample is not None:
+            self.on_sample(t, x, q)
 
 
 def _next_event_time(heap, serial, searches, horizon: float) -> float:
@@ -200,7 +214,7 @@ def simulate(
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
-    sampler = _Sampler(world, sample_dt, events=sample_events)
+    sampler = Sampler(world, sample_dt, events=sample_events)
     messages = 0
     # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
     # frontier of a search still under way (a certified lower bound on the agent's time). Only

@@ -94,7 +94,7 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
-from formation_sim.engine import build_agent, rounding_floor
+from formation_sim.engine import Sampler, build_agent, rounding_floor
 from formation_sim.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.world import World
@@ -315,12 +315,9 @@ class FormationSimulatorNode(Node):
         self.sensing_calls = 0
         self.steps = 0
         self._due: set[int] = set()
-        self._samples_t: list[float] = []
-        self._samples_x: list[np.ndarray] = []
-        self._samples_q: list[np.ndarray] = []
+        self._sampler = Sampler(self.world, self.sample_period, on_sample=self._on_sample)
         self._unpublished = 0  # samples at the end of the record not yet published for tools
         self._next_viz = 0.0  # sim time of the next ground truth and marker view
-        self._next_grid = 1
         self._created = time.monotonic()
         self._started: float | None = None
         self._last_progress = self._created
@@ -693,27 +690,12 @@ class FormationSimulatorNode(Node):
     # -- samples (pure evaluations; they never move the world) --------------------------------
 
     def _sample_grid(self, t_end: float) -> None:
-        if not self.sample_period:
-            return
-        while True:
-            tg = self._next_grid * self.sample_period
-            if tg >= t_end:
-                return
-            self._next_grid += 1
-            if tg > self.world.time:
-                x, q = self.world.state_at(tg)
-                self._add_sample(tg, x, q)
+        self._sampler.grid_until(t_end)
 
     def _sample_event(self) -> None:
-        if self._samples_t and self._samples_t[-1] == self.world.time:
-            return
-        self._add_sample(self.world.time, self.world.positions, self.world.velocities)
+        self._sampler.event()
 
-    def _add_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
-        self._samples_t.append(t)
-        self._samples_x.append(x)
-        if q is not None:
-            self._samples_q.append(q)
+    def _on_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
         self._unpublished += 1
         self._check_connectivity(t, x)
 
@@ -721,13 +703,15 @@ class FormationSimulatorNode(Node):
         """For tools: the exact state at every sample not yet published; /clock, ground truth and
         the marker view at most every `viz_period` of sim time (a view costs ~1 ms)."""
         count, self._unpublished = self._unpublished, 0
-        for k in range(len(self._samples_t) - count, len(self._samples_t)):
-            t, x = self._samples_t[k], self._samples_x[k]
+        samples = self._sampler
+        last = len(samples.times) - 1
+        for k in range(last + 1 - count, last + 1):
+            t, x = samples.times[k], samples.positions[k]
             state = WorldState(
-                time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=self._samples_q[k] if self.double else None
+                time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=samples.velocities[k] if self.double else None
             )
             self._state_pub.publish(encode_world_state(state))
-            if t >= self._next_viz or (self.finished and k == len(self._samples_t) - 1):
+            if t >= self._next_viz or (self.finished and k == last):
                 self._next_viz = t + self.viz_period
                 self._clock_pub.publish(Clock(clock=ros_time(t)))
                 self._truth_pub.publish(encode_pose_array(state))
@@ -786,9 +770,9 @@ class FormationSimulatorNode(Node):
             # A trigger counts once its command has acted on the world (a run stopped early may
             # have sensed for a trigger that never completed).
             trigger_times={i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()},
-            sample_times=np.array(self._samples_t),
-            sample_positions=np.array(self._samples_x),
-            sample_velocities=np.array(self._samples_q) if self._samples_q else None,
+            sample_times=np.array(self._sampler.times),
+            sample_positions=np.array(self._sampler.positions),
+            sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
             messages_sent=sum(s.info_sent for s in statuses.values() if s is not None),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
