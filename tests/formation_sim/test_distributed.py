@@ -248,3 +248,20 @@ def test_lockstep_run_takes_same_instant_rounds_and_stops_where_the_engine_stops
     _assert_same_events(summary, reference)
     instants = [t for times in reference.trigger_times.values() for t in times if t > 0.0]
     assert len(instants) > len(set(instants)), 'no second round at one instant before the stop'
+
+
+def test_the_port_files_of_a_domain_are_found_by_their_port_numbers(tmp_path):
+    from formation_sim.orchestrate import _domain_port_files
+
+    # Domain 231: ports 7400 + 250 * 231 + [0, 250) = [65150, 65400); no test uses it.
+    names = ['fastrtps_port65150', 'fastrtps_port65151_el', 'sem.fastrtps_port65399_mutex']
+    outside = ['fastrtps_port65400', 'fastrtps_port65149', 'fastrtps_65150', 'fastrtps_port65150x']
+    paths = [Path('/dev/shm') / name for name in names + outside]
+    try:
+        for path in paths:
+            path.touch()
+        found = {Path(path).name for path in _domain_port_files(231)}
+        assert found == set(names)
+    finally:
+        for path in paths:
+            path.unlink(missing_ok=True)

@@ -32,6 +32,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import socket
 import subprocess
@@ -229,6 +230,23 @@ def _mapped_shm_files(pid: int) -> set[str]:
     except OSError:
         return set()
     return {line.split()[-1] for line in maps.splitlines() if '/dev/shm/fastrtps_' in line or '/dev/shm/sem.fastrtps_' in line}
+
+
+_PORT_FILE = re.compile(r'^(?:sem\.)?fastrtps_port(\d+)(?:_el|_mutex)?$')
+
+
+def _domain_port_files(domain_id: int) -> set[str]:
+    """Fast DDS shared-memory port files of ROS domain `domain_id`, with their lock and semaphore.
+
+    Fast DDS names a port's files after its port number, and the ports of domain d are
+    7400 + 250 d + [0, 250) (the RTPS well-known port mapping).
+    """
+    first = 7400 + 250 * domain_id
+    return {
+        str(path)
+        for path in Path('/dev/shm').iterdir()
+        if (match := _PORT_FILE.match(path.name)) and first <= int(match[1]) < first + 250
+    }
 
 
 def _mapped_by_anyone(paths: set[str]) -> set[str]:
@@ -434,7 +452,7 @@ class FormationRun:
             try:
                 status, message, lost = self._launch_and_watch(paths, groups, env)
             finally:
-                self._stop_all()
+                self._stop_all(domain_id)
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
         recovered = self._recover_bag(bag) if self.record else None
@@ -624,11 +642,14 @@ class FormationRun:
         failed = [c for c in agents if not c.alive() and c.process.returncode != 0]
         return EXIT_FAILED if failed else EXIT_OK
 
-    def _stop_all(self) -> None:
+    def _stop_all(self, domain_id: int) -> None:
         """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.
 
         A child that dies by a signal cannot unlink its Fast DDS shared-memory files; those it had
-        mapped when it was signalled are removed once no live process maps them any more.
+        mapped when it was signalled are removed once no live process maps them any more.  It may
+        also have mapped a peer's port file after the last look (a port is mapped when it is first
+        sent to), which then outlives the peer: so the port files of the run's own domain that
+        nobody maps any more go too (a live participant always maps its own port).
         """
         first, second = self.stop_timeouts
         for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
@@ -647,7 +668,11 @@ class FormationRun:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 child.process.wait(timeout=1.0)
         orphaned = set().union(*(c.shm_files for c in self._children if (c.process.returncode or 0) < 0))
-        removable = orphaned - _mapped_by_anyone(orphaned)
+        if orphaned:
+            orphaned |= _domain_port_files(domain_id)
+        in_use = _mapped_by_anyone(orphaned)
+        # A lock file (_el) is never mapped: it goes only with its port file.
+        removable = {path for path in orphaned - in_use if not (path.endswith('_el') and path[:-3] in in_use)}
         for path in removable:
             with contextlib.suppress(OSError):
                 os.unlink(path)
