@@ -416,7 +416,7 @@ def hosts():
 
 
 @pytest.mark.timeout(300)
-def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts, bag_trigger_stamps, wait_for_stepping):
+def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts, bag_trigger_stamps):
     """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
     memory), discovery by multicast on the hosts' subnet."""
     from formation_sim.orchestrate import FormationRun
@@ -431,9 +431,15 @@ def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_eng
         launch_prefix=lambda name: ['ip', 'netns', 'exec', hosts.namespaces[place[name]]],
     )  # fmt: skip
     worker, results = _in_background(run)
-    wait_for_stepping(run)
-    # Which network stack each child lives on (read while they run: the run lasts seconds more).
-    stacks = {child.name: os.readlink(f'/proc/{child.pid}/ns/net') for child in run._children}
+    # Which network stack each child lives on, read while they discover each other over UDP
+    # (seconds; stepping to t = 2 then takes well under a second): once all five are started and
+    # each has left this process's stack (`ip netns exec` enters its namespace, then runs python).
+    own = os.readlink('/proc/self/ns/net')
+    stacks: dict[str, str] = {}
+    deadline = time.monotonic() + 60.0
+    while (len(stacks) < len(place) or own in stacks.values()) and time.monotonic() < deadline:
+        stacks = {child.name: os.readlink(f'/proc/{child.pid}/ns/net') for child in list(run._children)}
+        time.sleep(0.02)
     worker.join(timeout=240.0)
     (result,) = results
     assert result.ok, result.message

@@ -86,7 +86,7 @@ def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator)
     from formation_sim.sim_node import AgentLostError
 
     node = simulator()
-    node._sample_event()
+    node._sampler.event()
     for book in node.agents.values():
         book.trigger_times = [0.0, 0.5]
         book.commands_received = 2

@@ -36,7 +36,9 @@ import contextlib
 import heapq
 import math
 import random
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Sequence
@@ -49,6 +51,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -113,6 +116,21 @@ PROTOCOL_QOS = QoSProfile(
     liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
 )
 
+# The simulator's writers carry up to several messages per lock-step step (state samples at every
+# grid point and event), and the recorder, a reliable keep-all reader, can fall behind them on a
+# loaded machine; a reliable keep-last writer drops what its reader has not acknowledged once
+# its history is full.  A deeper history keeps it (depth is not part of QoS matching).  Not for
+# the views (ground truth, markers): transient local keeps `depth` samples for late joiners, and a
+# marker array of 300 agents is ~200 KB; they come at most every viz_period.
+SIMULATOR_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=PROTOCOL_QOS.reliability,
+    durability=PROTOCOL_QOS.durability,
+    liveliness=PROTOCOL_QOS.liveliness,
+    liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
+)
+
 # A reader shared by every agent (the simulator's Status and report readers) gets up to n
 # messages per step: a depth of 32 across all writers drops some with 30+ agents and the step
 # never settles.  Keep everything; history is not part of QoS matching, so writers are unchanged.
@@ -144,6 +162,38 @@ def make_executor(kind: str, *, context=None):
     if kind == 'single':
         return SingleThreadedExecutor(context=context)
     raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
+
+
+class StopSignals:
+    """SIGINT and SIGTERM as a flag that the spin loop turns into KeyboardInterrupt between spins.
+
+    rclpy's own handlers (or Python's) raise KeyboardInterrupt wherever the main thread is; inside
+    the EventsExecutor's C++ dispatch it comes out as a pybind11 RuntimeError ("Unable to convert
+    call argument"), and an interrupted run would look like a failed one.  Use with
+    `rclpy.init(..., signal_handler_options=SignalHandlerOptions.NO)`.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.received = threading.Event()
+        self._previous: dict = {}
+
+    def __enter__(self) -> StopSignals:
+        self._previous = {sig: signal.signal(sig, self._on_signal) for sig in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.received.set()
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt once a stop signal has come."""
+        if self.received.is_set():
+            raise KeyboardInterrupt
 
 
 class AgentNodeError(ValueError):
@@ -718,50 +768,52 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[FormationAgentNode] = []
     status = 0
-    try:
-        options = _parse(rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:])
-        if options.agents:
-            ids = [int(text) for text in options.agents.split(',') if text.strip()]
-            packed = len(ids) > 1
-            for agent_id in ids:
-                nodes.append(
-                    FormationAgentNode(
-                        namespace=agent_namespace(agent_id),
-                        start_parameter_services=not packed,
-                        parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id)],
+    with StopSignals() as stop:
+        try:
+            options = _parse(rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:])
+            if options.agents:
+                ids = [int(text) for text in options.agents.split(',') if text.strip()]
+                packed = len(ids) > 1
+                for agent_id in ids:
+                    nodes.append(
+                        FormationAgentNode(
+                            namespace=agent_namespace(agent_id),
+                            start_parameter_services=not packed,
+                            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id)],
+                        )
                     )
-                )
-        else:
-            nodes.append(FormationAgentNode())
-        executor = make_executor(options.executor)
-        for node in nodes:
-            executor.add_node(node)
-        while not all(node.finished for node in nodes):
-            executor.spin_once(timeout_sec=0.5)
+            else:
+                nodes.append(FormationAgentNode())
+            executor = make_executor(options.executor)
             for node in nodes:
-                node.check()
-        for node in nodes:
-            node.wait_for_delivery()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        status = 130
-    except PeerLostError as error:
-        print(f'formation_agent: {error}', file=sys.stderr, flush=True)
-        status = EXIT_PEER_LOST
-    except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
-        if not rclpy.ok():  # SIGINT/SIGTERM shut the context down between two spins
-            return 130
-        print(f'formation_agent: {error}', file=sys.stderr, flush=True)
-        traceback.print_exc(file=sys.stderr)
-        status = 1
-    finally:
-        for node in nodes:
-            with contextlib.suppress(Exception):  # a context shut down by a signal cannot publish
-                node.leave()
-            node.destroy_node()
-        rclpy.try_shutdown()
+                executor.add_node(node)
+            while not all(node.finished for node in nodes):
+                executor.spin_once(timeout_sec=0.1)
+                stop.check()
+                for node in nodes:
+                    node.check()
+            for node in nodes:
+                node.wait_for_delivery()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            status = 130
+        except PeerLostError as error:
+            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            status = EXIT_PEER_LOST
+        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+            if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
+                return 130
+            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            traceback.print_exc(file=sys.stderr)
+            status = 1
+        finally:
+            for node in nodes:
+                with contextlib.suppress(Exception):  # a context shut down by a signal cannot publish
+                    node.leave()
+                node.destroy_node()
+            rclpy.try_shutdown()
     return status
 
 

@@ -172,6 +172,17 @@ def rounding_floor(agent, world: World) -> str | None:
     )
 
 
+def due_twice(agent_id: int, threshold_model, t: float) -> str:
+    """Why an agent due again at the instant it has just triggered at stops the run (engine and
+    simulator alike); `threshold_model` is any agent of the team (they share the threshold)."""
+    return (
+        f'agent {agent_id} reached its threshold again at t={t!r}, the instant it has just triggered at '
+        f'(threshold {threshold_model.threshold(t):.3g}): the threshold has fallen to the rounding '
+        'level of the relative states, or the gains are outside what the theorem guarantees '
+        '(see `formation validate`); shorten the horizon or lower beta'
+    )
+
+
 def _pop_due(heap: list[tuple[float, int, int, int]], serial: dict[int, int], t: float) -> list[int]:
     """The agents planned for exactly `t` (live entries), taken off the heap, sorted."""
     due = []
@@ -269,13 +280,7 @@ def simulate(
             due = _pop_due(heap, serial, t)
             twice = [i for i in due if trigger_times[i][-1] == t]
             if twice:
-                agent = twice[0]
-                raise EngineError(
-                    f'agent {agent} reached its threshold again at t={t!r}, the instant it has just triggered at '
-                    f'(threshold {agents[agent].threshold(t):.3g}): the threshold has fallen to the rounding '
-                    'level of the relative states, or the gains are outside what the theorem guarantees '
-                    '(see `formation validate`); shorten the horizon or lower beta'
-                )
+                raise EngineError(due_twice(twice[0], some_agent, t))
             continue
         steps += 1
         if progress is not None and steps % 1000 == 0:

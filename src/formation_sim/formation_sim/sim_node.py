@@ -45,6 +45,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -57,6 +58,8 @@ from formation_agent.node import (
     LOST_GRACE,
     FAN_IN_QOS,
     PROTOCOL_QOS,
+    SIMULATOR_QOS,
+    StopSignals,
     make_executor,
 )
 from formation_msgs_py.codec import (
@@ -94,7 +97,7 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
-from formation_sim.engine import Sampler, build_agent, rounding_floor
+from formation_sim.engine import Sampler, build_agent, due_twice, rounding_floor
 from formation_sim.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.world import World
@@ -270,13 +273,13 @@ class FormationSimulatorNode(Node):
         )
         self.agents = {i: _AgentBook(neighbours=tuple(scenario.neighbours(i))) for i in scenario.agent_ids}
 
-        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
-        self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, PROTOCOL_QOS)
+        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
+        self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
-        self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, PROTOCOL_QOS)
-        self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, PROTOCOL_QOS)
+        self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
+        self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
         # For tools: the scenario once (so a bag is self-contained), a Foxglove view per sample.
-        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, PROTOCOL_QOS)
+        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._markers = FormationMarkers(scenario)
         self._marker_array = LiveMarkerArray(self._markers)
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
@@ -487,7 +490,7 @@ class FormationSimulatorNode(Node):
                 print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
         self._scenario_pub.publish(String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
-        self._sample_event()
+        self._sampler.event()
         if self.realtime:
             self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
             self._timer = self.create_timer(min(0.1, self.sample_period or 0.1), self._tick)
@@ -508,19 +511,19 @@ class FormationSimulatorNode(Node):
     def _realtime_event(self) -> float:
         """Advance the world to now (an event: a sensing or a command arrives)."""
         t = self._wall_time()
-        self._sample_grid(t)
+        self._sampler.grid_until(t)
         self.world.advance(t)
-        self._sample_event()
+        self._sampler.event()
         self.publish_samples()
         self.steps += 1
         return t
 
     def _realtime_tick(self) -> None:
         t = self._wall_time()
-        self._sample_grid(t)
+        self._sampler.grid_until(t)
         if t >= self.horizon:
             self.world.advance(self.horizon)
-            self._sample_event()
+            self._sampler.event()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
             self._step_pub.publish(encode_step(self.step))
@@ -655,45 +658,35 @@ class FormationSimulatorNode(Node):
         if t_next < t:
             laggards = [i for i, book in self.agents.items() if book.status.next_time < t]
             raise SimulatorError(f'agents {laggards} ask to trigger at t={t_next!r}, before the current t={t!r}')
+        due = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
         if t_next == t:
             # News at this instant put agents on their threshold already: they trigger at this
             # very instant, in a further step (as the in-process engine does).
-            again = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t))
-            twice = [i for i in again if self.agents[i].trigger_times and self.agents[i].trigger_times[-1] == t]
+            twice = [i for i in due if self.agents[i].trigger_times and self.agents[i].trigger_times[-1] == t]
             if twice:
-                raise SimulatorError(
-                    f'agent {twice[0]} reached its threshold again at t={t!r}, the instant it has just triggered at: '
-                    'the threshold has fallen to the rounding level of the relative states'
-                )
+                raise SimulatorError(due_twice(twice[0], self._threshold_model, t))
             self.steps += 1
-            self._publish_step(Step(index=self.step.index + 1, time=t, due=again))
+            self._publish_step(Step(index=self.step.index + 1, time=t, due=due))
             return
         self.steps += 1
         if t_next > self.horizon:
-            self._sample_grid(self.horizon)
+            self._sampler.grid_until(self.horizon)
             self.world.advance(self.horizon)
-            self._sample_event()
+            self._sampler.event()
             self.graph = self.snapshot_graph()
             self.finished = True
             self._finished_at = time.monotonic()
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
             self.publish_samples()
             return
-        self._sample_grid(t_next)
+        self._sampler.grid_until(t_next)
         self.world.advance(t_next)
-        self._sample_event()
+        self._sampler.event()
         if (problem := rounding_floor(self._threshold_model, self.world)) is not None:
             raise SimulatorError(problem)
-        due = tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
         self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
 
     # -- samples (pure evaluations; they never move the world) --------------------------------
-
-    def _sample_grid(self, t_end: float) -> None:
-        self._sampler.grid_until(t_end)
-
-    def _sample_event(self) -> None:
-        self._sampler.event()
 
     def _on_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
         self._unpublished += 1
@@ -863,47 +856,49 @@ def write_results(node: FormationSimulatorNode) -> None:
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = None
     status = 0
-    try:
-        node = FormationSimulatorNode()
-        executor = make_executor(node.executor_kind)
-        executor.add_node(node)
-        while not node.finished:
-            executor.spin_once(timeout_sec=0.5)
-            if node.failure is not None:
-                raise node.failure
-        node.collect_final_reports(executor)
-        node.wait_for_delivery()
-        if node.progress_period > 0.0:
-            node._print_progress()
-        if node.out_dir:
-            write_results(node)
-    except (KeyboardInterrupt, ExternalShutdownException) as error:
-        status = EXIT_INTERRUPTED
-        _write_partial(node, error)
-    except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
-        if not rclpy.ok():  # SIGINT/SIGTERM shut the context down between two spins
+    with StopSignals() as stop:
+        try:
+            node = FormationSimulatorNode()
+            executor = make_executor(node.executor_kind)
+            executor.add_node(node)
+            while not node.finished:
+                executor.spin_once(timeout_sec=0.1)
+                stop.check()
+                if node.failure is not None:
+                    raise node.failure
+            node.collect_final_reports(executor)
+            node.wait_for_delivery()
+            if node.progress_period > 0.0:
+                node._print_progress()
+            if node.out_dir:
+                write_results(node)
+        except (KeyboardInterrupt, ExternalShutdownException) as error:
             status = EXIT_INTERRUPTED
-            _write_partial(node, KeyboardInterrupt())
-            return status
-        print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-        if not isinstance(error, (AgentLostError, ConnectivityLostError)):
-            traceback.print_exc(file=sys.stderr)
-        status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
-        if node is not None:
-            node.fail(error)
-            try:
-                node.stop_agents(executor)
-            except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-                print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
-        _write_partial(node, error)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+            _write_partial(node, error)
+        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+            if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
+                status = EXIT_INTERRUPTED
+                _write_partial(node, KeyboardInterrupt())
+                return status
+            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+            if not isinstance(error, (AgentLostError, ConnectivityLostError)):
+                traceback.print_exc(file=sys.stderr)
+            status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
+            if node is not None:
+                node.fail(error)
+                try:
+                    node.stop_agents(executor)
+                except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+                    print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
+            _write_partial(node, error)
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return status
 
 
