@@ -48,6 +48,24 @@ def paper_scenario_dict():
     return _paper_scenario_dict
 
 
+@pytest.fixture(scope='session')
+def long_run_scenario(tmp_path_factory) -> str:
+    """A scenario file whose distributed run is still stepping when a test stops or kills part of it.
+
+    Section 5's single-integrator example with β = 0.05 up to t = 600: ~3 000 events, tens of
+    seconds of lock-step. (The example itself, β = 1, stops at the rounding floor at t ≈ 35 after
+    about a second of stepping: a kill that comes later meets a finished run.)
+    """
+    import yaml
+
+    data = _paper_scenario_dict(beta=0.05)
+    data['name'] = 'long_run'
+    data['horizon'] = 600.0
+    path = tmp_path_factory.mktemp('long_run') / 'long_run.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
 @pytest.fixture(scope='module')
 def ros(request, tmp_path_factory):
     """An rclpy context on the test module's own `DOMAIN_ID`, discovery limited to this machine."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import threading
 from pathlib import Path
 
@@ -110,10 +111,10 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.timeout(300)
-def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_for_stepping):
+def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_for_stepping, long_run_scenario):
     from formation_sim.orchestrate import FormationRun
 
-    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=113, progress=False, timeout=240.0)
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=113, progress=False, timeout=240.0)
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
@@ -129,17 +130,17 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_fo
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'interrupted' and result.failure == failure
-    assert 0.0 < summary['extra']['reached_time'] == failure['time'] < 1000.0
+    assert 0.0 < summary['extra']['reached_time'] == failure['time'] < run.horizon
     assert summary['total_events'] > 0
 
 
 @pytest.mark.timeout(300)
-def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping):
+def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, long_run_scenario):
     import signal
 
     from formation_sim.orchestrate import FormationRun, _mapped_by_anyone, _mapped_shm_files
 
-    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=114, progress=False, record=False, timeout=240.0)
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=114, progress=False, record=False, timeout=240.0)
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
@@ -199,14 +200,13 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping):
+def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping, long_run_scenario):
     from formation_sim.orchestrate import FormationRun
 
-    # No grace period: every child still alive right after SIGINT is killed with SIGKILL.
+    # No grace period: every child still alive right after SIGINT is killed by SIGTERM or SIGKILL.
     run = FormationRun(
-        'paper_single',
+        long_run_scenario,
         out_dir=tmp_path / 'run',
-        horizon=1000.0,
         domain_id=117,
         progress=False,
         record=False,
@@ -221,7 +221,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_st
     worker.join(timeout=60.0)
     (result,) = results
     assert result.exit_status == 130
-    killed = [child for child in run._children if child.process.returncode == -9]
+    killed = [child for child in run._children if child.process.returncode in (-signal.SIGTERM, -signal.SIGKILL)]
     assert killed, [child.process.returncode for child in run._children]
     files = set().union(*(child.shm_files for child in killed))
     assert files, 'the killed children mapped no Fast DDS shared-memory file'

@@ -126,9 +126,11 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
         publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
         seen = []
         node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
+        # The injector must hear every Step: a node that joins a running domain can take seconds
+        # to be discovered, longer than this whole run.
         run = FormationRun(
             scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
-            inject={'delay_ms': 2.0},
+            inject={'delay_ms': 2.0}, step_listeners=1,
         )
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
@@ -136,7 +138,7 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
         injected = False
         while worker.is_alive():
             executor.spin_once(timeout_sec=0.05)
-            if not injected and seen and max(seen) >= inject_at:
+            if not injected and seen and max(seen) >= inject_at and publisher.get_subscription_count() >= 1:
                 for msg, _ in bad:
                     publisher.publish(msg)
                 injected = True
@@ -146,6 +148,7 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
         rclpy.shutdown(context=context)
     (result,) = results
     assert injected, f'the run ended before step {inject_at}'
+    assert min(seen) == 0, 'the injector missed Steps: step 0 did not wait for it'
     assert result.ok, result.message
     summary = json.loads(result.summary.read_text())
     _assert_same_events(summary, reference)
@@ -169,11 +172,11 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
 
 
 @pytest.mark.timeout(300)
-def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping):
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping, long_run_scenario):
     from formation_sim.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
 
-    scenario = load_scenario('paper_single')
-    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=1000.0, domain_id=71, progress=False, timeout=240.0)
+    scenario = load_scenario(long_run_scenario)
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
     worker, results = _in_background(run)
     wait_for_stepping(run)
     time.sleep(0.5)  # well into the run
@@ -195,7 +198,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     assert failure['detected_by'] == 'simulator, orchestrator'
     assert failure['process']['name'] == 'agent_2' and failure['process']['returncode'] == -signal.SIGKILL
     t_fail = failure['time']
-    assert 0.0 < t_fail == summary['extra']['reached_time'] < 1000.0
+    assert 0.0 < t_fail == summary['extra']['reached_time'] < scenario.horizon
 
     # Up to the failure, the run is the engine's: every trigger that completed, at its time.
     reference = simulate(scenario, horizon=t_fail)
@@ -217,11 +220,11 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 
 
 @pytest.mark.timeout(300)
-def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, wait_for_stepping):
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
     from formation_sim.orchestrate import EXIT_LOST, FormationRun
     from formation_sim.recorder import read_bag
 
-    run = FormationRun('paper_single', out_dir=tmp_path / 'run', horizon=1000.0, domain_id=72, progress=False, timeout=240.0)
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0)
     worker, results = _in_background(run)
     wait_for_stepping(run)
     time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
@@ -243,9 +246,9 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     assert summary['total_events'] > 0
 
 
-def _start_cli_run(out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
+def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
     process = subprocess.Popen(
-        [sys.executable, '-m', 'formation_sim.cli', 'run', 'paper_single', '--horizon', '1000', '--out', str(out),
+        [sys.executable, '-m', 'formation_sim.cli', 'run', str(scenario), '--out', str(out),
          '--domain-id', str(domain_id), '--no-plot', *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
@@ -261,11 +264,11 @@ def _start_cli_run(out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
 
 
 @pytest.mark.timeout(300)
-def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_path, ros_env):
+def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_path, ros_env, long_run_scenario):
     from formation_sim.recorder import read_bag
 
     out = tmp_path / 'run'
-    process = _start_cli_run(out, 73)
+    process = _start_cli_run(long_run_scenario, out, 73)
     process.send_signal(signal.SIGINT)  # what a terminal's Ctrl-C sends (children have their own sessions)
     _, err = process.communicate(timeout=120.0)
     assert process.returncode == 130, err
@@ -278,12 +281,12 @@ def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_p
 
 
 @pytest.mark.timeout(300)
-def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env):
+def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env, long_run_scenario):
     """SIGKILL cannot be caught: the kernel's parent-death signal stops the children instead."""
     from formation_sim.recorder import read_bag
 
     out = tmp_path / 'run'
-    process = _start_cli_run(out, 74)
+    process = _start_cli_run(long_run_scenario, out, 74)
     process.kill()
     process.communicate(timeout=60.0)
     assert not _wait_until_gone(str(out)), 'orphan processes'

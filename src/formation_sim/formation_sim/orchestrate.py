@@ -281,6 +281,7 @@ class FormationRun:
         inject: dict[str, float] | None = None,
         launch_prefix: Callable[[str], Sequence[str]] | None = None,
         extra_env: dict[str, str] | None = None,
+        step_listeners: int = 0,
     ) -> None:
         """Check everything that can be checked before any process starts.
 
@@ -293,6 +294,8 @@ class FormationRun:
         stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
         `executor`: the rclpy executor of the simulator and agent processes, 'events'
         (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
+        `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
+        must hear every Step: step 0 waits until that many more readers of it are matched.
         """
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
@@ -326,6 +329,9 @@ class FormationRun:
                 'inject: loss needs the wall clock (clock=realtime, --real-time): lock-step waits for '
                 'every message sent, so a dropped one stalls the run'
             )
+        if step_listeners < 0:
+            raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
+        self.step_listeners = step_listeners
         self.launch_prefix = launch_prefix
         self.extra_env = dict(extra_env or {})
         self.domain_id = domain_id
@@ -568,6 +574,7 @@ class FormationRun:
             '-p', f'out_dir:={self.out_dir.resolve()}',
             '-p', f'sample_period:={float(self.sample_period)!r}',
             '-p', f'extra_subscribers:={1 if self.record else 0}',
+            '-p', f'step_listeners:={self.step_listeners}',
             '-p', f'clock_mode:={self.clock}',
             '-p', f'executor:={self.executor}',
             # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).

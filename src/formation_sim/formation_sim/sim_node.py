@@ -237,6 +237,8 @@ class FormationSimulatorNode(Node):
         self.sample_period = float(self.declare_parameter('sample_period', 0.01).value)
         self.viz_period = float(self.declare_parameter('viz_period', 0.04).value)
         self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
+        # Nodes outside the run that must hear every Step (monitors, fault injectors): step 0 waits.
+        self.step_listeners = int(self.declare_parameter('step_listeners', 0).value)
         self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
         self.stall_timeout = float(self.declare_parameter('stall_timeout', 60.0).value)
         self.discovery_timeout = float(self.declare_parameter('discovery_timeout', 120.0).value)
@@ -346,7 +348,7 @@ class FormationSimulatorNode(Node):
             if have < want:
                 gaps.append(f'{what} {have}/{want}')
 
-        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra)
+        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
         for pub in self._tool_publishers:
             count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
         count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
