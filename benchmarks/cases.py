@@ -5,10 +5,10 @@ from __future__ import annotations
 
 def build_scenario(case: dict):
     """`case` = {'kind': 'builtin', 'name': ...} or {'kind': 'random', 'n', 'seed', 'dynamics'}
-    (`formation_sim.generate.random_scenario` defaults otherwise), optionally 'beta' to replace
+    (`formation_sim.model.generate.random_scenario` defaults otherwise), optionally 'beta' to replace
     a single-integrator scenario's β (the long runs)."""
-    from formation_sim.generate import random_scenario
-    from formation_sim.scenario import SingleGains, load_scenario
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.model.scenario import SingleGains, load_scenario
 
     if case['kind'] == 'builtin':
         scenario = load_scenario(case['name'])

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from formation_sim import theory
+from formation_sim.model import theory
 
 
 def convergence_time(record, level: float) -> float | None:
@@ -39,7 +39,7 @@ def _final_error(record) -> float:
 
 def _periodic(scenario, horizon: float, period: float, target: float):
     """(works, record or reason) for periodic sampling with `period`."""
-    from formation_sim.engine import EngineError, simulate
+    from formation_sim.sim.engine import EngineError, simulate
 
     try:
         record = simulate(scenario, horizon=horizon, period=period, sample_dt=0.01)
@@ -77,8 +77,8 @@ def largest_period(scenario, horizon: float, target: float, *, start: float = 1.
 
 
 def compare(scenario, *, horizon: float, level: float = 1e-3) -> dict:
-    from formation_sim.baselines import simulate_continuous
-    from formation_sim.engine import simulate
+    from formation_sim.sim.baselines import simulate_continuous
+    from formation_sim.sim.engine import simulate
 
     started = time.perf_counter()
     event = simulate(scenario, horizon=horizon, sample_dt=0.01)

@@ -19,10 +19,10 @@ import sys
 import time
 from pathlib import Path
 
-from formation_sim.engine import simulate
-from formation_sim.orchestrate import FormationRun
-from formation_sim.scenario import load_scenario
-from formation_sim.summary import build_summary
+from formation_sim.sim.engine import simulate
+from formation_sim.runtime.orchestrate import FormationRun
+from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.summary import build_summary
 
 SCENARIO = Path(__file__).with_name('gentle_square.yaml')
 

@@ -1,4 +1,4 @@
-"""Distributed runs (`formation_sim.orchestrate.FormationRun`) measured from outside.
+"""Distributed runs (`formation_sim.runtime.orchestrate.FormationRun`) measured from outside.
 
 `measure_run` runs one scenario in lock-step and reports: events and steps per wall second while
 stepping (t = 0 to the horizon), start-up time (spawn and discovery: the simulator's
@@ -17,7 +17,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-ROLES = (('formation_sim.sim_node', 'simulator'), ('formation_agent.node', 'agents'), ('formation_sim.recorder', 'recorder'))
+ROLES = (('formation_sim.runtime.sim_node', 'simulator'), ('formation_agent.ros.node', 'agents'), ('formation_sim.runtime.recorder', 'recorder'))
 
 
 def _children() -> dict[int, str]:
@@ -83,7 +83,7 @@ def _bag_counts(bag: Path) -> Counter:
     """Messages per topic; Status messages of discovery (step_index -1) counted apart."""
     from formation_msgs_py.codec import decode_status
     from formation_msgs_py.topics import STATUS_TOPIC
-    from formation_sim.recorder import decode, read_bag
+    from formation_sim.bag.io import decode, read_bag
 
     counts: Counter = Counter()
     for topic, msgtype, _, rawdata in read_bag(bag):
@@ -106,7 +106,7 @@ def measure_run(
     timeout: float = 600.0,
 ) -> dict:
     """One lock-step run; the measurements described in the module docstring."""
-    from formation_sim.orchestrate import FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     watch = _MemoryWatch()
     watch.start()

@@ -2,54 +2,68 @@
 
     python benchmarks/engine_baseline.py REV CASE_JSON
 
-materialises `src/formation_agent/formation_agent/*.py` and `src/formation_sim/formation_sim/engine.py`
-of git revision REV in a temporary folder, puts them before the installed packages on sys.path
-and runs `simulate` on the case (the current scenario, world and generator code), printing one
-JSON line: events, wall time, CPU time.
+builds the case's scenario with the current code, then materialises the three packages of git
+revision REV (`git archive`) in a temporary folder, puts them before the installed packages on
+sys.path and runs REV's own `simulate` on that scenario (passed as YAML, loaded by REV's own
+scenario code), printing one JSON line: events, wall time, CPU time. Works for revisions before
+and after the sub-package layout (formation_sim.engine / formation_sim.sim.engine).
 """
 
 from __future__ import annotations
 
+import importlib
+import io
 import json
 import subprocess
 import sys
+import tarfile
 import tempfile
 import time
 from pathlib import Path
 
+import yaml
+
 ROOT = Path(__file__).resolve().parent.parent
-AGENT_FILES = ('__init__.py', 'closed_form.py', 'crossing.py', 'eta.py', 'tension.py')
+PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
 
 
 def materialise(rev: str, folder: Path) -> None:
-    package = folder / 'formation_agent'
-    package.mkdir(parents=True)
-    for name in AGENT_FILES:
-        text = subprocess.run(
-            ['git', 'show', f'{rev}:src/formation_agent/formation_agent/{name}'], cwd=ROOT, check=True, capture_output=True, text=True
-        ).stdout
-        (package / name).write_text(text)
-    engine = subprocess.run(
-        ['git', 'show', f'{rev}:src/formation_sim/formation_sim/engine.py'], cwd=ROOT, check=True, capture_output=True, text=True
-    ).stdout
-    (folder / 'baseline_engine.py').write_text(engine)
+    paths = [f'src/{package}/{package}' for package in PACKAGES]
+    archive = subprocess.run(['git', 'archive', '--format=tar', rev, *paths], cwd=ROOT, check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(folder, filter='data')
+
+
+def _first_module(*names: str):
+    for name in names:
+        try:
+            return importlib.import_module(name)
+        except ModuleNotFoundError:
+            continue
+    raise ModuleNotFoundError(f'none of {names} exists at this revision')
 
 
 def main() -> int:
     rev, case = sys.argv[1], json.loads(sys.argv[2])
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from cases import build_scenario  # noqa: PLC0415
+    from formation_sim.model.scenario import dump_scenario_text  # noqa: PLC0415
+
+    scenario_text = dump_scenario_text(build_scenario(case))
+    for name in [m for m in sys.modules if m.split('.')[0] in PACKAGES]:
+        del sys.modules[name]  # from here on, every formation module is REV's
+    # Editable installs resolve what REV lacks from the working tree: take them out of the way.
+    sys.meta_path[:] = [finder for finder in sys.meta_path if not getattr(finder, '__module__', '').startswith('__editable__')]
     with tempfile.TemporaryDirectory(prefix='bench_baseline_') as tmp:
         materialise(rev, Path(tmp))
-        sys.path.insert(0, tmp)
-        import baseline_engine  # noqa: PLC0415 - from the materialised revision
-        import formation_agent  # noqa: PLC0415
-
-        assert Path(formation_agent.__file__).is_relative_to(tmp)
-        sys.path.insert(1, str(Path(__file__).resolve().parent))
-        from cases import build_scenario  # noqa: PLC0415
-
-        scenario = build_scenario(case)
+        for package in PACKAGES:
+            sys.path.insert(0, str(Path(tmp) / 'src' / package))
+        scenario_module = _first_module('formation_sim.model.scenario', 'formation_sim.scenario')
+        engine = _first_module('formation_sim.sim.engine', 'formation_sim.engine')
+        assert Path(engine.__file__).is_relative_to(tmp), engine.__file__
+        scenario = scenario_module.scenario_from_dict(yaml.safe_load(scenario_text))
         cpu = time.process_time()
-        record = baseline_engine.simulate(scenario, horizon=case['horizon'], sample_dt=None)
+        record = engine.simulate(scenario, horizon=case['horizon'], sample_dt=None)
         cpu = time.process_time() - cpu
     print(json.dumps({'events': record.total_events, 'wall_s': record.wall_time, 'cpu_s': cpu}))
     return 0

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from formation_agent.closed_form import advance_double
+from formation_agent.core.closed_form import advance_double
 
 
 @dataclass(kw_only=True)

@@ -26,13 +26,13 @@ PING, PONG, SERVICE = '/bench/ping', '/bench/pong', '/bench/sense'
 
 
 def _executor(kind: str):
-    from formation_agent.node import make_executor  # the nodes' own choice of executors
+    from formation_agent.ros.process import make_executor  # the nodes' own choice of executors
 
     return make_executor(kind)
 
 
 def _qos():
-    from formation_agent.node import PROTOCOL_QOS
+    from formation_msgs_py.qos import PROTOCOL_QOS
 
     return PROTOCOL_QOS
 

@@ -101,7 +101,7 @@ def engine_cases(quick: bool) -> list[dict]:
 
 
 def run_engine(case: dict) -> dict:
-    from formation_sim.engine import simulate
+    from formation_sim.sim.engine import simulate
 
     scenario = build_scenario(case)
     walls, cpus = [], []
@@ -137,7 +137,7 @@ def run_engine(case: dict) -> dict:
 
 def engine_recording_cost() -> dict:
     """The default record (state at every event and every 0.01 s) against trigger times only."""
-    from formation_sim.engine import simulate
+    from formation_sim.sim.engine import simulate
 
     scenario = build_scenario(random(1000))
     lean = simulate(scenario, horizon=0.5, sample_dt=None, sample_events=False)
@@ -172,7 +172,7 @@ def naive_cases(quick: bool) -> list[dict]:
 def run_naive(case: dict, dt_step: float = 1e-4) -> dict:
     import numpy as np
 
-    from formation_sim.engine import simulate
+    from formation_sim.sim.engine import simulate
     from naive import simulate_fixed_step
 
     scenario = build_scenario(case)

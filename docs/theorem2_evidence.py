@@ -6,7 +6,7 @@ Run:  python docs/theorem2_evidence.py [--horizon 30] [--no-engine]
 2. The continuous controller (E ≡ 0, which meets (triggerdouble) trivially) integrated with
    scipy solve_ivp (DOP853, rtol 1e-12) in deviation coordinates δ_i = y_i - ȳ, so the decaying
    error is never a difference of large numbers.
-3. The exact event-triggered run (ETA-2) of `formation_sim.engine.simulate`.
+3. The exact event-triggered run (ETA-2) of `formation_sim.sim.engine.simulate`.
 
 For each, the log slope of the formation error max_edge ||x_i - x_j - d_ij|| and of V_d is fitted
 over windows and compared with the rates the theorem claims.
@@ -21,8 +21,9 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from formation_sim import theory
-from formation_sim.scenario import load_scenario
+from formation_sim.model import theory
+from formation_sim.model.gains import k4_value
+from formation_sim.model.scenario import load_scenario
 
 
 def window_slopes(times, values, windows):
@@ -95,7 +96,7 @@ def continuous_run(scenario, horizon):
 
 
 def engine_run(scenario, horizon):
-    from formation_sim.engine import simulate
+    from formation_sim.sim.engine import simulate
 
     record = simulate(scenario, horizon=horizon, sample_dt=0.05)
     times = record.sample_times
@@ -147,7 +148,7 @@ def main() -> None:
     if args.beta_d is not None:
         scenario = scenario.replace(gains=dataclasses.replace(scenario.gains, beta_d=args.beta_d))
     gains = scenario.gains
-    k4 = theory.k4_value(gains.k1, gains.k2, gains.k3)
+    k4 = k4_value(gains.k1, gains.k2, gains.k3)
     eig = np.linalg.eigvalsh(gains.P)
     printed, corrected = (2 - k4) * eig[0], (2 - k4) / eig[1]
     print(f'k1 = {gains.k1:.6f}, k2 = {gains.k2:.6f}, k3 = {gains.k3:.10f}, k4 = {k4:.6f}')
@@ -166,7 +167,7 @@ def main() -> None:
            gains.beta_d, 2 * printed, paper_k_v)
     if not args.no_engine:
         record, times, errors, lyap = engine_run(scenario, args.horizon)
-        report(f'ETA-2, formation_sim.engine.simulate ({record.total_events} events)', times, errors, lyap,
+        report(f'ETA-2, formation_sim.sim.engine.simulate ({record.total_events} events)', times, errors, lyap,
                windows, gains.beta_d, 0.0, paper_k_v)
         print('  events per 5 s window: ' + ', '.join(
             f'[{s:.0f},{s + 5:.0f}): {sum(1 for ts in record.trigger_times.values() for t in ts if s <= t < s + 5)}'

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Run a formation scenario as ROS 2 processes and print where the results are.
 
-Copy and adapt: everything is the public API of formation_sim.orchestrate.
+Copy and adapt: everything is the public API of formation_sim.runtime.orchestrate.
 
     python scripts/run_formation.py paper_single --horizon 10 --out runs/paper_single
 """
@@ -9,7 +9,7 @@ Copy and adapt: everything is the public API of formation_sim.orchestrate.
 import argparse
 import sys
 
-from formation_sim.orchestrate import FormationRun, RunError
+from formation_sim.runtime.orchestrate import FormationRun, RunError
 
 
 def main() -> int:

@@ -75,14 +75,15 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
         assert (share / package / 'package.xml').is_file()
         assert (share / 'ament_index' / 'resource_index' / 'packages' / package).is_file()
     site = next(colcon_install.glob('formation_sim/lib/python3*/site-packages'))
-    assert sorted(p.name for p in (site / 'formation_sim' / 'scenarios').glob('*.yaml'))
+    installed = {p.name for p in (site / 'formation_sim' / 'model' / 'scenarios').glob('*.yaml')}
+    assert installed >= {'paper_single.yaml', 'paper_double.yaml'}
 
 
 @pytest.mark.slow
 def test_colcon_install_is_what_python_imports(colcon_install: Path) -> None:
     probe = subprocess.run(
         [sys.executable, '-c',
-         'import formation_msgs_py.types, formation_agent.closed_form, formation_sim.recorder as r;'
+         'import formation_msgs_py.types, formation_agent.core.closed_form, formation_sim.runtime.recorder as r;'
          'print(r.__file__)'],
         env=install_env(colcon_install), capture_output=True, text=True, timeout=120,
         check=False)

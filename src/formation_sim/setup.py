@@ -14,7 +14,7 @@ setup(
     packages=find_namespace_packages(
         include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']
     ),
-    package_data={package_name: ['scenarios/*.yaml']},
+    package_data={package_name: ['model/scenarios/*.yaml']},
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
@@ -27,8 +27,8 @@ setup(
     entry_points={
         'console_scripts': [
             'formation = formation_sim.cli:main',
-            'formation_sim = formation_sim.sim_node:main',
-            'formation_recorder = formation_sim.recorder:main',
+            'formation_sim = formation_sim.runtime.sim_node:main',
+            'formation_recorder = formation_sim.runtime.recorder:main',
         ],
     },
 )

@@ -21,8 +21,9 @@ from pathlib import Path
 
 import pytest
 
-from formation_sim.engine import RunRecord, simulate
-from formation_sim.scenario import load_scenario
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.record import RunRecord
+from formation_sim.model.scenario import load_scenario
 
 # Session fixtures run once per xdist worker: each worker needs its own domain (gw0 -> 180, ...).
 DISTRIBUTED_DOMAIN = 180 + int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0').removeprefix('gw') or 0)
@@ -34,7 +35,7 @@ def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int]
     from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.codec import decode_trigger_info
-    from formation_sim.recorder import read_bag
+    from formation_sim.bag.io import read_bag
 
     counts: dict[str, int] = defaultdict(int)
     stamps: dict[tuple[int, int], list[float]] = defaultdict(list)
@@ -90,8 +91,8 @@ def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = Fals
     from formation_msgs_py.codec import encode_step, encode_trigger_info, encode_world_state
     from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Step, WorldState
     from formation_msgs_py.types import TriggerInfo
-    from formation_sim.recorder import BagWriter
-    from formation_sim.scenario import scenario_to_dict
+    from formation_sim.bag.io import BagWriter
+    from formation_sim.model.scenario import scenario_to_dict
 
     scenario = record.scenario
     p = scenario.dimension
@@ -153,8 +154,8 @@ class DistributedRun:
 @pytest.fixture(scope='session')
 def distributed_single_run(tmp_path_factory) -> DistributedRun:
     """paper_single, horizon 2, run once per session (per xdist worker) as ROS processes in domain DISTRIBUTED_DOMAIN."""
-    from formation_sim.orchestrate import FormationRun
-    from formation_sim.summary import write_summary
+    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.sim.summary import write_summary
 
     scenario = load_scenario('paper_single')
     horizon = 2.0

@@ -1,5 +1,27 @@
-"""Messages of the formation runtime: ROS-free dataclasses and their encoding over standard Jazzy types."""
+"""Messages of the formation runtime: ROS-free dataclasses, topic names, the lock-step protocol,
+and their encoding over standard Jazzy types.
 
-from formation_msgs_py.types import SensedState, TriggerInfo
+- `types`: `TriggerInfo` (what an agent broadcasts at its triggering times) and `SensedState`
+  (what its sensing service returns); `lockstep`: `Step`, `Status`, `WorldState`, `AgentReport`
+  and the reasons a message is rejected; `topics`: every topic and service name.
+- `codec` (rclpy message classes, imported lazily): encoders and decoders; `qos` (rclpy): the
+  protocol's quality of service.
 
-__all__ = ['SensedState', 'TriggerInfo']
+Everything here but `codec` and `qos` imports without ROS.
+"""
+
+from formation_msgs_py._lazy import lazy_exports
+
+__all__ = lazy_exports(globals(), {
+    'types': ('SensedState', 'TriggerInfo'),
+    'lockstep': (
+        'AgentReport', 'Status', 'Step', 'WorldState',
+        'DISCOVERY_STEP', 'STEP_FLAG_FINAL', 'STEP_FLAG_REALTIME', 'REJECT_REASONS',
+    ),
+    'topics': (
+        'STEP_TOPIC', 'STATUS_TOPIC', 'REPORT_TOPIC', 'STATE_TOPIC', 'GROUND_TRUTH_TOPIC',
+        'SENSING_LOG_TOPIC', 'SCENARIO_TOPIC', 'MARKERS_TOPIC', 'CLOCK_TOPIC',
+        'agent_namespace', 'trigger_info_topic', 'sense_service', 'command_topic',
+    ),
+    'codec': ('MessageError',),
+})  # fmt: skip

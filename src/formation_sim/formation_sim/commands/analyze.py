@@ -50,28 +50,32 @@ def default_out_dir(location) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim import analyze, figures, theory
-    from formation_sim.markers import MarkerError, write_bag_with_markers
+    from formation_sim.analysis import figures
+    from formation_sim.analysis.checks import run_series, theory_bounds
+    from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+    from formation_sim.analysis.report import build_report, write_report
+    from formation_sim.model import theory
+    from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
     from formation_sim.progress import Progress
-    from formation_sim.recorder import RecorderError
+    from formation_sim.bag.io import BagError
 
     show = not args.quiet
     try:
-        location = analyze.locate(args.run)
+        location = locate(args.run)
         if location.bag is None:
-            raise analyze.AnalysisError(f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)')
+            raise AnalysisError(f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)')
         reading = Progress(f'reading {location.bag}', enabled=show)
-        bag_run = analyze.load_bag_run(location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading)
+        bag_run = load_bag_run(location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading)
         reading.close()
-    except analyze.AnalysisError as error:
+    except AnalysisError as error:
         print(f'formation analyze: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
     record = bag_run.record
     out = args.out or default_out_dir(location)
     out.mkdir(parents=True, exist_ok=True)
-    series = analyze.run_series(record, progress=Progress('evaluating ν and V', enabled=show))
+    series = run_series(record, progress=Progress('evaluating ν and V', enabled=show))
     try:
-        bounds, bounds_error = analyze.theory_bounds(record.scenario), None
+        bounds, bounds_error = theory_bounds(record.scenario), None
     except theory.TheoryError as error:
         bounds, bounds_error = None, str(error)
     written: dict[str, str] = {}
@@ -87,15 +91,15 @@ def run(args: argparse.Namespace) -> int:
         copying = Progress(f'writing {target}', enabled=show)
         try:
             marked = write_bag_with_markers(location.bag, target, record.scenario, progress=copying)
-        except (RecorderError, MarkerError) as error:
+        except (BagError, MarkerError) as error:
             print(f'formation analyze: error: {error}', file=sys.stderr)
             return EXIT_UNREADABLE
         copying.close()
         written['bag with /formation/markers'] = target.name
         if marked.skipped_topics:
             print(f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}', file=sys.stderr)
-    report = analyze.build_report(bag_run, series=series, bounds=bounds, bounds_error=bounds_error, summary_path=location.summary, figures=written)
-    markdown, data = analyze.write_report(report, out)
+    report = build_report(bag_run, series=series, bounds=bounds, bounds_error=bounds_error, summary_path=location.summary, figures=written)
+    markdown, data = write_report(report, out)
     failed = [check['name'] for check in report['bag_checks'] + report['theorem_checks'] if not check['ok']]
     differs = report['summary_json'] is not None and not report['summary_json']['equal']
     if args.quiet:

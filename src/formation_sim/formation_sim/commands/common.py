@@ -13,8 +13,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from formation_sim.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario
-from formation_sim.validate import validate_scenario
+from formation_sim.model.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario
+from formation_sim.model.validate import validate_scenario
 
 if TYPE_CHECKING:
     from rclpy.node import Node

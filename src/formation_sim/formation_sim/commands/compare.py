@@ -36,7 +36,7 @@ def register(subparsers) -> None:
 
 def _default_out(a: Path, b: Path) -> Path:
     """RUN_A's run folder (never inside a bag), named after RUN_B's folder."""
-    from formation_sim.analyze import locate
+    from formation_sim.analysis.load import locate
 
     location = locate(a)
     base = location.run_dir or (location.bag.parent if location.bag is not None else location.summary.parent)
@@ -46,7 +46,7 @@ def _default_out(a: Path, b: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.compare import CompareError, compare_runs, load_run, overlay_figures, within, write_comparison
+    from formation_sim.analysis.compare import CompareError, compare_runs, load_run, overlay_figures, within, write_comparison
     from formation_sim.progress import Progress
 
     if args.tolerance is not None and not (math.isfinite(args.tolerance) and args.tolerance >= 0.0):

@@ -21,7 +21,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.recorder import BagRecoveryError, reindex
+    from formation_sim.bag.recovery import BagRecoveryError, reindex
 
     bag: Path = args.bag
     if not bag.is_dir():

@@ -40,7 +40,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.progress import Progress
-    from formation_sim.replay import ReplayError, main_replay
+    from formation_sim.runtime.replay import ReplayError, main_replay
 
     rate = 0.0 if args.as_fast_as_possible else args.rate
     if not check_domain('replay', args.domain_id):

@@ -52,7 +52,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.orchestrate import FormationRun, RunError
+    from formation_sim.runtime.orchestrate import FormationRun, RunError
 
     scenario = load_valid_scenario(args.scenario, 'run')
     if scenario is None:
@@ -78,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     figure = None
     if result.ok and not args.no_plot:
-        from formation_sim.plots import plot_run
-        from formation_sim.summary import load_record
+        from formation_sim.analysis.plots import plot_run
+        from formation_sim.sim.summary import load_record
 
         figure = plot_run(load_record(out, scenario), out)
     if args.quiet:

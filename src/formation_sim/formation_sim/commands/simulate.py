@@ -33,9 +33,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.engine import EngineError, simulate
-    from formation_sim.plots import plot_run
-    from formation_sim.summary import write_summary
+    from formation_sim.sim.engine import EngineError, simulate
+    from formation_sim.analysis.plots import plot_run
+    from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate')
     if scenario is None:
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         if args.continuous:
-            from formation_sim.baselines import simulate_continuous
+            from formation_sim.sim.baselines import simulate_continuous
 
             record = simulate_continuous(scenario, horizon=args.horizon, sample_dt=args.sample_dt)
         else:

@@ -25,7 +25,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     if not check_domain('topics', args.domain_id):
         return 2
-    from formation_sim.ros_inspect import discover_topics, format_topics
+    from formation_sim.runtime.graph import discover_topics, format_topics
 
     try:
         with inspection_node('topics', args.domain_id) as node:

@@ -10,8 +10,8 @@ import json
 import sys
 
 from formation_sim.commands.common import add_scenario_argument
-from formation_sim.scenario import ScenarioError, load_scenario
-from formation_sim.validate import validate_scenario
+from formation_sim.model.scenario import ScenarioError, load_scenario
+from formation_sim.model.validate import validate_scenario
 
 EXIT_VALID = 0
 EXIT_INVALID = 1

@@ -1,0 +1,18 @@
+"""The agent's algorithm, ROS-free: what one agent computes from what it alone knows.
+
+- `eta`: `Eta1Agent` (ETA-1) and `Eta2Agent` (ETA-2): sense-and-broadcast at a trigger, receive
+  a neighbour's triggering information, predict the neighbours' relative states in closed form
+  ((statexixj), (statexixjd), (stateqiqj)) and find the next triggering time.
+- `crossing`: the certified search for the first t with ||e_i(t)|| = α e^{-βt}.
+- `tension`: ω_ij and its derivatives (the edge-tension weights); `closed_form`: the ETA-2
+  closed-loop motion without cancellation.
+"""
+
+from formation_msgs_py._lazy import lazy_exports
+
+__all__ = lazy_exports(globals(), {
+    'eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
+    'crossing': ('CrossingError', 'CrossingSearch', 'ErrorModel', 'first_crossing'),
+    'tension': ('omega', 'omega_prime', 'omega_second'),
+    'closed_form': ('advance_double',),
+})  # fmt: skip

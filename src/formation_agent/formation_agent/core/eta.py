@@ -1,0 +1,815 @@
+"""ETA-1 and ETA-2 as run by one agent: only what that agent knows, no global state, no ROS.
+
+An agent knows its neighbours' desired displacements d_ij, the radius Δ and its gains. At its own
+triggering times it is handed what it senses and returns its new input and the triggering
+information for each neighbour; in between it is handed its neighbours' triggering information.
+From these it predicts every relative state in closed form (eqs. statexixj, statexixjd,
+stateqiqj) and finds its next triggering time as the first crossing of ||e_i(t)|| = α e^{-βt}
+(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`.
+
+Per edge the agent keeps an anchor: the time of the edge's last event (its own trigger or the
+neighbour's) and the relative state then, plus the neighbour's current input. Since both inputs
+are constant between the edge's events, the closed form from the anchor is exact.
+
+Speed: a search evaluates e_i and its bounds a few dozen times on a handful of edges, where numpy's
+per-call overhead dominates. For p <= 3 (every distributed run, the paper's examples) the agents
+therefore evaluate them edge by edge in plain floats, on vectors padded to three components (a
+zero component changes no sum, norm or product); numpy serves p > 3. Both follow the same
+formulas; tests/formation_agent/core/test_eta.py checks them against independent ones.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
+from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
+from formation_agent.core.crossing import CrossingSearch
+from formation_agent.core.tension import (
+    curvature_gain,
+    edge_capacity,
+    omega,
+    omega_prime,
+    omega_second,
+    weight_gain,
+)
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+
+class AgentError(ValueError):
+    """Input the agent cannot accept: bad parameters, malformed or inconsistent information."""
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class TriggerOutput:
+    """Result of a trigger: the new input and one triggering-information message per neighbour."""
+
+    time: float
+    control: np.ndarray
+    infos: tuple[TriggerInfo, ...]
+
+
+def _positive(name: str, value: float) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise AgentError(f'{name} must be a finite number > 0, got {value!r}')
+    return value
+
+
+class _EventTriggeredAgent:
+    """Bookkeeping shared by ETA-1 and ETA-2: neighbours, anchors, caching of the next time."""
+
+    algorithm = ''
+
+    def __init__(
+        self,
+        *,
+        agent_id: int,
+        neighbours: Mapping[int, object],
+        delta: float,
+        tolerance: float = 1e-12,
+    ) -> None:
+        if not neighbours:
+            raise AgentError(f'agent {agent_id} has no neighbours: the graph must be connected')
+        if agent_id in neighbours:
+            raise AgentError(f'agent {agent_id} lists itself as a neighbour (self-loop)')
+        self.agent_id = int(agent_id)
+        self.delta = _positive('delta (communication radius Δ)', delta)
+        self.neighbour_ids = tuple(int(j) for j in neighbours)
+        self._slot = {j: k for k, j in enumerate(self.neighbour_ids)}
+        self._neighbour_set = set(self.neighbour_ids)
+        offsets = np.array([np.asarray(neighbours[j], dtype=float) for j in self.neighbour_ids])
+        if offsets.ndim != 2 or offsets.shape[1] < 1:
+            raise AgentError(f'agent {agent_id}: desired displacements must be vectors of one dimension p >= 1')
+        if not np.all(np.isfinite(offsets)):
+            raise AgentError(f'agent {agent_id}: desired displacements are not finite')
+        self.offsets = offsets  # d_ij, one row per neighbour
+        self.capacity = edge_capacity(self.delta, offsets)  # Δ - ||d_ij||
+        for j, c in zip(self.neighbour_ids, self.capacity):
+            if c <= 0.0:
+                raise AgentError(
+                    f'edge ({agent_id},{j}): ||d_ij|| = {float(self.delta - c)!r} is not below Δ = {self.delta!r} '
+                    '(Assumption 1)'
+                )
+        self.dimension = offsets.shape[1]
+        self.tolerance = _positive('tolerance', tolerance)
+        m, p = offsets.shape
+        self._anchor_time = np.zeros(m)
+        self._anchor_y = np.zeros((m, p))  # y_i - y_j = x_i - x_j - d_ij at the anchor
+        self._neighbour_control = np.zeros((m, p))
+        self._heard = np.zeros(m, dtype=bool)
+        self.control = np.zeros(p)
+        self.last_trigger: float | None = None
+        self.last_event = 0.0
+        self._search: CrossingSearch | None = None  # the plan from the current knowledge
+        self.triggers = 0
+        self.infos_received = 0
+        self._interval: float | None = None  # between the last two triggers: the search's first span
+        # Plain-float mirror of the knowledge (p <= 3, padded to three components), kept up to
+        # date by trigger/receive, with one row of prediction constants per edge; and the
+        # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
+        self._fast = p <= _FAST_DIMENSION
+        zero = (0.0,) * _FAST_DIMENSION
+        self._offsets = [tuple(row) for row in offsets.tolist()]
+        self._offsets3 = [self._pad(row) for row in self._offsets]
+        self._capacity = self.capacity.tolist()
+        self._edge_time = [0.0] * m
+        self._edge_y = [zero] * m
+        self._edge_u = [zero] * m
+        self._u = zero
+        self._control_norm = 0.0
+        self._rows: list[tuple[float, ...]] = [()] * m
+        self._probe_key: tuple | None = None
+        self._probe_value: tuple[float, ...] = ()
+        self._probe: object = None
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def _vector(self, value, what: str) -> np.ndarray:
+        array = np.asarray(value, dtype=float)
+        if array.shape != (self.dimension,):
+            raise AgentError(
+                f'agent {self.agent_id}: {what} has shape {array.shape}, expected ({self.dimension},)'
+            )
+        if not np.all(np.isfinite(array)):
+            raise AgentError(f'agent {self.agent_id}: {what} is not finite: {array.tolist()}')
+        return array
+
+    def _floats(self, value, what: str, *args) -> tuple[float, ...]:
+        """`value` as a tuple of p finite floats (the checks of `_vector`, without numpy).
+
+        `what` names the value, as a format template filled with `args` only on error (this runs
+        for every message).
+        """
+        try:
+            floats = tuple(map(float, value))
+        except (TypeError, ValueError):
+            floats = None
+        if floats is not None and len(floats) == self.dimension and all(map(math.isfinite, floats)):
+            return floats
+        return tuple(self._vector(value, what.format(*args)).tolist())  # raises the error naming the rule
+
+    def _check_time(self, stamp: float, what: str, *args) -> float:
+        stamp = float(stamp)
+        if not math.isfinite(stamp):
+            raise AgentError(f'agent {self.agent_id}: {what.format(*args)} has a non-finite time {stamp!r}')
+        return stamp
+
+    def _relative_rows(self, values: Mapping[int, object] | None, what: str) -> list[tuple[float, ...]]:
+        if values is None or values.keys() != self._neighbour_set:
+            got = None if values is None else sorted(values)
+            raise AgentError(
+                f'agent {self.agent_id}: {what} must cover exactly its neighbours {sorted(self.neighbour_ids)}, got {got}'
+            )
+        template = what + '[{}]'
+        return [self._floats(values[j], template, j) for j in self.neighbour_ids]
+
+    def receive(self, info: TriggerInfo) -> None:
+        """Take a neighbour's triggering information (ETA step 6: re-predict from its time)."""
+        if info.receiver != self.agent_id:
+            raise AgentError(f'agent {self.agent_id} got information addressed to agent {info.receiver}')
+        k = self._slot.get(info.sender)
+        if k is None:
+            raise AgentError(
+                f'agent {self.agent_id} got information from agent {info.sender}, '
+                f'which is not a neighbour {sorted(self.neighbour_ids)}'
+            )
+        stamp = self._check_time(info.stamp, 'information from agent {}', info.sender)
+        if stamp < self._edge_time[k] or (self.last_trigger is not None and stamp < self.last_trigger):
+            raise AgentError(
+                f'agent {self.agent_id}: information from agent {info.sender} goes back in time '
+                f'(t={stamp!r}, edge last updated at t={self._edge_time[k]!r})'
+            )
+        # The message carries x_j - x_i; this agent's edge state is x_i - x_j - d_ij.
+        rel = self._floats(info.rel_position, 'rel_position from agent {}', info.sender)
+        control = self._floats(info.control, 'control from agent {}', info.sender)
+        self._receive_extra(k, info)
+        y = tuple(-r - d for r, d in zip(rel, self._offsets3[k]))
+        self._anchor_time[k] = stamp
+        self._anchor_y[k] = y
+        self._neighbour_control[k] = control
+        self._heard[k] = True
+        self._edge_time[k] = stamp
+        self._edge_y[k] = self._pad(y)
+        self._edge_u[k] = self._pad(control)
+        if self._fast:
+            self._rows[k] = self._row(k)
+        self.infos_received += 1
+        self.last_event = max(self.last_event, stamp)
+        search = self._search
+        if search is not None and search.result is not None and search.result <= stamp:
+            return  # already due at or before this time: its own trigger re-plans everything
+        self._search = None
+
+    def _receive_extra(self, k: int, info: TriggerInfo) -> None:
+        """ETA-2 also takes the relative velocity."""
+
+    def trigger(self, t: float, sensed: SensedState) -> TriggerOutput:
+        """ETA step 9: sense, update the input, and produce the triggering information."""
+        t = self._check_time(t, 'trigger')
+        if sensed.agent != self.agent_id:
+            raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
+        if self.last_trigger is not None and t < self.last_trigger:
+            raise AgentError(f'agent {self.agent_id}: trigger at t={t!r} before its last one at t={self.last_trigger!r}')
+        rel = self._relative_rows(sensed.rel_positions, 'sensed rel_positions')
+        # Edge by edge in plain floats (a handful of edges: numpy would cost more than it saves).
+        y = [tuple(r - d for r, d in zip(row, offset)) for row, offset in zip(rel, self._offsets)]
+        length = [math.sqrt(sum(v * v for v in row)) for row in y]
+        for k, (r, c) in enumerate(zip(length, self._capacity)):
+            if r >= c:
+                raise AgentError(
+                    f'agent {self.agent_id}: edge to agent {self.neighbour_ids[k]} is out of its range: '
+                    f'||x_i-x_j-d_ij|| = {r!r} >= Δ-||d_ij|| = {c!r}'
+                )
+        extra = self._sensed_extra(sensed)  # validated before anything changes
+        self._anchor_time[:] = t
+        self._anchor_y[:] = y
+        control = self._update(y, length, extra)
+        self.control = np.array(control)
+        m = len(self.neighbour_ids)
+        self._edge_time = [t] * m
+        self._edge_y = [self._pad(row) for row in y]
+        self._u = self._pad(control)
+        self._control_norm = math.sqrt(sum(c * c for c in self._u))
+        if self._fast:
+            self._rows = [self._row(k) for k in range(m)]
+        if self.last_trigger is not None and t > self.last_trigger:
+            self._interval = t - self.last_trigger
+        self.last_trigger = t
+        self.last_event = max(self.last_event, t)
+        self._search = None
+        self.triggers += 1
+        return TriggerOutput(time=t, control=np.array(control), infos=self._infos(t, rel, control))
+
+    def _weighted_sum(self, vectors: list[tuple[float, ...]], length: list[float]) -> list[float]:
+        """sum_j ω_ij(||y_ij||) v_j over the edges (eq. fij for ω), in plain floats."""
+        total = [0.0] * self.dimension
+        for vector, r, c in zip(vectors, length, self._capacity):
+            gap = c - r
+            w = (2.0 * c - r) / (gap * gap)
+            for d, v in enumerate(vector):
+                total[d] += w * v
+        return total
+
+    def _infos(self, t: float, rel: list[tuple[float, ...]], control: tuple[float, ...]) -> tuple[TriggerInfo, ...]:
+        return tuple(
+            TriggerInfo(
+                sender=self.agent_id,
+                receiver=j,
+                stamp=t,
+                control=control,
+                rel_position=rel[k],
+                rel_velocity=self._info_velocity(k),
+            )
+            for k, j in enumerate(self.neighbour_ids)
+        )
+
+    def _info_velocity(self, k: int):
+        return None
+
+    def _sensed_extra(self, sensed: SensedState):
+        return None
+
+    # -- planning -----------------------------------------------------------------------------
+
+    @property
+    def ready(self) -> bool:
+        """True once the agent has triggered and heard from every neighbour."""
+        return self.last_trigger is not None and bool(self._heard.all())
+
+    def next_trigger_time(self, limit: float = math.inf) -> float:
+        """Next triggering time t^i_{k+1} (ETA steps 3-5); inf if it lies beyond `limit`.
+
+        Before its first trigger the agent is due at t = 0 (t^i_1 = 0).
+        """
+        if self.last_trigger is None:
+            return 0.0
+        return self.trigger_search(limit).run()
+
+    def trigger_search(self, limit: float = math.inf) -> CrossingSearch:
+        """The certified search behind `next_trigger_time`, for callers that advance it in pieces.
+
+        `advance(until)` learns only as much as needed (its `frontier` is a certified lower bound
+        on t^i_{k+1}); the answer is the float `next_trigger_time` returns. The agent replaces the
+        search when its knowledge changes, so a caller holding an older one must drop it.
+        """
+        if self.last_trigger is None:
+            raise AgentError(f'agent {self.agent_id} has not triggered yet: it is due at t = 0')
+        search = self._search
+        if search is not None and search.limit != limit:
+            answer = search.result
+            still_valid = answer is not None and (math.isfinite(answer) or search.limit >= limit)
+            if not still_valid:
+                search = None
+        if search is None:
+            if not self._heard.all():
+                missing = [j for j, heard in zip(self.neighbour_ids, self._heard) if not heard]
+                raise AgentError(f'agent {self.agent_id} has not heard from neighbours {missing} yet')
+            alpha, beta = self._threshold
+            # The first trial span only sets how fast the certified steps grow, never what they
+            # certify; the agent's own last inter-event time is its natural scale. It depends on
+            # the knowledge alone, so a robot and the simulator take the same steps.
+            search = CrossingSearch(
+                self,
+                start=self.last_event,
+                alpha=alpha,
+                beta=beta,
+                limit=limit,
+                tolerance=self.tolerance,
+                initial_step=max(self._interval or 0.0, _FIRST_SPAN),
+            )
+            self._search = search
+        return search
+
+    def threshold(self, t: float) -> float:
+        """α e^{-βt} (eq. triggersingle) or α_d e^{-β_d t} (eq. triggerdouble)."""
+        alpha, beta = self._threshold
+        return alpha * math.exp(-beta * t)
+
+    # ErrorModel interface (formation_agent.core.crossing) -------------------------------------------
+
+    def error(self, t: float) -> np.ndarray:
+        """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
+        return self.error_and_rate(t)[0]
+
+    def error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """e_i(t) and de_i/dt (ETA-1), or E_i(t) and dE_i/dt (ETA-2)."""
+        if not self._fast:
+            return self._vector_error_and_rate(t)
+        e0, e1, e2, d0, d1, d2 = self._probe_at(t)
+        p = self.dimension
+        return np.array((e0, e1, e2)[:p]), np.array((d0, d1, d2)[:p])
+
+    def error_terms(self, t: float) -> tuple[float, float]:
+        """(||e||², e·ė) at t: all the search needs of e at a point."""
+        if not self._fast:
+            e, rate = self._vector_error_and_rate(t)
+            return float(e @ e), float(e @ rate)
+        e0, e1, e2, d0, d1, d2 = self._probe_at(t)
+        return e0 * e0 + e1 * e1 + e2 * e2, e0 * d0 + e1 * d1 + e2 * d2
+
+    def error_norm(self, t: float) -> float:
+        """||e(t)||, for polishing a crossing."""
+        if not self._fast:
+            return float(np.linalg.norm(self._vector_error_and_rate(t)[0]))
+        e0, e1, e2 = self._fast_error(t)
+        return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+
+    def bounds(self, a: float, span: float, size: float) -> tuple[float, float, float, float]:
+        """(H, E, E1, E2): bounds on ||e||, ||ė||, ||ë|| over [a, a+H], H <= span (crossing.ErrorModel)."""
+        if not self._fast:
+            return self._vector_bounds(a, span, size)
+        self._probe_at(a)
+        return self._fast_bounds(span, size)
+
+    # Plain-float evaluation (p <= 3) ---------------------------------------------------------
+
+    def _probe_at(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """e(t) and ė(t) padded to three components; keeps the per-edge values for `bounds`."""
+        key = (t, self.triggers, self.infos_received)
+        if self._probe_key != key:
+            self._probe_value = self._fast_probe(self._rows, t)
+            self._probe_key = key
+        return self._probe_value
+
+    @staticmethod
+    def _pad(values) -> tuple[float, ...]:
+        values = tuple(values)
+        return values + (0.0,) * (_FAST_DIMENSION - len(values))
+
+    def _padded(self, vector: np.ndarray) -> tuple[float, ...]:
+        return self._pad(vector.tolist())
+
+    def _room_error(self, k: int, r: float, c: float) -> AgentError:
+        return AgentError(
+            f'agent {self.agent_id}: predicted edge to agent {self.neighbour_ids[k]} left its range '
+            f'(||y_ij|| = {r!r} >= Δ-||d_ij|| = {c!r})'
+        )
+
+
+class Eta1Agent(_EventTriggeredAgent):
+    """Event-Triggered Algorithm 1: single integrators, Theorem 1."""
+
+    algorithm = 'eta1'
+
+    def __init__(
+        self,
+        *,
+        agent_id: int,
+        neighbours: Mapping[int, object],
+        delta: float,
+        alpha: float,
+        beta: float,
+        tolerance: float = 1e-12,
+    ) -> None:
+        super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
+        self.alpha = _positive('alpha', alpha)
+        self.beta = _positive('beta', beta)
+        self._threshold = (self.alpha, self.beta)
+
+    def _update(self, y: list[tuple[float, ...]], length: list[float], extra: None) -> tuple[float, ...]:
+        # u_i = -sum_j ω_ij(t_k) (x_i - x_j - d_ij)(t_k)   (eq. uxsingle)
+        return tuple(-v for v in self._weighted_sum(y, length))
+
+    def _state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted y_ij(t) and its constant rate u_i - u_j (eq. statexixj)."""
+        rate = self.control - self._neighbour_control
+        return self._anchor_y + (t - self._anchor_time)[:, None] * rate, rate
+
+    def _vector_error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        # e_i(t) = sum_j ω_ij(t) y_ij(t) - sum_j ω_ij(t_k) y_ij(t_k) = sum_j ω_ij(t) y_ij(t) + u_i
+        y, v = self._state(t)
+        r = np.linalg.norm(y, axis=1)
+        w = omega(r, self.capacity)
+        e = (w[:, None] * y).sum(axis=0) + self.control
+        # d/dt [ω(r) y] = ω'(r) (y·v / r) y + ω v   (eq. dotei); the first term vanishes at r = 0.
+        radial = np.divide((y * v).sum(axis=1), r, out=np.zeros_like(r), where=r > 0.0)
+        rate = ((omega_prime(r, self.capacity) * radial)[:, None] * y + w[:, None] * v).sum(axis=0)
+        return e, rate
+
+    def _vector_bounds(self, a: float, span: float, size: float) -> tuple[float, float, float, float]:
+        y, v = self._state(a)
+        r = np.linalg.norm(y, axis=1)
+        speed = np.linalg.norm(v, axis=1)
+        span = _span_within_capacity(span, r, speed, self.capacity, self.agent_id, self.neighbour_ids)
+        reach = r + span * speed  # ||y_ij|| <= reach on [a, a+span]: y is linear in t
+        rate = float((weight_gain(reach, self.capacity) * speed).sum())  # (eq. dotnormei)
+        curv = float((curvature_gain(reach, self.capacity) * speed * speed).sum())
+        size = min(
+            size + rate * span,
+            float(np.linalg.norm(self.control)) + float((omega(reach, self.capacity) * reach).sum()),
+        )
+        return span, size, rate, curv
+
+    def _row(self, k: int) -> tuple[float, ...]:
+        # Edge k: anchor time, y_ij at the anchor, its constant rate u_i - u_j (eq. statexixj),
+        # the rate's norm and the capacity Δ - ||d_ij||.
+        u, u_j = self._u, self._edge_u[k]
+        v0, v1, v2 = u[0] - u_j[0], u[1] - u_j[1], u[2] - u_j[2]
+        speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        return (self._edge_time[k], *self._edge_y[k], v0, v1, v2, speed, self._capacity[k])
+
+    def _fast_probe(self, rows, t: float):
+        # The formulas of _vector_error_and_rate, edge by edge; ω and dω/dr are eqs. fij, hij.
+        # Also the radii and the room limit of _span_within_capacity, for _fast_bounds.
+        e0 = e1 = e2 = d0 = d1 = d2 = 0.0
+        radii = []
+        cap = math.inf
+        for k, (t0, a0, a1, a2, v0, v1, v2, speed, c) in enumerate(rows):
+            s = t - t0
+            y0 = a0 + s * v0
+            y1 = a1 + s * v1
+            y2 = a2 + s * v2
+            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            gap = c - r
+            if gap <= 0.0:
+                raise self._room_error(k, r, c)
+            w = (2.0 * c - r) / (gap * gap)
+            radial = (y0 * v0 + y1 * v1 + y2 * v2) / r if r > 0.0 else 0.0
+            f = (3.0 * c - r) / (gap * gap * gap) * radial
+            e0 += w * y0
+            e1 += w * y1
+            e2 += w * y2
+            d0 += f * y0 + w * v0
+            d1 += f * y1 + w * v1
+            d2 += f * y2 + w * v2
+            radii.append(r)
+            if speed > 0.0:
+                room = _ROOM_FRACTION * gap / speed  # _span_within_capacity
+                if room < cap:
+                    cap = room
+        self._probe = (radii, cap)
+        u0, u1, u2 = self._u
+        return e0 + u0, e1 + u1, e2 + u2, d0, d1, d2
+
+    def _fast_error(self, t: float) -> tuple[float, float, float]:
+        # e(t) alone, by the very operations of _fast_probe.
+        e0 = e1 = e2 = 0.0
+        for k, (t0, a0, a1, a2, v0, v1, v2, _, c) in enumerate(self._rows):
+            s = t - t0
+            y0 = a0 + s * v0
+            y1 = a1 + s * v1
+            y2 = a2 + s * v2
+            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            gap = c - r
+            if gap <= 0.0:
+                raise self._room_error(k, r, c)
+            w = (2.0 * c - r) / (gap * gap)
+            e0 += w * y0
+            e1 += w * y1
+            e2 += w * y2
+        u0, u1, u2 = self._u
+        return e0 + u0, e1 + u1, e2 + u2
+
+    def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
+        # The formulas of _vector_bounds, edge by edge (tension.py: weight_gain, curvature_gain).
+        radii, cap = self._probe
+        span = min(span, cap)
+        rate = curv = reach_sum = 0.0
+        for r, row in zip(radii, self._rows):
+            speed, c = row[7], row[8]
+            reach = r + span * speed  # ||y_ij|| <= reach on [a, a+span]: y is linear in t
+            gap = c - reach
+            gap3 = gap * gap * gap
+            rate += 2.0 * c * c / gap3 * speed  # g_ij (eq. gij), (eq. dotnormei)
+            curv += (reach * ((8.0 * c - 2.0 * reach) / (gap3 * gap)) + 3.0 * ((3.0 * c - reach) / gap3)) * speed * speed
+            reach_sum += (2.0 * c - reach) / (gap * gap) * reach
+        return span, min(size + rate * span, self._control_norm + reach_sum), rate, curv
+
+
+class Eta2Agent(_EventTriggeredAgent):
+    """Event-Triggered Algorithm 2: double integrators, Theorem 2.
+
+    `control` is u^d_i(t_k) = -k1 sum ω (x_i-x_j-d_ij) - k2 sum ω (q_i-q_j) at t_k; the applied input
+    is u^d_i - k3 q_i(t) (eq. uxdouble), whose velocity feedback the plant closes continuously.
+    """
+
+    algorithm = 'eta2'
+
+    def __init__(
+        self,
+        *,
+        agent_id: int,
+        neighbours: Mapping[int, object],
+        delta: float,
+        alpha_d: float,
+        beta_d: float,
+        k1: float,
+        k2: float,
+        k3: float,
+        tolerance: float = 1e-12,
+    ) -> None:
+        super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
+        self.alpha_d = _positive('alpha_d', alpha_d)
+        self.beta_d = _positive('beta_d', beta_d)
+        self.k1 = _positive('k1', k1)
+        self.k2 = _positive('k2', k2)
+        self.k3 = _positive('k3', k3)
+        self._threshold = (self.alpha_d, self.beta_d)
+        self._anchor_q = np.zeros_like(self._anchor_y)  # q_i - q_j at the anchor
+        self._edge_q = [(0.0,) * _FAST_DIMENSION] * len(self.neighbour_ids)
+
+    def _receive_extra(self, k: int, info: TriggerInfo) -> None:
+        if info.rel_velocity is None:
+            raise AgentError(f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity')
+        q = tuple(-v for v in self._floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
+        self._anchor_q[k] = q
+        self._edge_q[k] = self._pad(q)
+
+    def _info_velocity(self, k: int):
+        return self._sensed_q[k]
+
+    def _sensed_extra(self, sensed: SensedState) -> list[tuple[float, ...]]:
+        return self._relative_rows(sensed.rel_velocities, 'sensed rel_velocities')
+
+    def _update(self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]) -> tuple[float, ...]:
+        self._anchor_q[:] = extra
+        self._sensed_q = extra
+        self._edge_q = [self._pad(row) for row in extra]
+        k1, k2 = self.k1, self.k2
+        mix = [tuple(k1 * a + k2 * b for a, b in zip(y_row, q_row)) for y_row, q_row in zip(y, extra)]
+        # u^d_i = -k1 sum_j ω_ij y_ij - k2 sum_j ω_ij q_ij at t_k  (eq. uxdouble without -k3 q_i)
+        return tuple(-v for v in self._weighted_sum(mix, length))
+
+    def _state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Predicted y_ij(t), q_ij(t) (eqs. statexixjd with x_ij(s) restored, stateqiqj) and u^d_i - u^d_j."""
+        key = (t, self.triggers, self.infos_received)  # the prediction changes only with these
+        if self._cached_key != key:
+            du = self.control - self._neighbour_control
+            y, q = advance_double(self._anchor_y, self._anchor_q, du, self.k3, t - self._anchor_time)
+            self._cached_key, self._cached_state = key, (y, q, du)
+        return self._cached_state
+
+    _cached_key = None
+
+    def _vector_error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        # E_i(t) = k1 e_i + k2 e_qi = sum_j ω_ij(t) (k1 y_ij + k2 q_ij)(t) + u^d_i  (eq. triggerdouble)
+        y, q, du = self._state(t)
+        r = np.linalg.norm(y, axis=1)
+        w = omega(r, self.capacity)
+        mix = self.k1 * y + self.k2 * q
+        e = (w[:, None] * mix).sum(axis=0) + self.control
+        accel = du - self.k3 * q  # d(q_i - q_j)/dt
+        radial = np.divide((y * q).sum(axis=1), r, out=np.zeros_like(r), where=r > 0.0)
+        rate = (
+            (omega_prime(r, self.capacity) * radial)[:, None] * mix
+            + w[:, None] * (self.k1 * q + self.k2 * accel)
+        ).sum(axis=0)  # (eqs. doteidouble, doteqi)
+        return e, rate
+
+    def _vector_bounds(self, a: float, span: float, size: float) -> tuple[float, float, float, float]:
+        y, q, du = self._state(a)
+        c = self.capacity
+        r = np.linalg.norm(y, axis=1)
+        # By (stateqiqj), q_ij(a+h) = q_ij(a) + (1 - e^{-k3 h}) (du - k3 q_ij(a)) / k3, and
+        # dq_ij/dt = e^{-k3 h} (du - k3 q_ij(a)) shrinks in norm. The speed bound depends on the
+        # span, which in turn is limited by it; one pass with the trial span is enough since
+        # shrinking the span only tightens the bound.
+        accel = np.linalg.norm(du - self.k3 * q, axis=1)
+        q_now = np.linalg.norm(q, axis=1)
+        speed = q_now + (one_minus_exp(self.k3 * span) / self.k3) * accel
+        span = _span_within_capacity(span, r, speed, c, self.agent_id, self.neighbour_ids)
+        reach = r + span * speed
+        low = r - span * speed
+        w, h, g = omega(reach, c), omega_prime(reach, c), weight_gain(reach, c)
+        k1, k2, k3 = self.k1, self.k2, self.k3
+        rate = float((k1 * g * speed + k2 * (h * speed * speed + w * accel)).sum())
+        # d²/dt² [ω(r) y] <= curvature_gain ||ẏ||² + g ||ÿ||; d²/dt² [ω(r) q] needs 1/r, so it is
+        # only bounded where r stays away from 0 (ω(||y||) has a kink at y = 0).
+        curv_y = (curvature_gain(reach, c) * speed * speed + g * accel).sum()
+        moving = speed > 0.0
+        if np.any(low[moving] <= 0.0):
+            curv = math.inf
+        else:
+            inv_low = np.divide(1.0, low, out=np.zeros_like(low), where=moving)
+            omega_ddot = omega_second(reach, c) * speed * speed + h * (speed * speed * inv_low + accel)
+            curv_q = (omega_ddot * speed + 2.0 * h * speed * accel + w * k3 * accel).sum()
+            curv = float(k1 * curv_y + k2 * curv_q)
+        size = min(
+            size + rate * span,
+            float(np.linalg.norm(self.control)) + float((w * (k1 * reach + k2 * speed)).sum()),
+        )
+        return span, size, rate, curv
+
+    def _row(self, k: int) -> tuple[float, ...]:
+        # Edge k: anchor time, y_ij and q_ij at the anchor, u^d_i - u^d_j, capacity Δ - ||d_ij||.
+        u, u_j = self._u, self._edge_u[k]
+        return (
+            self._edge_time[k],
+            *self._edge_y[k],
+            *self._edge_q[k],
+            u[0] - u_j[0],
+            u[1] - u_j[1],
+            u[2] - u_j[2],
+            self._capacity[k],
+        )
+
+    def _factors(self, t: float, t0: float) -> tuple[float, float, float]:
+        """(1 - e^{-z}) / k3, (z - 1 + e^{-z}) / k3² and e^{-z} for z = k3 (t - t0) (closed_form)."""
+        k3 = self.k3
+        z = k3 * (t - t0)
+        decay = -math.expm1(-z)  # 1 - e^{-z}
+        ramp = z_minus_one_plus_exp_float(z) if abs(z) < _SERIES_LIMIT else z - decay  # = z + expm1(-z)
+        return decay / k3, ramp / (k3 * k3), 1.0 - decay
+
+    def _fast_probe(self, rows, t: float):
+        # The formulas of _state and _vector_error_and_rate, edge by edge: the closed form
+        # (statexixjd, stateqiqj) from the anchor, then E_i and its rate (doteidouble, doteqi).
+        # Edges anchored at the same time (all of them after a trigger) share the factors.
+        k1, k2, k3 = self.k1, self.k2, self.k3
+        e0 = e1 = e2 = d0 = d1 = d2 = 0.0
+        probe = []
+        last_t0 = None
+        for k, (t0, a0, a1, a2, b0, b1, b2, u0, u1, u2, c) in enumerate(rows):
+            if t0 != last_t0:
+                fa, fb, keep = self._factors(t, t0)
+                last_t0 = t0
+            y0 = a0 + fa * b0 + fb * u0
+            y1 = a1 + fa * b1 + fb * u1
+            y2 = a2 + fa * b2 + fb * u2
+            q0 = keep * b0 + fa * u0
+            q1 = keep * b1 + fa * u1
+            q2 = keep * b2 + fa * u2
+            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            gap = c - r
+            if gap <= 0.0:
+                raise self._room_error(k, r, c)
+            w = (2.0 * c - r) / (gap * gap)
+            m0 = k1 * y0 + k2 * q0
+            m1 = k1 * y1 + k2 * q1
+            m2 = k1 * y2 + k2 * q2
+            e0 += w * m0
+            e1 += w * m1
+            e2 += w * m2
+            c0 = u0 - k3 * q0  # d(q_i - q_j)/dt
+            c1 = u1 - k3 * q1
+            c2 = u2 - k3 * q2
+            radial = (y0 * q0 + y1 * q1 + y2 * q2) / r if r > 0.0 else 0.0
+            f = (3.0 * c - r) / (gap * gap * gap) * radial
+            d0 += f * m0 + w * (k1 * q0 + k2 * c0)
+            d1 += f * m1 + w * (k1 * q1 + k2 * c1)
+            d2 += f * m2 + w * (k1 * q2 + k2 * c2)
+            probe.append((r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), c))
+        self._probe = probe
+        v0, v1, v2 = self._u
+        return e0 + v0, e1 + v1, e2 + v2, d0, d1, d2
+
+    def _fast_error(self, t: float) -> tuple[float, float, float]:
+        # E(t) alone, by the very operations of _fast_probe.
+        k1, k2 = self.k1, self.k2
+        e0 = e1 = e2 = 0.0
+        last_t0 = None
+        for k, (t0, a0, a1, a2, b0, b1, b2, u0, u1, u2, c) in enumerate(self._rows):
+            if t0 != last_t0:
+                fa, fb, keep = self._factors(t, t0)
+                last_t0 = t0
+            y0 = a0 + fa * b0 + fb * u0
+            y1 = a1 + fa * b1 + fb * u1
+            y2 = a2 + fa * b2 + fb * u2
+            q0 = keep * b0 + fa * u0
+            q1 = keep * b1 + fa * u1
+            q2 = keep * b2 + fa * u2
+            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            gap = c - r
+            if gap <= 0.0:
+                raise self._room_error(k, r, c)
+            w = (2.0 * c - r) / (gap * gap)
+            e0 += w * (k1 * y0 + k2 * q0)
+            e1 += w * (k1 * y1 + k2 * q1)
+            e2 += w * (k1 * y2 + k2 * q2)
+        v0, v1, v2 = self._u
+        return e0 + v0, e1 + v1, e2 + v2
+
+    def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
+        # The formulas of _vector_bounds, edge by edge (tension.py for ω and its derivatives).
+        k1, k2, k3 = self.k1, self.k2, self.k3
+        growth = -math.expm1(-k3 * span) / k3  # speed bound from the trial span, as there
+        probe = self._probe
+        speeds = []
+        for r, q_now, accel, c in probe:
+            speed = q_now + growth * accel
+            if speed > 0.0:
+                span = min(span, _ROOM_FRACTION * (c - r) / speed)  # _span_within_capacity
+            speeds.append(speed)
+        rate = curv_y = curv_q = reach_sum = 0.0
+        kink = False
+        for (r, _, accel, c), speed in zip(probe, speeds):
+            reach = r + span * speed
+            gap = c - reach
+            gap3 = gap * gap * gap
+            w = (2.0 * c - reach) / (gap * gap)
+            h = (3.0 * c - reach) / gap3
+            g = 2.0 * c * c / gap3
+            second = (8.0 * c - 2.0 * reach) / (gap3 * gap)
+            speed_sq = speed * speed
+            rate += k1 * g * speed + k2 * (h * speed_sq + w * accel)
+            curv_y += (reach * second + 3.0 * h) * speed_sq + g * accel
+            if speed > 0.0:
+                low = r - span * speed
+                if low <= 0.0:
+                    kink = True  # ω(||y||) has a kink at y = 0: no second-order bound
+                else:
+                    omega_ddot = second * speed_sq + h * (speed_sq / low + accel)
+                    curv_q += omega_ddot * speed + 2.0 * h * speed * accel + w * k3 * accel
+            else:
+                curv_q += w * k3 * accel
+            reach_sum += w * (k1 * reach + k2 * speed)
+        curv = math.inf if kink else k1 * curv_y + k2 * curv_q
+        return span, min(size + rate * span, self._control_norm + reach_sum), rate, curv
+
+
+# Agents of this dimension or less evaluate their prediction in plain floats.
+_FAST_DIMENSION = 3
+# First trial span of a search [s] before the agent has an inter-event time of its own, and its
+# least value (the search's former fixed choice).
+_FIRST_SPAN = 1e-3
+
+ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
+    'eta1': ('alpha', 'beta'),
+    'eta2': ('alpha_d', 'beta_d', 'k1', 'k2', 'k3'),
+}
+"""The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
+
+
+def make_agent(
+    *,
+    algorithm: str,
+    agent_id: int,
+    neighbours: Mapping[int, object],
+    delta: float,
+    gains: Mapping[str, float],
+    tolerance: float = 1e-12,
+) -> Eta1Agent | Eta2Agent:
+    """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored)."""
+    if algorithm not in ALGORITHM_GAINS:
+        raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
+    missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
+    if missing:
+        raise AgentError(f'agent {agent_id}: {algorithm} needs the gains {missing}')
+    kind = Eta1Agent if algorithm == 'eta1' else Eta2Agent
+    chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
+    return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
+
+
+# A step may use at most this fraction of an edge's remaining room, so that the bounds, which
+# are evaluated at the far end of the step, stay within a small factor of the local values.
+_ROOM_FRACTION = 0.125
+
+
+def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:
+    """Shrink `span` so that every predicted edge uses at most `_ROOM_FRACTION` of its room."""
+    room = capacity - r
+    if np.any(room <= 0.0):
+        k = int(np.flatnonzero(room <= 0.0)[0])
+        raise AgentError(
+            f'agent {agent_id}: predicted edge to agent {neighbour_ids[k]} left its range '
+            f'(||y_ij|| = {float(r[k])!r} >= Δ-||d_ij|| = {float(capacity[k])!r})'
+        )
+    moving = speed > 0.0
+    if np.any(moving):
+        span = min(span, float((_ROOM_FRACTION * room[moving] / speed[moving]).min()))
+    return span

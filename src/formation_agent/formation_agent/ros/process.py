@@ -1,0 +1,63 @@
+"""Node processes: which executor spins them, how SIGINT/SIGTERM stop them, how they exit."""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+from rclpy.executors import SingleThreadedExecutor
+
+EXIT_PEER_LOST = 3
+"""Exit status of a node that left because a peer it depends on was lost."""
+
+EXECUTORS = ('events', 'single')
+"""Executors a node process can spin: rclpy's EventsExecutor (default) or SingleThreadedExecutor.
+
+The SingleThreadedExecutor rebuilds its wait set in Python on every spin; on a 2-core machine
+that was most of the simulator's time per lock-step step (BENCHMARKS.md).  The EventsExecutor
+(rclpy.experimental, C++) dispatches each message as it comes.  It has no guard conditions, so
+the nodes use none.
+"""
+
+
+def make_executor(kind: str, *, context=None):
+    """The executor `kind` (one of EXECUTORS)."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
+
+
+class StopSignals:
+    """SIGINT and SIGTERM as a flag that the spin loop turns into KeyboardInterrupt between spins.
+
+    rclpy's own handlers (or Python's) raise KeyboardInterrupt wherever the main thread is; inside
+    the EventsExecutor's C++ dispatch it comes out as a pybind11 RuntimeError ("Unable to convert
+    call argument"), and an interrupted run would look like a failed one.  Use with
+    `rclpy.init(..., signal_handler_options=SignalHandlerOptions.NO)`.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.received = threading.Event()
+        self._previous: dict = {}
+
+    def __enter__(self) -> StopSignals:
+        self._previous = {sig: signal.signal(sig, self._on_signal) for sig in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.received.set()
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt once a stop signal has come."""
+        if self.received.is_set():
+            raise KeyboardInterrupt

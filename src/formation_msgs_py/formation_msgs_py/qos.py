@@ -1,0 +1,62 @@
+"""Quality of service of the formation protocol's topics (reasons: docs/MESSAGES.md).
+
+Every node of a run uses these profiles: a reader asking for more than its writer offers (a
+shorter liveliness lease, reliability) does not match it.
+"""
+
+from __future__ import annotations
+
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+
+LIVELINESS_LEASE = 1.0
+"""Seconds without a sign of life after which DDS declares a writer of the protocol lost.
+
+Liveliness is asserted by DDS itself (AUTOMATIC), not by Python code, so a busy agent stays alive
+and only a dead process, or a network that no longer reaches it, is declared lost.  Every node of
+a run must use the same lease: a reader asking for a shorter lease than its writer offers does
+not match it.
+"""
+
+LOST_GRACE = 0.5
+"""Seconds a node waits after a peer is declared lost before acting, so that what the peer sent
+before it left (already delivered, not yet taken) is handled first."""
+
+# Every message of the protocol matters, and a reader that matches a writer late must still get
+# what was written before: reliable + transient local.  Depth bounds what may be outstanding; the
+# lock-step never has more than one message per edge and step in flight.  Reasons per topic:
+# docs/MESSAGES.md, "Quality of service".
+PROTOCOL_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=32,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    liveliness=LivelinessPolicy.AUTOMATIC,
+    liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
+)
+
+# The simulator's writers carry up to several messages per lock-step step (state samples at every
+# grid point and event), and the recorder, a reliable keep-all reader, can fall behind them on a
+# loaded machine; a reliable keep-last writer drops what its reader has not acknowledged once
+# its history is full.  A deeper history keeps it (depth is not part of QoS matching).  Not for
+# the views (ground truth, markers): transient local keeps `depth` samples for late joiners, and a
+# marker array of 300 agents is ~200 KB; they come at most every viz_period.
+SIMULATOR_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=PROTOCOL_QOS.reliability,
+    durability=PROTOCOL_QOS.durability,
+    liveliness=PROTOCOL_QOS.liveliness,
+    liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
+)
+
+# A reader shared by every agent (the simulator's Status and report readers) gets up to n
+# messages per step: a depth of 32 across all writers drops some with 30+ agents and the step
+# never settles.  Keep everything; history is not part of QoS matching, so writers are unchanged.
+FAN_IN_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    reliability=PROTOCOL_QOS.reliability,
+    durability=PROTOCOL_QOS.durability,
+    liveliness=PROTOCOL_QOS.liveliness,
+    liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
+)

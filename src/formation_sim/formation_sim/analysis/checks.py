@@ -1,0 +1,194 @@
+"""The paper's quantities along a run and the guarantees of Theorems 1 and 2 they must respect.
+
+`run_series` evaluates, at every sample of a `RunRecord`, the edge lengths, the formation error,
+the tension ν (or ν_d) and the Lyapunov function V (or V_d); `theory_bounds` the proofs' bounds
+(k_ij, k_V, ξ_i and their Theorem 2 counterparts); `theorem_checks` checks the run against them
+and `inter_event_stats` the inter-event times against ξ_i. Each check is a `Check` with its numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from formation_sim.model import theory
+from formation_sim.sim.record import RunRecord
+from formation_sim.model.scenario import Scenario
+
+ProgressCallback = Callable[[int, int | None], None]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Check:
+    """One consistency or theorem check: what was checked, whether it held, the numbers."""
+
+    name: str
+    ok: bool
+    detail: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {'name': self.name, 'ok': self.ok, 'detail': self.detail}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Series:
+    """The paper's quantities at every sample of a run (rows = samples, columns = scenario edges)."""
+
+    times: np.ndarray  # (K,)
+    edge_lengths: np.ndarray  # (K, m) ||x_i - x_j||, must stay < Δ (Theorem 1/2 (i))
+    edge_errors: np.ndarray  # (K, m) ||x_i - x_j - d_ij|| = ||y_i - y_j||
+    formation_error: np.ndarray  # (K,) max over edges
+    tension: np.ndarray  # (K,) ν (single) or ν_d = k1 ν + ½ Σ||q_i||² (double)
+    lyapunov: np.ndarray  # (K,) V = ½ δᵀδ or V_d (double)
+
+
+def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -> Series:
+    scenario = record.scenario
+    heads, tails, d = scenario.edge_indices()
+    x = record.sample_positions
+    relative = x[:, heads] - x[:, tails]
+    lengths = np.linalg.norm(relative, axis=2)
+    errors = np.linalg.norm(relative - d, axis=2)
+    tau = theory.formation_feasibility(scenario).tau
+    double = scenario.dynamics == 'double'
+    q = record.sample_velocities
+    count = len(record.sample_times)
+    tension = np.empty(count)
+    lyapunov = np.empty(count)
+    for k in range(count):
+        if double:
+            tension[k] = theory.tension_double(scenario, x[k], q[k])
+            lyapunov[k] = theory.lyapunov_double(scenario, x[k], q[k], tau=tau)
+        else:
+            tension[k] = theory.tension(scenario, x[k])
+            lyapunov[k] = theory.lyapunov(scenario, x[k], tau=tau)
+        if progress is not None and k % 5000 == 0:
+            progress(k, count)
+    return Series(
+        times=np.asarray(record.sample_times, dtype=float),
+        edge_lengths=lengths,
+        edge_errors=errors,
+        formation_error=errors.max(axis=1),
+        tension=tension,
+        lyapunov=lyapunov,
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class TheoryBounds:
+    """What Theorem 1 (single) or Theorem 2 (double, corrected chain) guarantees for a scenario."""
+
+    theorem: int
+    rate: float  # β (Theorem 1) or β_d (Theorem 2)
+    k_nu: float  # ν(t) <= k_ν (kν), or ν_d(t) <= k^d_ν
+    k_V: float | None  # V(t) < k_V e^{-2 rate t} (kV), or V_d < k^d_V e^{-2 β_d t} (kVd, corrected)
+    error_gain: float | None  # ||y_i - y_j|| < error_gain e^{-rate t} (lengthysV) / (yiyj)
+    edge_bounds: dict[tuple[int, int], float]  # ||x_i - x_j|| <= k_ij + ||d_ij|| < Δ
+    xi: dict[int, float] | None  # (xi) / (xid): t_{k+1} - t_k >= ξ_i
+    note: str
+    # Theorem 2 only: k^d_V and the error gain of the chain as printed (rate (2-k4)ρ2(P)), drawn
+    # for comparison; docs/THEOREM2.md shows where the paper's example leaves them.
+    printed_k_V: float | None = None
+    printed_error_gain: float | None = None
+
+
+def theory_bounds(scenario: Scenario) -> TheoryBounds:
+    """The proof constants as bounds; raises theory.TheoryError outside the theorems' hypotheses."""
+    constants = theory.theorem_constants(scenario)
+    norms = {edge.pair: float(np.linalg.norm(edge.d)) for edge in scenario.edges}
+    edge_bounds = {pair: k + norms[pair] for pair, k in constants.k_edge.items()}
+    if constants.theorem == 1:
+        return TheoryBounds(
+            theorem=1,
+            rate=scenario.gains.beta,
+            k_nu=constants.k_nu,
+            k_V=constants.k_V,
+            error_gain=2.0 * math.sqrt(constants.k_V),  # (lengthysV): ||y_i-y_j||² < 4 k_V e^{-2βt}
+            edge_bounds=edge_bounds,
+            xi=constants.xi,
+            note='Theorem 1',
+        )
+    chain = constants.corrected_chain
+    gain = None if chain.k_V is None else 2.0 * math.sqrt(chain.z_gain * chain.k_V)  # (yiyj), corrected
+    printed = constants.paper_chain
+    printed_gain = None if printed.k_V is None else 2.0 * math.sqrt(printed.z_gain * printed.k_V)
+    return TheoryBounds(
+        theorem=2,
+        rate=scenario.gains.beta_d,
+        k_nu=constants.k_nu,
+        k_V=chain.k_V,
+        error_gain=gain,
+        edge_bounds=edge_bounds,
+        xi=chain.xi,
+        note='Theorem 2, corrected chain (docs/THEOREM2.md)' + ('' if chain.holds else ': β_d is not below (2-k4)/λmax(P), no decay bound'),
+        printed_k_V=printed.k_V,
+        printed_error_gain=printed_gain,
+    )
+
+
+def printed_chain_ratios(series: Series, bounds: TheoryBounds) -> dict[str, Any] | None:
+    """Theorem 2: the largest V_d / (printed k^d_V e^{-2β_d t}) and the first time it reaches 1."""
+    if bounds.printed_k_V is None:
+        return None
+    ratio = series.lyapunov / (bounds.printed_k_V * np.exp(-2.0 * bounds.rate * series.times))
+    worst = int(np.argmax(ratio))
+    above = np.flatnonzero(ratio >= 1.0)
+    return {
+        'max_ratio': float(ratio[worst]),
+        'at_time': float(series.times[worst]),
+        'first_time_above': float(series.times[above[0]]) if above.size else None,
+    }
+
+
+def theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | None) -> list[Check]:
+    """The theorems' guarantees checked at every sample (and every inter-event time)."""
+    scenario = record.scenario
+    delta = scenario.delta
+    longest = float(series.edge_lengths.max())
+    checks = [Check(name='connectivity: ||x_i - x_j|| < Δ', ok=longest < delta, detail=f'max edge length {longest!r} vs Δ = {delta!r}')]
+    if bounds is None:
+        return checks
+    over = []
+    for column, edge in enumerate(scenario.edges):
+        top = float(series.edge_lengths[:, column].max())
+        if not top <= bounds.edge_bounds[edge.pair]:
+            over.append(f'{edge.i}-{edge.j}: {top!r} > {bounds.edge_bounds[edge.pair]!r}')
+    checks.append(Check(name='edge lengths <= k_ij + ||d_ij|| (kij)', ok=not over, detail='; '.join(over) or 'every edge within its bound'))
+    top_nu = float(series.tension.max())
+    checks.append(Check(name='tension <= k_nu (knu)', ok=top_nu <= bounds.k_nu, detail=f'max {top_nu!r} vs k_nu = {bounds.k_nu!r}'))
+    t = series.times
+    if bounds.k_V is not None:
+        ratio = series.lyapunov / (bounds.k_V * np.exp(-2.0 * bounds.rate * t))
+        worst = int(np.argmax(ratio))
+        checks.append(Check(name='V < k_V e^{-2 beta t} (kV)', ok=bool(ratio[worst] < 1.0), detail=f'largest V / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}'))
+    if bounds.error_gain is not None:
+        ratio = series.formation_error / (bounds.error_gain * np.exp(-bounds.rate * t))
+        worst = int(np.argmax(ratio))
+        checks.append(Check(name='formation error < 2 sqrt(k_V) e^{-beta t}', ok=bool(ratio[worst] < 1.0), detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}'))
+    if bounds.xi is not None:
+        below = []
+        for agent, times in record.trigger_times.items():
+            if len(times) > 1:
+                gap = float(np.diff(times).min())
+                if not gap >= bounds.xi[agent]:
+                    below.append(f'agent {agent}: {gap!r} < {bounds.xi[agent]!r}')
+        checks.append(Check(name='inter-event times >= xi_i (xi)', ok=not below, detail='; '.join(below) or 'every agent'))
+    return checks
+
+
+def inter_event_stats(record: RunRecord, xi: dict[int, float] | None) -> dict[str, dict[str, Any]]:
+    result = {}
+    for agent, times in record.trigger_times.items():
+        gaps = np.diff(np.asarray(times, dtype=float))
+        result[str(agent)] = {
+            'events': len(times),
+            'min': float(gaps.min()) if gaps.size else None,
+            'median': float(np.median(gaps)) if gaps.size else None,
+            'max': float(gaps.max()) if gaps.size else None,
+            'xi': None if xi is None else xi.get(agent),
+        }
+    return result

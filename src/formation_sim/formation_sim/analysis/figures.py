@@ -1,0 +1,365 @@
+"""Figures and the animation of a run (matplotlib, Agg backend).
+
+Every plotting function draws into axes it is given and returns the artists it created, so
+callers (and tests) can read back exactly what was drawn: the raster's event times, the
+trajectory lines' end points, the bound curves.
+
+- `paper_figure`: the paper's Fig. 1 / Fig. 2 layout: (a) trajectories, circles at the initial
+  positions, the final formation's edges; (b) each agent's triggering times as an event raster.
+- `plot_edge_lengths`: every ||x_i - x_j|| against Δ (and the (kij) bounds k_ij + ||d_ij||).
+- `plot_formation_error`: max_ij ||x_i - x_j - d_ij|| on a log scale, with e(0) e^{-βt} (the
+  decay rate the theorem gives) and the bound 2 sqrt(k_V) e^{-βt} (lengthysV).
+- `plot_inter_event_times`: the distribution of t_{k+1} - t_k per agent, with ξ_i (xi) marked.
+- `plot_energy`: the tension ν (bound k_ν) and the Lyapunov function V (bound k_V e^{-2βt}).
+- `animate`: a GIF of the run (PillowWriter), edges coloured as in the Foxglove markers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from formation_sim.analysis.markers import agent_colour, edge_colour
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.collections import EventCollection
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    from formation_sim.analysis.checks import Series, TheoryBounds
+    from formation_sim.sim.record import RunRecord
+
+
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _colour(k: int) -> tuple[float, float, float, float]:
+    return agent_colour(k)
+
+
+# ------------------------------------------------------------------------------ (a) trajectories
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrajectoryPlot:
+    axes: Axes
+    planar: bool  # True: x_2 against x_1; False (p = 1): x against t
+    lines: dict[int, Line2D]  # agent -> its path
+    starts: dict[int, Line2D]  # agent -> circle at its initial position
+    formation: list[Line2D]  # the edges drawn between the final positions
+
+
+def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', label: str = '', formation: bool = True) -> TrajectoryPlot:
+    """Paths of all agents; with p >= 3 the first two coordinates (a projection)."""
+    scenario = record.scenario
+    x = record.sample_positions
+    planar = x.shape[2] >= 2
+    lines, starts, polygon = {}, {}, []
+    for k, agent in enumerate(scenario.agent_ids):
+        colour = _colour(k)
+        name = f'agent {agent}{label}'
+        if planar:
+            (lines[agent],) = ax.plot(x[:, k, 0], x[:, k, 1], linestyle, color=colour, lw=1.2, label=name)
+            (starts[agent],) = ax.plot([x[0, k, 0]], [x[0, k, 1]], 'o', mfc='none', mec=colour, ms=9)
+        else:
+            (lines[agent],) = ax.plot(record.sample_times, x[:, k, 0], linestyle, color=colour, lw=1.2, label=name)
+            (starts[agent],) = ax.plot([record.sample_times[0]], [x[0, k, 0]], 'o', mfc='none', mec=colour, ms=9)
+    if planar and formation:
+        index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+        for edge in scenario.edges:
+            a, b = index[edge.i], index[edge.j]
+            (line,) = ax.plot(x[-1, [a, b], 0], x[-1, [a, b], 1], 'k-', lw=0.9)
+            polygon.append(line)
+    if planar:
+        ax.set_xlabel('$x_{i,1}$' + (' (projection)' if x.shape[2] > 2 else ''))
+        ax.set_ylabel('$x_{i,2}$')
+        ax.set_aspect('equal', adjustable='datalim')
+    else:
+        ax.set_xlabel('t [s]')
+        ax.set_ylabel('$x_i$')
+    return TrajectoryPlot(axes=ax, planar=planar, lines=lines, starts=starts, formation=polygon)
+
+
+# ---------------------------------------------------------------------------- (b) event raster
+
+
+@dataclass(frozen=True, kw_only=True)
+class RasterPlot:
+    axes: Axes
+    events: dict[int, EventCollection]  # agent -> its triggering times (get_positions())
+
+
+def plot_trigger_raster(ax: Axes, record: RunRecord, *, row_offset: float = 0.0, height: float = 0.8, alpha: float = 1.0) -> RasterPlot:
+    """One row per agent (row k + 1 for the k-th agent, plus `row_offset`), a tick per trigger."""
+    ids = list(record.scenario.agent_ids)
+    events = {}
+    for k, agent in enumerate(ids):
+        times = np.asarray(record.trigger_times[agent], dtype=float)
+        (events[agent],) = ax.eventplot(times, lineoffsets=k + 1 + row_offset, linelengths=height, colors=[_colour(k)], linewidths=0.7, alpha=alpha)
+    if len(ids) <= 30:
+        ax.set_yticks(range(1, len(ids) + 1))
+        ax.set_yticklabels([str(agent) for agent in ids])
+    ax.set_xlim(0.0, record.horizon)
+    ax.set_ylim(0.3, len(ids) + 0.7 + max(row_offset, 0.0))
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('agent')
+    return RasterPlot(axes=ax, events=events)
+
+
+def paper_figure(record: RunRecord, *, title: str | None = None) -> tuple[Figure, TrajectoryPlot, RasterPlot]:
+    """The layout of the paper's Fig. 1 (ETA-1) and Fig. 2 (ETA-2)."""
+    plt = pyplot()
+    fig, (ax_a, ax_b) = plt.subplots(2, 1, figsize=(6.0, 7.5), gridspec_kw={'height_ratios': [3, 1.6]})
+    trajectories = plot_trajectories(ax_a, record)
+    algorithm = 'ETA-1' if record.scenario.dynamics == 'single' else 'ETA-2'
+    ax_a.set_title(f'(a) trajectories ({algorithm}); o initial positions, final formation in black', fontsize=9)
+    if len(record.scenario.agent_ids) <= 12:
+        ax_a.legend(loc='best', fontsize=8)
+    raster = plot_trigger_raster(ax_b, record)
+    ax_b.set_title(f'(b) triggering times of each agent ({record.total_events} events)', fontsize=9)
+    fig.suptitle(title or f'{record.scenario.name}: {record.mode} run', fontsize=10)
+    fig.tight_layout()
+    return fig, trajectories, raster
+
+
+# -------------------------------------------------------------------------- time-series panels
+
+
+@dataclass(frozen=True, kw_only=True)
+class SeriesPlot:
+    axes: Axes
+    lines: dict[str, Line2D]  # what each line shows -> the line
+
+
+def plot_edge_lengths(ax: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None = None) -> SeriesPlot:
+    scenario = record.scenario
+    lines = {}
+    for column, edge in enumerate(scenario.edges):
+        (lines[f'{edge.i}-{edge.j}'],) = ax.plot(series.times, series.edge_lengths[:, column], lw=1.0, label=f'$\\|x_{{{edge.i}}}-x_{{{edge.j}}}\\|$')
+    lines['delta'] = ax.axhline(scenario.delta, color='r', lw=1.2, label=f'Δ = {scenario.delta:g}')
+    if bounds is not None and len(scenario.edges) <= 6:
+        for column, edge in enumerate(scenario.edges):
+            colour = lines[f'{edge.i}-{edge.j}'].get_color()
+            lines[f'bound {edge.i}-{edge.j}'] = ax.axhline(bounds.edge_bounds[edge.pair], color=colour, ls=':', lw=0.8)
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('edge length')
+    ax.set_title('edge lengths against Δ (dotted: $k_{ij} + \\|d_{ij}\\|$ of (kij))', fontsize=9)
+    if len(scenario.edges) <= 10:
+        ax.legend(loc='best', fontsize=7)
+    return SeriesPlot(axes=ax, lines=lines)
+
+
+def plot_formation_error(ax: Axes, series: Series, bounds: TheoryBounds | None, *, rate: float | None = None) -> SeriesPlot:
+    """Error on a log scale; `rate` (β or β_d) draws e(0) e^{-rate t} when no bounds are known."""
+    t = series.times
+    lines = {}
+    positive = series.formation_error > 0.0
+    (lines['error'],) = ax.semilogy(t[positive], series.formation_error[positive], 'k', lw=1.2, label='$\\max_{ij}\\|x_i-x_j-d_{ij}\\|$')
+    rate = bounds.rate if bounds is not None else rate
+    if rate is not None:
+        (lines['envelope'],) = ax.semilogy(t, series.formation_error[0] * np.exp(-rate * t), 'b--', lw=1.0, label=f'$e(0)\\,e^{{-{rate:g}t}}$')
+    if bounds is not None and bounds.error_gain is not None:
+        (lines['bound'],) = ax.semilogy(t, bounds.error_gain * np.exp(-bounds.rate * t), 'r:', lw=1.2, label='$2\\sqrt{k_V}\\,e^{-\\beta t}$ (theorem)')
+    if bounds is not None and bounds.printed_error_gain is not None:
+        (lines['printed bound'],) = ax.semilogy(t, bounds.printed_error_gain * np.exp(-bounds.rate * t), 'm-.', lw=1.0, label='bound of the proof as printed')
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('formation error')
+    ax.set_title('formation error (log scale) against the exponential envelope', fontsize=9)
+    ax.legend(loc='best', fontsize=7)
+    return SeriesPlot(axes=ax, lines=lines)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HistogramPlot:
+    axes: Axes
+    gaps: dict[int, np.ndarray]  # agent -> its inter-event times, as histogrammed
+    xi_lines: dict[int, Any]  # agent -> vertical line at ξ_i
+
+
+def plot_inter_event_times(ax: Axes, record: RunRecord, xi: dict[int, float] | None) -> HistogramPlot:
+    """Log-spaced histogram of t_{k+1} - t_k per agent (step outlines), ξ_i as dashed lines."""
+    ids = list(record.scenario.agent_ids)
+    gaps = {agent: np.diff(np.asarray(record.trigger_times[agent], dtype=float)) for agent in ids}
+    values = np.concatenate([g[g > 0.0] for g in gaps.values()] + [np.array([])])
+    xi_values = [v for v in (xi or {}).values() if v and v > 0.0]
+    # One axis for the measured gaps and the proof's bounds, which may be orders of magnitude lower.
+    low = min([*values.tolist(), *xi_values], default=1e-3)
+    high = max(float(values.max()) if values.size else 1.0, 10.0 * low)
+    bins = np.logspace(np.log10(low) - 0.1, np.log10(high) + 0.1, 40)
+    for k, agent in enumerate(ids):
+        g = gaps[agent]
+        if g.size:
+            ax.hist(g[g > 0.0], bins=bins, histtype='step', color=_colour(k), lw=1.1, label=f'agent {agent} ({g.size})')
+    lines = {}
+    for k, agent in enumerate(ids):
+        if xi and xi.get(agent):
+            lines[agent] = ax.axvline(xi[agent], color=_colour(k), ls='--', lw=0.9)
+    ax.set_xscale('log')
+    ax.set_xlabel('inter-event time $t^i_{k+1}-t^i_k$ [s] (dashed: $\\xi_i$ of (xi))')
+    ax.set_ylabel('count')
+    ax.set_title('distribution of inter-event times', fontsize=9)
+    if len(ids) <= 12:
+        ax.legend(loc='best', fontsize=7)
+    return HistogramPlot(axes=ax, gaps=gaps, xi_lines=lines)
+
+
+def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None) -> SeriesPlot:
+    double = record.scenario.dynamics == 'double'
+    t = series.times
+    name_nu = '$\\nu_d$' if double else '$\\nu$'
+    name_v = '$V_d$' if double else '$V$'
+    lines = {}
+    (lines['tension'],) = ax_tension.semilogy(t, series.tension, 'k', lw=1.2, label=name_nu)
+    (lines['lyapunov'],) = ax_lyapunov.semilogy(t, series.lyapunov, 'k', lw=1.2, label=name_v)
+    if bounds is not None:
+        lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k^d_\\nu$' if double else '$k_\\nu$ (kν)')
+        if bounds.k_V is not None:
+            (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.k_V * np.exp(-2.0 * bounds.rate * t), 'r:', lw=1.2, label='$k_V e^{-2\\beta t}$ (kV)')
+        if bounds.printed_k_V is not None:
+            (lines['printed k_V'],) = ax_lyapunov.semilogy(t, bounds.printed_k_V * np.exp(-2.0 * bounds.rate * t), 'm-.', lw=1.0, label='$k^d_V e^{-2\\beta_d t}$ as printed (kVd)')
+    ax_tension.set_title(f'tension energy {name_nu}', fontsize=9)
+    ax_lyapunov.set_title(f'Lyapunov function {name_v}', fontsize=9)
+    for ax in (ax_tension, ax_lyapunov):
+        ax.set_xlabel('t [s]')
+        ax.legend(loc='best', fontsize=7)
+    return SeriesPlot(axes=ax_tension, lines=lines)
+
+
+# -------------------------------------------------------------------------------- all figures
+
+
+FIGURE_FILES = {
+    'formation (paper Fig. 1/2 style)': 'formation.png',
+    'edge lengths': 'edge_lengths.png',
+    'formation error': 'formation_error.png',
+    'inter-event times': 'inter_event_times.png',
+    'tension and Lyapunov function': 'energy.png',
+}
+
+
+def write_figures(record: RunRecord, series: Series, bounds: TheoryBounds | None, out_dir: str | Path, *, dpi: int = 100) -> dict[str, str]:
+    """Every analysis figure as a PNG in `out_dir`; returns title -> file name."""
+    plt = pyplot()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rate = record.scenario.gains.beta if record.scenario.dynamics == 'single' else record.scenario.gains.beta_d
+    figures = {}
+    fig, _, _ = paper_figure(record)
+    figures['formation (paper Fig. 1/2 style)'] = fig
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    plot_edge_lengths(ax, record, series, bounds)
+    figures['edge lengths'] = fig
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    plot_formation_error(ax, series, bounds, rate=rate)
+    figures['formation error'] = fig
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    plot_inter_event_times(ax, record, None if bounds is None else bounds.xi)
+    figures['inter-event times'] = fig
+    fig, (ax_nu, ax_v) = plt.subplots(1, 2, figsize=(9.0, 3.8))
+    plot_energy(ax_nu, ax_v, record, series, bounds)
+    figures['tension and Lyapunov function'] = fig
+    written = {}
+    for title, fig in figures.items():
+        fig.tight_layout()
+        fig.savefig(out / FIGURE_FILES[title], dpi=dpi)
+        plt.close(fig)
+        written[title] = FIGURE_FILES[title]
+    return written
+
+
+# ---------------------------------------------------------------------------------- animation
+
+
+def frame_indices(times: np.ndarray, *, frames: int) -> np.ndarray:
+    """Sample indices for `frames` frames evenly spaced in time: the last sample at or before each frame time."""
+    times = np.asarray(times, dtype=float)
+    targets = np.linspace(times[0], times[-1], max(2, frames))
+    return np.clip(np.searchsorted(times, targets, side='right') - 1, 0, len(times) - 1)
+
+
+def animate(
+    record: RunRecord,
+    path: str | Path,
+    *,
+    frames: int = 100,
+    fps: int = 12,
+    dpi: int = 70,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
+    """GIF of the run: agents, their trails, edges coloured by length / Δ, the desired formation."""
+    from matplotlib.animation import PillowWriter
+    from matplotlib.collections import LineCollection
+
+    from formation_sim.model import theory
+
+    plt = pyplot()
+    scenario = record.scenario
+    x = record.sample_positions
+    if x.shape[2] == 1:  # a line: draw it on the x axis
+        x = np.concatenate([x, np.zeros_like(x)], axis=2)
+    x = x[:, :, :2]
+    t = np.asarray(record.sample_times, dtype=float)
+    index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+    pairs = [(index[e.i], index[e.j]) for e in scenario.edges]
+    tau = theory.formation_feasibility(scenario).tau
+    offsets = tau - tau.mean(axis=0)
+    offsets = np.concatenate([offsets, np.zeros_like(offsets)], axis=1)[:, :2] if offsets.shape[1] == 1 else offsets[:, :2]
+    events = np.sort(np.concatenate([np.asarray(v, dtype=float) for v in record.trigger_times.values()]))
+    chosen = frame_indices(t, frames=frames)
+
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    span = np.ptp(x.reshape(-1, 2), axis=0).max()
+    pad = 0.1 * span + 0.05 * scenario.delta
+    ax.set_xlim(x[..., 0].min() - pad, x[..., 0].max() + pad)
+    ax.set_ylim(x[..., 1].min() - pad, x[..., 1].max() + pad)
+    ax.set_aspect('equal')
+    colours = [_colour(k) for k in range(len(scenario.agent_ids))]
+    trails = [ax.plot([], [], '-', color=colours[k], lw=0.8, alpha=0.6)[0] for k in range(len(colours))]
+    desired_edges = LineCollection([], colors=[(0.6, 0.6, 0.6, 0.6)], linewidths=0.8, linestyles='--')
+    ax.add_collection(desired_edges)
+    desired = ax.scatter([], [], s=60, facecolors='none', edgecolors=(0.5, 0.5, 0.5, 0.8))
+    edges = LineCollection([], linewidths=2.0)
+    ax.add_collection(edges)
+    agents = ax.scatter(x[0, :, 0], x[0, :, 1], s=60, c=colours, zorder=3)
+    label = ax.text(0.02, 0.97, '', transform=ax.transAxes, va='top', fontsize=9)
+    ax.set_title(f'{scenario.name}: edges green → red as their length nears Δ = {scenario.delta:g}', fontsize=9)
+
+    def draw(frame: int):
+        k = chosen[frame]
+        now = x[k]
+        for a, trail in enumerate(trails):
+            trail.set_data(x[: k + 1, a, 0], x[: k + 1, a, 1])
+        agents.set_offsets(now)
+        edges.set_segments([[now[a], now[b]] for a, b in pairs])
+        edges.set_color([edge_colour(float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])), scenario.delta) for a, b in pairs])
+        goal = now.mean(axis=0) + offsets
+        desired.set_offsets(goal)
+        desired_edges.set_segments([[goal[a], goal[b]] for a, b in pairs])
+        label.set_text(f't = {t[k]:.2f} s   events so far: {int(np.searchsorted(events, t[k], side="right"))}')
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # The writer directly (not FuncAnimation.save, which renders every frame twice on Agg).
+    writer = PillowWriter(fps=fps)
+    try:
+        with writer.saving(fig, str(path), dpi):
+            for frame in range(len(chosen)):
+                draw(frame)
+                writer.grab_frame()
+                if progress is not None:
+                    progress(frame + 1, len(chosen))
+    finally:
+        plt.close(fig)
+    return path

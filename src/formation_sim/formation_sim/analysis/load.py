@@ -1,0 +1,402 @@
+"""A run rebuilt from its rosbag2 bag alone: every metric recomputed, checked and reported.
+
+`load_bag_run(bag)` reads the bag once and rebuilds the `RunRecord` the simulator had:
+
+- triggering times from the TriggerInfo messages (`/agent_<i>/trigger_info/to_<j>`): one message
+  per neighbour per trigger, so agent i triggered at t iff some message from i is stamped t;
+  messages are grouped by (sender, stamp) and each group must reach every neighbour once;
+- the trajectories from `/formation/state` (WorldState: exact positions and velocities at every
+  event time and on the sample grid), the horizon and the clock mode from `/formation/step`;
+- messages sent = TriggerInfo messages recorded, sensing calls = `/formation/sensing_log` entries;
+- the scenario from `/formation/scenario` (std_msgs/String holding the scenario YAML) when the
+  bag has it, else from `scenario.yaml` of the run folder holding the bag, else from the
+  `scenario` the caller gives (`formation analyze --scenario`). Whatever its source, it must
+  agree with the bag: same agents, the first state equal to its initial state, every
+  TriggerInfo topic an edge of its graph.
+
+Every cross-check the bag allows (Status counters, sensing log, commands, a state sample at
+every event) becomes a `Check` in the report rather than an error: a bag with a lost message is
+still worth analysing, and the report says what is wrong.
+
+The checks and bounds: `formation_sim.analysis.checks`; the report: `formation_sim.analysis.report`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tempfile
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from formation_msgs_py.codec import (
+    MessageError,
+    decode_status,
+    decode_step,
+    decode_trigger_info,
+    decode_world_state,
+)
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
+from formation_msgs_py.topics import SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
+from formation_sim.sim.record import RunRecord
+from formation_sim.analysis.checks import Check, ProgressCallback
+from formation_sim.bag.io import BagError, decode, read_bag
+from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
+from formation_sim.sim.summary import SUMMARY_FILE
+
+
+SCENARIO_FILE = 'scenario.yaml'
+
+
+BAG_DIR = 'bag'
+
+
+TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
+
+
+COMMAND_TOPIC = re.compile(r'^/agent_(\d+)/(cmd_vel|cmd_accel)$')
+
+
+class AnalysisError(ValueError):
+    """A bag or run folder that cannot be analysed; the message says what is missing or wrong."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunLocation:
+    """Where a run's pieces are: the bag, the run folder, its summary.json."""
+
+    bag: Path | None
+    run_dir: Path | None
+    summary: Path | None
+
+
+def locate(path: str | Path) -> RunLocation:
+    """Find the bag and the run folder from a run folder, a bag folder, a .mcap file or a summary.json."""
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisError(f'{path}: no such file or folder')
+    if path.is_file():
+        if path.suffix == '.mcap':
+            bag = path.parent
+        elif path.name == SUMMARY_FILE or path.suffix == '.json':
+            run_dir = path.parent
+            bag = run_dir / BAG_DIR
+            return RunLocation(bag=bag if _is_bag(bag) else None, run_dir=run_dir, summary=path)
+        else:
+            raise AnalysisError(f'{path}: expected a run folder, a bag folder, a .mcap file or a summary.json')
+    elif _is_bag(path):
+        bag = path
+    elif _is_bag(path / BAG_DIR):
+        bag = path / BAG_DIR
+    else:
+        summary = path / SUMMARY_FILE
+        if summary.is_file():
+            return RunLocation(bag=None, run_dir=path, summary=summary)
+        raise AnalysisError(f'{path}: neither a bag (metadata.yaml or .mcap), nor a run folder with bag/ or {SUMMARY_FILE}')
+    run_dir = bag.parent if (bag.parent / SUMMARY_FILE).is_file() or (bag.parent / SCENARIO_FILE).is_file() else None
+    summary = run_dir / SUMMARY_FILE if run_dir is not None and (run_dir / SUMMARY_FILE).is_file() else None
+    return RunLocation(bag=bag, run_dir=run_dir, summary=summary)
+
+
+def _is_bag(path: Path) -> bool:
+    return path.is_dir() and ((path / 'metadata.yaml').is_file() or any(path.glob('*.mcap')))
+
+
+@dataclass(kw_only=True)
+class BagRun:
+    """A run as rebuilt from its bag."""
+
+    bag: Path
+    record: RunRecord
+    scenario_source: str
+    topics: dict[str, str]  # name -> type
+    counts: dict[str, int]  # name -> messages
+    checks: list[Check] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return all(check.ok for check in self.checks)
+
+
+def scenario_from_yaml(text: str, *, source: str) -> Scenario:
+    """A scenario from YAML text, read exactly as `load_scenario` reads a file."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / 'scenario.yaml'
+        path.write_text(text, encoding='utf-8')
+        try:
+            return load_scenario(path)
+        except ScenarioError as error:
+            raise AnalysisError(f'{source}: {str(error).replace(str(path), "scenario")}') from None
+
+
+def _message_total(bag: Path) -> int | None:
+    try:
+        from rosbags.rosbag2 import Reader
+
+        with Reader(bag) as reader:
+            return int(reader.message_count)
+    except Exception:  # noqa: BLE001 - only for the progress display
+        return None
+
+
+@dataclass
+class _Collected:
+    topics: dict[str, str] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    scenario_text: str | None = None
+    states: list = field(default_factory=list)
+    steps: list = field(default_factory=list)
+    statuses: dict[int, list] = field(default_factory=lambda: defaultdict(list))
+    sensing: list[tuple[int, float]] = field(default_factory=list)
+    # (sender, stamp) -> receivers, in bag order (duplicates kept, to be reported)
+    infos: dict[tuple[int, float], list[int]] = field(default_factory=lambda: defaultdict(list))
+    info_total: int = 0
+    commands: dict[int, int] = field(default_factory=lambda: defaultdict(int))
+    problems: list[str] = field(default_factory=list)
+
+
+def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
+    got = _Collected()
+    total = _message_total(bag) if progress is not None else None
+    number = 0
+    try:
+        for message in read_bag(bag):
+            number += 1
+            if progress is not None and number % 2000 == 0:
+                progress(number, total)
+            topic, msgtype = message.topic, message.msgtype
+            got.topics.setdefault(topic, msgtype)
+            got.counts[topic] += 1
+            try:
+                _dispatch(got, topic, msgtype, message.rawdata)
+            except MessageError as error:
+                got.problems.append(f'{topic} message {got.counts[topic]}: {error}')
+        if progress is not None:
+            progress(number, total)
+    except BagError as error:
+        raise AnalysisError(f'{bag}: {error}') from None
+    except Exception as error:
+        if type(error).__module__.startswith('rosbags'):
+            hint = '' if (bag / 'metadata.yaml').is_file() else ' (no metadata.yaml: if its recorder was killed, recover it with formation_sim.runtime.recorder.reindex)'
+            raise AnalysisError(f'{bag}: cannot read the bag: {error}{hint}') from None
+        raise
+    return got
+
+
+def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None:
+    array = msgtype == 'std_msgs/msg/Float64MultiArray'
+    if (match := TRIGGER_INFO_TOPIC.match(topic)) and array:
+        info = decode_trigger_info(decode(rawdata, msgtype))
+        sender, receiver = int(match.group(1)), int(match.group(2))
+        if (info.sender, info.receiver) != (sender, receiver):
+            raise MessageError(f'carries sender {info.sender} and receiver {info.receiver}, not the topic\'s {sender} -> {receiver}')
+        got.infos[(info.sender, info.stamp)].append(info.receiver)
+        got.info_total += 1
+    elif topic == STATE_TOPIC and array:
+        got.states.append(decode_world_state(decode(rawdata, msgtype)))
+    elif topic == STEP_TOPIC and array:
+        got.steps.append(decode_step(decode(rawdata, msgtype)))
+    elif topic == STATUS_TOPIC and array:
+        status = decode_status(decode(rawdata, msgtype))
+        got.statuses[status.agent].append(status)
+    elif topic == SENSING_LOG_TOPIC and msgtype == 'std_msgs/msg/String':
+        try:
+            entry = json.loads(decode(rawdata, msgtype).data)
+            got.sensing.append((int(entry['agent']), float(entry['time'])))
+        except (ValueError, KeyError, TypeError) as error:
+            raise MessageError(f'sensing log entry is not {{"agent", "time", ...}} JSON: {error}') from None
+    elif topic == SCENARIO_TOPIC and msgtype == 'std_msgs/msg/String':
+        got.scenario_text = decode(rawdata, msgtype).data
+    elif match := COMMAND_TOPIC.match(topic):
+        got.commands[int(match.group(1))] += 1
+
+
+def _resolve_scenario(got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None) -> tuple[Scenario, str]:
+    if got.scenario_text is not None:
+        return scenario_from_yaml(got.scenario_text, source=f'the bag\'s {SCENARIO_TOPIC}'), f'bag topic {SCENARIO_TOPIC}'
+    if run_dir is not None and (run_dir / SCENARIO_FILE).is_file():
+        path = run_dir / SCENARIO_FILE
+        try:
+            return load_scenario(path), f'run folder file {path}'
+        except ScenarioError as error:
+            raise AnalysisError(str(error)) from None
+    if fallback is not None:
+        if isinstance(fallback, Scenario):
+            return fallback, 'given by the caller'
+        try:
+            return load_scenario(fallback), f'--scenario {fallback}'
+        except ScenarioError as error:
+            raise AnalysisError(str(error)) from None
+    raise AnalysisError(
+        f'the bag has no {SCENARIO_TOPIC} topic and no {SCENARIO_FILE} lies next to it: '
+        'give the scenario (formation analyze --scenario NAME_OR_YAML)'
+    )
+
+
+def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None:
+    """Refuse a scenario that is not the bag's run (analysing it would be meaningless)."""
+    first = states[0]
+    if tuple(first.agent_ids) != scenario.agent_ids:
+        raise AnalysisError(f'the bag\'s agents {list(first.agent_ids)} are not the scenario\'s {list(scenario.agent_ids)}')
+    if first.positions.shape[1] != scenario.dimension:
+        raise AnalysisError(f'the bag\'s states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}')
+    if (first.velocities is None) != (scenario.dynamics == 'single'):
+        raise AnalysisError(f'the bag\'s states {"lack" if first.velocities is None else "carry"} velocities; the scenario is {scenario.dynamics!r}')
+    if first.time == 0.0:
+        for k, agent in enumerate(scenario.agent_ids):
+            if not np.array_equal(first.positions[k], scenario.positions[k]):
+                raise AnalysisError(
+                    f'agent {agent} starts at {first.positions[k].tolist()} in the bag but at '
+                    f'{scenario.positions[k].tolist()} in the scenario {scenario.name!r}'
+                )
+            if scenario.velocities is not None and not np.array_equal(first.velocities[k], scenario.velocities[k]):
+                raise AnalysisError(
+                    f'agent {agent} starts with velocity {first.velocities[k].tolist()} in the bag but '
+                    f'{scenario.velocities[k].tolist()} in the scenario {scenario.name!r}'
+                )
+    for sender, _ in got.infos:
+        if sender not in scenario.agent_ids:
+            raise AnalysisError(f'the bag has triggering information from agent {sender}, not an agent of {scenario.name!r}')
+    for (sender, _), receivers in got.infos.items():
+        stray = set(receivers) - set(scenario.neighbours(sender))
+        if stray:
+            raise AnalysisError(f'the bag has messages {sender} -> {sorted(stray)}, which are not edges of {scenario.name!r}')
+
+
+def load_bag_run(
+    bag: str | Path,
+    *,
+    run_dir: str | Path | None = None,
+    scenario: Scenario | str | Path | None = None,
+    progress: ProgressCallback | None = None,
+) -> BagRun:
+    """Rebuild the run recorded in `bag` (see the module docstring for what comes from where).
+
+    `scenario` is used only when neither the bag nor `run_dir` holds the scenario.
+    """
+    bag = Path(bag)
+    got = _read(bag, progress)
+    if not got.states:
+        raise AnalysisError(f'{bag}: no {STATE_TOPIC} messages: the trajectories cannot be rebuilt (topics: {sorted(got.topics)})')
+    run_dir = None if run_dir is None else Path(run_dir)
+    found, source = _resolve_scenario(got, run_dir, scenario)
+    states = sorted(got.states, key=lambda state: state.time)  # stable: ties keep bag order
+    _check_scenario_matches(found, got, states)
+    checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
+
+    # Samples: one per distinct time (a repeat of a time must repeat the state).
+    times, positions, velocities, repeats = [], [], [], []
+    for state in states:
+        if times and state.time == times[-1]:
+            if not np.array_equal(state.positions, positions[-1]):
+                repeats.append(state.time)
+            continue
+        times.append(state.time)
+        positions.append(np.asarray(state.positions, dtype=float))
+        if state.velocities is not None:
+            velocities.append(np.asarray(state.velocities, dtype=float))
+    checks.append(Check(name='state samples', ok=not repeats, detail=f'{len(times)} samples' + (f'; different states at the same time {repeats[:5]}' if repeats else '')))
+
+    trigger_times: dict[int, list[float]] = {agent: [] for agent in found.agent_ids}
+    missing, duplicated = [], []
+    for (sender, stamp), receivers in got.infos.items():
+        trigger_times[sender].append(stamp)
+        expected = set(found.neighbours(sender))
+        if len(receivers) != len(set(receivers)):
+            duplicated.append(f'{sender} @ {stamp!r}')
+        if set(receivers) != expected:
+            missing.append(f'{sender} @ {stamp!r} -> {sorted(expected - set(receivers))}')
+    for agent in trigger_times:
+        trigger_times[agent].sort()
+    checks.append(
+        Check(
+            name='one TriggerInfo per neighbour per trigger',
+            ok=not missing and not duplicated,
+            detail=f'{got.info_total} messages for {sum(map(len, trigger_times.values()))} triggers'
+            + (f'; missing: {missing[:5]}' if missing else '')
+            + (f'; duplicated: {duplicated[:5]}' if duplicated else ''),
+        )
+    )
+
+    steps = got.steps
+    final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
+    realtime = any(step.flags & STEP_FLAG_REALTIME for step in steps)
+    if final:
+        horizon = final[-1].time
+    else:
+        horizon = times[-1]
+        checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; horizon taken as the last state time {horizon!r}'))
+    if times[-1] != horizon:
+        checks.append(Check(name='final state', ok=False, detail=f'the last state is at t={times[-1]!r}, the run ended at t={horizon!r}'))
+    events = sorted({t for agent_times in trigger_times.values() for t in agent_times})
+    sampled = set(times)
+    unsampled = [t for t in events if t not in sampled]
+    checks.append(Check(name='a state sample at every event', ok=not unsampled, detail=f'{len(events)} distinct event times' + (f'; without a sample: {unsampled[:5]}' if unsampled else '')))
+
+    sensing_calls = len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
+    if SENSING_LOG_TOPIC in got.topics:
+        logged: dict[int, list[float]] = defaultdict(list)
+        for agent, t in got.sensing:
+            logged[agent].append(t)
+        differing = [agent for agent in found.agent_ids if sorted(logged.get(agent, [])) != trigger_times[agent]]
+        checks.append(Check(name='sensing log = triggers', ok=not differing, detail='every trigger sensed once at its time' if not differing else f'agents {differing} sensed at other times than they triggered'))
+    if got.commands:
+        differing = [agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])]
+        checks.append(Check(name='one command per trigger', ok=not differing, detail='yes' if not differing else f'agents {differing}: commands {dict(got.commands)}'))
+    extra: dict[str, Any] = {}
+    if steps:
+        extra['clock'] = 'realtime' if realtime else 'lockstep'
+        if final and not realtime:
+            extra['steps'] = final[-1].index  # lock-step: one Step per advance of the world
+        extra['reached_time'] = times[-1]  # the simulator samples the world where it stops
+        if final:
+            extra['failure'] = None  # the final Step goes out only when the horizon is reached
+    if got.statuses:
+        sent: dict[int, int] = defaultdict(int)
+        for (sender, _), receivers in got.infos.items():
+            sent[sender] += len(receivers)
+        # Counters only grow: the largest are the agent's final report.
+        last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
+        wrong = [
+            f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {len(trigger_times[agent])} / {sent[agent]}'
+            for agent, status in last.items()
+            if agent in trigger_times and (status.triggers != len(trigger_times[agent]) or status.info_sent != sent[agent])
+        ]
+        checks.append(Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or 'every agent\'s last Status counts what the bag holds'))
+        if realtime:
+            extra.update(_lateness(got.statuses, trigger_times))
+
+    record = RunRecord(
+        scenario=found,
+        horizon=horizon,
+        mode='distributed' if steps else 'recorded',
+        trigger_times=trigger_times,
+        sample_times=np.array(times),
+        sample_positions=np.array(positions),
+        sample_velocities=np.array(velocities) if velocities else None,
+        messages_sent=got.info_total,
+        sensing_calls=sensing_calls,
+        wall_time=math.nan,  # not in a bag
+        extra=extra,
+    )
+    return BagRun(bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks)
+
+
+def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:
+    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the simulator computes it."""
+    per_agent = {}
+    for agent, reports in statuses.items():
+        lateness, seen = [], 0
+        for status in reports:
+            if status.triggers > seen:
+                seen = status.triggers
+                if 0 < seen <= len(trigger_times.get(agent, [])):
+                    lateness.append(trigger_times[agent][seen - 1] - status.last_planned)
+        if lateness:
+            per_agent[str(agent)] = {'max': max(lateness), 'mean': float(np.mean(lateness))}
+    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}

@@ -1,0 +1,311 @@
+"""The analysis report of a run: its metrics, its checks, and where the bag differs from summary.json.
+
+`diff_summaries` lists every key where the summary recomputed from a bag (`bag_summary`) differs
+from the run's own summary.json; `build_report` gathers everything, `render_markdown` and
+`write_report` write `analysis.md` and `analysis.json`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from formation_sim.sim.record import RunRecord
+from formation_sim.analysis.checks import Series, TheoryBounds, inter_event_stats, printed_chain_ratios, theorem_checks
+from formation_sim.analysis.load import BagRun
+from formation_sim.sim.summary import build_summary
+
+
+# summary.json keys a bag cannot give back: wall-clock measurements of the live run. Besides
+# these, `extra` holds implementation-specific details (summary.py); those of its keys the bag
+# does not give (e.g. the simulator's own rejection counts) are listed as not recomputed.
+NOT_IN_BAG = ('wall_time',)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Difference:
+    key: str  # dotted path, list elements as [k]
+    bag: Any
+    summary: Any
+
+    def to_dict(self) -> dict[str, Any]:
+        return {'key': self.key, 'bag': self.bag, 'summary': self.summary}
+
+
+_MISSING = object()
+
+
+def diff_summaries(from_bag: dict, from_file: dict) -> tuple[list[Difference], list[str]]:
+    """Every leaf where the bag's summary differs from summary.json (floats compared exactly).
+
+    Returns (differences, keys of summary.json a bag cannot reproduce, see NOT_IN_BAG).
+    """
+    differences: list[Difference] = []
+    skipped: list[str] = []
+
+    def walk(a: Any, b: Any, key: str) -> None:
+        if (key in NOT_IN_BAG and (a is _MISSING or a is None)) or (key.startswith('extra.') and a is _MISSING):
+            skipped.append(key)
+            return
+        if isinstance(a, dict) and isinstance(b, dict):
+            for name in list(a) + [name for name in b if name not in a]:
+                walk(a.get(name, _MISSING), b.get(name, _MISSING), f'{key}.{name}' if key else str(name))
+            return
+        if isinstance(a, list) and isinstance(b, list):
+            if len(a) != len(b):
+                differences.append(Difference(key=f'{key} (length)', bag=len(a), summary=len(b)))
+            for k, (x, y) in enumerate(zip(a, b)):
+                walk(x, y, f'{key}[{k}]')
+            return
+        if a is _MISSING or b is _MISSING or not _same(a, b):
+            differences.append(Difference(key=key, bag=None if a is _MISSING else a, summary=None if b is _MISSING else b))
+
+    walk(from_bag, from_file, '')
+    return differences, skipped
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, bool) or isinstance(b, bool):  # True == 1 in Python, not in a summary
+        return type(a) is type(b) and a == b
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def bag_summary(record: RunRecord) -> dict:
+    """summary.json's schema computed from the rebuilt record (wall_time: not in a bag, null)."""
+    summary = build_summary(record)
+    summary['wall_time'] = None
+    return summary
+
+
+def json_safe(value: Any) -> Any:
+    """Replace non-finite floats by their names (JSON has none) and tuples/arrays by lists."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        return json_safe(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    return value
+
+
+def build_report(
+    run: BagRun,
+    *,
+    series: Series,
+    bounds: TheoryBounds | None,
+    bounds_error: str | None = None,
+    summary_path: Path | None = None,
+    figures: dict[str, str] | None = None,
+) -> dict[str, Any]:
+    """The analysis as a JSON-ready dictionary (`render_markdown` prints it)."""
+    record = run.record
+    scenario = record.scenario
+    summary = bag_summary(record)
+    comparison = None
+    if summary_path is not None:
+        file_summary = json.loads(Path(summary_path).read_text(encoding='utf-8'))
+        differences, skipped = diff_summaries(summary, file_summary)
+        comparison = {
+            'path': str(summary_path),
+            'equal': not differences,
+            'differences': [difference.to_dict() for difference in differences],
+            'not_in_bag': skipped,
+            'notes': _difference_notes(record) if differences else [],
+        }
+    t = series.times
+    return json_safe(
+        {
+            'schema': 'formation-analysis/1',
+            'bag': str(run.bag),
+            'scenario_source': run.scenario_source,
+            'run': {
+                'scenario': scenario.name,
+                'dynamics': scenario.dynamics,
+                'mode': record.mode,
+                'clock': record.extra.get('clock'),
+                'horizon': record.horizon,
+                'n_agents': scenario.n,
+                'dimension': scenario.dimension,
+                'delta': scenario.delta,
+            },
+            'topics': {name: {'type': run.topics[name], 'messages': run.counts[name]} for name in sorted(run.topics)},
+            'bag_checks': [check.to_dict() for check in run.checks],
+            'theorem_checks': [check.to_dict() for check in theorem_checks(record, series, bounds)],
+            'theory': None
+            if bounds is None
+            else {
+                'theorem': bounds.theorem,
+                'note': bounds.note,
+                'rate': bounds.rate,
+                'k_nu': bounds.k_nu,
+                'k_V': bounds.k_V,
+                'error_gain': bounds.error_gain,
+                'xi': bounds.xi,
+                'printed_chain': None
+                if bounds.printed_k_V is None
+                else {'k_V': bounds.printed_k_V, 'error_gain': bounds.printed_error_gain, **printed_chain_ratios(series, bounds)},
+            },
+            'theory_error': bounds_error,
+            'inter_event_times': inter_event_stats(record, None if bounds is None else bounds.xi),
+            'series': {
+                'samples': len(t),
+                'formation_error': {'initial': float(series.formation_error[0]), 'final': float(series.formation_error[-1])},
+                'tension': {'initial': float(series.tension[0]), 'max': float(series.tension.max()), 'final': float(series.tension[-1])},
+                'lyapunov': {'initial': float(series.lyapunov[0]), 'final': float(series.lyapunov[-1])},
+            },
+            'summary': summary,
+            'summary_json': comparison,
+            'figures': figures or {},
+        }
+    )
+
+
+def _difference_notes(record: RunRecord) -> list[str]:
+    """Known reasons for a bag to differ from its summary.json."""
+    notes = []
+    if record.extra.get('clock') == 'realtime':
+        at_end = [agent for agent, times in record.trigger_times.items() if times and times[-1] >= record.horizon]
+        if at_end:
+            notes.append(
+                f'agents {at_end} triggered at the horizon t = {record.horizon!r} (wall clock): summary.json counts '
+                'a trigger only once its command has acted on the world before the run ended, which a bag cannot show'
+            )
+    return notes
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    if value is None:
+        return '—'
+    return str(value)
+
+
+def render_markdown(report: dict[str, Any]) -> str:
+    run = report['run']
+    summary = report['summary']
+    lines = [
+        f'# Analysis of `{report["bag"]}`',
+        '',
+        f'Scenario **{run["scenario"]}** ({run["dynamics"]} integrators, n = {run["n_agents"]}, p = {run["dimension"]}, '
+        f'Δ = {_fmt(run["delta"])}), {run["mode"]} run, clock {run["clock"] or "—"}, horizon {_fmt(run["horizon"])} s. '
+        f'Scenario from: {report["scenario_source"]}. Every number below is recomputed from the bag.',
+        '',
+        '## Events and messages',
+        '',
+        '| agent | events | min inter-event [s] | median | max | ξ_i (proof bound) |',
+        '|---|---|---|---|---|---|',
+    ]
+    for agent, stats in report['inter_event_times'].items():
+        lines.append(f'| {agent} | {stats["events"]} | {_fmt(stats["min"])} | {_fmt(stats["median"])} | {_fmt(stats["max"])} | {_fmt(stats["xi"])} |')
+    lines += [
+        '',
+        f'Total events {summary["total_events"]}, triggering-information messages {summary["messages_sent"]}, '
+        f'sensing calls {summary["sensing_calls"]}.',
+        '',
+        '| edge | max length | Δ − max length | final error ‖x_i − x_j − d_ij‖ |',
+        '|---|---|---|---|',
+    ]
+    for edge in summary['edges']:
+        lines.append(f'| {edge["i"]}-{edge["j"]} | {_fmt(edge["max_length"])} | {_fmt(edge["min_range_slack"])} | {_fmt(edge["final_error"])} |')
+    series = report['series']
+    lines += [
+        '',
+        f'Formation error: {_fmt(series["formation_error"]["initial"])} at t = 0, {_fmt(series["formation_error"]["final"])} at the horizon. '
+        f'Tension: {_fmt(series["tension"]["initial"])} → max {_fmt(series["tension"]["max"])} → {_fmt(series["tension"]["final"])}. '
+        f'Lyapunov: {_fmt(series["lyapunov"]["initial"])} → {_fmt(series["lyapunov"]["final"])} ({series["samples"]} samples).',
+        '',
+        '## Theorem checks (at every sample)',
+        '',
+    ]
+    if report['theory']:
+        theory_info = report['theory']
+        lines.append(
+            f'{theory_info["note"]}: rate {_fmt(theory_info["rate"])}, k_ν = {_fmt(theory_info["k_nu"])}, '
+            f'k_V = {_fmt(theory_info["k_V"])}, error bound gain {_fmt(theory_info["error_gain"])}.'
+        )
+        printed = theory_info.get('printed_chain')
+        if printed:
+            above = printed['first_time_above']
+            lines.append(
+                f'For comparison, the chain as printed (rate (2-k4)ρ2(P)): k_V = {_fmt(printed["k_V"])}; '
+                f'V_d reaches {_fmt(printed["max_ratio"])} × its bound k_V e^{{-2β_d t}} (at t = {_fmt(printed["at_time"])} s)'
+                + (f', above it from t = {_fmt(above)} s on (docs/THEOREM2.md).' if above is not None else '; below it throughout.')
+            )
+        lines.append('')
+    elif report['theory_error']:
+        lines += [f'No proof constants: {report["theory_error"]}', '']
+    lines += _check_table(report['theorem_checks'])
+    lines += ['', '## Bag consistency', '']
+    lines += _check_table(report['bag_checks'])
+    lines += ['', '| topic | type | messages |', '|---|---|---|']
+    for name, info in report['topics'].items():
+        lines.append(f'| `{name}` | {info["type"]} | {info["messages"]} |')
+    lines += ['', '## The bag against summary.json', '']
+    comparison = report['summary_json']
+    if comparison is None:
+        lines.append('No summary.json next to the bag.')
+    elif comparison['equal']:
+        lines.append(
+            f'`{comparison["path"]}`: every metric recomputed from the bag equals the file '
+            f'(floats compared exactly). Not recomputed from the bag (wall-clock measurements, runtime '
+            f'details): {", ".join(comparison["not_in_bag"]) or "—"}.'
+        )
+    else:
+        differences = comparison['differences']
+        lines += [
+            f'`{comparison["path"]}` differs from the bag in {len(differences)} value(s) '
+            f'(not recomputed from the bag, not compared: {", ".join(comparison["not_in_bag"]) or "—"}):',
+            '',
+            '| key | from the bag | summary.json |',
+            '|---|---|---|',
+        ]
+        limit = 200
+        for difference in differences[:limit]:
+            lines.append(f'| `{difference["key"]}` | {_short(difference["bag"])} | {_short(difference["summary"])} |')
+        if len(differences) > limit:
+            lines.append(f'| … {len(differences) - limit} more (see the JSON report) | | |')
+        for note in comparison.get('notes', []):
+            lines += ['', f'Note: {note}.']
+    if report['figures']:
+        lines += ['', '## Figures', '']
+        for title, name in report['figures'].items():
+            if name.endswith('.gif') or name.endswith('.png'):
+                lines.append(f'![{title}]({name})')
+            else:
+                lines.append(f'- {title}: `{name}`')
+    return '\n'.join(lines) + '\n'
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value) if not isinstance(value, str) else value
+    return text if len(text) <= 120 else text[:117] + '…'
+
+
+def _check_table(checks: list[dict[str, Any]]) -> list[str]:
+    lines = ['| check | holds | detail |', '|---|---|---|']
+    for check in checks:
+        lines.append(f'| {check["name"]} | {"yes" if check["ok"] else "**NO**"} | {check["detail"]} |')
+    return lines
+
+
+def write_report(report: dict[str, Any], out_dir: str | Path) -> tuple[Path, Path]:
+    """`analysis.md` and `analysis.json` in `out_dir`."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    markdown = out / 'analysis.md'
+    data = out / 'analysis.json'
+    markdown.write_text(render_markdown(report), encoding='utf-8')
+    data.write_text(json.dumps(report, indent=1, allow_nan=False) + '\n', encoding='utf-8')
+    return markdown, data

@@ -1,0 +1,217 @@
+"""Recovering a bag whose recorder died (SIGKILL, a crash): `reindex`.
+
+A recorder killed hard leaves an MCAP file without summary and footer, and no ``metadata.yaml``;
+rosbags and ros2 bag refuse it. The file holds every message up to the recorder's last flush.
+`reindex(bag_dir)` rebuilds a readable bag from what is in the file.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from mcap.exceptions import McapError
+from mcap.records import Channel, Footer, Message, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapFileWriter
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from formation_sim.bag.io import BAG_VERSION, BagError
+
+
+class BagRecoveryError(BagError):
+    """`reindex` found nothing it could turn into a readable bag."""
+
+
+
+
+@dataclass(frozen=True, kw_only=True)
+class Recovery:
+    """What `reindex` found and did."""
+
+    mcap_path: Path
+    message_counts: dict[str, int]  # topic -> messages recovered
+    rewritten: bool  # False: the MCAP file was complete and is kept as it is
+    damaged_copy: Path | None  # the original, truncated file, when rewritten
+
+    @property
+    def message_count(self) -> int:
+        """Messages recovered in all."""
+        return sum(self.message_counts.values())
+
+
+@dataclass
+class _Salvage:
+    schemas: dict[int, Schema]
+    channels: dict[int, Channel]
+    messages: list[Message]
+    complete: bool  # the footer was reached
+
+
+def _salvage(mcap_path: Path) -> _Salvage:
+    """Read every record up to the end of the file or the first damaged one."""
+    salvage = _Salvage(schemas={}, channels={}, messages=[], complete=False)
+    with mcap_path.open('rb') as stream:
+        try:
+            # A chunk is parsed whole before its records are yielded: a chunk cut by the kill
+            # raises here and contributes nothing, every earlier chunk is kept.
+            for record in StreamReader(stream, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    salvage.schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    salvage.channels[record.id] = record
+                elif isinstance(record, Message):
+                    salvage.messages.append(record)
+                elif isinstance(record, Footer):
+                    salvage.complete = True
+        except (McapError, ValueError, EOFError, OSError, struct.error):
+            salvage.complete = False
+    return salvage
+
+
+def _type_hash(schema: Schema) -> str:
+    """RIHS01 hash of the type, computed from the definition stored in the MCAP schema."""
+    if schema.encoding != 'ros2msg':
+        return ''
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg(schema.data.decode(), schema.name))
+    return store.hash_rihs01(schema.name)
+
+
+def _qos_profiles(channel: Channel) -> list[dict[str, Any]]:
+    text = channel.metadata.get('offered_qos_profiles', '')
+    profiles = yaml.safe_load(text) if text else []
+    return profiles if isinstance(profiles, list) else []
+
+
+def _bag_metadata(
+    salvage: _Salvage, relative_path: str, counts: dict[int, int]
+) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` of a version 9 bag holding `salvage`."""
+    times = [m.log_time for m in salvage.messages]
+    start = min(times) if times else 0
+    duration = max(times) - start if times else 0
+    total = len(salvage.messages)
+    topics = []
+    for channel_id, channel in sorted(salvage.channels.items()):
+        schema = salvage.schemas[channel.schema_id]
+        topics.append({
+            'topic_metadata': {
+                'name': channel.topic,
+                'type': schema.name,
+                'serialization_format': channel.message_encoding,
+                'offered_qos_profiles': _qos_profiles(channel),
+                'type_description_hash': _type_hash(schema),
+            },
+            'message_count': counts.get(channel_id, 0),
+        })
+    return {
+        'version': BAG_VERSION,
+        'storage_identifier': 'mcap',
+        'relative_file_paths': [relative_path],
+        'duration': {'nanoseconds': duration},
+        'starting_time': {'nanoseconds_since_epoch': start},
+        'message_count': total,
+        'topics_with_message_count': topics,
+        'compression_format': '',
+        'compression_mode': '',
+        'files': [{
+            'path': relative_path,
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'duration': {'nanoseconds': duration},
+            'message_count': total,
+        }],
+        'custom_data': {'recovered_by': 'formation_sim.runtime.recorder.reindex'},
+        'ros_distro': 'rosbags',
+    }
+
+
+def _rewrite(salvage: _Salvage, target: Path, information: dict[str, Any]) -> None:
+    """Write the salvaged records as a complete MCAP file (ros2 profile, uncompressed)."""
+    with target.open('xb') as stream:
+        writer = McapFileWriter(stream, compression=CompressionType.NONE)
+        writer.start(profile='ros2', library='formation_sim.runtime.recorder.reindex')
+        schema_ids = {
+            old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
+            for old, s in sorted(salvage.schemas.items())
+        }
+        channel_ids = {
+            old: writer.register_channel(
+                topic=c.topic,
+                message_encoding=c.message_encoding,
+                schema_id=schema_ids[c.schema_id],
+                metadata=dict(c.metadata),
+            )
+            for old, c in sorted(salvage.channels.items())
+        }
+        for message in salvage.messages:
+            writer.add_message(
+                channel_id=channel_ids[message.channel_id],
+                log_time=message.log_time,
+                data=message.data,
+                publish_time=message.publish_time,
+                sequence=message.sequence,
+            )
+        # rosbag2 itself reads the bag information from here when metadata.yaml is missing.
+        writer.add_metadata('rosbag2', {'serialized_metadata': yaml.safe_dump(information)})
+        writer.finish()
+
+
+def reindex(bag_dir: Path | str) -> Recovery:
+    """Rebuild ``metadata.yaml`` (and if needed the MCAP file) of a bag whose recorder died.
+
+    Every message in a complete MCAP chunk is kept; a chunk cut short by the kill is dropped. A
+    truncated MCAP file is rewritten complete, and the original kept beside it as
+    ``<name>.mcap.damaged``. Any existing ``metadata.yaml`` is replaced.
+
+    Raises:
+        BagRecoveryError: `bag_dir` holds no single MCAP file, or no message-bearing record
+            survived in it.
+
+    """
+    bag_dir = Path(bag_dir)
+    candidates = sorted(bag_dir.glob('*.mcap'))
+    if len(candidates) != 1:
+        msg = f'{bag_dir}: expected exactly one .mcap file, found {[p.name for p in candidates]}'
+        raise BagRecoveryError(msg)
+    mcap_path = candidates[0]
+
+    salvage = _salvage(mcap_path)
+    if missing := {c.schema_id for c in salvage.channels.values()} - set(salvage.schemas):
+        msg = f'{mcap_path}: channels refer to schemas {sorted(missing)} that are not in the file'
+        raise BagRecoveryError(msg)
+    if not salvage.channels:
+        size = mcap_path.stat().st_size
+        msg = f'{mcap_path}: no complete MCAP chunk in its {size} bytes; nothing to recover'
+        raise BagRecoveryError(msg)
+    salvage.messages = [m for m in salvage.messages if m.channel_id in salvage.channels]
+
+    counts: dict[int, int] = dict.fromkeys(salvage.channels, 0)
+    for message in salvage.messages:
+        counts[message.channel_id] += 1
+    information = _bag_metadata(salvage, mcap_path.name, counts)
+
+    damaged_copy = None
+    if not salvage.complete:
+        damaged_copy = mcap_path.with_name(f'{mcap_path.name}.damaged')
+        recovered = mcap_path.with_name(f'{mcap_path.name}.recovering')
+        recovered.unlink(missing_ok=True)
+        _rewrite(salvage, recovered, information)
+        mcap_path.replace(damaged_copy)
+        recovered.replace(mcap_path)
+
+    metadata_path = bag_dir / 'metadata.yaml'
+    staging = bag_dir / 'metadata.yaml.tmp'
+    staging.write_text(yaml.safe_dump({'rosbag2_bagfile_information': information}), 'utf8')
+    staging.replace(metadata_path)
+
+    return Recovery(
+        mcap_path=mcap_path,
+        message_counts={salvage.channels[cid].topic: n for cid, n in counts.items()},
+        rewritten=not salvage.complete,
+        damaged_copy=damaged_copy,
+    )

@@ -1,0 +1,660 @@
+"""The problem model: agents, graph, desired formation, gains; loading and dumping YAML scenarios.
+
+A scenario holds exactly the data of the paper's Theorems 1 and 2: the communication radius Δ,
+the undirected graph with the desired displacements d_ij (Section 2.2), the initial states and the
+gains. Structural soundness (shapes, ids, edges) is checked on construction and raises
+`ScenarioError`; whether the paper's hypotheses hold is the job of `formation_sim.model.validate`.
+
+The YAML schema is documented in docs/SCENARIOS.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from importlib import resources
+import math
+import numbers
+from pathlib import Path
+import re
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from formation_sim.model.gains import paper_k3, riccati_solution
+
+DYNAMICS = ('single', 'double')
+BUILTIN_PACKAGE = 'formation_sim.model.scenarios'
+
+_TOP_REQUIRED = ('dynamics', 'communication_radius', 'horizon', 'agents', 'edges', 'gains')
+_TOP_KEYS = ('name',) + _TOP_REQUIRED
+_SINGLE_GAINS = ('alpha', 'beta')
+_DOUBLE_GAINS = ('alpha_d', 'beta_d', 'beta1', 'k3')
+_DOUBLE_OPTIONAL = ('k1', 'k2', 'k0')
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be read or is structurally unsound; the message names key and value."""
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def _finite_float(value: Any, where: str) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ScenarioError(f'{where}: expected a number, got {value!r}')
+    result = float(value)
+    if not math.isfinite(result):
+        raise ScenarioError(f'{where}: must be finite, got {value!r}')
+    return result
+
+
+def _vector(value: Any, where: str, *, size: int | None = None) -> np.ndarray:
+    """A finite float vector from a list of numbers (or an array), with an optional required size."""
+    if (
+        type(value) is np.ndarray
+        and value.ndim == 1
+        and value.size
+        and value.dtype.kind in 'fiu'
+        and (size is None or value.size == size)
+    ):
+        result = value.astype(float)  # fast path for generated scenarios: one copy, one check
+        if np.all(np.isfinite(result)):
+            return result
+    if isinstance(value, np.ndarray):
+        items = value.tolist() if value.ndim == 1 else None
+    elif isinstance(value, (list, tuple)):
+        items = list(value)
+    else:
+        items = None
+    if items is None or not items:
+        raise ScenarioError(f'{where}: expected a non-empty list of numbers, got {value!r}')
+    numbers_ = [_finite_float(item, f'{where}[{k}]') for k, item in enumerate(items)]
+    if size is not None and len(numbers_) != size:
+        raise ScenarioError(
+            f'{where}: has {len(numbers_)} components, expected {size} (the dimension p of the '
+            f'scenario): {value!r}'
+        )
+    return np.array(numbers_, dtype=float)
+
+
+def _agent_id(value: Any, where: str) -> int:
+    if type(value) is int and value >= 0:
+        return value
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise ScenarioError(f'{where}: agent ids are non-negative integers, got {value!r}')
+    if value < 0:
+        raise ScenarioError(f'{where}: agent ids are non-negative integers, got {value!r}')
+    return int(value)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Edge:
+    """An undirected edge (i, j), stored once, with d = d_ij = desired x_i - x_j (d_ji = -d_ij)."""
+
+    i: int
+    j: int
+    d: np.ndarray
+
+    def __post_init__(self) -> None:
+        i = _agent_id(self.i, 'edge i')
+        j = _agent_id(self.j, 'edge j')
+        if i == j:
+            raise ScenarioError(f'edge ({i}, {j}): i = j = {i} is a self-loop')
+        object.__setattr__(self, 'i', i)
+        object.__setattr__(self, 'j', j)
+        object.__setattr__(self, 'd', _readonly(_vector(self.d, f'edge ({i}, {j}) d')))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Edge):
+            return NotImplemented
+        return self.i == other.i and self.j == other.j and np.array_equal(self.d, other.d)
+
+    __hash__ = None
+
+    @property
+    def pair(self) -> tuple[int, int]:
+        return (self.i, self.j)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SingleGains:
+    """ETA-1 gains: threshold α e^{-βt} of (triggersingle)."""
+
+    alpha: float
+    beta: float
+
+    def __post_init__(self) -> None:
+        for key in _SINGLE_GAINS:
+            object.__setattr__(self, key, _finite_float(getattr(self, key), f'gains.{key}'))
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DoubleGains:
+    """ETA-2 gains: threshold α_d e^{-β_d t} (triggerdouble), β1 and P of (riccatti), damping k3.
+
+    P = [[k0, k1], [k1, k2]], so B^T P = [k1, k2] as the proof of Theorem 2 (ii) requires.
+    """
+
+    alpha_d: float
+    beta_d: float
+    beta1: float
+    k3: float
+    k1: float
+    k2: float
+    P: np.ndarray
+
+    def __post_init__(self) -> None:
+        for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2'):
+            object.__setattr__(self, key, _finite_float(getattr(self, key), f'gains.{key}'))
+        matrix = np.array(self.P, dtype=float)
+        if matrix.shape != (2, 2) or not np.all(np.isfinite(matrix)):
+            raise ScenarioError(f'gains.P: expected a finite 2x2 matrix, got {self.P!r}')
+        if matrix[0, 1] != matrix[1, 0]:
+            raise ScenarioError(f'gains.P: must be symmetric, got {matrix.tolist()}')
+        if matrix[0, 1] != self.k1 or matrix[1, 1] != self.k2:
+            raise ScenarioError(
+                f'gains: B^T P = [P01, P11] = {[matrix[0, 1], matrix[1, 1]]} must equal '
+                f'[k1, k2] = {[self.k1, self.k2]}'
+            )
+        object.__setattr__(self, 'P', _readonly(matrix))
+
+    @classmethod
+    def from_riccati(
+        cls, *, alpha_d: float, beta_d: float, beta1: float, k3: float | str
+    ) -> DoubleGains:
+        """P, k1, k2 solving (riccatti) with equality for this β1; k3='paper' is 2/(k2+sqrt(k1²+k2²))."""
+        beta1 = _finite_float(beta1, 'gains.beta1')
+        if not beta1 > 0.0:
+            raise ScenarioError(f'gains.beta1: must be > 0 to determine P from (riccatti), got {beta1!r}')
+        matrix = riccati_solution(beta1)
+        k1, k2 = float(matrix[0, 1]), float(matrix[1, 1])
+        if isinstance(k3, str):
+            if k3 != 'paper':
+                raise ScenarioError(f"gains.k3: expected a number or 'paper', got {k3!r}")
+            k3 = paper_k3(k1, k2)
+        return cls(alpha_d=alpha_d, beta_d=beta_d, beta1=beta1, k3=k3, k1=k1, k2=k2, P=matrix)
+
+    @property
+    def k0(self) -> float:
+        return float(self.P[0, 0])
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, DoubleGains):
+            return NotImplemented
+        return all(
+            getattr(self, key) == getattr(other, key)
+            for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2')
+        ) and np.array_equal(self.P, other.P)
+
+    __hash__ = None
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Scenario:
+    """One formation problem: Δ, graph with d_ij, initial states, gains, horizon."""
+
+    name: str
+    dynamics: str
+    delta: float
+    agent_ids: tuple[int, ...]
+    positions: np.ndarray
+    velocities: np.ndarray | None
+    edges: tuple[Edge, ...]
+    gains: SingleGains | DoubleGains
+    horizon: float
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ScenarioError(f'name: expected a non-empty string, got {self.name!r}')
+        if self.dynamics not in DYNAMICS:
+            raise ScenarioError(f"dynamics: must be 'single' or 'double', got {self.dynamics!r}")
+        delta = _finite_float(self.delta, 'communication_radius')
+        if not delta > 0.0:
+            raise ScenarioError(f'communication_radius: Δ must be > 0, got {delta!r}')
+        horizon = _finite_float(self.horizon, 'horizon')
+        if not horizon > 0.0:
+            raise ScenarioError(f'horizon: must be > 0, got {horizon!r}')
+        object.__setattr__(self, 'delta', delta)
+        object.__setattr__(self, 'horizon', horizon)
+
+        ids = tuple(_agent_id(agent, 'agent_ids') for agent in self.agent_ids)
+        if len(ids) < 2:
+            raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {list(ids)}')
+        if any(a >= b for a, b in zip(ids, ids[1:])):
+            raise ScenarioError(f'agent_ids: must be unique and sorted, got {list(ids)}')
+        object.__setattr__(self, 'agent_ids', ids)
+        index = {agent: k for k, agent in enumerate(ids)}
+
+        positions = np.array(self.positions, dtype=float)
+        if positions.ndim != 2 or positions.shape[0] != len(ids) or positions.shape[1] < 1:
+            raise ScenarioError(
+                f'positions: expected shape ({len(ids)}, p) for agents {list(ids)}, got {positions.shape}'
+            )
+        self._check_finite(positions, 'position')
+        object.__setattr__(self, 'positions', _readonly(positions))
+        if self.dynamics == 'double':
+            if self.velocities is None:
+                raise ScenarioError("velocities: required for dynamics 'double'")
+            velocities = np.array(self.velocities, dtype=float)
+            if velocities.shape != positions.shape:
+                raise ScenarioError(
+                    f'velocities: expected shape {positions.shape} like the positions, '
+                    f'got {velocities.shape}'
+                )
+            self._check_finite(velocities, 'velocity')
+            object.__setattr__(self, 'velocities', _readonly(velocities))
+        elif self.velocities is not None:
+            raise ScenarioError("velocities: must be absent for dynamics 'single'")
+
+        expected = SingleGains if self.dynamics == 'single' else DoubleGains
+        if not isinstance(self.gains, expected):
+            raise ScenarioError(
+                f'gains: dynamics {self.dynamics!r} needs {expected.__name__}, '
+                f'got {type(self.gains).__name__}'
+            )
+
+        edges = tuple(self.edges)
+        p = positions.shape[1]
+        first_seen: dict[tuple[int, int], int] = {}
+        for k, edge in enumerate(edges):
+            if not isinstance(edge, Edge):
+                raise ScenarioError(f'edges[{k}]: expected an Edge, got {edge!r}')
+            i, j = edge.i, edge.j
+            if i not in index or j not in index:
+                role, agent = ('i', i) if i not in index else ('j', j)
+                raise ScenarioError(
+                    f'edges[{k}] ({i}, {j}): {role}={agent} is not an agent (agents: {_id_list(ids)})'
+                )
+            if edge.d.shape != (p,):
+                raise ScenarioError(
+                    f'edges[{k}] ({i}, {j}): d has {edge.d.size} components, expected {p} (the '
+                    f'dimension p of the positions): {edge.d.tolist()}'
+                )
+            key = (i, j) if i < j else (j, i)
+            seen = first_seen.setdefault(key, k)
+            if seen != k:
+                other = edges[seen]
+                # Seen from the first listing's orientation, the second one asks for this d.
+                implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
+                agreement = (
+                    'they agree'
+                    if np.array_equal(implied, other.d)
+                    else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
+                )
+                raise ScenarioError(
+                    f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
+                    f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
+                )
+        object.__setattr__(self, 'edges', edges)
+        object.__setattr__(self, '_index', index)
+        object.__setattr__(self, '_neighbours', None)  # built on first use
+
+    def _check_finite(self, array: np.ndarray, what: str) -> None:
+        bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
+        if bad.size:
+            agent = self.agent_ids[bad[0]]
+            raise ScenarioError(f'agents.{agent}.{what}: must be finite, got {array[bad[0]].tolist()}')
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Scenario):
+            return NotImplemented
+        return (
+            self.name == other.name
+            and self.dynamics == other.dynamics
+            and self.delta == other.delta
+            and self.agent_ids == other.agent_ids
+            and np.array_equal(self.positions, other.positions)
+            and (
+                (self.velocities is None and other.velocities is None)
+                or (
+                    self.velocities is not None
+                    and other.velocities is not None
+                    and np.array_equal(self.velocities, other.velocities)
+                )
+            )
+            and self.edges == other.edges
+            and self.gains == other.gains
+            and self.horizon == other.horizon
+        )
+
+    __hash__ = None
+
+    @property
+    def n(self) -> int:
+        return len(self.agent_ids)
+
+    @property
+    def dimension(self) -> int:
+        return int(self.positions.shape[1])
+
+    def index(self, agent_id: int) -> int:
+        """Row of `agent_id` in positions/velocities."""
+        try:
+            return self._index[agent_id]
+        except KeyError:
+            raise ScenarioError(
+                f'unknown agent {agent_id!r} (agents: {_id_list(self.agent_ids)})'
+            ) from None
+
+    def neighbours(self, agent_id: int) -> dict[int, np.ndarray]:
+        """N_i with the desired displacement seen from agent i: j -> d_ij (d_ji = -d_ij)."""
+        self.index(agent_id)
+        if self._neighbours is None:
+            table: dict[int, dict[int, np.ndarray]] = {agent: {} for agent in self.agent_ids}
+            for edge in self.edges:
+                table[edge.i][edge.j] = edge.d
+                table[edge.j][edge.i] = _readonly(-edge.d)
+            object.__setattr__(self, '_neighbours', table)
+        return dict(self._neighbours[agent_id])
+
+    def edge_indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows of i, rows of j, d_ij stacked as (m, p)) over `edges`, for vectorised formulas."""
+        m = len(self.edges)
+        heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
+        tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
+        d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
+        return heads, tails, d
+
+    def replace(self, **changes: Any) -> Scenario:
+        """A copy with some fields changed (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+
+def _id_list(ids: tuple[int, ...]) -> str:
+    if len(ids) <= 12:
+        return ', '.join(map(str, ids))
+    return f'{ids[0]}, {ids[1]}, ..., {ids[-1]} ({len(ids)} agents)'
+
+
+# --------------------------------------------------------------------------- dicts
+
+
+def _mapping(value: Any, where: str) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise ScenarioError(f'{where}: expected a mapping, got {value!r}')
+    return value
+
+
+def _check_keys(data: Mapping, where: str, *, required: tuple, optional: tuple = ()) -> None:
+    allowed = required + optional
+    unknown = [key for key in data if key not in allowed]
+    if unknown:
+        raise ScenarioError(
+            f'{where}: unknown key {unknown[0]!r} (allowed: {", ".join(allowed)})'
+        )
+    missing = [key for key in required if key not in data]
+    if missing:
+        raise ScenarioError(f'{where}: missing key {missing[0]!r} (required: {", ".join(required)})')
+
+
+def _positive(value: Any, where: str, what: str) -> float:
+    number = _finite_float(value, where)
+    if not number > 0.0:
+        raise ScenarioError(f'{where}: {what} must be > 0, got {value!r}')
+    return number
+
+
+def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
+    """Build a scenario from the YAML schema (docs/SCENARIOS.md); `name` is used if data has none."""
+    data = _mapping(data, 'scenario')
+    _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name',))
+    scenario_name = data.get('name', name if name is not None else 'scenario')
+    if not isinstance(scenario_name, str) or not scenario_name:
+        raise ScenarioError(f'name: expected a non-empty string, got {scenario_name!r}')
+
+    dynamics = data['dynamics']
+    if dynamics not in DYNAMICS:
+        raise ScenarioError(f"dynamics: must be 'single' or 'double', got {dynamics!r}")
+    delta = _positive(data['communication_radius'], 'communication_radius', 'Δ')
+    horizon = _positive(data['horizon'], 'horizon', 'the horizon')
+
+    agents = _mapping(data['agents'], 'agents')
+    if len(agents) < 2:
+        raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {len(agents)}')
+    velocity_keys = ('position', 'velocity') if dynamics == 'double' else ('position',)
+    entries: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+    dimension: int | None = None
+    first_agent: int | None = None
+    for raw_id, entry in agents.items():
+        # JSON has only string keys: accept "12" for agent 12, so summary.json copies load too.
+        key = int(raw_id) if isinstance(raw_id, str) and raw_id.isascii() and raw_id.isdigit() else raw_id
+        agent = _agent_id(key, f'agents.{raw_id}')
+        if agent in entries:
+            raise ScenarioError(f'agents.{raw_id}: agent {agent} is listed twice')
+        where = f'agents.{agent}'
+        entry = _mapping(entry, where)
+        if dynamics == 'single' and 'velocity' in entry:
+            raise ScenarioError(
+                f"{where}.velocity: given, but dynamics is 'single' (single integrators have no "
+                f'velocity state): {entry["velocity"]!r}'
+            )
+        if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
+            raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
+        _check_keys(entry, where, required=velocity_keys)
+        position = _vector(entry['position'], f'{where}.position', size=dimension)
+        if dimension is None:
+            dimension, first_agent = position.size, agent
+        elif position.size != dimension:  # pragma: no cover - _vector already enforces the size
+            raise ScenarioError(f'{where}.position: dimension differs from agent {first_agent}')
+        velocity = (
+            _vector(entry['velocity'], f'{where}.velocity', size=dimension)
+            if dynamics == 'double'
+            else None
+        )
+        entries[agent] = (position, velocity)
+    ids = tuple(sorted(entries))
+    positions = np.array([entries[a][0] for a in ids])
+    velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
+
+    raw_edges = data['edges']
+    if not isinstance(raw_edges, list):
+        raise ScenarioError(f'edges: expected a list of {{i, j, d}}, got {raw_edges!r}')
+    edges = []
+    for k, raw in enumerate(raw_edges):
+        where = f'edges[{k}]'
+        raw = _mapping(raw, where)
+        _check_keys(raw, where, required=('i', 'j', 'd'))
+        i = _agent_id(raw['i'], f'{where}.i')
+        j = _agent_id(raw['j'], f'{where}.j')
+        where = f'edges[{k}] ({i}, {j})'
+        for role, agent in (('i', i), ('j', j)):
+            if agent not in entries:
+                raise ScenarioError(f'{where}: {role}={agent} is not an agent (agents: {_id_list(ids)})')
+        if i == j:
+            raise ScenarioError(f'{where}: i = j = {i} is a self-loop')
+        d = _vector(raw['d'], f'{where}.d', size=dimension)
+        edges.append(Edge(i=i, j=j, d=d))
+
+    gains = _gains_from_dict(data['gains'], dynamics)
+    return Scenario(
+        name=scenario_name,
+        dynamics=dynamics,
+        delta=delta,
+        agent_ids=ids,
+        positions=positions,
+        velocities=velocities,
+        edges=tuple(edges),
+        gains=gains,
+        horizon=horizon,
+    )
+
+
+def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
+    raw = _mapping(raw, 'gains')
+    if dynamics == 'single':
+        unknown = [key for key in raw if key not in _SINGLE_GAINS]
+        if unknown:
+            raise ScenarioError(
+                f"gains: unknown key {unknown[0]!r} for dynamics 'single' (allowed: alpha, beta)"
+            )
+        _check_keys(raw, 'gains', required=_SINGLE_GAINS)
+        return SingleGains(alpha=raw['alpha'], beta=raw['beta'])
+    unknown = [key for key in raw if key not in _DOUBLE_GAINS + _DOUBLE_OPTIONAL]
+    if unknown:
+        raise ScenarioError(
+            f"gains: unknown key {unknown[0]!r} for dynamics 'double' "
+            f'(allowed: {", ".join(_DOUBLE_GAINS + _DOUBLE_OPTIONAL)})'
+        )
+    _check_keys(raw, 'gains', required=_DOUBLE_GAINS, optional=_DOUBLE_OPTIONAL)
+    values = {key: raw[key] for key in ('alpha_d', 'beta_d', 'beta1')}
+    for key, value in values.items():
+        _finite_float(value, f'gains.{key}')
+    k3 = raw['k3']
+    if not isinstance(k3, str):
+        k3 = _finite_float(k3, 'gains.k3')
+    elif k3 != 'paper':
+        raise ScenarioError(f"gains.k3: expected a number or 'paper', got {k3!r}")
+    if 'k1' not in raw and 'k2' not in raw:
+        if 'k0' in raw:
+            raise ScenarioError(f'gains.k0: given ({raw["k0"]!r}) without k1 and k2')
+        return DoubleGains.from_riccati(k3=k3, **values)
+    if 'k1' not in raw or 'k2' not in raw:
+        given = 'k1' if 'k1' in raw else 'k2'
+        raise ScenarioError(
+            f'gains.{given}: given ({raw[given]!r}) without its partner; give both k1 and k2 or '
+            f'neither (then P, k1, k2 come from (riccatti))'
+        )
+    k1 = _finite_float(raw['k1'], 'gains.k1')
+    k2 = _finite_float(raw['k2'], 'gains.k2')
+    beta1 = float(values['beta1'])
+    # k0 = 2 β1 k1 k2 zeroes the off-diagonal of (riccatti), the best choice for given k1, k2.
+    k0 = _finite_float(raw['k0'], 'gains.k0') if 'k0' in raw else 2.0 * beta1 * k1 * k2
+    if k3 == 'paper':
+        k3 = paper_k3(k1, k2)
+    return DoubleGains(k3=k3, k1=k1, k2=k2, P=np.array([[k0, k1], [k1, k2]]), **values)
+
+
+def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
+    """The YAML schema of `scenario`; scenario_from_dict(scenario_to_dict(s)) == s exactly."""
+    double = scenario.dynamics == 'double'
+    agents: dict[int, dict[str, list[float]]] = {}
+    for k, agent in enumerate(scenario.agent_ids):
+        entry = {'position': scenario.positions[k].tolist()}
+        if double:
+            entry['velocity'] = scenario.velocities[k].tolist()
+        agents[agent] = entry
+    gains = scenario.gains
+    if double:
+        gains_dict: dict[str, Any] = {
+            'alpha_d': gains.alpha_d,
+            'beta_d': gains.beta_d,
+            'beta1': gains.beta1,
+            'k3': gains.k3,
+        }
+        if not (gains.beta1 > 0.0 and np.array_equal(gains.P, riccati_solution(gains.beta1))):
+            gains_dict.update(k1=gains.k1, k2=gains.k2, k0=gains.k0)
+    else:
+        gains_dict = {'alpha': gains.alpha, 'beta': gains.beta}
+    return {
+        'name': scenario.name,
+        'dynamics': scenario.dynamics,
+        'communication_radius': scenario.delta,
+        'horizon': scenario.horizon,
+        'agents': agents,
+        'edges': [{'i': e.i, 'j': e.j, 'd': e.d.tolist()} for e in scenario.edges],
+        'gains': gains_dict,
+    }
+
+
+# --------------------------------------------------------------------------- YAML
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that rejects duplicate keys and reads 1e-3 (YAML 1.2 style) as a float."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    'while constructing a mapping',
+                    node.start_mark,
+                    f'found duplicate key {key!r}',
+                    key_node.start_mark,
+                )
+            seen[key] = True
+        return super().construct_mapping(node, deep=deep)
+
+
+_Loader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$'),
+    list('-+0123456789.'),
+)
+
+
+def _parse_yaml(text: str, source: str) -> Any:
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
+    except yaml.MarkedYAMLError as error:
+        mark = error.problem_mark or error.context_mark
+        where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'unknown position'
+        problem = error.problem or error.context or 'malformed YAML'
+        context = ''
+        if error.context and error.context_mark and error.context_mark is not mark:
+            start = error.context_mark
+            context = f' ({error.context} started at line {start.line + 1}, column {start.column + 1})'
+        raise ScenarioError(f'{source}: malformed YAML at {where}: {problem}{context}') from None
+    except yaml.YAMLError as error:
+        raise ScenarioError(f'{source}: malformed YAML: {error}') from None
+
+
+def builtin_scenarios() -> tuple[str, ...]:
+    """Names accepted by `load_scenario` besides paths (the YAML files shipped in the package)."""
+    folder = resources.files(BUILTIN_PACKAGE)
+    return tuple(
+        sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith('.yaml'))
+    )
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a YAML file."""
+    if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
+        resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
+        text = resource.read_text(encoding='utf-8')
+        source, default_name = f'built-in scenario {name_or_path!r}', name_or_path
+    else:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise ScenarioError(
+                f'{str(name_or_path)!r}: no such scenario file and not a built-in scenario '
+                f'({", ".join(builtin_scenarios())})'
+            )
+        try:
+            text = path.read_text(encoding='utf-8')
+        except (OSError, UnicodeDecodeError) as error:
+            raise ScenarioError(f'{path}: cannot read: {error}') from None
+        source, default_name = str(path), path.stem
+    data = _parse_yaml(text, source)
+    try:
+        return scenario_from_dict(data, name=default_name)
+    except ScenarioError as error:
+        raise ScenarioError(f'{source}: {error}') from None
+
+
+class _Dumper(yaml.SafeDumper):
+    pass
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    # Vectors of numbers on one line, like the schema's examples.
+    flow = all(isinstance(item, (int, float)) for item in data)
+    return dumper.represent_sequence('tag:yaml.org,2002:seq', data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def dump_scenario_text(scenario: Scenario) -> str:
+    """`scenario` as YAML text that reads back exactly (floats keep every bit)."""
+    return yaml.dump(scenario_to_dict(scenario), Dumper=_Dumper, sort_keys=False, allow_unicode=True)
+
+
+def dump_scenario(scenario: Scenario, path: str | Path) -> None:
+    """Write `scenario` as YAML; load_scenario(path) == scenario exactly (floats keep every bit)."""
+    Path(path).write_text(dump_scenario_text(scenario), encoding='utf-8')

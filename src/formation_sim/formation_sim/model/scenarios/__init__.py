@@ -1,0 +1,1 @@
+"""Built-in scenarios (YAML), loaded by name through `formation_sim.model.scenario.load_scenario`."""

@@ -1,0 +1,418 @@
+"""Check a scenario against the hypotheses of Theorems 1 and 2 and report every number involved.
+
+Rules (the `rule` of each finding):
+
+connected     the graph is connected (Theorems 1, 2)                                   error
+feasible      Φ is non-empty: least-squares residual of τ_i - τ_j = d_ij ~ 0 (Assumption 1)  error
+edge_length   ||d_ij|| < Δ on every edge (Assumption 1)                                error
+initial       ||x_i(0) - x_j(0) - d_ij|| < Δ - ||d_ij|| (initial)                      error;
+              warning when the slack is below 5 % of Δ - ||d_ij||
+alpha         α > 0 (Theorem 1)                                                         error
+beta          0 < β < β0 = ρ2(DD^T)/Δ0 (Theorem 1)                                       error;
+              warning above 0.95 β0
+remark        β (or β1) above 4/(n(n-1)Δ) (Remark 3.2): agents cannot certify it alone  warning
+alpha_d       α_d > 0 (Theorem 2)                                                       error
+beta1         0 < β1 <= β0 (riccatti)                                                   error
+k1_k2         k1, k2 > 0 (riccatti)                                                     error
+riccati       P > 0 and ½(PC+C^T P) - β1 PBB^T P + 2I <= 0 (riccatti)                    error
+k3            0 < k3 < 4/(k2 + sqrt(k1²+k2²)), i.e. k4 < 2 (Theorem 2)                   error;
+              warning above 0.95 of the bound
+beta_d        0 < β_d < (2-k4) ρ2(P) as printed in Theorem 2                            error;
+              warning above 0.95 of the bound
+beta_d_corrected  β_d < (2-k4)/λmax(P), what the proof supports (docs/THEOREM2.md)     warning
+
+Notes (informational findings) carry the graph quantities, the feasibility residual, the slack of
+every edge and the Riccati solution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+from typing import Any
+
+import numpy as np
+
+from formation_sim.model import theory
+from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
+from formation_sim.model.scenario import Scenario
+
+NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
+SLACK_WARNING_FRACTION = 0.05  # warn when (initial) holds with less than this relative slack
+SLACK_LINES = 20  # per-edge slack lines printed by `format` (all are in to_dict)
+
+
+class ValidationError(ValueError):
+    """A scenario that breaks a hypothesis of the paper; `report` holds all findings."""
+
+    def __init__(self, report: ValidationReport) -> None:
+        self.report = report
+        first = report.errors[0]
+        more = f' (and {len(report.errors) - 1} more errors)' if len(report.errors) > 1 else ''
+        super().__init__(
+            f'scenario {report.scenario!r} is invalid: [{first.rule}] {first.subject}: '
+            f'{first.message}{more}'
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Finding:
+    rule: str
+    subject: str  # 'graph', 'formation', 'edge (i, j)', 'gains', ...
+    message: str  # human text with the numbers
+    values: dict[str, Any] = field(default_factory=dict)  # the numbers, JSON-friendly
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            'rule': self.rule,
+            'subject': self.subject,
+            'message': self.message,
+            'values': _json_safe(self.values),
+        }
+
+    def format(self) -> str:
+        return f'[{self.rule}] {self.subject}: {self.message}'
+
+
+@dataclass(kw_only=True)
+class ValidationReport:
+    scenario: str
+    dynamics: str
+    errors: list[Finding] = field(default_factory=list)
+    warnings: list[Finding] = field(default_factory=list)
+    notes: list[Finding] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            'scenario': self.scenario,
+            'dynamics': self.dynamics,
+            'ok': self.ok,
+            'errors': [f.to_dict() for f in self.errors],
+            'warnings': [f.to_dict() for f in self.warnings],
+            'notes': [f.to_dict() for f in self.notes],
+        }
+
+    def format(self) -> str:
+        verdict = 'VALID' if self.ok else 'INVALID'
+        lines = [
+            f'scenario {self.scenario!r} ({self.dynamics} integrators): {verdict}, '
+            f'{len(self.errors)} error(s), {len(self.warnings)} warning(s)'
+        ]
+        for note in self.notes:
+            lines.append(f'  {note.subject}: {note.message}')
+            if note.rule == 'initial' and 'edges' in note.values:
+                lines.extend(_slack_lines(note.values['edges']))
+        for title, findings in (('errors', self.errors), ('warnings', self.warnings)):
+            if findings:
+                lines.append(f'{title}:')
+                lines.extend(f'  {finding.format()}' for finding in findings)
+        return '\n'.join(lines)
+
+
+def _json_safe(value: Any) -> Any:
+    """Plain JSON types; non-finite floats (e.g. the relative slack of a zero margin) become None."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def _slack_lines(edges: list[dict[str, Any]]) -> list[str]:
+    shown = sorted(edges, key=lambda e: e['relative_slack'])[:SLACK_LINES]
+    lines = [
+        f'    edge ({e["i"]}, {e["j"]}): ||d_ij|| = {_g(e["d_norm"])}, Δ-||d_ij|| = {_g(e["margin"])}, '
+        f'||x_i(0)-x_j(0)-d_ij|| = {_g(e["error"])}, slack {_g(e["slack"])} '
+        f'({100.0 * e["relative_slack"]:.1f} %)'
+        for e in shown
+    ]
+    if len(edges) > len(shown):
+        lines.append(f'    ... {len(edges) - len(shown)} more edges with larger slack (see --json)')
+    return lines
+
+
+def _g(value: float) -> str:
+    return f'{value:.6g}'
+
+
+def _edge(edge) -> str:
+    return f'edge ({edge.i}, {edge.j})'
+
+
+class _Collector:
+    def __init__(self, report: ValidationReport) -> None:
+        self.report = report
+
+    def error(self, rule: str, subject: str, message: str, **values: Any) -> None:
+        self.report.errors.append(Finding(rule=rule, subject=subject, message=message, values=values))
+
+    def warning(self, rule: str, subject: str, message: str, **values: Any) -> None:
+        self.report.warnings.append(Finding(rule=rule, subject=subject, message=message, values=values))
+
+    def note(self, rule: str, subject: str, message: str, **values: Any) -> None:
+        self.report.notes.append(Finding(rule=rule, subject=subject, message=message, values=values))
+
+
+def validate_scenario(scenario: Scenario) -> ValidationReport:
+    """Every hypothesis of the theorem for `scenario.dynamics`, with the numbers."""
+    report = ValidationReport(scenario=scenario.name, dynamics=scenario.dynamics)
+    out = _Collector(report)
+    n, m = scenario.n, len(scenario.edges)
+
+    components = theory.graph_components(scenario)
+    connected = len(components) == 1
+    out.note(
+        'connected',
+        'graph',
+        f'{n} agents, {m} edges, p = {scenario.dimension}, Δ = {_g(scenario.delta)}, '
+        + ('connected' if connected else f'{len(components)} components'),
+        n=n,
+        m=m,
+        components=len(components),
+    )
+    if not connected:
+        sizes = [len(c) for c in components]
+        stray = components[1]
+        out.error(
+            'connected',
+            'graph',
+            f'the graph has {len(components)} connected components (sizes {sizes[:10]}); '
+            f'e.g. agent {stray[0]} has no path to agent {components[0][0]}',
+            component_sizes=sizes,
+            components=[list(c) for c in components[:10]],
+        )
+
+    feasibility = theory.formation_feasibility(scenario)
+    worst = int(np.argmax(feasibility.edge_residuals)) if m else None
+    if feasibility.feasible:
+        out.note(
+            'feasible',
+            'formation',
+            f'feasible: least-squares residual max ||τ_i-τ_j-d_ij|| = {_g(feasibility.residual)} '
+            f'(tolerance {_g(feasibility.tolerance)})',
+            residual=feasibility.residual,
+            tolerance=feasibility.tolerance,
+        )
+    else:
+        edge = scenario.edges[worst]
+        out.error(
+            'feasible',
+            'formation',
+            f'no τ with τ_i - τ_j = d_ij on every edge (Assumption 1): least-squares residual '
+            f'{_g(feasibility.residual)} on {_edge(edge)} exceeds {_g(feasibility.tolerance)}; '
+            f'the d_ij around some cycle do not sum to 0',
+            residual=feasibility.residual,
+            tolerance=feasibility.tolerance,
+            worst_edge=[edge.i, edge.j],
+        )
+
+    margins = theory.edge_margins(scenario)
+    errors0 = theory.edge_errors(scenario, scenario.positions)
+    slack_rows = []
+    for k, edge in enumerate(scenario.edges):
+        d_norm = float(np.linalg.norm(edge.d))
+        margin, error = float(margins[k]), float(errors0[k])
+        slack = margin - error
+        relative = slack / margin if margin > 0.0 else -math.inf
+        slack_rows.append(
+            dict(i=edge.i, j=edge.j, d_norm=d_norm, margin=margin, error=error, slack=slack,
+                 relative_slack=relative)
+        )
+        if not margin > 0.0:
+            out.error(
+                'edge_length',
+                _edge(edge),
+                f'||d_ij|| = {_g(d_norm)} is not below Δ = {_g(scenario.delta)} (Assumption 1)',
+                d_norm=d_norm,
+                delta=scenario.delta,
+            )
+        if not error < margin:
+            out.error(
+                'initial',
+                _edge(edge),
+                f'||x_i(0)-x_j(0)-d_ij|| = {_g(error)} is not below Δ-||d_ij|| = {_g(margin)} '
+                f'(initial)',
+                error=error,
+                margin=margin,
+            )
+        elif relative < SLACK_WARNING_FRACTION:
+            out.warning(
+                'initial',
+                _edge(edge),
+                f'(initial) holds with slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij|| = {_g(slack)}, only '
+                f'{100.0 * relative:.1f} % of Δ-||d_ij|| = {_g(margin)} (below '
+                f'{100.0 * SLACK_WARNING_FRACTION:.0f} %)',
+                slack=slack,
+                margin=margin,
+                relative_slack=relative,
+            )
+    if slack_rows:
+        least = min(slack_rows, key=lambda row: row['relative_slack'])
+        out.note(
+            'initial',
+            'initial condition',
+            f'(initial) slack per edge, least {_g(least["slack"])} '
+            f'({100.0 * least["relative_slack"]:.1f} %) on edge ({least["i"]}, {least["j"]})',
+            edges=slack_rows,
+        )
+
+    beta0 = None
+    if connected and margins.size and margins.max() > 0.0:
+        lam2 = theory.algebraic_connectivity(scenario)
+        delta0 = float(margins.max())
+        beta0 = lam2 / delta0
+        remark = theory.remark_beta_bound(scenario)
+        out.note(
+            'beta',
+            'graph',
+            f'ρ2(DD^T) = {_g(lam2)}, Δ0 = max(Δ-||d_ij||) = {_g(delta0)}, β0 = ρ2/Δ0 = {_g(beta0)}; '
+            f'Remark 3.2 bound 4/(n(n-1)Δ) = {_g(remark)}',
+            rho2=lam2,
+            delta0=delta0,
+            beta0=beta0,
+            remark_bound=remark,
+        )
+
+    if scenario.dynamics == 'single':
+        _check_single(scenario, out, beta0)
+    else:
+        _check_double(scenario, out, beta0)
+    return report
+
+
+def _check_remark(scenario: Scenario, out: _Collector, name: str, value: float) -> None:
+    remark = theory.remark_beta_bound(scenario)
+    if value > remark:
+        out.warning(
+            'remark',
+            'gains',
+            f'{name} = {_g(value)} exceeds 4/(n(n-1)Δ) = {_g(remark)} (Remark 3.2): an agent that '
+            f'knows only n and Δ cannot check {name} against β0 locally',
+            value=value,
+            remark_bound=remark,
+        )
+
+
+def _check_single(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
+    alpha, beta = scenario.gains.alpha, scenario.gains.beta
+    if not alpha > 0.0:
+        out.error('alpha', 'gains', f'α must be > 0, got α = {_g(alpha)}', alpha=alpha)
+    if beta0 is None:
+        return
+    if not 0.0 < beta < beta0:
+        out.error(
+            'beta', 'gains', f'0 < β < β0 = {_g(beta0)} required, got β = {_g(beta)}',
+            beta=beta, beta0=beta0,
+        )
+    elif beta > NEAR_EDGE_FRACTION * beta0:
+        out.warning(
+            'beta', 'gains',
+            f'β = {_g(beta)} is {100.0 * beta / beta0:.1f} % of β0 = {_g(beta0)} '
+            f'(above {100.0 * NEAR_EDGE_FRACTION:.0f} %)',
+            beta=beta, beta0=beta0,
+        )
+    if beta > 0.0:
+        _check_remark(scenario, out, 'β', beta)
+
+
+def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
+    gains = scenario.gains
+    k1, k2, k3, beta1, beta_d = gains.k1, gains.k2, gains.k3, gains.beta1, gains.beta_d
+    if not gains.alpha_d > 0.0:
+        out.error('alpha_d', 'gains', f'α_d must be > 0, got α_d = {_g(gains.alpha_d)}',
+                  alpha_d=gains.alpha_d)
+    if beta0 is not None:
+        if not 0.0 < beta1 <= beta0:
+            out.error('beta1', 'gains', f'0 < β1 <= β0 = {_g(beta0)} required, got β1 = {_g(beta1)}',
+                      beta1=beta1, beta0=beta0)
+        if beta1 > 0.0:
+            _check_remark(scenario, out, 'β1', beta1)
+
+    eigenvalues = np.linalg.eigvalsh(gains.P)
+    rho2_p, lam_max_p = float(eigenvalues.min()), float(eigenvalues.max())
+    lhs = riccati_lhs(gains.P, beta1)
+    lhs_max = float(np.linalg.eigvalsh(lhs).max())
+    out.note(
+        'riccati',
+        'gains',
+        f'P = [[{_g(gains.k0)}, {_g(k1)}], [{_g(k1)}, {_g(k2)}]] (k1 = {_g(k1)}, k2 = {_g(k2)}), '
+        f'eigenvalues ρ2(P) = {_g(rho2_p)}, λmax(P) = {_g(lam_max_p)}; largest eigenvalue of '
+        f'½(PC+C^T P) - β1 PBB^T P + 2I = {_g(lhs_max)}',
+        P=gains.P.tolist(), k1=k1, k2=k2, rho2_P=rho2_p, lambda_max_P=lam_max_p,
+        riccati_max_eigenvalue=lhs_max,
+    )
+    if not (k1 > 0.0 and k2 > 0.0):
+        out.error('k1_k2', 'gains', f'k1, k2 > 0 required, got k1 = {_g(k1)}, k2 = {_g(k2)}', k1=k1, k2=k2)
+    if not riccati_holds(gains.P, beta1):
+        out.error(
+            'riccati', 'gains',
+            f'P > 0 with ½(PC+C^T P) - β1 PBB^T P + 2I <= 0 required (riccatti); eigenvalues of P '
+            f'{_g(rho2_p)}, {_g(lam_max_p)}, largest eigenvalue of the left side {_g(lhs_max)} '
+            f'for β1 = {_g(beta1)}',
+            rho2_P=rho2_p, riccati_max_eigenvalue=lhs_max, beta1=beta1,
+        )
+    upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
+    k4 = k4_value(k1, k2, k3)
+    if not 0.0 < k3 < upper:
+        out.error(
+            'k3', 'gains',
+            f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {_g(upper)} required (k4 < 2), got k3 = {_g(k3)}, '
+            f'k4 = {_g(k4)}',
+            k3=k3, k3_upper_bound=upper, k4=k4,
+        )
+        return
+    if k3 > NEAR_EDGE_FRACTION * upper:
+        out.warning(
+            'k3', 'gains',
+            f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
+            k3=k3, k3_upper_bound=upper, k4=k4,
+        )
+    bound_paper = (2.0 - k4) * rho2_p
+    bound_corrected = (2.0 - k4) / lam_max_p
+    out.note(
+        'beta_d', 'gains',
+        f'k4 = {_g(k4)}; β_d bounds: (2-k4) ρ2(P) = {_g(bound_paper)} (as printed), '
+        f'(2-k4)/λmax(P) = {_g(bound_corrected)} (what the proof supports)',
+        k4=k4, beta_d_bound_paper=bound_paper, beta_d_bound_corrected=bound_corrected,
+    )
+    if not 0.0 < beta_d < bound_paper:
+        out.error(
+            'beta_d', 'gains',
+            f'0 < β_d < (2-k4) ρ2(P) = {_g(bound_paper)} required, got β_d = {_g(beta_d)}',
+            beta_d=beta_d, bound=bound_paper,
+        )
+        return
+    if beta_d > NEAR_EDGE_FRACTION * bound_paper:
+        out.warning(
+            'beta_d', 'gains',
+            f'β_d = {_g(beta_d)} is {100.0 * beta_d / bound_paper:.1f} % of (2-k4) ρ2(P) = '
+            f'{_g(bound_paper)}',
+            beta_d=beta_d, bound=bound_paper,
+        )
+    if not beta_d < bound_corrected:
+        out.warning(
+            'beta_d_corrected', 'gains',
+            f'β_d = {_g(beta_d)} is not below (2-k4)/λmax(P) = {_g(bound_corrected)}, the rate the '
+            f'proof of Theorem 2 (ii) supports; the printed bound (2-k4) ρ2(P) = {_g(bound_paper)} '
+            f'does not follow from it (docs/THEOREM2.md), so convergence at rate β_d is not '
+            f'guaranteed',
+            beta_d=beta_d, bound_corrected=bound_corrected, bound_paper=bound_paper,
+        )
+
+
+def require_valid(scenario: Scenario) -> ValidationReport:
+    """The report of a valid scenario (warnings allowed); raises ValidationError otherwise."""
+    report = validate_scenario(scenario)
+    if not report.ok:
+        raise ValidationError(report)
+    return report

@@ -1,0 +1,695 @@
+"""Start, watch and stop a distributed formation run: simulator, agents and recorder processes.
+
+```python
+from formation_sim.runtime.orchestrate import FormationRun
+
+result = FormationRun('paper_single', out_dir='runs/demo', horizon=10.0).run()
+print(result.summary, result.bag)
+```
+
+Every child runs in its own process group and session, in a private ROS domain limited to this
+machine (unless `localhost_only=False`); the run ends when the simulator reaches the horizon, when
+any child dies, or on Ctrl-C/SIGTERM.  Children are then stopped by PID (SIGINT, then SIGTERM,
+then SIGKILL after timeouts), and the Fast DDS shared-memory files of any child killed hard are
+removed.  If the orchestrator itself is killed, the kernel sends every child SIGTERM
+(PR_SET_PDEATHSIG), so nothing is left running.
+
+Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
+nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
+simulator detects a lost agent itself within the DDS liveliness lease and stops with a partial
+summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
+`LOST_DETECTION` s to do so, then stops the rest.  The summary's `extra.failure` names what failed
+and when; a bag left unfinished by a dead recorder is recovered with `recorder.reindex`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import fcntl
+import importlib.util
+import json
+import math
+import os
+import random
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from formation_sim.model.scenario import Scenario, dump_scenario, load_scenario
+from formation_sim.model.validate import require_valid
+
+DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
+MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
+SCENARIO_FILE = 'scenario.yaml'
+SUMMARY_FILE = 'summary.json'
+BAG_DIR = 'bag'
+LOG_DIR = 'logs'
+PROGRESS_PREFIX = 'progress '
+POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+
+# Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_LOST = 3  # a process of the run died or an agent was lost
+EXIT_INTERRUPTED = 130
+
+INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+
+# How long the simulator may take to notice a lost agent by itself: the DDS liveliness lease, its
+# grace, one 0.1 s tick, and margin for a loaded machine (formation_agent.ros.node.LIVELINESS_LEASE).
+LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
+
+
+class RunError(RuntimeError):
+    """The run could not be set up (bad arguments, no free ROS domain, existing output)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChildExit:
+    name: str
+    pid: int
+    returncode: int | None  # None: did not exit by itself and had to be stopped
+    signal_used: str | None  # the last signal sent to stop it, if any
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunResult:
+    """What a run left behind and how it ended."""
+
+    out_dir: Path
+    summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
+    bag: Path | None  # DIR/bag, None if not recorded or not readable
+    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 130 interrupted
+    domain_id: int
+    wall_time: float
+    children: tuple[ChildExit, ...] = ()
+    message: str = ''
+    failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
+    bag_recovered: bool = False  # the recorder died and its bag was rebuilt by recorder.reindex
+
+    @property
+    def ok(self) -> bool:
+        return self.exit_status == 0
+
+
+# -- ROS domain -------------------------------------------------------------------------------
+
+
+def _domain_ports(domain_id: int) -> tuple[int, int]:
+    """Fast DDS unicast ports of participant 0 in `domain_id` (RTPS port mapping)."""
+    base = 7400 + 250 * domain_id
+    return base + 10, base + 11
+
+
+def _ports_free(domain_id: int) -> bool:
+    for port in _domain_ports(domain_id):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('', port))
+            except OSError:
+                return False
+    return True
+
+
+@contextlib.contextmanager
+def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None) -> Iterator[int]:
+    """Hold a ROS domain id for the duration of the block (a lock file; the ports unused).
+
+    With `domain_id` the caller pins the id; it is still locked against other runs.
+    """
+    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    low, high = DOMAIN_RANGE
+    if domain_id is not None:
+        if not 0 <= domain_id <= high:
+            raise RunError(f'domain id must lie in [0, {high}], got {domain_id}')
+        candidates = [domain_id]
+    else:
+        candidates = list(range(low, high + 1))
+        start = random.randrange(len(candidates))
+        candidates = candidates[start:] + candidates[:start]
+    for candidate in candidates:
+        handle = open(lock_dir / f'{candidate}.lock', 'w')  # noqa: SIM115 - held while running
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        if domain_id is None and not _ports_free(candidate):
+            handle.close()
+            continue
+        try:
+            yield candidate
+        finally:
+            handle.close()
+        return
+    if domain_id is not None:
+        raise RunError(f'ROS domain {domain_id} is held by another formation run')
+    raise RunError(f'no free ROS domain in {low}-{high}')
+
+
+# -- processes --------------------------------------------------------------------------------
+
+
+try:  # looked up here, not in the forked child (a child before exec must take no lock)
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # pragma: no cover - not Linux
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the orchestrator dies, even by SIGKILL (Linux)."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+
+
+def describe_exit(returncode: int | None) -> str:
+    if returncode is None:
+        return 'still running'
+    if returncode < 0:
+        with contextlib.suppress(ValueError):
+            return f'killed by {signal.Signals(-returncode).name}'
+    return f'exited with status {returncode}'
+
+
+def _lost_or_failed(child: _Child) -> int:
+    """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
+    return EXIT_FAILED if (child.process.returncode or 0) > 0 else EXIT_LOST
+
+
+@dataclass
+class _Child:
+    name: str
+    process: subprocess.Popen
+    log: Path
+    expected_exit: bool  # leaves by itself when the run completes
+    signal_used: str | None = None
+    shm_files: set[str] = field(default_factory=set)
+    exited_at: float | None = None  # monotonic time its exit was seen
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def error_line(self) -> str:
+        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
+        try:
+            with self.log.open('rb') as handle:
+                handle.seek(max(0, self.log.stat().st_size - 65536))
+                lines = handle.read().decode(errors='replace').splitlines()
+        except OSError:
+            return ''
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: '))]
+        return named[-1].split(': ', 1)[1] if named else ''
+
+    def describe(self) -> str:
+        """'agent_2 (pid 123) killed by SIGKILL', with the error it named if it gave one."""
+        text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
+        error = self.error_line() if self.process.returncode not in (None, 0) else ''
+        return f'{text}: {error}' if error else text
+
+
+def _mapped_shm_files(pid: int) -> set[str]:
+    """Fast DDS shared-memory files mapped by process `pid`."""
+    try:
+        maps = Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return set()
+    return {line.split()[-1] for line in maps.splitlines() if '/dev/shm/fastrtps_' in line or '/dev/shm/sem.fastrtps_' in line}
+
+
+_PORT_FILE = re.compile(r'^(?:sem\.)?fastrtps_port(\d+)(?:_el|_mutex)?$')
+
+
+def _domain_port_files(domain_id: int) -> set[str]:
+    """Fast DDS shared-memory port files of ROS domain `domain_id`, with their lock and semaphore.
+
+    Fast DDS names a port's files after its port number, and the ports of domain d are
+    7400 + 250 d + [0, 250) (the RTPS well-known port mapping).
+    """
+    first = 7400 + 250 * domain_id
+    return {
+        str(path)
+        for path in Path('/dev/shm').iterdir()
+        if (match := _PORT_FILE.match(path.name)) and first <= int(match[1]) < first + 250
+    }
+
+
+def _mapped_by_anyone(paths: set[str]) -> set[str]:
+    """Those of `paths` still mapped by some live process."""
+    in_use = set()
+    for proc in Path('/proc').iterdir():
+        if proc.name.isdigit():
+            in_use |= _mapped_shm_files(int(proc.name)) & paths
+    return in_use
+
+
+class FormationRun:
+    """One distributed run of a scenario: simulator, agent processes and recorder."""
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path,
+        *,
+        out_dir: str | Path,
+        horizon: float | None = None,
+        domain_id: int | None = None,
+        agents_per_process: int = 1,
+        record: bool = True,
+        localhost_only: bool = True,
+        progress: bool = True,
+        sample_period: float = 0.01,
+        timeout: float | None = None,
+        clock: str = 'lockstep',
+        executor: str = 'events',
+        stop_timeouts: tuple[float, float] = (5.0, 3.0),
+        validate: bool = True,
+        inject: dict[str, float] | None = None,
+        launch_prefix: Callable[[str], Sequence[str]] | None = None,
+        extra_env: dict[str, str] | None = None,
+        step_listeners: int = 0,
+    ) -> None:
+        """Check everything that can be checked before any process starts.
+
+        `validate`: refuse a scenario that breaks the theorems' hypotheses (ValidationError);
+        False only for experiments on purpose outside them.  `inject`: fault injection on the
+        agents' arriving triggering information, keys `loss` (probability), `delay_ms`,
+        `jitter_ms`, `seed` (a test facility; loss needs clock='realtime').  `launch_prefix`:
+        child name ('simulator', 'recorder', 'agent_<i>' or 'agents_<i>-<j>') -> command put
+        before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
+        stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
+        `executor`: the rclpy executor of the simulator and agent processes, 'events'
+        (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
+        `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
+        must hear every Step: step 0 waits until that many more readers of it are matched.
+        """
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        if validate:
+            require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
+        self.out_dir = Path(out_dir)
+        self.horizon = float(self.scenario.horizon if horizon is None else horizon)
+        if not (math.isfinite(self.horizon) and self.horizon > 0.0):
+            raise RunError(f'horizon must be a finite number > 0, got {self.horizon!r}')
+        if agents_per_process < 1:
+            raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
+        if self.scenario.dimension > 3:
+            raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
+        if clock not in ('lockstep', 'realtime'):
+            raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
+        self.clock = clock
+        from formation_agent.ros.process import EXECUTORS
+
+        if executor not in EXECUTORS:
+            raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
+        self.executor = executor
+        self.inject = dict(inject or {})
+        if unknown := set(self.inject) - set(INJECT_KEYS):
+            raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
+        for key, value in self.inject.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise RunError(f'inject: {key} must be a finite number >= 0, got {value!r}')
+        if self.inject.get('loss', 0.0) > 1.0:
+            raise RunError(f'inject: loss is a probability in [0, 1], got {self.inject["loss"]!r}')
+        if self.inject.get('loss', 0.0) > 0.0 and clock != 'realtime':
+            raise RunError(
+                'inject: loss needs the wall clock (clock=realtime, --real-time): lock-step waits for '
+                'every message sent, so a dropped one stalls the run'
+            )
+        if step_listeners < 0:
+            raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
+        self.step_listeners = step_listeners
+        self.launch_prefix = launch_prefix
+        self.extra_env = dict(extra_env or {})
+        self.domain_id = domain_id
+        self.agents_per_process = agents_per_process
+        self.record = record
+        self.localhost_only = localhost_only
+        self.progress = progress
+        self.sample_period = sample_period
+        self.timeout = timeout
+        self.stop_timeouts = stop_timeouts
+        self._children: list[_Child] = []
+        self.removed_shm_files: list[str] = []
+        self._interrupted = threading.Event()
+        self._last_progress = ''
+        self._started_at = 0.0
+
+    # -- files ---------------------------------------------------------------------------------
+
+    def _agent_groups(self) -> list[list[int]]:
+        ids = list(self.scenario.agent_ids)
+        k = self.agents_per_process
+        return [ids[start : start + k] for start in range(0, len(ids), k)]
+
+    def _write_inputs(self) -> dict[str, Path]:
+        from formation_agent.ros.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.sim_node import agent_parameters, formation_topics
+
+        out = self.out_dir
+        (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        scenario_path = out / SCENARIO_FILE
+        dump_scenario(self.scenario, scenario_path)  # every float kept bit for bit
+        extra = 1 if self.record else 0
+        injected = {
+            f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()
+        }
+        agents = {
+            f'{agent_namespace(i)}/{NODE_NAME}': {
+                'ros__parameters': {
+                    **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
+                    **injected,
+                }
+            }
+            for i in self.scenario.agent_ids
+        }
+        agents_path = out / 'agents.params.yaml'
+        agents_path.write_text(yaml.safe_dump(agents, sort_keys=False), encoding='utf-8')
+        paths = {'scenario': scenario_path, 'agents': agents_path}
+        if self.record:
+            recorder = {
+                '/formation_recorder': {
+                    'ros__parameters': {
+                        'output': str((out / BAG_DIR).resolve()),
+                        'topics': [f'{name}:{msgtype}' for name, msgtype in formation_topics(self.scenario)],
+                    }
+                }
+            }
+            paths['recorder'] = out / 'recorder.params.yaml'
+            paths['recorder'].write_text(yaml.safe_dump(recorder, sort_keys=False), encoding='utf-8')
+        return paths
+
+    def _environment(self, domain_id: int, processes: int) -> dict[str, str]:
+        env = dict(os.environ)
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+        env['ROS_LOG_DIR'] = str((self.out_dir / LOG_DIR / 'ros').resolve())
+        env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
+        env['PYTHONUNBUFFERED'] = '1'
+        if self.localhost_only:
+            env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        else:
+            env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
+        if processes > MANY_PROCESSES:
+            env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.update(self.extra_env)
+        # Children find these packages the way this process did.
+        here = [
+            str(Path(next(iter(importlib.util.find_spec(name).submodule_search_locations))).resolve().parent)
+            for name in ('formation_msgs_py', 'formation_agent', 'formation_sim')
+        ]
+        env['PYTHONPATH'] = os.pathsep.join(dict.fromkeys(here + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]))
+        return env
+
+    def _start(self, name: str, args: list[str], env: dict[str, str], *, expected_exit: bool, pipe: bool = False) -> _Child:
+        log = self.out_dir / LOG_DIR / f'{name}.log'
+        handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
+        prefix = list(self.launch_prefix(name)) if self.launch_prefix is not None else []
+        process = subprocess.Popen(
+            [*prefix, sys.executable, *args],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if pipe else handle,
+            stderr=handle,
+            start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
+            preexec_fn=_die_with_parent,  # noqa: PLW1509 - only prctl, no locks taken
+            text=True,
+        )
+        child = _Child(name=name, process=process, log=log, expected_exit=expected_exit)
+        if pipe:
+            threading.Thread(target=self._pump, args=(child, handle), daemon=True).start()
+        self._children.append(child)
+        return child
+
+    def _pump(self, child: _Child, handle) -> None:
+        """Copy the simulator's stdout into its log; keep its progress lines for the terminal."""
+        for line in child.process.stdout:
+            handle.write(line)
+            handle.flush()
+            if line.startswith(PROGRESS_PREFIX):
+                self._last_progress = line[len(PROGRESS_PREFIX) :].strip()
+
+    # -- running -------------------------------------------------------------------------------
+
+    def run(self) -> RunResult:
+        if self.record and (self.out_dir / BAG_DIR).exists():
+            raise RunError(f'{self.out_dir / BAG_DIR} exists; the recorder never overwrites a bag')
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        (self.out_dir / SUMMARY_FILE).unlink(missing_ok=True)
+        started = self._started_at = time.monotonic()
+        lost: _Child | None = None
+        with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
+            paths = self._write_inputs()
+            groups = self._agent_groups()
+            env = self._environment(domain_id, len(groups) + 1 + int(self.record))
+            try:
+                status, message, lost = self._launch_and_watch(paths, groups, env)
+            finally:
+                self._stop_all(domain_id)
+        summary = self.out_dir / SUMMARY_FILE
+        bag = self.out_dir / BAG_DIR
+        recovered = self._recover_bag(bag) if self.record else None
+        failure = self._annotate_summary(summary, lost, status, message)
+        if status == EXIT_OK and not summary.is_file():
+            status, message = EXIT_FAILED, f'the simulator exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED:
+            message = failure['message'] + (f'; {message}' if message and message not in failure['message'] else '')
+        if recovered:
+            message += f'; the recorder died: its bag was recovered ({recovered})'
+        result = RunResult(
+            out_dir=self.out_dir,
+            summary=summary if summary.is_file() else None,
+            bag=bag if (bag / 'metadata.yaml').is_file() else None,
+            exit_status=status,
+            domain_id=domain_id,
+            wall_time=time.monotonic() - started,
+            children=tuple(
+                ChildExit(name=c.name, pid=c.pid, returncode=c.process.returncode, signal_used=c.signal_used)
+                for c in self._children
+            ),
+            message=message,
+            failure=failure,
+            bag_recovered=bool(recovered),
+        )
+        if self.progress:
+            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
+            self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
+        return result
+
+    def _recover_bag(self, bag: Path) -> str | None:
+        """A bag left without metadata.yaml (its recorder died) is rebuilt from its MCAP file."""
+        if not bag.is_dir() or (bag / 'metadata.yaml').is_file():
+            return None
+        from formation_sim.bag.io import BagError
+        from formation_sim.bag.recovery import reindex
+
+        try:
+            recovery = reindex(bag)
+        except (BagError, OSError) as error:
+            return f'recovery failed: {error}'
+        return f'{recovery.message_count} messages kept'
+
+    def _annotate_summary(self, summary: Path, lost: _Child | None, status: int, message: str) -> dict | None:
+        """Add the orchestrator's view of a failure to summary.json's extra.failure; return it."""
+        if not summary.is_file():
+            return None
+        data = json.loads(summary.read_text())
+        extra = data.setdefault('extra', {})
+        failure = extra.get('failure')
+        if failure is None and status == EXIT_OK:
+            return None
+        if failure is None:  # the simulator completed, but a child failed
+            failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
+        if lost is not None:
+            failure['process'] = {
+                'name': lost.name,
+                'pid': lost.pid,
+                'returncode': lost.process.returncode,
+                'exit': describe_exit(lost.process.returncode),
+                'seconds_after_launch': (lost.exited_at or time.monotonic()) - self._started_at,
+                'error': lost.error_line(),
+            }
+            failed_itself = (lost.process.returncode or 0) > 0  # it named an error and left
+            if failure['kind'] == 'interrupted':  # stopped by us because of that child
+                failure['kind'] = 'process_failed' if failed_itself else 'process_lost'
+                failure['message'] = lost.describe()
+            elif failure['kind'] == 'agent_lost' and failed_itself:
+                failure['kind'] = 'agent_failed'
+                failure['message'] = f'{lost.describe()}; {failure["message"]}'
+            if 'orchestrator' not in failure['detected_by']:
+                failure['detected_by'] += ', orchestrator'
+        extra['failure'] = failure
+        staging = summary.with_name(summary.name + '.tmp')
+        staging.write_text(json.dumps(data, indent=1, allow_nan=False) + '\n')
+        staging.replace(summary)
+        return failure
+
+    @contextlib.contextmanager
+    def _signals_trapped(self) -> Iterator[None]:
+        """Ctrl-C and SIGTERM ask the run to stop cleanly (only possible from the main thread)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {
+            sig: signal.signal(sig, lambda signum, frame: self._interrupted.set())
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+    @property
+    def last_progress(self) -> str:
+        """The simulator's latest progress line ('' before the first step)."""
+        return self._last_progress
+
+    def interrupt(self) -> None:
+        """Stop the run as Ctrl-C would (for callers on another thread)."""
+        self._interrupted.set()
+
+    def _launch_and_watch(
+        self, paths: dict[str, Path], groups: list[list[int]], env: dict[str, str]
+    ) -> tuple[int, str, _Child | None]:
+        """Start the children and watch them: (exit status, message, the child that was lost)."""
+        if self.record:
+            self._start('recorder', ['-m', 'formation_sim.runtime.recorder', '--ros-args', '--params-file', str(paths['recorder'])], env, expected_exit=False)
+        sim_args = [
+            '-m', 'formation_sim.runtime.sim_node', '--ros-args',
+            '-p', f'scenario:={paths["scenario"].resolve()}',
+            '-p', f'horizon:={self.horizon!r}',
+            '-p', f'out_dir:={self.out_dir.resolve()}',
+            '-p', f'sample_period:={float(self.sample_period)!r}',
+            '-p', f'extra_subscribers:={1 if self.record else 0}',
+            '-p', f'step_listeners:={self.step_listeners}',
+            '-p', f'clock_mode:={self.clock}',
+            '-p', f'executor:={self.executor}',
+            # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
+            '-p', f'discovery_timeout:={max(120.0, float(len(self.scenario.agent_ids)))!r}',
+        ]  # fmt: skip
+        simulator = self._start('simulator', sim_args, env, expected_exit=True, pipe=True)
+        for group in groups:
+            ids = ','.join(map(str, group))
+            name = f'agent_{group[0]}' if len(group) == 1 else f'agents_{group[0]}-{group[-1]}'
+            self._start(name, ['-m', 'formation_agent.ros.node', '--agents', ids, '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
+        if self.progress:
+            self._say(
+                f'ROS domain {env["ROS_DOMAIN_ID"]}: simulator, {len(groups)} agent process(es)'
+                f'{", recorder" if self.record else ""} started; waiting for discovery'
+            )
+        deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        shown = ''
+        lost: _Child | None = None
+        # Fast DDS maps a peer's shared-memory port file when it first sends to it: look often
+        # (each look costs ~0.6 ms per child), but spend at most ~1 % of a core on it.
+        snapshot_period = max(0.25, 0.06 * len(self._children))
+        next_snapshot = time.monotonic()
+        while True:
+            if self._interrupted.is_set():
+                return EXIT_INTERRUPTED, 'interrupted', lost
+            now = time.monotonic()
+            if deadline is not None and now > deadline:
+                return EXIT_FAILED, f'timed out after {self.timeout} s', lost
+            if self.progress and self._last_progress != shown:
+                shown = self._last_progress
+                self._say(shown)
+            for child in self._children:
+                if child.exited_at is None and not child.alive():
+                    child.exited_at = now
+            if now >= next_snapshot:
+                # A child killed by a signal cannot remove its Fast DDS shared-memory files, and
+                # once it is gone nobody can tell which were its own: note them while it lives.
+                for child in self._children:
+                    if child.exited_at is None:
+                        child.shm_files |= _mapped_shm_files(child.pid)
+                next_snapshot = now + snapshot_period
+            code = simulator.process.poll()
+            if code is not None:
+                if code == 0:
+                    return self._finish(), '', lost
+                status = _lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
+                seen = '' if lost is None else f'{lost.describe()}; '
+                return status, f'{seen}simulator {describe_exit(code)}; see {simulator.log}', lost
+            if lost is None:
+                lost = next(
+                    (
+                        c
+                        for c in self._children
+                        if c is not simulator and c.exited_at is not None
+                        and (c.process.returncode != 0 or not c.expected_exit)
+                    ),
+                    None,
+                )
+                if lost is not None and self.progress:
+                    self._say(f'{lost.describe()}; stopping the run')
+            if lost is not None and (lost.name == 'recorder' or now - lost.exited_at > LOST_DETECTION):
+                # An agent: the simulator has had the time to detect it and stop by itself.
+                return _lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
+            time.sleep(POLL_PERIOD)
+
+    def _finish(self) -> int:
+        """After the simulator's success: let the agents leave, then close the bag."""
+        limit = time.monotonic() + self.stop_timeouts[0]
+        agents = [c for c in self._children if c.expected_exit and c.name != 'simulator']
+        while any(c.alive() for c in agents) and time.monotonic() < limit:
+            time.sleep(POLL_PERIOD)
+        failed = [c for c in agents if not c.alive() and c.process.returncode != 0]
+        return EXIT_FAILED if failed else EXIT_OK
+
+    def _stop_all(self, domain_id: int) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.
+
+        A child that dies by a signal cannot unlink its Fast DDS shared-memory files; those it had
+        mapped when it was signalled are removed once no live process maps them any more.  It may
+        also have mapped a peer's port file after the last look (a port is mapped when it is first
+        sent to), which then outlives the peer: so the port files of the run's own domain that
+        nobody maps any more go too (a live participant always maps its own port).
+        """
+        first, second = self.stop_timeouts
+        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
+            alive = [c for c in self._children if c.alive()]
+            if not alive:
+                break
+            for child in alive:
+                child.shm_files |= _mapped_shm_files(child.pid)
+                child.signal_used = sig.name
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
+            limit = time.monotonic() + wait
+            while any(c.alive() for c in alive) and time.monotonic() < limit:
+                time.sleep(0.05)
+        for child in self._children:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.process.wait(timeout=1.0)
+        orphaned = set().union(*(c.shm_files for c in self._children if (c.process.returncode or 0) < 0))
+        if orphaned:
+            orphaned |= _domain_port_files(domain_id)
+        in_use = _mapped_by_anyone(orphaned)
+        # A lock file (_el) is never mapped: it goes only with its port file.
+        removable = {path for path in orphaned - in_use if not (path.endswith('_el') and path[:-3] in in_use)}
+        for path in removable:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        self.removed_shm_files = sorted(removable)
+
+    def _say(self, text: str, *, end: bool = False) -> None:
+        stream = sys.stderr
+        if stream.isatty():
+            stream.write(f'\r\033[K[formation run] {text}' + ('\n' if end else ''))
+        else:
+            stream.write(f'[formation run] {text}\n')
+        stream.flush()

@@ -1,0 +1,17 @@
+"""Exact simulation, ROS-free: the true dynamics in closed form and whole runs in one process.
+
+- `world`: `World`, the true state, advanced exactly from event to event ((single), (double)).
+- `engine`: `simulate`, the team's event-driven run with the agents' own core objects.
+- `record`: `RunRecord`, what any run produced; `summary`: summary.json and trajectory.npz.
+- `baselines`: the continuous-time controller (`simulate_continuous`) for comparison.
+"""
+
+from formation_msgs_py._lazy import lazy_exports
+
+__all__ = lazy_exports(globals(), {
+    'world': ('World', 'WorldError'),
+    'engine': ('EngineError', 'simulate'),
+    'record': ('RunRecord',),
+    'summary': ('build_summary', 'load_record', 'load_summary', 'write_summary'),
+    'baselines': ('BaselineError', 'simulate_continuous'),
+})  # fmt: skip

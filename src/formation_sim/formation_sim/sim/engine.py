@@ -1,0 +1,288 @@
+"""Exact event-driven simulation of a whole team in one process.
+
+The engine is only a router and a physical world: the agents are the same `formation_agent.core.eta`
+objects a robot would run. It moves the world from event to event in closed form; there is no
+time step anywhere. At each event time it lets every due agent sense and trigger, delivers all
+triggering information, and asks every agent whose knowledge changed for its next time once.
+
+Speed (BENCHMARKS.md): that question is answered lazily. Each agent's certified search
+(`Eta1Agent/Eta2Agent.trigger_search`) only advances while its frontier, a certified lower bound on
+the agent's time, is at or before the team's earliest known next event; a search overtaken by new
+information is dropped after the steps that were needed. The steps are those of an uninterrupted
+search, so the triggering times are the floats `next_trigger_time` gives, as in the agent nodes.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from formation_agent.core.crossing import CrossingSearch
+from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_sim.sim.record import RunRecord
+from formation_sim.sim.world import World
+
+
+class EngineError(RuntimeError):
+    """The simulation could not go on (an agent rejected its input, a step did not advance)."""
+
+
+def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Agent | Eta2Agent:
+    """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
+    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
+    gains = {name: getattr(scenario.gains, name) for name in ALGORITHM_GAINS[algorithm]}
+    return make_agent(
+        algorithm=algorithm,
+        agent_id=agent_id,
+        neighbours=scenario.neighbours(agent_id),
+        delta=scenario.delta,
+        gains=gains,
+        tolerance=tolerance,
+    )
+
+
+class Sampler:
+    """Collects the state at every event and on a regular grid, by pure evaluation.
+
+    Shared by the engine and the simulator node; `on_sample(t, x, q)` is called after each
+    sample is added (the simulator checks connectivity and queues it for its tools there).
+    """
+
+    def __init__(
+        self,
+        world: World,
+        sample_dt: float | None,
+        *,
+        events: bool = True,
+        on_sample: Callable[[float, np.ndarray, np.ndarray | None], None] | None = None,
+    ) -> None:
+        self.world = world
+        self.dt = sample_dt
+        self.events = events
+        self.on_sample = on_sample
+        self.times: list[float] = []
+        self.positions: list[np.ndarray] = []
+        self.velocities: list[np.ndarray] = []
+        self._next_grid = 1
+
+    def grid_until(self, t_end: float) -> None:
+        """Sample grid points after the world's time and before t_end (at t_end too without event samples)."""
+        if not self.dt:
+            return
+        while True:
+            tg = self._next_grid * self.dt
+            if tg > t_end or (tg == t_end and self.events):
+                return
+            self._next_grid += 1
+            if tg > self.world.time:
+                x, q = self.world.state_at(tg)
+                self._add(tg, x, q)
+
+    def event(self, *, force: bool = False) -> None:
+        if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
+            return
+        self._add(self.world.time, self.world.positions, self.world.velocities)
+
+    def _add(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
+        self.times.append(t)
+        self.positions.append(x)
+        if q is not None:
+            self.velocities.append(q)
+        if self.on_sample is not None:
+            self.on_sample(t, x, q)
+
+
+def _next_event_time(heap, serial, searches, horizon: float) -> float:
+    """The earliest planned time of the team, advancing unfinished searches only as needed.
+
+    A search whose frontier is at or before the earliest known time might still cross there or
+    earlier, so it takes certified steps until its frontier passes the next entry; ties put
+    searches first (kind 0), so a planned time on top is the team's minimum. The steps are those
+    `next_trigger_time` would take, so the times are the same floats, but a search overtaken by
+    new information before it finishes costs only the steps up to that moment.
+    """
+    while heap:
+        key, kind, i, number = heap[0]
+        if serial[i] != number:
+            heapq.heappop(heap)
+            continue
+        if kind == 1 or key > horizon:
+            return key
+        heapq.heappop(heap)
+        search = searches[i]
+        until = heap[0][0] if heap else math.inf
+        result = search.advance(min(until, horizon))
+        if result is None:
+            heapq.heappush(heap, (search.frontier, 0, i, number))
+        elif result <= horizon:
+            heapq.heappush(heap, (result, 1, i, number))
+    return math.inf
+
+
+ROUNDING_FLOOR_ULPS = 8.0
+"""A run stops once the threshold is this many ulps of the states (see `rounding_floor`)."""
+
+
+def rounding_floor(agent, world: World) -> str | None:
+    """Why the event chain can no longer be trusted at `world.time`, or None.
+
+    The threshold α e^{-βt} (α_d e^{-β_d t}) decays without end, the rounding of the states
+    does not: once the threshold is a few ulps of the largest position or velocity, whether an
+    agent triggers is decided by rounding, and the events come ever faster (paper_single with
+    β = 1: 6-7 events per second until t ≈ 37, then 19 000 in its 45th second).  Both the
+    engine and the distributed simulator stop there, with this message, at the same event.
+    """
+    t = world.time
+    threshold = agent.threshold(t)
+    scale = float(np.abs(world.positions).max())
+    if world.velocities is not None:
+        scale = max(scale, float(np.abs(world.velocities).max()))
+    floor = ROUNDING_FLOOR_ULPS * float(np.spacing(scale))
+    if threshold >= floor:
+        return None
+    return (
+        f'at t={t!r} the triggering threshold {threshold:.3g} is below {ROUNDING_FLOOR_ULPS:g} ulps ({floor:.3g}) '
+        f'of the states (largest |component| {scale:.3g}): from here on rounding, not the dynamics, decides '
+        'the events; shorten the horizon or lower beta'
+    )
+
+
+def due_twice(agent_id: int, threshold_model, t: float) -> str:
+    """Why an agent due again at the instant it has just triggered at stops the run (engine and
+    simulator alike); `threshold_model` is any agent of the team (they share the threshold)."""
+    return (
+        f'agent {agent_id} reached its threshold again at t={t!r}, the instant it has just triggered at '
+        f'(threshold {threshold_model.threshold(t):.3g}): the threshold has fallen to the rounding '
+        'level of the relative states, or the gains are outside what the theorem guarantees '
+        '(see `formation validate`); shorten the horizon or lower beta'
+    )
+
+
+def _pop_due(heap: list[tuple[float, int, int, int]], serial: dict[int, int], t: float) -> list[int]:
+    """The agents planned for exactly `t` (live entries), taken off the heap, sorted."""
+    due = []
+    while heap and heap[0][0] == t:
+        _, kind, i, number = heapq.heappop(heap)
+        if kind == 1 and serial[i] == number:
+            due.append(i)
+    return sorted(due)
+
+
+def simulate(
+    scenario,
+    *,
+    horizon: float | None = None,
+    sample_dt: float | None = 0.01,
+    tolerance: float = 1e-12,
+    period: float | None = None,
+    sample_events: bool = True,
+    progress: Callable[[float, int], None] | None = None,
+    on_event: Callable[[float, World, list[int]], None] | None = None,
+) -> RunRecord:
+    """Run ETA-1/ETA-2 (or periodic sampling with `period`) exactly up to `horizon`.
+
+    With `period`, every agent samples and broadcasts at k * period instead of at its own
+    triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
+    due)` is called at every event time before the due agents trigger (for checkers).
+
+    The record samples the state at every event time and every `sample_dt`; that is
+    O(events x agents) memory, so large teams may pass `sample_events=False` (then only the grid,
+    t = 0 and the horizon are sampled; `summary.json`'s maximum edge lengths are then taken over
+    those samples only).
+    """
+    horizon = float(scenario.horizon if horizon is None else horizon)
+    if not (math.isfinite(horizon) and horizon > 0.0):
+        raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
+    if period is not None and not (math.isfinite(period) and period > 0.0):
+        raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    started = time.perf_counter()
+    planned_period: dict[int, float] = {}
+    world = World.from_scenario(scenario)
+    agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
+    trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
+    sampler = Sampler(world, sample_dt, events=sample_events)
+    messages = 0
+    # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
+    # frontier of a search still under way (a certified lower bound on the agent's time). Only
+    # the entry with the agent's latest serial is live; older ones are skipped when they surface.
+    heap: list[tuple[float, int, int, int]] = []
+    serial: dict[int, int] = {}
+    searches: dict[int, CrossingSearch] = {}
+    counter = 0
+    due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
+    t = 0.0
+    steps = 0
+    sampler.event(force=True)  # t = 0
+    some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
+    while True:
+        sampler.event()
+        if period is None and (problem := rounding_floor(some_agent, world)) is not None:
+            raise EngineError(problem)
+        if on_event is not None:
+            on_event(t, world, due)
+        outbox = []
+        for i in due:
+            agent = agents[i]
+            try:
+                out = agent.trigger(t, world.sense(i, agent.neighbour_ids))
+            except ValueError as err:
+                raise EngineError(f'at t={t!r}: {err}') from err
+            world.set_control(i, out.control)
+            trigger_times[i].append(t)
+            outbox.extend(out.infos)
+        changed = set(due)
+        for info in outbox:
+            agents[info.receiver].receive(info)
+            changed.add(info.receiver)
+        messages += len(outbox)
+        for i in sorted(changed):
+            counter += 1
+            serial[i] = counter
+            if period is None:
+                # Searched lazily below: only as far as the team's next event needs.
+                search = agents[i].trigger_search(horizon)
+                searches[i] = search
+                heapq.heappush(heap, (search.frontier, 0, i, counter))
+            else:
+                nxt = (round(t / period) + 1) * period if i in due else planned_period[i]
+                planned_period[i] = nxt
+                heapq.heappush(heap, (nxt, 1, i, counter))
+        t_next = _next_event_time(heap, serial, searches, horizon)
+        if t_next == t and period is None:
+            # News at this instant put an agent on its threshold already (it would have crossed
+            # within rounding of its neighbour): it triggers at this very instant, in a further
+            # round. An agent due twice at one instant means the threshold is at rounding level.
+            due = _pop_due(heap, serial, t)
+            twice = [i for i in due if trigger_times[i][-1] == t]
+            if twice:
+                raise EngineError(due_twice(twice[0], some_agent, t))
+            continue
+        steps += 1
+        if progress is not None and steps % 1000 == 0:
+            progress(t, sum(map(len, trigger_times.values())))
+        if t_next > horizon:
+            sampler.grid_until(horizon)
+            world.advance(horizon)
+            sampler.event(force=True)
+            break
+        sampler.grid_until(t_next)
+        world.advance(t_next)
+        t = t_next
+        due = _pop_due(heap, serial, t)
+    return RunRecord(
+        scenario=scenario,
+        horizon=horizon,
+        mode='in_process' if period is None else 'periodic',
+        trigger_times=trigger_times,
+        sample_times=np.array(sampler.times),
+        sample_positions=np.array(sampler.positions),
+        sample_velocities=np.array(sampler.velocities) if sampler.velocities else None,
+        messages_sent=messages,
+        sensing_calls=sum(len(v) for v in trigger_times.values()),
+        wall_time=time.perf_counter() - started,
+        extra={'period': period} if period is not None else {},
+    )

@@ -1,0 +1,171 @@
+"""`summary.json` and the dense trajectory file of a run, whichever implementation produced it.
+
+Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as string keys):
+
+| key | meaning |
+|---|---|
+| `schema` | "formation-summary/1" |
+| `scenario`, `dynamics`, `mode`, `horizon`, `n_agents`, `dimension`, `delta` | what was run |
+| `trigger_times` | agent -> list of triggering times, t_1 = 0 included |
+| `event_counts`, `total_events` | agent -> number of triggers; their sum |
+| `min_inter_event_time` | agent -> smallest t_{k+1} - t_k (null with fewer than two triggers) |
+| `messages_sent`, `sensing_calls` | triggering-information messages (one per trigger per neighbour); sensing calls |
+| `edges` | list of {i, j, d, max_length, min_range_slack = Δ - max_length, final_error} |
+| `max_edge_length` | the largest `max_length` (must stay < Δ: connectivity preserved) |
+| `final_formation_error` | max over edges of ||x_i - x_j - d_ij|| at the horizon |
+| `final_positions`, `final_velocities` | agent -> vector (velocities null for single integrators) |
+| `theorem_constants` | `formation_sim.model.theory.TheoremConstants.to_dict()`, or {"error": ...} |
+| `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii) |
+| `wall_time` | seconds the run took |
+| `extra` | implementation-specific details (e.g. the distributed run's domain id) |
+| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it, which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
+| `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
+| `extra.injected_faults` | distributed runs: {dropped, delayed, by_agent}: triggering information dropped or delayed by fault injection (a test facility) |
+
+`max_length` is taken over the samples (every event time and the sampling grid). For single
+integrators the edge lengths are convex between events, so this is the exact maximum.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from formation_sim.model import theory
+from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.record import RunRecord
+
+SCHEMA = 'formation-summary/1'
+TRAJECTORY_FILE = 'trajectory.npz'
+SUMMARY_FILE = 'summary.json'
+
+
+def build_summary(record) -> dict:
+    """The summary dictionary of a `RunRecord` (see the module docstring for the schema)."""
+    scenario = record.scenario
+    ids = list(scenario.agent_ids)
+    index = {agent: k for k, agent in enumerate(ids)}
+    x = record.sample_positions
+    final_x = x[-1]
+    edges = []
+    for edge in scenario.edges:
+        a, b = index[edge.i], index[edge.j]
+        lengths = np.linalg.norm(x[:, a] - x[:, b], axis=1)
+        edges.append(
+            {
+                'i': edge.i,
+                'j': edge.j,
+                'd': np.asarray(edge.d).tolist(),
+                'max_length': float(lengths.max()),
+                'min_range_slack': float(scenario.delta - lengths.max()),
+                'final_error': float(np.linalg.norm(final_x[a] - final_x[b] - edge.d)),
+            }
+        )
+    gaps = {
+        agent: (float(np.diff(times).min()) if len(times) > 1 else None)
+        for agent, times in record.trigger_times.items()
+    }
+    try:
+        constants = theory.theorem_constants(scenario)
+        constants_dict = constants.to_dict()
+        xi = constants.xi
+    except ValueError as err:
+        constants_dict = {'error': str(err)}
+        xi = None
+    xi_check = {}
+    for agent in ids:
+        bound = None if xi is None else xi.get(agent)
+        gap = gaps[agent]
+        xi_check[str(agent)] = {
+            'xi': bound,
+            'min_inter_event_time': gap,
+            'holds': None if bound is None or gap is None else bool(gap >= bound),
+        }
+    velocities = record.sample_velocities
+    return {
+        'schema': SCHEMA,
+        'scenario': scenario.name,
+        'dynamics': scenario.dynamics,
+        'mode': record.mode,
+        'horizon': record.horizon,
+        'n_agents': len(ids),
+        'dimension': int(final_x.shape[1]),
+        'delta': scenario.delta,
+        'trigger_times': {str(a): list(map(float, t)) for a, t in record.trigger_times.items()},
+        'event_counts': {str(a): len(t) for a, t in record.trigger_times.items()},
+        'total_events': record.total_events,
+        'min_inter_event_time': {str(a): g for a, g in gaps.items()},
+        'messages_sent': record.messages_sent,
+        'sensing_calls': record.sensing_calls,
+        'edges': edges,
+        'max_edge_length': max(e['max_length'] for e in edges),
+        'final_formation_error': max(e['final_error'] for e in edges),
+        'final_positions': {str(a): final_x[index[a]].tolist() for a in ids},
+        'final_velocities': None
+        if velocities is None
+        else {str(a): velocities[-1][index[a]].tolist() for a in ids},
+        'theorem_constants': constants_dict,
+        'xi_check': xi_check,
+        'wall_time': record.wall_time,
+        'extra': record.extra,
+    }
+
+
+def write_summary(record, out_dir) -> Path:
+    """Write `summary.json` and `trajectory.npz` into `out_dir`; return the summary's path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = build_summary(record)
+    path = out / SUMMARY_FILE
+    path.write_text(json.dumps(summary, indent=1, allow_nan=False) + '\n')
+    arrays = {
+        'agent_ids': np.array(record.scenario.agent_ids),
+        'times': record.sample_times,
+        'positions': record.sample_positions,
+    }
+    if record.sample_velocities is not None:
+        arrays['velocities'] = record.sample_velocities
+    np.savez_compressed(out / TRAJECTORY_FILE, **arrays)
+    return path
+
+
+def load_summary(path) -> dict:
+    """Read a summary.json (a run folder or the file itself)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / SUMMARY_FILE
+    data = json.loads(path.read_text())
+    if data.get('schema') != SCHEMA:
+        raise ValueError(f'{path}: not a {SCHEMA} file (schema={data.get("schema")!r})')
+    return data
+
+
+def load_record(run_dir, scenario=None):
+    """Rebuild the `RunRecord` of a run folder from `summary.json` and `trajectory.npz`.
+
+    The scenario is read from the folder's `scenario.yaml` (written by `formation run`) unless
+    given. Counters and triggering times come from the summary, samples from the trajectory.
+    """
+    run_dir = Path(run_dir)
+    summary = load_summary(run_dir)
+    if scenario is None:
+        scenario = load_scenario(run_dir / 'scenario.yaml')
+    with np.load(run_dir / TRAJECTORY_FILE) as data:
+        times, positions = data['times'], data['positions']
+        velocities = data['velocities'] if 'velocities' in data else None
+    return RunRecord(
+        scenario=scenario,
+        horizon=summary['horizon'],
+        mode=summary['mode'],
+        trigger_times={int(a): list(t) for a, t in summary['trigger_times'].items()},
+        sample_times=times,
+        sample_positions=positions,
+        sample_velocities=velocities,
+        messages_sent=summary['messages_sent'],
+        sensing_calls=summary['sensing_calls'],
+        wall_time=summary['wall_time'],
+        extra=summary.get('extra', {}),
+    )
+

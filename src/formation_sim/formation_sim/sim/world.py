@@ -1,0 +1,131 @@
+"""The physical world: true agent states, integrated exactly from event to event.
+
+The world only moves forward when told to (`advance`), and only to event times, so the floating
+point history of the state is the same whether or not anyone samples it in between: `state_at`
+evaluates the closed form without changing anything.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from formation_agent.core.closed_form import advance_double
+from formation_msgs_py.types import SensedState
+
+
+class WorldError(ValueError):
+    """A request the world cannot honour (unknown agent, time going backwards, bad input)."""
+
+
+class World:
+    """True states of all agents under piecewise-constant commands."""
+
+    def __init__(
+        self,
+        *,
+        agent_ids: tuple[int, ...],
+        positions: np.ndarray,
+        velocities: np.ndarray | None = None,
+        damping: float | None = None,
+        start_time: float = 0.0,
+    ) -> None:
+        """Single integrators when `velocities` is None, else double integrators with damping k3."""
+        self.agent_ids = tuple(agent_ids)
+        self._index = {agent: k for k, agent in enumerate(self.agent_ids)}
+        self._x = np.array(positions, dtype=float)
+        if self._x.shape[0] != len(self.agent_ids):
+            raise WorldError(f'{self._x.shape[0]} positions for {len(self.agent_ids)} agents')
+        self.double = velocities is not None
+        if self.double:
+            if damping is None or not damping > 0.0:
+                raise WorldError(f'double integrators need damping k3 > 0, got {damping}')
+            self._q = np.array(velocities, dtype=float)
+            if self._q.shape != self._x.shape:
+                raise WorldError(f'velocities {self._q.shape} do not match positions {self._x.shape}')
+        else:
+            self._q = None
+        self.damping = damping
+        self._u = np.zeros_like(self._x)
+        self.time = float(start_time)
+
+    @classmethod
+    def from_scenario(cls, scenario) -> World:
+        damping = scenario.gains.k3 if scenario.dynamics == 'double' else None
+        return cls(
+            agent_ids=scenario.agent_ids,
+            positions=scenario.positions,
+            velocities=scenario.velocities,
+            damping=damping,
+        )
+
+    @property
+    def dimension(self) -> int:
+        return self._x.shape[1]
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self._x.copy()
+
+    @property
+    def velocities(self) -> np.ndarray | None:
+        return None if self._q is None else self._q.copy()
+
+    @property
+    def controls(self) -> np.ndarray:
+        return self._u.copy()
+
+    def index(self, agent: int) -> int:
+        try:
+            return self._index[agent]
+        except KeyError:
+            raise WorldError(f'unknown agent {agent}; agents are {list(self.agent_ids)}') from None
+
+    def set_control(self, agent: int, control) -> None:
+        """Command of `agent` from now on: u_i (single) or the piecewise-constant u^d_i (double)."""
+        value = np.asarray(control, dtype=float)
+        if value.shape != (self.dimension,):
+            raise WorldError(
+                f'control of agent {agent} has shape {value.shape}, expected ({self.dimension},)'
+            )
+        if not np.isfinite(value).all():
+            raise WorldError(f'control of agent {agent} is not finite: {value.tolist()}')
+        self._u[self.index(agent)] = value
+
+    def _propagate(self, t: float) -> tuple[np.ndarray, np.ndarray | None]:
+        tau = t - self.time
+        if tau < 0.0:
+            raise WorldError(f'cannot go back in time from {self.time!r} to {t!r}')
+        if tau == 0.0:
+            return self._x.copy(), None if self._q is None else self._q.copy()
+        if self._q is None:
+            return self._x + tau * self._u, None
+        return advance_double(self._x, self._q, self._u, self.damping, tau)
+
+    def advance(self, t: float) -> None:
+        """Move the true state to time `t` (>= now) exactly."""
+        self._x, q = self._propagate(t)
+        if q is not None:
+            self._q = q
+        self.time = float(t)
+
+    def state_at(self, t: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(positions, velocities) at `t` >= now, without changing the world."""
+        return self._propagate(t)
+
+    def sense(self, agent: int, neighbours) -> SensedState:
+        """What `agent` senses now: x_i - x_j (and q_i - q_j, q_i) for each neighbour j."""
+        i = self.index(agent)
+        neighbours = tuple(neighbours)
+        rows = [self.index(j) for j in neighbours]
+        # One vectorised difference per quantity; rows of it are the exact x_i - x_j.
+        rel_pos = dict(zip(neighbours, map(tuple, (self._x[i] - self._x[rows]).tolist())))
+        if self._q is None:
+            return SensedState(agent=agent, stamp=self.time, rel_positions=rel_pos)
+        rel_vel = dict(zip(neighbours, map(tuple, (self._q[i] - self._q[rows]).tolist())))
+        return SensedState(
+            agent=agent,
+            stamp=self.time,
+            rel_positions=rel_pos,
+            rel_velocities=rel_vel,
+            velocity=tuple(self._q[i].tolist()),
+        )

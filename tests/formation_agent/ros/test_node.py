@@ -1,0 +1,237 @@
+"""The agent node: parameters checked up front; bad messages rejected and counted; injected faults."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+DOMAIN_ID = 96
+
+GOOD = {
+    'agent_id': 1,
+    'algorithm': 'eta1',
+    'dimension': 2,
+    'neighbour_ids': [2, 3],
+    'neighbour_offsets': [0.0, -2.0, -2.0, 0.0],
+    'delta': 4.0,
+    'horizon': 10.0,
+    'alpha': 10.0,
+    'beta': 1.0,
+}
+
+
+def make_node(ros, **changes):
+    from rclpy.parameter import Parameter
+
+    from formation_agent.ros.node import FormationAgentNode
+
+    values = {**GOOD, **changes}
+    overrides = [Parameter(name, value=value) for name, value in values.items() if value is not None]
+    node = FormationAgentNode(namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False)
+    node.destroy_node()
+    return node
+
+
+def test_good_parameters_give_the_agent_its_neighbours(ros):
+    node = make_node(ros)
+    assert node.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
+    assert node.gains == {'alpha': 10.0, 'beta': 1.0}
+
+
+@pytest.mark.parametrize(
+    ('changes', 'complaint'),
+    [
+        ({'delta': None}, "parameter 'delta' (DOUBLE) is required"),
+        ({'beta': None}, "parameter 'beta' (DOUBLE) is required"),
+        ({'algorithm': 'eta3'}, "algorithm must be one of ['eta1', 'eta2'], got 'eta3'"),
+        ({'dimension': 4}, 'dimension must be 1, 2 or 3 (commands travel as geometry_msgs), got 4'),
+        ({'neighbour_offsets': [0.0, -2.0, -2.0]}, 'neighbour_offsets must hold dimension * len(neighbour_ids) = 2 * 2 values'),
+        ({'neighbour_ids': [2, 2]}, 'neighbour_ids repeat an id: [2, 2]'),
+        ({'horizon': float('inf')}, 'horizon must be a finite number > 0, got inf'),
+        ({'algorithm': 'eta2'}, "parameter 'alpha_d' (DOUBLE) is required"),
+        ({'agent_id': 7}, 'agent 7 must run in namespace /agent_7'),
+    ],
+)
+def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
+    from formation_agent.ros.node import AgentNodeError
+
+    with pytest.raises(AgentNodeError) as error:
+        make_node(ros, **changes)
+    assert complaint in str(error.value)
+    assert '/agent_1/formation_agent' in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ('changes', 'complaint'),
+    [
+        ({'inject_loss': 1.5}, 'inject_loss must be a probability in [0, 1], got 1.5'),
+        ({'inject_delay_ms': -1.0}, 'inject_delay_ms must be a finite number >= 0, got -1.0'),
+        ({'inject_jitter_ms': float('nan')}, 'inject_jitter_ms must be a finite number >= 0, got nan'),
+    ],
+)
+def test_bad_fault_injection_parameters_are_rejected(ros, changes, complaint):
+    from formation_agent.ros.node import AgentNodeError
+
+    with pytest.raises(AgentNodeError, match='agent 1: ') as error:
+        make_node(ros, **changes)
+    assert complaint in str(error.value)
+
+
+# -- bad messages --------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def live_node(ros):
+    """An agent node (not yet stepped) that the test feeds messages by hand."""
+    from rclpy.parameter import Parameter
+
+    from formation_agent.ros.node import FormationAgentNode
+
+    def build(**changes):
+        values = {**GOOD, **changes}
+        overrides = [Parameter(name, value=value) for name, value in values.items()]
+        node = FormationAgentNode(namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False)
+        nodes.append(node)
+        return node
+
+    nodes = []
+    yield build
+    for node in nodes:
+        node.destroy_node()
+
+
+def _info_msg(values):
+    from std_msgs.msg import Float64MultiArray
+
+    return Float64MultiArray(data=[float(v) for v in values])
+
+
+def _info(sender=2, receiver=1, stamp=0.0, control=(0.5, -0.5), rel_position=(1.0, 2.0), rel_velocity=None):
+    from formation_msgs_py.codec import encode_trigger_info
+    from formation_msgs_py.types import TriggerInfo
+
+    info = TriggerInfo(sender=sender, receiver=receiver, stamp=stamp, control=control, rel_position=rel_position, rel_velocity=rel_velocity)
+    return encode_trigger_info(info)
+
+
+def test_bad_trigger_information_is_rejected_counted_per_reason_and_never_reaches_the_core(live_node):
+    node = live_node()
+    received = []
+    node.core.receive = received.append  # what the core would see
+    arrivals = [
+        (_info_msg([2, 1, 2, 1, 0.0, 2, 0.5, -0.5, 1.0, 2.0]), 2, 'version'),
+        (_info_msg([1, 1, 2, 1, 0.0, 2, 0.5, -0.5, 1.0]), 2, 'length'),
+        (_info_msg([1, 1, 2, 1, 0.0, 2, math.nan, -0.5, 1.0, 2.0]), 2, 'non_finite'),
+        (_info_msg([1, 1, 2, 1, math.inf, 2, 0.5, -0.5, 1.0, 2.0]), 2, 'non_finite'),
+        (_info(sender=3), 2, 'sender'),  # agent 3's information on agent 2's topic
+        (_info(receiver=3), 2, 'receiver'),
+        (_info(control=(0.5,), rel_position=(1.0,)), 2, 'dimension'),
+        (_info(rel_velocity=(0.0, 0.0)), 2, 'dimension'),  # ETA-2 information for an ETA-1 agent
+        (_info(stamp=-0.25), 2, 'time_backwards'),
+        (_info(sender=3, stamp=0.0), 3, None),  # good: held until this agent's own trigger at t = 0
+        (_info(sender=3, stamp=0.0), 3, 'duplicate'),
+        (_info(stamp=0.5), 2, None),
+        (_info(stamp=0.25), 2, 'time_backwards'),
+        (_info(stamp=0.5), 2, 'duplicate'),
+    ]
+    expected: dict[str, int] = {}
+    for msg, sender, reason in arrivals:
+        node._on_arrival(msg, sender)
+        if reason is not None:
+            expected[reason] = expected.get(reason, 0) + 1
+        assert node.rejected == expected
+    assert received == [], 'nothing reaches the core before this agent has triggered'
+    assert [(info.sender, info.stamp) for info in node._held] == [(3, 0.0), (2, 0.5)]
+    assert node.info_received == 0
+    report = node.report(final=True)
+    assert report.rejected == expected and report.rejected_total == 12 and report.final
+
+
+def test_a_malformed_step_is_rejected_and_the_node_keeps_waiting(live_node):
+    node = live_node()
+    node._on_step(_info_msg([1, 0, 0.0]))
+    node._on_step(_info_msg([7, 0, 0.0, 0, 0.0]))
+    assert node.rejected == {'length': 1, 'version': 1}
+    assert node.step is None and not node.finished
+
+
+def test_fault_injection_drops_everything_at_loss_one(live_node):
+    node = live_node(inject_loss=1.0, inject_seed=3)
+    for k in range(20):
+        node._on_arrival(_info(stamp=0.1 * k), 2)
+    assert node.dropped == 20 and node.delayed == 0 and node._held == [] and node.rejected == {}
+
+
+def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
+    from rclpy.executors import SingleThreadedExecutor
+
+    node = live_node(inject_delay_ms=30.0, inject_jitter_ms=20.0)
+    for k in range(5):
+        node._on_arrival(_info(stamp=0.1 * k), 2)
+    assert node.delayed == 0 and node._held == []  # still on the wire
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        for _ in range(200):
+            if node.delayed == 5:
+                break
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        executor.remove_node(node)
+    assert node.delayed == 5 and node.rejected == {}, 'a delayed message out of order would be time_backwards'
+    assert [info.stamp for info in node._held] == [0.1 * k for k in range(5)]
+
+
+def test_injected_faults_are_reproducible_per_seed_and_keep_each_edge_in_order():
+    from formation_agent.ros.node import FaultInjection
+
+    def pattern(seed):
+        injection = FaultInjection(agent_id=4, loss=0.1, delay_ms=5.0, jitter_ms=40.0, seed=seed)
+        drops = [injection.drop() for _ in range(10_000)]
+        dues = [injection.due(sender=1, now=0.001 * k) for k in range(1_000)]
+        return drops, dues
+
+    drops, dues = pattern(7)
+    assert (drops, dues) == pattern(7)
+    assert drops != pattern(8)[0]
+    assert 900 < sum(drops) < 1100  # 10 % of 10 000 (binomial sd 30)
+    assert all(a <= b for a, b in zip(dues, dues[1:])), 'a later message overtook an earlier one'
+    assert all(due >= 0.001 * k + 0.005 for k, due in enumerate(dues))
+
+
+def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_agent.ros.node import PeerLostError
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.topics import STEP_TOPIC
+
+    node = live_node()
+    # Another participant, as the simulator's own process would be.
+    other = rclpy.Context()
+    rclpy.init(context=other, domain_id=DOMAIN_ID)
+    simulator = rclpy.create_node('fake_simulator', context=other)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        step_writer = simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        deadline = time.monotonic() + 20.0
+        while not node._simulator_seen and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert node._simulator_seen, 'the step writer never matched'
+        node.check()  # alive: nothing to report
+        simulator.destroy_publisher(step_writer)  # as its process would on the way out
+        with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph'):
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+                node.check()
+    finally:
+        executor.remove_node(node)
+        simulator.destroy_node()
+        rclpy.shutdown(context=other)

@@ -1,0 +1,357 @@
+"""formation_sim.analysis.analyze and formation_sim.analysis.figures: runs rebuilt from bags, metrics, checks, figures."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formation_sim.model import theory
+from formation_sim.analysis.checks import run_series, theorem_checks, theory_bounds
+from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+from formation_sim.analysis.report import bag_summary, diff_summaries
+from formation_sim.sim.engine import simulate
+from formation_sim.model.scenario import dump_scenario, load_scenario
+from formation_sim.sim.summary import build_summary, write_summary
+
+
+def _events(record) -> list[float]:
+    return sorted({t for times in record.trigger_times.values() for t in times})
+
+
+# ------------------------------------------------------------------------------ rebuilding
+
+
+def test_a_bag_gives_back_the_run_exactly(paper_single_record, write_run_bag, tmp_path):
+    record = paper_single_record
+    bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True)
+    run = load_bag_run(bag)
+    assert run.scenario_source == 'bag topic /formation/scenario'
+    assert run.record.scenario == record.scenario
+    assert run.record.trigger_times == record.trigger_times  # floats equal, not close
+    assert np.array_equal(run.record.sample_times, record.sample_times)
+    assert np.array_equal(run.record.sample_positions, record.sample_positions)
+    assert run.record.horizon == record.horizon
+    assert run.record.messages_sent == record.messages_sent
+    assert run.record.sensing_calls == record.total_events
+    assert [check for check in run.checks if not check.ok] == []
+    # Every metric of summary.json but what differs by construction (mode, wall time, details).
+    expected = build_summary(record)
+    got = bag_summary(run.record)
+    for key in set(expected) - {'mode', 'wall_time', 'extra'}:
+        assert got[key] == expected[key], key
+
+
+def test_double_integrator_bags_keep_the_velocities(write_run_bag, tmp_path):
+    record = simulate(load_scenario('paper_double'), horizon=0.3)
+    run = load_bag_run(write_run_bag(record, tmp_path / 'bag', scenario_topic=True))
+    assert np.array_equal(run.record.sample_velocities, record.sample_velocities)
+    assert run.record.trigger_times == record.trigger_times
+    assert bag_summary(run.record)['final_velocities'] == build_summary(record)['final_velocities']
+
+
+def test_the_scenario_comes_from_the_run_folder_or_the_caller(paper_single_record, write_run_bag, tmp_path):
+    record = paper_single_record
+    bag = write_run_bag(record, tmp_path / 'run' / 'bag')
+    with pytest.raises(AnalysisError, match=r'no /formation/scenario topic .* --scenario'):
+        load_bag_run(bag)
+    assert load_bag_run(bag, scenario='paper_single').scenario_source == '--scenario paper_single'
+    dump_scenario(record.scenario, tmp_path / 'run' / 'scenario.yaml')
+    location = locate(tmp_path / 'run')
+    assert location.bag == bag and location.run_dir == tmp_path / 'run'
+    run = load_bag_run(location.bag, run_dir=location.run_dir)
+    assert run.scenario_source.startswith('run folder file')
+    assert run.record.scenario == record.scenario
+
+
+def test_a_scenario_that_is_not_the_bags_run_is_refused(paper_single_record, write_run_bag, tmp_path):
+    bag = write_run_bag(paper_single_record, tmp_path / 'bag')
+    with pytest.raises(AnalysisError, match="lack velocities; the scenario is 'double'"):
+        load_bag_run(bag, scenario='paper_double')
+    moved = paper_single_record.scenario.replace(positions=paper_single_record.scenario.positions + [[0.0, 0.0], [0.0, 0.0], [0.5, 0.0]])
+    with pytest.raises(AnalysisError, match=r'agent 3 starts at \[4.5, 5.5\] in the bag but at \[5.0, 5.5\]'):
+        load_bag_run(bag, scenario=moved)
+
+
+def test_a_lost_message_is_reported_not_hidden(paper_single_record, write_run_bag, tmp_path):
+    record = paper_single_record
+    second = record.trigger_times[1][1]
+    bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True, drop={(1, 2, 1)})
+    run = load_bag_run(bag)
+    failed = {check.name: check.detail for check in run.checks if not check.ok}
+    assert set(failed) == {'one TriggerInfo per neighbour per trigger'}
+    assert f'1 @ {second!r} -> [2]' in failed['one TriggerInfo per neighbour per trigger']
+    assert run.record.trigger_times == record.trigger_times  # the message to agent 3 still shows the trigger
+    assert run.record.messages_sent == record.messages_sent - 1
+
+
+def test_a_trigger_whose_messages_are_all_lost_is_caught_by_the_sensing_log(paper_single_record, write_run_bag, tmp_path):
+    record = paper_single_record
+    bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True, drop={(1, 2, 1), (1, 3, 1)})
+    run = load_bag_run(bag)
+    failed = {check.name: check.detail for check in run.checks if not check.ok}
+    assert failed['sensing log = triggers'] == 'agents [1] sensed at other times than they triggered'
+    assert len(run.record.trigger_times[1]) == len(record.trigger_times[1]) - 1
+
+
+def test_locate_refuses_what_is_not_a_run(tmp_path):
+    with pytest.raises(AnalysisError, match='no such file or folder'):
+        locate(tmp_path / 'missing')
+    with pytest.raises(AnalysisError, match='neither a bag'):
+        locate(tmp_path)
+
+
+# ---------------------------------------------------------------------------- summary diff
+
+
+def test_every_differing_key_is_listed_with_both_values(paper_single_record):
+    from_bag = bag_summary(paper_single_record)
+    from_file = copy.deepcopy(from_bag)
+    from_file['wall_time'] = 1.25  # a bag has no wall time: not a difference
+    from_file['extra']['discovery_wall_time'] = 0.5  # runtime detail the bag lacks: not a difference
+    shifted = from_file['trigger_times']['2'][3] + 1e-15
+    from_file['trigger_times']['2'][3] = shifted
+    from_file['trigger_times']['3'].pop()
+    from_file['messages_sent'] += 1
+    from_file['edges'][1]['max_length'] = 9.0
+    differences, skipped = diff_summaries(from_bag, from_file)
+    found = {d.key: (d.bag, d.summary) for d in differences}
+    assert found == {
+        'trigger_times.2[3]': (from_bag['trigger_times']['2'][3], shifted),
+        'trigger_times.3 (length)': (len(from_bag['trigger_times']['3']), len(from_bag['trigger_times']['3']) - 1),
+        'messages_sent': (from_bag['messages_sent'], from_bag['messages_sent'] + 1),
+        'edges[1].max_length': (from_bag['edges'][1]['max_length'], 9.0),
+    }
+    assert set(skipped) == {'wall_time', 'extra.discovery_wall_time'}
+    assert diff_summaries(from_bag, copy.deepcopy(from_bag)) == ([], ['wall_time'])
+
+
+def test_a_key_the_bag_recomputes_is_compared_even_in_extra():
+    differences, _ = diff_summaries({'extra': {'failure': None}}, {'extra': {'failure': {'kind': 'stall'}}})
+    assert [d.key for d in differences] == ['extra.failure']
+    differences, _ = diff_summaries({'ready': True}, {'ready': 1})
+    assert [d.key for d in differences] == ['ready']  # True == 1 in Python, not in JSON
+
+
+# --------------------------------------------------------------------------- series, theory
+
+
+def test_series_at_t0_match_the_papers_formulas(paper_single_record):
+    record = paper_single_record
+    scenario = record.scenario
+    series = run_series(record)
+    x = scenario.positions
+    index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+    nu = 0.0
+    for column, edge in enumerate(scenario.edges):
+        rel = x[index[edge.i]] - x[index[edge.j]]
+        error = math.dist(rel, edge.d)
+        assert series.edge_lengths[0, column] == pytest.approx(math.hypot(*rel), rel=1e-15)
+        assert series.edge_errors[0, column] == pytest.approx(error, rel=1e-15)
+        nu += error**2 / (scenario.delta - math.hypot(*edge.d) - error)  # ν_ij, each edge once
+    assert series.tension[0] == pytest.approx(nu, rel=1e-12)
+    # V = ½ Σ ||y_i - ȳ||², with y_i = x_i - τ_i for a τ of the formation: τ = (0,0), d_21, d_31.
+    tau = np.array([[0.0, 0.0], [0.0, 2.0], [2.0, 0.0]])
+    y = x - tau
+    assert series.lyapunov[0] == pytest.approx(0.5 * float(np.sum((y - y.mean(axis=0)) ** 2)), rel=1e-12)
+
+
+def test_theorem_1_guarantees_hold_on_the_paper_run(paper_single_record):
+    record = paper_single_record
+    series = run_series(record)
+    checks = theorem_checks(record, series, theory_bounds(record.scenario))
+    assert [check for check in checks if not check.ok] == []
+    assert len(checks) == 6  # connectivity, (kij), (knu), (kV), (lengthysV), (xi)
+    assert np.all(series.edge_lengths < record.scenario.delta)
+
+
+def test_theorem_2_on_the_paper_example_gives_connectivity_but_no_decay_bound():
+    # docs/THEOREM2.md: β_d = 1 is not below the corrected (2-k4)/λmax(P) = 0.186, so the proof
+    # bounds ν_d and the edges (part (i)) but gives no k_V, decay bound or ξ.
+    record = simulate(load_scenario('paper_double'), horizon=0.5)
+    series = run_series(record)
+    bounds = theory_bounds(record.scenario)
+    assert bounds.k_V is None and bounds.error_gain is None and bounds.xi is None
+    assert 'no decay bound' in bounds.note
+    checks = theorem_checks(record, series, bounds)
+    assert [check.name for check in checks] == ['connectivity: ||x_i - x_j|| < Δ', 'edge lengths <= k_ij + ||d_ij|| (kij)', 'tension <= k_nu (knu)']
+    assert all(check.ok for check in checks)
+    assert bounds.printed_k_V is not None  # the printed chain, drawn for comparison
+
+
+def test_theorem_checks_catch_a_violation(paper_single_record):
+    record = paper_single_record
+    series = run_series(record)
+    bounds = theory_bounds(record.scenario)
+    grown = dataclasses.replace(series, formation_error=series.formation_error * 100.0, edge_lengths=series.edge_lengths * 2.0)
+    failed = {check.name: check.detail for check in theorem_checks(record, grown, bounds) if not check.ok}
+    assert 'formation error < 2 sqrt(k_V) e^{-beta t}' in failed
+    assert failed['connectivity: ||x_i - x_j|| < Δ'].startswith('max edge length 6.7082039')  # 2 ||(1.5, 3)||
+    tight = dataclasses.replace(bounds, xi={agent: 1.0 for agent in bounds.xi})
+    failed = {check.name: check.detail for check in theorem_checks(record, series, tight) if not check.ok}
+    assert failed['inter-event times >= xi_i (xi)'].startswith('agent 1: ')
+
+
+def test_double_integrator_bounds_use_the_corrected_chain():
+    # β_d below (2-k4)/λmax(P) = 0.186: the corrected chain holds and bounds the error by
+    # 2 sqrt(k^d_V / λmin(P)) e^{-β_d t} (yiyj, corrected).
+    base = load_scenario('paper_double')
+    scenario = base.replace(gains=dataclasses.replace(base.gains, beta_d=0.1))
+    bounds = theory_bounds(scenario)
+    chain = theory.theorem_constants(scenario).corrected_chain
+    assert chain.holds and bounds.theorem == 2 and bounds.rate == 0.1
+    assert bounds.error_gain == pytest.approx(2.0 * math.sqrt(chain.k_V / np.linalg.eigvalsh(scenario.gains.P).min()), rel=1e-12)
+
+
+# ------------------------------------------------------------------------------------ figures
+
+
+def test_the_paper_figure_draws_exactly_the_recorded_events_and_paths(paper_single_record):
+    from formation_sim.analysis.figures import paper_figure, pyplot
+
+    record = paper_single_record
+    fig, trajectories, raster = paper_figure(record)
+    try:
+        assert sum(len(c.get_positions()) for c in raster.events.values()) == record.total_events
+        for agent, collection in raster.events.items():
+            assert list(collection.get_positions()) == record.trigger_times[agent]
+        x = record.sample_positions
+        for k, agent in enumerate(record.scenario.agent_ids):
+            path = trajectories.lines[agent].get_xydata()
+            assert np.array_equal(path[-1], x[-1, k]) and np.array_equal(path[0], record.scenario.positions[k])
+            assert np.array_equal(trajectories.starts[agent].get_xydata()[0], record.scenario.positions[k])
+        index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}
+        assert len(trajectories.formation) == len(record.scenario.edges)
+        for line, edge in zip(trajectories.formation, record.scenario.edges):
+            assert np.array_equal(line.get_xydata(), x[-1, [index[edge.i], index[edge.j]]])
+    finally:
+        pyplot().close(fig)
+
+
+def test_analysis_panels_hold_the_series_and_bounds(paper_single_record):
+    from formation_sim.analysis.figures import plot_energy, plot_formation_error, plot_inter_event_times, pyplot
+
+    record = paper_single_record
+    series = run_series(record)
+    bounds = theory_bounds(record.scenario)
+    plt = pyplot()
+    fig, (ax_error, ax_gaps, ax_nu, ax_v) = plt.subplots(1, 4)
+    try:
+        error = plot_formation_error(ax_error, series, bounds)
+        t = error.lines['bound'].get_xdata()
+        assert np.all(series.formation_error < error.lines['bound'].get_ydata())  # Theorem 1 (ii)
+        assert np.allclose(error.lines['envelope'].get_ydata(), series.formation_error[0] * np.exp(-record.scenario.gains.beta * t))
+        gaps = plot_inter_event_times(ax_gaps, record, bounds.xi)
+        histogram_total = sum(patch.get_path().vertices[:, 1].max() > 0 for patch in ax_gaps.patches)  # one outline per agent
+        assert histogram_total == len(record.scenario.agent_ids)
+        assert sum(g.size for g in gaps.gaps.values()) == record.total_events - len(record.scenario.agent_ids)
+        assert {agent: line.get_xdata()[0] for agent, line in gaps.xi_lines.items()} == bounds.xi
+        energy = plot_energy(ax_nu, ax_v, record, series, bounds)
+        assert np.array_equal(energy.lines['tension'].get_ydata(), series.tension)
+        assert np.all(series.lyapunov < energy.lines['k_V'].get_ydata())  # (kV)
+    finally:
+        plt.close(fig)
+
+
+def test_the_animation_has_the_frames_asked_for(paper_single_record, tmp_path):
+    from PIL import Image
+
+    from formation_sim.analysis.figures import animate, frame_indices
+
+    record = paper_single_record
+    chosen = frame_indices(record.sample_times, frames=7)
+    assert chosen[0] == 0 and chosen[-1] == len(record.sample_times) - 1
+    assert np.all(np.diff(chosen) >= 0)
+    targets = np.linspace(0.0, record.sample_times[-1], 7)
+    assert np.all(record.sample_times[chosen] <= targets)
+    seen = []
+    path = animate(record, tmp_path / 'run.gif', frames=7, progress=lambda done, total: seen.append((done, total)))
+    with Image.open(path) as image:
+        assert image.n_frames == 7
+    assert seen[-1] == (7, 7)
+
+
+# ---------------------------------------------------------------------------------- command
+
+
+def _distributed_like(record):
+    """The record as the simulator node would report it (mode and the extras a bag holds)."""
+    extra = {'clock': 'lockstep', 'steps': len(_events(record)), 'reached_time': record.horizon, 'failure': None}
+    return dataclasses.replace(record, mode='distributed', extra=extra)
+
+
+def test_analyze_command_reports_agreement_and_each_difference(paper_single_record, write_run_bag, tmp_path):
+    from formation_sim.cli import main
+
+    record = _distributed_like(paper_single_record)
+    run_dir = tmp_path / 'run'
+    write_run_bag(record, run_dir / 'bag', scenario_topic=True)
+    summary = write_summary(record, run_dir)
+    assert main(['analyze', str(run_dir), '--no-animation', '--quiet']) == 0
+    report = json.loads((run_dir / 'analysis' / 'analysis.json').read_text())
+    assert report['summary_json']['equal'] is True
+    assert report['summary']['trigger_times'] == {str(a): t for a, t in record.trigger_times.items()}
+    for name in ('formation.png', 'edge_lengths.png', 'formation_error.png', 'inter_event_times.png', 'energy.png'):
+        assert (run_dir / 'analysis' / name).stat().st_size > 1000
+
+    data = json.loads(summary.read_text())
+    data['messages_sent'] += 2
+    summary.write_text(json.dumps(data))
+    assert main(['analyze', str(run_dir), '--no-figures', '--quiet', '--out', str(tmp_path / 'second')]) == 1
+    markdown = (tmp_path / 'second' / 'analysis.md').read_text()
+    assert f'| `messages_sent` | {record.messages_sent} | {record.messages_sent + 2} |' in markdown
+    assert 'differs from the bag in 1 value(s)' in markdown
+
+
+def test_analyze_command_exit_2_names_what_is_missing(tmp_path, capsys):
+    from formation_sim.cli import main
+
+    (tmp_path / 'empty').mkdir()
+    assert main(['analyze', str(tmp_path / 'empty')]) == 2
+    assert 'neither a bag' in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------- ROS
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_analysing_a_distributed_bag_reproduces_what_the_run_reported(distributed_single_run):
+    run = distributed_single_run
+    location = locate(run.out_dir)
+    rebuilt = load_bag_run(location.bag, run_dir=location.run_dir)
+    assert [check for check in rebuilt.checks if not check.ok] == []
+    summary = run.summary
+    assert {str(a): t for a, t in rebuilt.record.trigger_times.items()} == summary['trigger_times']  # exactly
+    final = rebuilt.record.sample_positions[-1]
+    for k, agent in enumerate(rebuilt.record.scenario.agent_ids):
+        assert final[k].tolist() == summary['final_positions'][str(agent)]
+    differences, skipped = diff_summaries(bag_summary(rebuilt.record), summary)
+    assert differences == []
+    assert 'wall_time' in skipped
+    # and the same events as the in-process engine
+    assert rebuilt.record.total_events == run.reference.total_events
+
+
+def test_a_wall_clock_trigger_at_the_horizon_is_explained(paper_single_record, tmp_path):
+    from formation_sim.analysis.load import BagRun
+    from formation_sim.analysis.report import build_report
+
+    reported = dataclasses.replace(paper_single_record, extra={'clock': 'realtime'})
+    summary = tmp_path / 'summary.json'
+    summary.write_text(json.dumps(bag_summary(reported)))
+    times = {agent: list(t) for agent, t in reported.trigger_times.items()}
+    times[2].append(reported.horizon)  # sensed at the horizon; its command came after the end
+    recorded = dataclasses.replace(reported, trigger_times=times)
+    run = BagRun(bag=tmp_path / 'bag', record=recorded, scenario_source='test', topics={}, counts={})
+    report = build_report(run, series=run_series(recorded), bounds=None, summary_path=summary)
+    assert {d['key'] for d in report['summary_json']['differences']} == {'trigger_times.2 (length)', 'event_counts.2', 'total_events'}
+    (note,) = report['summary_json']['notes']
+    assert note.startswith('agents [2] triggered at the horizon t = 1.0 (wall clock)')

@@ -1,0 +1,170 @@
+"""`formation run` refuses bad requests before it starts any process."""
+
+from __future__ import annotations
+
+import pytest
+
+from formation_sim.cli import main
+
+
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    [
+        (['--domain-id', '300'], 'domain id must lie in [0, 232], got 300'),
+        (['--agents-per-process', '0'], 'agents_per_process must be >= 1, got 0'),
+        (['--horizon', '-1'], 'horizon must be a finite number > 0, got -1.0'),
+    ],
+)
+def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, arguments, complaint):
+    assert main(['run', 'paper_single', '--out', str(tmp_path / 'run'), '--quiet', *arguments]) == 2
+    assert complaint in capsys.readouterr().err
+    assert not (tmp_path / 'run' / 'logs').exists()  # nothing was started
+
+
+def test_an_unknown_executor_is_refused_by_the_api(tmp_path):
+    from formation_sim.runtime.orchestrate import FormationRun, RunError
+
+    with pytest.raises(RunError, match=r"executor must be one of \('events', 'single'\), got 'multi'"):
+        FormationRun('paper_single', out_dir=tmp_path / 'run', executor='multi')
+
+
+def test_an_existing_bag_is_never_overwritten(tmp_path, capsys):
+    (tmp_path / 'run' / 'bag').mkdir(parents=True)
+    assert main(['run', 'paper_single', '--out', str(tmp_path / 'run'), '--quiet']) == 2
+    assert 'bag exists; the recorder never overwrites a bag' in capsys.readouterr().err
+
+
+def test_an_unknown_scenario_is_refused(tmp_path, capsys):
+    assert main(['run', 'no_such_scenario', '--out', str(tmp_path / 'run')]) == 2
+    assert 'no such scenario file and not a built-in scenario' in capsys.readouterr().err
+
+
+# -- an invalid scenario starts nothing ------------------------------------------------------------
+
+PAPER_SINGLE = """\
+name: {name}
+dynamics: single
+communication_radius: 4.0
+horizon: 10.0
+agents:
+  1: {{position: [2.0, 4.0]}}
+  2: {{position: [3.5, 7.0]}}
+  3: {{position: [{x3}, {y3}]}}
+edges:
+  - {{i: 1, j: 2, d: [0.0, -2.0]}}
+  - {{i: 1, j: 3, d: [-2.0, 0.0]}}
+  - {{i: 2, j: 3, d: [{d23}]}}
+gains: {{alpha: 10.0, beta: 1.0}}
+"""
+
+INVALID = [
+    # (label, edits, rule named, fragment of the message)
+    ('initial condition violated', {'x3': 4.3, 'y3': 5.5, 'd23': '-2.0, 2.0'}, '[initial] edge (2, 3)', '(initial)'),
+    ('infeasible formation', {'x3': 4.5, 'y3': 5.5, 'd23': '-2.0, 2.5'}, '[feasible] formation', 'Assumption 1'),
+]
+
+
+def _write(tmp_path, label, edits):
+    path = tmp_path / f'{label.replace(" ", "_")}.yaml'
+    path.write_text(PAPER_SINGLE.format(name=label.replace(' ', '_'), **edits))
+    return path
+
+
+class _NoProcesses:
+    """Stands in for subprocess.Popen: any attempt to start a process fails the test."""
+
+    started: list = []
+
+    def __init__(self, args, *rest, **options):
+        _NoProcesses.started.append(args)
+        raise AssertionError(f'a process was started for an invalid scenario: {args}')
+
+
+@pytest.mark.parametrize(('label', 'edits', 'rule', 'fragment'), INVALID, ids=[case[0] for case in INVALID])
+def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(tmp_path, monkeypatch, label, edits, rule, fragment):
+    import subprocess
+
+    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.model.validate import ValidationError
+
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    _NoProcesses.started = []
+    out = tmp_path / 'run'
+    with pytest.raises(ValidationError) as caught:
+        FormationRun(_write(tmp_path, label, edits), out_dir=out, progress=False).run()
+    assert rule in str(caught.value) and fragment in str(caught.value)
+    assert _NoProcesses.started == []
+    assert not out.exists(), 'no output folder, hence no bag and no logs'
+
+
+@pytest.mark.parametrize(('label', 'edits', 'rule', 'fragment'), INVALID, ids=[case[0] for case in INVALID])
+def test_formation_run_command_refuses_an_invalid_scenario(tmp_path, capsys, monkeypatch, label, edits, rule, fragment):
+    import subprocess
+
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    _NoProcesses.started = []
+    out = tmp_path / 'run'
+    assert main(['run', str(_write(tmp_path, label, edits)), '--out', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "breaks the theorems' hypotheses; nothing was run" in err
+    assert rule in err and fragment in err
+    assert _NoProcesses.started == [] and not out.exists()
+
+
+def test_formation_run_process_on_an_invalid_scenario_exits_non_zero_and_leaves_nothing(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / 'run'
+    path = _write(tmp_path, *INVALID[0][:2])
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_sim.cli', 'run', str(path), '--out', str(out)],
+        capture_output=True, text=True, timeout=120, check=False,
+    )
+    assert done.returncode == 2, done.stderr
+    assert '[initial] edge (2, 3)' in done.stderr
+    assert not out.exists()
+
+
+def test_fault_injection_requests_are_checked_before_anything_starts(tmp_path):
+    from formation_sim.runtime.orchestrate import FormationRun, RunError
+
+    with pytest.raises(RunError, match='loss needs the wall clock'):
+        FormationRun('paper_single', out_dir=tmp_path / 'a', inject={'loss': 0.1})
+    with pytest.raises(RunError, match=r"unknown keys \['drop'\]"):
+        FormationRun('paper_single', out_dir=tmp_path / 'b', inject={'drop': 0.1}, clock='realtime')
+    with pytest.raises(RunError, match='loss is a probability in \\[0, 1\\], got 2'):
+        FormationRun('paper_single', out_dir=tmp_path / 'c', inject={'loss': 2}, clock='realtime')
+    with pytest.raises(RunError, match='delay_ms must be a finite number >= 0, got -1'):
+        FormationRun('paper_single', out_dir=tmp_path / 'd', inject={'delay_ms': -1})
+    assert not any(tmp_path.iterdir())
+
+
+def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch):
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    local = FormationRun('paper_single', out_dir=tmp_path / 'a')._environment(70, 4)
+    assert local['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST' and local['ROS_DOMAIN_ID'] == '70'
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # as .ci/run sets it
+    network = FormationRun('paper_single', out_dir=tmp_path / 'b', localhost_only=False)._environment(70, 4)
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in network  # Jazzy's default: SUBNET
+    pinned = FormationRun('paper_single', out_dir=tmp_path / 'c', extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'})
+    assert pinned._environment(70, 4)['FASTDDS_BUILTIN_TRANSPORTS'] == 'UDPv4'
+
+
+def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    seen = {}
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            seen['localhost_only'] = self.localhost_only
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    assert main(['run', 'paper_single', '--out', str(tmp_path / 'a'), '--network', '--quiet']) == 2
+    assert seen == {'localhost_only': False}
+    assert main(['run', 'paper_single', '--out', str(tmp_path / 'b'), '--quiet']) == 2
+    assert seen == {'localhost_only': True}

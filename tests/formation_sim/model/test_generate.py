@@ -1,0 +1,83 @@
+"""Random scenarios: valid by construction, seeded, fast enough for 10 000 agents."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from formation_sim.model import gains, theory
+from formation_sim.model.generate import GenerateError, random_scenario
+from formation_sim.model.scenario import scenario_from_dict, scenario_to_dict
+from formation_sim.model.validate import validate_scenario
+
+CASES = [
+    dict(n=2 + (seed * 7) % 60, seed=seed, dynamics=('single', 'double')[seed % 2], dimension=1 + seed % 3,
+         slack=(0.5, 0.2, 0.9, 0.04)[seed % 4])
+    for seed in range(50)
+]
+
+
+@pytest.mark.parametrize('case', CASES, ids=[f'seed{c["seed"]}' for c in CASES])
+def test_random_scenarios_satisfy_every_hypothesis(case):
+    s = random_scenario(**case)
+    assert s.n == case['n'] and s.dynamics == case['dynamics'] and s.dimension == case['dimension']
+    report = validate_scenario(s)
+    assert report.ok, [f.format() for f in report.errors]
+    assert theory.is_connected(s)
+    # Feasible by construction, ||d_ij|| <= 0.75 Δ.
+    assert theory.formation_feasibility(s).residual < 1e-9
+    margins = theory.edge_margins(s)
+    assert np.all(margins >= 0.25 * s.delta - 1e-12)
+    # (initial) with the requested slack on every edge, attained on the tightest one.
+    errors = theory.edge_errors(s, s.positions)
+    assert np.all(errors <= (1.0 - case['slack']) * margins * (1 + 1e-12) + 1e-12)
+    assert np.max(errors / margins) == pytest.approx(1.0 - case['slack'], rel=1e-9)
+    beta0 = theory.beta0(s)
+    if s.dynamics == 'single':
+        assert s.gains.beta == pytest.approx(0.5 * beta0)
+    else:
+        g = s.gains
+        assert g.beta1 == pytest.approx(beta0)
+        assert g.k3 == pytest.approx(0.5 * gains.k3_upper_bound(g.k1, g.k2))
+        assert 0.0 < g.beta_d < min(gains.beta_d_bound_paper(g), gains.beta_d_bound_corrected(g))
+        assert np.all(np.linalg.norm(s.velocities, axis=1) <= 1.0)
+    # Below 5 % relative slack (initial) warns; nothing else is near an edge.
+    expected = {'remark', 'initial'} if case['slack'] < 0.05 else {'remark'}
+    assert {w.rule for w in report.warnings} - {'remark'} == expected - {'remark'}
+    # The constants of the proofs exist (the corrected chain of Theorem 2 included).
+    constants = theory.theorem_constants(s)
+    assert all(value > 0 for value in constants.xi.values())
+
+
+def test_same_seed_same_scenario_other_seed_other_scenario():
+    a = random_scenario(n=40, seed=7, dynamics='double')
+    assert a == random_scenario(n=40, seed=7, dynamics='double')
+    assert a != random_scenario(n=40, seed=8, dynamics='double')
+    assert scenario_from_dict(scenario_to_dict(a)) == a
+
+
+def test_slack_one_starts_in_formation():
+    s = random_scenario(n=20, seed=3, slack=1.0)
+    assert np.max(theory.edge_errors(s, s.positions)) < 1e-12
+
+
+def test_ten_thousand_agents():
+    s = random_scenario(n=10_000, seed=1)
+    assert s.n == 10_000 and theory.is_connected(s)
+    degree = 2 * len(s.edges) / s.n
+    assert 3.0 < degree < 12.0  # a sparse geometric graph around the requested mean degree 6
+    assert 0.0 < s.gains.beta < theory.beta0(s)
+
+
+@pytest.mark.parametrize('kwargs, fragment', [
+    (dict(n=1, seed=0), 'n must be an integer >= 2'),
+    (dict(n=5, seed=0, slack=0.0), 'slack'),
+    (dict(n=5, seed=0, slack=1.5), 'slack'),
+    (dict(n=5, seed=0, dynamics='triple'), 'dynamics'),
+    (dict(n=5, seed=0, dimension=0), 'dimension'),
+    (dict(n=5, seed=0, delta=-1.0), 'delta'),
+    (dict(n=5, seed=0, alpha=0.0), 'alpha'),
+])
+def test_bad_parameters(kwargs, fragment):
+    with pytest.raises(GenerateError, match=fragment):
+        random_scenario(**kwargs)

@@ -1,0 +1,160 @@
+"""Validation: each broken hypothesis gives its named error, near-edge cases warn, numbers are shown."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from formation_sim.model.scenario import DoubleGains, Edge, SingleGains, load_scenario, scenario_from_dict
+from formation_sim.model.validate import ValidationError, require_valid, validate_scenario
+
+
+# k3 = 0.6 (k4 ≈ 0.99), β_d = 0.1: below both the printed and the corrected bound.
+BELOW_BOTH_BOUNDS = {'beta_d': 0.1}
+
+
+def rules(findings):
+    return {(f.rule, f.subject) for f in findings}
+
+
+def test_paper_single_is_valid_with_two_warnings():
+    report = validate_scenario(load_scenario('paper_single'))
+    assert report.ok
+    # Edge (2,3): ||x_2-x_3-d_23|| = ||(1, -0.5)|| = 1.1180 < 4 - 2√2 = 1.1716, slack 4.6 %.
+    # β = 1 > 4/(3·2·4) = 1/6: the Remark's bound cannot certify β.
+    assert rules(report.warnings) == {('initial', 'edge (2, 3)'), ('remark', 'gains')}
+    text = report.format()
+    assert 'β0 = ρ2/Δ0 = 1.5' in text and 'ρ2(DD^T) = 3' in text
+    for edge in ('edge (1, 2)', 'edge (1, 3)', 'edge (2, 3)'):
+        assert edge in text  # the slack of every edge is listed
+    assert '0.0535389' in text  # 4 - 2√2 - √1.25
+
+
+def test_paper_double_warns_about_the_corrected_beta_d_bound():
+    report = validate_scenario(load_scenario('paper_double'))
+    assert report.ok
+    assert ('beta_d_corrected', 'gains') in rules(report.warnings)
+    warning = next(w for w in report.warnings if w.rule == 'beta_d_corrected')
+    assert warning.values['beta_d'] == 1.0
+    assert warning.values['bound_corrected'] == pytest.approx(1 / 5.3644, rel=1e-4)
+    assert warning.values['bound_paper'] == pytest.approx(1.1096, abs=1e-4)
+    assert 'P = [[5.0237, 1.1547], [1.1547, 1.45022]]' in report.format()
+
+
+def test_double_below_both_bounds_has_no_beta_d_warning(paper_scenario_dict):
+    report = validate_scenario(scenario_from_dict(paper_scenario_dict('double', **BELOW_BOTH_BOUNDS)))
+    assert report.ok
+    assert not {w.rule for w in report.warnings} & {'beta_d', 'beta_d_corrected', 'k3'}
+
+
+def _edit(paper_scenario_dict, dynamics, change):
+    """The paper's example (double integrators below both β_d bounds), changed by `change`."""
+    data = paper_scenario_dict(dynamics, **(BELOW_BOTH_BOUNDS if dynamics == 'double' else {}))
+    change(data)
+    return scenario_from_dict(data)
+
+
+def _gain(key, value):
+    return lambda data: data['gains'].__setitem__(key, value)
+
+
+def _position(agent, value):
+    return lambda data: data['agents'][agent].__setitem__('position', value)
+
+
+def _edge_d(k, value):
+    return lambda data: data['edges'][k].__setitem__('d', value)
+
+
+BROKEN = [
+    # (label, dynamics, change, rule, subject, fragments of the message)
+    ('disconnected', 'single', lambda d: d['edges'].__delitem__(slice(1, 3)) or d['edges'].__setitem__(0, {'i': 1, 'j': 2, 'd': [0.0, -2.0]}),
+     'connected', 'graph', ['2 connected components', 'agent 3']),
+    ('infeasible', 'single', _edge_d(2, [-2.0, 2.5]), 'feasible', 'formation', ['residual', 'Assumption 1']),
+    ('too long d', 'single',
+     lambda d: (d['edges'][0].__setitem__('d', [0.0, -4.5]), d['edges'][1].__setitem__('d', [-2.0, 0.0]),
+                d['edges'][2].__setitem__('d', [-2.0, 4.5]), d['agents'][2].__setitem__('position', [2.0, 8.5])),
+     'edge_length', 'edge (1, 2)', ['||d_ij|| = 4.5', 'Δ = 4']),
+    ('initial broken', 'single', _position(3, [4.3, 5.5]), 'initial', 'edge (2, 3)', ['(initial)', 'Δ-||d_ij|| = 1.17157']),
+    ('alpha zero', 'single', _gain('alpha', 0.0), 'alpha', 'gains', ['α = 0']),
+    ('beta at beta0', 'single', _gain('beta', 1.5), 'beta', 'gains', ['β0 = 1.5', 'β = 1.5']),
+    ('beta negative', 'single', _gain('beta', -0.1), 'beta', 'gains', ['β = -0.1']),
+    ('alpha_d negative', 'double', _gain('alpha_d', -1.0), 'alpha_d', 'gains', ['α_d = -1']),
+    ('beta1 above beta0', 'double', _gain('beta1', 1.6), 'beta1', 'gains', ['β0 = 1.5', 'β1 = 1.6']),
+    ('k3 too large', 'double', _gain('k3', 1.3), 'k3', 'gains', ['k3 = 1.3', '1.21066']),
+    ('k3 zero', 'double', _gain('k3', 0.0), 'k3', 'gains', ['k3 = 0']),
+    ('beta_d above printed bound', 'double', _gain('beta_d', 1.2), 'beta_d', 'gains', ['β_d = 1.2', 'ρ2(P)']),
+    ('riccati broken', 'double', lambda d: d['gains'].update(k1=0.5, k2=0.5), 'riccati', 'gains', ['riccatti', 'β1 = 1.5']),
+    ('k2 negative', 'double', lambda d: d['gains'].update(k1=1.2, k2=-1.5), 'k1_k2', 'gains', ['k2 = -1.5']),
+]
+
+
+@pytest.mark.parametrize('label, dynamics, change, rule, subject, fragments', BROKEN, ids=[b[0] for b in BROKEN])
+def test_broken_hypotheses_give_named_errors(label, dynamics, change, rule, subject, fragments, paper_scenario_dict):
+    report = validate_scenario(_edit(paper_scenario_dict, dynamics, change))
+    assert not report.ok
+    matching = [f for f in report.errors if f.rule == rule and f.subject == subject]
+    assert matching, (label, [f.format() for f in report.errors])
+    for fragment in fragments:
+        assert any(fragment in f.message for f in matching), (label, fragment, matching[0].message)
+    with pytest.raises(ValidationError) as caught:
+        require_valid(_edit(paper_scenario_dict, dynamics, change))
+    assert caught.value.report.errors == report.errors
+    assert f'[{report.errors[0].rule}]' in str(caught.value)
+    json.dumps(report.to_dict(), allow_nan=False)
+
+
+NEAR_EDGE = [
+    ('beta near beta0', 'single', _gain('beta', 1.45), 'beta'),
+    ('k3 near its bound', 'double', lambda d: d['gains'].update(k3=1.2, beta_d=0.001), 'k3'),
+    ('beta_d near printed bound', 'double', lambda d: d['gains'].update(k3=0.6053, beta_d=1.08), 'beta_d'),
+    ('beta_d above corrected bound', 'double', _gain('beta_d', 0.5), 'beta_d_corrected'),
+]
+
+
+@pytest.mark.parametrize('label, dynamics, change, rule', NEAR_EDGE, ids=[n[0] for n in NEAR_EDGE])
+def test_near_edge_conditions_warn_but_pass(label, dynamics, change, rule, paper_scenario_dict):
+    report = validate_scenario(_edit(paper_scenario_dict, dynamics, change))
+    assert report.ok, [f.format() for f in report.errors]
+    assert rule in {w.rule for w in report.warnings}
+    assert require_valid(_edit(paper_scenario_dict, dynamics, change)).ok
+
+
+def test_generous_slack_gives_no_initial_warning():
+    s = load_scenario('paper_single')
+    report = validate_scenario(s.replace(positions=np.array([[2.0, 4.0], [2.0, 6.0], [4.0, 4.0]])))
+    assert report.ok
+    assert 'initial' not in {w.rule for w in report.warnings}  # already in formation: 100 % slack
+
+
+def test_remark_warning_disappears_below_the_bound():
+    s = load_scenario('paper_single')
+    report = validate_scenario(s.replace(gains=SingleGains(alpha=10.0, beta=0.1)))
+    assert 'remark' not in {w.rule for w in report.warnings}
+
+
+def test_double_remark_applies_to_beta1():
+    s = load_scenario('paper_double')
+    gains = DoubleGains.from_riccati(alpha_d=10.0, beta_d=0.05, beta1=0.1, k3='paper')
+    report = validate_scenario(s.replace(gains=gains))
+    assert report.ok and 'remark' not in {w.rule for w in report.warnings}
+
+
+def test_report_dict_lists_every_edge_slack():
+    report = validate_scenario(load_scenario('paper_single'))
+    data = json.loads(json.dumps(report.to_dict(), allow_nan=False))
+    note = next(n for n in data['notes'] if n['rule'] == 'initial')
+    slacks = {(e['i'], e['j']): e['slack'] for e in note['values']['edges']}
+    assert slacks[(1, 2)] == pytest.approx(2.0 - np.hypot(1.5, 1.0))
+    assert slacks[(1, 3)] == pytest.approx(2.0 - np.hypot(0.5, 1.5))
+    assert slacks[(2, 3)] == pytest.approx(4.0 - 2.0 * np.sqrt(2.0) - np.hypot(1.0, 0.5))
+
+
+def test_zero_margin_edge_reports_without_nan():
+    s = load_scenario('paper_single')
+    edges = (Edge(i=1, j=2, d=np.array([0.0, -4.0])),) + s.edges[1:]
+    report = validate_scenario(s.replace(edges=edges))
+    assert ('edge_length', 'edge (1, 2)') in rules(report.errors)
+    json.dumps(report.to_dict(), allow_nan=False)

@@ -1,0 +1,550 @@
+"""Tests of formation_sim.runtime.recorder: bag round trips, metadata, recovery, and a live recording."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from geometry_msgs.msg import Pose, PoseArray
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64MultiArray
+
+from formation_sim.bag.io import BagWriter, BagError, TopicSpecError, UnknownMessageTypeError, decode, read_bag
+from formation_sim.bag.recovery import BagRecoveryError, reindex
+from formation_sim.runtime.recorder import parse_topic_spec
+
+STEP = '/formation/step'
+POSES = '/formation/poses'
+STEP_TYPE = 'std_msgs/msg/Float64MultiArray'
+POSES_TYPE = 'geometry_msgs/msg/PoseArray'
+
+
+def step_bytes(k: int) -> bytes:
+    return serialize_message(Float64MultiArray(data=[1.0, float(k), 0.1 * k]))
+
+
+def poses_bytes(k: int) -> bytes:
+    poses = PoseArray()
+    poses.header.frame_id = 'world'
+    poses.header.stamp.sec = k
+    for agent in range(3):
+        pose = Pose()
+        pose.position.x = k + 0.25 * agent
+        pose.position.y = -1.5 * agent
+        pose.orientation.w = 1.0
+        poses.poses.append(pose)
+    return serialize_message(poses)
+
+
+def interleaved(count: int) -> list[tuple[str, str, int, bytes]]:
+    """Steps and pose arrays alternating, stamped k * 0.1 s."""
+    messages = []
+    for k in range(count):
+        stamp = k * 100_000_000
+        messages.append((STEP, STEP_TYPE, stamp, step_bytes(k)))
+        messages.append((POSES, POSES_TYPE, stamp, poses_bytes(k)))
+    return messages
+
+
+def metadata(bag: Path) -> dict:
+    return yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+
+
+def test_round_trip_is_bit_identical(tmp_path: Path) -> None:
+    written = interleaved(20)
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic(STEP, STEP_TYPE)
+        bag.add_topic(POSES, POSES_TYPE)
+        for topic, _, stamp, data in written:
+            bag.write(topic, stamp, data)
+
+    assert [tuple(m) for m in read_bag(tmp_path / 'bag')] == written
+
+
+def test_decode_gives_the_published_values(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic(STEP, STEP_TYPE)
+        bag.add_topic(POSES, POSES_TYPE)
+        bag.write(STEP, 7, step_bytes(3))
+        bag.write(POSES, 7, poses_bytes(3))
+
+    step, poses = (decode(m.rawdata, m.msgtype) for m in read_bag(tmp_path / 'bag'))
+    assert list(step.data) == [1.0, 3.0, 0.1 * 3]
+    assert poses.header.frame_id == 'world'
+    assert [(p.position.x, p.position.y) for p in poses.poses] == [(3.0, 0.0), (3.25, -1.5),
+                                                                   (3.5, -3.0)]
+
+
+def test_metadata_is_version_9_mcap_with_counts(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic(STEP, STEP_TYPE)
+        bag.add_topic(POSES, POSES_TYPE)
+        for k in range(5):
+            bag.write(STEP, 1_000 + k, step_bytes(k))
+        bag.write(POSES, 2_000, poses_bytes(0))
+
+    info = metadata(tmp_path / 'bag')
+    assert info['version'] == 9
+    assert info['storage_identifier'] == 'mcap'
+    assert info['relative_file_paths'] == ['bag.mcap']
+    assert (tmp_path / 'bag' / 'bag.mcap').read_bytes().startswith(b'\x89MCAP0\r\n')
+    assert info['message_count'] == 6
+    assert info['starting_time']['nanoseconds_since_epoch'] == 1_000
+    assert info['duration']['nanoseconds'] == 1_000
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in info['topics_with_message_count']}
+    assert counts == {STEP: 5, POSES: 1}
+    formats = {t['topic_metadata']['serialization_format']
+               for t in info['topics_with_message_count']}
+    assert formats == {'cdr'}
+
+
+def test_writer_never_overwrites(tmp_path: Path) -> None:
+    (tmp_path / 'bag').mkdir()
+    with pytest.raises(BagError, match='never overwrites'):
+        BagWriter(tmp_path / 'bag').open()
+
+
+def test_bad_input_is_named(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic(STEP, STEP_TYPE)
+        with pytest.raises(TopicSpecError, match=r"'/formation/other' was not added.*step"):
+            bag.write('/formation/other', 0, step_bytes(0))
+        with pytest.raises(BagError, match=r'int nanoseconds, got 0\.5'):
+            bag.write(STEP, 0.5, step_bytes(0))
+        with pytest.raises(BagError, match=r'\[0, 2\*\*63\) ns, got -1'):
+            bag.write(STEP, -1, step_bytes(0))
+        with pytest.raises(TopicSpecError, match=r"added with type 'std_msgs/msg/Float64Multi"):
+            bag.add_topic(STEP, POSES_TYPE)
+        with pytest.raises(TopicSpecError, match='must be absolute'):
+            bag.add_topic('formation/step', STEP_TYPE)
+        with pytest.raises(UnknownMessageTypeError, match="'std_msgs/Float64' is not of the form"):
+            bag.add_topic('/x', 'std_msgs/Float64')
+        with pytest.raises(UnknownMessageTypeError, match="'nope_msgs/msg/Nope' of topic '/x'"):
+            bag.add_topic('/x', 'nope_msgs/msg/Nope')
+        bag.add_topic(STEP, STEP_TYPE)  # the same topic again is fine
+    with pytest.raises(BagError, match='is not open'):
+        bag.write(STEP, 0, step_bytes(0))
+
+
+def test_topic_spec_parsing() -> None:
+    assert parse_topic_spec('/formation/step:std_msgs/msg/Float64MultiArray') == (STEP, STEP_TYPE)
+    with pytest.raises(TopicSpecError, match="'/formation/step' is not of the form"):
+        parse_topic_spec('/formation/step')
+    with pytest.raises(TopicSpecError, match='must be absolute'):
+        parse_topic_spec('step:std_msgs/msg/Float64MultiArray')
+
+
+# --- recovery ----------------------------------------------------------------------------------
+
+# The child lists the bytes it flushed: serialize_message leaves CDR padding bytes
+# uninitialized, so the same message serialized again need not be the same bytes.
+KILLED_WRITER = textwrap.dedent("""
+    import json, os, signal, sys
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+    from formation_sim.bag.io import BagWriter
+
+    bag = BagWriter(sys.argv[1])
+    bag.open()
+    bag.add_topic('/formation/step', 'std_msgs/msg/Float64MultiArray')
+    bag.add_topic('/formation/poses', 'geometry_msgs/msg/PoseArray')
+    flushed = []
+    for k in range(30):
+        data = serialize_message(Float64MultiArray(data=[1.0, float(k), k / 10]))
+        bag.write('/formation/step', k, data)
+        flushed.append(data.hex())
+        if k % 10 == 9:
+            bag.flush()
+    with open(sys.argv[2], 'w') as listing:
+        json.dump(flushed, listing)
+    bag.write('/formation/step', 10**12, b'never flushed')
+    os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+
+def test_reindex_recovers_a_killed_recorder(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    listing = tmp_path / 'flushed.json'
+    run = subprocess.run([sys.executable, '-c', KILLED_WRITER, str(bag), str(listing)],
+                         check=False, capture_output=True, timeout=120)
+    assert run.returncode == -signal.SIGKILL, run.stderr.decode()
+    assert not (bag / 'metadata.yaml').exists()
+    flushed = [(STEP, STEP_TYPE, k, bytes.fromhex(data))
+               for k, data in enumerate(json.loads(listing.read_text()))]
+
+    recovery = reindex(bag)
+
+    assert recovery.rewritten
+    assert recovery.message_counts == {STEP: 30, POSES: 0}
+    assert recovery.damaged_copy is not None
+    assert recovery.damaged_copy.exists()
+    assert [tuple(m) for m in read_bag(bag)] == flushed
+    info = metadata(bag)
+    assert info['version'] == 9
+    assert info['storage_identifier'] == 'mcap'
+    assert info['message_count'] == 30
+    assert info['starting_time']['nanoseconds_since_epoch'] == 0
+    assert info['duration']['nanoseconds'] == 29
+
+
+def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as writer:
+        writer.add_topic(STEP, STEP_TYPE)
+        writer.add_topic(POSES, POSES_TYPE)
+        for topic, _, stamp, data in interleaved(7):
+            writer.write(topic, 5 + stamp, data)
+    original = metadata(bag)
+    mcap_bytes = (bag / 'bag.mcap').read_bytes()
+    (bag / 'metadata.yaml').unlink()
+
+    recovery = reindex(bag)
+
+    assert not recovery.rewritten
+    assert (bag / 'bag.mcap').read_bytes() == mcap_bytes
+    rebuilt = metadata(bag)
+    for key in ('version', 'storage_identifier', 'relative_file_paths', 'duration',
+                'starting_time', 'message_count', 'topics_with_message_count'):
+        assert rebuilt[key] == original[key], key
+    assert [tuple(m) for m in read_bag(bag)] == [
+        (t, mt, 5 + s, d) for t, mt, s, d in interleaved(7)]
+
+
+def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
+    source = tmp_path / 'source'
+    mcap = source / 'source.mcap'
+    written: list[tuple[str, str, int, bytes]] = []
+    flushed_at: dict[int, int] = {}  # file size after a flush -> messages written by then
+    writer = BagWriter(source)
+    writer.open()
+    writer.add_topic(STEP, STEP_TYPE)
+    writer.add_topic(POSES, POSES_TYPE)
+    for batch in range(4):
+        for topic, msgtype, stamp, data in interleaved(6 * (batch + 1))[12 * batch:]:
+            writer.write(topic, stamp, data)
+            written.append((topic, msgtype, stamp, data))
+        writer.flush()
+        flushed_at[mcap.stat().st_size] = len(written)
+    writer.close()
+    data_end = max(flushed_at)
+    complete = mcap.read_bytes()
+
+    # Cuts at every flush, and anywhere else in the data and in the summary written by close.
+    rng = random.Random(20170710)
+    cuts = sorted({*flushed_at, *rng.sample(range(1, len(complete)), 60)})
+    recovered_counts = []
+    for cut in cuts:
+        bag = tmp_path / f'cut{cut}'
+        bag.mkdir()
+        (bag / 'cut.mcap').write_bytes(complete[:cut])
+        try:
+            reindex(bag)
+        except BagRecoveryError:
+            assert cut < min(flushed_at), cut  # only before the first chunk is complete
+            recovered_counts.append(0)
+            continue
+        recovered = [tuple(m) for m in read_bag(bag)]
+        assert recovered == written[:len(recovered)], cut
+        if cut in flushed_at:
+            assert len(recovered) == flushed_at[cut], cut
+        if cut >= data_end:
+            assert len(recovered) == len(written), cut
+        recovered_counts.append(len(recovered))
+
+    assert recovered_counts == sorted(recovered_counts)
+
+
+def test_reindex_errors_name_the_problem(tmp_path: Path) -> None:
+    with pytest.raises(BagRecoveryError, match=r'exactly one \.mcap file, found \[\]'):
+        reindex(tmp_path)
+    (tmp_path / 'x.mcap').write_bytes(b'\x89MCAP0\r\n\x01')
+    with pytest.raises(BagRecoveryError, match='no complete MCAP chunk in its 9 bytes'):
+        reindex(tmp_path)
+
+
+# --- live recording ------------------------------------------------------------------------------
+
+def recorder_command() -> list[str]:
+    script = Path(sys.executable).with_name('formation_recorder')
+    if script.exists():  # the console script of the installed package
+        return [str(script)]
+    return [sys.executable, '-m', 'formation_sim.runtime.recorder']
+
+
+@contextlib.contextmanager
+def ros_domain(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain_id: int):
+    """A private ROS domain for this test: environment for children and a context for us."""
+    import rclpy  # noqa: PLC0415
+
+    env = {'ROS_DOMAIN_ID': str(domain_id), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+           'ROS_LOG_DIR': str(tmp_path / 'ros_log'), 'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}
+    for key, value in env.items():
+        monkeypatch.setenv(key, value)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@contextlib.contextmanager
+def recorder(tmp_path: Path, *parameters: str):
+    """Run the recorder with `parameters` (name:=value); kill it if the test leaves it running."""
+    arguments = [item for p in parameters for item in ('-p', p)]
+    with (tmp_path / 'recorder.log').open('w') as log:
+        process = subprocess.Popen([*recorder_command(), '--ros-args', *arguments],
+                                   stdout=log, stderr=subprocess.STDOUT)
+        try:
+            yield process
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+
+
+def recorder_log(tmp_path: Path) -> str:
+    return (tmp_path / 'recorder.log').read_text()
+
+
+def wait_for_subscribers(publishers: list, process: subprocess.Popen, tmp_path: Path) -> None:
+    deadline = time.monotonic() + 60
+    while any(pub.get_subscription_count() < 1 for pub in publishers):
+        assert process.poll() is None, recorder_log(tmp_path)
+        assert time.monotonic() < deadline, f'no subscription: {recorder_log(tmp_path)}'
+        time.sleep(0.05)
+
+
+def stop(process: subprocess.Popen, sig: signal.Signals, tmp_path: Path) -> None:
+    process.send_signal(sig)
+    try:
+        process.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'the recorder ignored {sig.name}: {recorder_log(tmp_path)}')
+    assert process.returncode == 0, recorder_log(tmp_path)
+
+
+def reliable_keep_all():
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: PLC0415
+
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(('sig', 'domain_id'), [(signal.SIGINT, 151), (signal.SIGTERM, 152)])
+def test_live_recording_keeps_every_message_in_order(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: signal.Signals, domain_id: int
+) -> None:
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    count = 40
+    with (ros_domain(tmp_path, monkeypatch, domain_id) as context,
+          recorder(tmp_path, f'output:={bag}',
+                   f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']") as process):
+        node = rclpy.create_node('live_recording_test', context=context)
+        step_pub = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        poses_pub = node.create_publisher(PoseArray, POSES, reliable_keep_all())
+        wait_for_subscribers([step_pub, poses_pub], process, tmp_path)
+        published_steps, published_poses = [], []
+        for k in range(count):
+            poses = PoseArray()
+            poses.poses.append(Pose())
+            poses.poses[0].position.x = float(k)
+            # Published serialized, so the bytes compared are the bytes sent.
+            published_steps.append(step_bytes(k))
+            published_poses.append(serialize_message(poses))
+            step_pub.publish(published_steps[-1])
+            poses_pub.publish(published_poses[-1])
+        # Acknowledged = in the recorder's reader queue; the recorder drains it on the signal.
+        assert step_pub.wait_for_all_acked(Duration(seconds=30))
+        assert poses_pub.wait_for_all_acked(Duration(seconds=30))
+        advertised_hash = str(node.get_publishers_info_by_topic(STEP)[0].topic_type_hash)
+        stop(process, sig, tmp_path)
+        node.destroy_node()
+
+    recorded = list(read_bag(bag))
+    assert [m.rawdata for m in recorded if m.topic == STEP] == published_steps
+    assert [m.rawdata for m in recorded if m.topic == POSES] == published_poses
+    # Each step is stamped with its own simulation time, data[2] = 0.1 k.
+    assert [m.timestamp_ns for m in recorded if m.topic == STEP] == [
+        round(0.1 * k * 1e9) for k in range(count)]
+    hashes = {t['topic_metadata']['name']: t['topic_metadata']['type_description_hash']
+              for t in metadata(bag)['topics_with_message_count']}
+    assert hashes[STEP] == advertised_hash
+
+
+@pytest.mark.ros
+def test_live_prefix_discovery_with_node_clock(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    started_ns = time.time_ns()
+    with (ros_domain(tmp_path, monkeypatch, 153) as context,
+          recorder(tmp_path, f'output:={bag}', 'prefix:=/formation/', "clock_topic:=''",
+                   'discovery_period:=0.2') as process):
+        node = rclpy.create_node('prefix_discovery_test', context=context)
+        poses_pub = node.create_publisher(PoseArray, POSES, reliable_keep_all())
+        elsewhere_pub = node.create_publisher(Float64MultiArray, '/elsewhere/step',
+                                              reliable_keep_all())
+        wait_for_subscribers([poses_pub], process, tmp_path)
+        published = []
+        for k in range(10):
+            poses = PoseArray()
+            poses.header.frame_id = f'frame{k}'
+            published.append(serialize_message(poses))
+            poses_pub.publish(published[-1])
+            elsewhere_pub.publish(Float64MultiArray(data=[float(k)]))
+        assert poses_pub.wait_for_all_acked(Duration(seconds=30))
+        stop(process, signal.SIGINT, tmp_path)
+        node.destroy_node()
+    stopped_ns = time.time_ns()
+
+    recorded = list(read_bag(bag))
+    assert {m.topic for m in recorded} == {POSES}
+    assert [m.rawdata for m in recorded] == published
+    stamps = [m.timestamp_ns for m in recorded]
+    assert stamps == sorted(stamps)
+    assert started_ns <= stamps[0]
+    assert stamps[-1] <= stopped_ns
+
+
+# --------------------------------------------------------------------------- draining on stop
+
+
+def publish_steps(publisher, first: int, count: int) -> list[bytes]:
+    """Publish steps first .. first + count - 1 serialized; return the bytes sent."""
+    sent = [step_bytes(k) for k in range(first, first + count)]
+    for data in sent:
+        publisher.publish(data)
+    return sent
+
+
+def finish(process: subprocess.Popen, tmp_path: Path) -> float:
+    """Wait for a signalled recorder to exit by itself (status 0); return the seconds waited."""
+    started = time.monotonic()
+    try:
+        process.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f'the recorder did not finish draining: {recorder_log(tmp_path)}')
+    assert process.returncode == 0, recorder_log(tmp_path)
+    return time.monotonic() - started
+
+
+@pytest.mark.ros
+def test_drain_keeps_messages_that_arrive_after_a_lull(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A burst right before SIGINT and one 0.3 s after it (a loaded publisher's late messages)."""
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    # A quiet period well above the lull, so a loaded test machine cannot make this flaky.
+    with (ros_domain(tmp_path, monkeypatch, 140) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=2.0') as process):
+        node = rclpy.create_node('drain_lull_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 200)
+        process.send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        assert process.poll() is None, recorder_log(tmp_path)
+        published += publish_steps(publisher, 200, 100)
+        assert publisher.wait_for_all_acked(Duration(seconds=30)), recorder_log(tmp_path)
+        assert finish(process, tmp_path) < 30.0
+        node.destroy_node()
+
+    assert [m.rawdata for m in read_bag(bag) if m.topic == STEP] == published
+    assert metadata(bag)['message_count'] == len(published)
+    assert 'drained' in recorder_log(tmp_path)
+
+
+@pytest.mark.ros
+def test_drain_ends_at_its_limit_while_messages_keep_coming(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rclpy  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 141) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=0.5', 'drain_limit:=1.5') as process):
+        node = rclpy.create_node('drain_limit_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 10)
+        process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        # Never quiet for 0.5 s: a step every 0.05 s until the recorder gives up.
+        deadline = signalled + 60
+        while process.poll() is None and time.monotonic() < deadline:
+            published += publish_steps(publisher, len(published), 1)
+            time.sleep(0.05)
+        waited = time.monotonic() - signalled
+        finish(process, tmp_path)
+        node.destroy_node()
+
+    assert 1.5 <= waited < 30.0
+    assert 'drain limit reached' in recorder_log(tmp_path)
+    recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
+    assert len(recorded) >= 10 + 1.5 / 0.05 / 2  # the steps of the drain are kept
+    assert recorded == published[: len(recorded)]  # in order, no gap
+
+
+@pytest.mark.ros
+def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 142) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
+                   'drain_quiet:=60.0', 'drain_limit:=120.0') as process):
+        node = rclpy.create_node('drain_interrupt_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 100)
+        assert publisher.wait_for_all_acked(Duration(seconds=30))
+        process.send_signal(signal.SIGINT)
+        time.sleep(0.5)
+        assert process.poll() is None, recorder_log(tmp_path)  # draining, 60 s quiet to go
+        process.send_signal(signal.SIGTERM)
+        assert finish(process, tmp_path) < 30.0
+        node.destroy_node()
+
+    assert 'drain cut short by a second stop signal' in recorder_log(tmp_path)
+    assert [m.rawdata for m in read_bag(bag) if m.topic == STEP] == published
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('parameter', ['drain_quiet:=0.0', 'drain_limit:=-1.0', 'drain_quiet:=.nan'])
+def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> None:
+    bag = tmp_path / 'bag'
+    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+           'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', parameter],
+                         capture_output=True, text=True, env=env, timeout=120)
+    name = parameter.split(':=')[0]
+    assert run.returncode != 0
+    assert f"parameter '{name}' must be a positive number of seconds" in run.stderr
+    assert not bag.exists()

@@ -1,0 +1,455 @@
+"""Faults a robot team meets: bad messages, dead processes, signals, lossy links, shared networks.
+
+Real processes in private ROS domains 70-79 (each test its own). Every run starts 2-5 processes;
+the tests share the distributed tests' xdist group, so one run at a time on its worker.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from formation_sim.sim.engine import simulate
+from formation_sim.model.scenario import load_scenario
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_distributed')]
+
+ROOT = Path(__file__).resolve().parents[3]
+GENTLE = ROOT / 'benchmarks' / 'gentle_square.yaml'
+TOLERANCE = 1e-9
+
+
+# -- helpers ----------------------------------------------------------------------------------
+
+
+def _assert_same_events(summary: dict, reference) -> None:
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert len(got) == len(times), f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        assert max(abs(a - b) for a, b in zip(got, times)) <= TOLERANCE, f'agent {agent}'
+    assert summary['total_events'] == reference.total_events
+    assert summary['messages_sent'] == reference.messages_sent
+
+
+def _in_background(run):
+    results: list = []
+    worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
+    worker.start()
+    return worker, results
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    """Live (not zombie) processes whose command line contains `text`."""
+    found = []
+    for proc in Path('/proc').iterdir():
+        if not proc.name.isdigit() or int(proc.name) == os.getpid():
+            continue
+        try:
+            cmdline = (proc / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+            state = (proc / 'stat').read_text().rsplit(')', 1)[1].split()[0]
+        except OSError:
+            continue
+        if text in cmdline and state != 'Z':
+            found.append(int(proc.name))
+    return found
+
+
+def _wait_until_gone(text: str, limit: float = 30.0) -> list[int]:
+    deadline = time.monotonic() + limit
+    while (left := _processes_mentioning(text)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return left
+
+
+@pytest.fixture
+def ros_env(tmp_path, monkeypatch):
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+
+
+# -- bad messages -------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, ros_env):
+    """Malformed and implausible triggering information on agent 1's topic from agent 2, injected
+    while the lock-step run goes on (through a 2 ms injected delay): the run still equals the
+    in-process engine, and summary.json counts each rejection under its reason."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+    from formation_msgs_py.codec import decode_step, encode_trigger_info
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    domain_id = 70
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    reference = simulate(scenario, horizon=horizon)
+    # Inject once every agent has received agent 2's second trigger (all steps before a step
+    # are settled when it is published): a stamp of 0 is then going backwards for sure.
+    events = sorted({t for times in reference.trigger_times.values() for t in times})
+    inject_at = events.index(reference.trigger_times[2][1]) + 1
+    assert inject_at < len(events) - 10
+
+    def raw(values):
+        return Float64MultiArray(data=[float(v) for v in values])
+
+    def info(**fields):
+        values = {'sender': 2, 'receiver': 1, 'stamp': 0.0, 'control': (0.5, -0.5), 'rel_position': (1.0, 2.0)}
+        return encode_trigger_info(TriggerInfo(**{**values, **fields}))
+
+    bad = [
+        (raw([2, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0, 2.0]), 'version'),
+        (raw([1, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0]), 'length'),
+        (raw([1, 1, 2, 1, 1.0, 2, math.nan, -0.5, 1.0, 2.0]), 'non_finite'),
+        (info(sender=3, stamp=1.0), 'sender'),
+        (info(stamp=0.0), 'time_backwards'),
+    ]
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('bad_message_injector', context=context)
+    try:
+        publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
+        seen = []
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
+        # The injector must hear every Step: a node that joins a running domain can take seconds
+        # to be discovered, longer than this whole run.
+        run = FormationRun(
+            scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
+            inject={'delay_ms': 2.0}, step_listeners=1,
+        )
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        worker, results = _in_background(run)
+        injected = False
+        while worker.is_alive():
+            executor.spin_once(timeout_sec=0.05)
+            if not injected and seen and max(seen) >= inject_at and publisher.get_subscription_count() >= 1:
+                for msg, _ in bad:
+                    publisher.publish(msg)
+                injected = True
+        worker.join()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    (result,) = results
+    assert injected, f'the run ended before step {inject_at}'
+    assert min(seen) == 0, 'the injector missed Steps: step 0 did not wait for it'
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    expected = {reason: 1 for _, reason in bad}
+    assert summary['extra']['rejected_messages'] == {
+        'total': len(bad),
+        'by_reason': expected,
+        'by_agent': {'1': expected},
+        'simulator': {},
+    }
+    assert summary['extra']['failure'] is None
+    # Every message that reached an agent's topic went through the injected delay.
+    assert summary['extra']['injected_faults']['delayed'] == summary['messages_sent'] + len(bad)
+    assert summary['extra']['injected_faults']['dropped'] == 0
+    log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
+    assert f'rejected a message on {trigger_info_topic(2, 1)} (sender, 1 so far)' in log
+    assert 'information from agent 3 on the topic of agent 2' in log
+
+
+# -- node faults --------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping, long_run_scenario):
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
+
+    scenario = load_scenario(long_run_scenario)
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    time.sleep(0.5)  # well into the run
+    victim = next(child for child in run._children if child.name == 'agent_2')
+    shm_files = _mapped_shm_files(victim.pid)
+    os.kill(victim.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST == 3
+    assert shm_files and not [path for path in shm_files - _mapped_by_anyone(shm_files) if Path(path).exists()]
+    assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
+    assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
+    assert not _wait_until_gone(str(result.out_dir))
+
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure == result.failure
+    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2]
+    assert failure['detected_by'] == 'simulator, orchestrator'
+    assert failure['process']['name'] == 'agent_2' and failure['process']['returncode'] == -signal.SIGKILL
+    t_fail = failure['time']
+    assert 0.0 < t_fail == summary['extra']['reached_time'] < scenario.horizon
+
+    # Up to the failure, the run is the engine's: every trigger that completed, at its time.
+    reference = simulate(scenario, horizon=t_fail)
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert got == times[: len(got)] and len(got) >= len([t for t in times if t < t_fail]), f'agent {agent}'
+
+    # The bag was finalised and holds every triggering-information message sent before the
+    # failing step, each exactly once and in order.
+    assert result.bag is not None and not result.bag_recovered
+    counts, stamps = bag_trigger_stamps(result.bag)
+    for i in scenario.agent_ids:
+        for j in scenario.neighbours(i):
+            before = [t for t in reference.trigger_times[i] if t < t_fail]
+            sent = stamps[(i, j)]
+            assert [t for t in sent if t < t_fail] == before, f'edge {i}->{j}'
+            assert all(t <= t_fail for t in sent) and sent == sorted(set(sent)), f'edge {i}->{j}'
+    assert counts['/formation/sensing_log'] >= sum(len([t for t in ts if t < t_fail]) for ts in reference.trigger_times.values())
+
+
+@pytest.mark.timeout(300)
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.bag.io import read_bag
+
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
+    recorder = next(child for child in run._children if child.name == 'recorder')
+    os.kill(recorder.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST
+    assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
+    assert 'its bag was recovered' in result.message
+    assert result.bag_recovered and result.bag is not None
+    assert not _wait_until_gone(str(result.out_dir))
+    messages = list(read_bag(result.bag))
+    assert {m.topic for m in messages} >= {'/formation/step', '/agent_1/trigger_info/to_2', '/formation/status'}
+    assert all(a.timestamp_ns <= b.timestamp_ns for a, b in zip(messages, messages[1:]))
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'process_lost' and failure['process']['name'] == 'recorder'
+    assert summary['total_events'] > 0
+
+
+def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'formation_sim.cli', 'run', str(scenario), '--out', str(out),
+         '--domain-id', str(domain_id), '--no-plot', *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    log = out / 'logs' / 'simulator.log'
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline:
+        if log.is_file() and 'progress t=' in log.read_text():
+            return process
+        assert process.poll() is None, process.communicate()
+        time.sleep(0.1)
+    process.kill()
+    raise AssertionError('the run never started stepping')
+
+
+@pytest.mark.timeout(300)
+def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_path, ros_env, long_run_scenario):
+    from formation_sim.bag.io import read_bag
+
+    out = tmp_path / 'run'
+    process = _start_cli_run(long_run_scenario, out, 73)
+    process.send_signal(signal.SIGINT)  # what a terminal's Ctrl-C sends (children have their own sessions)
+    _, err = process.communicate(timeout=120.0)
+    assert process.returncode == 130, err
+    assert 'interrupted' in err
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    assert (out / 'bag' / 'metadata.yaml').is_file()
+    assert sum(1 for _ in read_bag(out / 'bag')) > 0
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['failure']['kind'] == 'interrupted' and summary['total_events'] > 0
+
+
+@pytest.mark.timeout(300)
+def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env, long_run_scenario):
+    """SIGKILL cannot be caught: the kernel's parent-death signal stops the children instead."""
+    from formation_sim.bag.io import read_bag
+
+    out = tmp_path / 'run'
+    process = _start_cli_run(long_run_scenario, out, 74)
+    process.kill()
+    process.communicate(timeout=60.0)
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    assert (out / 'bag' / 'metadata.yaml').is_file()  # the recorder got SIGTERM and closed its bag
+    assert sum(1 for _ in read_bag(out / 'bag')) > 0
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['failure']['kind'] == 'interrupted'
+
+
+# -- communication faults (wall clock) ----------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_injected_loss_and_delay_happen_and_are_counted(tmp_path, ros_env):
+    """A test facility, not a result (the experiment's numbers are in the README). On the wall
+    clock the outcome may vary: a run either reaches the horizon or stops with the reason."""
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    scenario = load_scenario(GENTLE)
+    run = FormationRun(
+        scenario, out_dir=tmp_path / 'run', horizon=3.0, domain_id=75, progress=False, timeout=240.0, record=False,
+        agents_per_process=4, clock='realtime', inject={'loss': 0.1, 'delay_ms': 5.0, 'jitter_ms': 5.0, 'seed': 1},
+    )  # fmt: skip
+    result = run.run()
+    summary = json.loads(result.summary.read_text())
+    if not result.ok:  # an honest failure, named: not a crash
+        assert summary['extra']['failure']['kind'] in ('connectivity_lost', 'agent_failed'), result.message
+    injected = summary['extra']['injected_faults']
+    assert injected['dropped'] > 0 and injected['delayed'] > 0
+    assert injected['dropped'] + injected['delayed'] <= summary['messages_sent']  # each arrival once
+    assert set(injected['by_agent']) <= {str(i) for i in scenario.agent_ids}
+    assert sum(entry['dropped'] for entry in injected['by_agent'].values()) == injected['dropped']
+    assert summary['extra']['rejected_messages']['total'] == 0  # delays keep each edge in order
+    assert summary['extra']['reports_missing'] == []
+    params = (result.out_dir / 'agents.params.yaml').read_text()
+    assert 'inject_loss: 0.1' in params and 'inject_delay_ms: 5.0' in params and 'inject_seed: 1' in params
+
+
+# -- isolation ----------------------------------------------------------------------------------
+
+
+@pytest.mark.timeout(300)
+def test_two_runs_side_by_side_on_different_domains_do_not_see_each_other(tmp_path, ros_env):
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    scenario = load_scenario('paper_single')
+    reference = simulate(scenario, horizon=1.0)
+    runs = [
+        FormationRun(scenario, out_dir=tmp_path / f'run{domain_id}', horizon=1.0, domain_id=domain_id, progress=False,
+                     timeout=240.0, record=False, agents_per_process=3)
+        for domain_id in (76, 77)
+    ]  # fmt: skip
+    started = [_in_background(run) for run in runs]
+    for worker, _ in started:
+        worker.join(timeout=240.0)
+    own = {'/formation_simulator', *(f'/agent_{i}/formation_agent' for i in scenario.agent_ids)}
+    for (_, (result,)), domain_id in zip(started, (76, 77)):
+        assert result.ok, result.message
+        assert result.domain_id == domain_id
+        graph = json.loads((result.out_dir / 'graph.json').read_text())
+        assert set(graph) == own, f'domain {domain_id} sees {sorted(graph)}'
+        _assert_same_events(json.loads(result.summary.read_text()), reference)
+
+
+# -- several hosts ------------------------------------------------------------------------------
+
+SUBNET = '10.231.0'  # private addresses, only on links inside the namespaces made here
+
+
+class _Hosts:
+    """Network namespaces acting as hosts, joined by a bridge in a namespace of its own.
+
+    Nothing is added to the machine's own network stack: every link is created inside the
+    namespaces, and deleting them (`close`) removes everything.
+    """
+
+    def __init__(self, tag: str, names: list[str]) -> None:
+        self.tag = tag
+        self.created: list[str] = []
+        self.switch = f'{tag}sw'
+        self.namespaces = {name: f'{tag}{name}' for name in names}
+
+    def _ip(self, *args: str) -> None:
+        done = subprocess.run(['ip', *args], capture_output=True, text=True, check=False, timeout=30)
+        if done.returncode != 0:
+            raise OSError(f'ip {" ".join(args)}: {done.stderr.strip()}')
+
+    def open(self) -> None:
+        self._ip('netns', 'add', self.switch)
+        self.created.append(self.switch)
+        self._ip('-n', self.switch, 'link', 'add', 'br0', 'type', 'bridge')
+        self._ip('-n', self.switch, 'link', 'set', 'br0', 'up')
+        for k, namespace in enumerate(self.namespaces.values(), start=1):
+            self._ip('netns', 'add', namespace)
+            self.created.append(namespace)
+            self._ip('link', 'add', 'name', 'eth0', 'netns', namespace, 'type', 'veth', 'peer', 'name', f'port{k}', 'netns', self.switch)
+            self._ip('-n', self.switch, 'link', 'set', f'port{k}', 'master', 'br0', 'up')
+            self._ip('-n', namespace, 'addr', 'add', f'{SUBNET}.{k}/24', 'dev', 'eth0')
+            self._ip('-n', namespace, 'link', 'set', 'eth0', 'up')
+            self._ip('-n', namespace, 'link', 'set', 'lo', 'up')
+            # DDS discovery multicasts to 239.255.0.1: route it onto the link.
+            self._ip('-n', namespace, 'route', 'add', '224.0.0.0/4', 'dev', 'eth0')
+
+    def close(self) -> None:
+        for namespace in reversed(self.created):
+            subprocess.run(['ip', 'netns', 'del', namespace], capture_output=True, check=False, timeout=30)
+        self.created.clear()
+
+
+@pytest.fixture
+def hosts():
+    import shutil
+
+    if os.geteuid() != 0:
+        pytest.skip('network namespaces need root (CI runs as root)')
+    if shutil.which('ip') is None:
+        pytest.skip('iproute2 is not installed (apt-get install -y iproute2)')
+    made = _Hosts(f'fm{os.getpid() % 100000}', ['h0', 'h1', 'h2', 'h3'])
+    try:
+        made.open()
+    except OSError as error:
+        made.close()
+        if 'Operation not permitted' in str(error) or 'Permission denied' in str(error):
+            pytest.skip(f'network namespaces are not permitted here: {error}')
+        raise
+    try:
+        yield made
+    finally:
+        made.close()
+
+
+@pytest.mark.timeout(300)
+def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts, bag_trigger_stamps):
+    """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
+    memory), discovery by multicast on the hosts' subnet."""
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    place = {'simulator': 'h0', 'recorder': 'h0', 'agent_1': 'h1', 'agent_2': 'h2', 'agent_3': 'h3'}
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    reference = simulate(scenario, horizon=horizon)
+    run = FormationRun(
+        scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=78, progress=False, timeout=240.0,
+        localhost_only=False, extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
+        launch_prefix=lambda name: ['ip', 'netns', 'exec', hosts.namespaces[place[name]]],
+    )  # fmt: skip
+    worker, results = _in_background(run)
+    # Which network stack each child lives on, read while they discover each other over UDP
+    # (seconds; stepping to t = 2 then takes well under a second): once all five are started and
+    # each has left this process's stack (`ip netns exec` enters its namespace, then runs python).
+    own = os.readlink('/proc/self/ns/net')
+    stacks: dict[str, str] = {}
+    deadline = time.monotonic() + 60.0
+    while (len(stacks) < len(place) or own in stacks.values()) and time.monotonic() < deadline:
+        stacks = {child.name: os.readlink(f'/proc/{child.pid}/ns/net') for child in list(run._children)}
+        time.sleep(0.02)
+    worker.join(timeout=240.0)
+    (result,) = results
+    assert result.ok, result.message
+    assert os.readlink('/proc/self/ns/net') not in stacks.values()
+    assert stacks['recorder'] == stacks['simulator']
+    assert len({stacks[name] for name in ('simulator', 'agent_1', 'agent_2', 'agent_3')}) == 4
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    counts, _ = bag_trigger_stamps(result.bag)
+    assert counts['/agent_1/trigger_info/to_2'] == len(reference.trigger_times[1])

@@ -1,0 +1,172 @@
+"""`formation replay`: a checker node receives every recorded message once, in order, byte for byte."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+from formation_sim.bag.io import BagWriter, read_bag
+from formation_sim.runtime.recorder import import_message_class
+from formation_sim.runtime.replay import BagPlayer, ReplayError
+
+REPLAY_DOMAINS = {'synthetic': 171, 'distributed': 173}
+
+
+def _synthetic_bag(path: Path) -> Path:
+    """Three topics, bursts of messages sharing a time stamp, no /clock; each message distinct."""
+    from geometry_msgs.msg import Twist
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray, String
+
+    with BagWriter(path) as bag:
+        bag.add_topic('/formation/step', 'std_msgs/msg/Float64MultiArray')
+        bag.add_topic('/agent_1/cmd_vel', 'geometry_msgs/msg/Twist')
+        bag.add_topic('/formation/sensing_log', 'std_msgs/msg/String')
+        for k in range(120):
+            stamp = (k // 5) * 20_000_000  # 5 messages per stamp, 24 stamps over 0.46 s
+            bag.write('/formation/step', stamp, serialize_message(Float64MultiArray(data=[1.0, float(k), stamp / 1e9])))
+            if k % 2 == 0:
+                twist = Twist()
+                twist.linear.x = float(k)
+                bag.write('/agent_1/cmd_vel', stamp, serialize_message(twist))
+            if k % 3 == 0:
+                bag.write('/formation/sensing_log', stamp, serialize_message(String(data=f'{{"k":{k}}}')))
+    return path
+
+
+def _aligned(data: bytes) -> bytes:
+    """The payload as DDS delivers it: padded with zeros to a multiple of 4 bytes."""
+    return data + bytes(-len(data) % 4)
+
+
+class _Checker:
+    """Raw subscriptions (reliable, keep all) to every topic of a bag, in a private domain."""
+
+    def __init__(self, bag: Path, domain_id: int, *, clock: bool) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        self.rclpy = rclpy
+        self.expected: dict[str, list[bytes]] = defaultdict(list)
+        self.stamps: list[int] = []
+        types = {}
+        for message in read_bag(bag):
+            self.expected[message.topic].append(_aligned(message.rawdata))
+            types[message.topic] = message.msgtype
+            if not self.stamps or self.stamps[-1] != message.timestamp_ns:
+                self.stamps.append(message.timestamp_ns)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = Node('replay_checker', context=self.context, start_parameter_services=False)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self.received: dict[str, list[bytes]] = defaultdict(list)
+        for topic, msgtype in types.items():
+            self.node.create_subscription(import_message_class(msgtype), topic, lambda data, topic=topic: self.received[topic].append(bytes(data)), qos, raw=True)
+        self.clock: list[int] = []
+        if clock:
+            from rosgraph_msgs.msg import Clock
+
+            self.node.create_subscription(Clock, '/clock', lambda msg: self.clock.append(msg.clock.sec * 10**9 + msg.clock.nanosec), qos)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    @property
+    def total(self) -> int:
+        return sum(map(len, self.expected.values()))
+
+    def spin_until_done(self, process: subprocess.Popen, *, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while sum(map(len, self.received.values())) < self.total and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+            if process.poll() is not None and sum(map(len, self.received.values())) < self.total:
+                # The player has left; what it published is on its way or lost: drain briefly.
+                end = time.monotonic() + 2.0
+                while time.monotonic() < end:
+                    self.executor.spin_once(timeout_sec=0.05)
+                break
+        end = time.monotonic() + 0.3  # anything extra (duplicates) would arrive now
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+
+def _replay(bag: Path, domain_id: int, tmp_path: Path, *arguments: str) -> subprocess.Popen:
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path / 'ros_log'), RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+    log = (tmp_path / 'replay.log').open('w')
+    command = [sys.executable, '-m', 'formation_sim.cli', 'replay', str(bag), '--domain-id', str(domain_id), '--wait-for-subscribers', '1', *arguments]
+    return subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+
+
+def _finish(process: subprocess.Popen, tmp_path: Path) -> str:
+    try:
+        process.wait(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    return (tmp_path / 'replay.log').read_text()
+
+
+def test_bad_rates_and_unknown_topics_are_refused(tmp_path):
+    bag = _synthetic_bag(tmp_path / 'bag')
+    with pytest.raises(ReplayError, match=r'rate must be a finite number >= 0 \(0: as fast as possible\), got -1.0'):
+        BagPlayer(None, bag, rate=-1.0)
+    with pytest.raises(ReplayError, match=r"topics \['/nope'\] are not in"):
+        BagPlayer(None, bag, topics=['/nope'])
+
+
+def test_replay_of_a_missing_bag_exits_2(tmp_path, capsys):
+    from formation_sim.cli import main
+
+    assert main(['replay', str(tmp_path / 'missing')]) == 2
+    assert 'no such bag' in capsys.readouterr().err
+
+
+@pytest.mark.ros
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize('speed', [['--as-fast-as-possible'], ['--rate', '5']], ids=['fast', 'rate5'])
+def test_every_message_arrives_once_in_order_with_a_clock(tmp_path, speed):
+    bag = _synthetic_bag(tmp_path / 'bag')
+    checker = _Checker(bag, REPLAY_DOMAINS['synthetic'], clock=True)
+    try:
+        process = _replay(bag, REPLAY_DOMAINS['synthetic'], tmp_path, *speed)
+        checker.spin_until_done(process, timeout=60)
+        log = _finish(process, tmp_path)
+        assert process.returncode == 0, log
+        for topic, messages in checker.expected.items():
+            assert checker.received[topic] == messages, f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+        # The bag had no /clock: one per new time stamp, in order.
+        assert checker.clock == checker.stamps
+    finally:
+        checker.close()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_a_distributed_runs_bag_replays_completely(distributed_single_run, tmp_path):
+    bag = distributed_single_run.bag
+    checker = _Checker(bag, REPLAY_DOMAINS['distributed'], clock=False)  # /clock is one of the bag's topics
+    try:
+        process = _replay(bag, REPLAY_DOMAINS['distributed'], tmp_path, '--rate', '0')
+        checker.spin_until_done(process, timeout=120)
+        log = _finish(process, tmp_path)
+        assert process.returncode == 0, log
+        assert checker.total > 1000
+        for topic, messages in checker.expected.items():
+            assert checker.received[topic] == messages, f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+    finally:
+        checker.close()

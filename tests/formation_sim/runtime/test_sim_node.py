@@ -1,0 +1,115 @@
+"""The simulator node in one process: bad messages refused and counted, connectivity watched,
+and what a run that stops early reports (no other process is started)."""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pytest
+
+from formation_sim.model.scenario import load_scenario
+
+pytestmark = pytest.mark.ros
+
+DOMAIN_ID = 97
+
+
+@pytest.fixture
+def simulator(ros):
+    from formation_sim.runtime.sim_node import FormationSimulatorNode
+
+    nodes = []
+
+    def build(scenario='paper_single'):
+        node = FormationSimulatorNode(scenario=load_scenario(scenario), context=ros)
+        nodes.append(node)
+        return node
+
+    yield build
+    for node in nodes:
+        node.destroy_node()
+
+
+def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
+    from std_msgs.msg import Float64MultiArray, String
+
+    from formation_msgs_py.codec import encode_agent_report
+    from formation_msgs_py.lockstep import AgentReport
+
+    node = simulator()
+    node._on_status(Float64MultiArray(data=[1.0, 2.0, 0.0]))  # too short
+    node._on_status(Float64MultiArray(data=[3.0, 1, -1, 0.0, 0, 0, 0, 0, 1, 0.0]))  # layout version 3
+    node._on_report(String(data='not json'))
+    node._on_report(encode_agent_report(AgentReport(agent=9, final=True, rejected={})))  # no agent 9
+    assert node.rejected == {'length': 1, 'version': 1, 'field': 2}
+    assert all(book.status is None and book.report is None for book in node.agents.values())
+
+    node._on_report(encode_agent_report(AgentReport(agent=2, final=True, rejected={'sender': 3}, dropped=4)))
+    node._on_report(encode_agent_report(AgentReport(agent=2, final=False, rejected={})))  # after the final one
+    counts = node._message_counts()
+    assert counts['rejected_messages'] == {
+        'total': 3 + 4,
+        'by_reason': {'field': 2, 'length': 1, 'sender': 3, 'version': 1},
+        'by_agent': {'2': {'sender': 3}},
+        'simulator': {'length': 1, 'version': 1, 'field': 2},
+    }
+    assert counts['injected_faults']['dropped'] == 4
+    assert counts['reports_missing'] == [1, 3]
+
+
+def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_agents(simulator):
+    from formation_msgs_py.lockstep import Status
+    from formation_sim.runtime.sim_node import ConnectivityLostError
+
+    node = simulator()
+    scenario = node.scenario
+    x = np.array(scenario.positions, dtype=float)
+    node._check_connectivity(0.0, x)  # the initial state: every edge shorter than Δ
+    node.agents[3].status = Status(agent=3, step_index=4, next_time=np.inf, info_sent=2, info_received=1,
+                                   commands_sent=1, triggers=1, ready=False)  # fmt: skip
+    k2, k3 = scenario.index(2), scenario.index(3)
+    x[k3] = x[k2] - np.array([0.0, scenario.delta])  # edge (2, 3) exactly at Δ (not < Δ), the others short
+    with pytest.raises(ConnectivityLostError) as caught:
+        node._check_connectivity(1.25, x)
+    error = caught.value
+    assert (error.time, error.edge, error.length) == (1.25, (2, 3), scenario.delta)
+    assert 'edge (2, 3) reached the communication radius at t=1.25' in str(error)
+    assert "agents [3] are still waiting for a neighbour's triggering information" in str(error)
+    node._started = node._created
+    node.step = None
+    node.fail(error)
+    assert node.failure_info['kind'] == 'connectivity_lost'
+    assert node.failure_info['time'] == 1.25 and node.failure_info['edge'] == [2, 3]
+
+
+def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator):
+    from formation_sim.runtime.sim_node import AgentLostError
+
+    node = simulator()
+    node._sampler.event()
+    for book in node.agents.values():
+        book.trigger_times = [0.0, 0.5]
+        book.commands_received = 2
+    node.agents[2].commands_received = 1  # sensed at 0.5, lost before its command
+    node.fail(AgentLostError('agent 2 lost', agents=[2]))
+    record = node.record()
+    assert record.trigger_times == {1: [0.0, 0.5], 2: [0.0], 3: [0.0, 0.5]}
+    assert record.extra['failure']['kind'] == 'agent_lost' and record.extra['failure']['agents'] == [2]
+
+
+def test_discovery_says_what_it_still_waits_for(simulator):
+    from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
+
+    node = simulator()  # alone in its domain: no agent has matched anything
+    gaps = node._discovery_gaps()
+    assert '/formation/step readers 0/3' in gaps
+    assert '/formation/status writers 0/3' in gaps
+    assert 'agents whose command writer is not matched: 1, 2, 3' in gaps
+    assert 'agents not ready (their own endpoints unmatched): 1, 2, 3' in gaps
+    ready = dict(step_index=DISCOVERY_STEP, next_time=0.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
+    node.agents[2].status = Status(agent=2, **ready)
+    node.agents[3].lost = (0.0, 'no sign of life')
+    gaps = node._discovery_gaps()
+    assert 'agents not ready (their own endpoints unmatched): 1, 3' in gaps
+    assert 'agents whose liveliness lease expired: 3' in gaps
+    assert not node._connected()
