@@ -1,0 +1,184 @@
+"""Declared parameters: one table per node, each entry with its type, description and range.
+
+Every node of the project declares its parameters from a tuple of `ParameterSpec` through
+`declare_parameters`, which
+
+- gives each a `ParameterDescriptor` (description, type, range, choices), so that
+  `ros2 param describe` explains it on a ROS 2 install and `parameter_help` prints the same table
+  for `--help`;
+- reads them all and checks them all before it fails: one `ParameterError` lists every missing
+  parameter, every value of the wrong type, out of its range or not among its choices.
+
+```python
+SPECS = (
+    ParameterSpec(name='agent_id', type=INTEGER, description='this agent's id i', low=0),
+    ParameterSpec(name='delta', type=DOUBLE, description='communication radius Δ [m]', low=0.0, low_open=True),
+    ParameterSpec(name='robot', type=STRING, default='none', description='command adapter', choices=('none', 'unicycle')),
+)
+values = declare_parameters(node, SPECS)   # {'agent_id': 2, 'delta': 4.0, 'robot': 'none'}
+```
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
+from rclpy.parameter import Parameter
+
+BOOL = Parameter.Type.BOOL
+INTEGER = Parameter.Type.INTEGER
+DOUBLE = Parameter.Type.DOUBLE
+STRING = Parameter.Type.STRING
+INTEGER_ARRAY = Parameter.Type.INTEGER_ARRAY
+DOUBLE_ARRAY = Parameter.Type.DOUBLE_ARRAY
+STRING_ARRAY = Parameter.Type.STRING_ARRAY
+
+REQUIRED = object()
+"""The default of a parameter that has none: it must be given."""
+
+_TYPE_NAMES = {
+    BOOL: 'bool', INTEGER: 'int', DOUBLE: 'double', STRING: 'string',
+    INTEGER_ARRAY: 'int[]', DOUBLE_ARRAY: 'double[]', STRING_ARRAY: 'string[]',
+}  # fmt: skip
+_QUOTE_LIMIT = 80  # characters of a bad value quoted in an error
+
+
+class ParameterError(ValueError):
+    """Parameters missing, of the wrong type, or out of range; the message lists every one."""
+
+    def __init__(self, node_name: str, problems: Sequence[str]) -> None:
+        self.problems = tuple(problems)
+        super().__init__(f'{node_name}: ' + '; '.join(self.problems))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParameterSpec:
+    """One parameter of a node. `low`/`high` bound numbers (and each element of number arrays);
+    `low_open`/`high_open` make a bound strict (the descriptor's range, inclusive by ROS's
+    definition, then only documents it); `choices` lists the values a string may take."""
+
+    name: str
+    type: Parameter.Type
+    description: str
+    default: Any = REQUIRED
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] = ()
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+    def constraint_text(self) -> str:
+        """The range or choices in words ('> 0', 'in [0, 1]', "one of 'a', 'b'"), '' if none."""
+        if self.choices:
+            return 'one of ' + ', '.join(repr(choice) for choice in self.choices)
+        low = None if self.low is None else f'{"(" if self.low_open else "["}{_number(self.low)}'
+        high = None if self.high is None else f'{_number(self.high)}{")" if self.high_open else "]"}'
+        if low and high:
+            return f'in {low}, {high}'
+        if low:
+            return f'{">" if self.low_open else ">="} {_number(self.low)}'
+        if high:
+            return f'{"<" if self.high_open else "<="} {_number(self.high)}'
+        return ''
+
+    def descriptor(self) -> ParameterDescriptor:
+        descriptor = ParameterDescriptor(
+            name=self.name,
+            type=self.type.value,
+            description=self.description,
+            additional_constraints=self.constraint_text(),
+            read_only=True,  # read once at start: a change later would not be seen
+        )
+        # ROS ranges are inclusive; a strict bound is checked here and only written in words.
+        if self.type in (DOUBLE, DOUBLE_ARRAY) and not (self.low_open or self.high_open):
+            if self.low is not None and self.high is not None:
+                descriptor.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)]
+        if self.type in (INTEGER, INTEGER_ARRAY) and not (self.low_open or self.high_open):
+            if self.low is not None and self.high is not None:
+                descriptor.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+        return descriptor
+
+    def problem(self, value: Any) -> str | None:  # noqa: ANN401 - a parameter's value
+        """Why `value` breaks this spec's range or choices, or None."""
+        if self.choices:
+            return None if value in self.choices else f'must be {self.constraint_text()}, got {_quote(value)}'
+        if self.low is None and self.high is None:
+            return None
+        is_array = hasattr(value, '__len__') and not isinstance(value, str)
+        for number in value if is_array else (value,):
+            too_low = self.low is not None and (number <= self.low if self.low_open else number < self.low)
+            too_high = self.high is not None and (number >= self.high if self.high_open else number > self.high)
+            if too_low or too_high or (isinstance(number, float) and math.isnan(number)):
+                return f'must be {self.constraint_text()}{" (every element)" if is_array else ""}, got {_quote(number)}'
+        return None
+
+
+def _number(value: float) -> str:
+    """A bound as written: integers whole, other numbers exactly (repr)."""
+    if isinstance(value, int) or (math.isfinite(value) and value == int(value) and abs(value) < 1e15):
+        return str(int(value))
+    return repr(float(value))
+
+
+def _quote(value: Any) -> str:  # noqa: ANN401
+    text = repr(value)
+    return text if len(text) <= _QUOTE_LIMIT else text[: _QUOTE_LIMIT - 1] + '…'
+
+
+def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:  # noqa: ANN001 - an rclpy Node
+    """Declare every spec on `node` (idempotent), read and check all; raise one ParameterError."""
+    values: dict[str, Any] = {}
+    problems: list[str] = []
+    for spec in specs:
+        label = f'parameter {spec.name!r} ({_TYPE_NAMES.get(spec.type, spec.type.name.lower())})'
+        try:
+            if not node.has_parameter(spec.name):
+                default = spec.type if spec.required else spec.default
+                node.declare_parameter(spec.name, default, spec.descriptor())
+            value = node.get_parameter(spec.name).value
+        except ParameterUninitializedException:
+            problems.append(f'{label} is required: {spec.description}')
+            continue
+        except ParameterException as error:  # the wrong type, or outside the descriptor's range
+            problems.append(f'{label}: {str(error).removesuffix(f": {spec.name}")}')
+            continue
+        if (problem := spec.problem(value)) is not None:
+            problems.append(f'{label} {problem}')
+            continue
+        values[spec.name] = value
+    if problems:
+        raise ParameterError(node.get_fully_qualified_name(), problems)
+    return values
+
+
+def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:
+    """The table `--help` prints: name, type, default (or 'required'), range, description."""
+    rows = [
+        (
+            spec.name,
+            _TYPE_NAMES.get(spec.type, spec.type.name.lower()),
+            'required' if spec.required else _quote(spec.default),
+            spec.constraint_text(),
+            spec.description,
+        )
+        for spec in specs
+    ]
+    widths = [max(len(row[k]) for row in rows) for k in range(4)]
+    lines = [f'{title} (--ros-args -p name:=value, or --params-file FILE):']
+    for row in rows:
+        lines.append('  ' + '  '.join(cell.ljust(width) for cell, width in zip(row, widths)) + '  ' + row[4])
+    return '\n'.join(lines)
+
+
+def as_overrides(values: Mapping[str, Any]) -> list[Parameter]:
+    """`values` as rclpy parameter overrides (for nodes built in a test or in one process)."""
+    return [Parameter(name, value=value) for name, value in values.items()]
