@@ -32,3 +32,22 @@ def sense_service(agent_id: int) -> str:
 
 def command_topic(agent_id: int, *, double: bool) -> str:
     return f'{agent_namespace(agent_id)}/{"cmd_accel" if double else "cmd_vel"}'
+
+
+# -- robots (README, "Running on robots"): what a robot, real or simulated, speaks --------------
+
+
+def robot_pose_topic(agent_id: int) -> str:
+    """geometry_msgs/PoseStamped of robot i in the world frame (motion capture, a simulated robot)."""
+    return f'{agent_namespace(agent_id)}/robot/pose'
+
+
+def robot_odom_topic(agent_id: int) -> str:
+    """nav_msgs/Odometry of robot i: pose in the world frame, twist in its body frame (REP 105)."""
+    return f'{agent_namespace(agent_id)}/robot/odom'
+
+
+def robot_command_topic(agent_id: int) -> str:
+    """Velocity command to robot i: geometry_msgs/TwistStamped in the world frame (holonomic) or
+    geometry_msgs/Twist in its body frame, (v, ω) (differential drive)."""
+    return f'{agent_namespace(agent_id)}/robot/cmd_vel'
