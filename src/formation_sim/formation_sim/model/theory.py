@@ -385,14 +385,21 @@ def _per_agent_sum(n: int, heads, tails, values) -> np.ndarray:
     return total
 
 
-def theorem_constants(
-    scenario: Scenario, *, a: float = DEFAULT_A, b: float | None = None
-) -> TheoremConstants:
-    """All constants of the proof of Theorem 1 (single) or 2 (double).
+@dataclass(frozen=True, kw_only=True)
+class _Common:
+    """What both theorems' constants start from: the graph, its hypotheses, the initial state."""
 
-    Raises TheoryError when a hypothesis of the theorem, as stated in the paper, fails; run
-    `formation_sim.model.validate.validate_scenario` first for a full report.
-    """
+    n: int
+    heads: np.ndarray
+    tails: np.ndarray
+    pairs: list[tuple[int, int]]
+    margins: np.ndarray  # Δ - ||d_ij|| per edge
+    tau: np.ndarray  # a point of Φ
+    fields: dict[str, float]  # TheoremConstants' common fields
+
+
+def _common(scenario: Scenario) -> _Common:
+    """Check Assumption 1, (initial) and connectivity; compute β0 (Theorem 1) and the Remark's bound."""
     _require(is_connected(scenario), 'connected', 'the graph must be connected')
     feasibility = formation_feasibility(scenario)
     _require(
@@ -404,52 +411,78 @@ def theorem_constants(
     _require(bool(np.all(margins > 0.0)), 'edge_length', '||d_ij|| < Δ must hold on every edge')
     errors0 = edge_errors(scenario, scenario.positions)
     _require(bool(np.all(errors0 < margins)), 'initial', '(initial) must hold on every edge')
-
     heads, tails, _ = scenario.edge_indices()
-    n = scenario.n
     lam2 = algebraic_connectivity(scenario)
     d0 = float(margins.max())
-    b0 = lam2 / d0
-    common = dict(
-        n=n,
-        algebraic_connectivity=lam2,
-        delta0=d0,
-        beta0=b0,
-        remark_beta_bound=remark_beta_bound(scenario),
+    return _Common(
+        n=scenario.n,
+        heads=heads,
+        tails=tails,
+        pairs=[edge.pair for edge in scenario.edges],
+        margins=margins,
+        tau=feasibility.tau,
+        fields={
+            'n': scenario.n,
+            'algebraic_connectivity': lam2,
+            'delta0': d0,
+            'beta0': lam2 / d0,
+            'remark_beta_bound': remark_beta_bound(scenario),
+        },
     )
-    pairs = [edge.pair for edge in scenario.edges]
 
+
+def theorem_constants(
+    scenario: Scenario, *, a: float = DEFAULT_A, b: float | None = None
+) -> TheoremConstants:
+    """All constants of the proof of Theorem 1 (single) or 2 (double).
+
+    `a` is Theorem 1's free parameter in (0, 1), `b` Theorem 2's in (0, k3) (default k3/2).
+    Raises TheoryError when a hypothesis of the theorem, as stated in the paper, fails; run
+    `formation_sim.model.validate.validate_scenario` first for a full report.
+    """
+    common = _common(scenario)
     if scenario.dynamics == 'single':
-        alpha, beta = scenario.gains.alpha, scenario.gains.beta
-        _require(alpha > 0.0, 'alpha', f'α > 0 required, got {alpha!r}')
-        _require(0.0 < beta < b0, 'beta', f'0 < β < β0 = {b0!r} required, got β = {beta!r}')
-        _require(0.0 < a < 1.0, 'a', f'the free parameter a must lie in (0, 1), got {a!r}')
-        nu0 = tension(scenario, scenario.positions)
-        k_nu = nu0 + n * alpha * alpha / (8.0 * a * beta)  # (kν)
-        k_edge = _edge_bound(k_nu, margins)  # (kij)
-        V0 = lyapunov(scenario, scenario.positions, tau=feasibility.tau)
-        # (kV); the (betaV) line before it should read [e^{-2βt} - e^{-2β0 t}], not [e^{-2βt} - 1].
-        k_V = V0 + n * alpha * alpha / (8.0 * b0 * (b0 - beta))
-        f = f_ij(k_edge, margin=margins)
-        g = g_ij(k_edge, margin=margins)
-        F = _per_agent_sum(n, heads, tails, f)  # Σ_{l∈N_i} f_il(k_il)
-        # c_i = Σ_{j∈N_i} g_ij(k_ij) [2α + 2 sqrt(k_V) (F_i + F_j)], bounding ||y_i'|| + ||y_j'||.
-        per_edge = g * (2.0 * alpha + 2.0 * math.sqrt(k_V) * (F[heads] + F[tails]))
-        c = _per_agent_sum(n, heads, tails, per_edge)
-        xi = alpha / (c + alpha * beta)  # (xi)
-        return TheoremConstants(
-            theorem=1,
-            free_parameter=a,
-            nu0=nu0,
-            k_nu=k_nu,
-            k_edge=dict(zip(pairs, k_edge.tolist())),
-            V0=V0,
-            k_V=k_V,
-            c=dict(zip(scenario.agent_ids, c.tolist())),
-            xi=dict(zip(scenario.agent_ids, xi.tolist())),
-            **common,
-        )
+        return _theorem1_constants(scenario, common, a=a)
+    return _theorem2_constants(scenario, common, b=b)
 
+
+def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> TheoremConstants:
+    n, heads, tails, margins = common.n, common.heads, common.tails, common.margins
+    b0 = common.fields['beta0']
+    alpha, beta = scenario.gains.alpha, scenario.gains.beta
+    _require(alpha > 0.0, 'alpha', f'α > 0 required, got {alpha!r}')
+    _require(0.0 < beta < b0, 'beta', f'0 < β < β0 = {b0!r} required, got β = {beta!r}')
+    _require(0.0 < a < 1.0, 'a', f'the free parameter a must lie in (0, 1), got {a!r}')
+    nu0 = tension(scenario, scenario.positions)
+    k_nu = nu0 + n * alpha * alpha / (8.0 * a * beta)  # (kν)
+    k_edge = _edge_bound(k_nu, margins)  # (kij)
+    V0 = lyapunov(scenario, scenario.positions, tau=common.tau)
+    # (kV); the (betaV) line before it should read [e^{-2βt} - e^{-2β0 t}], not [e^{-2βt} - 1].
+    k_V = V0 + n * alpha * alpha / (8.0 * b0 * (b0 - beta))
+    f = f_ij(k_edge, margin=margins)
+    g = g_ij(k_edge, margin=margins)
+    F = _per_agent_sum(n, heads, tails, f)  # Σ_{l∈N_i} f_il(k_il)
+    # c_i = Σ_{j∈N_i} g_ij(k_ij) [2α + 2 sqrt(k_V) (F_i + F_j)], bounding ||y_i'|| + ||y_j'||.
+    per_edge = g * (2.0 * alpha + 2.0 * math.sqrt(k_V) * (F[heads] + F[tails]))
+    c = _per_agent_sum(n, heads, tails, per_edge)
+    xi = alpha / (c + alpha * beta)  # (xi)
+    return TheoremConstants(
+        theorem=1,
+        free_parameter=a,
+        nu0=nu0,
+        k_nu=k_nu,
+        k_edge=dict(zip(common.pairs, k_edge.tolist())),
+        V0=V0,
+        k_V=k_V,
+        c=dict(zip(scenario.agent_ids, c.tolist())),
+        xi=dict(zip(scenario.agent_ids, xi.tolist())),
+        **common.fields,
+    )
+
+
+def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None) -> TheoremConstants:
+    n, margins = common.n, common.margins
+    b0 = common.fields['beta0']
     gains = scenario.gains
     k1, k2, k3 = gains.k1, gains.k2, gains.k3
     alpha_d, beta_d, beta1 = gains.alpha_d, gains.beta_d, gains.beta1
@@ -476,47 +509,20 @@ def theorem_constants(
     nu0 = tension_double(scenario, scenario.positions, velocities)
     k_nu = nu0 + n * alpha_d * alpha_d / (8.0 * b * beta_d)  # k^d_ν
     k_edge = _edge_bound(k_nu / k1, margins)  # (kijd)
-    V0 = lyapunov_double(scenario, scenario.positions, velocities, tau=feasibility.tau)
-    f = f_ij(k_edge, margin=margins)
-    g = g_ij(k_edge, margin=margins)
-    h = h_ij(k_edge, margin=margins)
-    F = _per_agent_sum(n, heads, tails, f)  # Σ_{l∈N_i} f_il(k^d_il)
-
-    def chain(reading: str, rate_bound: float, z_gain: float) -> Theorem2Chain:
-        if not 0.0 < beta_d < rate_bound:
-            return Theorem2Chain(
-                reading=reading, rate_bound=rate_bound, z_gain=z_gain, holds=False,
-                k_V=None, c_q=None, c=None, xi=None,
-            )
-        # (kVd) with γ = rate_bound in place of (2-k4)ρ2(P); corrected: γ = (2-k4)/λmax(P).
-        k_V = V0 + n * alpha_d * alpha_d / (8.0 * beta1 * (rate_bound - beta_d))
-        # (yiyj): ||z_i-z_j||² <= 4 z_gain V_d; printed z_gain = 1, corrected 1/λmin(P).
-        s = 2.0 * math.sqrt(z_gain * k_V)  # ||y_i-y_j||, ||q_i-q_j|| < s e^{-β_d t}
-        # (cijq), bounding ||q_i' - q_j'|| < c^q_ij e^{-β_d t} (the garbled (dotqie)-(dotqi)).
-        c_q = 2.0 * alpha_d + ((k1 + k2) * (F[heads] + F[tails]) + k3) * s
-        # c^d_i from (doteq): e^{-2β_d t} <= e^{-β_d t} bounds the ||q_i-q_j||² term.
-        per_edge = k1 * g * s + k2 * h * s * s + k2 * f * c_q
-        c = _per_agent_sum(n, heads, tails, per_edge)
-        xi = alpha_d / (c + alpha_d * beta_d)  # (xid)
-        return Theorem2Chain(
-            reading=reading,
-            rate_bound=rate_bound,
-            z_gain=z_gain,
-            holds=True,
-            k_V=k_V,
-            c_q=dict(zip(pairs, c_q.tolist())),
-            c=dict(zip(scenario.agent_ids, c.tolist())),
-            xi=dict(zip(scenario.agent_ids, xi.tolist())),
-        )
-
-    paper_chain = chain('paper', bound_paper, 1.0)
-    corrected_chain = chain('corrected', bound_corrected, 1.0 / rho2_p)
+    V0 = lyapunov_double(scenario, scenario.positions, velocities, tau=common.tau)
+    edges = _Theorem2Edges(
+        f=f_ij(k_edge, margin=margins), g=g_ij(k_edge, margin=margins), h=h_ij(k_edge, margin=margins)
+    )
+    paper_chain = _theorem2_chain(scenario, common, edges, V0=V0, reading='paper', rate_bound=bound_paper, z_gain=1.0)
+    corrected_chain = _theorem2_chain(
+        scenario, common, edges, V0=V0, reading='corrected', rate_bound=bound_corrected, z_gain=1.0 / rho2_p
+    )
     return TheoremConstants(
         theorem=2,
         free_parameter=b,
         nu0=nu0,
         k_nu=k_nu,
-        k_edge=dict(zip(pairs, k_edge.tolist())),
+        k_edge=dict(zip(common.pairs, k_edge.tolist())),
         V0=V0,
         k_V=corrected_chain.k_V,
         c=corrected_chain.c,
@@ -531,5 +537,53 @@ def theorem_constants(
         c_q=corrected_chain.c_q,
         paper_chain=paper_chain,
         corrected_chain=corrected_chain,
-        **common,
+        **common.fields,
+    )
+
+
+@dataclass(frozen=True)
+class _Theorem2Edges:
+    """f_ij, g_ij, h_ij ((fij), (gij), (hij)) at k^d_ij, per edge."""
+
+    f: np.ndarray
+    g: np.ndarray
+    h: np.ndarray
+
+
+def _theorem2_chain(
+    scenario: Scenario, common: _Common, edges: _Theorem2Edges, *, V0: float, reading: str, rate_bound: float, z_gain: float
+) -> Theorem2Chain:
+    """Theorem 2 (ii)-(iii) with the rate bound γ and the factor of (yiyj) of one reading.
+
+    Printed: γ = (2-k4) ρ2(P), z_gain = 1. Corrected (docs/THEOREM2.md): γ = (2-k4)/λmax(P),
+    z_gain = 1/λmin(P). A reading whose γ does not exceed β_d gives no decay bound (holds=False).
+    """
+    gains = scenario.gains
+    k1, k2, k3, alpha_d, beta_d, beta1 = gains.k1, gains.k2, gains.k3, gains.alpha_d, gains.beta_d, gains.beta1
+    n, heads, tails = common.n, common.heads, common.tails
+    if not 0.0 < beta_d < rate_bound:
+        return Theorem2Chain(
+            reading=reading, rate_bound=rate_bound, z_gain=z_gain, holds=False,
+            k_V=None, c_q=None, c=None, xi=None,
+        )  # fmt: skip
+    # (kVd) with γ = rate_bound in place of (2-k4)ρ2(P).
+    k_V = V0 + n * alpha_d * alpha_d / (8.0 * beta1 * (rate_bound - beta_d))
+    # (yiyj): ||z_i-z_j||² <= 4 z_gain V_d.
+    s = 2.0 * math.sqrt(z_gain * k_V)  # ||y_i-y_j||, ||q_i-q_j|| < s e^{-β_d t}
+    F = _per_agent_sum(n, heads, tails, edges.f)  # Σ_{l∈N_i} f_il(k^d_il)
+    # (cijq), bounding ||q_i' - q_j'|| < c^q_ij e^{-β_d t} (the garbled (dotqie)-(dotqi)).
+    c_q = 2.0 * alpha_d + ((k1 + k2) * (F[heads] + F[tails]) + k3) * s
+    # c^d_i from (doteq): e^{-2β_d t} <= e^{-β_d t} bounds the ||q_i-q_j||² term.
+    per_edge = k1 * edges.g * s + k2 * edges.h * s * s + k2 * edges.f * c_q
+    c = _per_agent_sum(n, heads, tails, per_edge)
+    xi = alpha_d / (c + alpha_d * beta_d)  # (xid)
+    return Theorem2Chain(
+        reading=reading,
+        rate_bound=rate_bound,
+        z_gain=z_gain,
+        holds=True,
+        k_V=k_V,
+        c_q=dict(zip(common.pairs, c_q.tolist())),
+        c=dict(zip(scenario.agent_ids, c.tolist())),
+        xi=dict(zip(scenario.agent_ids, xi.tolist())),
     )
