@@ -273,7 +273,31 @@ def test_the_animation_has_the_frames_asked_for(paper_single_record, tmp_path):
     path = animate(record, tmp_path / 'run.gif', frames=7, progress=lambda done, total: seen.append((done, total)))
     with Image.open(path) as image:
         assert image.n_frames == 7
+        assert min(image.size) >= 500  # readable: 7 in at 80 dpi
     assert seen[-1] == (7, 7)
+
+
+def test_the_edge_length_margins_show_the_room_the_theorem_guarantees(paper_single_record):
+    # On a log scale of Δ - length, the guaranteed room Δ - (k_ij + ||d_ij||) lies below the
+    # measured room at every sample (Theorem 1 (i)): the dotted lines are visible, not on Δ.
+    from formation_sim.analysis.checks import run_series, theory_bounds
+    from formation_sim.analysis.figures import plot_edge_lengths, pyplot
+
+    record = paper_single_record
+    series, bounds = run_series(record), theory_bounds(record.scenario)
+    plt = pyplot()
+    fig, (ax, margin_ax) = plt.subplots(2, 1)
+    try:
+        plot = plot_edge_lengths(ax, record, series, bounds, margin_ax=margin_ax)
+        assert margin_ax.get_yscale() == 'log'
+        for column, edge in enumerate(record.scenario.edges):
+            room = plot.lines[f'room {edge.i}-{edge.j}'].get_ydata()
+            assert np.array_equal(room, record.scenario.delta - series.edge_lengths[:, column])
+            guaranteed = plot.lines[f'bound {edge.i}-{edge.j}'].get_ydata()[0]
+            assert guaranteed == pytest.approx(record.scenario.delta - bounds.edge_bounds[edge.pair], rel=1e-15)
+            assert 0.0 < guaranteed < room.min()
+    finally:
+        plt.close(fig)
 
 
 # ---------------------------------------------------------------------------------- command

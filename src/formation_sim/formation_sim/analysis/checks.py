@@ -68,6 +68,8 @@ def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -
             lyapunov[k] = theory.lyapunov(scenario, x[k], tau=tau)
         if progress is not None and k % 5000 == 0:
             progress(k, count)
+    if progress is not None:
+        progress(count, count)
     return Series(
         times=np.asarray(record.sample_times, dtype=float),
         edge_lengths=lengths,

@@ -1,7 +1,7 @@
 """Two runs of a scenario side by side: events, messages, trajectories, triggering times.
 
 A run is given as a run folder, a bag, or a summary.json. With a bag (a folder's `bag/` or the
-bag itself) everything comes from the bag (`formation_sim.analysis.analyze.load_bag_run`); otherwise from
+bag itself) everything comes from the bag (`formation_sim.analysis.load.load_bag_run`); otherwise from
 summary.json (triggering times, counters) and the `trajectory.npz` beside it, if any (the output
 of `formation simulate`, including `--period` runs).
 

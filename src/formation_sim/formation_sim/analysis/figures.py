@@ -6,7 +6,8 @@ trajectory lines' end points, the bound curves.
 
 - `paper_figure`: the paper's Fig. 1 / Fig. 2 layout: (a) trajectories, circles at the initial
   positions, the final formation's edges; (b) each agent's triggering times as an event raster.
-- `plot_edge_lengths`: every ||x_i - x_j|| against Δ (and the (kij) bounds k_ij + ||d_ij||).
+- `plot_edge_lengths`: every ||x_i - x_j|| against Δ, and the room left to Δ on a log scale with
+  the room the (kij) bounds guarantee, Δ - (k_ij + ||d_ij||).
 - `plot_formation_error`: max_ij ||x_i - x_j - d_ij|| on a log scale, with e(0) e^{-βt} (the
   decay rate the theorem gives) and the bound 2 sqrt(k_V) e^{-βt} (lengthysV).
 - `plot_inter_event_times`: the distribution of t_{k+1} - t_k per agent, with ξ_i (xi) marked.
@@ -143,21 +144,39 @@ class SeriesPlot:
     lines: dict[str, Line2D]  # what each line shows -> the line
 
 
-def plot_edge_lengths(ax: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None = None) -> SeriesPlot:
+def plot_edge_lengths(
+    ax: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None = None, *, margin_ax: Axes | None = None
+) -> SeriesPlot:
+    """Every ||x_i - x_j|| against Δ; on `margin_ax`, the room left to Δ on a log scale.
+
+    The bounds k_ij + ||d_ij|| of (kij) lie within a fraction of a percent of Δ on typical
+    scenarios, where they cannot be told from the Δ line: `margin_ax` shows Δ - ||x_i - x_j||
+    with the guaranteed room Δ - (k_ij + ||d_ij||) dotted below it, decades apart.
+    """
     scenario = record.scenario
     lines = {}
     for column, edge in enumerate(scenario.edges):
         (lines[f'{edge.i}-{edge.j}'],) = ax.plot(series.times, series.edge_lengths[:, column], lw=1.0, label=f'$\\|x_{{{edge.i}}}-x_{{{edge.j}}}\\|$')
     lines['delta'] = ax.axhline(scenario.delta, color='r', lw=1.2, label=f'Δ = {scenario.delta:g}')
-    if bounds is not None and len(scenario.edges) <= 6:
-        for column, edge in enumerate(scenario.edges):
-            colour = lines[f'{edge.i}-{edge.j}'].get_color()
-            lines[f'bound {edge.i}-{edge.j}'] = ax.axhline(bounds.edge_bounds[edge.pair], color=colour, ls=':', lw=0.8)
-    ax.set_xlabel('t [s]')
     ax.set_ylabel('edge length')
-    ax.set_title('edge lengths against Δ (dotted: $k_{ij} + \\|d_{ij}\\|$ of (kij))', fontsize=9)
+    ax.set_title('edge lengths against the communication radius Δ', fontsize=9)
     if len(scenario.edges) <= 10:
         ax.legend(loc='best', fontsize=7)
+    if margin_ax is None:
+        ax.set_xlabel('t [s]')
+        return SeriesPlot(axes=ax, lines=lines)
+    for column, edge in enumerate(scenario.edges):
+        colour = lines[f'{edge.i}-{edge.j}'].get_color()
+        room = scenario.delta - series.edge_lengths[:, column]
+        positive = room > 0.0
+        (lines[f'room {edge.i}-{edge.j}'],) = margin_ax.semilogy(series.times[positive], room[positive], color=colour, lw=1.0)
+        if bounds is not None and len(scenario.edges) <= 12:
+            guaranteed = scenario.delta - bounds.edge_bounds[edge.pair]
+            if guaranteed > 0.0:
+                lines[f'bound {edge.i}-{edge.j}'] = margin_ax.axhline(guaranteed, color=colour, ls=':', lw=1.0)
+    margin_ax.set_xlabel('t [s]')
+    margin_ax.set_ylabel('Δ − edge length')
+    margin_ax.set_title('room left to Δ (log scale); dotted: the room (kij) guarantees, Δ − ($k_{ij} + \\|d_{ij}\\|$)', fontsize=9)
     return SeriesPlot(axes=ax, lines=lines)
 
 
@@ -258,8 +277,8 @@ def write_figures(record: RunRecord, series: Series, bounds: TheoryBounds | None
     figures = {}
     fig, _, _ = paper_figure(record)
     figures['formation (paper Fig. 1/2 style)'] = fig
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    plot_edge_lengths(ax, record, series, bounds)
+    fig, (ax, margin_ax) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True)
+    plot_edge_lengths(ax, record, series, bounds, margin_ax=margin_ax)
     figures['edge lengths'] = fig
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     plot_formation_error(ax, series, bounds, rate=rate)
@@ -293,9 +312,9 @@ def animate(
     record: RunRecord,
     path: str | Path,
     *,
-    frames: int = 100,
-    fps: int = 12,
-    dpi: int = 70,
+    frames: int = 150,
+    fps: int = 15,
+    dpi: int = 80,
     progress: Callable[[int, int], None] | None = None,
 ) -> Path:
     """GIF of the run: agents, their trails, edges coloured by length / Δ, the desired formation."""
@@ -319,7 +338,7 @@ def animate(
     events = np.sort(np.concatenate([np.asarray(v, dtype=float) for v in record.trigger_times.values()]))
     chosen = frame_indices(t, frames=frames)
 
-    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    fig, ax = plt.subplots(figsize=(7.0, 7.0))
     span = np.ptp(x.reshape(-1, 2), axis=0).max()
     pad = 0.1 * span + 0.05 * scenario.delta
     ax.set_xlim(x[..., 0].min() - pad, x[..., 0].max() + pad)
@@ -333,7 +352,11 @@ def animate(
     edges = LineCollection([], linewidths=2.0)
     ax.add_collection(edges)
     agents = ax.scatter(x[0, :, 0], x[0, :, 1], s=60, c=colours, zorder=3)
-    label = ax.text(0.02, 0.97, '', transform=ax.transAxes, va='top', fontsize=9)
+    # Ids beside the agents, for teams small enough to read them.
+    ids = [ax.annotate(str(agent), x[0, k], xytext=(6, 6), textcoords='offset points', fontsize=9, color=colours[k], zorder=4)
+           for k, agent in enumerate(scenario.agent_ids)] if len(scenario.agent_ids) <= 30 else []  # fmt: skip
+    label = ax.text(0.02, 0.97, '', transform=ax.transAxes, va='top', fontsize=11, family='monospace',
+                    bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': 'none'})  # fmt: skip
     ax.set_title(f'{scenario.name}: edges green → red as their length nears Δ = {scenario.delta:g}', fontsize=9)
 
     def draw(frame: int):
@@ -342,12 +365,14 @@ def animate(
         for a, trail in enumerate(trails):
             trail.set_data(x[: k + 1, a, 0], x[: k + 1, a, 1])
         agents.set_offsets(now)
+        for k_agent, text in enumerate(ids):
+            text.xy = now[k_agent]
         edges.set_segments([[now[a], now[b]] for a, b in pairs])
         edges.set_color([edge_colour(float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])), scenario.delta) for a, b in pairs])
         goal = now.mean(axis=0) + offsets
         desired.set_offsets(goal)
         desired_edges.set_segments([[goal[a], goal[b]] for a, b in pairs])
-        label.set_text(f't = {t[k]:.2f} s   events so far: {int(np.searchsorted(events, t[k], side="right"))}')
+        label.set_text(f't = {t[k]:7.3f} s   events: {int(np.searchsorted(events, t[k], side="right"))}')
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -37,8 +37,8 @@ def register(subparsers) -> None:
     parser.add_argument('--markers', action='store_true', help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove')
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--no-animation', action='store_true', help='skip the GIF (the slowest part)')
-    parser.add_argument('--frames', type=int, default=100, help='animation frames (default 100)')
-    parser.add_argument('--fps', type=int, default=12, help='animation frames per second (default 12)')
+    parser.add_argument('--frames', type=int, default=150, help='animation frames (default 150)')
+    parser.add_argument('--fps', type=int, default=15, help='animation frames per second (default 15)')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
     parser.set_defaults(func=run)
 
@@ -73,7 +73,9 @@ def run(args: argparse.Namespace) -> int:
     record = bag_run.record
     out = args.out or default_out_dir(location)
     out.mkdir(parents=True, exist_ok=True)
-    series = run_series(record, progress=Progress('evaluating ν and V', enabled=show))
+    evaluating = Progress('evaluating ν and V', enabled=show)
+    series = run_series(record, progress=evaluating)
+    evaluating.close()
     try:
         bounds, bounds_error = theory_bounds(record.scenario), None
     except theory.TheoryError as error:
