@@ -379,3 +379,15 @@ def test_a_wall_clock_trigger_at_the_horizon_is_explained(paper_single_record, t
     assert {d['key'] for d in report['summary_json']['differences']} == {'trigger_times.2 (length)', 'event_counts.2', 'total_events'}
     (note,) = report['summary_json']['notes']
     assert note.startswith('agents [2] triggered at the horizon t = 1.0 (wall clock)')
+
+
+def test_the_analysis_api_says_what_it_takes(paper_single_record, write_run_bag, tmp_path):
+    from formation_sim.analysis import diff_summaries, load_bag_run, run_series
+
+    bag_run = load_bag_run(write_run_bag(paper_single_record, tmp_path / 'bag', scenario_topic=True))
+    with pytest.raises(TypeError, match=r'run_series takes a RunRecord \(a BagRun holds it: pass bag_run.record\), got BagRun'):
+        run_series(bag_run)
+    with pytest.raises(TypeError, match='from_bag is NoneType'):
+        diff_summaries(None, {})
+    with pytest.raises(TypeError, match='from_file is list'):
+        diff_summaries({}, [])

@@ -47,6 +47,10 @@ class Series:
 
 
 def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -> Series:
+    """The paper's quantities at every sample of `record` (a `BagRun` holds one: `bag_run.record`)."""
+    if not isinstance(record, RunRecord):
+        hint = ' (a BagRun holds it: pass bag_run.record)' if hasattr(record, 'record') else ''
+        raise TypeError(f'run_series takes a RunRecord{hint}, got {type(record).__name__}')
     scenario = record.scenario
     heads, tails, d = scenario.edge_indices()
     x = record.sample_positions

@@ -45,6 +45,12 @@ def diff_summaries(from_bag: dict, from_file: dict) -> tuple[list[Difference], l
 
     Returns (differences, keys of summary.json a bag cannot reproduce, see NOT_IN_BAG).
     """
+    for name, value in (('from_bag', from_bag), ('from_file', from_file)):
+        if not isinstance(value, dict):
+            raise TypeError(
+                f'diff_summaries takes two summary dicts, bag_summary(record) and load_summary(path); '
+                f'{name} is {type(value).__name__}'
+            )
     differences: list[Difference] = []
     skipped: list[str] = []
 
