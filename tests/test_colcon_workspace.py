@@ -34,21 +34,27 @@ def test_workspace_holds_relative_symlinks_to_the_packages() -> None:
         assert (link / 'package.xml').is_file()
 
 
-@pytest.fixture(scope='module')
-def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Build a copy of the workspace (the packages, not the links) and return its install/."""
+def _colcon(root: Path, *args: str) -> subprocess.CompletedProcess:
     colcon = Path(sys.executable).with_name('colcon')
     assert colcon.exists(), f'{colcon} is missing: run `make venv` (requirements-dev.txt)'
+    env = dict(os.environ, COLCON_HOME=str(root / 'colcon_home'), COLCON_LOG_PATH=str(root / 'log'))
+    return subprocess.run([str(colcon), *args], cwd=root, env=env, capture_output=True, text=True, timeout=600, check=False)
+
+
+@pytest.fixture(scope='module')
+def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Build a copy of the workspace (the packages, not the links) and return its install/.
+
+    The copy keeps the repository's shape: packages in src/, and tests/ beside it (a link to the
+    repository's tests), where each package's setup.cfg sends `colcon test`.
+    """
     root = tmp_path_factory.mktemp('colcon_ws')
     for name in PACKAGES:
         shutil.copytree(WORKSPACE_SRC / name, root / 'src' / name,
                         ignore=shutil.ignore_patterns('*.egg-info', '__pycache__'))
-    env = dict(os.environ, COLCON_HOME=str(root / 'colcon_home'),
-               COLCON_LOG_PATH=str(root / 'log'))
-    build = subprocess.run(
-        [str(colcon), 'build', '--base-paths', 'src', '--build-base', 'build',
-         '--install-base', 'install', '--event-handlers', 'console_direct+'],
-        cwd=root, env=env, capture_output=True, text=True, timeout=600, check=False)
+    (root / 'tests').symlink_to(REPO / 'tests')
+    build = _colcon(root, 'build', '--base-paths', 'src', '--build-base', 'build', '--install-base', 'install',
+                    '--event-handlers', 'console_direct+')  # fmt: skip
     assert build.returncode == 0, build.stdout + build.stderr
     return root / 'install'
 
@@ -100,3 +106,19 @@ def test_colcon_installed_formation_command_runs(colcon_install: Path) -> None:
                          capture_output=True, text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stdout + run.stderr
     assert 'simulate' in run.stdout
+
+
+@pytest.mark.slow
+def test_colcon_test_runs_the_package_tests(colcon_install: Path) -> None:
+    # formation_msgs_py's tests (no ROS process): colcon test finds them through setup.cfg and
+    # runs them against the installed package.
+    import xml.etree.ElementTree as ET
+
+    root = colcon_install.parent
+    run = _colcon(root, 'test', '--base-paths', 'src', '--build-base', 'build', '--install-base', 'install',
+                  '--packages-select', 'formation_msgs_py', '--event-handlers', 'console_direct+')  # fmt: skip
+    assert run.returncode == 0, run.stdout + run.stderr
+    suite = ET.parse(root / 'build' / 'formation_msgs_py' / 'pytest.xml').getroot()
+    suite = suite if suite.tag == 'testsuite' else suite.find('testsuite')
+    assert int(suite.get('tests')) >= 50
+    assert int(suite.get('failures')) == 0 and int(suite.get('errors')) == 0

@@ -21,6 +21,8 @@ setup(
     ],
     # formation_msgs_py and the ROS packages come from the workspace (package.xml), not from PyPI.
     install_requires=['setuptools', 'numpy', 'scipy'],
+    # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).
+    extras_require={'test': ['pytest']},
     zip_safe=True,
     entry_points={
         'console_scripts': [

@@ -21,5 +21,7 @@ setup(
     ],
     # ROS message packages come from ROS (package.xml), not from this list.
     install_requires=['setuptools'],
+    # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).
+    extras_require={'test': ['pytest']},
     zip_safe=True,
 )

@@ -23,6 +23,8 @@ setup(
     # formation_agent, formation_msgs_py and the ROS packages come from the workspace
     # (package.xml), not from PyPI.
     install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'matplotlib', 'mcap', 'rosbags'],
+    # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).
+    extras_require={'test': ['pytest']},
     zip_safe=False,
     entry_points={
         'console_scripts': [
