@@ -34,6 +34,9 @@ def test_the_exit_codes_are_documented_in_the_top_level_help(capsys):
 def _bad_input(tmp_path):
     """(command line, what the refusal says) per command: each must exit 2 without a traceback."""
     (tmp_path / 'empty').mkdir(exist_ok=True)
+    (tmp_path / 'a_file').write_text('not a folder')
+    (tmp_path / 'a_run').mkdir(exist_ok=True)
+    (tmp_path / 'a_run' / 'summary.json').write_text('{}')
     missing = str(tmp_path / 'missing')
     return [
         (['validate', missing], 'no such scenario file and not a built-in scenario'),
@@ -56,6 +59,18 @@ def _bad_input(tmp_path):
         (['echo', 'not a topic'], 'argument TOPIC: Invalid topic name'),
         (['echo', '/formation/step', '--count', '0'], 'argument --count: must be an integer >= 1, got 0'),
         (['echo', '/formation/step', '--timeout', 'inf'], 'argument --timeout: must be a finite number > 0, got inf'),
+        (['simulate', 'paper_single', '--out', str(tmp_path / 'a_file')], 'a_file is a file, not a folder'),
+        (['simulate', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
+        (['simulate', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
+        (['simulate', 'paper_single', '--period', 'nan'], 'argument --period: must be a finite number > 0, got nan'),
+        (['run', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
+        (['run', 'paper_single', '--out', str(tmp_path / 'a_run'), '--force', '--domain-id', '100', '--sample-dt', '1e-12'], 'asks for 1e+13 samples'),
+        (['run', 'paper_single', '--agents-per-process', '1.5'], "argument --agents-per-process: must be an integer >= 1, got '1.5'"),
+        (['analyze', missing, '--out', str(tmp_path / 'a_run')], 'a_run holds a run (summary.json or bag/) whose files the report would overwrite'),
+        (['compare', missing, missing, '--out', str(tmp_path / 'a_run')], 'whose files the report would overwrite'),
+        (['replay', missing, '--depth', '0'], 'argument --depth: must be an integer >= 1, got 0'),
+        (['echo', '/formation/step', '--domain-id', '233'], 'argument --domain-id: must be an integer in [0, 232]'),
+        (['validate', ''], "'': no such scenario file"),
         (['no_such_command'], "invalid choice: 'no_such_command'"),
         (['validate', 'paper_single', '--no-such-option'], 'unrecognized arguments: --no-such-option'),
         ([], 'COMMAND'),
@@ -78,7 +93,8 @@ def test_bad_input_exits_2_in_every_command(tmp_path, capsys):
         captured = capsys.readouterr()
         assert complaint in captured.err, (arguments, captured.err)
         assert 'Traceback' not in captured.err
-    assert not (tmp_path / 'x').exists() and sorted(p.name for p in tmp_path.iterdir()) == ['empty']
+    assert not (tmp_path / 'x').exists() and sorted(p.name for p in tmp_path.iterdir()) == ['a_file', 'a_run', 'empty']
+    assert [p.name for p in (tmp_path / 'a_run').iterdir()] == ['summary.json'] and not list((tmp_path / 'empty').iterdir())
 
 
 @pytest.mark.timeout(300)

@@ -771,10 +771,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         text = resource.read_text(encoding='utf-8')
         source, default_name = f'built-in scenario {short_repr(name_or_path)}', name_or_path
     else:
+        named = bool(str(name_or_path).strip())  # Path('') would be the current folder
         path = Path(name_or_path)
-        if path.is_dir():
+        if named and path.is_dir():
             raise ScenarioError(f'{short_repr(str(name_or_path))}: is a folder, not a scenario file')
-        if not path.is_file():
+        if not (named and path.is_file()):
             raise ScenarioError(
                 f'{short_repr(str(name_or_path))}: no such scenario file and not a built-in scenario '
                 f'({", ".join(builtin_scenarios())})'
