@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from importlib import resources
 
 import pytest
 
@@ -107,21 +108,11 @@ def test_a_folder_is_not_reported_as_missing(tmp_path, capsys):
 # Each is answered at once by `formation validate` (exit 2: unreadable, 1: a hypothesis broken),
 # without a traceback, naming the key, agent or edge and the value, in a message of bounded size.
 
-PAPER = """\
-name: case
-dynamics: single
-communication_radius: 4.0
-horizon: 10.0
-agents:
-  1: {position: [2.0, 4.0]}
-  2: {position: [3.5, 7.0]}
-  3: {position: [4.5, 5.5]}
-edges:
-  - {i: 1, j: 2, d: [0.0, -2.0]}
-  - {i: 1, j: 3, d: [-2.0, 0.0]}
-  - {i: 2, j: 3, d: [-2.0, 2.0]}
-gains: {alpha: 10.0, beta: 1.0}
-"""
+# The built-in paper_single, its comment lines dropped (so line numbers below count from `name`).
+PAPER = ''.join(
+    line for line in (resources.files('formation_sim.model.scenarios') / 'paper_single.yaml').read_text().splitlines(True)
+    if not line.startswith('#')
+).replace('name: paper_single', 'name: case')
 
 
 def edit(old, new, count=1):
