@@ -33,9 +33,10 @@ test: venv
 	exit $$rc
 
 # The paper's single-integrator example distributed over ROS 2 nodes and recorded, then the
-# figures and the report recomputed from the bag alone.
+# figures and the report recomputed from the bag alone. --force: each demo replaces the last one
+# in runs/demo (and only that folder), so `make demo` can be run again and again.
 demo: venv
-	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR)
+	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR) --force
 	$(VENV)/bin/formation analyze $(DEMO_DIR)
 
 bench: venv

@@ -13,7 +13,7 @@ Everything here but `codec` and `qos` imports without ROS.
 from formation_msgs_py._lazy import lazy_exports
 
 __all__ = lazy_exports(globals(), {
-    'types': ('SensedState', 'TriggerInfo'),
+    'types': ('MAX_AGENT_ID', 'SensedState', 'TriggerInfo'),
     'lockstep': (
         'AgentReport', 'Status', 'Step', 'WorldState',
         'DISCOVERY_STEP', 'STEP_FLAG_FINAL', 'STEP_FLAG_REALTIME', 'REJECT_REASONS',

@@ -29,7 +29,7 @@ from formation_msgs_py.lockstep import (
     Step,
     WorldState,
 )
-from formation_msgs_py.types import SensedState, TriggerInfo
+from formation_msgs_py.types import MAX_AGENT_ID, SensedState, TriggerInfo
 
 LAYOUT_VERSION = 1
 """Version of every array layout and of the sensing JSON; bumped on any incompatible change."""
@@ -37,7 +37,7 @@ LAYOUT_VERSION = 1
 KIND_ETA1 = 1
 KIND_ETA2 = 2
 
-_MAX_ID = 2**31 - 1
+_MAX_ID = MAX_AGENT_ID  # also bounds the other small integer fields (step flags)
 _MAX_COUNT = 2**53  # float64 holds every integer up to here exactly
 
 

@@ -10,6 +10,11 @@ from dataclasses import dataclass
 
 Vector = tuple[float, ...]
 
+# Agent ids are integers in [0, MAX_AGENT_ID]: they name topics (/agent_<i>/...), travel as int64
+# ROS parameters and, in the message layouts, as float64 fields checked against this bound (a
+# 32-bit signed range, which every robot stack's integer types hold).
+MAX_AGENT_ID = 2**31 - 1
+
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class TriggerInfo:

@@ -340,6 +340,70 @@ def test_analyze_command_exit_2_names_what_is_missing(tmp_path, capsys):
     assert 'neither a bag' in capsys.readouterr().err
 
 
+def _damage(bag, how):
+    """The bag folder as a damaged recording leaves it; returns the path to give the command."""
+    mcap = next(bag.glob('*.mcap'))
+    if how == 'recorder killed (no metadata.yaml)':
+        (bag / 'metadata.yaml').unlink()
+        return bag, 'no metadata.yaml (it holds'
+    if how == 'random bytes named .mcap':
+        (bag / 'metadata.yaml').unlink()
+        mcap.write_bytes(bytes(range(256)) * 8)
+        return mcap, 'no metadata.yaml (it holds'
+    if how == 'random bytes beside metadata.yaml':
+        mcap.write_bytes(bytes(range(256)) * 8)
+        return bag, 'cannot read the bag: File magic is invalid'
+    data = mcap.read_bytes()  # cut short beside its metadata.yaml
+    mcap.write_bytes(data[: len(data) // 2])
+    return bag, 'cannot read the bag: File end magic is invalid'
+
+
+DAMAGE = ['recorder killed (no metadata.yaml)', 'random bytes named .mcap', 'random bytes beside metadata.yaml', 'cut short']
+
+
+@pytest.mark.parametrize('command', ['analyze', 'compare'])
+@pytest.mark.parametrize('how', DAMAGE)
+def test_a_damaged_bag_is_refused_with_exit_2_and_what_to_do(paper_single_record, write_run_bag, tmp_path, capsys, command, how):
+    from formation_sim.cli import main
+
+    bag = write_run_bag(paper_single_record, tmp_path / 'run' / 'bag')
+    target, fragment = _damage(bag, how)
+    arguments = [str(target)] if command == 'analyze' else [str(target), str(target)]
+    assert main([command, *arguments, '--quiet']) == 2
+    err = capsys.readouterr().err
+    assert fragment in err and 'Traceback' not in err
+    if 'no metadata.yaml' in fragment:
+        assert f'`formation recover {bag}` rebuilds it' in err
+    assert not (tmp_path / 'run' / 'analysis').exists()
+
+
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    [
+        (['--fps', '0'], 'argument --fps: must be an integer in [1, 100], got 0'),
+        (['--fps', '12.5'], "argument --fps: must be an integer in [1, 100], got '12.5'"),
+        (['--frames', '0'], 'argument --frames: must be an integer >= 1, got 0'),
+    ],
+)
+def test_analyze_arguments_are_checked_before_the_analysis(tmp_path, capsys, arguments, complaint):
+    from formation_sim.cli import main
+
+    assert main(['analyze', str(tmp_path / 'nothing_here'), *arguments]) == 2  # refused before the run is even looked for
+    assert complaint in capsys.readouterr().err
+
+
+def test_a_report_never_overwrites_a_run(paper_single_record, write_run_bag, tmp_path, capsys):
+    from formation_sim.cli import main
+
+    write_run_bag(paper_single_record, tmp_path / 'a' / 'bag')
+    other = tmp_path / 'other'
+    write_summary(paper_single_record, other)
+    before = sorted(p.name for p in other.iterdir())
+    assert main(['analyze', str(tmp_path / 'a'), '--out', str(other), '--quiet']) == 2
+    assert 'holds a run (summary.json or bag/) whose files the report would overwrite' in capsys.readouterr().err
+    assert sorted(p.name for p in other.iterdir()) == before
+
+
 # ------------------------------------------------------------------------------------- ROS
 
 

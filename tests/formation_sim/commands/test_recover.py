@@ -61,5 +61,5 @@ def test_recover_names_what_it_cannot_do(tmp_path, capsys):
     assert main(['recover', str(tmp_path / 'missing')]) == 2
     assert 'is not a directory' in capsys.readouterr().err
     (tmp_path / 'empty').mkdir()
-    assert main(['recover', str(tmp_path / 'empty')]) == 1
+    assert main(['recover', str(tmp_path / 'empty')]) == 2  # bad input, like every command
     assert 'expected exactly one .mcap file, found []' in capsys.readouterr().err

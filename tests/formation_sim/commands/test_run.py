@@ -7,31 +7,79 @@ import pytest
 from formation_sim.cli import main
 
 
-@pytest.mark.parametrize(
-    ('arguments', 'complaint'),
-    [
-        (['--domain-id', '300'], 'domain id must lie in [0, 232], got 300'),
-        (['--agents-per-process', '0'], 'agents_per_process must be >= 1, got 0'),
-        (['--horizon', '-1'], 'horizon must be a finite number > 0, got -1.0'),
-    ],
-)
-def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, arguments, complaint):
+BAD_RUN_ARGUMENTS = [
+    # (arguments, what the refusal says): each refused while parsing, before anything starts
+    (['--domain-id', '300'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300'),
+    (['--domain-id', '999'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 999'),
+    (['--agents-per-process', '0'], 'argument --agents-per-process: must be an integer >= 1, got 0'),
+    (['--horizon', '-1'], 'argument --horizon: must be a finite number > 0, got -1.0'),
+    (['--horizon', 'nan'], 'argument --horizon: must be a finite number > 0, got nan'),
+    (['--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
+    (['--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
+    (['--timeout', 'soon'], "argument --timeout: must be a finite number > 0, got 'soon'"),
+    (['--sample-dt', '1e-9'], 'the sample spacing 1e-09 s asks for 1e+10 samples'),
+]
+
+
+@pytest.mark.parametrize(('arguments', 'complaint'), BAD_RUN_ARGUMENTS, ids=[' '.join(case[0]) for case in BAD_RUN_ARGUMENTS])
+def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, monkeypatch, arguments, complaint):
+    import subprocess
+
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    earlier = _earlier_run(tmp_path / 'run')
     assert main(['run', 'paper_single', '--out', str(tmp_path / 'run'), '--quiet', *arguments]) == 2
-    assert complaint in capsys.readouterr().err
-    assert not (tmp_path / 'run' / 'logs').exists()  # nothing was started
+    err = capsys.readouterr().err
+    assert complaint in err and 'Traceback' not in err
+    assert _listing(tmp_path / 'run') == earlier  # nothing started, nothing on disk changed
 
 
-def test_an_unknown_executor_is_refused_by_the_api(tmp_path):
+def _earlier_run(folder):
+    """What `formation simulate` leaves in `folder`; returns its listing with every file's bytes."""
+    assert main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(folder), '--quiet', '--no-plot']) == 0
+    return _listing(folder)
+
+
+def _listing(folder):
+    return {path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None for path in sorted(folder.rglob('*'))}
+
+
+@pytest.mark.parametrize('force', [False, True], ids=['plain', 'force'])
+def test_the_api_refuses_a_bad_request_before_touching_the_earlier_run(tmp_path, monkeypatch, force):
+    import subprocess
+
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
-    with pytest.raises(RunError, match=r"executor must be one of \('events', 'single'\), got 'multi'"):
-        FormationRun('paper_single', out_dir=tmp_path / 'run', executor='multi')
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    earlier = _earlier_run(tmp_path / 'run')
+    for options, complaint in [
+        ({'domain_id': 999}, 'domain id must lie in [0, 232], got 999'),
+        ({'timeout': -5.0}, 'timeout must be a finite number of seconds > 0, got -5.0'),
+        ({'sample_period': -1.0}, 'the sample spacing must be a finite number >= 0 (0: samples at events only), got -1.0'),
+        ({'horizon': 5e-324}, 'horizon must be a finite number > 0, got 5e-324'),
+    ]:
+        with pytest.raises(RunError) as caught:
+            FormationRun('paper_single', out_dir=tmp_path / 'run', force=force, **options)
+        assert complaint in str(caught.value)
+    assert _listing(tmp_path / 'run') == earlier
+
+
+def test_a_folder_holding_a_run_is_refused_and_kept(tmp_path, capsys, monkeypatch):
+    import subprocess
+
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    earlier = _earlier_run(tmp_path / 'run')
+    for extra in ([], ['--no-record']):
+        assert main(['run', 'paper_double', '--horizon', '1', '--out', str(tmp_path / 'run'), '--quiet', *extra]) == 2
+        err = capsys.readouterr().err
+        assert f'{tmp_path / "run"} already holds an earlier run (summary.json, trajectory.npz)' in err
+        assert 'add --force to replace the earlier run' in err
+    assert _listing(tmp_path / 'run') == earlier
 
 
 def test_an_existing_bag_is_never_overwritten(tmp_path, capsys):
     (tmp_path / 'run' / 'bag').mkdir(parents=True)
     assert main(['run', 'paper_single', '--out', str(tmp_path / 'run'), '--quiet']) == 2
-    assert 'bag exists; the recorder never overwrites a bag' in capsys.readouterr().err
+    assert f'{tmp_path / "run"} already holds an earlier run (bag/)' in capsys.readouterr().err
 
 
 def test_an_unknown_scenario_is_refused(tmp_path, capsys):
@@ -168,3 +216,48 @@ def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
     assert seen == {'localhost_only': False}
     assert main(['run', 'paper_single', '--out', str(tmp_path / 'b'), '--quiet']) == 2
     assert seen == {'localhost_only': True}
+
+
+# -- a real run: --force replaces an earlier run completely; the largest ids validate accepts run ----
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, capsys, paper_scenario_dict, monkeypatch):
+    import json
+
+    import yaml
+
+    from formation_sim.sim.engine import simulate
+    from formation_sim.model.scenario import load_scenario
+
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+    out = tmp_path / 'run'
+    assert main(['simulate', 'paper_double', '--horizon', '0.2', '--out', str(out), '--quiet']) == 0
+    (out / 'analysis').mkdir()
+    (out / 'analysis' / 'analysis.md').write_text('of the earlier run')
+    # Section 5's single-integrator team with ids 0, 7 and 2^31 - 1 (the largest id topics,
+    # messages and parameters carry), as validate accepts it.
+    ids = {1: 0, 2: 7, 3: 2**31 - 1}
+    data = paper_scenario_dict()
+    data['name'] = 'extreme_ids'
+    data['agents'] = {ids[k]: entry for k, entry in data['agents'].items()}
+    for edge in data['edges']:
+        edge['i'], edge['j'] = ids[edge['i']], ids[edge['j']]
+    path = tmp_path / 'extreme_ids.yaml'
+    path.write_text(yaml.safe_dump(data))
+    assert main(['validate', str(path)]) == 0
+    capsys.readouterr()
+
+    code = main(['run', str(path), '--horizon', '0.3', '--out', str(out), '--force', '--domain-id', '64', '--quiet', '--timeout', '300'])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err[-3000:]
+    assert captured.out.strip() == str(out)
+    assert not (out / 'analysis').exists()  # nothing of the earlier run is left beside this one
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['scenario'] == 'extreme_ids' and summary['dynamics'] == 'single'
+    assert (out / 'bag' / 'metadata.yaml').is_file()
+    reference = simulate(load_scenario(path), horizon=0.3)
+    assert summary['trigger_times'] == {str(agent): times for agent, times in reference.trigger_times.items()}
+    assert sorted(summary['trigger_times']) == ['0', '2147483647', '7']

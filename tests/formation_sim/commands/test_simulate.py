@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import matplotlib.image
 import pytest
 from matplotlib.collections import LineCollection
@@ -46,3 +48,71 @@ def test_simulate_writes_the_figure_with_the_panels_of_its_controller(tmp_path, 
     height, width = matplotlib.image.imread(out / FIGURE_FILE).shape[:2]
     # 7 in wide at 110 dpi; 9 in high with the raster below, 5.6 in without it.
     assert (width, height) == (770, 990 if panels == 2 else 616)
+
+
+# -- run folders: nothing is replaced unless asked, every argument checked first -------------------
+
+
+def _listing(folder):
+    return {path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None for path in sorted(folder.rglob('*'))}
+
+
+def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stale(tmp_path, capsys):
+    out = tmp_path / 'run'
+    assert main(['simulate', 'paper_single', '--horizon', '0.3', '--out', str(out), '--quiet']) == 0
+    (out / 'analysis').mkdir()
+    (out / 'analysis' / 'analysis.md').write_text('of the earlier run')
+    earlier = _listing(out)
+    capsys.readouterr()
+    assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot']) == 2
+    err = capsys.readouterr().err
+    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory.npz); nothing was changed' in err
+    assert _listing(out) == earlier
+    assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot', '--force']) == 0
+    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory.npz']  # no old figure, no old analysis
+    assert '"dynamics": "double"' in (out / 'summary.json').read_text()
+
+
+def test_without_out_every_run_gets_a_new_folder_under_runs(tmp_path, capsys, monkeypatch, paper_scenario_dict):
+    import yaml
+
+    monkeypatch.chdir(tmp_path)
+    data = paper_scenario_dict()
+    data['name'] = '../../escaped'
+    (tmp_path / 'escaping.yaml').write_text(yaml.safe_dump(data))
+    folders = []
+    for _ in range(2):
+        assert main(['simulate', 'escaping.yaml', '--horizon', '0.1', '--quiet', '--no-plot']) == 0
+        folders.append(capsys.readouterr().out.strip())
+    assert folders[0] != folders[1]
+    for folder in folders:
+        assert re.fullmatch(r'runs/escaped-simulate-\d{8}-\d{6}(-\d+)?', folder), folder
+        assert (tmp_path / folder / 'summary.json').is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['escaping.yaml', 'runs']
+    assert not (tmp_path.parent / 'escaped').exists() and not (tmp_path.parent.parent / 'escaped').exists()
+
+
+BAD_SIMULATE_ARGUMENTS = [
+    (['--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
+    (['--sample-dt', '1e-9'], 'argument --sample-dt: the sample spacing 1e-09 s asks for 1e+10 samples of 6 numbers'),
+    (['--sample-dt', '0', '--continuous'], 'argument --sample-dt: must be > 0 with --continuous'),
+    (['--horizon', 'inf'], 'argument --horizon: must be a finite number > 0, got inf'),
+    (['--horizon', '0'], 'argument --horizon: must be a finite number > 0, got 0.0'),
+    (['--period', '-1'], 'argument --period: must be a finite number > 0, got -1.0'),
+    (['--tolerance', '0'], 'argument --tolerance: must be a finite number > 0, got 0.0'),
+    (['--period', '0.1', '--continuous'], 'argument --continuous: not allowed with argument --period'),
+]
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(('arguments', 'complaint'), BAD_SIMULATE_ARGUMENTS, ids=[' '.join(case[0]) for case in BAD_SIMULATE_ARGUMENTS])
+def test_bad_arguments_exit_2_and_touch_nothing(tmp_path, capsys, arguments, complaint):
+    out = tmp_path / 'run'
+    assert main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(out), '--quiet', '--no-plot']) == 0
+    earlier = _listing(out)
+    capsys.readouterr()
+    for target in (out, tmp_path / 'new'):
+        assert main(['simulate', 'paper_single', '--out', str(target), '--force', *arguments]) == 2
+        err = capsys.readouterr().err
+        assert complaint in err and 'Traceback' not in err
+    assert _listing(out) == earlier and not (tmp_path / 'new').exists()

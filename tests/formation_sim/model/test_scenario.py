@@ -221,8 +221,8 @@ BROKEN_SINGLE = [
     ('position scalar', _set(('agents', 2, 'position'), 5.0), ['agents.2.position', 'list of numbers', '5.0']),
     ('velocity for single', _set(('agents', 1, 'velocity'), [0.0, 0.0]), ['agents.1.velocity', "'single'"]),
     ('unknown agent key', _set(('agents', 1, 'colour'), 'red'), ['agents.1', "unknown key 'colour'"]),
-    ('agent id text', _set(('agents', 'four'), {'position': [0.0, 0.0]}), ['agents.four', 'non-negative integers']),
-    ('agent id negative', _set(('agents', -1), {'position': [0.0, 0.0]}), ['agents.-1', 'non-negative integers']),
+    ('agent id text', _set(('agents', 'four'), {'position': [0.0, 0.0]}), ['agents.four', 'integers in [0, 2147483647]', "'four'"]),
+    ('agent id negative', _set(('agents', -1), {'position': [0.0, 0.0]}), ['agents.-1', 'integers in [0, 2147483647]']),
     ('one agent', _set(('agents',), {1: {'position': [0.0, 0.0]}}), ['at least 2 agents']),
     ('edge to nobody', _append_edge({'i': 1, 'j': 7, 'd': [0.0, 0.0]}), ['edges[3] (1, 7)', 'j=7 is not an agent']),
     ('self loop', _append_edge({'i': 2, 'j': 2, 'd': [0.0, 0.0]}), ['edges[3] (2, 2)', 'self-loop']),
@@ -349,3 +349,83 @@ def test_inputs_are_not_modified(paper_scenario_dict):
     before = copy.deepcopy(data)
     scenario_from_dict(data)
     assert data == before
+
+
+# --------------------------------------------------------------------------- limits of what is read
+
+
+def test_short_repr_cuts_long_values_and_says_how_long():
+    from formation_sim.model.scenario import short_repr
+
+    assert short_repr(-4.5) == '-4.5' and short_repr(5e-324) == '5e-324' and short_repr('four') == "'four'"
+    assert short_repr(10**400) == '100000000000... (an integer of 401 digits)'
+    assert short_repr(-(10**20000)).endswith('... (an integer of about 20000 digits)')  # past int -> str's limit
+    assert len(short_repr('x' * 10**6)) <= 80
+    nested: list = []
+    nested.append(nested)
+    assert short_repr(nested) == '[[[[...]]]]'
+    assert short_repr(list(range(1000))) == '[0, 1, 2, 3, 4, 5, 6, 7, ...]'
+
+
+@pytest.mark.parametrize(
+    ('make', 'fragment'),
+    [
+        (lambda s: s.replace(positions=[[10**400, 0.0], [1.0, 1.0], [2.0, 2.0]]), 'positions: a value is too large for a double'),
+        (lambda s: s.replace(positions=[['a', 0.0], [1.0, 1.0], [2.0, 2.0]]), "positions: expected numbers, got [['a', 0.0]"),
+        (lambda s: s.replace(agent_ids=(1, 2, 2**31)), 'agent_ids: agent ids are integers in [0, 2147483647]'),
+        (lambda s: Edge(i=1, j=2**31, d=np.zeros(2)), 'edge j: agent ids are integers in [0, 2147483647]'),
+        (lambda s: s.replace(name='x' * 201), 'name: at most 200 printable characters'),
+        (lambda s: SingleGains(alpha=10**400, beta=1.0), 'gains.alpha: 100000000000... (an integer of 401 digits) is too large for a double'),
+    ],
+)
+def test_programmatic_construction_refuses_what_a_file_would(make, fragment):
+    with pytest.raises(ScenarioError) as caught:
+        make(load_scenario('paper_single'))
+    assert fragment in str(caught.value)
+
+
+def test_the_largest_agent_id_travels():
+    s = load_scenario('paper_single').replace(agent_ids=(1, 2, 2**31 - 1), edges=(
+        Edge(i=1, j=2, d=np.array([0.0, -2.0])), Edge(i=1, j=2**31 - 1, d=np.array([-2.0, 0.0])),
+        Edge(i=2, j=2**31 - 1, d=np.array([-2.0, 2.0])),
+    ))
+    assert scenario_from_dict(scenario_to_dict(s)) == s
+
+
+def _aliased(repeats: int, size: int = 999) -> str:
+    """A YAML document of 1 + (size + 1) + 1 + repeats * (size + 1) + 1 + 1 nodes once its aliases are expanded."""
+    return f'a: &a [{", ".join(["0"] * size)}]\nb: [{", ".join(["*a"] * repeats)}]\n'
+
+
+def test_the_node_limit_counts_alias_expansions_exactly(tmp_path):
+    from formation_sim.model.scenario import MAX_YAML_NODES
+
+    # Nodes: the top mapping, key a, its list (1 + size), key b, list b, and repeats times the list a.
+    def nodes(repeats, size=999):
+        return 1 + 1 + (1 + size) + 1 + 1 + repeats * (1 + size)
+
+    below = (MAX_YAML_NODES - nodes(0)) // 1000
+    assert nodes(below) <= MAX_YAML_NODES < nodes(below + 1)
+    for repeats, refused in ((below, False), (below + 1, True)):
+        path = write(tmp_path, _aliased(repeats))
+        with pytest.raises(ScenarioError) as caught:
+            load_scenario(path)
+        assert ('more than 300000 nodes with its aliases expanded' in str(caught.value)) == refused, str(caught.value)[:300]
+        if not refused:
+            assert "unknown key 'a'" in str(caught.value)  # read completely, then refused by the schema
+
+
+def test_files_above_the_size_limit_are_refused_before_reading(tmp_path, monkeypatch):
+    import formation_sim.model.scenario as scenario_module
+
+    path = write(tmp_path, PAPER_YAML)
+    monkeypatch.setattr(scenario_module, 'MAX_FILE_BYTES', len(PAPER_YAML.encode()) - 1)
+    with pytest.raises(ScenarioError, match=r'0\.0 MB; a scenario file holds at most 0\.0 MB'):
+        load_scenario(path)
+    monkeypatch.setattr(scenario_module, 'MAX_FILE_BYTES', len(PAPER_YAML.encode()))
+    assert load_scenario(path).n == 3
+
+
+def test_a_folder_is_named_as_such():
+    with pytest.raises(ScenarioError, match="is a folder, not a scenario file"):
+        load_scenario('.')

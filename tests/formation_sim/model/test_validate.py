@@ -158,3 +158,140 @@ def test_zero_margin_edge_reports_without_nan():
     report = validate_scenario(s.replace(edges=edges))
     assert ('edge_length', 'edge (1, 2)') in rules(report.errors)
     json.dumps(report.to_dict(), allow_nan=False)
+
+
+# -- strict inequalities are shown with the digits that break them -------------------------------
+
+
+@pytest.mark.parametrize(
+    ('edits', 'expected'),
+    [
+        # β a hair above β0 = 1.5: 6 digits would read "β0 = 1.5 required, got β = 1.5".
+        ({'beta': 1.5000000000000002}, '0 < β < β0 = 1.5 required, got β = 1.5000000000000002'),
+        # ||d_ij|| a hair above Δ = 4: "||d_ij|| = 4 is not below Δ = 4" before.
+        ({'d12': [0.0, -4.000000000000001]}, '||d_ij|| = 4.000000000000001 is not below Δ = 4 (Assumption 1)'),
+        # ||d_ij|| = Δ exactly: equal values print alike, and rightly so.
+        ({'d12': [0.0, -4.0]}, '||d_ij|| = 4 is not below Δ = 4 (Assumption 1)'),
+    ],
+    ids=['beta', 'edge length above', 'edge length equal'],
+)
+def test_a_broken_strict_inequality_prints_enough_digits(paper_scenario_dict, edits, expected):
+    data = paper_scenario_dict()
+    if 'beta' in edits:
+        data['gains']['beta'] = edits['beta']
+    if 'd12' in edits:
+        data['edges'][0]['d'] = edits['d12']
+    messages = [finding.message for finding in validate_scenario(scenario_from_dict(data)).errors]
+    assert expected in messages, messages
+
+
+# -- what the agents receive as ROS parameters -------------------------------------------------------
+
+SUBNORMAL = 5e-324
+
+
+@pytest.mark.parametrize(
+    ('dynamics', 'where', 'subject', 'key'),
+    [
+        ('single', ('gains', 'alpha'), 'gains', 'gains.alpha'),
+        ('single', ('gains', 'beta'), 'gains', 'gains.beta'),
+        ('single', ('horizon',), 'scenario', 'horizon'),
+        ('single', ('edges', 1, 'd', 0), 'edge (1, 3)', 'd[0]'),
+        ('double', ('gains', 'alpha_d'), 'gains', 'gains.alpha_d'),
+        ('double', ('gains', 'beta_d'), 'gains', 'gains.beta_d'),
+        ('double', ('gains', 'k3'), 'gains', 'gains.k3'),
+    ],
+)
+def test_a_subnormal_parameter_is_refused_naming_its_key(paper_scenario_dict, dynamics, where, subject, key):
+    data = paper_scenario_dict(dynamics)
+    target = data
+    for step in where[:-1]:
+        target = target[step]
+    target[where[-1]] = SUBNORMAL
+    report = validate_scenario(scenario_from_dict(data))
+    found = [f for f in report.errors if f.rule == 'parameters']
+    assert [(f.subject, f.values['key']) for f in found] == [(subject, key)]
+    assert f'{key} = 5e-324 is a subnormal double' in found[0].message
+
+
+def test_zero_and_the_smallest_normal_double_are_carried(paper_scenario_dict):
+    data = paper_scenario_dict()
+    data['edges'][1]['d'] = [-2.0, 2.2250738585072014e-308]
+    data['edges'][0]['d'] = [-0.0, -2.0]
+    assert not [f for f in validate_scenario(scenario_from_dict(data)).errors if f.rule == 'parameters']
+
+
+# Doubles that a decimal round trip through YAML could lose, all normal: the parameter file must
+# carry each bit for bit.
+AWKWARD_NORMAL = [0.1, 1.0 / 3.0, -0.0, 2.2250738585072014e-308, 1.7976931348623157e308, np.nextafter(1.0, 2.0), 1e22, -7.5e-300, 123456789.12345679]
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('dynamics', ['single', 'double'])
+def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper_scenario_dict, dynamics):
+    """The file FormationRun writes, read by rcl's own parser as an agent node reads it; and a
+    subnormal value, which validate refuses, indeed does not survive it."""
+    import struct
+
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    data = paper_scenario_dict(dynamics)
+    data['edges'][0]['d'] = [float(AWKWARD_NORMAL[0]), float(AWKWARD_NORMAL[1])]
+    data['edges'][1]['d'] = [float(v) for v in AWKWARD_NORMAL[2:4]]
+    data['edges'][2]['d'] = [float(v) for v in AWKWARD_NORMAL[4:6]]
+    gains = ('alpha', 'beta') if dynamics == 'single' else ('alpha_d', 'beta_d')
+    data['gains'][gains[0]], data['gains'][gains[1]] = float(AWKWARD_NORMAL[7] * -1), float(AWKWARD_NORMAL[8])
+    data['communication_radius'] = float(AWKWARD_NORMAL[6])
+    data['horizon'] = 0.1 + 0.2
+    scenario = scenario_from_dict(data)
+    assert not [f for f in validate_scenario(scenario).errors if f.rule == 'parameters']
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', validate=False, progress=False)
+    run.out_dir.mkdir()
+    path = run._write_inputs()['agents']
+    read = _read_with_rcl(path, scenario.agent_ids)
+
+    from formation_sim.runtime.sim_node import agent_parameters
+
+    def bits(value):
+        return struct.pack('<d', value) if isinstance(value, float) else value
+
+    for agent in scenario.agent_ids:
+        expected = agent_parameters(scenario, agent, horizon=scenario.horizon, extra_subscribers=1)
+        for name, value in expected.items():
+            got = read[agent][name]
+            if isinstance(value, list):
+                assert [bits(v) for v in got] == [bits(v) for v in value], (agent, name)
+            else:
+                assert bits(got) == bits(value), (agent, name, got, value)
+
+    # The rule is needed: a subnormal gain is read back as text.
+    data['gains'][gains[0]] = SUBNORMAL
+    broken = FormationRun(scenario_from_dict(data), out_dir=tmp_path / 'broken', validate=False, progress=False)
+    broken.out_dir.mkdir()
+    assert isinstance(_read_with_rcl(broken._write_inputs()['agents'], scenario.agent_ids)[1][gains[0]], str)
+
+
+def _read_with_rcl(path, agent_ids):
+    """{agent: {name: value}} as rcl parses `path` for the node /agent_<i>/formation_agent."""
+    import os
+
+    import rclpy
+    from rclpy.node import Node
+
+    from formation_agent.ros.node import NODE_NAME
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = rclpy.Context()
+    rclpy.init(context=context, args=['test', '--ros-args', '--params-file', str(path)], domain_id=65)
+    try:
+        read = {}
+        for agent in agent_ids:
+            node = Node(
+                NODE_NAME, namespace=f'/agent_{agent}', context=context,
+                automatically_declare_parameters_from_overrides=True, start_parameter_services=False, enable_rosout=False,
+            )
+            read[agent] = {name: parameter.value for name, parameter in node._parameters.items()}
+            node.destroy_node()
+        return read
+    finally:
+        rclpy.shutdown(context=context)

@@ -19,7 +19,7 @@ from geometry_msgs.msg import Pose, PoseArray
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
 
-from formation_sim.bag.io import BagWriter, BagError, TopicSpecError, UnknownMessageTypeError, decode, read_bag
+from formation_sim.bag.io import BagWriter, BagError, BagReadError, TopicSpecError, UnknownMessageTypeError, decode, read_bag
 from formation_sim.bag.recovery import BagRecoveryError, reindex
 from formation_sim.runtime.recorder import parse_topic_spec
 
@@ -69,6 +69,21 @@ def test_round_trip_is_bit_identical(tmp_path: Path) -> None:
             bag.write(topic, stamp, data)
 
     assert [tuple(m) for m in read_bag(tmp_path / 'bag')] == written
+
+
+def test_an_unreadable_bag_raises_bag_read_error_naming_the_remedy(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic(STEP, STEP_TYPE)
+        bag.write(STEP, 0, step_bytes(0))
+    mcap = next((tmp_path / 'bag').glob('*.mcap'))
+    (tmp_path / 'bag' / 'metadata.yaml').unlink()  # what a SIGKILLed recorder leaves
+    with pytest.raises(BagReadError, match=rf'no metadata.yaml \(it holds {mcap.name}\).*`formation recover {tmp_path / "bag"}` rebuilds it'):
+        list(read_bag(tmp_path / 'bag'))
+    reindex(tmp_path / 'bag')
+    mcap.write_bytes(b'not an mcap file' * 10)
+    with pytest.raises(BagReadError, match='cannot read the bag: '):
+        list(read_bag(tmp_path / 'bag'))
+    assert issubclass(BagReadError, BagError)
 
 
 def test_decode_gives_the_published_values(tmp_path: Path) -> None:

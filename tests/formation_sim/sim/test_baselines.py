@@ -113,6 +113,5 @@ def test_simulate_command_runs_the_continuous_baseline(tmp_path, capsys):
     assert summary['total_events'] == 0 and summary['messages_sent'] == 0
     assert summary['sensing_calls'] == 3 * summary['extra']['rhs_evaluations']
     assert summary['max_edge_length'] < summary['delta']
-    with pytest.raises(SystemExit):
-        main(['simulate', 'paper_single', '--continuous', '--period', '0.1'])
+    assert main(['simulate', 'paper_single', '--continuous', '--period', '0.1']) == 2  # bad input
     assert 'not allowed with' in capsys.readouterr().err

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import struct
 import tempfile
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -176,15 +177,14 @@ def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
                 _dispatch(got, topic, msgtype, message.rawdata)
             except MessageError as error:
                 got.problems.append(f'{topic} message {got.counts[topic]}: {error}')
+            except Exception as error:  # CDR that does not decode as its type: the message is damaged
+                if not type(error).__module__.startswith('rosbags') and not isinstance(error, (struct.error, IndexError, ValueError)):
+                    raise
+                got.problems.append(f'{topic} message {got.counts[topic]}: does not decode as {msgtype}: {error}')
         if progress is not None:
             progress(number, total)
     except BagError as error:
-        raise AnalysisError(f'{bag}: {error}') from None
-    except Exception as error:
-        if type(error).__module__.startswith('rosbags'):
-            hint = '' if (bag / 'metadata.yaml').is_file() else ' (no metadata.yaml: if its recorder was killed, recover it with formation_sim.runtime.recorder.reindex)'
-            raise AnalysisError(f'{bag}: cannot read the bag: {error}{hint}') from None
-        raise
+        raise AnalysisError(str(error) if str(error).startswith(str(bag)) else f'{bag}: {error}') from None
     return got
 
 

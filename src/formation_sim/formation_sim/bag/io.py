@@ -10,6 +10,7 @@ Recovering a bag whose recorder died: `formation_sim.bag.recovery`. The recordin
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
@@ -27,6 +28,10 @@ BAG_VERSION = 9
 
 class BagError(Exception):
     """A bag could not be written, read or recovered."""
+
+
+class BagReadError(BagError):
+    """A bag that cannot be read: no metadata.yaml (its recorder died), or a damaged or foreign file."""
 
 
 class UnknownMessageTypeError(BagError, ValueError):
@@ -201,10 +206,28 @@ class BagMessage(NamedTuple):
 
 
 def read_bag(path: Path | str) -> Iterator[BagMessage]:
-    """Yield every message of the bag at `path` in timestamp order (ties: write order)."""
-    with Reader(Path(path)) as reader:
-        for connection, timestamp, rawdata in reader.messages():
-            yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(rawdata))
+    """Yield every message of the bag at `path` in timestamp order (ties: write order).
+
+    Raises BagReadError for a folder without metadata.yaml (what a recorder killed by SIGKILL
+    leaves: `formation_sim.bag.recovery.reindex`, `formation recover`, rebuilds it) and for files
+    rosbags cannot read.
+    """
+    path = Path(path)
+    if path.is_dir() and not (path / 'metadata.yaml').is_file():
+        mcap = sorted(p.name for p in path.glob('*.mcap'))
+        held = f'it holds {", ".join(mcap)}' if mcap else 'nor any .mcap file'
+        raise BagReadError(
+            f'{path}: no metadata.yaml ({held}); a recorder that was killed leaves its bag so: '
+            f'`formation recover {path}` rebuilds it'
+        )
+    try:
+        with Reader(path) as reader:
+            for connection, timestamp, rawdata in reader.messages():
+                yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(rawdata))
+    except Exception as error:
+        if not type(error).__module__.startswith(('rosbags', 'mcap')) and not isinstance(error, (OSError, struct.error)):
+            raise
+        raise BagReadError(f'{path}: cannot read the bag: {error}') from None
 
 
 def decode(rawdata: bytes, msgtype: str, *, typestore: Typestore | None = None) -> Any:  # noqa: ANN401

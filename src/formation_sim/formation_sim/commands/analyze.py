@@ -10,9 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from formation_sim.commands.common import EXIT_BAD_INPUT, POSITIVE_INT, bounded_int, check_report_argument
+
 EXIT_OK = 0
 EXIT_FINDINGS = 1
-EXIT_UNREADABLE = 2
+EXIT_UNREADABLE = EXIT_BAD_INPUT
 
 
 def register(subparsers) -> None:
@@ -37,8 +39,8 @@ def register(subparsers) -> None:
     parser.add_argument('--markers', action='store_true', help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove')
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--no-animation', action='store_true', help='skip the GIF (the slowest part)')
-    parser.add_argument('--frames', type=int, default=150, help='animation frames (default 150)')
-    parser.add_argument('--fps', type=int, default=15, help='animation frames per second (default 15)')
+    parser.add_argument('--frames', type=POSITIVE_INT, default=150, help='animation frames (default 150)')
+    parser.add_argument('--fps', type=bounded_int(1, 100), default=15, help='animation frames per second, 1-100 (default 15)')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
     parser.set_defaults(func=run)
 
@@ -60,6 +62,8 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.bag.io import BagError
 
     show = not args.quiet
+    if not check_report_argument('analyze', args.out):
+        return EXIT_UNREADABLE
     try:
         location = locate(args.run)
         if location.bag is None:
@@ -72,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_UNREADABLE
     record = bag_run.record
     out = args.out or default_out_dir(location)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        print(f'formation analyze: error: cannot create {out}: {error.strerror or error}', file=sys.stderr)
+        return EXIT_UNREADABLE
     evaluating = Progress('evaluating ν and V', enabled=show)
     series = run_series(record, progress=evaluating)
     evaluating.close()

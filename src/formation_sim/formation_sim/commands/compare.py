@@ -7,9 +7,10 @@ within --tolerance, 2 a run cannot be read or the runs are of different agents.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
+
+from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, NON_NEGATIVE, check_report_argument, refuse
 
 
 def register(subparsers) -> None:
@@ -28,7 +29,7 @@ def register(subparsers) -> None:
     parser.add_argument('--scenario', default=None, metavar='NAME_OR_YAML', help="scenario for bags that do not hold it (see formation analyze)")
     parser.add_argument('--label-a', default=None, help='name of run A in the report (default: its mode)')
     parser.add_argument('--label-b', default=None, help='name of run B in the report (default: its mode)')
-    parser.add_argument('--tolerance', type=float, default=None, metavar='T', help='exit 1 unless event counts are equal and every deviation is <= T')
+    parser.add_argument('--tolerance', type=NON_NEGATIVE, default=None, metavar='T', help='exit 1 unless event counts are equal and every deviation is <= T')
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
     parser.set_defaults(func=run)
@@ -49,9 +50,8 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.compare import CompareError, compare_runs, load_run, overlay_figures, within, write_comparison
     from formation_sim.progress import Progress
 
-    if args.tolerance is not None and not (math.isfinite(args.tolerance) and args.tolerance >= 0.0):
-        print(f'formation compare: error: --tolerance must be a finite number >= 0, got {args.tolerance!r}', file=sys.stderr)
-        return 2
+    if not check_report_argument('compare', args.out):
+        return EXIT_BAD_INPUT
     show = not args.quiet
     try:
         runs = []
@@ -66,9 +66,12 @@ def run(args: argparse.Namespace) -> int:
             a.label, b.label = f'{a.label} (A)', f'{b.label} (B)'
         report = compare_runs(a, b)
     except CompareError as error:
-        print(f'formation compare: error: {error}', file=sys.stderr)
-        return 2
+        return refuse('compare', error)
     out = args.out or _default_out(args.run_a, args.run_b)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        return refuse('compare', f'cannot create {out}: {error.strerror or error}')
     figures = None if args.no_figures else overlay_figures(a, b, out)
     markdown, data = write_comparison(report, out, figures)
     agree = args.tolerance is None or within(report, args.tolerance)
@@ -91,5 +94,5 @@ def run(args: argparse.Namespace) -> int:
             print(f'{title}: {out / name}')
     if not agree:
         print(f'formation compare: the runs differ by more than {args.tolerance}', file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILED
+    return EXIT_OK

@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from formation_sim.commands.common import add_domain_argument, check_domain, inspection_node
+from formation_sim.commands.common import (
+    NON_NEGATIVE,
+    POSITIVE,
+    POSITIVE_INT,
+    add_domain_argument,
+    inspection_node,
+    refuse,
+)
 
 
 def register(subparsers) -> None:
@@ -16,21 +23,29 @@ def register(subparsers) -> None:
         'and WorldState (Float64MultiArray layouts of docs/MESSAGES.md) are decoded into their '
         'fields; every other type is printed field by field. Messages are separated by ---.',
     )
-    parser.add_argument('topic', metavar='TOPIC')
+    parser.add_argument(
+        'topic',
+        metavar='TOPIC',
+        help="the topic's name, e.g. /formation/step or /agent_1/trigger_info/to_2 (`formation topics` lists them)",
+    )
     add_domain_argument(parser)
-    parser.add_argument('--count', type=int, default=None, metavar='K', help='exit after K messages')
-    parser.add_argument('--timeout', type=float, default=None, metavar='S', help='exit 1 if fewer than --count messages (or none) came within S seconds')
-    parser.add_argument('--wait', type=float, default=10.0, metavar='S', help='wait up to S seconds for a publisher of TOPIC (default 10)')
+    parser.add_argument('--count', type=POSITIVE_INT, default=None, metavar='K', help='exit after K messages')
+    parser.add_argument('--timeout', type=POSITIVE, default=None, metavar='S', help='exit 1 if fewer than --count messages (or none) came within S seconds')
+    parser.add_argument('--wait', type=NON_NEGATIVE, default=10.0, metavar='S', help='wait up to S seconds for a publisher of TOPIC (default 10)')
     parser.add_argument('--raw', action='store_true', help='do not decode formation layouts')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not check_domain('echo', args.domain_id):
-        return 2
-    if args.count is not None and args.count < 1:
-        print(f'formation echo: error: --count must be >= 1, got {args.count}', file=sys.stderr)
-        return 2
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    if not args.topic.startswith('/'):
+        args.topic = f'/{args.topic}'  # relative names resolve in the root namespace, as in ros2 topic echo
+    try:
+        validate_full_topic_name(args.topic)
+    except InvalidTopicNameException as error:
+        return refuse('echo', f'argument TOPIC: {error}')
     try:
         with inspection_node('echo', args.domain_id) as node:
             return _echo(node, args)

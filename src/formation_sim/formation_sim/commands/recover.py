@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
+
+from formation_sim.commands.common import refuse
 
 
 def register(subparsers) -> None:
@@ -25,13 +26,11 @@ def run(args: argparse.Namespace) -> int:
 
     bag: Path = args.bag
     if not bag.is_dir():
-        print(f'formation recover: error: {bag} is not a directory (give the bag directory)', file=sys.stderr)
-        return 2
+        return refuse('recover', f'{bag} is not a directory (give the bag directory)')
     try:
         recovery = reindex(bag)
     except BagRecoveryError as error:
-        print(f'formation recover: error: {error}', file=sys.stderr)
-        return 1
+        return refuse('recover', error)
     if recovery.rewritten:
         print(f'{bag}: recovered {recovery.message_count} messages into {recovery.mcap_path.name}; '
               f'the cut-short original is kept as {recovery.damaged_copy.name}')

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import add_domain_argument, check_domain
+from formation_sim.commands.common import NON_NEGATIVE, NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, add_domain_argument, refuse
 
 
 def register(subparsers) -> None:
@@ -19,21 +19,21 @@ def register(subparsers) -> None:
         'lose nothing, even with --as-fast-as-possible) or keep last --depth.',
     )
     parser.add_argument('bag', metavar='BAG', type=Path, help='bag folder (or its .mcap file)')
-    parser.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1; 0 = as fast as possible)')
+    parser.add_argument('--rate', type=NON_NEGATIVE, default=1.0, help='speed factor (default 1; 0 = as fast as possible)')
     parser.add_argument('--as-fast-as-possible', action='store_true', help='same as --rate 0')
     add_domain_argument(parser)
     parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='replay only these topics')
     parser.add_argument('--no-clock', action='store_true', help='do not publish /clock')
-    parser.add_argument('--depth', type=int, default=None, help='keep-last history of this depth instead of keep-all (may drop messages for slow readers)')
-    parser.add_argument('--delay', type=float, default=0.0, metavar='S', help='wait S seconds before the first message (discovery)')
+    parser.add_argument('--depth', type=POSITIVE_INT, default=None, help='keep-last history of this depth instead of keep-all (may drop messages for slow readers)')
+    parser.add_argument('--delay', type=NON_NEGATIVE, default=0.0, metavar='S', help='wait S seconds before the first message (discovery)')
     parser.add_argument(
         '--wait-for-subscribers',
-        type=int,
+        type=NON_NEGATIVE_INT,
         default=0,
         metavar='K',
         help='wait until every replayed topic has K matched subscribers before starting (timeout --wait-timeout)',
     )
-    parser.add_argument('--wait-timeout', type=float, default=30.0, metavar='S', help='give up waiting for subscribers after S seconds (default 30)')
+    parser.add_argument('--wait-timeout', type=POSITIVE, default=30.0, metavar='S', help='give up waiting for subscribers after S seconds (default 30)')
     parser.add_argument('--quiet', action='store_true', help='no progress')
     parser.set_defaults(func=run)
 
@@ -43,8 +43,6 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.replay import ReplayError, main_replay
 
     rate = 0.0 if args.as_fast_as_possible else args.rate
-    if not check_domain('replay', args.domain_id):
-        return 2
     progress = Progress(f'replaying {args.bag}', enabled=not args.quiet)
     try:
         result = main_replay(
@@ -60,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
         )
     except ReplayError as error:
-        print(f'formation replay: error: {error}', file=sys.stderr)
-        return 2
+        return refuse('replay', error)
     progress.close()
     for topic, why in result.skipped_topics.items():
         print(f'warning: {topic} not replayed: {why}', file=sys.stderr)

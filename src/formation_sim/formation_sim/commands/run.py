@@ -6,7 +6,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import add_run_arguments, default_out_dir, load_valid_scenario
+from formation_sim.commands.common import (
+    DOMAIN_ID,
+    EXIT_BAD_INPUT,
+    NON_NEGATIVE,
+    POSITIVE,
+    POSITIVE_INT,
+    add_run_arguments,
+    load_valid_scenario,
+    refuse,
+)
 
 
 def register(subparsers) -> None:
@@ -17,22 +26,27 @@ def register(subparsers) -> None:
         'sensing services, every agent is its own node talking only to its neighbours, and time '
         'advances in lock-step from event to event. Writes summary.json (same schema as '
         '`formation simulate`) and the rosbag2 bag (MCAP) into --out.',
-        epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started); 3 a process or '
-        'an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
+        epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started, nothing on disk '
+        'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
         'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')
-    parser.add_argument('--agents-per-process', type=int, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
-    parser.add_argument('--domain-id', type=int, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
+    parser.add_argument('--agents-per-process', type=POSITIVE_INT, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
+    parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
-    parser.add_argument('--sample-dt', type=float, default=0.01, help='spacing of the published state samples [s] (default 0.01)')
+    parser.add_argument(
+        '--sample-dt',
+        type=NON_NEGATIVE,
+        default=0.01,
+        help='spacing of the published state samples [s] (default 0.01; 0: samples at events only)',
+    )
     parser.add_argument(
         '--real-time',
         action='store_true',
         help='wall-clock mode, as on robots: agents keep their own timers; triggers come late by the '
         'processing delays, which the summary reports (default: lock-step sim time, exact)',
     )
-    parser.add_argument('--timeout', type=float, default=None, help='give up after this many wall-clock seconds')
+    parser.add_argument('--timeout', type=POSITIVE, default=None, help='give up after this many wall-clock seconds')
     parser.add_argument(
         '--executor',
         choices=('events', 'single'),
@@ -56,12 +70,12 @@ def run(args: argparse.Namespace) -> int:
 
     scenario = load_valid_scenario(args.scenario, 'run')
     if scenario is None:
-        return 2
-    out = args.out or default_out_dir(scenario.name, 'run')
+        return EXIT_BAD_INPUT
     try:
         result = FormationRun(
             scenario,
-            out_dir=out,
+            out_dir=args.out,
+            force=args.force,
             horizon=args.horizon,
             domain_id=args.domain_id,
             agents_per_process=args.agents_per_process,
@@ -74,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
             executor=args.executor,
         ).run()
     except RunError as error:
-        print(f'formation run: error: {error}', file=sys.stderr)
-        return 2
+        return refuse('run', error)
+    out = result.out_dir
     figure = None
     if result.ok and not args.no_plot:
         from formation_sim.analysis.plots import plot_run
@@ -85,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet:
         print(out)
     else:
+        print(f'folder:  {out}')
         print(f'summary: {result.summary}')
         print(f'bag:     {result.bag}')
         if figure is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from formation_sim.commands.common import add_domain_argument, check_domain, inspection_node
+from formation_sim.commands.common import NON_NEGATIVE, add_domain_argument, inspection_node
 
 
 def register(subparsers) -> None:
@@ -17,14 +17,12 @@ def register(subparsers) -> None:
         'subscribers, and (--verbose) the nodes behind them.',
     )
     add_domain_argument(parser)
-    parser.add_argument('--wait', type=float, default=3.0, metavar='S', help='discovery time at most S seconds (default 3; stops earlier once the graph is stable)')
+    parser.add_argument('--wait', type=NON_NEGATIVE, default=3.0, metavar='S', help='discovery time at most S seconds (default 3; stops earlier once the graph is stable)')
     parser.add_argument('--verbose', '-v', action='store_true', help='also list the node of every publisher and subscriber')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not check_domain('topics', args.domain_id):
-        return 2
     from formation_sim.runtime.graph import discover_topics, format_topics
 
     try:

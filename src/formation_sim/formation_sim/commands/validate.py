@@ -9,13 +9,13 @@ import argparse
 import json
 import sys
 
-from formation_sim.commands.common import add_scenario_argument
+from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, add_scenario_argument
 from formation_sim.model.scenario import ScenarioError, load_scenario
 from formation_sim.model.validate import validate_scenario
 
-EXIT_VALID = 0
-EXIT_INVALID = 1
-EXIT_UNREADABLE = 2
+EXIT_VALID = EXIT_OK
+EXIT_INVALID = EXIT_FAILED
+EXIT_UNREADABLE = EXIT_BAD_INPUT
 
 
 def register(subparsers) -> None:

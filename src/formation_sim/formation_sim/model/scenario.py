@@ -17,11 +17,13 @@ import math
 import numbers
 from pathlib import Path
 import re
+import reprlib
 from typing import Any, Mapping
 
 import numpy as np
 import yaml
 
+from formation_msgs_py.types import MAX_AGENT_ID
 from formation_sim.model.gains import paper_k3, riccati_solution
 
 DYNAMICS = ('single', 'double')
@@ -32,10 +34,42 @@ _TOP_KEYS = ('name',) + _TOP_REQUIRED
 _SINGLE_GAINS = ('alpha', 'beta')
 _DOUBLE_GAINS = ('alpha_d', 'beta_d', 'beta1', 'k3')
 _DOUBLE_OPTIONAL = ('k1', 'k2', 'k0')
+NAME_LIMIT = 200  # characters of a scenario name (a label in reports, summaries and folder names)
+
+# What a scenario file may hold. A team of 9 000 agents with 3 edges each (2-D) is ~300 000 YAML
+# nodes and ~2.5 MB; the pure-Python parser takes ~25 µs a node, so these bound loading to
+# seconds. Aliases count with everything they repeat: an "alias bomb" of a few hundred bytes
+# expands to billions of nodes and is refused while it is read. Larger teams: build them in
+# Python (scenario_from_dict, formation_sim.generate).
+MAX_FILE_BYTES = 4 * 1024 * 1024
+MAX_YAML_NODES = 300_000
 
 
 class ScenarioError(ValueError):
     """A scenario that cannot be read or is structurally unsound; the message names key and value."""
+
+
+class _ShortRepr(reprlib.Repr):
+    """repr() cut to a readable length: long strings, huge integers and deep or long containers end in '...'."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxlevel, self.maxlist, self.maxtuple, self.maxdict, self.maxset = 3, 8, 8, 6, 6
+        self.maxstring, self.maxother = 80, 80
+
+    def repr_int(self, x: int, level: int) -> str:
+        if abs(x) < 10**30:
+            return repr(x)
+        digits = len(str(abs(x))) if x.bit_length() < 10_000 else f'about {int(x.bit_length() * math.log10(2))}'
+        return f'{str(x)[:12] if x.bit_length() < 10_000 else "-" * (x < 0)}... (an integer of {digits} digits)'
+
+
+_SHORT_REPR = _ShortRepr()
+
+
+def short_repr(value: Any) -> str:  # noqa: ANN401
+    """repr(value), cut to a sensible length: what error messages quote of a user's value."""
+    return _SHORT_REPR.repr(value)
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:
@@ -45,11 +79,29 @@ def _readonly(array: np.ndarray) -> np.ndarray:
 
 def _finite_float(value: Any, where: str) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ScenarioError(f'{where}: expected a number, got {value!r}')
-    result = float(value)
+        raise ScenarioError(f'{where}: expected a number, got {short_repr(value)}')
+    try:
+        result = float(value)
+    except OverflowError:
+        raise ScenarioError(
+            f'{where}: {short_repr(value)} is too large for a double (|x| <= {_DOUBLE_MAX!r})'
+        ) from None
     if not math.isfinite(result):
-        raise ScenarioError(f'{where}: must be finite, got {value!r}')
+        raise ScenarioError(f'{where}: must be finite, got {short_repr(value)}')
     return result
+
+
+_DOUBLE_MAX = float(np.finfo(float).max)
+
+
+def _float_array(value: Any, where: str) -> np.ndarray:
+    """np.array(value, dtype=float), refusing what cannot become one (too large, not numbers)."""
+    try:
+        return np.array(value, dtype=float)
+    except OverflowError:
+        raise ScenarioError(f'{where}: a value is too large for a double (|x| <= {_DOUBLE_MAX!r})') from None
+    except (TypeError, ValueError) as error:
+        raise ScenarioError(f'{where}: expected numbers, got {short_repr(value)} ({error})') from None
 
 
 def _vector(value: Any, where: str, *, size: int | None = None) -> np.ndarray:
@@ -71,24 +123,36 @@ def _vector(value: Any, where: str, *, size: int | None = None) -> np.ndarray:
     else:
         items = None
     if items is None or not items:
-        raise ScenarioError(f'{where}: expected a non-empty list of numbers, got {value!r}')
+        raise ScenarioError(f'{where}: expected a non-empty list of numbers, got {short_repr(value)}')
     numbers_ = [_finite_float(item, f'{where}[{k}]') for k, item in enumerate(items)]
     if size is not None and len(numbers_) != size:
         raise ScenarioError(
             f'{where}: has {len(numbers_)} components, expected {size} (the dimension p of the '
-            f'scenario): {value!r}'
+            f'scenario): {short_repr(value)}'
         )
     return np.array(numbers_, dtype=float)
 
 
 def _agent_id(value: Any, where: str) -> int:
-    if type(value) is int and value >= 0:
+    if type(value) is int and 0 <= value <= MAX_AGENT_ID:
         return value
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise ScenarioError(f'{where}: agent ids are non-negative integers, got {value!r}')
-    if value < 0:
-        raise ScenarioError(f'{where}: agent ids are non-negative integers, got {value!r}')
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or not 0 <= value <= MAX_AGENT_ID:
+        raise ScenarioError(
+            f'{where}: agent ids are integers in [0, {MAX_AGENT_ID}] (they name topics and travel in '
+            f'messages and ROS parameters), got {short_repr(value)}'
+        )
     return int(value)
+
+
+def _name(value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise ScenarioError(f'name: expected a non-empty string, got {short_repr(value)}')
+    if len(value) > NAME_LIMIT or not value.isprintable():
+        raise ScenarioError(
+            f'name: at most {NAME_LIMIT} printable characters (no line breaks or control characters), '
+            f'got {short_repr(value)} ({len(value)} characters)'
+        )
+    return value
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -150,9 +214,9 @@ class DoubleGains:
     def __post_init__(self) -> None:
         for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2'):
             object.__setattr__(self, key, _finite_float(getattr(self, key), f'gains.{key}'))
-        matrix = np.array(self.P, dtype=float)
+        matrix = _float_array(self.P, 'gains.P')
         if matrix.shape != (2, 2) or not np.all(np.isfinite(matrix)):
-            raise ScenarioError(f'gains.P: expected a finite 2x2 matrix, got {self.P!r}')
+            raise ScenarioError(f'gains.P: expected a finite 2x2 matrix, got {short_repr(self.P)}')
         if matrix[0, 1] != matrix[1, 0]:
             raise ScenarioError(f'gains.P: must be symmetric, got {matrix.tolist()}')
         if matrix[0, 1] != self.k1 or matrix[1, 1] != self.k2:
@@ -169,12 +233,12 @@ class DoubleGains:
         """P, k1, k2 solving (riccatti) with equality for this β1; k3='paper' is 2/(k2+sqrt(k1²+k2²))."""
         beta1 = _finite_float(beta1, 'gains.beta1')
         if not beta1 > 0.0:
-            raise ScenarioError(f'gains.beta1: must be > 0 to determine P from (riccatti), got {beta1!r}')
+            raise ScenarioError(f'gains.beta1: must be > 0 to determine P from (riccatti), got {short_repr(beta1)}')
         matrix = riccati_solution(beta1)
         k1, k2 = float(matrix[0, 1]), float(matrix[1, 1])
         if isinstance(k3, str):
             if k3 != 'paper':
-                raise ScenarioError(f"gains.k3: expected a number or 'paper', got {k3!r}")
+                raise ScenarioError(f"gains.k3: expected a number or 'paper', got {short_repr(k3)}")
             k3 = paper_k3(k1, k2)
         return cls(alpha_d=alpha_d, beta_d=beta_d, beta1=beta1, k3=k3, k1=k1, k2=k2, P=matrix)
 
@@ -208,16 +272,15 @@ class Scenario:
     horizon: float
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise ScenarioError(f'name: expected a non-empty string, got {self.name!r}')
+        _name(self.name)
         if self.dynamics not in DYNAMICS:
-            raise ScenarioError(f"dynamics: must be 'single' or 'double', got {self.dynamics!r}")
+            raise ScenarioError(f"dynamics: must be 'single' or 'double', got {short_repr(self.dynamics)}")
         delta = _finite_float(self.delta, 'communication_radius')
         if not delta > 0.0:
-            raise ScenarioError(f'communication_radius: Δ must be > 0, got {delta!r}')
+            raise ScenarioError(f'communication_radius: Δ must be > 0, got {short_repr(delta)}')
         horizon = _finite_float(self.horizon, 'horizon')
         if not horizon > 0.0:
-            raise ScenarioError(f'horizon: must be > 0, got {horizon!r}')
+            raise ScenarioError(f'horizon: must be > 0, got {short_repr(horizon)}')
         object.__setattr__(self, 'delta', delta)
         object.__setattr__(self, 'horizon', horizon)
 
@@ -229,7 +292,7 @@ class Scenario:
         object.__setattr__(self, 'agent_ids', ids)
         index = {agent: k for k, agent in enumerate(ids)}
 
-        positions = np.array(self.positions, dtype=float)
+        positions = _float_array(self.positions, 'positions')
         if positions.ndim != 2 or positions.shape[0] != len(ids) or positions.shape[1] < 1:
             raise ScenarioError(
                 f'positions: expected shape ({len(ids)}, p) for agents {list(ids)}, got {positions.shape}'
@@ -239,7 +302,7 @@ class Scenario:
         if self.dynamics == 'double':
             if self.velocities is None:
                 raise ScenarioError("velocities: required for dynamics 'double'")
-            velocities = np.array(self.velocities, dtype=float)
+            velocities = _float_array(self.velocities, 'velocities')
             if velocities.shape != positions.shape:
                 raise ScenarioError(
                     f'velocities: expected shape {positions.shape} like the positions, '
@@ -253,7 +316,7 @@ class Scenario:
         expected = SingleGains if self.dynamics == 'single' else DoubleGains
         if not isinstance(self.gains, expected):
             raise ScenarioError(
-                f'gains: dynamics {self.dynamics!r} needs {expected.__name__}, '
+                f'gains: dynamics {short_repr(self.dynamics)} needs {expected.__name__}, '
                 f'got {type(self.gains).__name__}'
             )
 
@@ -262,7 +325,7 @@ class Scenario:
         first_seen: dict[tuple[int, int], int] = {}
         for k, edge in enumerate(edges):
             if not isinstance(edge, Edge):
-                raise ScenarioError(f'edges[{k}]: expected an Edge, got {edge!r}')
+                raise ScenarioError(f'edges[{k}]: expected an Edge, got {short_repr(edge)}')
             i, j = edge.i, edge.j
             if i not in index or j not in index:
                 role, agent = ('i', i) if i not in index else ('j', j)
@@ -337,7 +400,7 @@ class Scenario:
             return self._index[agent_id]
         except KeyError:
             raise ScenarioError(
-                f'unknown agent {agent_id!r} (agents: {_id_list(self.agent_ids)})'
+                f'unknown agent {short_repr(agent_id)} (agents: {_id_list(self.agent_ids)})'
             ) from None
 
     def neighbours(self, agent_id: int) -> dict[int, np.ndarray]:
@@ -375,7 +438,7 @@ def _id_list(ids: tuple[int, ...]) -> str:
 
 def _mapping(value: Any, where: str) -> Mapping:
     if not isinstance(value, Mapping):
-        raise ScenarioError(f'{where}: expected a mapping, got {value!r}')
+        raise ScenarioError(f'{where}: expected a mapping, got {short_repr(value)}')
     return value
 
 
@@ -384,17 +447,17 @@ def _check_keys(data: Mapping, where: str, *, required: tuple, optional: tuple =
     unknown = [key for key in data if key not in allowed]
     if unknown:
         raise ScenarioError(
-            f'{where}: unknown key {unknown[0]!r} (allowed: {", ".join(allowed)})'
+            f'{where}: unknown key {short_repr(unknown[0])} (allowed: {", ".join(allowed)})'
         )
     missing = [key for key in required if key not in data]
     if missing:
-        raise ScenarioError(f'{where}: missing key {missing[0]!r} (required: {", ".join(required)})')
+        raise ScenarioError(f'{where}: missing key {short_repr(missing[0])} (required: {", ".join(required)})')
 
 
 def _positive(value: Any, where: str, what: str) -> float:
     number = _finite_float(value, where)
     if not number > 0.0:
-        raise ScenarioError(f'{where}: {what} must be > 0, got {value!r}')
+        raise ScenarioError(f'{where}: {what} must be > 0, got {short_repr(value)}')
     return number
 
 
@@ -402,13 +465,11 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     """Build a scenario from the YAML schema (docs/SCENARIOS.md); `name` is used if data has none."""
     data = _mapping(data, 'scenario')
     _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name',))
-    scenario_name = data.get('name', name if name is not None else 'scenario')
-    if not isinstance(scenario_name, str) or not scenario_name:
-        raise ScenarioError(f'name: expected a non-empty string, got {scenario_name!r}')
+    scenario_name = _name(data.get('name', name if name is not None else 'scenario'))
 
     dynamics = data['dynamics']
     if dynamics not in DYNAMICS:
-        raise ScenarioError(f"dynamics: must be 'single' or 'double', got {dynamics!r}")
+        raise ScenarioError(f"dynamics: must be 'single' or 'double', got {short_repr(dynamics)}")
     delta = _positive(data['communication_radius'], 'communication_radius', 'Δ')
     horizon = _positive(data['horizon'], 'horizon', 'the horizon')
 
@@ -421,16 +482,17 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     first_agent: int | None = None
     for raw_id, entry in agents.items():
         # JSON has only string keys: accept "12" for agent 12, so summary.json copies load too.
-        key = int(raw_id) if isinstance(raw_id, str) and raw_id.isascii() and raw_id.isdigit() else raw_id
-        agent = _agent_id(key, f'agents.{raw_id}')
+        json_id = isinstance(raw_id, str) and raw_id.isascii() and raw_id.isdigit() and len(raw_id) <= 20
+        label = raw_id if isinstance(raw_id, str) and len(raw_id) <= 40 else short_repr(raw_id)
+        agent = _agent_id(int(raw_id) if json_id else raw_id, f'agents.{label}')
         if agent in entries:
-            raise ScenarioError(f'agents.{raw_id}: agent {agent} is listed twice')
+            raise ScenarioError(f'agents.{label}: agent {agent} is listed twice')
         where = f'agents.{agent}'
         entry = _mapping(entry, where)
         if dynamics == 'single' and 'velocity' in entry:
             raise ScenarioError(
                 f"{where}.velocity: given, but dynamics is 'single' (single integrators have no "
-                f'velocity state): {entry["velocity"]!r}'
+                f'velocity state): {short_repr(entry["velocity"])}'
             )
         if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
             raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
@@ -452,7 +514,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
 
     raw_edges = data['edges']
     if not isinstance(raw_edges, list):
-        raise ScenarioError(f'edges: expected a list of {{i, j, d}}, got {raw_edges!r}')
+        raise ScenarioError(f'edges: expected a list of {{i, j, d}}, got {short_repr(raw_edges)}')
     edges = []
     for k, raw in enumerate(raw_edges):
         where = f'edges[{k}]'
@@ -489,14 +551,14 @@ def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
         unknown = [key for key in raw if key not in _SINGLE_GAINS]
         if unknown:
             raise ScenarioError(
-                f"gains: unknown key {unknown[0]!r} for dynamics 'single' (allowed: alpha, beta)"
+                f"gains: unknown key {short_repr(unknown[0])} for dynamics 'single' (allowed: alpha, beta)"
             )
         _check_keys(raw, 'gains', required=_SINGLE_GAINS)
         return SingleGains(alpha=raw['alpha'], beta=raw['beta'])
     unknown = [key for key in raw if key not in _DOUBLE_GAINS + _DOUBLE_OPTIONAL]
     if unknown:
         raise ScenarioError(
-            f"gains: unknown key {unknown[0]!r} for dynamics 'double' "
+            f"gains: unknown key {short_repr(unknown[0])} for dynamics 'double' "
             f'(allowed: {", ".join(_DOUBLE_GAINS + _DOUBLE_OPTIONAL)})'
         )
     _check_keys(raw, 'gains', required=_DOUBLE_GAINS, optional=_DOUBLE_OPTIONAL)
@@ -507,15 +569,15 @@ def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
     if not isinstance(k3, str):
         k3 = _finite_float(k3, 'gains.k3')
     elif k3 != 'paper':
-        raise ScenarioError(f"gains.k3: expected a number or 'paper', got {k3!r}")
+        raise ScenarioError(f"gains.k3: expected a number or 'paper', got {short_repr(k3)}")
     if 'k1' not in raw and 'k2' not in raw:
         if 'k0' in raw:
-            raise ScenarioError(f'gains.k0: given ({raw["k0"]!r}) without k1 and k2')
+            raise ScenarioError(f'gains.k0: given ({short_repr(raw["k0"])}) without k1 and k2')
         return DoubleGains.from_riccati(k3=k3, **values)
     if 'k1' not in raw or 'k2' not in raw:
         given = 'k1' if 'k1' in raw else 'k2'
         raise ScenarioError(
-            f'gains.{given}: given ({raw[given]!r}) without its partner; give both k1 and k2 or '
+            f'gains.{given}: given ({short_repr(raw[given])}) without its partner; give both k1 and k2 or '
             f'neither (then P, k1, k2 come from (riccatti))'
         )
     k1 = _finite_float(raw['k1'], 'gains.k1')
@@ -563,24 +625,74 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
 # --------------------------------------------------------------------------- YAML
 
 
+class _TooManyNodes(yaml.YAMLError):
+    """The document holds more than MAX_YAML_NODES nodes, aliases expanded."""
+
+    def __init__(self, mark, alias: str | None) -> None:
+        super().__init__()
+        self.mark = mark
+        self.alias = alias  # the alias being expanded when the count ran over, if any
+
+
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that rejects duplicate keys and reads 1e-3 (YAML 1.2 style) as a float."""
+    """SafeLoader that rejects duplicate keys, reads 1e-3 (YAML 1.2 style) as a float and counts nodes.
+
+    Composing counts every node, an alias as all the nodes it repeats, and stops at
+    MAX_YAML_NODES: an alias bomb is refused before anything walks its expansion.
+    """
+
+    def __init__(self, stream) -> None:
+        super().__init__(stream)
+        self._nodes = 0
+        self._anchor_sizes: dict[str, int] = {}  # anchor -> nodes in the subtree it names
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            self._count(self._anchor_sizes.get(event.anchor, 1), event, alias=event.anchor)
+            return super().compose_node(parent, index)
+        before = self._nodes
+        self._count(1, event, alias=None)
+        node = super().compose_node(parent, index)
+        if event.anchor is not None:
+            self._anchor_sizes[event.anchor] = self._nodes - before
+        return node
+
+    def _count(self, nodes: int, event, *, alias: str | None) -> None:
+        self._nodes += nodes
+        if self._nodes > MAX_YAML_NODES:
+            raise _TooManyNodes(event.start_mark, alias)
 
     def construct_mapping(self, node, deep=False):
-        seen: dict[Any, Any] = {}
+        seen: set[Any] = set()
         for key_node, _ in node.value:
+            if key_node.tag == 'tag:yaml.org,2002:merge':
+                continue  # `<<: *base` merges keys the mapping itself may override (YAML merge keys)
             key = self.construct_object(key_node, deep=deep)
-            if key in seen:
+            try:
+                duplicate = key in seen
+            except TypeError:  # unhashable: the base class names it
+                break
+            if duplicate:
                 raise yaml.constructor.ConstructorError(
                     'while constructing a mapping',
                     node.start_mark,
-                    f'found duplicate key {key!r}',
+                    f'found duplicate key {short_repr(key)}',
                     key_node.start_mark,
                 )
-            seen[key] = True
+            seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
+    def construct_yaml_int(self, node):
+        try:
+            return super().construct_yaml_int(node)
+        except ValueError:  # beyond Python's 4300 digits for int(str): far beyond any double too
+            raise yaml.constructor.ConstructorError(
+                None, None, f'an integer of {len(node.value)} characters is too large for a double', node.start_mark
+            ) from None
 
+
+_Loader.add_constructor('tag:yaml.org,2002:int', _Loader.construct_yaml_int)
 _Loader.add_implicit_resolver(
     'tag:yaml.org,2002:float',
     re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$'),
@@ -591,6 +703,21 @@ _Loader.add_implicit_resolver(
 def _parse_yaml(text: str, source: str) -> Any:
     try:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
+    except _TooManyNodes as error:
+        where = f'line {error.mark.line + 1}, column {error.mark.column + 1}'
+        cause = (
+            f'with its aliases expanded (at {where}, *{short_repr(error.alias)[1:-1]} repeats what it names; '
+            f'an alias bomb?)'
+            if error.alias is not None
+            else f'(at {where})'
+        )
+        raise ScenarioError(
+            f'{source}: the YAML document holds more than {MAX_YAML_NODES} nodes {cause}; a scenario file '
+            f'holds at most {MAX_YAML_NODES} (about 9 000 agents): refused. Build larger teams in Python '
+            f'(scenario_from_dict, formation_sim.generate)'
+        ) from None
+    except RecursionError:
+        raise ScenarioError(f'{source}: malformed YAML: nested too deeply (a scenario nests 4 levels)') from None
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'unknown position'
@@ -612,23 +739,48 @@ def builtin_scenarios() -> tuple[str, ...]:
     )
 
 
+def _read_text(path: Path) -> str:
+    """The UTF-8 text of a scenario file (a leading BOM dropped), refused above MAX_FILE_BYTES."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ScenarioError(
+                f'{path}: {size / 1e6:.1f} MB; a scenario file holds at most {MAX_FILE_BYTES / 1e6:.1f} MB '
+                f'(about 9 000 agents): refused. Build larger teams in Python (scenario_from_dict, '
+                f'formation_sim.generate)'
+            )
+        data = path.read_bytes()[: MAX_FILE_BYTES + 1]  # the file may have grown since stat
+    except OSError as error:
+        raise ScenarioError(f'{path}: cannot read: {error.strerror or error}') from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ScenarioError(f'{path}: more than {MAX_FILE_BYTES / 1e6:.1f} MB; refused')
+    try:
+        return data.decode('utf-8-sig')
+    except UnicodeDecodeError as error:
+        line = data[: error.start].count(b'\n') + 1
+        raise ScenarioError(
+            f'{path}: not UTF-8 text: byte 0x{data[error.start]:02x} at line {line} (offset {error.start}) '
+            f'cannot be decoded; a scenario file is UTF-8 YAML'
+        ) from None
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a YAML file."""
     if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
         resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
         text = resource.read_text(encoding='utf-8')
-        source, default_name = f'built-in scenario {name_or_path!r}', name_or_path
+        source, default_name = f'built-in scenario {short_repr(name_or_path)}', name_or_path
     else:
+        named = bool(str(name_or_path).strip())  # Path('') would be the current folder
         path = Path(name_or_path)
-        if not path.is_file():
+        if named and path.is_dir():
+            raise ScenarioError(f'{short_repr(str(name_or_path))}: is a folder, not a scenario file')
+        if not (named and path.is_file()):
             raise ScenarioError(
-                f'{str(name_or_path)!r}: no such scenario file and not a built-in scenario '
+                f'{short_repr(str(name_or_path))}: no such scenario file and not a built-in scenario '
                 f'({", ".join(builtin_scenarios())})'
             )
-        try:
-            text = path.read_text(encoding='utf-8')
-        except (OSError, UnicodeDecodeError) as error:
-            raise ScenarioError(f'{path}: cannot read: {error}') from None
+        text = _read_text(path)
         source, default_name = str(path), path.stem
     data = _parse_yaml(text, source)
     try:

@@ -20,6 +20,9 @@ k3            0 < k3 < 4/(k2 + sqrt(k1²+k2²)), i.e. k4 < 2 (Theorem 2)        
 beta_d        0 < β_d < (2-k4) ρ2(P) as printed in Theorem 2                            error;
               warning above 0.95 of the bound
 beta_d_corrected  β_d < (2-k4)/λmax(P), what the proof supports (docs/THEOREM2.md)     warning
+parameters    Δ, the horizon, the agents' gains and every d_ij are 0 or normal doubles     error
+              (|x| >= 2.2e-308): agents receive them as ROS parameters, and rcl's parameter
+              file parser reads a subnormal number as text (the agent then cannot start)
 
 Notes (informational findings) carry the graph quantities, the feasibility residual, the slack of
 every edge and the Riccati solution.
@@ -29,10 +32,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+import sys
 from typing import Any
 
 import numpy as np
 
+from formation_agent.core.eta import ALGORITHM_GAINS
 from formation_sim.model import theory
 from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
 from formation_sim.model.scenario import Scenario
@@ -145,6 +150,16 @@ def _g(value: float) -> str:
     return f'{value:.6g}'
 
 
+def _apart(a: float, b: float) -> tuple[str, str]:
+    """a and b to 6 significant digits, or to as many more as it takes to print different numbers
+    differently (a strict inequality broken by 3.0000001 >= 3 must not read "3 is not below 3")."""
+    for digits in range(6, 18):
+        left, right = f'{a:.{digits}g}', f'{b:.{digits}g}'
+        if left != right or a == b:
+            return left, right
+    return repr(a), repr(b)  # pragma: no cover - 17 digits tell any two doubles apart
+
+
 def _edge(edge) -> str:
     return f'edge ({edge.i}, {edge.j})'
 
@@ -229,18 +244,20 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
                  relative_slack=relative)
         )
         if not margin > 0.0:
+            shown_norm, shown_delta = _apart(d_norm, scenario.delta)
             out.error(
                 'edge_length',
                 _edge(edge),
-                f'||d_ij|| = {_g(d_norm)} is not below Δ = {_g(scenario.delta)} (Assumption 1)',
+                f'||d_ij|| = {shown_norm} is not below Δ = {shown_delta} (Assumption 1)',
                 d_norm=d_norm,
                 delta=scenario.delta,
             )
         if not error < margin:
+            shown_error, shown_margin = _apart(error, margin)
             out.error(
                 'initial',
                 _edge(edge),
-                f'||x_i(0)-x_j(0)-d_ij|| = {_g(error)} is not below Δ-||d_ij|| = {_g(margin)} '
+                f'||x_i(0)-x_j(0)-d_ij|| = {shown_error} is not below Δ-||d_ij|| = {shown_margin} '
                 f'(initial)',
                 error=error,
                 margin=margin,
@@ -287,7 +304,26 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
         _check_single(scenario, out, beta0)
     else:
         _check_double(scenario, out, beta0)
+    _check_parameters(scenario, out)
     return report
+
+
+def _check_parameters(scenario: Scenario, out: _Collector) -> None:
+    """Every number the agents receive as a ROS parameter (sim_node.agent_parameters) is 0 or normal."""
+    smallest = sys.float_info.min  # rcl's parser (strtod) flags a subnormal result as out of range
+    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
+    carried = [('scenario', 'communication_radius', scenario.delta), ('scenario', 'horizon', scenario.horizon)]
+    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in ALGORITHM_GAINS[algorithm]]
+    carried += [(_edge(edge), f'd[{k}]', float(value)) for edge in scenario.edges for k, value in enumerate(edge.d)]
+    for subject, key, value in carried:
+        if value != 0.0 and abs(value) < smallest:
+            out.error(
+                'parameters', subject,
+                f'{key} = {value!r} is a subnormal double (0 < |x| < {smallest!r}): agents receive it as a ROS '
+                f"parameter, and rcl's parameter file parser reads it as text, so the agent cannot start; use 0 "
+                f'or a magnitude of at least {smallest!r}',
+                key=key, value=value,
+            )
 
 
 def _check_remark(scenario: Scenario, out: _Collector, name: str, value: float) -> None:
@@ -310,8 +346,9 @@ def _check_single(scenario: Scenario, out: _Collector, beta0: float | None) -> N
     if beta0 is None:
         return
     if not 0.0 < beta < beta0:
+        shown_beta, shown_beta0 = _apart(beta, beta0)
         out.error(
-            'beta', 'gains', f'0 < β < β0 = {_g(beta0)} required, got β = {_g(beta)}',
+            'beta', 'gains', f'0 < β < β0 = {shown_beta0} required, got β = {shown_beta}',
             beta=beta, beta0=beta0,
         )
     elif beta > NEAR_EDGE_FRACTION * beta0:
@@ -333,7 +370,8 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
                   alpha_d=gains.alpha_d)
     if beta0 is not None:
         if not 0.0 < beta1 <= beta0:
-            out.error('beta1', 'gains', f'0 < β1 <= β0 = {_g(beta0)} required, got β1 = {_g(beta1)}',
+            shown_beta1, shown_beta0 = _apart(beta1, beta0)
+            out.error('beta1', 'gains', f'0 < β1 <= β0 = {shown_beta0} required, got β1 = {shown_beta1}',
                       beta1=beta1, beta0=beta0)
         if beta1 > 0.0:
             _check_remark(scenario, out, 'β1', beta1)
@@ -364,9 +402,10 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
     upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
     k4 = k4_value(k1, k2, k3)
     if not 0.0 < k3 < upper:
+        shown_k3, shown_upper = _apart(k3, upper)
         out.error(
             'k3', 'gains',
-            f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {_g(upper)} required (k4 < 2), got k3 = {_g(k3)}, '
+            f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {shown_upper} required (k4 < 2), got k3 = {shown_k3}, '
             f'k4 = {_g(k4)}',
             k3=k3, k3_upper_bound=upper, k4=k4,
         )
@@ -386,9 +425,10 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         k4=k4, beta_d_bound_paper=bound_paper, beta_d_bound_corrected=bound_corrected,
     )
     if not 0.0 < beta_d < bound_paper:
+        shown_beta_d, shown_bound = _apart(beta_d, bound_paper)
         out.error(
             'beta_d', 'gains',
-            f'0 < β_d < (2-k4) ρ2(P) = {_g(bound_paper)} required, got β_d = {_g(beta_d)}',
+            f'0 < β_d < (2-k4) ρ2(P) = {shown_bound} required, got β_d = {shown_beta_d}',
             beta_d=beta_d, bound=bound_paper,
         )
         return
@@ -400,9 +440,10 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             beta_d=beta_d, bound=bound_paper,
         )
     if not beta_d < bound_corrected:
+        shown_beta_d, shown_bound = _apart(beta_d, bound_corrected)
         out.warning(
             'beta_d_corrected', 'gains',
-            f'β_d = {_g(beta_d)} is not below (2-k4)/λmax(P) = {_g(bound_corrected)}, the rate the '
+            f'β_d = {shown_beta_d} is not below (2-k4)/λmax(P) = {shown_bound}, the rate the '
             f'proof of Theorem 2 (ii) supports; the printed bound (2-k4) ρ2(P) = {_g(bound_paper)} '
             f'does not follow from it (docs/THEOREM2.md), so convergence at rate β_d is not '
             f'guaranteed',

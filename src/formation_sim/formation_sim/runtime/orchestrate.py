@@ -47,6 +47,8 @@ import yaml
 
 from formation_sim.model.scenario import Scenario, dump_scenario, load_scenario
 from formation_sim.model.validate import require_valid
+from formation_sim.sim.engine import EngineError, check_sample_dt
+from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
 
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
@@ -71,7 +73,7 @@ LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
 
 
 class RunError(RuntimeError):
-    """The run could not be set up (bad arguments, no free ROS domain, existing output)."""
+    """The run could not be set up (bad arguments, no free ROS domain, an output folder in use)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -265,7 +267,8 @@ class FormationRun:
         self,
         scenario: Scenario | str | Path,
         *,
-        out_dir: str | Path,
+        out_dir: str | Path | None = None,
+        force: bool = False,
         horizon: float | None = None,
         domain_id: int | None = None,
         agents_per_process: int = 1,
@@ -283,9 +286,11 @@ class FormationRun:
         extra_env: dict[str, str] | None = None,
         step_listeners: int = 0,
     ) -> None:
-        """Check everything that can be checked before any process starts.
+        """Check everything that can be checked before any process starts or anything on disk changes.
 
-        `validate`: refuse a scenario that breaks the theorems' hypotheses (ValidationError);
+        `out_dir`: a folder that is new or empty (`formation_sim.sim.run_folder`); None: a new folder
+        under runs/ named after the scenario.  `force`: replace the earlier run in `out_dir` (its
+        files are removed when the run starts).  `validate`: refuse a scenario that breaks the theorems' hypotheses (ValidationError);
         False only for experiments on purpose outside them.  `inject`: fault injection on the
         agents' arriving triggering information, keys `loss` (probability), `delay_ms`,
         `jitter_ms`, `seed` (a test facility; loss needs clock='realtime').  `launch_prefix`:
@@ -300,10 +305,20 @@ class FormationRun:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
             require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
-        self.out_dir = Path(out_dir)
+        self.out_dir = None if out_dir is None else Path(out_dir)
+        self.force = force
         self.horizon = float(self.scenario.horizon if horizon is None else horizon)
-        if not (math.isfinite(self.horizon) and self.horizon > 0.0):
+        if not (math.isfinite(self.horizon) and self.horizon >= sys.float_info.min):
+            # (the smallest normal double: a ROS parameter file cannot carry a subnormal one)
             raise RunError(f'horizon must be a finite number > 0, got {self.horizon!r}')
+        if domain_id is not None and not (isinstance(domain_id, int) and 0 <= domain_id <= DOMAIN_RANGE[1]):
+            raise RunError(f'domain id must lie in [0, {DOMAIN_RANGE[1]}], got {domain_id!r}')
+        try:
+            check_sample_dt(sample_period, horizon=self.horizon, scenario=self.scenario)
+        except EngineError as error:
+            raise RunError(f'sample_period: {error}') from None
+        if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0):
+            raise RunError(f'timeout must be a finite number of seconds > 0, got {timeout!r}')
         if agents_per_process < 1:
             raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
         if self.scenario.dimension > 3:
@@ -332,6 +347,11 @@ class FormationRun:
         if step_listeners < 0:
             raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
         self.step_listeners = step_listeners
+        if self.out_dir is not None:  # last: every other argument is refused before the folder is looked at
+            try:
+                check_out_dir(self.out_dir, force=force)
+            except RunFolderError as error:
+                raise RunError(str(error)) from None
         self.launch_prefix = launch_prefix
         self.extra_env = dict(extra_env or {})
         self.domain_id = domain_id
@@ -445,13 +465,13 @@ class FormationRun:
     # -- running -------------------------------------------------------------------------------
 
     def run(self) -> RunResult:
-        if self.record and (self.out_dir / BAG_DIR).exists():
-            raise RunError(f'{self.out_dir / BAG_DIR} exists; the recorder never overwrites a bag')
-        self.out_dir.mkdir(parents=True, exist_ok=True)
-        (self.out_dir / SUMMARY_FILE).unlink(missing_ok=True)
         started = self._started_at = time.monotonic()
         lost: _Child | None = None
         with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
+            try:  # the domain is ours: only now may the run folder change
+                self.out_dir = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force)
+            except RunFolderError as error:
+                raise RunError(str(error)) from None
             paths = self._write_inputs()
             groups = self._agent_groups()
             env = self._environment(domain_id, len(groups) + 1 + int(self.record))

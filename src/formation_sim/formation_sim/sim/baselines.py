@@ -24,6 +24,7 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.record import RunRecord
 
 METHOD = 'DOP853'  # 8th-order Runge-Kutta: tight tolerances at a moderate number of evaluations
@@ -92,6 +93,10 @@ def simulate_continuous(
         raise BaselineError(f'horizon must be a finite number > 0, got {horizon!r}')
     if not (math.isfinite(sample_dt) and sample_dt > 0.0):
         raise BaselineError(f'sample_dt must be a finite number > 0, got {sample_dt!r}')
+    try:
+        check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
+    except EngineError as error:
+        raise BaselineError(str(error)) from None
     started = time.perf_counter()
     sums = _EdgeSums(scenario)
     n, p = np.asarray(scenario.positions).shape

@@ -31,6 +31,31 @@ class EngineError(RuntimeError):
     """The simulation could not go on (an agent rejected its input, a step did not advance)."""
 
 
+# Numbers the sampling grid of one run may hold (positions, and velocities for double
+# integrators, at every grid point): 400 MB as doubles.  A smaller spacing would exhaust memory
+# (or, in the simulator node, publish for hours) instead of failing at once.
+MAX_GRID_VALUES = 50_000_000
+
+
+def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> None:
+    """Refuse a grid spacing that is negative, not finite, or too fine for the horizon (MAX_GRID_VALUES).
+
+    0 and None mean no grid (samples at events only).
+    """
+    if sample_dt is None or sample_dt == 0.0:
+        return
+    if not (isinstance(sample_dt, (int, float)) and math.isfinite(sample_dt) and sample_dt > 0.0):
+        raise EngineError(f'the sample spacing must be a finite number >= 0 (0: samples at events only), got {sample_dt!r}')
+    per_sample = scenario.n * scenario.dimension * (2 if scenario.dynamics == 'double' else 1)
+    values = horizon / sample_dt * per_sample
+    if values > MAX_GRID_VALUES:
+        raise EngineError(
+            f'the sample spacing {sample_dt!r} s asks for {horizon / sample_dt:.3g} samples of {per_sample} numbers '
+            f'over the horizon {horizon:g} s ({values:.3g} numbers; at most {MAX_GRID_VALUES:.0e}): use a spacing of '
+            f'at least {horizon * per_sample / MAX_GRID_VALUES:.3g} s, or 0 (samples at events only)'
+        )
+
+
 def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Agent | Eta2Agent:
     """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
@@ -199,6 +224,7 @@ def simulate(
         raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
     if period is not None and not (math.isfinite(period) and period > 0.0):
         raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
     started = time.perf_counter()
     planned_period: dict[int, float] = {}
     world = World.from_scenario(scenario)
