@@ -26,7 +26,7 @@ setup(
     zip_safe=True,
     entry_points={
         'console_scripts': [
-            'formation_agent = formation_agent.ros.node:main',
+            'formation_agent = formation_agent.ros.main:main',
         ],
     },
 )
