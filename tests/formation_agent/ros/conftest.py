@@ -49,11 +49,15 @@ def agent_environment(domain_id: int, log_dir: Path) -> dict[str, str]:
 class AgentProcess:
     """`formation_agent` for agent 1 in its own process; stdout/stderr kept in files."""
 
-    def __init__(self, tmp_path: Path, domain_id: int, *, python_prelude: str | None = None, **parameters) -> None:
+    def __init__(
+        self, tmp_path: Path, domain_id: int, *, python_prelude: str | None = None, params_files: tuple[Path, ...] = (), **parameters
+    ) -> None:
         self.params_file = tmp_path / 'agent_1.params.yaml'
         values = {**TEAM, **parameters}
         self.params_file.write_text(yaml.safe_dump({'/agent_1/formation_agent': {'ros__parameters': values}}))
         ros_args = ['--ros-args', '-r', '__ns:=/agent_1', '--params-file', str(self.params_file)]
+        for path in params_files:  # after the team's: the later file wins
+            ros_args += ['--params-file', str(path)]
         if python_prelude is None:
             command = [sys.executable, '-m', 'formation_agent.ros.main', *ros_args]
         else:  # the test changes something inside the process first (a fault), then runs main

@@ -13,12 +13,14 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 pytestmark = pytest.mark.ros
 
 DOMAIN_ID = 81
+CONFIG = Path(__file__).resolve().parents[3] / 'src' / 'formation_agent' / 'config'
 
 
 def _linear(msg):
@@ -118,6 +120,24 @@ def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
     assert rig.wait_for_exit(agent) == 1
     assert '\nformation_agent: injected fault in the core\nTraceback' in agent.stderr, agent.stderr
     _assert_stopped(rig, agent, status=1, failure='injected fault in the core')
+
+
+@pytest.mark.parametrize(
+    ('name', 'robot', 'pose_type', 'allowed'),
+    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5})],
+)  # fmt: skip
+def test_the_example_parameter_files_make_the_documented_robot(bench, agent_process, name, robot, pose_type, allowed):
+    """README's one command per robot: the team's file, then the robot's example file from config/."""
+    rig = bench(robot=robot, pose_type=pose_type)
+    rig.robots[2]['xy'] = (3.0, 0.3)  # far from its place: the agent asks for more than the robot can do
+    agent = agent_process(params_files=(CONFIG / f'{name}.params.yaml',))
+    rig.start()
+    rig.spin_until(lambda: len(rig.commands) >= 5, timeout=15.0, what='five commands')
+    rig.finish()
+    assert rig.wait_for_exit(agent) == 0, agent.stderr
+    (final,) = [report for report in rig.reports if report.final]
+    assert {kind: clipped.allowed for kind, clipped in final.saturation.items()}.items() <= allowed.items()
+    assert final.saturation['linear_speed'].count == final.robot_commands >= 5
 
 
 # -- the command line -------------------------------------------------------------------------------

@@ -268,3 +268,47 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         executor.remove_node(node)
         simulator.destroy_node()
         rclpy.shutdown(context=other)
+
+
+# -- robots ----------------------------------------------------------------------------------------
+
+
+def test_robot_modes_refuse_lock_step(live_node):
+    from formation_agent.ros.node import AgentNodeError
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import Step
+
+    node = live_node(sensing='poses', robot='holonomic')
+    with pytest.raises(AgentNodeError, match=r'agent 1: sensing: poses with robot: holonomic runs on the wall clock '
+                                             r'\(Step 0 flagged realtime\), but step 0 is lock-step'):
+        node._on_step(encode_step(Step(index=0, time=0.0)))
+
+
+@pytest.mark.parametrize('wall_clock', [False, True])
+def test_the_plant_gets_a_zero_command_on_the_wall_clock_only(ros, live_node, wall_clock):
+    """Lock-step: none (the simulated world stops with the run; a command outside a trigger is a
+    protocol violation).  Wall clock: zero, as a robot would need."""
+    from geometry_msgs.msg import Twist
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+
+    node = live_node()
+    received = []
+    node.create_subscription(Twist, '/agent_1/cmd_vel', received.append, PROTOCOL_QOS)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        if wall_clock:
+            node.output.start(time.time())
+        node.output.publish(0.0, (0.5, -0.25), None)
+        node.output.stop()
+        node.output.publish(0.1, (0.5, -0.25), None)  # nothing goes out after the stop
+        deadline = time.monotonic() + 5.0
+        while len(received) < 1 + wall_clock and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for _ in range(10):
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.remove_node(node)
+    assert [(msg.linear.x, msg.linear.y) for msg in received] == [(0.5, -0.25)] + [(0.0, 0.0)] * wall_clock
