@@ -36,8 +36,11 @@ from formation_msgs_py.types import SensedState
 class PlantOutput:
     """robot: none — u_i / u^d_i to the simulator's plant (or any plant that takes them)."""
 
-    robot_commands = 0
-    saturation: dict = {}  # noqa: RUF012 - never clipped, never changed
+    robot_commands = 0  # no robot: nothing sent to one, nothing clipped
+
+    @property
+    def saturation(self) -> dict:
+        return {}
 
     def __init__(self, node, config) -> None:  # noqa: ANN001
         double = config.double
