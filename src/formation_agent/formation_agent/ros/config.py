@@ -23,8 +23,8 @@ from formation_agent.ros.parameters import (
     read_parameters,
 )
 from formation_msgs_py.topics import agent_namespace, robot_command_topic, robot_odom_topic, robot_pose_topic
+from formation_msgs_py.types import MAX_AGENT_ID
 
-_MAX_ID = 2**31 - 1
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
 ROBOTS = ('none', 'holonomic', 'unicycle')
@@ -37,11 +37,11 @@ def _spec(name, kind, description, **options) -> ParameterSpec:
 
 AGENT_PARAMETERS = (
     # The formation (written per agent by `formation run`, from the scenario).
-    _spec('agent_id', INTEGER, "this agent's id i; the node runs in namespace /agent_<i>", low=0, high=_MAX_ID),
+    _spec('agent_id', INTEGER, "this agent's id i; the node runs in namespace /agent_<i>", low=0, high=MAX_AGENT_ID),
     _spec('algorithm', STRING, 'eta1 (single integrators, Theorem 1) or eta2 (double integrators, Theorem 2)',
           choices=('eta1', 'eta2')),
     _spec('dimension', INTEGER, 'dimension p of positions (commands travel as geometry_msgs: 1 to 3)', low=1, high=3),
-    _spec('neighbour_ids', INTEGER_ARRAY, 'ids j of the neighbours in the graph', low=0, high=_MAX_ID),
+    _spec('neighbour_ids', INTEGER_ARRAY, 'ids j of the neighbours in the graph', low=0, high=MAX_AGENT_ID),
     _spec('neighbour_offsets', DOUBLE_ARRAY, 'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]'),
     _spec('delta', DOUBLE, 'communication radius Δ [m]', low=0.0, low_open=True),
     _spec('horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True),
