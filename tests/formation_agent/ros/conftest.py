@@ -5,10 +5,14 @@ and commanding a robot; the bench, one rclpy node in the test process, plays eve
 it: the pose topics of robots 1 and 2 (100 Hz), the coordinator (Step 0 on the wall clock, the
 final Step; it reads Status and reports), agent 2's triggering-information endpoints, and the
 robot's command reader, which records every command with its arrival time.
+
+Each test gets a ROS domain of its own from a small pool (`robot_domain`), held by a lock file
+where `formation run` keeps its own, so tests in parallel (and other people's runs) never meet.
 """
 
 from __future__ import annotations
 
+import fcntl
 import math
 import os
 import signal
@@ -33,7 +37,8 @@ TEAM = {
     'sensing': 'poses',
     'robot': 'holonomic',
 }
-ETA2_GAINS = {'alpha_d': 10.0, 'beta_d': 1.0, 'k1': 1.0, 'k2': 1.0, 'k3': 0.6}
+DOMAIN_POOL = range(81, 90)  # below formation run's own range (100-232); no other test uses them
+DOMAIN_LOCKS = Path('/tmp/formation_domains')  # where formation run locks the domains it uses
 
 
 def agent_environment(domain_id: int, log_dir: Path) -> dict[str, str]:
@@ -202,24 +207,58 @@ class Bench:
 
 
 @pytest.fixture
-def bench(ros):
-    benches = []
-
-    def build(**options) -> Bench:
-        benches.append(Bench(ros, **options))
-        return benches[-1]
-
-    yield build
-    for made in benches:
-        made.close()
+def robot_domain() -> int:
+    """A ROS domain from DOMAIN_POOL, locked for the test (waits while all are in use)."""
+    DOMAIN_LOCKS.mkdir(parents=True, exist_ok=True)
+    deadline = time.monotonic() + 300.0
+    while True:
+        for domain in DOMAIN_POOL:
+            handle = open(DOMAIN_LOCKS / f'{domain}.lock', 'w')  # noqa: SIM115 - held while the test runs
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                handle.close()
+                continue
+            try:
+                yield domain
+            finally:
+                handle.close()
+            return
+        if time.monotonic() > deadline:
+            pytest.fail(f'every ROS domain in {DOMAIN_POOL.start}-{DOMAIN_POOL.stop - 1} stayed in use for 300 s')
+        time.sleep(0.5)
 
 
 @pytest.fixture
-def agent_process(tmp_path, request):
+def bench(robot_domain, tmp_path):
+    """`bench(robot=..., pose_type=...) -> Bench`, on the test's own domain."""
+    import rclpy
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=robot_domain)
+    benches = []
+
+    def build(**options) -> Bench:
+        benches.append(Bench(context, **options))
+        return benches[-1]
+
+    try:
+        yield build
+    finally:
+        for made in benches:
+            made.close()
+        rclpy.shutdown(context=context)
+
+
+@pytest.fixture
+def agent_process(tmp_path, robot_domain):
+    """`agent_process(**parameters) -> AgentProcess`, agent 1 on the test's own domain; killed after the test."""
     agents = []
 
     def start(**parameters) -> AgentProcess:
-        agents.append(AgentProcess(tmp_path, request.module.DOMAIN_ID, **parameters))
+        agents.append(AgentProcess(tmp_path, robot_domain, **parameters))
         return agents[-1]
 
     yield start

@@ -15,9 +15,9 @@ import pytest
 from formation_agent.core.eta import Eta1Agent, Eta2Agent
 from formation_msgs_py.types import SensedState
 
-pytestmark = pytest.mark.ros
+# Each test on a ROS domain of its own (conftest.py, robot_domain).
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-DOMAIN_ID = 82
 DISTANCE = 0.1  # control point ahead of the axle [m]
 
 

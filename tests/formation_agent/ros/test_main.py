@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.ros
+# Each test on a ROS domain of its own (conftest.py, robot_domain).
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-DOMAIN_ID = 81
 CONFIG = Path(__file__).resolve().parents[3] / 'src' / 'formation_agent' / 'config'
 
 
@@ -155,8 +155,8 @@ def test_help_prints_the_parameter_table():
     assert row[1:4] == ['double', '0.5', '>'] and row[4] == '0'
 
 
-def test_missing_parameters_are_named_at_once_without_a_traceback(tmp_path):
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(DOMAIN_ID), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
+def test_missing_parameters_are_named_at_once_without_a_traceback(tmp_path, robot_domain):
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(robot_domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
     done = subprocess.run(
         [sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '-r', '__ns:=/agent_1', '-p', 'agent_id:=1',
          '-p', 'algorithm:=eta1', '-p', 'robot:=unicycle'],
