@@ -488,3 +488,7 @@ class FormationAgentNode(Node):
         """Let reliable writers hand over what they still hold before the node goes away."""
         for pub in (self._status_pub, self._report_pub, self.output.publisher, *self._info_pubs.values()):
             pub.wait_for_all_acked(Duration(seconds=timeout_sec))
+
+
+if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so instead of doing nothing
+    raise SystemExit('formation_agent.ros.node holds the node; the command is `python -m formation_agent.ros.main` (formation_agent)')
