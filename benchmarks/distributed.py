@@ -17,7 +17,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-ROLES = (('formation_sim.runtime.sim_node', 'simulator'), ('formation_agent.ros.node', 'agents'), ('formation_sim.runtime.recorder', 'recorder'))
+ROLES = (('formation_sim.runtime.sim_node', 'simulator'), ('formation_agent.ros.main', 'agents'), ('formation_sim.runtime.recorder', 'recorder'))
 
 
 def _children() -> dict[int, str]:

@@ -1,5 +1,7 @@
 """Packaging for formation_agent: a pip-installable and ament_python package."""
 
+from glob import glob
+
 from setuptools import find_namespace_packages, setup
 
 package_name = 'formation_agent'
@@ -18,6 +20,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
         (f'share/{package_name}', ['package.xml']),
+        # Example parameter files for robots (README, "Running on robots").
+        (f'share/{package_name}/config', sorted(glob('config/*.params.yaml'))),
     ],
     # formation_msgs_py and the ROS packages come from the workspace (package.xml), not from PyPI.
     install_requires=['setuptools', 'numpy', 'scipy'],
@@ -26,7 +30,7 @@ setup(
     zip_safe=True,
     entry_points={
         'console_scripts': [
-            'formation_agent = formation_agent.ros.node:main',
+            'formation_agent = formation_agent.ros.main:main',
         ],
     },
 )

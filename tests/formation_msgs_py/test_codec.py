@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 
@@ -9,10 +10,13 @@ import numpy as np
 import pytest
 
 from formation_msgs_py.codec import (
+    AGENT_REPORT_VERSION,
     LAYOUT_VERSION,
     MessageError,
     decode_agent_report,
     decode_command,
+    decode_odometry,
+    decode_pose_stamped,
     decode_sensed_state,
     decode_status,
     decode_step,
@@ -20,6 +24,7 @@ from formation_msgs_py.codec import (
     decode_world_state,
     encode_acceleration_command,
     encode_agent_report,
+    encode_body_velocity,
     encode_pose_array,
     encode_sensed_state,
     encode_status,
@@ -27,10 +32,21 @@ from formation_msgs_py.codec import (
     encode_trigger_info,
     encode_velocity_command,
     encode_world_state,
+    encode_world_velocity,
     ros_time,
     sensing_refusal,
 )
-from formation_msgs_py.lockstep import LAYOUT_REASONS, REJECT_REASONS, STEP_FLAG_FINAL, AgentReport, Status, Step, WorldState
+from formation_msgs_py.lockstep import (
+    LAYOUT_REASONS,
+    REJECT_REASONS,
+    SATURATION_KINDS,
+    STEP_FLAG_FINAL,
+    AgentReport,
+    Saturation,
+    Status,
+    Step,
+    WorldState,
+)
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 pytestmark = pytest.mark.ros
@@ -292,17 +308,46 @@ def test_agent_report_round_trips_and_omits_zero_counts():
     assert set(LAYOUT_REASONS) < set(REJECT_REASONS)
 
 
+def test_agent_report_carries_saturation_and_failure_exactly():
+    clipped = {
+        'linear_speed': Saturation(count=12, largest_requested=0.41000000000000003, allowed=0.22),
+        'angular_speed': Saturation(count=3, largest_requested=3.0000000000000004, allowed=2.84),
+    }
+    report = AgentReport(
+        agent=2, final=True, rejected={}, robot_commands=1500, saturation=clipped,
+        failure='agent 2: the pose of robot 3 on /agent_3/robot/pose is 0.734 s old',
+    )  # fmt: skip
+    msg = through_wire(encode_agent_report(report))
+    assert json.loads(msg.data)['version'] == AGENT_REPORT_VERSION == 2
+    assert '"linear_speed":{"count":12,"largest_requested":0.41000000000000003,"allowed":0.22}' in msg.data
+    assert decode_agent_report(msg) == report
+    unclipped = AgentReport(agent=2, final=False, rejected={}, saturation={'linear_speed': Saturation(count=0, largest_requested=0.0, allowed=1.0)})
+    assert json.loads(encode_agent_report(unclipped).data)['saturation'] == {}
+    assert set(SATURATION_KINDS) == {'linear_speed', 'angular_speed', 'linear_acceleration'}
+
+
+_V2 = '"robot_commands":0,"saturation":{},"failure":null'
+
+
 @pytest.mark.parametrize(
     ('text', 'complaint'),
     [
         ('[1]', 'must be a JSON object'),
-        ('{"version":2}', 'version 2 is not supported'),
-        ('{"version":1,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0}', "missing fields ['late']"),
-        ('{"version":1,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0}', 'dropped must be a count'),
-        ('{"version":1,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0}', "rejected['x'] must be a count"),
-        ('{"version":1,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,"z":1}', "unknown fields ['z']"),
+        ('{"version":1}', 'version 1 is not supported (expected 2)'),
+        ('{"version":2,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,' + _V2 + '}', "missing fields ['late']"),
+        ('{"version":2,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0,' + _V2 + '}', 'dropped must be a count'),
+        ('{"version":2,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0,' + _V2 + '}', "rejected['x'] must be a count"),
+        ('{"version":2,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,' + _V2 + ',"z":1}', "unknown fields ['z']"),
+        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"warp":{"count":1,"largest_requested":2.0,"allowed":1.0}},"failure":null}', "saturation['warp']: unknown kind"),
+        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"linear_speed":{"count":1,"largest_requested":2.0}},"failure":null}', "must hold exactly ['count', 'largest_requested', 'allowed']"),
+        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"linear_speed":{"count":1,"largest_requested":Infinity,"allowed":1.0}},"failure":null}', 'largest_requested must be finite'),
+        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{},"failure":7}', 'failure must be null or a string, got 7'),
     ],
-)
+)  # fmt: skip
 def test_malformed_agent_report_is_rejected(text, complaint):
     from std_msgs.msg import String
 
@@ -358,3 +403,60 @@ def test_pose_array_pads_missing_axes():
     state = WorldState(time=0.5, agent_ids=(1, 2), positions=np.array([[1.0, 2.0], [3.0, 4.0]]))
     poses = encode_pose_array(state).poses
     assert [(p.position.x, p.position.y, p.position.z) for p in poses] == [(1.0, 2.0, 0.0), (3.0, 4.0, 0.0)]
+
+
+# -- robots ---------------------------------------------------------------------------------------
+
+
+def _pose_stamped(position=(1.0, 2.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0), frame='world', stamp=(1700000000, 250000000)):
+    from geometry_msgs.msg import PoseStamped
+
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = position
+    o = msg.pose.orientation
+    o.x, o.y, o.z, o.w = orientation
+    return msg
+
+
+def test_robot_poses_decode_with_stamp_frame_and_body_twist():
+    from nav_msgs.msg import Odometry
+
+    half = math.sqrt(0.5)  # 90 degrees about z
+    pose = decode_pose_stamped(through_wire(_pose_stamped(orientation=(0.0, 0.0, half, half), frame='mocap')))
+    assert pose.stamp == 1700000000.25 and pose.frame == 'mocap' and pose.position == (1.0, 2.0, 0.0)
+    assert pose.orientation == pytest.approx((0.0, 0.0, half, half), abs=1e-16) and pose.linear is None
+    odom = Odometry()
+    odom.header.frame_id = 'world'
+    odom.child_frame_id = 'base_link'
+    odom.pose.pose = _pose_stamped().pose
+    odom.twist.twist.linear.x = 0.22
+    odom.twist.twist.angular.z = -2.84
+    decoded = decode_odometry(through_wire(odom))
+    assert decoded.linear == (0.22, 0.0, 0.0) and decoded.angular == (0.0, 0.0, -2.84) and decoded.frame == 'world'
+
+
+@pytest.mark.parametrize(
+    ('changes', 'complaint'),
+    [
+        ({'position': (math.nan, 0.0, 0.0)}, 'pose position[0] must be finite, got nan'),
+        ({'orientation': (0.0, 0.0, 0.0, 0.0)}, 'pose: orientation must be a unit quaternion, got (0.0, 0.0, 0.0, 0.0)'),
+        ({'orientation': (0.0, 0.0, 0.0, math.inf)}, 'pose orientation[3] must be finite, got inf'),
+    ],
+)
+def test_a_pose_that_cannot_be_a_pose_is_refused(changes, complaint):
+    with pytest.raises(MessageError) as error:
+        decode_pose_stamped(_pose_stamped(**changes))
+    assert complaint in str(error.value)
+
+
+def test_robot_commands_carry_their_frame_and_values_bit_for_bit():
+    velocity = (0.1 + 0.2, -1e-300)
+    msg = through_wire(encode_world_velocity(velocity, frame_id='world', stamp=1700000000.5))
+    assert msg.header.frame_id == 'world' and (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1700000000, 500000000)
+    assert (msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z) == (0.1 + 0.2, -1e-300, 0.0)
+    body = through_wire(encode_body_velocity(0.22, -2.84))
+    assert (body.linear.x, body.linear.y, body.angular.z, body.angular.x) == (0.22, 0.0, -2.84, 0.0)
+    with pytest.raises(MessageError, match=r'body velocity\[1\] must be finite, got nan'):
+        encode_body_velocity(0.0, math.nan)

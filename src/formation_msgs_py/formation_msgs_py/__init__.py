@@ -1,9 +1,10 @@
 """Messages of the formation runtime: ROS-free dataclasses, topic names, the lock-step protocol,
 and their encoding over standard Jazzy types.
 
-- `types`: `TriggerInfo` (what an agent broadcasts at its triggering times) and `SensedState`
-  (what its sensing service returns); `lockstep`: `Step`, `Status`, `WorldState`, `AgentReport`
-  and the reasons a message is rejected; `topics`: every topic and service name.
+- `types`: `TriggerInfo` (what an agent broadcasts at its triggering times), `SensedState`
+  (what its sensing service returns) and `RobotPose` (a robot's pose as it arrives);
+  `lockstep`: `Step`, `Status`, `WorldState`, `AgentReport` (with `Saturation`) and the reasons
+  a message is rejected; `topics`: every topic and service name.
 - `codec` (rclpy message classes, imported lazily): encoders and decoders; `qos` (rclpy): the
   protocol's quality of service.
 
@@ -13,10 +14,10 @@ Everything here but `codec` and `qos` imports without ROS.
 from formation_msgs_py._lazy import lazy_exports
 
 __all__ = lazy_exports(globals(), {
-    'types': ('MAX_AGENT_ID', 'SensedState', 'TriggerInfo'),
+    'types': ('MAX_AGENT_ID', 'RobotPose', 'SensedState', 'TriggerInfo'),
     'lockstep': (
-        'AgentReport', 'Status', 'Step', 'WorldState',
-        'DISCOVERY_STEP', 'STEP_FLAG_FINAL', 'STEP_FLAG_REALTIME', 'REJECT_REASONS',
+        'AgentReport', 'Saturation', 'Status', 'Step', 'WorldState',
+        'DISCOVERY_STEP', 'STEP_FLAG_FINAL', 'STEP_FLAG_REALTIME', 'REJECT_REASONS', 'SATURATION_KINDS',
     ),
     'topics': (
         'STEP_TOPIC', 'STATUS_TOPIC', 'REPORT_TOPIC', 'STATE_TOPIC', 'GROUND_TRUTH_TOPIC',

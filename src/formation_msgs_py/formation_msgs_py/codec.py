@@ -24,12 +24,14 @@ from formation_msgs_py.lockstep import (
     REJECT_LENGTH,
     REJECT_NON_FINITE,
     REJECT_VERSION,
+    SATURATION_KINDS,
     AgentReport,
+    Saturation,
     Status,
     Step,
     WorldState,
 )
-from formation_msgs_py.types import MAX_AGENT_ID, SensedState, TriggerInfo
+from formation_msgs_py.types import MAX_AGENT_ID, RobotPose, SensedState, TriggerInfo
 
 LAYOUT_VERSION = 1
 """Version of every array layout and of the sensing JSON; bumped on any incompatible change."""
@@ -400,21 +402,39 @@ def decode_status(msg) -> Status:
 
 
 # --------------------------------------------------------------------------------------------
-# AgentReport  <->  std_msgs/String (compact JSON)
-#   {"version":1,"agent":i,"final":false,"rejected":{"sender":2},"dropped":0,"delayed":0,"late":0}
+# AgentReport  <->  std_msgs/String (compact JSON), its own layout version
+#   {"version":2,"agent":i,"final":false,"rejected":{"sender":2},"dropped":0,"delayed":0,"late":0,
+#    "robot_commands":0,"saturation":{"linear_speed":{"count":3,"largest_requested":0.41,"allowed":0.22}},
+#    "failure":null}
 
-_REPORT_COUNTERS = ('dropped', 'delayed', 'late')
+AGENT_REPORT_VERSION = 2
+"""Version of the AgentReport JSON: 2 added `robot_commands`, `saturation` and `failure`."""
+
+_REPORT_COUNTERS = ('dropped', 'delayed', 'late', 'robot_commands')
+_REPORT_FIELDS = ('version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS, 'saturation', 'failure')
+_SATURATION_FIELDS = ('count', 'largest_requested', 'allowed')
 
 
 def encode_agent_report(report: AgentReport):
     from std_msgs.msg import String
 
+    saturation = {}
+    for kind, clipped in sorted(report.saturation.items()):
+        _check_finite(f'agent report saturation {kind}', (clipped.largest_requested, clipped.allowed))
+        if clipped.count:
+            saturation[kind] = {
+                'count': int(clipped.count),
+                'largest_requested': float(clipped.largest_requested),
+                'allowed': float(clipped.allowed),
+            }
     body = {
-        'version': LAYOUT_VERSION,
+        'version': AGENT_REPORT_VERSION,
         'agent': int(report.agent),
         'final': bool(report.final),
         'rejected': {reason: int(n) for reason, n in sorted(report.rejected.items()) if n},
         **{name: int(getattr(report, name)) for name in _REPORT_COUNTERS},
+        'saturation': saturation,
+        'failure': None if report.failure is None else str(report.failure),
     }
     return String(data=json.dumps(body, separators=(',', ':')))
 
@@ -423,6 +443,23 @@ def _json_count(name: str, value) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= _MAX_COUNT:
         raise MessageError(f'{name} must be a count (integer >= 0), got {value!r}')
     return value
+
+
+def _decode_saturation(agent: int, table) -> dict[str, Saturation]:
+    if not isinstance(table, dict):
+        raise MessageError(f'agent report of agent {agent}: saturation must be an object, got {table!r}')
+    saturation = {}
+    for kind, clipped in table.items():
+        what = f'agent report of agent {agent} saturation[{kind!r}]'
+        if kind not in SATURATION_KINDS:
+            raise MessageError(f'{what}: unknown kind (known: {list(SATURATION_KINDS)})')
+        if not isinstance(clipped, dict) or set(clipped) != set(_SATURATION_FIELDS):
+            raise MessageError(f'{what} must hold exactly {list(_SATURATION_FIELDS)}, got {clipped!r}')
+        values = [_json_number(f'{what} {name}', clipped[name]) for name in _SATURATION_FIELDS[1:]]
+        if any(value < 0.0 for value in values):
+            raise MessageError(f'{what}: largest_requested and allowed must be >= 0, got {values}')
+        saturation[kind] = Saturation(count=_json_count(f'{what} count', clipped['count']), largest_requested=values[0], allowed=values[1])
+    return saturation
 
 
 def decode_agent_report(msg) -> AgentReport:
@@ -435,12 +472,12 @@ def decode_agent_report(msg) -> AgentReport:
         raise MessageError(f'agent report is not JSON ({error}): {text[:80]!r}') from None
     if not isinstance(body, dict):
         raise MessageError(f'agent report must be a JSON object, got {text[:80]!r}')
-    if body.get('version') != LAYOUT_VERSION:
+    if body.get('version') != AGENT_REPORT_VERSION:
         raise MessageError(
-            f'agent report: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})',
+            f'agent report: version {body.get("version")!r} is not supported (expected {AGENT_REPORT_VERSION})',
             reason=REJECT_VERSION,
         )
-    known = {'version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS}
+    known = set(_REPORT_FIELDS)
     if unknown := set(body) - known:
         raise MessageError(f'agent report: unknown fields {sorted(unknown)}')
     if missing := known - set(body):
@@ -448,6 +485,8 @@ def decode_agent_report(msg) -> AgentReport:
     agent = _json_count('agent report agent', body['agent'])
     if agent > _MAX_ID or not isinstance(body['final'], bool) or not isinstance(body['rejected'], dict):
         raise MessageError(f'agent report: agent, final or rejected malformed: {text[:120]!r}')
+    if body['failure'] is not None and not isinstance(body['failure'], str):
+        raise MessageError(f'agent report of agent {agent}: failure must be null or a string, got {body["failure"]!r}')
     rejected = {
         str(reason): _json_count(f'agent report of agent {agent} rejected[{reason!r}]', n)
         for reason, n in body['rejected'].items()
@@ -457,6 +496,8 @@ def decode_agent_report(msg) -> AgentReport:
         final=body['final'],
         rejected=rejected,
         **{name: _json_count(f'agent report of agent {agent} {name}', body[name]) for name in _REPORT_COUNTERS},
+        saturation=_decode_saturation(agent, body['saturation']),
+        failure=body['failure'],
     )
 
 
@@ -551,6 +592,68 @@ def decode_command(msg, dimension: int) -> tuple[float, ...]:
             f'angular={angular}'
         )
     return tuple(linear[:dimension])
+
+
+# --------------------------------------------------------------------------------------------
+# Robots (README, "Running on robots"): poses in, velocity commands out.
+#   geometry_msgs/PoseStamped or nav_msgs/Odometry -> RobotPose;
+#   holonomic: geometry_msgs/TwistStamped, linear = velocity in the frame of header.frame_id;
+#   differential drive: geometry_msgs/Twist in the body frame, linear.x = v, angular.z = ω.
+
+
+def stamp_seconds(stamp) -> float:
+    """builtin_interfaces/Time in seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _pose_fields(what: str, pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    position = (float(pose.position.x), float(pose.position.y), float(pose.position.z))
+    o = pose.orientation
+    orientation = (float(o.x), float(o.y), float(o.z), float(o.w))
+    _check_finite(f'{what} position', position)
+    _check_finite(f'{what} orientation', orientation)
+    norm = math.sqrt(sum(c * c for c in orientation))
+    if not 0.5 < norm < 2.0:  # a unit quaternion, give or take its sender's rounding
+        raise MessageError(f'{what}: orientation must be a unit quaternion, got {orientation} (norm {norm!r})')
+    return position, tuple(c / norm for c in orientation)
+
+
+def decode_pose_stamped(msg) -> RobotPose:
+    """geometry_msgs/PoseStamped -> RobotPose (no twist)."""
+    position, orientation = _pose_fields('pose', msg.pose)
+    return RobotPose(stamp=stamp_seconds(msg.header.stamp), frame=msg.header.frame_id, position=position, orientation=orientation)
+
+
+def decode_odometry(msg) -> RobotPose:
+    """nav_msgs/Odometry -> RobotPose with the body-frame twist (REP 105)."""
+    position, orientation = _pose_fields('odometry pose', msg.pose.pose)
+    twist = msg.twist.twist
+    linear = (float(twist.linear.x), float(twist.linear.y), float(twist.linear.z))
+    angular = (float(twist.angular.x), float(twist.angular.y), float(twist.angular.z))
+    _check_finite('odometry twist linear', linear)
+    _check_finite('odometry twist angular', angular)
+    return RobotPose(
+        stamp=stamp_seconds(msg.header.stamp), frame=msg.header.frame_id, position=position, orientation=orientation,
+        linear=linear, angular=angular,
+    )  # fmt: skip
+
+
+def encode_world_velocity(velocity: Sequence[float], *, frame_id: str, stamp: float):
+    """geometry_msgs/TwistStamped: a holonomic robot's velocity in the frame `frame_id`."""
+    from geometry_msgs.msg import Twist, TwistStamped
+    from std_msgs.msg import Header
+
+    return TwistStamped(
+        header=Header(stamp=ros_time(stamp), frame_id=frame_id), twist=Twist(linear=_vector3('world velocity', velocity))
+    )
+
+
+def encode_body_velocity(linear: float, angular: float):
+    """geometry_msgs/Twist in the body frame: a differential-drive robot's (v, ω)."""
+    from geometry_msgs.msg import Twist, Vector3
+
+    _check_finite('body velocity', (linear, angular))
+    return Twist(linear=Vector3(x=float(linear)), angular=Vector3(z=float(angular)))
 
 
 # --------------------------------------------------------------------------------------------

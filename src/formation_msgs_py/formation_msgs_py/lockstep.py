@@ -7,7 +7,7 @@ the step have been delivered (see docs/MESSAGES.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +30,7 @@ REJECT_RECEIVER = 'receiver'  # addressed to another agent
 REJECT_DIMENSION = 'dimension'  # p differs from the receiver's, or ETA-1/ETA-2 mixed up
 REJECT_TIME_BACKWARDS = 'time_backwards'  # stamped before t = 0 or before the sender's previous one
 REJECT_DUPLICATE = 'duplicate'  # stamped at the very time of the sender's previous one
+REJECT_FRAME = 'frame'  # a robot pose in another frame than the world frame
 LAYOUT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_NON_FINITE, REJECT_FIELD)
 REJECT_REASONS = (
     *LAYOUT_REASONS,
@@ -38,7 +39,14 @@ REJECT_REASONS = (
     REJECT_DIMENSION,
     REJECT_TIME_BACKWARDS,
     REJECT_DUPLICATE,
+    REJECT_FRAME,
 )
+
+# What a robot's command adapter clips (AgentReport.saturation; README, "Running on robots").
+SATURATION_LINEAR_SPEED = 'linear_speed'  # m/s: world-frame speed (holonomic), |v| (unicycle)
+SATURATION_ANGULAR_SPEED = 'angular_speed'  # rad/s: |ω| (unicycle)
+SATURATION_LINEAR_ACCELERATION = 'linear_acceleration'  # m/s²: ||dq/dt|| of the ETA-2 velocity reference
+SATURATION_KINDS = (SATURATION_LINEAR_SPEED, SATURATION_ANGULAR_SPEED, SATURATION_LINEAR_ACCELERATION)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -97,11 +105,26 @@ class WorldState:
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
+class Saturation:
+    """Commands a robot adapter clipped to one of its limits (one kind of SATURATION_KINDS).
+
+    For the speeds, `count` counts published robot commands; for the ETA-2 acceleration, the
+    triggers from which the velocity reference had to be held to the limit (it only ever starts
+    there: between triggers the requested acceleration only shrinks).
+    """
+
+    count: int  # commands clipped
+    largest_requested: float  # the largest value asked for (a norm, >= 0)
+    allowed: float  # the limit it was clipped to
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
 class AgentReport:
-    """What an agent node counted besides the protocol: rejected and fault-injected messages.
+    """What an agent node counted besides the protocol: rejected and fault-injected messages,
+    commands clipped to a robot's limits, and why it failed, if it did.
 
     Totals since the start (a later report supersedes an earlier one); `final` marks the report
-    an agent sends when it leaves at the final step.
+    an agent sends when it leaves (at the final step, or on its way out whatever the reason).
     """
 
     agent: int
@@ -110,6 +133,9 @@ class AgentReport:
     dropped: int = 0  # fault injection: messages dropped on arrival
     delayed: int = 0  # fault injection: messages handed on after a delay
     late: int = 0  # wall clock: information that arrived after the receiver's own later trigger
+    robot_commands: int = 0  # velocity commands published to the robot (robot adapters only)
+    saturation: dict[str, Saturation] = field(default_factory=dict)  # kind -> clipped; none: omitted
+    failure: str | None = None  # final report of an agent that stops on an error: the error
 
     @property
     def rejected_total(self) -> int:

@@ -60,3 +60,28 @@ FAN_IN_QOS = QoSProfile(
     liveliness=PROTOCOL_QOS.liveliness,
     liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
 )
+
+# -- robots (README, "Running on robots") --------------------------------------------------------
+
+# An agent reads poses best effort, keep last: a best-effort reader matches every writer (motion
+# capture drivers publish best effort, odometry usually reliable), and only the latest pose
+# matters (a pose that is late is refused by its age anyway).
+ROBOT_POSE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+# Velocity commands: reliable (the final zero command must arrive, and the agent waits for its
+# acknowledgement), volatile (a robot that connects late must never get an old command replayed),
+# and the protocol's liveliness lease, so a coordinator can tell that an agent's command writer is
+# gone.  A robot's reader matches if it asks for volatile durability (best effort or reliable).
+ROBOT_COMMAND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+    liveliness=LivelinessPolicy.AUTOMATIC,
+    liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
+)

@@ -45,3 +45,19 @@ class SensedState:
     rel_positions: dict[int, Vector]
     rel_velocities: dict[int, Vector] | None = None
     velocity: Vector | None = None
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class RobotPose:
+    """A robot's pose as it arrives on its pose topic (README, "Running on robots").
+
+    From geometry_msgs/PoseStamped: the pose only.  From nav_msgs/Odometry also the twist, which
+    REP 105 gives in the robot's body frame (`child_frame_id`): `linear` [m/s], `angular` [rad/s].
+    """
+
+    stamp: float  # header stamp in seconds, on the publisher's clock
+    frame: str  # header frame_id: the frame of the pose
+    position: tuple[float, float, float]
+    orientation: tuple[float, float, float, float]  # unit quaternion (x, y, z, w)
+    linear: tuple[float, float, float] | None = None  # body-frame twist (Odometry only)
+    angular: tuple[float, float, float] | None = None

@@ -38,47 +38,80 @@ def make_node(ros, **changes):
 
 def test_good_parameters_give_the_agent_its_neighbours(ros):
     node = make_node(ros)
-    assert node.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
-    assert node.gains == {'alpha': 10.0, 'beta': 1.0}
+    assert node.config.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
+    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0}
 
 
 @pytest.mark.parametrize(
     ('changes', 'complaint'),
     [
-        ({'delta': None}, "parameter 'delta' (DOUBLE) is required"),
-        ({'beta': None}, "parameter 'beta' (DOUBLE) is required"),
-        ({'algorithm': 'eta3'}, "algorithm must be one of ['eta1', 'eta2'], got 'eta3'"),
-        ({'dimension': 4}, 'dimension must be 1, 2 or 3 (commands travel as geometry_msgs), got 4'),
+        ({'delta': None}, "parameter 'delta' (double) is required: communication radius Δ [m]"),
+        ({'beta': None}, "parameter 'beta' (double) is required"),
+        ({'algorithm': 'eta3'}, "parameter 'algorithm' (string) must be one of 'eta1', 'eta2', got 'eta3'"),
+        ({'dimension': 4}, "parameter 'dimension' (int)"),  # rclpy's own range check, [1, 3]
         ({'neighbour_offsets': [0.0, -2.0, -2.0]}, 'neighbour_offsets must hold dimension * len(neighbour_ids) = 2 * 2 values'),
         ({'neighbour_ids': [2, 2]}, 'neighbour_ids repeat an id: [2, 2]'),
+        ({'neighbour_ids': [1, 2]}, 'neighbour_ids hold the agent itself (1)'),
         ({'horizon': float('inf')}, 'horizon must be a finite number > 0, got inf'),
-        ({'algorithm': 'eta2'}, "parameter 'alpha_d' (DOUBLE) is required"),
-        ({'agent_id': 7}, 'agent 7 must run in namespace /agent_7'),
+        ({'algorithm': 'eta2'}, "parameter 'alpha_d' (double) is required"),
+        ({'agent_id': 7}, 'agent 7 must run in namespace /agent_7, not /agent_1'),
+        ({'inject_loss': 1.5}, "parameter 'inject_loss' (double)"),  # rclpy's own range check, [0, 1]
+        ({'inject_delay_ms': -1.0}, "parameter 'inject_delay_ms' (double) must be >= 0, got -1.0"),
+        ({'inject_jitter_ms': float('nan')}, "parameter 'inject_jitter_ms' (double) must be >= 0, got nan"),
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
-    from formation_agent.ros.node import AgentNodeError
+    from formation_agent.ros.parameters import ParameterError
 
-    with pytest.raises(AgentNodeError) as error:
+    with pytest.raises(ParameterError) as error:
         make_node(ros, **changes)
     assert complaint in str(error.value)
-    assert '/agent_1/formation_agent' in str(error.value)
+    assert str(error.value).startswith('/agent_1/formation_agent: ')
+
+
+def test_every_missing_parameter_is_named_at_once(ros):
+    from formation_agent.ros.parameters import ParameterError
+
+    with pytest.raises(ParameterError) as error:
+        make_node(ros, delta=None, horizon=None, alpha=None, beta=None, neighbour_offsets=None)
+    named = [problem.split("'")[1] for problem in error.value.problems]
+    assert named == ['neighbour_offsets', 'delta', 'horizon', 'alpha', 'beta'], error.value.problems
+    assert all('is required' in problem for problem in error.value.problems)
 
 
 @pytest.mark.parametrize(
     ('changes', 'complaint'),
     [
-        ({'inject_loss': 1.5}, 'inject_loss must be a probability in [0, 1], got 1.5'),
-        ({'inject_delay_ms': -1.0}, 'inject_delay_ms must be a finite number >= 0, got -1.0'),
-        ({'inject_jitter_ms': float('nan')}, 'inject_jitter_ms must be a finite number >= 0, got nan'),
+        ({'robot': 'holonomic'}, 'robot: holonomic needs sensing: poses'),
+        ({'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.1, 'dimension': 3,
+          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle drives in the plane: dimension must be 2, got 3'),
+        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle needs control_point_distance l > 0'),
+        ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
+        ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
+        ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),
+        ({'sensing': 'poses', 'world_frame': ''}, "world_frame must name a frame, got ''"),
+        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', got 'tank'"),
     ],
-)
-def test_bad_fault_injection_parameters_are_rejected(ros, changes, complaint):
-    from formation_agent.ros.node import AgentNodeError
+)  # fmt: skip
+def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
+    from formation_agent.ros.parameters import ParameterError
 
-    with pytest.raises(AgentNodeError, match='agent 1: ') as error:
+    with pytest.raises(ParameterError) as error:
         make_node(ros, **changes)
     assert complaint in str(error.value)
+
+
+def test_robot_parameters_have_their_documented_defaults(ros):
+    node = make_node(ros)
+    config = node.config
+    assert (config.sensing, config.pose_type, config.pose_timeout, config.robot, config.world_frame) == ('service', 'pose', 0.5, 'none', 'world')
+    assert (config.command_rate, config.control_point_distance) == (50.0, 0.0)
+    assert math.inf == config.limits.linear_speed == config.limits.angular_speed == config.limits.linear_acceleration
+    assert config.robot_pose_topic(3) == '/agent_3/robot/pose' and config.robot_command_topic == '/agent_1/robot/cmd_vel'
+    odom = make_node(ros, sensing='poses', pose_type='odom').config
+    assert odom.robot_pose_topic(3) == '/agent_3/robot/odom'
+    vrpn = make_node(ros, sensing='poses', pose_topic='/vrpn/cf{id}/pose').config
+    assert vrpn.robot_pose_topic(12) == '/vrpn/cf12/pose'
 
 
 # -- bad messages --------------------------------------------------------------------------------
@@ -140,7 +173,7 @@ def test_bad_trigger_information_is_rejected_counted_per_reason_and_never_reache
     ]
     expected: dict[str, int] = {}
     for msg, sender, reason in arrivals:
-        node._on_arrival(msg, sender)
+        node.faults.arrive(msg, sender)
         if reason is not None:
             expected[reason] = expected.get(reason, 0) + 1
         assert node.rejected == expected
@@ -162,8 +195,8 @@ def test_a_malformed_step_is_rejected_and_the_node_keeps_waiting(live_node):
 def test_fault_injection_drops_everything_at_loss_one(live_node):
     node = live_node(inject_loss=1.0, inject_seed=3)
     for k in range(20):
-        node._on_arrival(_info(stamp=0.1 * k), 2)
-    assert node.dropped == 20 and node.delayed == 0 and node._held == [] and node.rejected == {}
+        node.faults.arrive(_info(stamp=0.1 * k), 2)
+    assert node.faults.dropped == 20 and node.faults.delayed == 0 and node._held == [] and node.rejected == {}
 
 
 def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
@@ -171,23 +204,23 @@ def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
 
     node = live_node(inject_delay_ms=30.0, inject_jitter_ms=20.0)
     for k in range(5):
-        node._on_arrival(_info(stamp=0.1 * k), 2)
-    assert node.delayed == 0 and node._held == []  # still on the wire
+        node.faults.arrive(_info(stamp=0.1 * k), 2)
+    assert node.faults.delayed == 0 and node._held == []  # still on the wire
     executor = SingleThreadedExecutor(context=ros)
     executor.add_node(node)
     try:
         for _ in range(200):
-            if node.delayed == 5:
+            if node.faults.delayed == 5:
                 break
             executor.spin_once(timeout_sec=0.02)
     finally:
         executor.remove_node(node)
-    assert node.delayed == 5 and node.rejected == {}, 'a delayed message out of order would be time_backwards'
+    assert node.faults.delayed == 5 and node.rejected == {}, 'a delayed message out of order would be time_backwards'
     assert [info.stamp for info in node._held] == [0.1 * k for k in range(5)]
 
 
 def test_injected_faults_are_reproducible_per_seed_and_keep_each_edge_in_order():
-    from formation_agent.ros.node import FaultInjection
+    from formation_agent.ros.faults import FaultInjection
 
     def pattern(seed):
         injection = FaultInjection(agent_id=4, loss=0.1, delay_ms=5.0, jitter_ms=40.0, seed=seed)
@@ -235,3 +268,47 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         executor.remove_node(node)
         simulator.destroy_node()
         rclpy.shutdown(context=other)
+
+
+# -- robots ----------------------------------------------------------------------------------------
+
+
+def test_robot_modes_refuse_lock_step(live_node):
+    from formation_agent.ros.node import AgentNodeError
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import Step
+
+    node = live_node(sensing='poses', robot='holonomic')
+    with pytest.raises(AgentNodeError, match=r'agent 1: sensing: poses with robot: holonomic runs on the wall clock '
+                                             r'\(Step 0 flagged realtime\), but step 0 is lock-step'):
+        node._on_step(encode_step(Step(index=0, time=0.0)))
+
+
+@pytest.mark.parametrize('wall_clock', [False, True])
+def test_the_plant_gets_a_zero_command_on_the_wall_clock_only(ros, live_node, wall_clock):
+    """Lock-step: none (the simulated world stops with the run; a command outside a trigger is a
+    protocol violation).  Wall clock: zero, as a robot would need."""
+    from geometry_msgs.msg import Twist
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+
+    node = live_node()
+    received = []
+    node.create_subscription(Twist, '/agent_1/cmd_vel', received.append, PROTOCOL_QOS)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        if wall_clock:
+            node.output.start(time.time())
+        node.output.publish(0.0, (0.5, -0.25), None)
+        node.output.stop()
+        node.output.publish(0.1, (0.5, -0.25), None)  # nothing goes out after the stop
+        deadline = time.monotonic() + 5.0
+        while len(received) < 1 + wall_clock and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for _ in range(10):
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.remove_node(node)
+    assert [(msg.linear.x, msg.linear.y) for msg in received] == [(0.5, -0.25)] + [(0.0, 0.0)] * wall_clock

@@ -6,6 +6,10 @@
 - `crossing`: the certified search for the first t with ||e_i(t)|| = α e^{-βt}.
 - `tension`: ω_ij and its derivatives (the edge-tension weights); `closed_form`: the ETA-2
   closed-loop motion without cancellation.
+- On robots (README, "Running on robots"): `kinematics` (control points, the unicycle's
+  diffeomorphism), `pose_sensing` (`PoseBook`: SensedState from poses, stale poses refused),
+  `velocity_reference` (ETA-2's q_i(t) for velocity-commanded robots), `commander`
+  (`RobotCommander`: velocity commands within a robot's `Limits`, clips counted).
 """
 
 from formation_msgs_py._lazy import lazy_exports
@@ -15,4 +19,8 @@ __all__ = lazy_exports(globals(), {
     'crossing': ('CrossingError', 'CrossingSearch', 'ErrorModel', 'first_crossing'),
     'tension': ('omega', 'omega_prime', 'omega_second'),
     'closed_form': ('advance_double',),
+    'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
+    'pose_sensing': ('PoseBook', 'PoseError'),
+    'velocity_reference': ('VelocityReference',),
+    'commander': ('Limits', 'RobotCommander', 'SaturationLog'),
 })  # fmt: skip

@@ -1,18 +1,26 @@
 """The agent's ROS 2 shell (rclpy): the node and what every node process of the project shares.
 
-- `node`: `FormationAgentNode` (one per agent; the `formation_agent` command runs one or more).
+- `node`: `FormationAgentNode` (one per agent): the lock-step and wall-clock protocol around the core.
+- `main`: the `formation_agent` command (one or more nodes per process; exit statuses; the zero
+  command on every way out).
+- `config`: the node's parameter table (`AGENT_PARAMETERS`, `GAIN_PARAMETERS`) read into an `AgentConfig`.
+- `sensing`: where it senses (`ServiceSensing`, `PoseSensing`); `commands`: where its commands
+  go (`PlantOutput`, `RobotOutput`); `inbox`: what it refuses to read; `faults`: injected
+  faults (a test facility).
 - `process`: the executor a node process spins (`make_executor`), SIGINT/SIGTERM as a flag
-  (`StopSignals`), and exit statuses (`EXIT_PEER_LOST`).
+  (`StopSignals`), and exit statuses (`EXIT_BAD_INPUT`, `EXIT_PEER_LOST`).
 - `parameters`: every node's parameter table (`ParameterSpec`): descriptors for
   `ros2 param describe`, one error naming every bad parameter, the `--help` table.
 
-QoS profiles of the protocol: `formation_msgs_py.qos`.
+QoS profiles of the protocol and the robot topics: `formation_msgs_py.qos`.
 """
 
 from formation_msgs_py._lazy import lazy_exports
 
 __all__ = lazy_exports(globals(), {
-    'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'main'),
-    'process': ('EXECUTORS', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
-    'parameters': ('ParameterError', 'ParameterSpec', 'declare_parameters', 'parameter_help'),
+    'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError'),
+    'main': ('main',),
+    'config': ('AgentConfig', 'agent_help', 'read_config'),
+    'process': ('EXECUTORS', 'EXIT_BAD_INPUT', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
+    'parameters': ('ParameterError', 'ParameterSpec', 'declare_parameters', 'parameter_help', 'read_parameters'),
 })  # fmt: skip

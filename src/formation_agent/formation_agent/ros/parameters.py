@@ -136,6 +136,18 @@ def _quote(value: Any) -> str:  # noqa: ANN401
 
 def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:  # noqa: ANN001 - an rclpy Node
     """Declare every spec on `node` (idempotent), read and check all; raise one ParameterError."""
+    values, problems = read_parameters(node, specs)
+    if problems:
+        raise ParameterError(node.get_fully_qualified_name(), problems)
+    return values
+
+
+def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any], list[str]]:  # noqa: ANN001
+    """Declare every spec on `node` (idempotent) and read it: the good values, and a problem per bad one.
+
+    For nodes whose later parameters depend on earlier ones (which gains an algorithm takes): they
+    gather the problems of every stage and raise one ParameterError at the end.
+    """
     values: dict[str, Any] = {}
     problems: list[str] = []
     for spec in specs:
@@ -155,9 +167,7 @@ def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]: 
             problems.append(f'{label} {problem}')
             continue
         values[spec.name] = value
-    if problems:
-        raise ParameterError(node.get_fully_qualified_name(), problems)
-    return values
+    return values, problems
 
 
 def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:

@@ -7,6 +7,9 @@ import threading
 
 from rclpy.executors import SingleThreadedExecutor
 
+EXIT_BAD_INPUT = 2
+"""Exit status of a node refused its parameters (every problem named on stderr; nothing started)."""
+
 EXIT_PEER_LOST = 3
 """Exit status of a node that left because a peer it depends on was lost."""
 

@@ -605,7 +605,7 @@ class FormationRun:
         for group in groups:
             ids = ','.join(map(str, group))
             name = f'agent_{group[0]}' if len(group) == 1 else f'agents_{group[0]}-{group[-1]}'
-            self._start(name, ['-m', 'formation_agent.ros.node', '--agents', ids, '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
+            self._start(name, ['-m', 'formation_agent.ros.main', '--agents', ids, '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents'])], env, expected_exit=True)
         if self.progress:
             self._say(
                 f'ROS domain {env["ROS_DOMAIN_ID"]}: simulator, {len(groups)} agent process(es)'

@@ -1,0 +1,135 @@
+"""Sensing from robot poses (README, "Running on robots"), ROS-free.
+
+On a robot the agent senses from the latest poses of itself and its neighbours (motion capture
+PoseStamped or Odometry), at its triggering times only, as the paper's agents do:
+
+- x_i - x_j from the control points (`kinematics.control_point`: the robot's origin for a
+  holonomic robot, the point l ahead of the axle for a unicycle);
+- ETA-2 also needs velocities, and its state q_i is the control point's velocity.  From
+  Odometry it is the twist, rotated from the body into the world frame (R (v + ω × offset),
+  REP 105); from PoseStamped the backward difference of the control point over the last two
+  poses, (z_k - z_{k-1}) / (t_k - t_{k-1}) — pose noise σ becomes a velocity noise of about
+  √2 σ / (t_k - t_{k-1}), so use Odometry for ETA-2 where there is one.
+
+A pose is used only while it is fresh: at a trigger each pose must be at most `timeout` seconds
+old (by its header stamp against the agent's clock) and not stamped more than `timeout` in the
+future (clocks out of step).  Otherwise `PoseError` names the robot, its topic, the age and the
+limit, and the agent stops safely.  Poses in another frame than the world frame, or older than
+the one already held, are refused on arrival and counted (`add`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from formation_agent.core.kinematics import control_point, control_point_velocity
+from formation_msgs_py.lockstep import REJECT_FRAME, REJECT_TIME_BACKWARDS
+from formation_msgs_py.types import RobotPose, SensedState
+
+
+class PoseError(ValueError):
+    """A pose the agent needs is missing, too old, or from the future: the agent must stop."""
+
+
+class PoseBook:
+    """The latest pose (and the one before, for differences) of this robot and its neighbours."""
+
+    def __init__(
+        self,
+        *,
+        agent_id: int,
+        neighbour_ids: Sequence[int],
+        dimension: int,
+        offset: Sequence[float],
+        world_frame: str,
+        timeout: float,
+        topic: Callable[[int], str],
+    ) -> None:
+        if not timeout > 0.0:
+            raise ValueError(f'pose timeout must be > 0, got {timeout!r}')
+        self.agent_id = agent_id
+        self.neighbour_ids = tuple(neighbour_ids)
+        self.robots = (agent_id, *self.neighbour_ids)
+        self.dimension = dimension
+        self.offset = np.asarray(offset, dtype=float)
+        self.world_frame = world_frame
+        self.timeout = float(timeout)
+        self.topic = topic  # robot id -> the topic its poses come on (for messages)
+        self._latest: dict[int, RobotPose] = {}
+        self._previous: dict[int, RobotPose] = {}  # the last pose stamped before the latest
+        self._refused: dict[int, str] = {}  # robot -> why its last refused pose was refused
+
+    def add(self, robot: int, pose: RobotPose) -> tuple[str, str] | None:
+        """Keep `pose` as the latest of `robot`; or say why not: (reason, detail)."""
+        if pose.frame != self.world_frame:
+            detail = f'pose of robot {robot} in frame {pose.frame!r}, not the world frame {self.world_frame!r}'
+            self._refused[robot] = detail
+            return REJECT_FRAME, detail
+        latest = self._latest.get(robot)
+        if latest is not None and pose.stamp < latest.stamp:
+            detail = f'pose of robot {robot} stamped {pose.stamp!r}, before the one held ({latest.stamp!r})'
+            return REJECT_TIME_BACKWARDS, detail
+        if latest is not None and pose.stamp > latest.stamp:
+            self._previous[robot] = latest
+        self._latest[robot] = pose
+        return None
+
+    def has_all(self) -> bool:
+        """A pose of every robot the agent senses has arrived."""
+        return all(robot in self._latest for robot in self.robots)
+
+    def fresh(self, robot: int, *, t: float, now: float) -> RobotPose:
+        """The latest pose of `robot` if it is fresh at wall time `now` (trigger time t), else PoseError."""
+        pose = self._latest.get(robot)
+        where = f'agent {self.agent_id}: the pose of robot {robot} on {self.topic(robot)}'
+        if pose is None:
+            refused = f'; its last pose was refused: {self._refused[robot]}' if robot in self._refused else ''
+            raise PoseError(f'{where} has not arrived by t={t:.3f}{refused}: the agent stops')
+        age = now - pose.stamp
+        if age > self.timeout:
+            raise PoseError(
+                f'{where} is {age:.3f} s old at t={t:.3f} (pose_timeout {self.timeout:g} s): the agent stops'
+            )
+        if age < -self.timeout:
+            raise PoseError(
+                f'{where} is stamped {-age:.3f} s in the future at t={t:.3f} (pose_timeout {self.timeout:g} s; '
+                'are the clocks synchronised?): the agent stops'
+            )
+        return pose
+
+    def _point(self, pose: RobotPose) -> np.ndarray:
+        return control_point(pose.position, pose.orientation, self.offset)[: self.dimension]
+
+    def _velocity(self, robot: int, pose: RobotPose, t: float) -> np.ndarray:
+        if pose.linear is not None:  # Odometry: the body twist, into the world frame
+            return control_point_velocity(pose.orientation, pose.linear, pose.angular, self.offset)[: self.dimension]
+        previous = self._previous.get(robot)
+        if previous is None:
+            raise PoseError(
+                f'agent {self.agent_id}: the velocity of robot {robot} needs two poses on {self.topic(robot)} '
+                f'(pose differences), one has arrived by t={t:.3f}: the agent stops'
+            )
+        return (self._point(pose) - self._point(previous)) / (pose.stamp - previous.stamp)
+
+    def sense(self, *, t: float, now: float, velocities: bool) -> SensedState:
+        """What the agent senses at its trigger t (wall time `now`): x_i - x_j, and for ETA-2 q_i, q_i - q_j."""
+        poses = {robot: self.fresh(robot, t=t, now=now) for robot in self.robots}
+        x = {robot: self._point(pose) for robot, pose in poses.items()}
+        i = self.agent_id
+        rel_positions = {j: _floats(x[i] - x[j]) for j in self.neighbour_ids}
+        if not velocities:
+            return SensedState(agent=i, stamp=t, rel_positions=rel_positions)
+        q = {robot: self._velocity(robot, pose, t) for robot, pose in poses.items()}
+        return SensedState(
+            agent=i,
+            stamp=t,
+            rel_positions=rel_positions,
+            rel_velocities={j: _floats(q[i] - q[j]) for j in self.neighbour_ids},
+            velocity=_floats(q[i]),
+        )
+
+
+def _floats(vector: np.ndarray) -> tuple[float, ...]:
+    return tuple(float(v) for v in vector)

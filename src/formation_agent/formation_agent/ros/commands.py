@@ -1,0 +1,144 @@
+"""Where an agent node's commands go (parameter `robot`), and the zero command when it stops.
+
+- `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
+  (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
+  closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
+- `RobotOutput` ('holonomic', 'unicycle'): a robot's velocity command from
+  `formation_agent.core.commander.RobotCommander` — a world-frame TwistStamped (holonomic) or a
+  body-frame Twist (v, ω) (differential drive, from the robot's heading) — within the robot's
+  limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
+  heading, ETA-2's velocity reference on time).
+
+`stop()` sends the zero command (once; nothing after it).  The node calls it on every way out:
+the final Step, a lost peer, SIGINT/SIGTERM, a stale pose, any exception.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from geometry_msgs.msg import Accel, Twist, TwistStamped
+
+from formation_agent.core.commander import RobotCommander
+from formation_agent.core.kinematics import yaw
+from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_msgs_py.codec import (
+    encode_acceleration_command,
+    encode_body_velocity,
+    encode_velocity_command,
+    encode_world_velocity,
+)
+from formation_msgs_py.qos import PROTOCOL_QOS, ROBOT_COMMAND_QOS
+from formation_msgs_py.types import SensedState
+
+
+class PlantOutput:
+    """robot: none — u_i / u^d_i to the simulator's plant (or any plant that takes them)."""
+
+    robot_commands = 0  # no robot: nothing sent to one, nothing clipped
+
+    @property
+    def saturation(self) -> dict:
+        return {}
+
+    def __init__(self, node, config) -> None:  # noqa: ANN001
+        double = config.double
+        self._encode = encode_acceleration_command if double else encode_velocity_command
+        self._zeros = (0.0,) * config.dimension
+        self.publisher = node.create_publisher(Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS)
+        self._wall_clock = False
+        self._stopped = False
+
+    def start(self, epoch: float) -> None:
+        self._wall_clock = True
+
+    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+        if not self._stopped:
+            self.publisher.publish(self._encode(control))
+
+    def stop(self) -> None:
+        """A zero command on the wall clock.  In lock-step none: the simulated world stops with the
+        run, and a command outside a triggering time would be a protocol violation."""
+        if self._wall_clock and not self._stopped:
+            self.publisher.publish(self._encode(self._zeros))
+        self._stopped = True
+
+
+class RobotOutput:
+    """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`."""
+
+    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
+        self._node = node
+        self._config = config
+        self._poses = poses
+        self._on_failure = on_failure
+        self.commander = RobotCommander(
+            drive=config.robot,
+            dimension=config.dimension,
+            limits=config.limits,
+            distance=config.control_point_distance,
+            k3=config.gains['k3'] if config.double else None,
+        )
+        self._holonomic = config.robot == 'holonomic'
+        self.publisher = node.create_publisher(
+            TwistStamped if self._holonomic else Twist, config.robot_command_topic, ROBOT_COMMAND_QOS
+        )
+        self._epoch = 0.0
+        self._last_t = 0.0  # the latest time a command was computed for (the clock may step back)
+        self._timer = None
+        self._stopped = False
+
+    @property
+    def robot_commands(self) -> int:
+        return self.commander.commands
+
+    @property
+    def saturation(self) -> dict:
+        return self.commander.saturation.records
+
+    def start(self, epoch: float) -> None:
+        self._epoch = epoch
+
+    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+        """The agent's new command at its trigger t: send at once, then keep sending at the command rate."""
+        if self._stopped:
+            return
+        self._last_t = max(self._last_t, t)
+        self.commander.set_control(t, control, sensed.velocity)
+        self._send()
+        if self._timer is None:
+            self._timer = self._node.create_timer(1.0 / self._config.command_rate, self._tick)
+
+    def _tick(self) -> None:
+        if self._stopped:
+            return
+        try:
+            self._send()
+        except PoseError as error:  # its own pose went stale: stop now, then leave
+            self.stop()
+            self._on_failure(error)
+
+    def _send(self) -> None:
+        wall = time.time()
+        t = self._last_t = max(wall - self._epoch, self._last_t)
+        pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
+        if self._holonomic:
+            velocity = self.commander.command(t)
+            self.publisher.publish(encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall))
+        else:
+            self.publisher.publish(encode_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
+
+    def stop(self) -> None:
+        """The zero command, once; nothing is sent after it."""
+        if self._stopped:
+            return
+        self._stopped = True
+        if self._timer is not None:
+            self._node.destroy_timer(self._timer)
+            self._timer = None
+        if self._holonomic:
+            zero = (0.0,) * self._config.dimension
+            self.publisher.publish(encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time()))
+        else:
+            self.publisher.publish(encode_body_velocity(0.0, 0.0))

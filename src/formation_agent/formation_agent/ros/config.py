@@ -1,0 +1,238 @@
+"""The agent node's parameters: one table (`AGENT_PARAMETERS`, `GAIN_PARAMETERS`), read into an `AgentConfig`.
+
+`formation_agent --help` prints the table (`agent_help`); `ros2 param describe` shows the same
+descriptions and ranges.  `read_config` checks every parameter, and the rules between them, and
+raises one `ParameterError` naming every problem.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from formation_agent.core.commander import Limits
+from formation_agent.ros.parameters import (
+    DOUBLE,
+    DOUBLE_ARRAY,
+    INTEGER,
+    INTEGER_ARRAY,
+    STRING,
+    ParameterError,
+    ParameterSpec,
+    parameter_help,
+    read_parameters,
+)
+from formation_msgs_py.topics import agent_namespace, robot_command_topic, robot_odom_topic, robot_pose_topic
+from formation_msgs_py.types import MAX_AGENT_ID
+
+SENSING_SOURCES = ('service', 'poses')
+POSE_TYPES = ('pose', 'odom')
+ROBOTS = ('none', 'holonomic', 'unicycle')
+LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration')
+
+
+def _spec(name, kind, description, **options) -> ParameterSpec:
+    return ParameterSpec(name=name, type=kind, description=description, **options)
+
+
+AGENT_PARAMETERS = (
+    # The formation (written per agent by `formation run`, from the scenario).
+    _spec('agent_id', INTEGER, "this agent's id i; the node runs in namespace /agent_<i>", low=0, high=MAX_AGENT_ID),
+    _spec('algorithm', STRING, 'eta1 (single integrators, Theorem 1) or eta2 (double integrators, Theorem 2)',
+          choices=('eta1', 'eta2')),
+    _spec('dimension', INTEGER, 'dimension p of positions (commands travel as geometry_msgs: 1 to 3)', low=1, high=3),
+    _spec('neighbour_ids', INTEGER_ARRAY, 'ids j of the neighbours in the graph', low=0, high=MAX_AGENT_ID),
+    _spec('neighbour_offsets', DOUBLE_ARRAY, 'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]'),
+    _spec('delta', DOUBLE, 'communication radius Δ [m]', low=0.0, low_open=True),
+    _spec('horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True),
+    # Robots (README, "Running on robots").
+    _spec('sensing', STRING, "where the agent senses: 'service' (the simulator's /agent_<i>/sense) or "
+          "'poses' (its own and its neighbours' pose topics)", default='service', choices=SENSING_SOURCES),
+    _spec('pose_type', STRING, "sensing: poses — 'pose' (geometry_msgs/PoseStamped, motion capture) or "
+          "'odom' (nav_msgs/Odometry; ETA-2 velocities from its twist)", default='pose', choices=POSE_TYPES),
+    _spec('pose_topic', STRING, "sensing: poses — topic of robot {id}'s poses, e.g. /vrpn/cf{id}/pose "
+          "('': /agent_{id}/robot/pose or /agent_{id}/robot/odom, by pose_type)", default=''),
+    _spec('pose_timeout', DOUBLE, 'sensing: poses — a pose older than this at a trigger (or on the '
+          'command timer, for its own robot) stops the agent [s]', default=0.5, low=0.0, low_open=True),
+    _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default='world'),
+    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant), 'holonomic' "
+          "(world-frame TwistStamped) or 'unicycle' (body-frame Twist (v, ω), differential drive)",
+          default='none', choices=ROBOTS),
+    _spec('command_topic', STRING, "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)", default=''),
+    _spec('control_point_distance', DOUBLE, 'robot: unicycle — distance l of the control point ahead of the '
+          'wheel axle [m]; the scenario positions are those of the control points', default=0.0, low=0.0),
+    _spec('max_linear_speed', DOUBLE, 'robot: speed limit [m/s] (inf: none); clips are counted and reported',
+          default=math.inf, low=0.0, low_open=True),
+    _spec('max_angular_speed', DOUBLE, 'robot: unicycle — turn rate limit [rad/s] (inf: none)',
+          default=math.inf, low=0.0, low_open=True),
+    _spec('max_linear_acceleration', DOUBLE, 'robot: ETA-2 — acceleration limit of the velocity reference '
+          '[m/s²] (inf: none)', default=math.inf, low=0.0, low_open=True),
+    _spec('command_rate', DOUBLE, 'robot: rate at which the velocity command is recomputed and republished [Hz]',
+          default=50.0, low=0.0, low_open=True),
+    # Runs and tests.
+    _spec('extra_subscribers', INTEGER, 'listeners besides the protocol peers (a recorder) that must match '
+          'before step 0', default=0, low=0),
+    _spec('inject_loss', DOUBLE, 'test facility: drop probability of arriving triggering information (wall clock)',
+          default=0.0, low=0.0, high=1.0),
+    _spec('inject_delay_ms', DOUBLE, 'test facility: delay of arriving triggering information [ms]', default=0.0, low=0.0),
+    _spec('inject_jitter_ms', DOUBLE, 'test facility: extra uniform delay in [0, jitter] [ms]', default=0.0, low=0.0),
+    _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0),
+)  # fmt: skip
+
+GAIN_PARAMETERS = {
+    'eta1': (
+        _spec('alpha', DOUBLE, 'eta1: threshold gain α of (triggersingle)', low=0.0, low_open=True),
+        _spec('beta', DOUBLE, 'eta1: threshold decay rate β of (triggersingle) [1/s]', low=0.0, low_open=True),
+    ),
+    'eta2': (
+        _spec('alpha_d', DOUBLE, 'eta2: threshold gain α_d of (triggerdouble)', low=0.0, low_open=True),
+        _spec('beta_d', DOUBLE, 'eta2: threshold decay rate β_d of (triggerdouble) [1/s]', low=0.0, low_open=True),
+        _spec('k1', DOUBLE, 'eta2: position gain k1 of (uxdouble)', low=0.0, low_open=True),
+        _spec('k2', DOUBLE, 'eta2: velocity gain k2 of (uxdouble)', low=0.0, low_open=True),
+        _spec('k3', DOUBLE, 'eta2: damping k3 of (uxdouble) [1/s]', low=0.0, low_open=True),
+    ),
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class AgentConfig:
+    agent_id: int
+    algorithm: str
+    dimension: int
+    neighbour_ids: tuple[int, ...]
+    neighbours: dict[int, tuple[float, ...]]  # j -> d_ij
+    delta: float
+    horizon: float
+    gains: dict[str, float]
+    sensing: str
+    pose_type: str
+    pose_topic: str
+    pose_timeout: float
+    world_frame: str
+    robot: str
+    command_topic: str
+    control_point_distance: float
+    limits: Limits
+    command_rate: float
+    extra_subscribers: int
+    inject_loss: float
+    inject_delay_ms: float
+    inject_jitter_ms: float
+    inject_seed: int
+
+    @property
+    def double(self) -> bool:
+        return self.algorithm == 'eta2'
+
+    @property
+    def wall_clock_only(self) -> bool:
+        """Poses and robots live on the wall clock: lock-step sim time cannot drive them."""
+        return self.sensing == 'poses' or self.robot != 'none'
+
+    def robot_pose_topic(self, robot: int) -> str:
+        if self.pose_topic:
+            return self.pose_topic.replace('{id}', str(robot))
+        return robot_pose_topic(robot) if self.pose_type == 'pose' else robot_odom_topic(robot)
+
+    @property
+    def robot_command_topic(self) -> str:
+        return self.command_topic or robot_command_topic(self.agent_id)
+
+    @property
+    def control_point_offset(self) -> tuple[float, float, float]:
+        """Where the control point sits in the robot's body frame."""
+        return (self.control_point_distance if self.robot == 'unicycle' else 0.0, 0.0, 0.0)
+
+
+def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
+    """Every parameter of `node`, checked; one ParameterError names every problem."""
+    values, problems = read_parameters(node, AGENT_PARAMETERS)
+    algorithm = values.get('algorithm')
+    if algorithm is not None:
+        gains, gain_problems = read_parameters(node, GAIN_PARAMETERS[algorithm])
+        problems += gain_problems
+    problems += _rules(node, values)
+    if problems:
+        raise ParameterError(node.get_fully_qualified_name(), problems)
+    p = values['dimension']
+    ids = tuple(int(j) for j in values['neighbour_ids'])
+    offsets = [float(v) for v in values['neighbour_offsets']]
+    return AgentConfig(
+        agent_id=values['agent_id'],
+        algorithm=algorithm,
+        dimension=p,
+        neighbour_ids=ids,
+        neighbours={j: tuple(offsets[k * p : (k + 1) * p]) for k, j in enumerate(ids)},
+        delta=values['delta'],
+        horizon=values['horizon'],
+        gains={name: float(value) for name, value in gains.items()},
+        limits=Limits(
+            linear_speed=values['max_linear_speed'],
+            angular_speed=values['max_angular_speed'],
+            linear_acceleration=values['max_linear_acceleration'],
+        ),
+        **{
+            name: values[name]
+            for name in (
+                'sensing', 'pose_type', 'pose_topic', 'pose_timeout', 'world_frame', 'robot', 'command_topic',
+                'control_point_distance', 'command_rate', 'extra_subscribers',
+                'inject_loss', 'inject_delay_ms', 'inject_jitter_ms', 'inject_seed',
+            )
+        },
+    )  # fmt: skip
+
+
+def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
+    """The rules between parameters (each checked only when its parameters are good)."""
+    problems = []
+
+    def have(*names: str) -> bool:
+        return all(name in values for name in names)
+
+    if have('dimension', 'neighbour_ids', 'neighbour_offsets'):
+        p, ids, offsets = values['dimension'], list(values['neighbour_ids']), values['neighbour_offsets']
+        if len(offsets) != p * len(ids):
+            problems.append(
+                f'neighbour_offsets must hold dimension * len(neighbour_ids) = {p} * {len(ids)} values '
+                f'(d_ij per neighbour), got {len(offsets)}'
+            )
+        if len(set(ids)) != len(ids):
+            problems.append(f'neighbour_ids repeat an id: {ids}')
+    if have('agent_id', 'neighbour_ids') and values['agent_id'] in values['neighbour_ids']:
+        problems.append(f'neighbour_ids hold the agent itself ({values["agent_id"]})')
+    if have('horizon') and not math.isfinite(values['horizon']):
+        problems.append(f'horizon must be a finite number > 0, got {values["horizon"]!r}')
+    if have('agent_id') and node.get_namespace() != (expected := agent_namespace(values['agent_id'])):
+        # Its relative names (sense, cmd_vel, trigger_info/to_<j>) must resolve under it.
+        problems.append(
+            f'agent {values["agent_id"]} must run in namespace {expected}, not {node.get_namespace()} '
+            f'(e.g. --ros-args -r __ns:={expected}, or formation_agent --agents {values["agent_id"]})'
+        )
+    if have('world_frame') and not values['world_frame']:
+        problems.append("world_frame must name a frame, got ''")
+    if have('pose_topic') and values['pose_topic'] and '{id}' not in values['pose_topic']:
+        problems.append(f"pose_topic must hold '{{id}}' (one topic per robot), got {values['pose_topic']!r}")
+    robot = values.get('robot')
+    if robot == 'none' and have('command_topic', *LIMIT_PARAMETERS):
+        given = [name for name in (*LIMIT_PARAMETERS, 'command_topic') if values[name] not in (math.inf, '')]
+        if given:
+            problems.append(
+                f"{', '.join(given)} apply to a robot's command adapter (robot: holonomic or unicycle); "
+                "with robot: none the simulator's plant takes the exact commands"
+            )
+    if robot not in (None, 'none') and have('sensing') and values['sensing'] != 'poses':
+        problems.append(
+            f"robot: {robot} needs sensing: poses (the simulator's sensing service reports its own simulated "
+            'world, which does not take robot commands)'
+        )
+    if robot == 'unicycle':
+        if have('dimension') and values['dimension'] != 2:
+            problems.append(f'robot: unicycle drives in the plane: dimension must be 2, got {values["dimension"]}')
+        if have('control_point_distance') and not values['control_point_distance'] > 0.0:
+            problems.append('robot: unicycle needs control_point_distance l > 0 (the control point ahead of the axle)')
+    return problems
+
+
+def agent_help() -> str:
+    """The parameter table `formation_agent --help` prints."""
+    return parameter_help((*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2']))

@@ -1,0 +1,58 @@
+"""What an agent node refuses to read (README, "Reliability"; docs/MESSAGES.md, "Bad messages").
+
+A message that breaks its layout (`formation_msgs_py.codec.MessageError`) or cannot be true is
+dropped before the core sees it, logged (the first three of each reason, then every hundredth)
+and counted per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) for the agent's report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from formation_msgs_py.lockstep import (
+    REJECT_DIMENSION,
+    REJECT_DUPLICATE,
+    REJECT_RECEIVER,
+    REJECT_SENDER,
+    REJECT_TIME_BACKWARDS,
+)
+from formation_msgs_py.types import TriggerInfo
+
+
+class Rejections:
+    """Messages refused, per reason; logged sparingly."""
+
+    def __init__(self, logger, *, changed: Callable[[], None]) -> None:  # noqa: ANN001 - an rclpy logger
+        self._logger = logger
+        self._changed = changed
+        self.counts: dict[str, int] = {}
+
+    def __call__(self, topic: str, reason: str, detail: str) -> None:
+        """Count and log a message that cannot be used; the node carries on without it."""
+        count = self.counts.get(reason, 0) + 1
+        self.counts[reason] = count
+        self._changed()
+        if count <= 3 or count % 100 == 0:  # the first few of each kind, then a trickle
+            self._logger.warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+
+def implausible(
+    info: TriggerInfo, *, sender: int, agent_id: int, algorithm: str, dimension: int, last_stamp: float | None
+) -> tuple[str, str] | None:
+    """Why `info`, well formed, cannot be the next information of `sender` for agent `agent_id`."""
+    if info.sender != sender:
+        return REJECT_SENDER, f'information from agent {info.sender} on the topic of agent {sender}'
+    if info.receiver != agent_id:
+        return REJECT_RECEIVER, f'information for agent {info.receiver}, not {agent_id}'
+    kind_ok = (info.rel_velocity is None) == (algorithm == 'eta1')
+    if len(info.control) != dimension or not kind_ok:
+        return REJECT_DIMENSION, (
+            f'{"ETA-1" if info.rel_velocity is None else "ETA-2"} information of dimension '
+            f'{len(info.control)}; this agent runs {algorithm.upper()} with p = {dimension}'
+        )
+    if info.stamp < 0.0 or (last_stamp is not None and info.stamp < last_stamp):
+        previous = 't = 0' if last_stamp is None else f'its previous one at t={last_stamp!r}'
+        return REJECT_TIME_BACKWARDS, f'agent {sender} stamped t={info.stamp!r}, before {previous}'
+    if info.stamp == last_stamp:
+        return REJECT_DUPLICATE, f'agent {sender} already sent information stamped t={last_stamp!r}'
+    return None

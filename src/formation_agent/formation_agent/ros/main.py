@@ -1,0 +1,123 @@
+"""The `formation_agent` command: one process running one or more agent nodes.
+
+```
+formation_agent --ros-args -r __ns:=/agent_2 --params-file team.yaml --params-file robot.yaml
+formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml   # packed, as `formation run` does
+formation_agent --help                                                      # options and the parameter table
+```
+
+Exit statuses: 0 the run ended (final Step); 1 the agent failed (a stale pose, a protocol
+violation, an error it names); 2 bad parameters (every problem named, nothing started); 3 a peer
+was lost (the simulator or coordinator); 130 SIGINT/SIGTERM.  Whichever it is, every node sends
+its zero command and its final report before the process exits (`FormationAgentNode.leave`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import traceback
+from collections.abc import Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from formation_agent.core.pose_sensing import PoseError
+from formation_agent.ros.config import agent_help
+from formation_agent.ros.faults import FaultInjectionError
+from formation_agent.ros.node import FormationAgentNode, PeerLostError
+from formation_agent.ros.parameters import ParameterError
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_msgs_py.topics import agent_namespace
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='formation_agent',
+        description='Run formation agent nodes (one per agent; several share an executor with --agents).',
+        epilog='Parameters come from ROS arguments, e.g. --ros-args --params-file agents.yaml, keyed by node '
+        'name /agent_<i>/formation_agent (or /** for every node).\n\n' + agent_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        '--executor',
+        choices=EXECUTORS,
+        default='events',
+        help='rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single (SingleThreadedExecutor)',
+    )
+    parser.add_argument(
+        '--agents',
+        help='comma-separated agent ids to run in this process, each in namespace /agent_<i> '
+        '(default: one node whose namespace and parameters come from the ROS arguments)',
+    )
+    return parser
+
+
+def _build_nodes(options: argparse.Namespace) -> list[FormationAgentNode]:
+    if not options.agents:
+        return [FormationAgentNode()]
+    ids = [int(text) for text in options.agents.split(',') if text.strip()]
+    packed = len(ids) > 1
+    return [
+        FormationAgentNode(
+            namespace=agent_namespace(agent_id),
+            start_parameter_services=not packed,
+            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id)],
+        )
+        for agent_id in ids
+    ]
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    argv = list(args if args is not None else sys.argv)
+    # --help and bad options end here, before ROS starts (exit 0 / 2, no traceback).
+    options = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    nodes: list[FormationAgentNode] = []
+    status = 0
+    failure: str | None = None
+    with StopSignals() as stop:
+        try:
+            nodes = _build_nodes(options)
+            executor = make_executor(options.executor)
+            for node in nodes:
+                executor.add_node(node)
+            while not all(node.finished for node in nodes):
+                executor.spin_once(timeout_sec=0.1)
+                stop.check()
+                for node in nodes:
+                    node.check()
+            for node in nodes:
+                node.wait_for_delivery()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            status, failure = 130, 'stopped by a signal'
+        except (ParameterError, FaultInjectionError) as error:  # bad input: every problem named, nothing started
+            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            status = EXIT_BAD_INPUT
+        except PeerLostError as error:
+            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            status, failure = EXIT_PEER_LOST, str(error)
+        except PoseError as error:  # the robots' poses failed it: said in full, no traceback needed
+            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            status, failure = 1, str(error)
+        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+            if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
+                status, failure = 130, 'stopped by a signal'
+            else:
+                print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+                traceback.print_exc(file=sys.stderr)
+                status, failure = 1, str(error)
+        finally:
+            for node in nodes:
+                with contextlib.suppress(Exception):  # best effort: the others must still stop
+                    node.leave(failure=failure)
+                node.destroy_node()
+            rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,172 @@
+"""The `formation_agent` command on a robot: a zero command on every way out, delivered before it exits.
+
+Each test runs agent 1 as a real process (holonomic robot, sensing from poses) against the bench
+(conftest.py), lets it command its robot, then ends it one way: the final Step, its coordinator
+lost, SIGINT, SIGTERM, a stale pose, an exception inside the node.  The robot's command reader
+must have received commands, and the last one must be all zeros; the final report says why the
+agent left.  Also: --help, and every missing parameter named at once.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+# Each test on a ROS domain of its own (conftest.py, robot_domain).
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+CONFIG = Path(__file__).resolve().parents[3] / 'src' / 'formation_agent' / 'config'
+
+
+def _linear(msg):
+    twist = msg.twist if hasattr(msg, 'twist') else msg
+    return (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z)
+
+
+def _named(stderr: str) -> str:
+    """The line in which the agent names why it stopped."""
+    return next(line for line in stderr.splitlines() if line.startswith('formation_agent: '))
+
+
+def _run_until_commanding(bench, agent_process, **parameters):
+    rig = bench()
+    agent = agent_process(**parameters)
+    rig.start()
+    rig.spin_until(lambda: len(rig.commands) >= 10, timeout=15.0, what='ten commands at the command rate')
+    assert any(_linear(msg) != (0.0,) * 6 for _, msg in rig.commands), 'the agent should be moving its robot'
+    return rig, agent
+
+
+def _assert_stopped(rig, agent, *, status, failure):
+    """The last command is all zeros, nothing came after the exit, and the final report says why."""
+    _, last = rig.commands[-1]
+    assert _linear(last) == (0.0,) * 6, f'last command {last}'
+    assert last.header.frame_id == 'world'
+    finals = [report for report in rig.reports if report.final]
+    assert len(finals) == 1, rig.reports
+    assert finals[0].robot_commands >= 10
+    if failure is None:
+        assert finals[0].failure is None
+    else:
+        assert failure in (finals[0].failure or ''), finals[0]
+    assert agent.process.returncode == status, agent.stderr
+
+
+def test_the_final_step_stops_the_robot(bench, agent_process):
+    rig, agent = _run_until_commanding(bench, agent_process)
+    rig.finish()
+    assert rig.wait_for_exit(agent) == 0
+    _assert_stopped(rig, agent, status=0, failure=None)
+
+
+def test_a_lost_coordinator_stops_the_robot(bench, agent_process):
+    rig, agent = _run_until_commanding(bench, agent_process)
+    rig.node.destroy_publisher(rig.step_pub)  # as the coordinator's process would on its way out
+    assert rig.wait_for_exit(agent) == 3
+    assert 'agent 1: the simulator (writer of /formation/step) is lost after step 0' in agent.stderr
+    _assert_stopped(rig, agent, status=3, failure='is lost after step 0')
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_stops_the_robot(bench, agent_process, signum):
+    rig, agent = _run_until_commanding(bench, agent_process)
+    agent.signal(signum)
+    assert rig.wait_for_exit(agent) == 130
+    _assert_stopped(rig, agent, status=130, failure='stopped by a signal')
+
+
+def test_a_stale_own_pose_stops_the_robot(bench, agent_process):
+    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=0.3)
+    rig.silent.add(1)
+    assert rig.wait_for_exit(agent) == 1
+    line = _named(agent.stderr)
+    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), line
+    assert '(pose_timeout 0.3 s): the agent stops' in line and 'Traceback' not in agent.stderr
+    _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.3')
+
+
+def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_process):
+    """Robot 2 goes silent; agent 1 finds out at its next trigger (news from agent 2 brings it on)."""
+    from formation_msgs_py.types import TriggerInfo
+
+    rig, agent = _run_until_commanding(bench, agent_process, alpha=0.01)
+    rig.silent.add(2)
+    rig.spin_for(0.7)  # robot 2's last pose is older than 0.5 s
+    # Agent 2 reports a trigger: agent 1 replans, and with α = 0.01 its next trigger is due at once.
+    rig.send_info(TriggerInfo(sender=2, receiver=1, stamp=0.01, control=(0.3, 0.0), rel_position=(0.5, 0.3)))
+    assert rig.wait_for_exit(agent) == 1
+    line = _named(agent.stderr)
+    assert line.startswith('formation_agent: agent 1: the pose of robot 2 on /agent_2/robot/pose is '), line
+    assert '(pose_timeout 0.5 s): the agent stops' in line
+    _assert_stopped(rig, agent, status=1, failure='the pose of robot 2 on /agent_2/robot/pose is')
+
+
+def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
+    from formation_msgs_py.types import TriggerInfo
+
+    fault = (
+        'from formation_agent.core import eta\n'
+        'def receive(self, info):\n'
+        '    raise RuntimeError("injected fault in the core")\n'
+        'eta.Eta1Agent.receive = receive\n'
+    )
+    rig, agent = _run_until_commanding(bench, agent_process, python_prelude=fault)
+    rig.send_info(TriggerInfo(sender=2, receiver=1, stamp=0.01, control=(0.3, 0.0), rel_position=(0.5, 0.3)))
+    assert rig.wait_for_exit(agent) == 1
+    assert '\nformation_agent: injected fault in the core\nTraceback' in agent.stderr, agent.stderr
+    _assert_stopped(rig, agent, status=1, failure='injected fault in the core')
+
+
+@pytest.mark.parametrize(
+    ('name', 'robot', 'pose_type', 'allowed'),
+    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5})],
+)  # fmt: skip
+def test_the_example_parameter_files_make_the_documented_robot(bench, agent_process, name, robot, pose_type, allowed):
+    """README's one command per robot: the team's file, then the robot's example file from config/."""
+    rig = bench(robot=robot, pose_type=pose_type)
+    rig.robots[2]['xy'] = (3.0, 0.3)  # far from its place: the agent asks for more than the robot can do
+    agent = agent_process(params_files=(CONFIG / f'{name}.params.yaml',))
+    rig.start()
+    rig.spin_until(lambda: len(rig.commands) >= 5, timeout=15.0, what='five commands')
+    rig.finish()
+    assert rig.wait_for_exit(agent) == 0, agent.stderr
+    (final,) = [report for report in rig.reports if report.final]
+    assert {kind: clipped.allowed for kind, clipped in final.saturation.items()}.items() <= allowed.items()
+    assert final.saturation['linear_speed'].count == final.robot_commands >= 5
+
+
+# -- the command line -------------------------------------------------------------------------------
+
+
+def test_help_prints_the_parameter_table():
+    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--help'], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stderr == ''
+    table = done.stdout[done.stdout.index('parameters (--ros-args'):].splitlines()[1:]
+    names = [line.split()[0] for line in table]
+    for name in ('agent_id', 'sensing', 'pose_type', 'pose_timeout', 'robot', 'control_point_distance', 'max_linear_speed',
+                 'max_angular_speed', 'max_linear_acceleration', 'command_rate', 'world_frame', 'alpha', 'k3'):
+        assert name in names, name
+    row = table[names.index('pose_timeout')].split()
+    assert row[1:4] == ['double', '0.5', '>'] and row[4] == '0'
+
+
+def test_missing_parameters_are_named_at_once_without_a_traceback(tmp_path, robot_domain):
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(robot_domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '-r', '__ns:=/agent_1', '-p', 'agent_id:=1',
+         '-p', 'algorithm:=eta1', '-p', 'robot:=unicycle'],
+        capture_output=True, text=True, timeout=60, env=env,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert 'Traceback' not in done.stderr
+    message = done.stderr.strip().splitlines()[-1]
+    assert message.startswith('formation_agent: /agent_1/formation_agent: ')
+    for name in ('dimension', 'neighbour_ids', 'neighbour_offsets', 'delta', 'horizon', 'alpha', 'beta'):
+        assert f"parameter '{name}' (" in message and 'is required' in message, name
+    assert 'robot: unicycle needs sensing: poses' in message
+    assert 'robot: unicycle needs control_point_distance l > 0' in message
