@@ -26,12 +26,12 @@ def test_random_scenarios_satisfy_every_hypothesis(case):
     assert theory.is_connected(s)
     # Feasible by construction, ||d_ij|| <= 0.75 Δ.
     assert theory.formation_feasibility(s).residual < 1e-9
-    margins = theory.edge_margins(s)
-    assert np.all(margins >= 0.25 * s.delta - 1e-12)
+    capacities = theory.edge_capacities(s)
+    assert np.all(capacities >= 0.25 * s.delta - 1e-12)
     # (initial) with the requested slack on every edge, attained on the tightest one.
     errors = theory.edge_errors(s, s.positions)
-    assert np.all(errors <= (1.0 - case['slack']) * margins * (1 + 1e-12) + 1e-12)
-    assert np.max(errors / margins) == pytest.approx(1.0 - case['slack'], rel=1e-9)
+    assert np.all(errors <= (1.0 - case['slack']) * capacities * (1 + 1e-12) + 1e-12)
+    assert np.max(errors / capacities) == pytest.approx(1.0 - case['slack'], rel=1e-9)
     beta0 = theory.beta0(s)
     if s.dynamics == 'single':
         assert s.gains.beta == pytest.approx(0.5 * beta0)

@@ -100,12 +100,12 @@ def test_feasibility(single):
 @pytest.mark.parametrize('c', [0.5, 1.0, 2.0])
 def test_edge_functions(c):
     l = np.linspace(0.0, 0.95 * c, 40)
-    f = theory.f_ij(l, margin=c)
-    g = theory.g_ij(l, margin=c)
-    h = theory.h_ij(l, margin=c)
+    f = theory.f_ij(l, capacity=c)
+    g = theory.g_ij(l, capacity=c)
+    h = theory.h_ij(l, capacity=c)
     assert f[0] == pytest.approx(2.0 / c)  # ω_ij at the formation: the 2/Δ0 of Theorem 1 (ii)
     step = 1e-6
-    derivative = (theory.f_ij(l + step, margin=c) - theory.f_ij(np.maximum(l - step, 0), margin=c)) / (
+    derivative = (theory.f_ij(l + step, capacity=c) - theory.f_ij(np.maximum(l - step, 0), capacity=c)) / (
         l + step - np.maximum(l - step, 0)
     )
     np.testing.assert_allclose(h, derivative, rtol=1e-5)  # h = f'
@@ -121,12 +121,12 @@ def test_omega_is_the_gradient_weight_of_the_tension():
     step = 1e-7
     nu = lambda v: np.dot(v, v) / (c - np.linalg.norm(v))  # noqa: E731
     gradient = np.array([(nu(rel + step * e) - nu(rel - step * e)) / (2 * step) for e in np.eye(2)])
-    np.testing.assert_allclose(gradient, theory.f_ij(0.5, margin=c) * rel, rtol=1e-7)
+    np.testing.assert_allclose(gradient, theory.f_ij(0.5, capacity=c) * rel, rtol=1e-7)
 
 
 def test_edge_functions_reject_outside_the_domain():
     with pytest.raises(theory.TheoryError, match='Δ - ||d_ij||'):
-        theory.f_ij(1.0, margin=1.0)
+        theory.f_ij(1.0, capacity=1.0)
 
 
 # --------------------------------------------------------------------------- ν, V
@@ -134,10 +134,10 @@ def test_edge_functions_reject_outside_the_domain():
 
 def test_tension_and_lyapunov_of_the_example(single, double):
     x = single.positions
-    # y_i - y_j = x_i - x_j - d_ij: (-1.5, -1), (-0.5, -1.5), (1, -0.5); margins 2, 2, 4 - 2√2.
+    # y_i - y_j = x_i - x_j - d_ij: (-1.5, -1), (-0.5, -1.5), (1, -0.5); capacities 2, 2, 4 - 2√2.
     lengths = [math.hypot(-1.5, -1.0), math.hypot(-0.5, -1.5), math.hypot(1.0, -0.5)]
-    margins = [2.0, 2.0, 4.0 - 2.0 * math.sqrt(2.0)]
-    expected = sum(l * l / (c - l) for l, c in zip(lengths, margins))
+    capacities = [2.0, 2.0, 4.0 - 2.0 * math.sqrt(2.0)]
+    expected = sum(l * l / (c - l) for l, c in zip(lengths, capacities))
     assert theory.tension(single, x) == pytest.approx(expected, rel=1e-14)
     # y = x - τ with τ = (0,0), (0,2), (2,0): y = (2,4), (3.5,5), (2.5,5.5); ½ Σ ||y_i - ȳ||² = 7/6.
     assert theory.lyapunov(single, x) == pytest.approx(7.0 / 6.0, rel=1e-14)
@@ -206,11 +206,11 @@ def test_theorem1_constants(single):
     alpha, beta = 10.0, 1.0
     assert c.theorem == 1 and c.free_parameter == 0.5 and c.beta0 == pytest.approx(1.5)
     assert c.k_nu == pytest.approx(c.nu0 + 3 * alpha**2 / (8 * 0.5 * beta))  # (kν)
-    margins = dict(zip([e.pair for e in single.edges], theory.edge_margins(single)))
+    capacities = dict(zip([e.pair for e in single.edges], theory.edge_capacities(single)))
     for pair, k in c.k_edge.items():
         # (kij): k_ij < Δ - ||d_ij|| and ν_ij(k_ij) = 2 k_ν.
-        assert 0.0 < k < margins[pair]
-        assert k * k / (margins[pair] - k) == pytest.approx(2.0 * c.k_nu, rel=1e-9)
+        assert 0.0 < k < capacities[pair]
+        assert k * k / (capacities[pair] - k) == pytest.approx(2.0 * c.k_nu, rel=1e-9)
     assert c.k_V == pytest.approx(7.0 / 6.0 + 3 * alpha**2 / (8 * 1.5 * 0.5))  # (kV)
     for agent in single.agent_ids:
         assert c.xi[agent] == pytest.approx(alpha / (c.c[agent] + alpha * beta))  # (xi)
@@ -222,10 +222,10 @@ def test_theorem1_constants(single):
 
 def test_theorem1_constant_c_by_hand(single):
     c = theory.theorem_constants(single, a=0.25)
-    margins = {e.pair: m for e, m in zip(single.edges, theory.edge_margins(single))}
+    capacities = {e.pair: m for e, m in zip(single.edges, theory.edge_capacities(single))}
     k = c.k_edge
-    f = {p: theory.f_ij(k[p], margin=margins[p]) for p in k}
-    g = {p: theory.g_ij(k[p], margin=margins[p]) for p in k}
+    f = {p: theory.f_ij(k[p], capacity=capacities[p]) for p in k}
+    g = {p: theory.g_ij(k[p], capacity=capacities[p]) for p in k}
     edge = lambda i, j: (min(i, j), max(i, j))  # noqa: E731
     F = {i: sum(f[edge(i, j)] for j in single.neighbours(i)) for i in single.agent_ids}
     for i in single.agent_ids:
@@ -245,9 +245,9 @@ def test_theorem2_constants_of_the_example(double):
     assert c.paper_chain.k_V == pytest.approx(c.V0 + 3 * 100.0 / (8 * 1.5 * (c.rho2_P - 1.0)))  # (kVd)
     assert c.lambda_max_P == pytest.approx(5.3644, abs=1e-4)
     for pair, k in c.k_edge.items():
-        margin = 4.0 - float(np.linalg.norm(next(e.d for e in double.edges if e.pair == pair)))
+        capacity = 4.0 - float(np.linalg.norm(next(e.d for e in double.edges if e.pair == pair)))
         K = c.k_nu / double.gains.k1
-        assert k * k / (margin - k) == pytest.approx(2.0 * K, rel=1e-9)  # (kijd)
+        assert k * k / (capacity - k) == pytest.approx(2.0 * K, rel=1e-9)  # (kijd)
     json.dumps(c.to_dict(), allow_nan=False)
     assert c.to_dict()['corrected_chain']['k_V_d'] is None
 
@@ -285,7 +285,7 @@ def test_theorem_constants_refuse_broken_hypotheses(single, double):
 def continuous_double(scenario, horizon):
     """The E = 0 closed loop of (uydouble) in deviation coordinates; returns times and V_d(t)."""
     heads, tails, _ = scenario.edge_indices()
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     g = scenario.gains
     n, p = scenario.n, scenario.dimension
     y = scenario.positions - theory.formation_feasibility(scenario).tau
@@ -296,7 +296,7 @@ def continuous_double(scenario, horizon):
         dy, dq = s[: n * p].reshape(n, p), s[n * p :].reshape(n, p)
         rel = dy[heads] - dy[tails]
         l = np.linalg.norm(rel, axis=1)
-        w = (2 * margins - l) / (margins - l) ** 2
+        w = (2 * capacities - l) / (capacities - l) ** 2
         force = np.zeros((n, p))
         term = w[:, None] * (g.k1 * rel + g.k2 * (dq[heads] - dq[tails]))
         np.add.at(force, heads, term)
@@ -330,14 +330,14 @@ def test_continuous_double_obeys_the_corrected_rate_and_breaks_the_printed_one(d
 def test_continuous_single_obeys_theorem1_rate(single):
     # Theorem 1 (ii) with e ≡ 0: V' <= -2β0 V.
     heads, tails, _ = single.edge_indices()
-    margins = theory.edge_margins(single)
+    capacities = theory.edge_capacities(single)
     y0 = single.positions - theory.formation_feasibility(single).tau
 
     def rhs(_t, s):
         y = s.reshape(3, 2)
         rel = y[heads] - y[tails]
         l = np.linalg.norm(rel, axis=1)
-        w = (2 * margins - l) / (margins - l) ** 2
+        w = (2 * capacities - l) / (capacities - l) ** 2
         u = np.zeros((3, 2))
         np.add.at(u, heads, -w[:, None] * rel)
         np.add.at(u, tails, w[:, None] * rel)

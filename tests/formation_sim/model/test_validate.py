@@ -152,7 +152,7 @@ def test_report_dict_lists_every_edge_slack():
     assert slacks[(2, 3)] == pytest.approx(4.0 - 2.0 * np.sqrt(2.0) - np.hypot(1.0, 0.5))
 
 
-def test_zero_margin_edge_reports_without_nan():
+def test_zero_capacity_edge_reports_without_nan():
     s = load_scenario('paper_single')
     edges = (Edge(i=1, j=2, d=np.array([0.0, -4.0])),) + s.edges[1:]
     report = validate_scenario(s.replace(edges=edges))

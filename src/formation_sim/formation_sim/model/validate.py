@@ -119,7 +119,7 @@ class ValidationReport:
 
 
 def _json_safe(value: Any) -> Any:
-    """Plain JSON types; non-finite floats (e.g. the relative slack of a zero margin) become None."""
+    """Plain JSON types; non-finite floats (e.g. the relative slack of a zero capacity) become None."""
     if isinstance(value, dict):
         return {str(k): _json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -136,7 +136,7 @@ def _json_safe(value: Any) -> Any:
 def _slack_lines(edges: list[dict[str, Any]]) -> list[str]:
     shown = sorted(edges, key=lambda e: e['relative_slack'])[:SLACK_LINES]
     lines = [
-        f'    edge ({e["i"]}, {e["j"]}): ||d_ij|| = {_g(e["d_norm"])}, Δ-||d_ij|| = {_g(e["margin"])}, '
+        f'    edge ({e["i"]}, {e["j"]}): ||d_ij|| = {_g(e["d_norm"])}, Δ-||d_ij|| = {_g(e["capacity"])}, '
         f'||x_i(0)-x_j(0)-d_ij|| = {_g(e["error"])}, slack {_g(e["slack"])} '
         f'({100.0 * e["relative_slack"]:.1f} %)'
         for e in shown
@@ -231,19 +231,19 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             worst_edge=[edge.i, edge.j],
         )
 
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     errors0 = theory.edge_errors(scenario, scenario.positions)
     slack_rows = []
     for k, edge in enumerate(scenario.edges):
         d_norm = float(np.linalg.norm(edge.d))
-        margin, error = float(margins[k]), float(errors0[k])
-        slack = margin - error
-        relative = slack / margin if margin > 0.0 else -math.inf
+        capacity, error = float(capacities[k]), float(errors0[k])
+        slack = capacity - error
+        relative = slack / capacity if capacity > 0.0 else -math.inf
         slack_rows.append(
-            dict(i=edge.i, j=edge.j, d_norm=d_norm, margin=margin, error=error, slack=slack,
+            dict(i=edge.i, j=edge.j, d_norm=d_norm, capacity=capacity, error=error, slack=slack,
                  relative_slack=relative)
         )
-        if not margin > 0.0:
+        if not capacity > 0.0:
             shown_norm, shown_delta = _apart(d_norm, scenario.delta)
             out.error(
                 'edge_length',
@@ -252,25 +252,25 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
                 d_norm=d_norm,
                 delta=scenario.delta,
             )
-        if not error < margin:
-            shown_error, shown_margin = _apart(error, margin)
+        if not error < capacity:
+            shown_error, shown_capacity = _apart(error, capacity)
             out.error(
                 'initial',
                 _edge(edge),
-                f'||x_i(0)-x_j(0)-d_ij|| = {shown_error} is not below Δ-||d_ij|| = {shown_margin} '
+                f'||x_i(0)-x_j(0)-d_ij|| = {shown_error} is not below Δ-||d_ij|| = {shown_capacity} '
                 f'(initial)',
                 error=error,
-                margin=margin,
+                capacity=capacity,
             )
         elif relative < SLACK_WARNING_FRACTION:
             out.warning(
                 'initial',
                 _edge(edge),
                 f'(initial) holds with slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij|| = {_g(slack)}, only '
-                f'{100.0 * relative:.1f} % of Δ-||d_ij|| = {_g(margin)} (below '
+                f'{100.0 * relative:.1f} % of Δ-||d_ij|| = {_g(capacity)} (below '
                 f'{100.0 * SLACK_WARNING_FRACTION:.0f} %)',
                 slack=slack,
-                margin=margin,
+                capacity=capacity,
                 relative_slack=relative,
             )
     if slack_rows:
@@ -284,9 +284,9 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
         )
 
     beta0 = None
-    if connected and margins.size and margins.max() > 0.0:
+    if connected and capacities.size and capacities.max() > 0.0:
         lam2 = theory.algebraic_connectivity(scenario)
-        delta0 = float(margins.max())
+        delta0 = float(capacities.max())
         beta0 = lam2 / delta0
         remark = theory.remark_beta_bound(scenario)
         out.note(
