@@ -129,17 +129,31 @@ def test_generous_slack_gives_no_initial_warning():
     assert 'initial' not in {w.rule for w in report.warnings}  # already in formation: 100 % slack
 
 
-def test_remark_warning_disappears_below_the_bound():
+REMARK_BOUND_N3 = 4.0 / (3 * 2 * 4.0)  # Remark 3.2: 4/(n(n-1)Δ) for the paper's n = 3, Δ = 4
+
+
+def _remark_warnings(report):
+    return [w for w in report.warnings if w.rule == 'remark']
+
+
+def test_remark_warns_above_its_bound_and_only_there():
     s = load_scenario('paper_single')
-    report = validate_scenario(s.replace(gains=SingleGains(alpha=10.0, beta=0.1)))
-    assert 'remark' not in {w.rule for w in report.warnings}
+    above = _remark_warnings(validate_scenario(s))  # β = 1 > 1/6
+    assert len(above) == 1
+    assert above[0].values == {'value': 1.0, 'remark_bound': pytest.approx(REMARK_BOUND_N3, rel=1e-15)}
+    assert 'β = 1 exceeds 4/(n(n-1)Δ) = 0.166667' in above[0].message
+    assert _remark_warnings(validate_scenario(s.replace(gains=SingleGains(alpha=10.0, beta=0.1)))) == []
 
 
 def test_double_remark_applies_to_beta1():
     s = load_scenario('paper_double')
+    above = _remark_warnings(validate_scenario(s))  # β1 = 1.5 > 1/6
+    assert len(above) == 1
+    assert above[0].values == {'value': 1.5, 'remark_bound': pytest.approx(REMARK_BOUND_N3, rel=1e-15)}
+    assert 'β1 = 1.5 exceeds 4/(n(n-1)Δ) = 0.166667' in above[0].message
     gains = DoubleGains.from_riccati(alpha_d=10.0, beta_d=0.05, beta1=0.1, k3='paper')
     report = validate_scenario(s.replace(gains=gains))
-    assert report.ok and 'remark' not in {w.rule for w in report.warnings}
+    assert report.ok and _remark_warnings(report) == []
 
 
 def test_report_dict_lists_every_edge_slack():
