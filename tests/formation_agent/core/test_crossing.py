@@ -189,7 +189,7 @@ def test_polishing_bracket_with_three_roots_gives_the_first():
 def test_search_past_the_tolerance_advanced_in_pieces_gives_the_same_float(pieces):
     # The steps the search takes inside the tolerance (the bracket not yet proven) carry the
     # last step's bounds over to the next point; pieces must not change them.
-    from formation_agent.crossing import CrossingSearch
+    from formation_agent.core.crossing import CrossingSearch
 
     model = ThreeRoots(tau=1e-3, margin0=5e-13)
     whole = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0)

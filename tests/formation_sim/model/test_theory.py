@@ -343,7 +343,7 @@ def _theorem2_by_hand(scenario, *, b, reading):
 def _double_cases():
     paper = load_scenario('paper_double')
     slow = paper.replace(gains=DoubleGains.from_riccati(alpha_d=10.0, beta_d=0.1, beta1=1.5, k3='paper'))
-    from formation_sim.generate import random_scenario
+    from formation_sim.model.generate import random_scenario
 
     team = random_scenario(n=7, seed=5, dynamics='double', dimension=3, slack=0.3)
     # At rest in formation with a small α_d, c^d_i is a few α_d and α_d β_d a visible part of it

@@ -84,7 +84,10 @@ class ErrorModel(Protocol):
 
 # Steps never grow by more than this factor, so that bounds stay tight around the current point.
 _GROWTH = 4.0
-_MAX_STEPS = 200_000
+# A search gives up (CrossingError) after this many certified steps.
+MAX_STEPS = 200_000
+# The relative margin 1 - ||e||²/(α e^{-βt})² at which the search starts to finish (its default).
+DEFAULT_TOLERANCE = 1e-12
 _RTOL = 4.0 * 2.0**-52  # 4 ulps relative
 
 
@@ -108,7 +111,7 @@ class CrossingSearch:
         alpha: float,
         beta: float,
         limit: float,
-        tolerance: float = 1e-12,
+        tolerance: float = DEFAULT_TOLERANCE,
         initial_step: float = 1e-3,
     ) -> None:
         self.model = model
@@ -147,8 +150,8 @@ class CrossingSearch:
             if a > self.limit:
                 self.result = math.inf
                 break
-            if self.steps >= _MAX_STEPS:
-                raise CrossingError(f'no convergence after {_MAX_STEPS} certified steps (t={a!r})')
+            if self.steps >= MAX_STEPS:
+                raise CrossingError(f'no convergence after {MAX_STEPS} certified steps (t={a!r})')
             self.steps += 1
             size_sq, size_rate = terms(a)
             scale = math.exp(beta * a) / alpha
@@ -232,7 +235,7 @@ def first_crossing(
     alpha: float,
     beta: float,
     limit: float,
-    tolerance: float = 1e-12,
+    tolerance: float = DEFAULT_TOLERANCE,
     initial_step: float = 1e-3,
 ) -> float:
     """Smallest t >= start with ||e(t)|| >= α e^{-βt}; inf if there is none up to `limit`.

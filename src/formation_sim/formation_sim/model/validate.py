@@ -7,6 +7,9 @@ feasible      Φ is non-empty: least-squares residual of τ_i - τ_j = d_ij ~ 0 
 edge_length   ||d_ij|| < Δ on every edge (Assumption 1)                                error
 initial       ||x_i(0) - x_j(0) - d_ij|| < Δ - ||d_ij|| (initial)                      error;
               warning when the slack is below 5 % of Δ - ||d_ij||
+precision     double precision resolves the initial slack: one ulp of x_i - x_j - d_ij    error
+              moves the triggering error by at most PRECISION_LIMIT of the threshold
+              (`_check_precision` derives it)
 alpha         α > 0 (Theorem 1)                                                         error
 beta          0 < β < β0 = ρ2(DD^T)/Δ0 (Theorem 1)                                       error;
               warning above 0.95 β0
@@ -37,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS
 from formation_sim.model import theory
 from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
@@ -45,6 +49,9 @@ from formation_sim.model.scenario import Scenario
 NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
 SLACK_WARNING_FRACTION = 0.05  # warn when (initial) holds with less than this relative slack
 SLACK_LINES = 20  # per-edge slack lines printed by `format` (all are in to_dict)
+# The largest step of the rounded triggering error, relative to the threshold, that the certified
+# search gets through (see `_check_precision`): its tolerance times its steps, with a factor 2 to spare.
+PRECISION_LIMIT = DEFAULT_TOLERANCE * MAX_STEPS / 4.0
 
 
 class ValidationError(ValueError):
@@ -283,6 +290,8 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             edges=slack_rows,
         )
 
+    _check_precision(scenario, out, capacities, errors0)
+
     beta0 = None
     if connected and capacities.size and capacities.max() > 0.0:
         lam2 = theory.algebraic_connectivity(scenario)
@@ -324,6 +333,75 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
                 f'or a magnitude of at least {smallest!r}',
                 key=key, value=value,
             )
+
+
+def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray, errors0: np.ndarray) -> None:
+    """Refuse an initial slack below what double precision resolves (rule `precision`).
+
+    Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
+    prediction moves in steps of one ulp of y_ij, and each such step moves the triggering error
+    by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
+    k2 f_ij ulp(q_i - q_j)). Near the threshold the computed error then stands still for a while
+    at some margin φ > tolerance, and the certified search walks such a plateau in steps of
+    about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α tolerance). It gives
+    up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
+    σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
+    ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
+    (Late in a run the threshold itself shrinks toward the rounding of the states: the engine's
+    rounding floor stops the run there.)
+    """
+    gains = scenario.gains
+    if scenario.dynamics == 'single':
+        name, threshold, k1, k2 = 'α', gains.alpha, 1.0, 0.0
+    else:
+        name, threshold, k1, k2 = 'α_d', gains.alpha_d, gains.k1, gains.k2
+    if not (threshold > 0.0 and k1 > 0.0 and k2 >= 0.0):
+        return  # the gains' own rules report them
+    heads, tails, d = scenario.edge_indices()
+    y = scenario.positions[heads] - scenario.positions[tails] - d
+    ulp_y = np.spacing(np.abs(y).max(axis=1))
+    if scenario.velocities is None:
+        speed = ulp_q = np.zeros(len(heads))
+    else:
+        q = scenario.velocities[heads] - scenario.velocities[tails]
+        speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
+
+    def error_step(k: int, sigma: float) -> float:
+        c = float(capacities[k])
+        g, h, f = 2.0 * c * c / sigma**3, (2.0 * c + sigma) / sigma**3, (c + sigma) / sigma**2
+        return float((k1 * g + k2 * h * speed[k]) * ulp_y[k] + k2 * f * ulp_q[k])
+
+    limit = PRECISION_LIMIT * threshold
+    for k, edge in enumerate(scenario.edges):
+        capacity, slack = float(capacities[k]), float(capacities[k] - errors0[k])
+        if not (capacity > 0.0 and slack > 0.0):
+            continue  # edge_length or initial already refuses it
+        step = error_step(k, slack)
+        if step <= limit:
+            continue
+        # The least resolvable slack: the step falls with the slack, so bisect (geometrically).
+        low, high = slack, capacity
+        if error_step(k, high) > limit:
+            floor = high
+        else:
+            for _ in range(100):
+                middle = math.sqrt(low * high)
+                low, high = (middle, high) if error_step(k, middle) > limit else (low, middle)
+            floor = high
+        how = (
+            'g_ij × ulp, (gij)' if k2 == 0.0 else '(k1 g_ij + k2 h_ij ||q_i-q_j||) × ulp + k2 f_ij × ulp(q_i-q_j)'
+        )
+        out.error(
+            'precision',
+            _edge(edge),
+            f'initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij|| = {_g(slack)} is below {_g(floor)}, the least '
+            f'double precision resolves on this edge: one ulp of x_i-x_j-d_ij ({_g(ulp_y[k])}) moves the '
+            f'triggering error by {_g(step)} ({how}), {_g(step / threshold)} of the threshold {name} = '
+            f'{_g(threshold)}, where the certified search resolves at most {_g(PRECISION_LIMIT)} of it '
+            f'(tolerance {_g(DEFAULT_TOLERANCE)} × {MAX_STEPS} steps / 4)',
+            slack=slack, floor=floor, ulp=float(ulp_y[k]), error_step=step, threshold=threshold,
+            limit=PRECISION_LIMIT,
+        )
 
 
 def _check_remark(scenario: Scenario, out: _Collector, name: str, value: float) -> None:
