@@ -367,9 +367,13 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
         speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
 
     def error_step(k: int, sigma: float) -> float:
-        c = float(capacities[k])
-        g, h, f = 2.0 * c * c / sigma**3, (2.0 * c + sigma) / sigma**3, (c + sigma) / sigma**2
-        return float((k1 * g + k2 * h * speed[k]) * ulp_y[k] + k2 * f * ulp_q[k])
+        ratio = float(capacities[k]) / sigma  # g, h, f through c/σ: no overflow for any finite Δ
+        step = k1 * (2.0 * ratio * ratio / sigma) * float(ulp_y[k])
+        if k2 > 0.0:
+            if speed[k] > 0.0:
+                step += k2 * ((2.0 * ratio + 1.0) / (sigma * sigma)) * float(speed[k] * ulp_y[k])
+            step += k2 * ((ratio + 1.0) / sigma) * float(ulp_q[k])
+        return step
 
     limit = PRECISION_LIMIT * threshold
     for k, edge in enumerate(scenario.edges):
