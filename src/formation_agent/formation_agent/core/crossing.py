@@ -124,9 +124,9 @@ class CrossingSearch:
         self.result: float | None = None
         self.steps = 0
         self._span = float(initial_step)
-        # (end, E, E1, E2): the bounds of the last step, valid on [its point, end]; the last
-        # step's end point may use them to prove its polishing bracket holds one root.
-        self._cover: tuple[float, float, float, float] | None = None
+        # (end, E, E2): bounds of the last step, valid from its point to end; the point it
+        # leads to may use them to prove that its polishing bracket holds one root.
+        self._cover = (-math.inf, math.nan, math.nan)
         self._terms = getattr(model, 'error_terms', None) or _vector_terms(model)
         self._norm = getattr(model, 'error_norm', None) or _vector_norm(model)
 
@@ -145,7 +145,7 @@ class CrossingSearch:
         beta, alpha, tolerance = self.beta, self.alpha, self.tolerance
         terms, bounds = self._terms, self.model.bounds
         span = self._span
-        cover = self._cover
+        cover_end, bound_e, bound_curv = self._cover
         while self.result is None and a <= until:
             if a > self.limit:
                 self.result = math.inf
@@ -164,12 +164,12 @@ class CrossingSearch:
                 )
             size = math.sqrt(size_sq)
             if phi <= tolerance:
-                result = self._finish(a, phi, phi_rate, size, cover, stuck=False)
+                result = self._finish(a, phi, phi_rate, size, cover_end, bound_e, bound_curv, stuck=False)
                 if result is not None:
                     self.result = result
                     break
             span_eff, bound_e, bound_rate, bound_curv = bounds(a, span, size)
-            cover = (a + span_eff, bound_e, bound_rate, bound_curv)
+            cover_end = a + span_eff
             lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate
             step = phi / lipschitz if lipschitz > 0.0 else math.inf
             curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv)
@@ -183,20 +183,23 @@ class CrossingSearch:
             nxt = a + step
             if nxt <= a:
                 # The certified step is below the resolution of t: we sit on the crossing.
-                self.result = self._finish(a, phi, phi_rate, size, cover, stuck=True)
+                self.result = self._finish(a, phi, phi_rate, size, cover_end, bound_e, bound_curv, stuck=True)
                 break
             a = nxt
         self.frontier = a
         self._span = span
-        self._cover = cover
+        self._cover = (cover_end, bound_e, bound_curv)
         return self.result
 
-    def _finish(self, a: float, phi: float, phi_rate: float, size: float, cover, *, stuck: bool) -> float | None:
+    def _finish(
+        self, a: float, phi: float, phi_rate: float, size: float, cover_end: float, bound_e: float, bound_curv: float,
+        *, stuck: bool,
+    ) -> float | None:
         """The crossing from a point whose margin is within tolerance; None: step on from a.
 
-        `size` is ||e(a)||, so the margin at a costs no evaluation. `cover` is (end, E, E1, E2),
-        bounds valid from at or before a to end (the last step's), or None. `stuck`: no certified
-        step can leave a (then a is returned where the bracket is not proven).
+        `size` is ||e(a)||, so the margin at a costs no evaluation. `bound_e`, `bound_curv` bound
+        ||e||, ||ë|| from at or before a up to `cover_end` (the last step's bounds). `stuck`: no
+        certified step can leave a (then a is returned where the bracket is not proven).
         """
         if phi <= 0.0 or phi_rate >= 0.0:
             return a
@@ -207,12 +210,10 @@ class CrossingSearch:
             return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
         width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
         b = a + width
-        if cover is None or cover[0] < b:
+        if cover_end < b:
             span, bound_e, _, bound_curv = self.model.bounds(a, b - a, size)
             if a + span < b:
                 return a if stuck else None
-        else:
-            _, bound_e, _, bound_curv = cover
         # φ'' <= 4β² + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so [a, b] holds one root.
         curvature = 4.0 * beta * beta + 2.0 * scale * scale * bound_e * bound_curv
         if not curvature * (b - a) <= -0.5 * phi_rate:  # also False for a NaN or infinite bound
