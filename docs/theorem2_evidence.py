@@ -40,7 +40,7 @@ def window_slopes(times, values, windows):
 def linear_rates(scenario):
     """Eigenvalues of the E = 0 closed loop linearised at the formation (ω_ij = 2/(Δ-||d_ij||))."""
     gains = scenario.gains
-    weights = 2.0 / theory.edge_margins(scenario)  # f_ij(0), (fij)
+    weights = 2.0 / theory.edge_capacities(scenario)  # f_ij(0), (fij)
     lap = theory.laplacian(scenario, weights)
     n = scenario.n
     top = np.hstack([np.zeros((n, n)), np.eye(n)])
@@ -59,7 +59,7 @@ def linear_rates(scenario):
 
 def continuous_run(scenario, horizon):
     heads, tails, d = scenario.edge_indices()
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     gains = scenario.gains
     n, p = scenario.n, scenario.dimension
     tau = theory.formation_feasibility(scenario).tau
@@ -72,7 +72,7 @@ def continuous_run(scenario, horizon):
         dq = state[n * p :].reshape(n, p)
         rel = dy[heads] - dy[tails]  # y_i - y_j = x_i - x_j - d_ij
         length = np.linalg.norm(rel, axis=1)
-        omega = (2.0 * margins - length) / (margins - length) ** 2  # (fij)
+        omega = (2.0 * capacities - length) / (capacities - length) ** 2  # (fij)
         coupling = np.zeros((n, p))
         term = omega[:, None] * (gains.k1 * rel + gains.k2 * (dq[heads] - dq[tails]))
         np.add.at(coupling, heads, term)

@@ -158,10 +158,6 @@ def test_trigger_info_with_mismatched_vectors_cannot_be_encoded():
         encode_trigger_info(bad)
 
 
-def test_message_error_is_a_value_error():
-    assert issubclass(MessageError, ValueError)
-
-
 def double_state() -> SensedState:
     return SensedState(
         agent=2,

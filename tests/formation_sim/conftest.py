@@ -7,6 +7,7 @@
 - `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
 - `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker index) and the
   in-process run of the same scenario, shared by every test that asks for it in a session.
+- `tight_edge`: a paper example whose edge (2, 3) starts with a given fraction of its capacity as slack.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from formation_sim.sim.engine import simulate
@@ -60,6 +62,25 @@ def _wait_for_stepping(run, limit: float = 120.0) -> None:
         time.sleep(0.05)
     assert reached() > 0.0, f'the run never stepped past t = 0 (last progress: {run.last_progress!r})'
 
+
+
+def _tight_edge(name: str, fraction: float):
+    """`name` (a built-in) with agent 3 moved along y_23 = x_2 - x_3 - d_23 so that the slack
+    Δ - ||d_23|| - ||y_23(0)|| is `fraction` of the capacity Δ - ||d_23||."""
+    scenario = load_scenario(name)
+    edge = next(e for e in scenario.edges if e.pair == (2, 3))
+    x = scenario.positions.copy()
+    two, three = scenario.index(2), scenario.index(3)
+    y = x[two] - x[three] - edge.d
+    capacity = scenario.delta - np.linalg.norm(edge.d)
+    x[three] = x[two] - edge.d - y / np.linalg.norm(y) * (1.0 - fraction) * capacity
+    return scenario.replace(positions=x, name=f'{name}_slack{fraction:g}')
+
+
+@pytest.fixture(scope='session')
+def tight_edge():
+    """`tight_edge(name, fraction) -> Scenario`: edge (2, 3) of a paper example with slack `fraction` of its capacity."""
+    return _tight_edge
 
 
 @pytest.fixture

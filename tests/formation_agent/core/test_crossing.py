@@ -132,3 +132,69 @@ def test_polishing_root_finder_reaches_a_few_ulps(f, a, b, root):
 
     x = _root_in_bracket(f, a, f(a), b, f(b))
     assert abs(x - root) <= 8 * math.ulp(root)
+
+
+class ThreeRoots:
+    """||e(t)||² = 1 - φ0 P(t/τ): with α = 1, β = 0 the margin φ(t) = φ0 P(t/τ) exactly.
+
+    P(s) = (1-s)(2-s)(3-s)/6 (1 + c1 s + c2 s²) has roots 1, 2, 3 in [0, 5] and no other, P(0) = 1,
+    P'(0) = -0.4, P(5) = -1. So at t = 0 the margin φ0 is within the search's tolerance and the
+    polishing bracket [0, 2φ/|φ'|] = [0, 5τ] holds the three roots τ, 2τ, 3τ; regula falsi's first
+    point is 2.5τ, between the second and the third root, where the margin is positive.
+    """
+
+    C1 = 11 / 6 - 0.4
+    C2 = (0.25 - 1 - 5 * C1) / 25
+
+    def __init__(self, *, tau, margin0):
+        cubic = np.polynomial.Polynomial.fromroots([1.0, 2.0, 3.0]) * (-1 / 6)
+        self.poly = cubic * np.polynomial.Polynomial([1.0, self.C1, self.C2])
+        self.tau, self.margin0 = tau, margin0
+
+    def _p(self, t, order=0):
+        return self.poly.deriv(order)(t / self.tau) / self.tau**order if order else self.poly(t / self.tau)
+
+    def error_and_rate(self, t):
+        e = math.sqrt(1.0 - self.margin0 * self._p(t))
+        return np.array([e]), np.array([-self.margin0 * self._p(t, 1) / (2 * e)])
+
+    def error(self, t):
+        return self.error_and_rate(t)[0]
+
+    def bounds(self, a, span, size):
+        # |P^(k)(s)| <= sum_m |c_m| |s|^m over the span, with the chain rule's 1/τ^k.
+        top = max(abs(a), abs(a + span)) / self.tau
+        p0, p1, p2 = (
+            sum(abs(c) * top**m for m, c in enumerate(self.poly.deriv(k).coef)) / self.tau**k for k in range(3)
+        )
+        low = math.sqrt(1.0 - self.margin0 * p0)  # ||e|| >= low on the span
+        rate = self.margin0 * p1 / (2 * low)
+        return span, math.sqrt(1.0 + self.margin0 * p0), rate, self.margin0 * p2 / (2 * low) + rate * rate / low
+
+
+def test_polishing_bracket_with_three_roots_gives_the_first():
+    # Regula falsi alone finds *a* root of its bracket: here it would return 3τ. The search must
+    # prove the bracket holds one root before refining, or keep stepping.
+    tau = 1e-3
+    model = ThreeRoots(tau=tau, margin0=5e-13)
+    assert [model._p(k * tau) for k in (1, 2, 3)] == pytest.approx([0.0] * 3, abs=1e-14)
+    assert model._p(0.0) == 1.0 and model._p(2.5 * tau) > 0.0 and model._p(5 * tau) == pytest.approx(-1.0)
+    t = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0, tolerance=1e-12)
+    # The margin is evaluated to ~1e-16 absolute and falls at 3.5e-10 per second at τ: the
+    # crossing is resolvable to ~3e-7 s.
+    assert abs(t - tau) < 1e-3 * tau
+
+
+@pytest.mark.parametrize('pieces', [2, 7, 50])
+def test_search_past_the_tolerance_advanced_in_pieces_gives_the_same_float(pieces):
+    # The steps the search takes inside the tolerance (the bracket not yet proven) carry the
+    # last step's bounds over to the next point; pieces must not change them.
+    from formation_agent.core.crossing import CrossingSearch
+
+    model = ThreeRoots(tau=1e-3, margin0=5e-13)
+    whole = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0)
+    search = CrossingSearch(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0)
+    for until in np.linspace(0.0, 1e-3, pieces):
+        if search.advance(float(until)) is not None:
+            break
+    assert search.run() == whole

@@ -116,3 +116,18 @@ def test_bad_arguments_exit_2_and_touch_nothing(tmp_path, capsys, arguments, com
         err = capsys.readouterr().err
         assert complaint in err and 'Traceback' not in err
     assert _listing(out) == earlier and not (tmp_path / 'new').exists()
+
+
+def test_simulate_refuses_an_initial_slack_double_precision_cannot_resolve(tmp_path, capsys, tight_edge):
+    # Issue 10's "initial slack of 1e-12": formerly a CrossingError traceback. Now validate refuses
+    # it, naming the edge, the slack and the floor, before anything is written.
+    from formation_sim.model.scenario import dump_scenario
+
+    path = tmp_path / 'tight.yaml'
+    dump_scenario(tight_edge('paper_single', 1e-12), path)
+    out = tmp_path / 'run'
+    assert main(['simulate', str(path), '--horizon', '1e-6', '--out', str(out)]) == 2
+    captured = capsys.readouterr()
+    text = captured.out + captured.err
+    assert '[precision] edge (2, 3): initial slack' in text and 'is below 0.00106827' in text
+    assert 'Traceback' not in text and not out.exists()

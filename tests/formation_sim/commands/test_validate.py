@@ -9,7 +9,7 @@ from importlib import resources
 
 import pytest
 
-from formation_sim.cli import COMMANDS, main
+from formation_sim.cli import main
 
 GOOD = """\
 name: good
@@ -29,10 +29,6 @@ def write(tmp_path, text):
     path = tmp_path / 'case.yaml'
     path.write_text(text, encoding='utf-8')
     return str(path)
-
-
-def test_validate_is_registered():
-    assert 'validate' in COMMANDS
 
 
 def test_valid_builtin_prints_the_report(capsys):

@@ -22,13 +22,19 @@ from formation_sim.model.scenario import (
     scenario_from_dict,
     scenario_to_dict,
 )
+from formation_sim.model.validate import require_valid
 
 
 # --------------------------------------------------------------------------- the paper's examples
 
 
-def test_builtin_names():
-    assert set(builtin_scenarios()) >= {'paper_single', 'paper_double'}
+def test_every_builtin_loads_under_its_name_and_is_valid():
+    names = builtin_scenarios()
+    assert {'paper_single', 'paper_double'} <= set(names)
+    for name in names:
+        scenario = load_scenario(name)
+        assert scenario.name == name
+        assert require_valid(scenario).ok  # a shipped scenario meets every hypothesis of its theorem
 
 
 @pytest.mark.parametrize('name', ['paper_single', 'paper_double'])

@@ -100,12 +100,12 @@ def test_feasibility(single):
 @pytest.mark.parametrize('c', [0.5, 1.0, 2.0])
 def test_edge_functions(c):
     l = np.linspace(0.0, 0.95 * c, 40)
-    f = theory.f_ij(l, margin=c)
-    g = theory.g_ij(l, margin=c)
-    h = theory.h_ij(l, margin=c)
+    f = theory.f_ij(l, capacity=c)
+    g = theory.g_ij(l, capacity=c)
+    h = theory.h_ij(l, capacity=c)
     assert f[0] == pytest.approx(2.0 / c)  # ω_ij at the formation: the 2/Δ0 of Theorem 1 (ii)
     step = 1e-6
-    derivative = (theory.f_ij(l + step, margin=c) - theory.f_ij(np.maximum(l - step, 0), margin=c)) / (
+    derivative = (theory.f_ij(l + step, capacity=c) - theory.f_ij(np.maximum(l - step, 0), capacity=c)) / (
         l + step - np.maximum(l - step, 0)
     )
     np.testing.assert_allclose(h, derivative, rtol=1e-5)  # h = f'
@@ -121,12 +121,12 @@ def test_omega_is_the_gradient_weight_of_the_tension():
     step = 1e-7
     nu = lambda v: np.dot(v, v) / (c - np.linalg.norm(v))  # noqa: E731
     gradient = np.array([(nu(rel + step * e) - nu(rel - step * e)) / (2 * step) for e in np.eye(2)])
-    np.testing.assert_allclose(gradient, theory.f_ij(0.5, margin=c) * rel, rtol=1e-7)
+    np.testing.assert_allclose(gradient, theory.f_ij(0.5, capacity=c) * rel, rtol=1e-7)
 
 
 def test_edge_functions_reject_outside_the_domain():
     with pytest.raises(theory.TheoryError, match='Δ - ||d_ij||'):
-        theory.f_ij(1.0, margin=1.0)
+        theory.f_ij(1.0, capacity=1.0)
 
 
 # --------------------------------------------------------------------------- ν, V
@@ -134,10 +134,10 @@ def test_edge_functions_reject_outside_the_domain():
 
 def test_tension_and_lyapunov_of_the_example(single, double):
     x = single.positions
-    # y_i - y_j = x_i - x_j - d_ij: (-1.5, -1), (-0.5, -1.5), (1, -0.5); margins 2, 2, 4 - 2√2.
+    # y_i - y_j = x_i - x_j - d_ij: (-1.5, -1), (-0.5, -1.5), (1, -0.5); capacities 2, 2, 4 - 2√2.
     lengths = [math.hypot(-1.5, -1.0), math.hypot(-0.5, -1.5), math.hypot(1.0, -0.5)]
-    margins = [2.0, 2.0, 4.0 - 2.0 * math.sqrt(2.0)]
-    expected = sum(l * l / (c - l) for l, c in zip(lengths, margins))
+    capacities = [2.0, 2.0, 4.0 - 2.0 * math.sqrt(2.0)]
+    expected = sum(l * l / (c - l) for l, c in zip(lengths, capacities))
     assert theory.tension(single, x) == pytest.approx(expected, rel=1e-14)
     # y = x - τ with τ = (0,0), (0,2), (2,0): y = (2,4), (3.5,5), (2.5,5.5); ½ Σ ||y_i - ȳ||² = 7/6.
     assert theory.lyapunov(single, x) == pytest.approx(7.0 / 6.0, rel=1e-14)
@@ -206,14 +206,14 @@ def test_theorem1_constants(single):
     alpha, beta = 10.0, 1.0
     assert c.theorem == 1 and c.free_parameter == 0.5 and c.beta0 == pytest.approx(1.5)
     assert c.k_nu == pytest.approx(c.nu0 + 3 * alpha**2 / (8 * 0.5 * beta))  # (kν)
-    margins = dict(zip([e.pair for e in single.edges], theory.edge_margins(single)))
+    capacities = dict(zip([e.pair for e in single.edges], theory.edge_capacities(single)))
     for pair, k in c.k_edge.items():
         # (kij): k_ij < Δ - ||d_ij|| and ν_ij(k_ij) = 2 k_ν.
-        assert 0.0 < k < margins[pair]
-        assert k * k / (margins[pair] - k) == pytest.approx(2.0 * c.k_nu, rel=1e-9)
+        assert 0.0 < k < capacities[pair]
+        assert k * k / (capacities[pair] - k) == pytest.approx(2.0 * c.k_nu, rel=1e-9)
     assert c.k_V == pytest.approx(7.0 / 6.0 + 3 * alpha**2 / (8 * 1.5 * 0.5))  # (kV)
     for agent in single.agent_ids:
-        assert c.xi[agent] == pytest.approx(alpha / (c.c[agent] + alpha * beta))  # (xi)
+        assert c.xi[agent] == pytest.approx(alpha / (c.c[agent] + alpha * beta), rel=1e-12, abs=0.0)  # (xi)
         assert c.xi[agent] > 0.0
     json.dumps(c.to_dict(), allow_nan=False)
     assert set(c.to_dict()['xi_i']) == {'1', '2', '3'}
@@ -222,10 +222,10 @@ def test_theorem1_constants(single):
 
 def test_theorem1_constant_c_by_hand(single):
     c = theory.theorem_constants(single, a=0.25)
-    margins = {e.pair: m for e, m in zip(single.edges, theory.edge_margins(single))}
+    capacities = {e.pair: m for e, m in zip(single.edges, theory.edge_capacities(single))}
     k = c.k_edge
-    f = {p: theory.f_ij(k[p], margin=margins[p]) for p in k}
-    g = {p: theory.g_ij(k[p], margin=margins[p]) for p in k}
+    f = {p: theory.f_ij(k[p], capacity=capacities[p]) for p in k}
+    g = {p: theory.g_ij(k[p], capacity=capacities[p]) for p in k}
     edge = lambda i, j: (min(i, j), max(i, j))  # noqa: E731
     F = {i: sum(f[edge(i, j)] for j in single.neighbours(i)) for i in single.agent_ids}
     for i in single.agent_ids:
@@ -245,9 +245,9 @@ def test_theorem2_constants_of_the_example(double):
     assert c.paper_chain.k_V == pytest.approx(c.V0 + 3 * 100.0 / (8 * 1.5 * (c.rho2_P - 1.0)))  # (kVd)
     assert c.lambda_max_P == pytest.approx(5.3644, abs=1e-4)
     for pair, k in c.k_edge.items():
-        margin = 4.0 - float(np.linalg.norm(next(e.d for e in double.edges if e.pair == pair)))
+        capacity = 4.0 - float(np.linalg.norm(next(e.d for e in double.edges if e.pair == pair)))
         K = c.k_nu / double.gains.k1
-        assert k * k / (margin - k) == pytest.approx(2.0 * K, rel=1e-9)  # (kijd)
+        assert k * k / (capacity - k) == pytest.approx(2.0 * K, rel=1e-9)  # (kijd)
     json.dumps(c.to_dict(), allow_nan=False)
     assert c.to_dict()['corrected_chain']['k_V_d'] is None
 
@@ -262,7 +262,134 @@ def test_theorem2_corrected_chain_when_beta_d_is_small(double):
     # Larger k^d_V and the 1/λmin factor can only enlarge c^d_i, i.e. shrink ξ^d_i.
     for agent in double.agent_ids:
         assert c.xi[agent] < c.paper_chain.xi[agent]
-        assert c.xi[agent] == pytest.approx(10.0 / (c.c[agent] + 10.0 * 0.1))  # (xid)
+        assert c.xi[agent] == pytest.approx(10.0 / (c.c[agent] + 10.0 * 0.1), rel=1e-12, abs=0.0)  # (xid)
+
+
+# Theorem 2 (iii) by hand: every constant from the paper's formulas, written out here edge by edge
+# and agent by agent from the scenario's data alone (nothing of formation_sim.theory is used).
+
+
+def _formation_offsets(scenario):
+    """Some τ with τ_i - τ_j = d_ij on every edge (Assumption 1), walking the graph from agent 1."""
+    first = scenario.agent_ids[0]
+    tau = {first: np.zeros(scenario.dimension)}
+    pending = [first]
+    while pending:
+        i = pending.pop()
+        for edge in scenario.edges:
+            for a, b, sign in ((edge.i, edge.j, -1.0), (edge.j, edge.i, 1.0)):
+                if a == i and b not in tau:
+                    tau[b] = tau[a] + sign * edge.d  # τ_j = τ_i - d_ij, τ_i = τ_j + d_ij
+                    pending.append(b)
+    return tau
+
+
+def _theorem2_by_hand(scenario, *, b, reading):
+    g = scenario.gains
+    k1, k2, k3, alpha_d, beta_d, beta1 = g.k1, g.k2, g.k3, g.alpha_d, g.beta_d, g.beta1
+    n, delta = scenario.n, scenario.delta
+    x = {i: scenario.positions[k] for k, i in enumerate(scenario.agent_ids)}
+    q = {i: scenario.velocities[k] for k, i in enumerate(scenario.agent_ids)}
+    d = {}
+    for edge in scenario.edges:
+        d[edge.i, edge.j], d[edge.j, edge.i] = edge.d, -edge.d
+    neighbours = {i: [j for (a, j) in d if a == i] for i in scenario.agent_ids}
+    cap = {pair: delta - np.linalg.norm(v) for pair, v in d.items()}  # Δ - ||d_ij||
+    length0 = {(i, j): np.linalg.norm(x[i] - x[j] - d[i, j]) for (i, j) in d}
+    # ν_d(Δ, y(0)) = k1/2 Σ_i Σ_{j∈N_i} ||y_i - y_j||² / (Δ - ||d_ij|| - ||y_i - y_j||) + ½ Σ_i ||q_i||²
+    nu_d0 = k1 / 2 * sum(length0[p] ** 2 / (cap[p] - length0[p]) for p in d) + 0.5 * sum(v @ v for v in q.values())
+    k_nu = nu_d0 + n * alpha_d**2 / (8 * b * beta_d)  # k^d_ν
+    K = k_nu / k1
+    k_edge = {p: -K + math.sqrt(K * K + 2 * K * cap[p]) for p in d}  # (kijd)
+    f = {p: (2 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 2 for p in d}  # (fij) at k^d_ij
+    gg = {p: 2 * cap[p] ** 2 / (cap[p] - k_edge[p]) ** 3 for p in d}  # (gij)
+    h = {p: (3 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 3 for p in d}  # (hij)
+    # V_d(0) = ½ Σ_i (z_i - z̄)^T (P⊗I_p) (z_i - z̄), z_i = (y_i, q_i), y_i = x_i - τ_i
+    tau = _formation_offsets(scenario)
+    y = {i: x[i] - tau[i] for i in x}
+    y_mean, q_mean = sum(y.values()) / n, sum(q.values()) / n
+    P = g.P
+    V0 = 0.5 * sum(
+        P[0, 0] * (y[i] - y_mean) @ (y[i] - y_mean)
+        + 2 * P[0, 1] * (y[i] - y_mean) @ (q[i] - q_mean)
+        + P[1, 1] * (q[i] - q_mean) @ (q[i] - q_mean)
+        for i in x
+    )
+    trace, det = P[0, 0] + P[1, 1], P[0, 0] * P[1, 1] - P[0, 1] * P[1, 0]
+    lam_min = (trace - math.sqrt(trace * trace - 4 * det)) / 2  # ρ2(P)
+    lam_max = (trace + math.sqrt(trace * trace - 4 * det)) / 2
+    k4 = k3 * (k2 + math.sqrt(k1 * k1 + k2 * k2)) / 2
+    if reading == 'paper':
+        rate, V_scale = (2 - k4) * lam_min, 1.0  # as printed: (kVd), (yiyj) with 4 V_d
+    else:
+        rate, V_scale = (2 - k4) / lam_max, 1.0 / lam_min  # docs/THEOREM2.md
+    hand = dict(k_nu=k_nu, k_edge=k_edge, V0=V0, rate=rate)
+    if not beta_d < rate:
+        return hand  # the proof gives nothing
+    k_V = V0 + n * alpha_d**2 / (8 * beta1 * (rate - beta_d))  # (kVd)
+    kv = V_scale * k_V  # corrected: sqrt(k^d_V) -> sqrt(k^d_V / λmin(P)) throughout
+    F = {i: sum(f[i, l] for l in neighbours[i]) for i in x}
+    # (cijq): 2α_d + 2 {(k1 + k2)[Σ_{l∈N_i} f_il(k^d_il) + Σ_{l∈N_j} f_jl(k^d_jl)] + k3} sqrt(k^d_V)
+    c_q = {(i, j): 2 * alpha_d + 2 * ((k1 + k2) * (F[i] + F[j]) + k3) * math.sqrt(kv) for (i, j) in d}
+    # c^d_i = Σ_{j∈N_i} {2 k1 g_ij(k^d_ij) sqrt(k^d_V) + 4 k2 h_ij(k^d_ij) k^d_V + k2 f_ij(k^d_ij) c^q_ij}
+    c = {
+        i: sum(2 * k1 * gg[i, j] * math.sqrt(kv) + 4 * k2 * h[i, j] * kv + k2 * f[i, j] * c_q[i, j] for j in neighbours[i])
+        for i in x
+    }
+    xi = {i: alpha_d / (c[i] + alpha_d * beta_d) for i in x}  # (xid)
+    return dict(hand, k_V=k_V, c_q=c_q, c=c, xi=xi)
+
+
+def _double_cases():
+    paper = load_scenario('paper_double')
+    slow = paper.replace(gains=DoubleGains.from_riccati(alpha_d=10.0, beta_d=0.1, beta1=1.5, k3='paper'))
+    from formation_sim.model.generate import random_scenario
+
+    team = random_scenario(n=7, seed=5, dynamics='double', dimension=3, slack=0.3)
+    # At rest in formation with a small α_d, c^d_i is a few α_d and α_d β_d a visible part of it
+    # (elsewhere c^d_i is 1e11 to 1e17 and hides it).
+    resting = slow.replace(
+        positions=np.array([[2.0, 4.0], [2.0, 6.0], [4.0, 4.0]]),
+        velocities=np.zeros((3, 2)),
+        gains=DoubleGains.from_riccati(alpha_d=0.01, beta_d=0.1, beta1=1.5, k3='paper'),
+    )
+    return [
+        ('paper_double', paper, None),  # β_d = 1: only the printed chain holds
+        ('paper_double beta_d=0.1', slow, None),
+        ('paper_double beta_d=0.1 b=0.2 k3', slow, 0.2 * slow.gains.k3),
+        ('paper_double at rest in formation', resting, None),
+        ('random n=7 p=3', team, None),
+    ]
+
+
+@pytest.mark.parametrize('label, scenario, b', _double_cases(), ids=[c[0] for c in _double_cases()])
+def test_theorem2_constants_by_hand(label, scenario, b):
+    c = theory.theorem_constants(scenario, b=b)
+    b = c.free_parameter
+    assert b == (scenario.gains.k3 / 2 if 'b=' not in label else 0.2 * scenario.gains.k3)
+    def close(value, expected):  # relative only: ξ^d_i can be 1e-16, below approx's default abs
+        return value == pytest.approx(expected, rel=1e-12, abs=0.0)
+
+    for reading, chain in (('paper', c.paper_chain), ('corrected', c.corrected_chain)):
+        hand = _theorem2_by_hand(scenario, b=b, reading=reading)
+        assert close(c.k_nu, hand['k_nu']) and close(c.V0, hand['V0'])
+        for (i, j), k in c.k_edge.items():
+            assert close(k, hand['k_edge'][i, j])
+        assert close(chain.rate_bound, hand['rate'])
+        assert chain.holds == ('k_V' in hand)
+        if not chain.holds:
+            assert chain.k_V is chain.c_q is chain.c is chain.xi is None
+            continue
+        assert close(chain.k_V, hand['k_V'])
+        assert chain.c_q.keys() == {e.pair for e in scenario.edges}
+        for (i, j), value in chain.c_q.items():
+            assert close(value, hand['c_q'][i, j]) and close(value, hand['c_q'][j, i])  # symmetric
+        for i in scenario.agent_ids:
+            assert close(chain.c[i], hand['c'][i]) and close(chain.xi[i], hand['xi'][i])
+    # The top-level constants are the corrected chain's.
+    assert (c.k_V, c.c_q, c.c, c.xi) == (
+        c.corrected_chain.k_V, c.corrected_chain.c_q, c.corrected_chain.c, c.corrected_chain.xi
+    )
 
 
 def test_theorem_constants_refuse_broken_hypotheses(single, double):
@@ -285,7 +412,7 @@ def test_theorem_constants_refuse_broken_hypotheses(single, double):
 def continuous_double(scenario, horizon):
     """The E = 0 closed loop of (uydouble) in deviation coordinates; returns times and V_d(t)."""
     heads, tails, _ = scenario.edge_indices()
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     g = scenario.gains
     n, p = scenario.n, scenario.dimension
     y = scenario.positions - theory.formation_feasibility(scenario).tau
@@ -296,7 +423,7 @@ def continuous_double(scenario, horizon):
         dy, dq = s[: n * p].reshape(n, p), s[n * p :].reshape(n, p)
         rel = dy[heads] - dy[tails]
         l = np.linalg.norm(rel, axis=1)
-        w = (2 * margins - l) / (margins - l) ** 2
+        w = (2 * capacities - l) / (capacities - l) ** 2
         force = np.zeros((n, p))
         term = w[:, None] * (g.k1 * rel + g.k2 * (dq[heads] - dq[tails]))
         np.add.at(force, heads, term)
@@ -330,14 +457,14 @@ def test_continuous_double_obeys_the_corrected_rate_and_breaks_the_printed_one(d
 def test_continuous_single_obeys_theorem1_rate(single):
     # Theorem 1 (ii) with e ≡ 0: V' <= -2β0 V.
     heads, tails, _ = single.edge_indices()
-    margins = theory.edge_margins(single)
+    capacities = theory.edge_capacities(single)
     y0 = single.positions - theory.formation_feasibility(single).tau
 
     def rhs(_t, s):
         y = s.reshape(3, 2)
         rel = y[heads] - y[tails]
         l = np.linalg.norm(rel, axis=1)
-        w = (2 * margins - l) / (margins - l) ** 2
+        w = (2 * capacities - l) / (capacities - l) ** 2
         u = np.zeros((3, 2))
         np.add.at(u, heads, -w[:, None] * rel)
         np.add.at(u, tails, w[:, None] * rel)

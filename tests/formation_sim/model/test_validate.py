@@ -129,17 +129,31 @@ def test_generous_slack_gives_no_initial_warning():
     assert 'initial' not in {w.rule for w in report.warnings}  # already in formation: 100 % slack
 
 
-def test_remark_warning_disappears_below_the_bound():
+REMARK_BOUND_N3 = 4.0 / (3 * 2 * 4.0)  # Remark 3.2: 4/(n(n-1)Δ) for the paper's n = 3, Δ = 4
+
+
+def _remark_warnings(report):
+    return [w for w in report.warnings if w.rule == 'remark']
+
+
+def test_remark_warns_above_its_bound_and_only_there():
     s = load_scenario('paper_single')
-    report = validate_scenario(s.replace(gains=SingleGains(alpha=10.0, beta=0.1)))
-    assert 'remark' not in {w.rule for w in report.warnings}
+    above = _remark_warnings(validate_scenario(s))  # β = 1 > 1/6
+    assert len(above) == 1
+    assert above[0].values == {'value': 1.0, 'remark_bound': pytest.approx(REMARK_BOUND_N3, rel=1e-15)}
+    assert 'β = 1 exceeds 4/(n(n-1)Δ) = 0.166667' in above[0].message
+    assert _remark_warnings(validate_scenario(s.replace(gains=SingleGains(alpha=10.0, beta=0.1)))) == []
 
 
 def test_double_remark_applies_to_beta1():
     s = load_scenario('paper_double')
+    above = _remark_warnings(validate_scenario(s))  # β1 = 1.5 > 1/6
+    assert len(above) == 1
+    assert above[0].values == {'value': 1.5, 'remark_bound': pytest.approx(REMARK_BOUND_N3, rel=1e-15)}
+    assert 'β1 = 1.5 exceeds 4/(n(n-1)Δ) = 0.166667' in above[0].message
     gains = DoubleGains.from_riccati(alpha_d=10.0, beta_d=0.05, beta1=0.1, k3='paper')
     report = validate_scenario(s.replace(gains=gains))
-    assert report.ok and 'remark' not in {w.rule for w in report.warnings}
+    assert report.ok and _remark_warnings(report) == []
 
 
 def test_report_dict_lists_every_edge_slack():
@@ -152,7 +166,7 @@ def test_report_dict_lists_every_edge_slack():
     assert slacks[(2, 3)] == pytest.approx(4.0 - 2.0 * np.sqrt(2.0) - np.hypot(1.0, 0.5))
 
 
-def test_zero_margin_edge_reports_without_nan():
+def test_zero_capacity_edge_reports_without_nan():
     s = load_scenario('paper_single')
     edges = (Edge(i=1, j=2, d=np.array([0.0, -4.0])),) + s.edges[1:]
     report = validate_scenario(s.replace(edges=edges))
@@ -295,3 +309,68 @@ def _read_with_rcl(path, agent_ids):
         return read
     finally:
         rclpy.shutdown(context=context)
+
+
+# Double precision and the initial slack (rule `precision`): one ulp of y_ij moves the triggering
+# error by g_ij ulp (gij), g_ij = 2c²/σ³ for capacity c and slack σ; the certified search gets
+# through the plateaus that leaves if that step is at most 1e-12 × 200 000 / 4 = 5e-8 of α.
+SEARCH_LIMIT = 1e-12 * 200_000 / 4
+
+
+def _precision_errors(report):
+    return [f for f in report.errors if f.rule == 'precision']
+
+
+@pytest.mark.parametrize('fraction', [1e-12, 1e-6, 8e-4])
+def test_initial_slack_below_double_precision_is_refused_with_the_floor(fraction, tight_edge):
+    s = tight_edge('paper_single', fraction)
+    report = validate_scenario(s)
+    (finding,) = _precision_errors(report)
+    assert finding.subject == 'edge (2, 3)'
+    c = 4.0 - 2.0 * np.sqrt(2.0)
+    y = s.positions[1] - s.positions[2] - np.array([-2.0, 2.0])
+    slack = c - np.linalg.norm(y)
+    ulp = np.spacing(np.abs(y).max())
+    step = 2 * c * c / slack**3 * ulp
+    floor = (2 * c * c * ulp / (SEARCH_LIMIT * 10.0)) ** (1 / 3)  # g_ij(floor) ulp = 5e-8 α
+    assert finding.values['slack'] == pytest.approx(slack, rel=1e-9)
+    assert finding.values['error_step'] == pytest.approx(step, rel=1e-9)
+    assert finding.values['floor'] == pytest.approx(floor, rel=1e-9)
+    assert floor == pytest.approx(9.1e-4 * c, rel=0.01)  # relative slack 9.1e-4 and up resolve
+    for number in (slack, floor, step, step / 10.0):
+        assert f'{number:.6g}' in finding.message
+    assert 'α = 10' in finding.message and '5e-08' in finding.message
+    with pytest.raises(ValidationError, match=r'\[precision\] edge \(2, 3\)'):
+        require_valid(s)
+
+
+def test_initial_slack_above_the_floor_is_accepted(tight_edge):
+    # Relative slack 1e-3 runs (200 084 events to t = 10; tests/formation_sim/test_engine.py runs its start).
+    report = validate_scenario(tight_edge('paper_single', 1e-3))
+    assert report.ok and not _precision_errors(report)
+    assert ('initial', 'edge (2, 3)') in rules(report.warnings)  # still the generic 5 % warning
+
+
+def test_double_integrator_slack_floor_counts_velocities(tight_edge):
+    # E_i = k1 e_i + k2 e_qi: one ulp of y moves it by (k1 g + k2 h ||q_i-q_j||) ulp, one ulp of
+    # q_i - q_j by k2 f ulp(q); f = (c+σ)/σ², g = 2c²/σ³, h = (2c+σ)/σ³.
+    from scipy.optimize import brentq
+
+    s = tight_edge('paper_double', 1e-3)
+    (finding,) = _precision_errors(validate_scenario(s))
+    g = s.gains
+    c = 4.0 - 2.0 * np.sqrt(2.0)
+    y = s.positions[1] - s.positions[2] - np.array([-2.0, 2.0])
+    q = s.velocities[1] - s.velocities[2]
+    ulp_y, ulp_q = np.spacing(np.abs(y).max()), np.spacing(np.abs(q).max())
+
+    def step(sigma):
+        return (g.k1 * 2 * c * c / sigma**3 + g.k2 * (2 * c + sigma) / sigma**3 * np.linalg.norm(q)) * ulp_y + (
+            g.k2 * (c + sigma) / sigma**2 * ulp_q
+        )
+
+    floor = brentq(lambda sigma: step(sigma) - SEARCH_LIMIT * g.alpha_d, 1e-6, c, xtol=1e-15, rtol=1e-13)
+    assert finding.values['error_step'] == pytest.approx(step(c - np.linalg.norm(y)), rel=1e-9)
+    assert finding.values['floor'] == pytest.approx(floor, rel=1e-9)
+    assert 'α_d = 10' in finding.message
+    assert not _precision_errors(validate_scenario(tight_edge('paper_double', 3e-3)))

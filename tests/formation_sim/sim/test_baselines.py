@@ -70,7 +70,7 @@ def test_tension_never_grows_and_connectivity_holds(paper_run):
     assert all(math.isfinite(v) for v in values)
     assert np.all(np.diff(values) <= 1e-9 * values[0])
     for x in record.sample_positions:
-        assert np.all(theory.edge_errors(scenario, x) < theory.edge_margins(scenario))
+        assert np.all(theory.edge_errors(scenario, x) < theory.edge_capacities(scenario))
 
 
 def test_centroid_laws(paper_run):

@@ -328,3 +328,28 @@ def test_the_run_stops_once_rounding_decides_the_events():
     largest = np.abs(before.sample_positions[-1]).max()
     assert scenario.gains.alpha * math.exp(-scenario.gains.beta * t) < 8 * np.spacing(largest)
     assert before.sample_times[-1] == math.nextafter(t, 0.0)
+
+
+def test_initial_slack_just_above_the_precision_floor_triggers_on_the_threshold(tight_edge):
+    # Relative slack 1e-3 on edge (2, 3) (formation validate's floor is 9.1e-4): the first
+    # inter-event times are ~3e-15 s. Checked on the true states, a trigger may sit off the
+    # threshold by what one ulp of the positions (8.9e-16) moves e_i: g_23 ulp / α = 1.5e-7.
+    from formation_sim.model.validate import require_valid
+
+    scenario = tight_edge('paper_single', 1e-3)
+    assert require_valid(scenario).ok
+    horizon = 1e-12
+    trace = Trace(scenario)
+    record = simulate(scenario, horizon=horizon, sample_dt=None, on_event=trace)
+    assert record.total_events > 300
+    on_threshold, worst_inside = check_triggering(scenario, trace, horizon, dense=4)
+    assert on_threshold.max() < 1e-6
+    assert worst_inside <= 1.0 + 1e-6
+
+
+def test_a_search_rounding_stalls_is_an_engine_error_naming_the_agent(tight_edge):
+    # Slack 1e-12 of the capacity (refused by formation validate, rule precision): the rounded
+    # prediction of agent 2 stands still below its threshold and the search gives up. The engine
+    # says so instead of letting the search's CrossingError through.
+    with pytest.raises(EngineError, match=r'agent 2: no convergence after 200000 certified steps .*\[precision\]'):
+        simulate(tight_edge('paper_single', 1e-12), horizon=1e-20, sample_dt=None)

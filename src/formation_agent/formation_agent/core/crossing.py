@@ -1,8 +1,8 @@
 """Certified search for the first time ||e(t)|| reaches α e^{-βt}.
 
-Steps 4-5 of ETA-1/ETA-2 ask for the *smallest* solution of ||e_i(t)|| = α e^{-βt}. Between events
-e_i(t) is a closed-form function of t, so instead of sampling it on a grid (which can step over an
-early crossing) we walk forward in steps that are proven crossing-free:
+Step 4 of ETA-1 (step 5 of ETA-2) asks for the *smallest* solution of ||e_i(t)|| = α e^{-βt}.
+Between events e_i(t) is a closed-form function of t, so instead of sampling it on a grid (which
+can step over an early crossing) we walk forward in steps that are proven crossing-free:
 
 With S = e^{βa}/α, the normalised margin φ(t) = e^{-2β(t-a)} - S²||e(t)||² is positive exactly
 while ||e(t)|| < α e^{-βt}. Given bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|| on [a, a+H]:
@@ -13,9 +13,33 @@ while ||e(t)|| < α e^{-βt}. Given bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|
 The largest h keeping either lower bound positive is crossing-free. Near a simple root the
 quadratic bound makes the steps converge quadratically (a certified Newton iteration); near a
 tangential touch they shrink like sqrt(φ/M) and pass it. The first-order bound serves where e is
-only Lipschitz (ETA-2 when a relative position passes through its desired value). Once the margin
-is below `tolerance`, the root is polished inside a bracket of width ~φ/|φ'| (Illinois regula falsi,
-in plain Python: the agents need no scipy, which halves an agent process's start-up).
+only Lipschitz (ETA-2 when a relative position passes through its desired value).
+
+The last step. At a step point a with φ(a) <= `tolerance` the search tries to finish:
+
+* φ(a) <= 0: a is the first crossing (no crossing in [start, a), the threshold reached at a).
+* φ'(a) >= 0: a touch within the tolerance (||e(a)|| >= (1 - tolerance)^{1/2} α e^{-βa} while
+  the margin does not fall); it counts as reached, and a is returned.
+* Otherwise the bracket [a, b], b = a + 2φ(a)/|φ'(a)|, is used only once it is proven to hold
+  exactly one root: with the same bounds over [a, b], φ'' <= K = 4β² + 2 S² E E2, and if
+  K (b - a) <= |φ'(a)|/2 then φ' <= φ'(a)/2 < 0 on [a, b] and φ(b) <= φ(a) - 3/4 |φ'(a)| (b - a)
+  < 0. So φ has exactly one root in (a, b), the first crossing, which Illinois regula falsi
+  (in plain Python: the agents need no scipy, which halves an agent process's start-up) refines
+  to 4 ulps. Should the computed margin at b still be >= 0, rounding hides a sign change that
+  is proven to lie in (a, b), and a is returned (within b - a of the crossing).
+* Without that proof (the bracket may hold several roots, or e is only Lipschitz there) the
+  search keeps taking certified steps from a and tries again at the next point.
+
+The search also stops where a certified step falls below the resolution of t (a + h == a);
+there it finishes as above, except that without the proof it returns a itself.
+
+What is proven, then: with a the point where the search stops, no crossing lies in [start, a),
+and the result is either the first crossing (to the 4 ulps of regula falsi, or to b - a where
+rounding hides the sign change) or a itself: a touch within the tolerance, or the last point the
+resolution of t lets the steps reach. So no result lies past the first crossing (beyond those
+4 ulps), and a later root is never returned in place of an earlier one. All of this is for the
+values and bounds the model computes; their own rounding is the model's (late in a run it is
+what the engine's rounding floor watches).
 
 The search is resumable (`CrossingSearch`): at any moment its `frontier` is a certified lower
 bound on the answer (no crossing in [start, frontier)), so a simulator of many agents can advance
@@ -60,7 +84,10 @@ class ErrorModel(Protocol):
 
 # Steps never grow by more than this factor, so that bounds stay tight around the current point.
 _GROWTH = 4.0
-_MAX_STEPS = 200_000
+# A search gives up (CrossingError) after this many certified steps.
+MAX_STEPS = 200_000
+# The relative margin 1 - ||e||²/(α e^{-βt})² at which the search starts to finish (its default).
+DEFAULT_TOLERANCE = 1e-12
 _RTOL = 4.0 * 2.0**-52  # 4 ulps relative
 
 
@@ -71,7 +98,10 @@ class CrossingSearch:
     `result` is None until the search is done, then the crossing time (inf: none up to `limit`).
     """
 
-    __slots__ = ('model', 'start', 'alpha', 'beta', 'limit', 'tolerance', 'frontier', 'result', 'steps', '_span', '_terms', '_norm')
+    __slots__ = (
+        'model', 'start', 'alpha', 'beta', 'limit', 'tolerance', 'frontier', 'result', 'steps',
+        '_span', '_terms', '_norm', '_cover',
+    )
 
     def __init__(
         self,
@@ -81,7 +111,7 @@ class CrossingSearch:
         alpha: float,
         beta: float,
         limit: float,
-        tolerance: float = 1e-12,
+        tolerance: float = DEFAULT_TOLERANCE,
         initial_step: float = 1e-3,
     ) -> None:
         self.model = model
@@ -94,6 +124,9 @@ class CrossingSearch:
         self.result: float | None = None
         self.steps = 0
         self._span = float(initial_step)
+        # (end, E, E2): bounds of the last step, valid from its point to end; the point it
+        # leads to may use them to prove that its polishing bracket holds one root.
+        self._cover = (-math.inf, math.nan, math.nan)
         self._terms = getattr(model, 'error_terms', None) or _vector_terms(model)
         self._norm = getattr(model, 'error_norm', None) or _vector_norm(model)
 
@@ -112,12 +145,13 @@ class CrossingSearch:
         beta, alpha, tolerance = self.beta, self.alpha, self.tolerance
         terms, bounds = self._terms, self.model.bounds
         span = self._span
+        cover_end, bound_e, bound_curv = self._cover
         while self.result is None and a <= until:
             if a > self.limit:
                 self.result = math.inf
                 break
-            if self.steps >= _MAX_STEPS:
-                raise CrossingError(f'no convergence after {_MAX_STEPS} certified steps (t={a!r})')
+            if self.steps >= MAX_STEPS:
+                raise CrossingError(f'no convergence after {MAX_STEPS} certified steps (t={a!r})')
             self.steps += 1
             size_sq, size_rate = terms(a)
             scale = math.exp(beta * a) / alpha
@@ -130,9 +164,12 @@ class CrossingSearch:
                 )
             size = math.sqrt(size_sq)
             if phi <= tolerance:
-                self.result = self._polish(a, phi, phi_rate, size)
-                break
+                result = self._finish(a, phi, phi_rate, size, cover_end, bound_e, bound_curv, stuck=False)
+                if result is not None:
+                    self.result = result
+                    break
             span_eff, bound_e, bound_rate, bound_curv = bounds(a, span, size)
+            cover_end = a + span_eff
             lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate
             step = phi / lipschitz if lipschitz > 0.0 else math.inf
             curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv)
@@ -146,35 +183,49 @@ class CrossingSearch:
             nxt = a + step
             if nxt <= a:
                 # The certified step is below the resolution of t: we sit on the crossing.
-                self.result = self._polish(a, phi, phi_rate, size)
+                self.result = self._finish(a, phi, phi_rate, size, cover_end, bound_e, bound_curv, stuck=True)
                 break
             a = nxt
         self.frontier = a
         self._span = span
+        self._cover = (cover_end, bound_e, bound_curv)
         return self.result
 
-    def _polish(self, a: float, phi: float, phi_rate: float, size: float) -> float:
-        """Refine a point whose margin is within tolerance to where ||e|| = α e^{-βt}.
+    def _finish(
+        self, a: float, phi: float, phi_rate: float, size: float, cover_end: float, bound_e: float, bound_curv: float,
+        *, stuck: bool,
+    ) -> float | None:
+        """The crossing from a point whose margin is within tolerance; None: step on from a.
 
-        `size` is ||e(a)||, so the margin at a costs no evaluation.
+        `size` is ||e(a)||, so the margin at a costs no evaluation. `bound_e`, `bound_curv` bound
+        ||e||, ||ë|| from at or before a up to `cover_end` (the last step's bounds). `stuck`: no
+        certified step can leave a (then a is returned where the bracket is not proven).
         """
         if phi <= 0.0 or phi_rate >= 0.0:
             return a
         beta = self.beta
         scale = math.exp(beta * a) / self.alpha
-        norm = self._norm
-
-        def margin(t: float) -> float:
-            return math.exp(-beta * (t - a)) - scale * norm(t)
-
         margin_a = 1.0 - scale * size  # e^{-β(a - a)} = 1
         if margin_a <= 0.0:
             return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
         width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
         b = a + width
+        if cover_end < b:
+            span, bound_e, _, bound_curv = self.model.bounds(a, b - a, size)
+            if a + span < b:
+                return a if stuck else None
+        # φ'' <= 4β² + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so [a, b] holds one root.
+        curvature = 4.0 * beta * beta + 2.0 * scale * scale * bound_e * bound_curv
+        if not curvature * (b - a) <= -0.5 * phi_rate:  # also False for a NaN or infinite bound
+            return a if stuck else None
+        norm = self._norm
+
+        def margin(t: float) -> float:
+            return math.exp(-beta * (t - a)) - scale * norm(t)
+
         margin_b = margin(b)
         if margin_b >= 0.0:
-            return a  # a touch, or a crossing closer than the resolution: trigger here
+            return a  # the root proven to lie in (a, b) is below the rounding of the margin
         return _root_in_bracket(margin, a, margin_a, b, margin_b)
 
 
@@ -185,7 +236,7 @@ def first_crossing(
     alpha: float,
     beta: float,
     limit: float,
-    tolerance: float = 1e-12,
+    tolerance: float = DEFAULT_TOLERANCE,
     initial_step: float = 1e-3,
 ) -> float:
     """Smallest t >= start with ||e(t)|| >= α e^{-βt}; inf if there is none up to `limit`.

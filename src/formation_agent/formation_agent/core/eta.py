@@ -169,7 +169,7 @@ class _EventTriggeredAgent:
         return [self._floats(values[j], template, j) for j in self.neighbour_ids]
 
     def receive(self, info: TriggerInfo) -> None:
-        """Take a neighbour's triggering information (ETA step 6: re-predict from its time)."""
+        """Take a neighbour's triggering information (ETA-1 step 6, ETA-2 step 7: predict anew from its time)."""
         if info.receiver != self.agent_id:
             raise AgentError(f'agent {self.agent_id} got information addressed to agent {info.receiver}')
         k = self._slot.get(info.sender)
@@ -209,7 +209,7 @@ class _EventTriggeredAgent:
         """ETA-2 also takes the relative velocity."""
 
     def trigger(self, t: float, sensed: SensedState) -> TriggerOutput:
-        """ETA step 9: sense, update the input, and produce the triggering information."""
+        """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering information."""
         t = self._check_time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
@@ -282,7 +282,7 @@ class _EventTriggeredAgent:
         return self.last_trigger is not None and bool(self._heard.all())
 
     def next_trigger_time(self, limit: float = math.inf) -> float:
-        """Next triggering time t^i_{k+1} (ETA steps 3-5); inf if it lies beyond `limit`.
+        """Next triggering time t^i_{k+1} (ETA-1 steps 3-4, ETA-2 steps 4-5); inf if it lies beyond `limit`.
 
         Before its first trigger the agent is due at t = 0 (t^i_1 = 0).
         """
@@ -381,10 +381,7 @@ class _EventTriggeredAgent:
         values = tuple(values)
         return values + (0.0,) * (_FAST_DIMENSION - len(values))
 
-    def _padded(self, vector: np.ndarray) -> tuple[float, ...]:
-        return self._pad(vector.tolist())
-
-    def _room_error(self, k: int, r: float, c: float) -> AgentError:
+    def _out_of_range_error(self, k: int, r: float, c: float) -> AgentError:
         return AgentError(
             f'agent {self.agent_id}: predicted edge to agent {self.neighbour_ids[k]} left its range '
             f'(||y_ij|| = {r!r} >= Δ-||d_ij|| = {c!r})'
@@ -455,7 +452,7 @@ class Eta1Agent(_EventTriggeredAgent):
 
     def _fast_probe(self, rows, t: float):
         # The formulas of _vector_error_and_rate, edge by edge; ω and dω/dr are eqs. fij, hij.
-        # Also the radii and the room limit of _span_within_capacity, for _fast_bounds.
+        # Also the radii and the span limit of _span_within_capacity, for _fast_bounds.
         e0 = e1 = e2 = d0 = d1 = d2 = 0.0
         radii = []
         cap = math.inf
@@ -467,7 +464,7 @@ class Eta1Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._room_error(k, r, c)
+                raise self._out_of_range_error(k, r, c)
             w = (2.0 * c - r) / (gap * gap)
             radial = (y0 * v0 + y1 * v1 + y2 * v2) / r if r > 0.0 else 0.0
             f = (3.0 * c - r) / (gap * gap * gap) * radial
@@ -479,9 +476,9 @@ class Eta1Agent(_EventTriggeredAgent):
             d2 += f * y2 + w * v2
             radii.append(r)
             if speed > 0.0:
-                room = _ROOM_FRACTION * gap / speed  # _span_within_capacity
-                if room < cap:
-                    cap = room
+                limit = _GAP_FRACTION * gap / speed  # _span_within_capacity
+                if limit < cap:
+                    cap = limit
         self._probe = (radii, cap)
         u0, u1, u2 = self._u
         return e0 + u0, e1 + u1, e2 + u2, d0, d1, d2
@@ -497,7 +494,7 @@ class Eta1Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._room_error(k, r, c)
+                raise self._out_of_range_error(k, r, c)
             w = (2.0 * c - r) / (gap * gap)
             e0 += w * y0
             e1 += w * y1
@@ -677,7 +674,7 @@ class Eta2Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._room_error(k, r, c)
+                raise self._out_of_range_error(k, r, c)
             w = (2.0 * c - r) / (gap * gap)
             m0 = k1 * y0 + k2 * q0
             m1 = k1 * y1 + k2 * q1
@@ -716,7 +713,7 @@ class Eta2Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._room_error(k, r, c)
+                raise self._out_of_range_error(k, r, c)
             w = (2.0 * c - r) / (gap * gap)
             e0 += w * (k1 * y0 + k2 * q0)
             e1 += w * (k1 * y1 + k2 * q1)
@@ -733,7 +730,7 @@ class Eta2Agent(_EventTriggeredAgent):
         for r, q_now, accel, c in probe:
             speed = q_now + growth * accel
             if speed > 0.0:
-                span = min(span, _ROOM_FRACTION * (c - r) / speed)  # _span_within_capacity
+                span = min(span, _GAP_FRACTION * (c - r) / speed)  # _span_within_capacity
             speeds.append(speed)
         rate = curv_y = curv_q = reach_sum = 0.0
         kink = False
@@ -795,21 +792,22 @@ def make_agent(
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
 
 
-# A step may use at most this fraction of an edge's remaining room, so that the bounds, which
-# are evaluated at the far end of the step, stay within a small factor of the local values.
-_ROOM_FRACTION = 0.125
+# A step may use at most this fraction of an edge's gap c - ||y_ij|| (what is left of its capacity
+# c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
+# within a small factor of the local values.
+_GAP_FRACTION = 0.125
 
 
 def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:
-    """Shrink `span` so that every predicted edge uses at most `_ROOM_FRACTION` of its room."""
-    room = capacity - r
-    if np.any(room <= 0.0):
-        k = int(np.flatnonzero(room <= 0.0)[0])
+    """Shrink `span` so that every predicted edge uses at most `_GAP_FRACTION` of its gap."""
+    gap = capacity - r
+    if np.any(gap <= 0.0):
+        k = int(np.flatnonzero(gap <= 0.0)[0])
         raise AgentError(
             f'agent {agent_id}: predicted edge to agent {neighbour_ids[k]} left its range '
             f'(||y_ij|| = {float(r[k])!r} >= Δ-||d_ij|| = {float(capacity[k])!r})'
         )
     moving = speed > 0.0
     if np.any(moving):
-        span = min(span, float((_ROOM_FRACTION * room[moving] / speed[moving]).min()))
+        span = min(span, float((_GAP_FRACTION * gap[moving] / speed[moving]).min()))
     return span

@@ -112,10 +112,10 @@ def random_scenario(
     reach = REACH_FRACTION * delta
     tau, pairs = _connected_points(rng, n, dimension, reach, degree)
     d = tau[pairs[:, 0]] - tau[pairs[:, 1]]
-    margins = delta - np.linalg.norm(d, axis=1)
+    capacities = delta - np.linalg.norm(d, axis=1)
 
     offsets = _in_ball(rng, n, dimension)
-    ratios = np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1) / margins
+    ratios = np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1) / capacities
     worst = float(ratios.max())
     offsets = offsets * ((1.0 - slack) / worst) if worst > 0.0 else np.zeros_like(offsets)
     positions = tau + offsets

@@ -30,7 +30,6 @@ DYNAMICS = ('single', 'double')
 BUILTIN_PACKAGE = 'formation_sim.model.scenarios'
 
 _TOP_REQUIRED = ('dynamics', 'communication_radius', 'horizon', 'agents', 'edges', 'gains')
-_TOP_KEYS = ('name',) + _TOP_REQUIRED
 _SINGLE_GAINS = ('alpha', 'beta')
 _DOUBLE_GAINS = ('alpha_d', 'beta_d', 'beta1', 'k3')
 _DOUBLE_OPTIONAL = ('k1', 'k2', 'k0')

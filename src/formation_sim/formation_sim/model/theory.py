@@ -100,15 +100,15 @@ def algebraic_connectivity(scenario: Scenario) -> float:
     return float(np.sort(values)[1])
 
 
-def edge_margins(scenario: Scenario) -> np.ndarray:
-    """Δ - ||d_ij|| per edge (the room (initial) leaves for ||y_i - y_j||)."""
+def edge_capacities(scenario: Scenario) -> np.ndarray:
+    """The capacity c = Δ - ||d_ij|| of each edge: what (initial) leaves for ||y_i - y_j||."""
     _, _, d = scenario.edge_indices()
     return scenario.delta - np.linalg.norm(d, axis=1)
 
 
 def delta0(scenario: Scenario) -> float:
     """Δ0 = max over edges of Δ - ||d_ij|| (Theorem 1)."""
-    return float(edge_margins(scenario).max())
+    return float(edge_capacities(scenario).max())
 
 
 def beta0(scenario: Scenario) -> float:
@@ -178,9 +178,9 @@ def formation_feasibility(scenario: Scenario) -> Feasibility:
 # --------------------------------------------------------------------------- (fij), (gij), (hij)
 
 
-def _edge_domain(l, margin):
+def _edge_domain(l, capacity):
     l = np.asarray(l, dtype=float)
-    c = np.asarray(margin, dtype=float)
+    c = np.asarray(capacity, dtype=float)
     if np.any(c <= 0.0):
         raise TheoryError(f'Δ - ||d_ij|| must be > 0, got {np.min(c)!r}')
     if np.any(l < 0.0) or np.any(l >= c):
@@ -188,21 +188,21 @@ def _edge_domain(l, margin):
     return l, c
 
 
-def f_ij(l, *, margin):
+def f_ij(l, *, capacity):
     """(fij): (2c - l) / (c - l)², c = Δ - ||d_ij||; ω_ij = f_ij(||y_i - y_j||)."""
-    l, c = _edge_domain(l, margin)
+    l, c = _edge_domain(l, capacity)
     return (2.0 * c - l) / (c - l) ** 2
 
 
-def g_ij(l, *, margin):
+def g_ij(l, *, capacity):
     """(gij): 2c² / (c - l)³ = h_ij(l) l + f_ij(l), the gain in ||e_i'|| of (dotnormei)."""
-    l, c = _edge_domain(l, margin)
+    l, c = _edge_domain(l, capacity)
     return 2.0 * c * c / (c - l) ** 3
 
 
-def h_ij(l, *, margin):
+def h_ij(l, *, capacity):
     """(hij): (3c - l) / (c - l)³ = f_ij'(l)."""
-    l, c = _edge_domain(l, margin)
+    l, c = _edge_domain(l, capacity)
     return (3.0 * c - l) / (c - l) ** 3
 
 
@@ -212,7 +212,7 @@ def h_ij(l, *, margin):
 def tension(scenario: Scenario, positions) -> float:
     """ν(Δ, y) = ½ Σ_i Σ_{j∈N_i} ν_ij = Σ_edges ||y_i-y_j||² / (Δ-||d_ij||-||y_i-y_j||); inf outside."""
     l = edge_errors(scenario, positions)
-    c = edge_margins(scenario)
+    c = edge_capacities(scenario)
     if np.any(l >= c):
         return math.inf
     return float(np.sum(l * l / (c - l)))
@@ -372,10 +372,10 @@ def _require(condition: bool, rule: str, message: str) -> None:
         raise TheoryError(f'[{rule}] {message}')
 
 
-def _edge_bound(k_nu_scaled: float, margins: np.ndarray) -> np.ndarray:
+def _edge_bound(k_nu_scaled: float, capacities: np.ndarray) -> np.ndarray:
     # (kij) / (kijd): the positive root of l² + 2K l - 2K c = 0 from ν_ij <= 2K. The paper's
     # ν_ij <= 2ν is loose (ν sums each edge once, so ν_ij <= ν) but valid; kept as printed.
-    return -k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * margins)
+    return -k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * capacities)
 
 
 def _per_agent_sum(n: int, heads, tails, values) -> np.ndarray:
@@ -393,7 +393,7 @@ class _Common:
     heads: np.ndarray
     tails: np.ndarray
     pairs: list[tuple[int, int]]
-    margins: np.ndarray  # Δ - ||d_ij|| per edge
+    capacities: np.ndarray  # Δ - ||d_ij|| per edge
     tau: np.ndarray  # a point of Φ
     fields: dict[str, float]  # TheoremConstants' common fields
 
@@ -407,19 +407,19 @@ def _common(scenario: Scenario) -> _Common:
         'feasible',
         f'the formation is infeasible: least-squares residual {feasibility.residual:.3g}',
     )
-    margins = edge_margins(scenario)
-    _require(bool(np.all(margins > 0.0)), 'edge_length', '||d_ij|| < Δ must hold on every edge')
+    capacities = edge_capacities(scenario)
+    _require(bool(np.all(capacities > 0.0)), 'edge_length', '||d_ij|| < Δ must hold on every edge')
     errors0 = edge_errors(scenario, scenario.positions)
-    _require(bool(np.all(errors0 < margins)), 'initial', '(initial) must hold on every edge')
+    _require(bool(np.all(errors0 < capacities)), 'initial', '(initial) must hold on every edge')
     heads, tails, _ = scenario.edge_indices()
     lam2 = algebraic_connectivity(scenario)
-    d0 = float(margins.max())
+    d0 = float(capacities.max())
     return _Common(
         n=scenario.n,
         heads=heads,
         tails=tails,
         pairs=[edge.pair for edge in scenario.edges],
-        margins=margins,
+        capacities=capacities,
         tau=feasibility.tau,
         fields={
             'n': scenario.n,
@@ -447,7 +447,7 @@ def theorem_constants(
 
 
 def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> TheoremConstants:
-    n, heads, tails, margins = common.n, common.heads, common.tails, common.margins
+    n, heads, tails, capacities = common.n, common.heads, common.tails, common.capacities
     b0 = common.fields['beta0']
     alpha, beta = scenario.gains.alpha, scenario.gains.beta
     _require(alpha > 0.0, 'alpha', f'α > 0 required, got {alpha!r}')
@@ -455,12 +455,12 @@ def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> The
     _require(0.0 < a < 1.0, 'a', f'the free parameter a must lie in (0, 1), got {a!r}')
     nu0 = tension(scenario, scenario.positions)
     k_nu = nu0 + n * alpha * alpha / (8.0 * a * beta)  # (kν)
-    k_edge = _edge_bound(k_nu, margins)  # (kij)
+    k_edge = _edge_bound(k_nu, capacities)  # (kij)
     V0 = lyapunov(scenario, scenario.positions, tau=common.tau)
     # (kV); the (betaV) line before it should read [e^{-2βt} - e^{-2β0 t}], not [e^{-2βt} - 1].
     k_V = V0 + n * alpha * alpha / (8.0 * b0 * (b0 - beta))
-    f = f_ij(k_edge, margin=margins)
-    g = g_ij(k_edge, margin=margins)
+    f = f_ij(k_edge, capacity=capacities)
+    g = g_ij(k_edge, capacity=capacities)
     F = _per_agent_sum(n, heads, tails, f)  # Σ_{l∈N_i} f_il(k_il)
     # c_i = Σ_{j∈N_i} g_ij(k_ij) [2α + 2 sqrt(k_V) (F_i + F_j)], bounding ||y_i'|| + ||y_j'||.
     per_edge = g * (2.0 * alpha + 2.0 * math.sqrt(k_V) * (F[heads] + F[tails]))
@@ -481,7 +481,7 @@ def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> The
 
 
 def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None) -> TheoremConstants:
-    n, margins = common.n, common.margins
+    n, capacities = common.n, common.capacities
     b0 = common.fields['beta0']
     gains = scenario.gains
     k1, k2, k3 = gains.k1, gains.k2, gains.k3
@@ -508,10 +508,10 @@ def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None)
     velocities = scenario.velocities
     nu0 = tension_double(scenario, scenario.positions, velocities)
     k_nu = nu0 + n * alpha_d * alpha_d / (8.0 * b * beta_d)  # k^d_ν
-    k_edge = _edge_bound(k_nu / k1, margins)  # (kijd)
+    k_edge = _edge_bound(k_nu / k1, capacities)  # (kijd)
     V0 = lyapunov_double(scenario, scenario.positions, velocities, tau=common.tau)
     edges = _Theorem2Edges(
-        f=f_ij(k_edge, margin=margins), g=g_ij(k_edge, margin=margins), h=h_ij(k_edge, margin=margins)
+        f=f_ij(k_edge, capacity=capacities), g=g_ij(k_edge, capacity=capacities), h=h_ij(k_edge, capacity=capacities)
     )
     paper_chain = _theorem2_chain(scenario, common, edges, V0=V0, reading='paper', rate_bound=bound_paper, z_gain=1.0)
     corrected_chain = _theorem2_chain(

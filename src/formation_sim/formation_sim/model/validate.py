@@ -7,6 +7,9 @@ feasible      Φ is non-empty: least-squares residual of τ_i - τ_j = d_ij ~ 0 
 edge_length   ||d_ij|| < Δ on every edge (Assumption 1)                                error
 initial       ||x_i(0) - x_j(0) - d_ij|| < Δ - ||d_ij|| (initial)                      error;
               warning when the slack is below 5 % of Δ - ||d_ij||
+precision     double precision resolves the initial slack: one ulp of x_i - x_j - d_ij    error
+              moves the triggering error by at most PRECISION_LIMIT of the threshold
+              (`_check_precision` derives it)
 alpha         α > 0 (Theorem 1)                                                         error
 beta          0 < β < β0 = ρ2(DD^T)/Δ0 (Theorem 1)                                       error;
               warning above 0.95 β0
@@ -37,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS
 from formation_sim.model import theory
 from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
@@ -45,6 +49,9 @@ from formation_sim.model.scenario import Scenario
 NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
 SLACK_WARNING_FRACTION = 0.05  # warn when (initial) holds with less than this relative slack
 SLACK_LINES = 20  # per-edge slack lines printed by `format` (all are in to_dict)
+# The largest step of the rounded triggering error, relative to the threshold, that the certified
+# search gets through (see `_check_precision`): its tolerance times its steps, with a factor 2 to spare.
+PRECISION_LIMIT = DEFAULT_TOLERANCE * MAX_STEPS / 4.0
 
 
 class ValidationError(ValueError):
@@ -119,7 +126,7 @@ class ValidationReport:
 
 
 def _json_safe(value: Any) -> Any:
-    """Plain JSON types; non-finite floats (e.g. the relative slack of a zero margin) become None."""
+    """Plain JSON types; non-finite floats (e.g. the relative slack of a zero capacity) become None."""
     if isinstance(value, dict):
         return {str(k): _json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -136,7 +143,7 @@ def _json_safe(value: Any) -> Any:
 def _slack_lines(edges: list[dict[str, Any]]) -> list[str]:
     shown = sorted(edges, key=lambda e: e['relative_slack'])[:SLACK_LINES]
     lines = [
-        f'    edge ({e["i"]}, {e["j"]}): ||d_ij|| = {_g(e["d_norm"])}, Δ-||d_ij|| = {_g(e["margin"])}, '
+        f'    edge ({e["i"]}, {e["j"]}): ||d_ij|| = {_g(e["d_norm"])}, Δ-||d_ij|| = {_g(e["capacity"])}, '
         f'||x_i(0)-x_j(0)-d_ij|| = {_g(e["error"])}, slack {_g(e["slack"])} '
         f'({100.0 * e["relative_slack"]:.1f} %)'
         for e in shown
@@ -231,19 +238,19 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             worst_edge=[edge.i, edge.j],
         )
 
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     errors0 = theory.edge_errors(scenario, scenario.positions)
     slack_rows = []
     for k, edge in enumerate(scenario.edges):
         d_norm = float(np.linalg.norm(edge.d))
-        margin, error = float(margins[k]), float(errors0[k])
-        slack = margin - error
-        relative = slack / margin if margin > 0.0 else -math.inf
+        capacity, error = float(capacities[k]), float(errors0[k])
+        slack = capacity - error
+        relative = slack / capacity if capacity > 0.0 else -math.inf
         slack_rows.append(
-            dict(i=edge.i, j=edge.j, d_norm=d_norm, margin=margin, error=error, slack=slack,
+            dict(i=edge.i, j=edge.j, d_norm=d_norm, capacity=capacity, error=error, slack=slack,
                  relative_slack=relative)
         )
-        if not margin > 0.0:
+        if not capacity > 0.0:
             shown_norm, shown_delta = _apart(d_norm, scenario.delta)
             out.error(
                 'edge_length',
@@ -252,25 +259,25 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
                 d_norm=d_norm,
                 delta=scenario.delta,
             )
-        if not error < margin:
-            shown_error, shown_margin = _apart(error, margin)
+        if not error < capacity:
+            shown_error, shown_capacity = _apart(error, capacity)
             out.error(
                 'initial',
                 _edge(edge),
-                f'||x_i(0)-x_j(0)-d_ij|| = {shown_error} is not below Δ-||d_ij|| = {shown_margin} '
+                f'||x_i(0)-x_j(0)-d_ij|| = {shown_error} is not below Δ-||d_ij|| = {shown_capacity} '
                 f'(initial)',
                 error=error,
-                margin=margin,
+                capacity=capacity,
             )
         elif relative < SLACK_WARNING_FRACTION:
             out.warning(
                 'initial',
                 _edge(edge),
                 f'(initial) holds with slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij|| = {_g(slack)}, only '
-                f'{100.0 * relative:.1f} % of Δ-||d_ij|| = {_g(margin)} (below '
+                f'{100.0 * relative:.1f} % of Δ-||d_ij|| = {_g(capacity)} (below '
                 f'{100.0 * SLACK_WARNING_FRACTION:.0f} %)',
                 slack=slack,
-                margin=margin,
+                capacity=capacity,
                 relative_slack=relative,
             )
     if slack_rows:
@@ -283,10 +290,12 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             edges=slack_rows,
         )
 
+    _check_precision(scenario, out, capacities, errors0)
+
     beta0 = None
-    if connected and margins.size and margins.max() > 0.0:
+    if connected and capacities.size and capacities.max() > 0.0:
         lam2 = theory.algebraic_connectivity(scenario)
-        delta0 = float(margins.max())
+        delta0 = float(capacities.max())
         beta0 = lam2 / delta0
         remark = theory.remark_beta_bound(scenario)
         out.note(
@@ -324,6 +333,79 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
                 f'or a magnitude of at least {smallest!r}',
                 key=key, value=value,
             )
+
+
+def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray, errors0: np.ndarray) -> None:
+    """Refuse an initial slack below what double precision resolves (rule `precision`).
+
+    Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
+    prediction moves in steps of one ulp of y_ij, and each such step moves the triggering error
+    by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
+    k2 f_ij ulp(q_i - q_j)). Near the threshold the computed error then stands still for a while
+    at some margin φ > tolerance, and the certified search walks such a plateau in steps of
+    about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α tolerance). It gives
+    up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
+    σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
+    ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
+    (Late in a run the threshold itself shrinks toward the rounding of the states: the engine's
+    rounding floor stops the run there.)
+    """
+    gains = scenario.gains
+    if scenario.dynamics == 'single':
+        name, threshold, k1, k2 = 'α', gains.alpha, 1.0, 0.0
+    else:
+        name, threshold, k1, k2 = 'α_d', gains.alpha_d, gains.k1, gains.k2
+    if not (threshold > 0.0 and k1 > 0.0 and k2 >= 0.0):
+        return  # the gains' own rules report them
+    heads, tails, d = scenario.edge_indices()
+    y = scenario.positions[heads] - scenario.positions[tails] - d
+    ulp_y = np.spacing(np.abs(y).max(axis=1))
+    if scenario.velocities is None:
+        speed = ulp_q = np.zeros(len(heads))
+    else:
+        q = scenario.velocities[heads] - scenario.velocities[tails]
+        speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
+
+    def error_step(k: int, sigma: float) -> float:
+        ratio = float(capacities[k]) / sigma  # g, h, f through c/σ: no overflow for any finite Δ
+        step = k1 * (2.0 * ratio * ratio / sigma) * float(ulp_y[k])
+        if k2 > 0.0:
+            if speed[k] > 0.0:
+                step += k2 * ((2.0 * ratio + 1.0) / (sigma * sigma)) * float(speed[k] * ulp_y[k])
+            step += k2 * ((ratio + 1.0) / sigma) * float(ulp_q[k])
+        return step
+
+    limit = PRECISION_LIMIT * threshold
+    for k, edge in enumerate(scenario.edges):
+        capacity, slack = float(capacities[k]), float(capacities[k] - errors0[k])
+        if not (capacity > 0.0 and slack > 0.0):
+            continue  # edge_length or initial already refuses it
+        step = error_step(k, slack)
+        if step <= limit:
+            continue
+        # The least resolvable slack: the step falls with the slack, so bisect (geometrically).
+        low, high = slack, capacity
+        if error_step(k, high) > limit:
+            floor = high
+        else:
+            for _ in range(100):
+                middle = math.sqrt(low * high)
+                low, high = (middle, high) if error_step(k, middle) > limit else (low, middle)
+            floor = high
+        how = (
+            'g_ij × ulp, (gij)' if k2 == 0.0 else '(k1 g_ij + k2 h_ij ||q_i-q_j||) × ulp + k2 f_ij × ulp(q_i-q_j)'
+        )
+        out.error(
+            'precision',
+            _edge(edge),
+            f'initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij|| = {_g(slack)} is below {_g(floor)}, the least '
+            f'double precision resolves on this edge: one ulp of x_i-x_j-d_ij ({_g(ulp_y[k])}) moves the '
+            f'triggering error by {_g(step)} ({how}), {_g(step / threshold)} of the threshold {name} = '
+            f'{_g(threshold)}, where the certified search resolves at most {_g(PRECISION_LIMIT)} of it '
+            f'(tolerance {_g(DEFAULT_TOLERANCE)} × {MAX_STEPS} steps / 4)',
+            slack=slack, floor=floor, ulp=float(ulp_y[k]), error_step=step, threshold=threshold,
+            limit=PRECISION_LIMIT,
+        )
 
 
 def _check_remark(scenario: Scenario, out: _Collector, name: str, value: float) -> None:

@@ -31,7 +31,6 @@ from formation_sim.bag.io import BagError, UnknownMessageTypeError, read_bag
 from formation_sim.runtime.recorder import import_message_class
 
 CLOCK_TOPIC = '/clock'
-CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 
 
 class ReplayError(ValueError):

@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from formation_agent.core.crossing import CrossingSearch
+from formation_agent.core.crossing import CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
@@ -140,7 +140,13 @@ def _next_event_time(heap, serial, searches, horizon: float) -> float:
         heapq.heappop(heap)
         search = searches[i]
         until = heap[0][0] if heap else math.inf
-        result = search.advance(min(until, horizon))
+        try:
+            result = search.advance(min(until, horizon))
+        except CrossingError as error:
+            raise EngineError(
+                f'agent {i}: {error}; the rounded prediction no longer resolves its threshold '
+                '(`formation validate` checks this for the initial state: rule [precision])'
+            ) from error
         if result is None:
             heapq.heappush(heap, (search.frontier, 0, i, number))
         elif result <= horizon:
