@@ -122,7 +122,7 @@ class _EventTriggeredAgent:
         self._edge_u = [zero] * m
         self._u = zero
         self._control_norm = 0.0
-        self._rows: list[tuple[float, ...]] = [()] * m
+        self._rows: list[tuple[float, ...]] = [()] * m  # one per edge, laid out by `_row`
         self._probe_key: tuple | None = None
         self._probe_value: tuple[float, ...] = ()
         self._probe: object = None
@@ -356,7 +356,7 @@ class _EventTriggeredAgent:
         """||e(t)||, for polishing a crossing."""
         if not self._fast:
             return float(np.linalg.norm(self._vector_error_and_rate(t)[0]))
-        e0, e1, e2 = self._fast_error(t)
+        e0, e1, e2, _, _, _ = self._fast_probe(t, with_rate=False)
         return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
 
     def bounds(self, a: float, span: float, size: float) -> tuple[float, float, float, float]:
@@ -372,7 +372,7 @@ class _EventTriggeredAgent:
         """e(t) and ė(t) padded to three components; keeps the per-edge values for `bounds`."""
         key = (t, self.triggers, self.infos_received)
         if self._probe_key != key:
-            self._probe_value = self._fast_probe(self._rows, t)
+            self._probe_value = self._fast_probe(t)
             self._probe_key = key
         return self._probe_value
 
@@ -443,34 +443,40 @@ class Eta1Agent(_EventTriggeredAgent):
         return span, size, rate, curv
 
     def _row(self, k: int) -> tuple[float, ...]:
-        # Edge k: anchor time, y_ij at the anchor, its constant rate u_i - u_j (eq. statexixj),
-        # the rate's norm and the capacity Δ - ||d_ij||.
+        """Edge k as the plain-float path reads it, vectors padded to three components:
+        (anchor, y0, y1, y2, v0, v1, v2, speed, capacity) — the edge's last event, y_ij there,
+        its constant rate v = u_i - u_j until the edge's next event (statexixj), ||v||, and
+        Δ - ||d_ij||. A plain tuple: unpacking one is faster than a named tuple in the hot loop."""
         u, u_j = self._u, self._edge_u[k]
         v0, v1, v2 = u[0] - u_j[0], u[1] - u_j[1], u[2] - u_j[2]
+        y0, y1, y2 = self._edge_y[k]
         speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        return (self._edge_time[k], *self._edge_y[k], v0, v1, v2, speed, self._capacity[k])
+        return (self._edge_time[k], y0, y1, y2, v0, v1, v2, speed, self._capacity[k])
 
-    def _fast_probe(self, rows, t: float):
-        # The formulas of _vector_error_and_rate, edge by edge; ω and dω/dr are eqs. fij, hij.
-        # Also the radii and the span limit of _span_within_capacity, for _fast_bounds.
+    def _fast_probe(self, t: float, *, with_rate: bool = True):
+        """e(t) and, `with_rate`, ė(t), padded to three components (the formulas of
+        _vector_error_and_rate, edge by edge; ω and dω/dr are eqs. fij, hij). With the rate it
+        also keeps the radii and the span limit of _span_within_capacity, for _fast_bounds."""
         e0 = e1 = e2 = d0 = d1 = d2 = 0.0
         radii = []
         cap = math.inf
-        for k, (t0, a0, a1, a2, v0, v1, v2, speed, c) in enumerate(rows):
-            s = t - t0
-            y0 = a0 + s * v0
-            y1 = a1 + s * v1
-            y2 = a2 + s * v2
+        for k, (anchor, ya0, ya1, ya2, v0, v1, v2, speed, c) in enumerate(self._rows):
+            s = t - anchor
+            y0 = ya0 + s * v0  # (statexixj): y_ij(t) = y_ij(anchor) + (t - anchor)(u_i - u_j)
+            y1 = ya1 + s * v1
+            y2 = ya2 + s * v2
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
                 raise self._out_of_range_error(k, r, c)
-            w = (2.0 * c - r) / (gap * gap)
-            radial = (y0 * v0 + y1 * v1 + y2 * v2) / r if r > 0.0 else 0.0
-            f = (3.0 * c - r) / (gap * gap * gap) * radial
+            w = (2.0 * c - r) / (gap * gap)  # ω_ij (fij)
             e0 += w * y0
             e1 += w * y1
             e2 += w * y2
+            if not with_rate:
+                continue
+            radial = (y0 * v0 + y1 * v1 + y2 * v2) / r if r > 0.0 else 0.0
+            f = (3.0 * c - r) / (gap * gap * gap) * radial  # dω/dr (hij) times dr/dt
             d0 += f * y0 + w * v0
             d1 += f * y1 + w * v1
             d2 += f * y2 + w * v2
@@ -479,28 +485,10 @@ class Eta1Agent(_EventTriggeredAgent):
                 limit = _GAP_FRACTION * gap / speed  # _span_within_capacity
                 if limit < cap:
                     cap = limit
-        self._probe = (radii, cap)
+        if with_rate:
+            self._probe = (radii, cap)
         u0, u1, u2 = self._u
         return e0 + u0, e1 + u1, e2 + u2, d0, d1, d2
-
-    def _fast_error(self, t: float) -> tuple[float, float, float]:
-        # e(t) alone, by the very operations of _fast_probe.
-        e0 = e1 = e2 = 0.0
-        for k, (t0, a0, a1, a2, v0, v1, v2, _, c) in enumerate(self._rows):
-            s = t - t0
-            y0 = a0 + s * v0
-            y1 = a1 + s * v1
-            y2 = a2 + s * v2
-            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-            gap = c - r
-            if gap <= 0.0:
-                raise self._out_of_range_error(k, r, c)
-            w = (2.0 * c - r) / (gap * gap)
-            e0 += w * y0
-            e1 += w * y1
-            e2 += w * y2
-        u0, u1, u2 = self._u
-        return e0 + u0, e1 + u1, e2 + u2
 
     def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
         # The formulas of _vector_bounds, edge by edge (tension.py: weight_gain, curvature_gain).
@@ -633,93 +621,71 @@ class Eta2Agent(_EventTriggeredAgent):
         return span, size, rate, curv
 
     def _row(self, k: int) -> tuple[float, ...]:
-        # Edge k: anchor time, y_ij and q_ij at the anchor, u^d_i - u^d_j, capacity Δ - ||d_ij||.
+        """Edge k as the plain-float path reads it, vectors padded to three components:
+        (anchor, y0, y1, y2, q0, q1, q2, u0, u1, u2, capacity) — the edge's last event, y_ij and
+        q_i - q_j there, u^d_i - u^d_j (constant until the edge's next event), Δ - ||d_ij||."""
         u, u_j = self._u, self._edge_u[k]
-        return (
-            self._edge_time[k],
-            *self._edge_y[k],
-            *self._edge_q[k],
-            u[0] - u_j[0],
-            u[1] - u_j[1],
-            u[2] - u_j[2],
-            self._capacity[k],
-        )
+        y0, y1, y2 = self._edge_y[k]
+        q0, q1, q2 = self._edge_q[k]
+        return (self._edge_time[k], y0, y1, y2, q0, q1, q2, u[0] - u_j[0], u[1] - u_j[1], u[2] - u_j[2], self._capacity[k])
 
-    def _factors(self, t: float, t0: float) -> tuple[float, float, float]:
-        """(1 - e^{-z}) / k3, (z - 1 + e^{-z}) / k3² and e^{-z} for z = k3 (t - t0) (closed_form)."""
+    def _closed_form(self, t: float, anchor: float) -> tuple[float, float, float]:
+        """(lag, ramp, fade): the factors of the closed-loop motion q' = u^d - k3 q from `anchor`
+        to `t`, z = k3 (t - anchor): y(t) = y + lag q + ramp du (statexixjd) and
+        q(t) = fade q + lag du (stateqiqj), with lag = (1 - e^{-z}) / k3,
+        ramp = (z - 1 + e^{-z}) / k3² and fade = e^{-z} (a plain tuple: this is the hot path)."""
         k3 = self.k3
-        z = k3 * (t - t0)
+        z = k3 * (t - anchor)
         decay = -math.expm1(-z)  # 1 - e^{-z}
         ramp = z_minus_one_plus_exp_float(z) if abs(z) < _SERIES_LIMIT else z - decay  # = z + expm1(-z)
         return decay / k3, ramp / (k3 * k3), 1.0 - decay
 
-    def _fast_probe(self, rows, t: float):
-        # The formulas of _state and _vector_error_and_rate, edge by edge: the closed form
-        # (statexixjd, stateqiqj) from the anchor, then E_i and its rate (doteidouble, doteqi).
-        # Edges anchored at the same time (all of them after a trigger) share the factors.
+    def _fast_probe(self, t: float, *, with_rate: bool = True):
+        """E(t) and, `with_rate`, its rate, padded to three components: the closed form
+        (statexixjd, stateqiqj) from each edge's anchor, then E_i and its rate (doteidouble,
+        doteqi), edge by edge (the formulas of _state and _vector_error_and_rate). Edges anchored
+        at the same time (all of them after a trigger) share the factors. With the rate it also
+        keeps each edge's radius, speeds and capacity for _fast_bounds."""
         k1, k2, k3 = self.k1, self.k2, self.k3
         e0 = e1 = e2 = d0 = d1 = d2 = 0.0
         probe = []
-        last_t0 = None
-        for k, (t0, a0, a1, a2, b0, b1, b2, u0, u1, u2, c) in enumerate(rows):
-            if t0 != last_t0:
-                fa, fb, keep = self._factors(t, t0)
-                last_t0 = t0
-            y0 = a0 + fa * b0 + fb * u0
-            y1 = a1 + fa * b1 + fb * u1
-            y2 = a2 + fa * b2 + fb * u2
-            q0 = keep * b0 + fa * u0
-            q1 = keep * b1 + fa * u1
-            q2 = keep * b2 + fa * u2
+        last_anchor = None
+        for k, (anchor, ya0, ya1, ya2, qa0, qa1, qa2, u0, u1, u2, c) in enumerate(self._rows):
+            if anchor != last_anchor:
+                lag, ramp, fade = self._closed_form(t, anchor)
+                last_anchor = anchor
+            y0 = ya0 + lag * qa0 + ramp * u0  # (statexixjd)
+            y1 = ya1 + lag * qa1 + ramp * u1
+            y2 = ya2 + lag * qa2 + ramp * u2
+            q0 = fade * qa0 + lag * u0  # (stateqiqj)
+            q1 = fade * qa1 + lag * u1
+            q2 = fade * qa2 + lag * u2
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
                 raise self._out_of_range_error(k, r, c)
-            w = (2.0 * c - r) / (gap * gap)
+            w = (2.0 * c - r) / (gap * gap)  # ω_ij (fij)
             m0 = k1 * y0 + k2 * q0
             m1 = k1 * y1 + k2 * q1
             m2 = k1 * y2 + k2 * q2
             e0 += w * m0
             e1 += w * m1
             e2 += w * m2
-            c0 = u0 - k3 * q0  # d(q_i - q_j)/dt
-            c1 = u1 - k3 * q1
-            c2 = u2 - k3 * q2
+            if not with_rate:
+                continue
+            a0 = u0 - k3 * q0  # d(q_i - q_j)/dt
+            a1 = u1 - k3 * q1
+            a2 = u2 - k3 * q2
             radial = (y0 * q0 + y1 * q1 + y2 * q2) / r if r > 0.0 else 0.0
-            f = (3.0 * c - r) / (gap * gap * gap) * radial
-            d0 += f * m0 + w * (k1 * q0 + k2 * c0)
-            d1 += f * m1 + w * (k1 * q1 + k2 * c1)
-            d2 += f * m2 + w * (k1 * q2 + k2 * c2)
-            probe.append((r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), c))
-        self._probe = probe
+            f = (3.0 * c - r) / (gap * gap * gap) * radial  # dω/dr (hij) times dr/dt
+            d0 += f * m0 + w * (k1 * q0 + k2 * a0)
+            d1 += f * m1 + w * (k1 * q1 + k2 * a1)
+            d2 += f * m2 + w * (k1 * q2 + k2 * a2)
+            probe.append((r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), c))
+        if with_rate:
+            self._probe = probe
         v0, v1, v2 = self._u
         return e0 + v0, e1 + v1, e2 + v2, d0, d1, d2
-
-    def _fast_error(self, t: float) -> tuple[float, float, float]:
-        # E(t) alone, by the very operations of _fast_probe.
-        k1, k2 = self.k1, self.k2
-        e0 = e1 = e2 = 0.0
-        last_t0 = None
-        for k, (t0, a0, a1, a2, b0, b1, b2, u0, u1, u2, c) in enumerate(self._rows):
-            if t0 != last_t0:
-                fa, fb, keep = self._factors(t, t0)
-                last_t0 = t0
-            y0 = a0 + fa * b0 + fb * u0
-            y1 = a1 + fa * b1 + fb * u1
-            y2 = a2 + fa * b2 + fb * u2
-            q0 = keep * b0 + fa * u0
-            q1 = keep * b1 + fa * u1
-            q2 = keep * b2 + fa * u2
-            r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-            gap = c - r
-            if gap <= 0.0:
-                raise self._out_of_range_error(k, r, c)
-            w = (2.0 * c - r) / (gap * gap)
-            e0 += w * (k1 * y0 + k2 * q0)
-            e1 += w * (k1 * y1 + k2 * q1)
-            e2 += w * (k1 * y2 + k2 * q2)
-        v0, v1, v2 = self._u
-        return e0 + v0, e1 + v1, e2 + v2
 
     def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
         # The formulas of _vector_bounds, edge by edge (tension.py for ω and its derivatives).
@@ -761,6 +727,7 @@ class Eta2Agent(_EventTriggeredAgent):
 
 # Agents of this dimension or less evaluate their prediction in plain floats.
 _FAST_DIMENSION = 3
+
 # First trial span of a search [s] before the agent has an inter-event time of its own, and its
 # least value (the search's former fixed choice).
 _FIRST_SPAN = 1e-3
