@@ -42,7 +42,10 @@ def register(subparsers) -> None:
         action='store_true',
         help='baseline: the continuous controller (weights and states at every instant), integrated by scipy (DOP853, rtol 1e-10)',
     )
-    parser.add_argument('--tolerance', type=POSITIVE, default=1e-12, help='relative margin at which a crossing counts as reached (default 1e-12)')
+    parser.add_argument(
+        '--tolerance', type=POSITIVE, default=None,
+        help='relative margin at which a crossing counts as reached (default: the agents\' own, 1e-12)',
+    )  # fmt: skip
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
     parser.set_defaults(func=run)
@@ -82,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                 scenario,
                 horizon=args.horizon,
                 sample_dt=args.sample_dt,
-                tolerance=args.tolerance,
+                **({} if args.tolerance is None else {'tolerance': args.tolerance}),
                 period=args.period,
                 progress=progress,
             )

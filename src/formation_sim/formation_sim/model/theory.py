@@ -31,6 +31,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 import scipy.sparse.linalg as spla
 
+from formation_agent.core.tension import omega, omega_prime, weight_gain
 from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -191,19 +192,19 @@ def _edge_domain(l, capacity):
 def f_ij(l, *, capacity):
     """(fij): (2c - l) / (c - l)², c = Δ - ||d_ij||; ω_ij = f_ij(||y_i - y_j||)."""
     l, c = _edge_domain(l, capacity)
-    return (2.0 * c - l) / (c - l) ** 2
+    return omega(l, c)
 
 
 def g_ij(l, *, capacity):
     """(gij): 2c² / (c - l)³ = h_ij(l) l + f_ij(l), the gain in ||e_i'|| of (dotnormei)."""
     l, c = _edge_domain(l, capacity)
-    return 2.0 * c * c / (c - l) ** 3
+    return weight_gain(l, c)
 
 
 def h_ij(l, *, capacity):
     """(hij): (3c - l) / (c - l)³ = f_ij'(l)."""
     l, c = _edge_domain(l, capacity)
-    return (3.0 * c - l) / (c - l) ** 3
+    return omega_prime(l, c)
 
 
 # --------------------------------------------------------------------------- ν, V

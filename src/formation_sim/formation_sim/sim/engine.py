@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from formation_agent.core.crossing import CrossingError, CrossingSearch
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
@@ -56,7 +56,7 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
         )
 
 
-def build_agent(scenario, agent_id: int, *, tolerance: float = 1e-12) -> Eta1Agent | Eta2Agent:
+def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE) -> Eta1Agent | Eta2Agent:
     """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
     gains = {name: getattr(scenario.gains, name) for name in ALGORITHM_GAINS[algorithm]}
@@ -208,7 +208,7 @@ def simulate(
     *,
     horizon: float | None = None,
     sample_dt: float | None = 0.01,
-    tolerance: float = 1e-12,
+    tolerance: float = DEFAULT_TOLERANCE,
     period: float | None = None,
     sample_events: bool = True,
     progress: Callable[[float, int], None] | None = None,
