@@ -168,6 +168,67 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     assert 'information from agent 3 on the topic of agent 2' in log
 
 
+@pytest.mark.timeout(300)
+def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_protocol(tmp_path, ros_env):
+    """Thousands of malformed messages per second, with the protocol's own QoS, on the topic that
+    carries agent 2's information to agent 1, from step 0 to the end of a lock-step run. Before
+    agents' readers kept all they received, the junk pushed agent 2's real information out of
+    agent 1's 32-deep history and the run stalled at step 0 (2 runs of 2 at 4000/s here)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.codec import decode_step
+    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    domain_id = 60
+    scenario = load_scenario('paper_single')
+    horizon = 10.0
+    reference = simulate(scenario, horizon=horizon)
+    rate = 4000.0  # junk messages per second
+    junk = Float64MultiArray(data=[2.0, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0, 2.0])  # layout version 2
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('junk_flooder', context=context)
+    try:
+        publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
+        seen: list[int] = []
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
+        run = FormationRun(
+            scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
+            step_listeners=1,
+        )  # fmt: skip
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        worker, results = _in_background(run)
+        sent, began, first_step = 0, None, None
+        while worker.is_alive():
+            executor.spin_once(timeout_sec=0.0)
+            if began is None and seen and publisher.get_subscription_count() >= 1:
+                began, first_step = time.monotonic(), max(seen)
+            if began is not None:
+                for _ in range(int((time.monotonic() - began) * rate) - sent):
+                    publisher.publish(junk)
+                    sent += 1
+            time.sleep(0.001)
+        worker.join()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    (result,) = results
+    assert first_step is not None and first_step <= 1, f'the flood began at step {first_step}'
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    rejected = summary['extra']['rejected_messages']
+    # The junk reached agent 1 while the run went on, and only there.
+    assert rejected['by_agent'] == {'1': {'version': rejected['total']}}
+    assert rejected['total'] >= 500, f'{rejected["total"]} junk messages rejected of {sent} sent'
+
+
 # -- node faults --------------------------------------------------------------------------------
 
 

@@ -51,7 +51,7 @@ from formation_msgs_py.codec import (
     encode_trigger_info,
 )
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status, Step
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS
 from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
@@ -129,7 +129,7 @@ class FormationAgentNode(Node):
                 Float64MultiArray,
                 trigger_info_topic(j, self.agent_id),
                 lambda msg, sender=j: self.faults.arrive(msg, sender),
-                PROTOCOL_QOS,
+                READER_QOS,
             )
             for j in self.neighbour_ids
         ]
@@ -139,7 +139,7 @@ class FormationAgentNode(Node):
             Float64MultiArray,
             STEP_TOPIC,
             self._on_step,
-            PROTOCOL_QOS,
+            READER_QOS,
             event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_simulator_liveliness),
         )
         self.step: Step | None = None

@@ -52,7 +52,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, make_executor
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, FAN_IN_QOS, PROTOCOL_QOS, SIMULATOR_QOS
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.codec import (
     MessageError,
     decode_agent_report,
@@ -286,8 +286,8 @@ class FormationSimulatorNode(Node):
             self._scenario_pub,
             self._markers_pub,
         )
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, FAN_IN_QOS)
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, FAN_IN_QOS)
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
         command_type = Accel if self.double else Twist
         # One command writer per agent: its DDS liveliness is the agent's sign of life.
         self._command_subs = {
@@ -295,7 +295,7 @@ class FormationSimulatorNode(Node):
                 command_type,
                 command_topic(i, double=self.double),
                 lambda msg, agent=i: self._on_command(msg, agent),
-                PROTOCOL_QOS,
+                READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
                     liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
                 ),
