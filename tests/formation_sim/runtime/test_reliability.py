@@ -1,6 +1,6 @@
 """Faults a robot team meets: bad messages, dead processes, signals, lossy links, shared networks.
 
-Real processes in private ROS domains 70-79 (each test its own). Every run starts 2-5 processes;
+Real processes in private ROS domains 60-79 (each test its own). Every run starts 2-5 processes;
 the tests share the distributed tests' xdist group, so one run at a time on its worker.
 """
 
@@ -234,7 +234,8 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
 
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping, long_run_scenario):
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
+    from formation_sim.runtime.fastdds_shm import held_files, mapped_by_anyone
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
@@ -242,12 +243,12 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     wait_for_stepping(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
-    shm_files = _mapped_shm_files(victim.pid)
+    shm_files = held_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=120.0)
     (result,) = results
     assert result.exit_status == EXIT_LOST == 3
-    assert shm_files and not [path for path in shm_files - _mapped_by_anyone(shm_files) if Path(path).exists()]
+    assert shm_files and not [path for path in shm_files - mapped_by_anyone(shm_files) if Path(path).exists()]
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
     assert not _wait_until_gone(str(result.out_dir))
@@ -305,6 +306,73 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     failure = summary['extra']['failure']
     assert failure['kind'] == 'process_lost' and failure['process']['name'] == 'recorder'
     assert summary['total_events'] > 0
+
+
+BYSTANDER = """
+import sys, time, rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node('bystander')
+node.create_publisher(String, '/bystander', 10)
+node.create_subscription(String, '/bystander', lambda msg: None, 10)
+print('ready', flush=True)
+sys.stdin.read()  # until the test closes it
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.timeout(300)
+def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+    """Every child of a recorded run killed with SIGKILL at once: each segment and port its
+    children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
+    outside the domain's range; a live participant of another domain and a dead port of nobody
+    in the run keep theirs."""
+    from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    def family(path: str) -> set[Path]:
+        name = Path(path).name.removeprefix('sem.').removesuffix('_mutex').removesuffix('_el')
+        return {SHM_DIR / name, SHM_DIR / f'sem.{name}_mutex', SHM_DIR / f'{name}_el'}
+
+    stranger = [SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}', SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}_el']
+    bystander = subprocess.Popen(
+        [sys.executable, '-c', BYSTANDER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        env={**os.environ, 'ROS_DOMAIN_ID': '68'}, start_new_session=True,
+    )  # fmt: skip
+    try:
+        for path in stranger:
+            path.touch()
+        assert bystander.stdout.readline().strip() == 'ready'
+        bystanders = held_files(bystander.pid)
+        assert bystanders, 'the bystander holds no Fast DDS file'
+        run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=65, progress=False, timeout=240.0)
+        worker, results = _in_background(run)
+        wait_for_stepping(run)
+        time.sleep(0.5)
+        children = list(run._children)
+        held = set().union(*(held_files(child.pid) for child in children))
+        for child in children:
+            os.kill(child.pid, signal.SIGKILL)
+        worker.join(timeout=120.0)
+        (result,) = results
+        assert result.exit_status == EXIT_LOST, result.message
+        assert all(child.process.returncode == -signal.SIGKILL for child in run._children)
+        ports = {Path(path).name for path in held if 'fastrtps_port' in path}
+        assert any(not 7400 + 250 * 65 <= int(name.split('port')[1].split('_')[0]) < 7400 + 250 * 66 for name in ports), ports
+        assert any(path.endswith('_el') for path in held), 'no lock file noted'
+        left = sorted(str(path) for path in set().union(*(family(path) for path in held)) if path.exists())
+        assert not left, f'left in /dev/shm: {left}'
+        assert all(Path(path).exists() for path in bystanders), 'a live participant lost its files'
+        assert all(path.exists() for path in stranger), 'a dead port of nobody in the run was removed'
+        assert set(run.removed_shm_files) >= {path for path in held if Path(path).name.startswith('fastrtps_')}
+    finally:
+        bystander.stdin.close()
+        try:
+            bystander.wait(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            bystander.kill()
+        for path in stranger:
+            path.unlink(missing_ok=True)
 
 
 def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:

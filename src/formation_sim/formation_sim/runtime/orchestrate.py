@@ -32,7 +32,6 @@ import json
 import math
 import os
 import random
-import re
 import signal
 import socket
 import subprocess
@@ -49,6 +48,7 @@ from formation_sim.model.scenario import Scenario, dump_scenario, load_scenario
 from formation_sim.model.validate import require_valid
 from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
+from formation_sim.runtime.fastdds_shm import domain_port_files, held_files, remove_orphans
 
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
@@ -223,41 +223,6 @@ class _Child:
         text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
         error = self.error_line() if self.process.returncode not in (None, 0) else ''
         return f'{text}: {error}' if error else text
-
-
-def _mapped_shm_files(pid: int) -> set[str]:
-    """Fast DDS shared-memory files mapped by process `pid`."""
-    try:
-        maps = Path(f'/proc/{pid}/maps').read_text()
-    except OSError:
-        return set()
-    return {line.split()[-1] for line in maps.splitlines() if '/dev/shm/fastrtps_' in line or '/dev/shm/sem.fastrtps_' in line}
-
-
-_PORT_FILE = re.compile(r'^(?:sem\.)?fastrtps_port(\d+)(?:_el|_mutex)?$')
-
-
-def _domain_port_files(domain_id: int) -> set[str]:
-    """Fast DDS shared-memory port files of ROS domain `domain_id`, with their lock and semaphore.
-
-    Fast DDS names a port's files after its port number, and the ports of domain d are
-    7400 + 250 d + [0, 250) (the RTPS well-known port mapping).
-    """
-    first = 7400 + 250 * domain_id
-    return {
-        str(path)
-        for path in Path('/dev/shm').iterdir()
-        if (match := _PORT_FILE.match(path.name)) and first <= int(match[1]) < first + 250
-    }
-
-
-def _mapped_by_anyone(paths: set[str]) -> set[str]:
-    """Those of `paths` still mapped by some live process."""
-    in_use = set()
-    for proc in Path('/proc').iterdir():
-        if proc.name.isdigit():
-            in_use |= _mapped_shm_files(int(proc.name)) & paths
-    return in_use
 
 
 class FormationRun:
@@ -635,7 +600,7 @@ class FormationRun:
                 # once it is gone nobody can tell which were its own: note them while it lives.
                 for child in self._children:
                     if child.exited_at is None:
-                        child.shm_files |= _mapped_shm_files(child.pid)
+                        child.shm_files |= held_files(child.pid)
                 next_snapshot = now + snapshot_period
             code = simulator.process.poll()
             if code is not None:
@@ -671,13 +636,13 @@ class FormationRun:
         return EXIT_FAILED if failed else EXIT_OK
 
     def _stop_all(self, domain_id: int) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.
+        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive; then the shm files.
 
-        A child that dies by a signal cannot unlink its Fast DDS shared-memory files; those it had
-        mapped when it was signalled are removed once no live process maps them any more.  It may
-        also have mapped a peer's port file after the last look (a port is mapped when it is first
-        sent to), which then outlives the peer: so the port files of the run's own domain that
-        nobody maps any more go too (a live participant always maps its own port).
+        A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
+        that mapped one of its ports keeps the port's reference (the file outlives both).  Once
+        every child is gone, the files any of them held (noted while they ran, `held_files`) go
+        if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
+        the dead port files of the run's own domain (a port mapped after the last look).
         """
         first, second = self.stop_timeouts
         for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
@@ -685,26 +650,22 @@ class FormationRun:
             if not alive:
                 break
             for child in alive:
-                child.shm_files |= _mapped_shm_files(child.pid)
+                child.shm_files |= held_files(child.pid)
                 child.signal_used = sig.name
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(child.pid, sig)  # the group we created for it, nothing else
+                    if sig == signal.SIGINT:
+                        os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
             limit = time.monotonic() + wait
             while any(c.alive() for c in alive) and time.monotonic() < limit:
                 time.sleep(0.05)
         for child in self._children:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 child.process.wait(timeout=1.0)
-        orphaned = set().union(*(c.shm_files for c in self._children if (c.process.returncode or 0) < 0))
-        if orphaned:
-            orphaned |= _domain_port_files(domain_id)
-        in_use = _mapped_by_anyone(orphaned)
-        # A lock file (_el) is never mapped: it goes only with its port file.
-        removable = {path for path in orphaned - in_use if not (path.endswith('_el') and path[:-3] in in_use)}
-        for path in removable:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-        self.removed_shm_files = sorted(removable)
+        held = set().union(*(c.shm_files for c in self._children))
+        if any((c.process.returncode or 0) < 0 for c in self._children):
+            held |= domain_port_files(domain_id)
+        self.removed_shm_files = remove_orphans(held)
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr
