@@ -5,6 +5,8 @@
   through the real codec encoders, into a bag (no ROS process: rclpy only serializes).
 - `wait_for_stepping`: waits until a FormationRun's simulator reports sim time past 0.
 - `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
+- `small_disk`: `small_disk(megabytes)` mounts a tmpfs of that size (a disk that fills up);
+  root only, skipped otherwise, unmounted after the test.
 - `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker index) and the
   in-process run of the same scenario, shared by every test that asks for it in a session.
 - `tight_edge`: a paper example whose edge (2, 3) starts with a given fraction of its capacity as slack.
@@ -81,6 +83,32 @@ def _tight_edge(name: str, fraction: float):
 def tight_edge():
     """`tight_edge(name, fraction) -> Scenario`: edge (2, 3) of a paper example with slack `fraction` of its capacity."""
     return _tight_edge
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """`small_disk(megabytes) -> Path`: a folder on a tmpfs that holds only that much."""
+    import subprocess
+
+    mounted: list[Path] = []
+
+    def mount(megabytes: float) -> Path:
+        if os.geteuid() != 0:
+            pytest.skip('mounting a small tmpfs needs root (CI runs as root)')
+        folder = tmp_path / f'disk{len(mounted)}'
+        folder.mkdir()
+        done = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={int(megabytes * 1024)}k', 'tmpfs', str(folder)],
+                              capture_output=True, text=True, check=False, timeout=30)  # fmt: skip
+        if done.returncode != 0:
+            pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
+        mounted.append(folder)
+        return folder
+
+    try:
+        yield mount
+    finally:
+        for folder in reversed(mounted):
+            subprocess.run(['umount', '--lazy', str(folder)], capture_output=True, check=False, timeout=30)
 
 
 @pytest.fixture

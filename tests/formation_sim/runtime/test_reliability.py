@@ -6,6 +6,7 @@ the tests share the distributed tests' xdist group, so one run at a time on its 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -296,6 +297,7 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     (result,) = results
     assert result.exit_status == EXIT_LOST
     assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
+    assert result.message.count(f'recorder (pid {recorder.pid})') == 1, result.message  # said once
     assert 'its bag was recovered' in result.message
     assert result.bag_recovered and result.bag is not None
     assert not _wait_until_gone(str(result.out_dir))
@@ -373,6 +375,120 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
             bystander.kill()
         for path in stranger:
             path.unlink(missing_ok=True)
+
+
+@pytest.mark.timeout(300)
+def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(tmp_path, ros_env, wait_for_stepping, long_run_scenario, bag_trigger_stamps):
+    """SIGSTOP on the recorder mid-run: it acknowledges nothing more, and every keep-last writer
+    of the run would overwrite what it has not acknowledged. The simulator sees its heartbeat
+    writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
+    orchestrator sends SIGCONT with SIGINT) it closes its bag, and summary.json says, per topic,
+    what the run published and the bag lacks."""
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    recorder = next(child for child in run._children if child.name == 'recorder')
+    os.kill(recorder.pid, signal.SIGSTOP)
+    try:
+        worker.join(timeout=120.0)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(recorder.pid, signal.SIGCONT)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST, result.message
+    assert 'the recorder lost at t=' in result.message and 'no sign of life for 1.0 s' in result.message
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'recorder_lost' and failure['detected_by'] == 'simulator'
+    assert 0.0 < failure['time'] == summary['extra']['reached_time'] < 600.0
+    assert result.bag is not None and not result.bag_recovered  # closed by the recorder itself
+    assert not _wait_until_gone(str(result.out_dir))
+
+    # What the bag holds is what the run published less what summary.json says is missing.
+    published, recording = summary['extra']['published'], summary['extra']['recording']
+    counts, _ = bag_trigger_stamps(result.bag)
+    for topic, n in published.items():
+        if topic != '/formation/status':  # the bag also holds the agents' discovery announcements
+            assert counts.get(topic, 0) == n - recording['missing'].get(topic, 0), topic
+    assert recording['complete'] == (not recording['missing'])
+    assert ('the bag misses' in result.message) == bool(recording['missing']), result.message
+    if recording['missing']:
+        worst = max(recording['missing'], key=recording['missing'].get)
+        assert f'{worst} {published[worst] - recording["missing"][worst]} of {published[worst]}' in result.message
+
+
+@pytest.mark.timeout(300)
+def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+    """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
+    with the failure, the last sim time and step of the simulator's progress, every process's
+    exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    scenario = load_scenario(long_run_scenario)
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=63, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    time.sleep(1.5)  # past a progress line or two
+    simulator = next(child for child in run._children if child.name == 'simulator')
+    os.kill(simulator.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST
+    assert result.message.startswith(f'simulator (pid {simulator.pid}) killed by SIGKILL; see ')
+    assert result.summary is not None and result.bag is not None and not result.bag_recovered
+    assert not _wait_until_gone(str(result.out_dir))
+
+    summary = json.loads(result.summary.read_text())
+    extra = summary['extra']
+    failure = extra['failure']
+    assert failure == result.failure
+    assert failure['kind'] == 'process_lost' and failure['detected_by'] == 'orchestrator'
+    assert failure['process']['name'] == 'simulator' and failure['process']['returncode'] == -signal.SIGKILL
+    assert extra['processes']['simulator'] == 'killed by SIGKILL'
+    assert 'bag' in extra['summary_source']
+    # The last progress line came before the kill; the bag holds the run up to the kill.
+    assert isinstance(failure['step'], int) and failure['step'] > 0
+    assert 0.0 < failure['time'] <= extra['reached_time'] < scenario.horizon
+    # The bag may hold the triggers of the step in progress (sent, not yet sampled): one more step.
+    last = max(t for times in summary['trigger_times'].values() for t in times)
+    reference = simulate(scenario, horizon=last + 1.0)
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert got == times[: len(got)], f'agent {agent}'
+        assert len(got) >= len([t for t in times if t < extra['reached_time']]), f'agent {agent}'
+
+
+@pytest.mark.timeout(300)
+def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_env, small_disk, long_run_scenario):
+    """`formation run` into a 2 MB tmpfs: the bag fills it. The recorder names the error and
+    leaves; the run stops; what cannot be written (the recovered bag, summary.json) is named and
+    absent rather than empty or cut short, and no temporary file is left."""
+    out = small_disk(2) / 'run'
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_sim.cli', 'run', long_run_scenario, '--horizon', '20', '--out', str(out),
+         '--domain-id', '64', '--no-plot'],
+        capture_output=True, text=True, timeout=240, check=False,
+    )  # fmt: skip
+    assert done.returncode in (1, 3), done.stderr
+    assert 'Traceback' not in done.stderr, done.stderr
+    assert 'No space left on device' in done.stderr
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    files = [path for path in out.rglob('*') if path.is_file() and 'logs' not in path.relative_to(out).parts]
+    assert not [path.name for path in files if path.name.endswith(('.tmp', '.recovering'))], files
+    for path in files:
+        assert path.stat().st_size > 0, f'{path} is empty'
+        if path.suffix in ('.json', '.yaml'):
+            (json.loads if path.suffix == '.json' else __import__('yaml').safe_load)(path.read_text())  # complete
+    if (out / 'summary.json').exists():
+        assert 'extra' in json.loads((out / 'summary.json').read_text())
+    else:
+        assert "summary.json could not be written: [Errno 28] No space left on device" in done.stderr
+    bag = out / 'bag'
+    if not (bag / 'metadata.yaml').exists():  # not recovered: the damage is named
+        assert 'its bag could not be recovered' in done.stderr and 'free space, then recover it again' in done.stderr
+        assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']
 
 
 def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:

@@ -163,6 +163,7 @@ class FormationAgentNode(Node):
         self.failure: Exception | None = None
         self._last_stamp: dict[int, float] = {}  # sender -> stamp of its last accepted information
         self._final_report_sent = False
+        self.published: dict[str, int] = {}  # topic -> messages published from step 0 on (commands: self.output)
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self._simulator_seen = False
         self._simulator_lost_at: float | None = None
@@ -297,7 +298,7 @@ class FormationAgentNode(Node):
         self.output.publish(t, tuple(float(v) for v in out.control), sensed)
         self.commands_sent += 1
         for info in out.infos:
-            self._info_pubs[info.receiver].publish(encode_trigger_info(info))
+            self._publish(self._info_pubs[info.receiver], encode_trigger_info(info))
             self.info_sent += 1
         held, self._held = self._held, []
         for info in held:
@@ -442,11 +443,14 @@ class FormationAgentNode(Node):
             ready=ready,
             last_planned=self._planned,
         )
-        self._status_pub.publish(encode_status(status))
+        self._publish(self._status_pub, encode_status(status))
 
     # -- reports and leaving ----------------------------------------------------------------------
 
     def report(self, *, final: bool = False, failure: str | None = None) -> AgentReport:
+        published = dict(self.published)
+        if isinstance(self.output, PlantOutput) and self.output.sent:
+            published[self.output.publisher.topic_name] = self.output.sent
         return AgentReport(
             agent=self.agent_id,
             final=final,
@@ -457,6 +461,7 @@ class FormationAgentNode(Node):
             robot_commands=self.output.robot_commands,
             saturation=self.output.saturation,
             failure=failure,
+            published=published,
         )
 
     def _report_changed(self) -> None:
@@ -465,10 +470,24 @@ class FormationAgentNode(Node):
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
         self._report_dirty = False
         self._final_report_sent = final
+        self._count_published(self._report_pub)  # a report counts itself
         self._report_pub.publish(encode_agent_report(self.report(final=final, failure=failure)))
 
+    def _publish(self, publisher, msg) -> None:  # noqa: ANN001
+        self._count_published(publisher)
+        publisher.publish(msg)
+
+    def _count_published(self, publisher) -> None:  # noqa: ANN001
+        """Count what a recorder must hold: everything from step 0 on, when it is matched for sure
+        (the simulator starts step 0 only once every agent has matched all its listeners)."""
+        if self.step is not None:
+            topic = publisher.topic_name
+            self.published[topic] = self.published.get(topic, 0) + 1
+
     def _publish_report_if_dirty(self) -> None:
-        if self._report_dirty and not self.finished:
+        # Not before step 0: a recorder may not be matched yet, and every report it must hold
+        # counts (news from discovery go out with the first report after it).
+        if self._report_dirty and not self.finished and self.step is not None:
             self._publish_report()
 
     def leave(self, *, failure: str | None = None) -> None:

@@ -32,6 +32,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import socket
 import subprocess
@@ -215,7 +216,7 @@ class _Child:
                 lines = handle.read().decode(errors='replace').splitlines()
         except OSError:
             return ''
-        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: '))]
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))]
         return named[-1].split(': ', 1)[1] if named else ''
 
     def describe(self) -> str:
@@ -422,8 +423,9 @@ class FormationRun:
     def _pump(self, child: _Child, handle) -> None:
         """Copy the simulator's stdout into its log; keep its progress lines for the terminal."""
         for line in child.process.stdout:
-            handle.write(line)
-            handle.flush()
+            with contextlib.suppress(OSError):  # a full disk: keep reading, or the child blocks on the pipe
+                handle.write(line)
+                handle.flush()
             if line.startswith(PROGRESS_PREFIX):
                 self._last_progress = line[len(PROGRESS_PREFIX) :].strip()
 
@@ -446,14 +448,43 @@ class FormationRun:
                 self._stop_all(domain_id)
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        recovered = self._recover_bag(bag) if self.record else None
-        failure = self._annotate_summary(summary, lost, status, message)
+        notes: list[str] = []  # what the message adds after the failure
+        recovered = self._recover_bag(bag, notes) if self.record else False
+        data = self._read_summary(summary, notes)
+        if data is None and 't=' in self._last_progress:  # it ran, and the simulator left no summary
+            data = self._summary_of_what_is_known(bag, status, notes)
+        failure = None
+        if data is not None:
+            failure = self._annotate(data, lost, status, message)
+            check = self._check_recording(data, bag, notes)
+            if check is not None and not check.complete:
+                if failure is None:
+                    failure = data['extra']['failure'] = {
+                        'kind': 'recording_incomplete',
+                        'message': check.describe_missing(),
+                        'agents': [],
+                        'time': data['extra'].get('reached_time'),
+                        'step': data['extra'].get('steps'),
+                        'detected_by': 'orchestrator',
+                    }
+                    status = EXIT_FAILED if status == EXIT_OK else status
+                elif status != EXIT_INTERRUPTED:
+                    notes.append(check.describe_missing())
+            if check is not None and check.foreign and status != EXIT_INTERRUPTED:
+                notes.append(check.describe_foreign())
+            from formation_sim.sim.summary import write_summary_file
+
+            try:
+                write_summary_file(data, summary)
+            except OSError as error:
+                summary.unlink(missing_ok=True)  # the simulator's, without the failure: not to be believed
+                notes.append(f'summary.json could not be written: {error}')
         if status == EXIT_OK and not summary.is_file():
-            status, message = EXIT_FAILED, f'the simulator exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED:
-            message = failure['message'] + (f'; {message}' if message and message not in failure['message'] else '')
-        if recovered:
-            message += f'; the recorder died: its bag was recovered ({recovered})'
+            status = EXIT_FAILED
+            message = message or f'the simulator exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+            message = failure['message'] + (f'; {message}' if message else '')
+        message = '; '.join([message, *notes] if message else notes)
         result = RunResult(
             out_dir=self.out_dir,
             summary=summary if summary.is_file() else None,
@@ -467,31 +498,106 @@ class FormationRun:
             ),
             message=message,
             failure=failure,
-            bag_recovered=bool(recovered),
+            bag_recovered=recovered,
         )
         if self.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
         return result
 
-    def _recover_bag(self, bag: Path) -> str | None:
-        """A bag left without metadata.yaml (its recorder died) is rebuilt from its MCAP file."""
-        if not bag.is_dir() or (bag / 'metadata.yaml').is_file():
-            return None
+    def _recover_bag(self, bag: Path, notes: list[str]) -> bool:
+        """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file."""
+        if not bag.is_dir():
+            return False
         from formation_sim.bag.io import BagError
         from formation_sim.bag.recovery import reindex
 
+        recorder = next((c for c in self._children if c.name == 'recorder'), None)
+        died = recorder is not None and recorder.process.returncode not in (0, None)
+        how = 'the recorder died: its bag' if died else 'the bag, left unfinished,'
         try:
             recovery = reindex(bag)
         except (BagError, OSError) as error:
-            return f'recovery failed: {error}'
-        return f'{recovery.message_count} messages kept'
+            notes.append(f'{how} could not be recovered: {error}')
+            return False
+        if recovery.healthy:
+            return False
+        notes.append(f'{how} was recovered ({recovery.message_count} messages kept)')
+        return True
 
-    def _annotate_summary(self, summary: Path, lost: _Child | None, status: int, message: str) -> dict | None:
-        """Add the orchestrator's view of a failure to summary.json's extra.failure; return it."""
-        if not summary.is_file():
+    def _read_summary(self, path: Path, notes: list[str]) -> dict | None:
+        if not path.is_file():
             return None
-        data = json.loads(summary.read_text())
+        try:
+            return json.loads(path.read_text(encoding='utf-8'))
+        except (OSError, ValueError) as error:
+            notes.append(f'{path} could not be read ({error}): replaced by what the run knows')
+            return None
+
+    def _process_info(self, child: _Child) -> dict:
+        return {
+            'name': child.name,
+            'pid': child.pid,
+            'returncode': child.process.returncode,
+            'exit': describe_exit(child.process.returncode),
+            'seconds_after_launch': (child.exited_at or time.monotonic()) - self._started_at,
+            'error': child.error_line(),
+        }
+
+    def _summary_of_what_is_known(self, bag: Path, status: int, notes: list[str]) -> dict:
+        """summary.json when the simulator left none (killed hard, or it could not write): the
+        failure, the last sim time and step of its progress, the processes, and the run as far as
+        the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
+        from formation_sim.sim.summary import SCHEMA, build_summary
+
+        simulator = next(c for c in self._children if c.name == 'simulator')
+        progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', self._last_progress)}
+        stopped_by_us = status == EXIT_INTERRUPTED or simulator.signal_used is not None
+        killed = simulator.process.returncode is None or simulator.process.returncode < 0
+        failure = {
+            'kind': 'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
+            'message': f'simulator (pid {simulator.pid}) {describe_exit(simulator.process.returncode)}',
+            'agents': [],
+            'time': progress.get('t'),  # its last progress line (once a second, 6 decimals)
+            'step': int(progress['steps']) if 'steps' in progress else None,
+            'wall_time': progress.get('wall'),
+            'detected_by': 'orchestrator',
+            'process': self._process_info(simulator),
+        }
+        scenario = self.scenario
+        data = None
+        if (bag / 'metadata.yaml').is_file():
+            from formation_sim.analysis.load import AnalysisError, load_bag_run
+
+            try:
+                data = build_summary(load_bag_run(bag, run_dir=self.out_dir, scenario=scenario).record)
+                data['wall_time'] = None
+                source = 'orchestrator: the simulator left no summary; the run as far as its bag holds it'
+            except (AnalysisError, ValueError) as error:
+                notes.append(f'the bag could not be read back: {error}')
+        if data is None:
+            data = {
+                'schema': SCHEMA,
+                'scenario': scenario.name,
+                'dynamics': scenario.dynamics,
+                'mode': 'distributed',
+                'horizon': self.horizon,
+                'n_agents': len(scenario.agent_ids),
+                'dimension': scenario.dimension,
+                'delta': scenario.delta,
+                'wall_time': None,
+                'extra': {},
+            }
+            source = 'orchestrator: the simulator left no summary and there is no readable bag'
+        data['extra'].update(
+            failure=failure,
+            summary_source=source,
+            processes={c.name: describe_exit(c.process.returncode) for c in self._children},
+        )
+        return data
+
+    def _annotate(self, data: dict, lost: _Child | None, status: int, message: str) -> dict | None:
+        """Add the orchestrator's view of a failure to the summary's extra.failure; return it."""
         extra = data.setdefault('extra', {})
         failure = extra.get('failure')
         if failure is None and status == EXIT_OK:
@@ -499,14 +605,7 @@ class FormationRun:
         if failure is None:  # the simulator completed, but a child failed
             failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
         if lost is not None:
-            failure['process'] = {
-                'name': lost.name,
-                'pid': lost.pid,
-                'returncode': lost.process.returncode,
-                'exit': describe_exit(lost.process.returncode),
-                'seconds_after_launch': (lost.exited_at or time.monotonic()) - self._started_at,
-                'error': lost.error_line(),
-            }
+            failure['process'] = self._process_info(lost)
             failed_itself = (lost.process.returncode or 0) > 0  # it named an error and left
             if failure['kind'] == 'interrupted':  # stopped by us because of that child
                 failure['kind'] = 'process_failed' if failed_itself else 'process_lost'
@@ -517,10 +616,26 @@ class FormationRun:
             if 'orchestrator' not in failure['detected_by']:
                 failure['detected_by'] += ', orchestrator'
         extra['failure'] = failure
-        staging = summary.with_name(summary.name + '.tmp')
-        staging.write_text(json.dumps(data, indent=1, allow_nan=False) + '\n')
-        staging.replace(summary)
         return failure
+
+    def _check_recording(self, data: dict, bag: Path, notes: list[str]):
+        """What the run published against what its bag holds (extra.recording); None without a bag."""
+        published = data.get('extra', {}).get('published')
+        if not self.record or not published or not (bag / 'metadata.yaml').is_file():
+            return None
+        from formation_sim.analysis.accounting import check_recording
+        from formation_sim.runtime.sim_node import formation_topics
+
+        recorded = {name for name, _ in formation_topics(self.scenario)}  # not, e.g., a robot's own topics
+        published = {topic: n for topic, n in published.items() if topic in recorded}
+
+        try:
+            check = check_recording(published, bag)
+        except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
+            notes.append(f'the bag could not be checked against what the run published: {error}')
+            return None
+        data['extra']['recording'] = check.to_dict()
+        return check
 
     @contextlib.contextmanager
     def _signals_trapped(self) -> Iterator[None]:
@@ -608,7 +723,7 @@ class FormationRun:
                     return self._finish(), '', lost
                 status = _lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
-                return status, f'{seen}simulator {describe_exit(code)}; see {simulator.log}', lost
+                return status, f'{seen}simulator (pid {simulator.pid}) {describe_exit(code)}; see {simulator.log}', lost
             if lost is None:
                 lost = next(
                     (

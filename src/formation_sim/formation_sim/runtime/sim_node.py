@@ -78,6 +78,7 @@ from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
     MARKERS_TOPIC,
+    RECORDER_TOPIC,
     REPORT_TOPIC,
     SCENARIO_TOPIC,
     SENSING_LOG_TOPIC,
@@ -89,6 +90,7 @@ from formation_msgs_py.topics import (
     trigger_info_topic,
 )
 from formation_sim.sim.engine import Sampler, build_agent, due_twice, rounding_floor
+from formation_sim.sim.files import write_atomically
 from formation_sim.analysis.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.sim.record import RunRecord
@@ -132,6 +134,12 @@ class ConnectivityLostError(SimulatorError):
         self.time = time
         self.edge = edge
         self.length = length
+
+
+class RecorderLostError(SimulatorError):
+    """A recorder stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'recorder_lost'
 
 
 class AgentLostError(SimulatorError):
@@ -306,6 +314,20 @@ class FormationSimulatorNode(Node):
             self.create_service(Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent))
             for i in self.agents
         ]
+        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
+        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
+        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
+        self._recorder_sub = self.create_subscription(
+            String,
+            RECORDER_TOPIC,
+            lambda msg: None,
+            READER_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
+        )
+        self._recorders_alive = 0
+        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
+        self._recorder_lease_expired = False
+        self.published: dict[str, int] = {}  # topic -> messages this node published there
 
         self.step: Step | None = None
         self.finished = False
@@ -346,6 +368,7 @@ class FormationSimulatorNode(Node):
             count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
         count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
         count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
         unmatched = [i for i, sub in self._command_subs.items() if sub.get_publisher_count() < 1]
         expired = [i for i, book in self.agents.items() if book.lost is not None]
         not_ready = [
@@ -398,7 +421,17 @@ class FormationSimulatorNode(Node):
             how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)' if book.lease_expired else 'its node left the graph'
             book.lost = (time.monotonic(), how)
 
+    def _on_recorder_liveliness(self, info) -> None:
+        if info.alive_count >= self._recorders_alive:
+            self._recorders_alive = info.alive_count
+            self._recorder_lost = None
+        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
+            self._recorder_lease_expired = info.not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
+            self._recorder_lost = (time.monotonic(), how)
+
     def _check_lost(self, now: float) -> None:
+        self._check_recorder_lost(now)
         # During discovery a lease may expire while a busy machine starts many processes: discovery
         # waits for the agent to come back (bounded by its timeout); an agent that left counts.
         lost = {
@@ -415,6 +448,15 @@ class FormationSimulatorNode(Node):
         names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {", ".join(map(str, agents))}'
         hows = '; '.join(sorted({how for _, how in lost.values()}))
         raise AgentLostError(f'{names} lost {where}: {hows}; the run stops', agents=agents)
+
+    def _check_recorder_lost(self, now: float) -> None:
+        lost = self._recorder_lost
+        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
+            return
+        where = 'during discovery' if self.step is None else f'at t={self.world.time!r} (step {self.step.index})'
+        raise RecorderLostError(
+            f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )
 
     def _on_report(self, msg: String) -> None:
         try:
@@ -461,6 +503,10 @@ class FormationSimulatorNode(Node):
         if isinstance(error, ConnectivityLostError):
             self.failure_info.update(edge=list(error.edge), length=error.length)
 
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
+
     def _print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
         try:
@@ -484,7 +530,7 @@ class FormationSimulatorNode(Node):
             with contextlib.suppress(OSError):
                 print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
-        self._scenario_pub.publish(String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._sampler.event()
         if self.realtime:
             self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
@@ -492,7 +538,7 @@ class FormationSimulatorNode(Node):
             self._epoch = time.time()
             self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
             self._due = set(self.agents)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.publish_samples()
             return
         self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
@@ -521,7 +567,7 @@ class FormationSimulatorNode(Node):
             self._sampler.event()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
             self._finished_at = time.monotonic()
         self.publish_samples()
@@ -535,7 +581,7 @@ class FormationSimulatorNode(Node):
         book.expected_triggers += 1
         self.sensing_calls += 1
         log = {'version': 1, 'agent': agent, 'step': 0, 'time': t}
-        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
         return encode_sensed_state(self.world.sense(agent, book.neighbours))
 
     # -- lock-step ------------------------------------------------------------------------------
@@ -547,7 +593,7 @@ class FormationSimulatorNode(Node):
             self.agents[i].expected_triggers += 1
             self.agents[i].trigger_times.append(step.time)
         self._last_advance = time.monotonic()
-        self._step_pub.publish(encode_step(step))
+        self._publish(self._step_pub, encode_step(step))
 
     def _on_status(self, msg: Float64MultiArray) -> None:
         try:
@@ -626,7 +672,7 @@ class FormationSimulatorNode(Node):
         self.sensing_calls += 1
         sensed = self.world.sense(agent, book.neighbours)
         log = {'version': 1, 'agent': agent, 'step': index, 'time': self.world.time}
-        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
         return encode_sensed_state(sensed)
 
     def _settled(self) -> bool:
@@ -698,12 +744,12 @@ class FormationSimulatorNode(Node):
             state = WorldState(
                 time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=samples.velocities[k] if self.double else None
             )
-            self._state_pub.publish(encode_world_state(state))
+            self._publish(self._state_pub, encode_world_state(state))
             if t >= self._next_viz or (self.finished and k == last):
                 self._next_viz = t + self.viz_period
-                self._clock_pub.publish(Clock(clock=ros_time(t)))
-                self._truth_pub.publish(encode_pose_array(state))
-                self._markers_pub.publish(self._marker_array.update(self._markers.markers(x), time=t))
+                self._publish(self._clock_pub, Clock(clock=ros_time(t)))
+                self._publish(self._truth_pub, encode_pose_array(state))
+                self._publish(self._markers_pub, self._marker_array.update(self._markers.markers(x), time=t))
 
     def _check_connectivity(self, t: float, x: np.ndarray) -> None:
         """Theorems 1 (i) and 2 (i): every edge stays shorter than Δ. Stop at the first that does not."""
@@ -795,7 +841,18 @@ class FormationSimulatorNode(Node):
             },
             'late_information': sum(r.late for r in reports),
             'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
+            'published': self._published(),
         }
+
+    def _published(self) -> dict[str, int]:
+        """Messages published per topic by this node and by every agent whose final report came
+        (the others' are unknown: reports_missing), from step 0 on: what a recorder must hold."""
+        counts = dict(self.published)
+        for book in self.agents.values():
+            if book.report is not None and book.report.final:
+                for topic, n in book.report.published.items():
+                    counts[topic] = counts.get(topic, 0) + n
+        return dict(sorted(counts.items()))
 
     def _lateness(self) -> dict:
         """Wall clock: how late triggers came against the times agents had planned them."""
@@ -809,10 +866,19 @@ class FormationSimulatorNode(Node):
             'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0),
         }
 
-    def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
+    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
         self.publish_samples()
-        for pub in (self._step_pub, *self._tool_publishers):
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
+
+    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
+        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
+        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
+        end: what it lacks is counted against the bag after the run)."""
+        deadline = time.monotonic() + timeout_sec
+        pending = list(publishers)
+        while pending and self._recorder_lost is None and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
+            executor.spin_once(timeout_sec=0.0)
 
     def stop_agents(self, executor) -> None:
         """The run failed: a final Step sends the agents home, with their final reports."""
@@ -820,7 +886,7 @@ class FormationSimulatorNode(Node):
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self.finished = True
-        self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
         self.publish_samples()
         self.collect_final_reports(executor)
         # A live agent's final report says it got the final Step; a lost agent is still matched
@@ -828,8 +894,7 @@ class FormationSimulatorNode(Node):
         publishers = self._tool_publishers
         if not self.final_reports_in():
             publishers = (self._step_pub, *publishers)
-        for pub in publishers:
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=1.0))
+        self._wait_acknowledged(executor, publishers, 1.0)
 
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
@@ -843,7 +908,7 @@ def write_results(node: FormationSimulatorNode) -> None:
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_summary(node.record(), out)
-    (out / GRAPH_FILE).write_text(json.dumps(node.graph, indent=1, sort_keys=True) + '\n', encoding='utf-8')
+    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
 
 
 def main(args: Sequence[str] | None = None) -> int:
@@ -862,11 +927,15 @@ def main(args: Sequence[str] | None = None) -> int:
                 if node.failure is not None:
                     raise node.failure
             node.collect_final_reports(executor)
-            node.wait_for_delivery()
+            node.wait_for_delivery(executor)
             if node.progress_period > 0.0:
                 node._print_progress()
             if node.out_dir:
-                write_results(node)
+                try:
+                    write_results(node)
+                except OSError as error:  # e.g. a full disk: the run itself went well
+                    _tell(f'formation_sim: cannot write the results: {error}')
+                    status = EXIT_FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
             status = EXIT_INTERRUPTED
             _write_partial(node, error)
@@ -875,16 +944,17 @@ def main(args: Sequence[str] | None = None) -> int:
                 status = EXIT_INTERRUPTED
                 _write_partial(node, KeyboardInterrupt())
                 return status
-            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-            if not isinstance(error, (AgentLostError, ConnectivityLostError)):
-                traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
+            _tell(f'formation_sim: {error}')
+            if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
+                with contextlib.suppress(OSError):
+                    traceback.print_exc(file=sys.stderr)
+            status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
             if node is not None:
                 node.fail(error)
                 try:
                     node.stop_agents(executor)
                 except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-                    print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
+                    _tell(f'formation_sim: could not stop the agents: {problem}')
             _write_partial(node, error)
         finally:
             if node is not None:
@@ -901,7 +971,13 @@ def _write_partial(node: FormationSimulatorNode | None, error: BaseException) ->
     try:
         write_results(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-        print(f'formation_sim: could not write the partial results: {problem}', file=sys.stderr, flush=True)
+        _tell(f'formation_sim: could not write the partial results: {problem}')
+
+
+def _tell(line: str) -> None:
+    """A line on stderr (the run's log), if it can still be written (the disk may be full)."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
 
 
 if __name__ == '__main__':

@@ -35,6 +35,7 @@ import numpy as np
 
 from formation_sim.model import theory
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
 
 SCHEMA = 'formation-summary/1'
@@ -118,8 +119,7 @@ def write_summary(record, out_dir) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary = build_summary(record)
-    path = out / SUMMARY_FILE
-    path.write_text(json.dumps(summary, indent=1, allow_nan=False) + '\n')
+    path = write_summary_file(summary, out / SUMMARY_FILE)
     arrays = {
         'agent_ids': np.array(record.scenario.agent_ids),
         'times': record.sample_times,
@@ -127,8 +127,13 @@ def write_summary(record, out_dir) -> Path:
     }
     if record.sample_velocities is not None:
         arrays['velocities'] = record.sample_velocities
-    np.savez_compressed(out / TRAJECTORY_FILE, **arrays)
+    write_atomically(out / TRAJECTORY_FILE, lambda handle: np.savez_compressed(handle, **arrays))
     return path
+
+
+def write_summary_file(summary: dict, path) -> Path:
+    """Write a summary dictionary as `path` (summary.json), whole or not at all."""
+    return write_atomically(path, json.dumps(summary, indent=1, allow_nan=False) + '\n')
 
 
 def load_summary(path) -> dict:
