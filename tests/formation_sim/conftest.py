@@ -128,8 +128,15 @@ def paper_single_record() -> RunRecord:
     return simulate(load_scenario('paper_single'), horizon=1.0)
 
 
-def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None) -> Path:
-    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger)."""
+def _write_run_bag(
+    record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None,
+    asked_horizon: float | None = None,
+) -> Path:
+    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger).
+
+    The run ends at record.horizon; `asked_horizon` (default the same) is the horizon it was run
+    for, which the scenario topic carries: a later one makes the bag a run stopped early.
+    """
     import yaml
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import Twist
@@ -155,7 +162,8 @@ def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = Fals
 
     array = 'std_msgs/msg/Float64MultiArray'
     if scenario_topic:
-        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(scenario), sort_keys=False)))
+        asked = scenario.replace(horizon=record.horizon if asked_horizon is None else asked_horizon)  # as the simulator publishes it
+        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(asked), sort_keys=False)))
     events = sorted({t for times in record.trigger_times.values() for t in times})
     for index, t in enumerate(events):
         add(t, '/formation/step', array, encode_step(Step(index=index, time=t)))
@@ -187,7 +195,7 @@ def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = Fals
 
 @pytest.fixture(scope='session')
 def write_run_bag():
-    """write_run_bag(record, path, *, scenario_topic=False, drop=None) -> path."""
+    """write_run_bag(record, path, *, scenario_topic=False, drop=None, asked_horizon=None) -> path."""
     return _write_run_bag
 
 

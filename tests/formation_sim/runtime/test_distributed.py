@@ -138,7 +138,7 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_fo
 def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, long_run_scenario):
     import signal
 
-    from formation_sim.runtime.fastdds_shm import held_files, mapped_by_anyone
+    from formation_sim.runtime.fastdds_shm import held_files, in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=114, progress=False, record=False, timeout=240.0)
@@ -151,7 +151,7 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, lo
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=60.0)
     # What the victim could not remove, the orchestrator did (unless another process still uses it).
-    assert not [path for path in leftovers - mapped_by_anyone(leftovers) if Path(path).exists()]
+    assert not [path for path in leftovers - in_use(leftovers) if Path(path).exists()]
     (result,) = results
     assert result.exit_status == 3
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
@@ -202,6 +202,7 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
 
 @pytest.mark.timeout(300)
 def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping, long_run_scenario):
+    from formation_sim.runtime.fastdds_shm import in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
     # No grace period: every child still alive right after SIGINT is killed by SIGTERM or SIGKILL.
@@ -226,7 +227,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_st
     assert killed, [child.process.returncode for child in run._children]
     files = set().union(*(child.shm_files for child in killed))
     assert files, 'the killed children mapped no Fast DDS shared-memory file'
-    assert not [path for path in files if Path(path).exists()]
+    assert not [path for path in files - in_use(files) if Path(path).exists()]
     assert not [child for child in result.children if _alive(child.pid)]
 
 

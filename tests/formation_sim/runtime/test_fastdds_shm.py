@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from formation_sim.runtime.fastdds_shm import SHM_DIR, domain_port_files, held_files, remove_orphans
+from formation_sim.runtime.fastdds_shm import SHM_DIR, domain_port_files, held_files, in_use, remove_orphans
 
 pytestmark = pytest.mark.skipif(not SHM_DIR.is_dir(), reason='no /dev/shm here')
 
@@ -51,6 +51,7 @@ def test_the_files_of_a_dead_owner_go_whole_and_those_held_or_mapped_stay(made):
     handle = mapped[0].open('r+b')  # a peer alive maps a segment whose owner is gone
     view = mmap.mmap(handle.fileno(), 0)
     try:
+        assert in_use(str(path) for path in dead_port + dead_segment + locked + mapped) == {str(path) for path in locked + mapped}
         named = [dead_port[0], dead_segment[1], locked[0], mapped[1]]  # any one file names its family
         removed = remove_orphans(str(path) for path in named)
         assert sorted(removed) == sorted(str(path) for path in dead_port + dead_segment)

@@ -56,8 +56,11 @@ from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, tri
 from formation_msgs_py.types import TriggerInfo
 
 NODE_NAME = 'formation_agent'
-DELIVERY_TIMEOUT = 1.0
-"""Seconds a leaving node waits for its readers to acknowledge its last messages (zero command, report)."""
+DELIVERY_TIMEOUT = 4.0
+"""Seconds a leaving node waits, at most, for its readers to acknowledge what it published (its
+last messages too: zero command, report): Fast DDS repairs a message lost on the way at the
+writer's next heartbeat (every 3 s by default, 0.1 s in a run: `formation_sim.runtime`'s
+fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 
 
 class AgentNodeError(ValueError):
@@ -490,9 +493,10 @@ class FormationAgentNode(Node):
         if self._report_dirty and not self.finished and self.step is not None:
             self._publish_report()
 
-    def leave(self, *, failure: str | None = None) -> None:
+    def leave(self, *, failure: str | None = None, deadline: float | None = None) -> None:
         """On the way out, whatever the reason: the zero command, the final report if not yet sent
-        (with `failure`, why the agent stops early), and the delivery of both (bounded)."""
+        (with `failure`, why the agent stops early), and the delivery of everything it published
+        (until `deadline`, time.monotonic(); default DELIVERY_TIMEOUT from now)."""
         if not rclpy.ok(context=self.context):
             return  # a context shut down by someone else cannot publish
         self.finished = True
@@ -500,13 +504,14 @@ class FormationAgentNode(Node):
         self.output.stop()
         if not self._final_report_sent:
             self._publish_report(final=True, failure=failure)
-        for pub in (self.output.publisher, self._report_pub):
-            pub.wait_for_all_acked(Duration(seconds=DELIVERY_TIMEOUT))
+        self.wait_for_delivery(time.monotonic() + DELIVERY_TIMEOUT if deadline is None else deadline)
 
-    def wait_for_delivery(self, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
-        """Let reliable writers hand over what they still hold before the node goes away."""
-        for pub in (self._status_pub, self._report_pub, self.output.publisher, *self._info_pubs.values()):
-            pub.wait_for_all_acked(Duration(seconds=timeout_sec))
+    def wait_for_delivery(self, deadline: float) -> None:
+        """Let reliable writers hand over what they still hold before the node goes away (until
+        `deadline`, time.monotonic())."""
+        pending = [self._status_pub, self._report_pub, self.output.publisher, *self._info_pubs.values()]
+        while pending and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
 
 
 if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so instead of doing nothing

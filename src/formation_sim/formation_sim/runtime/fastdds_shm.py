@@ -108,6 +108,29 @@ def _lock_if_free(lock: Path) -> Iterator[bool]:
         os.close(fd)  # releases the lock
 
 
+def in_use(paths: Iterable[str]) -> set[str]:
+    """Those of `paths` whose segment or port a live process holds (its lock) or maps.
+
+    Ports 7000, 7001, … are taken by whichever participant comes next: a file of a dead process
+    may be made anew by a live one.
+    """
+    paths = set(paths)
+    bases = {path: _base(Path(path).name) for path in paths}
+    family = {str(file) for base in set(bases.values()) - {None} for file in _family(base)}
+    mapped = mapped_by_anyone(family)
+    used = set()
+    for path, base in bases.items():
+        if base is None:
+            continue
+        if any(str(file) in mapped for file in _family(base)):
+            used.add(path)
+            continue
+        with _lock_if_free(SHM_DIR / f'{base}_el') as free:
+            if not free:
+                used.add(path)
+    return used
+
+
 def remove_orphans(paths: Iterable[str]) -> list[str]:
     """Remove the files of every segment or port named in `paths` whose owner is gone; return them.
 

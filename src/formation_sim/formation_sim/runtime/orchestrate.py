@@ -59,6 +59,7 @@ BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 PROGRESS_PREFIX = 'progress '
 POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 
 # Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
 EXIT_OK = 0
@@ -391,6 +392,7 @@ class FormationRun:
             env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
         if processes > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
         env.update(self.extra_env)
         # Children find these packages the way this process did.
         here = [
@@ -471,7 +473,7 @@ class FormationRun:
                 elif status != EXIT_INTERRUPTED:
                     notes.append(check.describe_missing())
             if check is not None and check.foreign and status != EXIT_INTERRUPTED:
-                notes.append(check.describe_foreign())
+                notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -618,6 +620,20 @@ class FormationRun:
         extra['failure'] = failure
         return failure
 
+    def _strangers(self, topics: dict[str, int], domain_id: int) -> str:
+        """'; nodes outside the run wrote on them: /formation_replay (ROS domain 64)', as graph.json saw them."""
+        from formation_agent.ros.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.sim_node import GRAPH_FILE
+
+        own = {'/formation_simulator', '/formation_recorder', *(f'{agent_namespace(i)}/{NODE_NAME}' for i in self.scenario.agent_ids)}
+        try:
+            graph = json.loads((self.out_dir / GRAPH_FILE).read_text(encoding='utf-8'))
+        except (OSError, ValueError):
+            graph = {}
+        strangers = sorted(node for node, ends in graph.items() if node not in own and set(ends.get('publishers', ())) & set(topics))
+        return f'; nodes outside the run wrote on them: {", ".join(strangers)} (ROS domain {domain_id})' if strangers else ''
+
     def _check_recording(self, data: dict, bag: Path, notes: list[str]):
         """What the run published against what its bag holds (extra.recording); None without a bag."""
         published = data.get('extra', {}).get('published')
@@ -751,7 +767,12 @@ class FormationRun:
         return EXIT_FAILED if failed else EXIT_OK
 
     def _stop_all(self, domain_id: int) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive; then the shm files.
+        """Stop the children still alive, the recorder last; then remove their shm files.
+
+        Each gets SIGINT, then SIGTERM, then SIGKILL (`stop_timeouts`).  The simulator and the agents
+        go first: they flush what they published to the recorder before they exit (a message
+        dropped on the way is only repaired at a writer's next heartbeat, after up to 3 s), and the
+        recorder, still recording meanwhile, then drains and closes its bag.
 
         A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
         that mapped one of its ports keeps the port's reference (the file outlives both).  Once
@@ -759,9 +780,21 @@ class FormationRun:
         if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
         the dead port files of the run's own domain (a port mapped after the last look).
         """
+        self._stop([c for c in self._children if c.name != 'recorder'])
+        self._stop([c for c in self._children if c.name == 'recorder'])
+        for child in self._children:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.process.wait(timeout=1.0)
+        held = set().union(*(c.shm_files for c in self._children))
+        if any((c.process.returncode or 0) < 0 for c in self._children):
+            held |= domain_port_files(domain_id)
+        self.removed_shm_files = remove_orphans(held)
+
+    def _stop(self, children: list[_Child]) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to those of `children` still alive."""
         first, second = self.stop_timeouts
         for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
-            alive = [c for c in self._children if c.alive()]
+            alive = [c for c in children if c.alive()]
             if not alive:
                 break
             for child in alive:
@@ -774,13 +807,6 @@ class FormationRun:
             limit = time.monotonic() + wait
             while any(c.alive() for c in alive) and time.monotonic() < limit:
                 time.sleep(0.05)
-        for child in self._children:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                child.process.wait(timeout=1.0)
-        held = set().union(*(c.shm_files for c in self._children))
-        if any((c.process.returncode or 0) < 0 for c in self._children):
-            held |= domain_port_files(domain_id)
-        self.removed_shm_files = remove_orphans(held)
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr

@@ -43,6 +43,7 @@ if TYPE_CHECKING:
 
 DEFAULT_CLOCK_TOPIC = STEP_TOPIC
 # /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time].
+_STEP_INDEX = 1
 _STEP_TIME_INDEX = 2
 _NS_PER_S = 1_000_000_000
 
@@ -99,9 +100,11 @@ class RecorderNode(Node):
       step), so bag order follows the simulation. '' stamps with the node's clock instead.
     - ``flush_period`` (double, s): how often written messages are pushed to the file, which
       bounds what a SIGKILL loses.
-    - ``heartbeat_topic`` (string): after every flush, ``{"version": 1, "recorded": N}``
-      (std_msgs/String, the protocol's QoS) with the messages on disk so far. Its writer's DDS
-      liveliness tells a run the recorder still takes and acknowledges what is published ('' = off).
+    - ``heartbeat_topic`` (string): after every flush and every step recorded,
+      ``{"version": 1, "recorder": NODE, "recorded": N, "step": K}`` (std_msgs/String, the
+      protocol's QoS): N messages written so far, the latest step K recorded (-1: none). The
+      simulator keeps its steps at most `formation_sim.runtime.sim_node.RECORDER_LAG` ahead of K,
+      and its writer's DDS liveliness tells a run the recorder still works ('' = off).
     - ``drain_quiet`` (double, s): on stopping, `drain` takes messages until none came for this
       long.
     - ``drain_limit`` (double, s): `drain` ends after this long even if messages keep coming.
@@ -163,6 +166,7 @@ class RecorderNode(Node):
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
         self._sim_time_ns: int | None = None
+        self._step_index = -1  # the latest step recorded (-1: none yet)
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
         self.flushed_count = 0  # messages in the file for sure (as of the last flush)
         self.failure: RecorderError | None = None  # the bag could not be written
@@ -222,9 +226,12 @@ class RecorderNode(Node):
             self._fail(error)
             return
         self.flushed_count = self.bag.message_count
+        self._beat()
+
+    def _beat(self) -> None:
         if self._heartbeat is not None:
-            beat = json.dumps({'version': 1, 'recorded': self.bag.message_count}, separators=(',', ':'))
-            self._heartbeat.publish(self._heartbeat_type(data=beat))
+            beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self._step_index}
+            self._heartbeat.publish(self._heartbeat_type(data=json.dumps(beat, separators=(',', ':'))))
 
     def discover(self) -> None:
         """Subscribe to every not yet recorded topic under the prefix."""
@@ -263,6 +270,8 @@ class RecorderNode(Node):
                     self.bag.write(name, self._timestamp_ns(), rawdata)
                 except OSError as error:
                     self._fail(error)
+            if is_clock and self.failure is None:
+                self._beat()  # a run paces its steps on this (the simulator's flow control)
 
         self._subscriptions_by_topic[name] = self.create_subscription(
             message_class, name, on_message, self._qos, raw=True
@@ -277,6 +286,8 @@ class RecorderNode(Node):
             data[_STEP_TIME_INDEX] >= 0
         ):
             self._sim_time_ns = round(data[_STEP_TIME_INDEX] * _NS_PER_S)
+            if float(data[_STEP_INDEX]).is_integer():
+                self._step_index = int(data[_STEP_INDEX])
         elif not self._bad_clock_warned:
             self._bad_clock_warned = True
             self.get_logger().warning(

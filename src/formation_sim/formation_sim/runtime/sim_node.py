@@ -45,6 +45,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
@@ -98,12 +100,40 @@ from formation_sim.sim.summary import write_summary
 from formation_sim.sim.world import World
 
 GRAPH_FILE = 'graph.json'
+
+RECORDER_LAG = 2
+"""Steps the lock-step may run ahead of what a recorder has written (its heartbeat says which step).
+
+A recorder that falls behind lets its readers' queues fill (Fast DDS keeps at most 400 unread
+messages per topic), then every keep-last writer overwrites what it did not acknowledge: a
+lock-step run at full speed on a loaded 2-core machine lost hundreds of view messages that way
+in 3 runs of 4.  Held within a few steps, the messages outstanding stay far below the writers'
+depths."""
 CLOCK_MODES = ('lockstep', 'realtime')
 
 
 EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
+
+
+VIEW_HISTORY_BYTES = 16 * 2**20
+
+
+def view_qos(sample) -> QoSProfile:
+    """SIMULATOR_QOS for a view (ground truth, markers) whose messages are like `sample`: as deep,
+    unless its history (kept for late joiners: transient local) would hold more than
+    VIEW_HISTORY_BYTES (a marker array of 300 agents is ~200 KB); never below PROTOCOL_QOS's 32.
+    A shallow history lost views to a recorder a few hundred messages behind (README)."""
+    size = max(1, len(serialize_message(sample)))
+    return QoSProfile(
+        history=SIMULATOR_QOS.history,
+        depth=max(PROTOCOL_QOS.depth, min(SIMULATOR_QOS.depth, VIEW_HISTORY_BYTES // size)),
+        reliability=SIMULATOR_QOS.reliability,
+        durability=SIMULATOR_QOS.durability,
+        liveliness=SIMULATOR_QOS.liveliness,
+        liveliness_lease_duration=SIMULATOR_QOS.liveliness_lease_duration,
+    )
 
 
 class SimulatorError(RuntimeError):
@@ -278,14 +308,16 @@ class FormationSimulatorNode(Node):
 
         self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
+        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=scenario.velocities)
+        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
         # For tools: the scenario once (so a bag is self-contained), a Foxglove view per sample.
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._markers = FormationMarkers(scenario)
         self._marker_array = LiveMarkerArray(self._markers)
-        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
+        view = self._markers.to_ros(self._markers.markers(scenario.positions), time=0.0)
+        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, view_qos(view))
         self._tool_publishers = (
             self._state_pub,
             self._truth_pub,
@@ -320,11 +352,12 @@ class FormationSimulatorNode(Node):
         self._recorder_sub = self.create_subscription(
             String,
             RECORDER_TOPIC,
-            lambda msg: None,
+            self._on_recorder,
             READER_QOS,
             event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
         )
         self._recorders_alive = 0
+        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
         self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
         self._recorder_lease_expired = False
         self.published: dict[str, int] = {}  # topic -> messages this node published there
@@ -449,6 +482,26 @@ class FormationSimulatorNode(Node):
         hows = '; '.join(sorted({how for _, how in lost.values()}))
         raise AgentLostError(f'{names} lost {where}: {hows}; the run stops', agents=agents)
 
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (flow control, `RECORDER_LAG`)."""
+        try:
+            beat = json.loads(msg.data)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
+            return
+        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
+        self._advance_if_settled()
+
+    def _recorder_behind(self) -> bool:
+        """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
+        if self.extra_subscribers < 1:
+            return False
+        recorded = sorted(self._recorded_steps.values())[: self.extra_subscribers]
+        return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
+
     def _check_recorder_lost(self, now: float) -> None:
         lost = self._recorder_lost
         if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
@@ -520,6 +573,8 @@ class FormationSimulatorNode(Node):
 
     def _describe_wait(self) -> str:
         lines = [f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)})']
+        if self.extra_subscribers:
+            lines.append(f'recorders at steps {self._recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG})')
         for i, book in self.agents.items():
             lines.append(f'agent {i}: status {book.status}, expected triggers {book.expected_triggers}, commands received {book.commands_received}')
         return '; '.join(lines)
@@ -636,7 +691,13 @@ class FormationSimulatorNode(Node):
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
         if self.finished:
-            return  # the run is over (or failed): the world no longer moves
+            # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
+            # sensing was answered before a stop still completes (its information is out, and in
+            # the bag): counted, its command acting from the last instant on moves nothing.
+            due = not self.realtime and agent in self._due and book.sensed_at_step == self.step.index
+            if due and book.commands_received < book.expected_triggers:
+                book.commands_received += 1
+            return
         if self.realtime and self.step is not None:
             if not self.finished:
                 control = decode_command(msg, self.scenario.dimension)
@@ -694,6 +755,8 @@ class FormationSimulatorNode(Node):
     def _advance_if_settled(self) -> None:
         if self.realtime or self.step is None or self.finished or not self._settled():
             return
+        if self._recorder_behind():
+            return  # the recorder's next heartbeat comes back here
         t = self.step.time
         t_next = min(book.status.next_time for book in self.agents.values())
         if t_next < t:
@@ -794,7 +857,6 @@ class FormationSimulatorNode(Node):
 
     def record(self):
         """The run as a `RunRecord` (the same schema as the in-process engine's)."""
-        statuses = {i: book.status for i, book in self.agents.items()}
         return RunRecord(
             scenario=self.scenario,
             horizon=self.horizon,
@@ -805,7 +867,7 @@ class FormationSimulatorNode(Node):
             sample_times=np.array(self._sampler.times),
             sample_positions=np.array(self._sampler.positions),
             sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
-            messages_sent=sum(s.info_sent for s in statuses.values() if s is not None),
+            messages_sent=sum(self._information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
@@ -843,6 +905,16 @@ class FormationSimulatorNode(Node):
             'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
             'published': self._published(),
         }
+
+    def _information_sent(self, agent: int) -> int:
+        """Triggering-information messages `agent` published: as its final report counts them, else
+        as its latest Status does.  A Status lags when a run stops between an agent's trigger and
+        the news of its due neighbours, which it waits for before reporting (one message per
+        neighbour fewer than the bag holds, seen after SIGINT); a final report never does."""
+        book = self.agents[agent]
+        if book.report is not None and book.report.final:
+            return sum(book.report.published.get(trigger_info_topic(agent, j), 0) for j in book.neighbours)
+        return book.status.info_sent if book.status is not None else 0
 
     def _published(self) -> dict[str, int]:
         """Messages published per topic by this node and by every agent whose final report came
@@ -894,7 +966,7 @@ class FormationSimulatorNode(Node):
         publishers = self._tool_publishers
         if not self.final_reports_in():
             publishers = (self._step_pub, *publishers)
-        self._wait_acknowledged(executor, publishers, 1.0)
+        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
 
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
@@ -938,24 +1010,18 @@ def main(args: Sequence[str] | None = None) -> int:
                     status = EXIT_FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
             status = EXIT_INTERRUPTED
-            _write_partial(node, error)
+            _stop_and_write(node, executor, error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
                 status = EXIT_INTERRUPTED
-                _write_partial(node, KeyboardInterrupt())
+                _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
             _tell(f'formation_sim: {error}')
             if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
                 with contextlib.suppress(OSError):
                     traceback.print_exc(file=sys.stderr)
             status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
-            if node is not None:
-                node.fail(error)
-                try:
-                    node.stop_agents(executor)
-                except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-                    _tell(f'formation_sim: could not stop the agents: {problem}')
-            _write_partial(node, error)
+            _stop_and_write(node, executor, error)
         finally:
             if node is not None:
                 node.destroy_node()
@@ -963,11 +1029,20 @@ def main(args: Sequence[str] | None = None) -> int:
     return status
 
 
-def _write_partial(node: FormationSimulatorNode | None, error: BaseException) -> None:
-    """A run stopped early after step 0: the summary of what happened, and why it stopped."""
-    if node is None or node.step is None or not node.out_dir:
+def _stop_and_write(node: FormationSimulatorNode | None, executor, error: BaseException) -> None:
+    """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
+    it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
+    bag ends where the summary does; then the summary of what happened, and why it stopped."""
+    if node is None:
         return
     node.fail(error)
+    if executor is not None:
+        try:
+            node.stop_agents(executor)
+        except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+            _tell(f'formation_sim: could not stop the agents: {problem}')
+    if node.step is None or not node.out_dir:
+        return
     try:
         write_results(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
