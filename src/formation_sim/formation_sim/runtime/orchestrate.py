@@ -16,10 +16,13 @@ removed.  If the orchestrator itself is killed, the kernel sends every child SIG
 
 Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
 nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
-simulator detects a lost agent itself within the DDS liveliness lease and stops with a partial
-summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
-`LOST_DETECTION` s to do so, then stops the rest.  The summary's `extra.failure` names what failed
-and when; a bag left unfinished by a dead recorder is recovered with `recorder.reindex`.
+simulator detects a lost agent or recorder itself within the DDS liveliness lease and stops with
+a partial summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
+`LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
+`extra.failure` names what failed and when (this process writes the summary itself if the
+simulator could not); a bag left unfinished is recovered with `formation_sim.bag.recovery.reindex`; and the bag is
+checked against what the run published (`formation_sim.analysis.accounting`): a run that lost messages
+fails, however it ended.
 """
 
 from __future__ import annotations

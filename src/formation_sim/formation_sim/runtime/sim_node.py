@@ -20,10 +20,13 @@ how late every trigger was against the time its agent had planned.
 
 Faults (README, "Reliability"): an agent whose command writer loses DDS liveliness (its process
 died, or the network no longer reaches it) is declared lost after `LIVELINESS_LEASE` +
-`LOST_GRACE` s; the run then stops.  Whenever a run stops early, after step 0 (an agent lost, a
-protocol violation, a stall, SIGINT/SIGTERM), the simulator still writes summary.json with what
-happened up to then and `extra.failure` saying what went wrong, where and when.  Exit status: 0
-done, 1 failed, 3 an agent lost, 130 interrupted.
+`LOST_GRACE` s, and so is a recorder whose heartbeat writer does (frozen, it acknowledges
+nothing); the run then stops.  Lock-step waits for a recorder that falls more than
+`RECORDER_LAG` steps behind.  Whenever a run stops early, after step 0 (an agent lost, a protocol
+violation, a stall, SIGINT/SIGTERM), the simulator ends it as at the horizon (a final Step, the
+samples, the final reports) and writes summary.json with what happened up to then and
+`extra.failure` saying what went wrong, where and when.  Exit status: 0 done, 1 failed, 3 an
+agent or the recorder lost, 130 interrupted.
 """
 
 from __future__ import annotations
