@@ -19,7 +19,7 @@ Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as
 | `wall_time` | seconds the run took |
 | `extra` | implementation-specific details (e.g. the distributed run's domain id) |
 | `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it (kind: agent_lost, agent_failed, recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
-| `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.accounting`) |
+| `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.analysis.accounting`) |
 | `extra.summary_source`, `extra.processes` | only when `formation run` wrote the summary because the simulator could not: how, and every process's exit |
 | `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
 | `extra.injected_faults` | distributed runs: {dropped, delayed, by_agent}: triggering information dropped or delayed by fault injection (a test facility) |
