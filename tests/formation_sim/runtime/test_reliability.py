@@ -197,7 +197,6 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
     try:
         publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
         seen: list[int] = []
-        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
         run = FormationRun(
             scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
             step_listeners=1,
@@ -205,10 +204,16 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         worker, results = _in_background(run)
+        # Step 0 waits for this node's Step reader, made only once agent 1 and the recorder read
+        # the junk topic: the flood is on from the first step.
+        deadline = time.monotonic() + 120.0
+        while publisher.get_subscription_count() < 2 and worker.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
         sent, began, first_step = 0, None, None
         while worker.is_alive():
             executor.spin_once(timeout_sec=0.0)
-            if began is None and seen and publisher.get_subscription_count() >= 1:
+            if began is None and seen:
                 began, first_step = time.monotonic(), max(seen)
             if began is not None:
                 for _ in range(int((time.monotonic() - began) * rate) - sent):

@@ -20,9 +20,9 @@ simulator detects a lost agent or recorder itself within the DDS liveliness leas
 a partial summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
 `LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
 `extra.failure` names what failed and when (this process writes the summary itself if the
-simulator could not); a bag left unfinished is recovered with `formation_sim.bag.recovery.reindex`; and the bag is
-checked against what the run published (`formation_sim.analysis.accounting`): a run that lost messages
-fails, however it ended.
+simulator could not); a bag left unfinished is recovered (`formation_sim.bag.recovery.reindex`);
+and the bag is checked against what the run published (`formation_sim.analysis.accounting`): a
+run that lost messages fails, however it ended.
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ class RunResult:
     children: tuple[ChildExit, ...] = ()
     message: str = ''
     failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
-    bag_recovered: bool = False  # the recorder died and its bag was rebuilt by recorder.reindex
+    bag_recovered: bool = False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
 
     @property
     def ok(self) -> bool:
@@ -647,7 +647,6 @@ class FormationRun:
 
         recorded = {name for name, _ in formation_topics(self.scenario)}  # not, e.g., a robot's own topics
         published = {topic: n for topic, n in published.items() if topic in recorded}
-
         try:
             check = check_recording(published, bag)
         except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
