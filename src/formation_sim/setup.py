@@ -14,7 +14,7 @@ setup(
     packages=find_namespace_packages(
         include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']
     ),
-    package_data={package_name: ['model/scenarios/*.yaml']},
+    package_data={package_name: ['model/scenarios/*.yaml', 'runtime/fastdds_profile.xml']},
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),

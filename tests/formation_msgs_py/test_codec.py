@@ -294,7 +294,10 @@ def test_malformed_step_is_rejected():
 
 
 def test_agent_report_round_trips_and_omits_zero_counts():
-    report = AgentReport(agent=4, final=True, rejected={'sender': 2, 'time_backwards': 1}, dropped=7, delayed=30, late=1)
+    report = AgentReport(
+        agent=4, final=True, rejected={'sender': 2, 'time_backwards': 1}, dropped=7, delayed=30, late=1,
+        published={'/agent_4/cmd_vel': 12, '/formation/status': 30},
+    )  # fmt: skip
     msg = through_wire(encode_agent_report(report))
     assert '"rejected":{"sender":2,"time_backwards":1}' in msg.data
     assert decode_agent_report(msg) == report
@@ -314,7 +317,7 @@ def test_agent_report_carries_saturation_and_failure_exactly():
         failure='agent 2: the pose of robot 3 on /agent_3/robot/pose is 0.734 s old',
     )  # fmt: skip
     msg = through_wire(encode_agent_report(report))
-    assert json.loads(msg.data)['version'] == AGENT_REPORT_VERSION == 2
+    assert json.loads(msg.data)['version'] == AGENT_REPORT_VERSION == 3
     assert '"linear_speed":{"count":12,"largest_requested":0.41000000000000003,"allowed":0.22}' in msg.data
     assert decode_agent_report(msg) == report
     unclipped = AgentReport(agent=2, final=False, rejected={}, saturation={'linear_speed': Saturation(count=0, largest_requested=0.0, allowed=1.0)})
@@ -322,26 +325,30 @@ def test_agent_report_carries_saturation_and_failure_exactly():
     assert set(SATURATION_KINDS) == {'linear_speed', 'angular_speed', 'linear_acceleration'}
 
 
-_V2 = '"robot_commands":0,"saturation":{},"failure":null'
+_V3 = '"robot_commands":0,"saturation":{},"failure":null,"published":{}'
 
 
 @pytest.mark.parametrize(
     ('text', 'complaint'),
     [
         ('[1]', 'must be a JSON object'),
-        ('{"version":1}', 'version 1 is not supported (expected 2)'),
-        ('{"version":2,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,' + _V2 + '}', "missing fields ['late']"),
-        ('{"version":2,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0,' + _V2 + '}', 'dropped must be a count'),
-        ('{"version":2,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0,' + _V2 + '}', "rejected['x'] must be a count"),
-        ('{"version":2,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,' + _V2 + ',"z":1}', "unknown fields ['z']"),
-        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"warp":{"count":1,"largest_requested":2.0,"allowed":1.0}},"failure":null}', "saturation['warp']: unknown kind"),
-        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"linear_speed":{"count":1,"largest_requested":2.0}},"failure":null}', "must hold exactly ['count', 'largest_requested', 'allowed']"),
-        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"linear_speed":{"count":1,"largest_requested":Infinity,"allowed":1.0}},"failure":null}', 'largest_requested must be finite'),
-        ('{"version":2,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{},"failure":7}', 'failure must be null or a string, got 7'),
+        ('{"version":2}', 'version 2 is not supported (expected 3)'),
+        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,' + _V3 + '}', "missing fields ['late']"),
+        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0,' + _V3 + '}', 'dropped must be a count'),
+        ('{"version":3,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0,' + _V3 + '}', "rejected['x'] must be a count"),
+        ('{"version":3,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,' + _V3 + ',"z":1}', "unknown fields ['z']"),
+        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"warp":{"count":1,"largest_requested":2.0,"allowed":1.0}},"failure":null,"published":{}}', "saturation['warp']: unknown kind"),
+        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"linear_speed":{"count":1,"largest_requested":2.0}},"failure":null,"published":{}}', "must hold exactly ['count', 'largest_requested', 'allowed']"),
+        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{"linear_speed":{"count":1,"largest_requested":Infinity,"allowed":1.0}},"failure":null,"published":{}}', 'largest_requested must be finite'),
+        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{},"failure":7,"published":{}}', 'failure must be null or a string, got 7'),
+        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{},"failure":null,"published":{"/t":-2}}', "published['/t'] must be a count"),
+        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+         '"saturation":{},"failure":null,"published":[]}', 'published malformed'),
     ],
 )  # fmt: skip
 def test_malformed_agent_report_is_rejected(text, complaint):

@@ -5,6 +5,8 @@
   through the real codec encoders, into a bag (no ROS process: rclpy only serializes).
 - `wait_for_stepping`: waits until a FormationRun's simulator reports sim time past 0.
 - `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
+- `small_disk`: `small_disk(megabytes)` mounts a tmpfs of that size (a disk that fills up);
+  root only, skipped otherwise, unmounted after the test.
 - `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker index) and the
   in-process run of the same scenario, shared by every test that asks for it in a session.
 - `tight_edge`: a paper example whose edge (2, 3) starts with a given fraction of its capacity as slack.
@@ -84,6 +86,32 @@ def tight_edge():
 
 
 @pytest.fixture
+def small_disk(tmp_path):
+    """`small_disk(megabytes) -> Path`: a folder on a tmpfs that holds only that much."""
+    import subprocess
+
+    mounted: list[Path] = []
+
+    def mount(megabytes: float) -> Path:
+        if os.geteuid() != 0:
+            pytest.skip('mounting a small tmpfs needs root (CI runs as root)')
+        folder = tmp_path / f'disk{len(mounted)}'
+        folder.mkdir()
+        done = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={int(megabytes * 1024)}k', 'tmpfs', str(folder)],
+                              capture_output=True, text=True, check=False, timeout=30)  # fmt: skip
+        if done.returncode != 0:
+            pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
+        mounted.append(folder)
+        return folder
+
+    try:
+        yield mount
+    finally:
+        for folder in reversed(mounted):
+            subprocess.run(['umount', '--lazy', str(folder)], capture_output=True, check=False, timeout=30)
+
+
+@pytest.fixture
 def wait_for_stepping():
     """`wait_for_stepping(run)`: block until a FormationRun's simulator reports sim time past 0."""
     return _wait_for_stepping
@@ -100,8 +128,15 @@ def paper_single_record() -> RunRecord:
     return simulate(load_scenario('paper_single'), horizon=1.0)
 
 
-def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None) -> Path:
-    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger)."""
+def _write_run_bag(
+    record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None,
+    asked_horizon: float | None = None,
+) -> Path:
+    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger).
+
+    The run ends at record.horizon; `asked_horizon` (default the same) is the horizon it was run
+    for, which the scenario topic carries: a later one makes the bag a run stopped early.
+    """
     import yaml
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import Twist
@@ -127,7 +162,8 @@ def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = Fals
 
     array = 'std_msgs/msg/Float64MultiArray'
     if scenario_topic:
-        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(scenario), sort_keys=False)))
+        asked = scenario.replace(horizon=record.horizon if asked_horizon is None else asked_horizon)  # as the simulator publishes it
+        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(asked), sort_keys=False)))
     events = sorted({t for times in record.trigger_times.values() for t in times})
     for index, t in enumerate(events):
         add(t, '/formation/step', array, encode_step(Step(index=index, time=t)))
@@ -159,7 +195,7 @@ def _write_run_bag(record: RunRecord, path: Path, *, scenario_topic: bool = Fals
 
 @pytest.fixture(scope='session')
 def write_run_bag():
-    """write_run_bag(record, path, *, scenario_topic=False, drop=None) -> path."""
+    """write_run_bag(record, path, *, scenario_topic=False, drop=None, asked_horizon=None) -> path."""
     return _write_run_bag
 
 

@@ -403,15 +403,15 @@ def decode_status(msg) -> Status:
 
 # --------------------------------------------------------------------------------------------
 # AgentReport  <->  std_msgs/String (compact JSON), its own layout version
-#   {"version":2,"agent":i,"final":false,"rejected":{"sender":2},"dropped":0,"delayed":0,"late":0,
+#   {"version":3,"agent":i,"final":false,"rejected":{"sender":2},"dropped":0,"delayed":0,"late":0,
 #    "robot_commands":0,"saturation":{"linear_speed":{"count":3,"largest_requested":0.41,"allowed":0.22}},
-#    "failure":null}
+#    "failure":null,"published":{"/agent_1/cmd_vel":3,...}}
 
-AGENT_REPORT_VERSION = 2
-"""Version of the AgentReport JSON: 2 added `robot_commands`, `saturation` and `failure`."""
+AGENT_REPORT_VERSION = 3
+"""Version of the AgentReport JSON: 2 added `robot_commands`, `saturation` and `failure`; 3 `published`."""
 
 _REPORT_COUNTERS = ('dropped', 'delayed', 'late', 'robot_commands')
-_REPORT_FIELDS = ('version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS, 'saturation', 'failure')
+_REPORT_FIELDS = ('version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS, 'saturation', 'failure', 'published')
 _SATURATION_FIELDS = ('count', 'largest_requested', 'allowed')
 
 
@@ -435,6 +435,7 @@ def encode_agent_report(report: AgentReport):
         **{name: int(getattr(report, name)) for name in _REPORT_COUNTERS},
         'saturation': saturation,
         'failure': None if report.failure is None else str(report.failure),
+        'published': {topic: int(n) for topic, n in sorted(report.published.items())},
     }
     return String(data=json.dumps(body, separators=(',', ':')))
 
@@ -483,14 +484,16 @@ def decode_agent_report(msg) -> AgentReport:
     if missing := known - set(body):
         raise MessageError(f'agent report: missing fields {sorted(missing)}')
     agent = _json_count('agent report agent', body['agent'])
-    if agent > _MAX_ID or not isinstance(body['final'], bool) or not isinstance(body['rejected'], dict):
-        raise MessageError(f'agent report: agent, final or rejected malformed: {text[:120]!r}')
+    if agent > _MAX_ID or not isinstance(body['final'], bool) or not all(
+        isinstance(body[name], dict) for name in ('rejected', 'published')
+    ):
+        raise MessageError(f'agent report: agent, final, rejected or published malformed: {text[:120]!r}')
     if body['failure'] is not None and not isinstance(body['failure'], str):
         raise MessageError(f'agent report of agent {agent}: failure must be null or a string, got {body["failure"]!r}')
-    rejected = {
-        str(reason): _json_count(f'agent report of agent {agent} rejected[{reason!r}]', n)
-        for reason, n in body['rejected'].items()
-    }
+    rejected, published = (
+        {str(key): _json_count(f'agent report of agent {agent} {name}[{key!r}]', n) for key, n in body[name].items()}
+        for name in ('rejected', 'published')
+    )
     return AgentReport(
         agent=agent,
         final=body['final'],
@@ -498,6 +501,7 @@ def decode_agent_report(msg) -> AgentReport:
         **{name: _json_count(f'agent report of agent {agent} {name}', body[name]) for name in _REPORT_COUNTERS},
         saturation=_decode_saturation(agent, body['saturation']),
         failure=body['failure'],
+        published=published,
     )
 
 

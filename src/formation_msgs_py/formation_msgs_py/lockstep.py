@@ -136,6 +136,9 @@ class AgentReport:
     robot_commands: int = 0  # velocity commands published to the robot (robot adapters only)
     saturation: dict[str, Saturation] = field(default_factory=dict)  # kind -> clipped; none: omitted
     failure: str | None = None  # final report of an agent that stops on an error: the error
+    # topic -> messages the agent published there from step 0 on (this report included): what a
+    # recorder matched before step 0 must hold
+    published: dict[str, int] = field(default_factory=dict)
 
     @property
     def rejected_total(self) -> int:

@@ -50,10 +50,14 @@ SIMULATOR_QOS = QoSProfile(
     liveliness_lease_duration=PROTOCOL_QOS.liveliness_lease_duration,
 )
 
-# A reader shared by every agent (the simulator's Status and report readers) gets up to n
-# messages per step: a depth of 32 across all writers drops some with 30+ agents and the step
-# never settles.  Keep everything; history is not part of QoS matching, so writers are unchanged.
-FAN_IN_QOS = QoSProfile(
+# Every reader of the protocol keeps all it receives until the node takes it.  A reader's keep-last
+# history is shared by every writer of its topic (the topics have no key: one instance), so any
+# other writer can push a message out before it is taken: with 30+ agents on the simulator's Status
+# and report readers (n messages per step), or a foreign node flooding a triggering-information or
+# Step topic with junk (1000 messages/s evicted agents' own information and stalled lock-step).
+# Kept, a message waits behind the junk but is never lost.  History is not part of QoS matching,
+# so writers are unchanged.
+READER_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     reliability=PROTOCOL_QOS.reliability,
     durability=PROTOCOL_QOS.durability,

@@ -14,6 +14,7 @@ GROUND_TRUTH_TOPIC = '/formation/ground_truth'  # PoseArray (tools only)
 SENSING_LOG_TOPIC = '/formation/sensing_log'  # one record per sensing call (tools only)
 SCENARIO_TOPIC = '/formation/scenario'  # the run's scenario YAML, once (tools only)
 MARKERS_TOPIC = '/formation/markers'  # Foxglove view (tools only)
+RECORDER_TOPIC = '/formation/recorder'  # the recorder's heartbeat: its liveliness is its sign of life
 CLOCK_TOPIC = '/clock'
 
 

@@ -32,7 +32,8 @@ def test_a_bag_gives_back_the_run_exactly(paper_single_record, write_run_bag, tm
     bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True)
     run = load_bag_run(bag)
     assert run.scenario_source == 'bag topic /formation/scenario'
-    assert run.record.scenario == record.scenario
+    assert run.record.scenario == record.scenario.replace(horizon=record.horizon)  # as the simulator publishes it
+    assert run.horizon == record.horizon and run.stop is None
     assert run.record.trigger_times == record.trigger_times  # floats equal, not close
     assert np.array_equal(run.record.sample_times, record.sample_times)
     assert np.array_equal(run.record.sample_positions, record.sample_positions)
@@ -455,3 +456,73 @@ def test_the_analysis_api_says_what_it_takes(paper_single_record, write_run_bag,
         diff_summaries(None, {})
     with pytest.raises(TypeError, match='from_file is list'):
         diff_summaries({}, [])
+
+
+# ------------------------------------------------------------------------------ runs stopped early
+
+
+def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_named(paper_single_record, write_run_bag, tmp_path, capsys):
+    """A run asked for t = 10 that stopped at t = 1 (SIGINT): its bag ends with the final Step the
+    simulator sends at the stop, and its summary.json states the horizon asked and the failure."""
+    from formation_sim.cli import main
+
+    stopped = _distributed_like(paper_single_record)
+    run_dir = tmp_path / 'run'
+    write_run_bag(stopped, run_dir / 'bag', scenario_topic=True, asked_horizon=10.0)
+    failure = {'kind': 'interrupted', 'message': 'stopped by a signal (SIGINT/SIGTERM)', 'agents': [], 'time': 1.0, 'step': 123}
+    reported = dataclasses.replace(stopped, horizon=10.0, extra={'clock': 'lockstep', 'steps': 122, 'reached_time': 1.0, 'failure': failure})
+    write_summary(reported, run_dir)
+
+    assert main(['analyze', str(run_dir), '--no-figures']) == 0
+    err = capsys.readouterr().err
+    stop = 'the run stopped early at t = 1 (step 123), before its horizon 10: interrupted: stopped by a signal (SIGINT/SIGTERM) (summary.json)'
+    assert stop in err and 'summary.json equals the bag' in err
+    report = json.loads((run_dir / 'analysis' / 'analysis.json').read_text())
+    assert report['run']['stopped'] == {'time': 1.0, 'step': 123, 'horizon': 10.0, 'final_step': True, 'reason': 'interrupted: stopped by a signal (SIGINT/SIGTERM)'}
+    assert report['summary_json']['equal'] and all(check['ok'] for check in report['bag_checks'])
+    assert '**The run stopped early**: at t = 1 (step 123), before its horizon 10' in (run_dir / 'analysis' / 'analysis.md').read_text()
+
+    # A summary that does not end where the bag does is still a finding.
+    data = json.loads((run_dir / 'summary.json').read_text())
+    data['extra']['reached_time'] = 1.5
+    (run_dir / 'summary.json').write_text(json.dumps(data))
+    assert main(['analyze', str(run_dir), '--no-figures', '--quiet', '--out', str(tmp_path / 'second')]) == 1
+    assert '| `extra.reached_time` | 1.0 | 1.5 |' in (tmp_path / 'second' / 'analysis.md').read_text()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_an_interrupted_distributed_run_agrees_with_its_bag(tmp_path, monkeypatch, wait_for_stepping, long_run_scenario, capsys):
+    """SIGINT mid-run: the simulator sends a final Step at the instant it stopped and the samples up
+    to it, counts the triggers whose command was on its way, and every process flushes what it
+    published before the recorder closes the bag; then summary.json (messages_sent included) is
+    exactly what the bag gives back."""
+    import threading
+
+    from formation_sim.cli import main
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=69, progress=False, timeout=240.0)
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
+    worker.start()
+    wait_for_stepping(run)
+    run.interrupt()
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == 130 and result.message == 'interrupted'
+    summary = json.loads(result.summary.read_text())
+    assert summary['extra']['recording']['complete'], summary['extra']['recording']
+
+    assert main(['analyze', str(result.out_dir), '--no-figures']) == 0, (result.out_dir / 'analysis' / 'analysis.md').read_text()
+    err = capsys.readouterr().err
+    reached = summary['extra']['reached_time']
+    assert f'the run stopped early at t = {reached:.6g}' in err and 'before its horizon 600: interrupted: ' in err
+    report = json.loads((result.out_dir / 'analysis' / 'analysis.json').read_text())
+    assert report['summary_json']['equal'], report['summary_json']['differences']
+    assert report['summary']['messages_sent'] == summary['messages_sent']
+    assert report['run']['stopped']['time'] == reached < 600.0

@@ -51,10 +51,30 @@ def test_recover_makes_a_killed_recorders_bag_readable(tmp_path, capsys):
     assert [m.rawdata for m in read_bag(bag)] == kept
     assert [m.timestamp_ns for m in read_bag(bag)] == [1000 * k for k in range(20)]
 
-    # Again on the recovered bag: complete now, nothing lost.
+    # Again on the recovered bag: healthy now, left exactly as it is.
+    before = {path.name: path.read_bytes() for path in bag.iterdir()}
     assert main(['recover', str(bag)]) == 0
-    assert 'was complete' in capsys.readouterr().out
+    assert 'healthy (metadata.yaml and a complete MCAP file, 20 messages); left as it is' in capsys.readouterr().out
+    assert {path.name: path.read_bytes() for path in bag.iterdir()} == before
     assert [m.rawdata for m in read_bag(bag)] == kept
+
+
+def test_recover_leaves_a_recorders_healthy_bag_and_its_custom_data_alone(tmp_path, capsys):
+    import yaml
+
+    from formation_sim.bag.io import BagWriter
+
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as writer:
+        writer.set_custom_data('formation_timestamps', 'simulation time of /formation/step')
+        writer.add_topic('/formation/sensing_log', 'std_msgs/msg/String')
+        writer.write('/formation/sensing_log', 5, b'\x00\x01\x00\x00\x01\x00\x00\x00\x00')
+    metadata = (bag / 'metadata.yaml').read_bytes()
+    assert main(['recover', str(bag)]) == 0
+    assert 'left as it is' in capsys.readouterr().out
+    assert (bag / 'metadata.yaml').read_bytes() == metadata
+    custom = yaml.safe_load(metadata)['rosbag2_bagfile_information']['custom_data']
+    assert custom['formation_timestamps'] == 'simulation time of /formation/step'
 
 
 def test_recover_names_what_it_cannot_do(tmp_path, capsys):

@@ -138,7 +138,8 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_fo
 def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, long_run_scenario):
     import signal
 
-    from formation_sim.runtime.orchestrate import FormationRun, _mapped_by_anyone, _mapped_shm_files
+    from formation_sim.runtime.fastdds_shm import held_files, in_use
+    from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=114, progress=False, record=False, timeout=240.0)
     results = []
@@ -146,11 +147,11 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, lo
     worker.start()
     wait_for_stepping(run)
     victim = next(child for child in run._children if child.name == 'agent_2')
-    leftovers = _mapped_shm_files(victim.pid)
+    leftovers = held_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=60.0)
     # What the victim could not remove, the orchestrator did (unless another process still uses it).
-    assert not [path for path in leftovers - _mapped_by_anyone(leftovers) if Path(path).exists()]
+    assert not [path for path in leftovers - in_use(leftovers) if Path(path).exists()]
     (result,) = results
     assert result.exit_status == 3
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
@@ -201,6 +202,7 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
 
 @pytest.mark.timeout(300)
 def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping, long_run_scenario):
+    from formation_sim.runtime.fastdds_shm import in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
     # No grace period: every child still alive right after SIGINT is killed by SIGTERM or SIGKILL.
@@ -225,7 +227,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_st
     assert killed, [child.process.returncode for child in run._children]
     files = set().union(*(child.shm_files for child in killed))
     assert files, 'the killed children mapped no Fast DDS shared-memory file'
-    assert not [path for path in files if Path(path).exists()]
+    assert not [path for path in files - in_use(files) if Path(path).exists()]
     assert not [child for child in result.children if _alive(child.pid)]
 
 
@@ -248,20 +250,3 @@ def test_lockstep_run_takes_same_instant_rounds_and_stops_where_the_engine_stops
     _assert_same_events(summary, reference)
     instants = [t for times in reference.trigger_times.values() for t in times if t > 0.0]
     assert len(instants) > len(set(instants)), 'no second round at one instant before the stop'
-
-
-def test_the_port_files_of_a_domain_are_found_by_their_port_numbers(tmp_path):
-    from formation_sim.runtime.orchestrate import _domain_port_files
-
-    # Domain 231: ports 7400 + 250 * 231 + [0, 250) = [65150, 65400); no test uses it.
-    names = ['fastrtps_port65150', 'fastrtps_port65151_el', 'sem.fastrtps_port65399_mutex']
-    outside = ['fastrtps_port65400', 'fastrtps_port65149', 'fastrtps_65150', 'fastrtps_port65150x']
-    paths = [Path('/dev/shm') / name for name in names + outside]
-    try:
-        for path in paths:
-            path.touch()
-        found = {Path(path).name for path in _domain_port_files(231)}
-        assert found == set(names)
-    finally:
-        for path in paths:
-            path.unlink(missing_ok=True)

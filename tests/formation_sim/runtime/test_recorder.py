@@ -280,6 +280,29 @@ def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
     assert recovered_counts == sorted(recovered_counts)
 
 
+def test_reindex_on_a_full_disk_changes_nothing_and_says_what_to_do(tmp_path: Path, small_disk) -> None:
+    source = tmp_path / 'source'
+    with BagWriter(source) as writer:
+        writer.add_topic(STEP, STEP_TYPE)
+        writer.add_topic(POSES, POSES_TYPE)
+        for topic, _, stamp, data in interleaved(3500):
+            writer.write(topic, stamp, data)
+    complete = (source / 'source.mcap').read_bytes()
+    assert len(complete) > 1_000_000
+    bag = small_disk(1.5) / 'bag'
+    bag.mkdir()
+    cut = complete[: len(complete) - 100]  # the summary cut short: the copy would need ~1.2 MB more
+    (bag / 'bag.mcap').write_bytes(cut)
+
+    with pytest.raises(BagRecoveryError) as failed:
+        reindex(bag)
+    message = str(failed.value)
+    assert 'cannot write the recovered copy bag.mcap.recovering: No space left on device' in message
+    assert 'the bag is unchanged: free space, then recover it again' in message
+    assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']  # no temporary left
+    assert (bag / 'bag.mcap').read_bytes() == cut
+
+
 def test_reindex_errors_name_the_problem(tmp_path: Path) -> None:
     with pytest.raises(BagRecoveryError, match=r'exactly one \.mcap file, found \[\]'):
         reindex(tmp_path)

@@ -1,11 +1,12 @@
 """Faults a robot team meets: bad messages, dead processes, signals, lossy links, shared networks.
 
-Real processes in private ROS domains 70-79 (each test its own). Every run starts 2-5 processes;
+Real processes in private ROS domains 60-79 (each test its own). Every run starts 2-5 processes;
 the tests share the distributed tests' xdist group, so one run at a time on its worker.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -168,12 +169,84 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     assert 'information from agent 3 on the topic of agent 2' in log
 
 
+@pytest.mark.timeout(300)
+def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_protocol(tmp_path, ros_env):
+    """Thousands of malformed messages per second, with the protocol's own QoS, on the topic that
+    carries agent 2's information to agent 1, from step 0 to the end of a lock-step run. Before
+    agents' readers kept all they received, the junk pushed agent 2's real information out of
+    agent 1's 32-deep history and the run stalled at step 0 (2 runs of 2 at 4000/s here)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.codec import decode_step
+    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    domain_id = 60
+    scenario = load_scenario('paper_single')
+    horizon = 10.0
+    reference = simulate(scenario, horizon=horizon)
+    rate = 4000.0  # junk messages per second
+    junk = Float64MultiArray(data=[2.0, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0, 2.0])  # layout version 2
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('junk_flooder', context=context)
+    try:
+        publisher = node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
+        seen: list[int] = []
+        run = FormationRun(
+            scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
+            step_listeners=1,
+        )  # fmt: skip
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        worker, results = _in_background(run)
+        # Step 0 waits for this node's Step reader, made only once agent 1 and the recorder read
+        # the junk topic: the flood is on from the first step.
+        deadline = time.monotonic() + 120.0
+        while publisher.get_subscription_count() < 2 and worker.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: seen.append(decode_step(msg).index), PROTOCOL_QOS)
+        sent, began, first_step = 0, None, None
+        while worker.is_alive():
+            executor.spin_once(timeout_sec=0.0)
+            if began is None and seen:
+                began, first_step = time.monotonic(), max(seen)
+            if began is not None:
+                for _ in range(int((time.monotonic() - began) * rate) - sent):
+                    publisher.publish(junk)
+                    sent += 1
+            time.sleep(0.001)
+        worker.join()
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    (result,) = results
+    assert first_step is not None and first_step <= 1, f'the flood began at step {first_step}'
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    _assert_same_events(summary, reference)
+    rejected = summary['extra']['rejected_messages']
+    # The junk reached agent 1 while the run went on, and only there.
+    assert rejected['by_agent'] == {'1': {'version': rejected['total']}}
+    assert rejected['total'] >= 500, f'{rejected["total"]} junk messages rejected of {sent} sent'
+    # The recorder records every writer of the topic: the junk is in the bag, said to be foreign.
+    recording = summary['extra']['recording']
+    assert recording['complete'] and set(recording['foreign']) == {trigger_info_topic(2, 1)}
+    assert recording['foreign'][trigger_info_topic(2, 1)] >= rejected['total']
+    assert 'messages from publishers outside the run' in result.message and '/junk_flooder' in result.message
+
+
 # -- node faults --------------------------------------------------------------------------------
 
 
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping, long_run_scenario):
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun, _mapped_by_anyone, _mapped_shm_files
+    from formation_sim.runtime.fastdds_shm import held_files, in_use
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
@@ -181,12 +254,12 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     wait_for_stepping(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
-    shm_files = _mapped_shm_files(victim.pid)
+    shm_files = held_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=120.0)
     (result,) = results
     assert result.exit_status == EXIT_LOST == 3
-    assert shm_files and not [path for path in shm_files - _mapped_by_anyone(shm_files) if Path(path).exists()]
+    assert shm_files and not [path for path in shm_files - in_use(shm_files) if Path(path).exists()]
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
     assert not _wait_until_gone(str(result.out_dir))
@@ -234,6 +307,7 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     (result,) = results
     assert result.exit_status == EXIT_LOST
     assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
+    assert result.message.count(f'recorder (pid {recorder.pid})') == 1, result.message  # said once
     assert 'its bag was recovered' in result.message
     assert result.bag_recovered and result.bag is not None
     assert not _wait_until_gone(str(result.out_dir))
@@ -244,6 +318,190 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     failure = summary['extra']['failure']
     assert failure['kind'] == 'process_lost' and failure['process']['name'] == 'recorder'
     assert summary['total_events'] > 0
+
+
+BYSTANDER = """
+import sys, time, rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node('bystander')
+node.create_publisher(String, '/bystander', 10)
+node.create_subscription(String, '/bystander', lambda msg: None, 10)
+print('ready', flush=True)
+sys.stdin.read()  # until the test closes it
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.timeout(300)
+def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+    """Every child of a recorded run killed with SIGKILL at once: each segment and port its
+    children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
+    outside the domain's range; a live participant of another domain and a dead port of nobody
+    in the run keep theirs."""
+    from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files, in_use
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    def family(path: str) -> set[Path]:
+        name = Path(path).name.removeprefix('sem.').removesuffix('_mutex').removesuffix('_el')
+        return {SHM_DIR / name, SHM_DIR / f'sem.{name}_mutex', SHM_DIR / f'{name}_el'}
+
+    stranger = [SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}', SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}_el']
+    bystander = subprocess.Popen(
+        [sys.executable, '-c', BYSTANDER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        env={**os.environ, 'ROS_DOMAIN_ID': '68'}, start_new_session=True,
+    )  # fmt: skip
+    try:
+        for path in stranger:
+            path.touch()
+        assert bystander.stdout.readline().strip() == 'ready'
+        bystanders = held_files(bystander.pid)
+        assert bystanders, 'the bystander holds no Fast DDS file'
+        run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=65, progress=False, timeout=240.0)
+        worker, results = _in_background(run)
+        wait_for_stepping(run)
+        time.sleep(0.5)
+        children = list(run._children)
+        held = set().union(*(held_files(child.pid) for child in children))
+        for child in children:
+            os.kill(child.pid, signal.SIGKILL)
+        worker.join(timeout=120.0)
+        (result,) = results
+        assert result.exit_status == EXIT_LOST, result.message
+        assert all(child.process.returncode == -signal.SIGKILL for child in run._children)
+        ports = {Path(path).name for path in held if 'fastrtps_port' in path}
+        assert any(not 7400 + 250 * 65 <= int(name.split('port')[1].split('_')[0]) < 7400 + 250 * 66 for name in ports), ports
+        assert any(path.endswith('_el') for path in held), 'no lock file noted'
+        family_files = {str(path) for path in set().union(*(family(path) for path in held))}
+        # (a port 70xx of a killed child may be taken over at once by a new participant elsewhere)
+        left = sorted(path for path in family_files - in_use(family_files) if Path(path).exists())
+        assert not left, f'left in /dev/shm: {left}'
+        assert all(Path(path).exists() for path in bystanders), 'a live participant lost its files'
+        assert all(path.exists() for path in stranger), 'a dead port of nobody in the run was removed'
+        segments = {path for path in held if Path(path).name.startswith('fastrtps_') and 'port' not in path}
+        assert segments and set(run.removed_shm_files) >= segments  # segment names are never reused
+    finally:
+        bystander.stdin.close()
+        try:
+            bystander.wait(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            bystander.kill()
+        for path in stranger:
+            path.unlink(missing_ok=True)
+
+
+@pytest.mark.timeout(300)
+def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(tmp_path, ros_env, wait_for_stepping, long_run_scenario, bag_trigger_stamps):
+    """SIGSTOP on the recorder mid-run: it acknowledges nothing more, and every keep-last writer
+    of the run would overwrite what it has not acknowledged. The simulator sees its heartbeat
+    writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
+    orchestrator sends SIGCONT with SIGINT) it closes its bag, and summary.json says, per topic,
+    what the run published and the bag lacks."""
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    recorder = next(child for child in run._children if child.name == 'recorder')
+    os.kill(recorder.pid, signal.SIGSTOP)
+    try:
+        worker.join(timeout=120.0)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(recorder.pid, signal.SIGCONT)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST, result.message
+    assert 'the recorder lost at t=' in result.message and 'no sign of life for 1.0 s' in result.message
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'recorder_lost' and failure['detected_by'] == 'simulator'
+    assert 0.0 < failure['time'] == summary['extra']['reached_time'] < 600.0
+    assert result.bag is not None and not result.bag_recovered  # closed by the recorder itself
+    assert not _wait_until_gone(str(result.out_dir))
+
+    # What the bag holds is what the run published less what summary.json says is missing.
+    published, recording = summary['extra']['published'], summary['extra']['recording']
+    counts, _ = bag_trigger_stamps(result.bag)
+    for topic, n in published.items():
+        if topic != '/formation/status':  # the bag also holds the agents' discovery announcements
+            assert counts.get(topic, 0) == n - recording['missing'].get(topic, 0), topic
+    assert recording['complete'] == (not recording['missing'])
+    assert ('the bag misses' in result.message) == bool(recording['missing']), result.message
+    if recording['missing']:
+        worst = max(recording['missing'], key=recording['missing'].get)
+        assert f'{worst} {published[worst] - recording["missing"][worst]} of {published[worst]}' in result.message
+
+
+@pytest.mark.timeout(300)
+def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+    """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
+    with the failure, the last sim time and step of the simulator's progress, every process's
+    exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    scenario = load_scenario(long_run_scenario)
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=63, progress=False, timeout=240.0)
+    worker, results = _in_background(run)
+    wait_for_stepping(run)
+    time.sleep(1.5)  # past a progress line or two
+    simulator = next(child for child in run._children if child.name == 'simulator')
+    os.kill(simulator.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST
+    assert result.message.startswith(f'simulator (pid {simulator.pid}) killed by SIGKILL; see ')
+    assert result.summary is not None and result.bag is not None and not result.bag_recovered
+    assert not _wait_until_gone(str(result.out_dir))
+
+    summary = json.loads(result.summary.read_text())
+    extra = summary['extra']
+    failure = extra['failure']
+    assert failure == result.failure
+    assert failure['kind'] == 'process_lost' and failure['detected_by'] == 'orchestrator'
+    assert failure['process']['name'] == 'simulator' and failure['process']['returncode'] == -signal.SIGKILL
+    assert extra['processes']['simulator'] == 'killed by SIGKILL'
+    assert 'bag' in extra['summary_source']
+    # The last progress line came before the kill; the bag holds the run up to the kill.
+    assert isinstance(failure['step'], int) and failure['step'] > 0
+    assert 0.0 < failure['time'] <= extra['reached_time'] < scenario.horizon
+    # The bag may hold the triggers of the step in progress (sent, not yet sampled): one more step.
+    last = max(t for times in summary['trigger_times'].values() for t in times)
+    reference = simulate(scenario, horizon=last + 1.0)
+    for agent, times in reference.trigger_times.items():
+        got = summary['trigger_times'][str(agent)]
+        assert got == times[: len(got)], f'agent {agent}'
+        assert len(got) >= len([t for t in times if t < extra['reached_time']]), f'agent {agent}'
+
+
+@pytest.mark.timeout(300)
+def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_env, small_disk, long_run_scenario):
+    """`formation run` into a 2 MB tmpfs: the bag fills it. The recorder names the error and
+    leaves; the run stops; what cannot be written (the recovered bag, summary.json) is named and
+    absent rather than empty or cut short, and no temporary file is left."""
+    out = small_disk(2) / 'run'
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_sim.cli', 'run', long_run_scenario, '--horizon', '20', '--out', str(out),
+         '--domain-id', '64', '--no-plot'],
+        capture_output=True, text=True, timeout=240, check=False,
+    )  # fmt: skip
+    assert done.returncode in (1, 3), done.stderr
+    assert 'Traceback' not in done.stderr, done.stderr
+    assert 'No space left on device' in done.stderr
+    assert not _wait_until_gone(str(out)), 'orphan processes'
+    files = [path for path in out.rglob('*') if path.is_file() and 'logs' not in path.relative_to(out).parts]
+    assert not [path.name for path in files if path.name.endswith(('.tmp', '.recovering'))], files
+    for path in files:
+        assert path.stat().st_size > 0, f'{path} is empty'
+        if path.suffix in ('.json', '.yaml'):
+            (json.loads if path.suffix == '.json' else __import__('yaml').safe_load)(path.read_text())  # complete
+    if (out / 'summary.json').exists():
+        assert 'extra' in json.loads((out / 'summary.json').read_text())
+    else:
+        assert "summary.json could not be written: [Errno 28] No space left on device" in done.stderr
+    bag = out / 'bag'
+    if not (bag / 'metadata.yaml').exists():  # not recovered: the damage is named
+        assert 'its bag could not be recovered' in done.stderr and 'free space, then recover it again' in done.stderr
+        assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']
 
 
 def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:

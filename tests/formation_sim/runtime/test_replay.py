@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -13,9 +15,9 @@ import pytest
 
 from formation_sim.bag.io import BagWriter, read_bag
 from formation_sim.runtime.recorder import import_message_class
-from formation_sim.runtime.replay import BagPlayer, ReplayError
+from formation_sim.runtime.replay import BagPlayer, ReplayError, main_replay
 
-REPLAY_DOMAINS = {'synthetic': 171, 'distributed': 173}
+REPLAY_DOMAINS = {'synthetic': 171, 'distributed': 173, 'live': 66, 'elsewhere': 67}
 
 
 def _synthetic_bag(path: Path) -> Path:
@@ -170,3 +172,64 @@ def test_a_distributed_runs_bag_replays_completely(distributed_single_run, tmp_p
             assert checker.received[topic] == messages, f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
     finally:
         checker.close()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_replay_refuses_the_domain_of_a_live_run_on_this_machine(tmp_path, monkeypatch, wait_for_stepping, long_run_scenario):
+    """The run holds its domain's lock: the replay is refused before it publishes anything, and
+    the run's bag holds only the run's own messages."""
+    from formation_sim.cli import main
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+    domain = REPLAY_DOMAINS['live']
+    bag = _synthetic_bag(tmp_path / 'old_bag')  # it has /formation/step and /agent_1/cmd_vel, as the run does
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=domain, progress=False, timeout=240.0)
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
+    worker.start()
+    try:
+        wait_for_stepping(run)
+        with pytest.raises(ReplayError) as refused:
+            main_replay(bag, domain_id=domain, rate=0.0)
+        assert str(refused.value).startswith(f'ROS domain {domain} is held by another formation run: replaying there would ')
+        assert main(['replay', str(bag), '--domain-id', str(domain), '--quiet']) == 2
+    finally:
+        run.interrupt()
+        worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == 130
+    summary = json.loads(result.summary.read_text())
+    assert summary['extra']['recording']['foreign'] == {}
+    assert summary['extra']['recording']['complete'], summary['extra']['recording']
+
+
+@pytest.mark.ros
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(180)
+def test_replay_refuses_a_domain_whose_graph_shows_a_run_elsewhere(tmp_path, monkeypatch):
+    """A run on another machine holds no lock here, but its nodes are in the domain's ROS graph."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
+    domain = REPLAY_DOMAINS['elsewhere']
+    bag = _synthetic_bag(tmp_path / 'bag')
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        simulator = rclpy.create_node('formation_simulator', context=context)  # as a remote run's would appear
+        simulator.create_publisher(Float64MultiArray, '/formation/step', 10)
+        with pytest.raises(ReplayError) as refused:
+            main_replay(bag, domain_id=domain, rate=0.0)
+        message = str(refused.value)
+        assert message.startswith(f'ROS domain {domain} has a formation run live (/formation_simulator, ')
+        assert '/formation_simulator (writes /formation/step)' in message and 'choose another --domain-id' in message
+        simulator.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -49,6 +49,7 @@ class PlantOutput:
         self.publisher = node.create_publisher(Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS)
         self._wall_clock = False
         self._stopped = False
+        self.sent = 0  # commands published (its report's count of what a recorder must hold)
 
     def start(self, epoch: float) -> None:
         self._wall_clock = True
@@ -56,12 +57,14 @@ class PlantOutput:
     def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
         if not self._stopped:
             self.publisher.publish(self._encode(control))
+            self.sent += 1
 
     def stop(self) -> None:
         """A zero command on the wall clock.  In lock-step none: the simulated world stops with the
         run, and a command outside a triggering time would be a protocol violation."""
         if self._wall_clock and not self._stopped:
             self.publisher.publish(self._encode(self._zeros))
+            self.sent += 1
         self._stopped = True
 
 

@@ -91,8 +91,12 @@ class InjectedFaults:
         now = time.monotonic()
         due = self.injection.due(sender, now)
         self._seq += 1
-        heapq.heappush(self._line, (due, self._seq, sender, msg))
-        self._arm(now)
+        entry = (due, self._seq, sender, msg)
+        heapq.heappush(self._line, entry)
+        if self._timer is None or self._line[0] is entry:
+            # Only a new earliest message moves the timer: junk may arrive by the thousand per
+            # second, and each message would otherwise destroy and create a timer.
+            self._arm(now)
 
     def _arm(self, now: float) -> None:
         if self._timer is not None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+import time
 import traceback
 from collections.abc import Sequence
 
@@ -28,7 +29,7 @@ from rclpy.signals import SignalHandlerOptions
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.config import agent_help
 from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import FormationAgentNode, PeerLostError
+from formation_agent.ros.node import DELIVERY_TIMEOUT, FormationAgentNode, PeerLostError
 from formation_agent.ros.parameters import ParameterError
 from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, make_executor
 from formation_msgs_py.topics import agent_namespace
@@ -90,8 +91,6 @@ def main(args: Sequence[str] | None = None) -> int:
                 stop.check()
                 for node in nodes:
                     node.check()
-            for node in nodes:
-                node.wait_for_delivery()
         except (KeyboardInterrupt, ExternalShutdownException):
             status, failure = 130, 'stopped by a signal'
         except (ParameterError, FaultInjectionError) as error:  # bad input: every problem named, nothing started
@@ -111,9 +110,10 @@ def main(args: Sequence[str] | None = None) -> int:
                 traceback.print_exc(file=sys.stderr)
                 status, failure = 1, str(error)
         finally:
+            deadline = time.monotonic() + DELIVERY_TIMEOUT  # one for every node of the process
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
-                    node.leave(failure=failure)
+                    node.leave(failure=failure, deadline=deadline)
                 node.destroy_node()
             rclpy.try_shutdown()
     return status

@@ -51,13 +51,16 @@ from formation_msgs_py.codec import (
     encode_trigger_info,
 )
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status, Step
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS
 from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
 NODE_NAME = 'formation_agent'
-DELIVERY_TIMEOUT = 1.0
-"""Seconds a leaving node waits for its readers to acknowledge its last messages (zero command, report)."""
+DELIVERY_TIMEOUT = 4.0
+"""Seconds a leaving node waits, at most, for its readers to acknowledge what it published (its
+last messages too: zero command, report): Fast DDS repairs a message lost on the way at the
+writer's next heartbeat (every 3 s by default, 0.1 s in a run: `formation_sim.runtime`'s
+fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 
 
 class AgentNodeError(ValueError):
@@ -129,7 +132,7 @@ class FormationAgentNode(Node):
                 Float64MultiArray,
                 trigger_info_topic(j, self.agent_id),
                 lambda msg, sender=j: self.faults.arrive(msg, sender),
-                PROTOCOL_QOS,
+                READER_QOS,
             )
             for j in self.neighbour_ids
         ]
@@ -139,7 +142,7 @@ class FormationAgentNode(Node):
             Float64MultiArray,
             STEP_TOPIC,
             self._on_step,
-            PROTOCOL_QOS,
+            READER_QOS,
             event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_simulator_liveliness),
         )
         self.step: Step | None = None
@@ -163,6 +166,7 @@ class FormationAgentNode(Node):
         self.failure: Exception | None = None
         self._last_stamp: dict[int, float] = {}  # sender -> stamp of its last accepted information
         self._final_report_sent = False
+        self.published: dict[str, int] = {}  # topic -> messages published from step 0 on (commands: self.output)
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self._simulator_seen = False
         self._simulator_lost_at: float | None = None
@@ -297,7 +301,7 @@ class FormationAgentNode(Node):
         self.output.publish(t, tuple(float(v) for v in out.control), sensed)
         self.commands_sent += 1
         for info in out.infos:
-            self._info_pubs[info.receiver].publish(encode_trigger_info(info))
+            self._publish(self._info_pubs[info.receiver], encode_trigger_info(info))
             self.info_sent += 1
         held, self._held = self._held, []
         for info in held:
@@ -442,11 +446,14 @@ class FormationAgentNode(Node):
             ready=ready,
             last_planned=self._planned,
         )
-        self._status_pub.publish(encode_status(status))
+        self._publish(self._status_pub, encode_status(status))
 
     # -- reports and leaving ----------------------------------------------------------------------
 
     def report(self, *, final: bool = False, failure: str | None = None) -> AgentReport:
+        published = dict(self.published)
+        if isinstance(self.output, PlantOutput) and self.output.sent:
+            published[self.output.publisher.topic_name] = self.output.sent
         return AgentReport(
             agent=self.agent_id,
             final=final,
@@ -457,6 +464,7 @@ class FormationAgentNode(Node):
             robot_commands=self.output.robot_commands,
             saturation=self.output.saturation,
             failure=failure,
+            published=published,
         )
 
     def _report_changed(self) -> None:
@@ -465,15 +473,30 @@ class FormationAgentNode(Node):
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
         self._report_dirty = False
         self._final_report_sent = final
+        self._count_published(self._report_pub)  # a report counts itself
         self._report_pub.publish(encode_agent_report(self.report(final=final, failure=failure)))
 
+    def _publish(self, publisher, msg) -> None:  # noqa: ANN001
+        self._count_published(publisher)
+        publisher.publish(msg)
+
+    def _count_published(self, publisher) -> None:  # noqa: ANN001
+        """Count what a recorder must hold: everything from step 0 on, when it is matched for sure
+        (the simulator starts step 0 only once every agent has matched all its listeners)."""
+        if self.step is not None:
+            topic = publisher.topic_name
+            self.published[topic] = self.published.get(topic, 0) + 1
+
     def _publish_report_if_dirty(self) -> None:
-        if self._report_dirty and not self.finished:
+        # Not before step 0: a recorder may not be matched yet, and every report it must hold
+        # counts (news from discovery go out with the first report after it).
+        if self._report_dirty and not self.finished and self.step is not None:
             self._publish_report()
 
-    def leave(self, *, failure: str | None = None) -> None:
+    def leave(self, *, failure: str | None = None, deadline: float | None = None) -> None:
         """On the way out, whatever the reason: the zero command, the final report if not yet sent
-        (with `failure`, why the agent stops early), and the delivery of both (bounded)."""
+        (with `failure`, why the agent stops early), and the delivery of everything it published
+        (until `deadline`, time.monotonic(); default DELIVERY_TIMEOUT from now)."""
         if not rclpy.ok(context=self.context):
             return  # a context shut down by someone else cannot publish
         self.finished = True
@@ -481,13 +504,14 @@ class FormationAgentNode(Node):
         self.output.stop()
         if not self._final_report_sent:
             self._publish_report(final=True, failure=failure)
-        for pub in (self.output.publisher, self._report_pub):
-            pub.wait_for_all_acked(Duration(seconds=DELIVERY_TIMEOUT))
+        self.wait_for_delivery(time.monotonic() + DELIVERY_TIMEOUT if deadline is None else deadline)
 
-    def wait_for_delivery(self, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
-        """Let reliable writers hand over what they still hold before the node goes away."""
-        for pub in (self._status_pub, self._report_pub, self.output.publisher, *self._info_pubs.values()):
-            pub.wait_for_all_acked(Duration(seconds=timeout_sec))
+    def wait_for_delivery(self, deadline: float) -> None:
+        """Let reliable writers hand over what they still hold before the node goes away (until
+        `deadline`, time.monotonic())."""
+        pending = [self._status_pub, self._report_pub, self.output.publisher, *self._info_pubs.values()]
+        while pending and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
 
 
 if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so instead of doing nothing

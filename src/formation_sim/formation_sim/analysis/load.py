@@ -118,6 +118,8 @@ class BagRun:
     topics: dict[str, str]  # name -> type
     counts: dict[str, int]  # name -> messages
     checks: list[Check] = field(default_factory=list)
+    horizon: float | None = None  # the horizon the run was asked for (from /formation/scenario), if known
+    stop: dict[str, Any] | None = None  # {time, step, horizon, final_step}: where a run that stopped early ended
 
     @property
     def ok(self) -> bool:
@@ -326,11 +328,12 @@ def load_bag_run(
     steps = got.steps
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
     realtime = any(step.flags & STEP_FLAG_REALTIME for step in steps)
-    if final:
-        horizon = final[-1].time
-    else:
-        horizon = times[-1]
-        checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; horizon taken as the last state time {horizon!r}'))
+    # The run ends at its final Step: at the horizon, or where it stopped early (the simulator
+    # sends one then too); a bag without one ends where its recording did.
+    horizon = final[-1].time if final else times[-1]
+    asked = found.horizon if got.scenario_text is not None else None  # the run publishes its own horizon
+    finished = bool(final) and (asked is None or horizon == asked)
+    stop = None if finished else {'time': horizon, 'step': final[-1].index if final else None, 'horizon': asked, 'final_step': bool(final)}
     if times[-1] != horizon:
         checks.append(Check(name='final state', ok=False, detail=f'the last state is at t={times[-1]!r}, the run ended at t={horizon!r}'))
     events = sorted({t for agent_times in trigger_times.values() for t in agent_times})
@@ -343,7 +346,11 @@ def load_bag_run(
         logged: dict[int, list[float]] = defaultdict(list)
         for agent, t in got.sensing:
             logged[agent].append(t)
-        differing = [agent for agent in found.agent_ids if sorted(logged.get(agent, [])) != trigger_times[agent]]
+        # A run that stopped early may have answered a sensing whose trigger the stop cut short.
+        cut = {agent: sorted(logged.get(agent, [])) for agent in found.agent_ids}
+        if stop is not None:
+            cut = {agent: times[:-1] if times and times[-1] == horizon and times[:-1] == trigger_times[agent] else times for agent, times in cut.items()}
+        differing = [agent for agent in found.agent_ids if cut[agent] != trigger_times[agent]]
         checks.append(Check(name='sensing log = triggers', ok=not differing, detail='every trigger sensed once at its time' if not differing else f'agents {differing} sensed at other times than they triggered'))
     if got.commands:
         differing = [agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])]
@@ -351,11 +358,11 @@ def load_bag_run(
     extra: dict[str, Any] = {}
     if steps:
         extra['clock'] = 'realtime' if realtime else 'lockstep'
-        if final and not realtime:
+        if finished and not realtime:
             extra['steps'] = final[-1].index  # lock-step: one Step per advance of the world
         extra['reached_time'] = times[-1]  # the simulator samples the world where it stops
-        if final:
-            extra['failure'] = None  # the final Step goes out only when the horizon is reached
+        if finished:
+            extra['failure'] = None  # the run reached its horizon (why one stopped is not in a bag)
     if got.statuses:
         sent: dict[int, int] = defaultdict(int)
         for (sender, _), receivers in got.infos.items():
@@ -384,7 +391,10 @@ def load_bag_run(
         wall_time=math.nan,  # not in a bag
         extra=extra,
     )
-    return BagRun(bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks)
+    return BagRun(
+        bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
+        horizon=asked, stop=stop,
+    )  # fmt: skip
 
 
 def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:

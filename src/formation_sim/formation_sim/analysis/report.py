@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from formation_msgs_py.topics import STEP_TOPIC
 from formation_sim.sim.record import RunRecord
 from formation_sim.analysis.checks import Series, TheoryBounds, inter_event_stats, printed_chain_ratios, theorem_checks
 from formation_sim.analysis.load import BagRun
@@ -83,10 +84,16 @@ def _same(a: Any, b: Any) -> bool:
     return a == b
 
 
-def bag_summary(record: RunRecord) -> dict:
-    """summary.json's schema computed from the rebuilt record (wall_time: not in a bag, null)."""
+def bag_summary(record: RunRecord, *, horizon: float | None = None) -> dict:
+    """summary.json's schema computed from the rebuilt record (wall_time: not in a bag, null).
+
+    `horizon`: the horizon the run was asked for, which summary.json states also for a run that
+    stopped early (the record itself ends where the bag does).
+    """
     summary = build_summary(record)
     summary['wall_time'] = None
+    if horizon is not None:
+        summary['horizon'] = horizon
     return summary
 
 
@@ -117,10 +124,14 @@ def build_report(
     """The analysis as a JSON-ready dictionary (`render_markdown` prints it)."""
     record = run.record
     scenario = record.scenario
-    summary = bag_summary(record)
+    summary = bag_summary(record, horizon=run.horizon)
     comparison = None
+    stop = None if run.stop is None else {**run.stop, 'reason': None}
     if summary_path is not None:
         file_summary = json.loads(Path(summary_path).read_text(encoding='utf-8'))
+        failure = (file_summary.get('extra') or {}).get('failure')
+        if stop is not None and isinstance(failure, dict):
+            stop['reason'] = f'{failure.get("kind")}: {failure.get("message")}'
         differences, skipped = diff_summaries(summary, file_summary)
         comparison = {
             'path': str(summary_path),
@@ -144,6 +155,7 @@ def build_report(
                 'n_agents': scenario.n,
                 'dimension': scenario.dimension,
                 'delta': scenario.delta,
+                'stopped': stop,
             },
             'topics': {name: {'type': run.topics[name], 'messages': run.counts[name]} for name in sorted(run.topics)},
             'bag_checks': [check.to_dict() for check in run.checks],
@@ -208,6 +220,7 @@ def render_markdown(report: dict[str, Any]) -> str:
         f'Δ = {_fmt(run["delta"])}), {run["mode"]} run, clock {run["clock"] or "—"}, horizon {_fmt(run["horizon"])} s. '
         f'Scenario from: {report["scenario_source"]}. Every number below is recomputed from the bag.',
         '',
+        *([f'**The run stopped early**: {describe_stop(run["stopped"])}.', ''] if run.get('stopped') else []),
         '## Events and messages',
         '',
         '| agent | events | min inter-event [s] | median | max | ξ_i (proof bound) |',
@@ -292,6 +305,16 @@ def render_markdown(report: dict[str, Any]) -> str:
             else:
                 lines.append(f'- {title}: `{name}`')
     return '\n'.join(lines) + '\n'
+
+
+def describe_stop(stop: dict[str, Any]) -> str:
+    """'at t = 4.97 (step 123), before its horizon 600: interrupted: stopped by a signal (summary.json)'."""
+    where = f'at t = {_fmt(stop["time"])}' + (f' (step {stop["step"]})' if stop.get('step') is not None else '')
+    if stop.get('horizon') is not None:
+        where += f', before its horizon {_fmt(stop["horizon"])}'
+    if not stop.get('final_step'):
+        where += f' (the bag has no final {STEP_TOPIC} message: the run or its recording ended there)'
+    return where + (f': {stop["reason"]} (summary.json)' if stop.get('reason') else '')
 
 
 def _short(value: Any) -> str:

@@ -18,9 +18,11 @@ from mcap.records import Channel, Footer, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapFileWriter
+from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from formation_sim.bag.io import BAG_VERSION, BagError
+from formation_sim.sim.files import write_atomically
 
 
 class BagRecoveryError(BagError):
@@ -37,6 +39,7 @@ class Recovery:
     message_counts: dict[str, int]  # topic -> messages recovered
     rewritten: bool  # False: the MCAP file was complete and is kept as it is
     damaged_copy: Path | None  # the original, truncated file, when rewritten
+    healthy: bool = False  # the bag was readable as it was: nothing was changed
 
     @property
     def message_count(self) -> int:
@@ -161,16 +164,33 @@ def _rewrite(salvage: _Salvage, target: Path, information: dict[str, Any]) -> No
         writer.finish()
 
 
+def _readable_counts(bag_dir: Path) -> dict[str, int] | None:
+    """Messages per topic of a bag that opens as it is (metadata.yaml and a complete MCAP file)."""
+    if not (bag_dir / 'metadata.yaml').is_file():
+        return None
+    try:
+        with Reader(bag_dir) as reader:
+            counts: dict[str, int] = {}
+            for connection in reader.connections:
+                counts[connection.topic] = counts.get(connection.topic, 0) + connection.msgcount
+            return counts
+    except Exception:  # noqa: BLE001 - rosbags raises several unrelated types for a damaged bag
+        return None
+
+
 def reindex(bag_dir: Path | str) -> Recovery:
     """Rebuild ``metadata.yaml`` (and if needed the MCAP file) of a bag whose recorder died.
 
-    Every message in a complete MCAP chunk is kept; a chunk cut short by the kill is dropped. A
-    truncated MCAP file is rewritten complete, and the original kept beside it as
-    ``<name>.mcap.damaged``. Any existing ``metadata.yaml`` is replaced.
+    A bag that opens as it is (metadata.yaml and a complete MCAP file) is left alone
+    (`Recovery.healthy`). Otherwise every message in a complete MCAP chunk is kept; a chunk cut
+    short by the kill is dropped. A truncated MCAP file is rewritten complete, and the original
+    kept beside it as ``<name>.mcap.damaged``; ``metadata.yaml`` is written anew (atomically).
+    Nothing is changed if the rewrite cannot be written (a full disk), and no temporary stays.
 
     Raises:
-        BagRecoveryError: `bag_dir` holds no single MCAP file, or no message-bearing record
-            survived in it.
+        BagRecoveryError: `bag_dir` holds no single MCAP file, no message-bearing record
+            survived in it, or the recovered files cannot be written (the message says what
+            was done and what to do).
 
     """
     bag_dir = Path(bag_dir)
@@ -179,6 +199,8 @@ def reindex(bag_dir: Path | str) -> Recovery:
         msg = f'{bag_dir}: expected exactly one .mcap file, found {[p.name for p in candidates]}'
         raise BagRecoveryError(msg)
     mcap_path = candidates[0]
+    if (healthy := _readable_counts(bag_dir)) is not None:
+        return Recovery(mcap_path=mcap_path, message_counts=healthy, rewritten=False, damaged_copy=None, healthy=True)
 
     salvage = _salvage(mcap_path)
     if missing := {c.schema_id for c in salvage.channels.values()} - set(salvage.schemas):
@@ -200,14 +222,26 @@ def reindex(bag_dir: Path | str) -> Recovery:
         damaged_copy = mcap_path.with_name(f'{mcap_path.name}.damaged')
         recovered = mcap_path.with_name(f'{mcap_path.name}.recovering')
         recovered.unlink(missing_ok=True)
-        _rewrite(salvage, recovered, information)
+        try:
+            _rewrite(salvage, recovered, information)
+        except OSError as error:
+            recovered.unlink(missing_ok=True)
+            size = sum(len(m.data) for m in salvage.messages)
+            msg = (
+                f'{bag_dir}: cannot write the recovered copy {recovered.name}: {error.strerror} (it needs about '
+                f'{size / 1e6:.1f} MB beside the cut-short {mcap_path.name}, which holds {len(salvage.messages)} '
+                'messages in complete chunks); the bag is unchanged: free space, then recover it again'
+            )
+            raise BagRecoveryError(msg) from error
         mcap_path.replace(damaged_copy)
         recovered.replace(mcap_path)
 
-    metadata_path = bag_dir / 'metadata.yaml'
-    staging = bag_dir / 'metadata.yaml.tmp'
-    staging.write_text(yaml.safe_dump({'rosbag2_bagfile_information': information}), 'utf8')
-    staging.replace(metadata_path)
+    try:
+        write_atomically(bag_dir / 'metadata.yaml', yaml.safe_dump({'rosbag2_bagfile_information': information}))
+    except OSError as error:
+        done = f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
+        msg = f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it again'
+        raise BagRecoveryError(msg) from error
 
     return Recovery(
         mcap_path=mcap_path,

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis import figures
     from formation_sim.analysis.checks import run_series, theory_bounds
     from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
-    from formation_sim.analysis.report import build_report, write_report
+    from formation_sim.analysis.report import build_report, describe_stop, write_report
     from formation_sim.model import theory
     from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
     from formation_sim.progress import Progress
@@ -122,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
             f'final formation error {summary["final_formation_error"]:.3g}',
             file=sys.stderr,
         )
+        if report['run']['stopped']:
+            print(f'the run stopped early {describe_stop(report["run"]["stopped"])}', file=sys.stderr)
         if report['summary_json'] is not None:
             state = 'equals the bag' if not differs else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
             print(f'summary.json {state}', file=sys.stderr)

@@ -15,7 +15,8 @@ def register(subparsers) -> None:
         description='Recover a rosbag2 bag (MCAP) whose recorder was killed: every message in a '
         'complete MCAP chunk is kept (the recorder flushes every 0.5 s), a cut-short file is '
         'rewritten complete with the original kept beside it as <name>.mcap.damaged, and '
-        'metadata.yaml is rebuilt. `formation run` does this by itself when its recorder dies.',
+        'metadata.yaml is rebuilt. A healthy bag (one that opens as it is) is left alone. `formation run` '
+        'does this by itself when its recorder dies.',
     )
     parser.add_argument('bag', metavar='BAG', type=Path, help='bag directory (holding one .mcap file)')
     parser.set_defaults(func=run)
@@ -31,6 +32,9 @@ def run(args: argparse.Namespace) -> int:
         recovery = reindex(bag)
     except BagRecoveryError as error:
         return refuse('recover', error)
+    if recovery.healthy:
+        print(f'{bag}: healthy (metadata.yaml and a complete MCAP file, {recovery.message_count} messages); left as it is')
+        return 0
     if recovery.rewritten:
         print(f'{bag}: recovered {recovery.message_count} messages into {recovery.mcap_path.name}; '
               f'the cut-short original is kept as {recovery.damaged_copy.name}')

@@ -105,6 +105,6 @@ def run(args: argparse.Namespace) -> int:
         if figure is not None:
             print(f'figure:  {figure}')
         print(f'logs:    {Path(out) / "logs"}')
-    if not result.ok:
-        print(f'formation run: {result.message}', file=sys.stderr)
+    if args.quiet and result.message:  # otherwise the run's last progress line said it already
+        print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status

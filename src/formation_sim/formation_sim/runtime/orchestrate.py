@@ -16,10 +16,13 @@ removed.  If the orchestrator itself is killed, the kernel sends every child SIG
 
 Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
 nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
-simulator detects a lost agent itself within the DDS liveliness lease and stops with a partial
-summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
-`LOST_DETECTION` s to do so, then stops the rest.  The summary's `extra.failure` names what failed
-and when; a bag left unfinished by a dead recorder is recovered with `recorder.reindex`.
+simulator detects a lost agent or recorder itself within the DDS liveliness lease and stops with
+a partial summary; this process sees any child exit within `POLL_PERIOD`, gives the simulator
+`LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
+`extra.failure` names what failed and when (this process writes the summary itself if the
+simulator could not); a bag left unfinished is recovered (`formation_sim.bag.recovery.reindex`);
+and the bag is checked against what the run published (`formation_sim.analysis.accounting`): a
+run that lost messages fails, however it ended.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ from formation_sim.model.scenario import Scenario, dump_scenario, load_scenario
 from formation_sim.model.validate import require_valid
 from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
+from formation_sim.runtime.fastdds_shm import domain_port_files, held_files, remove_orphans
 
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
@@ -58,6 +62,7 @@ BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 PROGRESS_PREFIX = 'progress '
 POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 
 # Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
 EXIT_OK = 0
@@ -97,7 +102,7 @@ class RunResult:
     children: tuple[ChildExit, ...] = ()
     message: str = ''
     failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
-    bag_recovered: bool = False  # the recorder died and its bag was rebuilt by recorder.reindex
+    bag_recovered: bool = False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
 
     @property
     def ok(self) -> bool:
@@ -215,7 +220,7 @@ class _Child:
                 lines = handle.read().decode(errors='replace').splitlines()
         except OSError:
             return ''
-        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: '))]
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))]
         return named[-1].split(': ', 1)[1] if named else ''
 
     def describe(self) -> str:
@@ -223,41 +228,6 @@ class _Child:
         text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
         error = self.error_line() if self.process.returncode not in (None, 0) else ''
         return f'{text}: {error}' if error else text
-
-
-def _mapped_shm_files(pid: int) -> set[str]:
-    """Fast DDS shared-memory files mapped by process `pid`."""
-    try:
-        maps = Path(f'/proc/{pid}/maps').read_text()
-    except OSError:
-        return set()
-    return {line.split()[-1] for line in maps.splitlines() if '/dev/shm/fastrtps_' in line or '/dev/shm/sem.fastrtps_' in line}
-
-
-_PORT_FILE = re.compile(r'^(?:sem\.)?fastrtps_port(\d+)(?:_el|_mutex)?$')
-
-
-def _domain_port_files(domain_id: int) -> set[str]:
-    """Fast DDS shared-memory port files of ROS domain `domain_id`, with their lock and semaphore.
-
-    Fast DDS names a port's files after its port number, and the ports of domain d are
-    7400 + 250 d + [0, 250) (the RTPS well-known port mapping).
-    """
-    first = 7400 + 250 * domain_id
-    return {
-        str(path)
-        for path in Path('/dev/shm').iterdir()
-        if (match := _PORT_FILE.match(path.name)) and first <= int(match[1]) < first + 250
-    }
-
-
-def _mapped_by_anyone(paths: set[str]) -> set[str]:
-    """Those of `paths` still mapped by some live process."""
-    in_use = set()
-    for proc in Path('/proc').iterdir():
-        if proc.name.isdigit():
-            in_use |= _mapped_shm_files(int(proc.name)) & paths
-    return in_use
 
 
 class FormationRun:
@@ -425,6 +395,7 @@ class FormationRun:
             env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
         if processes > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
         env.update(self.extra_env)
         # Children find these packages the way this process did.
         here = [
@@ -457,8 +428,9 @@ class FormationRun:
     def _pump(self, child: _Child, handle) -> None:
         """Copy the simulator's stdout into its log; keep its progress lines for the terminal."""
         for line in child.process.stdout:
-            handle.write(line)
-            handle.flush()
+            with contextlib.suppress(OSError):  # a full disk: keep reading, or the child blocks on the pipe
+                handle.write(line)
+                handle.flush()
             if line.startswith(PROGRESS_PREFIX):
                 self._last_progress = line[len(PROGRESS_PREFIX) :].strip()
 
@@ -481,14 +453,43 @@ class FormationRun:
                 self._stop_all(domain_id)
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        recovered = self._recover_bag(bag) if self.record else None
-        failure = self._annotate_summary(summary, lost, status, message)
+        notes: list[str] = []  # what the message adds after the failure
+        recovered = self._recover_bag(bag, notes) if self.record else False
+        data = self._read_summary(summary, notes)
+        if data is None and 't=' in self._last_progress:  # it ran, and the simulator left no summary
+            data = self._summary_of_what_is_known(bag, status, notes)
+        failure = None
+        if data is not None:
+            failure = self._annotate(data, lost, status, message)
+            check = self._check_recording(data, bag, notes)
+            if check is not None and not check.complete:
+                if failure is None:
+                    failure = data['extra']['failure'] = {
+                        'kind': 'recording_incomplete',
+                        'message': check.describe_missing(),
+                        'agents': [],
+                        'time': data['extra'].get('reached_time'),
+                        'step': data['extra'].get('steps'),
+                        'detected_by': 'orchestrator',
+                    }
+                    status = EXIT_FAILED if status == EXIT_OK else status
+                elif status != EXIT_INTERRUPTED:
+                    notes.append(check.describe_missing())
+            if check is not None and check.foreign and status != EXIT_INTERRUPTED:
+                notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
+            from formation_sim.sim.summary import write_summary_file
+
+            try:
+                write_summary_file(data, summary)
+            except OSError as error:
+                summary.unlink(missing_ok=True)  # the simulator's, without the failure: not to be believed
+                notes.append(f'summary.json could not be written: {error}')
         if status == EXIT_OK and not summary.is_file():
-            status, message = EXIT_FAILED, f'the simulator exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED:
-            message = failure['message'] + (f'; {message}' if message and message not in failure['message'] else '')
-        if recovered:
-            message += f'; the recorder died: its bag was recovered ({recovered})'
+            status = EXIT_FAILED
+            message = message or f'the simulator exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+            message = failure['message'] + (f'; {message}' if message else '')
+        message = '; '.join([message, *notes] if message else notes)
         result = RunResult(
             out_dir=self.out_dir,
             summary=summary if summary.is_file() else None,
@@ -502,31 +503,106 @@ class FormationRun:
             ),
             message=message,
             failure=failure,
-            bag_recovered=bool(recovered),
+            bag_recovered=recovered,
         )
         if self.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self._last_progress}', end=True)
         return result
 
-    def _recover_bag(self, bag: Path) -> str | None:
-        """A bag left without metadata.yaml (its recorder died) is rebuilt from its MCAP file."""
-        if not bag.is_dir() or (bag / 'metadata.yaml').is_file():
-            return None
+    def _recover_bag(self, bag: Path, notes: list[str]) -> bool:
+        """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file."""
+        if not bag.is_dir():
+            return False
         from formation_sim.bag.io import BagError
         from formation_sim.bag.recovery import reindex
 
+        recorder = next((c for c in self._children if c.name == 'recorder'), None)
+        died = recorder is not None and recorder.process.returncode not in (0, None)
+        how = 'the recorder died: its bag' if died else 'the bag, left unfinished,'
         try:
             recovery = reindex(bag)
         except (BagError, OSError) as error:
-            return f'recovery failed: {error}'
-        return f'{recovery.message_count} messages kept'
+            notes.append(f'{how} could not be recovered: {error}')
+            return False
+        if recovery.healthy:
+            return False
+        notes.append(f'{how} was recovered ({recovery.message_count} messages kept)')
+        return True
 
-    def _annotate_summary(self, summary: Path, lost: _Child | None, status: int, message: str) -> dict | None:
-        """Add the orchestrator's view of a failure to summary.json's extra.failure; return it."""
-        if not summary.is_file():
+    def _read_summary(self, path: Path, notes: list[str]) -> dict | None:
+        if not path.is_file():
             return None
-        data = json.loads(summary.read_text())
+        try:
+            return json.loads(path.read_text(encoding='utf-8'))
+        except (OSError, ValueError) as error:
+            notes.append(f'{path} could not be read ({error}): replaced by what the run knows')
+            return None
+
+    def _process_info(self, child: _Child) -> dict:
+        return {
+            'name': child.name,
+            'pid': child.pid,
+            'returncode': child.process.returncode,
+            'exit': describe_exit(child.process.returncode),
+            'seconds_after_launch': (child.exited_at or time.monotonic()) - self._started_at,
+            'error': child.error_line(),
+        }
+
+    def _summary_of_what_is_known(self, bag: Path, status: int, notes: list[str]) -> dict:
+        """summary.json when the simulator left none (killed hard, or it could not write): the
+        failure, the last sim time and step of its progress, the processes, and the run as far as
+        the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
+        from formation_sim.sim.summary import SCHEMA, build_summary
+
+        simulator = next(c for c in self._children if c.name == 'simulator')
+        progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', self._last_progress)}
+        stopped_by_us = status == EXIT_INTERRUPTED or simulator.signal_used is not None
+        killed = simulator.process.returncode is None or simulator.process.returncode < 0
+        failure = {
+            'kind': 'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
+            'message': f'simulator (pid {simulator.pid}) {describe_exit(simulator.process.returncode)}',
+            'agents': [],
+            'time': progress.get('t'),  # its last progress line (once a second, 6 decimals)
+            'step': int(progress['steps']) if 'steps' in progress else None,
+            'wall_time': progress.get('wall'),
+            'detected_by': 'orchestrator',
+            'process': self._process_info(simulator),
+        }
+        scenario = self.scenario
+        data = None
+        if (bag / 'metadata.yaml').is_file():
+            from formation_sim.analysis.load import AnalysisError, load_bag_run
+
+            try:
+                data = build_summary(load_bag_run(bag, run_dir=self.out_dir, scenario=scenario).record)
+                data['wall_time'] = None
+                source = 'orchestrator: the simulator left no summary; the run as far as its bag holds it'
+            except (AnalysisError, ValueError) as error:
+                notes.append(f'the bag could not be read back: {error}')
+        if data is None:
+            data = {
+                'schema': SCHEMA,
+                'scenario': scenario.name,
+                'dynamics': scenario.dynamics,
+                'mode': 'distributed',
+                'horizon': self.horizon,
+                'n_agents': len(scenario.agent_ids),
+                'dimension': scenario.dimension,
+                'delta': scenario.delta,
+                'wall_time': None,
+                'extra': {},
+            }
+            source = 'orchestrator: the simulator left no summary and there is no readable bag'
+        data['extra'].update(
+            failure=failure,
+            summary_source=source,
+            processes={c.name: describe_exit(c.process.returncode) for c in self._children},
+        )
+        return data
+
+    def _annotate(self, data: dict, lost: _Child | None, status: int, message: str) -> dict | None:
+        """Add the orchestrator's view of a failure to the summary's extra.failure; return it."""
         extra = data.setdefault('extra', {})
         failure = extra.get('failure')
         if failure is None and status == EXIT_OK:
@@ -534,14 +610,7 @@ class FormationRun:
         if failure is None:  # the simulator completed, but a child failed
             failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
         if lost is not None:
-            failure['process'] = {
-                'name': lost.name,
-                'pid': lost.pid,
-                'returncode': lost.process.returncode,
-                'exit': describe_exit(lost.process.returncode),
-                'seconds_after_launch': (lost.exited_at or time.monotonic()) - self._started_at,
-                'error': lost.error_line(),
-            }
+            failure['process'] = self._process_info(lost)
             failed_itself = (lost.process.returncode or 0) > 0  # it named an error and left
             if failure['kind'] == 'interrupted':  # stopped by us because of that child
                 failure['kind'] = 'process_failed' if failed_itself else 'process_lost'
@@ -552,10 +621,39 @@ class FormationRun:
             if 'orchestrator' not in failure['detected_by']:
                 failure['detected_by'] += ', orchestrator'
         extra['failure'] = failure
-        staging = summary.with_name(summary.name + '.tmp')
-        staging.write_text(json.dumps(data, indent=1, allow_nan=False) + '\n')
-        staging.replace(summary)
         return failure
+
+    def _strangers(self, topics: dict[str, int], domain_id: int) -> str:
+        """'; nodes outside the run wrote on them: /formation_replay (ROS domain 64)', as graph.json saw them."""
+        from formation_agent.ros.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.sim_node import GRAPH_FILE
+
+        own = {'/formation_simulator', '/formation_recorder', *(f'{agent_namespace(i)}/{NODE_NAME}' for i in self.scenario.agent_ids)}
+        try:
+            graph = json.loads((self.out_dir / GRAPH_FILE).read_text(encoding='utf-8'))
+        except (OSError, ValueError):
+            graph = {}
+        strangers = sorted(node for node, ends in graph.items() if node not in own and set(ends.get('publishers', ())) & set(topics))
+        return f'; nodes outside the run wrote on them: {", ".join(strangers)} (ROS domain {domain_id})' if strangers else ''
+
+    def _check_recording(self, data: dict, bag: Path, notes: list[str]):
+        """What the run published against what its bag holds (extra.recording); None without a bag."""
+        published = data.get('extra', {}).get('published')
+        if not self.record or not published or not (bag / 'metadata.yaml').is_file():
+            return None
+        from formation_sim.analysis.accounting import check_recording
+        from formation_sim.runtime.sim_node import formation_topics
+
+        recorded = {name for name, _ in formation_topics(self.scenario)}  # not, e.g., a robot's own topics
+        published = {topic: n for topic, n in published.items() if topic in recorded}
+        try:
+            check = check_recording(published, bag)
+        except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
+            notes.append(f'the bag could not be checked against what the run published: {error}')
+            return None
+        data['extra']['recording'] = check.to_dict()
+        return check
 
     @contextlib.contextmanager
     def _signals_trapped(self) -> Iterator[None]:
@@ -635,7 +733,7 @@ class FormationRun:
                 # once it is gone nobody can tell which were its own: note them while it lives.
                 for child in self._children:
                     if child.exited_at is None:
-                        child.shm_files |= _mapped_shm_files(child.pid)
+                        child.shm_files |= held_files(child.pid)
                 next_snapshot = now + snapshot_period
             code = simulator.process.poll()
             if code is not None:
@@ -643,7 +741,7 @@ class FormationRun:
                     return self._finish(), '', lost
                 status = _lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
-                return status, f'{seen}simulator {describe_exit(code)}; see {simulator.log}', lost
+                return status, f'{seen}simulator (pid {simulator.pid}) {describe_exit(code)}; see {simulator.log}', lost
             if lost is None:
                 lost = next(
                     (
@@ -671,40 +769,46 @@ class FormationRun:
         return EXIT_FAILED if failed else EXIT_OK
 
     def _stop_all(self, domain_id: int) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive.
+        """Stop the children still alive, the recorder last; then remove their shm files.
 
-        A child that dies by a signal cannot unlink its Fast DDS shared-memory files; those it had
-        mapped when it was signalled are removed once no live process maps them any more.  It may
-        also have mapped a peer's port file after the last look (a port is mapped when it is first
-        sent to), which then outlives the peer: so the port files of the run's own domain that
-        nobody maps any more go too (a live participant always maps its own port).
+        Each gets SIGINT, then SIGTERM, then SIGKILL (`stop_timeouts`).  The simulator and the agents
+        go first: they flush what they published to the recorder before they exit (a message
+        dropped on the way is only repaired at a writer's next heartbeat, after up to 3 s), and the
+        recorder, still recording meanwhile, then drains and closes its bag.
+
+        A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
+        that mapped one of its ports keeps the port's reference (the file outlives both).  Once
+        every child is gone, the files any of them held (noted while they ran, `held_files`) go
+        if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
+        the dead port files of the run's own domain (a port mapped after the last look).
         """
-        first, second = self.stop_timeouts
-        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
-            alive = [c for c in self._children if c.alive()]
-            if not alive:
-                break
-            for child in alive:
-                child.shm_files |= _mapped_shm_files(child.pid)
-                child.signal_used = sig.name
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
-            limit = time.monotonic() + wait
-            while any(c.alive() for c in alive) and time.monotonic() < limit:
-                time.sleep(0.05)
+        self._stop([c for c in self._children if c.name != 'recorder'])
+        self._stop([c for c in self._children if c.name == 'recorder'])
         for child in self._children:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 child.process.wait(timeout=1.0)
-        orphaned = set().union(*(c.shm_files for c in self._children if (c.process.returncode or 0) < 0))
-        if orphaned:
-            orphaned |= _domain_port_files(domain_id)
-        in_use = _mapped_by_anyone(orphaned)
-        # A lock file (_el) is never mapped: it goes only with its port file.
-        removable = {path for path in orphaned - in_use if not (path.endswith('_el') and path[:-3] in in_use)}
-        for path in removable:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-        self.removed_shm_files = sorted(removable)
+        held = set().union(*(c.shm_files for c in self._children))
+        if any((c.process.returncode or 0) < 0 for c in self._children):
+            held |= domain_port_files(domain_id)
+        self.removed_shm_files = remove_orphans(held)
+
+    def _stop(self, children: list[_Child]) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to those of `children` still alive."""
+        first, second = self.stop_timeouts
+        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
+            alive = [c for c in children if c.alive()]
+            if not alive:
+                break
+            for child in alive:
+                child.shm_files |= held_files(child.pid)
+                child.signal_used = sig.name
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
+                    if sig == signal.SIGINT:
+                        os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
+            limit = time.monotonic() + wait
+            while any(c.alive() for c in alive) and time.monotonic() < limit:
+                time.sleep(0.05)
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr

@@ -20,9 +20,12 @@ What survives the end of a recorder:
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import json
 import math
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -30,7 +33,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
-from formation_msgs_py.topics import STEP_TOPIC
+from formation_msgs_py.topics import RECORDER_TOPIC, STEP_TOPIC
 from formation_sim.bag.io import BagError, BagWriter, TopicSpecError, UnknownMessageTypeError, check_msgtype
 
 from rclpy.node import Node
@@ -40,6 +43,7 @@ if TYPE_CHECKING:
 
 DEFAULT_CLOCK_TOPIC = STEP_TOPIC
 # /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time].
+_STEP_INDEX = 1
 _STEP_TIME_INDEX = 2
 _NS_PER_S = 1_000_000_000
 
@@ -96,6 +100,11 @@ class RecorderNode(Node):
       step), so bag order follows the simulation. '' stamps with the node's clock instead.
     - ``flush_period`` (double, s): how often written messages are pushed to the file, which
       bounds what a SIGKILL loses.
+    - ``heartbeat_topic`` (string): after every flush and every step recorded,
+      ``{"version": 1, "recorder": NODE, "recorded": N, "step": K}`` (std_msgs/String, the
+      protocol's QoS): N messages written so far, the latest step K recorded (-1: none). The
+      simulator keeps its steps at most `formation_sim.runtime.sim_node.RECORDER_LAG` ahead of K,
+      and its writer's DDS liveliness tells a run the recorder still works ('' = off).
     - ``drain_quiet`` (double, s): on stopping, `drain` takes messages until none came for this
       long.
     - ``drain_limit`` (double, s): `drain` ends after this long even if messages keep coming.
@@ -110,6 +119,7 @@ class RecorderNode(Node):
         clock_topic: str = DEFAULT_CLOCK_TOPIC,
         discovery_period: float = 1.0,
         flush_period: float = 0.5,
+        heartbeat_topic: str = RECORDER_TOPIC,
         drain_quiet: float = 0.5,
         drain_limit: float = 10.0,
         node_name: str = 'formation_recorder',
@@ -129,6 +139,8 @@ class RecorderNode(Node):
             self.declare_parameter('discovery_period', float(discovery_period)).value
         )
         flush_period = float(self.declare_parameter('flush_period', float(flush_period)).value)
+        heartbeat_topic = str(self.declare_parameter('heartbeat_topic', heartbeat_topic).value)
+        self._heartbeat_topic = heartbeat_topic
         self._drain_quiet = float(self.declare_parameter('drain_quiet', float(drain_quiet)).value)
         self._drain_limit = float(self.declare_parameter('drain_limit', float(drain_limit)).value)
 
@@ -154,7 +166,10 @@ class RecorderNode(Node):
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
         self._sim_time_ns: int | None = None
+        self._step_index = -1  # the latest step recorded (-1: none yet)
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
+        self.flushed_count = 0  # messages in the file for sure (as of the last flush)
+        self.failure: RecorderError | None = None  # the bag could not be written
         self._bad_clock_warned = False
         self._subscriptions_by_topic: dict[str, Any] = {}
         self._skipped: set[str] = set()
@@ -174,7 +189,15 @@ class RecorderNode(Node):
             self.bag.close()
             raise
 
-        self._timers = [self.create_timer(flush_period, self.bag.flush)]
+        self._heartbeat = None
+        if heartbeat_topic:
+            from std_msgs.msg import String
+
+            from formation_msgs_py.qos import PROTOCOL_QOS  # its liveliness lease is the run's
+
+            self._heartbeat = self.create_publisher(String, heartbeat_topic, PROTOCOL_QOS)
+            self._heartbeat_type = String
+        self._timers = [self.create_timer(flush_period, self._flush)]
         if self._prefix:
             self._timers.append(self.create_timer(discovery_period, self.discover))
             self.discover()
@@ -187,10 +210,35 @@ class RecorderNode(Node):
         """Messages written to the bag so far."""
         return self.bag.message_count
 
+    def _fail(self, error: OSError) -> None:
+        """The bag cannot be written (a full disk): stop recording; `main` leaves with the error."""
+        self.failure = RecorderError(
+            f'cannot write the bag {self.bag.path}: {error}; recording stopped, {self.flushed_count} '
+            'messages are in the file (formation recover BAG rebuilds it, once there is space)'
+        )
+
+    def _flush(self) -> None:
+        if self.failure is not None:
+            return
+        try:
+            self.bag.flush()
+        except OSError as error:
+            self._fail(error)
+            return
+        self.flushed_count = self.bag.message_count
+        self._beat()
+
+    def _beat(self) -> None:
+        if self._heartbeat is not None:
+            beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self._step_index}
+            self._heartbeat.publish(self._heartbeat_type(data=json.dumps(beat, separators=(',', ':'))))
+
     def discover(self) -> None:
         """Subscribe to every not yet recorded topic under the prefix."""
         for name, types in self.get_topic_names_and_types():
             if not name.startswith(self._prefix) or name in self.bag.topics or name in self._skipped:
+                continue
+            if name == self._heartbeat_topic:  # its own sign of life, not a topic of the run
                 continue
             if len(types) != 1:
                 self.get_logger().warning(f'{name} has types {types}; recording it as {types[0]}')
@@ -217,8 +265,13 @@ class RecorderNode(Node):
             self.received_count += 1
             if is_clock:
                 self._on_step(rawdata)
-            if record:
-                self.bag.write(name, self._timestamp_ns(), rawdata)
+            if record and self.failure is None:
+                try:
+                    self.bag.write(name, self._timestamp_ns(), rawdata)
+                except OSError as error:
+                    self._fail(error)
+            if is_clock and self.failure is None:
+                self._beat()  # a run paces its steps on this (the simulator's flow control)
 
         self._subscriptions_by_topic[name] = self.create_subscription(
             message_class, name, on_message, self._qos, raw=True
@@ -233,6 +286,8 @@ class RecorderNode(Node):
             data[_STEP_TIME_INDEX] >= 0
         ):
             self._sim_time_ns = round(data[_STEP_TIME_INDEX] * _NS_PER_S)
+            if float(data[_STEP_INDEX]).is_integer():
+                self._step_index = int(data[_STEP_INDEX])
         elif not self._bad_clock_warned:
             self._bad_clock_warned = True
             self.get_logger().warning(
@@ -304,9 +359,21 @@ class RecorderNode(Node):
         return drained
 
     def close(self) -> None:
-        """Finalize the bag (MCAP summary and ``metadata.yaml``)."""
+        """Finalize the bag (MCAP summary and ``metadata.yaml``), unless it could not be written.
+
+        Raises:
+            RecorderError: finalizing failed (a full disk); the MCAP file is then cut short and
+                has no ``metadata.yaml`` (`formation_sim.bag.recovery.reindex` rebuilds it).
+
+        """
         self.stop_timers()
-        self.bag.close()
+        if self.failure is not None:
+            return  # writing more would fail again: the file stays as the last flush left it
+        try:
+            self.bag.close()
+        except OSError as error:
+            self._fail(error)
+            raise self.failure from None
 
 
 def main(args: Sequence[str] | None = None) -> int:
@@ -336,18 +403,28 @@ def main(args: Sequence[str] | None = None) -> int:
         # which fell behind a 3-agent lock-step run on a loaded machine.
         executor = make_executor('events')
         executor.add_node(node)
-        while not stop.is_set():
+        while not stop.is_set() and node.failure is None:
             executor.spin_once(timeout_sec=0.1)
         node.stop_timers()
-        node.drain(executor, interrupted=lambda: requests > 1)
-        node.get_logger().info(f'stopping: {node.message_count} messages in {node.bag.path}')
+        if node.failure is None:
+            node.drain(executor, interrupted=lambda: requests > 1)
+            node.get_logger().info(f'stopping: {node.message_count} messages in {node.bag.path}')
+            node.close()
+    except RecorderError:
+        if node is None or node.failure is None:
+            raise  # not the bag failing to be written (e.g. a bad parameter)
     finally:
         if node is not None:
-            node.close()
+            with contextlib.suppress(RecorderError):
+                node.close()
             node.destroy_node()
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if node is not None and node.failure is not None:
+        with contextlib.suppress(OSError):  # the log may be on the full disk too
+            print(f'formation_recorder: {node.failure}', file=sys.stderr, flush=True)
+        return 1
     return 0
 
 

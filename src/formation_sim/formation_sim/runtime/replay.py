@@ -16,11 +16,19 @@ wait lasts until the writer's next periodic heartbeat, which made a 2 s bag take
 
 `/clock`: a bag that recorded `/clock` replays it like any topic; otherwise the player publishes
 `rosgraph_msgs/Clock` on `/clock` with each new bag timestamp (disable with `clock=False`).
+
+Never into a live run: a replay on the domain of a formation run would feed that run's agents
+old messages and mix them into its bag.  `main_replay` holds the domain's lock, as a run does
+(`formation_sim.runtime.orchestrate.reserve_domain`: refused if a run on this machine holds it, and no
+run can start there meanwhile), and refuses a domain whose ROS graph shows a run's nodes or a
+writer of the Step topic (a run on another machine).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -31,6 +39,8 @@ from formation_sim.bag.io import BagError, UnknownMessageTypeError, read_bag
 from formation_sim.runtime.recorder import import_message_class
 
 CLOCK_TOPIC = '/clock'
+RUN_NODES = ('formation_simulator', 'formation_agent', 'formation_recorder')  # the nodes of a formation run
+GRAPH_WAIT = 1.5  # seconds to discover a run already on the domain before publishing anything
 
 
 class ReplayError(ValueError):
@@ -195,20 +205,62 @@ def main_replay(
     wait_timeout: float = 30.0,
     progress: Callable[[int, int | None], None] | None = None,
 ) -> ReplayResult:
-    """Start rclpy (in `domain_id` if given), replay `bag`, shut down; Ctrl-C stops cleanly."""
-    import rclpy
-    from rclpy.node import Node
+    """Start rclpy (in `domain_id`, else ROS_DOMAIN_ID's), replay `bag`, shut down; Ctrl-C stops cleanly.
+
+    Refused (ReplayError) on a domain where a formation run is live (see the module docstring).
+    """
+    from formation_sim.runtime.orchestrate import RunError, reserve_domain
 
     bag = Path(bag)
     if not bag.exists():
         raise ReplayError(f'{bag}: no such bag')
     if bag.is_file():
         bag = bag.parent
+    try:
+        domain = domain_id if domain_id is not None else int(os.environ.get('ROS_DOMAIN_ID') or 0)
+    except ValueError:
+        raise ReplayError(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]!r} is not a domain id') from None
+    hint = 'replaying there would feed that run old messages and mix them into its bag; choose another --domain-id'
+    with contextlib.ExitStack() as held:
+        try:
+            held.enter_context(reserve_domain(domain))
+        except RunError as error:
+            raise ReplayError(f'{error}: {hint}') from None
+        return _replay_on(bag, domain, hint, rate=rate, topics=topics, clock=clock, depth=depth, delay=delay,
+                          wait_for_subscribers=wait_for_subscribers, wait_timeout=wait_timeout, progress=progress)  # fmt: skip
+
+
+def live_run_nodes(node, *, wait: float) -> list[str]:
+    """The nodes of a formation run (or the writers of its Step topic) `node` sees within `wait` s."""
+    from formation_msgs_py.topics import STEP_TOPIC
+
+    deadline = time.monotonic() + wait
+    while True:
+        found = sorted(
+            f'{namespace.rstrip("/")}/{name}' for name, namespace in node.get_node_names_and_namespaces() if name in RUN_NODES
+        )
+        writers = node.get_publishers_info_by_topic(STEP_TOPIC)
+        found += [f'{info.node_namespace.rstrip("/")}/{info.node_name} (writes {STEP_TOPIC})' for info in writers]
+        named = all(info.node_name != '_NODE_NAME_UNKNOWN_' for info in writers)  # a writer is seen before its node
+        if (found and named) or time.monotonic() > deadline:
+            return sorted(set(found))
+        time.sleep(0.05)
+
+
+def _replay_on(
+    bag: Path, domain: int, hint: str, *, rate, topics, clock, depth, delay, wait_for_subscribers, wait_timeout, progress
+) -> ReplayResult:
+    import rclpy
+    from rclpy.node import Node
+
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
+    rclpy.init(context=context, domain_id=domain)
     node = None
     try:
         node = Node('formation_replay', context=context, start_parameter_services=False)
+        if running := live_run_nodes(node, wait=GRAPH_WAIT):
+            shown = ', '.join(running[:5]) + (f' and {len(running) - 5} more' if len(running) > 5 else '')
+            raise ReplayError(f'ROS domain {domain} has a formation run live ({shown}): {hint}')
         player = BagPlayer(node, bag, rate=rate, topics=topics, clock=clock, depth=depth)
         try:
             if wait_for_subscribers > 0:

@@ -20,10 +20,13 @@ how late every trigger was against the time its agent had planned.
 
 Faults (README, "Reliability"): an agent whose command writer loses DDS liveliness (its process
 died, or the network no longer reaches it) is declared lost after `LIVELINESS_LEASE` +
-`LOST_GRACE` s; the run then stops.  Whenever a run stops early, after step 0 (an agent lost, a
-protocol violation, a stall, SIGINT/SIGTERM), the simulator still writes summary.json with what
-happened up to then and `extra.failure` saying what went wrong, where and when.  Exit status: 0
-done, 1 failed, 3 an agent lost, 130 interrupted.
+`LOST_GRACE` s, and so is a recorder whose heartbeat writer does (frozen, it acknowledges
+nothing); the run then stops.  Lock-step waits for a recorder that falls more than
+`RECORDER_LAG` steps behind.  Whenever a run stops early, after step 0 (an agent lost, a protocol
+violation, a stall, SIGINT/SIGTERM), the simulator ends it as at the horizon (a final Step, the
+samples, the final reports) and writes summary.json with what happened up to then and
+`extra.failure` saying what went wrong, where and when.  Exit status: 0 done, 1 failed, 3 an
+agent or the recorder lost, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -45,6 +48,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
@@ -52,7 +57,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, make_executor
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, FAN_IN_QOS, PROTOCOL_QOS, SIMULATOR_QOS
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.codec import (
     MessageError,
     decode_agent_report,
@@ -78,6 +83,7 @@ from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
     MARKERS_TOPIC,
+    RECORDER_TOPIC,
     REPORT_TOPIC,
     SCENARIO_TOPIC,
     SENSING_LOG_TOPIC,
@@ -89,6 +95,7 @@ from formation_msgs_py.topics import (
     trigger_info_topic,
 )
 from formation_sim.sim.engine import Sampler, build_agent, due_twice, rounding_floor
+from formation_sim.sim.files import write_atomically
 from formation_sim.analysis.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.sim.record import RunRecord
@@ -96,12 +103,40 @@ from formation_sim.sim.summary import write_summary
 from formation_sim.sim.world import World
 
 GRAPH_FILE = 'graph.json'
+
 CLOCK_MODES = ('lockstep', 'realtime')
+
+RECORDER_LAG = 2
+"""Steps the lock-step may run ahead of what a recorder has written (its heartbeat says which step).
+
+Lock-step at full speed outruns a recorder (one Python process taking every message): on a loaded
+2-core machine 3 runs of 4 lost hundreds of view and Status messages, the writers' keep-last
+histories turning over before the recorder had them.  Held within a few steps of it, what is
+outstanding stays far below the writers' depths (24 runs of 24 complete since, views kept deeper)."""
 
 
 EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
+
+
+VIEW_HISTORY_BYTES = 16 * 2**20
+
+
+def view_qos(sample) -> QoSProfile:
+    """SIMULATOR_QOS for a view (ground truth, markers) whose messages are like `sample`: as deep,
+    unless its history (kept for late joiners: transient local) would hold more than
+    VIEW_HISTORY_BYTES (a marker array of 300 agents is ~200 KB); never below PROTOCOL_QOS's 32.
+    A shallow history lost views to a recorder a few hundred messages behind (README)."""
+    size = max(1, len(serialize_message(sample)))
+    return QoSProfile(
+        history=SIMULATOR_QOS.history,
+        depth=max(PROTOCOL_QOS.depth, min(SIMULATOR_QOS.depth, VIEW_HISTORY_BYTES // size)),
+        reliability=SIMULATOR_QOS.reliability,
+        durability=SIMULATOR_QOS.durability,
+        liveliness=SIMULATOR_QOS.liveliness,
+        liveliness_lease_duration=SIMULATOR_QOS.liveliness_lease_duration,
+    )
 
 
 class SimulatorError(RuntimeError):
@@ -132,6 +167,12 @@ class ConnectivityLostError(SimulatorError):
         self.time = time
         self.edge = edge
         self.length = length
+
+
+class RecorderLostError(SimulatorError):
+    """A recorder stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'recorder_lost'
 
 
 class AgentLostError(SimulatorError):
@@ -270,14 +311,16 @@ class FormationSimulatorNode(Node):
 
         self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
+        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=scenario.velocities)
+        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
         # For tools: the scenario once (so a bag is self-contained), a Foxglove view per sample.
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._markers = FormationMarkers(scenario)
         self._marker_array = LiveMarkerArray(self._markers)
-        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
+        view = self._markers.to_ros(self._markers.markers(scenario.positions), time=0.0)
+        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, view_qos(view))
         self._tool_publishers = (
             self._state_pub,
             self._truth_pub,
@@ -286,8 +329,8 @@ class FormationSimulatorNode(Node):
             self._scenario_pub,
             self._markers_pub,
         )
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, FAN_IN_QOS)
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, FAN_IN_QOS)
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
         command_type = Accel if self.double else Twist
         # One command writer per agent: its DDS liveliness is the agent's sign of life.
         self._command_subs = {
@@ -295,7 +338,7 @@ class FormationSimulatorNode(Node):
                 command_type,
                 command_topic(i, double=self.double),
                 lambda msg, agent=i: self._on_command(msg, agent),
-                PROTOCOL_QOS,
+                READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
                     liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
                 ),
@@ -306,6 +349,21 @@ class FormationSimulatorNode(Node):
             self.create_service(Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent))
             for i in self.agents
         ]
+        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
+        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
+        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
+        self._recorder_sub = self.create_subscription(
+            String,
+            RECORDER_TOPIC,
+            self._on_recorder,
+            READER_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
+        )
+        self._recorders_alive = 0
+        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
+        self._recorder_lease_expired = False
+        self.published: dict[str, int] = {}  # topic -> messages this node published there
 
         self.step: Step | None = None
         self.finished = False
@@ -346,6 +404,7 @@ class FormationSimulatorNode(Node):
             count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
         count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
         count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
         unmatched = [i for i, sub in self._command_subs.items() if sub.get_publisher_count() < 1]
         expired = [i for i, book in self.agents.items() if book.lost is not None]
         not_ready = [
@@ -398,7 +457,17 @@ class FormationSimulatorNode(Node):
             how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)' if book.lease_expired else 'its node left the graph'
             book.lost = (time.monotonic(), how)
 
+    def _on_recorder_liveliness(self, info) -> None:
+        if info.alive_count >= self._recorders_alive:
+            self._recorders_alive = info.alive_count
+            self._recorder_lost = None
+        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
+            self._recorder_lease_expired = info.not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
+            self._recorder_lost = (time.monotonic(), how)
+
     def _check_lost(self, now: float) -> None:
+        self._check_recorder_lost(now)
         # During discovery a lease may expire while a busy machine starts many processes: discovery
         # waits for the agent to come back (bounded by its timeout); an agent that left counts.
         lost = {
@@ -415,6 +484,35 @@ class FormationSimulatorNode(Node):
         names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {", ".join(map(str, agents))}'
         hows = '; '.join(sorted({how for _, how in lost.values()}))
         raise AgentLostError(f'{names} lost {where}: {hows}; the run stops', agents=agents)
+
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (flow control, `RECORDER_LAG`)."""
+        try:
+            beat = json.loads(msg.data)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
+            return
+        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
+        self._advance_if_settled()
+
+    def _recorder_behind(self) -> bool:
+        """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
+        if self.extra_subscribers < 1:
+            return False
+        recorded = sorted(self._recorded_steps.values())[: self.extra_subscribers]
+        return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
+
+    def _check_recorder_lost(self, now: float) -> None:
+        lost = self._recorder_lost
+        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
+            return
+        where = 'during discovery' if self.step is None else f'at t={self.world.time!r} (step {self.step.index})'
+        raise RecorderLostError(
+            f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )
 
     def _on_report(self, msg: String) -> None:
         try:
@@ -461,6 +559,10 @@ class FormationSimulatorNode(Node):
         if isinstance(error, ConnectivityLostError):
             self.failure_info.update(edge=list(error.edge), length=error.length)
 
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
+
     def _print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
         try:
@@ -474,6 +576,8 @@ class FormationSimulatorNode(Node):
 
     def _describe_wait(self) -> str:
         lines = [f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)})']
+        if self.extra_subscribers:
+            lines.append(f'recorders at steps {self._recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG})')
         for i, book in self.agents.items():
             lines.append(f'agent {i}: status {book.status}, expected triggers {book.expected_triggers}, commands received {book.commands_received}')
         return '; '.join(lines)
@@ -484,7 +588,7 @@ class FormationSimulatorNode(Node):
             with contextlib.suppress(OSError):
                 print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
-        self._scenario_pub.publish(String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._sampler.event()
         if self.realtime:
             self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
@@ -492,7 +596,7 @@ class FormationSimulatorNode(Node):
             self._epoch = time.time()
             self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
             self._due = set(self.agents)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.publish_samples()
             return
         self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
@@ -521,7 +625,7 @@ class FormationSimulatorNode(Node):
             self._sampler.event()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
             self._finished_at = time.monotonic()
         self.publish_samples()
@@ -535,7 +639,7 @@ class FormationSimulatorNode(Node):
         book.expected_triggers += 1
         self.sensing_calls += 1
         log = {'version': 1, 'agent': agent, 'step': 0, 'time': t}
-        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
         return encode_sensed_state(self.world.sense(agent, book.neighbours))
 
     # -- lock-step ------------------------------------------------------------------------------
@@ -547,7 +651,7 @@ class FormationSimulatorNode(Node):
             self.agents[i].expected_triggers += 1
             self.agents[i].trigger_times.append(step.time)
         self._last_advance = time.monotonic()
-        self._step_pub.publish(encode_step(step))
+        self._publish(self._step_pub, encode_step(step))
 
     def _on_status(self, msg: Float64MultiArray) -> None:
         try:
@@ -590,7 +694,13 @@ class FormationSimulatorNode(Node):
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
         if self.finished:
-            return  # the run is over (or failed): the world no longer moves
+            # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
+            # sensing was answered before a stop still completes (its information is out, and in
+            # the bag): counted, its command acting from the last instant on moves nothing.
+            due = not self.realtime and agent in self._due and book.sensed_at_step == self.step.index
+            if due and book.commands_received < book.expected_triggers:
+                book.commands_received += 1
+            return
         if self.realtime and self.step is not None:
             if not self.finished:
                 control = decode_command(msg, self.scenario.dimension)
@@ -626,7 +736,7 @@ class FormationSimulatorNode(Node):
         self.sensing_calls += 1
         sensed = self.world.sense(agent, book.neighbours)
         log = {'version': 1, 'agent': agent, 'step': index, 'time': self.world.time}
-        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
         return encode_sensed_state(sensed)
 
     def _settled(self) -> bool:
@@ -648,6 +758,8 @@ class FormationSimulatorNode(Node):
     def _advance_if_settled(self) -> None:
         if self.realtime or self.step is None or self.finished or not self._settled():
             return
+        if self._recorder_behind():
+            return  # the recorder's next heartbeat comes back here
         t = self.step.time
         t_next = min(book.status.next_time for book in self.agents.values())
         if t_next < t:
@@ -698,12 +810,12 @@ class FormationSimulatorNode(Node):
             state = WorldState(
                 time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=samples.velocities[k] if self.double else None
             )
-            self._state_pub.publish(encode_world_state(state))
+            self._publish(self._state_pub, encode_world_state(state))
             if t >= self._next_viz or (self.finished and k == last):
                 self._next_viz = t + self.viz_period
-                self._clock_pub.publish(Clock(clock=ros_time(t)))
-                self._truth_pub.publish(encode_pose_array(state))
-                self._markers_pub.publish(self._marker_array.update(self._markers.markers(x), time=t))
+                self._publish(self._clock_pub, Clock(clock=ros_time(t)))
+                self._publish(self._truth_pub, encode_pose_array(state))
+                self._publish(self._markers_pub, self._marker_array.update(self._markers.markers(x), time=t))
 
     def _check_connectivity(self, t: float, x: np.ndarray) -> None:
         """Theorems 1 (i) and 2 (i): every edge stays shorter than Δ. Stop at the first that does not."""
@@ -748,7 +860,6 @@ class FormationSimulatorNode(Node):
 
     def record(self):
         """The run as a `RunRecord` (the same schema as the in-process engine's)."""
-        statuses = {i: book.status for i, book in self.agents.items()}
         return RunRecord(
             scenario=self.scenario,
             horizon=self.horizon,
@@ -759,7 +870,7 @@ class FormationSimulatorNode(Node):
             sample_times=np.array(self._sampler.times),
             sample_positions=np.array(self._sampler.positions),
             sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
-            messages_sent=sum(s.info_sent for s in statuses.values() if s is not None),
+            messages_sent=sum(self._information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
@@ -795,7 +906,28 @@ class FormationSimulatorNode(Node):
             },
             'late_information': sum(r.late for r in reports),
             'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
+            'published': self._published(),
         }
+
+    def _information_sent(self, agent: int) -> int:
+        """Triggering-information messages `agent` published: as its final report counts them, else
+        as its latest Status does.  A Status lags when a run stops between an agent's trigger and
+        the news of its due neighbours, which it waits for before reporting (one message per
+        neighbour fewer than the bag holds, seen after SIGINT); a final report never does."""
+        book = self.agents[agent]
+        if book.report is not None and book.report.final:
+            return sum(book.report.published.get(trigger_info_topic(agent, j), 0) for j in book.neighbours)
+        return book.status.info_sent if book.status is not None else 0
+
+    def _published(self) -> dict[str, int]:
+        """Messages published per topic by this node and by every agent whose final report came
+        (the others' are unknown: reports_missing), from step 0 on: what a recorder must hold."""
+        counts = dict(self.published)
+        for book in self.agents.values():
+            if book.report is not None and book.report.final:
+                for topic, n in book.report.published.items():
+                    counts[topic] = counts.get(topic, 0) + n
+        return dict(sorted(counts.items()))
 
     def _lateness(self) -> dict:
         """Wall clock: how late triggers came against the times agents had planned them."""
@@ -809,10 +941,19 @@ class FormationSimulatorNode(Node):
             'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0),
         }
 
-    def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
+    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
         self.publish_samples()
-        for pub in (self._step_pub, *self._tool_publishers):
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
+
+    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
+        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
+        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
+        end: what it lacks is counted against the bag after the run)."""
+        deadline = time.monotonic() + timeout_sec
+        pending = list(publishers)
+        while pending and self._recorder_lost is None and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
+            executor.spin_once(timeout_sec=0.0)
 
     def stop_agents(self, executor) -> None:
         """The run failed: a final Step sends the agents home, with their final reports."""
@@ -820,7 +961,7 @@ class FormationSimulatorNode(Node):
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self.finished = True
-        self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self.world.time, flags=flags, epoch=self._epoch)))
         self.publish_samples()
         self.collect_final_reports(executor)
         # A live agent's final report says it got the final Step; a lost agent is still matched
@@ -828,8 +969,7 @@ class FormationSimulatorNode(Node):
         publishers = self._tool_publishers
         if not self.final_reports_in():
             publishers = (self._step_pub, *publishers)
-        for pub in publishers:
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=1.0))
+        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
 
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
@@ -843,7 +983,7 @@ def write_results(node: FormationSimulatorNode) -> None:
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_summary(node.record(), out)
-    (out / GRAPH_FILE).write_text(json.dumps(node.graph, indent=1, sort_keys=True) + '\n', encoding='utf-8')
+    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
 
 
 def main(args: Sequence[str] | None = None) -> int:
@@ -862,30 +1002,29 @@ def main(args: Sequence[str] | None = None) -> int:
                 if node.failure is not None:
                     raise node.failure
             node.collect_final_reports(executor)
-            node.wait_for_delivery()
+            node.wait_for_delivery(executor)
             if node.progress_period > 0.0:
                 node._print_progress()
             if node.out_dir:
-                write_results(node)
+                try:
+                    write_results(node)
+                except OSError as error:  # e.g. a full disk: the run itself went well
+                    _tell(f'formation_sim: cannot write the results: {error}')
+                    status = EXIT_FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
             status = EXIT_INTERRUPTED
-            _write_partial(node, error)
+            _stop_and_write(node, executor, error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
                 status = EXIT_INTERRUPTED
-                _write_partial(node, KeyboardInterrupt())
+                _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
-            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-            if not isinstance(error, (AgentLostError, ConnectivityLostError)):
-                traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
-            if node is not None:
-                node.fail(error)
-                try:
-                    node.stop_agents(executor)
-                except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-                    print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
-            _write_partial(node, error)
+            _tell(f'formation_sim: {error}')
+            if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
+                with contextlib.suppress(OSError):
+                    traceback.print_exc(file=sys.stderr)
+            status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
+            _stop_and_write(node, executor, error)
         finally:
             if node is not None:
                 node.destroy_node()
@@ -893,15 +1032,30 @@ def main(args: Sequence[str] | None = None) -> int:
     return status
 
 
-def _write_partial(node: FormationSimulatorNode | None, error: BaseException) -> None:
-    """A run stopped early after step 0: the summary of what happened, and why it stopped."""
-    if node is None or node.step is None or not node.out_dir:
+def _stop_and_write(node: FormationSimulatorNode | None, executor, error: BaseException) -> None:
+    """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
+    it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
+    bag ends where the summary does; then the summary of what happened, and why it stopped."""
+    if node is None:
         return
     node.fail(error)
+    if executor is not None:
+        try:
+            node.stop_agents(executor)
+        except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+            _tell(f'formation_sim: could not stop the agents: {problem}')
+    if node.step is None or not node.out_dir:
+        return
     try:
         write_results(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-        print(f'formation_sim: could not write the partial results: {problem}', file=sys.stderr, flush=True)
+        _tell(f'formation_sim: could not write the partial results: {problem}')
+
+
+def _tell(line: str) -> None:
+    """A line on stderr (the run's log), if it can still be written (the disk may be full)."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
 
 
 if __name__ == '__main__':

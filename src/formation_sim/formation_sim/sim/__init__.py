@@ -2,7 +2,8 @@
 
 - `world`: `World`, the true state, advanced exactly from event to event ((single), (double)).
 - `engine`: `simulate`, the team's event-driven run with the agents' own core objects.
-- `record`: `RunRecord`, what any run produced; `summary`: summary.json and trajectory.npz.
+- `record`: `RunRecord`, what any run produced; `summary`: summary.json and trajectory.npz;
+  `files`: result files written whole or not at all.
 - `baselines`: the continuous-time controller (`simulate_continuous`) for comparison.
 """
 

@@ -18,7 +18,9 @@ Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as
 | `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii) |
 | `wall_time` | seconds the run took |
 | `extra` | implementation-specific details (e.g. the distributed run's domain id) |
-| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it, which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
+| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it (kind: agent_lost, agent_failed, recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
+| `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.analysis.accounting`) |
+| `extra.summary_source`, `extra.processes` | only when `formation run` wrote the summary because the simulator could not: how, and every process's exit |
 | `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
 | `extra.injected_faults` | distributed runs: {dropped, delayed, by_agent}: triggering information dropped or delayed by fault injection (a test facility) |
 
@@ -35,6 +37,7 @@ import numpy as np
 
 from formation_sim.model import theory
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
 
 SCHEMA = 'formation-summary/1'
@@ -118,8 +121,7 @@ def write_summary(record, out_dir) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary = build_summary(record)
-    path = out / SUMMARY_FILE
-    path.write_text(json.dumps(summary, indent=1, allow_nan=False) + '\n')
+    path = write_summary_file(summary, out / SUMMARY_FILE)
     arrays = {
         'agent_ids': np.array(record.scenario.agent_ids),
         'times': record.sample_times,
@@ -127,8 +129,13 @@ def write_summary(record, out_dir) -> Path:
     }
     if record.sample_velocities is not None:
         arrays['velocities'] = record.sample_velocities
-    np.savez_compressed(out / TRAJECTORY_FILE, **arrays)
+    write_atomically(out / TRAJECTORY_FILE, lambda handle: np.savez_compressed(handle, **arrays))
     return path
+
+
+def write_summary_file(summary: dict, path) -> Path:
+    """Write a summary dictionary as `path` (summary.json), whole or not at all."""
+    return write_atomically(path, json.dumps(summary, indent=1, allow_nan=False) + '\n')
 
 
 def load_summary(path) -> dict:
