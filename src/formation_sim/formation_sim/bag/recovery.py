@@ -128,7 +128,7 @@ def _bag_metadata(
             'duration': {'nanoseconds': duration},
             'message_count': total,
         }],
-        'custom_data': {'recovered_by': 'formation_sim.runtime.recorder.reindex'},
+        'custom_data': {'recovered_by': 'formation_sim.bag.recovery.reindex'},
         'ros_distro': 'rosbags',
     }
 
@@ -137,7 +137,7 @@ def _rewrite(salvage: _Salvage, target: Path, information: dict[str, Any]) -> No
     """Write the salvaged records as a complete MCAP file (ros2 profile, uncompressed)."""
     with target.open('xb') as stream:
         writer = McapFileWriter(stream, compression=CompressionType.NONE)
-        writer.start(profile='ros2', library='formation_sim.runtime.recorder.reindex')
+        writer.start(profile='ros2', library='formation_sim.bag.recovery.reindex')
         schema_ids = {
             old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
             for old, s in sorted(salvage.schemas.items())
