@@ -48,7 +48,7 @@ from formation_sim.sim.record import RunRecord
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
-from formation_sim.sim.summary import SUMMARY_FILE
+from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra
 
 
 SCENARIO_FILE = 'scenario.yaml'
@@ -398,15 +398,12 @@ def load_bag_run(
 
 
 def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:
-    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the simulator computes it."""
-    per_agent = {}
+    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the coordinator computes it."""
+    planned: dict[int, dict[int, float]] = {}
     for agent, reports in statuses.items():
-        lateness, seen = [], 0
+        plans, seen = planned.setdefault(agent, {}), 0
         for status in reports:
             if status.triggers > seen:
                 seen = status.triggers
-                if 0 < seen <= len(trigger_times.get(agent, [])):
-                    lateness.append(trigger_times[agent][seen - 1] - status.last_planned)
-        if lateness:
-            per_agent[str(agent)] = {'max': max(lateness), 'mean': float(np.mean(lateness))}
-    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}
+                plans[seen] = status.last_planned
+    return lateness_extra(planned, trigger_times)

@@ -116,6 +116,19 @@ def build_summary(record) -> dict:
     }
 
 
+def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int, list[float]]) -> dict:
+    """Wall clock: `extra.lateness` and `extra.max_lateness`, per agent trigger time − planned time
+    over the triggers whose plan a Status announced (`planned`: agent -> trigger number k ->
+    `Status.last_planned` of the Status that first counted k triggers)."""
+    per_agent = {}
+    for agent, plans in planned.items():
+        times = trigger_times.get(agent, [])
+        late = [times[k - 1] - when for k, when in sorted(plans.items()) if 0 < k <= len(times)]
+        if late:
+            per_agent[str(agent)] = {'max': max(late), 'mean': float(np.mean(late))}
+    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}
+
+
 def write_summary(record, out_dir) -> Path:
     """Write `summary.json` and `trajectory.npz` into `out_dir`; return the summary's path."""
     out = Path(out_dir)
