@@ -118,6 +118,62 @@ def load_valid_scenario(name: str, command: str) -> Scenario | None:
     return scenario
 
 
+# --------------------------------------------------------------------------- robots
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
+    """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
+    from formation_sim.runtime.launch import POSE_TYPES, RobotOptions
+
+    defaults = RobotOptions()
+    group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
+    group.add_argument(model_flag, choices=('holonomic', 'unicycle'), default=None, help='what the robots are (default: the backend\'s model)')
+    group.add_argument('--control-point-distance', type=float, default=defaults.control_point_distance, metavar='L',
+                       help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
+    group.add_argument('--max-speed', type=float, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
+    group.add_argument('--max-angular-speed', type=float, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    group.add_argument('--max-acceleration', type=float, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
+    group.add_argument('--command-rate', type=float, default=defaults.command_rate, metavar='HZ',
+                       help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
+    group.add_argument('--pose-type', choices=POSE_TYPES, default=defaults.pose_type, help=f'what the agents read (default {defaults.pose_type})')
+    group.add_argument('--pose-timeout', type=float, default=defaults.pose_timeout, metavar='S',
+                       help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})')
+    group.add_argument('--world-frame', default=defaults.world_frame, help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})')
+    group.add_argument('--pose-noise', type=float, default=0.0, metavar='SIGMA', help='simulated robots: σ of the position noise [m]')
+    group.add_argument('--yaw-noise', type=float, default=0.0, metavar='SIGMA', help='simulated robots: σ of the heading noise [rad]')
+    group.add_argument('--latency', type=float, default=0.0, metavar='S', help='simulated robots: delay of every pose [s]')
+    group.add_argument('--command-latency', type=float, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
+    group.add_argument('--robot-seed', type=int, default=0, metavar='N', help='simulated robots: seed of the noise')
+    group.add_argument('--robot-rate', type=float, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
+    group.add_argument('--initial-heading', type=float, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    group.add_argument('--robots-per-process', type=int, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+
+
+def robot_options(args: argparse.Namespace, model: str):
+    """The `RobotOptions` of the parsed robot arguments."""
+    from formation_sim.runtime.launch import RobotOptions
+
+    return RobotOptions(
+        model=model,
+        control_point_distance=args.control_point_distance,
+        max_linear_speed=args.max_speed,
+        max_angular_speed=args.max_angular_speed,
+        max_linear_acceleration=args.max_acceleration,
+        command_rate=args.command_rate,
+        pose_type=args.pose_type,
+        pose_timeout=args.pose_timeout,
+        world_frame=args.world_frame,
+        rate=args.robot_rate,
+        yaw=args.initial_heading,
+        pose_noise=args.pose_noise,
+        yaw_noise=args.yaw_noise,
+        latency=args.latency,
+        command_latency=args.command_latency,
+        seed=args.robot_seed,
+        robots_per_process=args.robots_per_process,
+    )
+
+
 # --------------------------------------------------------------------------- ROS
 
 

@@ -57,6 +57,7 @@ from formation_msgs_py.topics import (
     SCENARIO_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
+    robot_command_topic,
     robot_odom_topic,
     robot_pose_topic,
     robot_true_odom_topic,
@@ -84,6 +85,24 @@ EXIT_INTERRUPTED = 130
 
 POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
+
+
+def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool) -> list[tuple[str, str]]:
+    """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
+    triggering information, and per robot its pose, odometry, command (and simulated: its truth)."""
+    array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
+    command_type = 'geometry_msgs/msg/TwistStamped' if model == 'holonomic' else 'geometry_msgs/msg/Twist'
+    topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
+    for i in scenario.agent_ids:
+        topics += [
+            (robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'),
+            (robot_odom_topic(i), odometry),
+            (robot_command_topic(i), command_type),
+        ]
+        if simulated:
+            topics.append((robot_true_odom_topic(i), odometry))
+        topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
+    return topics
 
 
 class FormationCoordinatorNode(Node):
