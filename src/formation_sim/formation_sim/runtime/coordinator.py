@@ -44,6 +44,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
@@ -84,6 +85,10 @@ EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
 POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
+# Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
+# `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
+# any reliable pose writer matches (robots' drivers keep ROS's defaults).
+POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
 
 
@@ -211,7 +216,7 @@ class FormationCoordinatorNode(Node):
         self._poses: dict[int, list[RobotSample]] = {i: [] for i in self.scenario.agent_ids}
         self._early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.scenario.agent_ids}
         self._pose_subs = {
-            i: self.create_subscription(kind, topic(i), lambda msg, agent=i: self._on_pose(msg, agent), FAN_IN_QOS)
+            i: self.create_subscription(kind, topic(i), lambda msg, agent=i: self._on_pose(msg, agent), POSE_READER_QOS)
             for i in self.scenario.agent_ids
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
@@ -233,7 +238,8 @@ class FormationCoordinatorNode(Node):
     def _world_gaps(self) -> list[str]:
         missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
         topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[self.trajectory_source]
-        return [f'robots whose {topic} writer is not matched: {ids_text(missing)}'] if missing else []
+        # The coordinator reads reliable, as the recorder does, so that both see every pose.
+        return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}'] if missing else []
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""

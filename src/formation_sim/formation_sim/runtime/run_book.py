@@ -18,7 +18,7 @@ import numpy as np
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE
-from formation_sim.sim.summary import lateness_extra
+from formation_sim.sim.summary import lateness_extra, saturation_extra
 
 
 class CoordinatorError(RuntimeError):
@@ -288,18 +288,8 @@ class RunBook:
         }
 
     def saturation(self) -> dict:
-        """`extra.saturation`: velocity commands the agents' limits clipped (AgentReport.saturated),
-        in total and per agent; `agents_reporting` says how many reports carried the count."""
-        counts = {
-            i: int(book.report.saturated)
-            for i, book in self.agents.items()
-            if book.report is not None and getattr(book.report, 'saturated', None) is not None
-        }
-        return {
-            'total': sum(counts.values()),
-            'by_agent': {str(i): n for i, n in counts.items() if n},
-            'agents_reporting': len(counts),
-        }
+        """`extra.saturation` from the agents' latest reports."""
+        return saturation_extra(book.report for book in self.agents.values())
 
     def lateness(self, trigger_times: dict[int, list[float]]) -> dict:
         """Wall clock: how late triggers came against the times agents had planned them."""
