@@ -92,20 +92,21 @@ POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=Reliabi
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
 
 
-def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool) -> list[tuple[str, str]]:
+def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
     """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
-    triggering information, and per robot its pose, odometry, command (and simulated: its truth)."""
+    triggering information, and per robot the poses its agents read (`pose_type`), its command
+    and, simulated, its noise-free state (real robots: both pose topics, whichever they have)."""
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
     command_type = 'geometry_msgs/msg/TwistStamped' if model == 'holonomic' else 'geometry_msgs/msg/Twist'
     topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
     for i in scenario.agent_ids:
-        topics += [
-            (robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'),
-            (robot_odom_topic(i), odometry),
-            (robot_command_topic(i), command_type),
-        ]
+        if pose_type == 'pose' or not simulated:
+            topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
+        if pose_type == 'odom' or not simulated:
+            topics.append((robot_odom_topic(i), odometry))
         if simulated:
             topics.append((robot_true_odom_topic(i), odometry))
+        topics.append((robot_command_topic(i), command_type))
         topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
     return topics
 

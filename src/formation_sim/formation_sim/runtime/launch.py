@@ -43,6 +43,7 @@ ROBOTS_FILE = 'robots.params.yaml'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+AGENT_MODULE = 'formation_agent.ros.node'  # `python -m` it: the formation_agent command
 
 
 class RunError(RuntimeError):
@@ -206,7 +207,7 @@ class LaunchPlan:
             return formation_topics(self.scenario)
         from formation_sim.runtime.coordinator import robot_run_topics
 
-        return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots)
+        return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
@@ -275,7 +276,7 @@ class LaunchPlan:
             specs += self.robot_processes(paths['robots'])
         specs.append(ProcessSpec(name=self.keeper, args=self._keeper_args(paths), expected_exit=True, keeper=True))
         for group in self.agent_groups():
-            args = ('-m', 'formation_agent.ros.node', '--agents', ','.join(map(str, group)), '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents']))
+            args = ('-m', AGENT_MODULE, '--agents', ','.join(map(str, group)), '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents']))
             specs.append(ProcessSpec(name=_group_name('agent', group), args=args, expected_exit=True))
         return specs
 

@@ -213,7 +213,8 @@ class SimulatedRobotNode(Node):
             stamp, where, heading, body_linear, body_angular = self._measurements.popleft()
             odometry = self._odometry(stamp, where, heading, body_linear, body_angular, sigma=(self.noise.position_sigma, self.noise.yaw_sigma))
             self._odom_pub.publish(odometry)
-            self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
+            if self._pose_pub.get_subscription_count():  # most readers take the odometry
+                self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
         self._take_command(now)  # held from now to the next tick
 
     def _body_twist(self) -> tuple[np.ndarray, float]:
