@@ -1,0 +1,119 @@
+"""`formation run` on robots: simulated unicycles and holonomic robots, and robots started apart
+as real ones would be (`--backend external`).  Real processes on the wall clock in private ROS
+domains 163-165; robots_square with short horizons (its commands settle in about a second).
+
+What issue 9 asks of each: the run exits 0, no edge reaches Δ, the bag holds every robot's
+command topic and its last message is a stop, and `formation analyze DIR` exits 0 (every check
+holds and summary.json equals the bag).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from formation_sim.cli import main
+from formation_sim.model.scenario import load_scenario
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_robots')]
+
+
+def _agents_drive_robots() -> bool:
+    try:
+        from formation_agent.ros.config import SENSING_SOURCES
+    except ImportError:
+        return False
+    return 'poses' in SENSING_SOURCES
+
+
+needs_robot_agents = pytest.mark.skipif(
+    not _agents_drive_robots(),
+    reason="needs the agent's pose sensing and robot command adapters (issue 9, agent side)",
+)
+
+
+def _last_commands(bag: Path, scenario) -> dict[int, list[float]]:
+    """Every robot's last velocity command in the bag, as (linear xyz, angular xyz)."""
+    from formation_sim.bag.io import decode, read_bag
+
+    last = {}
+    for message in read_bag(bag):
+        for agent in scenario.agent_ids:
+            if message.topic == f'/agent_{agent}/robot/cmd_vel':
+                msg = decode(message.rawdata, message.msgtype)
+                twist = msg.twist if message.msgtype.endswith('TwistStamped') else msg
+                last[agent] = [twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z]
+    return last
+
+
+def _assert_a_good_robot_run(out: Path, capsys) -> dict:
+    scenario = load_scenario('robots_square')
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['mode'] == 'robots' and summary['extra']['failure'] is None
+    assert summary['max_edge_length'] < scenario.delta
+    assert summary['total_events'] >= len(scenario.agent_ids)
+    last = _last_commands(out / 'bag', scenario)
+    assert set(last) == set(scenario.agent_ids), f'robots without a recorded command: {set(scenario.agent_ids) - set(last)}'
+    assert all(not any(values) for values in last.values()), last
+    capsys.readouterr()
+    assert main(['analyze', str(out), '--no-figures', '--quiet']) == 0, capsys.readouterr().err
+    report = json.loads((out / 'analysis' / 'analysis.json').read_text())
+    assert report['summary_json']['equal'], report['summary_json']['differences'][:5]
+    return summary
+
+
+@needs_robot_agents
+@pytest.mark.timeout(300)
+def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
+    out = tmp_path / 'unicycle'
+    arguments = ['run', 'robots_square', '--backend', 'unicycle', '--horizon', '4', '--out', str(out), '--domain-id', '163',
+                 '--max-speed', '0.22', '--max-angular-speed', '2.84', '--quiet', '--no-plot']  # fmt: skip
+    assert main(arguments) == 0, capsys.readouterr().err
+    summary = _assert_a_good_robot_run(out, capsys)
+    # Within the limits by the theory's bound (formation validate --max-speed 0.22): nothing clipped.
+    assert summary['extra']['saturation']['total'] == 0
+    assert summary['final_formation_error'] < 0.5 * 0.0318  # from 3.2 cm at t = 0
+
+
+@needs_robot_agents
+@pytest.mark.timeout(300)
+def test_a_holonomic_team_forms_its_square_and_stops(tmp_path, capsys):
+    out = tmp_path / 'holonomic'
+    assert main(['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164', '--quiet', '--no-plot']) == 0
+    _assert_a_good_robot_run(out, capsys)
+
+
+@needs_robot_agents
+@pytest.mark.timeout(300)
+def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsys):
+    from formation_sim.runtime.launch import RobotOptions, with_our_packages
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    domain = 165
+    env = with_our_packages({**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')})
+    robots = subprocess.Popen(
+        [sys.executable, '-m', 'formation_sim.cli', 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain),
+         '--out', str(tmp_path / 'fleet'), '--duration', '200'],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        result = FormationRun(
+            'robots_square', out_dir=tmp_path / 'external', horizon=3.0, domain_id=domain, progress=False, timeout=240.0,
+            backend='external', robots=RobotOptions(model='unicycle'),
+        ).run()  # fmt: skip
+        assert result.ok, result.message
+        assert not [c for c in result.children if c.name.startswith('robot')]  # the run started none
+        summary = _assert_a_good_robot_run(result.out_dir, capsys)
+        assert summary['extra']['robots']['trajectory'] == 'odom'  # measured, as on real robots
+    finally:
+        os.killpg(robots.pid, signal.SIGINT)
+        _, err = robots.communicate(timeout=30)
+    assert robots.returncode == 0, err
+    # The fleet's robots stopped with their commands and are gone with it.
+    assert (tmp_path / 'fleet' / 'robots.params.yaml').is_file()
