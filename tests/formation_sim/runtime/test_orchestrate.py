@@ -80,6 +80,15 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     assert summary['extra']['saturation']['total'] == 0
     assert summary['final_formation_error'] < 0.5 * 0.0318  # from 3.2 cm at t = 0
 
+    # Against the exact run: the control points follow the same paths, to within the latency's
+    # worth of motion (a fraction of the initial formation error of 3.2 cm).
+    exact = tmp_path / 'exact'
+    assert main(['simulate', 'robots_square', '--horizon', '4', '--out', str(exact), '--no-plot']) == 0
+    assert main(['compare', str(out), str(exact), '--out', str(tmp_path / 'compare'), '--no-figures', '--quiet']) == 0
+    comparison = json.loads((tmp_path / 'compare' / 'compare.json').read_text())
+    assert comparison['runs']['a']['mode'] == 'robots' and comparison['runs']['b']['mode'] == 'in_process'
+    assert comparison['trajectory']['max_deviation'] < 0.0318
+
 
 @needs_robot_agents
 @pytest.mark.timeout(300)
