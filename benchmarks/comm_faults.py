@@ -71,7 +71,7 @@ def run_once(out: Path, inject: dict[str, float], seed: int, domain_id: int | No
     return row
 
 
-def _median(rows: list[dict], key: str) -> float | None:
+def median_of(rows: list[dict], key: str) -> float | None:
     values = [row[key] for row in rows if row.get(key) is not None]
     return statistics.median(values) if values else None
 
@@ -90,10 +90,10 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
         cut = [row for row in rows if (row.get('failure') or {}).get('kind') == 'connectivity_lost']
         cut_at = ', '.join(f'{row["failure"]["time"]:.2f} s' for row in cut)
         worst_edge = max((row['max_edge_length'] for row in done), default=None)
-        error = _median(done, 'final_formation_error')
-        events = _median(done, 'total_events')
-        lateness = _median(done, 'max_lateness')
-        dropped, delayed = _median(rows, 'dropped'), _median(rows, 'delayed')
+        error = median_of(done, 'final_formation_error')
+        events = median_of(done, 'total_events')
+        lateness = median_of(done, 'max_lateness')
+        dropped, delayed = median_of(rows, 'dropped'), median_of(rows, 'delayed')
         lines.append(
             f'| {label} | {len(done)}/{len(rows)} | {len(cut)}{f" ({cut_at})" if cut else ""} | '
             f'{"–" if error is None else f"{error:.4f}"} | '

@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from comm_faults import median_of  # benchmarks/ is on the path of a script run from it
 
 from formation_sim.analysis.compare import RunData, compare_trajectories
 from formation_sim.model.scenario import load_scenario
@@ -77,11 +77,6 @@ def run_once(out: Path, backend: str, clock: str | None, robot: dict | None, *, 
     return row
 
 
-def _median(rows: list[dict], key: str) -> float | None:
-    values = [row[key] for row in rows if row.get(key) is not None]
-    return statistics.median(values) if values else None
-
-
 def table(results: dict[str, list[dict]], reference: dict) -> str:
     delta = reference['delta']
     lines = [
@@ -93,12 +88,12 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
     ]
     for label, rows in results.items():
         done = [row for row in rows if row['ok']]
-        error = _median(done, 'final_formation_error')
+        error = median_of(done, 'final_formation_error')
         worst_edge = max((row['max_edge_length'] for row in done), default=None)
-        events = _median(done, 'total_events')
-        saturated = _median(done, 'saturated')
-        distance = _median(done, 'distance_from_exact')
-        lateness = _median(done, 'max_lateness')
+        events = median_of(done, 'total_events')
+        saturated = median_of(done, 'saturated')
+        distance = median_of(done, 'distance_from_exact')
+        lateness = median_of(done, 'max_lateness')
         lines.append(
             f'| {label} | {len(done)}/{len(rows)} | {"–" if error is None else f"{error:.2e}"} | '
             f'{"–" if worst_edge is None else f"{worst_edge:.4f} / {delta:g}"} | {"–" if events is None else f"{events:g}"} | '

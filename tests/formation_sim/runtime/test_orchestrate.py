@@ -92,10 +92,17 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
 
 @needs_robot_agents
 @pytest.mark.timeout(300)
-def test_a_holonomic_team_forms_its_square_and_stops(tmp_path, capsys):
+def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated(tmp_path, capsys):
+    # 0.05 m/s: below the 0.1 m/s the exact run asks for at the start (formation validate).
     out = tmp_path / 'holonomic'
-    assert main(['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164', '--quiet', '--no-plot']) == 0
-    _assert_a_good_robot_run(out, capsys)
+    arguments = ['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164',
+                 '--max-speed', '0.05', '--quiet', '--no-plot']  # fmt: skip
+    assert main(arguments) == 0
+    assert 'commands saturated at the robots\' limits: linear_speed' in capsys.readouterr().err
+    summary = _assert_a_good_robot_run(out, capsys)
+    saturation = summary['extra']['saturation']
+    assert saturation['total'] > 0 and saturation['by_kind']['linear_speed']['allowed'] == 0.05
+    assert saturation['by_kind']['linear_speed']['largest_requested'] > 0.05
 
 
 @needs_robot_agents

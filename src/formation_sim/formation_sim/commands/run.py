@@ -125,6 +125,21 @@ def run(args: argparse.Namespace) -> int:
         if figure is not None:
             print(f'figure:  {figure}')
         print(f'logs:    {Path(out) / "logs"}')
+    _warn_saturation(result)
     if args.quiet and result.message:  # otherwise the run's last progress line said it already
         print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status
+
+
+def _warn_saturation(result) -> None:
+    """Robot runs: say whether the agents clipped commands to the robots' limits (the theorems assume not)."""
+    import json
+
+    if result.summary is None:
+        return
+    saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
+    if saturation and saturation.get('total'):
+        kinds = ', '.join(f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, {entry["allowed"]:g} allowed)'
+                          for kind, entry in saturation['by_kind'].items())  # fmt: skip
+        print(f'warning: {saturation["total"]} commands saturated at the robots\' limits: {kinds}; agents '
+              f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json extra.saturation)', file=sys.stderr)

@@ -64,14 +64,34 @@ class Command:
 
 
 @dataclass(kw_only=True)
-class HolonomicRobot:
-    """Position (p = 1, 2 or 3) and yaw, moved exactly under piecewise-constant world-frame velocities."""
+class _Robot:
+    """Pose (position, yaw), limits, the command held and how many commands the limits clipped."""
 
     position: np.ndarray
     yaw: float = 0.0
     limits: Limits = field(default_factory=Limits)
     command: Command | None = None  # None: standing still
     saturated: int = 0  # commands clipped by the limits
+
+    def advance(self, duration: float) -> None:
+        """Move for `duration` seconds under the current command (exact)."""
+        if duration < 0.0:
+            raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
+        if self.command is not None and duration > 0.0:
+            self._move(duration)
+
+    def _hold(self, linear: tuple[float, ...], angular: float, *, clipped: bool) -> Command:
+        self.saturated += clipped
+        self.command = Command(linear=linear, angular=angular)
+        return self.command
+
+    def _move(self, duration: float) -> None:
+        raise NotImplementedError
+
+
+@dataclass(kw_only=True)
+class HolonomicRobot(_Robot):
+    """Position (p = 1, 2 or 3) and yaw, moved exactly under piecewise-constant world-frame velocities."""
 
     model = 'holonomic'
 
@@ -94,16 +114,9 @@ class HolonomicRobot:
         if speed > self.limits.linear:
             linear = linear * (self.limits.linear / speed)
         angular = max(-self.limits.angular, min(self.limits.angular, float(command.angular)))
-        self.saturated += clipped
-        self.command = Command(linear=tuple(linear.tolist()), angular=angular)
-        return self.command
+        return self._hold(tuple(linear.tolist()), angular, clipped=clipped)
 
-    def advance(self, duration: float) -> None:
-        """Move for `duration` seconds under the current command (exact)."""
-        if duration < 0.0:
-            raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
-        if self.command is None or duration == 0.0:
-            return
+    def _move(self, duration: float) -> None:
         self.position = self.position + duration * np.array(self.command.linear)
         self.yaw = wrap_angle(self.yaw + duration * self.command.angular)
 
@@ -116,14 +129,8 @@ class HolonomicRobot:
 
 
 @dataclass(kw_only=True)
-class UnicycleRobot:
+class UnicycleRobot(_Robot):
     """Axle position (x, y) and heading θ, moved exactly along arcs under piecewise-constant (v, ω)."""
-
-    position: np.ndarray
-    yaw: float = 0.0
-    limits: Limits = field(default_factory=Limits)
-    command: Command | None = None
-    saturated: int = 0
 
     model = 'unicycle'
 
@@ -143,16 +150,10 @@ class UnicycleRobot:
         clipped = abs(v) > self.limits.linear or abs(w) > self.limits.angular
         v = max(-self.limits.linear, min(self.limits.linear, v))
         w = max(-self.limits.angular, min(self.limits.angular, w))
-        self.saturated += clipped
-        self.command = Command(linear=(v,), angular=w)
-        return self.command
+        return self._hold((v,), w, clipped=clipped)
 
-    def advance(self, duration: float) -> None:
-        """Drive the exact arc of the current (v, ω) for `duration` seconds."""
-        if duration < 0.0:
-            raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
-        if self.command is None or duration == 0.0:
-            return
+    def _move(self, duration: float) -> None:
+        """The exact arc of the current (v, ω) (module docstring)."""
         v, w = self.command.linear[0], self.command.angular
         half = 0.5 * w * duration
         chord = v * duration * np.sinc(half / math.pi)  # np.sinc(u) = sin(πu)/(πu)
