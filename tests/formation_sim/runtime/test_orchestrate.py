@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -133,3 +134,50 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
     assert robots.returncode == 0, err
     # The fleet's robots stopped with their commands and are gone with it.
     assert (tmp_path / 'fleet' / 'robots.params.yaml').is_file()
+
+
+@needs_robot_agents
+@pytest.mark.timeout(300)
+def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_path):
+    """SIGKILL leaves no zero command: the coordinator sees the agent's liveliness lapse and ends
+    the run; the robot, without commands, stops after its command timeout (0.5 s)."""
+    import threading
+
+    from formation_sim.bag.io import decode, read_bag
+    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    run = FormationRun(
+        'robots_square', out_dir=tmp_path / 'run', horizon=60.0, domain_id=166, progress=False, timeout=240.0,
+        backend='holonomic', robots=RobotOptions(model='holonomic'),
+        # As robots on their own machines talk: UDP. Over shared memory, a SIGKILLed reader once
+        # stalled a neighbour's robot's pose writer for 1.4 s here (Fast DDS's port health check),
+        # and that neighbour's agent stopped on its pose timeout too.
+        extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
+    )  # fmt: skip
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()))
+    worker.start()
+    deadline = time.monotonic() + 120.0
+    while 't=' not in run.last_progress and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)  # well into the run
+    victim = next(child for child in run._children if child.name == 'agent_2')
+    killed_at = time.time()
+    os.kill(victim.pid, signal.SIGKILL)
+    worker.join(timeout=120.0)
+    (result,) = results
+    assert result.exit_status == EXIT_LOST, result.message
+    failure = json.loads(result.summary.read_text())['extra']['failure']
+    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2] and failure['detected_by'] == 'coordinator, orchestrator'
+    # Robot 2 as it truly moved: still after its command timeout (and a tick), to the end of the bag.
+    after = []
+    for message in read_bag(result.bag):
+        if message.topic == '/agent_2/robot/true_odom':
+            msg = decode(message.rawdata, message.msgtype)
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            if stamp > killed_at + 0.5 + 0.2:
+                after.append((msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.pose.pose.position.x, msg.pose.pose.position.y))
+    assert after, 'the bag holds no pose of robot 2 after its timeout'
+    assert all(vx == 0.0 and vy == 0.0 for vx, vy, _, _ in after)
+    assert len({(x, y) for _, _, x, y in after}) == 1

@@ -349,7 +349,11 @@ class FormationRun:
             if code is not None:
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
-                    return (EXIT_FAILED if failed else EXIT_OK), '', lost
+                    if not failed:
+                        return EXIT_OK, '', lost
+                    # The time keeper reached the end, but a process that should have left
+                    # cleanly did not (an agent that stopped on an error near the horizon).
+                    return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
                 status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
                 return status, f'{seen}{keeper.name} {describe_exit(code)}; see {keeper.log}', lost
