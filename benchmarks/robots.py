@@ -70,7 +70,7 @@ def run_once(out: Path, backend: str, clock: str | None, robot: dict | None, *, 
             max_edge_length=summary['max_edge_length'],
             delta=summary['delta'],
             total_events=summary['total_events'],
-            saturated=(extra.get('saturation') or {}).get('total', 0),
+            saturated=None if extra.get('saturation') is None else extra['saturation']['total'],  # robots only
             max_lateness=extra.get('max_lateness'),
             failure=extra['failure'],
         )
