@@ -291,6 +291,9 @@ class FormationCoordinatorNode(Node):
         end = self.reached_time
         trigger_times = {i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()}
         times = sample_times(end, self.sample_period, [t for ts in trigger_times.values() for t in ts])
+        silent = [i for i, samples in self._poses.items() if not samples]
+        if silent:
+            raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
         tracks = {i: PoseTrack.from_samples(samples) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         statuses = [book.status for book in self.agents.values() if book.status is not None]
