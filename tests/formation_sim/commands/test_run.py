@@ -266,7 +266,8 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
     [
         (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
         (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
-        (['--backend', 'unicycle', '--control-point-distance', '0'], 'control_point_distance must be > 0, got 0.0'),
+        (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
+        (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
     ],
 )
 def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arguments, complaint):

@@ -280,4 +280,4 @@ def test_command_limits_in_json_and_bad_limits_refused(capsys):
     assert largest['source'] == 'exact run' and math.isclose(largest['max_acceleration'], 1208.19, rel_tol=1e-5)
     assert data['commands']['within'] is False
     assert main(['validate', 'robots_square', '--max-speed', '-1']) == 2
-    assert '--max-speed must be a finite number > 0, got -1.0' in capsys.readouterr().err
+    assert 'argument --max-speed: must be a finite number > 0, got -1.0' in capsys.readouterr().err

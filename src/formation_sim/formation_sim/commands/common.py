@@ -52,6 +52,7 @@ POSITIVE = _number('a finite number > 0', lambda v: math.isfinite(v) and v > 0.0
 NON_NEGATIVE = _number('a finite number >= 0', lambda v: math.isfinite(v) and v >= 0.0)
 POSITIVE_INT = _number('an integer >= 1', lambda v: v >= 1, integer=True)
 NON_NEGATIVE_INT = _number('an integer >= 0', lambda v: v >= 0, integer=True)
+FINITE = _number('a finite number', math.isfinite)
 DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
 
 
@@ -127,26 +128,27 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
 
     defaults = RobotOptions()
     group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
-    group.add_argument(model_flag, choices=('holonomic', 'unicycle'), default=None, help='what the robots are (default: the backend\'s model)')
-    group.add_argument('--control-point-distance', type=float, default=defaults.control_point_distance, metavar='L',
-                       help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
-    group.add_argument('--max-speed', type=float, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
-    group.add_argument('--max-angular-speed', type=float, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
-    group.add_argument('--max-acceleration', type=float, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
-    group.add_argument('--command-rate', type=float, default=defaults.command_rate, metavar='HZ',
-                       help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
-    group.add_argument('--pose-type', choices=POSE_TYPES, default=defaults.pose_type, help=f'what the agents read (default {defaults.pose_type})')
-    group.add_argument('--pose-timeout', type=float, default=defaults.pose_timeout, metavar='S',
-                       help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})')
-    group.add_argument('--world-frame', default=defaults.world_frame, help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})')
-    group.add_argument('--pose-noise', type=float, default=0.0, metavar='SIGMA', help='simulated robots: σ of the position noise [m]')
-    group.add_argument('--yaw-noise', type=float, default=0.0, metavar='SIGMA', help='simulated robots: σ of the heading noise [rad]')
-    group.add_argument('--latency', type=float, default=0.0, metavar='S', help='simulated robots: delay of every pose [s]')
-    group.add_argument('--command-latency', type=float, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
-    group.add_argument('--robot-seed', type=int, default=0, metavar='N', help='simulated robots: seed of the noise')
-    group.add_argument('--robot-rate', type=float, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
-    group.add_argument('--initial-heading', type=float, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
-    group.add_argument('--robots-per-process', type=int, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+    add = group.add_argument
+    add(model_flag, choices=('holonomic', 'unicycle'), default=None, help="what the robots are (default: the backend's model)")
+    add('--control-point-distance', type=POSITIVE, default=defaults.control_point_distance, metavar='L',
+        help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
+    add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
+    add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
+    add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
+        help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
+    add('--pose-type', choices=POSE_TYPES, default=defaults.pose_type, help=f'what the agents read (default {defaults.pose_type})')
+    add('--pose-timeout', type=POSITIVE, default=defaults.pose_timeout, metavar='S',
+        help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})')
+    add('--world-frame', default=defaults.world_frame, help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})')
+    add('--pose-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the position noise [m]')
+    add('--yaw-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the heading noise [rad]')
+    add('--latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay of every pose [s]')
+    add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
+    add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
+    add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
+    add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
 
 
 def robot_options(args: argparse.Namespace, model: str):

@@ -8,10 +8,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
-from formation_sim.commands.common import add_robot_arguments, add_scenario_argument, load_valid_scenario, robot_options
+from formation_sim.commands.common import (
+    DOMAIN_ID,
+    EXIT_BAD_INPUT,
+    POSITIVE,
+    add_robot_arguments,
+    add_scenario_argument,
+    load_valid_scenario,
+    refuse,
+    robot_options,
+)
 
 
 def register(subparsers) -> None:
@@ -26,9 +34,10 @@ def register(subparsers) -> None:
         epilog='Exit status: 0 stopped; 2 bad input; 3 a robot process died (see OUT/logs).',
     )
     add_scenario_argument(parser)
-    parser.add_argument('--domain-id', type=int, required=True, metavar='N', help='ROS_DOMAIN_ID of the run to serve')
-    parser.add_argument('--out', type=Path, default=None, help='folder for robots.params.yaml and logs (default: runs/<scenario>-robots-<time>)')
-    parser.add_argument('--duration', type=float, default=None, metavar='S', help='stop after this many seconds (default: run until stopped)')
+    parser.add_argument('--domain-id', type=DOMAIN_ID, required=True, metavar='N', help='ROS_DOMAIN_ID of the run to serve')
+    parser.add_argument('--out', type=Path, default=None, help='folder for robots.params.yaml and logs, new or empty (default: a new folder runs/<scenario>-robots-<date>-<time>)')
+    parser.add_argument('--force', action='store_true', help="replace an earlier run's files in --out")
+    parser.add_argument('--duration', type=POSITIVE, default=None, metavar='S', help='stop after this many seconds (default: run until stopped)')
     parser.add_argument('--network', action='store_true', help='let DDS discovery reach the local network (default: this machine only)')
     add_robot_arguments(parser, model_flag='--model')
     parser.set_defaults(func=run)
@@ -40,18 +49,22 @@ def run(args: argparse.Namespace) -> int:
 
     scenario = load_valid_scenario(args.scenario, 'robots')
     if scenario is None:
-        return 2
+        return EXIT_BAD_INPUT
     if args.model is None:
-        print('formation robots: error: --model holonomic|unicycle is required', file=sys.stderr)
-        return 2
-    out = args.out or Path('runs') / f'{scenario.name}-robots-{time.strftime("%Y%m%d-%H%M%S")}'
+        return refuse('robots', '--model holonomic|unicycle is required')
     try:
-        fleet = RobotFleet(scenario, robots=robot_options(args, args.model), out_dir=out, domain_id=args.domain_id, localhost_only=not args.network)
+        fleet = RobotFleet(
+            scenario, robots=robot_options(args, args.model), out_dir=args.out, force=args.force, domain_id=args.domain_id,
+            localhost_only=not args.network,
+        )  # fmt: skip
     except RunError as error:
-        print(f'formation robots: error: {error}', file=sys.stderr)
-        return 2
-    print(f'{len(scenario.agent_ids)} {args.model} robots in ROS domain {args.domain_id}; logs in {out / "logs"}; Ctrl-C stops them', file=sys.stderr)
-    status = fleet.run(duration=args.duration)
+        return refuse('robots', error)
+    print(f'{len(scenario.agent_ids)} {args.model} robots in ROS domain {args.domain_id}; Ctrl-C stops them', file=sys.stderr)
+    try:
+        status = fleet.run(duration=args.duration)
+    except RunError as error:
+        return refuse('robots', error)
+    print(f'logs: {fleet.plan.out_dir / "logs"}', file=sys.stderr)
     if status:
         print(f'formation robots: {", ".join(child.describe() for child in fleet.died)}', file=sys.stderr)
     return status

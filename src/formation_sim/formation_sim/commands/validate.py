@@ -12,7 +12,7 @@ import json
 import math
 import sys
 
-from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, add_scenario_argument
+from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, POSITIVE, add_scenario_argument
 from formation_sim.model.scenario import ScenarioError, load_scenario
 from formation_sim.model.validate import validate_scenario
 
@@ -35,20 +35,14 @@ def register(subparsers) -> None:
     )
     add_scenario_argument(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
-    parser.add_argument('--max-speed', type=float, default=None, metavar='V', help="the robots' speed limit [m/s]")
-    parser.add_argument('--max-angular-speed', type=float, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
-    parser.add_argument('--control-point-distance', type=float, default=0.1, metavar='L', help='unicycles: the control point l ahead of the axle [m] (default 0.1)')
-    parser.add_argument('--max-acceleration', type=float, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
+    parser.add_argument('--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]")
+    parser.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
+    parser.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L', help='unicycles: the control point l ahead of the axle [m] (default 0.1)')
+    parser.add_argument('--max-acceleration', type=POSITIVE, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    limits = {'--max-speed': args.max_speed, '--max-angular-speed': args.max_angular_speed, '--max-acceleration': args.max_acceleration,
-              '--control-point-distance': args.control_point_distance}  # fmt: skip
-    for flag, value in limits.items():
-        if value is not None and not (math.isfinite(value) and value > 0.0):
-            print(f'formation validate: error: {flag} must be a finite number > 0, got {value!r}', file=sys.stderr)
-            return EXIT_UNREADABLE
     try:
         scenario = load_scenario(args.scenario)
     except ScenarioError as error:

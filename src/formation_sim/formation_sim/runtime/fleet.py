@@ -2,7 +2,7 @@
 --backend external` when no real robots are at hand (README, "Running on robots").
 
 ```python
-fleet = RobotFleet('robots_square', robots=RobotOptions(model='unicycle'), out_dir='runs/fleet', domain_id=42)
+fleet = RobotFleet('robots_square', robots=RobotOptions(model='unicycle'), out_dir='runs/fleet', domain_id=42)  # out_dir new or empty
 fleet.run()   # until Ctrl-C / SIGTERM, fleet.stop(), or `duration`
 ```
 
@@ -13,6 +13,7 @@ finds them by their topics.  The fleet takes no lock on the domain: the run does
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import threading
 import time
@@ -22,6 +23,7 @@ from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.runtime.launch import LOG_DIR, LaunchPlan, RobotOptions, RunError
 from formation_sim.runtime.shm import remove_orphaned
 from formation_sim.runtime.supervise import POLL_PERIOD, Supervisor
+from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
 
 
 class RobotFleet:
@@ -32,7 +34,8 @@ class RobotFleet:
         scenario: Scenario | str | Path,
         *,
         robots: RobotOptions,
-        out_dir: str | Path,
+        out_dir: str | Path | None = None,
+        force: bool = False,
         domain_id: int,
         localhost_only: bool = True,
         extra_env: dict[str, str] | None = None,
@@ -41,11 +44,18 @@ class RobotFleet:
         if not 0 <= domain_id <= 232:
             raise RunError(f'domain id must lie in [0, 232], got {domain_id}')
         robots.check(self.scenario)
+        self.out_dir = None if out_dir is None else Path(out_dir)
+        self.force = force
+        if self.out_dir is not None:
+            try:
+                check_out_dir(self.out_dir, force=force)
+            except RunFolderError as error:
+                raise RunError(str(error)) from None
         self.domain_id = domain_id
         self.localhost_only = localhost_only
         self.extra_env = dict(extra_env or {})
         self.plan = LaunchPlan(
-            scenario=self.scenario, backend=robots.model, out_dir=Path(out_dir), horizon=self.scenario.horizon,
+            scenario=self.scenario, backend=robots.model, out_dir=self.out_dir, horizon=self.scenario.horizon,
             clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor='events',
             step_listeners=0, inject={}, robots=robots,
         )  # fmt: skip
@@ -58,6 +68,11 @@ class RobotFleet:
 
     def run(self, *, duration: float | None = None) -> int:
         """Start the robots and keep them until stopped; 0, or 3 if a robot process died."""
+        try:
+            out = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='robots', force=self.force)
+        except RunFolderError as error:
+            raise RunError(str(error)) from None
+        self.plan = dataclasses.replace(self.plan, out_dir=out)
         params = self.plan.write_robot_inputs()
         env = self.plan.environment(self.domain_id, localhost_only=self.localhost_only, extra_env=self.extra_env)
         self.supervisor = Supervisor(log_dir=self.plan.out_dir / LOG_DIR, env=env)
