@@ -51,24 +51,33 @@ def run_once(out: Path, inject: dict[str, float], seed: int, domain_id: int | No
         timeout=300.0,
         inject={**inject, 'seed': seed} if inject else None,
     )
-    result = run.run()
-    row: dict = {'ok': result.ok, 'message': result.message, 'wall_time': result.wall_time}
-    if result.summary is not None:
-        summary = json.loads(result.summary.read_text())
+    row, summary = result_row(run.run())
+    if summary is not None:
         extra = summary['extra']
         row.update(
-            final_formation_error=summary['final_formation_error'],
-            max_edge_length=summary['max_edge_length'],
-            delta=summary['delta'],
-            total_events=summary['total_events'],
             messages_sent=summary['messages_sent'],
             dropped=extra['injected_faults']['dropped'],
             delayed=extra['injected_faults']['delayed'],
-            max_lateness=extra.get('max_lateness'),
             reached_time=extra['reached_time'],
-            failure=extra['failure'],
         )
     return row
+
+
+def result_row(result) -> tuple[dict, dict | None]:
+    """A run's outcome and the numbers every table shows, and its summary (None: none written)."""
+    row: dict = {'ok': result.ok, 'message': result.message, 'wall_time': result.wall_time}
+    if result.summary is None:
+        return row, None
+    summary = json.loads(result.summary.read_text())
+    row.update(
+        final_formation_error=summary['final_formation_error'],
+        max_edge_length=summary['max_edge_length'],
+        delta=summary['delta'],
+        total_events=summary['total_events'],
+        max_lateness=summary['extra'].get('max_lateness'),
+        failure=summary['extra']['failure'],
+    )
+    return row, summary
 
 
 def median_of(rows: list[dict], key: str) -> float | None:

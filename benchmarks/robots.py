@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from comm_faults import median_of  # benchmarks/ is on the path of a script run from it
+from comm_faults import median_of, result_row  # benchmarks/ is on the path of a script run from it
 
 from formation_sim.analysis.compare import RunData, compare_trajectories
 from formation_sim.model.scenario import load_scenario
@@ -61,19 +61,10 @@ def run_once(out: Path, backend: str, clock: str | None, robot: dict | None, *, 
         SCENARIO, out_dir=out, horizon=horizon, domain_id=domain_id, record=False, progress=False, timeout=horizon + 300.0,
         backend=backend, clock=clock, robots=robots,
     ).run()  # fmt: skip
-    row: dict = {'ok': result.ok, 'message': result.message, 'wall_time': result.wall_time}
-    if result.summary is not None:
-        summary = json.loads(result.summary.read_text())
-        extra = summary['extra']
-        row.update(
-            final_formation_error=summary['final_formation_error'],
-            max_edge_length=summary['max_edge_length'],
-            delta=summary['delta'],
-            total_events=summary['total_events'],
-            saturated=None if extra.get('saturation') is None else extra['saturation']['total'],  # robots only
-            max_lateness=extra.get('max_lateness'),
-            failure=extra['failure'],
-        )
+    row, summary = result_row(result)
+    if summary is not None:
+        saturation = summary['extra'].get('saturation')
+        row['saturated'] = None if saturation is None else saturation['total']  # robots only
     return row
 
 

@@ -169,7 +169,7 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     (result,) = results
     assert result.exit_status == EXIT_LOST, result.message
     failure = json.loads(result.summary.read_text())['extra']['failure']
-    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2] and failure['detected_by'] == 'coordinator, orchestrator'
+    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2] and failure['detected_by'] == 'coordinator, orchestrator', failure
     # Robot 2 as it truly moved: still after its command timeout (and a tick), to the end of the bag.
     after = []
     for message in read_bag(result.bag):
@@ -178,6 +178,6 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
             stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
             if stamp > killed_at + 0.5 + 0.2:
                 after.append((msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.pose.pose.position.x, msg.pose.pose.position.y))
-    assert after, 'the bag holds no pose of robot 2 after its timeout'
+    assert after, f'the bag holds no pose of robot 2 after its timeout (killed at {killed_at}): {failure}'
     assert all(vx == 0.0 and vy == 0.0 for vx, vy, _, _ in after)
     assert len({(x, y) for _, _, x, y in after}) == 1

@@ -53,11 +53,11 @@ def _stamp(msg) -> float:
 
 
 def _state(msg) -> tuple[float, float, float]:
-    from formation_sim.sim.robots import yaw_from_quaternion
+    from formation_agent.core.kinematics import yaw
 
     pose = msg.pose.pose
     q = pose.orientation
-    return pose.position.x, pose.position.y, yaw_from_quaternion(q.x, q.y, q.z, q.w)
+    return pose.position.x, pose.position.y, yaw((q.x, q.y, q.z, q.w))
 
 
 @pytest.fixture

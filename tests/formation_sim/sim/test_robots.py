@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from formation_agent.core import kinematics
 from formation_sim.sim.robots import (
     Command,
     HolonomicRobot,
@@ -28,7 +29,6 @@ from formation_sim.sim.robots import (
     run_time,
     sample_times,
     trajectory_samples,
-    yaw_from_quaternion,
 )
 
 
@@ -103,7 +103,7 @@ def test_noise_is_seeded_per_robot_and_has_the_asked_spread():
 
 def test_quaternions_and_stamps():
     for yaw in (-3.0, -0.5, 0.0, 1.2, 3.1):
-        assert math.isclose(yaw_from_quaternion(*quaternion_from_yaw(yaw)), yaw, abs_tol=1e-15)
+        assert math.isclose(kinematics.yaw(quaternion_from_yaw(yaw)), yaw, abs_tol=1e-15)
     stamp = SimpleNamespace(sec=1_700_000_123, nanosec=250_000_000)
     assert run_time(stamp, 1_700_000_120.5) == 2.75
 

@@ -237,10 +237,14 @@ class FormationCoordinatorNode(Node):
         }
 
     def _world_gaps(self) -> list[str]:
-        missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
         topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[self.trajectory_source]
         # The coordinator reads reliable, as the recorder does, so that both see every pose.
-        return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}'] if missing else []
+        missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
+        if missing:
+            return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}']
+        # The first sample (t = 0) needs each robot's pose from before it.
+        silent = [i for i, early in self._early.items() if not early]
+        return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}'] if silent else []
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""

@@ -43,7 +43,7 @@ ROBOTS_FILE = 'robots.params.yaml'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
-AGENT_MODULE = 'formation_agent.ros.node'  # `python -m` it: the formation_agent command
+AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
 
 
 class RunError(RuntimeError):

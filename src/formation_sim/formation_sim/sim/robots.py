@@ -13,8 +13,9 @@ control loop holds its last command over a tick), never with a fixed integration
 
 A unicycle's scenario position is its *control point* p = (x, y) + l (cos θ, sin θ), the point l
 ahead of the axle that the near-identity diffeomorphism lets the agent steer like a single
-integrator (README, "Running on robots"); `control_point` maps a pose to it and `axle_position`
-back.  `trajectory_samples` turns recorded pose streams into the samples of a `RunRecord`, the one
+integrator (README, "Running on robots"; `formation_agent.core.kinematics`, which reads poses
+here as the agents read them); `control_point` places it for a planar pose and `axle_position`
+goes back.  `trajectory_samples` turns recorded pose streams into the samples of a `RunRecord`, the one
 way both the coordinator (summary.json) and `formation analyze` (the bag) read them.
 """
 
@@ -24,6 +25,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from formation_agent.core import kinematics
 
 ROBOT_MODELS = ('holonomic', 'unicycle')
 
@@ -198,16 +201,6 @@ def axle_position(point, yaw: float, distance: float) -> np.ndarray:
     return np.asarray(point, dtype=float) - distance * np.array([math.cos(yaw), math.sin(yaw)])
 
 
-def control_point_velocity(velocity, yaw: float, angular: float, distance: float) -> np.ndarray:
-    """d/dt of the control point: the axle's world velocity plus l ω (−sin θ, cos θ)."""
-    return np.asarray(velocity, dtype=float) + distance * angular * np.array([-math.sin(yaw), math.cos(yaw)])
-
-
-def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
-    """The rotation about z of a quaternion (REP 103: roll, pitch, yaw)."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 def quaternion_from_yaw(yaw: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by `yaw` about z."""
     return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
@@ -254,33 +247,37 @@ def run_time(stamp, epoch: float) -> float:
     return (stamp.sec - epoch) + stamp.nanosec * 1e-9
 
 
-def _scenario_position(pose, *, model: str, dimension: int, control_point_distance: float) -> tuple[np.ndarray, float]:
-    q = pose.orientation
-    yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w)
-    where = np.array([pose.position.x, pose.position.y, pose.position.z], dtype=float)
-    if model == 'unicycle':
-        return control_point(where[:2], yaw, control_point_distance), yaw
-    return where[:dimension], yaw
+def _control_offset(model: str, control_point_distance: float) -> tuple[float, float, float]:
+    """Where the scenario's point sits in the body frame: l ahead on x (unicycle), the origin (holonomic)."""
+    return (control_point_distance if model == 'unicycle' else 0.0, 0.0, 0.0)
+
+
+def _pose(pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    p, q = pose.position, pose.orientation
+    return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
 
 
 def pose_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
-    """A `geometry_msgs/PoseStamped` (an rclpy or rosbags message) as a `RobotSample`."""
-    position, _ = _scenario_position(msg.pose, model=model, dimension=dimension, control_point_distance=control_point_distance)
-    return RobotSample(time=run_time(msg.header.stamp, epoch), position=position)
+    """A `geometry_msgs/PoseStamped` (an rclpy or rosbags message) as a `RobotSample`: the control
+    point as the agents compute it (`formation_agent.core.kinematics`)."""
+    position, orientation = _pose(msg.pose)
+    point = kinematics.control_point(position, orientation, _control_offset(model, control_point_distance))
+    return RobotSample(time=run_time(msg.header.stamp, epoch), position=point[:dimension])
 
 
 def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
     """A `nav_msgs/Odometry` (pose in the world frame, twist in the body frame, REP 105) as a
-    `RobotSample` with the scenario point's world velocity."""
-    position, yaw = _scenario_position(msg.pose.pose, model=model, dimension=dimension, control_point_distance=control_point_distance)
+    `RobotSample` with the control point's world velocity R (v + ω × offset)."""
+    position, orientation = _pose(msg.pose.pose)
+    offset = _control_offset(model, control_point_distance)
     twist = msg.twist.twist
-    c, s = math.cos(yaw), math.sin(yaw)
-    world = np.array([c * twist.linear.x - s * twist.linear.y, s * twist.linear.x + c * twist.linear.y, twist.linear.z])
-    if model == 'unicycle':
-        velocity = control_point_velocity(world[:2], yaw, twist.angular.z, control_point_distance)
-    else:
-        velocity = world[:dimension]
-    return RobotSample(time=run_time(msg.header.stamp, epoch), position=position, velocity=velocity)
+    linear = (twist.linear.x, twist.linear.y, twist.linear.z)
+    angular = (twist.angular.x, twist.angular.y, twist.angular.z)
+    return RobotSample(
+        time=run_time(msg.header.stamp, epoch),
+        position=kinematics.control_point(position, orientation, offset)[:dimension],
+        velocity=kinematics.control_point_velocity(orientation, linear, angular, offset)[:dimension],
+    )
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -137,7 +137,7 @@ def saturation_extra(reports) -> dict:
     for report in reports:
         if report is None:
             continue
-        for kind, clipped in sorted(getattr(report, 'saturation', {}).items()):
+        for kind, clipped in sorted(report.saturation.items()):
             if not clipped.count:
                 continue
             total += clipped.count
