@@ -25,20 +25,6 @@ from formation_sim.model.scenario import load_scenario
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_robots')]
 
 
-def _agents_drive_robots() -> bool:
-    try:
-        from formation_agent.ros.config import SENSING_SOURCES
-    except ImportError:
-        return False
-    return 'poses' in SENSING_SOURCES
-
-
-needs_robot_agents = pytest.mark.skipif(
-    not _agents_drive_robots(),
-    reason="needs the agent's pose sensing and robot command adapters (issue 9, agent side)",
-)
-
-
 def _last_commands(bag: Path, scenario) -> dict[int, list[float]]:
     """Every robot's last velocity command in the bag, as (linear xyz, angular xyz)."""
     from formation_sim.bag.io import decode, read_bag
@@ -69,7 +55,6 @@ def _assert_a_good_robot_run(out: Path, capsys) -> dict:
     return summary
 
 
-@needs_robot_agents
 @pytest.mark.timeout(300)
 def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     out = tmp_path / 'unicycle'
@@ -91,7 +76,6 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     assert comparison['trajectory']['max_deviation'] < 0.0318
 
 
-@needs_robot_agents
 @pytest.mark.timeout(300)
 def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated(tmp_path, capsys):
     # 0.05 m/s: below the 0.1 m/s the exact run asks for at the start (formation validate).
@@ -106,7 +90,6 @@ def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated
     assert saturation['by_kind']['linear_speed']['largest_requested'] > 0.05
 
 
-@needs_robot_agents
 @pytest.mark.timeout(300)
 def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsys):
     from formation_sim.runtime.launch import RobotOptions, with_our_packages
@@ -136,7 +119,6 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
     assert (tmp_path / 'fleet' / 'robots.params.yaml').is_file()
 
 
-@needs_robot_agents
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_path):
     """SIGKILL leaves no zero command: the coordinator sees the agent's liveliness lapse and ends

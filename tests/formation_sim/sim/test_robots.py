@@ -136,7 +136,10 @@ def test_tracks_are_sampled_by_interpolation_held_at_their_ends():
     assert track.times.tolist() == [-0.01, 0.1, 0.3] and track.velocities is None
     other = PoseTrack.from_samples([RobotSample(time=0.0, position=np.array([5.0, 5.0]))])
     positions, velocities = trajectory_samples({1: track, 2: other}, (1, 2), np.array([0.0, 0.2, 1.0]))
-    assert velocities is None
+    assert np.allclose(velocities[:, 1], 0.0)  # from pose differences: robot 2 stands still
+    # Within a track that moves at a constant velocity, the differences give that velocity.
+    _, velocities = trajectory_samples({1: track}, (1,), np.array([0.0, 0.1, 0.25]))
+    assert np.allclose(velocities[:, 0], [[1.0, 2.0]] * 3)
     assert np.allclose(positions[:, 0], [[0.0, 0.0], [0.2, 0.4], [0.3, 0.6]])
     assert np.allclose(positions[:, 1], [[5.0, 5.0]] * 3)
     with pytest.raises(RobotError, match='no pose'):

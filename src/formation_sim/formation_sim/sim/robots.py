@@ -309,16 +309,18 @@ class PoseTrack:
 def trajectory_samples(
     tracks: dict[int, PoseTrack], agent_ids, times: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Every agent's position (and velocity) at `times`, linearly interpolated in its track.
+    """Every agent's position and velocity at `times`, linearly interpolated in its track.
 
-    Before a track's first pose and after its last the nearest pose is held.  The coordinator
-    (summary.json) and `formation analyze` (the bag) both sample a robot run this way, so the
-    two agree whenever they saw the same poses.
+    Before a track's first pose and after its last the nearest pose is held.  Tracks without
+    velocities (PoseStamped) get them from the positions' differences over `times` (central,
+    np.gradient); None with a single sample.  The coordinator (summary.json) and
+    `formation analyze` (the bag) both sample a robot run this way, so the two agree whenever they
+    saw the same poses.
     """
     times = np.asarray(times, dtype=float)
     positions = np.stack([_interpolate(tracks[i].times, tracks[i].positions, times) for i in agent_ids], axis=1)
     if any(tracks[i].velocities is None for i in agent_ids):
-        return positions, None
+        return positions, (np.gradient(positions, times, axis=0) if len(times) > 1 else None)
     velocities = np.stack([_interpolate(tracks[i].times, tracks[i].velocities, times) for i in agent_ids], axis=1)
     return positions, velocities
 
