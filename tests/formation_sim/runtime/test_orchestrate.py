@@ -40,7 +40,10 @@ def _last_commands(bag: Path, scenario) -> dict[int, list[float]]:
 
 
 def _assert_a_good_robot_run(out: Path, capsys) -> dict:
+    from formation_sim.sim.run_folder import RUN_ENTRIES
+
     scenario = load_scenario('robots_square')
+    assert {p.name for p in out.iterdir()} <= RUN_ENTRIES  # --force may replace all a robot run leaves
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['mode'] == 'robots' and summary['extra']['failure'] is None
     assert summary['max_edge_length'] < scenario.delta

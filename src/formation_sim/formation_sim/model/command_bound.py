@@ -69,9 +69,9 @@ class CommandBound:
 def command_bound(scenario: Scenario) -> CommandBound:
     """The proofs' bound on every agent's command; raises theory.TheoryError outside the hypotheses."""
     constants = theory.theorem_constants(scenario)
-    margins = theory.edge_margins(scenario)
+    capacities = theory.edge_capacities(scenario)
     k_edge = np.array([constants.k_edge[edge.pair] for edge in scenario.edges])
-    f = theory.f_ij(k_edge, margin=margins)
+    f = theory.f_ij(k_edge, capacity=capacities)
     heads, tails, _ = scenario.edge_indices()
     ids = scenario.agent_ids
 
