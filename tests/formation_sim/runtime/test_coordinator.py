@@ -140,7 +140,9 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     node._end_at_horizon()
     arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(Step(index=1, time=horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=EPOCH)))
     for agent in scenario.agent_ids:
-        arrive('/formation/agent_report', 'std_msgs/msg/String', encode_agent_report(AgentReport(agent=agent, final=True, rejected={})), node._on_report)
+        published = {f'/agent_{agent}/trigger_info/to_{j}': len(triggers[agent]) for j in scenario.neighbours(agent)}
+        report = AgentReport(agent=agent, final=True, rejected={}, published=published)
+        arrive('/formation/agent_report', 'std_msgs/msg/String', encode_agent_report(report), node._on_report)
         # The robots' last commands (the coordinator does not read them): robot 4 was left turning.
         arrive(f'/agent_{agent}/robot/cmd_vel', 'geometry_msgs/msg/Twist', Twist(angular=Vector3(z=0.3 if agent == 4 else 0.0)))
 

@@ -48,6 +48,8 @@ def _assert_a_good_robot_run(out: Path, capsys) -> dict:
     assert summary['mode'] == 'robots' and summary['extra']['failure'] is None
     assert summary['max_edge_length'] < scenario.delta
     assert summary['total_events'] >= len(scenario.agent_ids)
+    recording = summary['extra']['recording']  # what the coordinator and agents published, all in the bag
+    assert recording['complete'] and not recording['foreign'] and recording['recorded'] == recording['published'] > 0
     last = _last_commands(out / 'bag', scenario)
     assert set(last) == set(scenario.agent_ids), f'robots without a recorded command: {set(scenario.agent_ids) - set(last)}'
     assert all(not any(values) for values in last.values()), last

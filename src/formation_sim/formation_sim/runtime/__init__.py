@@ -2,7 +2,7 @@
 
 - `orchestrate`: `FormationRun` starts a run in a private ROS domain, watches it and stops it by
   PID; its pieces: `launch` (the backend's plan: inputs, processes, environment, ROS domain),
-  `supervise` (the children), `shm` (Fast DDS files of children killed hard), `results`.
+  `supervise` (the children, stopped by PID, their Fast DDS files removed by `fastdds_shm`), `results`.
 - `coordinator`: the coordinator node (opens, watches and ends a run, writes its summary; no
   world: on robots); `run_book`: its books (statuses, reports, lock-step settlement, faults).
 - `sim_node`: the simulator node = the coordinator plus the exact world, the sensing services and

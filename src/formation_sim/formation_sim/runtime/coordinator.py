@@ -51,8 +51,9 @@ from std_msgs.msg import Float64MultiArray, String
 from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, make_executor
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
-from formation_msgs_py.qos import FAN_IN_QOS, SIMULATOR_QOS
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
+    RECORDER_TOPIC,
     REPORT_TOPIC,
     ROBOTS_TOPIC,
     SCENARIO_TOPIC,
@@ -70,11 +71,13 @@ from formation_sim.runtime.run_book import (
     ConnectivityLostError,
     CoordinatorError,
     DiscoveryError,
+    RecorderLostError,
     RunBook,
     ids_text,
 )
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.files import write_atomically
 from formation_sim.sim.summary import write_summary
 
 GRAPH_FILE = 'graph.json'
@@ -157,8 +160,23 @@ class FormationCoordinatorNode(Node):
         # For tools: the scenario once (so a bag is self-contained).
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._tool_publishers = [self._scenario_pub]
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, FAN_IN_QOS)
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, FAN_IN_QOS)
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
+        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
+        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
+        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
+        self._recorder_sub = self.create_subscription(
+            String,
+            RECORDER_TOPIC,
+            self._on_recorder,
+            READER_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
+        )
+        self._recorders_alive = 0
+        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
+        self._recorder_lease_expired = False
+        self.published: dict[str, int] = {}  # topic -> messages this node published there
 
         self.step: Step | None = None
         self.finished = False
@@ -230,7 +248,7 @@ class FormationCoordinatorNode(Node):
                 Float64MultiArray,
                 trigger_info_topic(i, min(book.neighbours)),
                 lambda msg, agent=i: self._on_info(msg, agent),
-                FAN_IN_QOS,
+                READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)),
             )
             for i, book in self.agents.items()
@@ -248,10 +266,10 @@ class FormationCoordinatorNode(Node):
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""
-        self._robots_pub.publish(String(data=json.dumps(self.robots, separators=(',', ':'))))
+        self._publish(self._robots_pub, String(data=json.dumps(self.robots, separators=(',', ':'))))
         self._epoch = time.time()
         self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
-        self._step_pub.publish(encode_step(self.step))
+        self._publish(self._step_pub, encode_step(self.step))
         for agent, early in self._early.items():
             self._poses[agent] = [self._sample(msg) for msg in early]
 
@@ -266,7 +284,7 @@ class FormationCoordinatorNode(Node):
     def _end_at_horizon(self) -> None:
         self.graph = self.snapshot_graph()
         self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
-        self._step_pub.publish(encode_step(self.step))
+        self._publish(self._step_pub, encode_step(self.step))
         self.finished = True
         self._finished_at = time.monotonic()
         self._reached = self.horizon
@@ -300,7 +318,6 @@ class FormationCoordinatorNode(Node):
             raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
         tracks = {i: PoseTrack.from_samples(samples) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
-        statuses = [book.status for book in self.agents.values() if book.status is not None]
         return RunRecord(
             scenario=self.scenario,
             horizon=self.horizon,
@@ -309,7 +326,7 @@ class FormationCoordinatorNode(Node):
             sample_times=times,
             sample_positions=positions,
             sample_velocities=velocities if self.double else None,
-            messages_sent=sum(s.info_sent for s in statuses),
+            messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=sum(map(len, trigger_times.values())),
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
@@ -363,6 +380,7 @@ class FormationCoordinatorNode(Node):
             count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
         count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
         count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
         unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
         expired = [i for i, book in self.agents.items() if book.lost is not None]
         for what, agents in (
@@ -402,7 +420,7 @@ class FormationCoordinatorNode(Node):
             with contextlib.suppress(OSError):
                 print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
         self.graph = self.snapshot_graph()
-        self._scenario_pub.publish(String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._begin()
 
     # -- faults -----------------------------------------------------------------------------------
@@ -420,9 +438,44 @@ class FormationCoordinatorNode(Node):
         return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
 
     def _check_lost(self, now: float) -> None:
+        self._check_recorder_lost(now)
         error = self.book.lost_error(now, started=self.step is not None, where=self._where())
         if error is not None:
             raise error
+
+    def _on_recorder_liveliness(self, info) -> None:
+        if info.alive_count >= self._recorders_alive:
+            self._recorders_alive = info.alive_count
+            self._recorder_lost = None
+        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
+            self._recorder_lease_expired = info.not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
+            self._recorder_lost = (time.monotonic(), how)
+
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
+        try:
+            beat = json.loads(msg.data)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
+            return
+        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
+        self._after_status()
+
+    def _check_recorder_lost(self, now: float) -> None:
+        lost = self._recorder_lost
+        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
+            return
+        raise RecorderLostError(
+            f'the recorder lost {self._where()}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )
+
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
 
     def _on_status(self, msg: Float64MultiArray) -> None:
         try:
@@ -514,15 +567,25 @@ class FormationCoordinatorNode(Node):
             'reached_time': reached,
             'failure': self.failure_info,
             **self.book.message_counts(),
+            'published': self.book.published(self.published),
         }
 
     def _message_counts(self) -> dict:
-        return self.book.message_counts()
+        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
 
-    def wait_for_delivery(self, timeout_sec: float = 5.0) -> None:
+    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
         self.flush()
-        for pub in (self._step_pub, *self._tool_publishers):
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=timeout_sec))
+        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
+
+    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
+        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
+        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
+        end: what it lacks is counted against the bag after the run)."""
+        deadline = time.monotonic() + timeout_sec
+        pending = list(publishers)
+        while pending and self._recorder_lost is None and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
+            executor.spin_once(timeout_sec=0.0)
 
     def stop_agents(self, executor) -> None:
         """The run failed: a final Step sends the agents home, with their final reports."""
@@ -531,7 +594,7 @@ class FormationCoordinatorNode(Node):
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
         self.finished = True
-        self._step_pub.publish(encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
         self.flush()
         self.collect_final_reports(executor)
         # A live agent's final report says it got the final Step; a lost agent is still matched
@@ -539,8 +602,7 @@ class FormationCoordinatorNode(Node):
         publishers = self._tool_publishers
         if not self.final_reports_in():
             publishers = (self._step_pub, *publishers)
-        for pub in publishers:
-            pub.wait_for_all_acked(rclpy.duration.Duration(seconds=1.0))
+        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
 
     def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
         """After the final step: wait (bounded) for every live agent's last report."""
@@ -554,7 +616,7 @@ def write_results(node: FormationCoordinatorNode) -> None:
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_summary(node.record(), out)
-    (out / GRAPH_FILE).write_text(json.dumps(node.graph, indent=1, sort_keys=True) + '\n', encoding='utf-8')
+    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
 
 
 def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordinatorNode] = FormationCoordinatorNode) -> int:
@@ -575,30 +637,29 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
                     raise node.failure
             node.collect_final_reports(executor)
             node.after_final_step(executor)
-            node.wait_for_delivery()
+            node.wait_for_delivery(executor)
             if node.progress_period > 0.0:
                 node._print_progress()
             if node.out_dir:
-                write_results(node)
+                try:
+                    write_results(node)
+                except OSError as error:  # e.g. a full disk: the run itself went well
+                    _tell(f'formation_sim: cannot write the results: {error}')
+                    status = EXIT_FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
             status = EXIT_INTERRUPTED
-            _write_partial(node, error)
+            _stop_and_write(node, executor, error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
                 status = EXIT_INTERRUPTED
-                _write_partial(node, KeyboardInterrupt())
+                _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
-            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
-            if not isinstance(error, (AgentLostError, ConnectivityLostError)):
-                traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, AgentLostError) else EXIT_FAILED
-            if node is not None:
-                node.fail(error)
-                try:
-                    node.stop_agents(executor)
-                except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-                    print(f'formation_sim: could not stop the agents: {problem}', file=sys.stderr, flush=True)
-            _write_partial(node, error)
+            _tell(f'formation_sim: {error}')
+            if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
+                with contextlib.suppress(OSError):
+                    traceback.print_exc(file=sys.stderr)
+            status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
+            _stop_and_write(node, executor, error)
         finally:
             if node is not None:
                 node.destroy_node()
@@ -606,15 +667,30 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
     return status
 
 
-def _write_partial(node: FormationCoordinatorNode | None, error: BaseException) -> None:
-    """A run stopped early after step 0: the summary of what happened, and why it stopped."""
-    if node is None or node.step is None or not node.out_dir:
+def _stop_and_write(node: FormationCoordinatorNode | None, executor, error: BaseException) -> None:
+    """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
+    it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
+    bag ends where the summary does; then the summary of what happened, and why it stopped."""
+    if node is None:
         return
     node.fail(error)
+    if executor is not None:
+        try:
+            node.stop_agents(executor)
+        except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+            _tell(f'formation_sim: could not stop the agents: {problem}')
+    if node.step is None or not node.out_dir:
+        return
     try:
         write_results(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-        print(f'formation_sim: could not write the partial results: {problem}', file=sys.stderr, flush=True)
+        _tell(f'formation_sim: could not write the partial results: {problem}')
+
+
+def _tell(line: str) -> None:
+    """A line on stderr (the run's log), if it can still be written (the disk may be full)."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
 
 
 if __name__ == '__main__':

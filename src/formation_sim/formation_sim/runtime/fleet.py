@@ -21,7 +21,6 @@ from pathlib import Path
 
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.runtime.launch import LOG_DIR, LaunchPlan, RobotOptions, RunError
-from formation_sim.runtime.shm import remove_orphaned
 from formation_sim.runtime.supervise import POLL_PERIOD, Supervisor
 from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
 
@@ -92,8 +91,7 @@ class RobotFleet:
                 self.supervisor.note_shm_files()
                 time.sleep(max(POLL_PERIOD, 0.25))
         finally:
-            self.supervisor.stop((5.0, 3.0))
-            remove_orphaned(self.supervisor.killed_files(), self.domain_id)
+            self.supervisor.stop((5.0, 3.0), domain_id=self.domain_id)
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
         return status

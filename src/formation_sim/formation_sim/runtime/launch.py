@@ -43,6 +43,7 @@ ROBOTS_FILE = 'robots.params.yaml'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
 
 
@@ -209,6 +210,14 @@ class LaunchPlan:
 
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
+    def counted_topics(self) -> set[str]:
+        """The recorded topics whose messages the run's nodes count (summary.json extra.published):
+        all but a robot's own (its poses, and the velocity commands it takes)."""
+        from formation_msgs_py.topics import robot_command_topic, robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        robot = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic, robot_command_topic)}
+        return {name for name, _ in self.recorder_topics()} - robot
+
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
         from formation_agent.ros.node import NODE_NAME
@@ -330,6 +339,7 @@ class LaunchPlan:
             env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
         if self.process_count() > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
         env.update(extra_env)
         return with_our_packages(env)
 

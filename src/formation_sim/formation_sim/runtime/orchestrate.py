@@ -11,19 +11,22 @@ print(result.summary, result.bag)
 ```
 
 The pieces: `launch` (the backend's plan: domain, environment, inputs, processes), `supervise`
-(children in their own process groups, stopped by PID), `shm` (Fast DDS files of children killed
-hard), `results` (what a run leaves).  The run ends when the time keeper (the simulator, or the
-coordinator of a robot backend) reaches the horizon, when any child dies, or on Ctrl-C/SIGTERM.
-Children are then stopped (SIGINT, then SIGTERM, then SIGKILL after timeouts) and the Fast DDS
-shared-memory files of any child killed hard are removed.  If the orchestrator itself is killed,
+(children in their own process groups, stopped by PID; `fastdds_shm` for the shared-memory files
+of the dead), `results` (what a run leaves).  The run ends when the time keeper (the simulator,
+or the coordinator of a robot backend) reaches the horizon, when any child dies, or on
+Ctrl-C/SIGTERM.  Children are then stopped (SIGINT, then SIGTERM, then SIGKILL after timeouts; the
+recorder last) and the Fast DDS shared-memory files whose owners died are removed.  If the orchestrator itself is killed,
 the kernel sends every child SIGTERM (PR_SET_PDEATHSIG), so nothing is left running.
 
 Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
 nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
-time keeper detects a lost agent itself within the DDS liveliness lease and stops with a partial
-summary; this process sees any child exit within `POLL_PERIOD`, gives the time keeper
-`LOST_DETECTION` s to do so, then stops the rest.  The summary's `extra.failure` names what failed
-and when; a bag left unfinished by a dead recorder is recovered with `recorder.reindex`.
+time keeper detects a lost agent or recorder itself within the DDS liveliness lease and stops
+with a partial summary; this process sees any child exit within `POLL_PERIOD`, gives the time
+keeper `LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
+`extra.failure` names what failed and when (this process writes the summary itself if the time
+keeper could not); a bag left unfinished is recovered (`formation_sim.bag.recovery.reindex`);
+and the bag is checked against what the run published (`formation_sim.analysis.accounting`): a
+run that lost messages fails, however it ended.
 """
 
 from __future__ import annotations
@@ -60,11 +63,14 @@ from formation_sim.runtime.results import (
     EXIT_OK,
     ChildExit,
     RunResult,
-    annotate_summary,
+    annotate,
+    check_recording,
     lost_or_failed,
+    read_summary,
     recover_bag,
+    strangers,
+    summary_of_what_is_known,
 )
-from formation_sim.runtime.shm import remove_orphaned
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
 
 __all__ = [
@@ -252,19 +258,52 @@ class FormationRun:
             try:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
-                self._supervisor.stop(self.stop_timeouts)
-                self.removed_shm_files = remove_orphaned(self._supervisor.killed_files(), domain_id)
+                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id)
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        recovered = recover_bag(bag) if self.record else None
-        after = (lost.exited_at or time.monotonic()) - self._started_at if lost is not None else 0.0
-        failure = annotate_summary(summary, lost, status, message, seconds_after_launch=after)
+        notes: list[str] = []  # what the message adds after the failure
+        recorder = next((c for c in self._children if c.name == 'recorder'), None)
+        recovered = recover_bag(bag, notes, recorder=recorder) if self.record else False
+        data = read_summary(summary, notes)
+        if data is None and 't=' in self.last_progress:  # it ran, and the time keeper left no summary
+            keeper = next(c for c in self._children if c.name == self.plan.keeper)
+            data = summary_of_what_is_known(
+                keeper, scenario=self.scenario, horizon=self.horizon, mode='distributed' if self.backend == 'exact' else 'robots',
+                bag=bag, run_dir=self.out_dir, status=status, last_progress=self.last_progress, children=self._children,
+                launched=self._started_at, notes=notes,
+            )  # fmt: skip
+        failure = None
+        if data is not None:
+            failure = annotate(data, lost, status, message, launched=self._started_at)
+            check = self._check_recording(data, bag, notes)
+            if check is not None and not check.complete:
+                if failure is None:
+                    failure = data['extra']['failure'] = {
+                        'kind': 'recording_incomplete',
+                        'message': check.describe_missing(),
+                        'agents': [],
+                        'time': data['extra'].get('reached_time'),
+                        'step': data['extra'].get('steps'),
+                        'detected_by': 'orchestrator',
+                    }
+                    status = EXIT_FAILED if status == EXIT_OK else status
+                elif status != EXIT_INTERRUPTED:
+                    notes.append(check.describe_missing())
+            if check is not None and check.foreign and status != EXIT_INTERRUPTED:
+                notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
+            from formation_sim.sim.summary import write_summary_file
+
+            try:
+                write_summary_file(data, summary)
+            except OSError as error:
+                summary.unlink(missing_ok=True)  # the time keeper's, without the failure: not to be believed
+                notes.append(f'summary.json could not be written: {error}')
         if status == EXIT_OK and not summary.is_file():
-            status, message = EXIT_FAILED, f'the {self.plan.keeper} exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED:
-            message = failure['message'] + (f'; {message}' if message and message not in failure['message'] else '')
-        if recovered:
-            message += f'; the recorder died: its bag was recovered ({recovered})'
+            status = EXIT_FAILED
+            message = message or f'the {self.plan.keeper} exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+            message = failure['message'] + (f'; {message}' if message else '')
+        message = '; '.join([message, *notes] if message else notes)
         result = RunResult(
             out_dir=self.out_dir,
             summary=summary if summary.is_file() else None,
@@ -278,12 +317,30 @@ class FormationRun:
             ),
             message=message,
             failure=failure,
-            bag_recovered=bool(recovered),
+            bag_recovered=recovered,
         )
         if self.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self.last_progress}', end=True)
         return result
+
+    def _check_recording(self, data: dict, bag: Path, notes: list[str]):
+        """What the run published against what its bag holds (extra.recording); None without a bag."""
+        if not self.record:
+            return None
+        return check_recording(data, bag, self.plan.counted_topics(), notes)
+
+    def _strangers(self, topics: dict[str, int], domain_id: int) -> str:
+        """'; nodes outside the run wrote on them: …', as graph.json saw them."""
+        from formation_agent.ros.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.coordinator import GRAPH_FILE
+        from formation_sim.runtime.robot_node import NODE_NAME as ROBOT_NODE_NAME
+
+        own = {'/formation_simulator', '/formation_coordinator', '/formation_recorder'}
+        for i in self.scenario.agent_ids:
+            own |= {f'{agent_namespace(i)}/{NODE_NAME}', f'{agent_namespace(i)}/{ROBOT_NODE_NAME}'}
+        return strangers(topics, self.out_dir / GRAPH_FILE, own, domain_id)
 
     @contextlib.contextmanager
     def _signals_trapped(self) -> Iterator[None]:
@@ -356,7 +413,7 @@ class FormationRun:
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
                 status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
-                return status, f'{seen}{keeper.name} {describe_exit(code)}; see {keeper.log}', lost
+                return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}', lost
             if lost is None:
                 lost = next(
                     (

@@ -18,6 +18,7 @@ import numpy as np
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE
+from formation_msgs_py.topics import trigger_info_topic
 from formation_sim.sim.summary import lateness_extra, saturation_extra
 
 
@@ -49,6 +50,12 @@ class ConnectivityLostError(CoordinatorError):
         self.time = time
         self.edge = edge
         self.length = length
+
+
+class RecorderLostError(CoordinatorError):
+    """A recorder stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'recorder_lost'
 
 
 class AgentLostError(CoordinatorError):
@@ -261,6 +268,27 @@ class RunBook:
         )
 
     # -- summary.json -----------------------------------------------------------------------------
+
+    def information_sent(self, agent: int) -> int:
+        """Triggering-information messages `agent` published: as its final report counts them, else
+        as its latest Status does.  A Status lags when a run stops between an agent's trigger and
+        the news of its due neighbours, which it waits for before reporting (one message per
+        neighbour fewer than the bag holds, seen after SIGINT); a final report never does."""
+        book = self.agents[agent]
+        if book.report is not None and book.report.final:
+            return sum(book.report.published.get(trigger_info_topic(agent, j), 0) for j in book.neighbours)
+        return book.status.info_sent if book.status is not None else 0
+
+    def published(self, own: dict[str, int]) -> dict[str, int]:
+        """Messages published per topic by the coordinator (`own`) and by every agent whose final
+        report came (the others' are unknown: reports_missing), from step 0 on: what a recorder
+        must hold (`extra.published`, checked against the bag by the orchestrator)."""
+        counts = dict(own)
+        for book in self.agents.values():
+            if book.report is not None and book.report.final:
+                for topic, n in book.report.published.items():
+                    counts[topic] = counts.get(topic, 0) + n
+        return dict(sorted(counts.items()))
 
     def message_counts(self) -> dict:
         """Rejected messages per reason and agent, and faults injected, from the agents' reports."""

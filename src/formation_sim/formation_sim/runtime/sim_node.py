@@ -21,10 +21,13 @@ how late every trigger was against the time its agent had planned.
 
 Faults (README, "Reliability"): an agent whose command writer loses DDS liveliness (its process
 died, or the network no longer reaches it) is declared lost after `LIVELINESS_LEASE` +
-`LOST_GRACE` s; the run then stops.  Whenever a run stops early, after step 0 (an agent lost, a
-protocol violation, a stall, SIGINT/SIGTERM), the simulator still writes summary.json with what
-happened up to then and `extra.failure` saying what went wrong, where and when.  Exit status: 0
-done, 1 failed, 3 an agent lost, 130 interrupted.
+`LOST_GRACE` s, and so is a recorder whose heartbeat writer does (frozen, it acknowledges
+nothing); the run then stops.  Lock-step waits for a recorder that falls more than
+`RECORDER_LAG` steps behind.  Whenever a run stops early, after step 0 (an agent lost, a protocol
+violation, a stall, SIGINT/SIGTERM), the simulator ends it as at the horizon (a final Step, the
+samples, the final reports) and writes summary.json with what happened up to then and
+`extra.failure` saying what went wrong, where and when.  Exit status: 0 done, 1 failed, 3 an
+agent or the recorder lost, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ from collections.abc import Sequence
 import numpy as np
 from geometry_msgs.msg import Accel, PoseArray, Twist
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
@@ -52,7 +57,7 @@ from formation_msgs_py.codec import (
     sensing_refusal,
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step, WorldState
-from formation_msgs_py.qos import PROTOCOL_QOS, SIMULATOR_QOS
+from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
@@ -83,6 +88,7 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     ConnectivityLostError,
     CoordinatorError,
     DiscoveryError,
+    RecorderLostError,
     StallError,
 )
 from formation_sim.sim.engine import Sampler, build_agent, due_twice, rounding_floor
@@ -91,6 +97,32 @@ from formation_sim.sim.world import World
 
 CLOCK_MODES = ('lockstep', 'realtime')
 SimulatorError = CoordinatorError
+
+RECORDER_LAG = 2
+"""Steps the lock-step may run ahead of what a recorder has written (its heartbeat says which step).
+
+Lock-step at full speed outruns a recorder (one Python process taking every message): on a loaded
+2-core machine 3 runs of 4 lost hundreds of view and Status messages, the writers' keep-last
+histories turning over before the recorder had them.  Held within a few steps of it, what is
+outstanding stays far below the writers' depths (24 runs of 24 complete since, views kept deeper)."""
+
+VIEW_HISTORY_BYTES = 16 * 2**20
+
+
+def view_qos(sample) -> QoSProfile:
+    """SIMULATOR_QOS for a view (ground truth, markers) whose messages are like `sample`: as deep,
+    unless its history (kept for late joiners: transient local) would hold more than
+    VIEW_HISTORY_BYTES (a marker array of 300 agents is ~200 KB); never below PROTOCOL_QOS's 32.
+    A shallow history lost views to a recorder a few hundred messages behind (README)."""
+    size = max(1, len(serialize_message(sample)))
+    return QoSProfile(
+        history=SIMULATOR_QOS.history,
+        depth=max(PROTOCOL_QOS.depth, min(SIMULATOR_QOS.depth, VIEW_HISTORY_BYTES // size)),
+        reliability=SIMULATOR_QOS.reliability,
+        durability=SIMULATOR_QOS.durability,
+        liveliness=SIMULATOR_QOS.liveliness,
+        liveliness_lease_duration=SIMULATOR_QOS.liveliness_lease_duration,
+    )
 
 
 def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
@@ -169,13 +201,15 @@ class FormationSimulatorNode(FormationCoordinatorNode):
         # The agents' threshold, the very same floats, to stop where the engine stops.
         self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, PROTOCOL_QOS)
+        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=scenario.velocities)
+        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
         # For tools: a Foxglove view per sample.
         self._markers = FormationMarkers(scenario)
         self._marker_array = LiveMarkerArray(self._markers)
-        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, PROTOCOL_QOS)
+        view = self._markers.to_ros(self._markers.markers(scenario.positions), time=0.0)
+        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, view_qos(view))
         self._tool_publishers = [
             self._state_pub,
             self._truth_pub,
@@ -204,7 +238,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
                 command_type,
                 command_topic(i, double=self.double),
                 lambda msg, agent=i: self._on_command(msg, agent),
-                PROTOCOL_QOS,
+                READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
                     liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
                 ),
@@ -229,7 +263,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             self._epoch = time.time()
             self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
             self._due = set(self.agents)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.publish_samples()
             return
         self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
@@ -241,7 +275,15 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
 
     def _describe_wait(self) -> str:
-        return f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); ' + self.book.waiting_description()
+        recorders = f'recorders at steps {self._recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
+        return f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}' + self.book.waiting_description()
+
+    def _recorder_behind(self) -> bool:
+        """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
+        if self.extra_subscribers < 1:
+            return False
+        recorded = sorted(self._recorded_steps.values())[: self.extra_subscribers]
+        return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
 
     # -- wall clock -----------------------------------------------------------------------------
 
@@ -267,7 +309,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             self._sampler.event()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
-            self._step_pub.publish(encode_step(self.step))
+            self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
             self._finished_at = time.monotonic()
         self.publish_samples()
@@ -285,7 +327,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
 
     def _log_sensing(self, agent: int, step: int, t: float) -> None:
         log = {'version': 1, 'agent': agent, 'step': step, 'time': t}
-        self._log_pub.publish(String(data=json.dumps(log, separators=(',', ':'))))
+        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
 
     # -- lock-step ------------------------------------------------------------------------------
 
@@ -294,7 +336,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
         self._due = set(step.due)
         self.book.mark_due(step.due, step.time)
         self._last_advance = time.monotonic()
-        self._step_pub.publish(encode_step(step))
+        self._publish(self._step_pub, encode_step(step))
 
     def _after_status(self) -> None:
         self._advance_if_settled()
@@ -302,7 +344,13 @@ class FormationSimulatorNode(FormationCoordinatorNode):
     def _on_command(self, msg, agent: int) -> None:
         book = self.agents[agent]
         if self.finished:
-            return  # the run is over (or failed): the world no longer moves
+            # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
+            # sensing was answered before a stop still completes (its information is out, and in
+            # the bag): counted, its command acting from the last instant on moves nothing.
+            due = not self.realtime and agent in self._due and book.sensed_at_step == self.step.index
+            if due and book.commands_received < book.expected_triggers:
+                book.commands_received += 1
+            return
         if self.realtime and self.step is not None:
             control = decode_command(msg, self.scenario.dimension)
             self._realtime_event()  # the command acts from its arrival on
@@ -345,6 +393,8 @@ class FormationSimulatorNode(FormationCoordinatorNode):
     def _advance_if_settled(self) -> None:
         if self.realtime or self.step is None or self.finished or not self._settled():
             return
+        if self._recorder_behind():
+            return  # the recorder's next heartbeat comes back here
         t = self.step.time
         t_next, due = self.book.next_due(t)
         if t_next == t:
@@ -394,12 +444,12 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             state = WorldState(
                 time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=samples.velocities[k] if self.double else None
             )
-            self._state_pub.publish(encode_world_state(state))
+            self._publish(self._state_pub, encode_world_state(state))
             if t >= self._next_viz or (self.finished and k == last):
                 self._next_viz = t + self.viz_period
-                self._clock_pub.publish(Clock(clock=ros_time(t)))
-                self._truth_pub.publish(encode_pose_array(state))
-                self._markers_pub.publish(self._marker_array.update(self._markers.markers(x), time=t))
+                self._publish(self._clock_pub, Clock(clock=ros_time(t)))
+                self._publish(self._truth_pub, encode_pose_array(state))
+                self._publish(self._markers_pub, self._marker_array.update(self._markers.markers(x), time=t))
 
     def flush(self) -> None:
         self.publish_samples()
@@ -411,7 +461,6 @@ class FormationSimulatorNode(FormationCoordinatorNode):
 
     def record(self) -> RunRecord:
         """The run as a `RunRecord` (the same schema as the in-process engine's)."""
-        statuses = {i: book.status for i, book in self.agents.items()}
         return RunRecord(
             scenario=self.scenario,
             horizon=self.horizon,
@@ -422,7 +471,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             sample_times=np.array(self._sampler.times),
             sample_positions=np.array(self._sampler.positions),
             sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
-            messages_sent=sum(s.info_sent for s in statuses.values() if s is not None),
+            messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={

@@ -3,7 +3,8 @@
 Every child runs in its own process group and session (a terminal's Ctrl-C reaches only the
 orchestrator) and gets SIGTERM from the kernel if the orchestrator dies, even by SIGKILL
 (PR_SET_PDEATHSIG).  `stop` sends SIGINT, then SIGTERM, then SIGKILL after timeouts, each to the
-children still alive and to nothing else.
+children still alive and to nothing else, the recorder last; then the Fast DDS shared-memory files
+the children held go if their owners are dead (`fastdds_shm`).
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from formation_sim.runtime.fastdds_shm import domain_port_files, held_files, remove_orphans
 from formation_sim.runtime.launch import ProcessSpec
-from formation_sim.runtime.shm import mapped_shm_files
 
 POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
 PROGRESS_PREFIX = 'progress '
@@ -73,7 +74,7 @@ class Child:
                 lines = handle.read().decode(errors='replace').splitlines()
         except OSError:
             return ''
-        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: '))]
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))]
         return named[-1].split(': ', 1)[1] if named else ''
 
     def describe(self) -> str:
@@ -121,8 +122,9 @@ class Supervisor:
     def _pump(self, child: Child, handle) -> None:
         """Copy the time keeper's stdout into its log; keep its progress lines for the terminal."""
         for line in child.process.stdout:
-            handle.write(line)
-            handle.flush()
+            with contextlib.suppress(OSError):  # a full disk: keep reading, or the child blocks on the pipe
+                handle.write(line)
+                handle.flush()
             if line.startswith(PROGRESS_PREFIX):
                 self.last_progress = line[len(PROGRESS_PREFIX) :].strip()
 
@@ -136,7 +138,7 @@ class Supervisor:
         is gone nobody can tell which were its own: note them while it lives."""
         for child in self.children:
             if child.exited_at is None:
-                child.shm_files |= mapped_shm_files(child.pid)
+                child.shm_files |= held_files(child.pid)
 
     def wait_for_expected(self, timeout: float, *, besides: Child) -> list[Child]:
         """After the time keeper's success: let the others that leave by themselves leave; those
@@ -147,25 +149,44 @@ class Supervisor:
             time.sleep(POLL_PERIOD)
         return [c for c in leaving if not c.alive() and c.process.returncode != 0]
 
-    def stop(self, timeouts: tuple[float, float]) -> None:
-        """SIGINT, then SIGTERM, then SIGKILL, each to the children still alive."""
-        first, second = timeouts
-        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
-            alive = [c for c in self.children if c.alive()]
-            if not alive:
-                break
-            for child in alive:
-                child.shm_files |= mapped_shm_files(child.pid)
-                child.signal_used = sig.name
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
-            limit = time.monotonic() + wait
-            while any(c.alive() for c in alive) and time.monotonic() < limit:
-                time.sleep(0.05)
+    def stop(self, timeouts: tuple[float, float], *, domain_id: int) -> list[str]:
+        """Stop the children still alive, the recorder last; then remove their shm files (the list).
+
+        Each gets SIGINT, then SIGTERM, then SIGKILL (`timeouts`).  The time keeper, the agents
+        and the robots go first: they flush what they published to the recorder before they exit
+        (a message dropped on the way is only repaired at a writer's next heartbeat, after up to
+        3 s), and the recorder, still recording meanwhile, then drains and closes its bag.
+
+        A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
+        that mapped one of its ports keeps the port's reference (the file outlives both).  Once
+        every child is gone, the files any of them held (noted while they ran, `held_files`) go
+        if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
+        the dead port files of the run's own domain (a port mapped after the last look).
+        """
+        self._stop([c for c in self.children if c.name != 'recorder'], timeouts)
+        self._stop([c for c in self.children if c.name == 'recorder'], timeouts)
         for child in self.children:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 child.process.wait(timeout=1.0)
+        held = set().union(*(c.shm_files for c in self.children))
+        if any((c.process.returncode or 0) < 0 for c in self.children):
+            held |= domain_port_files(domain_id)
+        return remove_orphans(held)
 
-    def killed_files(self) -> list[set[str]]:
-        """The shared-memory files noted for each child killed by a signal."""
-        return [c.shm_files for c in self.children if (c.process.returncode or 0) < 0]
+    def _stop(self, children: list[Child], timeouts: tuple[float, float]) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to those of `children` still alive."""
+        first, second = timeouts
+        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
+            alive = [c for c in children if c.alive()]
+            if not alive:
+                break
+            for child in alive:
+                child.shm_files |= held_files(child.pid)
+                child.signal_used = sig.name
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
+                    if sig == signal.SIGINT:
+                        os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
+            limit = time.monotonic() + wait
+            while any(c.alive() for c in alive) and time.monotonic() < limit:
+                time.sleep(0.05)
