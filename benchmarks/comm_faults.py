@@ -51,27 +51,36 @@ def run_once(out: Path, inject: dict[str, float], seed: int, domain_id: int | No
         timeout=300.0,
         inject={**inject, 'seed': seed} if inject else None,
     )
-    result = run.run()
-    row: dict = {'ok': result.ok, 'message': result.message, 'wall_time': result.wall_time}
-    if result.summary is not None:
-        summary = json.loads(result.summary.read_text())
+    row, summary = result_row(run.run())
+    if summary is not None:
         extra = summary['extra']
         row.update(
-            final_formation_error=summary['final_formation_error'],
-            max_edge_length=summary['max_edge_length'],
-            delta=summary['delta'],
-            total_events=summary['total_events'],
             messages_sent=summary['messages_sent'],
             dropped=extra['injected_faults']['dropped'],
             delayed=extra['injected_faults']['delayed'],
-            max_lateness=extra.get('max_lateness'),
             reached_time=extra['reached_time'],
-            failure=extra['failure'],
         )
     return row
 
 
-def _median(rows: list[dict], key: str) -> float | None:
+def result_row(result) -> tuple[dict, dict | None]:
+    """A run's outcome and the numbers every table shows, and its summary (None: none written)."""
+    row: dict = {'ok': result.ok, 'message': result.message, 'wall_time': result.wall_time}
+    if result.summary is None:
+        return row, None
+    summary = json.loads(result.summary.read_text())
+    row.update(
+        final_formation_error=summary['final_formation_error'],
+        max_edge_length=summary['max_edge_length'],
+        delta=summary['delta'],
+        total_events=summary['total_events'],
+        max_lateness=summary['extra'].get('max_lateness'),
+        failure=summary['extra']['failure'],
+    )
+    return row, summary
+
+
+def median_of(rows: list[dict], key: str) -> float | None:
     values = [row[key] for row in rows if row.get(key) is not None]
     return statistics.median(values) if values else None
 
@@ -90,10 +99,10 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
         cut = [row for row in rows if (row.get('failure') or {}).get('kind') == 'connectivity_lost']
         cut_at = ', '.join(f'{row["failure"]["time"]:.2f} s' for row in cut)
         worst_edge = max((row['max_edge_length'] for row in done), default=None)
-        error = _median(done, 'final_formation_error')
-        events = _median(done, 'total_events')
-        lateness = _median(done, 'max_lateness')
-        dropped, delayed = _median(rows, 'dropped'), _median(rows, 'delayed')
+        error = median_of(done, 'final_formation_error')
+        events = median_of(done, 'total_events')
+        lateness = median_of(done, 'max_lateness')
+        dropped, delayed = median_of(rows, 'dropped'), median_of(rows, 'delayed')
         lines.append(
             f'| {label} | {len(done)}/{len(rows)} | {len(cut)}{f" ({cut_at})" if cut else ""} | '
             f'{"–" if error is None else f"{error:.4f}"} | '

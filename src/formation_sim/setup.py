@@ -31,6 +31,8 @@ setup(
             'formation = formation_sim.cli:main',
             'formation_sim = formation_sim.runtime.sim_node:main',
             'formation_recorder = formation_sim.runtime.recorder:main',
+            'formation_robot = formation_sim.runtime.robot_node:main',
+            'formation_coordinator = formation_sim.runtime.coordinator:main',
         ],
     },
 )

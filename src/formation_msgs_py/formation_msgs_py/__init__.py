@@ -21,9 +21,9 @@ __all__ = lazy_exports(globals(), {
     ),
     'topics': (
         'STEP_TOPIC', 'STATUS_TOPIC', 'REPORT_TOPIC', 'STATE_TOPIC', 'GROUND_TRUTH_TOPIC',
-        'SENSING_LOG_TOPIC', 'SCENARIO_TOPIC', 'MARKERS_TOPIC', 'CLOCK_TOPIC',
+        'SENSING_LOG_TOPIC', 'SCENARIO_TOPIC', 'MARKERS_TOPIC', 'CLOCK_TOPIC', 'ROBOTS_TOPIC',
         'agent_namespace', 'trigger_info_topic', 'sense_service', 'command_topic',
-        'robot_pose_topic', 'robot_odom_topic', 'robot_command_topic',
+        'robot_pose_topic', 'robot_odom_topic', 'robot_command_topic', 'robot_true_odom_topic',
     ),
     'codec': ('MessageError',),
 })  # fmt: skip

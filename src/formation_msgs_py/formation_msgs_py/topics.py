@@ -16,6 +16,7 @@ SCENARIO_TOPIC = '/formation/scenario'  # the run's scenario YAML, once (tools o
 MARKERS_TOPIC = '/formation/markers'  # Foxglove view (tools only)
 RECORDER_TOPIC = '/formation/recorder'  # the recorder's heartbeat: its liveliness is its sign of life
 CLOCK_TOPIC = '/clock'
+ROBOTS_TOPIC = '/formation/robots'  # what the robots of a robot run are (JSON, once; tools only)
 
 
 def agent_namespace(agent_id: int) -> str:
@@ -52,3 +53,9 @@ def robot_command_topic(agent_id: int) -> str:
     """Velocity command to robot i: geometry_msgs/TwistStamped in the world frame (holonomic) or
     geometry_msgs/Twist in its body frame, (v, ω) (differential drive)."""
     return f'{agent_namespace(agent_id)}/robot/cmd_vel'
+
+
+def robot_true_odom_topic(agent_id: int) -> str:
+    """nav_msgs/Odometry of a *simulated* robot i as it truly is: no noise, no latency.  For tools
+    and the run's summary only; an agent never reads it (a real robot has no such topic)."""
+    return f'{agent_namespace(agent_id)}/robot/true_odom'

@@ -261,3 +261,16 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
     reference = simulate(load_scenario(path), horizon=0.3)
     assert summary['trigger_times'] == {str(agent): times for agent, times in reference.trigger_times.items()}
     assert sorted(summary['trigger_times']) == ['0', '2147483647', '7']
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    [
+        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
+        (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
+        (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
+        (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
+    ],
+)
+def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arguments, complaint):
+    assert main(['run', 'robots_square', '--out', str(tmp_path / 'run'), '--quiet', *arguments]) == 2
+    assert complaint in capsys.readouterr().err
+    assert not (tmp_path / 'run').exists()

@@ -261,7 +261,7 @@ def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper
     assert not [f for f in validate_scenario(scenario).errors if f.rule == 'parameters']
     run = FormationRun(scenario, out_dir=tmp_path / 'run', validate=False, progress=False)
     run.out_dir.mkdir()
-    path = run._write_inputs()['agents']
+    path = run.plan.write_inputs()['agents']
     read = _read_with_rcl(path, scenario.agent_ids)
 
     from formation_sim.runtime.sim_node import agent_parameters
@@ -282,7 +282,7 @@ def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper
     data['gains'][gains[0]] = SUBNORMAL
     broken = FormationRun(scenario_from_dict(data), out_dir=tmp_path / 'broken', validate=False, progress=False)
     broken.out_dir.mkdir()
-    assert isinstance(_read_with_rcl(broken._write_inputs()['agents'], scenario.agent_ids)[1][gains[0]], str)
+    assert isinstance(_read_with_rcl(broken.plan.write_inputs()['agents'], scenario.agent_ids)[1][gains[0]], str)
 
 
 def _read_with_rcl(path, agent_ids):

@@ -8,6 +8,11 @@
 - the trajectories from `/formation/state` (WorldState: exact positions and velocities at every
   event time and on the sample grid), the horizon and the clock mode from `/formation/step`;
 - messages sent = TriggerInfo messages recorded, sensing calls = `/formation/sensing_log` entries;
+- robot runs (`formation run --backend holonomic | unicycle | external`, no `/formation/state`):
+  the trajectories from the robots' pose topics (`/formation/robots` names which: a simulated
+  robot's noise-free `true_odom`, else the measured `odom` or `pose`), run time from their header
+  stamps and the epoch of Step 0, sampled as the coordinator samples them
+  (`formation_sim.sim.robots.trajectory_samples`); every robot's last command must be a stop;
 - the scenario from `/formation/scenario` (std_msgs/String holding the scenario YAML) when the
   bag has it, else from `scenario.yaml` of the run folder holding the bag, else from the
   `scenario` the caller gives (`formation analyze --scenario`). Whatever its source, it must
@@ -37,18 +42,28 @@ import numpy as np
 
 from formation_msgs_py.codec import (
     MessageError,
+    decode_agent_report,
     decode_status,
     decode_step,
     decode_trigger_info,
     decode_world_state,
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
-from formation_msgs_py.topics import SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
+from formation_msgs_py.topics import (
+    REPORT_TOPIC,
+    ROBOTS_TOPIC,
+    SCENARIO_TOPIC,
+    SENSING_LOG_TOPIC,
+    STATE_TOPIC,
+    STATUS_TOPIC,
+    STEP_TOPIC,
+)
 from formation_sim.sim.record import RunRecord
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
-from formation_sim.sim.summary import SUMMARY_FILE
+from formation_sim.sim.robots import PoseTrack, RobotError, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra, saturation_extra
 
 
 SCENARIO_FILE = 'scenario.yaml'
@@ -61,6 +76,9 @@ TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
 
 
 COMMAND_TOPIC = re.compile(r'^/agent_(\d+)/(cmd_vel|cmd_accel)$')
+
+
+ROBOT_TOPIC = re.compile(r'^/agent_(\d+)/robot/(pose|odom|true_odom|cmd_vel)$')
 
 
 class AnalysisError(ValueError):
@@ -161,6 +179,9 @@ class _Collected:
     info_total: int = 0
     commands: dict[int, int] = field(default_factory=lambda: defaultdict(int))
     problems: list[str] = field(default_factory=list)
+    robots: dict | None = None  # /formation/robots: what the robots of a robot run are
+    robot_messages: dict[tuple[int, str], list[tuple[str, bytes]]] = field(default_factory=lambda: defaultdict(list))
+    reports: dict[int, Any] = field(default_factory=dict)  # agent -> its latest report (the final one kept)
 
 
 def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
@@ -216,6 +237,18 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         got.scenario_text = decode(rawdata, msgtype).data
     elif match := COMMAND_TOPIC.match(topic):
         got.commands[int(match.group(1))] += 1
+    elif match := ROBOT_TOPIC.match(topic):
+        # Decoded once the run is known (which topic is the trajectory, the epoch, the model).
+        got.robot_messages[(int(match.group(1)), match.group(2))].append((msgtype, rawdata))
+    elif topic == ROBOTS_TOPIC and msgtype == 'std_msgs/msg/String':
+        try:
+            got.robots = json.loads(decode(rawdata, msgtype).data)
+        except ValueError as error:
+            raise MessageError(f'not JSON: {error}') from None
+    elif topic == REPORT_TOPIC and msgtype == 'std_msgs/msg/String':
+        report = decode_agent_report(decode(rawdata, msgtype))
+        if report.agent not in got.reports or not got.reports[report.agent].final:
+            got.reports[report.agent] = report
 
 
 def _resolve_scenario(got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None) -> tuple[Scenario, str]:
@@ -283,9 +316,15 @@ def load_bag_run(
     """
     bag = Path(bag)
     got = _read(bag, progress)
-    if not got.states:
-        raise AnalysisError(f'{bag}: no {STATE_TOPIC} messages: the trajectories cannot be rebuilt (topics: {sorted(got.topics)})')
     run_dir = None if run_dir is None else Path(run_dir)
+    if not got.states and got.robots is not None:
+        found, source = _resolve_scenario(got, run_dir, scenario)
+        return _robot_run(bag, got, found, source)
+    if not got.states:
+        raise AnalysisError(
+            f'{bag}: no {STATE_TOPIC} messages and no {ROBOTS_TOPIC} (a robot run): the trajectories cannot be '
+            f'rebuilt (topics: {sorted(got.topics)})'
+        )
     found, source = _resolve_scenario(got, run_dir, scenario)
     states = sorted(got.states, key=lambda state: state.time)  # stable: ties keep bag order
     _check_scenario_matches(found, got, states)
@@ -304,26 +343,8 @@ def load_bag_run(
             velocities.append(np.asarray(state.velocities, dtype=float))
     checks.append(Check(name='state samples', ok=not repeats, detail=f'{len(times)} samples' + (f'; different states at the same time {repeats[:5]}' if repeats else '')))
 
-    trigger_times: dict[int, list[float]] = {agent: [] for agent in found.agent_ids}
-    missing, duplicated = [], []
-    for (sender, stamp), receivers in got.infos.items():
-        trigger_times[sender].append(stamp)
-        expected = set(found.neighbours(sender))
-        if len(receivers) != len(set(receivers)):
-            duplicated.append(f'{sender} @ {stamp!r}')
-        if set(receivers) != expected:
-            missing.append(f'{sender} @ {stamp!r} -> {sorted(expected - set(receivers))}')
-    for agent in trigger_times:
-        trigger_times[agent].sort()
-    checks.append(
-        Check(
-            name='one TriggerInfo per neighbour per trigger',
-            ok=not missing and not duplicated,
-            detail=f'{got.info_total} messages for {sum(map(len, trigger_times.values()))} triggers'
-            + (f'; missing: {missing[:5]}' if missing else '')
-            + (f'; duplicated: {duplicated[:5]}' if duplicated else ''),
-        )
-    )
+    trigger_times, triggers_check = _trigger_times(got, found)
+    checks.append(triggers_check)
 
     steps = got.steps
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
@@ -364,17 +385,7 @@ def load_bag_run(
         if finished:
             extra['failure'] = None  # the run reached its horizon (why one stopped is not in a bag)
     if got.statuses:
-        sent: dict[int, int] = defaultdict(int)
-        for (sender, _), receivers in got.infos.items():
-            sent[sender] += len(receivers)
-        # Counters only grow: the largest are the agent's final report.
-        last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
-        wrong = [
-            f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {len(trigger_times[agent])} / {sent[agent]}'
-            for agent, status in last.items()
-            if agent in trigger_times and (status.triggers != len(trigger_times[agent]) or status.info_sent != sent[agent])
-        ]
-        checks.append(Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or 'every agent\'s last Status counts what the bag holds'))
+        checks.append(_status_check(got, {agent: len(times) for agent, times in trigger_times.items()}))
         if realtime:
             extra.update(_lateness(got.statuses, trigger_times))
 
@@ -398,15 +409,146 @@ def load_bag_run(
 
 
 def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:
-    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the simulator computes it."""
-    per_agent = {}
+    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the coordinator computes it."""
+    planned: dict[int, dict[int, float]] = {}
     for agent, reports in statuses.items():
-        lateness, seen = [], 0
+        plans, seen = planned.setdefault(agent, {}), 0
         for status in reports:
             if status.triggers > seen:
                 seen = status.triggers
-                if 0 < seen <= len(trigger_times.get(agent, [])):
-                    lateness.append(trigger_times[agent][seen - 1] - status.last_planned)
-        if lateness:
-            per_agent[str(agent)] = {'max': max(lateness), 'mean': float(np.mean(lateness))}
-    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}
+                plans[seen] = status.last_planned
+    return lateness_extra(planned, trigger_times)
+
+
+def _trigger_times(got: _Collected, scenario: Scenario) -> tuple[dict[int, list[float]], Check]:
+    """Triggering times from the TriggerInfo messages, and the check that each reached every neighbour once."""
+    trigger_times: dict[int, list[float]] = {agent: [] for agent in scenario.agent_ids}
+    missing, duplicated = [], []
+    for (sender, stamp), receivers in got.infos.items():
+        trigger_times[sender].append(stamp)
+        expected = set(scenario.neighbours(sender))
+        if len(receivers) != len(set(receivers)):
+            duplicated.append(f'{sender} @ {stamp!r}')
+        if set(receivers) != expected:
+            missing.append(f'{sender} @ {stamp!r} -> {sorted(expected - set(receivers))}')
+    for agent in trigger_times:
+        trigger_times[agent].sort()
+    check = Check(
+        name='one TriggerInfo per neighbour per trigger',
+        ok=not missing and not duplicated,
+        detail=f'{got.info_total} messages for {sum(map(len, trigger_times.values()))} triggers'
+        + (f'; missing: {missing[:5]}' if missing else '')
+        + (f'; duplicated: {duplicated[:5]}' if duplicated else ''),
+    )
+    return trigger_times, check
+
+
+def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
+    """Every agent's last Status counts the triggers (`triggers`: per agent) and messages the bag holds."""
+    sent: dict[int, int] = defaultdict(int)
+    for (sender, _), receivers in got.infos.items():
+        sent[sender] += len(receivers)
+    # Counters only grow: the largest are the agent's final report.
+    last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
+    wrong = [
+        f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {triggers[agent]} / {sent[agent]}'
+        for agent, status in last.items()
+        if agent in triggers and (status.triggers != triggers[agent] or status.info_sent != sent[agent])
+    ]
+    return Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or "every agent's last Status counts what the bag holds")
+
+
+def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
+    """A robot run rebuilt from its bag: trajectories from the pose topics (module docstring)."""
+    robots = got.robots
+    try:
+        model, trajectory = robots['model'], robots['trajectory']
+        distance, period = float(robots['control_point_distance']), float(robots['sample_period'])
+    except (KeyError, TypeError, ValueError) as error:
+        raise AnalysisError(f'{bag}: {ROBOTS_TOPIC} lacks {error} (model, trajectory, control_point_distance, sample_period)') from None
+    steps = got.steps
+    start = [step for step in steps if step.index == 0 and step.flags & STEP_FLAG_REALTIME]
+    if not start:
+        raise AnalysisError(f'{bag}: no wall-clock Step 0 on {STEP_TOPIC}: the run never started, or its epoch is missing')
+    epoch = start[0].epoch
+    final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
+    checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
+    tracks, missing = {}, []
+    for agent in scenario.agent_ids:
+        samples = []
+        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
+            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
+            samples.append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
+        try:
+            tracks[agent] = PoseTrack.from_samples(samples)
+        except RobotError:
+            missing.append(agent)
+    if missing:
+        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    trigger_times, triggers_check = _trigger_times(got, scenario)
+    all_counts = {agent: len(times) for agent, times in trigger_times.items()}
+    if final:
+        end = final[-1].time
+    else:
+        end = min(track.times[-1] for track in tracks.values())
+        checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}'))
+    # The coordinator counts the triggers up to where the run ended (and samples them).
+    trigger_times = {agent: [t for t in times if t <= end] for agent, times in trigger_times.items()}
+    checks.append(triggers_check)
+    uncovered = [agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)]
+    checks.append(
+        Check(
+            name='poses cover the run',
+            ok=not uncovered,
+            detail=f'every robot has {trajectory} poses from before t = 0 to after t = {end!r}'
+            if not uncovered
+            else f'robots {uncovered} lack poses at the start or the end (their first or last pose is held there)',
+        )
+    )
+    checks.append(_last_commands_check(got, scenario))
+    if got.statuses:
+        checks.append(_status_check(got, all_counts))
+    times = sample_times(end, period, [t for ts in trigger_times.values() for t in ts])
+    positions, velocities = trajectory_samples(tracks, scenario.agent_ids, times)
+    extra: dict[str, Any] = {'clock': 'realtime', 'reached_time': float(times[-1])}
+    if final:
+        extra['failure'] = None  # as for the exact backend: the final Step marks the end of the run
+    if got.statuses:
+        extra.update(_lateness(got.statuses, trigger_times))
+    extra.update(robots=robots, saturation=saturation_extra(got.reports.get(agent) for agent in scenario.agent_ids))
+    record = RunRecord(
+        scenario=scenario,
+        horizon=end,
+        mode='robots',
+        trigger_times=trigger_times,
+        sample_times=times,
+        sample_positions=positions,
+        sample_velocities=velocities if scenario.dynamics == 'double' else None,
+        messages_sent=got.info_total,
+        sensing_calls=sum(map(len, trigger_times.values())),
+        wall_time=math.nan,
+        extra=extra,
+    )
+    return BagRun(bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks)
+
+
+def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:
+    """Every robot's last velocity command is a stop (what the agents send when they leave)."""
+    moving, silent = [], []
+    for agent in scenario.agent_ids:
+        commands = got.robot_messages.get((agent, 'cmd_vel'))
+        if not commands:
+            silent.append(agent)
+            continue
+        msgtype, rawdata = commands[-1]
+        msg = decode(rawdata, msgtype)
+        twist = msg.twist if msgtype == 'geometry_msgs/msg/TwistStamped' else msg
+        values = [twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z]
+        if any(values):
+            moving.append(f'{agent}: {values}')
+    detail = f'{len(scenario.agent_ids) - len(silent) - len(moving)} robots stopped by their last command'
+    if moving:
+        detail += f'; still moving: {moving[:5]}'
+    if silent:
+        detail += f'; no command recorded for robots {silent}'
+    return Check(name="every robot's last command is a stop", ok=not moving and not silent, detail=detail)

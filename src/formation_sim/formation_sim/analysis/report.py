@@ -325,7 +325,8 @@ def _short(value: Any) -> str:
 def _check_table(checks: list[dict[str, Any]]) -> list[str]:
     lines = ['| check | holds | detail |', '|---|---|---|']
     for check in checks:
-        lines.append(f'| {check["name"]} | {"yes" if check["ok"] else "**NO**"} | {check["detail"]} |')
+        holds = 'yes' if check['ok'] else '**NO**' if check.get('binding', True) else 'no (not binding)'
+        lines.append(f'| {check["name"]} | {holds} | {check["detail"]} |')
     return lines
 
 

@@ -52,6 +52,7 @@ POSITIVE = _number('a finite number > 0', lambda v: math.isfinite(v) and v > 0.0
 NON_NEGATIVE = _number('a finite number >= 0', lambda v: math.isfinite(v) and v >= 0.0)
 POSITIVE_INT = _number('an integer >= 1', lambda v: v >= 1, integer=True)
 NON_NEGATIVE_INT = _number('an integer >= 0', lambda v: v >= 0, integer=True)
+FINITE = _number('a finite number', math.isfinite)
 DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
 
 
@@ -116,6 +117,63 @@ def load_valid_scenario(name: str, command: str) -> Scenario | None:
     for warning in report.warnings:
         print(f'warning: {warning.message}', file=sys.stderr)
     return scenario
+
+
+# --------------------------------------------------------------------------- robots
+
+
+def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
+    """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
+    from formation_sim.runtime.launch import POSE_TYPES, RobotOptions
+
+    defaults = RobotOptions()
+    group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
+    add = group.add_argument
+    add(model_flag, choices=('holonomic', 'unicycle'), default=None, help="what the robots are (default: the backend's model)")
+    add('--control-point-distance', type=POSITIVE, default=defaults.control_point_distance, metavar='L',
+        help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
+    add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
+    add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
+    add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
+        help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
+    add('--pose-type', choices=POSE_TYPES, default=defaults.pose_type, help=f'what the agents read (default {defaults.pose_type})')
+    add('--pose-timeout', type=POSITIVE, default=defaults.pose_timeout, metavar='S',
+        help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})')
+    add('--world-frame', default=defaults.world_frame, help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})')
+    add('--pose-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the position noise [m]')
+    add('--yaw-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the heading noise [rad]')
+    add('--latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay of every pose [s]')
+    add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
+    add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
+    add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
+    add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+
+
+def robot_options(args: argparse.Namespace, model: str):
+    """The `RobotOptions` of the parsed robot arguments."""
+    from formation_sim.runtime.launch import RobotOptions
+
+    return RobotOptions(
+        model=model,
+        control_point_distance=args.control_point_distance,
+        max_linear_speed=args.max_speed,
+        max_angular_speed=args.max_angular_speed,
+        max_linear_acceleration=args.max_acceleration,
+        command_rate=args.command_rate,
+        pose_type=args.pose_type,
+        pose_timeout=args.pose_timeout,
+        world_frame=args.world_frame,
+        rate=args.robot_rate,
+        yaw=args.initial_heading,
+        pose_noise=args.pose_noise,
+        yaw_noise=args.yaw_noise,
+        latency=args.latency,
+        command_latency=args.command_latency,
+        seed=args.robot_seed,
+        robots_per_process=args.robots_per_process,
+    )
 
 
 # --------------------------------------------------------------------------- ROS

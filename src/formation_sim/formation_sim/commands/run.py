@@ -1,4 +1,5 @@
-"""`formation run SCENARIO`: the distributed run, one ROS 2 process per agent, in lock-step sim time."""
+"""`formation run SCENARIO [--backend B]`: the distributed run, one ROS 2 process per agent: on the
+simulator's exact world (in lock-step sim time by default), on simulated robots, or on real ones."""
 
 from __future__ import annotations
 
@@ -12,25 +13,36 @@ from formation_sim.commands.common import (
     NON_NEGATIVE,
     POSITIVE,
     POSITIVE_INT,
+    add_robot_arguments,
     add_run_arguments,
     load_valid_scenario,
     refuse,
+    robot_options,
 )
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         'run',
-        help='run the team as ROS 2 processes (simulator, one node per agent, recorder)',
-        description='Distributed run over ROS 2: a simulator node holds the exact world and the '
-        'sensing services, every agent is its own node talking only to its neighbours, and time '
-        'advances in lock-step from event to event. Writes summary.json (same schema as '
-        '`formation simulate`) and the rosbag2 bag (MCAP) into --out.',
+        help='run the team as ROS 2 processes (one node per agent, a simulator or robots, recorder)',
+        description='Distributed run over ROS 2, every agent its own node talking only to its neighbours. '
+        'Backend exact (default): a simulator node holds the exact world and the sensing services, and '
+        'time advances in lock-step from event to event. Backends holonomic and unicycle: one simulated '
+        'robot per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
+        'external: the coordinator, agents and recorder only; the robots are whatever publishes '
+        '/agent_<i>/robot/pose (or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). '
+        'Writes summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
         epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started, nothing on disk '
         'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
         'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')
+    parser.add_argument(
+        '--backend',
+        choices=('exact', 'holonomic', 'unicycle', 'external'),
+        default='exact',
+        help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
+    )
     parser.add_argument('--agents-per-process', type=POSITIVE_INT, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
     parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
@@ -60,6 +72,7 @@ def register(subparsers) -> None:
         help='let DDS discovery reach the local network (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) for agents on '
         'other machines; default: this machine only (LOCALHOST)',
     )
+    add_robot_arguments(parser, model_flag='--robot')
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -71,6 +84,11 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'run')
     if scenario is None:
         return EXIT_BAD_INPUT
+    robots = None
+    if args.backend != 'exact':
+        if args.backend == 'external' and args.robot is None:
+            return refuse('run', '--backend external needs --robot holonomic|unicycle (what the robots are)')
+        robots = robot_options(args, args.robot or args.backend)
     try:
         result = FormationRun(
             scenario,
@@ -83,9 +101,11 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             sample_period=args.sample_dt,
             timeout=args.timeout,
-            clock='realtime' if args.real_time else 'lockstep',
+            clock='realtime' if args.real_time or args.backend != 'exact' else 'lockstep',
             localhost_only=not args.network,
             executor=args.executor,
+            backend=args.backend,
+            robots=robots,
         ).run()
     except RunError as error:
         return refuse('run', error)
@@ -105,6 +125,21 @@ def run(args: argparse.Namespace) -> int:
         if figure is not None:
             print(f'figure:  {figure}')
         print(f'logs:    {Path(out) / "logs"}')
+    _warn_saturation(result)
     if args.quiet and result.message:  # otherwise the run's last progress line said it already
         print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status
+
+
+def _warn_saturation(result) -> None:
+    """Robot runs: say whether the agents clipped commands to the robots' limits (the theorems assume not)."""
+    import json
+
+    if result.summary is None:
+        return
+    saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
+    if saturation and saturation.get('total'):
+        kinds = ', '.join(f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, {entry["allowed"]:g} allowed)'
+                          for kind, entry in saturation['by_kind'].items())  # fmt: skip
+        print(f'warning: {saturation["total"]} commands saturated at the robots\' limits: {kinds}; agents '
+              f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json extra.saturation)', file=sys.stderr)

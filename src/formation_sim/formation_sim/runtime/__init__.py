@@ -1,8 +1,13 @@
 """The distributed runtime (rclpy, Fast DDS): processes, and what starts and watches them.
 
-- `orchestrate`: `FormationRun` starts a simulator, one process per agent (or per group), and a
-  recorder in a private ROS domain, watches them and stops them by PID.
-- `sim_node`: the simulator node (the true world, the sensing services, the lock-step clock).
+- `orchestrate`: `FormationRun` starts a run in a private ROS domain, watches it and stops it by
+  PID; its pieces: `launch` (the backend's plan: inputs, processes, environment, ROS domain),
+  `supervise` (the children, stopped by PID, their Fast DDS files removed by `fastdds_shm`), `results`.
+- `coordinator`: the coordinator node (opens, watches and ends a run, writes its summary; no
+  world: on robots); `run_book`: its books (statuses, reports, lock-step settlement, faults).
+- `sim_node`: the simulator node = the coordinator plus the exact world, the sensing services and
+  the lock-step clock (backend `exact`).
+- `robot_node`: a simulated kinematic robot (backends `holonomic`, `unicycle`).
 - `recorder`: the recorder node (raw subscriptions into a rosbag2 bag).
 - `replay`: bags published again; `graph`: topics and messages of a live ROS graph.
 - `fastdds_shm`: the Fast DDS shared-memory files a process holds, and removing those the dead
@@ -13,7 +18,10 @@ from formation_msgs_py._lazy import lazy_exports
 
 __all__ = lazy_exports(globals(), {
     'orchestrate': ('FormationRun', 'RunError', 'RunResult'),
+    'launch': ('RobotOptions',),
+    'coordinator': ('FormationCoordinatorNode',),
     'sim_node': ('FormationSimulatorNode', 'SimulatorError', 'agent_parameters'),
+    'robot_node': ('SimulatedRobotNode',),
     'recorder': ('RecorderError', 'RecorderNode'),
     'replay': ('BagPlayer', 'ReplayError'),
 })  # fmt: skip

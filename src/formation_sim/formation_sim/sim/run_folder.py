@@ -33,6 +33,7 @@ RUN_ENTRIES = frozenset(
         'scenario.yaml',
         'agents.params.yaml',
         'recorder.params.yaml',
+        'robots.params.yaml',
         'graph.json',
         'bag',
         'logs',

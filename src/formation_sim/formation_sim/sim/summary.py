@@ -116,6 +116,38 @@ def build_summary(record) -> dict:
     }
 
 
+def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int, list[float]]) -> dict:
+    """Wall clock: `extra.lateness` and `extra.max_lateness`, per agent trigger time − planned time
+    over the triggers whose plan a Status announced (`planned`: agent -> trigger number k ->
+    `Status.last_planned` of the Status that first counted k triggers)."""
+    per_agent = {}
+    for agent, plans in planned.items():
+        times = trigger_times.get(agent, [])
+        late = [times[k - 1] - when for k, when in sorted(plans.items()) if 0 < k <= len(times)]
+        if late:
+            per_agent[str(agent)] = {'max': max(late), 'mean': float(np.mean(late))}
+    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}
+
+
+def saturation_extra(reports) -> dict:
+    """Robot runs: `extra.saturation`, the commands the agents' robot adapters clipped to their
+    limits (the theorems assume none), from each agent's latest report (`AgentReport.saturation`:
+    kind -> count, largest value requested, limit): in total, per kind and per agent."""
+    total, by_kind, by_agent = 0, {}, {}
+    for report in reports:
+        if report is None:
+            continue
+        for kind, clipped in sorted(report.saturation.items()):
+            if not clipped.count:
+                continue
+            total += clipped.count
+            entry = by_kind.setdefault(kind, {'count': 0, 'largest_requested': 0.0, 'allowed': clipped.allowed})
+            entry['count'] += clipped.count
+            entry['largest_requested'] = max(entry['largest_requested'], clipped.largest_requested)
+            by_agent.setdefault(str(report.agent), {})[kind] = clipped.count
+    return {'total': total, 'by_kind': by_kind, 'by_agent': by_agent}
+
+
 def write_summary(record, out_dir) -> Path:
     """Write `summary.json` and `trajectory.npz` into `out_dir`; return the summary's path."""
     out = Path(out_dir)

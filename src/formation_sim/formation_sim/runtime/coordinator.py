@@ -1,0 +1,697 @@
+"""The coordinator node: opens a run of agent nodes, watches it, ends it, and writes what it saw.
+
+It holds no world.  On robots (`formation run --backend holonomic | unicycle | external`) the
+robots are the world: agents sense poses and command velocities themselves (README, "Running on
+robots"), and the coordinator only keeps the run's time and books (`run_book.RunBook`):
+
+- **opens the run** once every agent is connected (discovery, docs/MESSAGES.md): Step 0 at
+  t = 0 in wall-clock mode, carrying the epoch every agent times its triggers from;
+- **watches** every agent's Status and reports, and its sign of life: the DDS liveliness of its
+  triggering-information writer (the one to its first neighbour, on which it also reads the
+  agent's triggering times); and the robots' poses, stopping the run at the first edge that
+  reaches Δ (`robot_trajectory` topic: a simulated robot's noise-free `true_odom`, else the
+  measured `odom` or `pose`);
+- **ends the run** at the horizon with the final Step, or on a fault (an agent lost, an edge at
+  Δ, a protocol violation; SIGINT/SIGTERM) with a final Step that sends the agents home;
+- **writes summary.json** (`formation_sim.sim.summary`, mode `robots`) from what it saw: the
+  triggering times from the agents' messages, the formation from the poses sampled every
+  `sample_period` and at every event (`formation_sim.sim.robots.trajectory_samples`, as
+  `formation analyze` samples the bag), and `extra`: the run's failure, rejected messages,
+  lateness and the commands the agents' limits saturated.
+
+The simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) is this coordinator plus
+the exact world and the agents' sensing services.  Exit status: 0 done, 1 failed, 3 an agent
+lost, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import sys
+import time
+import traceback
+from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Float64MultiArray, String
+
+from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.topics import (
+    RECORDER_TOPIC,
+    REPORT_TOPIC,
+    ROBOTS_TOPIC,
+    SCENARIO_TOPIC,
+    STATUS_TOPIC,
+    STEP_TOPIC,
+    robot_command_topic,
+    robot_odom_topic,
+    robot_pose_topic,
+    robot_true_odom_topic,
+    trigger_info_topic,
+)
+from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
+from formation_sim.runtime.run_book import (
+    AgentLostError,
+    ConnectivityLostError,
+    CoordinatorError,
+    DiscoveryError,
+    RecorderLostError,
+    RunBook,
+    ids_text,
+)
+from formation_sim.sim.record import RunRecord
+from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.files import write_atomically
+from formation_sim.sim.summary import write_summary
+
+GRAPH_FILE = 'graph.json'
+TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
+
+EXIT_FAILED = 1
+EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
+EXIT_INTERRUPTED = 130
+
+POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
+# Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
+# `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
+# any reliable pose writer matches (robots' drivers keep ROS's defaults).
+POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
+
+
+def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
+    """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
+    triggering information, and per robot the poses its agents read (`pose_type`), its command
+    and, simulated, its noise-free state (real robots: both pose topics, whichever they have)."""
+    array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
+    command_type = 'geometry_msgs/msg/TwistStamped' if model == 'holonomic' else 'geometry_msgs/msg/Twist'
+    topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
+    for i in scenario.agent_ids:
+        if pose_type == 'pose' or not simulated:
+            topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
+        if pose_type == 'odom' or not simulated:
+            topics.append((robot_odom_topic(i), odometry))
+        if simulated:
+            topics.append((robot_true_odom_topic(i), odometry))
+        topics.append((robot_command_topic(i), command_type))
+        topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
+    return topics
+
+
+class FormationCoordinatorNode(Node):
+    """Time keeper and bookkeeper of a run whose world is the robots (or, subclassed, the simulator's)."""
+
+    def __init__(
+        self,
+        *,
+        scenario: Scenario | None = None,
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,
+        node_name: str = 'formation_coordinator',
+    ) -> None:
+        super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
+        source = self.declare_parameter('scenario', '').value
+        horizon = float(self.declare_parameter('horizon', 0.0).value)
+        self.out_dir = str(self.declare_parameter('out_dir', '').value)
+        self.sample_period = float(self.declare_parameter('sample_period', 0.01).value)
+        self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
+        # Nodes outside the run that must hear every Step (monitors, fault injectors): step 0 waits.
+        self.step_listeners = int(self.declare_parameter('step_listeners', 0).value)
+        self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
+        self.discovery_timeout = float(self.declare_parameter('discovery_timeout', 120.0).value)
+        self.executor_kind = str(self.declare_parameter('executor', 'events').value)
+        if self.executor_kind not in EXECUTORS:
+            raise CoordinatorError(f'executor must be one of {EXECUTORS}, got {self.executor_kind!r}')
+        self.clock_mode = self._declare_clock_mode()
+        self.realtime = self.clock_mode == 'realtime'
+        if scenario is None:
+            if not source:
+                raise CoordinatorError("parameter 'scenario' is required (a built-in name or a YAML path)")
+            scenario = load_scenario(source)
+        self.scenario = scenario
+        self.horizon = scenario.horizon if horizon <= 0.0 else horizon
+        if not math.isfinite(self.horizon):
+            raise CoordinatorError(f'horizon must be finite, got {self.horizon!r}')
+        if not (math.isfinite(self.sample_period) and self.sample_period >= 0.0):
+            raise CoordinatorError(f'sample_period must be >= 0 (0: events only), got {self.sample_period!r}')
+        if scenario.dimension > 3:
+            raise CoordinatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+        self.double = scenario.dynamics == 'double'
+        self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
+        self.agents = self.book.agents
+
+        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
+        # For tools: the scenario once (so a bag is self-contained).
+        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
+        self._tool_publishers = [self._scenario_pub]
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
+        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
+        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
+        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
+        self._recorder_sub = self.create_subscription(
+            String,
+            RECORDER_TOPIC,
+            self._on_recorder,
+            READER_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
+        )
+        self._recorders_alive = 0
+        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
+        self._recorder_lease_expired = False
+        self.published: dict[str, int] = {}  # topic -> messages this node published there
+
+        self.step: Step | None = None
+        self.finished = False
+        self.failure: Exception | None = None
+        self.steps = 0
+        self._created = time.monotonic()
+        self._started: float | None = None
+        self._last_progress = self._created
+        self._epoch = 0.0
+        self._finished_at: float | None = None
+        self.graph: dict = {}
+        self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
+        self._setup_world()
+        # One writer per agent whose DDS liveliness is the agent's sign of life.
+        self._agent_writers = self._watch_agents()
+        self._timer = self.create_timer(0.1, self._tick)
+
+    # -- what a subclass with a world of its own replaces ---------------------------------------
+
+    serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+
+    def _declare_clock_mode(self) -> str:
+        return 'realtime'  # robots run on the wall clock
+
+    def _setup_world(self) -> None:
+        """The robots: which topic shows each where it is, and what its scenario position is."""
+        self.robot_model = str(self.declare_parameter('robot', 'holonomic').value)
+        if self.robot_model not in ROBOT_MODELS:
+            raise CoordinatorError(f'robot must be one of {ROBOT_MODELS}, got {self.robot_model!r}')
+        self.control_point_distance = float(self.declare_parameter('control_point_distance', 0.1).value)
+        if self.robot_model == 'unicycle' and not (math.isfinite(self.control_point_distance) and self.control_point_distance > 0.0):
+            raise CoordinatorError(f'control_point_distance must be > 0 for unicycles, got {self.control_point_distance!r}')
+        self.trajectory_source = str(self.declare_parameter('robot_trajectory', 'true_odom').value)
+        if self.trajectory_source not in TRAJECTORY_SOURCES:
+            raise CoordinatorError(f'robot_trajectory must be one of {TRAJECTORY_SOURCES}, got {self.trajectory_source!r}')
+        self.backend = str(self.declare_parameter('backend', 'external').value)
+        if self.robot_model == 'unicycle' and self.scenario.dimension != 2:
+            raise CoordinatorError(f'unicycles move in the plane: the scenario must have p = 2, got p = {self.scenario.dimension}')
+        self.robots = {
+            'version': 1,
+            'backend': self.backend,
+            'model': self.robot_model,
+            'control_point_distance': self.control_point_distance if self.robot_model == 'unicycle' else 0.0,
+            'trajectory': self.trajectory_source,
+            'sample_period': self.sample_period,
+        }
+        self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
+        self._tool_publishers.append(self._robots_pub)
+        topic, kind = {
+            'true_odom': (robot_true_odom_topic, Odometry),
+            'odom': (robot_odom_topic, Odometry),
+            'pose': (robot_pose_topic, PoseStamped),
+        }[self.trajectory_source]
+        if not (math.isfinite(self.sample_period) and self.sample_period > 0.0):
+            raise CoordinatorError(f'sample_period must be > 0 on robots, got {self.sample_period!r}')
+        self._poses: dict[int, list[RobotSample]] = {i: [] for i in self.scenario.agent_ids}
+        self._early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.scenario.agent_ids}
+        self._pose_subs = {
+            i: self.create_subscription(kind, topic(i), lambda msg, agent=i: self._on_pose(msg, agent), POSE_READER_QOS)
+            for i in self.scenario.agent_ids
+        }
+        self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
+
+    def _watch_agents(self) -> dict:
+        """Each agent's triggering information to its first neighbour: its triggering times (one
+        message per trigger and neighbour, stamped with the trigger's time) and its sign of life."""
+        return {
+            i: self.create_subscription(
+                Float64MultiArray,
+                trigger_info_topic(i, min(book.neighbours)),
+                lambda msg, agent=i: self._on_info(msg, agent),
+                READER_QOS,
+                event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)),
+            )
+            for i, book in self.agents.items()
+        }
+
+    def _world_gaps(self) -> list[str]:
+        topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[self.trajectory_source]
+        # The coordinator reads reliable, as the recorder does, so that both see every pose.
+        missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
+        if missing:
+            return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}']
+        # The first sample (t = 0) needs each robot's pose from before it.
+        silent = [i for i, early in self._early.items() if not early]
+        return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}'] if silent else []
+
+    def _begin(self) -> None:
+        """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""
+        self._publish(self._robots_pub, String(data=json.dumps(self.robots, separators=(',', ':'))))
+        self._epoch = time.time()
+        self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
+        self._publish(self._step_pub, encode_step(self.step))
+        for agent, early in self._early.items():
+            self._poses[agent] = [self._sample(msg) for msg in early]
+
+    def _running_tick(self) -> None:
+        t = self.reached_time
+        latest = [samples[-1] if samples else None for samples in self._poses.values()]
+        if all(sample is not None for sample in latest):
+            self.book.check_connectivity(t, np.array([sample.position for sample in latest]))
+        if t >= self.horizon:
+            self._end_at_horizon()
+
+    def _end_at_horizon(self) -> None:
+        self.graph = self.snapshot_graph()
+        self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
+        self._publish(self._step_pub, encode_step(self.step))
+        self.finished = True
+        self._finished_at = time.monotonic()
+        self._reached = self.horizon
+
+    @property
+    def reached_time(self) -> float:
+        """Run time now: wall time since the epoch, never past the horizon (frozen once finished)."""
+        if self.step is None:
+            return 0.0
+        if self.finished:
+            return getattr(self, '_reached', self.horizon)
+        return min(self.horizon, max(0.0, time.time() - self._epoch))
+
+    def after_final_step(self, executor) -> None:
+        """Before the summary: the poses up to the horizon (each robot's first one past it)."""
+        deadline = time.monotonic() + POSES_AFTER_HORIZON
+        end = self.reached_time
+        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in self._poses.values()):
+            executor.spin_once(timeout_sec=0.02)
+
+    def flush(self) -> None:
+        """Anything still to publish before the node goes."""
+
+    def record(self) -> RunRecord:
+        """The run as the coordinator saw it (triggers from the agents' messages, formation from the poses)."""
+        end = self.reached_time
+        trigger_times = {i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()}
+        times = sample_times(end, self.sample_period, [t for ts in trigger_times.values() for t in ts])
+        silent = [i for i, samples in self._poses.items() if not samples]
+        if silent:
+            raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
+        tracks = {i: PoseTrack.from_samples(samples) for i, samples in self._poses.items()}
+        positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
+        return RunRecord(
+            scenario=self.scenario,
+            horizon=self.horizon,
+            mode='robots',
+            trigger_times=trigger_times,
+            sample_times=times,
+            sample_positions=positions,
+            sample_velocities=velocities if self.double else None,
+            messages_sent=sum(self.book.information_sent(i) for i in self.agents),
+            sensing_calls=sum(map(len, trigger_times.values())),
+            wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
+            extra={
+                **self._run_extra(end),
+                **self.book.lateness(trigger_times),
+                'robots': self.robots,
+                'saturation': self.book.saturation(),
+            },
+        )
+
+    def _on_info(self, msg: Float64MultiArray, agent: int) -> None:
+        try:
+            info = decode_trigger_info(msg)
+        except MessageError as error:
+            self._reject(trigger_info_topic(agent, min(self.agents[agent].neighbours)), error.reason, str(error))
+            return
+        if info.sender != agent:
+            self._reject(trigger_info_topic(agent, info.receiver), 'sender', f'information from agent {info.sender} on the topic of agent {agent}')
+            return
+        stamps = self._info_stamps[agent]
+        if info.stamp not in stamps:  # a copy replayed after a rematch (transient local) is no new trigger
+            stamps.add(info.stamp)
+            self.agents[agent].trigger_times.append(info.stamp)
+
+    def _on_pose(self, msg, agent: int) -> None:
+        if self.step is None:  # before t = 0: the last few, for the first sample
+            self._early[agent].append(msg)
+            return
+        self._poses[agent].append(self._sample(msg))
+
+    def _sample(self, msg) -> RobotSample:
+        sample = odometry_sample if isinstance(msg, Odometry) else pose_sample
+        return sample(msg, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch)
+
+    # -- discovery ------------------------------------------------------------------------------
+
+    def _connected(self) -> bool:
+        return not self._discovery_gaps()
+
+    def _discovery_gaps(self) -> list[str]:
+        """What discovery still waits for (empty: step 0 can go)."""
+        n, extra = len(self.agents), self.extra_subscribers
+        gaps = []
+
+        def count(what: str, have: int, want: int) -> None:
+            if have < want:
+                gaps.append(f'{what} {have}/{want}')
+
+        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
+        for pub in self._tool_publishers:
+            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
+        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
+        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
+        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
+        expired = [i for i, book in self.agents.items() if book.lost is not None]
+        for what, agents in (
+            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
+            ('agents whose liveliness lease expired', expired),
+            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
+        ):
+            if agents:
+                gaps.append(f'{what}: {ids_text(agents)}')
+        return gaps + self._world_gaps()
+
+    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if not self.finished:
+            self._check_lost(now)
+        if self.step is None:
+            if self._connected():
+                self._start()
+            elif now - self._created > self.discovery_timeout:
+                raise DiscoveryError(
+                    f'discovery did not complete within {self.discovery_timeout} s; still missing: '
+                    + '; '.join(self._discovery_gaps())
+                )
+            return
+        if self.finished:
+            return
+        self._running_tick()
+        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
+            self._last_progress = now
+            self._print_progress()
+
+    def _start(self) -> None:
+        self._started = time.monotonic()
+        if self.progress_period > 0.0:
+            with contextlib.suppress(OSError):
+                print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
+        self.graph = self.snapshot_graph()
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._begin()
+
+    # -- faults -----------------------------------------------------------------------------------
+
+    def _on_agent_liveliness(self, agent: int, info) -> None:
+        self.book.note_liveliness(
+            agent,
+            alive_count=info.alive_count,
+            not_alive_count_change=info.not_alive_count_change,
+            finished=self.finished,
+            now=time.monotonic(),
+        )
+
+    def _where(self) -> str:
+        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
+
+    def _check_lost(self, now: float) -> None:
+        self._check_recorder_lost(now)
+        error = self.book.lost_error(now, started=self.step is not None, where=self._where())
+        if error is not None:
+            raise error
+
+    def _on_recorder_liveliness(self, info) -> None:
+        if info.alive_count >= self._recorders_alive:
+            self._recorders_alive = info.alive_count
+            self._recorder_lost = None
+        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
+            self._recorder_lease_expired = info.not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
+            self._recorder_lost = (time.monotonic(), how)
+
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
+        try:
+            beat = json.loads(msg.data)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
+            return
+        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
+        self._after_status()
+
+    def _check_recorder_lost(self, now: float) -> None:
+        lost = self._recorder_lost
+        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
+            return
+        raise RecorderLostError(
+            f'the recorder lost {self._where()}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )
+
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
+
+    def _on_status(self, msg: Float64MultiArray) -> None:
+        try:
+            status = decode_status(msg)
+        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
+            self._reject(STATUS_TOPIC, error.reason, str(error))
+            return
+        self.book.accept_status(status)
+        self._after_status()
+
+    def _after_status(self) -> None:
+        """Lock-step settles steps here; the wall clock needs nothing."""
+
+    def _on_report(self, msg: String) -> None:
+        try:
+            report = decode_agent_report(msg)
+        except MessageError as error:
+            self._reject(REPORT_TOPIC, error.reason, str(error))
+            return
+        if (refusal := self.book.accept_report(report)) is not None:
+            self._reject(REPORT_TOPIC, 'field', refusal)
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        count = self.book.count_rejection(reason)
+        if count <= 3 or count % 100 == 0:
+            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        return self.book.rejected
+
+    def final_reports_in(self) -> bool:
+        return self.book.final_reports_in()
+
+    def fail(self, error: BaseException) -> None:
+        """Note why the run stops early (extra.failure of the summary)."""
+        if self.failure_info is not None:
+            return
+        if isinstance(error, CoordinatorError):
+            kind = error.kind
+        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
+            kind = 'interrupted'
+        else:
+            kind = 'error'
+        self.failure_info = {
+            'kind': kind,
+            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
+            'time': getattr(error, 'time', self.reached_time),
+            'step': None if self.step is None else self.step.index,
+            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
+            'detected_by': self.get_name().removeprefix('formation_'),
+        }
+        if isinstance(error, ConnectivityLostError):
+            self.failure_info.update(edge=list(error.edge), length=error.length)
+
+    def _print_progress(self) -> None:
+        events = sum(len(book.trigger_times) for book in self.agents.values())
+        try:
+            print(
+                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+                flush=True,
+            )
+        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
+            self.progress_period = 0.0
+
+    # -- results --------------------------------------------------------------------------------
+
+    def snapshot_graph(self) -> dict:
+        """Publishers, subscriptions, services and clients of every node in the graph."""
+        graph = {}
+        for name, namespace in self.get_node_names_and_namespaces():
+            key = f'{namespace.rstrip("/")}/{name}'
+            graph[key] = {
+                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
+                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
+                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
+                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
+            }
+        return graph
+
+    def _run_extra(self, reached: float) -> dict:
+        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
+        return {
+            'clock': self.clock_mode,
+            'steps': self.steps,
+            'discovery_wall_time': (self._started or self._created) - self._created,
+            'reached_time': reached,
+            'failure': self.failure_info,
+            **self.book.message_counts(),
+            'published': self.book.published(self.published),
+        }
+
+    def _message_counts(self) -> dict:
+        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
+
+    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
+        self.flush()
+        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
+
+    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
+        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
+        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
+        end: what it lacks is counted against the bag after the run)."""
+        deadline = time.monotonic() + timeout_sec
+        pending = list(publishers)
+        while pending and self._recorder_lost is None and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
+            executor.spin_once(timeout_sec=0.0)
+
+    def stop_agents(self, executor) -> None:
+        """The run failed: a final Step sends the agents home, with their final reports."""
+        if self.step is None or not rclpy.ok():
+            return
+        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
+        self._reached = self.reached_time
+        self.finished = True
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
+        self.flush()
+        self.collect_final_reports(executor)
+        # A live agent's final report says it got the final Step; a lost agent is still matched
+        # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
+        publishers = self._tool_publishers
+        if not self.final_reports_in():
+            publishers = (self._step_pub, *publishers)
+        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
+
+    def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
+        """After the final step: wait (bounded) for every live agent's last report."""
+        deadline = time.monotonic() + timeout_sec
+        while not self.final_reports_in() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+
+
+def write_results(node: FormationCoordinatorNode) -> None:
+    """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
+    out = Path(node.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_summary(node.record(), out)
+    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
+
+
+def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordinatorNode] = FormationCoordinatorNode) -> int:
+    """Run one coordinator (or simulator, `node_class`) node until the run ends; its exit status."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = None
+    status = 0
+    with StopSignals() as stop:
+        try:
+            node = node_class()
+            executor = make_executor(node.executor_kind)
+            executor.add_node(node)
+            while not node.finished:
+                executor.spin_once(timeout_sec=0.1)
+                stop.check()
+                if node.failure is not None:
+                    raise node.failure
+            node.collect_final_reports(executor)
+            node.after_final_step(executor)
+            node.wait_for_delivery(executor)
+            if node.progress_period > 0.0:
+                node._print_progress()
+            if node.out_dir:
+                try:
+                    write_results(node)
+                except OSError as error:  # e.g. a full disk: the run itself went well
+                    _tell(f'formation_sim: cannot write the results: {error}')
+                    status = EXIT_FAILED
+        except (KeyboardInterrupt, ExternalShutdownException) as error:
+            status = EXIT_INTERRUPTED
+            _stop_and_write(node, executor, error)
+        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+            if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
+                status = EXIT_INTERRUPTED
+                _stop_and_write(node, executor, KeyboardInterrupt())
+                return status
+            _tell(f'formation_sim: {error}')
+            if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
+                with contextlib.suppress(OSError):
+                    traceback.print_exc(file=sys.stderr)
+            status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
+            _stop_and_write(node, executor, error)
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+    return status
+
+
+def _stop_and_write(node: FormationCoordinatorNode | None, executor, error: BaseException) -> None:
+    """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
+    it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
+    bag ends where the summary does; then the summary of what happened, and why it stopped."""
+    if node is None:
+        return
+    node.fail(error)
+    if executor is not None:
+        try:
+            node.stop_agents(executor)
+        except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+            _tell(f'formation_sim: could not stop the agents: {problem}')
+    if node.step is None or not node.out_dir:
+        return
+    try:
+        write_results(node)
+    except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+        _tell(f'formation_sim: could not write the partial results: {problem}')
+
+
+def _tell(line: str) -> None:
+    """A line on stderr (the run's log), if it can still be written (the disk may be full)."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Simulated robots started on their own, as real robots would be: the world of `formation run
+--backend external` when no real robots are at hand (README, "Running on robots").
+
+```python
+fleet = RobotFleet('robots_square', robots=RobotOptions(model='unicycle'), out_dir='runs/fleet', domain_id=42)  # out_dir new or empty
+fleet.run()   # until Ctrl-C / SIGTERM, fleet.stop(), or `duration`
+```
+
+Each robot is a `robot_node` process (or `robots_per_process` to one) placed at its agent's
+scenario position, in the given ROS domain; the run started there with `--backend external`
+finds them by their topics.  The fleet takes no lock on the domain: the run does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import threading
+import time
+from pathlib import Path
+
+from formation_sim.model.scenario import Scenario, load_scenario
+from formation_sim.runtime.launch import LOG_DIR, LaunchPlan, RobotOptions, RunError
+from formation_sim.runtime.supervise import POLL_PERIOD, Supervisor
+from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
+
+
+class RobotFleet:
+    """The simulated robots of a scenario, each its own process, until stopped."""
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path,
+        *,
+        robots: RobotOptions,
+        out_dir: str | Path | None = None,
+        force: bool = False,
+        domain_id: int,
+        localhost_only: bool = True,
+        extra_env: dict[str, str] | None = None,
+    ) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        if not 0 <= domain_id <= 232:
+            raise RunError(f'domain id must lie in [0, 232], got {domain_id}')
+        robots.check(self.scenario)
+        self.out_dir = None if out_dir is None else Path(out_dir)
+        self.force = force
+        if self.out_dir is not None:
+            try:
+                check_out_dir(self.out_dir, force=force)
+            except RunFolderError as error:
+                raise RunError(str(error)) from None
+        self.domain_id = domain_id
+        self.localhost_only = localhost_only
+        self.extra_env = dict(extra_env or {})
+        self.plan = LaunchPlan(
+            scenario=self.scenario, backend=robots.model, out_dir=self.out_dir, horizon=self.scenario.horizon,
+            clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor='events',
+            step_listeners=0, inject={}, robots=robots,
+        )  # fmt: skip
+        self.supervisor: Supervisor | None = None
+        self.died: list = []  # robot processes that exited on their own
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def run(self, *, duration: float | None = None) -> int:
+        """Start the robots and keep them until stopped; 0, or 3 if a robot process died."""
+        try:
+            out = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='robots', force=self.force)
+        except RunFolderError as error:
+            raise RunError(str(error)) from None
+        self.plan = dataclasses.replace(self.plan, out_dir=out)
+        params = self.plan.write_robot_inputs()
+        env = self.plan.environment(self.domain_id, localhost_only=self.localhost_only, extra_env=self.extra_env)
+        self.supervisor = Supervisor(log_dir=self.plan.out_dir / LOG_DIR, env=env)
+        trapped = threading.current_thread() is threading.main_thread()
+        previous = {sig: signal.signal(sig, lambda *_: self._stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} if trapped else {}
+        status = 0
+        try:
+            for spec in self.plan.robot_processes(params):
+                self.supervisor.start(spec)
+            deadline = None if duration is None else time.monotonic() + duration
+            while not self._stop.is_set() and (deadline is None or time.monotonic() < deadline):
+                self.supervisor.note_exits(time.monotonic())
+                if dead := [c for c in self.supervisor.children if c.exited_at is not None]:
+                    self.died = dead
+                    status = 3
+                    break
+                self.supervisor.note_shm_files()
+                time.sleep(max(POLL_PERIOD, 0.25))
+        finally:
+            self.supervisor.stop((5.0, 3.0), domain_id=self.domain_id)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        return status

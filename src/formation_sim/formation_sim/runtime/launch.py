@@ -1,0 +1,414 @@
+"""The launch plan of a run: its ROS domain and environment, the inputs it writes, the processes it starts.
+
+A backend decides who keeps time and what the world is (README, "Running on robots"):
+
+| backend | time keeper | world | agents sense | extra processes |
+|---|---|---|---|---|
+| `exact` | simulator (`sim_node`, lock-step or wall clock) | the simulator's exact world | its sensing service | – |
+| `holonomic`, `unicycle` | coordinator (`coordinator`, wall clock) | one simulated robot per agent (`robot_node`) | the robots' poses | the robots |
+| `external` | coordinator | whatever publishes the robots' poses and takes their commands | the robots' poses | – |
+
+Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
+told not to, the recorder.  `LaunchPlan.write_inputs` writes what every process reads into the run
+folder, so a run can be started again by hand, on several machines (README, "Agents on separate
+machines"; the external setup).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import importlib.util
+import math
+import os
+import random
+import socket
+from collections.abc import Iterator
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import yaml
+
+from formation_sim.model.scenario import Scenario, dump_scenario
+from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
+
+BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
+POSE_TYPES = ('odom', 'pose')
+DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
+MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
+SCENARIO_FILE = 'scenario.yaml'
+AGENTS_FILE = 'agents.params.yaml'
+RECORDER_FILE = 'recorder.params.yaml'
+ROBOTS_FILE = 'robots.params.yaml'
+BAG_DIR = 'bag'
+LOG_DIR = 'logs'
+INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
+AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
+
+
+class RunError(RuntimeError):
+    """The run could not be set up (bad arguments, no free ROS domain, existing output)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotOptions:
+    """The robots of a robot backend, and what the agents on them are told (their parameters).
+
+    Limits apply twice, as on real robots: the agent saturates its commands (and counts it, the
+    theorems assume no saturation) and the base clips what it is sent.  A unicycle's scenario
+    position is its control point, `control_point_distance` ahead of the axle.
+    """
+
+    model: str = 'unicycle'  # 'holonomic' | 'unicycle' (for `external`: what the robots are)
+    control_point_distance: float = 0.1  # l [m]
+    max_linear_speed: float = math.inf  # [m/s]
+    max_angular_speed: float = math.inf  # [rad/s]
+    max_linear_acceleration: float = math.inf  # [m/s²] (ETA-2)
+    command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
+    pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
+    pose_timeout: float = 0.5  # [s] an older pose stops the agent safely
+    world_frame: str = 'world'
+    # Simulated robots only:
+    rate: float = 100.0  # [Hz]
+    yaw: float = 0.0  # initial heading of every robot [rad]
+    pose_noise: float = 0.0  # σ [m]
+    yaw_noise: float = 0.0  # σ [rad]
+    latency: float = 0.0  # [s] from a pose's measurement to its publication
+    command_latency: float = 0.0  # [s] from a command's arrival to its effect
+    command_timeout: float = 0.5  # [s] a robot without commands for this long stops
+    seed: int = 0
+    robots_per_process: int = 1
+
+    def check(self, scenario: Scenario) -> None:
+        """Raise RunError naming the first option that cannot work with `scenario`."""
+        if self.model not in ROBOT_MODELS:
+            raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
+        if self.model == 'unicycle' and scenario.dimension != 2:
+            raise RunError(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if self.pose_type not in POSE_TYPES:
+            raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
+        try:
+            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed)
+        except RobotError as error:
+            raise RunError(str(error)) from None
+        positive = ('control_point_distance', 'max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
+        for name in positive:
+            if not getattr(self, name) > 0.0:
+                raise RunError(f'{name} must be > 0, got {getattr(self, name)!r}')
+        for name in ('pose_noise', 'yaw_noise', 'latency', 'command_latency'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
+        if not math.isfinite(self.yaw):
+            raise RunError(f'yaw must be finite, got {self.yaw!r}')
+        if self.robots_per_process < 1:
+            raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
+        if not self.world_frame:
+            raise RunError('world_frame must not be empty')
+
+    def agent_parameters(self) -> dict:
+        """What an agent on such a robot is told (formation_agent's robot parameters)."""
+        params = {
+            'sensing': 'poses',
+            'pose_type': self.pose_type,
+            'pose_timeout': float(self.pose_timeout),
+            'robot': self.model,
+            'control_point_distance': float(self.control_point_distance),
+            'command_rate': float(self.command_rate),
+            'world_frame': self.world_frame,
+        }
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration'):
+            if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
+                params[name] = float(getattr(self, name))
+        return params
+
+    def robot_parameters(self, scenario: Scenario, agent_id: int) -> dict:
+        """A simulated robot's parameters (`robot_node.SPECS`), placed at the agent's scenario position."""
+        params = {
+            'robot_id': int(agent_id),
+            'model': self.model,
+            'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
+            'yaw': float(self.yaw),
+            'control_point_distance': float(self.control_point_distance),
+            'rate': float(self.rate),
+            'pose_noise': float(self.pose_noise),
+            'yaw_noise': float(self.yaw_noise),
+            'pose_latency': float(self.latency),
+            'command_latency': float(self.command_latency),
+            'command_timeout': float(self.command_timeout),
+            'seed': int(self.seed),
+            'world_frame': self.world_frame,
+        }
+        for name in ('max_linear_speed', 'max_angular_speed'):
+            if math.isfinite(getattr(self, name)):
+                params[name] = float(getattr(self, name))
+        return params
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProcessSpec:
+    """One process of a run: its name, the arguments after `python`, and how it is expected to end."""
+
+    name: str  # 'simulator', 'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', 'robots_<i>-<j>'
+    args: tuple[str, ...]
+    expected_exit: bool  # leaves by itself when the run completes (else it is stopped)
+    keeper: bool = False  # the run's time keeper: its exit ends the run, its progress lines are shown
+
+
+def _groups(ids: list[int], size: int) -> list[list[int]]:
+    return [ids[start : start + size] for start in range(0, len(ids), size)]
+
+
+def _group_name(kind: str, group: list[int]) -> str:
+    return f'{kind}_{group[0]}' if len(group) == 1 else f'{kind}s_{group[0]}-{group[-1]}'
+
+
+@dataclass(frozen=True, kw_only=True)
+class LaunchPlan:
+    """What a run writes and starts; built and checked before anything touches the disk."""
+
+    scenario: Scenario
+    backend: str
+    out_dir: Path | None  # None until the run claims its folder (FormationRun.run)
+    horizon: float
+    clock: str  # 'lockstep' | 'realtime' (robot backends: always 'realtime')
+    record: bool
+    agents_per_process: int
+    sample_period: float
+    executor: str
+    step_listeners: int
+    inject: dict
+    robots: RobotOptions | None
+
+    @property
+    def keeper(self) -> str:
+        return 'simulator' if self.backend == 'exact' else 'coordinator'
+
+    @property
+    def simulated_robots(self) -> bool:
+        return self.backend in ('holonomic', 'unicycle')
+
+    def agent_groups(self) -> list[list[int]]:
+        return _groups(list(self.scenario.agent_ids), self.agents_per_process)
+
+    def process_count(self) -> int:
+        robots = len(_groups(list(self.scenario.agent_ids), self.robots.robots_per_process)) if self.simulated_robots else 0
+        return len(self.agent_groups()) + 1 + int(self.record) + robots
+
+    # -- inputs ------------------------------------------------------------------------------------
+
+    def recorder_topics(self) -> list[tuple[str, str]]:
+        if self.backend == 'exact':
+            from formation_sim.runtime.sim_node import formation_topics
+
+            return formation_topics(self.scenario)
+        from formation_sim.runtime.coordinator import robot_run_topics
+
+        return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
+
+    def counted_topics(self) -> set[str]:
+        """The recorded topics whose messages the run's nodes count (summary.json extra.published):
+        all but a robot's own (its poses, and the velocity commands it takes)."""
+        from formation_msgs_py.topics import robot_command_topic, robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        robot = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic, robot_command_topic)}
+        return {name for name, _ in self.recorder_topics()} - robot
+
+    def write_inputs(self) -> dict[str, Path]:
+        """scenario.yaml and the params files every process reads; their paths by role."""
+        from formation_agent.ros.node import NODE_NAME
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.sim_node import agent_parameters
+
+        out = self.out_dir
+        (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        paths = {'scenario': out / SCENARIO_FILE}
+        dump_scenario(self.scenario, paths['scenario'])  # every float kept bit for bit
+        extra = 1 if self.record else 0
+        injected = {f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()}
+        on_robots = self.robots.agent_parameters() if self.robots is not None else {}
+        agents = {
+            f'{agent_namespace(i)}/{NODE_NAME}': {
+                'ros__parameters': {
+                    **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
+                    **injected,
+                    **on_robots,
+                }
+            }
+            for i in self.scenario.agent_ids
+        }
+        paths['agents'] = out / AGENTS_FILE
+        _write_yaml(paths['agents'], agents)
+        if self.record:
+            recorder = {
+                '/formation_recorder': {
+                    'ros__parameters': {
+                        'output': str((out / BAG_DIR).resolve()),
+                        'topics': [f'{name}:{msgtype}' for name, msgtype in self.recorder_topics()],
+                        # Robots: wall-clock stamps (run time is in the messages' headers and Step 0).
+                        **({} if self.backend == 'exact' else {'clock_topic': ''}),
+                    }
+                }
+            }
+            paths['recorder'] = out / RECORDER_FILE
+            _write_yaml(paths['recorder'], recorder)
+        if self.simulated_robots:
+            paths['robots'] = self.write_robot_inputs()
+        return paths
+
+    def write_robot_inputs(self) -> Path:
+        """robots.params.yaml: every simulated robot's parameters, keyed by its node name."""
+        from formation_msgs_py.topics import agent_namespace
+        from formation_sim.runtime.robot_node import NODE_NAME
+
+        (self.out_dir / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        robots = {
+            f'{agent_namespace(i)}/{NODE_NAME}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
+            for i in self.scenario.agent_ids
+        }
+        path = self.out_dir / ROBOTS_FILE
+        _write_yaml(path, robots)
+        return path
+
+    # -- processes ---------------------------------------------------------------------------------
+
+    def processes(self, paths: dict[str, Path]) -> list[ProcessSpec]:
+        """Every process in the order it starts: recorder, robots, time keeper, agents."""
+        specs = []
+        if self.record:
+            specs.append(ProcessSpec(name='recorder', args=('-m', 'formation_sim.runtime.recorder', '--ros-args', '--params-file', str(paths['recorder'])), expected_exit=False))
+        if self.simulated_robots:
+            specs += self.robot_processes(paths['robots'])
+        specs.append(ProcessSpec(name=self.keeper, args=self._keeper_args(paths), expected_exit=True, keeper=True))
+        for group in self.agent_groups():
+            args = ('-m', AGENT_MODULE, '--agents', ','.join(map(str, group)), '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents']))
+            specs.append(ProcessSpec(name=_group_name('agent', group), args=args, expected_exit=True))
+        return specs
+
+    def robot_processes(self, params_file: Path) -> list[ProcessSpec]:
+        """The simulated robots, `robots_per_process` to a process; they run until stopped."""
+        specs = []
+        for group in _groups(list(self.scenario.agent_ids), self.robots.robots_per_process):
+            args = ('-m', 'formation_sim.runtime.robot_node', '--robots', ','.join(map(str, group)), '--ros-args', '--params-file', str(params_file))
+            specs.append(ProcessSpec(name=_group_name('robot', group), args=args, expected_exit=False))
+        return specs
+
+    def _keeper_args(self, paths: dict[str, Path]) -> tuple[str, ...]:
+        module = 'formation_sim.runtime.sim_node' if self.backend == 'exact' else 'formation_sim.runtime.coordinator'
+        args = [
+            '-m', module, '--ros-args',
+            '-p', f'scenario:={paths["scenario"].resolve()}',
+            '-p', f'horizon:={self.horizon!r}',
+            '-p', f'out_dir:={self.out_dir.resolve()}',
+            '-p', f'sample_period:={float(self.sample_period)!r}',
+            '-p', f'extra_subscribers:={1 if self.record else 0}',
+            '-p', f'step_listeners:={self.step_listeners}',
+            '-p', f'executor:={self.executor}',
+            # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
+            '-p', f'discovery_timeout:={max(120.0, float(len(self.scenario.agent_ids)))!r}',
+        ]  # fmt: skip
+        if self.backend == 'exact':
+            args += ['-p', f'clock_mode:={self.clock}']
+        else:
+            robots = self.robots
+            args += [
+                '-p', f'backend:={self.backend}',
+                '-p', f'robot:={robots.model}',
+                '-p', f'control_point_distance:={float(robots.control_point_distance)!r}',
+                # Simulated robots: the formation as it truly is; real ones: as measured.
+                '-p', f'robot_trajectory:={"true_odom" if self.simulated_robots else robots.pose_type}',
+            ]  # fmt: skip
+        return tuple(args)
+
+    # -- environment -------------------------------------------------------------------------------
+
+    def environment(self, domain_id: int, *, localhost_only: bool, extra_env: dict[str, str]) -> dict[str, str]:
+        """The environment of every child: its ROS domain, logs, discovery range, our packages."""
+        env = dict(os.environ)
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+        env['ROS_LOG_DIR'] = str((self.out_dir / LOG_DIR / 'ros').resolve())
+        env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
+        env['PYTHONUNBUFFERED'] = '1'
+        if localhost_only:
+            env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        else:
+            env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
+        if self.process_count() > MANY_PROCESSES:
+            env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
+        env.update(extra_env)
+        return with_our_packages(env)
+
+
+def with_our_packages(env: dict[str, str]) -> dict[str, str]:
+    """`env` whose PYTHONPATH lets a child find these packages the way this process did."""
+    here = [
+        str(Path(next(iter(importlib.util.find_spec(name).submodule_search_locations))).resolve().parent)
+        for name in ('formation_msgs_py', 'formation_agent', 'formation_sim')
+    ]
+    env['PYTHONPATH'] = os.pathsep.join(dict.fromkeys(here + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]))
+    return env
+
+
+def _write_yaml(path: Path, data: dict) -> None:
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding='utf-8')
+
+
+# -- ROS domain -----------------------------------------------------------------------------------
+
+
+def _domain_ports(domain_id: int) -> tuple[int, int]:
+    """Fast DDS unicast ports of participant 0 in `domain_id` (RTPS port mapping)."""
+    base = 7400 + 250 * domain_id
+    return base + 10, base + 11
+
+
+def _ports_free(domain_id: int) -> bool:
+    for port in _domain_ports(domain_id):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('', port))
+            except OSError:
+                return False
+    return True
+
+
+@contextlib.contextmanager
+def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None) -> Iterator[int]:
+    """Hold a ROS domain id for the duration of the block (a lock file; the ports unused).
+
+    With `domain_id` the caller pins the id; it is still locked against other runs.
+    """
+    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    low, high = DOMAIN_RANGE
+    if domain_id is not None:
+        if not 0 <= domain_id <= high:
+            raise RunError(f'domain id must lie in [0, {high}], got {domain_id}')
+        candidates = [domain_id]
+    else:
+        candidates = list(range(low, high + 1))
+        start = random.randrange(len(candidates))
+        candidates = candidates[start:] + candidates[:start]
+    for candidate in candidates:
+        handle = open(lock_dir / f'{candidate}.lock', 'w')  # noqa: SIM115 - held while running
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        if domain_id is None and not _ports_free(candidate):
+            handle.close()
+            continue
+        try:
+            yield candidate
+        finally:
+            handle.close()
+        return
+    if domain_id is not None:
+        raise RunError(f'ROS domain {domain_id} is held by another formation run')
+    raise RunError(f'no free ROS domain in {low}-{high}')

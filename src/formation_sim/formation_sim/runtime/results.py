@@ -1,0 +1,201 @@
+"""What a run leaves behind: the result of `FormationRun.run`, and the summary as the orchestrator
+completes it (its view of a failure, a bag rebuilt when it was left unfinished, what the run
+published against what its bag holds, a summary of what is known when the time keeper left none)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from formation_sim.runtime.supervise import Child, describe_exit
+
+# Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_LOST = 3  # a process of the run died or an agent was lost
+EXIT_INTERRUPTED = 130
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChildExit:
+    name: str
+    pid: int
+    returncode: int | None  # None: did not exit by itself and had to be stopped
+    signal_used: str | None  # the last signal sent to stop it, if any
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunResult:
+    """What a run left behind and how it ended."""
+
+    out_dir: Path
+    summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
+    bag: Path | None  # DIR/bag, None if not recorded or not readable
+    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 130 interrupted
+    domain_id: int
+    wall_time: float
+    children: tuple[ChildExit, ...] = ()
+    message: str = ''
+    failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
+    bag_recovered: bool = False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
+
+    @property
+    def ok(self) -> bool:
+        return self.exit_status == 0
+
+
+def lost_or_failed(child: Child) -> int:
+    """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
+    return EXIT_FAILED if child.failed_itself else EXIT_LOST
+
+
+def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
+    """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file."""
+    if not bag.is_dir():
+        return False
+    from formation_sim.bag.io import BagError
+    from formation_sim.bag.recovery import reindex
+
+    died = recorder is not None and recorder.process.returncode not in (0, None)
+    how = 'the recorder died: its bag' if died else 'the bag, left unfinished,'
+    try:
+        recovery = reindex(bag)
+    except (BagError, OSError) as error:
+        notes.append(f'{how} could not be recovered: {error}')
+        return False
+    if recovery.healthy:
+        return False
+    notes.append(f'{how} was recovered ({recovery.message_count} messages kept)')
+    return True
+
+
+def read_summary(path: Path, notes: list[str]) -> dict | None:
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding='utf-8'))
+    except (OSError, ValueError) as error:
+        notes.append(f'{path} could not be read ({error}): replaced by what the run knows')
+        return None
+
+
+def process_info(child: Child, *, launched: float) -> dict:
+    """extra.failure.process: a child and how it ended (`launched`: the run's monotonic start)."""
+    return {
+        'name': child.name,
+        'pid': child.pid,
+        'returncode': child.process.returncode,
+        'exit': describe_exit(child.process.returncode),
+        'seconds_after_launch': (child.exited_at or time.monotonic()) - launched,
+        'error': child.error_line(),
+    }
+
+
+def summary_of_what_is_known(
+    keeper: Child, *, scenario, horizon: float, mode: str, bag: Path, run_dir: Path, status: int, last_progress: str,
+    children: list[Child], launched: float, notes: list[str],
+) -> dict:  # fmt: skip
+    """summary.json when the time keeper left none (killed hard, or it could not write): the
+    failure, the last run time and step of its progress, the processes, and the run as far as
+    the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
+    from formation_sim.sim.summary import SCHEMA, build_summary
+
+    progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)}
+    stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
+    killed = keeper.process.returncode is None or keeper.process.returncode < 0
+    failure = {
+        'kind': 'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
+        'message': f'{keeper.name} (pid {keeper.pid}) {describe_exit(keeper.process.returncode)}',
+        'agents': [],
+        'time': progress.get('t'),  # its last progress line (once a second, 6 decimals)
+        'step': int(progress['steps']) if 'steps' in progress else None,
+        'wall_time': progress.get('wall'),
+        'detected_by': 'orchestrator',
+        'process': process_info(keeper, launched=launched),
+    }
+    data = None
+    if (bag / 'metadata.yaml').is_file():
+        from formation_sim.analysis.load import AnalysisError, load_bag_run
+
+        try:
+            data = build_summary(load_bag_run(bag, run_dir=run_dir, scenario=scenario).record)
+            data['wall_time'] = None
+            source = f'orchestrator: the {keeper.name} left no summary; the run as far as its bag holds it'
+        except (AnalysisError, ValueError) as error:
+            notes.append(f'the bag could not be read back: {error}')
+    if data is None:
+        data = {
+            'schema': SCHEMA,
+            'scenario': scenario.name,
+            'dynamics': scenario.dynamics,
+            'mode': mode,
+            'horizon': horizon,
+            'n_agents': len(scenario.agent_ids),
+            'dimension': scenario.dimension,
+            'delta': scenario.delta,
+            'wall_time': None,
+            'extra': {},
+        }
+        source = f'orchestrator: the {keeper.name} left no summary and there is no readable bag'
+    data['extra'].update(
+        failure=failure,
+        summary_source=source,
+        processes={c.name: describe_exit(c.process.returncode) for c in children},
+    )
+    return data
+
+
+def annotate(data: dict, lost: Child | None, status: int, message: str, *, launched: float) -> dict | None:
+    """Add the orchestrator's view of a failure to the summary's extra.failure; return it."""
+    extra = data.setdefault('extra', {})
+    failure = extra.get('failure')
+    if failure is None and status == EXIT_OK:
+        return None
+    if failure is None:  # the time keeper completed, but a child failed
+        failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
+    if lost is not None:
+        failure['process'] = process_info(lost, launched=launched)
+        if failure['kind'] == 'interrupted':  # stopped by us because of that child
+            failure['kind'] = 'process_failed' if lost.failed_itself else 'process_lost'
+            failure['message'] = lost.describe()
+        elif failure['kind'] == 'agent_lost' and lost.failed_itself:
+            failure['kind'] = 'agent_failed'
+            failure['message'] = f'{lost.describe()}; {failure["message"]}'
+        if 'orchestrator' not in failure['detected_by']:
+            failure['detected_by'] += ', orchestrator'
+    extra['failure'] = failure
+    return failure
+
+
+def strangers(topics: dict[str, int], graph_file: Path, own_nodes: set[str], domain_id: int) -> str:
+    """'; nodes outside the run wrote on them: /formation_replay (ROS domain 64)', as graph.json saw them."""
+    try:
+        graph = json.loads(graph_file.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        graph = {}
+    found = sorted(node for node, ends in graph.items() if node not in own_nodes and set(ends.get('publishers', ())) & set(topics))
+    return f'; nodes outside the run wrote on them: {", ".join(found)} (ROS domain {domain_id})' if found else ''
+
+
+def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
+    """What the run published on the `counted` topics (those its nodes count: not a robot's poses,
+    nor the commands to it) against what its bag holds (extra.recording); None without a bag or
+    counts."""
+    published = data.get('extra', {}).get('published')
+    if not published or not (bag / 'metadata.yaml').is_file():
+        return None
+    from formation_sim.analysis.accounting import check_recording as check
+
+    published = {topic: n for topic, n in published.items() if topic in counted}
+    try:
+        result = check(published, bag)
+    except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
+        notes.append(f'the bag could not be checked against what the run published: {error}')
+        return None
+    result = dataclasses.replace(result, foreign={topic: n for topic, n in result.foreign.items() if topic in counted})
+    data['extra']['recording'] = result.to_dict()
+    return result

@@ -1,0 +1,316 @@
+"""A simulated robot: what the `holonomic` and `unicycle` backends of `formation run` put under
+each agent, as a swarm stack's simulation backend stands in for its hardware.
+
+Each robot is its own node (`/agent_<i>/simulated_robot`, its own process by default) and talks to
+its agent only as a real robot would (README, "Running on robots"; names in
+`formation_msgs_py.topics`):
+
+- it takes velocity commands on `/agent_<i>/robot/cmd_vel`: `geometry_msgs/TwistStamped` in the
+  world frame (`header.frame_id` = `world_frame`) for a holonomic robot, `geometry_msgs/Twist`
+  (v = linear.x, ω = angular.z) in its body frame for a unicycle (differential drive);
+- it publishes its pose at `rate` Hz (100 by default): `geometry_msgs/PoseStamped` on
+  `/agent_<i>/robot/pose` and `nav_msgs/Odometry` on `/agent_<i>/robot/odom` (pose in the world
+  frame, twist in the body frame, REP 105), with seeded Gaussian noise (`pose_noise`, `yaw_noise`)
+  and `pose_latency` s late (stamped with the time of the measurement);
+- for tools only, the noise-free state on `/agent_<i>/robot/true_odom` (the run's summary and
+  `formation analyze` measure the formation on it; an agent never reads it).
+
+Between ticks the robot moves exactly under the command it holds (`formation_sim.sim.robots`: a
+straight line, or the closed-form arc of a unicycle); a command takes effect at the first tick
+at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
+`max_angular_speed` as a real base clips it.  A robot whose commands stop coming (its agent died,
+the network broke) stops after `command_timeout` s, as real bases do.
+
+Time is the wall clock (`time.time()`, the clock of the Step 0 epoch the agents time their
+triggers from), so poses line up with the run on one machine and on machines whose clocks agree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import traceback
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from formation_agent.ros.parameters import (
+    BOOL,
+    DOUBLE,
+    DOUBLE_ARRAY,
+    INTEGER,
+    STRING,
+    ParameterSpec,
+    declare_parameters,
+    parameter_help,
+)
+from formation_agent.ros.process import StopSignals, make_executor
+from formation_msgs_py.topics import (
+    agent_namespace,
+    robot_command_topic,
+    robot_odom_topic,
+    robot_pose_topic,
+    robot_true_odom_topic,
+)
+from formation_sim.sim.robots import (
+    ROBOT_MODELS,
+    Command,
+    Limits,
+    PoseNoise,
+    RobotError,
+    make_robot,
+    quaternion_from_yaw,
+)
+
+NODE_NAME = 'simulated_robot'
+
+# A robot's topics keep ROS's default profile (reliable, volatile, keep last 10), what mobile bases
+# and motion-capture bridges use: a command stream supersedes itself, a late joiner wants no old
+# poses.  Reliable, so the recorder (a reliable reader) matches and records them.
+ROBOT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+SPECS = (
+    ParameterSpec(name='robot_id', type=INTEGER, description='id i of the agent this robot carries', low=0),
+    ParameterSpec(name='model', type=STRING, default='unicycle', description='kinematics', choices=ROBOT_MODELS),
+    ParameterSpec(
+        name='position', type=DOUBLE_ARRAY,
+        description="initial position in the scenario's sense [m] (a unicycle: its control point)",
+    ),
+    ParameterSpec(name='yaw', type=DOUBLE, default=0.0, description='initial heading θ [rad]'),
+    ParameterSpec(
+        name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, low_open=True,
+        description='unicycle: distance l of the control point ahead of the axle [m]',
+    ),
+    ParameterSpec(name='rate', type=DOUBLE, default=100.0, low=0.0, low_open=True, description='ticks (pose publications) per second [Hz]'),
+    ParameterSpec(name='max_linear_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='speed limit [m/s]'),
+    ParameterSpec(name='max_angular_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='turn-rate limit [rad/s]'),
+    ParameterSpec(name='pose_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on each position axis [m]'),
+    ParameterSpec(name='yaw_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on the heading [rad]'),
+    ParameterSpec(
+        name='pose_latency', type=DOUBLE, default=0.0, low=0.0,
+        description='delay between a measurement and its publication [s] (stamped with the measurement time)',
+    ),
+    ParameterSpec(name='command_latency', type=DOUBLE, default=0.0, low=0.0, description='delay before a command takes effect [s]'),
+    ParameterSpec(
+        name='command_timeout', type=DOUBLE, default=0.5, low=0.0, low_open=True,
+        description='stop when no command has come for this long [s]',
+    ),
+    ParameterSpec(name='seed', type=INTEGER, default=0, description='seed of the pose noise (one stream per robot)'),
+    ParameterSpec(name='world_frame', type=STRING, default='world', description='frame of poses and holonomic commands'),
+    ParameterSpec(name='publish_truth', type=BOOL, default=True, description='also publish the noise-free state on robot/true_odom'),
+)  # fmt: skip
+
+
+class SimulatedRobotNode(Node):
+    """One kinematic robot (holonomic or unicycle) at a fixed rate, talking only poses and commands."""
+
+    def __init__(self, *, namespace: str | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
+        super().__init__(NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context)
+        p = declare_parameters(self, SPECS)
+        self.robot_id = int(p['robot_id'])
+        name = self.get_fully_qualified_name()
+        try:
+            self.robot = make_robot(
+                p['model'],
+                scenario_position=p['position'],
+                yaw=float(p['yaw']),
+                control_point_distance=float(p['control_point_distance']),
+                limits=Limits(linear=float(p['max_linear_speed']), angular=float(p['max_angular_speed'])),
+            )
+            self.noise = PoseNoise(
+                position_sigma=float(p['pose_noise']), yaw_sigma=float(p['yaw_noise']), seed=int(p['seed']), robot_id=self.robot_id
+            )
+        except RobotError as error:
+            raise RobotError(f'{name}: {error}') from None
+        self.world_frame = str(p['world_frame'])
+        self.body_frame = f'{agent_namespace(self.robot_id).lstrip("/")}/base_link'
+        self.pose_latency = float(p['pose_latency'])
+        self.command_latency = float(p['command_latency'])
+        self.command_timeout = float(p['command_timeout'])
+        self.holonomic = self.robot.model == 'holonomic'
+
+        self._pose_pub = self.create_publisher(PoseStamped, robot_pose_topic(self.robot_id), ROBOT_QOS)
+        self._odom_pub = self.create_publisher(Odometry, robot_odom_topic(self.robot_id), ROBOT_QOS)
+        self._truth_pub = self.create_publisher(Odometry, robot_true_odom_topic(self.robot_id), ROBOT_QOS) if p['publish_truth'] else None
+        self._command_sub = self.create_subscription(
+            TwistStamped if self.holonomic else Twist, robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
+        )
+        self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
+        self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = deque()  # pose_latency queue
+        self._last_command_at: float | None = None  # arrival of the command the robot holds
+        self.commands_received = 0
+        self.commands_refused = 0
+        self.timeouts = 0  # times the robot stopped because commands stopped coming
+        self._last_tick = time.time()
+        self._timer = self.create_timer(1.0 / float(p['rate']), self._tick)
+
+    # -- commands -------------------------------------------------------------------------------
+
+    def _on_command(self, msg) -> None:
+        now = time.time()
+        p = self.robot.dimension
+        if self.holonomic:
+            if msg.header.frame_id != self.world_frame:
+                self.commands_refused += 1
+                if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
+                    self.get_logger().warning(
+                        f'refused a command in frame {msg.header.frame_id!r}: this holonomic robot takes world-frame '
+                        f'velocities in {self.world_frame!r} ({self.commands_refused} refused so far)'
+                    )
+                return
+            twist = msg.twist
+            command = Command(linear=(twist.linear.x, twist.linear.y, twist.linear.z)[:p], angular=twist.angular.z)
+        else:
+            command = Command(linear=(msg.linear.x,), angular=msg.angular.z)
+        values = (*command.linear, command.angular)
+        if not all(math.isfinite(v) for v in values):
+            self.commands_refused += 1
+            self.get_logger().warning(f'refused a command with a non-finite value: {values}')
+            return
+        self.commands_received += 1
+        self._commands.append((now, command))
+
+    def _take_command(self, now: float) -> None:
+        """The newest command that has arrived at least `command_latency` ago, else a stop on timeout."""
+        due = None
+        while self._commands and self._commands[0][0] + self.command_latency <= now:
+            due = self._commands.popleft()
+        if due is not None:
+            self._last_command_at = due[0]
+            self.robot.set_command(due[1])
+            return
+        held = self.robot.command
+        if held is not None and not held.is_zero and self._last_command_at is not None:
+            if now - self._last_command_at > self.command_timeout + self.command_latency:
+                self.timeouts += 1
+                self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
+                self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
+
+    # -- ticks ----------------------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        now = time.time()
+        self.robot.advance(max(0.0, now - self._last_tick))  # exact, under the command held since the last tick
+        self._last_tick = now
+        position, yaw = self.robot.position.copy(), self.robot.yaw
+        linear, angular = self._body_twist()
+        if self._truth_pub is not None:
+            self._truth_pub.publish(self._odometry(now, position, yaw, linear, angular, sigma=(0.0, 0.0)))
+        measured, measured_yaw = self.noise.measure(position, yaw)
+        self._measurements.append((now, measured, measured_yaw, linear, angular))
+        while self._measurements and self._measurements[0][0] + self.pose_latency <= now:
+            stamp, where, heading, body_linear, body_angular = self._measurements.popleft()
+            odometry = self._odometry(stamp, where, heading, body_linear, body_angular, sigma=(self.noise.position_sigma, self.noise.yaw_sigma))
+            self._odom_pub.publish(odometry)
+            if self._pose_pub.get_subscription_count():  # most readers take the odometry
+                self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
+        self._take_command(now)  # held from now to the next tick
+
+    def _body_twist(self) -> tuple[np.ndarray, float]:
+        """The velocity in the body frame (REP 105: Odometry's twist is in child_frame_id)."""
+        command = self.robot.command
+        angular = 0.0 if command is None else command.angular
+        if not self.holonomic:
+            return np.array([0.0 if command is None else command.linear[0], 0.0, 0.0]), angular
+        world = np.zeros(3)
+        world[: self.robot.dimension] = self.robot.world_velocity()
+        c, s = math.cos(self.robot.yaw), math.sin(self.robot.yaw)
+        return np.array([c * world[0] + s * world[1], -s * world[0] + c * world[1], world[2]]), angular
+
+    def _odometry(self, stamp: float, position: np.ndarray, yaw: float, linear: np.ndarray, angular: float, *, sigma) -> Odometry:
+        msg = Odometry()
+        seconds = math.floor(stamp)
+        msg.header.stamp.sec = int(seconds)
+        msg.header.stamp.nanosec = min(999_999_999, round((stamp - seconds) * 1e9))
+        msg.header.frame_id = self.world_frame
+        msg.child_frame_id = self.body_frame
+        pose = msg.pose.pose
+        where = np.zeros(3)
+        where[: position.size] = position
+        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in where)
+        q = quaternion_from_yaw(yaw)
+        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
+        position_variance, yaw_variance = sigma[0] ** 2, sigma[1] ** 2
+        covariance = [0.0] * 36
+        for k in range(3):
+            covariance[7 * k] = position_variance
+        covariance[35] = yaw_variance
+        msg.pose.covariance = covariance
+        msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.linear.z = (float(v) for v in linear)
+        msg.twist.twist.angular.z = float(angular)
+        return msg
+
+
+def _parse(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog='formation_robot',
+        description='Simulated kinematic robots (holonomic or unicycle) for formation runs: each takes velocity '
+        'commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
+        epilog=parameter_help(SPECS) + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
+        '(formation run --backend unicycle writes robots.params.yaml).',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        '--robots',
+        help='comma-separated robot ids to run in this process, each in namespace /agent_<i> '
+        '(default: one node whose namespace and parameters come from the ROS arguments)',
+    )
+    return parser.parse_args(list(argv))
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    argv = list(args if args is not None else sys.argv)
+    options = _parse(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    nodes: list[SimulatedRobotNode] = []
+    status = 0
+    with StopSignals() as stop:
+        try:
+            if options.robots:
+                for robot_id in (int(text) for text in options.robots.split(',') if text.strip()):
+                    nodes.append(
+                        SimulatedRobotNode(
+                            namespace=agent_namespace(robot_id),
+                            parameter_overrides=[Parameter('robot_id', Parameter.Type.INTEGER, robot_id)],
+                        )
+                    )
+            else:
+                nodes.append(SimulatedRobotNode())
+            executor = make_executor('events')
+            for node in nodes:
+                executor.add_node(node)
+            while True:  # a robot runs until it is stopped, as a real one does
+                executor.spin_once(timeout_sec=0.1)
+                stop.check()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            status = 0
+        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
+            if stop.received.is_set() or not rclpy.ok():
+                return 0
+            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+            traceback.print_exc(file=sys.stderr)
+            status = 1
+        finally:
+            for node in nodes:
+                node.get_logger().info(
+                    f'commands received {node.commands_received}, refused {node.commands_refused}, '
+                    f'clipped by the limits {node.robot.saturated}, stops on timeout {node.timeouts}'
+                )
+                node.destroy_node()
+            rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())

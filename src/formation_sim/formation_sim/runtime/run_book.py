@@ -1,0 +1,325 @@
+"""The bookkeeping of a distributed run: what the coordinator knows of every agent.
+
+`RunBook` holds, per agent, its latest Status, its reports, its triggering times and its signs of
+life, and answers the coordinator's questions (docs/MESSAGES.md): is the lock-step step settled,
+which agents are due next, who is lost, did an edge reach Δ, what goes into summary.json's
+`extra`.  The nodes (`coordinator.FormationCoordinatorNode`, `sim_node.FormationSimulatorNode`)
+only move messages in and out of it.
+
+Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
+`extra.failure.kind` in summary.json.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
+from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE
+from formation_msgs_py.topics import trigger_info_topic
+from formation_sim.sim.summary import lateness_extra, saturation_extra
+
+
+class CoordinatorError(RuntimeError):
+    """The distributed run cannot go on: a protocol violation, a stall, or a dead peer."""
+
+    kind = 'protocol'  # extra.failure.kind in summary.json
+
+
+class StallError(CoordinatorError):
+    """No step settled within the stall timeout."""
+
+    kind = 'stall'
+
+
+class DiscoveryError(CoordinatorError):
+    """The agents did not all connect within the discovery timeout."""
+
+    kind = 'discovery'
+
+
+class ConnectivityLostError(CoordinatorError):
+    """An edge of the graph reached the communication radius Δ in the true world."""
+
+    kind = 'connectivity_lost'
+
+    def __init__(self, message: str, *, time: float, edge: tuple[int, int], length: float) -> None:
+        super().__init__(message)
+        self.time = time
+        self.edge = edge
+        self.length = length
+
+
+class RecorderLostError(CoordinatorError):
+    """A recorder stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'recorder_lost'
+
+
+class AgentLostError(CoordinatorError):
+    """One or more agents stopped showing signs of life (or left) before the end of the run."""
+
+    kind = 'agent_lost'
+
+    def __init__(self, message: str, *, agents: list[int]) -> None:
+        super().__init__(message)
+        self.agents = agents
+
+
+def ids_text(agents: list[int], *, most: int = 20) -> str:
+    """Agent ids for a message, the first `most` of a long list."""
+    shown = ', '.join(map(str, agents[:most]))
+    return shown + (f', … ({len(agents)} in all)' if len(agents) > most else '')
+
+
+@dataclass
+class AgentBook:
+    """What the coordinator knows of one agent: its latest status and what it received from it."""
+
+    neighbours: tuple[int, ...]
+    status: Status | None = None
+    expected_triggers: int = 0
+    commands_received: int = 0
+    sensed_at_step: int = -1
+    trigger_times: list[float] = field(default_factory=list)
+    planned: dict[int, float] = field(default_factory=dict)  # wall clock: trigger number -> its planned time
+    report: AgentReport | None = None  # its latest report (rejected and injected messages)
+    alive: bool = False  # its watched writer is matched and alive (DDS liveliness)
+    lost: tuple[float, str] | None = None  # (monotonic time, how) once that writer went away
+    lease_expired: bool = False  # how it went: its lease expired (else its writer was deleted)
+
+
+class RunBook:
+    """Every agent's book, and the rules the coordinator applies to them."""
+
+    def __init__(self, scenario, *, realtime: bool, serves_sensing: bool = True) -> None:
+        self.scenario = scenario
+        self.realtime = realtime
+        # A simulator serves the sensing, so it knows how often each agent was due before the
+        # agent reports; a coordinator learns the triggers from the agents' own messages.
+        self.serves_sensing = serves_sensing
+        self.agents = {i: AgentBook(neighbours=tuple(scenario.neighbours(i))) for i in scenario.agent_ids}
+        self.rejected: dict[str, int] = {}  # malformed messages the coordinator itself refused
+        index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+        self._edge_rows = (
+            np.array([index[e.i] for e in scenario.edges], dtype=int),
+            np.array([index[e.j] for e in scenario.edges], dtype=int),
+        )
+
+    # -- messages ---------------------------------------------------------------------------------
+
+    def count_rejection(self, reason: str) -> int:
+        """Count a message refused for `reason`; return how many so far."""
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+        return self.rejected[reason]
+
+    def accept_status(self, status: Status) -> bool:
+        """Take an agent's Status; True when it reports a new trigger.  Raises CoordinatorError for
+        a Status no working agent sends (unknown agent, counters going back, too many triggers)."""
+        book = self.agents.get(status.agent)
+        if book is None:
+            raise CoordinatorError(f'status from agent {status.agent}, which is not in the scenario {sorted(self.agents)}')
+        previous = book.status
+        if previous is not None and (
+            status.step_index < previous.step_index
+            or status.info_sent < previous.info_sent
+            or status.info_received < previous.info_received
+            or status.triggers < previous.triggers
+        ):
+            raise CoordinatorError(f'agent {status.agent}: status went backwards from {previous} to {status}')
+        if self.serves_sensing and status.triggers > book.expected_triggers:
+            raise CoordinatorError(
+                f'agent {status.agent} reports {status.triggers} triggers, but was due {book.expected_triggers} times'
+            )
+        new_trigger = (previous is None or status.triggers > previous.triggers) and status.triggers > 0
+        if new_trigger:
+            self._check_planned(status, book)
+        book.status = status
+        return new_trigger
+
+    def _check_planned(self, status: Status, book: AgentBook) -> None:
+        """A new trigger: lock-step, it must be the step's time; wall clock, when it was planned for."""
+        if self.realtime:
+            book.planned[status.triggers] = status.last_planned
+            return
+        t = book.trigger_times[status.triggers - 1]
+        if status.last_planned != t:
+            raise CoordinatorError(f'agent {status.agent} triggered for t={status.last_planned!r} at step time t={t!r}')
+
+    def accept_report(self, report: AgentReport) -> str | None:
+        """Take an agent's report; the reason it is refused, or None."""
+        book = self.agents.get(report.agent)
+        if book is None:
+            return f'report of agent {report.agent}, not in the scenario'
+        if book.report is None or not book.report.final:
+            book.report = report
+        return None
+
+    def final_reports_in(self) -> bool:
+        """Every agent still alive has sent its final report."""
+        return all(book.report is not None and book.report.final for book in self.agents.values() if book.lost is None)
+
+    # -- discovery and lost agents ----------------------------------------------------------------
+
+    def not_ready(self) -> list[int]:
+        """Agents that have not yet said all their endpoints are matched (discovery)."""
+        return [
+            i for i, book in self.agents.items()
+            if book.status is None or book.status.step_index != DISCOVERY_STEP or not book.status.ready
+        ]  # fmt: skip
+
+    def note_liveliness(self, agent: int, *, alive_count: int, not_alive_count_change: int, finished: bool, now: float) -> None:
+        """A liveliness change of the writer watched for `agent`."""
+        book = self.agents[agent]
+        if alive_count > 0:
+            book.alive = True
+            book.lost = None
+        elif book.alive and book.lost is None and not finished:
+            # A lease that expired: the process died or the network lost it.  A writer deleted:
+            # the agent left (its process exited) before the end of the run.
+            book.lease_expired = not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)' if book.lease_expired else 'its node left the graph'
+            book.lost = (now, how)
+
+    def lost_error(self, now: float, *, started: bool, where: str) -> AgentLostError | None:
+        """The agents lost, once the grace after the first has passed (else None).
+
+        During discovery a lease may expire while a busy machine starts many processes: discovery
+        waits for the agent to come back (bounded by its timeout); an agent that left counts.
+        """
+        lost = {
+            i: book.lost
+            for i, book in self.agents.items()
+            if book.lost is not None and not (not started and book.lease_expired)
+        }
+        # After a short grace, so that what a lost agent sent before it went is handled first,
+        # and agents lost together (one process) are named together.
+        if not lost or now - min(at for at, _ in lost.values()) <= LOST_GRACE:
+            return None
+        agents = sorted(lost)
+        names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {", ".join(map(str, agents))}'
+        hows = '; '.join(sorted({how for _, how in lost.values()}))
+        return AgentLostError(f'{names} lost {where}: {hows}; the run stops', agents=agents)
+
+    # -- lock-step --------------------------------------------------------------------------------
+
+    def settled(self, step_index: int, due: set[int]) -> bool:
+        """Every message of the step has been delivered and every agent has answered it
+        (docs/MESSAGES.md, the lock-step protocol, step 5)."""
+        sent = received = 0
+        for i, book in self.agents.items():
+            status = book.status
+            if status is None or not status.ready or status.triggers != book.expected_triggers:
+                return False
+            if i in due and status.step_index != step_index:
+                return False
+            if status.commands_sent != book.commands_received:
+                return False
+            sent += status.info_sent
+            received += status.info_received
+        if received > sent:
+            raise CoordinatorError(f'agents report {received} messages received but only {sent} sent')
+        return sent == received
+
+    def next_due(self, t: float) -> tuple[float, tuple[int, ...]]:
+        """The smallest next triggering time reported and the agents that reported exactly it."""
+        t_next = min(book.status.next_time for book in self.agents.values())
+        if t_next < t:
+            laggards = [i for i, book in self.agents.items() if book.status.next_time < t]
+            raise CoordinatorError(f'agents {laggards} ask to trigger at t={t_next!r}, before the current t={t!r}')
+        return t_next, tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
+
+    def mark_due(self, due, t: float) -> None:
+        for i in due:
+            self.agents[i].expected_triggers += 1
+            self.agents[i].trigger_times.append(t)
+
+    def waiting_description(self) -> str:
+        return '; '.join(
+            f'agent {i}: status {book.status}, expected triggers {book.expected_triggers}, commands received {book.commands_received}'
+            for i, book in self.agents.items()
+        )
+
+    # -- the world as seen ------------------------------------------------------------------------
+
+    def check_connectivity(self, t: float, x: np.ndarray) -> None:
+        """Theorems 1 (i) and 2 (i): every edge stays shorter than Δ. Stop at the first that does not."""
+        rows_i, rows_j = self._edge_rows
+        lengths = np.linalg.norm(x[rows_i] - x[rows_j], axis=1)
+        worst = int(np.argmax(lengths))
+        if lengths[worst] < self.scenario.delta:
+            return
+        edge = self.scenario.edges[worst]
+        # After t = 0, an agent not ready never heard from some neighbour: its information was
+        # lost (it triggers only at events, so nothing repeats it), and the agent waits.
+        waiting = [
+            i for i, book in self.agents.items()
+            if book.status is not None and book.status.step_index >= 0 and not book.status.ready
+        ]  # fmt: skip
+        hint = f"; agents {waiting} are still waiting for a neighbour's triggering information (lost?)" if waiting else ''
+        raise ConnectivityLostError(
+            f'edge ({edge.i}, {edge.j}) reached the communication radius at t={t!r}: '
+            f'||x_{edge.i} - x_{edge.j}|| = {lengths[worst]:.6g} >= Δ = {self.scenario.delta:g}{hint}',
+            time=t,
+            edge=(edge.i, edge.j),
+            length=float(lengths[worst]),
+        )
+
+    # -- summary.json -----------------------------------------------------------------------------
+
+    def information_sent(self, agent: int) -> int:
+        """Triggering-information messages `agent` published: as its final report counts them, else
+        as its latest Status does.  A Status lags when a run stops between an agent's trigger and
+        the news of its due neighbours, which it waits for before reporting (one message per
+        neighbour fewer than the bag holds, seen after SIGINT); a final report never does."""
+        book = self.agents[agent]
+        if book.report is not None and book.report.final:
+            return sum(book.report.published.get(trigger_info_topic(agent, j), 0) for j in book.neighbours)
+        return book.status.info_sent if book.status is not None else 0
+
+    def published(self, own: dict[str, int]) -> dict[str, int]:
+        """Messages published per topic by the coordinator (`own`) and by every agent whose final
+        report came (the others' are unknown: reports_missing), from step 0 on: what a recorder
+        must hold (`extra.published`, checked against the bag by the orchestrator)."""
+        counts = dict(own)
+        for book in self.agents.values():
+            if book.report is not None and book.report.final:
+                for topic, n in book.report.published.items():
+                    counts[topic] = counts.get(topic, 0) + n
+        return dict(sorted(counts.items()))
+
+    def message_counts(self) -> dict:
+        """Rejected messages per reason and agent, and faults injected, from the agents' reports."""
+        books = self.agents.values()
+        by_agent = {str(i): dict(book.report.rejected) for i, book in self.agents.items() if book.report and book.report.rejected}
+        by_reason: dict[str, int] = {}
+        for counts in (*by_agent.values(), self.rejected):
+            for reason, n in counts.items():
+                by_reason[reason] = by_reason.get(reason, 0) + n
+        reports = [book.report for book in books if book.report is not None]
+        return {
+            'rejected_messages': {
+                'total': sum(by_reason.values()),
+                'by_reason': dict(sorted(by_reason.items())),
+                'by_agent': by_agent,
+                'simulator': dict(self.rejected),
+            },
+            'injected_faults': {
+                'dropped': sum(r.dropped for r in reports),
+                'delayed': sum(r.delayed for r in reports),
+                'by_agent': {str(r.agent): {'dropped': r.dropped, 'delayed': r.delayed} for r in reports if r.dropped or r.delayed},
+            },
+            'late_information': sum(r.late for r in reports),
+            'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
+        }
+
+    def saturation(self) -> dict:
+        """`extra.saturation` from the agents' latest reports."""
+        return saturation_extra(book.report for book in self.agents.values())
+
+    def lateness(self, trigger_times: dict[int, list[float]]) -> dict:
+        """Wall clock: how late triggers came against the times agents had planned them."""
+        return lateness_extra({i: book.planned for i, book in self.agents.items()}, trigger_times)
+

@@ -1,0 +1,192 @@
+"""Process supervision of a run: start each child in its own group, watch it, stop it by PID.
+
+Every child runs in its own process group and session (a terminal's Ctrl-C reaches only the
+orchestrator) and gets SIGTERM from the kernel if the orchestrator dies, even by SIGKILL
+(PR_SET_PDEATHSIG).  `stop` sends SIGINT, then SIGTERM, then SIGKILL after timeouts, each to the
+children still alive and to nothing else, the recorder last; then the Fast DDS shared-memory files
+the children held go if their owners are dead (`fastdds_shm`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from formation_sim.runtime.fastdds_shm import domain_port_files, held_files, remove_orphans
+from formation_sim.runtime.launch import ProcessSpec
+
+POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+PROGRESS_PREFIX = 'progress '
+
+try:  # looked up here, not in the forked child (a child before exec must take no lock)
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # pragma: no cover - not Linux
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the orchestrator dies, even by SIGKILL (Linux)."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+
+
+def describe_exit(returncode: int | None) -> str:
+    if returncode is None:
+        return 'still running'
+    if returncode < 0:
+        with contextlib.suppress(ValueError):
+            return f'killed by {signal.Signals(-returncode).name}'
+    return f'exited with status {returncode}'
+
+
+@dataclass
+class Child:
+    name: str
+    process: subprocess.Popen
+    log: Path
+    expected_exit: bool  # leaves by itself when the run completes
+    signal_used: str | None = None
+    shm_files: set[str] = field(default_factory=set)
+    exited_at: float | None = None  # monotonic time its exit was seen
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def error_line(self) -> str:
+        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
+        try:
+            with self.log.open('rb') as handle:
+                handle.seek(max(0, self.log.stat().st_size - 65536))
+                lines = handle.read().decode(errors='replace').splitlines()
+        except OSError:
+            return ''
+        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))]
+        return named[-1].split(': ', 1)[1] if named else ''
+
+    def describe(self) -> str:
+        """'agent_2 (pid 123) killed by SIGKILL', with the error it named if it gave one."""
+        text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
+        error = self.error_line() if self.process.returncode not in (None, 0) else ''
+        return f'{text}: {error}' if error else text
+
+    @property
+    def failed_itself(self) -> bool:
+        """It named an error and left (else it died, was killed, or vanished)."""
+        return (self.process.returncode or 0) > 0
+
+
+class Supervisor:
+    """The children of one run."""
+
+    def __init__(self, *, log_dir: Path, env: dict[str, str], launch_prefix: Callable[[str], Sequence[str]] | None = None) -> None:
+        self.log_dir = log_dir
+        self.env = env
+        self.launch_prefix = launch_prefix
+        self.children: list[Child] = []
+        self.last_progress = ''  # the time keeper's latest progress line
+
+    def start(self, spec: ProcessSpec) -> Child:
+        log = self.log_dir / f'{spec.name}.log'
+        handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
+        prefix = list(self.launch_prefix(spec.name)) if self.launch_prefix is not None else []
+        process = subprocess.Popen(
+            [*prefix, sys.executable, *spec.args],
+            env=self.env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if spec.keeper else handle,
+            stderr=handle,
+            start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
+            preexec_fn=_die_with_parent,  # noqa: PLW1509 - only prctl, no locks taken
+            text=True,
+        )
+        child = Child(name=spec.name, process=process, log=log, expected_exit=spec.expected_exit)
+        if spec.keeper:
+            threading.Thread(target=self._pump, args=(child, handle), daemon=True).start()
+        self.children.append(child)
+        return child
+
+    def _pump(self, child: Child, handle) -> None:
+        """Copy the time keeper's stdout into its log; keep its progress lines for the terminal."""
+        for line in child.process.stdout:
+            with contextlib.suppress(OSError):  # a full disk: keep reading, or the child blocks on the pipe
+                handle.write(line)
+                handle.flush()
+            if line.startswith(PROGRESS_PREFIX):
+                self.last_progress = line[len(PROGRESS_PREFIX) :].strip()
+
+    def note_exits(self, now: float) -> None:
+        for child in self.children:
+            if child.exited_at is None and not child.alive():
+                child.exited_at = now
+
+    def note_shm_files(self) -> None:
+        """A child killed by a signal cannot remove its Fast DDS shared-memory files, and once it
+        is gone nobody can tell which were its own: note them while it lives."""
+        for child in self.children:
+            if child.exited_at is None:
+                child.shm_files |= held_files(child.pid)
+
+    def wait_for_expected(self, timeout: float, *, besides: Child) -> list[Child]:
+        """After the time keeper's success: let the others that leave by themselves leave; those
+        that left with a non-zero status."""
+        limit = time.monotonic() + timeout
+        leaving = [c for c in self.children if c.expected_exit and c is not besides]
+        while any(c.alive() for c in leaving) and time.monotonic() < limit:
+            time.sleep(POLL_PERIOD)
+        return [c for c in leaving if not c.alive() and c.process.returncode != 0]
+
+    def stop(self, timeouts: tuple[float, float], *, domain_id: int) -> list[str]:
+        """Stop the children still alive, the recorder last; then remove their shm files (the list).
+
+        Each gets SIGINT, then SIGTERM, then SIGKILL (`timeouts`).  The time keeper, the agents
+        and the robots go first: they flush what they published to the recorder before they exit
+        (a message dropped on the way is only repaired at a writer's next heartbeat, after up to
+        3 s), and the recorder, still recording meanwhile, then drains and closes its bag.
+
+        A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
+        that mapped one of its ports keeps the port's reference (the file outlives both).  Once
+        every child is gone, the files any of them held (noted while they ran, `held_files`) go
+        if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
+        the dead port files of the run's own domain (a port mapped after the last look).
+        """
+        self._stop([c for c in self.children if c.name != 'recorder'], timeouts)
+        self._stop([c for c in self.children if c.name == 'recorder'], timeouts)
+        for child in self.children:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.process.wait(timeout=1.0)
+        held = set().union(*(c.shm_files for c in self.children))
+        if any((c.process.returncode or 0) < 0 for c in self.children):
+            held |= domain_port_files(domain_id)
+        return remove_orphans(held)
+
+    def _stop(self, children: list[Child], timeouts: tuple[float, float]) -> None:
+        """SIGINT, then SIGTERM, then SIGKILL, each to those of `children` still alive."""
+        first, second = timeouts
+        for sig, wait in ((signal.SIGINT, first), (signal.SIGTERM, second), (signal.SIGKILL, 2.0)):
+            alive = [c for c in children if c.alive()]
+            if not alive:
+                break
+            for child in alive:
+                child.shm_files |= held_files(child.pid)
+                child.signal_used = sig.name
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(child.pid, sig)  # the group we created for it, nothing else
+                    if sig == signal.SIGINT:
+                        os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
+            limit = time.monotonic() + wait
+            while any(c.alive() for c in alive) and time.monotonic() < limit:
+                time.sleep(0.05)

@@ -1,0 +1,341 @@
+"""Kinematic robots, ROS-free: how the simulated robot backends move, and what a robot's pose means.
+
+Two models, each moved exactly under a command held constant between two instants (a base's
+control loop holds its last command over a tick), never with a fixed integration step:
+
+- `HolonomicRobot` (omnidirectional base, quadrotor in velocity mode): ẋ = v in the world frame,
+  θ̇ = ω; over a hold of length τ, x ← x + τ v, θ ← θ + τ ω.
+- `UnicycleRobot` (differential drive): ẋ = v cos θ, ẏ = v sin θ, θ̇ = ω with (v, ω) in the body
+  frame; over a hold of length τ it drives the arc
+      x ← x + v τ sinc(ωτ/2) cos(θ + ωτ/2),   y ← y + v τ sinc(ωτ/2) sin(θ + ωτ/2),   θ ← θ + ωτ
+  (sin(θ+ωτ) − sin θ = 2 cos(θ + ωτ/2) sin(ωτ/2), so ω → 0 gives the straight line with no
+  cancellation; sinc(u) = sin(u)/u).
+
+A unicycle's scenario position is its *control point* p = (x, y) + l (cos θ, sin θ), the point l
+ahead of the axle that the near-identity diffeomorphism lets the agent steer like a single
+integrator (README, "Running on robots"; `formation_agent.core.kinematics`, which reads poses
+here as the agents read them); `control_point` places it for a planar pose and `axle_position`
+goes back.  `trajectory_samples` turns recorded pose streams into the samples of a `RunRecord`, the one
+way both the coordinator (summary.json) and `formation analyze` (the bag) read them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from formation_agent.core import kinematics
+
+ROBOT_MODELS = ('holonomic', 'unicycle')
+
+
+class RobotError(ValueError):
+    """A robot set up with impossible values (a limit <= 0, a pose of the wrong size)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Limits:
+    """What the base can do; commands beyond are clipped (and counted) as a real base does.
+
+    Holonomic: the linear velocity is scaled down to `linear` keeping its direction, |ω| clipped.
+    Unicycle: |v| clipped to `linear`, |ω| to `angular` (each on its own, as a TurtleBot3 does).
+    """
+
+    linear: float = math.inf  # [m/s]
+    angular: float = math.inf  # [rad/s]
+
+    def __post_init__(self) -> None:
+        for name in ('linear', 'angular'):
+            value = getattr(self, name)
+            if not value > 0.0:  # also NaN
+                raise RobotError(f'the {name} speed limit must be > 0 (inf: none), got {value!r}')
+
+
+@dataclass(frozen=True, kw_only=True)
+class Command:
+    """A velocity command as the base applies it: `linear` in the world frame (holonomic, p values)
+    or (v,) in the body frame (unicycle); `angular` = ω [rad/s]."""
+
+    linear: tuple[float, ...]
+    angular: float = 0.0
+
+    @property
+    def is_zero(self) -> bool:
+        return self.angular == 0.0 and not any(self.linear)
+
+
+@dataclass(kw_only=True)
+class _Robot:
+    """Pose (position, yaw), limits, the command held and how many commands the limits clipped."""
+
+    position: np.ndarray
+    yaw: float = 0.0
+    limits: Limits = field(default_factory=Limits)
+    command: Command | None = None  # None: standing still
+    saturated: int = 0  # commands clipped by the limits
+
+    def advance(self, duration: float) -> None:
+        """Move for `duration` seconds under the current command (exact)."""
+        if duration < 0.0:
+            raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
+        if self.command is not None and duration > 0.0:
+            self._move(duration)
+
+    def _hold(self, linear: tuple[float, ...], angular: float, *, clipped: bool) -> Command:
+        self.saturated += clipped
+        self.command = Command(linear=linear, angular=angular)
+        return self.command
+
+    def _move(self, duration: float) -> None:
+        raise NotImplementedError
+
+
+@dataclass(kw_only=True)
+class HolonomicRobot(_Robot):
+    """Position (p = 1, 2 or 3) and yaw, moved exactly under piecewise-constant world-frame velocities."""
+
+    model = 'holonomic'
+
+    def __post_init__(self) -> None:
+        self.position = np.array(self.position, dtype=float)
+        if self.position.ndim != 1 or not 1 <= self.position.size <= 3:
+            raise RobotError(f'a holonomic robot has a position of 1 to 3 values, got {self.position.tolist()}')
+
+    @property
+    def dimension(self) -> int:
+        return int(self.position.size)
+
+    def set_command(self, command: Command) -> Command:
+        """Apply `command` from now on, clipped to the limits; returns what is applied."""
+        linear = np.array(command.linear, dtype=float)
+        if linear.size != self.dimension:
+            raise RobotError(f'a holonomic robot in {self.dimension} dimensions takes {self.dimension} velocity values, got {linear.tolist()}')
+        speed = float(np.linalg.norm(linear))
+        clipped = speed > self.limits.linear or abs(command.angular) > self.limits.angular
+        if speed > self.limits.linear:
+            linear = linear * (self.limits.linear / speed)
+        angular = max(-self.limits.angular, min(self.limits.angular, float(command.angular)))
+        return self._hold(tuple(linear.tolist()), angular, clipped=clipped)
+
+    def _move(self, duration: float) -> None:
+        self.position = self.position + duration * np.array(self.command.linear)
+        self.yaw = wrap_angle(self.yaw + duration * self.command.angular)
+
+    def world_velocity(self) -> np.ndarray:
+        return np.zeros(self.dimension) if self.command is None else np.array(self.command.linear)
+
+    def scenario_position(self, control_point_distance: float = 0.0) -> np.ndarray:
+        """The point the scenario places: the robot's own position."""
+        return self.position.copy()
+
+
+@dataclass(kw_only=True)
+class UnicycleRobot(_Robot):
+    """Axle position (x, y) and heading θ, moved exactly along arcs under piecewise-constant (v, ω)."""
+
+    model = 'unicycle'
+
+    def __post_init__(self) -> None:
+        self.position = np.array(self.position, dtype=float)
+        if self.position.shape != (2,):
+            raise RobotError(f'a unicycle moves in the plane: its position has 2 values, got {self.position.tolist()}')
+
+    @property
+    def dimension(self) -> int:
+        return 2
+
+    def set_command(self, command: Command) -> Command:
+        if len(command.linear) != 1:
+            raise RobotError(f'a unicycle takes one forward speed v, got {list(command.linear)}')
+        v, w = float(command.linear[0]), float(command.angular)
+        clipped = abs(v) > self.limits.linear or abs(w) > self.limits.angular
+        v = max(-self.limits.linear, min(self.limits.linear, v))
+        w = max(-self.limits.angular, min(self.limits.angular, w))
+        return self._hold((v,), w, clipped=clipped)
+
+    def _move(self, duration: float) -> None:
+        """The exact arc of the current (v, ω) (module docstring)."""
+        v, w = self.command.linear[0], self.command.angular
+        half = 0.5 * w * duration
+        chord = v * duration * np.sinc(half / math.pi)  # np.sinc(u) = sin(πu)/(πu)
+        middle = self.yaw + half
+        self.position = self.position + chord * np.array([math.cos(middle), math.sin(middle)])
+        self.yaw = wrap_angle(self.yaw + w * duration)
+
+    def world_velocity(self) -> np.ndarray:
+        """The axle's velocity in the world frame."""
+        v = 0.0 if self.command is None else self.command.linear[0]
+        return v * np.array([math.cos(self.yaw), math.sin(self.yaw)])
+
+    def scenario_position(self, control_point_distance: float) -> np.ndarray:
+        """The control point, l ahead of the axle: what the scenario places."""
+        return control_point(self.position, self.yaw, control_point_distance)
+
+
+def make_robot(model: str, *, scenario_position, yaw: float, control_point_distance: float, limits: Limits):
+    """A robot whose scenario position (a unicycle's control point) is `scenario_position`."""
+    if model == 'holonomic':
+        return HolonomicRobot(position=scenario_position, yaw=yaw, limits=limits)
+    if model == 'unicycle':
+        position = np.asarray(scenario_position, dtype=float)
+        if position.shape != (2,):
+            raise RobotError(f'a unicycle moves in the plane: the scenario must be 2-D, got position {position.tolist()}')
+        return UnicycleRobot(position=axle_position(position, yaw, control_point_distance), yaw=yaw, limits=limits)
+    raise RobotError(f'robot model must be one of {ROBOT_MODELS}, got {model!r}')
+
+
+def wrap_angle(angle: float) -> float:
+    """The same angle in [-π, π)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def control_point(position, yaw: float, distance: float) -> np.ndarray:
+    """The point `distance` ahead of the axle at `position` heading `yaw` (near-identity diffeomorphism)."""
+    return np.asarray(position, dtype=float) + distance * np.array([math.cos(yaw), math.sin(yaw)])
+
+
+def axle_position(point, yaw: float, distance: float) -> np.ndarray:
+    """The axle whose control point, heading `yaw`, is `point` (the inverse of `control_point`)."""
+    return np.asarray(point, dtype=float) - distance * np.array([math.cos(yaw), math.sin(yaw)])
+
+
+def quaternion_from_yaw(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by `yaw` about z."""
+    return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+class PoseNoise:
+    """Seeded Gaussian measurement noise: σ [m] on each position axis, σ_yaw [rad] on the heading.
+
+    One stream per (seed, robot), so a run's noise depends only on the seed and how many poses
+    each robot published.
+    """
+
+    def __init__(self, *, position_sigma: float, yaw_sigma: float, seed: int, robot_id: int) -> None:
+        for name, value in (('position_sigma', position_sigma), ('yaw_sigma', yaw_sigma)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise RobotError(f'{name} must be a finite number >= 0, got {value!r}')
+        self.position_sigma = position_sigma
+        self.yaw_sigma = yaw_sigma
+        self._random = np.random.default_rng([int(seed), int(robot_id)])
+
+    def measure(self, position: np.ndarray, yaw: float) -> tuple[np.ndarray, float]:
+        if self.position_sigma > 0.0:
+            position = position + self._random.normal(0.0, self.position_sigma, size=position.shape)
+        if self.yaw_sigma > 0.0:
+            yaw = wrap_angle(yaw + float(self._random.normal(0.0, self.yaw_sigma)))
+        return position, yaw
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotSample:
+    """One pose of a robot as a run sees it: run time (stamp − Step 0 epoch), the scenario
+    position (a unicycle's control point) and, from odometry, that point's world velocity."""
+
+    time: float
+    position: np.ndarray
+    velocity: np.ndarray | None = None
+
+
+def run_time(stamp, epoch: float) -> float:
+    """A header stamp (builtin_interfaces/Time) as run time: seconds since the epoch.
+
+    (sec − epoch) first: two numbers near 1.7e9 subtract exactly, and the nanoseconds keep their
+    precision (sec + nanosec·1e-9 alone rounds to ~0.2 µs)."""
+    return (stamp.sec - epoch) + stamp.nanosec * 1e-9
+
+
+def _control_offset(model: str, control_point_distance: float) -> tuple[float, float, float]:
+    """Where the scenario's point sits in the body frame: l ahead on x (unicycle), the origin (holonomic)."""
+    return (control_point_distance if model == 'unicycle' else 0.0, 0.0, 0.0)
+
+
+def _pose(pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    p, q = pose.position, pose.orientation
+    return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
+
+
+def pose_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
+    """A `geometry_msgs/PoseStamped` (an rclpy or rosbags message) as a `RobotSample`: the control
+    point as the agents compute it (`formation_agent.core.kinematics`)."""
+    position, orientation = _pose(msg.pose)
+    point = kinematics.control_point(position, orientation, _control_offset(model, control_point_distance))
+    return RobotSample(time=run_time(msg.header.stamp, epoch), position=point[:dimension])
+
+
+def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
+    """A `nav_msgs/Odometry` (pose in the world frame, twist in the body frame, REP 105) as a
+    `RobotSample` with the control point's world velocity R (v + ω × offset)."""
+    position, orientation = _pose(msg.pose.pose)
+    offset = _control_offset(model, control_point_distance)
+    twist = msg.twist.twist
+    linear = (twist.linear.x, twist.linear.y, twist.linear.z)
+    angular = (twist.angular.x, twist.angular.y, twist.angular.z)
+    return RobotSample(
+        time=run_time(msg.header.stamp, epoch),
+        position=kinematics.control_point(position, orientation, offset)[:dimension],
+        velocity=kinematics.control_point_velocity(orientation, linear, angular, offset)[:dimension],
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoseTrack:
+    """One robot's recorded poses: run times, increasing, with the scenario position at each and,
+    when the source carries it, the velocity of that point in the world frame."""
+
+    times: np.ndarray  # (K,)
+    positions: np.ndarray  # (K, p)
+    velocities: np.ndarray | None = None  # (K, p)
+
+    @classmethod
+    def from_samples(cls, samples: list[RobotSample]) -> PoseTrack:
+        """In time order; of poses stamped alike, the first received."""
+        if not samples:
+            raise RobotError('a robot published no pose: its trajectory cannot be sampled')
+        ordered = sorted(range(len(samples)), key=lambda k: samples[k].time)  # stable
+        kept = [k for n, k in enumerate(ordered) if n == 0 or samples[k].time != samples[ordered[n - 1]].time]
+        velocities = None
+        if all(samples[k].velocity is not None for k in kept):
+            velocities = np.array([samples[k].velocity for k in kept])
+        return cls(
+            times=np.array([samples[k].time for k in kept]),
+            positions=np.array([samples[k].position for k in kept]),
+            velocities=velocities,
+        )
+
+
+def trajectory_samples(
+    tracks: dict[int, PoseTrack], agent_ids, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Every agent's position and velocity at `times`, linearly interpolated in its track.
+
+    Before a track's first pose and after its last the nearest pose is held.  Tracks without
+    velocities (PoseStamped) get them from the positions' differences over `times` (central,
+    np.gradient); None with a single sample.  The coordinator (summary.json) and
+    `formation analyze` (the bag) both sample a robot run this way, so the two agree whenever they
+    saw the same poses.
+    """
+    times = np.asarray(times, dtype=float)
+    positions = np.stack([_interpolate(tracks[i].times, tracks[i].positions, times) for i in agent_ids], axis=1)
+    if any(tracks[i].velocities is None for i in agent_ids):
+        return positions, (np.gradient(positions, times, axis=0) if len(times) > 1 else None)
+    velocities = np.stack([_interpolate(tracks[i].times, tracks[i].velocities, times) for i in agent_ids], axis=1)
+    return positions, velocities
+
+
+def _interpolate(stamps: np.ndarray, values: np.ndarray, times: np.ndarray) -> np.ndarray:
+    if len(stamps) == 0:
+        raise RobotError('a robot published no pose: its trajectory cannot be sampled')
+    return np.stack([np.interp(times, stamps, values[:, axis]) for axis in range(values.shape[1])], axis=1)
+
+
+def sample_times(horizon: float, period: float, events=()) -> np.ndarray:
+    """The sample grid of a robot run: 0, period, 2 period, … up to the horizon, the horizon
+    itself and every event time in [0, horizon] (so that every trigger has its sample)."""
+    if not (math.isfinite(period) and period > 0.0):
+        raise RobotError(f'the sample period must be > 0, got {period!r}')
+    grid = np.arange(0, math.floor(horizon / period) + 1) * period
+    extra = [t for t in events if 0.0 <= t <= horizon]
+    return np.unique(np.concatenate([grid[grid <= horizon], [horizon], np.asarray(extra, dtype=float)]))

@@ -1,0 +1,178 @@
+"""The coordinator in one process (no other process is started): what it waits for, when it stops
+a robot run, and that its summary is what `formation analyze` reads back from the same messages."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+
+from formation_sim.model.scenario import load_scenario
+
+pytestmark = pytest.mark.ros
+
+DOMAIN_ID = 162
+EPOCH = 1_700_000_000.25
+
+
+@pytest.fixture
+def coordinator(ros):
+    from formation_agent.ros.parameters import as_overrides
+    from formation_sim.runtime.coordinator import FormationCoordinatorNode
+
+    nodes = []
+
+    def build(**parameters):
+        defaults = {'robot': 'unicycle', 'control_point_distance': 0.1, 'robot_trajectory': 'true_odom', 'backend': 'unicycle'}
+        node = FormationCoordinatorNode(scenario=load_scenario('robots_square'), parameter_overrides=as_overrides({**defaults, **parameters}), context=ros)
+        nodes.append(node)
+        return node
+
+    yield build
+    for node in nodes:
+        node.destroy_node()
+
+
+def _start(node, epoch: float) -> None:
+    """The run as if Step 0 had gone out at `epoch`."""
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+
+    node._started = node._created
+    node._epoch = epoch
+    node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=epoch)
+
+
+def _odometry(agent: int, t: float, *, epoch: float = EPOCH):
+    """Robot `agent` of robots_square driving an arc: its exact state at run time t."""
+    from nav_msgs.msg import Odometry
+
+    from formation_sim.sim.robots import quaternion_from_yaw
+
+    v, w = 0.05 * agent, 0.3
+    yaw = 0.2 * agent + w * t
+    x = 0.3 * agent + v / w * (math.sin(yaw) - math.sin(0.2 * agent))
+    y = -0.2 * agent - v / w * (math.cos(yaw) - math.cos(0.2 * agent))
+    msg = Odometry()
+    stamp = epoch + t
+    msg.header.stamp.sec = math.floor(stamp)
+    msg.header.stamp.nanosec = round((stamp - math.floor(stamp)) * 1e9)
+    msg.header.frame_id = 'world'
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = quaternion_from_yaw(yaw)[2:]
+    msg.twist.twist.linear.x, msg.twist.twist.angular.z = v, w
+    return msg
+
+
+def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
+    node = coordinator()
+    gaps = node._discovery_gaps()
+    assert 'agents whose triggering-information writer is not matched: 1, 2, 3, 4' in gaps
+    assert 'robots whose robot/true_odom writer is not matched (not running, or a best-effort writer): 1, 2, 3, 4' in gaps
+    assert '/formation/robots readers 0/1' not in gaps  # no recorder asked for
+    assert not node._connected()
+
+
+def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
+    from formation_sim.runtime.run_book import ConnectivityLostError
+
+    node = coordinator()
+    _start(node, time.time() - 0.5)
+    scenario = node.scenario
+    for agent in scenario.agent_ids:
+        node._on_pose(_odometry(agent, 0.4, epoch=node._epoch), agent)
+    node._running_tick()  # the poses above: every edge shorter than Δ = 2
+    far = _odometry(3, 0.45, epoch=node._epoch)
+    far.pose.pose.position.x = 3.0  # robot 3's control point more than 2 m from its neighbours
+    node._on_pose(far, 3)
+    with pytest.raises(ConnectivityLostError, match=r'edge \(2, 3\) reached the communication radius at t=0\.5'):
+        node._running_tick()
+
+
+def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coordinator, tmp_path):
+    from geometry_msgs.msg import Twist, Vector3
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from formation_msgs_py.codec import encode_agent_report, encode_status, encode_step, encode_trigger_info
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, AgentReport, Status, Step
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.analysis.load import load_bag_run
+    from formation_sim.analysis.report import bag_summary, diff_summaries
+    from formation_sim.bag.io import BagWriter
+    from formation_sim.model.scenario import dump_scenario_text
+    from formation_sim.sim.summary import build_summary
+
+    horizon = 1.0
+    node = coordinator(horizon=horizon, sample_period=0.05)
+    scenario = node.scenario
+    messages = []  # (topic, type, message) in arrival order, for the bag
+
+    def arrive(topic, msgtype, msg, handler=None):
+        messages.append((topic, msgtype, msg))
+        if handler is not None:
+            handler(msg)
+
+    for agent in scenario.agent_ids:  # poses before t = 0 reach the coordinator during discovery
+        arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, -0.013), lambda m, a=agent: node._on_pose(m, a))
+    _start(node, EPOCH)
+    arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(node.step))
+    arrive('/formation/scenario', 'std_msgs/msg/String', String(data=dump_scenario_text(scenario.replace(horizon=horizon))))
+    arrive('/formation/robots', 'std_msgs/msg/String', String(data=json.dumps(node.robots, separators=(',', ':'))))
+    triggers = {1: [0.0, 0.31, 0.72], 2: [0.0, 0.5], 3: [0.0, 0.1234567], 4: [0.0, 0.9, 1.02]}  # 1.02: after the horizon
+    for k in range(-1, 108):  # 100 Hz, stamps a little off the grid
+        t = k * 0.01 + 0.0031
+        for agent in scenario.agent_ids:
+            arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, t), lambda m, a=agent: node._on_pose(m, a))
+        for agent, times in triggers.items():
+            for number, stamp in enumerate(times, start=1):
+                if t - 0.01 < stamp <= t:
+                    for j in scenario.neighbours(agent):
+                        info = TriggerInfo(sender=agent, receiver=j, stamp=stamp, control=(0.01, -0.02), rel_position=(1.0, 0.0))
+                        watched = j == min(scenario.neighbours(agent))
+                        arrive(f'/agent_{agent}/trigger_info/to_{j}', 'std_msgs/msg/Float64MultiArray', encode_trigger_info(info),
+                               (lambda m, a=agent: node._on_info(m, a)) if watched else None)  # fmt: skip
+                    status = Status(agent=agent, step_index=0, next_time=math.inf, info_sent=2 * number, info_received=0,
+                                    commands_sent=0, triggers=number, ready=True, last_planned=stamp - 0.004)  # fmt: skip
+                    arrive('/formation/status', 'std_msgs/msg/Float64MultiArray', encode_status(status), node._on_status)
+    node._end_at_horizon()
+    arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(Step(index=1, time=horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=EPOCH)))
+    for agent in scenario.agent_ids:
+        published = {f'/agent_{agent}/trigger_info/to_{j}': len(triggers[agent]) for j in scenario.neighbours(agent)}
+        report = AgentReport(agent=agent, final=True, rejected={}, published=published)
+        arrive('/formation/agent_report', 'std_msgs/msg/String', encode_agent_report(report), node._on_report)
+        # The robots' last commands (the coordinator does not read them): robot 4 was left turning.
+        arrive(f'/agent_{agent}/robot/cmd_vel', 'geometry_msgs/msg/Twist', Twist(angular=Vector3(z=0.3 if agent == 4 else 0.0)))
+
+    record = node.record()
+    assert record.mode == 'robots' and record.trigger_times == {1: [0.0, 0.31, 0.72], 2: [0.0, 0.5], 3: [0.0, 0.1234567], 4: [0.0, 0.9]}
+    assert record.sample_times[0] == 0.0 and record.sample_times[-1] == horizon and 0.1234567 in record.sample_times
+    # Samples: the control points l = 0.1 ahead of the axles, interpolated between poses.
+    k = int(np.flatnonzero(record.sample_times == 0.5)[0])
+    x, y, yaw = _axle(2, 0.5)
+    assert np.allclose(record.sample_positions[k, 1], [x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], atol=1e-5)
+    lateness = record.extra['lateness']['3']
+    assert math.isclose(lateness['max'], 0.004, abs_tol=1e-12)
+
+    with BagWriter(tmp_path / 'bag') as bag:
+        for topic, msgtype, _ in messages:
+            bag.add_topic(topic, msgtype)
+        for number, (topic, _, msg) in enumerate(messages):
+            bag.write(topic, number, serialize_message(msg))
+    from_bag = load_bag_run(tmp_path / 'bag')
+    assert from_bag.record.mode == 'robots'
+    checks = {check.name: check for check in from_bag.checks}
+    assert [name for name, check in checks.items() if not check.ok] == ["every robot's last command is a stop"]
+    assert checks["every robot's last command is a stop"].detail == '3 robots stopped by their last command; still moving: [\'4: [0.0, 0.0, 0.0, 0.0, 0.0, 0.3]\']'
+    # Agent 4's trigger after the horizon is not a trigger of the run, but its Status counted it.
+    assert checks['status counters = bag'].ok and checks['one TriggerInfo per neighbour per trigger'].detail == '20 messages for 10 triggers'
+    differences, _ = diff_summaries(bag_summary(from_bag.record), build_summary(record))
+    assert [d.key for d in differences if d.key != 'wall_time'] == []
+
+
+def _axle(agent: int, t: float) -> tuple[float, float, float]:
+    v, w = 0.05 * agent, 0.3
+    yaw = 0.2 * agent + w * t
+    return 0.3 * agent + v / w * (math.sin(yaw) - math.sin(0.2 * agent)), -0.2 * agent - v / w * (math.cos(yaw) - math.cos(0.2 * agent)), yaw

@@ -1,0 +1,110 @@
+"""The launch plan of each backend: what a run writes and starts, and the options it refuses
+before anything touches the disk (no process is started here)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from formation_sim.model.scenario import load_scenario
+from formation_sim.runtime.launch import RobotOptions, RunError
+from formation_sim.runtime.orchestrate import FormationRun
+
+TURTLEBOT3 = RobotOptions(model='unicycle', control_point_distance=0.1, max_linear_speed=0.22, max_angular_speed=2.84)
+
+
+def _plan(tmp_path, backend, robots=None, **options):
+    return FormationRun('robots_square', out_dir=tmp_path / 'run', backend=backend, robots=robots, **options).plan
+
+
+def test_the_exact_backend_is_the_simulator_and_its_agents(tmp_path):
+    plan = _plan(tmp_path, 'exact')
+    specs = plan.processes(plan.write_inputs())
+    assert [spec.name for spec in specs] == ['recorder', 'simulator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
+    assert [spec.name for spec in specs if spec.keeper] == ['simulator'] and plan.clock == 'lockstep'
+    assert '-p' in specs[1].args and 'clock_mode:=lockstep' in specs[1].args
+    agents = yaml.safe_load((tmp_path / 'run' / 'agents.params.yaml').read_text())
+    assert 'sensing' not in agents['/agent_1/formation_agent']['ros__parameters']  # the simulator's service
+    assert not (tmp_path / 'run' / 'robots.params.yaml').exists()
+
+
+def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_agent(tmp_path):
+    plan = _plan(tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': math.pi / 2, 'robots_per_process': 2}))
+    paths = plan.write_inputs()
+    specs = plan.processes(paths)
+    assert [spec.name for spec in specs] == ['recorder', 'robots_1-2', 'robots_3-4', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
+    assert plan.clock == 'realtime'
+    coordinator = next(spec for spec in specs if spec.keeper).args
+    assert 'formation_sim.runtime.coordinator' in coordinator and 'robot:=unicycle' in coordinator
+    assert 'robot_trajectory:=true_odom' in coordinator  # simulated: the formation as it truly is
+    robots = yaml.safe_load(paths['robots'].read_text())
+    scenario = load_scenario('robots_square')
+    for agent in scenario.agent_ids:
+        params = robots[f'/agent_{agent}/simulated_robot']['ros__parameters']
+        assert params['model'] == 'unicycle' and params['max_linear_speed'] == 0.22 and params['max_angular_speed'] == 2.84
+        # The robot node puts its axle l behind `position` along `yaw`: here the scenario point itself.
+        assert params['position'] == scenario.positions[scenario.index(agent)].tolist() and params['yaw'] == math.pi / 2
+    agents = yaml.safe_load(paths['agents'].read_text())['/agent_3/formation_agent']['ros__parameters']
+    assert {key: agents[key] for key in ('sensing', 'pose_type', 'robot', 'control_point_distance', 'max_linear_speed', 'max_angular_speed', 'world_frame')} == {
+        'sensing': 'poses', 'pose_type': 'odom', 'robot': 'unicycle', 'control_point_distance': 0.1,
+        'max_linear_speed': 0.22, 'max_angular_speed': 2.84, 'world_frame': 'world',
+    }  # fmt: skip
+    assert 'max_linear_acceleration' not in agents  # no limit given: the agent's default (none)
+    recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
+    assert recorder['clock_topic'] == ''  # wall-clock stamps: run time is in the headers
+    recorded = {spec.split(':')[0] for spec in recorder['topics']}
+    assert {'/agent_2/robot/cmd_vel', '/agent_2/robot/odom', '/agent_2/robot/true_odom', '/formation/robots'} <= recorded
+    assert '/agent_2/robot/pose' not in recorded  # the agents read odometry
+
+
+def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_agents_read(tmp_path):
+    plan = _plan(tmp_path, 'external', RobotOptions(model='holonomic', pose_type='pose'))
+    specs = plan.processes(plan.write_inputs())
+    assert [spec.name for spec in specs] == ['recorder', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
+    assert 'robot_trajectory:=pose' in next(spec for spec in specs if spec.keeper).args
+    recorder = yaml.safe_load((tmp_path / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
+    assert '/agent_1/robot/cmd_vel:geometry_msgs/msg/TwistStamped' in recorder['topics']
+
+
+@pytest.mark.parametrize(
+    ('options', 'complaint'),
+    [
+        (dict(backend='external'), "backend 'external' needs robots=RobotOptions(model=...)"),
+        (dict(backend='unicycle', robots=RobotOptions(model='holonomic')), "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
+        (dict(backend='holonomic', clock='lockstep'), "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'"),
+        (dict(backend='exact', robots=TURTLEBOT3), "robots are options of the robot backends"),
+        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'external'), got 'mujoco'"),
+        (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
+        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
+    ],
+)
+def test_bad_robot_options_are_refused_before_anything_exists(tmp_path, options, complaint):
+    with pytest.raises(RunError) as caught:
+        FormationRun('robots_square', out_dir=tmp_path / 'run', **options)
+    assert complaint in str(caught.value)
+    assert not (tmp_path / 'run').exists()
+
+
+def test_unicycles_need_a_planar_scenario(tmp_path, paper_scenario_dict):
+    data = paper_scenario_dict()
+    for agent in data['agents'].values():
+        agent['position'] = [*agent['position'], 0.0]
+    for edge in data['edges']:
+        edge['d'] = [*edge['d'], 0.0]
+    path = tmp_path / 'space.yaml'
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(RunError, match='unicycles move in the plane: the scenario must have p = 2, got p = 3'):
+        FormationRun(path, out_dir=tmp_path / 'run', backend='unicycle')
+    assert FormationRun(path, out_dir=tmp_path / 'run', backend='holonomic').plan.robots.model == 'holonomic'
+
+
+def test_robot_options_reach_the_simulated_robots(tmp_path):
+    noisy = RobotOptions(model='holonomic', pose_noise=0.005, latency=0.02, seed=3)
+    params = noisy.robot_parameters(load_scenario('robots_square'), 2)
+    assert {key: params[key] for key in ('pose_noise', 'pose_latency', 'seed', 'rate')} == {'pose_noise': 0.005, 'pose_latency': 0.02, 'seed': 3, 'rate': 100.0}
+    assert np.array_equal(params['position'], [1.015, -0.0075])

@@ -1,0 +1,146 @@
+"""The simulated robot node in one process: it moves exactly as its command says between ticks,
+takes only commands in its frame, and stops when commands stop coming."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+DOMAIN_ID = 161
+
+
+class _Probe:
+    """A test node: publishes commands to robot i and keeps what the robot publishes."""
+
+    def __init__(self, context, robot_id: int, *, holonomic: bool) -> None:
+        from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+        from nav_msgs.msg import Odometry
+        from rclpy.node import Node
+
+        from formation_msgs_py.topics import robot_command_topic, robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+        from formation_sim.runtime.robot_node import ROBOT_QOS
+
+        self.node = Node(f'probe_{robot_id}', context=context, start_parameter_services=False)
+        self.truth: list = []
+        self.odom: list = []
+        self.poses: list = []
+        self.commands = self.node.create_publisher(TwistStamped if holonomic else Twist, robot_command_topic(robot_id), ROBOT_QOS)
+        self.node.create_subscription(Odometry, robot_true_odom_topic(robot_id), self.truth.append, ROBOT_QOS)
+        self.node.create_subscription(Odometry, robot_odom_topic(robot_id), self.odom.append, ROBOT_QOS)
+        self.node.create_subscription(PoseStamped, robot_pose_topic(robot_id), self.poses.append, ROBOT_QOS)
+
+
+def _robot(context, **parameters):
+    from formation_agent.ros.parameters import as_overrides
+    from formation_sim.runtime.robot_node import SimulatedRobotNode
+
+    return SimulatedRobotNode(namespace=f'/agent_{parameters["robot_id"]}', parameter_overrides=as_overrides(parameters), context=context)
+
+
+def _spin(executor, seconds: float, until=lambda: False) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not until():
+        executor.spin_once(timeout_sec=0.01)
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def _state(msg) -> tuple[float, float, float]:
+    from formation_agent.core.kinematics import yaw
+
+    pose = msg.pose.pose
+    q = pose.orientation
+    return pose.position.x, pose.position.y, yaw((q.x, q.y, q.z, q.w))
+
+
+@pytest.fixture
+def executor(ros):
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=ros)
+    yield executor
+    for node in list(executor.get_nodes()):
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop(ros, executor):
+    from geometry_msgs.msg import Twist, Vector3
+
+    robot = _robot(ros, robot_id=1, model='unicycle', position=[1.0, 0.5], yaw=0.3, control_point_distance=0.1, command_timeout=0.3)
+    probe = _Probe(ros, 1, holonomic=False)
+    executor.add_node(robot)
+    executor.add_node(probe.node)
+    _spin(executor, 30.0, until=lambda: probe.commands.get_subscription_count() > 0 and len(probe.truth) > 2)
+    assert probe.truth, 'the robot published no odometry'
+    # Placed by its control point: the axle is l behind (1.0, 0.5) along θ = 0.3.
+    x, y, yaw = _state(probe.truth[0])
+    assert np.allclose([x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], [1.0, 0.5]) and math.isclose(yaw, 0.3)
+
+    v, w = 0.2, 1.5
+    probe.commands.publish(Twist(linear=Vector3(x=v), angular=Vector3(z=w)))
+    sent = time.time()
+    _spin(executor, 0.6)
+    moving = [msg for msg in probe.truth if msg.twist.twist.angular.z == w]
+    assert len(moving) >= 5, f'{len(moving)} ticks under the command'
+    # Between two ticks under one command, the pose moved along the exact arc (closed form in
+    # sim.robots, checked against an ODE solver in test_robots): here against the arc formula.
+    for a, b in zip(moving, moving[1:]):
+        (xa, ya, ta), (xb, yb, tb) = _state(a), _state(b)
+        tau = _stamp(b) - _stamp(a)
+        expected = (xa + v / w * (math.sin(ta + w * tau) - math.sin(ta)), ya - v / w * (math.cos(ta + w * tau) - math.cos(ta)))
+        assert np.allclose((xb, yb), expected, atol=1e-7), (tau, (xb, yb), expected)
+        assert math.isclose(math.remainder(tb - ta - w * tau, 2 * math.pi), 0.0, abs_tol=1e-7)
+
+    # No command for command_timeout: the robot stops, and stays where it stopped.
+    _spin(executor, 0.8)
+    stopped = [msg for msg in probe.truth if _stamp(msg) > sent + 0.3 and msg.twist.twist.linear.x == 0.0]
+    assert stopped, 'the robot kept moving without commands'
+    assert robot.timeouts == 1
+    first_stop = _stamp(stopped[0])
+    assert first_stop >= sent + 0.3  # never before the timeout
+    rests = {_state(msg)[:2] for msg in probe.truth if _stamp(msg) > first_stop}
+    assert len(rests) == 1, 'it moved after stopping'
+    # What the agent sees: the same poses on pose and odom, body-frame twist (v, 0) and ω.
+    assert probe.poses and probe.odom and probe.odom[-1].child_frame_id == 'agent_1/base_link'
+
+
+def test_a_holonomic_robot_takes_world_frame_commands_only_and_publishes_noisy_late_poses(ros, executor):
+    from geometry_msgs.msg import TwistStamped
+
+    robot = _robot(ros, robot_id=2, model='holonomic', position=[0.0, 0.0], pose_noise=0.01, pose_latency=0.05, seed=7,
+                   max_linear_speed=0.22)  # fmt: skip
+    probe = _Probe(ros, 2, holonomic=True)
+    executor.add_node(robot)
+    executor.add_node(probe.node)
+    _spin(executor, 30.0, until=lambda: probe.commands.get_subscription_count() > 0 and len(probe.truth) > 2 and probe.odom)
+
+    wrong = TwistStamped()
+    wrong.header.frame_id = 'map'
+    wrong.twist.linear.x = 0.1
+    probe.commands.publish(wrong)
+    _spin(executor, 0.2)
+    assert robot.commands_refused == 1 and robot.robot.command is None
+
+    command = TwistStamped()
+    command.header.frame_id = 'world'
+    command.twist.linear.x, command.twist.linear.y = 0.3, 0.4  # 0.5 m/s: clipped to 0.22
+    probe.commands.publish(command)
+    _spin(executor, 0.3)
+    assert robot.robot.saturated == 1
+    moving = [msg for msg in probe.truth if msg.twist.twist.linear.x != 0.0]
+    assert moving and math.isclose(math.hypot(moving[-1].twist.twist.linear.x, moving[-1].twist.twist.linear.y), 0.22)
+    # Measured poses: stamped with the measurement, published pose_latency later, scattered
+    # around the truth of the same instant.
+    truth = {_stamp(msg): _state(msg)[:2] for msg in probe.truth}
+    errors = np.array([np.subtract(_state(msg)[:2], truth[_stamp(msg)]) for msg in probe.odom if _stamp(msg) in truth])
+    assert len(errors) > 10
+    assert 0.004 < errors.std() < 0.02
+    assert _stamp(probe.odom[-1]) <= _stamp(probe.truth[-1]) - 0.04  # the latency

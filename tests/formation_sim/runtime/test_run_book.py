@@ -1,0 +1,90 @@
+"""The run's books without ROS traffic: which Status a coordinator refuses, when a lost agent
+stops the run, and the summary's saturation and lateness."""
+
+from __future__ import annotations
+
+
+import pytest
+
+from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
+from formation_sim.model.scenario import load_scenario
+from formation_sim.runtime.run_book import AgentLostError, CoordinatorError, RunBook
+
+
+def _status(agent: int, **fields) -> Status:
+    values = dict(step_index=0, next_time=1.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
+    return Status(agent=agent, **{**values, **fields})
+
+
+def test_a_simulator_refuses_triggers_it_never_served_a_coordinator_learns_them_from_the_agents():
+    scenario = load_scenario('paper_single')
+    simulator = RunBook(scenario, realtime=True)
+    with pytest.raises(CoordinatorError, match='agent 2 reports 1 triggers, but was due 0 times'):
+        simulator.accept_status(_status(2, triggers=1))
+    coordinator = RunBook(scenario, realtime=True, serves_sensing=False)
+    assert coordinator.accept_status(_status(2, triggers=1, last_planned=0.0)) is True  # a new trigger
+    assert coordinator.accept_status(_status(2, triggers=1, info_received=1)) is False
+    with pytest.raises(CoordinatorError, match='agent 2: status went backwards'):
+        coordinator.accept_status(_status(2, triggers=0))
+    with pytest.raises(CoordinatorError, match=r'status from agent 9, which is not in the scenario \[1, 2, 3\]'):
+        coordinator.accept_status(_status(9))
+
+
+def test_lateness_is_each_trigger_against_the_plan_its_status_announced():
+    book = RunBook(load_scenario('paper_single'), realtime=True, serves_sensing=False)
+    book.accept_status(_status(1, triggers=1, last_planned=0.0))
+    book.accept_status(_status(1, triggers=2, last_planned=0.5))
+    book.accept_status(_status(1, triggers=3, last_planned=0.9))  # its trigger not seen (run ended)
+    extra = book.lateness({1: [0.01, 0.53], 2: [], 3: []})
+    assert extra['lateness'] == {'1': {'max': 0.53 - 0.5, 'mean': (0.01 + (0.53 - 0.5)) / 2}}
+    assert extra['max_lateness'] == 0.53 - 0.5
+
+
+def test_agents_lost_together_are_named_together_after_the_grace():
+    book = RunBook(load_scenario('paper_single'), realtime=True)
+    for agent in (1, 2, 3):
+        book.note_liveliness(agent, alive_count=1, not_alive_count_change=0, finished=False, now=0.0)
+    book.note_liveliness(2, alive_count=0, not_alive_count_change=1, finished=False, now=10.0)
+    book.note_liveliness(3, alive_count=0, not_alive_count_change=0, finished=False, now=10.2)  # its writer deleted
+    assert book.lost_error(10.4, started=True, where='at t=1.0 (step 0)') is None  # within LOST_GRACE of the first
+    error = book.lost_error(10.6, started=True, where='at t=1.0 (step 0)')
+    assert isinstance(error, AgentLostError) and error.agents == [2, 3]
+    assert str(error) == (
+        'agents 2, 3 lost at t=1.0 (step 0): its node left the graph; no sign of life for 1.0 s '
+        '(DDS liveliness lease); the run stops'
+    )
+    # During discovery a lapsed lease may come back (a busy machine): only the agent that left counts.
+    assert book.lost_error(10.6, started=False, where='during discovery') is None  # 0.4 s after agent 3 left
+    assert book.lost_error(10.8, started=False, where='during discovery').agents == [3]
+    book.agents[1].status = _status(1, step_index=DISCOVERY_STEP, ready=False)
+    assert book.not_ready() == [1, 2, 3]
+
+
+def test_saturation_in_the_summary_adds_up_the_agents_reports():
+    from dataclasses import dataclass
+
+    from formation_sim.sim.summary import saturation_extra
+
+    @dataclass
+    class Clipped:  # the agent's AgentReport.saturation entries
+        count: int
+        largest_requested: float
+        allowed: float
+
+    @dataclass
+    class Report:
+        agent: int
+        saturation: dict
+
+    reports = [
+        Report(1, {'linear_speed': Clipped(3, 0.31, 0.22), 'angular_speed': Clipped(0, 0.0, 2.84)}),
+        Report(2, {'linear_speed': Clipped(2, 0.45, 0.22)}),
+        None,  # an agent that never reported
+        Report(4, {}),
+    ]
+    assert saturation_extra(reports) == {
+        'total': 5,
+        'by_kind': {'linear_speed': {'count': 5, 'largest_requested': 0.45, 'allowed': 0.22}},
+        'by_agent': {'1': {'linear_speed': 3}, '2': {'linear_speed': 2}},
+    }
+    assert saturation_extra([None]) == {'total': 0, 'by_kind': {}, 'by_agent': {}}
