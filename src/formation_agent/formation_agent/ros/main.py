@@ -31,7 +31,7 @@ from formation_agent.ros.config import agent_help
 from formation_agent.ros.faults import FaultInjectionError
 from formation_agent.ros.node import DELIVERY_TIMEOUT, FormationAgentNode, PeerLostError
 from formation_agent.ros.parameters import ParameterError
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import agent_namespace
 
 
@@ -120,4 +120,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

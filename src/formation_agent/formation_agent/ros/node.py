@@ -62,6 +62,16 @@ last messages too: zero command, report): Fast DDS repairs a message lost on the
 writer's next heartbeat (every 3 s by default, 0.1 s in a run: `formation_sim.runtime`'s
 fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 
+DISCOVERY_CHECK = 0.1
+"""Seconds between an agent's looks at its endpoints during discovery: it announces its Status
+(step −1) when its readiness changes, not every look (reliable, transient local: a simulator that
+matches later still gets the latest)."""
+
+DISCOVERY_LOG_AFTER = 2.0
+DISCOVERY_LOG_PERIOD = 5.0
+"""An agent not yet connected says what it waits for after DISCOVERY_LOG_AFTER seconds, then
+every DISCOVERY_LOG_PERIOD seconds."""
+
 
 class AgentNodeError(ValueError):
     """A violation of the lock-step protocol seen by an agent."""
@@ -171,7 +181,10 @@ class FormationAgentNode(Node):
         self._simulator_seen = False
         self._simulator_lost_at: float | None = None
         self._simulator_lease_expired = False
-        self._discovery = self.create_timer(0.1, self._announce)
+        self._created = time.monotonic()
+        self._announced: bool | None = None  # the readiness of the last discovery Status
+        self._next_discovery_log = self._created + DISCOVERY_LOG_AFTER
+        self._discovery = self.create_timer(DISCOVERY_CHECK, self._announce)
 
     @property
     def rejected(self) -> dict[str, int]:
@@ -186,20 +199,53 @@ class FormationAgentNode(Node):
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""
-        listeners = 1 + self.config.extra_subscribers
-        return (
-            all(pub.get_subscription_count() >= listeners for pub in self._info_pubs.values())
-            and all(sub.get_publisher_count() >= 1 for sub in self._info_subs)
-            and self.sensing.ready()
-            and self.output.publisher.get_subscription_count() >= listeners
-            and self._status_pub.get_subscription_count() >= listeners
-            and self._report_pub.get_subscription_count() >= listeners
-            and self._step_sub.get_publisher_count() >= 1
-        )
+        return not self.discovery_gaps()
+
+    def discovery_gaps(self) -> list[str]:
+        """What discovery still waits for, one phrase per endpoint (empty: connected)."""
+        extra = self.config.extra_subscribers
+        listeners = 1 + extra
+        others = ['a recorder'] if extra == 1 else [f'{extra} listeners'] if extra else []
+        gaps = []
+
+        def readers(publisher, peer: str) -> None:
+            have = publisher.get_subscription_count()
+            if have < listeners:
+                gaps.append(f'readers of {publisher.topic_name}: {have} of {listeners} ({", ".join([peer, *others])})')
+
+        for j, publisher in self._info_pubs.items():
+            readers(publisher, f'agent {j}')
+        silent = [j for j, sub in zip(self.neighbour_ids, self._info_subs) if sub.get_publisher_count() < 1]
+        gaps += [f'a writer of {trigger_info_topic(j, self.agent_id)} (agent {j})' for j in silent]
+        gaps += self.sensing.gaps()
+        readers(self.output.publisher, 'the robot' if self.config.robot != 'none' else 'the simulator')
+        readers(self._status_pub, 'the simulator or coordinator')
+        readers(self._report_pub, 'the simulator or coordinator')
+        if self._step_sub.get_publisher_count() < 1:
+            gaps.append(f'a writer of {STEP_TOPIC} (the simulator or coordinator)')
+        return gaps
 
     def _announce(self) -> None:
-        if self.step is None and self._status_pub.get_subscription_count() >= 1:
-            self._publish_status(step_index=DISCOVERY_STEP, ready=self.connected())
+        """During discovery: a Status (step −1) whenever the agent's readiness changes, and now and
+        then a log line saying what it still waits for."""
+        if self.step is not None:
+            return
+        gaps = self.discovery_gaps()
+        ready = not gaps
+        if ready != self._announced:
+            self._announced = ready
+            self._publish_status(step_index=DISCOVERY_STEP, ready=ready)
+            if ready:
+                self.get_logger().info(
+                    f'agent {self.agent_id}: every endpoint matched {time.monotonic() - self._created:.1f} s after the node '
+                    'started; waiting for step 0'
+                )
+        now = time.monotonic()
+        if gaps and now >= self._next_discovery_log:
+            self._next_discovery_log = now + DISCOVERY_LOG_PERIOD
+            self.get_logger().info(
+                f'agent {self.agent_id}: discovery for {now - self._created:.0f} s, still waiting for: {"; ".join(gaps)}'
+            )
 
     # -- steps ----------------------------------------------------------------------------------
 

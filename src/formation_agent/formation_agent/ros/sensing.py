@@ -32,9 +32,14 @@ class ServiceSensing:
 
     def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
         self._client = node.create_client(Trigger, 'sense')
+        self._name = node.resolve_service_name('sense')
 
     def ready(self) -> bool:
         return self._client.service_is_ready()
+
+    def gaps(self) -> list[str]:
+        """What sensing still waits for (empty: ready)."""
+        return [] if self.ready() else [f'the sensing service {self._name} (served by the simulator)']
 
     def start(self, epoch: float) -> None:
         """Wall clock from `epoch` on (the simulator stamps its answers itself)."""
@@ -81,6 +86,14 @@ class PoseSensing:
     def ready(self) -> bool:
         """Every pose topic has a writer and a first pose of every robot has arrived."""
         return all(sub.get_publisher_count() >= 1 for sub in self._subs) and self.book.has_all()
+
+    def gaps(self) -> list[str]:
+        """What sensing still waits for (empty: ready)."""
+        unmatched = [sub.topic_name for sub in self._subs if sub.get_publisher_count() < 1]
+        if unmatched:
+            return [f'a writer of the robots\' poses on {", ".join(unmatched)}']
+        missing = self.book.missing()
+        return [f'a first pose on {", ".join(self._config.robot_pose_topic(robot) for robot in missing)}'] if missing else []
 
     def start(self, epoch: float) -> None:
         self._epoch = epoch

@@ -48,9 +48,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
-from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
     RECORDER_TOPIC,
@@ -87,6 +87,7 @@ EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
+DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
@@ -193,6 +194,12 @@ class FormationCoordinatorNode(Node):
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
         self._timer = self.create_timer(0.1, self._tick)
+        # Discovery as the agents report it: who has announced itself, who is ready (step 0
+        # goes as soon as the last one is and the node's own endpoints are matched).
+        self._announced: set[int] = set()
+        self._ready: set[int] = set()
+        self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
+        self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
 
     # -- what a subclass with a world of its own replaces ---------------------------------------
 
@@ -399,13 +406,16 @@ class FormationCoordinatorNode(Node):
         if not self.finished:
             self._check_lost(now)
         if self.step is None:
-            if self._connected():
+            if len(self._ready) == len(self.agents) and self._connected():  # (cheap while agents are missing)
                 self._start()
             elif now - self._created > self.discovery_timeout:
                 raise DiscoveryError(
                     f'discovery did not complete within {self.discovery_timeout} s; still missing: '
                     + '; '.join(self._discovery_gaps())
                 )
+            elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
+                self._next_discovery_progress = now + self.progress_period
+                self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
             return
         if self.finished:
             return
@@ -415,10 +425,9 @@ class FormationCoordinatorNode(Node):
             self._print_progress()
 
     def _start(self) -> None:
-        self._started = time.monotonic()
+        self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
-            with contextlib.suppress(OSError):
-                print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
+            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
         self.graph = self.snapshot_graph()
         self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._begin()
@@ -484,7 +493,27 @@ class FormationCoordinatorNode(Node):
             self._reject(STATUS_TOPIC, error.reason, str(error))
             return
         self.book.accept_status(status)
+        if self.step is None and status.step_index == DISCOVERY_STEP:
+            self._on_announcement(status)
+            return
         self._after_status()
+
+    def _on_announcement(self, status) -> None:
+        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
+        now = time.monotonic()
+        self._announced.add(status.agent)
+        (self._ready.add if status.ready else self._ready.discard)(status.agent)
+        if len(self._announced) == len(self.agents):
+            self._marks.setdefault('agents_announced', now)
+        if len(self._ready) == len(self.agents):
+            self._marks.setdefault('agents_ready', now)
+            if self._connected():
+                self._start()
+
+    def _say(self, line: str) -> None:
+        """A line on stdout, where `formation run` shows the progress lines."""
+        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
+            print(line, flush=True)
 
     def _after_status(self) -> None:
         """Lock-step settles steps here; the wall clock needs nothing."""
@@ -558,12 +587,23 @@ class FormationCoordinatorNode(Node):
             }
         return graph
 
+    def timestamps(self) -> dict[str, float]:
+        """When this node reached each mark of the run, as Unix times (summary.json
+        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+        agent's first discovery Status), agents_ready (every agent connected), step0, final_step."""
+        marks = dict(self._marks)
+        if self._finished_at is not None:
+            marks['final_step'] = self._finished_at
+        offset = time.time() - time.monotonic()
+        return {name: at + offset for name, at in marks.items()}
+
     def _run_extra(self, reached: float) -> dict:
         """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
         return {
             'clock': self.clock_mode,
             'steps': self.steps,
             'discovery_wall_time': (self._started or self._created) - self._created,
+            'timestamps': self.timestamps(),
             'reached_time': reached,
             'failure': self.failure_info,
             **self.book.message_counts(),
@@ -694,4 +734,4 @@ def _tell(line: str) -> None:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

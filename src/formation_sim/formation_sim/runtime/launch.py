@@ -45,6 +45,7 @@ LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
 FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
+RECORDER_DRAIN_QUIET = 0.1  # [s] the run's recorder closes its bag once nothing came for this long
 
 
 class RunError(RuntimeError):
@@ -249,6 +250,9 @@ class LaunchPlan:
                     'ros__parameters': {
                         'output': str((out / BAG_DIR).resolve()),
                         'topics': [f'{name}:{msgtype}' for name, msgtype in self.recorder_topics()],
+                        # Stopped last, once every writer has left and its messages were
+                        # acknowledged by the recorder: they are in its readers already.
+                        'drain_quiet': RECORDER_DRAIN_QUIET,
                         # Robots: wall-clock stamps (run time is in the messages' headers and Step 0).
                         **({} if self.backend == 'exact' else {'clock_topic': ''}),
                     }
@@ -339,6 +343,9 @@ class LaunchPlan:
             env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
         if self.process_count() > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        # numpy's OpenBLAS starts a thread per core at import, which costs every child ~0.1 s of
+        # CPU while all of them start at once; no node does linear algebra worth a thread.
+        env.setdefault('OPENBLAS_NUM_THREADS', '1')
         env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
         env.update(extra_env)
         return with_our_packages(env)

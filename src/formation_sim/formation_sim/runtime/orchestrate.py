@@ -66,10 +66,13 @@ from formation_sim.runtime.results import (
     annotate,
     check_recording,
     lost_or_failed,
+    describe_phases,
+    phases,
     read_summary,
     recover_bag,
     strangers,
     summary_of_what_is_known,
+    timeline,
 )
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
 
@@ -231,6 +234,7 @@ class FormationRun:
         )
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
+        self.marks: dict[str, float] = {}
         self._interrupted = threading.Event()
         self._started_at = 0.0
 
@@ -246,6 +250,7 @@ class FormationRun:
 
     def run(self) -> RunResult:
         started = self._started_at = time.monotonic()
+        self.marks = {'run': time.time()}  # the orchestrator's marks of the run (Unix times; extra.timeline)
         lost: Child | None = None
         with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
@@ -259,6 +264,7 @@ class FormationRun:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
                 self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id)
+                self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
         notes: list[str] = []  # what the message adds after the failure
@@ -273,6 +279,7 @@ class FormationRun:
                 launched=self._started_at, notes=notes,
             )  # fmt: skip
         failure = None
+        run_phases: dict[str, float] = {}
         if data is not None:
             failure = annotate(data, lost, status, message, launched=self._started_at)
             check = self._check_recording(data, bag, notes)
@@ -291,6 +298,10 @@ class FormationRun:
                     notes.append(check.describe_missing())
             if check is not None and check.foreign and status != EXIT_INTERRUPTED:
                 notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
+            self.marks['checked'] = time.time()
+            extra = data.setdefault('extra', {})
+            extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
+            extra['phases'] = run_phases = phases(extra['timeline'])
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -318,10 +329,12 @@ class FormationRun:
             message=message,
             failure=failure,
             bag_recovered=recovered,
+            phases=run_phases,
         )
         if self.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
-            self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self.last_progress}', end=True)
+            spent = f' ({describe_phases(run_phases)})' if run_phases else ''
+            self._say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result
 
     def _check_recording(self, data: dict, bag: Path, notes: list[str]):
@@ -375,6 +388,7 @@ class FormationRun:
             child = supervisor.start(spec)
             if spec.keeper:
                 keeper = child
+        self.marks['spawned'] = time.time()
         if self.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
@@ -385,9 +399,9 @@ class FormationRun:
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''
         lost: Child | None = None
-        # Fast DDS maps a peer's shared-memory port file when it first sends to it: look often
-        # (each look costs ~0.6 ms per child), but spend at most ~1 % of a core on it.
-        snapshot_period = max(0.25, 0.06 * len(supervisor.children))
+        # The children's Fast DDS files, noted while they live (a look at /dev/shm; the children's
+        # memory maps only when it changed: supervise.Supervisor.note_shm_files).
+        snapshot_period = 0.2
         next_snapshot = time.monotonic()
         while True:
             if self._interrupted.is_set():
@@ -400,10 +414,11 @@ class FormationRun:
                 self._say(shown)
             supervisor.note_exits(now)
             if now >= next_snapshot:
-                supervisor.note_shm_files()
+                supervisor.note_shm_files(now)
                 next_snapshot = now + snapshot_period
             code = keeper.process.poll()
             if code is not None:
+                self.marks['keeper_exited'] = time.time()
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
                     if not failed:

@@ -429,4 +429,6 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    raise SystemExit(main())
+    from formation_agent.ros.process import exit_process
+
+    exit_process(main())

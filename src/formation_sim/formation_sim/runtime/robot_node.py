@@ -55,7 +55,7 @@ from formation_agent.ros.parameters import (
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import StopSignals, make_executor
+from formation_agent.ros.process import StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import (
     agent_namespace,
     robot_command_topic,
@@ -313,4 +313,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

@@ -33,7 +33,6 @@ agent or the recorder lost, 130 interrupted.
 from __future__ import annotations
 
 import json
-import sys
 import time
 from collections.abc import Sequence
 
@@ -47,6 +46,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     decode_command,
     encode_pose_array,
@@ -486,4 +486,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())
