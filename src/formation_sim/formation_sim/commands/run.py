@@ -72,6 +72,12 @@ def register(subparsers) -> None:
         help='let DDS discovery reach the local network (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) for agents on '
         'other machines; default: this machine only (LOCALHOST)',
     )
+    parser.add_argument(
+        '--discovery-server',
+        action='store_true',
+        help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
+        'process announcing itself to every other: for large teams (BENCHMARKS.md)',
+    )
     add_robot_arguments(parser, model_flag='--robot')
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
@@ -106,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
             executor=args.executor,
             backend=args.backend,
             robots=robots,
+            discovery='server' if args.discovery_server else 'simple',
         ).run()
     except RunError as error:
         return refuse('run', error)

@@ -48,12 +48,15 @@ from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_ou
 from formation_sim.runtime.launch import (
     BACKENDS,
     BAG_DIR,
+    DISCOVERY_MODES,
     DOMAIN_RANGE,
     INJECT_KEYS,
     LOG_DIR,
     LaunchPlan,
     RobotOptions,
     RunError,
+    discovery_server_program,
+    free_udp_port,
     reserve_domain,
 )
 from formation_sim.runtime.results import (
@@ -115,6 +118,7 @@ class FormationRun:
         step_listeners: int = 0,
         backend: str = 'exact',
         robots: RobotOptions | None = None,
+        discovery: str = 'simple',
     ) -> None:
         """Check everything that can be checked before any process starts or anything on disk changes.
 
@@ -136,6 +140,9 @@ class FormationRun:
         (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
         `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
         must hear every Step: step 0 waits until that many more readers of it are matched.
+        `discovery`: 'simple' (Fast DDS's simple discovery, every participant announces itself to
+        every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
+        children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
         """
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
@@ -202,6 +209,10 @@ class FormationRun:
             )
         if step_listeners < 0:
             raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
+        if discovery not in DISCOVERY_MODES:
+            raise RunError(f'discovery must be one of {DISCOVERY_MODES}, got {discovery!r}')
+        if discovery == 'server':
+            discovery_server_program()  # RunError now, before anything starts, if it is not installed
         self.step_listeners = step_listeners
         if self.out_dir is not None:  # last: every other argument is refused before the folder is looked at
             try:
@@ -231,6 +242,8 @@ class FormationRun:
             step_listeners=step_listeners,
             inject=self.inject,
             robots=robots,
+            discovery=discovery,
+            localhost_only=localhost_only,
         )
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
@@ -240,7 +253,7 @@ class FormationRun:
 
     def _environment(self, domain_id: int, processes: int | None = None) -> dict[str, str]:
         """The children's environment (launch.LaunchPlan.environment)."""
-        return self.plan.environment(domain_id, localhost_only=self.localhost_only, extra_env=self.extra_env)
+        return self.plan.environment(domain_id, extra_env=self.extra_env)
 
     @property
     def _children(self) -> list[Child]:
@@ -257,7 +270,8 @@ class FormationRun:
                 self.out_dir = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force)
             except RunFolderError as error:
                 raise RunError(str(error)) from None
-            self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir)
+            port = free_udp_port(domain_id) if self.plan.discovery == 'server' else None
+            self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir, discovery_port=port)
             paths = self.plan.write_inputs()
             self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.launch_prefix)
             try:
@@ -392,9 +406,11 @@ class FormationRun:
         if self.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
+            server = f', discovery server on port {self.plan.discovery_port}' if self.plan.discovery == 'server' else ''
             self._say(
                 f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent process(es)'
-                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.record else ""} started; waiting for discovery'
+                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.record else ""}{server} started; '
+                'waiting for discovery'
             )
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''

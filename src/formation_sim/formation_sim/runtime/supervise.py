@@ -107,8 +107,8 @@ class Supervisor:
         handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
         prefix = list(self.launch_prefix(spec.name)) if self.launch_prefix is not None else []
         process = subprocess.Popen(
-            [*prefix, sys.executable, *spec.args],
-            env=self.env,
+            [*prefix, spec.program or sys.executable, *spec.args],
+            env={**self.env, **dict(spec.env)},
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE if spec.keeper else handle,
             stderr=handle,
