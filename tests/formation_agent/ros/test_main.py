@@ -156,11 +156,11 @@ def test_an_agent_waiting_in_discovery_says_what_it_waits_for_again_and_again(ag
         assert said == [
             'readers of /agent_1/trigger_info/to_2: 0 of 1 (agent 2)',
             'a writer of /agent_2/trigger_info/to_1 (agent 2)',
-            "a writer of the robots' poses on /agent_1/robot/pose, /agent_2/robot/pose",
             'readers of /agent_1/robot/cmd_vel: 0 of 1 (the robot)',
             'readers of /formation/status: 0 of 1 (the simulator or coordinator)',
             'readers of /formation/agent_report: 0 of 1 (the simulator or coordinator)',
             'a writer of /formation/step (the simulator or coordinator)',
+            "a writer of the robots' poses on /agent_1/robot/pose, /agent_2/robot/pose",
         ], line
     seconds = [float(line.split('discovery for ', 1)[1].split(' s,')[0]) for line in waits]
     assert seconds[1] - seconds[0] >= DISCOVERY_LOG_PERIOD - 1.0, seconds  # printed rounded to the second

@@ -290,11 +290,11 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
         'readers of /agent_1/trigger_info/to_3: 0 of 2 (agent 3, a recorder)',
         'a writer of /agent_2/trigger_info/to_1 (agent 2)',
         'a writer of /agent_3/trigger_info/to_1 (agent 3)',
-        'the sensing service /agent_1/sense (served by the simulator)',
         'readers of /agent_1/cmd_vel: 0 of 2 (the simulator, a recorder)',
         'readers of /formation/status: 0 of 2 (the simulator or coordinator, a recorder)',
         'readers of /formation/agent_report: 0 of 2 (the simulator or coordinator, a recorder)',
         'a writer of /formation/step (the simulator or coordinator)',
+        'the sensing service /agent_1/sense (served by the simulator)',
     ]
     assert not node.connected()
     # The simulator's side of it, in a participant of its own (its own process in a run).

@@ -25,6 +25,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.config import agent_help
@@ -62,11 +63,16 @@ def _build_nodes(options: argparse.Namespace) -> list[FormationAgentNode]:
         return [FormationAgentNode()]
     ids = [int(text) for text in options.agents.split(',') if text.strip()]
     packed = len(ids) > 1
+    # Packed (large teams): no per-node parameter, type description and /rosout endpoints, which
+    # every process of the run would discover (~5 of ~20 endpoints an agent node has); the log
+    # still goes to the process's own output.
+    services = [] if not packed else [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)]
     return [
         FormationAgentNode(
             namespace=agent_namespace(agent_id),
             start_parameter_services=not packed,
-            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id)],
+            enable_rosout=not packed,
+            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id), *services],
         )
         for agent_id in ids
     ]
@@ -82,7 +88,12 @@ def main(args: Sequence[str] | None = None) -> int:
     failure: str | None = None
     with StopSignals() as stop:
         try:
+            began = time.monotonic()
             nodes = _build_nodes(options)
+            if len(nodes) > 1:  # how long a packed process takes to be up (large teams)
+                nodes[0].get_logger().info(
+                    f'{len(nodes)} agent nodes created in {time.monotonic() - began:.1f} s (agents {options.agents})'
+                )
             executor = make_executor(options.executor)
             for node in nodes:
                 executor.add_node(node)

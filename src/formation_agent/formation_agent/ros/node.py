@@ -26,8 +26,10 @@ injected for tests (`formation_agent.ros.faults`); parameters: `formation_agent.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
+from collections.abc import Iterator
 
 import rclpy
 from rclpy.duration import Duration
@@ -65,7 +67,11 @@ fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 DISCOVERY_CHECK = 0.1
 """Seconds between an agent's looks at its endpoints during discovery: it announces its Status
 (step −1) when its readiness changes, not every look (reliable, transient local: a simulator that
-matches later still gets the latest)."""
+matches later still gets the latest), and once ready again every DISCOVERY_REANNOUNCE seconds
+until step 0: a sign of life for a simulator that saw its liveliness lease lapse meanwhile (a
+machine starting 1000 agents is slow to assert it)."""
+
+DISCOVERY_REANNOUNCE = 1.0
 
 DISCOVERY_LOG_AFTER = 2.0
 DISCOVERY_LOG_PERIOD = 5.0
@@ -89,6 +95,7 @@ class FormationAgentNode(Node):
         *,
         namespace: str | None = None,
         start_parameter_services: bool = True,
+        enable_rosout: bool = True,
         parameter_overrides: list[Parameter] | None = None,
         core=None,
         context=None,
@@ -102,6 +109,7 @@ class FormationAgentNode(Node):
             NODE_NAME,
             namespace=namespace,
             start_parameter_services=start_parameter_services,
+            enable_rosout=enable_rosout,
             parameter_overrides=parameter_overrides or [],
             context=context,
         )
@@ -183,6 +191,7 @@ class FormationAgentNode(Node):
         self._simulator_lease_expired = False
         self._created = time.monotonic()
         self._announced: bool | None = None  # the readiness of the last discovery Status
+        self._next_announcement = 0.0
         self._next_discovery_log = self._created + DISCOVERY_LOG_AFTER
         self._discovery = self.create_timer(DISCOVERY_CHECK, self._announce)
 
@@ -199,49 +208,59 @@ class FormationAgentNode(Node):
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""
-        return not self.discovery_gaps()
+        return next(self._gaps(), None) is None
 
     def discovery_gaps(self) -> list[str]:
         """What discovery still waits for, one phrase per endpoint (empty: connected)."""
+        return list(self._gaps())
+
+    def _gaps(self) -> Iterator[str]:
+        """What discovery still waits for, one at a time (`connected` stops at the first: with
+        many agents in one process, every look at a match count costs)."""
         extra = self.config.extra_subscribers
         listeners = 1 + extra
         others = ['a recorder'] if extra == 1 else [f'{extra} listeners'] if extra else []
-        gaps = []
 
-        def readers(publisher, peer: str) -> None:
+        def readers(publisher, peer: str) -> Iterator[str]:
             have = publisher.get_subscription_count()
             if have < listeners:
-                gaps.append(f'readers of {publisher.topic_name}: {have} of {listeners} ({", ".join([peer, *others])})')
+                yield f'readers of {publisher.topic_name}: {have} of {listeners} ({", ".join([peer, *others])})'
 
         for j, publisher in self._info_pubs.items():
-            readers(publisher, f'agent {j}')
-        silent = [j for j, sub in zip(self.neighbour_ids, self._info_subs) if sub.get_publisher_count() < 1]
-        gaps += [f'a writer of {trigger_info_topic(j, self.agent_id)} (agent {j})' for j in silent]
-        gaps += self.sensing.gaps()
-        readers(self.output.publisher, 'the robot' if self.config.robot != 'none' else 'the simulator')
-        readers(self._status_pub, 'the simulator or coordinator')
-        readers(self._report_pub, 'the simulator or coordinator')
+            yield from readers(publisher, f'agent {j}')
+        for j, subscription in zip(self.neighbour_ids, self._info_subs):
+            if subscription.get_publisher_count() < 1:
+                yield f'a writer of {trigger_info_topic(j, self.agent_id)} (agent {j})'
+        yield from readers(self.output.publisher, 'the robot' if self.config.robot != 'none' else 'the simulator')
+        yield from readers(self._status_pub, 'the simulator or coordinator')
+        yield from readers(self._report_pub, 'the simulator or coordinator')
         if self._step_sub.get_publisher_count() < 1:
-            gaps.append(f'a writer of {STEP_TOPIC} (the simulator or coordinator)')
-        return gaps
+            yield f'a writer of {STEP_TOPIC} (the simulator or coordinator)'
+        # Last: whether a service is there is looked up in the whole ROS graph (rmw_fastrtps
+        # walks every endpoint it knows), where a match count is one number.
+        yield from self.sensing.gaps()
 
     def _announce(self) -> None:
-        """During discovery: a Status (step −1) whenever the agent's readiness changes, and now and
-        then a log line saying what it still waits for."""
+        """During discovery: a Status (step −1) whenever the agent's readiness changes and every
+        DISCOVERY_REANNOUNCE seconds once ready, and now and then a log line saying what it still
+        waits for."""
         if self.step is not None:
             return
-        gaps = self.discovery_gaps()
+        now = time.monotonic()
+        logging = now >= self._next_discovery_log
+        gaps = self.discovery_gaps() if logging else list(itertools.islice(self._gaps(), 1))
         ready = not gaps
-        if ready != self._announced:
+        changed = ready != self._announced
+        if changed or (ready and now >= self._next_announcement):
             self._announced = ready
+            self._next_announcement = now + DISCOVERY_REANNOUNCE
             self._publish_status(step_index=DISCOVERY_STEP, ready=ready)
-            if ready:
+            if ready and changed:
                 self.get_logger().info(
                     f'agent {self.agent_id}: every endpoint matched {time.monotonic() - self._created:.1f} s after the node '
                     'started; waiting for step 0'
                 )
-        now = time.monotonic()
-        if gaps and now >= self._next_discovery_log:
+        if gaps and logging:
             self._next_discovery_log = now + DISCOVERY_LOG_PERIOD
             self.get_logger().info(
                 f'agent {self.agent_id}: discovery for {now - self._created:.0f} s, still waiting for: {"; ".join(gaps)}'

@@ -27,15 +27,26 @@ from formation_msgs_py.types import SensedState
 SensedGetter = Callable[[], SensedState]
 
 
+SERVICE_LOOK_PERIOD = 0.5
+"""Seconds between looks for the sensing service during discovery: rmw_fastrtps answers whether a
+service is there by walking every endpoint of the ROS graph it knows (1000 agents: ~20 000), a
+match count is one number."""
+
+
 class ServiceSensing:
     """The simulator's sensing service: one request per trigger, answered asynchronously."""
 
     def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
         self._client = node.create_client(Trigger, 'sense')
         self._name = node.resolve_service_name('sense')
+        self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
+        self._next_look = 0.0
 
     def ready(self) -> bool:
-        return self._client.service_is_ready()
+        if not self._found and time.monotonic() >= self._next_look:
+            self._found = self._client.service_is_ready()
+            self._next_look = time.monotonic() + SERVICE_LOOK_PERIOD
+        return self._found
 
     def gaps(self) -> list[str]:
         """What sensing still waits for (empty: ready)."""
