@@ -31,6 +31,24 @@ def test_the_exact_backend_is_the_simulator_and_its_agents(tmp_path):
     assert not (tmp_path / 'run' / 'robots.params.yaml').exists()
 
 
+def test_auto_packing_keeps_one_process_per_agent_for_small_teams_and_few_processes_for_large_ones(tmp_path):
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.runtime.launch import AUTO_AGENT_PROCESSES, ONE_PROCESS_PER_AGENT_UP_TO
+
+    small = FormationRun('paper_single', out_dir=tmp_path / 'small', agents_per_process='auto').plan
+    assert small.agent_groups() == [[1], [2], [3]]
+    edge = random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO, seed=3)
+    assert FormationRun(edge, out_dir=tmp_path / 'edge', agents_per_process='auto').plan.agents_per_process == 1
+    large = FormationRun(random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO + 1, seed=3), out_dir=tmp_path / 'large', agents_per_process='auto').plan
+    groups = large.agent_groups()
+    assert 1 < len(groups) <= AUTO_AGENT_PROCESSES and sorted(i for group in groups for i in group) == list(large.scenario.agent_ids)
+    assert max(map(len, groups)) == -(-(ONE_PROCESS_PER_AGENT_UP_TO + 1) // AUTO_AGENT_PROCESSES)
+    for bad in (0, 'many', 2.5, True):
+        with pytest.raises(RunError, match=f"agents_per_process must be an integer >= 1 or 'auto', got {bad!r}"):
+            FormationRun('paper_single', out_dir=tmp_path / 'bad', agents_per_process=bad)
+    assert not (tmp_path / 'bad').exists()
+
+
 def test_a_discovery_server_starts_first_and_every_other_child_is_its_client(tmp_path, monkeypatch):
     import dataclasses
     import os

@@ -56,6 +56,16 @@ FINITE = _number('a finite number', math.isfinite)
 DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
 
 
+def POSITIVE_INT_OR_AUTO(text: str) -> int | str:  # noqa: N802 - an argparse type, named as the others
+    """An integer >= 1, or 'auto'."""
+    if text == 'auto':
+        return text
+    try:
+        return POSITIVE_INT(text)
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
+
+
 def bounded_int(low: int, high: int) -> Callable[[str], float]:
     return _number(f'an integer in [{low}, {high}]', lambda v: low <= v <= high, integer=True)
 

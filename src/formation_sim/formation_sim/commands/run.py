@@ -12,7 +12,7 @@ from formation_sim.commands.common import (
     EXIT_BAD_INPUT,
     NON_NEGATIVE,
     POSITIVE,
-    POSITIVE_INT,
+    POSITIVE_INT_OR_AUTO,
     add_robot_arguments,
     add_run_arguments,
     load_valid_scenario,
@@ -43,7 +43,14 @@ def register(subparsers) -> None:
         default='exact',
         help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
     )
-    parser.add_argument('--agents-per-process', type=POSITIVE_INT, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
+    parser.add_argument(
+        '--agents-per-process',
+        type=POSITIVE_INT_OR_AUTO,
+        default=1,
+        metavar='K',
+        help='agent nodes sharing one process (default 1: every agent its own process); auto: one each up to 24 agents, '
+        'beyond that the team in at most 6 processes (for large teams: BENCHMARKS.md)',
+    )
     parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
     parser.add_argument(

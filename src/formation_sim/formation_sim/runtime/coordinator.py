@@ -289,11 +289,11 @@ class FormationCoordinatorNode(Node):
             self._end_at_horizon()
 
     def _end_at_horizon(self) -> None:
+        self._finished_at = time.monotonic()
         self.graph = self.snapshot_graph()
         self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
         self._publish(self._step_pub, encode_step(self.step))
         self.finished = True
-        self._finished_at = time.monotonic()
         self._reached = self.horizon
 
     @property
@@ -428,7 +428,6 @@ class FormationCoordinatorNode(Node):
         self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
             self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
-        self.graph = self.snapshot_graph()
         self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._begin()
 
@@ -581,7 +580,10 @@ class FormationCoordinatorNode(Node):
     # -- results --------------------------------------------------------------------------------
 
     def snapshot_graph(self) -> dict:
-        """Publishers, subscriptions, services and clients of every node in the graph."""
+        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
+
+        Taken at the final Step, while every agent is still there (and, for a run that stops
+        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
         graph = {}
         for name, namespace in self.get_node_names_and_namespaces():
             key = f'{namespace.rstrip("/")}/{name}'
@@ -593,10 +595,16 @@ class FormationCoordinatorNode(Node):
             }
         return graph
 
+    def mark(self, name: str) -> None:
+        """Note the time the run reached `name` (extra.timestamps)."""
+        self._marks[name] = time.monotonic()
+
     def timestamps(self) -> dict[str, float]:
         """When this node reached each mark of the run, as Unix times (summary.json
         extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
-        agent's first discovery Status), agents_ready (every agent connected), step0, final_step."""
+        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+        final_reports (every agent's final report in, or the wait for them over), delivered (what
+        this node published acknowledged)."""
         marks = dict(self._marks)
         if self._finished_at is not None:
             marks['final_step'] = self._finished_at
@@ -639,6 +647,10 @@ class FormationCoordinatorNode(Node):
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
+        if self._finished_at is None:
+            self._finished_at = time.monotonic()
+        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
+            self.graph = self.snapshot_graph()
         self.finished = True
         self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
         self.flush()
@@ -682,8 +694,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
                 if node.failure is not None:
                     raise node.failure
             node.collect_final_reports(executor)
+            node.mark('final_reports')
             node.after_final_step(executor)
             node.wait_for_delivery(executor)
+            node.mark('delivered')
             if node.progress_period > 0.0:
                 node._print_progress()
             if node.out_dir:

@@ -40,6 +40,8 @@ DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel 
 POSE_TYPES = ('odom', 'pose')
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
+ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
+AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
@@ -164,6 +166,20 @@ class ProcessSpec:
     keeper: bool = False  # the run's time keeper: its exit ends the run, its progress lines are shown
     program: str | None = None  # the program `args` go to (None: this Python)
     env: tuple[tuple[str, str], ...] = ()  # variables of this process alone, besides the run's environment
+
+
+def resolve_agents_per_process(value: int | str, n: int) -> int:
+    """How many agent nodes share a process: `value` itself, or for 'auto' one process per agent up
+    to ONE_PROCESS_PER_AGENT_UP_TO agents (the mission's default, within localhost discovery's ~30
+    processes) and beyond that the team split into at most AUTO_AGENT_PROCESSES processes: on 2 cores, 100
+    to 1000 agents started and stepped fastest in 4-6 processes, where every process is one more
+    participant for every other to discover and to keep the ROS graph of (1000 agents in 10
+    processes took longer to discover than in 5)."""
+    if value == 'auto':
+        return 1 if n <= ONE_PROCESS_PER_AGENT_UP_TO else -(-n // AUTO_AGENT_PROCESSES)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise RunError(f"agents_per_process must be an integer >= 1 or 'auto', got {value!r}")
+    return value
 
 
 def _groups(ids: list[int], size: int) -> list[list[int]]:

@@ -58,6 +58,7 @@ from formation_sim.runtime.launch import (
     discovery_server_program,
     free_udp_port,
     reserve_domain,
+    resolve_agents_per_process,
 )
 from formation_sim.runtime.results import (
     EXIT_FAILED,
@@ -102,7 +103,7 @@ class FormationRun:
         force: bool = False,
         horizon: float | None = None,
         domain_id: int | None = None,
-        agents_per_process: int = 1,
+        agents_per_process: int | str = 1,
         record: bool = True,
         localhost_only: bool = True,
         progress: bool = True,
@@ -136,6 +137,8 @@ class FormationRun:
         'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', …) -> command put
         before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
         stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
+        `agents_per_process`: agent nodes sharing one process, or 'auto' (one process per agent
+        up to 24 agents, beyond that the team in at most 6 processes: launch.resolve_agents_per_process).
         `executor`: the rclpy executor of the time keeper and agent processes, 'events'
         (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
         `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
@@ -163,8 +166,7 @@ class FormationRun:
             raise RunError(f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {sample_period!r}')
         if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0):
             raise RunError(f'timeout must be a finite number of seconds > 0, got {timeout!r}')
-        if agents_per_process < 1:
-            raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
+        agents_per_process = resolve_agents_per_process(agents_per_process, len(self.scenario.agent_ids))
         if self.scenario.dimension > 3:
             raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
         if backend not in BACKENDS:

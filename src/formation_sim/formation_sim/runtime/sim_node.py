@@ -307,11 +307,11 @@ class FormationSimulatorNode(FormationCoordinatorNode):
         if t >= self.horizon:
             self.world.advance(self.horizon)
             self._sampler.event()
+            self._finished_at = time.monotonic()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
             self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
-            self._finished_at = time.monotonic()
         self.publish_samples()
 
     def _sense_realtime(self, agent: int):
@@ -411,9 +411,9 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             self._sampler.grid_until(self.horizon)
             self.world.advance(self.horizon)
             self._sampler.event()
+            self._finished_at = time.monotonic()
             self.graph = self.snapshot_graph()
             self.finished = True
-            self._finished_at = time.monotonic()
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
             self.publish_samples()
             return
