@@ -27,10 +27,10 @@ from formation_msgs_py.types import SensedState
 SensedGetter = Callable[[], SensedState]
 
 
-SERVICE_LOOK_PERIOD = 0.5
-"""Seconds between looks for the sensing service during discovery: rmw_fastrtps answers whether a
-service is there by walking every endpoint of the ROS graph it knows (1000 agents: ~20 000), a
-match count is one number."""
+SERVICE_LOOKS = (0.1, 1.0)
+"""Seconds between looks for the sensing service during discovery, doubling from the first to the
+second while it is not there: rmw_fastrtps answers whether a service is there by walking every
+endpoint of the ROS graph it knows (1000 agents: ~20 000), where a match count is one number."""
 
 
 class ServiceSensing:
@@ -41,11 +41,13 @@ class ServiceSensing:
         self._name = node.resolve_service_name('sense')
         self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
         self._next_look = 0.0
+        self._wait = SERVICE_LOOKS[0]
 
     def ready(self) -> bool:
         if not self._found and time.monotonic() >= self._next_look:
             self._found = self._client.service_is_ready()
-            self._next_look = time.monotonic() + SERVICE_LOOK_PERIOD
+            self._next_look = time.monotonic() + self._wait
+            self._wait = min(2.0 * self._wait, SERVICE_LOOKS[1])
         return self._found
 
     def gaps(self) -> list[str]:
