@@ -83,6 +83,22 @@ def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, 
 
     _assert_agents_isolated(json.loads((result.out_dir / 'graph.json').read_text()), scenario)
     assert all(child.returncode == 0 for child in result.children), result.children
+    _assert_timeline(summary, result)
+
+
+def _assert_timeline(summary: dict, result) -> None:
+    """Where the run's time went: every mark in the order the run reaches them, and the phases
+    adding up to them; stepping is the simulator's own stepping time."""
+    timeline, phases = summary['extra']['timeline'], summary['extra']['phases']
+    order = ['run', 'spawned', 'node_created', 'node_up', 'agents_ready', 'step0', 'final_step', 'final_reports', 'delivered',
+             'keeper_exited', 'stopped', 'checked']  # fmt: skip
+    assert [mark for mark in timeline if mark in order] == order, timeline
+    assert timeline['agents_announced'] <= timeline['agents_ready']
+    assert all(timeline[a] <= timeline[b] for a, b in zip(order, order[1:])), timeline
+    assert phases['start'] == timeline['step0']
+    assert phases['stepping'] == pytest.approx(summary['wall_time'], abs=1e-6)
+    assert phases['start'] + phases['stepping'] + phases['end'] == pytest.approx(timeline['checked'])
+    assert timeline['checked'] < result.wall_time
 
 
 @pytest.mark.timeout(300)
