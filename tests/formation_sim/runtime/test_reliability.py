@@ -280,15 +280,24 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
         assert got == times[: len(got)] and len(got) >= len([t for t in times if t < t_fail]), f'agent {agent}'
 
     # The bag was finalised and holds every triggering-information message sent before the
-    # failing step, each exactly once and in order.
+    # failing step, each exactly once and in order — but for what the killed agent had not yet
+    # handed to the recorder: lock-step keeps the recorder within RECORDER_LAG steps, and a
+    # process killed hard delivers nothing more, so its messages of those last steps may be gone.
+    from formation_sim.runtime.sim_node import RECORDER_LAG
+
     assert result.bag is not None and not result.bag_recovered
     counts, stamps = bag_trigger_stamps(result.bag)
+    steps = sorted({t for times in reference.trigger_times.values() for t in times if t < t_fail})
+    in_flight = set(steps[-(RECORDER_LAG + 1):])
     for i in scenario.agent_ids:
         for j in scenario.neighbours(i):
             before = [t for t in reference.trigger_times[i] if t < t_fail]
-            sent = stamps[(i, j)]
-            assert [t for t in sent if t < t_fail] == before, f'edge {i}->{j}'
-            assert all(t <= t_fail for t in sent) and sent == sorted(set(sent)), f'edge {i}->{j}'
+            sent = [t for t in stamps[(i, j)] if t < t_fail]
+            assert stamps[(i, j)] == sorted(set(stamps[(i, j)])) and all(t <= t_fail for t in stamps[(i, j)]), f'edge {i}->{j}'
+            if i == 2:  # the victim: a prefix, missing at most its last steps
+                assert sent == before[: len(sent)] and set(before[len(sent):]) <= in_flight, f'edge {i}->{j}'
+            else:
+                assert sent == before, f'edge {i}->{j}'
     assert counts['/formation/sensing_log'] >= sum(len([t for t in ts if t < t_fail]) for ts in reference.trigger_times.values())
 
 
