@@ -111,8 +111,8 @@ def test_metadata_is_version_9_mcap_with_counts(tmp_path: Path) -> None:
     info = metadata(tmp_path / 'bag')
     assert info['version'] == 9
     assert info['storage_identifier'] == 'mcap'
-    assert info['relative_file_paths'] == ['bag.mcap']
-    assert (tmp_path / 'bag' / 'bag.mcap').read_bytes().startswith(b'\x89MCAP0\r\n')
+    assert info['relative_file_paths'] == ['bag_0.mcap']
+    assert (tmp_path / 'bag' / 'bag_0.mcap').read_bytes().startswith(b'\x89MCAP0\r\n')
     assert info['message_count'] == 6
     assert info['starting_time']['nanoseconds_since_epoch'] == 1_000
     assert info['duration']['nanoseconds'] == 1_000
@@ -201,7 +201,8 @@ def test_reindex_recovers_a_killed_recorder(tmp_path: Path) -> None:
     recovery = reindex(bag)
 
     assert recovery.rewritten
-    assert recovery.message_counts == {STEP: 30, POSES: 0}
+    # A topic's channel is written with its first message: POSES, which had none, is not in the file.
+    assert recovery.message_counts == {STEP: 30}
     assert recovery.damaged_copy is not None
     assert recovery.damaged_copy.exists()
     assert [tuple(m) for m in read_bag(bag)] == flushed
@@ -221,13 +222,13 @@ def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -
         for topic, _, stamp, data in interleaved(7):
             writer.write(topic, 5 + stamp, data)
     original = metadata(bag)
-    mcap_bytes = (bag / 'bag.mcap').read_bytes()
+    mcap_bytes = (bag / 'bag_0.mcap').read_bytes()
     (bag / 'metadata.yaml').unlink()
 
     recovery = reindex(bag)
 
     assert not recovery.rewritten
-    assert (bag / 'bag.mcap').read_bytes() == mcap_bytes
+    assert (bag / 'bag_0.mcap').read_bytes() == mcap_bytes
     rebuilt = metadata(bag)
     for key in ('version', 'storage_identifier', 'relative_file_paths', 'duration',
                 'starting_time', 'message_count', 'topics_with_message_count'):
@@ -238,7 +239,7 @@ def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -
 
 def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
     source = tmp_path / 'source'
-    mcap = source / 'source.mcap'
+    mcap = source / 'source_0.mcap'
     written: list[tuple[str, str, int, bytes]] = []
     flushed_at: dict[int, int] = {}  # file size after a flush -> messages written by then
     writer = BagWriter(source)
@@ -287,20 +288,20 @@ def test_reindex_on_a_full_disk_changes_nothing_and_says_what_to_do(tmp_path: Pa
         writer.add_topic(POSES, POSES_TYPE)
         for topic, _, stamp, data in interleaved(3500):
             writer.write(topic, stamp, data)
-    complete = (source / 'source.mcap').read_bytes()
+    complete = (source / 'source_0.mcap').read_bytes()
     assert len(complete) > 1_000_000
     bag = small_disk(1.5) / 'bag'
     bag.mkdir()
     cut = complete[: len(complete) - 100]  # the summary cut short: the copy would need ~1.2 MB more
-    (bag / 'bag.mcap').write_bytes(cut)
+    (bag / 'bag_0.mcap').write_bytes(cut)
 
     with pytest.raises(BagRecoveryError) as failed:
         reindex(bag)
     message = str(failed.value)
-    assert 'cannot write the recovered copy bag.mcap.recovering: No space left on device' in message
+    assert 'cannot write the recovered copy bag_0.mcap.recovering: No space left on device' in message
     assert 'the bag is unchanged: free space, then recover it again' in message
-    assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']  # no temporary left
-    assert (bag / 'bag.mcap').read_bytes() == cut
+    assert sorted(path.name for path in bag.iterdir()) == ['bag_0.mcap']  # no temporary left
+    assert (bag / 'bag_0.mcap').read_bytes() == cut
 
 
 def test_reindex_errors_name_the_problem(tmp_path: Path) -> None:

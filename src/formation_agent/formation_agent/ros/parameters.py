@@ -152,12 +152,17 @@ def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any
     problems: list[str] = []
     for spec in specs:
         label = f'parameter {spec.name!r} ({_TYPE_NAMES.get(spec.type, spec.type.name.lower())})'
+        # An empty array says nothing of its element type (rclpy would take it for bytes):
+        # declared by type, it stays unset unless given, and then reads as the default.
+        by_type = spec.required or (isinstance(spec.default, (list, tuple)) and not spec.default)
         try:
             if not node.has_parameter(spec.name):
-                default = spec.type if spec.required else spec.default
-                node.declare_parameter(spec.name, default, spec.descriptor())
+                node.declare_parameter(spec.name, spec.type if by_type else spec.default, spec.descriptor())
             value = node.get_parameter(spec.name).value
         except ParameterUninitializedException:
+            if not spec.required:
+                values[spec.name] = list(spec.default)
+                continue
             problems.append(f'{label} is required: {spec.description}')
             continue
         except ParameterException as error:  # the wrong type, or outside the descriptor's range

@@ -51,11 +51,12 @@ from formation_agent.ros.parameters import (
     DOUBLE_ARRAY,
     INTEGER,
     STRING,
+    ParameterError,
     ParameterSpec,
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import StopSignals, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, make_executor
 from formation_msgs_py.topics import (
     agent_namespace,
     robot_command_topic,
@@ -295,10 +296,13 @@ def main(args: Sequence[str] | None = None) -> int:
                 stop.check()
         except (KeyboardInterrupt, ExternalShutdownException):
             status = 0
+        except (ParameterError, RobotError) as error:  # bad input: every problem named, nothing started
+            print(f'formation_robot: {error}', file=sys.stderr, flush=True)
+            status = EXIT_BAD_INPUT
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():
                 return 0
-            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+            print(f'formation_robot: {error}', file=sys.stderr, flush=True)
             traceback.print_exc(file=sys.stderr)
             status = 1
         finally:
