@@ -175,9 +175,9 @@ def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any
     return values, problems
 
 
-def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:
-    """The table `--help` prints: name, type, default (or 'required'), range, description."""
-    rows = [
+def _rows(specs: Sequence[ParameterSpec]) -> list[tuple[str, str, str, str, str]]:
+    """name, type, default (or 'required'), range or choices, description: one row per spec."""
+    return [
         (
             spec.name,
             _TYPE_NAMES.get(spec.type, spec.type.name.lower()),
@@ -187,6 +187,20 @@ def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters')
         )
         for spec in specs
     ]
+
+
+def parameter_table(specs: Sequence[ParameterSpec]) -> str:
+    """The same table in Markdown (docs/PARAMETERS.md)."""
+    lines = ['| parameter | type | default | range | meaning |', '|---|---|---|---|---|']
+    for row in _rows(specs):
+        name, kind, default, constraint, description = (cell.replace('|', '\\|') for cell in row)
+        lines.append(f'| `{name}` | {kind} | {default if default == "required" else f"`{default}`"} | {constraint} | {description} |')
+    return '\n'.join(lines)
+
+
+def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:
+    """The table `--help` prints: name, type, default (or 'required'), range, description."""
+    rows = _rows(specs)
     widths = [max(len(row[k]) for row in rows) for k in range(4)]
     lines = [f'{title} (--ros-args -p name:=value, or --params-file FILE):']
     for row in rows:
