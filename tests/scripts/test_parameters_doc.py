@@ -44,9 +44,9 @@ BAD = {
     'formation_coordinator': (['-p', 'scenario:=robots_square', '-p', 'robot:=tank', '-p', 'robot_trajectory:=gps', '-p', 'horizon:=-3.0'],
                               ["parameter 'robot' (string) must be one of 'holonomic', 'unicycle', got 'tank'",
                                "parameter 'robot_trajectory' (string) must be one of 'true_odom', 'odom', 'pose', got 'gps'",
-                               "parameter 'horizon' (double) must be >= 0, got -3.0"]),
+                               "parameter 'horizon' (double) must be >= 0, finite, got -3.0"]),
     'formation_recorder': (['-p', 'drain_limit:=-1.0', '-p', "topics:=['nameless']"],
-                           ["parameter 'output' (string) is required", "parameter 'drain_limit' (double) must be > 0, got -1.0",
+                           ["parameter 'output' (string) is required", "parameter 'drain_limit' (double) must be > 0, finite, got -1.0",
                             "parameter 'topics': topic spec 'nameless' is not of the form '/name:package/msg/Type'"]),
     'formation_robot': (['-p', 'model:=tank', '-p', 'seed:=-1'],
                         ["parameter 'robot_id' (int) is required", "parameter 'model' (string) must be one of 'holonomic', 'unicycle', got 'tank'",
@@ -132,4 +132,4 @@ def test_the_parameter_services_describe_each_parameter(tmp_path):
         descriptor = described[spec.name]
         assert (descriptor.type, descriptor.description, descriptor.additional_constraints) == (spec.type.value, spec.description, spec.constraint_text())
         assert descriptor.read_only
-    assert described['flush_period'].additional_constraints == '> 0'
+    assert described['flush_period'].additional_constraints == '> 0, finite'

@@ -585,7 +585,7 @@ def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> No
                          capture_output=True, text=True, env=env, timeout=120)
     name, value = parameter.split(':=')
     assert run.returncode == 2, run.stderr
-    assert f"parameter '{name}' (double) must be > 0, got {float(value.replace('.nan', 'nan'))!r}" in run.stderr
+    assert f"parameter '{name}' (double) must be > 0, finite, got {float(value.replace('.nan', 'nan'))!r}" in run.stderr
     assert 'Traceback' not in run.stderr
     assert not bag.exists()
 
@@ -609,16 +609,16 @@ def test_lock_step_messages_are_stamped_with_the_latest_steps_sim_time() -> None
     from formation_sim.runtime.recorder import RunClock
 
     clock = RunClock()
-    assert clock.now_ns() == 0 and clock.step_index == -1  # before the first Step
+    assert clock.stamp_ns() == 0 and clock.step_index == -1  # before the first Step
     stamps = []
     for index, t in enumerate([0.0, 5.5e-7, 0.25, 0.25, 1.0]):
         assert clock.on_step([1.0, float(index), t, 0.0, 0.0])
-        stamps.append(clock.now_ns())
+        stamps.append(clock.stamp_ns())
     assert stamps == [0, 550, 250_000_000, 250_000_000, 1_000_000_000]
     assert clock.step_index == 4 and not clock.realtime
-    assert clock.on_step([1.0, 5.0, 2.0]) and clock.now_ns() == 2_000_000_000  # [version, step, time] suffices
+    assert clock.on_step([1.0, 5.0, 2.0]) and clock.stamp_ns() == 2_000_000_000  # [version, step, time] suffices
     assert not clock.on_step([1.0, 6.0, -1.0]) and not clock.on_step([1.0, 6.0, float('nan')]) and not clock.on_step([1.0])
-    assert clock.now_ns() == 2_000_000_000 and clock.step_index == 5  # refused Steps change nothing
+    assert clock.stamp_ns() == 2_000_000_000 and clock.step_index == 5  # refused Steps change nothing
 
 
 def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch() -> None:
@@ -629,18 +629,24 @@ def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch
     clocks = _Clocks(wall_ns=round(epoch * 1e9) + 20_000_000)  # Step 0 arrives 20 ms after its epoch
     clock = RunClock(monotonic_ns=lambda: clocks.monotonic, wall_ns=lambda: clocks.wall)
     clocks.advance(0.3)
-    assert clock.now_ns() == 0  # discovery: before the run
+    assert clock.stamp_ns() == 0 and not clock.started  # discovery: before the run
     clocks.wall -= 300_000_000
+    clocks.advance(-0.015)
+    overtook = clock.received_ns()  # a message of the run that came 15 ms before Step 0 (5 ms after the epoch)
+    clocks.advance(-0.3)
+    discovery = clock.received_ns()  # one from well before the epoch
+    clocks.advance(0.315)
     assert clock.on_step([1.0, 0.0, 0.0, float(STEP_FLAG_REALTIME), epoch])
-    assert clock.realtime and clock.now_ns() == 20_000_000
+    assert clock.realtime and clock.stamp_ns() == 20_000_000
+    assert clock.stamp_ns(overtook) == 5_000_000 and clock.stamp_ns(discovery) == 0
     clocks.advance(1.25)
-    assert clock.now_ns() == 1_270_000_000
+    assert clock.stamp_ns() == 1_270_000_000
     clocks.advance(0.5, wall_jump=-3.0)  # NTP steps the wall clock back: bag time goes on
-    assert clock.now_ns() == 1_770_000_000
+    assert clock.stamp_ns() == 1_770_000_000
     assert clock.on_step([1.0, 1.0, 8.0, float(STEP_FLAG_FINAL | STEP_FLAG_REALTIME), epoch])  # the final Step
-    assert clock.now_ns() == 1_770_000_000 and clock.step_index == 1
+    assert clock.stamp_ns() == 1_770_000_000 and clock.step_index == 1
     clocks.advance(0.01)
-    assert clock.now_ns() == 1_780_000_000
+    assert clock.stamp_ns() == 1_780_000_000
 
 
 def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_path: Path) -> None:
@@ -655,7 +661,7 @@ def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_
                          capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
     assert bad.returncode == 2 and 'Traceback' not in bad.stderr
     assert "parameter 'output' (string) is required" in bad.stderr
-    assert "parameter 'flush_period' (double) must be > 0, got 0.0" in bad.stderr
+    assert "parameter 'flush_period' (double) must be > 0, finite, got 0.0" in bad.stderr
     assert "parameter 'topics': message type 'std_msgs/msg/Nope' cannot be imported" in bad.stderr
 
 

@@ -80,15 +80,17 @@ class ParameterSpec:
         """The range or choices in words ('> 0', 'in [0, 1]', "one of 'a', 'b'"), '' if none."""
         if self.choices:
             return 'one of ' + ', '.join(repr(choice) for choice in self.choices)
+        # high = inf, open: a finite number (rclpy accepts inf and nan for a double).
+        finite = self.high == math.inf and self.high_open
         low = None if self.low is None else f'{"(" if self.low_open else "["}{_number(self.low)}'
-        high = None if self.high is None else f'{_number(self.high)}{")" if self.high_open else "]"}'
+        high = None if self.high is None or finite else f'{_number(self.high)}{")" if self.high_open else "]"}'
         if low and high:
             return f'in {low}, {high}'
         if low:
-            return f'{">" if self.low_open else ">="} {_number(self.low)}'
+            return f'{">" if self.low_open else ">="} {_number(self.low)}{", finite" if finite else ""}'
         if high:
             return f'{"<" if self.high_open else "<="} {_number(self.high)}'
-        return ''
+        return 'finite' if finite else ''
 
     def descriptor(self) -> ParameterDescriptor:
         descriptor = ParameterDescriptor(

@@ -100,9 +100,9 @@ EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample nee
 
 COORDINATOR_COMMON_PARAMETERS = (
     ParameterSpec(name='scenario', type=STRING, description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)'),
-    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, description="the run ends at this time [s] (0: the scenario's horizon)"),
+    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, high=math.inf, high_open=True, description="the run ends at this time [s] (0: the scenario's horizon)"),
     ParameterSpec(name='out_dir', type=STRING, default='', description="where summary.json and graph.json go ('': nowhere)"),
-    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
+    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, high=math.inf, high_open=True, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
     ParameterSpec(name='extra_subscribers', type=INTEGER, default=0, low=0, description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0"),
     ParameterSpec(name='step_listeners', type=INTEGER, default=0, low=0, description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them'),
     ParameterSpec(name='progress_period', type=DOUBLE, default=1.0, low=0.0, description='a progress line on stdout every this many seconds (0: none)'),
@@ -162,9 +162,6 @@ class FormationCoordinatorNode(Node):
             except ScenarioError as error:
                 problems.append(f"parameter 'scenario' (string): {error}")
         if scenario is not None:
-            horizon = values.get('horizon', 0.0)
-            if not math.isfinite(horizon):
-                problems.append(f"parameter 'horizon' (double) must be finite, got {horizon!r}")
             if scenario.dimension > 3:
                 problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
             problems += self._world_problems(values, scenario)

@@ -9,8 +9,9 @@ Time stamps (`RunClock`): bag time is the run's time.  In lock-step a message is
 simulation time of the latest Step on the clock topic; on the wall clock (a Step flagged realtime:
 `formation run --real-time` and every robot run) with the time it was received, counted from the
 Step's epoch (t = 0 of the run) on a monotonic clock, so that bag time equals sim time on a
-synchronised clock.  Messages received before the first Step are stamped 0.  Either way the
-stamps of a topic never decrease.
+synchronised clock.  Messages received before the first Step wait up to `EARLY_WINDOW` s for it:
+those received after its epoch (they overtook Step 0) get their time, older ones are stamped 0.
+Either way the stamps of a topic never decrease.
 
 QoS: each topic's MCAP channel is written with its first message, carrying the QoS every
 publisher of the topic offered then (`formation_sim.runtime.bag_qos.offered_qos`, from the ROS
@@ -25,7 +26,8 @@ What survives the end of a recorder:
 - SIGKILL (or a crash of the interpreter): nothing is finalized. The bag directory holds an MCAP
   file without summary and footer, and no ``metadata.yaml``; rosbags and ros2 bag refuse it.
   The file holds every message up to the last `BagWriter.flush` (the node flushes every
-  ``flush_period`` seconds); messages after it were still in memory and are lost.
+  ``flush_period`` seconds); messages after it were still in memory and are lost (before the
+  first Step, also those of the last `EARLY_WINDOW` s, which wait for it).
   `reindex(bag_dir)` rebuilds a readable bag from what is in the file.
 """
 
@@ -40,6 +42,7 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
@@ -74,8 +77,13 @@ _STEP_TIME_INDEX = 2
 _STEP_FLAGS_INDEX = 3
 _STEP_EPOCH_INDEX = 4
 _NS_PER_S = 1_000_000_000
+# Messages that come before the first Step wait this long [s] before they are written: on the wall
+# clock a message of the run can overtake Step 0 (an agent triggers the moment it gets Step 0, the
+# recorder may take its message first), and only Step 0's epoch gives its time.  Older ones were
+# surely sent before the run began and are stamped 0.
+EARLY_WINDOW = 2.0
 
-_positive_seconds = {'low': 0.0, 'low_open': True}
+_positive_seconds = {'low': 0.0, 'low_open': True, 'high': math.inf, 'high_open': True}
 RECORDER_PARAMETERS = (
     ParameterSpec(name='output', type=STRING, description='the bag directory to create (it must not exist: a bag is never overwritten)'),
     ParameterSpec(name='topics', type=STRING_ARRAY, default=[], description="topics recorded from the start, each '/name:package/msg/Type'"),
@@ -129,7 +137,7 @@ def import_message_class(msgtype: str) -> type:
 class RunClock:
     """Bag time of the messages of a run, from the Steps on its clock topic (module docstring).
 
-    `on_step(data)` takes each Step's data; `now_ns()` is the time stamp of a message received now.
+    `on_step(data)` takes each Step's data; `stamp_ns()` is the time stamp of a message received now.
     """
 
     def __init__(self, *, monotonic_ns: Callable[[], int] = time.monotonic_ns, wall_ns: Callable[[], int] = time.time_ns) -> None:
@@ -159,13 +167,23 @@ class RunClock:
             self.step_index = int(data[_STEP_INDEX])
         return True
 
-    def now_ns(self) -> int:
-        """The bag time of a message received now: sim time (lock-step), time since the epoch
-        (wall clock, never decreasing), 0 before the first Step."""
+    @property
+    def started(self) -> bool:
+        """Whether a Step has come (before it, the wall-clock epoch is unknown)."""
+        return self.step_index >= 0 or self._anchor is not None
+
+    def received_ns(self) -> int:
+        """When a message is received now, on the clock `stamp_ns` takes."""
+        return self._monotonic_ns()
+
+    def stamp_ns(self, received_ns: int | None = None) -> int:
+        """The bag time of a message received at `received_ns` (`received_ns()`; default now): sim
+        time of the latest Step (lock-step), time since the epoch (wall clock; never decreasing,
+        0 before the epoch), 0 before the first Step."""
         if self._anchor is None:
             return self._sim_ns
         since, run_time = self._anchor
-        return max(0, run_time + self._monotonic_ns() - since)
+        return max(0, run_time + (self._monotonic_ns() if received_ns is None else received_ns) - since)
 
 
 class RecorderNode(Node):
@@ -219,6 +237,7 @@ class RecorderNode(Node):
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
         self.clock = RunClock()
+        self._early: deque[tuple[int, str, bytes]] = deque()  # (received, topic, rawdata) before the first Step
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
         self.flushed_count = 0  # messages in the file for sure (as of the last flush)
         self.failure: RecorderError | None = None  # the bag could not be written
@@ -272,6 +291,7 @@ class RecorderNode(Node):
         )
 
     def _flush(self) -> None:
+        self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
         if self.failure is not None:
             return
         try:
@@ -320,18 +340,35 @@ class RecorderNode(Node):
             if is_clock:
                 self._on_step(rawdata)
             if record and self.failure is None:
-                try:
-                    if not self.bag.has_channel(name):
-                        self._offer(name)
-                    self.bag.write(name, self._timestamp_ns(), rawdata)
-                except OSError as error:
-                    self._fail(error)
+                if self._clock_topic and not self.clock.started:
+                    self._early.append((self.clock.received_ns(), name, bytes(rawdata)))
+                    self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
+                else:
+                    self._write_early()  # the first Step has come: what waited goes first
+                    self._write(name, self._timestamp_ns(), rawdata)
             if is_clock and self.failure is None:
                 self._beat()  # a run paces its steps on this (the simulator's flow control)
 
         self._subscriptions_by_topic[name] = self.create_subscription(
             message_class, name, on_message, self._qos, raw=True
         )
+
+    def _write(self, name: str, stamp_ns: int, rawdata: bytes) -> None:
+        if self.failure is not None:
+            return
+        try:
+            if not self.bag.has_channel(name):
+                self._offer(name)
+            self.bag.write(name, stamp_ns, rawdata)
+        except OSError as error:
+            self._fail(error)
+
+    def _write_early(self, *, before: int | None = None) -> None:
+        """Write the messages that came before the first Step (those received before `before`
+        only), stamped as the clock now can (0 until a Step says when the run began)."""
+        while self._early and (before is None or self._early[0][0] < before):
+            received, name, rawdata = self._early.popleft()
+            self._write(name, self.clock.stamp_ns(received) if self.clock.started else 0, rawdata)
 
     def _offer(self, name: str) -> None:
         """Record the QoS the publishers of `name` offer (before its first message is written)."""
@@ -355,7 +392,7 @@ class RecorderNode(Node):
     def _timestamp_ns(self) -> int:
         if not self._clock_topic:
             return self.get_clock().now().nanoseconds
-        return self.clock.now_ns()
+        return self.clock.stamp_ns()
 
     def stop_timers(self) -> None:
         """Stop discovery and periodic flushing (before draining and closing)."""
@@ -424,6 +461,7 @@ class RecorderNode(Node):
 
         """
         self.stop_timers()
+        self._write_early()
         if self.failure is not None:
             return  # writing more would fail again: the file stays as the last flush left it
         for name in self.bag.topics:

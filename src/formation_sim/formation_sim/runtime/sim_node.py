@@ -33,6 +33,7 @@ agent or the recorder lost, 130 interrupted.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -103,7 +104,7 @@ SimulatorError = CoordinatorError
 SIMULATOR_PARAMETERS = (
     *coordinator.COORDINATOR_COMMON_PARAMETERS,
     ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
-    ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
+    ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
     ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description='a lock-step step not settled after this many seconds ends the run, naming every agent\'s last Status'),
 )  # fmt: skip
 """The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
