@@ -729,6 +729,12 @@ def _trigger_infos(messages: dict[str, list]):
     return [(stamp, decode_trigger_info(msg)) for name, stamped in messages.items() if '/trigger_info/' in name for stamp, msg in stamped]
 
 
+def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None:
+    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run time)."""
+    lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
+    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+
+
 def _epoch(messages: dict[str, list]) -> float:
     from formation_msgs_py.codec import decode_step  # noqa: PLC0415
 
@@ -769,9 +775,7 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
     horizon = 3.0
     scenario = Path(__file__).parents[3] / 'benchmarks' / 'gentle_square.yaml'
     messages = _run_with_bag(tmp_path, scenario, 45, horizon=horizon, clock='realtime')
-    # Each triggering message is received after its trigger, and soon: bag time = run time.
-    lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
-    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+    _assert_received_soon_after_their_trigger(messages)
     assert max(info.stamp for _, info in _trigger_infos(messages)) > horizon / 2  # spread over the run
     final_stamp = messages[STEP][-1][0]
     assert final_stamp >= (horizon - 0.01) * 1e9  # the final Step goes out at the horizon on the wall clock
@@ -792,8 +796,7 @@ def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path:
     horizon = 3.0
     messages = _run_with_bag(tmp_path, 'robots_square', 46, horizon=horizon, backend='holonomic', robots=RobotOptions(model='holonomic'))
     epoch = _epoch(messages)
-    lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
-    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+    _assert_received_soon_after_their_trigger(messages)
     # A pose's bag time is when it came, since the epoch: right after its measurement (header stamp).
     poses = messages['/agent_1/robot/true_odom']
     measured = [(stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses]
