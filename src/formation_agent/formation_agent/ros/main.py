@@ -75,9 +75,10 @@ def _namespace_from_agent_id() -> str | None:
         probe.destroy_node()
 
 
-def _build_nodes(options: argparse.Namespace) -> list[FormationAgentNode]:
+def _build_nodes(options: argparse.Namespace, ros_arguments: Sequence[str]) -> list[FormationAgentNode]:
     if not options.agents:
-        return [FormationAgentNode(namespace=_namespace_from_agent_id())]
+        named = any('__ns:=' in argument for argument in ros_arguments)  # -r __ns:=/agent_<i> decides
+        return [FormationAgentNode(namespace=None if named else _namespace_from_agent_id())]
     ids = [int(text) for text in options.agents.split(',') if text.strip()]
     packed = len(ids) > 1
     return [
@@ -111,7 +112,7 @@ def main(args: Sequence[str] | None = None) -> int:
     failure: str | None = None
     with StopSignals() as stop:
         try:
-            nodes = _build_nodes(options)
+            nodes = _build_nodes(options, argv)
             executor = make_executor(options.executor)
             for node in nodes:
                 executor.add_node(node)

@@ -114,7 +114,7 @@ COORDINATOR_COMMON_PARAMETERS = (
 COORDINATOR_PARAMETERS = (
     *COORDINATOR_COMMON_PARAMETERS,
     ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
-    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle: the control point l ahead of the axle [m] (the scenario's positions are the control points')"),
+    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle: the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
     ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
     ParameterSpec(name='backend', type=STRING, default='external', choices=('holonomic', 'unicycle', 'external'), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
 )  # fmt: skip

@@ -147,6 +147,7 @@ class RunClock:
         # Wall clock: (monotonic time, run time) when the first realtime Step came.
         self._anchor: tuple[int, int] | None = None
         self.step_index = -1  # the latest Step's index (-1: none yet)
+        self.started = False  # a Step has come (before it, the wall-clock epoch is unknown)
 
     @property
     def realtime(self) -> bool:
@@ -165,12 +166,8 @@ class RunClock:
             self._sim_ns = round(data[_STEP_TIME_INDEX] * _NS_PER_S)
         if float(data[_STEP_INDEX]).is_integer():
             self.step_index = int(data[_STEP_INDEX])
+        self.started = True
         return True
-
-    @property
-    def started(self) -> bool:
-        """Whether a Step has come (before it, the wall-clock epoch is unknown)."""
-        return self.step_index >= 0 or self._anchor is not None
 
     def received_ns(self) -> int:
         """When a message is received now, on the clock `stamp_ns` takes."""
