@@ -521,7 +521,7 @@ def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_
     bag = out / 'bag'
     if not (bag / 'metadata.yaml').exists():  # not recovered: the damage is named
         assert 'its bag could not be recovered' in done.stderr and 'free space, then recover it again' in done.stderr
-        assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']
+        assert sorted(path.name for path in bag.iterdir()) == ['bag_0.mcap']
 
 
 def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:

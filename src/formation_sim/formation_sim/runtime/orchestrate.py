@@ -254,6 +254,7 @@ class FormationRun:
                 raise RunError(str(error)) from None
             self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir)
             paths = self.plan.write_inputs()
+            (self.out_dir / LOG_DIR).mkdir(exist_ok=True)
             self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.launch_prefix)
             try:
                 status, message, lost = self._launch_and_watch(paths)

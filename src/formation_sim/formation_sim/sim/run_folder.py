@@ -34,6 +34,8 @@ RUN_ENTRIES = frozenset(
         'agents.params.yaml',
         'recorder.params.yaml',
         'robots.params.yaml',
+        'simulator.params.yaml',
+        'coordinator.params.yaml',
         'graph.json',
         'bag',
         'logs',
