@@ -6,7 +6,7 @@ import re
 
 import matplotlib.image
 import pytest
-from matplotlib.collections import LineCollection
+from matplotlib.collections import LineCollection, PathCollection
 
 from formation_sim.sim.baselines import simulate_continuous
 from formation_sim.cli import main
@@ -26,7 +26,10 @@ def test_continuous_figure_has_no_raster_and_says_why(scenario):
     assert 'no triggering events' in fig.get_suptitle()
     (ax,) = fig.axes
     assert not ax.get_title().startswith('(a)')  # a lone panel is not labelled
-    assert len(ax.get_lines()) == 2 * scenario.n + len(scenario.edges)  # trajectories, start circles, final edges
+    paths, formation = (c for c in ax.collections if isinstance(c, LineCollection))  # trajectories, final edges
+    (starts,) = (c for c in ax.collections if isinstance(c, PathCollection))  # start circles
+    assert len(paths.get_segments()) == len(starts.get_offsets()) == scenario.n
+    assert len(formation.get_segments()) == len(scenario.edges)
 
 
 def test_event_triggered_figure_draws_one_tick_per_trigger(scenario):
@@ -66,10 +69,10 @@ def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stal
     capsys.readouterr()
     assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot']) == 2
     err = capsys.readouterr().err
-    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory.npz); nothing was changed' in err
+    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); nothing was changed' in err
     assert _listing(out) == earlier
     assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot', '--force']) == 0
-    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory.npz']  # no old figure, no old analysis
+    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory']  # no old figure, no old analysis
     assert '"dynamics": "double"' in (out / 'summary.json').read_text()
 
 
@@ -101,6 +104,10 @@ BAD_SIMULATE_ARGUMENTS = [
     (['--period', '-1'], 'argument --period: must be a finite number > 0, got -1.0'),
     (['--tolerance', '0'], 'argument --tolerance: must be a finite number > 0, got 0.0'),
     (['--period', '0.1', '--continuous'], 'argument --continuous: not allowed with argument --period'),
+    (['--samples', 'all'], "argument --samples: invalid choice: 'all' (choose from 'auto', 'events', 'grid', 'none')"),
+    (['--samples', 'none', '--sample-dt', '0.1'], 'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt 0.1'),
+    (['--samples', 'grid', '--sample-dt', '0'], 'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)'),
+    (['--samples', 'events', '--continuous'], 'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got events'),
 ]
 
 
