@@ -745,13 +745,26 @@ def builtin_scenarios() -> tuple[str, ...]:
 _LARGER_TEAMS = 'the same schema as JSON (.json, `formation generate`), or Python (scenario_from_dict, formation_sim.generate)'
 
 
-def _read_text(path: Path, *, limit: int, kind: str) -> str:
-    """The UTF-8 text of a scenario file (a leading BOM dropped), refused above `limit` bytes."""
+def _size_limit(kind: str) -> int:
+    return MAX_JSON_BYTES if kind == 'JSON' else MAX_FILE_BYTES
+
+
+def _too_large(source: str, size: int, kind: str) -> ScenarioError:
+    limit = _size_limit(kind)
+    if kind == 'YAML':
+        what, larger = 'a scenario file', f' (about 9 000 agents): refused. Larger teams: {_LARGER_TEAMS}'
+    else:
+        what, larger = f'a {kind} scenario file', ': refused'
+    return ScenarioError(f'{source}: {size / 1e6:.1f} MB; {what} holds at most {limit / 1e6:.1f} MB{larger}')
+
+
+def _read_text(path: Path, *, kind: str) -> str:
+    """The UTF-8 text of a scenario file (a leading BOM dropped), refused above its size limit."""
+    limit = _size_limit(kind)
     try:
         size = path.stat().st_size
         if size > limit:
-            larger = f' (about 9 000 agents): refused. Larger teams: {_LARGER_TEAMS}' if kind == 'YAML' else ': refused'
-            raise ScenarioError(f'{path}: {size / 1e6:.1f} MB; a {kind} scenario file holds at most {limit / 1e6:.1f} MB{larger}')
+            raise _too_large(str(path), size, kind)
         data = path.read_bytes()[: limit + 1]  # the file may have grown since stat
     except OSError as error:
         raise ScenarioError(f'{path}: cannot read: {error.strerror or error}') from None
@@ -767,36 +780,42 @@ def _read_text(path: Path, *, limit: int, kind: str) -> str:
         ) from None
 
 
+def file_kind(path: str | Path) -> str:
+    """'JSON' for a name ending in .json, else 'YAML': how `load_scenario` and `dump_scenario` read and write it."""
+    return 'JSON' if Path(path).suffix.lower() == JSON_SUFFIX else 'YAML'
+
+
+def scenario_from_text(text: str, *, kind: str, source: str, name: str) -> Scenario:
+    """The scenario in `text` (a file's content, `kind` 'JSON' or 'YAML'), checked as `load_scenario`
+    checks a file: size, syntax, schema; `name` if the text has none; errors name `source`."""
+    size = len(text.encode('utf-8'))
+    if size > _size_limit(kind):
+        raise _too_large(source, size, kind)
+    data = _parse_json(text, source) if kind == 'JSON' else _parse_yaml(text, source)
+    try:
+        return scenario_from_dict(data, name=name)
+    except ScenarioError as error:
+        raise ScenarioError(f'{source}: {error}') from None
+
+
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a file: JSON
     if its name ends in .json, YAML otherwise."""
     if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
         resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
         text = resource.read_text(encoding='utf-8')
-        source, default_name = f'built-in scenario {short_repr(name_or_path)}', name_or_path
-    else:
-        named = bool(str(name_or_path).strip())  # Path('') would be the current folder
-        path = Path(name_or_path)
-        if named and path.is_dir():
-            raise ScenarioError(f'{short_repr(str(name_or_path))}: is a folder, not a scenario file')
-        if not (named and path.is_file()):
-            raise ScenarioError(
-                f'{short_repr(str(name_or_path))}: no such scenario file and not a built-in scenario '
-                f'({", ".join(builtin_scenarios())})'
-            )
-        source, default_name = str(path), path.stem
-        if path.suffix.lower() == JSON_SUFFIX:
-            data = _parse_json(_read_text(path, limit=MAX_JSON_BYTES, kind='JSON'), source)
-            return _from_dict(data, default_name, source)
-        text = _read_text(path, limit=MAX_FILE_BYTES, kind='YAML')
-    return _from_dict(_parse_yaml(text, source), default_name, source)
-
-
-def _from_dict(data: Any, default_name: str, source: str) -> Scenario:  # noqa: ANN401
-    try:
-        return scenario_from_dict(data, name=default_name)
-    except ScenarioError as error:
-        raise ScenarioError(f'{source}: {error}') from None
+        return scenario_from_text(text, kind='YAML', source=f'built-in scenario {short_repr(name_or_path)}', name=name_or_path)
+    named = bool(str(name_or_path).strip())  # Path('') would be the current folder
+    path = Path(name_or_path)
+    if named and path.is_dir():
+        raise ScenarioError(f'{short_repr(str(name_or_path))}: is a folder, not a scenario file')
+    if not (named and path.is_file()):
+        raise ScenarioError(
+            f'{short_repr(str(name_or_path))}: no such scenario file and not a built-in scenario '
+            f'({", ".join(builtin_scenarios())})'
+        )
+    kind = file_kind(path)
+    return scenario_from_text(_read_text(path, kind=kind), kind=kind, source=str(path), name=path.stem)
 
 
 class _Dumper(yaml.SafeDumper):
@@ -830,12 +849,15 @@ def dump_scenario_json_text(scenario: Scenario) -> str:
     return f'{{\n{head}"agents": {{\n{agents}\n}},\n"edges": [\n{edges}\n],\n"gains": {text(data["gains"])}\n}}\n'
 
 
+def dump_scenario_as(scenario: Scenario, kind: str) -> str:
+    """`scenario` as the text of a 'JSON' or 'YAML' file."""
+    return dump_scenario_json_text(scenario) if kind == 'JSON' else dump_scenario_text(scenario)
+
+
 def dump_scenario(scenario: Scenario, path: str | Path) -> None:
     """Write `scenario` as JSON if `path` ends in .json, else YAML; load_scenario(path) == scenario
     exactly (floats keep every bit)."""
-    path = Path(path)
-    json_file = path.suffix.lower() == JSON_SUFFIX
-    path.write_text(dump_scenario_json_text(scenario) if json_file else dump_scenario_text(scenario), encoding='utf-8')
+    Path(path).write_text(dump_scenario_as(scenario, file_kind(path)), encoding='utf-8')
 
 
 # --------------------------------------------------------------------------- JSON
