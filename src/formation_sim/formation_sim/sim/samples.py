@@ -295,13 +295,13 @@ def write_trajectory(samples: Samples, run_dir: str | Path, *, agent_ids) -> Sam
     velocities = samples.velocities is not None
     writer = TrajectoryWriter(run_dir, agent_ids=agent_ids, dimension=samples.positions.shape[2], velocities=velocities)
     try:
-        for positions, velocity_rows in samples.blocks(values=1 << 22):
+        for positions, velocity_rows in samples.blocks():
             writer.append(positions, velocity_rows)
+        return writer.close(samples.times, edge_maxima=samples.edge_maxima)
     except BaseException:
         writer.abandon()
-        discard_incomplete(run_dir)
+        discard_incomplete(run_dir)  # the samples are still in memory: nothing half-written stays
         raise
-    return writer.close(samples.times, edge_maxima=samples.edge_maxima)
 
 
 def discard_incomplete(run_dir: str | Path) -> None:

@@ -151,14 +151,15 @@ def saturation_extra(reports) -> dict:
 
 
 def write_summary(record, out_dir) -> Path:
-    """Write the trajectory (unless the run streamed it there already) and `summary.json` into
-    `out_dir`; return the summary's path. The summary comes last: a folder with a summary holds a
-    whole run."""
+    """Write `summary.json` and the trajectory (unless the run streamed it there already) into
+    `out_dir`; return the summary's path. The small summary first: on a disk about to fill up it is
+    what matters most."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    path = write_summary_file(build_summary(record), out / SUMMARY_FILE)
     if record.samples.path is None or record.samples.path.parent.resolve() != out.resolve():
         write_trajectory(record.samples, out, agent_ids=record.scenario.agent_ids)
-    return write_summary_file(build_summary(record), out / SUMMARY_FILE)
+    return path
 
 
 def write_summary_file(summary: dict, path) -> Path:
