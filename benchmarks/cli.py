@@ -2,7 +2,7 @@
 the streaming record (issue 14) run in the same benchmark run.
 
 Each run is a process of its own: its wall time, its peak resident memory (the kernel's
-`ru_maxrss` of that child, through `os.wait4`), and the engine's own wall time from its
+`ru_maxrss` of that process, taken by `peak_rss.py`), and the engine's own wall time from its
 summary.json (the event loop alone). The previous code is `CLI_BASELINE_REV` (main before the
 streaming record), materialised once (`engine_baseline.materialise`) and run by `cli_baseline.py`
 on the YAML form of the same scenario (it reads no JSON); its triggering times are compared with
@@ -17,7 +17,6 @@ Also: how long `load_scenario` takes for the same team as YAML and as JSON.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import statistics
 import subprocess
@@ -43,22 +42,22 @@ def scenario_files(folder: Path, case: dict) -> tuple[Path, Path]:
     return paths
 
 
+def measure_process(command: list[str], log: Path) -> dict:
+    """Wall time, peak RSS (MiB) and exit status of `command`, through `peak_rss.py`; its output in `log`."""
+    done = subprocess.run([sys.executable, str(HERE / 'peak_rss.py'), str(log), '--', *command], capture_output=True, text=True, check=True)
+    return json.loads(done.stdout)
+
+
 def run_process(command: list[str], out: Path) -> dict:
     """Run `command` (a formation simulate writing into `out`); wall, peak RSS, engine wall, triggers."""
     log = out.with_name(out.name + '.log')
-    with log.open('wb') as sink:
-        started = time.perf_counter()
-        process = subprocess.Popen(command, stdout=sink, stderr=sink)
-        _, status, usage = os.wait4(process.pid, 0)  # this child's own peak RSS, not only the largest so far
-        wall = time.perf_counter() - started
-    process.returncode = code = os.waitstatus_to_exitcode(status)
-    row = {'wall_s': wall, 'peak_rss_mib': usage.ru_maxrss / 1024, 'exit': code}
-    if code != 0:
+    row = measure_process(command, log)
+    if row['exit'] != 0:
         row['error'] = log.read_text(errors='replace')[-500:]
         return row
     summary = json.loads((out / 'summary.json').read_text())
     row.update(engine_wall_s=summary['wall_time'], events=summary['total_events'], trigger_times=summary['trigger_times'])
-    row['ratio'] = wall / summary['wall_time']
+    row['ratio'] = row['wall_s'] / summary['wall_time']
     row['trajectory_mib'] = sum(path.stat().st_size for path in out.rglob('*') if path.is_file() and path.name != 'formation.png') / 2**20
     return row
 
@@ -78,12 +77,16 @@ def measure_case(case: dict, *, repeats: int, baseline_folder: Path | None, work
             rows['before'].append(run_process(command, out))
             shutil.rmtree(out, ignore_errors=True)
     if baseline_folder is None and case.get('api_baseline'):
-        for _ in range(case.get('api_repeats', 1)):
-            done = subprocess.run(
-                [sys.executable, str(HERE / 'engine_baseline.py'), CLI_BASELINE_REV, json.dumps({**case, 'engine': {'sample_events': False}})],
-                capture_output=True, text=True, timeout=3600, check=True,
-            )  # fmt: skip
-            rows['before'].append(json.loads(done.stdout.strip().splitlines()[-1]))
+        for repeat in range(case.get('api_repeats', 1)):
+            log = work / f'api-{repeat}.log'
+            command = [sys.executable, str(HERE / 'engine_baseline.py'), CLI_BASELINE_REV, json.dumps({**case, 'engine': {'sample_events': False}})]
+            process = measure_process(command, log)
+            engine = json.loads(log.read_text().strip().splitlines()[-1])
+            # The process (scenario built from the case, the revision's engine) and the engine's own wall time.
+            rows['before'].append({
+                'wall_s': process['wall_s'], 'peak_rss_mib': process['peak_rss_mib'], 'engine_wall_s': engine['wall_s'],
+                'ratio': process['wall_s'] / engine['wall_s'], 'events': engine['events'],
+            })  # fmt: skip
     result = {'case': case, 'repeats': repeats, 'runs': rows}
     for key, runs in rows.items():
         done = [run for run in runs if run.get('exit', 0) == 0]

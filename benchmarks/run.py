@@ -178,7 +178,7 @@ def _cli_markdown(results: dict) -> list[str]:
         now, bare, before = r.get('now', {}), r.get('now_no_plot', {}), r.get('before', {})
         api = r['case'].get('api_baseline')
         before_wall = before.get('wall_s')
-        before_text = f'{_fmt(before_wall)} (API, engine only)' if api else _fmt(before_wall)
+        before_text = f'{_fmt(before_wall)} (Python API, grid samples)' if api else _fmt(before_wall)
         lines.append(
             f'| {r["case"]["n"]} | {_fmt(r["case"]["horizon"])} | {_fmt(now.get("events"))} | {_fmt(now.get("engine_wall_s"))} | '
             f'{_fmt(now.get("wall_s"))} | {_fmt(now.get("ratio"), 3)}× | {_fmt(now.get("peak_rss_mib"))} | {_fmt(now.get("trajectory_mib"))} | '

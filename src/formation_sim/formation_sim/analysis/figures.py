@@ -77,13 +77,22 @@ class TrajectoryPlot:
     paths: LineCollection  # segment k: the path of the k-th agent
     starts: PathCollection  # offset k: the k-th agent's initial position (a circle)
     formation: LineCollection | None  # segment e: the e-th edge between the final positions
-    handles: list[Line2D]  # one legend entry per agent (not drawn)
+    labels: list[str]  # the k-th agent's name in a legend
+
+    def legend_handles(self) -> list[Line2D]:
+        """One legend entry per agent (made when asked: a legend of 1000 agents is never drawn)."""
+        from matplotlib.lines import Line2D
+
+        style, colours, width = self.paths.get_linestyle(), self.paths.get_colors(), self.paths.get_linewidths()
+        return [
+            Line2D([], [], linestyle=style[k % len(style)], color=colours[k], lw=width[k % len(width)], label=label)
+            for k, label in enumerate(self.labels)
+        ]
 
 
 def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', label: str = '', formation: bool = True) -> TrajectoryPlot:
     """Paths of all agents; with p >= 3 the first two coordinates (a projection)."""
     from matplotlib.collections import LineCollection
-    from matplotlib.lines import Line2D
 
     scenario = record.scenario
     times = np.asarray(record.sample_times, dtype=float)
@@ -106,7 +115,6 @@ def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', labe
             LineCollection(np.stack([x[-1, heads, :2], x[-1, tails, :2]], axis=1), colors='k', linewidths=0.9), autolim=True
         )
     ax.autoscale_view()
-    handles = [Line2D([], [], linestyle=linestyle, color=colour, lw=1.2, label=f'agent {agent}{label}') for agent, colour in zip(scenario.agent_ids, colours)]
     if planar:
         ax.set_xlabel('$x_{i,1}$' + (' (projection)' if x.shape[2] > 2 else ''))
         ax.set_ylabel('$x_{i,2}$')
@@ -114,7 +122,8 @@ def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', labe
     else:
         ax.set_xlabel('t [s]')
         ax.set_ylabel('$x_i$')
-    return TrajectoryPlot(axes=ax, planar=planar, rows=rows, paths=drawn, starts=starts, formation=polygon, handles=handles)
+    labels = [f'agent {agent}{label}' for agent in scenario.agent_ids]
+    return TrajectoryPlot(axes=ax, planar=planar, rows=rows, paths=drawn, starts=starts, formation=polygon, labels=labels)
 
 
 # ---------------------------------------------------------------------------- (b) event raster
@@ -167,7 +176,7 @@ def paper_figure(record: RunRecord, *, title: str | None = None) -> tuple[Figure
     algorithm = 'ETA-1' if record.scenario.dynamics == 'single' else 'ETA-2'
     ax_a.set_title(f'(a) trajectories ({algorithm}); o initial positions, final formation in black', fontsize=9)
     if len(record.scenario.agent_ids) <= 12:
-        ax_a.legend(handles=trajectories.handles, loc='best', fontsize=8)
+        ax_a.legend(handles=trajectories.legend_handles(), loc='best', fontsize=8)
     raster = plot_trigger_raster(ax_b, record)
     ax_b.set_title(f'(b) triggering times of each agent ({record.total_events} events)', fontsize=9)
     fig.suptitle(title or f'{record.scenario.name}: {record.mode} run', fontsize=10)

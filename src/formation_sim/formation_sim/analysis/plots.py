@@ -46,7 +46,7 @@ def run_figure(record, *, title: str | None = None) -> Figure:
     panel = 'trajectories; o initial positions; final formation in black' if trajectories.planar else 'positions over time'
     ax_traj.set_title(f'(a) {panel}' if events else panel)
     if len(scenario.agent_ids) <= 12:
-        ax_traj.legend(handles=trajectories.handles, loc='best', fontsize=8)
+        ax_traj.legend(handles=trajectories.legend_handles(), loc='best', fontsize=8)
     heading = title or f'{scenario.name}: {record.mode}'
     if events:
         plot_trigger_raster(ax_events, record)

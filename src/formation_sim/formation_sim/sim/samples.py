@@ -88,16 +88,17 @@ class Samples:
         count = len(self.times)
         row = max(1, int(np.prod(self.positions.shape[1:])))
         step = max(1, values // row)
+        on_disk = self.path is not None  # the arrays map whole files (read_trajectory)
         for start in range(0, count, step):
             stop = min(count, start + step)
             yield (
-                _rows(self.positions, start, stop),
-                None if self.velocities is None else _rows(self.velocities, start, stop),
+                _rows(self.positions, start, stop, from_file=on_disk),
+                None if self.velocities is None else _rows(self.velocities, start, stop, from_file=on_disk),
             )
 
 
-def _rows(array: np.ndarray, start: int, stop: int) -> np.ndarray:
-    if not isinstance(array, np.memmap):
+def _rows(array: np.ndarray, start: int, stop: int, *, from_file: bool) -> np.ndarray:
+    if not (from_file and isinstance(array, np.memmap)):
         return array[start:stop]
     shape = (stop - start, *array.shape[1:])
     row_bytes = int(np.prod(array.shape[1:])) * array.itemsize
@@ -123,14 +124,17 @@ def squared_lengths(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     for c in range(dimension):
         component = a[..., c] - b[..., c]
         component *= component
-        total = component if total is None else total + component
+        if total is None:
+            total = component
+        else:
+            total += component
     return total
 
 
 class EdgeLengths:
     """The largest length ‖x_i − x_j‖ of every edge over the states shown to it (the summary's `max_length`).
 
-    `add_states` takes whole states (every edge); `add_agents` only the edges of some agents. For
+    `add_states` takes whole states (every edge); `add_edges` only some edges (`edges_of` agents). For
     single integrators an edge's length is convex between its two agents' triggering times, so
     the states at t = 0, the horizon and those triggering times give its exact maximum; the engine
     uses that when it does not keep every event time as a sample (`edge_maxima` of `Samples`).
