@@ -19,6 +19,11 @@ from formation_sim.commands.common import (
 )
 
 
+DEFAULT_SAMPLE_DT = 0.01
+SAMPLE_POLICIES = ('auto', 'events', 'grid', 'none')
+AUTO_EVENTS_MAX_AGENTS = 1000  # above, `auto` keeps the grid only: n = 10 000, T = 2 has 74 000 events of 160 kB
+
+
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         'simulate',
@@ -60,11 +65,6 @@ def register(subparsers) -> None:
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
     parser.set_defaults(func=run)
-
-
-DEFAULT_SAMPLE_DT = 0.01
-SAMPLE_POLICIES = ('auto', 'events', 'grid', 'none')
-AUTO_EVENTS_MAX_AGENTS = 1000  # above, `auto` keeps the grid only: n = 10 000, T = 2 has 74 000 events of 160 kB
 
 
 def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | None] | str:
