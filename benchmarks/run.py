@@ -471,6 +471,7 @@ def main() -> int:
     parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli'), default=None)
     parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
     parser.add_argument('--three-agents', action='store_true', help='distributed: only the 3-agent cases (the lock-step target)')
+    parser.add_argument('--cli-agents', type=int, nargs='+', default=None, metavar='N', help='cli: only the teams of these sizes (1000, 3000, 10000)')
     parser.add_argument('--out', type=Path, default=HERE / 'results')
     args = parser.parse_args()
     sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli']
@@ -548,9 +549,10 @@ def main() -> int:
 
         results['load']['cli'] = [load()]
         progress('scenario load times')
-        results['scenario_load'] = load_times([300] if args.quick else [1000, 3000, 10000])
+        cases = [case for case in cli_cases(args.quick) if args.cli_agents is None or case['n'] in args.cli_agents]
+        results['scenario_load'] = load_times([case['n'] for case in cases])
         save()
-        results['cli'] = measure(cli_cases(args.quick), repeats=1 if args.quick else 3, progress=progress)
+        results['cli'] = measure(cases, repeats=1 if args.quick else 3, progress=progress)
         results['load']['cli'].append(load())
         save()
     save()
