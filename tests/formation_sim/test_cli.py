@@ -41,6 +41,8 @@ def _bad_input(tmp_path):
     return [
         (['validate', missing], 'no such scenario file and not a built-in scenario'),
         (['validate', str(tmp_path)], 'is a folder, not a scenario file'),
+        (['generate', '--agents', '3', '--out', str(tmp_path / 'a_run' / 'summary.json')], 'summary.json exists; nothing was changed'),
+        (['generate', '--agents', '3', '--slack', '0', '--out', str(tmp_path / 'x.json')], 'argument --slack: must be a number in (0, 1], got 0.0'),
         (['simulate', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
         (['simulate', 'no_such_scenario'], 'no such scenario file'),
         (['run', 'paper_single', '--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),

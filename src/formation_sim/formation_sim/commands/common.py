@@ -54,6 +54,7 @@ POSITIVE_INT = _number('an integer >= 1', lambda v: v >= 1, integer=True)
 NON_NEGATIVE_INT = _number('an integer >= 0', lambda v: v >= 0, integer=True)
 FINITE = _number('a finite number', math.isfinite)
 DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
+UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
 def bounded_int(low: int, high: int) -> Callable[[str], float]:

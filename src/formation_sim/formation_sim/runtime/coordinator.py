@@ -78,6 +78,7 @@ from formation_sim.runtime.run_book import (
     ids_text,
 )
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import Samples
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.summary import write_summary
@@ -362,9 +363,7 @@ class FormationCoordinatorNode(Node):
             horizon=self.horizon,
             mode='robots',
             trigger_times=trigger_times,
-            sample_times=times,
-            sample_positions=positions,
-            sample_velocities=velocities if self.double else None,
+            samples=Samples(times=times, positions=positions, velocities=velocities if self.double else None),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=sum(map(len, trigger_times.values())),
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),

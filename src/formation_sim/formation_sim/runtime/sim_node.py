@@ -486,9 +486,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             # A trigger counts once its command has acted on the world (a run stopped early may
             # have sensed for a trigger that never completed).
             trigger_times={i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()},
-            sample_times=np.array(self._sampler.times),
-            sample_positions=np.array(self._sampler.positions),
-            sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
+            samples=self._sampler.samples(),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),

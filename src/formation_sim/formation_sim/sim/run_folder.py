@@ -28,7 +28,9 @@ RUN_ENTRIES = frozenset(
     {
         'summary.json',
         'summary.json.tmp',
-        'trajectory.npz',
+        'trajectory',
+        'trajectory.incomplete',
+        'trajectory.npz',  # runs written before the trajectory folder
         'formation.png',
         'scenario.yaml',
         'agents.params.yaml',
