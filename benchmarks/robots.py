@@ -27,7 +27,8 @@ from formation_sim.model.scenario import load_scenario
 from formation_sim.runtime.launch import RobotOptions
 from formation_sim.runtime.orchestrate import FormationRun
 from formation_sim.sim.engine import simulate
-from formation_sim.sim.summary import TRAJECTORY_FILE, build_summary
+from formation_sim.sim.samples import load_trajectory
+from formation_sim.sim.summary import build_summary
 
 SCENARIO = 'robots_square'
 LIMITS = {'max_linear_speed': 0.22, 'max_angular_speed': 2.84, 'control_point_distance': 0.1}
@@ -45,8 +46,8 @@ SETTINGS: list[tuple[str, str, str | None, dict | None]] = [
 
 
 def _trajectory(out: Path, label: str, scenario) -> RunData:
-    with np.load(out / TRAJECTORY_FILE) as data:
-        times, positions = np.asarray(data['times'], dtype=float), np.asarray(data['positions'], dtype=float)
+    samples = load_trajectory(out)
+    times, positions = np.asarray(samples.times, dtype=float), np.asarray(samples.positions, dtype=float)
     return RunData(
         label=label, source=str(out), scenario=scenario.name, dynamics=scenario.dynamics, mode='', horizon=float(times[-1]),
         agent_ids=scenario.agent_ids, edges=[], trigger_times={}, messages_sent=0, sensing_calls=0, times=times, positions=positions,

@@ -9,7 +9,9 @@ implementation before the speed work, measured in the same run), `naive` (a fixe
 simulation of the same controllers, dt = 1e-4: speed and accuracy), `comm` (messages and
 sensing: event-triggered, periodic, continuous), `distributed` (lock-step throughput, start-up,
 memory, messages per event, against a bare rclpy round trip), `long` (peak memory of long
-distributed runs), `startup` (time to first result of `formation run`: every phase, against the
+distributed runs), `cli` (`formation simulate` as a process at n = 1000, 3000, 10 000: wall time
+against the engine's, peak memory, against the code before the streaming record; scenario load
+times, YAML and JSON), `startup` (time to first result of `formation run`: every phase, against the
 code before the start-up work, alternating), `large` (100 to 1000 agents: simple discovery and a
 discovery server, against the code before; `startup.py`). Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the
 repository root holds the tables of a full run with the machine they came from.
@@ -154,6 +156,43 @@ def engine_recording_cost() -> dict:
         'full_samples': len(full.sample_times),
         'full_sample_mib': full.sample_positions.nbytes / 2**20,
     }
+
+
+# -- cli --------------------------------------------------------------------------------------
+
+
+def cli_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [{**random(300), 'horizon': 2.0}]
+    return [
+        {**random(1000), 'horizon': 2.0},
+        {**random(3000), 'horizon': 2.0},
+        # The previous command cannot run it (below): its Python API with grid samples is the baseline.
+        {**random(10000), 'horizon': 2.0, 'api_baseline': True, 'api_repeats': 2},
+    ]
+
+
+def _cli_markdown(results: dict) -> list[str]:
+    lines = [
+        '| n | T [s] | events | engine wall [s] | process wall [s] | process / engine | peak RSS [MiB] | trajectory [MiB] | '
+        '--no-plot: process / engine | before: process wall [s] | before: process / engine | before: peak RSS [MiB] | '
+        'wall before / now | RSS before / now | same triggering times |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+    ]
+    for r in results['cli']:
+        now, bare, before = r.get('now', {}), r.get('now_no_plot', {}), r.get('before', {})
+        api = r['case'].get('api_baseline')
+        before_wall = before.get('wall_s')
+        before_text = f'{_fmt(before_wall)} (Python API, grid samples)' if api else _fmt(before_wall)
+        lines.append(
+            f'| {r["case"]["n"]} | {_fmt(r["case"]["horizon"])} | {_fmt(now.get("events"))} | {_fmt(now.get("engine_wall_s"))} | '
+            f'{_fmt(now.get("wall_s"))} | {_fmt(now.get("ratio"), 3)}× | {_fmt(now.get("peak_rss_mib"))} | {_fmt(now.get("trajectory_mib"))} | '
+            f'{_fmt(bare.get("ratio"), 3)}× | {before_text} | {_fmt(before.get("ratio"), 3) + "×" if "ratio" in before else "–"} | '
+            f'{_fmt(before.get("peak_rss_mib"))} | {_fmt(before_wall / now["wall_s"] if before_wall and now.get("wall_s") else None)}× | '
+            f'{_fmt(before["peak_rss_mib"] / now["peak_rss_mib"] if before.get("peak_rss_mib") and now.get("peak_rss_mib") else None)}× | '
+            f'{"yes" if r["trigger_times_equal"] else "NO" if r["trigger_times_equal"] is False else "–"} |'
+        )
+    return lines
 
 
 # -- naive ------------------------------------------------------------------------------------
@@ -432,6 +471,15 @@ def markdown(results: dict) -> str:
                 f'{ms_event / 1e3 / b["single_s"]:.2f}× / {ms_event / 1e3 / b["events_s"]:.2f}×.',
                 '',
             ]
+    if 'scenario_load' in results:
+        lines += ['| n | edges | YAML [MiB] | YAML load [s] | JSON [MiB] | JSON load [s] | YAML / JSON |', '|---|---|---|---|---|---|---|']
+        for r in results['scenario_load']:
+            yaml_text = f'refused after {r["yaml_s"]:.2f} s ({r["yaml_refused"]})' if r['yaml_refused'] else f'{r["yaml_s"]:.3g}'
+            ratio = '–' if r['yaml_refused'] else f'{r["yaml_s"] / r["json_s"]:.0f}×'
+            lines.append(f'| {r["n"]} | {r["edges"]} | {r["yaml_mib"]:.2f} | {yaml_text} | {r["json_mib"]:.2f} | {r["json_s"]:.3g} | {ratio} |')
+        lines.append('')
+    if 'cli' in results:
+        lines += [*_cli_markdown(results), '']
     if 'startup' in results:
         lines += [
             '| case | code | runs | `formation run` wall [s] | stepping [s] | outside stepping [s] | outside / stepping | discovery [s] | now / before: wall | now / before: outside |',
@@ -483,13 +531,14 @@ def markdown(results: dict) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description='Benchmarks (see BENCHMARKS.md).')
-    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'startup', 'large'), default=None)
+    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large'), default=None)
     parser.add_argument('--repeats', type=int, default=5, help='startup: runs of each case and code (default 5)')
     parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
     parser.add_argument('--three-agents', action='store_true', help='distributed: only the 3-agent cases (the lock-step target)')
+    parser.add_argument('--cli-agents', type=int, nargs='+', default=None, metavar='N', help='cli: only the teams of these sizes (1000, 3000, 10000)')
     parser.add_argument('--out', type=Path, default=HERE / 'results')
     args = parser.parse_args()
-    sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'startup', 'large']
+    sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large']
     results: dict = {'machine': machine(), 'sections': sections, 'load': {}}
     args.out.mkdir(parents=True, exist_ok=True)
     stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
@@ -559,6 +608,17 @@ def main() -> int:
             progress(f'long {label(case)} T={case["horizon"]}')
             results['long'].append(run_distributed(case, runs / f'long-{len(results["long"])}'))
             save()
+    if 'cli' in sections:
+        from cli import load_times, measure
+
+        results['load']['cli'] = [load()]
+        progress('scenario load times')
+        cases = [case for case in cli_cases(args.quick) if args.cli_agents is None or case['n'] in args.cli_agents]
+        results['scenario_load'] = load_times([case['n'] for case in cases])
+        save()
+        results['cli'] = measure(cases, repeats=1 if args.quick else 3, progress=progress)
+        results['load']['cli'].append(load())
+        save()
     if 'startup' in sections:
         from startup import summarise, time_to_first_result
 

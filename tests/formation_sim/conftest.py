@@ -205,7 +205,7 @@ class DistributedRun:
     bag: Path
     summary: dict
     reference: RunRecord  # the in-process engine's run of the same scenario and horizon
-    reference_dir: Path  # its summary.json and trajectory.npz
+    reference_dir: Path  # its summary.json and trajectory/
 
 
 @pytest.fixture(scope='session')

@@ -41,6 +41,8 @@ def _bad_input(tmp_path):
     return [
         (['validate', missing], 'no such scenario file and not a built-in scenario'),
         (['validate', str(tmp_path)], 'is a folder, not a scenario file'),
+        (['generate', '--agents', '3', '--out', str(tmp_path / 'a_run' / 'summary.json')], 'summary.json exists; nothing was changed'),
+        (['generate', '--agents', '3', '--slack', '0', '--out', str(tmp_path / 'x.json')], 'argument --slack: must be a number in (0, 1], got 0.0'),
         (['simulate', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
         (['simulate', 'no_such_scenario'], 'no such scenario file'),
         (['run', 'paper_single', '--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
@@ -74,6 +76,9 @@ def _bad_input(tmp_path):
         (['validate', 'robots_square', '--max-speed', '0'], 'argument --max-speed: must be a finite number > 0, got 0.0'),
         (['run', 'robots_square', '--backend', 'external'], '--backend external needs --robot holonomic|unicycle'),
         (['run', 'robots_square', '--backend', 'unicycle', '--latency', '-0.02'], 'argument --latency: must be a finite number >= 0, got -0.02'),
+        (['params', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
+        (['params', 'robots_square', '--backend', 'external', '--out', str(tmp_path / 'x')], '--backend external needs --robot holonomic|unicycle'),
+        (['params', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
         (['robots', 'robots_square', '--domain-id', '42'], '--model holonomic|unicycle is required'),
         (['robots', 'robots_square', '--model', 'unicycle', '--domain-id', '42', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
         (['no_such_command'], "invalid choice: 'no_such_command'"),

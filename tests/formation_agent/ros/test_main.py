@@ -198,3 +198,25 @@ def test_missing_parameters_are_named_at_once_without_a_traceback(tmp_path, robo
         assert f"parameter '{name}' (" in message and 'is required' in message, name
     assert 'robot: unicycle needs sensing: poses' in message
     assert 'robot: unicycle needs control_point_distance l > 0' in message
+
+
+def test_a_node_without_an_agent_says_how_to_name_one(tmp_path, robot_domain):
+    """agents.params.yaml is keyed by node name: a node started at / finds no agent_id in it."""
+    import yaml
+
+    team = tmp_path / 'agents.params.yaml'
+    team.write_text(yaml.safe_dump({'/agent_1/formation_agent': {'ros__parameters': {'agent_id': 1}}}))
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(robot_domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
+    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '--params-file', str(team)],
+                          capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    assert done.returncode == 2 and 'Traceback' not in done.stderr
+    message = done.stderr.strip().splitlines()[-1]
+    assert message.startswith("formation_agent: /formation_agent: parameter 'agent_id' (int) is required")
+    assert message.endswith('name the agent with --agents i, -r __ns:=/agent_<i> or -p agent_id:=i')
+    # Named by its id, the node moves to /agent_1 and the file's section applies (then it misses the rest).
+    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '--params-file', str(team), '-p', 'agent_id:=1'],
+                          capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    assert done.returncode == 2
+    message = done.stderr.strip().splitlines()[-1]
+    assert message.startswith("formation_agent: /agent_1/formation_agent: parameter 'algorithm' (string) is required")
+    assert 'agent_id' not in message

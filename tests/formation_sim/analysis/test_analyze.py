@@ -6,7 +6,6 @@ import copy
 import dataclasses
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,20 +217,35 @@ def test_the_paper_figure_draws_exactly_the_recorded_events_and_paths(paper_sing
     record = paper_single_record
     fig, trajectories, raster = paper_figure(record)
     try:
-        assert sum(len(c.get_positions()) for c in raster.events.values()) == record.total_events
-        for agent, collection in raster.events.items():
-            assert list(collection.get_positions()) == record.trigger_times[agent]
+        assert len(raster.ticks.get_segments()) == record.total_events
+        for agent in record.scenario.agent_ids:
+            assert raster.drawn_times(agent) == record.trigger_times[agent]
         x = record.sample_positions
+        assert np.array_equal(trajectories.rows, np.arange(len(record.sample_times)))  # a small run: every sample
+        paths, starts = trajectories.paths.get_segments(), trajectories.starts.get_offsets()
         for k, agent in enumerate(record.scenario.agent_ids):
-            path = trajectories.lines[agent].get_xydata()
-            assert np.array_equal(path[-1], x[-1, k]) and np.array_equal(path[0], record.scenario.positions[k])
-            assert np.array_equal(trajectories.starts[agent].get_xydata()[0], record.scenario.positions[k])
+            assert np.array_equal(paths[k], x[:, k]) and np.array_equal(paths[k][0], record.scenario.positions[k])
+            assert np.array_equal(starts[k], record.scenario.positions[k])
         index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}
-        assert len(trajectories.formation) == len(record.scenario.edges)
-        for line, edge in zip(trajectories.formation, record.scenario.edges):
-            assert np.array_equal(line.get_xydata(), x[-1, [index[edge.i], index[edge.j]]])
+        edges = trajectories.formation.get_segments()
+        assert len(edges) == len(record.scenario.edges)
+        for segment, edge in zip(edges, record.scenario.edges):
+            assert np.array_equal(segment, x[-1, [index[edge.i], index[edge.j]]])
+        assert [handle.get_label() for handle in fig.axes[0].get_legend().legend_handles] == ['agent 1', 'agent 2', 'agent 3']
     finally:
         pyplot().close(fig)
+
+
+def test_a_long_run_of_a_large_team_is_drawn_through_evenly_spaced_samples():
+    from formation_sim.analysis.figures import FIGURE_POINTS, figure_rows
+
+    times = np.concatenate([np.linspace(0.0, 1e-6, 50_000), np.linspace(1e-6, 2.0, 20_000)[1:]])  # a burst, then calm
+    assert np.array_equal(figure_rows(times, agents=3), np.arange(len(times)))  # few points: all of them
+    rows = figure_rows(times, agents=1000)
+    assert rows[0] == 0 and rows[-1] == len(times) - 1 and np.all(np.diff(rows) > 0)
+    assert len(rows) * 1000 <= FIGURE_POINTS
+    gaps = np.diff(times[rows])
+    assert gaps.max() < 2.5 * 2.0 / (FIGURE_POINTS // 1000)  # evenly spread in time, not crowded into the burst
 
 
 def test_analysis_panels_hold_the_series_and_bounds(paper_single_record):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -19,7 +20,6 @@ from formation_sim.analysis.compare import (
     within,
 )
 from formation_sim.sim.engine import simulate
-from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.summary import write_summary
 
 
@@ -80,7 +80,7 @@ def test_identical_in_process_runs_agree_exactly(paper_single_record, tmp_path):
     write_summary(simulate(paper_single_record.scenario, horizon=paper_single_record.horizon), tmp_path / 'b')
     a = load_run(tmp_path / 'a', label='first')
     b = load_run(tmp_path / 'b' / 'summary.json', label='second')
-    assert a.source.endswith('+ trajectory.npz')
+    assert a.source.endswith('+ trajectory/')
     report = compare_runs(a, b)
     assert report['events_equal'] and report['max_trigger_deviation'] == 0.0
     assert report['trajectory']['max_deviation'] == 0.0
@@ -115,7 +115,7 @@ def test_event_triggered_against_periodic_sampling(paper_single_record, tmp_path
 
 def test_a_summary_without_trajectory_compares_events_only(paper_single_record, tmp_path):
     write_summary(paper_single_record, tmp_path / 'a')
-    (tmp_path / 'a' / 'trajectory.npz').unlink()
+    shutil.rmtree(tmp_path / 'a' / 'trajectory')
     run = load_run(tmp_path / 'a', label='A')
     assert run.times is None
     report = compare_runs(run, run)

@@ -71,7 +71,7 @@ def test_a_folder_holding_a_run_is_refused_and_kept(tmp_path, capsys, monkeypatc
     for extra in ([], ['--no-record']):
         assert main(['run', 'paper_double', '--horizon', '1', '--out', str(tmp_path / 'run'), '--quiet', *extra]) == 2
         err = capsys.readouterr().err
-        assert f'{tmp_path / "run"} already holds an earlier run (summary.json, trajectory.npz)' in err
+        assert f'{tmp_path / "run"} already holds an earlier run (summary.json, trajectory/)' in err
         assert 'add --force to replace the earlier run' in err
     assert _listing(tmp_path / 'run') == earlier
 

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import matplotlib.image
+import numpy as np
 import pytest
-from matplotlib.collections import LineCollection
+from matplotlib.collections import LineCollection, PathCollection
 
 from formation_sim.sim.baselines import simulate_continuous
 from formation_sim.cli import main
 from formation_sim.sim.engine import simulate
 from formation_sim.analysis.plots import FIGURE_FILE, run_figure
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.samples import load_trajectory
 
 
 @pytest.fixture(scope='module')
@@ -26,7 +29,10 @@ def test_continuous_figure_has_no_raster_and_says_why(scenario):
     assert 'no triggering events' in fig.get_suptitle()
     (ax,) = fig.axes
     assert not ax.get_title().startswith('(a)')  # a lone panel is not labelled
-    assert len(ax.get_lines()) == 2 * scenario.n + len(scenario.edges)  # trajectories, start circles, final edges
+    paths, formation = (c for c in ax.collections if isinstance(c, LineCollection))  # trajectories, final edges
+    (starts,) = (c for c in ax.collections if isinstance(c, PathCollection))  # start circles
+    assert len(paths.get_segments()) == len(starts.get_offsets()) == scenario.n
+    assert len(formation.get_segments()) == len(scenario.edges)
 
 
 def test_event_triggered_figure_draws_one_tick_per_trigger(scenario):
@@ -66,10 +72,10 @@ def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stal
     capsys.readouterr()
     assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot']) == 2
     err = capsys.readouterr().err
-    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory.npz); nothing was changed' in err
+    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); nothing was changed' in err
     assert _listing(out) == earlier
     assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot', '--force']) == 0
-    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory.npz']  # no old figure, no old analysis
+    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory']  # no old figure, no old analysis
     assert '"dynamics": "double"' in (out / 'summary.json').read_text()
 
 
@@ -101,6 +107,10 @@ BAD_SIMULATE_ARGUMENTS = [
     (['--period', '-1'], 'argument --period: must be a finite number > 0, got -1.0'),
     (['--tolerance', '0'], 'argument --tolerance: must be a finite number > 0, got 0.0'),
     (['--period', '0.1', '--continuous'], 'argument --continuous: not allowed with argument --period'),
+    (['--samples', 'all'], "argument --samples: invalid choice: 'all' (choose from 'auto', 'events', 'grid', 'none')"),
+    (['--samples', 'none', '--sample-dt', '0.1'], 'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt 0.1'),
+    (['--samples', 'grid', '--sample-dt', '0'], 'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)'),
+    (['--samples', 'events', '--continuous'], 'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got events'),
 ]
 
 
@@ -131,3 +141,58 @@ def test_simulate_refuses_an_initial_slack_double_precision_cannot_resolve(tmp_p
     text = captured.out + captured.err
     assert '[precision] edge (2, 3): initial slack' in text and 'is below 0.00106827' in text
     assert 'Traceback' not in text and not out.exists()
+
+
+# -- what the trajectory keeps ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(('policy', 'times'), [
+    ('events', None),  # every event time and the grid: the record of the Python API
+    ('grid', [0.0, 0.25, 0.5, 0.75, 1.0]),
+    ('none', [0.0, 1.0]),
+])
+def test_each_sample_policy_keeps_what_it_says_and_the_same_run(tmp_path, capsys, policy, times):
+    scenario = load_scenario('paper_single')
+    reference = simulate(scenario, horizon=1.0, sample_dt=0.25)  # in memory, every event time sampled
+    out = tmp_path / policy
+    grid = [] if policy == 'none' else ['--sample-dt', '0.25']
+    assert main(['simulate', 'paper_single', '--horizon', '1', '--out', str(out), '--samples', policy, *grid, '--no-plot']) == 0
+    assert f'samples: {policy}, ' in capsys.readouterr().err
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['samples'] == policy
+    assert {int(a): t for a, t in summary['trigger_times'].items()} == reference.trigger_times  # sampling never moves an event
+    samples = load_trajectory(out)
+    if times is None:
+        assert np.array_equal(samples.times, reference.sample_times) and np.array_equal(samples.positions, reference.sample_positions)
+    else:
+        assert samples.times.tolist() == times
+        rows = np.searchsorted(reference.sample_times, times)
+        assert np.array_equal(samples.positions, reference.sample_positions[rows])
+    # The connectivity check covers every trigger whatever is kept (single integrators: exact).
+    for edge, expected in zip(summary['edges'], reference_edges(reference)):
+        assert edge['max_length'] == pytest.approx(expected, rel=4e-16, abs=0.0)
+
+
+def reference_edges(record):
+    index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}
+    x = record.sample_positions
+    return [float(np.linalg.norm(x[:, index[e.i]] - x[:, index[e.j]], axis=1).max()) for e in record.scenario.edges]
+
+
+def test_auto_keeps_event_samples_for_small_teams_only(tmp_path, capsys, monkeypatch):
+    import formation_sim.commands.simulate as command
+
+    assert main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'small'), '--no-plot']) == 0
+    assert 'samples: events (auto)' in capsys.readouterr().err
+    monkeypatch.setattr(command, 'AUTO_EVENTS_MAX_AGENTS', 2)  # three agents count as a large team now
+    assert main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'large'), '--no-plot']) == 0
+    assert 'samples: grid (auto), 51 states' in capsys.readouterr().err
+    assert json.loads((tmp_path / 'large' / 'summary.json').read_text())['extra']['samples'] == 'grid'
+
+
+def test_a_run_that_fails_leaves_no_folder_and_no_samples(tmp_path, capsys):
+    out = tmp_path / 'run'
+    assert main(['simulate', 'paper_single', '--horizon', '200', '--out', str(out), '--no-plot']) == 1  # stops at t ≈ 35
+    err = capsys.readouterr().err
+    assert 'rounding, not the dynamics, decides the events' in err and 'Traceback' not in err
+    assert not out.exists()  # the samples streamed so far went with it

@@ -194,17 +194,115 @@ CATALOGUE = [
     ('an edge as a list', edit('{i: 1, j: 2, d: [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'), 2, ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]']),
 ]
 
+# The same problem as a JSON file (the format for large teams), one agent and one edge a line.
+PAPER_JSON = """\
+{
+"name": "case",
+"dynamics": "single",
+"communication_radius": 4.0,
+"horizon": 10.0,
+"agents": {
+  "1": {"position": [2.0, 4.0]},
+  "2": {"position": [3.5, 7.0]},
+  "3": {"position": [4.5, 5.5]}
+},
+"edges": [
+  {"i": 1, "j": 2, "d": [0.0, -2.0]},
+  {"i": 1, "j": 3, "d": [-2.0, 0.0]},
+  {"i": 2, "j": 3, "d": [-2.0, 2.0]}
+],
+"gains": {"alpha": 10.0, "beta": 1.0}
+}
+"""
+
+
+def edit_json(old, new):
+    assert old in PAPER_JSON, old
+    return PAPER_JSON.replace(old, new, 1)
+
+
+JSON_CATALOGUE = [
+    # -- syntax, with line and column
+    ('missing comma', edit_json('"horizon": 10.0,', '"horizon": 10.0'), 2, ["malformed JSON at line 6, column 1: Expecting ',' delimiter"]),
+    ('trailing comma', edit_json('"beta": 1.0}', '"beta": 1.0,}'), 2, ['malformed JSON at line 16, column 38: Expecting property name enclosed in double quotes']),
+    ('single quotes', edit_json('"dynamics": "single"', "'dynamics': 'single'"), 2, ['malformed JSON at line 3, column 1']),
+    ('two documents', PAPER_JSON + PAPER_JSON, 2, ['malformed JSON at line 18, column 1: Extra data']),
+    ('empty file', '', 2, ['malformed JSON at line 1, column 1: Expecting value']),
+    ('NUL byte in a string', edit_json('"name": "case"', '"name": "ca\x00se"'), 2, ['malformed JSON at line 2, column 12: Invalid control character']),
+    ('nested too deeply', edit_json('"horizon": 10.0', '"horizon": ' + '[' * 100_000 + ']' * 100_000), 2, ['malformed JSON: nested too deeply']),
+    ('non-UTF-8 bytes', PAPER_JSON.encode().replace(b'"case"', b'"ca\xffse"'), 2, ['not UTF-8 text: byte 0xff at line 2 (offset 13)', 'UTF-8 JSON']),
+    ('40 MB file', lambda: ' ' * 40_000_000 + PAPER_JSON, 2, ['40.0 MB; a JSON scenario file holds at most 33.6 MB: refused']),
+    # -- what json.loads would accept silently or differently
+    ('duplicate key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"horizon": 20.0,'), 2, ["malformed JSON: duplicate key 'horizon'", "'communication_radius', 'horizon', 'horizon'"]),
+    ('duplicate agent', edit_json('"3": {"position": [4.5, 5.5]}', '"2": {"position": [4.5, 5.5]}'), 2, ["duplicate key '2' in the object with keys ['1', '2', '2']"]),
+    ('NaN', edit_json('"alpha": 10.0', '"alpha": NaN'), 2, ['gains.alpha: must be finite, got nan']),
+    ('-Infinity', edit_json('[2.0, 4.0]', '[-Infinity, 4.0]'), 2, ['agents.1.position[0]: must be finite, got -inf']),
+    ('1e999', edit_json('"horizon": 10.0', '"horizon": 1e999'), 2, ['horizon: must be finite, got inf']),
+    ('integer beyond a double', edit_json('"beta": 1.0', '"beta": 1' + '0' * 400), 2, ['gains.beta: 100000000000... (an integer of 401 digits) is too large for a double']),
+    ('integer past int() digits', edit_json('"horizon": 10.0', '"horizon": 1' + '0' * 6000), 2, ['an integer of 6001 digits is too large for a double']),
+    ('nan spelled as text', edit_json('"alpha": 10.0', '"alpha": "nan"'), 2, ["gains.alpha: expected a number, got 'nan'"]),
+    ('true for a number', edit_json('"alpha": 10.0', '"alpha": true'), 2, ['gains.alpha: expected a number, got True']),
+    ('subnormal α', edit_json('"alpha": 10.0', '"alpha": 5e-324'), 1, ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double']),
+    ('β a hair above β0', edit_json('"beta": 1.0', '"beta": 1.5000000000000002'), 1, ['0 < β < β0 = 1.5 required, got β = 1.5000000000000002']),
+    # -- the schema, as for YAML
+    ('a list', '[1, 2]', 2, ['scenario: expected a mapping, got [1, 2]']),
+    ('unknown key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"extra": 1,'), 2, ["scenario: unknown key 'extra'"]),
+    ('agents null', PAPER_JSON.split('"agents"')[0] + '"agents": null,\n"edges": [],\n"gains": {"alpha": 1.0, "beta": 0.1}\n}', 2, ['agents: expected a mapping, got None']),
+    ('id 2^31', edit_json('"3": {', '"2147483648": {').replace('"j": 3', '"j": 2147483648'), 2, ['agents.2147483648: agent ids are integers in [0, 2147483647]']),
+    ('id text', edit_json('"3": {', '"three": {'), 2, ["agents.three: agent ids are integers", "got 'three'"]),
+    ('edge id as text', edit_json('"i": 2, "j": 3', '"i": "2", "j": 3'), 2, ["edges[2].i: agent ids are integers", "got '2'"]),
+    ('edge to nobody', edit_json('"i": 2, "j": 3', '"i": 2, "j": 9'), 2, ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)']),
+    ('name of 300 characters', edit_json('"name": "case"', '"name": "' + 'n' * 300 + '"'), 2, ['name: at most 200 printable characters', '(300 characters)']),
+    ('mismatched dimensions', edit_json('[2.0, 4.0]', '[2.0, 4.0, 1.0]'), 2, ['agents.2.position: has 2 components, expected 3']),
+    ('an edge as a list', edit_json('{"i": 1, "j": 2, "d": [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'), 2, ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]']),
+    ('no edges', PAPER_JSON.split('"edges"')[0] + '"edges": [],\n"gains": {"alpha": 10.0, "beta": 1.0}\n}', 1, ['[connected] graph: the graph has 3 connected components']),
+]
+
 MESSAGE_LIMIT = 2000  # characters: an error quotes values cut short, never their whole expansion
 
 
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize(('label', 'content', 'code', 'fragments'), CATALOGUE, ids=[case[0] for case in CATALOGUE])
 def test_every_broken_file_gets_a_clear_answer(tmp_path, capsys, label, content, code, fragments):
-    path = tmp_path / 'case.yaml'
+    _check_clear_answer(tmp_path / 'case.yaml', capsys, label, content, code, fragments)
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(('label', 'content', 'code', 'fragments'), JSON_CATALOGUE, ids=[case[0] for case in JSON_CATALOGUE])
+def test_every_broken_json_file_gets_a_clear_answer(tmp_path, capsys, label, content, code, fragments):
+    _check_clear_answer(tmp_path / 'case.json', capsys, label, content, code, fragments)
+
+
+def test_the_json_paper_file_is_the_builtin_scenario(tmp_path, capsys):
+    from formation_sim.model.scenario import load_scenario
+
+    path = tmp_path / 'case.json'
+    path.write_text(PAPER_JSON)
+    assert load_scenario(path) == load_scenario('paper_single').replace(name='case')
+    path.write_text('\ufeff' + PAPER_JSON, encoding='utf-8')  # a byte order mark is dropped, as for YAML
+    assert main(['validate', str(path), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['scenario'] == 'case'
+
+
+def test_a_deeply_nested_json_file_is_refused_in_its_own_process(tmp_path):
+    """A million nested brackets: json's C scanner counts its recursion (RecursionError), no crash."""
+    path = tmp_path / 'deep.json'
+    path.write_text('{"horizon": ' + '[' * 1_000_000 + ']' * 1_000_000 + '}')
+    done = subprocess.run(
+        [sys.executable, '-c', 'import sys; from formation_sim.cli import main; sys.exit(main(sys.argv[1:]))', 'validate', str(path)],
+        capture_output=True, text=True, timeout=60, check=False,
+    )
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert 'malformed JSON: nested too deeply' in done.stderr and len(done.stderr) < MESSAGE_LIMIT
+
+
+def _check_clear_answer(path, capsys, label, content, code, fragments):
+    content = content() if callable(content) else content
     if isinstance(content, bytes):
         path.write_bytes(content)
     else:
         path.write_text(content, encoding='utf-8', newline='')
+    tmp_path = path.parent
     assert main(['validate', str(path)]) == code, label
     captured = capsys.readouterr()
     text = captured.err if code == 2 else captured.out

@@ -152,14 +152,19 @@ def awkward_scenario() -> Scenario:
     lambda: load_scenario('paper_double'),
     awkward_scenario,
 ])
-def test_dict_and_yaml_round_trips_are_exact(make, tmp_path):
+@pytest.mark.parametrize('suffix', ['.yaml', '.json', '.JSON'])
+def test_dict_and_file_round_trips_are_exact(make, tmp_path, suffix):
     s = make()
     assert scenario_from_dict(scenario_to_dict(s)) == s
-    path = tmp_path / 'scenario.yaml'
+    path = tmp_path / f'scenario{suffix}'
     dump_scenario(s, path)
+    json_file = suffix.lower() == '.json'
+    assert path.read_text().startswith('{') == json_file  # the format follows the name
     loaded = load_scenario(path)
     assert loaded == s
     np.testing.assert_array_equal(loaded.positions.view(np.int64), s.positions.view(np.int64))  # bit for bit
+    if s.velocities is not None:
+        np.testing.assert_array_equal(loaded.velocities.view(np.int64), s.velocities.view(np.int64))
 
 
 def test_dict_round_trip_keeps_explicit_riccati_gains(paper_scenario_dict):
@@ -430,6 +435,28 @@ def test_files_above_the_size_limit_are_refused_before_reading(tmp_path, monkeyp
         load_scenario(path)
     monkeypatch.setattr(scenario_module, 'MAX_FILE_BYTES', len(PAPER_YAML.encode()))
     assert load_scenario(path).n == 3
+
+
+def test_json_files_have_their_own_size_limit(tmp_path, monkeypatch):
+    import formation_sim.model.scenario as scenario_module
+
+    path = tmp_path / 'paper.json'
+    dump_scenario(load_scenario('paper_single'), path)
+    size = path.stat().st_size
+    monkeypatch.setattr(scenario_module, 'MAX_FILE_BYTES', size - 1)  # the YAML limit does not apply
+    assert load_scenario(path).name == 'paper_single'
+    monkeypatch.setattr(scenario_module, 'MAX_JSON_BYTES', size - 1)
+    with pytest.raises(ScenarioError, match=r'paper\.json: 0\.0 MB; a JSON scenario file holds at most 0\.0 MB: refused'):
+        load_scenario(path)
+
+
+def test_a_large_team_in_json_reads_back_exactly(tmp_path):
+    from formation_sim.model.generate import random_scenario
+
+    team = random_scenario(n=2000, seed=3, dynamics='double', dimension=3)
+    path = tmp_path / 'team.json'
+    dump_scenario(team, path)
+    assert load_scenario(path) == team
 
 
 def test_a_folder_is_named_as_such():

@@ -25,7 +25,10 @@ def test_the_exact_backend_is_the_simulator_and_its_agents(tmp_path):
     specs = plan.processes(plan.write_inputs())
     assert [spec.name for spec in specs] == ['recorder', 'simulator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
     assert [spec.name for spec in specs if spec.keeper] == ['simulator'] and plan.clock == 'lockstep'
-    assert '-p' in specs[1].args and 'clock_mode:=lockstep' in specs[1].args
+    simulator = yaml.safe_load((tmp_path / 'run' / 'simulator.params.yaml').read_text())['/formation_simulator']['ros__parameters']
+    assert specs[1].args[-2:] == ('--params-file', str(tmp_path / 'run' / 'simulator.params.yaml'))
+    assert simulator['clock_mode'] == 'lockstep' and simulator['scenario'] == str((tmp_path / 'run' / 'scenario.yaml').resolve())
+    assert specs[1].command == f'formation_sim --ros-args --params-file {tmp_path / "run" / "simulator.params.yaml"}'
     agents = yaml.safe_load((tmp_path / 'run' / 'agents.params.yaml').read_text())
     assert 'sensing' not in agents['/agent_1/formation_agent']['ros__parameters']  # the simulator's service
     assert not (tmp_path / 'run' / 'robots.params.yaml').exists()
@@ -87,9 +90,10 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
     specs = plan.processes(paths)
     assert [spec.name for spec in specs] == ['recorder', 'robots_1-2', 'robots_3-4', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
     assert plan.clock == 'realtime'
-    coordinator = next(spec for spec in specs if spec.keeper).args
-    assert 'formation_sim.runtime.coordinator' in coordinator and 'robot:=unicycle' in coordinator
-    assert 'robot_trajectory:=true_odom' in coordinator  # simulated: the formation as it truly is
+    assert 'formation_sim.runtime.coordinator' in next(spec for spec in specs if spec.keeper).args
+    coordinator = yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters']
+    assert coordinator['robot'] == 'unicycle' and coordinator['backend'] == 'unicycle'
+    assert coordinator['robot_trajectory'] == 'true_odom'  # simulated: the formation as it truly is
     robots = yaml.safe_load(paths['robots'].read_text())
     scenario = load_scenario('robots_square')
     for agent in scenario.agent_ids:
@@ -104,7 +108,7 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
     }  # fmt: skip
     assert 'max_linear_acceleration' not in agents  # no limit given: the agent's default (none)
     recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
-    assert recorder['clock_topic'] == ''  # wall-clock stamps: run time is in the headers
+    assert 'clock_topic' not in recorder  # the Step topic: bag time is the run's time, as on the exact backend
     recorded = {spec.split(':')[0] for spec in recorder['topics']}
     assert {'/agent_2/robot/cmd_vel', '/agent_2/robot/odom', '/agent_2/robot/true_odom', '/formation/robots'} <= recorded
     assert '/agent_2/robot/pose' not in recorded  # the agents read odometry
@@ -114,7 +118,8 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
     plan = _plan(tmp_path, 'external', RobotOptions(model='holonomic', pose_type='pose'))
     specs = plan.processes(plan.write_inputs())
     assert [spec.name for spec in specs] == ['recorder', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
-    assert 'robot_trajectory:=pose' in next(spec for spec in specs if spec.keeper).args
+    coordinator = yaml.safe_load((tmp_path / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+    assert coordinator['robot_trajectory'] == 'pose' and coordinator['backend'] == 'external'
     recorder = yaml.safe_load((tmp_path / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
     assert '/agent_1/robot/cmd_vel:geometry_msgs/msg/TwistStamped' in recorder['topics']
 

@@ -111,8 +111,8 @@ def test_metadata_is_version_9_mcap_with_counts(tmp_path: Path) -> None:
     info = metadata(tmp_path / 'bag')
     assert info['version'] == 9
     assert info['storage_identifier'] == 'mcap'
-    assert info['relative_file_paths'] == ['bag.mcap']
-    assert (tmp_path / 'bag' / 'bag.mcap').read_bytes().startswith(b'\x89MCAP0\r\n')
+    assert info['relative_file_paths'] == ['bag_0.mcap']
+    assert (tmp_path / 'bag' / 'bag_0.mcap').read_bytes().startswith(b'\x89MCAP0\r\n')
     assert info['message_count'] == 6
     assert info['starting_time']['nanoseconds_since_epoch'] == 1_000
     assert info['duration']['nanoseconds'] == 1_000
@@ -201,7 +201,8 @@ def test_reindex_recovers_a_killed_recorder(tmp_path: Path) -> None:
     recovery = reindex(bag)
 
     assert recovery.rewritten
-    assert recovery.message_counts == {STEP: 30, POSES: 0}
+    # A topic's channel is written with its first message: POSES, which had none, is not in the file.
+    assert recovery.message_counts == {STEP: 30}
     assert recovery.damaged_copy is not None
     assert recovery.damaged_copy.exists()
     assert [tuple(m) for m in read_bag(bag)] == flushed
@@ -221,13 +222,13 @@ def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -
         for topic, _, stamp, data in interleaved(7):
             writer.write(topic, 5 + stamp, data)
     original = metadata(bag)
-    mcap_bytes = (bag / 'bag.mcap').read_bytes()
+    mcap_bytes = (bag / 'bag_0.mcap').read_bytes()
     (bag / 'metadata.yaml').unlink()
 
     recovery = reindex(bag)
 
     assert not recovery.rewritten
-    assert (bag / 'bag.mcap').read_bytes() == mcap_bytes
+    assert (bag / 'bag_0.mcap').read_bytes() == mcap_bytes
     rebuilt = metadata(bag)
     for key in ('version', 'storage_identifier', 'relative_file_paths', 'duration',
                 'starting_time', 'message_count', 'topics_with_message_count'):
@@ -238,7 +239,7 @@ def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -
 
 def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
     source = tmp_path / 'source'
-    mcap = source / 'source.mcap'
+    mcap = source / 'source_0.mcap'
     written: list[tuple[str, str, int, bytes]] = []
     flushed_at: dict[int, int] = {}  # file size after a flush -> messages written by then
     writer = BagWriter(source)
@@ -287,20 +288,20 @@ def test_reindex_on_a_full_disk_changes_nothing_and_says_what_to_do(tmp_path: Pa
         writer.add_topic(POSES, POSES_TYPE)
         for topic, _, stamp, data in interleaved(3500):
             writer.write(topic, stamp, data)
-    complete = (source / 'source.mcap').read_bytes()
+    complete = (source / 'source_0.mcap').read_bytes()
     assert len(complete) > 1_000_000
     bag = small_disk(1.5) / 'bag'
     bag.mkdir()
     cut = complete[: len(complete) - 100]  # the summary cut short: the copy would need ~1.2 MB more
-    (bag / 'bag.mcap').write_bytes(cut)
+    (bag / 'bag_0.mcap').write_bytes(cut)
 
     with pytest.raises(BagRecoveryError) as failed:
         reindex(bag)
     message = str(failed.value)
-    assert 'cannot write the recovered copy bag.mcap.recovering: No space left on device' in message
+    assert 'cannot write the recovered copy bag_0.mcap.recovering: No space left on device' in message
     assert 'the bag is unchanged: free space, then recover it again' in message
-    assert sorted(path.name for path in bag.iterdir()) == ['bag.mcap']  # no temporary left
-    assert (bag / 'bag.mcap').read_bytes() == cut
+    assert sorted(path.name for path in bag.iterdir()) == ['bag_0.mcap']  # no temporary left
+    assert (bag / 'bag_0.mcap').read_bytes() == cut
 
 
 def test_reindex_errors_name_the_problem(tmp_path: Path) -> None:
@@ -582,7 +583,226 @@ def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> No
            'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
     run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', parameter],
                          capture_output=True, text=True, env=env, timeout=120)
-    name = parameter.split(':=')[0]
-    assert run.returncode != 0
-    assert f"parameter '{name}' must be a positive number of seconds" in run.stderr
+    name, value = parameter.split(':=')
+    assert run.returncode == 2, run.stderr
+    assert f"parameter '{name}' (double) must be > 0, finite, got {float(value.replace('.nan', 'nan'))!r}" in run.stderr
+    assert 'Traceback' not in run.stderr
     assert not bag.exists()
+
+
+# --------------------------------------------------------------------------- the run's time
+
+
+class _Clocks:
+    """A monotonic and a wall clock the test moves by hand (ns)."""
+
+    def __init__(self, wall_ns: int) -> None:
+        self.monotonic = 5_000_000_000
+        self.wall = wall_ns
+
+    def advance(self, seconds: float, *, wall_jump: float = 0.0) -> None:
+        self.monotonic += round(seconds * 1e9)
+        self.wall += round((seconds + wall_jump) * 1e9)
+
+
+def test_lock_step_messages_are_stamped_with_the_latest_steps_sim_time() -> None:
+    from formation_sim.runtime.recorder import RunClock
+
+    clock = RunClock()
+    assert clock.stamp_ns() == 0 and clock.step_index == -1  # before the first Step
+    stamps = []
+    for index, t in enumerate([0.0, 5.5e-7, 0.25, 0.25, 1.0]):
+        assert clock.on_step([1.0, float(index), t, 0.0, 0.0])
+        stamps.append(clock.stamp_ns())
+    assert stamps == [0, 550, 250_000_000, 250_000_000, 1_000_000_000]
+    assert clock.step_index == 4 and not clock.realtime
+    assert clock.on_step([1.0, 5.0, 2.0]) and clock.stamp_ns() == 2_000_000_000  # [version, step, time] suffices
+    assert not clock.on_step([1.0, 6.0, -1.0]) and not clock.on_step([1.0, 6.0, float('nan')]) and not clock.on_step([1.0])
+    assert clock.stamp_ns() == 2_000_000_000 and clock.step_index == 5  # refused Steps change nothing
+
+
+def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch() -> None:
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
+    from formation_sim.runtime.recorder import RunClock
+
+    epoch = 1_700_000_000.5
+    clocks = _Clocks(wall_ns=round(epoch * 1e9) + 20_000_000)  # Step 0 arrives 20 ms after its epoch
+    clock = RunClock(monotonic_ns=lambda: clocks.monotonic, wall_ns=lambda: clocks.wall)
+    clocks.advance(0.3)
+    assert clock.stamp_ns() == 0 and not clock.started  # discovery: before the run
+    clocks.wall -= 300_000_000
+    clocks.advance(-0.015)
+    overtook = clock.received_ns()  # a message of the run that came 15 ms before Step 0 (5 ms after the epoch)
+    clocks.advance(-0.3)
+    discovery = clock.received_ns()  # one from well before the epoch
+    clocks.advance(0.315)
+    assert clock.on_step([1.0, 0.0, 0.0, float(STEP_FLAG_REALTIME), epoch])
+    assert clock.realtime and clock.stamp_ns() == 20_000_000
+    assert clock.stamp_ns(overtook) == 5_000_000 and clock.stamp_ns(discovery) == 0
+    clocks.advance(1.25)
+    assert clock.stamp_ns() == 1_270_000_000
+    clocks.advance(0.5, wall_jump=-3.0)  # NTP steps the wall clock back: bag time goes on
+    assert clock.stamp_ns() == 1_770_000_000
+    assert clock.on_step([1.0, 1.0, 8.0, float(STEP_FLAG_FINAL | STEP_FLAG_REALTIME), epoch])  # the final Step
+    assert clock.stamp_ns() == 1_770_000_000 and clock.step_index == 1
+    clocks.advance(0.01)
+    assert clock.stamp_ns() == 1_780_000_000
+
+
+def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_path: Path) -> None:
+    from formation_sim.runtime.recorder import RECORDER_PARAMETERS
+
+    shown = subprocess.run([*recorder_command(), '--help'], capture_output=True, text=True, timeout=60)
+    assert shown.returncode == 0 and shown.stderr == ''
+    rows = {line.split()[0] for line in shown.stdout.splitlines() if line.startswith('  ') and not line.startswith('  -')}
+    assert rows == {spec.name for spec in RECORDER_PARAMETERS}
+    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    bad = subprocess.run([*recorder_command(), '--ros-args', '-p', 'flush_period:=0.0', '-p', "topics:=['/a:std_msgs/msg/Nope']"],
+                         capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
+    assert bad.returncode == 2 and 'Traceback' not in bad.stderr
+    assert "parameter 'output' (string) is required" in bad.stderr
+    assert "parameter 'flush_period' (double) must be > 0, finite, got 0.0" in bad.stderr
+    assert "parameter 'topics': message type 'std_msgs/msg/Nope' cannot be imported" in bad.stderr
+
+
+@pytest.mark.ros
+def test_each_topic_keeps_the_qos_its_publishers_offered(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """As rosbag2 records them: one profile per publisher, transient local stays transient local."""
+    import rclpy  # noqa: PLC0415
+    from rclpy.duration import Duration  # noqa: PLC0415
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy  # noqa: PLC0415
+
+    bag = tmp_path / 'bag'
+    latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL, liveliness=LivelinessPolicy.AUTOMATIC,
+                         liveliness_lease_duration=Duration(seconds=1.0))  # fmt: skip
+    volatile = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    with (ros_domain(tmp_path, monkeypatch, 44) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']") as process):
+        node = rclpy.create_node('qos_recording_test', context=context)
+        steps = [node.create_publisher(Float64MultiArray, STEP, latched) for _ in range(2)]
+        poses = node.create_publisher(PoseArray, POSES, volatile)
+        wait_for_subscribers([*steps, poses], process, tmp_path)
+        steps[0].publish(step_bytes(0))
+        poses.publish(poses_bytes(0))
+        assert all(publisher.wait_for_all_acked(Duration(seconds=30)) for publisher in (steps[0], poses))
+        stop(process, signal.SIGINT, tmp_path)
+        node.destroy_node()
+
+    offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(bag)['topics_with_message_count']}
+    assert [(p['reliability'], p['durability'], p['liveliness_lease_duration']) for p in offered[STEP]] == [
+        ('reliable', 'transient_local', {'sec': 1, 'nsec': 0})] * 2  # fmt: skip
+    assert [(p['reliability'], p['durability']) for p in offered[POSES]] == [('reliable', 'volatile')]
+
+
+# --------------------------------------------------------------------------- bags of real runs
+
+
+def _bag_of_a_run(bag: Path) -> dict[str, list]:
+    """Per topic, its (bag time, message) in bag order, after checking what every run's bag must
+    hold: the run's QoS on every topic (the scenario latched), Jazzy's distro and type hashes,
+    stamps that never decrease on a topic."""
+    from mcap.reader import make_reader  # noqa: PLC0415
+
+    info = metadata(bag)
+    assert info['ros_distro'] == 'jazzy'
+    topics = {t['topic_metadata']['name']: t['topic_metadata'] for t in info['topics_with_message_count']}
+    for name, topic in topics.items():
+        assert topic['offered_qos_profiles'], f'{name}: no offered QoS recorded'
+        assert topic['type_description_hash'].startswith('RIHS01_'), name
+    assert {p['durability'] for p in topics['/formation/scenario']['offered_qos_profiles']} == {'transient_local'}
+    with next(bag.glob('*.mcap')).open('rb') as stream:
+        channels = make_reader(stream).get_summary().channels.values()
+        assert {c.topic: c.metadata['topic_type_hash'] for c in channels} == {n: t['type_description_hash'] for n, t in topics.items()}
+    messages: dict[str, list] = {}
+    for message in read_bag(bag):
+        messages.setdefault(message.topic, []).append((message.timestamp_ns, decode(message.rawdata, message.msgtype)))
+    for name, stamped in messages.items():
+        stamps = [stamp for stamp, _ in stamped]
+        assert stamps == sorted(stamps), f'{name}: time stamps go backwards'
+    return messages
+
+
+def _trigger_infos(messages: dict[str, list]):
+    from formation_msgs_py.codec import decode_trigger_info  # noqa: PLC0415
+
+    return [(stamp, decode_trigger_info(msg)) for name, stamped in messages.items() if '/trigger_info/' in name for stamp, msg in stamped]
+
+
+def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None:
+    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run time)."""
+    lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
+    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+
+
+def _epoch(messages: dict[str, list]) -> float:
+    from formation_msgs_py.codec import decode_step  # noqa: PLC0415
+
+    return decode_step(messages[STEP][0][1]).epoch
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+def test_a_lock_step_bag_is_stamped_with_sim_time(distributed_single_run) -> None:
+    from formation_msgs_py.codec import decode_step  # noqa: PLC0415
+
+    messages = _bag_of_a_run(distributed_single_run.bag)
+    steps = [(stamp, decode_step(msg)) for stamp, msg in messages[STEP]]
+    assert [stamp for stamp, _ in steps] == [round(step.time * 1e9) for _, step in steps]
+    infos = _trigger_infos(messages)
+    assert len(infos) == distributed_single_run.summary['messages_sent']
+    # Information is sent at its own trigger, the step's time: bag time is its stamp t^i_k.
+    assert [stamp for stamp, _ in infos] == [round(info.stamp * 1e9) for _, info in infos]
+
+
+def _run_with_bag(tmp_path: Path, scenario, domain_id: int, **options):
+    from formation_sim.runtime.orchestrate import FormationRun  # noqa: PLC0415
+
+    result = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=domain_id, progress=False, timeout=240.0, **options).run()
+    assert result.ok, result.message
+    return _bag_of_a_run(result.bag)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: Path) -> None:
+    from formation_msgs_py.codec import decode_status  # noqa: PLC0415
+    from formation_msgs_py.lockstep import DISCOVERY_STEP  # noqa: PLC0415
+
+    horizon = 3.0
+    scenario = Path(__file__).parents[3] / 'benchmarks' / 'gentle_square.yaml'
+    messages = _run_with_bag(tmp_path, scenario, 45, horizon=horizon, clock='realtime')
+    _assert_received_soon_after_their_trigger(messages)
+    assert max(info.stamp for _, info in _trigger_infos(messages)) > horizon / 2  # spread over the run
+    final_stamp = messages[STEP][-1][0]
+    assert final_stamp >= (horizon - 0.01) * 1e9  # the final Step goes out at the horizon on the wall clock
+    # Stamped 0: only what came before Step 0 (the agents' discovery announcements, the scenario).
+    for name, stamped in messages.items():
+        for stamp, msg in stamped:
+            if stamp == 0:
+                assert name == '/formation/scenario' or (name == '/formation/status' and decode_status(msg).step_index == DISCOVERY_STEP), name
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group('formation_distributed')
+@pytest.mark.timeout(300)
+def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: Path) -> None:
+    from formation_sim.runtime.launch import RobotOptions  # noqa: PLC0415
+
+    horizon = 3.0
+    messages = _run_with_bag(tmp_path, 'robots_square', 46, horizon=horizon, backend='holonomic', robots=RobotOptions(model='holonomic'))
+    epoch = _epoch(messages)
+    _assert_received_soon_after_their_trigger(messages)
+    # A pose's bag time is when it came, since the epoch: right after its measurement (header stamp).
+    poses = messages['/agent_1/robot/true_odom']
+    measured = [(stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses]
+    assert all(t < 0.05 for stamp, t in measured if stamp == 0)  # stamped 0: measured before the run began
+    lags = [stamp / 1e9 - t for stamp, t in measured if stamp > 0]
+    assert len(lags) > 100 * horizon / 2 and min(lags) >= -1e-3 and max(lags) < 0.5, (min(lags), max(lags))
+    offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(tmp_path / 'run' / 'bag')['topics_with_message_count']}
+    assert {p['durability'] for p in offered['/agent_1/robot/true_odom']} == {'volatile'}  # as the robot offers it
+    assert {p['durability'] for p in offered['/formation/robots']} == {'transient_local'}

@@ -233,3 +233,63 @@ def test_replay_refuses_a_domain_whose_graph_shows_a_run_elsewhere(tmp_path, mon
         simulator.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+@pytest.mark.ros
+def test_replay_offers_the_recorded_qos_so_the_scenario_is_latched_for_late_joiners(tmp_path):
+    """As ros2 bag play: each topic offered as its publishers offered it when recorded."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.serialization import serialize_message
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+    from std_msgs.msg import Float64MultiArray, String
+
+    forever = QosTime(sec=9223372036, nsec=854775807)
+    latched = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, forever, forever, QosLiveliness.AUTOMATIC, QosTime(1, 0), False)
+    volatile = latched._replace(durability=QosDurability.VOLATILE, liveliness_lease_duration=forever)
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as writer:
+        writer.add_topic('/formation/scenario', 'std_msgs/msg/String', offered_qos_profiles=[latched])
+        writer.add_topic('/formation/state', 'std_msgs/msg/Float64MultiArray', offered_qos_profiles=[volatile])
+        writer.add_topic('/formation/status', 'std_msgs/msg/Float64MultiArray')  # recorded without QoS
+        writer.write('/formation/scenario', 0, serialize_message(String(data='name: latched')))
+        writer.write('/formation/state', 1, serialize_message(Float64MultiArray(data=[1.0])))
+        writer.write('/formation/status', 2, serialize_message(Float64MultiArray(data=[2.0])))
+
+    contexts = []
+    for _ in range(2):
+        contexts.append(rclpy.Context())
+        rclpy.init(context=contexts[-1], domain_id=47)
+    player_node = Node('bag_player', context=contexts[0], start_parameter_services=False)
+    late = Node('late_joiner', context=contexts[1], start_parameter_services=False)
+    try:
+        result = BagPlayer(player_node, bag, rate=0.0, clock=False).play()  # nobody listens yet
+        assert result.published == 3
+        offered = {}
+        deadline = time.monotonic() + 30
+        while len(offered) < 3 and time.monotonic() < deadline:
+            for topic in ('/formation/scenario', '/formation/state', '/formation/status'):
+                if infos := late.get_publishers_info_by_topic(topic):
+                    offered[topic] = infos[0].qos_profile
+            time.sleep(0.05)
+        assert offered['/formation/scenario'].durability == DurabilityPolicy.TRANSIENT_LOCAL
+        assert offered['/formation/scenario'].liveliness_lease_duration.nanoseconds == 10**9
+        assert offered['/formation/state'].durability == DurabilityPolicy.VOLATILE
+        assert offered['/formation/status'].durability == DurabilityPolicy.TRANSIENT_LOCAL  # none recorded: the player's default
+        # A reader that comes after the replay still gets the scenario.
+        got = []
+        late.create_subscription(String, '/formation/scenario', got.append,
+                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        executor = SingleThreadedExecutor(context=contexts[1])
+        executor.add_node(late)
+        deadline = time.monotonic() + 30
+        while not got and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert [msg.data for msg in got] == ['name: latched']
+    finally:
+        player_node.destroy_node()
+        late.destroy_node()
+        for context in contexts:
+            rclpy.try_shutdown(context=context)

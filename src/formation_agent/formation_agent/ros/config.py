@@ -76,7 +76,7 @@ AGENT_PARAMETERS = (
           default=0.0, low=0.0, high=1.0),
     _spec('inject_delay_ms', DOUBLE, 'test facility: delay of arriving triggering information [ms]', default=0.0, low=0.0),
     _spec('inject_jitter_ms', DOUBLE, 'test facility: extra uniform delay in [0, jitter] [ms]', default=0.0, low=0.0),
-    _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0),
+    _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0, low=0),
 )  # fmt: skip
 
 GAIN_PARAMETERS = {

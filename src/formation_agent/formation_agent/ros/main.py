@@ -2,9 +2,13 @@
 
 ```
 formation_agent --ros-args -r __ns:=/agent_2 --params-file team.yaml --params-file robot.yaml
+formation_agent --ros-args --params-file agents.params.yaml -p agent_id:=2   # the same node: /agent_2 from its id
 formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml   # packed, as `formation run` does
 formation_agent --help                                                      # options and the parameter table
 ```
+
+A node started without `--agents` takes its namespace from the ROS arguments (`-r __ns:=/agent_<i>`)
+or, without one, from its `agent_id` (`-p agent_id:=i`, or a parameter file's ``/**`` section).
 
 Exit statuses: 0 the run ended (final Step); 1 the agent failed (a stale pose, a protocol
 violation, an error it names); 2 bad parameters (every problem named, nothing started); 3 a peer
@@ -28,10 +32,10 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from formation_agent.core.pose_sensing import PoseError
-from formation_agent.ros.config import agent_help
+from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
 from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import DELIVERY_TIMEOUT, FormationAgentNode, PeerLostError
-from formation_agent.ros.parameters import ParameterError
+from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError
+from formation_agent.ros.parameters import ParameterError, read_parameters
 from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import agent_namespace
 
@@ -53,14 +57,29 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         '--agents',
         help='comma-separated agent ids to run in this process, each in namespace /agent_<i> '
-        '(default: one node whose namespace and parameters come from the ROS arguments)',
+        '(default: one node whose namespace and parameters come from the ROS arguments: -r __ns:=/agent_<i>, '
+        'or -p agent_id:=i)',
     )
     return parser
 
 
-def _build_nodes(options: argparse.Namespace) -> list[FormationAgentNode]:
+def _namespace_from_agent_id() -> str | None:
+    """/agent_<i> for a node the ROS arguments put in no namespace but give an agent_id
+    (`-p agent_id:=i`, or a parameter file's ``/**`` section); None otherwise (the arguments decide)."""
+    probe = rclpy.create_node(NODE_NAME, start_parameter_services=False, enable_rosout=False)
+    try:
+        if probe.get_namespace() != '/':
+            return None  # -r __ns:=... chose it
+        values, _ = read_parameters(probe, [spec for spec in AGENT_PARAMETERS if spec.name == 'agent_id'])
+        return agent_namespace(values['agent_id']) if 'agent_id' in values else None
+    finally:
+        probe.destroy_node()
+
+
+def _build_nodes(options: argparse.Namespace, ros_arguments: Sequence[str]) -> list[FormationAgentNode]:
     if not options.agents:
-        return [FormationAgentNode()]
+        named = any('__ns:=' in argument for argument in ros_arguments)  # -r __ns:=/agent_<i> decides
+        return [FormationAgentNode(namespace=None if named else _namespace_from_agent_id())]
     ids = [int(text) for text in options.agents.split(',') if text.strip()]
     packed = len(ids) > 1
     # Packed (large teams): no per-node parameter, type description and /rosout endpoints, which
@@ -78,6 +97,17 @@ def _build_nodes(options: argparse.Namespace) -> list[FormationAgentNode]:
     ]
 
 
+def _missing_id_hint(error: Exception, options: argparse.Namespace) -> str:
+    """Why a node without --agents and without a namespace found no agent_id, and what to do."""
+    missing = any(problem.startswith("parameter 'agent_id' (int) is required") for problem in getattr(error, 'problems', ()))
+    if not missing or options.agents:
+        return ''
+    return (
+        '. A parameter file keyed by node name, as agents.params.yaml is, gives /agent_<i>/formation_agent its '
+        'parameters: name the agent with --agents i, -r __ns:=/agent_<i> or -p agent_id:=i'
+    )
+
+
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(args if args is not None else sys.argv)
     # --help and bad options end here, before ROS starts (exit 0 / 2, no traceback).
@@ -89,7 +119,7 @@ def main(args: Sequence[str] | None = None) -> int:
     with StopSignals() as stop:
         try:
             began = time.monotonic()
-            nodes = _build_nodes(options)
+            nodes = _build_nodes(options, argv)
             if len(nodes) > 1:  # how long a packed process takes to be up (large teams)
                 nodes[0].get_logger().info(
                     f'{len(nodes)} agent nodes created in {time.monotonic() - began:.1f} s (agents {options.agents})'
@@ -105,7 +135,7 @@ def main(args: Sequence[str] | None = None) -> int:
         except (KeyboardInterrupt, ExternalShutdownException):
             status, failure = 130, 'stopped by a signal'
         except (ParameterError, FaultInjectionError) as error:  # bad input: every problem named, nothing started
-            print(f'formation_agent: {error}', file=sys.stderr, flush=True)
+            print(f'formation_agent: {error}{_missing_id_hint(error, options)}', file=sys.stderr, flush=True)
             status = EXIT_BAD_INPUT
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)

@@ -80,15 +80,17 @@ class ParameterSpec:
         """The range or choices in words ('> 0', 'in [0, 1]', "one of 'a', 'b'"), '' if none."""
         if self.choices:
             return 'one of ' + ', '.join(repr(choice) for choice in self.choices)
+        # high = inf, open: a finite number (rclpy accepts inf and nan for a double).
+        finite = self.high == math.inf and self.high_open
         low = None if self.low is None else f'{"(" if self.low_open else "["}{_number(self.low)}'
-        high = None if self.high is None else f'{_number(self.high)}{")" if self.high_open else "]"}'
+        high = None if self.high is None or finite else f'{_number(self.high)}{")" if self.high_open else "]"}'
         if low and high:
             return f'in {low}, {high}'
         if low:
-            return f'{">" if self.low_open else ">="} {_number(self.low)}'
+            return f'{">" if self.low_open else ">="} {_number(self.low)}{", finite" if finite else ""}'
         if high:
             return f'{"<" if self.high_open else "<="} {_number(self.high)}'
-        return ''
+        return 'finite' if finite else ''
 
     def descriptor(self) -> ParameterDescriptor:
         descriptor = ParameterDescriptor(
@@ -152,12 +154,17 @@ def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any
     problems: list[str] = []
     for spec in specs:
         label = f'parameter {spec.name!r} ({_TYPE_NAMES.get(spec.type, spec.type.name.lower())})'
+        # An empty array says nothing of its element type (rclpy would take it for bytes):
+        # declared by type, it stays unset unless given, and then reads as the default.
+        by_type = spec.required or (isinstance(spec.default, (list, tuple)) and not spec.default)
         try:
             if not node.has_parameter(spec.name):
-                default = spec.type if spec.required else spec.default
-                node.declare_parameter(spec.name, default, spec.descriptor())
+                node.declare_parameter(spec.name, spec.type if by_type else spec.default, spec.descriptor())
             value = node.get_parameter(spec.name).value
         except ParameterUninitializedException:
+            if not spec.required:
+                values[spec.name] = list(spec.default)
+                continue
             problems.append(f'{label} is required: {spec.description}')
             continue
         except ParameterException as error:  # the wrong type, or outside the descriptor's range
@@ -170,9 +177,9 @@ def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any
     return values, problems
 
 
-def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:
-    """The table `--help` prints: name, type, default (or 'required'), range, description."""
-    rows = [
+def _rows(specs: Sequence[ParameterSpec]) -> list[tuple[str, str, str, str, str]]:
+    """name, type, default (or 'required'), range or choices, description: one row per spec."""
+    return [
         (
             spec.name,
             _TYPE_NAMES.get(spec.type, spec.type.name.lower()),
@@ -182,6 +189,20 @@ def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters')
         )
         for spec in specs
     ]
+
+
+def parameter_table(specs: Sequence[ParameterSpec]) -> str:
+    """The same table in Markdown (docs/PARAMETERS.md)."""
+    lines = ['| parameter | type | default | range | meaning |', '|---|---|---|---|---|']
+    for row in _rows(specs):
+        name, kind, default, constraint, description = (cell.replace('|', '\\|') for cell in row)
+        lines.append(f'| `{name}` | {kind} | {default if default == "required" else f"`{default}`"} | {constraint} | {description} |')
+    return '\n'.join(lines)
+
+
+def parameter_help(specs: Sequence[ParameterSpec], *, title: str = 'parameters') -> str:
+    """The table `--help` prints: name, type, default (or 'required'), range, description."""
+    rows = _rows(specs)
     widths = [max(len(row[k]) for row in rows) for k in range(4)]
     lines = [f'{title} (--ros-args -p name:=value, or --params-file FILE):']
     for row in rows:

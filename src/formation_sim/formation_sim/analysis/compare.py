@@ -2,8 +2,8 @@
 
 A run is given as a run folder, a bag, or a summary.json. With a bag (a folder's `bag/` or the
 bag itself) everything comes from the bag (`formation_sim.analysis.load.load_bag_run`); otherwise from
-summary.json (triggering times, counters) and the `trajectory.npz` beside it, if any (the output
-of `formation simulate`, including `--period` runs).
+summary.json (triggering times, counters) and the trajectory beside it, if any (the output
+of `formation simulate`, including `--period` runs: `trajectory/`, or an older run's `trajectory.npz`).
 
 - Triggering times are matched per agent index by index: the k-th trigger of agent i in A
   against the k-th in B, for k below the smaller count; a count mismatch is reported per agent
@@ -27,7 +27,8 @@ from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
 from formation_sim.analysis.report import bag_summary, json_safe
 from formation_sim.analysis.figures import pyplot
 from formation_sim.analysis.markers import agent_colour
-from formation_sim.sim.summary import TRAJECTORY_FILE, load_summary
+from formation_sim.sim.samples import LEGACY_TRAJECTORY_FILE, TrajectoryError, load_trajectory
+from formation_sim.sim.summary import load_summary
 
 
 class CompareError(ValueError):
@@ -91,13 +92,15 @@ def load_run(path: str | Path, *, label: str, scenario=None, progress=None) -> R
         summary = load_summary(location.summary)
     except (OSError, ValueError) as error:
         raise CompareError(f'{location.summary}: {error}') from None
-    trajectory = location.summary.parent / TRAJECTORY_FILE
+    try:
+        samples = load_trajectory(location.summary.parent)
+    except TrajectoryError as error:
+        raise CompareError(str(error)) from None
     times = positions = None
     source = f'summary {location.summary}'
-    if trajectory.is_file():
-        with np.load(trajectory) as data:
-            times, positions = np.asarray(data['times'], dtype=float), np.asarray(data['positions'], dtype=float)
-        source += f' + {TRAJECTORY_FILE}'
+    if samples is not None:
+        times, positions = samples.times, samples.positions
+        source += f" + {samples.path.name + '/' if samples.path is not None else LEGACY_TRAJECTORY_FILE}"
     agent_ids = tuple(sorted(int(agent) for agent in summary['trigger_times']))
     return RunData(
         label=label,
@@ -313,7 +316,7 @@ def render_markdown(report: dict[str, Any]) -> str:
     lines += ['', '## Trajectories', '']
     trajectory = report['trajectory']
     if trajectory is None:
-        lines.append('Not compared: a run has no trajectory (summary.json without trajectory.npz).')
+        lines.append('Not compared: a run has no trajectory (summary.json without trajectory/).')
     else:
         lines.append(
             f'Largest distance between the two runs\' positions of an agent: {cell(trajectory["max_deviation"])} '

@@ -59,6 +59,7 @@ from formation_msgs_py.topics import (
     STEP_TOPIC,
 )
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
@@ -394,9 +395,7 @@ def load_bag_run(
         horizon=horizon,
         mode='distributed' if steps else 'recorded',
         trigger_times=trigger_times,
-        sample_times=np.array(times),
-        sample_positions=np.array(positions),
-        sample_velocities=np.array(velocities) if velocities else None,
+        samples=Samples.from_rows(times, positions, velocities or None),
         messages_sent=got.info_total,
         sensing_calls=sensing_calls,
         wall_time=math.nan,  # not in a bag
@@ -521,9 +520,7 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
         horizon=end,
         mode='robots',
         trigger_times=trigger_times,
-        sample_times=times,
-        sample_positions=positions,
-        sample_velocities=velocities if scenario.dynamics == 'double' else None,
+        samples=Samples(times=times, positions=positions, velocities=velocities if scenario.dynamics == 'double' else None),
         messages_sent=got.info_total,
         sensing_calls=sum(map(len, trigger_times.values())),
         wall_time=math.nan,

@@ -408,10 +408,12 @@ def write_bag_with_markers(
         for key, value in custom.items():
             bag.set_custom_data(str(key), str(value))
         bag.set_custom_data('formation_markers', f'{MARKERS_TOPIC} added by formation analyze --markers from {source.resolve()}')
+        offered = {c.topic: list(getattr(c.ext, 'offered_qos_profiles', [])) for c in connections}
         for connection in connections:
             if connection.topic not in unknown and connection.topic != MARKERS_TOPIC:
-                bag.add_topic(connection.topic, connection.msgtype)
-        bag.add_topic(MARKERS_TOPIC, MARKERS_TYPE)
+                bag.add_topic(connection.topic, connection.msgtype, offered_qos_profiles=offered[connection.topic])
+        # The simulator's own markers were offered as its state is (reliable, transient local).
+        bag.add_topic(MARKERS_TOPIC, MARKERS_TYPE, offered_qos_profiles=offered.get(MARKERS_TOPIC) or offered.get(state_topic, []))
         for number, message in enumerate(read_bag(source), start=1):
             if message.topic in unknown or message.topic == MARKERS_TOPIC:
                 continue

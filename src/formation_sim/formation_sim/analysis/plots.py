@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 FIGURE_FILE = 'formation.png'
@@ -42,11 +41,11 @@ def run_figure(record, *, title: str | None = None) -> Figure:
     else:
         # An empty raster would only say "no events" in a whole panel: the title says it instead.
         fig, ax_traj = plt.subplots(1, 1, figsize=(7.0, 5.6))
-    planar = plot_trajectories(ax_traj, record).planar
-    panel = 'trajectories; o initial positions; final formation in black' if planar else 'positions over time'
+    trajectories = plot_trajectories(ax_traj, record)
+    panel = 'trajectories; o initial positions; final formation in black' if trajectories.planar else 'positions over time'
     ax_traj.set_title(f'(a) {panel}' if events else panel)
     if len(scenario.agent_ids) <= 12:
-        ax_traj.legend(loc='best', fontsize=8)
+        ax_traj.legend(handles=trajectories.legend_handles(), loc='best', fontsize=8)
     heading = title or f'{scenario.name}: {record.mode}'
     if events:
         plot_trigger_raster(ax_events, record)

@@ -19,10 +19,16 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapFileWriter
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from formation_sim.bag.io import BAG_VERSION, BagError
-from formation_sim.sim.files import write_atomically
+from formation_sim.bag.io import (
+    MCAP_RECORD,
+    BagError,
+    TopicRecord,
+    bag_information,
+    mcap_bag_record,
+    type_hash,
+    write_bag_information,
+)
 
 
 class BagRecoveryError(BagError):
@@ -76,61 +82,37 @@ def _salvage(mcap_path: Path) -> _Salvage:
     return salvage
 
 
-def _type_hash(schema: Schema) -> str:
-    """RIHS01 hash of the type, computed from the definition stored in the MCAP schema."""
-    if schema.encoding != 'ros2msg':
-        return ''
-    store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_msg(schema.data.decode(), schema.name))
-    return store.hash_rihs01(schema.name)
-
-
-def _qos_profiles(channel: Channel) -> list[dict[str, Any]]:
+def _topic_record(channel: Channel, schema: Schema, count: int) -> TopicRecord:
+    """A salvaged channel as the bag's metadata describes it: its recorded QoS and type hash kept
+    (the hash computed from the stored definition when the channel has none)."""
     text = channel.metadata.get('offered_qos_profiles', '')
     profiles = yaml.safe_load(text) if text else []
-    return profiles if isinstance(profiles, list) else []
+    digest = channel.metadata.get('topic_type_hash', '')
+    if not digest and schema.encoding == 'ros2msg':
+        digest = type_hash(schema.name, definition=schema.data.decode())
+    return TopicRecord(
+        name=channel.topic,
+        msgtype=schema.name,
+        type_hash=digest,
+        offered_qos_profiles=profiles if isinstance(profiles, list) else [],
+        message_count=count,
+        serialization_format=channel.message_encoding,
+    )
 
 
-def _bag_metadata(
-    salvage: _Salvage, relative_path: str, counts: dict[int, int]
-) -> dict[str, Any]:
+def _bag_metadata(salvage: _Salvage, relative_path: str, counts: dict[int, int]) -> dict[str, Any]:
     """The ``rosbag2_bagfile_information`` of a version 9 bag holding `salvage`."""
     times = [m.log_time for m in salvage.messages]
-    start = min(times) if times else 0
-    duration = max(times) - start if times else 0
-    total = len(salvage.messages)
-    topics = []
-    for channel_id, channel in sorted(salvage.channels.items()):
-        schema = salvage.schemas[channel.schema_id]
-        topics.append({
-            'topic_metadata': {
-                'name': channel.topic,
-                'type': schema.name,
-                'serialization_format': channel.message_encoding,
-                'offered_qos_profiles': _qos_profiles(channel),
-                'type_description_hash': _type_hash(schema),
-            },
-            'message_count': counts.get(channel_id, 0),
-        })
-    return {
-        'version': BAG_VERSION,
-        'storage_identifier': 'mcap',
-        'relative_file_paths': [relative_path],
-        'duration': {'nanoseconds': duration},
-        'starting_time': {'nanoseconds_since_epoch': start},
-        'message_count': total,
-        'topics_with_message_count': topics,
-        'compression_format': '',
-        'compression_mode': '',
-        'files': [{
-            'path': relative_path,
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'duration': {'nanoseconds': duration},
-            'message_count': total,
-        }],
-        'custom_data': {'recovered_by': 'formation_sim.bag.recovery.reindex'},
-        'ros_distro': 'rosbags',
-    }
+    return bag_information(
+        relative_path=relative_path,
+        topics=[
+            _topic_record(channel, salvage.schemas[channel.schema_id], counts.get(channel_id, 0))
+            for channel_id, channel in sorted(salvage.channels.items())
+        ],
+        start_ns=min(times, default=0),
+        end_ns=max(times, default=0),
+        custom_data={'recovered_by': 'formation_sim.bag.recovery.reindex'},
+    )
 
 
 def _rewrite(salvage: _Salvage, target: Path, information: dict[str, Any]) -> None:
@@ -160,7 +142,7 @@ def _rewrite(salvage: _Salvage, target: Path, information: dict[str, Any]) -> No
                 sequence=message.sequence,
             )
         # rosbag2 itself reads the bag information from here when metadata.yaml is missing.
-        writer.add_metadata('rosbag2', {'serialized_metadata': yaml.safe_dump(information)})
+        writer.add_metadata(MCAP_RECORD, mcap_bag_record(information))
         writer.finish()
 
 
@@ -237,7 +219,7 @@ def reindex(bag_dir: Path | str) -> Recovery:
         recovered.replace(mcap_path)
 
     try:
-        write_atomically(bag_dir / 'metadata.yaml', yaml.safe_dump({'rosbag2_bagfile_information': information}))
+        write_bag_information(bag_dir, information)
     except OSError as error:
         done = f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
         msg = f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it again'

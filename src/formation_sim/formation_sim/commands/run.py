@@ -10,14 +10,12 @@ from pathlib import Path
 from formation_sim.commands.common import (
     DOMAIN_ID,
     EXIT_BAD_INPUT,
-    NON_NEGATIVE,
     POSITIVE,
-    POSITIVE_INT_OR_AUTO,
-    add_robot_arguments,
+    add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
+    plan_options,
     refuse,
-    robot_options,
 )
 
 
@@ -37,42 +35,9 @@ def register(subparsers) -> None:
         'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')
-    parser.add_argument(
-        '--backend',
-        choices=('exact', 'holonomic', 'unicycle', 'external'),
-        default='exact',
-        help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
-    )
-    parser.add_argument(
-        '--agents-per-process',
-        type=POSITIVE_INT_OR_AUTO,
-        default=1,
-        metavar='K',
-        help='agent nodes sharing one process (default 1: every agent its own process); auto: one each up to 24 agents, '
-        'beyond that the team in at most 6 processes (for large teams: BENCHMARKS.md)',
-    )
+    add_plan_arguments(parser)
     parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
-    parser.add_argument('--no-record', action='store_true', help='do not record a bag')
-    parser.add_argument(
-        '--sample-dt',
-        type=NON_NEGATIVE,
-        default=0.01,
-        help='spacing of the published state samples [s] (default 0.01; 0: samples at events only)',
-    )
-    parser.add_argument(
-        '--real-time',
-        action='store_true',
-        help='wall-clock mode, as on robots: agents keep their own timers; triggers come late by the '
-        'processing delays, which the summary reports (default: lock-step sim time, exact)',
-    )
     parser.add_argument('--timeout', type=POSITIVE, default=None, help='give up after this many wall-clock seconds')
-    parser.add_argument(
-        '--executor',
-        choices=('events', 'single'),
-        default='events',
-        help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
-        '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
-    )
     parser.add_argument(
         '--network',
         action='store_true',
@@ -85,7 +50,6 @@ def register(subparsers) -> None:
         help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
         'process announcing itself to every other: for large teams (BENCHMARKS.md)',
     )
-    add_robot_arguments(parser, model_flag='--robot')
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -97,28 +61,14 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'run')
     if scenario is None:
         return EXIT_BAD_INPUT
-    robots = None
-    if args.backend != 'exact':
-        if args.backend == 'external' and args.robot is None:
-            return refuse('run', '--backend external needs --robot holonomic|unicycle (what the robots are)')
-        robots = robot_options(args, args.robot or args.backend)
     try:
         result = FormationRun(
             scenario,
-            out_dir=args.out,
-            force=args.force,
-            horizon=args.horizon,
+            **plan_options(args),
             domain_id=args.domain_id,
-            agents_per_process=args.agents_per_process,
-            record=not args.no_record,
             progress=not args.quiet,
-            sample_period=args.sample_dt,
             timeout=args.timeout,
-            clock='realtime' if args.real_time or args.backend != 'exact' else 'lockstep',
             localhost_only=not args.network,
-            executor=args.executor,
-            backend=args.backend,
-            robots=robots,
             discovery='server' if args.discovery_server else 'simple',
         ).run()
     except RunError as error:

@@ -19,21 +19,37 @@ from formation_sim.commands.common import (
 )
 
 
+DEFAULT_SAMPLE_DT = 0.01
+SAMPLE_POLICIES = ('auto', 'events', 'grid', 'none')
+AUTO_EVENTS_MAX_AGENTS = 1000  # above, `auto` keeps the grid only: n = 10 000, T = 2 has 74 000 events of 160 kB
+
+
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         'simulate',
         help='run ETA-1/ETA-2 exactly in one process (no ROS)',
         description='Exact event-driven simulation: every agent runs the same ETA-1/ETA-2 core '
         'as the ROS agent node; the world moves in closed form from event to event. Writes '
-        'summary.json, trajectory.npz and formation.png into --out.',
+        'summary.json, trajectory/ (streamed as the run goes: memory stays O(agents + events)) and '
+        'formation.png into --out.',
         epilog='Exit status: 0 done; 1 the simulation failed; 2 bad input (nothing was written).',
     )
     add_run_arguments(parser, kind='simulate')
     parser.add_argument(
         '--sample-dt',
         type=NON_NEGATIVE,
-        default=0.01,
-        help='spacing of the dense trajectory samples [s] (default 0.01; 0: samples at events only)',
+        default=None,
+        help=f'spacing of the grid of trajectory samples [s] (default {DEFAULT_SAMPLE_DT}; 0: no grid)',
+    )
+    parser.add_argument(
+        '--samples',
+        choices=SAMPLE_POLICIES,
+        default='auto',
+        help='which states the trajectory keeps: events = the whole team at every event time and on '
+        'the grid; grid = on the grid, at t = 0 and at the horizon; none = at t = 0 and the horizon '
+        f'only. Default auto: events for teams of up to {AUTO_EVENTS_MAX_AGENTS} agents, grid for '
+        'larger ones (every event sample holds the whole team). The summary\'s edge maxima cover '
+        'every triggering time either way',
     )
     baseline = parser.add_mutually_exclusive_group()
     baseline.add_argument('--period', type=POSITIVE, default=None, help='baseline: periodic sampling with this period instead of event triggering')
@@ -51,19 +67,42 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | None] | str:
+    """(policy, grid spacing) for `--samples` and `--sample-dt`, or why they do not go together."""
+    policy = args.samples
+    if args.continuous:
+        if policy != 'auto':
+            return f'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got {policy}'
+        if args.sample_dt == 0.0:
+            return 'argument --sample-dt: must be > 0 with --continuous (its trajectory is the sample grid)'
+        return 'grid', DEFAULT_SAMPLE_DT if args.sample_dt is None else args.sample_dt
+    if policy == 'auto':
+        policy = 'events' if agents <= AUTO_EVENTS_MAX_AGENTS else 'grid'
+    if policy == 'none':
+        if args.sample_dt is not None:
+            return f'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt {args.sample_dt:g}'
+        return policy, None
+    if policy == 'grid' and args.sample_dt == 0.0:
+        return 'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)'
+    return policy, DEFAULT_SAMPLE_DT if args.sample_dt is None else args.sample_dt
+
+
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.plots import plot_run
     from formation_sim.sim.engine import EngineError, check_sample_dt, simulate
     from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+    from formation_sim.sim.samples import TRAJECTORY_DIR, discard_incomplete
     from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate')
     if scenario is None:
         return EXIT_BAD_INPUT
-    if args.continuous and args.sample_dt == 0.0:
-        return refuse('simulate', 'argument --sample-dt: must be > 0 with --continuous (its trajectory is the sample grid)')
+    chosen = sample_policy(args, scenario.n)
+    if isinstance(chosen, str):
+        return refuse('simulate', chosen)
+    policy, sample_dt = chosen
     try:
-        check_sample_dt(args.sample_dt, horizon=scenario.horizon if args.horizon is None else args.horizon, scenario=scenario)
+        check_sample_dt(sample_dt, horizon=scenario.horizon if args.horizon is None else args.horizon, scenario=scenario)
     except EngineError as error:
         return refuse('simulate', f'argument --sample-dt: {error}')
     try:
@@ -79,25 +118,37 @@ def run(args: argparse.Namespace) -> int:
         if args.continuous:
             from formation_sim.sim.baselines import simulate_continuous
 
-            record = simulate_continuous(scenario, horizon=args.horizon, sample_dt=args.sample_dt)
+            record = simulate_continuous(scenario, horizon=args.horizon, sample_dt=sample_dt)
         else:
             record = simulate(
                 scenario,
                 horizon=args.horizon,
-                sample_dt=args.sample_dt,
+                sample_dt=sample_dt,
+                sample_events=policy == 'events',
                 **({} if args.tolerance is None else {'tolerance': args.tolerance}),
                 period=args.period,
+                trajectory_dir=out,  # the samples go to disk as they come
                 progress=progress,
             )
-    except (EngineError, ValueError, ArithmeticError) as error:
-        # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles
-        kind = '' if isinstance(error, (EngineError, ValueError)) else f'{type(error).__name__} (a number left the range of doubles): '
+    except (EngineError, ValueError, ArithmeticError, OSError) as error:
+        # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;
+        # OSError: the trajectory could not be written (a full disk)
+        kind = (
+            '' if isinstance(error, (EngineError, ValueError))
+            else 'cannot write the trajectory: ' if isinstance(error, OSError)
+            else f'{type(error).__name__} (a number left the range of doubles): '
+        )  # fmt: skip
         print(f'\nformation simulate: error: {kind}{error}', file=sys.stderr)
+        discard_incomplete(out)  # a failed run's samples are no result
         with contextlib.suppress(OSError):
-            out.rmdir()  # the run folder made for this run, still empty
+            out.rmdir()  # the run folder made for this run, empty again
         return EXIT_FAILED
-    summary_path = write_summary(record, out)
-    figure = None if args.no_plot else plot_run(record, out)
+    try:
+        summary_path = write_summary(record, out)
+        figure = None if args.no_plot else plot_run(record, out)
+    except OSError as error:
+        print(f'\nformation simulate: error: cannot write the results: {error}', file=sys.stderr)
+        return EXIT_FAILED
     if args.quiet:
         print(out)
         return EXIT_OK
@@ -106,10 +157,15 @@ def run(args: argparse.Namespace) -> int:
         if args.continuous
         else f'{record.total_events} events'
     )
-    print(f'\r{scenario.name}: {what} up to t = {record.horizon:g} s in {record.wall_time:.2f} s wall time', file=sys.stderr)
+    kept = f'samples: {policy}' + (' (auto)' if args.samples == 'auto' and not args.continuous else '')
+    print(
+        f'\r{scenario.name}: {what} up to t = {record.horizon:g} s in {record.wall_time:.2f} s wall time; '
+        f'{kept}, {len(record.sample_times)} states',
+        file=sys.stderr,
+    )
     print(f'run folder: {out}')
     print(f'summary:    {summary_path}')
-    print(f'trajectory: {Path(out) / "trajectory.npz"}')
+    print(f'trajectory: {record.samples.path or Path(out) / TRAJECTORY_DIR}/')
     if figure is not None:
         print(f'figure:     {figure}')
     return EXIT_OK

@@ -26,6 +26,7 @@ lost, 130 interrupted.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import math
@@ -48,7 +49,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.process import EXECUTORS, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
+from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterError, ParameterSpec, parameter_help, read_parameters
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
@@ -65,7 +67,7 @@ from formation_msgs_py.topics import (
     robot_true_odom_topic,
     trigger_info_topic,
 )
-from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
+from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
 from formation_sim.runtime.run_book import (
     AgentLostError,
     ConnectivityLostError,
@@ -76,11 +78,13 @@ from formation_sim.runtime.run_book import (
     ids_text,
 )
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import Samples
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.summary import write_summary
 
 GRAPH_FILE = 'graph.json'
+COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
 
 EXIT_FAILED = 1
@@ -94,6 +98,29 @@ POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a p
 # any reliable pose writer matches (robots' drivers keep ROS's defaults).
 POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
+
+
+COORDINATOR_COMMON_PARAMETERS = (
+    ParameterSpec(name='scenario', type=STRING, description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)'),
+    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, high=math.inf, high_open=True, description="the run ends at this time [s] (0: the scenario's horizon)"),
+    ParameterSpec(name='out_dir', type=STRING, default='', description="where summary.json and graph.json go ('': nowhere)"),
+    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, high=math.inf, high_open=True, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
+    ParameterSpec(name='extra_subscribers', type=INTEGER, default=0, low=0, description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0"),
+    ParameterSpec(name='step_listeners', type=INTEGER, default=0, low=0, description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them'),
+    ParameterSpec(name='progress_period', type=DOUBLE, default=1.0, low=0.0, description='a progress line on stdout every this many seconds (0: none)'),
+    ParameterSpec(name='discovery_timeout', type=DOUBLE, default=120.0, low=0.0, low_open=True, description='give up when the run is not connected after this long [s]'),
+    ParameterSpec(name='executor', type=STRING, default='events', choices=EXECUTORS, description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)'),
+)  # fmt: skip
+"""What the coordinator and the simulator share."""
+
+COORDINATOR_PARAMETERS = (
+    *COORDINATOR_COMMON_PARAMETERS,
+    ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
+    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle: the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
+    ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
+    ParameterSpec(name='backend', type=STRING, default='external', choices=('holonomic', 'unicycle', 'external'), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
+)  # fmt: skip
+"""The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
 
 def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
@@ -127,32 +154,34 @@ class FormationCoordinatorNode(Node):
         node_name: str = 'formation_coordinator',
     ) -> None:
         super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
-        source = self.declare_parameter('scenario', '').value
-        horizon = float(self.declare_parameter('horizon', 0.0).value)
-        self.out_dir = str(self.declare_parameter('out_dir', '').value)
-        self.sample_period = float(self.declare_parameter('sample_period', 0.01).value)
-        self.extra_subscribers = int(self.declare_parameter('extra_subscribers', 0).value)
+        # Every parameter read and every rule checked before anything is set up: one
+        # ParameterError names every problem (the command exits 2, nothing started).
+        specs = [spec for spec in self.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
+        values, problems = read_parameters(self, specs)
+        if scenario is None and 'scenario' in values:
+            try:
+                scenario = load_scenario(values['scenario'])
+            except ScenarioError as error:
+                problems.append(f"parameter 'scenario' (string): {error}")
+        if scenario is not None:
+            if scenario.dimension > 3:
+                problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+            problems += self._world_problems(values, scenario)
+        if problems:
+            raise ParameterError(self.get_fully_qualified_name(), problems)
+        self.parameter_values = values
+        self.out_dir = values['out_dir']
+        self.sample_period = values['sample_period']
+        self.extra_subscribers = values['extra_subscribers']
         # Nodes outside the run that must hear every Step (monitors, fault injectors): step 0 waits.
-        self.step_listeners = int(self.declare_parameter('step_listeners', 0).value)
-        self.progress_period = float(self.declare_parameter('progress_period', 1.0).value)
-        self.discovery_timeout = float(self.declare_parameter('discovery_timeout', 120.0).value)
-        self.executor_kind = str(self.declare_parameter('executor', 'events').value)
-        if self.executor_kind not in EXECUTORS:
-            raise CoordinatorError(f'executor must be one of {EXECUTORS}, got {self.executor_kind!r}')
-        self.clock_mode = self._declare_clock_mode()
+        self.step_listeners = values['step_listeners']
+        self.progress_period = values['progress_period']
+        self.discovery_timeout = values['discovery_timeout']
+        self.executor_kind = values['executor']
+        self.clock_mode = self._clock_mode(values)
         self.realtime = self.clock_mode == 'realtime'
-        if scenario is None:
-            if not source:
-                raise CoordinatorError("parameter 'scenario' is required (a built-in name or a YAML path)")
-            scenario = load_scenario(source)
         self.scenario = scenario
-        self.horizon = scenario.horizon if horizon <= 0.0 else horizon
-        if not math.isfinite(self.horizon):
-            raise CoordinatorError(f'horizon must be finite, got {self.horizon!r}')
-        if not (math.isfinite(self.sample_period) and self.sample_period >= 0.0):
-            raise CoordinatorError(f'sample_period must be >= 0 (0: events only), got {self.sample_period!r}')
-        if scenario.dimension > 3:
-            raise CoordinatorError(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+        self.horizon = scenario.horizon if values['horizon'] <= 0.0 else values['horizon']
         self.double = scenario.dynamics == 'double'
         self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
         self.agents = self.book.agents
@@ -204,24 +233,37 @@ class FormationCoordinatorNode(Node):
     # -- what a subclass with a world of its own replaces ---------------------------------------
 
     serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+    PARAMETERS = COORDINATOR_PARAMETERS
+    COMMAND = 'formation_coordinator'
+    PARAMS_FILE = COORDINATOR_FILE
+    DESCRIPTION = (
+        'The time keeper of a robot run (formation run --backend holonomic|unicycle|external): opens the run '
+        'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
+        'fault, and writes summary.json and graph.json into out_dir.'
+    )
 
-    def _declare_clock_mode(self) -> str:
+    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+        """The rules between the world's parameters and the scenario (robots)."""
+        problems = []
+        model = values.get('robot')
+        if model == 'unicycle':
+            if 'control_point_distance' in values and not values['control_point_distance'] > 0.0:
+                problems.append(f"parameter 'control_point_distance' (double) must be > 0 for unicycles, got {values['control_point_distance']!r}")
+            if scenario.dimension != 2:
+                problems.append(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if 'sample_period' in values and not values['sample_period'] > 0.0:
+            problems.append(f"parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its grid), got {values['sample_period']!r}")
+        return problems
+
+    def _clock_mode(self, values: dict) -> str:
         return 'realtime'  # robots run on the wall clock
 
     def _setup_world(self) -> None:
         """The robots: which topic shows each where it is, and what its scenario position is."""
-        self.robot_model = str(self.declare_parameter('robot', 'holonomic').value)
-        if self.robot_model not in ROBOT_MODELS:
-            raise CoordinatorError(f'robot must be one of {ROBOT_MODELS}, got {self.robot_model!r}')
-        self.control_point_distance = float(self.declare_parameter('control_point_distance', 0.1).value)
-        if self.robot_model == 'unicycle' and not (math.isfinite(self.control_point_distance) and self.control_point_distance > 0.0):
-            raise CoordinatorError(f'control_point_distance must be > 0 for unicycles, got {self.control_point_distance!r}')
-        self.trajectory_source = str(self.declare_parameter('robot_trajectory', 'true_odom').value)
-        if self.trajectory_source not in TRAJECTORY_SOURCES:
-            raise CoordinatorError(f'robot_trajectory must be one of {TRAJECTORY_SOURCES}, got {self.trajectory_source!r}')
-        self.backend = str(self.declare_parameter('backend', 'external').value)
-        if self.robot_model == 'unicycle' and self.scenario.dimension != 2:
-            raise CoordinatorError(f'unicycles move in the plane: the scenario must have p = 2, got p = {self.scenario.dimension}')
+        self.robot_model = self.parameter_values['robot']
+        self.control_point_distance = self.parameter_values['control_point_distance']
+        self.trajectory_source = self.parameter_values['robot_trajectory']
+        self.backend = self.parameter_values['backend']
         self.robots = {
             'version': 1,
             'backend': self.backend,
@@ -237,8 +279,6 @@ class FormationCoordinatorNode(Node):
             'odom': (robot_odom_topic, Odometry),
             'pose': (robot_pose_topic, PoseStamped),
         }[self.trajectory_source]
-        if not (math.isfinite(self.sample_period) and self.sample_period > 0.0):
-            raise CoordinatorError(f'sample_period must be > 0 on robots, got {self.sample_period!r}')
         self._poses: dict[int, list[RobotSample]] = {i: [] for i in self.scenario.agent_ids}
         self._early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.scenario.agent_ids}
         self._pose_subs = {
@@ -330,9 +370,7 @@ class FormationCoordinatorNode(Node):
             horizon=self.horizon,
             mode='robots',
             trigger_times=trigger_times,
-            sample_times=times,
-            sample_positions=positions,
-            sample_velocities=velocities if self.double else None,
+            samples=Samples(times=times, positions=positions, velocities=velocities if self.double else None),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=sum(map(len, trigger_times.values())),
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
@@ -677,15 +715,34 @@ def write_results(node: FormationCoordinatorNode) -> None:
     write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
 
 
+def _parser(node_class: type[FormationCoordinatorNode]) -> argparse.ArgumentParser:
+    return argparse.ArgumentParser(
+        prog=node_class.COMMAND,
+        description=node_class.DESCRIPTION,
+        epilog=parameter_help(node_class.PARAMETERS)
+        + f'\n\nExample: {node_class.COMMAND} --ros-args --params-file DIR/{node_class.PARAMS_FILE} '
+        '(formation params SCENARIO --out DIR writes it)\n'
+        'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
+        '3 an agent or the recorder was lost; 130 interrupted.',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
 def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordinatorNode] = FormationCoordinatorNode) -> int:
     """Run one coordinator (or simulator, `node_class`) node until the run ends; its exit status."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    argv = list(args if args is not None else sys.argv)
+    _parser(node_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = None
     status = 0
     with StopSignals() as stop:
         try:
-            node = node_class()
+            try:
+                node = node_class()
+            except ParameterError as error:  # bad input: every problem named, nothing started
+                _tell(f'{node_class.COMMAND}: {error}')
+                return EXIT_BAD_INPUT
             executor = make_executor(node.executor_kind)
             executor.add_node(node)
             while not node.finished:

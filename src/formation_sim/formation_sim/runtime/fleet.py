@@ -73,6 +73,7 @@ class RobotFleet:
             raise RunError(str(error)) from None
         self.plan = dataclasses.replace(self.plan, out_dir=out)
         params = self.plan.write_robot_inputs()
+        (out / LOG_DIR).mkdir(exist_ok=True)
         env = self.plan.environment(self.domain_id, extra_env=self.extra_env)
         self.supervisor = Supervisor(log_dir=self.plan.out_dir / LOG_DIR, env=env)
         trapped = threading.current_thread() is threading.main_thread()

@@ -10,8 +10,10 @@ A backend decides who keeps time and what the world is (README, "Running on robo
 
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
 told not to, the recorder.  `LaunchPlan.write_inputs` writes what every process reads into the run
-folder, so a run can be started again by hand, on several machines (README, "Agents on separate
-machines"; the external setup).
+folder (the scenario and one parameter file per kind of node, the only place they are built), so a
+run can be started again by hand, on several machines (README, "Agents on separate machines"; the
+external setup): `formation params` writes them without starting anything, and
+`ProcessSpec.command` is the command line that starts each process by hand.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import importlib.util
 import math
 import os
 import random
+import shlex
 import shutil
 import socket
 import sys
@@ -52,6 +55,14 @@ INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
 FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
 RECORDER_DRAIN_QUIET = 0.1  # [s] the run's recorder closes its bag once nothing came for this long
+# The console script of each node module (setup.py of formation_agent and formation_sim).
+COMMANDS = {
+    AGENT_MODULE: 'formation_agent',
+    'formation_sim.runtime.sim_node': 'formation_sim',
+    'formation_sim.runtime.coordinator': 'formation_coordinator',
+    'formation_sim.runtime.recorder': 'formation_recorder',
+    'formation_sim.runtime.robot_node': 'formation_robot',
+}
 
 
 class RunError(RuntimeError):
@@ -167,6 +178,14 @@ class ProcessSpec:
     program: str | None = None  # the program `args` go to (None: this Python)
     env: tuple[tuple[str, str], ...] = ()  # variables of this process alone, besides the run's environment
 
+    @property
+    def command(self) -> str:
+        """The same process started by hand: its console script (or program) and arguments."""
+        if self.program is not None:
+            return shlex.join([self.program, *self.args])
+        module, *rest = self.args[1:]
+        return shlex.join([COMMANDS[module], *rest])
+
 
 def resolve_agents_per_process(value: int | str, n: int) -> int:
     """How many agent nodes share a process: `value` itself, or for 'auto' one process per agent up
@@ -248,10 +267,11 @@ class LaunchPlan:
         """scenario.yaml and the params files every process reads; their paths by role."""
         from formation_agent.ros.node import NODE_NAME
         from formation_msgs_py.topics import agent_namespace
-        from formation_sim.runtime.sim_node import agent_parameters
+        from formation_sim.runtime.coordinator import COORDINATOR_FILE
+        from formation_sim.runtime.sim_node import SIMULATOR_FILE, agent_parameters
 
         out = self.out_dir
-        (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
         paths = {'scenario': out / SCENARIO_FILE}
         dump_scenario(self.scenario, paths['scenario'])  # every float kept bit for bit
         extra = 1 if self.record else 0
@@ -269,6 +289,8 @@ class LaunchPlan:
         }
         paths['agents'] = out / AGENTS_FILE
         _write_yaml(paths['agents'], agents)
+        paths['keeper'] = out / (SIMULATOR_FILE if self.backend == 'exact' else COORDINATOR_FILE)
+        _write_yaml(paths['keeper'], {self._keeper_node: {'ros__parameters': self.keeper_parameters(paths['scenario'])}})
         if self.record:
             recorder = {
                 '/formation_recorder': {
@@ -278,8 +300,6 @@ class LaunchPlan:
                         # Stopped last, once every writer has left and its messages were
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
-                        # Robots: wall-clock stamps (run time is in the messages' headers and Step 0).
-                        **({} if self.backend == 'exact' else {'clock_topic': ''}),
                     }
                 }
             }
@@ -294,7 +314,7 @@ class LaunchPlan:
         from formation_msgs_py.topics import agent_namespace
         from formation_sim.runtime.robot_node import NODE_NAME
 
-        (self.out_dir / LOG_DIR).mkdir(parents=True, exist_ok=True)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
         robots = {
             f'{agent_namespace(i)}/{NODE_NAME}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
             for i in self.scenario.agent_ids
@@ -340,32 +360,38 @@ class LaunchPlan:
             specs.append(ProcessSpec(name=_group_name('robot', group), args=args, expected_exit=False))
         return specs
 
+    @property
+    def _keeper_node(self) -> str:
+        return '/formation_simulator' if self.backend == 'exact' else '/formation_coordinator'
+
+    def keeper_parameters(self, scenario_file: Path) -> dict:
+        """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`, `coordinator.COORDINATOR_PARAMETERS`)."""
+        params = {
+            'scenario': str(scenario_file.resolve()),
+            'horizon': float(self.horizon),
+            'out_dir': str(self.out_dir.resolve()),
+            'sample_period': float(self.sample_period),
+            'extra_subscribers': 1 if self.record else 0,
+            'step_listeners': int(self.step_listeners),
+            'executor': self.executor,
+            # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
+            'discovery_timeout': max(120.0, float(len(self.scenario.agent_ids))),
+        }
+        if self.backend == 'exact':
+            params['clock_mode'] = self.clock
+        else:
+            params.update(
+                backend=self.backend,
+                robot=self.robots.model,
+                control_point_distance=float(self.robots.control_point_distance),
+                # Simulated robots: the formation as it truly is; real ones: as measured.
+                robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+            )
+        return params
+
     def _keeper_args(self, paths: dict[str, Path]) -> tuple[str, ...]:
         module = 'formation_sim.runtime.sim_node' if self.backend == 'exact' else 'formation_sim.runtime.coordinator'
-        args = [
-            '-m', module, '--ros-args',
-            '-p', f'scenario:={paths["scenario"].resolve()}',
-            '-p', f'horizon:={self.horizon!r}',
-            '-p', f'out_dir:={self.out_dir.resolve()}',
-            '-p', f'sample_period:={float(self.sample_period)!r}',
-            '-p', f'extra_subscribers:={1 if self.record else 0}',
-            '-p', f'step_listeners:={self.step_listeners}',
-            '-p', f'executor:={self.executor}',
-            # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
-            '-p', f'discovery_timeout:={max(120.0, float(len(self.scenario.agent_ids)))!r}',
-        ]  # fmt: skip
-        if self.backend == 'exact':
-            args += ['-p', f'clock_mode:={self.clock}']
-        else:
-            robots = self.robots
-            args += [
-                '-p', f'backend:={self.backend}',
-                '-p', f'robot:={robots.model}',
-                '-p', f'control_point_distance:={float(robots.control_point_distance)!r}',
-                # Simulated robots: the formation as it truly is; real ones: as measured.
-                '-p', f'robot_trajectory:={"true_odom" if self.simulated_robots else robots.pose_type}',
-            ]  # fmt: skip
-        return tuple(args)
+        return ('-m', module, '--ros-args', '--params-file', str(paths['keeper']))
 
     # -- environment -------------------------------------------------------------------------------
 

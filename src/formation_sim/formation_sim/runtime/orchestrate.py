@@ -275,6 +275,7 @@ class FormationRun:
             port = free_udp_port(domain_id) if self.plan.discovery == 'server' else None
             self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir, discovery_port=port)
             paths = self.plan.write_inputs()
+            (self.out_dir / LOG_DIR).mkdir(exist_ok=True)
             self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.launch_prefix)
             try:
                 status, message, lost = self._launch_and_watch(paths)

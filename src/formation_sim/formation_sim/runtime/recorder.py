@@ -2,8 +2,20 @@
 
 `RecorderNode` and `main()` (the `formation_recorder` command) subscribe raw to a list of topics
 (and optionally to every topic under a prefix) and write each message as it arrives through the
-ROS-free `formation_sim.bag.io.BagWriter`, stamped with the latest simulation time seen on the
-clock topic. Reading bags back: `formation_sim.bag.io`; recovering one: `formation_sim.bag.recovery`.
+ROS-free `formation_sim.bag.io.BagWriter`. Reading bags back: `formation_sim.bag.io`; recovering
+one: `formation_sim.bag.recovery`.
+
+Time stamps (`RunClock`): bag time is the run's time.  In lock-step a message is stamped with the
+simulation time of the latest Step on the clock topic; on the wall clock (a Step flagged realtime:
+`formation run --real-time` and every robot run) with the time it was received, counted from the
+Step's epoch (t = 0 of the run) on a monotonic clock, so that bag time equals sim time on a
+synchronised clock.  Messages received before the first Step wait up to `EARLY_WINDOW` s for it:
+those received after its epoch (they overtook Step 0) get their time, older ones are stamped 0.
+Either way the stamps of a topic never decrease.
+
+QoS: each topic's MCAP channel is written with its first message, carrying the QoS every
+publisher of the topic offered then (`formation_sim.runtime.bag_qos.offered_qos`, from the ROS
+graph, as rosbag2 records it), so `ros2 bag play` and `formation replay` offer the same again.
 
 What survives the end of a recorder:
 
@@ -14,12 +26,14 @@ What survives the end of a recorder:
 - SIGKILL (or a crash of the interpreter): nothing is finalized. The bag directory holds an MCAP
   file without summary and footer, and no ``metadata.yaml``; rosbags and ros2 bag refuse it.
   The file holds every message up to the last `BagWriter.flush` (the node flushes every
-  ``flush_period`` seconds); messages after it were still in memory and are lost.
+  ``flush_period`` seconds); messages after it were still in memory and are lost (before the
+  first Step, also those of the last `EARLY_WINDOW` s, which wait for it).
   `reindex(bag_dir)` rebuilds a readable bag from what is in the file.
 """
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import importlib
 import json
@@ -28,35 +42,69 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
+from formation_agent.ros.parameters import (
+    DOUBLE,
+    STRING,
+    STRING_ARRAY,
+    ParameterError,
+    ParameterSpec,
+    parameter_help,
+    read_parameters,
+)
+from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
 from formation_msgs_py.topics import RECORDER_TOPIC, STEP_TOPIC
-from formation_sim.bag.io import BagError, BagWriter, TopicSpecError, UnknownMessageTypeError, check_msgtype
+from formation_sim.bag.io import BagError, BagWriter, TopicSpecError, UnknownMessageTypeError, check_msgtype, jazzy_typestore
+from formation_sim.runtime.bag_qos import offered_qos
 
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor
 
 DEFAULT_CLOCK_TOPIC = STEP_TOPIC
-# /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time].
+NODE_NAME = 'formation_recorder'
+# /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time, flags, epoch, ...]
+# (formation_msgs_py.codec.encode_step); flags and epoch are optional for other clock topics.
 _STEP_INDEX = 1
 _STEP_TIME_INDEX = 2
+_STEP_FLAGS_INDEX = 3
+_STEP_EPOCH_INDEX = 4
 _NS_PER_S = 1_000_000_000
+# Messages that come before the first Step wait this long [s] before they are written: on the wall
+# clock a message of the run can overtake Step 0 (an agent triggers the moment it gets Step 0, the
+# recorder may take its message first), and only Step 0's epoch gives its time.  Older ones were
+# surely sent before the run began and are stamped 0.
+EARLY_WINDOW = 2.0
+
+_positive_seconds = {'low': 0.0, 'low_open': True, 'high': math.inf, 'high_open': True}
+RECORDER_PARAMETERS = (
+    ParameterSpec(name='output', type=STRING, description='the bag directory to create (it must not exist: a bag is never overwritten)'),
+    ParameterSpec(name='topics', type=STRING_ARRAY, default=[], description="topics recorded from the start, each '/name:package/msg/Type'"),
+    ParameterSpec(name='prefix', type=STRING, default='', description="also record every topic whose name starts with this, found by polling the graph ('': none)"),
+    ParameterSpec(
+        name='clock_topic', type=STRING, default=DEFAULT_CLOCK_TOPIC,
+        description="the run's Step topic (std_msgs/Float64MultiArray [version, step, time, flags, epoch, ...]): bag time is "
+        "its sim time in lock-step, the receive time since its epoch on the wall clock ('': the node's clock)",
+    ),
+    ParameterSpec(name='discovery_period', type=DOUBLE, default=1.0, description='how often the graph is polled for topics under prefix [s]', **_positive_seconds),
+    ParameterSpec(name='flush_period', type=DOUBLE, default=0.5, description='how often written messages are pushed to the file (what a SIGKILL can lose) [s]', **_positive_seconds),
+    ParameterSpec(
+        name='heartbeat_topic', type=STRING, default=RECORDER_TOPIC,
+        description="where it says how much it recorded, after every flush and step (a run watches its liveliness; '': none)",
+    ),
+    ParameterSpec(name='drain_quiet', type=DOUBLE, default=0.5, description='on stopping, take messages until none came for this long [s]', **_positive_seconds),
+    ParameterSpec(name='drain_limit', type=DOUBLE, default=10.0, description='on stopping, stop taking messages after this long anyway [s]', **_positive_seconds),
+)  # fmt: skip
 
 
 class RecorderError(BagError):
     """The recorder could not be set up or could not write its bag."""
-
-
-
-class RecorderConfigError(RecorderError, ValueError):
-    """A recorder parameter is missing or out of range."""
-
-
 
 
 
@@ -85,88 +133,107 @@ def import_message_class(msgtype: str) -> type:
         raise UnknownMessageTypeError(msg) from err
 
 
+class RunClock:
+    """Bag time of the messages of a run, from the Steps on its clock topic (module docstring).
+
+    `on_step(data)` takes each Step's data; `stamp_ns()` is the time stamp of a message received now.
+    """
+
+    def __init__(self, *, monotonic_ns: Callable[[], int] = time.monotonic_ns, wall_ns: Callable[[], int] = time.time_ns) -> None:
+        self._monotonic_ns = monotonic_ns
+        self._wall_ns = wall_ns
+        self._sim_ns = 0  # lock-step: the latest Step's time
+        # Wall clock: (monotonic time, run time) when the first realtime Step came.
+        self._anchor: tuple[int, int] | None = None
+        self.step_index = -1  # the latest Step's index (-1: none yet)
+        self.started = False  # a Step has come (before it, the wall-clock epoch is unknown)
+
+    @property
+    def realtime(self) -> bool:
+        return self._anchor is not None
+
+    def on_step(self, data: Sequence[float]) -> bool:
+        """Take a Step's data; False (and nothing changed) unless it holds [version, step, time >= 0, ...]."""
+        if len(data) <= _STEP_TIME_INDEX or not (math.isfinite(data[_STEP_TIME_INDEX]) and data[_STEP_TIME_INDEX] >= 0):
+            return False
+        flags = data[_STEP_FLAGS_INDEX] if len(data) > _STEP_FLAGS_INDEX else 0.0
+        epoch = data[_STEP_EPOCH_INDEX] if len(data) > _STEP_EPOCH_INDEX else 0.0
+        if math.isfinite(flags) and flags.is_integer() and int(flags) & STEP_FLAG_REALTIME and math.isfinite(epoch):
+            if self._anchor is None:  # the epoch is the run's t = 0 on every machine's wall clock
+                self._anchor = (self._monotonic_ns(), self._wall_ns() - round(epoch * _NS_PER_S))
+        else:
+            self._sim_ns = round(data[_STEP_TIME_INDEX] * _NS_PER_S)
+        if float(data[_STEP_INDEX]).is_integer():
+            self.step_index = int(data[_STEP_INDEX])
+        self.started = True
+        return True
+
+    def received_ns(self) -> int:
+        """When a message is received now, on the clock `stamp_ns` takes."""
+        return self._monotonic_ns()
+
+    def stamp_ns(self, received_ns: int | None = None) -> int:
+        """The bag time of a message received at `received_ns` (`received_ns()`; default now): sim
+        time of the latest Step (lock-step), time since the epoch (wall clock; never decreasing,
+        0 before the epoch), 0 before the first Step."""
+        if self._anchor is None:
+            return self._sim_ns
+        since, run_time = self._anchor
+        return max(0, run_time + (self._monotonic_ns() if received_ns is None else received_ns) - since)
+
+
 class RecorderNode(Node):
-    """Record topics into a bag, stamping messages with the simulation time.
+    """Record topics into a bag, stamped with the run's time (`RunClock`).
 
-    Parameters (each overridable with ``--ros-args -p name:=value``):
-
-    - ``output`` (string, required): bag directory to create.
-    - ``topics`` (string array): ``'/name:package/msg/Type'`` entries recorded from the start.
-    - ``prefix`` (string): also record every topic whose name starts with it, found by polling
-      the graph every ``discovery_period`` s ('' = off). Messages published before a topic is
-      found are not recorded.
-    - ``clock_topic`` (string): std_msgs/Float64MultiArray ``[version, step_index, time]``
-      topic. Each message is stamped with the latest ``time`` seen there (0 before the first
-      step), so bag order follows the simulation. '' stamps with the node's clock instead.
-    - ``flush_period`` (double, s): how often written messages are pushed to the file, which
-      bounds what a SIGKILL loses.
-    - ``heartbeat_topic`` (string): after every flush and every step recorded,
-      ``{"version": 1, "recorder": NODE, "recorded": N, "step": K}`` (std_msgs/String, the
-      protocol's QoS): N messages written so far, the latest step K recorded (-1: none). The
-      simulator keeps its steps at most `formation_sim.runtime.sim_node.RECORDER_LAG` ahead of K,
-      and its writer's DDS liveliness tells a run the recorder still works ('' = off).
-    - ``drain_quiet`` (double, s): on stopping, `drain` takes messages until none came for this
-      long.
-    - ``drain_limit`` (double, s): `drain` ends after this long even if messages keep coming.
+    Parameters: `RECORDER_PARAMETERS` (`formation_recorder --help` prints them, docs/PARAMETERS.md
+    lists them).  ``heartbeat_topic``: ``{"version": 1, "recorder": NODE, "recorded": N, "step":
+    K}`` (std_msgs/String, the protocol's QoS): N messages written so far, the latest step K
+    recorded (-1: none). The simulator keeps its steps at most
+    `formation_sim.runtime.sim_node.RECORDER_LAG` ahead of K, and its writer's DDS liveliness
+    tells a run the recorder still works.
     """
 
     def __init__(
         self,
         *,
-        output: Path | str = '',
-        topics: Sequence[str] = (),
-        prefix: str = '',
-        clock_topic: str = DEFAULT_CLOCK_TOPIC,
-        discovery_period: float = 1.0,
-        flush_period: float = 0.5,
-        heartbeat_topic: str = RECORDER_TOPIC,
-        drain_quiet: float = 0.5,
-        drain_limit: float = 10.0,
-        node_name: str = 'formation_recorder',
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,  # noqa: ANN001 - an rclpy Context
+        node_name: str = NODE_NAME,
     ) -> None:
-        """Declare the parameters (the arguments are their defaults) and open the bag."""
-        from rclpy.parameter import Parameter
+        """Declare and check the parameters (one ParameterError names every problem), open the bag."""
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        super().__init__(node_name)
-        output = str(self.declare_parameter('output', str(output)).value)
-        specs = self.declare_parameter(
-            'topics', list(topics) if topics else Parameter.Type.STRING_ARRAY
-        ).value
-        self._prefix = str(self.declare_parameter('prefix', prefix).value)
-        self._clock_topic = str(self.declare_parameter('clock_topic', clock_topic).value)
-        discovery_period = float(
-            self.declare_parameter('discovery_period', float(discovery_period)).value
-        )
-        flush_period = float(self.declare_parameter('flush_period', float(flush_period)).value)
-        heartbeat_topic = str(self.declare_parameter('heartbeat_topic', heartbeat_topic).value)
-        self._heartbeat_topic = heartbeat_topic
-        self._drain_quiet = float(self.declare_parameter('drain_quiet', float(drain_quiet)).value)
-        self._drain_limit = float(self.declare_parameter('drain_limit', float(drain_limit)).value)
-
-        if not output:
-            msg = "parameter 'output' is required: the bag directory to create"
-            raise RecorderConfigError(msg)
-        for name, period in (
-            ('discovery_period', discovery_period),
-            ('flush_period', flush_period),
-            ('drain_quiet', self._drain_quiet),
-            ('drain_limit', self._drain_limit),
-        ):
-            if not (math.isfinite(period) and period > 0):
-                msg = f'parameter {name!r} must be a positive number of seconds, got {period}'
-                raise RecorderConfigError(msg)
-        requested = [parse_topic_spec(spec) for spec in (specs or [])]
+        super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
+        values, problems = read_parameters(self, RECORDER_PARAMETERS)
+        requested: list[tuple[str, str]] = []
+        for spec in values.get('topics') or []:
+            try:
+                name, msgtype = parse_topic_spec(spec)
+                import_message_class(msgtype)  # recordable: importable here and known to the bag
+                if msgtype not in jazzy_typestore().fielddefs:
+                    raise UnknownMessageTypeError(f'message type {msgtype!r} is not in the typestore of ROS 2 Jazzy')
+                requested.append((name, msgtype))
+            except BagError as error:
+                problems.append(f"parameter 'topics': {error}")
         names = [name for name, _ in requested]
         if duplicates := sorted({n for n in names if names.count(n) > 1}):
-            msg = f"parameter 'topics' names {duplicates} more than once"
-            raise TopicSpecError(msg)
+            problems.append(f"parameter 'topics' names {duplicates} more than once")
+        if values.get('output') == '':
+            problems.append("parameter 'output' (string) must name the bag directory to create, got ''")
+        if problems:
+            raise ParameterError(self.get_fully_qualified_name(), problems)
+        output = values['output']
+        self._prefix = values['prefix']
+        self._clock_topic = values['clock_topic']
+        heartbeat_topic = self._heartbeat_topic = values['heartbeat_topic']
+        self._drain_quiet = values['drain_quiet']
+        self._drain_limit = values['drain_limit']
 
         self._qos = QoSProfile(
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
-        self._sim_time_ns: int | None = None
-        self._step_index = -1  # the latest step recorded (-1: none yet)
+        self.clock = RunClock()
+        self._early: deque[tuple[int, str, bytes]] = deque()  # (received, topic, rawdata) before the first Step
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
         self.flushed_count = 0  # messages in the file for sure (as of the last flush)
         self.failure: RecorderError | None = None  # the bag could not be written
@@ -178,7 +245,9 @@ class RecorderNode(Node):
         self.bag.open()
         self.bag.set_custom_data(
             'formation_timestamps',
-            f'simulation time of {self._clock_topic}' if self._clock_topic else 'node clock',
+            f'run time: sim time of {self._clock_topic} (lock-step), receive time since its epoch (wall clock)'
+            if self._clock_topic
+            else 'node clock',
         )
         try:
             for name, msgtype in requested:
@@ -197,9 +266,9 @@ class RecorderNode(Node):
 
             self._heartbeat = self.create_publisher(String, heartbeat_topic, PROTOCOL_QOS)
             self._heartbeat_type = String
-        self._timers = [self.create_timer(flush_period, self._flush)]
+        self._timers = [self.create_timer(values['flush_period'], self._flush)]
         if self._prefix:
-            self._timers.append(self.create_timer(discovery_period, self.discover))
+            self._timers.append(self.create_timer(values['discovery_period'], self.discover))
             self.discover()
         self.get_logger().info(
             f'recording {sorted(self.bag.topics)} (prefix {self._prefix!r}) into {output}'
@@ -218,6 +287,7 @@ class RecorderNode(Node):
         )
 
     def _flush(self) -> None:
+        self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
         if self.failure is not None:
             return
         try:
@@ -230,7 +300,7 @@ class RecorderNode(Node):
 
     def _beat(self) -> None:
         if self._heartbeat is not None:
-            beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self._step_index}
+            beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self.clock.step_index}
             self._heartbeat.publish(self._heartbeat_type(data=json.dumps(beat, separators=(',', ':'))))
 
     def discover(self) -> None:
@@ -266,10 +336,12 @@ class RecorderNode(Node):
             if is_clock:
                 self._on_step(rawdata)
             if record and self.failure is None:
-                try:
-                    self.bag.write(name, self._timestamp_ns(), rawdata)
-                except OSError as error:
-                    self._fail(error)
+                if self._clock_topic and not self.clock.started:
+                    self._early.append((self.clock.received_ns(), name, bytes(rawdata)))
+                    self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
+                else:
+                    self._write_early()  # the first Step has come: what waited goes first
+                    self._write(name, self._timestamp_ns(), rawdata)
             if is_clock and self.failure is None:
                 self._beat()  # a run paces its steps on this (the simulator's flow control)
 
@@ -277,28 +349,46 @@ class RecorderNode(Node):
             message_class, name, on_message, self._qos, raw=True
         )
 
+    def _write(self, name: str, stamp_ns: int, rawdata: bytes) -> None:
+        if self.failure is not None:
+            return
+        try:
+            if not self.bag.has_channel(name):
+                self._offer(name)
+            self.bag.write(name, stamp_ns, rawdata)
+        except OSError as error:
+            self._fail(error)
+
+    def _write_early(self, *, before: int | None = None) -> None:
+        """Write the messages that came before the first Step (those received before `before`
+        only), stamped as the clock now can (0 until a Step says when the run began)."""
+        while self._early and (before is None or self._early[0][0] < before):
+            received, name, rawdata = self._early.popleft()
+            self._write(name, self.clock.stamp_ns(received) if self.clock.started else 0, rawdata)
+
+    def _offer(self, name: str) -> None:
+        """Record the QoS the publishers of `name` offer (before its first message is written)."""
+        profiles = offered_qos(self, name)
+        if not profiles:
+            self.get_logger().warning(f'{name}: no publisher in the ROS graph yet: its offered QoS is not recorded')
+        self.bag.set_offered_qos(name, profiles)
+
     def _on_step(self, rawdata: bytes) -> None:
         from rclpy.serialization import deserialize_message
         from std_msgs.msg import Float64MultiArray
 
         data = deserialize_message(rawdata, Float64MultiArray).data
-        if len(data) > _STEP_TIME_INDEX and math.isfinite(data[_STEP_TIME_INDEX]) and (
-            data[_STEP_TIME_INDEX] >= 0
-        ):
-            self._sim_time_ns = round(data[_STEP_TIME_INDEX] * _NS_PER_S)
-            if float(data[_STEP_INDEX]).is_integer():
-                self._step_index = int(data[_STEP_INDEX])
-        elif not self._bad_clock_warned:
+        if not self.clock.on_step(data) and not self._bad_clock_warned:
             self._bad_clock_warned = True
             self.get_logger().warning(
-                f'{self._clock_topic}: data {list(data)} is not [version, step_index, time >= 0];'
+                f'{self._clock_topic}: data {list(data)} is not [version, step_index, time >= 0, ...];'
                 ' keeping the previous time'
             )
 
     def _timestamp_ns(self) -> int:
         if not self._clock_topic:
             return self.get_clock().now().nanoseconds
-        return self._sim_time_ns if self._sim_time_ns is not None else 0
+        return self.clock.stamp_ns()
 
     def stop_timers(self) -> None:
         """Stop discovery and periodic flushing (before draining and closing)."""
@@ -367,8 +457,13 @@ class RecorderNode(Node):
 
         """
         self.stop_timers()
+        self._write_early()
         if self.failure is not None:
             return  # writing more would fail again: the file stays as the last flush left it
+        for name in self.bag.topics:
+            if not self.bag.has_channel(name):  # no message came: its publishers as they are now
+                with contextlib.suppress(Exception):  # the node's context may be gone already
+                    self.bag.set_offered_qos(name, offered_qos(self, name))
         try:
             self.bag.close()
         except OSError as error:
@@ -376,13 +471,29 @@ class RecorderNode(Node):
             raise self.failure from None
 
 
+def _parser() -> argparse.ArgumentParser:
+    return argparse.ArgumentParser(
+        prog='formation_recorder',
+        description='Record topics of a formation run into a rosbag2 bag (version 9, MCAP, CDR; '
+        'readable by ros2 bag and rosbags) until SIGINT or SIGTERM, then drain and finalize it.',
+        epilog=parameter_help(RECORDER_PARAMETERS)
+        + '\n\nExample: formation_recorder --ros-args -p output:=runs/x/bag '
+        "-p \"topics:=['/formation/step:std_msgs/msg/Float64MultiArray']\" -p prefix:=/formation/\n"
+        'Exit status: 0 the bag is complete; 1 it could not be written (a full disk); 2 bad parameters '
+        '(every problem named, nothing created).',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
 def main(args: Sequence[str] | None = None) -> int:
     """Run the recorder until SIGINT or SIGTERM, then finalize the bag."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from formation_agent.ros.process import make_executor
+    from formation_agent.ros.process import EXIT_BAD_INPUT, make_executor
 
+    argv = list(args if args is not None else sys.argv)
+    _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts (exit 0)
     stop = threading.Event()
     requests = 0  # the first stop signal starts the drain, a second one ends it
 
@@ -393,8 +504,7 @@ def main(args: Sequence[str] | None = None) -> int:
 
     # Own handlers instead of rclpy's: rclpy's would shut the context down before the messages
     # still queued in the subscriptions are taken.
-    rclpy.init(args=list(args) if args is not None else None,
-               signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     node: RecorderNode | None = None
     try:
@@ -410,9 +520,12 @@ def main(args: Sequence[str] | None = None) -> int:
             node.drain(executor, interrupted=lambda: requests > 1)
             node.get_logger().info(f'stopping: {node.message_count} messages in {node.bag.path}')
             node.close()
-    except RecorderError:
-        if node is None or node.failure is None:
-            raise  # not the bag failing to be written (e.g. a bad parameter)
+    except (ParameterError, BagError) as error:
+        if node is None:  # bad parameters, or a bag that exists already: nothing was recorded
+            print(f'formation_recorder: {error}', file=sys.stderr, flush=True)
+            return EXIT_BAD_INPUT
+        if node.failure is None:
+            raise
     finally:
         if node is not None:
             with contextlib.suppress(RecorderError):

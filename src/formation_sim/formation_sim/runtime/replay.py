@@ -6,8 +6,12 @@ nothing is deserialized or re-encoded (readers get the same bytes, which the DDS
 with zeros to a multiple of 4). Message k is published at wall time
 start + (stamp_k - stamp_0) / rate; rate 0 publishes as fast as possible.
 
-QoS: reliable and transient local, like the formation protocol, so the formation's own nodes
-and tools match the replay. History keep-all by default: a keep-last writer drops the oldest
+QoS: what the topic's publishers offered when it was recorded (the bag's `offered_qos_profiles`,
+`formation_sim.runtime.bag_qos.replay_offer`, as ros2 bag play does): a transient-local topic such
+as `/formation/scenario` is latched again for late joiners, a volatile one is not.  A topic recorded
+without them, or with publishers that offered different policies: reliable and transient local,
+like the formation protocol, so the formation's own nodes and tools match the replay.  History
+keep-all by default: a keep-last writer drops the oldest
 sample once `depth` newer ones are queued, even if a slow reader has not acknowledged it yet, and
 a fast replay would then lose messages; keep-all never drops (the writer holds every message it
 published, for late joiners too: memory grows with the bag). `depth` selects keep-last instead.
@@ -35,8 +39,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from formation_sim.bag.io import BagError, UnknownMessageTypeError, read_bag
+from formation_sim.runtime.bag_qos import replay_offer
 from formation_sim.runtime.recorder import import_message_class
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
 
 CLOCK_TOPIC = '/clock'
 RUN_NODES = ('formation_simulator', 'formation_agent', 'formation_recorder')  # the nodes of a formation run
@@ -69,12 +79,16 @@ def replay_qos(depth: int | None = None):
     )
 
 
-def _bag_topics(bag: Path) -> dict[str, str]:
+def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
+    """Topic -> (message type, the QoS profiles its publishers offered when recorded)."""
     from rosbags.rosbag2 import Reader
 
     try:
         with Reader(bag) as reader:
-            return {connection.topic: connection.msgtype for connection in reader.connections}
+            return {
+                connection.topic: (connection.msgtype, list(getattr(connection.ext, 'offered_qos_profiles', [])))
+                for connection in reader.connections
+            }
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
         raise ReplayError(f'{bag}: cannot read the bag: {error}') from None
 
@@ -111,13 +125,16 @@ class BagPlayer:
         self.result = ReplayResult()
         qos = replay_qos(depth)
         self.publishers = {}
+        self.offered: dict[str, QoSProfile] = {}  # topic -> the QoS its publisher offers
         for topic in sorted(wanted):
+            msgtype, recorded = stored[topic]
             try:
-                msg_class = import_message_class(stored[topic])
+                msg_class = import_message_class(msgtype)
             except UnknownMessageTypeError as error:
                 self.result.skipped_topics[topic] = str(error)
                 continue
-            self.publishers[topic] = node.create_publisher(msg_class, topic, qos)
+            self.offered[topic] = replay_offer(recorded, depth=depth) or qos
+            self.publishers[topic] = node.create_publisher(msg_class, topic, self.offered[topic])
             self.result.per_topic[topic] = 0
         self._clock = None
         if clock and CLOCK_TOPIC not in stored:

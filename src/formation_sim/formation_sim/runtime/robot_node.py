@@ -51,11 +51,12 @@ from formation_agent.ros.parameters import (
     DOUBLE_ARRAY,
     INTEGER,
     STRING,
+    ParameterError,
     ParameterSpec,
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import StopSignals, exit_process, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import (
     agent_namespace,
     robot_command_topic,
@@ -63,6 +64,7 @@ from formation_msgs_py.topics import (
     robot_pose_topic,
     robot_true_odom_topic,
 )
+from formation_msgs_py.types import MAX_AGENT_ID
 from formation_sim.sim.robots import (
     ROBOT_MODELS,
     Command,
@@ -81,7 +83,7 @@ NODE_NAME = 'simulated_robot'
 ROBOT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 SPECS = (
-    ParameterSpec(name='robot_id', type=INTEGER, description='id i of the agent this robot carries', low=0),
+    ParameterSpec(name='robot_id', type=INTEGER, description='id i of the agent this robot carries', low=0, high=MAX_AGENT_ID),
     ParameterSpec(name='model', type=STRING, default='unicycle', description='kinematics', choices=ROBOT_MODELS),
     ParameterSpec(
         name='position', type=DOUBLE_ARRAY,
@@ -106,7 +108,7 @@ SPECS = (
         name='command_timeout', type=DOUBLE, default=0.5, low=0.0, low_open=True,
         description='stop when no command has come for this long [s]',
     ),
-    ParameterSpec(name='seed', type=INTEGER, default=0, description='seed of the pose noise (one stream per robot)'),
+    ParameterSpec(name='seed', type=INTEGER, default=0, low=0, description='seed of the pose noise (one stream per robot)'),
     ParameterSpec(name='world_frame', type=STRING, default='world', description='frame of poses and holonomic commands'),
     ParameterSpec(name='publish_truth', type=BOOL, default=True, description='also publish the noise-free state on robot/true_odom'),
 )  # fmt: skip
@@ -295,10 +297,13 @@ def main(args: Sequence[str] | None = None) -> int:
                 stop.check()
         except (KeyboardInterrupt, ExternalShutdownException):
             status = 0
+        except (ParameterError, RobotError) as error:  # bad input: every problem named, nothing started
+            print(f'formation_robot: {error}', file=sys.stderr, flush=True)
+            status = EXIT_BAD_INPUT
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():
                 return 0
-            print(f'formation_sim: {error}', file=sys.stderr, flush=True)
+            print(f'formation_robot: {error}', file=sys.stderr, flush=True)
             traceback.print_exc(file=sys.stderr)
             status = 1
         finally:

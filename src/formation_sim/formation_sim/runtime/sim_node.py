@@ -33,6 +33,7 @@ agent or the recorder lost, 130 interrupted.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Sequence
 
@@ -74,6 +75,7 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.analysis.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
 from formation_sim.model.scenario import Scenario
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
 from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's public names since before the split
     EXIT_AGENT_LOST,
@@ -96,7 +98,16 @@ from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
 
 CLOCK_MODES = ('lockstep', 'realtime')
+SIMULATOR_FILE = 'simulator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 SimulatorError = CoordinatorError
+
+SIMULATOR_PARAMETERS = (
+    *coordinator.COORDINATOR_COMMON_PARAMETERS,
+    ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
+    ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
+    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description='a lock-step step not settled after this many seconds ends the run, naming every agent\'s last Status'),
+)  # fmt: skip
+"""The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
 
 RECORDER_LAG = 2
 """Steps the lock-step may run ahead of what a recorder has written (its heartbeat says which step).
@@ -184,19 +195,26 @@ class FormationSimulatorNode(FormationCoordinatorNode):
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
         super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name='formation_simulator')
 
-    def _declare_clock_mode(self) -> str:
-        self.viz_period = float(self.declare_parameter('viz_period', 0.04).value)
-        self.stall_timeout = float(self.declare_parameter('stall_timeout', 60.0).value)
-        clock_mode = str(self.declare_parameter('clock_mode', 'lockstep').value)
-        if clock_mode not in CLOCK_MODES:
-            raise SimulatorError(f'clock_mode must be one of {CLOCK_MODES}, got {clock_mode!r}')
-        return clock_mode
+    PARAMETERS = SIMULATOR_PARAMETERS
+    COMMAND = 'formation_sim'
+    PARAMS_FILE = SIMULATOR_FILE
+    DESCRIPTION = (
+        'The simulator of a formation run (formation run, backend exact): the exact world, every agent\'s sensing '
+        'service, the lock-step clock (or the wall clock), the tools\' topics; writes summary.json and graph.json '
+        'into out_dir.'
+    )
+
+    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+        return []
+
+    def _clock_mode(self, values: dict) -> str:
+        self.viz_period = values['viz_period']
+        self.stall_timeout = values['stall_timeout']
+        return values['clock_mode']
 
     def _setup_world(self) -> None:
         """The exact world, its sampler and the tools' view of it."""
         scenario = self.scenario
-        if not (np.isfinite(self.viz_period) and self.viz_period >= 0.0):
-            raise SimulatorError(f'viz_period must be >= 0 (0: every sample), got {self.viz_period!r}')
         self.world = World.from_scenario(scenario)
         # The agents' threshold, the very same floats, to stop where the engine stops.
         self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
@@ -468,9 +486,7 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             # A trigger counts once its command has acted on the world (a run stopped early may
             # have sensed for a trigger that never completed).
             trigger_times={i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()},
-            sample_times=np.array(self._sampler.times),
-            sample_positions=np.array(self._sampler.positions),
-            sample_velocities=np.array(self._sampler.velocities) if self._sampler.velocities else None,
+            samples=self._sampler.samples(),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),

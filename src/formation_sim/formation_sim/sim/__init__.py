@@ -2,7 +2,8 @@
 
 - `world`: `World`, the true state, advanced exactly from event to event ((single), (double)).
 - `engine`: `simulate`, the team's event-driven run with the agents' own core objects.
-- `record`: `RunRecord`, what any run produced; `summary`: summary.json and trajectory.npz;
+- `record`: `RunRecord`, what any run produced; `samples`: its sample store, in memory or a
+  run folder's `trajectory/` (streamed, memory-mapped); `summary`: summary.json;
   `files`: result files written whole or not at all.
 - `baselines`: the continuous-time controller (`simulate_continuous`) for comparison.
 """
@@ -13,6 +14,7 @@ __all__ = lazy_exports(globals(), {
     'world': ('World', 'WorldError'),
     'engine': ('EngineError', 'simulate'),
     'record': ('RunRecord',),
+    'samples': ('Samples', 'TrajectoryError', 'load_trajectory'),
     'summary': ('build_summary', 'load_record', 'load_summary', 'write_summary'),
     'baselines': ('BaselineError', 'simulate_continuous'),
 })  # fmt: skip

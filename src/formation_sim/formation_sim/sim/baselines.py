@@ -26,6 +26,7 @@ from scipy.integrate import solve_ivp
 
 from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import Samples
 
 METHOD = 'DOP853'  # 8th-order Runge-Kutta: tight tolerances at a moderate number of evaluations
 
@@ -143,9 +144,7 @@ def simulate_continuous(
         horizon=horizon,
         mode='continuous',
         trigger_times={agent: [] for agent in scenario.agent_ids},
-        sample_times=solution.t,
-        sample_positions=positions,
-        sample_velocities=velocities,
+        samples=Samples(times=solution.t, positions=positions, velocities=velocities),
         messages_sent=0,
         sensing_calls=n * int(solution.nfev),
         wall_time=time.perf_counter() - started,

@@ -18,12 +18,14 @@ import heapq
 import math
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
 from formation_sim.sim.world import World
 
 
@@ -74,7 +76,10 @@ class Sampler:
     """Collects the state at every event and on a regular grid, by pure evaluation.
 
     Shared by the engine and the simulator node; `on_sample(t, x, q)` is called after each
-    sample is added (the simulator checks connectivity and queues it for its tools there).
+    sample is added (the simulator checks connectivity and queues it for its tools there). The
+    states stay in memory (`positions`, `velocities`) unless a `writer` streams them to disk.
+    Without event samples, `watch` keeps each edge's largest length at its agents' triggering
+    times (`EdgeLengths`), so the summary's edge maxima stay exact for single integrators.
     """
 
     def __init__(
@@ -84,11 +89,15 @@ class Sampler:
         *,
         events: bool = True,
         on_sample: Callable[[float, np.ndarray, np.ndarray | None], None] | None = None,
+        writer: TrajectoryWriter | None = None,
+        watch: EdgeLengths | None = None,
     ) -> None:
         self.world = world
         self.dt = sample_dt
         self.events = events
         self.on_sample = on_sample
+        self.writer = writer
+        self.watch = watch
         self.times: list[float] = []
         self.positions: list[np.ndarray] = []
         self.velocities: list[np.ndarray] = []
@@ -107,18 +116,35 @@ class Sampler:
                 x, q = self.world.state_at(tg)
                 self._add(tg, x, q)
 
-    def event(self, *, force: bool = False) -> None:
+    def event(self, *, due=(), force: bool = False) -> None:
+        """The world's present state as a sample (with event samples, or `force`); `due`: the agents
+        about to trigger now, whose edges the watch measures."""
+        if self.watch is not None and due:
+            edges = self.watch.edges_of([self.world.index(agent) for agent in due])
+            self.watch.add_edges(
+                edges, self.world.positions_of(self.watch.heads[edges]), self.world.positions_of(self.watch.tails[edges])
+            )
         if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
             return
         self._add(self.world.time, self.world.positions, self.world.velocities)
 
     def _add(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
         self.times.append(t)
-        self.positions.append(x)
-        if q is not None:
-            self.velocities.append(q)
+        if self.writer is not None:
+            self.writer.append(x, q)
+        else:
+            self.positions.append(x)
+            if q is not None:
+                self.velocities.append(q)
         if self.on_sample is not None:
             self.on_sample(t, x, q)
+
+    def samples(self) -> Samples:
+        """What was sampled: in memory, or the writer's trajectory, completed and memory-mapped."""
+        maxima = None if self.watch is None else self.watch.maxima
+        if self.writer is not None:
+            return self.writer.close(self.times, edge_maxima=maxima)
+        return Samples.from_rows(self.times, self.positions, self.velocities or None, edge_maxima=maxima)
 
 
 def _next_event_time(heap, serial, searches, horizon: float) -> float:
@@ -211,6 +237,7 @@ def simulate(
     tolerance: float = DEFAULT_TOLERANCE,
     period: float | None = None,
     sample_events: bool = True,
+    trajectory_dir: str | Path | None = None,
     progress: Callable[[float, int], None] | None = None,
     on_event: Callable[[float, World, list[int]], None] | None = None,
 ) -> RunRecord:
@@ -220,10 +247,12 @@ def simulate(
     triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
     due)` is called at every event time before the due agents trigger (for checkers).
 
-    The record samples the state at every event time and every `sample_dt`; that is
-    O(events x agents) memory, so large teams may pass `sample_events=False` (then only the grid,
-    t = 0 and the horizon are sampled; `summary.json`'s maximum edge lengths are then taken over
-    those samples only).
+    The record samples the state at every event time and every `sample_dt` (0 or None: no grid).
+    `sample_events=False` samples only the grid, t = 0 and the horizon; each edge's largest length
+    is then also measured at its two agents' triggering times (`Samples.edge_maxima`), which for
+    single integrators is still the exact maximum. Samples are kept in memory (O(samples x agents)),
+    or, with `trajectory_dir` (a run folder), written into its `trajectory/` as they are produced
+    (memory O(agents + samples)) and memory-mapped in the record (`formation_sim.sim.samples`).
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -232,12 +261,45 @@ def simulate(
         raise EngineError(f'period must be a finite number > 0, got {period!r}')
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
     started = time.perf_counter()
-    planned_period: dict[int, float] = {}
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
-    sampler = Sampler(world, sample_dt, events=sample_events)
+    writer = None
+    if trajectory_dir is not None:
+        writer = TrajectoryWriter(
+            trajectory_dir, agent_ids=scenario.agent_ids, dimension=scenario.dimension, velocities=scenario.dynamics == 'double'
+        )
+    watch = None if sample_events else EdgeLengths(scenario)
+    sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch)
+    try:
+        messages = _run(scenario, world, agents, sampler, trigger_times, horizon=horizon, period=period, progress=progress, on_event=on_event)
+    except BaseException:
+        if writer is not None:
+            writer.abandon()  # what was written stays, named trajectory.incomplete
+        raise
+    wall_time = time.perf_counter() - started
+    return RunRecord(
+        scenario=scenario,
+        horizon=horizon,
+        mode='in_process' if period is None else 'periodic',
+        trigger_times=trigger_times,
+        samples=sampler.samples(),
+        messages_sent=messages,
+        sensing_calls=sum(len(v) for v in trigger_times.values()),
+        wall_time=wall_time,
+        extra={
+            'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
+            **({'period': period} if period is not None else {}),
+        },
+    )
+
+
+def _run(
+    scenario, world: World, agents: dict, sampler: Sampler, trigger_times: dict[int, list[float]], *, horizon, period, progress, on_event
+) -> int:
+    """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent."""
     messages = 0
+    planned_period: dict[int, float] = {}
     # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
     # frontier of a search still under way (a certified lower bound on the agent's time). Only
     # the entry with the agent's latest serial is live; older ones are skipped when they surface.
@@ -251,7 +313,7 @@ def simulate(
     sampler.event(force=True)  # t = 0
     some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
     while True:
-        sampler.event()
+        sampler.event(due=due)
         if period is None and (problem := rounding_floor(some_agent, world)) is not None:
             raise EngineError(problem)
         if on_event is not None:
@@ -305,16 +367,4 @@ def simulate(
         world.advance(t_next)
         t = t_next
         due = _pop_due(heap, serial, t)
-    return RunRecord(
-        scenario=scenario,
-        horizon=horizon,
-        mode='in_process' if period is None else 'periodic',
-        trigger_times=trigger_times,
-        sample_times=np.array(sampler.times),
-        sample_positions=np.array(sampler.positions),
-        sample_velocities=np.array(sampler.velocities) if sampler.velocities else None,
-        messages_sent=messages,
-        sensing_calls=sum(len(v) for v in trigger_times.values()),
-        wall_time=time.perf_counter() - started,
-        extra={'period': period} if period is not None else {},
-    )
+    return messages

@@ -2,7 +2,8 @@
 
 Every kind of run fills one: the in-process engine (`formation_sim.sim.engine`), the baselines
 (`formation_sim.sim.baselines`), the simulator node of a distributed run, and a bag read back
-(`formation_sim.analysis`).
+(`formation_sim.analysis`). Its samples (`formation_sim.sim.samples.Samples`) are in memory, or,
+for `formation simulate` and run folders read back, memory-mapped from the run's trajectory folder.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from formation_sim.sim.samples import Samples
 
 
 @dataclass(kw_only=True)
@@ -20,9 +23,7 @@ class RunRecord:
     horizon: float
     mode: str
     trigger_times: dict[int, list[float]]
-    sample_times: np.ndarray
-    sample_positions: np.ndarray
-    sample_velocities: np.ndarray | None
+    samples: Samples
     messages_sent: int
     sensing_calls: int
     wall_time: float
@@ -31,3 +32,18 @@ class RunRecord:
     @property
     def total_events(self) -> int:
         return sum(len(times) for times in self.trigger_times.values())
+
+    @property
+    def sample_times(self) -> np.ndarray:
+        """(K,) increasing: every event time and a grid, or what the run's sample policy kept."""
+        return self.samples.times
+
+    @property
+    def sample_positions(self) -> np.ndarray:
+        """(K, n, p), in memory or memory-mapped."""
+        return self.samples.positions
+
+    @property
+    def sample_velocities(self) -> np.ndarray | None:
+        """(K, n, p) for double integrators, else None."""
+        return self.samples.velocities

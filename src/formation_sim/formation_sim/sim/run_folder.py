@@ -28,12 +28,16 @@ RUN_ENTRIES = frozenset(
     {
         'summary.json',
         'summary.json.tmp',
-        'trajectory.npz',
+        'trajectory',
+        'trajectory.incomplete',
+        'trajectory.npz',  # runs written before the trajectory folder
         'formation.png',
         'scenario.yaml',
         'agents.params.yaml',
         'recorder.params.yaml',
         'robots.params.yaml',
+        'simulator.params.yaml',
+        'coordinator.params.yaml',
         'graph.json',
         'bag',
         'logs',

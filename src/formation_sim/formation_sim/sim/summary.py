@@ -1,4 +1,4 @@
-"""`summary.json` and the dense trajectory file of a run, whichever implementation produced it.
+"""`summary.json` and the trajectory folder of a run, whichever implementation produced it.
 
 Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as string keys):
 
@@ -24,8 +24,12 @@ Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as
 | `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
 | `extra.injected_faults` | distributed runs: {dropped, delayed, by_agent}: triggering information dropped or delayed by fault injection (a test facility) |
 
-`max_length` is taken over the samples (every event time and the sampling grid). For single
-integrators the edge lengths are convex between events, so this is the exact maximum.
+`max_length` is taken over the samples (every event time and the sampling grid) and, for runs
+that keep no event samples (`formation simulate --samples grid|none`), over each edge's two
+agents' triggering times (`formation_sim.sim.samples.EdgeLengths`). For single integrators an
+edge's length is convex between those times, so either way this is the exact maximum.
+
+The samples go to the run folder's `trajectory/` (format: `formation_sim.sim.samples`).
 """
 
 from __future__ import annotations
@@ -39,9 +43,9 @@ from formation_sim.model import theory
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
+from formation_sim.sim.samples import TrajectoryError, edge_maxima, load_trajectory, write_trajectory
 
 SCHEMA = 'formation-summary/1'
-TRAJECTORY_FILE = 'trajectory.npz'
 SUMMARY_FILE = 'summary.json'
 
 
@@ -50,22 +54,20 @@ def build_summary(record) -> dict:
     scenario = record.scenario
     ids = list(scenario.agent_ids)
     index = {agent: k for k, agent in enumerate(ids)}
-    x = record.sample_positions
-    final_x = x[-1]
-    edges = []
-    for edge in scenario.edges:
-        a, b = index[edge.i], index[edge.j]
-        lengths = np.linalg.norm(x[:, a] - x[:, b], axis=1)
-        edges.append(
-            {
-                'i': edge.i,
-                'j': edge.j,
-                'd': np.asarray(edge.d).tolist(),
-                'max_length': float(lengths.max()),
-                'min_range_slack': float(scenario.delta - lengths.max()),
-                'final_error': float(np.linalg.norm(final_x[a] - final_x[b] - edge.d)),
-            }
-        )
+    final_x = np.asarray(record.sample_positions[-1])
+    maxima = edge_maxima(scenario, record.samples)
+    final_errors = [np.linalg.norm(final_x[index[edge.i]] - final_x[index[edge.j]] - edge.d) for edge in scenario.edges]
+    edges = [
+        {
+            'i': edge.i,
+            'j': edge.j,
+            'd': np.asarray(edge.d).tolist(),
+            'max_length': float(longest),
+            'min_range_slack': float(scenario.delta - longest),
+            'final_error': float(error),
+        }
+        for edge, longest, error in zip(scenario.edges, maxima, final_errors)
+    ]
     gaps = {
         agent: (float(np.diff(times).min()) if len(times) > 1 else None)
         for agent, times in record.trigger_times.items()
@@ -149,19 +151,14 @@ def saturation_extra(reports) -> dict:
 
 
 def write_summary(record, out_dir) -> Path:
-    """Write `summary.json` and `trajectory.npz` into `out_dir`; return the summary's path."""
+    """Write `summary.json` and the trajectory (unless the run streamed it there already) into
+    `out_dir`; return the summary's path. The small summary first: on a disk about to fill up it is
+    what matters most."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary = build_summary(record)
-    path = write_summary_file(summary, out / SUMMARY_FILE)
-    arrays = {
-        'agent_ids': np.array(record.scenario.agent_ids),
-        'times': record.sample_times,
-        'positions': record.sample_positions,
-    }
-    if record.sample_velocities is not None:
-        arrays['velocities'] = record.sample_velocities
-    write_atomically(out / TRAJECTORY_FILE, lambda handle: np.savez_compressed(handle, **arrays))
+    path = write_summary_file(build_summary(record), out / SUMMARY_FILE)
+    if record.samples.path is None or record.samples.path.parent.resolve() != out.resolve():
+        write_trajectory(record.samples, out, agent_ids=record.scenario.agent_ids)
     return path
 
 
@@ -182,26 +179,25 @@ def load_summary(path) -> dict:
 
 
 def load_record(run_dir, scenario=None):
-    """Rebuild the `RunRecord` of a run folder from `summary.json` and `trajectory.npz`.
+    """Rebuild the `RunRecord` of a run folder from `summary.json` and its trajectory (memory-mapped).
 
     The scenario is read from the folder's `scenario.yaml` (written by `formation run`) unless
-    given. Counters and triggering times come from the summary, samples from the trajectory.
+    given. Counters and triggering times come from the summary, samples from the trajectory
+    (`formation_sim.sim.samples.load_trajectory`; TrajectoryError if there is none).
     """
     run_dir = Path(run_dir)
     summary = load_summary(run_dir)
     if scenario is None:
         scenario = load_scenario(run_dir / 'scenario.yaml')
-    with np.load(run_dir / TRAJECTORY_FILE) as data:
-        times, positions = data['times'], data['positions']
-        velocities = data['velocities'] if 'velocities' in data else None
+    samples = load_trajectory(run_dir)
+    if samples is None:
+        raise TrajectoryError(f'{run_dir}: holds no trajectory')
     return RunRecord(
         scenario=scenario,
         horizon=summary['horizon'],
         mode=summary['mode'],
         trigger_times={int(a): list(t) for a, t in summary['trigger_times'].items()},
-        sample_times=times,
-        sample_positions=positions,
-        sample_velocities=velocities,
+        samples=samples,
         messages_sent=summary['messages_sent'],
         sensing_calls=summary['sensing_calls'],
         wall_time=summary['wall_time'],

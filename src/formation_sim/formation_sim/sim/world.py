@@ -70,6 +70,10 @@ class World:
     def velocities(self) -> np.ndarray | None:
         return None if self._q is None else self._q.copy()
 
+    def positions_of(self, rows: np.ndarray) -> np.ndarray:
+        """The positions of the agents at these rows (a copy of those rows only)."""
+        return self._x[rows]
+
     @property
     def controls(self) -> np.ndarray:
         return self._u.copy()

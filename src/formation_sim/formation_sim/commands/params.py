@@ -1,0 +1,66 @@
+"""`formation params SCENARIO --out DIR`: the parameter files `formation run` would write, without a run.
+
+The same launch plan as `formation run` (`formation_sim.runtime.launch.LaunchPlan.write_inputs`,
+the one place they are built) writes the scenario and every node's parameter file into DIR, and
+prints the command that starts each process by hand (`ProcessSpec.command`): for agents on
+separate machines, robots, or a node to inspect with `ros2 param describe`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+
+from formation_sim.commands.common import (
+    EXIT_BAD_INPUT,
+    add_plan_arguments,
+    add_run_arguments,
+    load_valid_scenario,
+    plan_options,
+    refuse,
+)
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'params',
+        help='write the parameter files of a distributed run (agents, recorder, simulator or coordinator, robots) without starting it',
+        description='Write what `formation run` with the same arguments would write before it starts its processes: '
+        'scenario.yaml, agents.params.yaml, recorder.params.yaml, simulator.params.yaml (backend exact) or '
+        'coordinator.params.yaml (robot backends) and robots.params.yaml (simulated robots), each keyed by node '
+        'name; then print the command that starts each process by hand. Nothing is started.',
+        epilog='The output folder follows the run-folder rule of `formation run`: new or empty, or --force to '
+        'replace an earlier run there. Exit status: 0 written; 2 bad input (nothing written).',
+    )
+    add_run_arguments(parser, kind='params')
+    add_plan_arguments(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from formation_sim.runtime.launch import FASTDDS_PROFILE, RunError
+    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+
+    scenario = load_valid_scenario(args.scenario, 'params')
+    if scenario is None:
+        return EXIT_BAD_INPUT
+    try:
+        plan = FormationRun(scenario, **plan_options(args)).plan  # every argument checked, nothing touched yet
+        out = claim_out_dir(args.out, scenario_name=scenario.name, kind='params', force=args.force)
+    except (RunError, RunFolderError) as error:
+        return refuse('params', error)
+    plan = dataclasses.replace(plan, out_dir=out)
+    paths = plan.write_inputs()
+    print(f'folder: {out}')
+    for role, path in paths.items():
+        print(f'  {role + ":":10s} {path.name}')
+    print(
+        '\nStart the processes by hand, each with the same ROS_DOMAIN_ID (and '
+        f'FASTRTPS_DEFAULT_PROFILES_FILE={FASTDDS_PROFILE}, as formation run does), in this order:'
+    )
+    for spec in plan.processes(paths):
+        print(f'  {spec.command}')
+    sys.stdout.flush()
+    return 0
