@@ -17,27 +17,47 @@ import time
 from collections import Counter
 from pathlib import Path
 
-ROLES = (('formation_sim.runtime.sim_node', 'simulator'), ('formation_agent.ros.main', 'agents'), ('formation_sim.runtime.recorder', 'recorder'))
+ROLES = (
+    ('formation_sim.runtime.sim_node', 'simulator'),
+    ('formation_agent.ros.main', 'agents'),
+    ('formation_sim.runtime.recorder', 'recorder'),
+    ('fast-discovery-server', 'discovery_server'),
+    ('formation_sim.cli', 'command'),
+    ('from formation_sim.cli import main', 'command'),
+)
 
 
-def _children() -> dict[int, str]:
-    """Processes whose parent is this process, with their role."""
+def _children(*, descendants: bool = False) -> dict[int, str]:
+    """Processes whose parent is this process (or, with `descendants`, any of its descendants),
+    with their role."""
     me = os.getpid()
-    found = {}
+    parents, commands = {}, {}
     for entry in Path('/proc').iterdir():
         if not entry.name.isdigit():
             continue
         try:
             stat = (entry / 'stat').read_text()
-            parent = int(stat.rsplit(')', 1)[1].split()[1])
-            if parent != me:
-                continue
-            command = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+            parents[int(entry.name)] = int(stat.rsplit(')', 1)[1].split()[1])
+            commands[int(entry.name)] = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
         except (OSError, ValueError, IndexError):
             continue
-        for marker, role in ROLES:
-            if marker in command:
-                found[int(entry.name)] = role
+
+    def ours(pid: int) -> bool:
+        for _ in range(8):  # the command, its children (through a launch prefix, at most a few levels)
+            pid = parents.get(pid, 0)
+            if pid == me:
+                return True
+            if not descendants or pid <= 1:
+                return False
+        return False
+
+    found = {}
+    for pid, command in commands.items():
+        if not ours(pid):
+            continue
+        role = next((role for marker, role in ROLES if marker in command), None)
+        if role is not None:
+            found[pid] = role
     return found
 
 
@@ -54,16 +74,17 @@ def _peak_rss_kib(pid: int) -> int | None:
 class _MemoryWatch(threading.Thread):
     """Peak RSS per child process, sampled every `period` seconds until stopped."""
 
-    def __init__(self, period: float = 0.2) -> None:
+    def __init__(self, period: float = 0.2, *, descendants: bool = False) -> None:
         super().__init__(daemon=True)
         self.period = period
+        self.descendants = descendants
         self.peaks: dict[int, int] = {}
         self.roles: dict[int, str] = {}
         self._halt = threading.Event()
 
     def run(self) -> None:
         while not self._halt.is_set():
-            for pid, role in _children().items():
+            for pid, role in _children(descendants=self.descendants).items():
                 peak = _peak_rss_kib(pid)
                 if peak is not None:
                     self.roles[pid] = role

@@ -11,7 +11,9 @@ sensing: event-triggered, periodic, continuous), `distributed` (lock-step throug
 memory, messages per event, against a bare rclpy round trip), `long` (peak memory of long
 distributed runs), `cli` (`formation simulate` as a process at n = 1000, 3000, 10 000: wall time
 against the engine's, peak memory, against the code before the streaming record; scenario load
-times, YAML and JSON). Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the
+times, YAML and JSON), `startup` (time to first result of `formation run`: every phase, against the
+code before the start-up work, alternating), `large` (100 to 1000 agents: simple discovery and a
+discovery server, against the code before; `startup.py`). Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the
 repository root holds the tables of a full run with the machine they came from.
 
 Timing: wall-clock and process CPU time; each engine case is repeated and the median reported.
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import itertools
 import json
 import math
 import os
@@ -42,7 +45,9 @@ from cases import build_scenario, builtin, label, random  # noqa: E402
 
 # The implementation before the speed work (its parent commit), for the speed-up columns.
 BASELINE_REV = 'fe95009^'
-DOMAINS = iter(range(204, 233))  # ROS_DOMAIN_ID range of the benchmarks (ping-pong uses 201)
+# ROS_DOMAIN_IDs of the benchmarks' runs, one after the other (ping-pong uses 201); no test pins
+# one of these (tests/ use 200, 201, 224, 231, 232 of formation run's range).
+DOMAINS = itertools.cycle(range(204, 224))
 
 
 def machine() -> dict:
@@ -296,6 +301,26 @@ def run_distributed(case: dict, out: Path, *, record: bool = False) -> dict:
     return row
 
 
+# -- time to first result, large teams ---------------------------------------------------------------
+
+
+def startup_cases(quick: bool) -> list[dict]:
+    cases = [{**builtin('paper_single'), 'horizon': 10.0, 'label': 'paper_single T=10 (make demo)'}]
+    if not quick:
+        cases.append({**random(6), 'horizon': 2.0, 'label': 'random n=6 T=2'})
+    return cases
+
+
+def large_cases(quick: bool) -> list[dict]:
+    if quick:
+        return [{**random(100), 'horizon': 0.5, 'per_process': 25, 'variants': ['simple', 'server'], 'label': 'n=100'}]
+    return [
+        {**random(100), 'horizon': 0.5, 'per_process': 25, 'variants': ['before', 'simple', 'server'], 'label': 'n=100'},
+        {**random(300), 'horizon': 0.2, 'per_process': 50, 'variants': ['before', 'simple', 'server'], 'label': 'n=300'},
+        {**random(1000), 'horizon': 0.05, 'per_process': 'auto', 'variants': ['simple', 'server'], 'label': 'n=1000'},
+    ]
+
+
 PROTOCOL_TOPICS = ('trigger_info', 'command', '/formation/step', '/formation/status')
 
 
@@ -455,6 +480,44 @@ def markdown(results: dict) -> str:
         lines.append('')
     if 'cli' in results:
         lines += [*_cli_markdown(results), '']
+    if 'startup' in results:
+        lines += [
+            '| case | code | runs | `formation run` wall [s] | stepping [s] | outside stepping [s] | outside / stepping | discovery [s] | now / before: wall | now / before: outside |',
+            '|---|---|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['startup']['table']:
+            lines.append(
+                f'| {r["case"]} | {r["code"]} | {r["runs"]} | {r["total_wall_s"]:.2f} | {r["stepping_s"]:.2f} | {r["outside_stepping_s"]:.2f} | '
+                f'{r["outside_over_stepping"]:.2f} | {_fmt(r["discovery_s"])} | {_fmt(r.get("total_now_over_before"), 2)} | '
+                f'{_fmt(r.get("outside_now_over_before"), 2)} |'
+            )
+        lines.append('')
+        for r in results['startup']['table']:
+            if r.get('timeline'):
+                marks = ', '.join(f'{name} {at:.2f}' for name, at in r['timeline'].items())
+                lines += [f'{r["case"]}, {r["code"]}, marks of the run [s since FormationRun.run began, medians]: {marks}.', '']
+    if 'large' in results:
+        lines += [
+            '| team | code | discovery | agents/process | processes | ok | `formation run` wall [s] | discovery [s] | step 0 at [s] | steps | ms/step | end [s] | agents RSS [MiB] | simulator RSS [MiB] | equal to the engine |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+        ]
+        for r in results['large']:
+            code = 'before' if r['variant'] == 'before' else 'now'
+            discovery = 'server' if r['variant'] == 'server' else 'simple'
+            agents = r['memory_mib'].get('agents', {}).get('sum')
+            simulator = r['memory_mib'].get('simulator', {}).get('max')
+            head = f'| {r["case"]} T={r["horizon"]:g} | {code} | {discovery} | {r["per_process"]} | {r["processes"]} |'
+            if not r.get('events'):
+                lines.append(f'{head} no: {r["message"][:120]} | {r["total_wall_s"]:.0f} | | | | | | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | – |')
+                continue
+            timeline = r.get('timeline') or {}
+            phases = r.get('phases') or {}
+            lines.append(
+                f'{head} {"yes" if r["exit_status"] == 0 else "no"} | {r["total_wall_s"]:.1f} | {r["discovery_s"]:.1f} | {_fmt(timeline.get("step0"), 3)} | '
+                f'{r["steps"]} | {1e3 * r["stepping_s"] / r["steps"]:.1f} | {_fmt(phases.get("end"), 3)} | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | '
+                f'{"yes (max difference 0)" if r.get("equal") else r.get("equal")} |'
+            )
+        lines.append('')
     if 'long' in results:
         lines += ['| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |', '|---|---|---|---|---|---|---|']
         for r in results['long']:
@@ -468,13 +531,14 @@ def markdown(results: dict) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description='Benchmarks (see BENCHMARKS.md).')
-    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli'), default=None)
+    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large'), default=None)
+    parser.add_argument('--repeats', type=int, default=5, help='startup: runs of each case and code (default 5)')
     parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
     parser.add_argument('--three-agents', action='store_true', help='distributed: only the 3-agent cases (the lock-step target)')
     parser.add_argument('--cli-agents', type=int, nargs='+', default=None, metavar='N', help='cli: only the teams of these sizes (1000, 3000, 10000)')
     parser.add_argument('--out', type=Path, default=HERE / 'results')
     args = parser.parse_args()
-    sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli']
+    sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large']
     results: dict = {'machine': machine(), 'sections': sections, 'load': {}}
     args.out.mkdir(parents=True, exist_ok=True)
     stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
@@ -554,6 +618,21 @@ def main() -> int:
         save()
         results['cli'] = measure(cases, repeats=1 if args.quick else 3, progress=progress)
         results['load']['cli'].append(load())
+        save()
+    if 'startup' in sections:
+        from startup import summarise, time_to_first_result
+
+        results['load']['startup'] = [load()]
+        rows = time_to_first_result(startup_cases(args.quick), repeats=1 if args.quick else args.repeats, runs=runs, domains=DOMAINS, progress=progress)
+        results['startup'] = {'runs': rows, 'table': summarise(rows)}
+        results['load']['startup'].append(load())
+        save()
+    if 'large' in sections:
+        from startup import large_teams
+
+        results['load']['large'] = [load()]
+        results['large'] = large_teams(large_cases(args.quick), runs=runs, domains=DOMAINS, progress=progress, timeout=900.0)
+        results['load']['large'].append(load())
         save()
     save()
     print(markdown(results))

@@ -67,7 +67,7 @@ def _bad_input(tmp_path):
         (['simulate', 'paper_single', '--period', 'nan'], 'argument --period: must be a finite number > 0, got nan'),
         (['run', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
         (['run', 'paper_single', '--out', str(tmp_path / 'a_run'), '--force', '--domain-id', '100', '--sample-dt', '1e-12'], 'asks for 1e+13 samples'),
-        (['run', 'paper_single', '--agents-per-process', '1.5'], "argument --agents-per-process: must be an integer >= 1, got '1.5'"),
+        (['run', 'paper_single', '--agents-per-process', '1.5'], "argument --agents-per-process: must be an integer >= 1 or 'auto', got '1.5'"),
         (['analyze', missing, '--out', str(tmp_path / 'a_run')], 'a_run holds a run (summary.json or bag/) whose files the report would overwrite'),
         (['compare', missing, missing, '--out', str(tmp_path / 'a_run')], 'whose files the report would overwrite'),
         (['replay', missing, '--depth', '0'], 'argument --depth: must be an integer >= 1, got 0'),

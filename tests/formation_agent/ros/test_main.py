@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -138,6 +139,33 @@ def test_the_example_parameter_files_make_the_documented_robot(bench, agent_proc
     (final,) = [report for report in rig.reports if report.final]
     assert {kind: clipped.allowed for kind, clipped in final.saturation.items()}.items() <= allowed.items()
     assert final.saturation['linear_speed'].count == final.robot_commands >= 5
+
+
+def test_an_agent_waiting_in_discovery_says_what_it_waits_for_again_and_again(agent_process):
+    from formation_agent.ros.node import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD
+
+    agent = agent_process()  # agent 1, nobody else on its domain: no robot, no coordinator, no agent 2
+    deadline = time.monotonic() + DISCOVERY_LOG_AFTER + DISCOVERY_LOG_PERIOD + 30.0
+    waits = []
+    while len(waits) < 2 and time.monotonic() < deadline and agent.process.poll() is None:
+        time.sleep(0.2)
+        waits = [line for line in agent.stderr.splitlines() if 'still waiting for: ' in line]
+    assert len(waits) == 2, agent.stderr
+    for line in waits:
+        said = line.split('still waiting for: ', 1)[1].split('; ')
+        assert said == [
+            'readers of /agent_1/trigger_info/to_2: 0 of 1 (agent 2)',
+            'a writer of /agent_2/trigger_info/to_1 (agent 2)',
+            'readers of /agent_1/robot/cmd_vel: 0 of 1 (the robot)',
+            'readers of /formation/status: 0 of 1 (the simulator or coordinator)',
+            'readers of /formation/agent_report: 0 of 1 (the simulator or coordinator)',
+            'a writer of /formation/step (the simulator or coordinator)',
+            "a writer of the robots' poses on /agent_1/robot/pose, /agent_2/robot/pose",
+        ], line
+    seconds = [float(line.split('discovery for ', 1)[1].split(' s,')[0]) for line in waits]
+    assert seconds[1] - seconds[0] >= DISCOVERY_LOG_PERIOD - 1.0, seconds  # printed rounded to the second
+    agent.signal(signal.SIGINT)
+    assert agent.process.wait(timeout=30) == 130
 
 
 # -- the command line -------------------------------------------------------------------------------

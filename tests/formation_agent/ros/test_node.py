@@ -270,6 +270,63 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         rclpy.shutdown(context=other)
 
 
+# -- discovery ---------------------------------------------------------------------------------------
+
+
+def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simulator_is_there(ros, live_node):
+    import rclpy
+    from geometry_msgs.msg import Twist
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64MultiArray, String
+    from std_srvs.srv import Trigger
+
+    from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
+    from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC
+
+    node = live_node(extra_subscribers=1)
+    alone = node.discovery_gaps()
+    assert alone == [
+        'readers of /agent_1/trigger_info/to_2: 0 of 2 (agent 2, a recorder)',
+        'readers of /agent_1/trigger_info/to_3: 0 of 2 (agent 3, a recorder)',
+        'a writer of /agent_2/trigger_info/to_1 (agent 2)',
+        'a writer of /agent_3/trigger_info/to_1 (agent 3)',
+        'readers of /agent_1/cmd_vel: 0 of 2 (the simulator, a recorder)',
+        'readers of /formation/status: 0 of 2 (the simulator or coordinator, a recorder)',
+        'readers of /formation/agent_report: 0 of 2 (the simulator or coordinator, a recorder)',
+        'a writer of /formation/step (the simulator or coordinator)',
+        'the sensing service /agent_1/sense (served by the simulator)',
+    ]
+    assert not node.connected()
+    # The simulator's side of it, in a participant of its own (its own process in a run).
+    other = rclpy.Context()
+    rclpy.init(context=other, domain_id=DOMAIN_ID)
+    simulator = rclpy.create_node('fake_simulator', context=other)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        for topic, kind in ((STATUS_TOPIC, Float64MultiArray), (REPORT_TOPIC, String), ('/agent_1/cmd_vel', Twist)):
+            simulator.create_subscription(kind, topic, lambda msg: None, READER_QOS)
+        simulator.create_service(Trigger, '/agent_1/sense', lambda request, response: response)
+        deadline = time.monotonic() + 20.0
+        while len(node.discovery_gaps()) > 7 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        # What is left: the neighbours, and the second reader (a recorder) of each writer.
+        assert node.discovery_gaps() == [
+            'readers of /agent_1/trigger_info/to_2: 0 of 2 (agent 2, a recorder)',
+            'readers of /agent_1/trigger_info/to_3: 0 of 2 (agent 3, a recorder)',
+            'a writer of /agent_2/trigger_info/to_1 (agent 2)',
+            'a writer of /agent_3/trigger_info/to_1 (agent 3)',
+            'readers of /agent_1/cmd_vel: 1 of 2 (the simulator, a recorder)',
+            'readers of /formation/status: 1 of 2 (the simulator or coordinator, a recorder)',
+            'readers of /formation/agent_report: 1 of 2 (the simulator or coordinator, a recorder)',
+        ]
+    finally:
+        executor.remove_node(node)
+        simulator.destroy_node()
+        rclpy.shutdown(context=other)
+
+
 # -- robots ----------------------------------------------------------------------------------------
 
 

@@ -20,7 +20,6 @@ from formation_sim.analysis.compare import (
     within,
 )
 from formation_sim.sim.engine import simulate
-from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.summary import write_summary
 
 

@@ -11,7 +11,7 @@ BAD_RUN_ARGUMENTS = [
     # (arguments, what the refusal says): each refused while parsing, before anything starts
     (['--domain-id', '300'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300'),
     (['--domain-id', '999'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 999'),
-    (['--agents-per-process', '0'], 'argument --agents-per-process: must be an integer >= 1, got 0'),
+    (['--agents-per-process', '0'], "argument --agents-per-process: must be an integer >= 1 or 'auto', got 0"),
     (['--horizon', '-1'], 'argument --horizon: must be a finite number > 0, got -1.0'),
     (['--horizon', 'nan'], 'argument --horizon: must be a finite number > 0, got nan'),
     (['--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),

@@ -83,6 +83,22 @@ def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, 
 
     _assert_agents_isolated(json.loads((result.out_dir / 'graph.json').read_text()), scenario)
     assert all(child.returncode == 0 for child in result.children), result.children
+    _assert_timeline(summary, result)
+
+
+def _assert_timeline(summary: dict, result) -> None:
+    """Where the run's time went: every mark in the order the run reaches them, and the phases
+    adding up to them; stepping is the simulator's own stepping time."""
+    timeline, phases = summary['extra']['timeline'], summary['extra']['phases']
+    order = ['run', 'spawned', 'node_created', 'node_up', 'agents_ready', 'step0', 'final_step', 'final_reports', 'delivered',
+             'keeper_exited', 'stopped', 'checked']  # fmt: skip
+    assert [mark for mark in timeline if mark in order] == order, timeline
+    assert timeline['agents_announced'] <= timeline['agents_ready']
+    assert all(timeline[a] <= timeline[b] for a, b in zip(order, order[1:])), timeline
+    assert phases['start'] == timeline['step0']
+    assert phases['stepping'] == pytest.approx(summary['wall_time'], abs=1e-6)
+    assert phases['start'] + phases['stepping'] + phases['end'] == pytest.approx(timeline['checked'])
+    assert timeline['checked'] < result.wall_time
 
 
 @pytest.mark.timeout(300)
@@ -96,6 +112,28 @@ def test_agents_packed_in_one_process_give_the_same_run(tmp_path):
     assert result.bag is None
     assert [child.name for child in result.children] == ['simulator', 'agents_1-3']
     _assert_same_events(json.loads(result.summary.read_text()), reference)
+
+
+@pytest.mark.timeout(300)
+def test_a_run_discovering_through_a_discovery_server_equals_the_engine(tmp_path):
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    scenario = load_scenario('paper_single')
+    horizon = 3.0
+    reference = simulate(scenario, horizon=horizon)
+    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=118, progress=False, timeout=240.0, discovery='server')
+    result = run.run()
+    assert result.ok, result.message
+    assert [child.name for child in result.children] == ['discovery_server', 'recorder', 'simulator', 'agent_1', 'agent_2', 'agent_3']
+    _assert_same_events(json.loads(result.summary.read_text()), reference)
+    # Every child was a client of the run's server, which served on that port.
+    port = run.plan.discovery_port
+    assert run._supervisor.env['ROS_DISCOVERY_SERVER'] == f'127.0.0.1:{port}'
+    assert f'Server Addresses:   UDPv4:[127.0.0.1]:{port}' in (result.out_dir / 'logs' / 'discovery_server.log').read_text()
+    # The ROS graph is whole all the same (every node saw every other through the server).
+    graph = json.loads((result.out_dir / 'graph.json').read_text())
+    assert set(graph) == {'/formation_simulator', '/formation_recorder', *(f'/agent_{i}/formation_agent' for i in scenario.agent_ids)}
+    _assert_agents_isolated(graph, scenario)
 
 
 def _alive(pid: int) -> bool:

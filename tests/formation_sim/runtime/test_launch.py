@@ -34,6 +34,56 @@ def test_the_exact_backend_is_the_simulator_and_its_agents(tmp_path):
     assert not (tmp_path / 'run' / 'robots.params.yaml').exists()
 
 
+def test_auto_packing_keeps_one_process_per_agent_for_small_teams_and_few_processes_for_large_ones(tmp_path):
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.runtime.launch import AUTO_AGENT_PROCESSES, ONE_PROCESS_PER_AGENT_UP_TO
+
+    small = FormationRun('paper_single', out_dir=tmp_path / 'small', agents_per_process='auto').plan
+    assert small.agent_groups() == [[1], [2], [3]]
+    edge = random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO, seed=3)
+    assert FormationRun(edge, out_dir=tmp_path / 'edge', agents_per_process='auto').plan.agents_per_process == 1
+    large = FormationRun(random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO + 1, seed=3), out_dir=tmp_path / 'large', agents_per_process='auto').plan
+    groups = large.agent_groups()
+    assert 1 < len(groups) <= AUTO_AGENT_PROCESSES and sorted(i for group in groups for i in group) == list(large.scenario.agent_ids)
+    assert max(map(len, groups)) == -(-(ONE_PROCESS_PER_AGENT_UP_TO + 1) // AUTO_AGENT_PROCESSES)
+    for bad in (0, 'many', 2.5, True):
+        with pytest.raises(RunError, match=f"agents_per_process must be an integer >= 1 or 'auto', got {bad!r}"):
+            FormationRun('paper_single', out_dir=tmp_path / 'bad', agents_per_process=bad)
+    assert not (tmp_path / 'bad').exists()
+
+
+def test_a_discovery_server_starts_first_and_every_other_child_is_its_client(tmp_path, monkeypatch):
+    import dataclasses
+    import os
+
+    monkeypatch.setenv('ROS_DISCOVERY_SERVER', '10.0.0.9:11811')  # a user's own server is not the run's
+    simple = _plan(tmp_path / 'simple', 'exact')
+    assert 'ROS_DISCOVERY_SERVER' not in simple.environment(150, extra_env={})
+    plan = dataclasses.replace(_plan(tmp_path / 'server', 'exact', discovery='server'), discovery_port=40123)
+    specs = plan.processes(plan.write_inputs())
+    assert [spec.name for spec in specs][:3] == ['discovery_server', 'recorder', 'simulator']
+    # The simulator writes every node's endpoints into graph.json: it must learn of them all.
+    assert [spec.name for spec in specs if dict(spec.env).get('ROS_SUPER_CLIENT') == 'TRUE'] == ['simulator']
+    server = specs[0]
+    assert os.access(server.program, os.X_OK) and server.program.endswith('fast-discovery-server')
+    assert server.args == ('--server-id', '0', '--udp-address', '127.0.0.1', '--udp-port', '40123') and not server.expected_exit
+    assert plan.environment(150, extra_env={})['ROS_DISCOVERY_SERVER'] == '127.0.0.1:40123'
+    assert plan.process_count() == simple.process_count() + 1
+    across = dataclasses.replace(_plan(tmp_path / 'across', 'exact', discovery='server', localhost_only=False), discovery_port=40123)
+    assert across.discovery_server_process().args[3] == '0.0.0.0'  # clients on other machines reach it
+
+
+def test_a_discovery_server_that_is_not_installed_is_refused_before_anything_exists(tmp_path, monkeypatch):
+    import formation_sim.runtime.launch as launch
+
+    monkeypatch.setattr(launch, 'DISCOVERY_SERVER_PROGRAM', 'no-such-discovery-server')
+    with pytest.raises(RunError, match='the discovery server needs no-such-discovery-server .*neither .*/no-such-discovery-server nor'):
+        _plan(tmp_path, 'exact', discovery='server')
+    with pytest.raises(RunError, match="discovery must be one of \\('simple', 'server'\\), got 'multicast'"):
+        _plan(tmp_path, 'exact', discovery='multicast')
+    assert not (tmp_path / 'run').exists()
+
+
 def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_agent(tmp_path):
     plan = _plan(tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': math.pi / 2, 'robots_per_process': 2}))
     paths = plan.write_inputs()

@@ -80,6 +80,10 @@ class PoseBook:
         """A pose of every robot the agent senses has arrived."""
         return all(robot in self._latest for robot in self.robots)
 
+    def missing(self) -> list[int]:
+        """The robots the agent senses whose first pose has not arrived."""
+        return [robot for robot in self.robots if robot not in self._latest]
+
     def fresh(self, robot: int, *, t: float, now: float) -> RobotPose:
         """The latest pose of `robot` if it is fresh at wall time `now` (trigger time t), else PoseError."""
         pose = self._latest.get(robot)

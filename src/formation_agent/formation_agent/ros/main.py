@@ -29,13 +29,14 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
 from formation_agent.ros.faults import FaultInjectionError
 from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError
 from formation_agent.ros.parameters import ParameterError, read_parameters
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import agent_namespace
 
 
@@ -81,11 +82,16 @@ def _build_nodes(options: argparse.Namespace, ros_arguments: Sequence[str]) -> l
         return [FormationAgentNode(namespace=None if named else _namespace_from_agent_id())]
     ids = [int(text) for text in options.agents.split(',') if text.strip()]
     packed = len(ids) > 1
+    # Packed (large teams): no per-node parameter, type description and /rosout endpoints, which
+    # every process of the run would discover (~5 of ~20 endpoints an agent node has); the log
+    # still goes to the process's own output.
+    services = [] if not packed else [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)]
     return [
         FormationAgentNode(
             namespace=agent_namespace(agent_id),
             start_parameter_services=not packed,
-            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id)],
+            enable_rosout=not packed,
+            parameter_overrides=[Parameter('agent_id', Parameter.Type.INTEGER, agent_id), *services],
         )
         for agent_id in ids
     ]
@@ -112,7 +118,12 @@ def main(args: Sequence[str] | None = None) -> int:
     failure: str | None = None
     with StopSignals() as stop:
         try:
+            began = time.monotonic()
             nodes = _build_nodes(options, argv)
+            if len(nodes) > 1:  # how long a packed process takes to be up (large teams)
+                nodes[0].get_logger().info(
+                    f'{len(nodes)} agent nodes created in {time.monotonic() - began:.1f} s (agents {options.agents})'
+                )
             executor = make_executor(options.executor)
             for node in nodes:
                 executor.add_node(node)
@@ -150,4 +161,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

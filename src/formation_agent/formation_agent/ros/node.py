@@ -26,8 +26,10 @@ injected for tests (`formation_agent.ros.faults`); parameters: `formation_agent.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
+from collections.abc import Iterator
 
 import rclpy
 from rclpy.duration import Duration
@@ -62,6 +64,20 @@ last messages too: zero command, report): Fast DDS repairs a message lost on the
 writer's next heartbeat (every 3 s by default, 0.1 s in a run: `formation_sim.runtime`'s
 fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 
+DISCOVERY_CHECK = 0.1
+"""Seconds between an agent's looks at its endpoints during discovery: it announces its Status
+(step −1) when its readiness changes, not every look (reliable, transient local: a simulator that
+matches later still gets the latest), and once ready again every DISCOVERY_REANNOUNCE seconds
+until step 0: a sign of life for a simulator that saw its liveliness lease lapse meanwhile (a
+machine starting 1000 agents is slow to assert it)."""
+
+DISCOVERY_REANNOUNCE = 1.0
+
+DISCOVERY_LOG_AFTER = 2.0
+DISCOVERY_LOG_PERIOD = 5.0
+"""An agent not yet connected says what it waits for after DISCOVERY_LOG_AFTER seconds, then
+every DISCOVERY_LOG_PERIOD seconds."""
+
 
 class AgentNodeError(ValueError):
     """A violation of the lock-step protocol seen by an agent."""
@@ -79,6 +95,7 @@ class FormationAgentNode(Node):
         *,
         namespace: str | None = None,
         start_parameter_services: bool = True,
+        enable_rosout: bool = True,
         parameter_overrides: list[Parameter] | None = None,
         core=None,
         context=None,
@@ -92,6 +109,7 @@ class FormationAgentNode(Node):
             NODE_NAME,
             namespace=namespace,
             start_parameter_services=start_parameter_services,
+            enable_rosout=enable_rosout,
             parameter_overrides=parameter_overrides or [],
             context=context,
         )
@@ -171,7 +189,11 @@ class FormationAgentNode(Node):
         self._simulator_seen = False
         self._simulator_lost_at: float | None = None
         self._simulator_lease_expired = False
-        self._discovery = self.create_timer(0.1, self._announce)
+        self._created = time.monotonic()
+        self._announced: bool | None = None  # the readiness of the last discovery Status
+        self._next_announcement = 0.0
+        self._next_discovery_log = self._created + DISCOVERY_LOG_AFTER
+        self._discovery = self.create_timer(DISCOVERY_CHECK, self._announce)
 
     @property
     def rejected(self) -> dict[str, int]:
@@ -186,20 +208,63 @@ class FormationAgentNode(Node):
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""
-        listeners = 1 + self.config.extra_subscribers
-        return (
-            all(pub.get_subscription_count() >= listeners for pub in self._info_pubs.values())
-            and all(sub.get_publisher_count() >= 1 for sub in self._info_subs)
-            and self.sensing.ready()
-            and self.output.publisher.get_subscription_count() >= listeners
-            and self._status_pub.get_subscription_count() >= listeners
-            and self._report_pub.get_subscription_count() >= listeners
-            and self._step_sub.get_publisher_count() >= 1
-        )
+        return next(self._gaps(), None) is None
+
+    def discovery_gaps(self) -> list[str]:
+        """What discovery still waits for, one phrase per endpoint (empty: connected)."""
+        return list(self._gaps())
+
+    def _gaps(self) -> Iterator[str]:
+        """What discovery still waits for, one at a time (`connected` stops at the first: with
+        many agents in one process, every look at a match count costs)."""
+        extra = self.config.extra_subscribers
+        listeners = 1 + extra
+        others = ['a recorder'] if extra == 1 else [f'{extra} listeners'] if extra else []
+
+        def readers(publisher, peer: str) -> Iterator[str]:
+            have = publisher.get_subscription_count()
+            if have < listeners:
+                yield f'readers of {publisher.topic_name}: {have} of {listeners} ({", ".join([peer, *others])})'
+
+        for j, publisher in self._info_pubs.items():
+            yield from readers(publisher, f'agent {j}')
+        for j, subscription in zip(self.neighbour_ids, self._info_subs):
+            if subscription.get_publisher_count() < 1:
+                yield f'a writer of {trigger_info_topic(j, self.agent_id)} (agent {j})'
+        yield from readers(self.output.publisher, 'the robot' if self.config.robot != 'none' else 'the simulator')
+        yield from readers(self._status_pub, 'the simulator or coordinator')
+        yield from readers(self._report_pub, 'the simulator or coordinator')
+        if self._step_sub.get_publisher_count() < 1:
+            yield f'a writer of {STEP_TOPIC} (the simulator or coordinator)'
+        # Last: whether a service is there is looked up in the whole ROS graph (rmw_fastrtps
+        # walks every endpoint it knows), where a match count is one number.
+        yield from self.sensing.gaps()
 
     def _announce(self) -> None:
-        if self.step is None and self._status_pub.get_subscription_count() >= 1:
-            self._publish_status(step_index=DISCOVERY_STEP, ready=self.connected())
+        """During discovery: a Status (step −1) whenever the agent's readiness changes and every
+        DISCOVERY_REANNOUNCE seconds once ready, and now and then a log line saying what it still
+        waits for."""
+        if self.step is not None:
+            return
+        now = time.monotonic()
+        logging = now >= self._next_discovery_log
+        gaps = self.discovery_gaps() if logging else list(itertools.islice(self._gaps(), 1))
+        ready = not gaps
+        changed = ready != self._announced
+        if changed or (ready and now >= self._next_announcement):
+            self._announced = ready
+            self._next_announcement = now + DISCOVERY_REANNOUNCE
+            self._publish_status(step_index=DISCOVERY_STEP, ready=ready)
+            if ready and changed:
+                self.get_logger().info(
+                    f'agent {self.agent_id}: every endpoint matched {time.monotonic() - self._created:.1f} s after the node '
+                    'started; waiting for step 0'
+                )
+        if gaps and logging:
+            self._next_discovery_log = now + DISCOVERY_LOG_PERIOD
+            self.get_logger().info(
+                f'agent {self.agent_id}: discovery for {now - self._created:.0f} s, still waiting for: {"; ".join(gaps)}'
+            )
 
     # -- steps ----------------------------------------------------------------------------------
 

@@ -27,14 +27,32 @@ from formation_msgs_py.types import SensedState
 SensedGetter = Callable[[], SensedState]
 
 
+SERVICE_LOOKS = (0.1, 1.0)
+"""Seconds between looks for the sensing service during discovery, doubling from the first to the
+second while it is not there: rmw_fastrtps answers whether a service is there by walking every
+endpoint of the ROS graph it knows (1000 agents: ~20 000), where a match count is one number."""
+
+
 class ServiceSensing:
     """The simulator's sensing service: one request per trigger, answered asynchronously."""
 
     def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
         self._client = node.create_client(Trigger, 'sense')
+        self._name = node.resolve_service_name('sense')
+        self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
+        self._next_look = 0.0
+        self._wait = SERVICE_LOOKS[0]
 
     def ready(self) -> bool:
-        return self._client.service_is_ready()
+        if not self._found and time.monotonic() >= self._next_look:
+            self._found = self._client.service_is_ready()
+            self._next_look = time.monotonic() + self._wait
+            self._wait = min(2.0 * self._wait, SERVICE_LOOKS[1])
+        return self._found
+
+    def gaps(self) -> list[str]:
+        """What sensing still waits for (empty: ready)."""
+        return [] if self.ready() else [f'the sensing service {self._name} (served by the simulator)']
 
     def start(self, epoch: float) -> None:
         """Wall clock from `epoch` on (the simulator stamps its answers itself)."""
@@ -81,6 +99,14 @@ class PoseSensing:
     def ready(self) -> bool:
         """Every pose topic has a writer and a first pose of every robot has arrived."""
         return all(sub.get_publisher_count() >= 1 for sub in self._subs) and self.book.has_all()
+
+    def gaps(self) -> list[str]:
+        """What sensing still waits for (empty: ready)."""
+        unmatched = [sub.topic_name for sub in self._subs if sub.get_publisher_count() < 1]
+        if unmatched:
+            return [f'a writer of the robots\' poses on {", ".join(unmatched)}']
+        missing = self.book.missing()
+        return [f'a first pose on {", ".join(self._config.robot_pose_topic(robot) for robot in missing)}'] if missing else []
 
     def start(self, epoch: float) -> None:
         self._epoch = epoch

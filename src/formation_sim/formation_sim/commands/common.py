@@ -57,6 +57,16 @@ DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v
 UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
+def POSITIVE_INT_OR_AUTO(text: str) -> int | str:  # noqa: N802 - an argparse type, named as the others
+    """An integer >= 1, or 'auto'."""
+    if text == 'auto':
+        return text
+    try:
+        return POSITIVE_INT(text)
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
+
+
 def bounded_int(low: int, high: int) -> Callable[[str], float]:
     return _number(f'an integer in [{low}, {high}]', lambda v: low <= v <= high, integer=True)
 
@@ -152,7 +162,14 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
         default='exact',
         help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
     )
-    parser.add_argument('--agents-per-process', type=POSITIVE_INT, default=1, metavar='K', help='agent nodes sharing one process (default 1)')
+    parser.add_argument(
+        '--agents-per-process',
+        type=POSITIVE_INT_OR_AUTO,
+        default=1,
+        metavar='K',
+        help='agent nodes sharing one process (default 1: every agent its own process); auto: one each up to 24 agents, '
+        'beyond that the team in at most 6 processes (for large teams: BENCHMARKS.md)',
+    )
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
     parser.add_argument(
         '--sample-dt',

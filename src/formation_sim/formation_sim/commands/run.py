@@ -44,6 +44,12 @@ def register(subparsers) -> None:
         help='let DDS discovery reach the local network (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET) for agents on '
         'other machines; default: this machine only (LOCALHOST)',
     )
+    parser.add_argument(
+        '--discovery-server',
+        action='store_true',
+        help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
+        'process announcing itself to every other: for large teams (BENCHMARKS.md)',
+    )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -63,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             timeout=args.timeout,
             localhost_only=not args.network,
+            discovery='server' if args.discovery_server else 'simple',
         ).run()
     except RunError as error:
         return refuse('run', error)

@@ -50,9 +50,9 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterError, ParameterSpec, parameter_help, read_parameters
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, make_executor
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
-from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
     RECORDER_TOPIC,
@@ -91,6 +91,7 @@ EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
+DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
@@ -222,6 +223,12 @@ class FormationCoordinatorNode(Node):
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
         self._timer = self.create_timer(0.1, self._tick)
+        # Discovery as the agents report it: who has announced itself, who is ready (step 0
+        # goes as soon as the last one is and the node's own endpoints are matched).
+        self._announced: set[int] = set()
+        self._ready: set[int] = set()
+        self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
+        self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
 
     # -- what a subclass with a world of its own replaces ---------------------------------------
 
@@ -322,11 +329,11 @@ class FormationCoordinatorNode(Node):
             self._end_at_horizon()
 
     def _end_at_horizon(self) -> None:
+        self._finished_at = time.monotonic()
         self.graph = self.snapshot_graph()
         self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
         self._publish(self._step_pub, encode_step(self.step))
         self.finished = True
-        self._finished_at = time.monotonic()
         self._reached = self.horizon
 
     @property
@@ -437,13 +444,16 @@ class FormationCoordinatorNode(Node):
         if not self.finished:
             self._check_lost(now)
         if self.step is None:
-            if self._connected():
+            if len(self._ready) == len(self.agents) and self._connected():  # (cheap while agents are missing)
                 self._start()
             elif now - self._created > self.discovery_timeout:
                 raise DiscoveryError(
                     f'discovery did not complete within {self.discovery_timeout} s; still missing: '
                     + '; '.join(self._discovery_gaps())
                 )
+            elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
+                self._next_discovery_progress = now + self.progress_period
+                self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
             return
         if self.finished:
             return
@@ -453,11 +463,9 @@ class FormationCoordinatorNode(Node):
             self._print_progress()
 
     def _start(self) -> None:
-        self._started = time.monotonic()
+        self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
-            with contextlib.suppress(OSError):
-                print(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})', flush=True)
-        self.graph = self.snapshot_graph()
+            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
         self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._begin()
 
@@ -522,7 +530,33 @@ class FormationCoordinatorNode(Node):
             self._reject(STATUS_TOPIC, error.reason, str(error))
             return
         self.book.accept_status(status)
+        if self.step is None and status.step_index == DISCOVERY_STEP:
+            self._on_announcement(status)
+            return
         self._after_status()
+
+    def _on_announcement(self, status) -> None:
+        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
+        now = time.monotonic()
+        self._announced.add(status.agent)
+        (self._ready.add if status.ready else self._ready.discard)(status.agent)
+        book = self.agents[status.agent]
+        if book.lost is not None and book.lease_expired:
+            # It speaks after its lease lapsed while a busy machine started many processes: alive.
+            # (DDS said so again for most, but 3 agents of 1000 stayed "expired" for minutes, and
+            # step 0 waited for them; ready agents announce themselves every second until step 0.)
+            book.lost = None
+        if len(self._announced) == len(self.agents):
+            self._marks.setdefault('agents_announced', now)
+        if len(self._ready) == len(self.agents):
+            self._marks.setdefault('agents_ready', now)
+            if self._connected():
+                self._start()
+
+    def _say(self, line: str) -> None:
+        """A line on stdout, where `formation run` shows the progress lines."""
+        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
+            print(line, flush=True)
 
     def _after_status(self) -> None:
         """Lock-step settles steps here; the wall clock needs nothing."""
@@ -584,7 +618,10 @@ class FormationCoordinatorNode(Node):
     # -- results --------------------------------------------------------------------------------
 
     def snapshot_graph(self) -> dict:
-        """Publishers, subscriptions, services and clients of every node in the graph."""
+        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
+
+        Taken at the final Step, while every agent is still there (and, for a run that stops
+        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
         graph = {}
         for name, namespace in self.get_node_names_and_namespaces():
             key = f'{namespace.rstrip("/")}/{name}'
@@ -596,12 +633,29 @@ class FormationCoordinatorNode(Node):
             }
         return graph
 
+    def mark(self, name: str) -> None:
+        """Note the time the run reached `name` (extra.timestamps)."""
+        self._marks[name] = time.monotonic()
+
+    def timestamps(self) -> dict[str, float]:
+        """When this node reached each mark of the run, as Unix times (summary.json
+        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+        final_reports (every agent's final report in, or the wait for them over), delivered (what
+        this node published acknowledged)."""
+        marks = dict(self._marks)
+        if self._finished_at is not None:
+            marks['final_step'] = self._finished_at
+        offset = time.time() - time.monotonic()
+        return {name: at + offset for name, at in marks.items()}
+
     def _run_extra(self, reached: float) -> dict:
         """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
         return {
             'clock': self.clock_mode,
             'steps': self.steps,
             'discovery_wall_time': (self._started or self._created) - self._created,
+            'timestamps': self.timestamps(),
             'reached_time': reached,
             'failure': self.failure_info,
             **self.book.message_counts(),
@@ -631,6 +685,10 @@ class FormationCoordinatorNode(Node):
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
+        if self._finished_at is None:
+            self._finished_at = time.monotonic()
+        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
+            self.graph = self.snapshot_graph()
         self.finished = True
         self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
         self.flush()
@@ -693,8 +751,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
                 if node.failure is not None:
                     raise node.failure
             node.collect_final_reports(executor)
+            node.mark('final_reports')
             node.after_final_step(executor)
             node.wait_for_delivery(executor)
+            node.mark('delivered')
             if node.progress_period > 0.0:
                 node._print_progress()
             if node.out_dir:
@@ -751,4 +811,4 @@ def _tell(line: str) -> None:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

@@ -41,6 +41,13 @@ def _family(base: str) -> list[Path]:
     return [SHM_DIR / base, SHM_DIR / f'sem.{base}_mutex', SHM_DIR / f'{base}_el']
 
 
+def fastdds_names() -> set[str]:
+    """The names of the Fast DDS files in /dev/shm now (of every process on the machine)."""
+    with contextlib.suppress(OSError):
+        return {name for name in os.listdir(SHM_DIR) if _base(name)}
+    return set()
+
+
 def held_files(pid: int) -> set[str]:
     """The Fast DDS files process `pid` maps (segments, ports) or holds open (its lock files)."""
     held = set()

@@ -56,7 +56,7 @@ class RobotFleet:
         self.plan = LaunchPlan(
             scenario=self.scenario, backend=robots.model, out_dir=self.out_dir, horizon=self.scenario.horizon,
             clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor='events',
-            step_listeners=0, inject={}, robots=robots,
+            step_listeners=0, inject={}, robots=robots, localhost_only=localhost_only,
         )  # fmt: skip
         self.supervisor: Supervisor | None = None
         self.died: list = []  # robot processes that exited on their own
@@ -74,7 +74,7 @@ class RobotFleet:
         self.plan = dataclasses.replace(self.plan, out_dir=out)
         params = self.plan.write_robot_inputs()
         (out / LOG_DIR).mkdir(exist_ok=True)
-        env = self.plan.environment(self.domain_id, localhost_only=self.localhost_only, extra_env=self.extra_env)
+        env = self.plan.environment(self.domain_id, extra_env=self.extra_env)
         self.supervisor = Supervisor(log_dir=self.plan.out_dir / LOG_DIR, env=env)
         trapped = threading.current_thread() is threading.main_thread()
         previous = {sig: signal.signal(sig, lambda *_: self._stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} if trapped else {}
@@ -89,7 +89,7 @@ class RobotFleet:
                     self.died = dead
                     status = 3
                     break
-                self.supervisor.note_shm_files()
+                self.supervisor.note_shm_files(time.monotonic())
                 time.sleep(max(POLL_PERIOD, 0.25))
         finally:
             self.supervisor.stop((5.0, 3.0), domain_id=self.domain_id)

@@ -25,7 +25,9 @@ import math
 import os
 import random
 import shlex
+import shutil
 import socket
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -36,9 +38,13 @@ from formation_sim.model.scenario import Scenario, dump_scenario
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
 BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
+DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
+DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
 POSE_TYPES = ('odom', 'pose')
 DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
+ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
+AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
@@ -48,6 +54,7 @@ LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
 FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
+RECORDER_DRAIN_QUIET = 0.1  # [s] the run's recorder closes its bag once nothing came for this long
 # The console script of each node module (setup.py of formation_agent and formation_sim).
 COMMANDS = {
     AGENT_MODULE: 'formation_agent',
@@ -164,16 +171,34 @@ class RobotOptions:
 class ProcessSpec:
     """One process of a run: its name, the arguments after `python`, and how it is expected to end."""
 
-    name: str  # 'simulator', 'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', 'robots_<i>-<j>'
+    name: str  # 'simulator', 'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', 'robots_<i>-<j>', 'discovery_server'
     args: tuple[str, ...]
     expected_exit: bool  # leaves by itself when the run completes (else it is stopped)
     keeper: bool = False  # the run's time keeper: its exit ends the run, its progress lines are shown
+    program: str | None = None  # the program `args` go to (None: this Python)
+    env: tuple[tuple[str, str], ...] = ()  # variables of this process alone, besides the run's environment
 
     @property
     def command(self) -> str:
-        """The same process started by hand: its console script and arguments."""
+        """The same process started by hand: its console script (or program) and arguments."""
+        if self.program is not None:
+            return shlex.join([self.program, *self.args])
         module, *rest = self.args[1:]
         return shlex.join([COMMANDS[module], *rest])
+
+
+def resolve_agents_per_process(value: int | str, n: int) -> int:
+    """How many agent nodes share a process: `value` itself, or for 'auto' one process per agent up
+    to ONE_PROCESS_PER_AGENT_UP_TO agents (the mission's default, within localhost discovery's ~30
+    processes) and beyond that the team split into at most AUTO_AGENT_PROCESSES processes: on 2 cores, 100
+    to 1000 agents started and stepped fastest in 4-6 processes, where every process is one more
+    participant for every other to discover and to keep the ROS graph of (1000 agents in 10
+    processes took longer to discover than in 5)."""
+    if value == 'auto':
+        return 1 if n <= ONE_PROCESS_PER_AGENT_UP_TO else -(-n // AUTO_AGENT_PROCESSES)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise RunError(f"agents_per_process must be an integer >= 1 or 'auto', got {value!r}")
+    return value
 
 
 def _groups(ids: list[int], size: int) -> list[list[int]]:
@@ -200,6 +225,9 @@ class LaunchPlan:
     step_listeners: int
     inject: dict
     robots: RobotOptions | None
+    discovery: str = 'simple'  # one of DISCOVERY_MODES
+    discovery_port: int | None = None  # the discovery server's UDP port (chosen when the run starts)
+    localhost_only: bool = True  # discovery and traffic stay on this machine
 
     @property
     def keeper(self) -> str:
@@ -214,7 +242,7 @@ class LaunchPlan:
 
     def process_count(self) -> int:
         robots = len(_groups(list(self.scenario.agent_ids), self.robots.robots_per_process)) if self.simulated_robots else 0
-        return len(self.agent_groups()) + 1 + int(self.record) + robots
+        return len(self.agent_groups()) + 1 + int(self.record) + robots + int(self.discovery == 'server')
 
     # -- inputs ------------------------------------------------------------------------------------
 
@@ -269,6 +297,9 @@ class LaunchPlan:
                     'ros__parameters': {
                         'output': str((out / BAG_DIR).resolve()),
                         'topics': [f'{name}:{msgtype}' for name, msgtype in self.recorder_topics()],
+                        # Stopped last, once every writer has left and its messages were
+                        # acknowledged by the recorder: they are in its readers already.
+                        'drain_quiet': RECORDER_DRAIN_QUIET,
                     }
                 }
             }
@@ -295,17 +326,31 @@ class LaunchPlan:
     # -- processes ---------------------------------------------------------------------------------
 
     def processes(self, paths: dict[str, Path]) -> list[ProcessSpec]:
-        """Every process in the order it starts: recorder, robots, time keeper, agents."""
+        """Every process in the order it starts: discovery server, recorder, robots, time keeper, agents."""
         specs = []
+        if self.discovery == 'server':
+            specs.append(self.discovery_server_process())
         if self.record:
             specs.append(ProcessSpec(name='recorder', args=('-m', 'formation_sim.runtime.recorder', '--ros-args', '--params-file', str(paths['recorder'])), expected_exit=False))
         if self.simulated_robots:
             specs += self.robot_processes(paths['robots'])
-        specs.append(ProcessSpec(name=self.keeper, args=self._keeper_args(paths), expected_exit=True, keeper=True))
+        # Through a discovery server a client learns only of the endpoints it shares topics with;
+        # the time keeper, which writes every node's endpoints into graph.json, must see them all.
+        whole_graph = (('ROS_SUPER_CLIENT', 'TRUE'),) if self.discovery == 'server' else ()
+        specs.append(ProcessSpec(name=self.keeper, args=self._keeper_args(paths), expected_exit=True, keeper=True, env=whole_graph))
         for group in self.agent_groups():
             args = ('-m', AGENT_MODULE, '--agents', ','.join(map(str, group)), '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents']))
             specs.append(ProcessSpec(name=_group_name('agent', group), args=args, expected_exit=True))
         return specs
+
+    def discovery_server_process(self) -> ProcessSpec:
+        """Fast DDS's discovery server: every other process of the run is its client
+        (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
+        announcing itself to every other.  It listens on this machine only, unless the run's
+        discovery reaches the network (then on every interface, for clients elsewhere)."""
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
+        return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
     def robot_processes(self, params_file: Path) -> list[ProcessSpec]:
         """The simulated robots, `robots_per_process` to a process; they run until stopped."""
@@ -350,22 +395,57 @@ class LaunchPlan:
 
     # -- environment -------------------------------------------------------------------------------
 
-    def environment(self, domain_id: int, *, localhost_only: bool, extra_env: dict[str, str]) -> dict[str, str]:
-        """The environment of every child: its ROS domain, logs, discovery range, our packages."""
+    def environment(self, domain_id: int, *, extra_env: dict[str, str]) -> dict[str, str]:
+        """The environment of every child: its ROS domain, logs, discovery, our packages."""
         env = dict(os.environ)
         env['ROS_DOMAIN_ID'] = str(domain_id)
         env['ROS_LOG_DIR'] = str((self.out_dir / LOG_DIR / 'ros').resolve())
         env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
         env['PYTHONUNBUFFERED'] = '1'
-        if localhost_only:
+        if self.localhost_only:
             env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         else:
             env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
+        if self.discovery == 'server':
+            env['ROS_DISCOVERY_SERVER'] = f'127.0.0.1:{self.discovery_port}'  # a client of the run's server
+        else:
+            env.pop('ROS_DISCOVERY_SERVER', None)  # a user's server is not the run's
         if self.process_count() > MANY_PROCESSES:
             env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        # numpy's OpenBLAS starts a thread per core at import, which costs every child ~0.1 s of
+        # CPU while all of them start at once; no node does linear algebra worth a thread.
+        env.setdefault('OPENBLAS_NUM_THREADS', '1')
         env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
         env.update(extra_env)
         return with_our_packages(env)
+
+
+def discovery_server_program() -> str:
+    """The path of Fast DDS's discovery server program, or RunError saying where it was looked for.
+
+    The ros-fastrtps wheel installs it beside this Python (bin/fast-discovery-server); it finds
+    its libraries through LD_LIBRARY_PATH, which the wheels' bootstrap sets for every Python
+    process and hence for the run's children.  A ROS install has it on PATH."""
+    beside = Path(sys.executable).parent / DISCOVERY_SERVER_PROGRAM
+    found = str(beside) if os.access(beside, os.X_OK) else shutil.which(DISCOVERY_SERVER_PROGRAM)
+    if found is None:
+        raise RunError(
+            f'the discovery server needs {DISCOVERY_SERVER_PROGRAM} (Fast DDS, installed with the ros-fastrtps wheel): '
+            f'neither {beside} nor any {DISCOVERY_SERVER_PROGRAM} on PATH'
+        )
+    return found
+
+
+def free_udp_port(domain_id: int) -> int:
+    """A UDP port free on this machine now, outside the RTPS ports of ROS domain `domain_id`
+    (7400 + 250 d + [0, 250)), for the run's discovery server."""
+    first = 7400 + 250 * domain_id
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind(('127.0.0.1', 0))
+            port = probe.getsockname()[1]
+        if not first <= port < first + 250:
+            return port
 
 
 def with_our_packages(env: dict[str, str]) -> dict[str, str]:

@@ -48,13 +48,17 @@ from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_ou
 from formation_sim.runtime.launch import (
     BACKENDS,
     BAG_DIR,
+    DISCOVERY_MODES,
     DOMAIN_RANGE,
     INJECT_KEYS,
     LOG_DIR,
     LaunchPlan,
     RobotOptions,
     RunError,
+    discovery_server_program,
+    free_udp_port,
     reserve_domain,
+    resolve_agents_per_process,
 )
 from formation_sim.runtime.results import (
     EXIT_FAILED,
@@ -66,10 +70,13 @@ from formation_sim.runtime.results import (
     annotate,
     check_recording,
     lost_or_failed,
+    describe_phases,
+    phases,
     read_summary,
     recover_bag,
     strangers,
     summary_of_what_is_known,
+    timeline,
 )
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
 
@@ -96,7 +103,7 @@ class FormationRun:
         force: bool = False,
         horizon: float | None = None,
         domain_id: int | None = None,
-        agents_per_process: int = 1,
+        agents_per_process: int | str = 1,
         record: bool = True,
         localhost_only: bool = True,
         progress: bool = True,
@@ -112,6 +119,7 @@ class FormationRun:
         step_listeners: int = 0,
         backend: str = 'exact',
         robots: RobotOptions | None = None,
+        discovery: str = 'simple',
     ) -> None:
         """Check everything that can be checked before any process starts or anything on disk changes.
 
@@ -129,10 +137,15 @@ class FormationRun:
         'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', …) -> command put
         before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
         stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
+        `agents_per_process`: agent nodes sharing one process, or 'auto' (one process per agent
+        up to 24 agents, beyond that the team in at most 6 processes: launch.resolve_agents_per_process).
         `executor`: the rclpy executor of the time keeper and agent processes, 'events'
         (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
         `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
         must hear every Step: step 0 waits until that many more readers of it are matched.
+        `discovery`: 'simple' (Fast DDS's simple discovery, every participant announces itself to
+        every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
+        children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
         """
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
@@ -153,8 +166,7 @@ class FormationRun:
             raise RunError(f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {sample_period!r}')
         if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0):
             raise RunError(f'timeout must be a finite number of seconds > 0, got {timeout!r}')
-        if agents_per_process < 1:
-            raise RunError(f'agents_per_process must be >= 1, got {agents_per_process}')
+        agents_per_process = resolve_agents_per_process(agents_per_process, len(self.scenario.agent_ids))
         if self.scenario.dimension > 3:
             raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
         if backend not in BACKENDS:
@@ -199,6 +211,10 @@ class FormationRun:
             )
         if step_listeners < 0:
             raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
+        if discovery not in DISCOVERY_MODES:
+            raise RunError(f'discovery must be one of {DISCOVERY_MODES}, got {discovery!r}')
+        if discovery == 'server':
+            discovery_server_program()  # RunError now, before anything starts, if it is not installed
         self.step_listeners = step_listeners
         if self.out_dir is not None:  # last: every other argument is refused before the folder is looked at
             try:
@@ -228,15 +244,18 @@ class FormationRun:
             step_listeners=step_listeners,
             inject=self.inject,
             robots=robots,
+            discovery=discovery,
+            localhost_only=localhost_only,
         )
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
+        self.marks: dict[str, float] = {}
         self._interrupted = threading.Event()
         self._started_at = 0.0
 
     def _environment(self, domain_id: int, processes: int | None = None) -> dict[str, str]:
         """The children's environment (launch.LaunchPlan.environment)."""
-        return self.plan.environment(domain_id, localhost_only=self.localhost_only, extra_env=self.extra_env)
+        return self.plan.environment(domain_id, extra_env=self.extra_env)
 
     @property
     def _children(self) -> list[Child]:
@@ -246,13 +265,15 @@ class FormationRun:
 
     def run(self) -> RunResult:
         started = self._started_at = time.monotonic()
+        self.marks = {'run': time.time()}  # the orchestrator's marks of the run (Unix times; extra.timeline)
         lost: Child | None = None
         with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
                 self.out_dir = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force)
             except RunFolderError as error:
                 raise RunError(str(error)) from None
-            self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir)
+            port = free_udp_port(domain_id) if self.plan.discovery == 'server' else None
+            self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir, discovery_port=port)
             paths = self.plan.write_inputs()
             (self.out_dir / LOG_DIR).mkdir(exist_ok=True)
             self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.launch_prefix)
@@ -260,6 +281,7 @@ class FormationRun:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
                 self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id)
+                self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
         notes: list[str] = []  # what the message adds after the failure
@@ -274,6 +296,7 @@ class FormationRun:
                 launched=self._started_at, notes=notes,
             )  # fmt: skip
         failure = None
+        run_phases: dict[str, float] = {}
         if data is not None:
             failure = annotate(data, lost, status, message, launched=self._started_at)
             check = self._check_recording(data, bag, notes)
@@ -292,6 +315,10 @@ class FormationRun:
                     notes.append(check.describe_missing())
             if check is not None and check.foreign and status != EXIT_INTERRUPTED:
                 notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
+            self.marks['checked'] = time.time()
+            extra = data.setdefault('extra', {})
+            extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
+            extra['phases'] = run_phases = phases(extra['timeline'])
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -319,10 +346,12 @@ class FormationRun:
             message=message,
             failure=failure,
             bag_recovered=recovered,
+            phases=run_phases,
         )
         if self.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
-            self._say(f'{outcome} in {result.wall_time:.1f} s: {message or self.last_progress}', end=True)
+            spent = f' ({describe_phases(run_phases)})' if run_phases else ''
+            self._say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result
 
     def _check_recording(self, data: dict, bag: Path, notes: list[str]):
@@ -376,19 +405,22 @@ class FormationRun:
             child = supervisor.start(spec)
             if spec.keeper:
                 keeper = child
+        self.marks['spawned'] = time.time()
         if self.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
+            server = f', discovery server on port {self.plan.discovery_port}' if self.plan.discovery == 'server' else ''
             self._say(
                 f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent process(es)'
-                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.record else ""} started; waiting for discovery'
+                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.record else ""}{server} started; '
+                'waiting for discovery'
             )
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
         shown = ''
         lost: Child | None = None
-        # Fast DDS maps a peer's shared-memory port file when it first sends to it: look often
-        # (each look costs ~0.6 ms per child), but spend at most ~1 % of a core on it.
-        snapshot_period = max(0.25, 0.06 * len(supervisor.children))
+        # The children's Fast DDS files, noted while they live (a look at /dev/shm; the children's
+        # memory maps only when it changed: supervise.Supervisor.note_shm_files).
+        snapshot_period = 0.2
         next_snapshot = time.monotonic()
         while True:
             if self._interrupted.is_set():
@@ -401,10 +433,11 @@ class FormationRun:
                 self._say(shown)
             supervisor.note_exits(now)
             if now >= next_snapshot:
-                supervisor.note_shm_files()
+                supervisor.note_shm_files(now)
                 next_snapshot = now + snapshot_period
             code = keeper.process.poll()
             if code is not None:
+                self.marks['keeper_exited'] = time.time()
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
                     if not failed:

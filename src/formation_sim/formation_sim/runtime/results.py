@@ -42,6 +42,7 @@ class RunResult:
     message: str = ''
     failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
     bag_recovered: bool = False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
+    phases: dict[str, float] = dataclasses.field(default_factory=dict)  # extra.phases: start, stepping, end [s]
 
     @property
     def ok(self) -> bool:
@@ -57,6 +58,8 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
     """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file."""
     if not bag.is_dir():
         return False
+    if recorder is not None and recorder.process.returncode == 0 and (bag / 'metadata.yaml').is_file():
+        return False  # the recorder closed it and said so (it exits 0 only then)
     from formation_sim.bag.io import BagError
     from formation_sim.bag.recovery import reindex
 
@@ -71,6 +74,32 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
         return False
     notes.append(f'{how} was recovered ({recovery.message_count} messages kept)')
     return True
+
+
+def timeline(keeper: dict[str, float], marks: dict[str, float], *, started: float) -> dict[str, float]:
+    """summary.json's extra.timeline: every mark of the run in seconds since `started` (the Unix
+    time the run began), in order: the time keeper's (`keeper`, its extra.timestamps) and the
+    orchestrator's (`marks`): spawned (every child started), keeper_exited, stopped (every child
+    gone, the recorder last), checked (the bag checked against the summary)."""
+    points = {name: at - started for name, at in {**keeper, **marks}.items() if isinstance(at, (int, float))}
+    return dict(sorted(points.items(), key=lambda item: item[1]))
+
+
+def phases(marks: dict[str, float]) -> dict[str, float]:
+    """summary.json's extra.phases from its timeline: `start` (spawn, imports, DDS participants,
+    discovery: up to step 0), `stepping` (step 0 to the final step), `end` (final reports,
+    acknowledgements, the summary, every process's exit, the bag closed and checked)."""
+    spans = {'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
+    return {
+        phase: marks[last] - (0.0 if first is None else marks[first])
+        for phase, (first, last) in spans.items()
+        if last in marks and (first is None or first in marks)
+    }
+
+
+def describe_phases(phases: dict[str, float]) -> str:
+    """'start 1.2 s, stepping 0.9 s, end 0.5 s'."""
+    return ', '.join(f'{phase} {seconds:.1f} s' for phase, seconds in phases.items())
 
 
 def read_summary(path: Path, notes: list[str]) -> dict | None:

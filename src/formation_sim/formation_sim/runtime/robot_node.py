@@ -56,7 +56,7 @@ from formation_agent.ros.parameters import (
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import (
     agent_namespace,
     robot_command_topic,
@@ -318,4 +318,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from collections.abc import Sequence
 
@@ -48,6 +47,7 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     decode_command,
     encode_pose_array,
@@ -325,11 +325,11 @@ class FormationSimulatorNode(FormationCoordinatorNode):
         if t >= self.horizon:
             self.world.advance(self.horizon)
             self._sampler.event()
+            self._finished_at = time.monotonic()
             self.graph = self.snapshot_graph()
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
             self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
-            self._finished_at = time.monotonic()
         self.publish_samples()
 
     def _sense_realtime(self, agent: int):
@@ -429,9 +429,9 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             self._sampler.grid_until(self.horizon)
             self.world.advance(self.horizon)
             self._sampler.event()
+            self._finished_at = time.monotonic()
             self.graph = self.snapshot_graph()
             self.finished = True
-            self._finished_at = time.monotonic()
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
             self.publish_samples()
             return
@@ -502,4 +502,4 @@ def main(args: Sequence[str] | None = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    exit_process(main())

@@ -21,10 +21,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from formation_sim.runtime.fastdds_shm import domain_port_files, held_files, remove_orphans
+from formation_sim.runtime.fastdds_shm import domain_port_files, fastdds_names, held_files, remove_orphans
 from formation_sim.runtime.launch import ProcessSpec
 
 POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
+SHM_LOOK_PERIOD = 2.0  # children's shared-memory files are looked at when /dev/shm changes, or after this long [s]
 PROGRESS_PREFIX = 'progress '
 
 try:  # looked up here, not in the forked child (a child before exec must take no lock)
@@ -98,14 +99,16 @@ class Supervisor:
         self.launch_prefix = launch_prefix
         self.children: list[Child] = []
         self.last_progress = ''  # the time keeper's latest progress line
+        self._shm_seen: set[str] = set()  # the Fast DDS files in /dev/shm at the last look
+        self._next_shm_look = 0.0
 
     def start(self, spec: ProcessSpec) -> Child:
         log = self.log_dir / f'{spec.name}.log'
         handle = open(log, 'w', encoding='utf-8')  # noqa: SIM115 - owned by the child
         prefix = list(self.launch_prefix(spec.name)) if self.launch_prefix is not None else []
         process = subprocess.Popen(
-            [*prefix, sys.executable, *spec.args],
-            env=self.env,
+            [*prefix, spec.program or sys.executable, *spec.args],
+            env={**self.env, **dict(spec.env)},
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE if spec.keeper else handle,
             stderr=handle,
@@ -133,9 +136,20 @@ class Supervisor:
             if child.exited_at is None and not child.alive():
                 child.exited_at = now
 
-    def note_shm_files(self) -> None:
+    def note_shm_files(self, now: float) -> None:
         """A child killed by a signal cannot remove its Fast DDS shared-memory files, and once it
-        is gone nobody can tell which were its own: note them while it lives."""
+        is gone nobody can tell which were its own: note them while it lives.
+
+        A file is noted with the child that creates it (its owner maps it and holds its lock), so
+        the children are looked at when /dev/shm holds new Fast DDS files, and otherwise only
+        every SHM_LOOK_PERIOD: reading a process's memory map costs milliseconds, which a
+        2-core machine starting a run needs for the run."""
+        names = fastdds_names()
+        if names <= self._shm_seen and now < self._next_shm_look:
+            self._shm_seen = names
+            return
+        self._shm_seen = names
+        self._next_shm_look = now + SHM_LOOK_PERIOD
         for child in self.children:
             if child.exited_at is None:
                 child.shm_files |= held_files(child.pid)
