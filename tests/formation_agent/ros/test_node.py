@@ -137,6 +137,21 @@ def live_node(ros):
         node.destroy_node()
 
 
+@pytest.fixture
+def fake_simulator():
+    """A node in a participant of its own, as the simulator's own process would be."""
+    import rclpy
+
+    other = rclpy.Context()
+    rclpy.init(context=other, domain_id=DOMAIN_ID)
+    simulator = rclpy.create_node('fake_simulator', context=other)
+    try:
+        yield simulator
+    finally:
+        simulator.destroy_node()
+        rclpy.shutdown(context=other)
+
+
 def _info_msg(values):
     from std_msgs.msg import Float64MultiArray
 
@@ -236,8 +251,7 @@ def test_injected_faults_are_reproducible_per_seed_and_keep_each_edge_in_order()
     assert all(due >= 0.001 * k + 0.005 for k, due in enumerate(dues))
 
 
-def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node):
-    import rclpy
+def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node, fake_simulator):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
 
@@ -246,10 +260,7 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     from formation_msgs_py.topics import STEP_TOPIC
 
     node = live_node()
-    # Another participant, as the simulator's own process would be.
-    other = rclpy.Context()
-    rclpy.init(context=other, domain_id=DOMAIN_ID)
-    simulator = rclpy.create_node('fake_simulator', context=other)
+    simulator = fake_simulator
     executor = SingleThreadedExecutor(context=ros)
     executor.add_node(node)
     try:
@@ -266,15 +277,12 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
                 node.check()
     finally:
         executor.remove_node(node)
-        simulator.destroy_node()
-        rclpy.shutdown(context=other)
 
 
 # -- discovery ---------------------------------------------------------------------------------------
 
 
-def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simulator_is_there(ros, live_node):
-    import rclpy
+def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simulator_is_there(ros, live_node, fake_simulator):
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray, String
@@ -297,10 +305,7 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
         'the sensing service /agent_1/sense (served by the simulator)',
     ]
     assert not node.connected()
-    # The simulator's side of it, in a participant of its own (its own process in a run).
-    other = rclpy.Context()
-    rclpy.init(context=other, domain_id=DOMAIN_ID)
-    simulator = rclpy.create_node('fake_simulator', context=other)
+    simulator = fake_simulator  # the simulator's side of it
     executor = SingleThreadedExecutor(context=ros)
     executor.add_node(node)
     try:
@@ -323,8 +328,6 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
         ]
     finally:
         executor.remove_node(node)
-        simulator.destroy_node()
-        rclpy.shutdown(context=other)
 
 
 # -- robots ----------------------------------------------------------------------------------------
