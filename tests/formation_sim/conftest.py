@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import threading
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -64,6 +65,23 @@ def _wait_for_stepping(run, limit: float = 120.0) -> None:
         time.sleep(0.05)
     assert reached() > 0.0, f'the run never stepped past t = 0 (last progress: {run.last_progress!r})'
 
+
+class _SteppingRun:
+    """A FormationRun whose run() goes on in a thread of the test, already stepping past t = 0."""
+
+    def __init__(self, run) -> None:
+        self.run = run
+        self._results: list = []
+        self._worker = threading.Thread(target=lambda: self._results.append(run.run()), daemon=True)
+        self._worker.start()
+        _wait_for_stepping(run)
+
+    def result(self, timeout: float):
+        """run()'s result, once it returned within `timeout` seconds."""
+        self._worker.join(timeout=timeout)
+        assert not self._worker.is_alive(), f'the run did not end within {timeout} s'
+        (result,) = self._results
+        return result
 
 
 def _tight_edge(name: str, fraction: float):
@@ -115,6 +133,13 @@ def small_disk(tmp_path):
 def wait_for_stepping():
     """`wait_for_stepping(run)`: block until a FormationRun's simulator reports sim time past 0."""
     return _wait_for_stepping
+
+
+@pytest.fixture
+def stepping_run():
+    """`stepping_run(run)`: start a FormationRun's run() in a thread and return once it steps;
+    `.result(timeout)` joins it."""
+    return _SteppingRun
 
 
 @pytest.fixture

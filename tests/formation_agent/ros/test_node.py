@@ -279,6 +279,25 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         executor.remove_node(node)
 
 
+def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its_reason(live_node):
+    """A CrossingError of the core's certified search is named with the agent and the validate rule
+    (as the engine names it), not left to a traceback; main() then stops the agent with status 1."""
+    from formation_agent.core.crossing import CrossingError
+    from formation_agent.ros.node import PredictionError
+
+    class Unresolvable:
+        ready = True
+
+        def next_trigger_time(self, limit):
+            raise CrossingError('no convergence after 100000 certified steps (t=0.5)')
+
+    node = live_node()
+    node.core = Unresolvable()
+    with pytest.raises(PredictionError, match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
+                                              r'prediction no longer resolves its threshold .*rule \[precision\]\)$'):
+        node._publish_status(step_index=3, ready=True)
+
+
 # -- discovery ---------------------------------------------------------------------------------------
 
 

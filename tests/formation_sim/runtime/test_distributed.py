@@ -6,7 +6,6 @@ import json
 import math
 import os
 import signal
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -149,18 +148,13 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.timeout(300)
-def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_for_stepping, long_run_scenario):
+def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, stepping_run, long_run_scenario):
     from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=113, progress=False, timeout=240.0)
-    results = []
-    worker = threading.Thread(target=lambda: results.append(run.run()))
-    worker.start()
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     run.interrupt()
-    worker.join(timeout=60.0)
-    assert not worker.is_alive()
-    (result,) = results
+    result = stepping.result(timeout=60.0)
     assert result.exit_status == 130 and result.message == 'interrupted'
     assert result.bag is not None  # the recorder was stopped by SIGINT and closed its bag
     assert not [child for child in result.children if _alive(child.pid)]
@@ -173,24 +167,20 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, wait_fo
 
 
 @pytest.mark.timeout(300)
-def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, wait_for_stepping, long_run_scenario):
+def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_run_scenario):
     import signal
 
     from formation_sim.runtime.fastdds_shm import held_files, in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=114, progress=False, record=False, timeout=240.0)
-    results = []
-    worker = threading.Thread(target=lambda: results.append(run.run()))
-    worker.start()
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     victim = next(child for child in run._children if child.name == 'agent_2')
     leftovers = held_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
-    worker.join(timeout=60.0)
+    result = stepping.result(timeout=60.0)
     # What the victim could not remove, the orchestrator did (unless another process still uses it).
     assert not [path for path in leftovers - in_use(leftovers) if Path(path).exists()]
-    (result,) = results
     assert result.exit_status == 3
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message
@@ -239,7 +229,7 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_stepping, long_run_scenario):
+def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, stepping_run, long_run_scenario):
     from formation_sim.runtime.fastdds_shm import in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
@@ -253,13 +243,9 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, wait_for_st
         timeout=240.0,
         stop_timeouts=(0.0, 0.0),
     )
-    results = []
-    worker = threading.Thread(target=lambda: results.append(run.run()))
-    worker.start()
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     run.interrupt()
-    worker.join(timeout=60.0)
-    (result,) = results
+    result = stepping.result(timeout=60.0)
     assert result.exit_status == 130
     killed = [child for child in run._children if child.process.returncode in (-signal.SIGTERM, -signal.SIGKILL)]
     assert killed, [child.process.returncode for child in run._children]

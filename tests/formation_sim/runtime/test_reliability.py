@@ -255,20 +255,18 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
 
 
 @pytest.mark.timeout(300)
-def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, wait_for_stepping, long_run_scenario):
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario):
     from formation_sim.runtime.fastdds_shm import held_files, in_use
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
-    worker, results = _in_background(run)
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
     shm_files = held_files(victim.pid)
     os.kill(victim.pid, signal.SIGKILL)
-    worker.join(timeout=120.0)
-    (result,) = results
+    result = stepping.result(timeout=120.0)
     assert result.exit_status == EXIT_LOST == 3
     assert shm_files and not [path for path in shm_files - in_use(shm_files) if Path(path).exists()]
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
@@ -313,18 +311,16 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 
 
 @pytest.mark.timeout(300)
-def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, stepping_run, long_run_scenario):
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
     from formation_sim.bag.io import read_bag
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0)
-    worker, results = _in_background(run)
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
     recorder = next(child for child in run._children if child.name == 'recorder')
     os.kill(recorder.pid, signal.SIGKILL)
-    worker.join(timeout=120.0)
-    (result,) = results
+    result = stepping.result(timeout=120.0)
     assert result.exit_status == EXIT_LOST
     assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
     assert result.message.count(f'recorder (pid {recorder.pid})') == 1, result.message  # said once
@@ -354,7 +350,7 @@ rclpy.shutdown()
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(tmp_path, ros_env, stepping_run, long_run_scenario):
     """Every child of a recorded run killed with SIGKILL at once: each segment and port its
     children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
     outside the domain's range; a live participant of another domain and a dead port of nobody
@@ -378,15 +374,13 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
         bystanders = held_files(bystander.pid)
         assert bystanders, 'the bystander holds no Fast DDS file'
         run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=65, progress=False, timeout=240.0)
-        worker, results = _in_background(run)
-        wait_for_stepping(run)
+        stepping = stepping_run(run)
         time.sleep(0.5)
         children = list(run._children)
         held = set().union(*(held_files(child.pid) for child in children))
         for child in children:
             os.kill(child.pid, signal.SIGKILL)
-        worker.join(timeout=120.0)
-        (result,) = results
+        result = stepping.result(timeout=120.0)
         assert result.exit_status == EXIT_LOST, result.message
         assert all(child.process.returncode == -signal.SIGKILL for child in run._children)
         ports = {Path(path).name for path in held if 'fastrtps_port' in path}
@@ -411,7 +405,7 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
 
 
 @pytest.mark.timeout(300)
-def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(tmp_path, ros_env, wait_for_stepping, long_run_scenario, bag_trigger_stamps):
+def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(tmp_path, ros_env, stepping_run, long_run_scenario, bag_trigger_stamps):
     """SIGSTOP on the recorder mid-run: it acknowledges nothing more, and every keep-last writer
     of the run would overwrite what it has not acknowledged. The simulator sees its heartbeat
     writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
@@ -420,16 +414,14 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0)
-    worker, results = _in_background(run)
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     recorder = next(child for child in run._children if child.name == 'recorder')
     os.kill(recorder.pid, signal.SIGSTOP)
     try:
-        worker.join(timeout=120.0)
+        result = stepping.result(timeout=120.0)
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(recorder.pid, signal.SIGCONT)
-    (result,) = results
     assert result.exit_status == EXIT_LOST, result.message
     assert 'the recorder lost at t=' in result.message and 'no sign of life for 1.0 s' in result.message
     summary = json.loads(result.summary.read_text())
@@ -453,7 +445,7 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
 
 
 @pytest.mark.timeout(300)
-def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_path, ros_env, wait_for_stepping, long_run_scenario):
+def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_path, ros_env, stepping_run, long_run_scenario):
     """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
     with the failure, the last sim time and step of the simulator's progress, every process's
     exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
@@ -461,13 +453,11 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_pat
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=63, progress=False, timeout=240.0)
-    worker, results = _in_background(run)
-    wait_for_stepping(run)
+    stepping = stepping_run(run)
     time.sleep(1.5)  # past a progress line or two
     simulator = next(child for child in run._children if child.name == 'simulator')
     os.kill(simulator.pid, signal.SIGKILL)
-    worker.join(timeout=120.0)
-    (result,) = results
+    result = stepping.result(timeout=120.0)
     assert result.exit_status == EXIT_LOST
     assert result.message.startswith(f'simulator (pid {simulator.pid}) killed by SIGKILL; see ')
     assert result.summary is not None and result.bag is not None and not result.bag_recovered

@@ -16,7 +16,7 @@ from formation_msgs_py._lazy import lazy_exports
 
 __all__ = lazy_exports(globals(), {
     'eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
-    'crossing': ('CrossingError', 'CrossingSearch', 'DEFAULT_TOLERANCE', 'ErrorModel', 'MAX_STEPS', 'first_crossing'),
+    'crossing': ('CrossingError', 'CrossingSearch', 'DEFAULT_TOLERANCE', 'ErrorModel', 'MAX_STEPS', 'PRECISION_HINT', 'first_crossing'),
     'tension': ('omega', 'omega_prime', 'omega_second'),
     'closed_form': ('advance_double',),
     'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),

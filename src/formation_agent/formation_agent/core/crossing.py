@@ -60,6 +60,13 @@ class CrossingError(RuntimeError):
     """The search could not proceed (non-finite error, or a step that does not advance)."""
 
 
+# What a CrossingError means for a run, said by the engine and by an agent node alike.
+PRECISION_HINT = (
+    'the rounded prediction no longer resolves its threshold '
+    '(`formation validate` checks this for the initial state: rule [precision])'
+)
+
+
 class ErrorModel(Protocol):
     """Closed-form triggering error e(t) of one agent between two events.
 

@@ -34,7 +34,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
 from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError
+from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError, PredictionError
 from formation_agent.ros.parameters import ParameterError, read_parameters
 from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import agent_namespace
@@ -140,7 +140,7 @@ def main(args: Sequence[str] | None = None) -> int:
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = EXIT_PEER_LOST, str(error)
-        except PoseError as error:  # the robots' poses failed it: said in full, no traceback needed
+        except (PoseError, PredictionError) as error:  # the poses or double precision failed it: said in full
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = 1, str(error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log

@@ -38,6 +38,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
+from formation_agent.core.crossing import PRECISION_HINT, CrossingError
 from formation_agent.core.eta import make_agent
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
@@ -85,6 +86,10 @@ class AgentNodeError(ValueError):
 
 class PeerLostError(RuntimeError):
     """A peer the agent depends on (the simulator) stopped showing signs of life."""
+
+
+class PredictionError(RuntimeError):
+    """The agent's certified search cannot resolve its next triggering time in double precision."""
 
 
 class FormationAgentNode(Node):
@@ -499,7 +504,10 @@ class FormationAgentNode(Node):
             # A next time is only defined once the agent has triggered and heard every neighbour.
             ready = bool(self.core.ready)
             if ready:
-                self._next_time = float(self.core.next_trigger_time(self.horizon))
+                try:
+                    self._next_time = float(self.core.next_trigger_time(self.horizon))
+                except CrossingError as error:
+                    raise PredictionError(f'agent {self.agent_id}: {error}; {PRECISION_HINT}') from error
         status = Status(
             agent=self.agent_id,
             step_index=step_index,

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingError, CrossingSearch
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
@@ -169,10 +169,7 @@ def _next_event_time(heap, serial, searches, horizon: float) -> float:
         try:
             result = search.advance(min(until, horizon))
         except CrossingError as error:
-            raise EngineError(
-                f'agent {i}: {error}; the rounded prediction no longer resolves its threshold '
-                '(`formation validate` checks this for the initial state: rule [precision])'
-            ) from error
+            raise EngineError(f'agent {i}: {error}; {PRECISION_HINT}') from error
         if result is None:
             heapq.heappush(heap, (search.frontier, 0, i, number))
         elif result <= horizon:
