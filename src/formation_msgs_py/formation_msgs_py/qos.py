@@ -22,6 +22,15 @@ LOST_GRACE = 0.5
 """Seconds a node waits after a peer is declared lost before acting, so that what the peer sent
 before it left (already delivered, not yet taken) is handled first."""
 
+KEEPER_LEASE_GRACE = 3.0
+"""Seconds a lock-step agent waits after its time keeper's lease lapsed (its writer still in the
+graph) before leaving. Nothing moves while the keeper is silent, and a keeper that is briefly
+unable to assert its liveliness must be left the time to end the run itself: after a SIGKILLed
+agent, Fast DDS's shared-memory port health check stalled the keeper's writers for ~1.4 s here,
+its neighbours left too, and the run reported them lost along with the dead one. Longer than the
+keeper's own LIVELINESS_LEASE + LOST_GRACE toward a lost agent; on the wall clock (robots) an
+agent keeps LOST_GRACE, since there its robot would go on moving."""
+
 # Every message of the protocol matters, and a reader that matches a writer late must still get
 # what was written before: reliable + transient local.  Depth bounds what may be outstanding; the
 # lock-step never has more than one message per edge and step in flight.  Reasons per topic:

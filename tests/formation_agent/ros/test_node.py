@@ -298,6 +298,31 @@ def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its
         node._publish_status(step_index=3, ready=True)
 
 
+@pytest.mark.parametrize(('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)])
+def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_lapsed(live_node, flags, lease_lapsed, patience):
+    """In lock-step nothing moves while the simulator is silent: an agent gives a lapsed lease
+    KEEPER_LEASE_GRACE before it leaves (the simulator ends the run itself); a writer that left
+    the graph, or the wall clock (a robot would go on moving), gets LOST_GRACE."""
+    from types import SimpleNamespace
+
+    from formation_agent.ros.node import PeerLostError
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+    from formation_msgs_py.qos import KEEPER_LEASE_GRACE, LOST_GRACE
+
+    assert (KEEPER_LEASE_GRACE, LOST_GRACE) == (3.0, 0.5)
+    node = live_node()
+    node.step = Step(index=7, time=1.25, flags=STEP_FLAG_REALTIME if flags == 'realtime' else 0)
+    node._on_simulator_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
+    node._on_simulator_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
+    lost = node._simulator_lost_at
+    node._simulator_lost_at = lost - (patience - 0.05)
+    node.check()  # still patient
+    node._simulator_lost_at = lost - (patience + 0.05)
+    how = 'no sign of life for 1.0 s' if lease_lapsed else 'it left the graph'
+    with pytest.raises(PeerLostError, match=rf'agent 1: the simulator \(writer of /formation/step\) is lost after step 7 \(t=1.25\): {how}'):
+        node.check()
+
+
 # -- discovery ---------------------------------------------------------------------------------------
 
 

@@ -351,6 +351,32 @@ def test_initial_slack_above_the_floor_is_accepted(tight_edge):
     assert ('initial', 'edge (2, 3)') in rules(report.warnings)  # still the generic 5 % warning
 
 
+@pytest.mark.parametrize('scale', [1e-100, 1e-20, 1e-5, 1e5, 1e20, 1e100, 1e160])
+def test_a_scenario_validate_accepts_at_any_scale_runs(scale):
+    """paper_single with every length (and α) times `scale` and β half its β0 there. ω_ij is not
+    homogeneous in lengths: small scales lose the precision the certified search needs, large
+    ones overflow ‖·‖². Whatever validate accepts the engine runs; what it refuses, it refuses by rule."""
+    from formation_sim.model.theory import beta0
+    from formation_sim.sim.engine import simulate
+
+    paper = load_scenario('paper_single')
+    scaled = paper.replace(
+        positions=paper.positions * scale,
+        edges=tuple(Edge(i=e.i, j=e.j, d=np.asarray(e.d) * scale) for e in paper.edges),
+        delta=paper.delta * scale,
+    )
+    with np.errstate(all='ignore'):
+        scaled = scaled.replace(gains=SingleGains(alpha=paper.gains.alpha * scale, beta=0.5 * beta0(scaled)))
+        report = validate_scenario(scaled)
+    if scale <= 1e-20 or scale >= 1e160:  # not resolvable in double precision
+        assert not report.ok
+        assert {finding.rule for finding in report.errors} <= {'precision', 'initial', 'edge_length'}, report.errors
+        return
+    assert report.ok, report.errors
+    record = simulate(scaled, horizon=0.5)
+    assert record.total_events > 0 and record.horizon == 0.5
+
+
 def test_double_integrator_slack_floor_counts_velocities(tight_edge):
     # E_i = k1 e_i + k2 e_qi: one ulp of y moves it by (k1 g + k2 h ||q_i-q_j||) ulp, one ulp of
     # q_i - q_j by k2 f ulp(q); f = (c+σ)/σ², g = 2c²/σ³, h = (2c+σ)/σ³.

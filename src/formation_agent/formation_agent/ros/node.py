@@ -54,7 +54,7 @@ from formation_msgs_py.codec import (
     encode_trigger_info,
 )
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status, Step
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS
+from formation_msgs_py.qos import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS
 from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
@@ -390,7 +390,9 @@ class FormationAgentNode(Node):
         # During discovery a lease may expire on a machine busy starting many processes: keep
         # waiting for step 0 (a simulator that left deletes its writer, which does count).
         waiting = self.step is None and self._simulator_lease_expired
-        if lost is not None and not self.finished and not waiting and time.monotonic() - lost > LOST_GRACE:
+        lockstep = self.step is not None and not self.step.realtime
+        grace = KEEPER_LEASE_GRACE if lockstep and self._simulator_lease_expired else LOST_GRACE
+        if lost is not None and not self.finished and not waiting and time.monotonic() - lost > grace:
             where = 'during discovery' if self.step is None else f'after step {self.step.index} (t={self.step.time!r})'
             how = f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)' if self._simulator_lease_expired else 'it left the graph'
             raise PeerLostError(f'agent {self.agent_id}: the simulator (writer of {STEP_TOPIC}) is lost {where}: {how}')
