@@ -144,7 +144,8 @@ CATALOGUE = [
     ('subnormal horizon', edit('horizon: 10.0', 'horizon: 5e-324'), 1, ['[parameters] scenario: horizon = 5e-324 is a subnormal double']),
     ('subnormal d', edit('d: [0.0, -2.0]', 'd: [1e-320, -2.0]'), 1, ['[parameters] edge (1, 2): d[0] = 1e-320 is a subnormal double']),
     ('position 1e308', edit('[2.0, 4.0]', '[1e308, 4.0]'), 1, ['[initial] edge (1, 2)', '(initial)']),
-    ('Δ 1e308', edit('communication_radius: 4.0', 'communication_radius: 1e308'), 1, ['[beta] gains: 0 < β < β0 = 3e-308 required, got β = 1']),
+    ('Δ 1e308', edit('communication_radius: 4.0', 'communication_radius: 1e308'), 1, ['[scale] scenario: Δ = 1e+308 is above 1.80925e+75 (2^250)']),
+    ('Δ 1e-300', edit('communication_radius: 4.0', 'communication_radius: 4e-300'), 1, ['[edge_length] edge (1, 2)']),
     ('-0.0 breaking (initial)', edit('[2.0, 4.0]', '[-0.0, 4.0]'), 1, ['[initial] edge (1, 2): ||x_i(0)-x_j(0)-d_ij|| = 3.64005 is not below Δ-||d_ij|| = 2']),
     ('β a hair above β0', edit('beta: 1.0', 'beta: 1.5000000000000002'), 1, ['0 < β < β0 = 1.5 required, got β = 1.5000000000000002']),
     # -- YAML features

@@ -351,30 +351,57 @@ def test_initial_slack_above_the_floor_is_accepted(tight_edge):
     assert ('initial', 'edge (2, 3)') in rules(report.warnings)  # still the generic 5 % warning
 
 
-@pytest.mark.parametrize('scale', [1e-100, 1e-20, 1e-5, 1e5, 1e20, 1e100, 1e160])
-def test_a_scenario_validate_accepts_at_any_scale_runs(scale):
-    """paper_single with every length (and α) times `scale` and β half its β0 there. ω_ij is not
-    homogeneous in lengths: small scales lose the precision the certified search needs, large
-    ones overflow ‖·‖². Whatever validate accepts the engine runs; what it refuses, it refuses by rule."""
-    from formation_sim.model.theory import beta0
+def _paper_single_in_units(power: int):
+    """paper_single with lengths × s = 2^power, β / s and the horizon × s (α unchanged): ω_ij scales
+    as 1/s and the commands not at all, so it is the same run with its times × s."""
+    paper = load_scenario('paper_single')
+    s = 2.0**power
+    return paper.replace(
+        positions=paper.positions * s,
+        edges=tuple(Edge(i=e.i, j=e.j, d=np.asarray(e.d) * s) for e in paper.edges),
+        delta=paper.delta * s,
+        gains=SingleGains(alpha=paper.gains.alpha, beta=paper.gains.beta / s),
+        horizon=paper.horizon * s,
+    )
+
+
+@pytest.mark.parametrize('power', [-200, -40, -3, 3])
+def test_the_same_run_in_other_length_units_is_accepted_and_runs_alike(power):
     from formation_sim.sim.engine import simulate
 
-    paper = load_scenario('paper_single')
-    scaled = paper.replace(
-        positions=paper.positions * scale,
-        edges=tuple(Edge(i=e.i, j=e.j, d=np.asarray(e.d) * scale) for e in paper.edges),
-        delta=paper.delta * scale,
-    )
+    reference = simulate(load_scenario('paper_single'), sample_dt=None, sample_events=False)
+    scaled = _paper_single_in_units(power)
+    assert validate_scenario(scaled).ok
+    record = simulate(scaled, sample_dt=None, sample_events=False)
+    assert record.total_events == reference.total_events == 187
+    for agent in reference.trigger_times:
+        back = np.asarray(record.trigger_times[agent]) / 2.0**power  # exact: a power of two
+        assert np.allclose(back, reference.trigger_times[agent], rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize('power', [-330, -251, 251, 600])
+def test_lengths_outside_what_double_precision_computes_with_are_refused_by_rule_scale(power):
+    """2^-300: the engine's curvature bound divided by an underflowed gap⁴ (ZeroDivisionError
+    after validate had accepted it); 2^300: the fourth powers overflow and the bound is silently
+    lost. Only the scale findings are reported: the other rules' numbers would be inf or 0."""
     with np.errstate(all='ignore'):
-        scaled = scaled.replace(gains=SingleGains(alpha=paper.gains.alpha * scale, beta=0.5 * beta0(scaled)))
-        report = validate_scenario(scaled)
-    if scale <= 1e-20 or scale >= 1e160:  # not resolvable in double precision
-        assert not report.ok
-        assert {finding.rule for finding in report.errors} <= {'precision', 'initial', 'edge_length'}, report.errors
-        return
-    assert report.ok, report.errors
-    record = simulate(scaled, horizon=0.5)
-    assert record.total_events > 0 and record.horizon == 0.5
+        report = validate_scenario(_paper_single_in_units(power))
+    assert report.errors and {finding.rule for finding in report.errors} == {'scale'}
+    finding = report.errors[0]
+    if power < 0:
+        # Edge (1, 2) of paper_single: Δ = 4, d = (0, -2), x1 - x2 = (-1.5, -3): slack 2 - ||(-1.5, -1)||.
+        # Its capacity Δ - ||d|| = 2 is named when it is itself too small, else the slack.
+        capacity, slack = 2.0 * 2.0**power, (2.0 - np.hypot(1.5, 1.0)) * 2.0**power
+        name, value = ('Δ-||d_ij||', capacity) if capacity < 2.0**-250 else ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slack)
+        assert finding.subject == 'edge (1, 2)'
+        assert finding.message.startswith(
+            f'{name} = {value:.6g} is below {2.0**-250:.6g} (2^-250): the certified search divides by the fourth power of the distance to Δ'
+        ), finding.message
+    else:
+        assert finding.subject == 'scenario'
+        assert finding.message.startswith(f'Δ = {4.0 * 2.0**power:.6g} is above {2.0**250:.6g} (2^250): '), finding.message
+    assert finding.message.endswith('state the scenario in other length units (ETA-1 runs the same with lengths × s, '
+                                    'β / s and time × s: ω_ij scales as 1/s, the commands not at all)')
 
 
 def test_double_integrator_slack_floor_counts_velocities(tight_edge):

@@ -23,6 +23,10 @@ k3            0 < k3 < 4/(k2 + sqrt(k1²+k2²)), i.e. k4 < 2 (Theorem 2)        
 beta_d        0 < β_d < (2-k4) ρ2(P) as printed in Theorem 2                            error;
               warning above 0.95 of the bound
 beta_d_corrected  β_d < (2-k4)/λmax(P), what the proof supports (docs/THEOREM2.md)     warning
+scale         Δ <= LENGTH_MAX, and every capacity Δ - ||d_ij|| and positive initial slack    error
+              >= LENGTH_MIN: the certified search divides by fourth powers of the distance
+              to Δ, which must stay normal doubles (`_check_scale`); the other rules are
+              not evaluated then (their numbers would be overflow or underflow)
 parameters    Δ, the horizon, the agents' gains and every d_ij are 0 or normal doubles     error
               (|x| >= 2.2e-308): agents receive them as ROS parameters, and rcl's parameter
               file parser reads a subnormal number as text (the agent then cannot start)
@@ -52,6 +56,12 @@ SLACK_LINES = 20  # per-edge slack lines printed by `format` (all are in to_dict
 # The largest step of the rounded triggering error, relative to the threshold, that the certified
 # search gets through (see `_check_precision`): its tolerance times its steps, with a factor 2 to spare.
 PRECISION_LIMIT = DEFAULT_TOLERANCE * MAX_STEPS / 4.0
+# The range of lengths the engine computes in: its certified bounds take fourth powers of the
+# distance to Δ (formation_agent.core.eta, `_fast_bounds`: g_ij/gap³, the curvature /gap⁴), and
+# 2^±250 keeps a fourth power within normal doubles (2^±1022) with 2^±20 to spare for a run whose
+# edges come closer to Δ than at t = 0.
+LENGTH_MIN = 2.0**-250
+LENGTH_MAX = 2.0**250
 
 
 class ValidationError(ValueError):
@@ -214,6 +224,9 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             components=[list(c) for c in components[:10]],
         )
 
+    if not _check_scale(scenario, out):
+        return report  # every number below would be computed outside double precision's range
+
     feasibility = theory.formation_feasibility(scenario)
     worst = int(np.argmax(feasibility.edge_residuals)) if m else None
     if feasibility.feasible:
@@ -315,6 +328,39 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
         _check_double(scenario, out, beta0)
     _check_parameters(scenario, out)
     return report
+
+
+def _check_scale(scenario: Scenario, out: _Collector) -> bool:
+    """Refuse lengths the engine cannot compute with (rule `scale`); True when they are in range."""
+    units = (
+        'state the scenario in other length units (ETA-1 runs the same with lengths × s, β / s and '
+        'time × s: ω_ij scales as 1/s, the commands not at all)'
+    )
+    found = False
+    if scenario.delta > LENGTH_MAX:
+        out.error(
+            'scale', 'scenario',
+            f'Δ = {_g(scenario.delta)} is above {_g(LENGTH_MAX)} (2^250): squared lengths and the fourth '
+            f"powers in the certified search's bounds overflow double precision; {units}",
+            delta=scenario.delta, limit=LENGTH_MAX,
+        )
+        return False
+    with np.errstate(over='ignore', invalid='ignore'):
+        capacities = theory.edge_capacities(scenario)
+        slacks = capacities - theory.edge_errors(scenario, scenario.positions)
+    for k, edge in enumerate(scenario.edges):
+        for name, value in (('Δ-||d_ij||', capacities[k]), ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slacks[k])):
+            if 0.0 < value < LENGTH_MIN:
+                out.error(
+                    'scale', _edge(edge),
+                    f'{name} = {_g(float(value))} is below {_g(LENGTH_MIN)} (2^-250): the certified search '
+                    f'divides by the fourth power of the distance to Δ, which underflows double precision '
+                    f'there; {units}',
+                    key=name, value=float(value), limit=LENGTH_MIN,
+                )
+                found = True
+                break
+    return not found
 
 
 def _check_parameters(scenario: Scenario, out: _Collector) -> None:
