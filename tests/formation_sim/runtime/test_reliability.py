@@ -96,7 +96,7 @@ def _outsider_with_run(name: str, domain_id: int, run):
     from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.codec import decode_step
-    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
     from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
 
     assert run.step_listeners == 1
@@ -112,7 +112,9 @@ def _outsider_with_run(name: str, domain_id: int, run):
         while publisher.get_subscription_count() < 2 and worker.is_alive() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.02)
         steps: list[int] = []
-        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg).index), PROTOCOL_QOS)
+        # Keep-all, as every reader of the protocol: a keep-last 32 history lost Steps 0-4 while
+        # this busy test process did not take them for a moment.
+        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg).index), READER_QOS)
         yield _Outsider(publisher=publisher, executor=executor, worker=worker, results=results, steps=steps)
         worker.join()
     finally:
