@@ -53,7 +53,7 @@ from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterErr
 from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
     RECORDER_TOPIC,
     REPORT_TOPIC,
@@ -73,6 +73,7 @@ from formation_sim.runtime.run_book import (
     ConnectivityLostError,
     CoordinatorError,
     DiscoveryError,
+    RecorderBook,
     RecorderLostError,
     RunBook,
     ids_text,
@@ -202,10 +203,7 @@ class FormationCoordinatorNode(Node):
             READER_QOS,
             event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
         )
-        self._recorders_alive = 0
-        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
-        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
-        self._recorder_lease_expired = False
+        self.recorders = RecorderBook()
         self.published: dict[str, int] = {}  # topic -> messages this node published there
 
         self.step: Step | None = None
@@ -484,40 +482,23 @@ class FormationCoordinatorNode(Node):
         return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
 
     def _check_lost(self, now: float) -> None:
-        self._check_recorder_lost(now)
-        error = self.book.lost_error(now, started=self.step is not None, where=self._where())
+        """Stop the run once the recorder or an agent is lost (the books say when that is)."""
+        started, where = self.step is not None, self._where()
+        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(now, started=started, where=where)
         if error is not None:
             raise error
 
     def _on_recorder_liveliness(self, info) -> None:
-        if info.alive_count >= self._recorders_alive:
-            self._recorders_alive = info.alive_count
-            self._recorder_lost = None
-        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
-            self._recorder_lease_expired = info.not_alive_count_change > 0
-            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
-            self._recorder_lost = (time.monotonic(), how)
+        self.recorders.note_liveliness(
+            alive_count=info.alive_count, not_alive_count_change=info.not_alive_count_change, now=time.monotonic()
+        )
 
     def _on_recorder(self, msg: String) -> None:
         """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
-        try:
-            beat = json.loads(msg.data)
-            name, step = str(beat['recorder']), beat['step']
-            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
-                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
-        except (ValueError, KeyError, TypeError) as error:
-            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
+        if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
+            self._reject(RECORDER_TOPIC, 'field', refusal)
             return
-        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
         self._after_status()
-
-    def _check_recorder_lost(self, now: float) -> None:
-        lost = self._recorder_lost
-        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
-            return
-        raise RecorderLostError(
-            f'the recorder lost {self._where()}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
-        )
 
     def _publish(self, publisher, msg) -> None:
         publisher.publish(msg)
@@ -675,7 +656,7 @@ class FormationCoordinatorNode(Node):
         end: what it lacks is counted against the bag after the run)."""
         deadline = time.monotonic() + timeout_sec
         pending = list(publishers)
-        while pending and self._recorder_lost is None and time.monotonic() < deadline:
+        while pending and self.recorders.lost is None and time.monotonic() < deadline:
             pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
             executor.spin_once(timeout_sec=0.0)
 

@@ -1,10 +1,11 @@
-"""The bookkeeping of a distributed run: what the coordinator knows of every agent.
+"""The bookkeeping of a distributed run: what the coordinator knows of every agent and recorder.
 
 `RunBook` holds, per agent, its latest Status, its reports, its triggering times and its signs of
 life, and answers the coordinator's questions (docs/MESSAGES.md): is the lock-step step settled,
 which agents are due next, who is lost, did an edge reach Δ, what goes into summary.json's
-`extra`.  The nodes (`coordinator.FormationCoordinatorNode`, `sim_node.FormationSimulatorNode`)
-only move messages in and out of it.
+`extra`.  `RecorderBook` does the same for the recorders: their signs of life and the latest step
+each has written.  The nodes (`coordinator.FormationCoordinatorNode`,
+`sim_node.FormationSimulatorNode`) only move messages in and out of them.
 
 Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 `extra.failure.kind` in summary.json.
@@ -13,6 +14,8 @@ Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
+import json
 
 import numpy as np
 
@@ -323,3 +326,49 @@ class RunBook:
         """Wall clock: how late triggers came against the times agents had planned them."""
         return lateness_extra({i: book.planned for i, book in self.agents.items()}, trigger_times)
 
+
+
+class RecorderBook:
+    """What the coordinator knows of the recorders (the run's extra subscribers): whether their
+    heartbeat writers are alive, and the latest step each has written (lock-step flow control).
+
+    A frozen recorder lets every reliable keep-last writer of the run overwrite what it did not
+    acknowledge, so a recorder lost stops the run as an agent lost does."""
+
+    def __init__(self) -> None:
+        self.alive = 0  # heartbeat writers alive (DDS liveliness)
+        self.recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self.lost: tuple[float, str] | None = None  # (monotonic time, how) once one went away
+        self.lease_expired = False  # how it went: its lease expired (else its writer was deleted)
+
+    def note_liveliness(self, *, alive_count: int, not_alive_count_change: int, now: float) -> None:
+        """A liveliness change of the recorders' heartbeat writers."""
+        if alive_count >= self.alive:
+            self.alive = alive_count
+            self.lost = None
+        elif self.lost is None:  # also after the end: no more waiting for its acknowledgements
+            self.lease_expired = not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self.lease_expired else 'it left the graph'
+            self.lost = (now, how)
+
+    def accept_heartbeat(self, text: str) -> str | None:
+        """Take a recorder's heartbeat (JSON: version 1, recorder, step); the reason it is refused, or None."""
+        try:
+            beat = json.loads(text)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            return f'recorder heartbeat {text[:80]!r}: {error}'
+        self.recorded_steps[name] = max(step, self.recorded_steps.get(name, -1))
+        return None
+
+    def lost_error(self, now: float, *, started: bool, where: str) -> RecorderLostError | None:
+        """The recorder lost, once LOST_GRACE has passed (else None); during discovery a lease that
+        expired waits for the recorder to come back, as an agent's does (`RunBook.lost_error`)."""
+        lost = self.lost
+        if lost is None or (not started and self.lease_expired) or now - lost[0] <= LOST_GRACE:
+            return None
+        return RecorderLostError(
+            f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )

@@ -293,14 +293,14 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
 
     def _describe_wait(self) -> str:
-        recorders = f'recorders at steps {self._recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
+        recorders = f'recorders at steps {self.recorders.recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
         return f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}' + self.book.waiting_description()
 
     def _recorder_behind(self) -> bool:
         """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
         if self.extra_subscribers < 1:
             return False
-        recorded = sorted(self._recorded_steps.values())[: self.extra_subscribers]
+        recorded = sorted(self.recorders.recorded_steps.values())[: self.extra_subscribers]
         return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
 
     # -- wall clock -----------------------------------------------------------------------------
