@@ -35,7 +35,6 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -78,13 +77,11 @@ from formation_sim.runtime.run_book import (
     RunBook,
     ids_text,
 )
+from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
-from formation_sim.sim.files import write_atomically
-from formation_sim.sim.summary import write_summary
 
-GRAPH_FILE = 'graph.json'
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
 
@@ -646,24 +643,10 @@ class FormationCoordinatorNode(Node):
     def _message_counts(self) -> dict:
         return {**self.book.message_counts(), 'published': self.book.published(self.published)}
 
-    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
-        self.flush()
-        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
+    # -- the end (driven by `run_end` from main) -------------------------------------------------
 
-    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
-        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
-        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
-        end: what it lacks is counted against the bag after the run)."""
-        deadline = time.monotonic() + timeout_sec
-        pending = list(publishers)
-        while pending and self.recorders.lost is None and time.monotonic() < deadline:
-            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
-            executor.spin_once(timeout_sec=0.0)
-
-    def stop_agents(self, executor) -> None:
-        """The run failed: a final Step sends the agents home, with their final reports."""
-        if self.step is None or not rclpy.ok():
-            return
+    def end_now(self) -> None:
+        """The run stops early at this instant (after step 0): a final Step sends the agents home."""
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
         if self._finished_at is None:
@@ -672,28 +655,11 @@ class FormationCoordinatorNode(Node):
             self.graph = self.snapshot_graph()
         self.finished = True
         self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
-        self.flush()
-        self.collect_final_reports(executor)
-        # A live agent's final report says it got the final Step; a lost agent is still matched
-        # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
-        publishers = self._tool_publishers
-        if not self.final_reports_in():
-            publishers = (self._step_pub, *publishers)
-        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
 
-    def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
-        """After the final step: wait (bounded) for every live agent's last report."""
-        deadline = time.monotonic() + timeout_sec
-        while not self.final_reports_in() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-
-
-def write_results(node: FormationCoordinatorNode) -> None:
-    """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
-    out = Path(node.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_summary(node.record(), out)
-    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
+    def delivery_publishers(self, *, with_steps: bool) -> list:
+        """The writers whose readers must acknowledge everything before the node goes: the tools'
+        topics and, `with_steps`, the Steps."""
+        return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
 
 
 def _parser(node_class: type[FormationCoordinatorNode]) -> argparse.ArgumentParser:
@@ -731,10 +697,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
                 stop.check()
                 if node.failure is not None:
                     raise node.failure
-            node.collect_final_reports(executor)
+            collect_final_reports(node, executor)
             node.mark('final_reports')
             node.after_final_step(executor)
-            node.wait_for_delivery(executor)
+            wait_for_delivery(node, executor)
             node.mark('delivered')
             if node.progress_period > 0.0:
                 node._print_progress()
@@ -774,7 +740,7 @@ def _stop_and_write(node: FormationCoordinatorNode | None, executor, error: Base
     node.fail(error)
     if executor is not None:
         try:
-            node.stop_agents(executor)
+            stop_agents(node, executor)
         except Exception as problem:  # noqa: BLE001 - the original failure is what matters
             _tell(f'formation_sim: could not stop the agents: {problem}')
     if node.step is None or not node.out_dir:

@@ -81,10 +81,9 @@ from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's 
     EXIT_AGENT_LOST,
     EXIT_FAILED,
     EXIT_INTERRUPTED,
-    GRAPH_FILE,
     FormationCoordinatorNode,
-    write_results,
 )
+from formation_sim.runtime.run_end import GRAPH_FILE, write_results  # noqa: F401 - likewise
 from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     AgentLostError,
     ConnectivityLostError,
