@@ -143,6 +143,19 @@ def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_ty
 class FormationCoordinatorNode(Node):
     """Time keeper and bookkeeper of a run whose world is the robots (or, subclassed, the simulator's)."""
 
+    # What a subclass with a world of its own replaces (with the methods of the last section).
+    serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
+
+    PARAMETERS = COORDINATOR_PARAMETERS
+    COMMAND = 'formation_coordinator'
+    PARAMS_FILE = COORDINATOR_FILE
+    DESCRIPTION = (
+        'The time keeper of a robot run (formation run --backend holonomic|unicycle|external): opens the run '
+        'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
+        'fault, and writes summary.json and graph.json into out_dir.'
+    )
+
     def __init__(
         self,
         *,
@@ -218,24 +231,265 @@ class FormationCoordinatorNode(Node):
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
         self._timer = self.create_timer(0.1, self._tick)
-        # Discovery as the agents report it: who has announced itself, who is ready (step 0
-        # goes as soon as the last one is and the node's own endpoints are matched).
-        self._announced: set[int] = set()
-        self._ready: set[int] = set()
         self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
         self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
 
-    # -- what a subclass with a world of its own replaces ---------------------------------------
+    # -- the run's life cycle: discovery, step 0, the run, its end ------------------------------
 
-    serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
-    PARAMETERS = COORDINATOR_PARAMETERS
-    COMMAND = 'formation_coordinator'
-    PARAMS_FILE = COORDINATOR_FILE
-    DESCRIPTION = (
-        'The time keeper of a robot run (formation run --backend holonomic|unicycle|external): opens the run '
-        'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
-        'fault, and writes summary.json and graph.json into out_dir.'
-    )
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if not self.finished:
+            self._check_lost(now)
+        if self.step is None:
+            self._discovery_tick(now)
+            return
+        if self.finished:
+            return
+        self._running_tick()
+        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
+            self._last_progress = now
+            self._print_progress()
+
+    def _discovery_tick(self, now: float) -> None:
+        """Before step 0: start once connected, give up after the discovery timeout, else say what is missing."""
+        if self.book.all_ready() and self._connected():  # (cheap while agents are missing)
+            self._start()
+        elif now - self._created > self.discovery_timeout:
+            raise DiscoveryError(
+                f'discovery did not complete within {self.discovery_timeout} s; still missing: '
+                + '; '.join(self._discovery_gaps())
+            )
+        elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
+            self._next_discovery_progress = now + self.progress_period
+            self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
+
+    def _on_announcement(self, status) -> None:
+        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
+        now = time.monotonic()
+        self.book.note_announcement(status)
+        if self.book.all_announced():
+            self._marks.setdefault('agents_announced', now)
+        if self.book.all_ready():
+            self._marks.setdefault('agents_ready', now)
+            if self._connected():
+                self._start()
+
+    def _connected(self) -> bool:
+        return not self._discovery_gaps()
+
+    def _discovery_gaps(self) -> list[str]:
+        """What discovery still waits for (empty: step 0 can go)."""
+        n, extra = len(self.agents), self.extra_subscribers
+        gaps = []
+
+        def count(what: str, have: int, want: int) -> None:
+            if have < want:
+                gaps.append(f'{what} {have}/{want}')
+
+        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
+        for pub in self._tool_publishers:
+            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
+        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
+        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
+        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
+        expired = [i for i, book in self.agents.items() if book.lost is not None]
+        for what, agents in (
+            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
+            ('agents whose liveliness lease expired', expired),
+            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
+        ):
+            if agents:
+                gaps.append(f'{what}: {ids_text(agents)}')
+        return gaps + self._world_gaps()
+
+    def _start(self) -> None:
+        self._started = self._marks['step0'] = time.monotonic()
+        if self.progress_period > 0.0:
+            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._begin()
+
+    def end_now(self) -> None:
+        """The run stops early at this instant (after step 0): a final Step sends the agents home."""
+        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
+        self._reached = self.reached_time
+        if self._finished_at is None:
+            self._finished_at = time.monotonic()
+        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
+            self.graph = self.snapshot_graph()
+        self.finished = True
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
+
+    def fail(self, error: BaseException) -> None:
+        """Note why the run stops early (extra.failure of the summary)."""
+        if self.failure_info is not None:
+            return
+        if isinstance(error, CoordinatorError):
+            kind = error.kind
+        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
+            kind = 'interrupted'
+        else:
+            kind = 'error'
+        self.failure_info = {
+            'kind': kind,
+            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
+            'time': getattr(error, 'time', self.reached_time),
+            'step': None if self.step is None else self.step.index,
+            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
+            'detected_by': self.get_name().removeprefix('formation_'),
+        }
+        if isinstance(error, ConnectivityLostError):
+            self.failure_info.update(edge=list(error.edge), length=error.length)
+
+    # -- the agents' messages -------------------------------------------------------------------
+
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
+
+    def _on_status(self, msg: Float64MultiArray) -> None:
+        try:
+            status = decode_status(msg)
+        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
+            self._reject(STATUS_TOPIC, error.reason, str(error))
+            return
+        self.book.accept_status(status)
+        if self.step is None and status.step_index == DISCOVERY_STEP:
+            self._on_announcement(status)
+            return
+        self._after_status()
+
+    def _after_status(self) -> None:
+        """Lock-step settles steps here; the wall clock needs nothing."""
+
+    def _on_report(self, msg: String) -> None:
+        try:
+            report = decode_agent_report(msg)
+        except MessageError as error:
+            self._reject(REPORT_TOPIC, error.reason, str(error))
+            return
+        if (refusal := self.book.accept_report(report)) is not None:
+            self._reject(REPORT_TOPIC, 'field', refusal)
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        count = self.book.count_rejection(reason)
+        if count <= 3 or count % 100 == 0:
+            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        return self.book.rejected
+
+    def final_reports_in(self) -> bool:
+        return self.book.final_reports_in()
+
+    # -- watching peers: agents and recorders (the books say when one is lost) ------------------
+
+    def _on_agent_liveliness(self, agent: int, info) -> None:
+        self.book.note_liveliness(
+            agent,
+            alive_count=info.alive_count,
+            not_alive_count_change=info.not_alive_count_change,
+            finished=self.finished,
+            now=time.monotonic(),
+        )
+
+    def _on_recorder_liveliness(self, info) -> None:
+        self.recorders.note_liveliness(
+            alive_count=info.alive_count, not_alive_count_change=info.not_alive_count_change, now=time.monotonic()
+        )
+
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
+        if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
+            self._reject(RECORDER_TOPIC, 'field', refusal)
+            return
+        self._after_status()
+
+    def _check_lost(self, now: float) -> None:
+        """Stop the run once the recorder or an agent is lost (the books say when that is)."""
+        started, where = self.step is not None, self._where()
+        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(now, started=started, where=where)
+        if error is not None:
+            raise error
+
+    def _where(self) -> str:
+        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
+
+    # -- progress and results -------------------------------------------------------------------
+
+    def _say(self, line: str) -> None:
+        """A line on stdout, where `formation run` shows the progress lines."""
+        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
+            print(line, flush=True)
+
+    def _print_progress(self) -> None:
+        events = sum(len(book.trigger_times) for book in self.agents.values())
+        try:
+            print(
+                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+                flush=True,
+            )
+        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
+            self.progress_period = 0.0
+
+    def snapshot_graph(self) -> dict:
+        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
+
+        Taken at the final Step, while every agent is still there (and, for a run that stops
+        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
+        graph = {}
+        for name, namespace in self.get_node_names_and_namespaces():
+            key = f'{namespace.rstrip("/")}/{name}'
+            graph[key] = {
+                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
+                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
+                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
+                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
+            }
+        return graph
+
+    def mark(self, name: str) -> None:
+        """Note the time the run reached `name` (extra.timestamps)."""
+        self._marks[name] = time.monotonic()
+
+    def timestamps(self) -> dict[str, float]:
+        """When this node reached each mark of the run, as Unix times (summary.json
+        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+        final_reports (every agent's final report in, or the wait for them over), delivered (what
+        this node published acknowledged)."""
+        marks = dict(self._marks)
+        if self._finished_at is not None:
+            marks['final_step'] = self._finished_at
+        offset = time.time() - time.monotonic()
+        return {name: at + offset for name, at in marks.items()}
+
+    def _run_extra(self, reached: float) -> dict:
+        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
+        return {
+            'clock': self.clock_mode,
+            'steps': self.steps,
+            'discovery_wall_time': (self._started or self._created) - self._created,
+            'timestamps': self.timestamps(),
+            'reached_time': reached,
+            'failure': self.failure_info,
+            **self._message_counts(),
+        }
+
+    def _message_counts(self) -> dict:
+        """Messages rejected, faults injected, reports missing, and what was published per topic."""
+        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
+
+    def delivery_publishers(self, *, with_steps: bool) -> list:
+        """The writers whose readers must acknowledge everything before the node goes: the tools'
+        topics and, `with_steps`, the Steps."""
+        return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
+
+    # -- the world: the robots (FormationSimulatorNode's is the exact one) ----------------------
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""
@@ -400,266 +654,6 @@ class FormationCoordinatorNode(Node):
     def _sample(self, msg) -> RobotSample:
         sample = odometry_sample if isinstance(msg, Odometry) else pose_sample
         return sample(msg, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch)
-
-    # -- discovery ------------------------------------------------------------------------------
-
-    def _connected(self) -> bool:
-        return not self._discovery_gaps()
-
-    def _discovery_gaps(self) -> list[str]:
-        """What discovery still waits for (empty: step 0 can go)."""
-        n, extra = len(self.agents), self.extra_subscribers
-        gaps = []
-
-        def count(what: str, have: int, want: int) -> None:
-            if have < want:
-                gaps.append(f'{what} {have}/{want}')
-
-        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
-        for pub in self._tool_publishers:
-            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
-        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
-        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
-        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
-        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
-        expired = [i for i, book in self.agents.items() if book.lost is not None]
-        for what, agents in (
-            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
-            ('agents whose liveliness lease expired', expired),
-            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
-        ):
-            if agents:
-                gaps.append(f'{what}: {ids_text(agents)}')
-        return gaps + self._world_gaps()
-
-    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
-
-    def _tick(self) -> None:
-        now = time.monotonic()
-        if not self.finished:
-            self._check_lost(now)
-        if self.step is None:
-            if len(self._ready) == len(self.agents) and self._connected():  # (cheap while agents are missing)
-                self._start()
-            elif now - self._created > self.discovery_timeout:
-                raise DiscoveryError(
-                    f'discovery did not complete within {self.discovery_timeout} s; still missing: '
-                    + '; '.join(self._discovery_gaps())
-                )
-            elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
-                self._next_discovery_progress = now + self.progress_period
-                self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
-            return
-        if self.finished:
-            return
-        self._running_tick()
-        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
-            self._last_progress = now
-            self._print_progress()
-
-    def _start(self) -> None:
-        self._started = self._marks['step0'] = time.monotonic()
-        if self.progress_period > 0.0:
-            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
-        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
-        self._begin()
-
-    # -- faults -----------------------------------------------------------------------------------
-
-    def _on_agent_liveliness(self, agent: int, info) -> None:
-        self.book.note_liveliness(
-            agent,
-            alive_count=info.alive_count,
-            not_alive_count_change=info.not_alive_count_change,
-            finished=self.finished,
-            now=time.monotonic(),
-        )
-
-    def _where(self) -> str:
-        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
-
-    def _check_lost(self, now: float) -> None:
-        """Stop the run once the recorder or an agent is lost (the books say when that is)."""
-        started, where = self.step is not None, self._where()
-        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(now, started=started, where=where)
-        if error is not None:
-            raise error
-
-    def _on_recorder_liveliness(self, info) -> None:
-        self.recorders.note_liveliness(
-            alive_count=info.alive_count, not_alive_count_change=info.not_alive_count_change, now=time.monotonic()
-        )
-
-    def _on_recorder(self, msg: String) -> None:
-        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
-        if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
-            self._reject(RECORDER_TOPIC, 'field', refusal)
-            return
-        self._after_status()
-
-    def _publish(self, publisher, msg) -> None:
-        publisher.publish(msg)
-        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
-
-    def _on_status(self, msg: Float64MultiArray) -> None:
-        try:
-            status = decode_status(msg)
-        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
-            self._reject(STATUS_TOPIC, error.reason, str(error))
-            return
-        self.book.accept_status(status)
-        if self.step is None and status.step_index == DISCOVERY_STEP:
-            self._on_announcement(status)
-            return
-        self._after_status()
-
-    def _on_announcement(self, status) -> None:
-        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
-        now = time.monotonic()
-        self._announced.add(status.agent)
-        (self._ready.add if status.ready else self._ready.discard)(status.agent)
-        book = self.agents[status.agent]
-        if book.lost is not None and book.lease_expired:
-            # It speaks after its lease lapsed while a busy machine started many processes: alive.
-            # (DDS said so again for most, but 3 agents of 1000 stayed "expired" for minutes, and
-            # step 0 waited for them; ready agents announce themselves every second until step 0.)
-            book.lost = None
-        if len(self._announced) == len(self.agents):
-            self._marks.setdefault('agents_announced', now)
-        if len(self._ready) == len(self.agents):
-            self._marks.setdefault('agents_ready', now)
-            if self._connected():
-                self._start()
-
-    def _say(self, line: str) -> None:
-        """A line on stdout, where `formation run` shows the progress lines."""
-        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
-            print(line, flush=True)
-
-    def _after_status(self) -> None:
-        """Lock-step settles steps here; the wall clock needs nothing."""
-
-    def _on_report(self, msg: String) -> None:
-        try:
-            report = decode_agent_report(msg)
-        except MessageError as error:
-            self._reject(REPORT_TOPIC, error.reason, str(error))
-            return
-        if (refusal := self.book.accept_report(report)) is not None:
-            self._reject(REPORT_TOPIC, 'field', refusal)
-
-    def _reject(self, topic: str, reason: str, detail: str) -> None:
-        count = self.book.count_rejection(reason)
-        if count <= 3 or count % 100 == 0:
-            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
-
-    @property
-    def rejected(self) -> dict[str, int]:
-        return self.book.rejected
-
-    def final_reports_in(self) -> bool:
-        return self.book.final_reports_in()
-
-    def fail(self, error: BaseException) -> None:
-        """Note why the run stops early (extra.failure of the summary)."""
-        if self.failure_info is not None:
-            return
-        if isinstance(error, CoordinatorError):
-            kind = error.kind
-        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
-            kind = 'interrupted'
-        else:
-            kind = 'error'
-        self.failure_info = {
-            'kind': kind,
-            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
-            'time': getattr(error, 'time', self.reached_time),
-            'step': None if self.step is None else self.step.index,
-            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
-            'detected_by': self.get_name().removeprefix('formation_'),
-        }
-        if isinstance(error, ConnectivityLostError):
-            self.failure_info.update(edge=list(error.edge), length=error.length)
-
-    def _print_progress(self) -> None:
-        events = sum(len(book.trigger_times) for book in self.agents.values())
-        try:
-            print(
-                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
-                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
-                flush=True,
-            )
-        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
-            self.progress_period = 0.0
-
-    # -- results --------------------------------------------------------------------------------
-
-    def snapshot_graph(self) -> dict:
-        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
-
-        Taken at the final Step, while every agent is still there (and, for a run that stops
-        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
-        graph = {}
-        for name, namespace in self.get_node_names_and_namespaces():
-            key = f'{namespace.rstrip("/")}/{name}'
-            graph[key] = {
-                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
-                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
-                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
-                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
-            }
-        return graph
-
-    def mark(self, name: str) -> None:
-        """Note the time the run reached `name` (extra.timestamps)."""
-        self._marks[name] = time.monotonic()
-
-    def timestamps(self) -> dict[str, float]:
-        """When this node reached each mark of the run, as Unix times (summary.json
-        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
-        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
-        final_reports (every agent's final report in, or the wait for them over), delivered (what
-        this node published acknowledged)."""
-        marks = dict(self._marks)
-        if self._finished_at is not None:
-            marks['final_step'] = self._finished_at
-        offset = time.time() - time.monotonic()
-        return {name: at + offset for name, at in marks.items()}
-
-    def _run_extra(self, reached: float) -> dict:
-        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
-        return {
-            'clock': self.clock_mode,
-            'steps': self.steps,
-            'discovery_wall_time': (self._started or self._created) - self._created,
-            'timestamps': self.timestamps(),
-            'reached_time': reached,
-            'failure': self.failure_info,
-            **self.book.message_counts(),
-            'published': self.book.published(self.published),
-        }
-
-    def _message_counts(self) -> dict:
-        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
-
-    # -- the end (driven by `run_end` from main) -------------------------------------------------
-
-    def end_now(self) -> None:
-        """The run stops early at this instant (after step 0): a final Step sends the agents home."""
-        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
-        self._reached = self.reached_time
-        if self._finished_at is None:
-            self._finished_at = time.monotonic()
-        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
-            self.graph = self.snapshot_graph()
-        self.finished = True
-        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
-
-    def delivery_publishers(self, *, with_steps: bool) -> list:
-        """The writers whose readers must acknowledge everything before the node goes: the tools'
-        topics and, `with_steps`, the Steps."""
-        return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
 
 
 def _parser(node_class: type[FormationCoordinatorNode]) -> argparse.ArgumentParser:
