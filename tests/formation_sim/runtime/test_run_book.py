@@ -60,6 +60,28 @@ def test_agents_lost_together_are_named_together_after_the_grace():
     assert book.not_ready() == [1, 2, 3]
 
 
+def test_discovery_waits_for_every_agent_ready_and_an_agent_that_speaks_after_its_lease_lapsed_is_alive():
+    book = RunBook(load_scenario('paper_single'), realtime=False)
+    for agent in (1, 2, 3):
+        book.note_liveliness(agent, alive_count=1, not_alive_count_change=0, finished=False, now=0.0)
+    book.note_announcement(_status(1, step_index=DISCOVERY_STEP, ready=True))
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=True))
+    assert not book.all_announced() and not book.all_ready()
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=False))
+    assert book.all_announced() and not book.all_ready()
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=False))  # a neighbour unmatched again
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
+    assert not book.all_ready()
+    book.note_liveliness(1, alive_count=0, not_alive_count_change=1, finished=False, now=1.0)  # a lease lapsed (busy machine)
+    book.note_liveliness(3, alive_count=0, not_alive_count_change=0, finished=False, now=1.0)  # a writer deleted
+    book.note_announcement(_status(1, step_index=DISCOVERY_STEP, ready=True))
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
+    assert book.agents[1].lost is None  # it spoke: alive
+    assert book.agents[3].lost is not None  # its node left: a late Status does not bring it back
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=True))
+    assert book.all_ready()
+
+
 def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_forgiven_during_discovery():
     recorders = RecorderBook()
     recorders.note_liveliness(alive_count=1, not_alive_count_change=0, now=0.0)

@@ -3,8 +3,9 @@
 - `orchestrate`: `FormationRun` starts a run in a private ROS domain, watches it and stops it by
   PID; its pieces: `launch` (the backend's plan: inputs, processes, environment, ROS domain),
   `supervise` (the children, stopped by PID, their Fast DDS files removed by `fastdds_shm`), `results`.
-- `coordinator`: the coordinator node (opens, watches and ends a run, writes its summary; no
-  world: on robots); `run_book`: its books (statuses, reports, lock-step settlement, faults).
+- `coordinator`: the coordinator node (opens, watches and ends a run; no world: on robots);
+  `run_book`: its books (statuses, reports, lock-step settlement, lost agents and recorders);
+  `run_end`: the end of a run (final reports, delivery, summary.json and graph.json).
 - `sim_node`: the simulator node = the coordinator plus the exact world, the sensing services and
   the lock-step clock (backend `exact`).
 - `robot_node`: a simulated kinematic robot (backends `holonomic`, `unicycle`).

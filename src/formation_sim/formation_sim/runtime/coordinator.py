@@ -20,8 +20,10 @@ robots"), and the coordinator only keeps the run's time and books (`run_book.Run
   lateness and the commands the agents' limits saturated.
 
 The simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) is this coordinator plus
-the exact world and the agents' sensing services.  Exit status: 0 done, 1 failed, 3 an agent
-lost, 130 interrupted.
+the exact world and the agents' sensing services.  What the node knows of the agents and the
+recorders is kept in `run_book` (`RunBook`, `RecorderBook`); `main()` ends the run through
+`run_end` (final reports, delivery, the agents stopped early, summary.json and graph.json).
+Exit status: 0 done, 1 failed, 3 an agent or the recorder lost, 130 interrupted.
 """
 
 from __future__ import annotations

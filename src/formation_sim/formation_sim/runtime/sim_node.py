@@ -1,8 +1,9 @@
 """The simulator node of the `exact` backend: the coordinator plus the physical world.
 
 A `coordinator.FormationCoordinatorNode` (discovery, Step, liveliness, Status and reports,
-failures, summary.json; the books in `run_book.RunBook`) that also holds the exact `World`, serves every agent's sensing service `/agent_<i>/sense`, applies the
-commands agents publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
+failures; the books in `run_book`, summary.json through `run_end`) that also holds the exact
+`World`, serves every agent's sensing service `/agent_<i>/sense`, applies the commands agents
+publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
 only), the exact state `/formation/state` and `/formation/ground_truth` at a sample period (pure
 evaluations, the world itself only advances from event to event), and `/formation/sensing_log`.
 
