@@ -1,4 +1,4 @@
-"""The end of a run, driven by `coordinator.main` once the node's callbacks are done with it.
+"""The end of a run, driven by `coordinator.main` once the time keeper's callbacks are done with it.
 
 At the horizon: the agents' final reports, then every reader's acknowledgement of what the node
 published, then the results on disk (summary.json, graph.json).  A run that stops early (a fault,
@@ -12,15 +12,13 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Protocol
 
 import rclpy
 from rclpy.duration import Duration
 
-from formation_msgs_py.lockstep import Step
 from formation_sim.runtime.run_book import RecorderBook
+from formation_sim.runtime.time_keeper import TimeKeeperNode
 from formation_sim.sim.files import write_atomically
-from formation_sim.sim.record import RunRecord
 from formation_sim.sim.summary import write_summary
 
 GRAPH_FILE = 'graph.json'
@@ -28,35 +26,20 @@ FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final report
 DELIVERY_TIMEOUT = 5.0  # [s] the longest wait for the readers' acknowledgements
 
 
-class EndingRun(Protocol):
-    """What the end of a run needs of its node (`coordinator.FormationCoordinatorNode`)."""
-
-    step: Step | None
-    out_dir: str
-    graph: dict
-    recorders: RecorderBook
-
-    def final_reports_in(self) -> bool: ...
-    def flush(self) -> None: ...
-    def end_now(self) -> None: ...
-    def delivery_publishers(self, *, with_steps: bool) -> list: ...
-    def record(self) -> RunRecord: ...
-
-
-def collect_final_reports(node: EndingRun, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT) -> None:
+def collect_final_reports(node: TimeKeeperNode, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT) -> None:
     """After the final step: wait (bounded) for every live agent's last report."""
     deadline = time.monotonic() + timeout_sec
     while not node.final_reports_in() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
 
 
-def wait_for_delivery(node: EndingRun, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
+def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
     """What is left published, wait (bounded) until every reader acknowledged the Steps and the tools' topics."""
     node.flush()
     _wait_acknowledged(executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec)
 
 
-def stop_agents(node: EndingRun, executor) -> None:
+def stop_agents(node: TimeKeeperNode, executor) -> None:
     """The run failed: a final Step sends the agents home, with their final reports."""
     if node.step is None or not rclpy.ok():
         return
@@ -81,7 +64,7 @@ def _wait_acknowledged(executor, publishers, *, recorders: RecorderBook, timeout
         executor.spin_once(timeout_sec=0.0)
 
 
-def write_results(node: EndingRun) -> None:
+def write_results(node: TimeKeeperNode) -> None:
     """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
