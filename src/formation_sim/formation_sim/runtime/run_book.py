@@ -13,9 +13,8 @@ Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import json
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -345,7 +344,6 @@ class RunBook:
     def lateness(self, trigger_times: dict[int, list[float]]) -> dict:
         """Wall clock: how late triggers came against the times agents had planned them."""
         return lateness_extra({i: book.planned for i, book in self.agents.items()}, trigger_times)
-
 
 
 class RecorderBook:
