@@ -1,5 +1,5 @@
-"""The run's books without ROS traffic: which Status a coordinator refuses, when a lost agent
-stops the run, and the summary's saturation and lateness."""
+"""The run's books without ROS traffic: which Status a coordinator refuses, when a lost agent or
+recorder stops the run, which recorder heartbeats count, and the summary's saturation and lateness."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.run_book import AgentLostError, CoordinatorError, RunBook
+from formation_sim.runtime.run_book import AgentLostError, CoordinatorError, RecorderBook, RecorderLostError, RunBook
 
 
 def _status(agent: int, **fields) -> Status:
@@ -58,6 +58,63 @@ def test_agents_lost_together_are_named_together_after_the_grace():
     assert book.lost_error(10.8, started=False, where='during discovery').agents == [3]
     book.agents[1].status = _status(1, step_index=DISCOVERY_STEP, ready=False)
     assert book.not_ready() == [1, 2, 3]
+
+
+def test_discovery_waits_for_every_agent_ready_and_an_agent_that_speaks_after_its_lease_lapsed_is_alive():
+    book = RunBook(load_scenario('paper_single'), realtime=False)
+    for agent in (1, 2, 3):
+        book.note_liveliness(agent, alive_count=1, not_alive_count_change=0, finished=False, now=0.0)
+    book.note_announcement(_status(1, step_index=DISCOVERY_STEP, ready=True))
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=True))
+    assert not book.all_announced() and not book.all_ready()
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=False))
+    assert book.all_announced() and not book.all_ready()
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=False))  # a neighbour unmatched again
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
+    assert not book.all_ready()
+    book.note_liveliness(1, alive_count=0, not_alive_count_change=1, finished=False, now=1.0)  # a lease lapsed (busy machine)
+    book.note_liveliness(3, alive_count=0, not_alive_count_change=0, finished=False, now=1.0)  # a writer deleted
+    book.note_announcement(_status(1, step_index=DISCOVERY_STEP, ready=True))
+    book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
+    assert book.agents[1].lost is None  # it spoke: alive
+    assert book.agents[3].lost is not None  # its node left: a late Status does not bring it back
+    book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=True))
+    assert book.all_ready()
+
+
+def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_forgiven_during_discovery():
+    recorders = RecorderBook()
+    recorders.note_liveliness(alive_count=1, not_alive_count_change=0, now=0.0)
+    recorders.note_liveliness(alive_count=0, not_alive_count_change=1, now=5.0)  # its lease expired (frozen)
+    recorders.note_liveliness(alive_count=0, not_alive_count_change=0, now=5.3)  # the first loss is the one kept
+    assert recorders.lost_error(5.5, started=True, where='at t=2.0 (step 7)') is None  # within LOST_GRACE
+    error = recorders.lost_error(5.6, started=True, where='at t=2.0 (step 7)')
+    assert isinstance(error, RecorderLostError)
+    assert str(error) == (
+        'the recorder lost at t=2.0 (step 7): no sign of life for 1.0 s (DDS liveliness lease: stopped or frozen?); '
+        'what it did not acknowledge is overwritten, so the run stops'
+    )
+    assert recorders.lost_error(9.0, started=False, where='during discovery') is None  # it may come back
+    recorders.note_liveliness(alive_count=1, not_alive_count_change=0, now=9.0)  # and it did
+    assert recorders.lost is None
+    recorders.note_liveliness(alive_count=0, not_alive_count_change=0, now=10.0)  # its writer deleted: it left
+    assert str(recorders.lost_error(10.6, started=False, where='during discovery')).startswith(
+        'the recorder lost during discovery: it left the graph;'
+    )
+
+
+def test_a_recorder_heartbeat_gives_its_latest_step_and_a_malformed_one_is_refused_with_the_reason():
+    recorders = RecorderBook()
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/formation_recorder", "step": 4}') is None
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/formation_recorder", "step": 3}') is None  # late, out of order
+    assert recorders.recorded_steps == {'/formation_recorder': 4}
+    assert recorders.accept_heartbeat('{"version": 2, "recorder": "r", "step": 1}') == (
+        """recorder heartbeat '{"version": 2, "recorder": "r", "step": 1}': version 2, step 1"""
+    )
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "r", "step": true}').endswith('version 1, step True')
+    assert recorders.accept_heartbeat('{"version": 1}') == """recorder heartbeat '{"version": 1}': 'recorder'"""  # the field missing
+    assert recorders.accept_heartbeat('not json').startswith("recorder heartbeat 'not json': Expecting value")
+    assert recorders.recorded_steps == {'/formation_recorder': 4}
 
 
 def test_saturation_in_the_summary_adds_up_the_agents_reports():

@@ -19,8 +19,11 @@ robots"), and the coordinator only keeps the run's time and books (`run_book.Run
   `formation analyze` samples the bag), and `extra`: the run's failure, rejected messages,
   lateness and the commands the agents' limits saturated.
 
-The simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) is this coordinator plus
-the exact world and the agents' sensing services.  Exit status: 0 done, 1 failed, 3 an agent
+Opening, watching and ending the run is `time_keeper.TimeKeeperNode`'s life cycle, which the
+simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares with its exact world
+and the agents' sensing services; this module adds the robots' world, and `main()` of both time
+keepers, which ends the run through `run_end` (final reports, delivery, the agents stopped
+early, summary.json and graph.json).  Exit status: 0 done, 1 failed, 3 an agent or the recorder
 lost, 130 interrupted.
 """
 
@@ -29,13 +32,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import sys
 import time
 import traceback
 from collections import deque
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -43,19 +44,17 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterError, ParameterSpec, parameter_help, read_parameters
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
-from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, decode_trigger_info, encode_step
-from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE, READER_QOS, SIMULATOR_QOS
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
+from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
+from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
-    RECORDER_TOPIC,
     REPORT_TOPIC,
     ROBOTS_TOPIC,
     SCENARIO_TOPIC,
@@ -67,23 +66,14 @@ from formation_msgs_py.topics import (
     robot_true_odom_topic,
     trigger_info_topic,
 )
-from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
-from formation_sim.runtime.run_book import (
-    AgentLostError,
-    ConnectivityLostError,
-    CoordinatorError,
-    DiscoveryError,
-    RecorderLostError,
-    RunBook,
-    ids_text,
-)
+from formation_sim.model.scenario import Scenario
+from formation_sim.runtime.run_book import AgentLostError, ConnectivityLostError, CoordinatorError, RecorderLostError, ids_text
+from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results
+from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
-from formation_sim.sim.files import write_atomically
-from formation_sim.sim.summary import write_summary
 
-GRAPH_FILE = 'graph.json'
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
 
@@ -91,7 +81,6 @@ EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
-DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
@@ -100,21 +89,8 @@ POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=Reliabi
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
 
 
-COORDINATOR_COMMON_PARAMETERS = (
-    ParameterSpec(name='scenario', type=STRING, description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)'),
-    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, high=math.inf, high_open=True, description="the run ends at this time [s] (0: the scenario's horizon)"),
-    ParameterSpec(name='out_dir', type=STRING, default='', description="where summary.json and graph.json go ('': nowhere)"),
-    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, high=math.inf, high_open=True, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
-    ParameterSpec(name='extra_subscribers', type=INTEGER, default=0, low=0, description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0"),
-    ParameterSpec(name='step_listeners', type=INTEGER, default=0, low=0, description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them'),
-    ParameterSpec(name='progress_period', type=DOUBLE, default=1.0, low=0.0, description='a progress line on stdout every this many seconds (0: none)'),
-    ParameterSpec(name='discovery_timeout', type=DOUBLE, default=120.0, low=0.0, low_open=True, description='give up when the run is not connected after this long [s]'),
-    ParameterSpec(name='executor', type=STRING, default='events', choices=EXECUTORS, description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)'),
-)  # fmt: skip
-"""What the coordinator and the simulator share."""
-
 COORDINATOR_PARAMETERS = (
-    *COORDINATOR_COMMON_PARAMETERS,
+    *TIME_KEEPER_PARAMETERS,
     ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
     ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle: the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
     ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
@@ -142,97 +118,13 @@ def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_ty
     return topics
 
 
-class FormationCoordinatorNode(Node):
-    """Time keeper and bookkeeper of a run whose world is the robots (or, subclassed, the simulator's)."""
-
-    def __init__(
-        self,
-        *,
-        scenario: Scenario | None = None,
-        parameter_overrides: list[Parameter] | None = None,
-        context=None,
-        node_name: str = 'formation_coordinator',
-    ) -> None:
-        super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
-        # Every parameter read and every rule checked before anything is set up: one
-        # ParameterError names every problem (the command exits 2, nothing started).
-        specs = [spec for spec in self.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
-        values, problems = read_parameters(self, specs)
-        if scenario is None and 'scenario' in values:
-            try:
-                scenario = load_scenario(values['scenario'])
-            except ScenarioError as error:
-                problems.append(f"parameter 'scenario' (string): {error}")
-        if scenario is not None:
-            if scenario.dimension > 3:
-                problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
-            problems += self._world_problems(values, scenario)
-        if problems:
-            raise ParameterError(self.get_fully_qualified_name(), problems)
-        self.parameter_values = values
-        self.out_dir = values['out_dir']
-        self.sample_period = values['sample_period']
-        self.extra_subscribers = values['extra_subscribers']
-        # Nodes outside the run that must hear every Step (monitors, fault injectors): step 0 waits.
-        self.step_listeners = values['step_listeners']
-        self.progress_period = values['progress_period']
-        self.discovery_timeout = values['discovery_timeout']
-        self.executor_kind = values['executor']
-        self.clock_mode = self._clock_mode(values)
-        self.realtime = self.clock_mode == 'realtime'
-        self.scenario = scenario
-        self.horizon = scenario.horizon if values['horizon'] <= 0.0 else values['horizon']
-        self.double = scenario.dynamics == 'double'
-        self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
-        self.agents = self.book.agents
-
-        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
-        # For tools: the scenario once (so a bag is self-contained).
-        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
-        self._tool_publishers = [self._scenario_pub]
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
-        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
-        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
-        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
-        self._recorder_sub = self.create_subscription(
-            String,
-            RECORDER_TOPIC,
-            self._on_recorder,
-            READER_QOS,
-            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
-        )
-        self._recorders_alive = 0
-        self._recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
-        self._recorder_lost: tuple[float, str] | None = None  # (monotonic time, how)
-        self._recorder_lease_expired = False
-        self.published: dict[str, int] = {}  # topic -> messages this node published there
-
-        self.step: Step | None = None
-        self.finished = False
-        self.failure: Exception | None = None
-        self.steps = 0
-        self._created = time.monotonic()
-        self._started: float | None = None
-        self._last_progress = self._created
-        self._epoch = 0.0
-        self._finished_at: float | None = None
-        self.graph: dict = {}
-        self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
-        self._setup_world()
-        # One writer per agent whose DDS liveliness is the agent's sign of life.
-        self._agent_writers = self._watch_agents()
-        self._timer = self.create_timer(0.1, self._tick)
-        # Discovery as the agents report it: who has announced itself, who is ready (step 0
-        # goes as soon as the last one is and the node's own endpoints are matched).
-        self._announced: set[int] = set()
-        self._ready: set[int] = set()
-        self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
-        self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
-
-    # -- what a subclass with a world of its own replaces ---------------------------------------
+class FormationCoordinatorNode(TimeKeeperNode):
+    """The time keeper of a run whose world is the robots: it reads their poses and the agents'
+    triggering times, and samples the formation from them."""
 
     serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
+
     PARAMETERS = COORDINATOR_PARAMETERS
     COMMAND = 'formation_coordinator'
     PARAMS_FILE = COORDINATOR_FILE
@@ -241,6 +133,9 @@ class FormationCoordinatorNode(Node):
         'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
         'fault, and writes summary.json and graph.json into out_dir.'
     )
+
+    def __init__(self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
+        super().__init__(node_name='formation_coordinator', scenario=scenario, parameter_overrides=parameter_overrides, context=context)
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""
@@ -353,7 +248,7 @@ class FormationCoordinatorNode(Node):
             executor.spin_once(timeout_sec=0.02)
 
     def flush(self) -> None:
-        """Anything still to publish before the node goes."""
+        """The robots' world publishes nothing that could wait."""
 
     def record(self) -> RunRecord:
         """The run as the coordinator saw it (triggers from the agents' messages, formation from the poses)."""
@@ -406,316 +301,8 @@ class FormationCoordinatorNode(Node):
         sample = odometry_sample if isinstance(msg, Odometry) else pose_sample
         return sample(msg, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch)
 
-    # -- discovery ------------------------------------------------------------------------------
 
-    def _connected(self) -> bool:
-        return not self._discovery_gaps()
-
-    def _discovery_gaps(self) -> list[str]:
-        """What discovery still waits for (empty: step 0 can go)."""
-        n, extra = len(self.agents), self.extra_subscribers
-        gaps = []
-
-        def count(what: str, have: int, want: int) -> None:
-            if have < want:
-                gaps.append(f'{what} {have}/{want}')
-
-        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
-        for pub in self._tool_publishers:
-            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
-        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
-        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
-        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
-        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
-        expired = [i for i, book in self.agents.items() if book.lost is not None]
-        for what, agents in (
-            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
-            ('agents whose liveliness lease expired', expired),
-            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
-        ):
-            if agents:
-                gaps.append(f'{what}: {ids_text(agents)}')
-        return gaps + self._world_gaps()
-
-    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
-
-    def _tick(self) -> None:
-        now = time.monotonic()
-        if not self.finished:
-            self._check_lost(now)
-        if self.step is None:
-            if len(self._ready) == len(self.agents) and self._connected():  # (cheap while agents are missing)
-                self._start()
-            elif now - self._created > self.discovery_timeout:
-                raise DiscoveryError(
-                    f'discovery did not complete within {self.discovery_timeout} s; still missing: '
-                    + '; '.join(self._discovery_gaps())
-                )
-            elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
-                self._next_discovery_progress = now + self.progress_period
-                self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
-            return
-        if self.finished:
-            return
-        self._running_tick()
-        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
-            self._last_progress = now
-            self._print_progress()
-
-    def _start(self) -> None:
-        self._started = self._marks['step0'] = time.monotonic()
-        if self.progress_period > 0.0:
-            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
-        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
-        self._begin()
-
-    # -- faults -----------------------------------------------------------------------------------
-
-    def _on_agent_liveliness(self, agent: int, info) -> None:
-        self.book.note_liveliness(
-            agent,
-            alive_count=info.alive_count,
-            not_alive_count_change=info.not_alive_count_change,
-            finished=self.finished,
-            now=time.monotonic(),
-        )
-
-    def _where(self) -> str:
-        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
-
-    def _check_lost(self, now: float) -> None:
-        self._check_recorder_lost(now)
-        error = self.book.lost_error(now, started=self.step is not None, where=self._where())
-        if error is not None:
-            raise error
-
-    def _on_recorder_liveliness(self, info) -> None:
-        if info.alive_count >= self._recorders_alive:
-            self._recorders_alive = info.alive_count
-            self._recorder_lost = None
-        elif self._recorder_lost is None:  # also after the end: no more waiting for its acknowledgements
-            self._recorder_lease_expired = info.not_alive_count_change > 0
-            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self._recorder_lease_expired else 'it left the graph'
-            self._recorder_lost = (time.monotonic(), how)
-
-    def _on_recorder(self, msg: String) -> None:
-        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
-        try:
-            beat = json.loads(msg.data)
-            name, step = str(beat['recorder']), beat['step']
-            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
-                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
-        except (ValueError, KeyError, TypeError) as error:
-            self._reject(RECORDER_TOPIC, 'field', f'recorder heartbeat {msg.data[:80]!r}: {error}')
-            return
-        self._recorded_steps[name] = max(step, self._recorded_steps.get(name, -1))
-        self._after_status()
-
-    def _check_recorder_lost(self, now: float) -> None:
-        lost = self._recorder_lost
-        if lost is None or (self.step is None and self._recorder_lease_expired) or now - lost[0] <= LOST_GRACE:
-            return
-        raise RecorderLostError(
-            f'the recorder lost {self._where()}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
-        )
-
-    def _publish(self, publisher, msg) -> None:
-        publisher.publish(msg)
-        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
-
-    def _on_status(self, msg: Float64MultiArray) -> None:
-        try:
-            status = decode_status(msg)
-        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
-            self._reject(STATUS_TOPIC, error.reason, str(error))
-            return
-        self.book.accept_status(status)
-        if self.step is None and status.step_index == DISCOVERY_STEP:
-            self._on_announcement(status)
-            return
-        self._after_status()
-
-    def _on_announcement(self, status) -> None:
-        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
-        now = time.monotonic()
-        self._announced.add(status.agent)
-        (self._ready.add if status.ready else self._ready.discard)(status.agent)
-        book = self.agents[status.agent]
-        if book.lost is not None and book.lease_expired:
-            # It speaks after its lease lapsed while a busy machine started many processes: alive.
-            # (DDS said so again for most, but 3 agents of 1000 stayed "expired" for minutes, and
-            # step 0 waited for them; ready agents announce themselves every second until step 0.)
-            book.lost = None
-        if len(self._announced) == len(self.agents):
-            self._marks.setdefault('agents_announced', now)
-        if len(self._ready) == len(self.agents):
-            self._marks.setdefault('agents_ready', now)
-            if self._connected():
-                self._start()
-
-    def _say(self, line: str) -> None:
-        """A line on stdout, where `formation run` shows the progress lines."""
-        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
-            print(line, flush=True)
-
-    def _after_status(self) -> None:
-        """Lock-step settles steps here; the wall clock needs nothing."""
-
-    def _on_report(self, msg: String) -> None:
-        try:
-            report = decode_agent_report(msg)
-        except MessageError as error:
-            self._reject(REPORT_TOPIC, error.reason, str(error))
-            return
-        if (refusal := self.book.accept_report(report)) is not None:
-            self._reject(REPORT_TOPIC, 'field', refusal)
-
-    def _reject(self, topic: str, reason: str, detail: str) -> None:
-        count = self.book.count_rejection(reason)
-        if count <= 3 or count % 100 == 0:
-            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
-
-    @property
-    def rejected(self) -> dict[str, int]:
-        return self.book.rejected
-
-    def final_reports_in(self) -> bool:
-        return self.book.final_reports_in()
-
-    def fail(self, error: BaseException) -> None:
-        """Note why the run stops early (extra.failure of the summary)."""
-        if self.failure_info is not None:
-            return
-        if isinstance(error, CoordinatorError):
-            kind = error.kind
-        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
-            kind = 'interrupted'
-        else:
-            kind = 'error'
-        self.failure_info = {
-            'kind': kind,
-            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
-            'time': getattr(error, 'time', self.reached_time),
-            'step': None if self.step is None else self.step.index,
-            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
-            'detected_by': self.get_name().removeprefix('formation_'),
-        }
-        if isinstance(error, ConnectivityLostError):
-            self.failure_info.update(edge=list(error.edge), length=error.length)
-
-    def _print_progress(self) -> None:
-        events = sum(len(book.trigger_times) for book in self.agents.values())
-        try:
-            print(
-                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
-                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
-                flush=True,
-            )
-        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
-            self.progress_period = 0.0
-
-    # -- results --------------------------------------------------------------------------------
-
-    def snapshot_graph(self) -> dict:
-        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
-
-        Taken at the final Step, while every agent is still there (and, for a run that stops
-        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
-        graph = {}
-        for name, namespace in self.get_node_names_and_namespaces():
-            key = f'{namespace.rstrip("/")}/{name}'
-            graph[key] = {
-                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
-                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
-                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
-                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
-            }
-        return graph
-
-    def mark(self, name: str) -> None:
-        """Note the time the run reached `name` (extra.timestamps)."""
-        self._marks[name] = time.monotonic()
-
-    def timestamps(self) -> dict[str, float]:
-        """When this node reached each mark of the run, as Unix times (summary.json
-        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
-        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
-        final_reports (every agent's final report in, or the wait for them over), delivered (what
-        this node published acknowledged)."""
-        marks = dict(self._marks)
-        if self._finished_at is not None:
-            marks['final_step'] = self._finished_at
-        offset = time.time() - time.monotonic()
-        return {name: at + offset for name, at in marks.items()}
-
-    def _run_extra(self, reached: float) -> dict:
-        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
-        return {
-            'clock': self.clock_mode,
-            'steps': self.steps,
-            'discovery_wall_time': (self._started or self._created) - self._created,
-            'timestamps': self.timestamps(),
-            'reached_time': reached,
-            'failure': self.failure_info,
-            **self.book.message_counts(),
-            'published': self.book.published(self.published),
-        }
-
-    def _message_counts(self) -> dict:
-        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
-
-    def wait_for_delivery(self, executor, timeout_sec: float = 5.0) -> None:
-        self.flush()
-        self._wait_acknowledged(executor, (self._step_pub, *self._tool_publishers), timeout_sec)
-
-    def _wait_acknowledged(self, executor, publishers, timeout_sec: float) -> None:
-        """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
-        recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
-        end: what it lacks is counted against the bag after the run)."""
-        deadline = time.monotonic() + timeout_sec
-        pending = list(publishers)
-        while pending and self._recorder_lost is None and time.monotonic() < deadline:
-            pending = [pub for pub in pending if not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.05))]
-            executor.spin_once(timeout_sec=0.0)
-
-    def stop_agents(self, executor) -> None:
-        """The run failed: a final Step sends the agents home, with their final reports."""
-        if self.step is None or not rclpy.ok():
-            return
-        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
-        self._reached = self.reached_time
-        if self._finished_at is None:
-            self._finished_at = time.monotonic()
-        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
-            self.graph = self.snapshot_graph()
-        self.finished = True
-        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
-        self.flush()
-        self.collect_final_reports(executor)
-        # A live agent's final report says it got the final Step; a lost agent is still matched
-        # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
-        publishers = self._tool_publishers
-        if not self.final_reports_in():
-            publishers = (self._step_pub, *publishers)
-        self._wait_acknowledged(executor, publishers, 5.0)  # as at the horizon: the bag ends where the summary does
-
-    def collect_final_reports(self, executor, timeout_sec: float = 3.0) -> None:
-        """After the final step: wait (bounded) for every live agent's last report."""
-        deadline = time.monotonic() + timeout_sec
-        while not self.final_reports_in() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-
-
-def write_results(node: FormationCoordinatorNode) -> None:
-    """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
-    out = Path(node.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_summary(node.record(), out)
-    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')
-
-
-def _parser(node_class: type[FormationCoordinatorNode]) -> argparse.ArgumentParser:
+def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
     return argparse.ArgumentParser(
         prog=node_class.COMMAND,
         description=node_class.DESCRIPTION,
@@ -728,7 +315,7 @@ def _parser(node_class: type[FormationCoordinatorNode]) -> argparse.ArgumentPars
     )
 
 
-def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordinatorNode] = FormationCoordinatorNode) -> int:
+def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] = FormationCoordinatorNode) -> int:
     """Run one coordinator (or simulator, `node_class`) node until the run ends; its exit status."""
     argv = list(args if args is not None else sys.argv)
     _parser(node_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
@@ -750,10 +337,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
                 stop.check()
                 if node.failure is not None:
                     raise node.failure
-            node.collect_final_reports(executor)
+            collect_final_reports(node, executor)
             node.mark('final_reports')
             node.after_final_step(executor)
-            node.wait_for_delivery(executor)
+            wait_for_delivery(node, executor)
             node.mark('delivered')
             if node.progress_period > 0.0:
                 node._print_progress()
@@ -784,7 +371,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[FormationCoordin
     return status
 
 
-def _stop_and_write(node: FormationCoordinatorNode | None, executor, error: BaseException) -> None:
+def _stop_and_write(node: TimeKeeperNode | None, executor, error: BaseException) -> None:
     """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
     it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
     bag ends where the summary does; then the summary of what happened, and why it stopped."""
@@ -793,7 +380,7 @@ def _stop_and_write(node: FormationCoordinatorNode | None, executor, error: Base
     node.fail(error)
     if executor is not None:
         try:
-            node.stop_agents(executor)
+            stop_agents(node, executor)
         except Exception as problem:  # noqa: BLE001 - the original failure is what matters
             _tell(f'formation_sim: could not stop the agents: {problem}')
     if node.step is None or not node.out_dir:

@@ -364,7 +364,7 @@ class FormationRun:
         """'; nodes outside the run wrote on them: …', as graph.json saw them."""
         from formation_agent.ros.node import NODE_NAME
         from formation_msgs_py.topics import agent_namespace
-        from formation_sim.runtime.coordinator import GRAPH_FILE
+        from formation_sim.runtime.run_end import GRAPH_FILE
         from formation_sim.runtime.robot_node import NODE_NAME as ROBOT_NODE_NAME
 
         own = {'/formation_simulator', '/formation_coordinator', '/formation_recorder'}

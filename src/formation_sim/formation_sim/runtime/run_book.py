@@ -1,10 +1,11 @@
-"""The bookkeeping of a distributed run: what the coordinator knows of every agent.
+"""The bookkeeping of a distributed run: what the coordinator knows of every agent and recorder.
 
 `RunBook` holds, per agent, its latest Status, its reports, its triggering times and its signs of
 life, and answers the coordinator's questions (docs/MESSAGES.md): is the lock-step step settled,
 which agents are due next, who is lost, did an edge reach Δ, what goes into summary.json's
-`extra`.  The nodes (`coordinator.FormationCoordinatorNode`, `sim_node.FormationSimulatorNode`)
-only move messages in and out of it.
+`extra`.  `RecorderBook` does the same for the recorders: their signs of life and the latest step
+each has written.  The nodes (`coordinator.FormationCoordinatorNode`,
+`sim_node.FormationSimulatorNode`) only move messages in and out of them.
 
 Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 `extra.failure.kind` in summary.json.
@@ -12,6 +13,7 @@ Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -102,6 +104,8 @@ class RunBook:
         self.serves_sensing = serves_sensing
         self.agents = {i: AgentBook(neighbours=tuple(scenario.neighbours(i))) for i in scenario.agent_ids}
         self.rejected: dict[str, int] = {}  # malformed messages the coordinator itself refused
+        self._announced: set[int] = set()  # agents that sent a discovery Status
+        self._ready: set[int] = set()  # agents whose latest discovery Status said ready
         index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
         self._edge_rows = (
             np.array([index[e.i] for e in scenario.edges], dtype=int),
@@ -169,6 +173,24 @@ class RunBook:
             i for i, book in self.agents.items()
             if book.status is None or book.status.step_index != DISCOVERY_STEP or not book.status.ready
         ]  # fmt: skip
+
+    def note_announcement(self, status: Status) -> None:
+        """An agent's discovery Status (taken by `accept_status`): announced, ready or not, alive."""
+        self._announced.add(status.agent)
+        (self._ready.add if status.ready else self._ready.discard)(status.agent)
+        book = self.agents[status.agent]
+        if book.lost is not None and book.lease_expired:
+            # It speaks after its lease lapsed while a busy machine started many processes: alive.
+            # (DDS said so again for most, but 3 agents of 1000 stayed "expired" for minutes, and
+            # step 0 waited for them; ready agents announce themselves every second until step 0.)
+            book.lost = None
+
+    def all_announced(self) -> bool:
+        return len(self._announced) == len(self.agents)
+
+    def all_ready(self) -> bool:
+        """Every agent's latest discovery Status said its endpoints are matched."""
+        return len(self._ready) == len(self.agents)
 
     def note_liveliness(self, agent: int, *, alive_count: int, not_alive_count_change: int, finished: bool, now: float) -> None:
         """A liveliness change of the writer watched for `agent`."""
@@ -323,3 +345,48 @@ class RunBook:
         """Wall clock: how late triggers came against the times agents had planned them."""
         return lateness_extra({i: book.planned for i, book in self.agents.items()}, trigger_times)
 
+
+class RecorderBook:
+    """What the coordinator knows of the recorders (the run's extra subscribers): whether their
+    heartbeat writers are alive, and the latest step each has written (lock-step flow control).
+
+    A frozen recorder lets every reliable keep-last writer of the run overwrite what it did not
+    acknowledge, so a recorder lost stops the run as an agent lost does."""
+
+    def __init__(self) -> None:
+        self.alive = 0  # heartbeat writers alive (DDS liveliness)
+        self.recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self.lost: tuple[float, str] | None = None  # (monotonic time, how) once one went away
+        self.lease_expired = False  # how it went: its lease expired (else its writer was deleted)
+
+    def note_liveliness(self, *, alive_count: int, not_alive_count_change: int, now: float) -> None:
+        """A liveliness change of the recorders' heartbeat writers."""
+        if alive_count >= self.alive:
+            self.alive = alive_count
+            self.lost = None
+        elif self.lost is None:  # also after the end: no more waiting for its acknowledgements
+            self.lease_expired = not_alive_count_change > 0
+            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self.lease_expired else 'it left the graph'
+            self.lost = (now, how)
+
+    def accept_heartbeat(self, text: str) -> str | None:
+        """Take a recorder's heartbeat (JSON: version 1, recorder, step); the reason it is refused, or None."""
+        try:
+            beat = json.loads(text)
+            name, step = str(beat['recorder']), beat['step']
+            if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
+                raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+        except (ValueError, KeyError, TypeError) as error:
+            return f'recorder heartbeat {text[:80]!r}: {error}'
+        self.recorded_steps[name] = max(step, self.recorded_steps.get(name, -1))
+        return None
+
+    def lost_error(self, now: float, *, started: bool, where: str) -> RecorderLostError | None:
+        """The recorder lost, once LOST_GRACE has passed (else None); during discovery a lease that
+        expired waits for the recorder to come back, as an agent's does (`RunBook.lost_error`)."""
+        lost = self.lost
+        if lost is None or (not started and self.lease_expired) or now - lost[0] <= LOST_GRACE:
+            return None
+        return RecorderLostError(
+            f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )

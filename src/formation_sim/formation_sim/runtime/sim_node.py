@@ -1,8 +1,9 @@
-"""The simulator node of the `exact` backend: the coordinator plus the physical world.
+"""The simulator node of the `exact` backend: the time keeper plus the physical world.
 
-A `coordinator.FormationCoordinatorNode` (discovery, Step, liveliness, Status and reports,
-failures, summary.json; the books in `run_book.RunBook`) that also holds the exact `World`, serves every agent's sensing service `/agent_<i>/sense`, applies the
-commands agents publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
+A `time_keeper.TimeKeeperNode` (discovery, Step, liveliness, Status and reports, failures; the
+books in `run_book`, summary.json through `run_end`), as the coordinator is, that holds the exact
+`World`, serves every agent's sensing service `/agent_<i>/sense`, applies the commands agents
+publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
 only), the exact state `/formation/state` and `/formation/ground_truth` at a sample period (pure
 evaluations, the world itself only advances from event to event), and `/formation/sensing_log`.
 
@@ -77,14 +78,8 @@ from formation_sim.analysis.markers import MARKERS_TYPE, FormationMarkers, LiveM
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
-from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's public names since before the split
-    EXIT_AGENT_LOST,
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    GRAPH_FILE,
-    FormationCoordinatorNode,
-    write_results,
-)
+from formation_sim.runtime.coordinator import EXIT_AGENT_LOST, EXIT_FAILED, EXIT_INTERRUPTED  # noqa: F401 - the simulator's public names since before the split
+from formation_sim.runtime.run_end import GRAPH_FILE, write_results  # noqa: F401 - likewise
 from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     AgentLostError,
     ConnectivityLostError,
@@ -93,6 +88,7 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     RecorderLostError,
     StallError,
 )
+from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.engine import Sampler, build_agent, due_twice, rounding_floor
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
@@ -102,7 +98,7 @@ SIMULATOR_FILE = 'simulator.params.yaml'  # its parameters in a run folder (form
 SimulatorError = CoordinatorError
 
 SIMULATOR_PARAMETERS = (
-    *coordinator.COORDINATOR_COMMON_PARAMETERS,
+    *TIME_KEEPER_PARAMETERS,
     ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
     ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
     ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description='a lock-step step not settled after this many seconds ends the run, naming every agent\'s last Status'),
@@ -186,7 +182,7 @@ def agent_parameters(scenario: Scenario, agent_id: int, *, horizon: float, extra
     return params
 
 
-class FormationSimulatorNode(FormationCoordinatorNode):
+class FormationSimulatorNode(TimeKeeperNode):
     """World, sensing services and lock-step clock of a distributed formation run."""
 
     serves_sensing = True
@@ -293,14 +289,14 @@ class FormationSimulatorNode(FormationCoordinatorNode):
             raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
 
     def _describe_wait(self) -> str:
-        recorders = f'recorders at steps {self._recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
+        recorders = f'recorders at steps {self.recorders.recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
         return f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}' + self.book.waiting_description()
 
     def _recorder_behind(self) -> bool:
         """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
         if self.extra_subscribers < 1:
             return False
-        recorded = sorted(self._recorded_steps.values())[: self.extra_subscribers]
+        recorded = sorted(self.recorders.recorded_steps.values())[: self.extra_subscribers]
         return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
 
     # -- wall clock -----------------------------------------------------------------------------

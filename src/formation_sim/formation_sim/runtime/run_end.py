@@ -1,0 +1,72 @@
+"""The end of a run, driven by `coordinator.main` once the time keeper's callbacks are done with it.
+
+At the horizon: the agents' final reports, then every reader's acknowledgement of what the node
+published, then the results on disk (summary.json, graph.json).  A run that stops early (a fault,
+SIGINT/SIGTERM) ends the same way after a final Step at the instant it stopped, so that the bag
+ends where the summary does.  Every wait spins the node's executor and is bounded: an agent or a
+recorder that went away must not hold the end of the run up.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.duration import Duration
+
+from formation_sim.runtime.run_book import RecorderBook
+from formation_sim.runtime.time_keeper import TimeKeeperNode
+from formation_sim.sim.files import write_atomically
+from formation_sim.sim.summary import write_summary
+
+GRAPH_FILE = 'graph.json'
+FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final reports
+DELIVERY_TIMEOUT = 5.0  # [s] the longest wait for the readers' acknowledgements
+
+
+def collect_final_reports(node: TimeKeeperNode, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT) -> None:
+    """After the final step: wait (bounded) for every live agent's last report."""
+    deadline = time.monotonic() + timeout_sec
+    while not node.final_reports_in() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+
+
+def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
+    """What is left published, wait (bounded) until every reader acknowledged the Steps and the tools' topics."""
+    node.flush()
+    _wait_acknowledged(executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec)
+
+
+def stop_agents(node: TimeKeeperNode, executor) -> None:
+    """The run failed: a final Step sends the agents home, with their final reports."""
+    if node.step is None or not rclpy.ok():
+        return
+    node.end_now()
+    node.flush()
+    collect_final_reports(node, executor)
+    # A live agent's final report says it got the final Step; a lost agent is still matched
+    # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
+    publishers = node.delivery_publishers(with_steps=not node.final_reports_in())
+    # As at the horizon: the bag ends where the summary does.
+    _wait_acknowledged(executor, publishers, recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT)
+
+
+def _wait_acknowledged(executor, publishers, *, recorders: RecorderBook, timeout_sec: float) -> None:
+    """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
+    recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
+    end: what it lacks is counted against the bag after the run)."""
+    deadline = time.monotonic() + timeout_sec
+    pending = list(publishers)
+    while pending and recorders.lost is None and time.monotonic() < deadline:
+        pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
+        executor.spin_once(timeout_sec=0.0)
+
+
+def write_results(node: TimeKeeperNode) -> None:
+    """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
+    out = Path(node.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_summary(node.record(), out)
+    write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')

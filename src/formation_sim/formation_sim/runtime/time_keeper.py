@@ -1,0 +1,453 @@
+"""The time keeper of a distributed run, whatever its world: `TimeKeeperNode`.
+
+It is the base of the coordinator of a robot run (`coordinator.FormationCoordinatorNode`: the
+robots are the world) and of the simulator (`sim_node.FormationSimulatorNode`: the exact world),
+and holds the run's life cycle (docs/MESSAGES.md):
+
+- **discovery**: Step 0 goes once every agent says it is ready and every endpoint of the node is
+  matched (`extra_subscribers`, `step_listeners`, the world's own); a progress line says what is
+  still missing, and a `DiscoveryError` after `discovery_timeout`;
+- **the run**: the agents' Status and reports go into `run_book.RunBook`; agents and recorders are
+  watched (DDS liveliness, `RunBook` and `run_book.RecorderBook` say when one is lost);
+- **its end**: at the horizon (the world's), or early (`fail` notes why, `end_now` sends the agents
+  home); `coordinator.main` then drives `run_end` (final reports, delivery, summary.json).
+
+A world supplies the hooks of the last section of the class.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray, String
+
+from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterError, ParameterSpec, read_parameters
+from formation_agent.ros.process import EXECUTORS
+from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, encode_step
+from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
+from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
+from formation_sim.runtime.run_book import (
+    ConnectivityLostError,
+    CoordinatorError,
+    DiscoveryError,
+    RecorderBook,
+    RunBook,
+    ids_text,
+)
+from formation_sim.sim.record import RunRecord
+
+DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
+
+TIME_KEEPER_PARAMETERS = (
+    ParameterSpec(name='scenario', type=STRING, description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)'),
+    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, high=math.inf, high_open=True, description="the run ends at this time [s] (0: the scenario's horizon)"),
+    ParameterSpec(name='out_dir', type=STRING, default='', description="where summary.json and graph.json go ('': nowhere)"),
+    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, high=math.inf, high_open=True, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
+    ParameterSpec(name='extra_subscribers', type=INTEGER, default=0, low=0, description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0"),
+    ParameterSpec(name='step_listeners', type=INTEGER, default=0, low=0, description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them'),
+    ParameterSpec(name='progress_period', type=DOUBLE, default=1.0, low=0.0, description='a progress line on stdout every this many seconds (0: none)'),
+    ParameterSpec(name='discovery_timeout', type=DOUBLE, default=120.0, low=0.0, low_open=True, description='give up when the run is not connected after this long [s]'),
+    ParameterSpec(name='executor', type=STRING, default='events', choices=EXECUTORS, description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)'),
+)  # fmt: skip
+"""What the coordinator and the simulator share."""
+
+
+class TimeKeeperNode(Node):
+    """The life cycle of a distributed run: discovery, step 0, the run watched, its end; the world
+    is a subclass's."""
+
+    def __init__(
+        self,
+        *,
+        node_name: str,
+        scenario: Scenario | None = None,
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,
+    ) -> None:
+        super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
+        # Every parameter read and every rule checked before anything is set up: one
+        # ParameterError names every problem (the command exits 2, nothing started).
+        specs = [spec for spec in self.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
+        values, problems = read_parameters(self, specs)
+        if scenario is None and 'scenario' in values:
+            try:
+                scenario = load_scenario(values['scenario'])
+            except ScenarioError as error:
+                problems.append(f"parameter 'scenario' (string): {error}")
+        if scenario is not None:
+            if scenario.dimension > 3:
+                problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+            problems += self._world_problems(values, scenario)
+        if problems:
+            raise ParameterError(self.get_fully_qualified_name(), problems)
+        self.parameter_values = values
+        self.out_dir = values['out_dir']
+        self.sample_period = values['sample_period']
+        self.extra_subscribers = values['extra_subscribers']
+        # Nodes outside the run that must hear every Step (monitors, fault injectors): step 0 waits.
+        self.step_listeners = values['step_listeners']
+        self.progress_period = values['progress_period']
+        self.discovery_timeout = values['discovery_timeout']
+        self.executor_kind = values['executor']
+        self.clock_mode = self._clock_mode(values)
+        self.realtime = self.clock_mode == 'realtime'
+        self.scenario = scenario
+        self.horizon = scenario.horizon if values['horizon'] <= 0.0 else values['horizon']
+        self.double = scenario.dynamics == 'double'
+        self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
+        self.agents = self.book.agents
+
+        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
+        # For tools: the scenario once (so a bag is self-contained).
+        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
+        self._tool_publishers = [self._scenario_pub]
+        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
+        # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
+        # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
+        # every reliable keep-last writer of the run overwrite what it did not acknowledge.
+        self._recorder_sub = self.create_subscription(
+            String,
+            RECORDER_TOPIC,
+            self._on_recorder,
+            READER_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_recorder_liveliness),
+        )
+        self.recorders = RecorderBook()
+        self.published: dict[str, int] = {}  # topic -> messages this node published there
+
+        self.step: Step | None = None
+        self.finished = False
+        self.failure: Exception | None = None
+        self.steps = 0
+        self._created = time.monotonic()
+        self._started: float | None = None
+        self._last_progress = self._created
+        self._epoch = 0.0
+        self._finished_at: float | None = None
+        self.graph: dict = {}
+        self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
+        self._setup_world()
+        # One writer per agent whose DDS liveliness is the agent's sign of life.
+        self._agent_writers = self._watch_agents()
+        self._timer = self.create_timer(0.1, self._tick)
+        self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
+        self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
+
+    # -- the run's life cycle: discovery, step 0, the run, its end ------------------------------
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if not self.finished:
+            self._check_lost(now)
+        if self.step is None:
+            self._discovery_tick(now)
+            return
+        if self.finished:
+            return
+        self._running_tick()
+        if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
+            self._last_progress = now
+            self._print_progress()
+
+    def _discovery_tick(self, now: float) -> None:
+        """Before step 0: start once connected, give up after the discovery timeout, else say what is missing."""
+        if self.book.all_ready() and self._connected():  # (cheap while agents are missing)
+            self._start()
+        elif now - self._created > self.discovery_timeout:
+            raise DiscoveryError(
+                f'discovery did not complete within {self.discovery_timeout} s; still missing: '
+                + '; '.join(self._discovery_gaps())
+            )
+        elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
+            self._next_discovery_progress = now + self.progress_period
+            self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
+
+    def _on_announcement(self, status) -> None:
+        """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
+        now = time.monotonic()
+        self.book.note_announcement(status)
+        if self.book.all_announced():
+            self._marks.setdefault('agents_announced', now)
+        if self.book.all_ready():
+            self._marks.setdefault('agents_ready', now)
+            if self._connected():
+                self._start()
+
+    def _connected(self) -> bool:
+        return not self._discovery_gaps()
+
+    def _discovery_gaps(self) -> list[str]:
+        """What discovery still waits for (empty: step 0 can go)."""
+        n, extra = len(self.agents), self.extra_subscribers
+        gaps = []
+
+        def count(what: str, have: int, want: int) -> None:
+            if have < want:
+                gaps.append(f'{what} {have}/{want}')
+
+        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
+        for pub in self._tool_publishers:
+            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
+        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
+        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
+        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
+        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
+        expired = [i for i, book in self.agents.items() if book.lost is not None]
+        for what, agents in (
+            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
+            ('agents whose liveliness lease expired', expired),
+            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
+        ):
+            if agents:
+                gaps.append(f'{what}: {ids_text(agents)}')
+        return gaps + self._world_gaps()
+
+    def _start(self) -> None:
+        self._started = self._marks['step0'] = time.monotonic()
+        if self.progress_period > 0.0:
+            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
+        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+        self._begin()
+
+    def end_now(self) -> None:
+        """The run stops early at this instant (after step 0): a final Step sends the agents home."""
+        flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
+        self._reached = self.reached_time
+        if self._finished_at is None:
+            self._finished_at = time.monotonic()
+        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
+            self.graph = self.snapshot_graph()
+        self.finished = True
+        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
+
+    def fail(self, error: BaseException) -> None:
+        """Note why the run stops early (extra.failure of the summary)."""
+        if self.failure_info is not None:
+            return
+        if isinstance(error, CoordinatorError):
+            kind = error.kind
+        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
+            kind = 'interrupted'
+        else:
+            kind = 'error'
+        self.failure_info = {
+            'kind': kind,
+            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
+            'time': getattr(error, 'time', self.reached_time),
+            'step': None if self.step is None else self.step.index,
+            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
+            'detected_by': self.get_name().removeprefix('formation_'),
+        }
+        if isinstance(error, ConnectivityLostError):
+            self.failure_info.update(edge=list(error.edge), length=error.length)
+
+    # -- the agents' messages -------------------------------------------------------------------
+
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
+
+    def _on_status(self, msg: Float64MultiArray) -> None:
+        try:
+            status = decode_status(msg)
+        except MessageError as error:  # not from a working agent: the stall timeout covers the rest
+            self._reject(STATUS_TOPIC, error.reason, str(error))
+            return
+        self.book.accept_status(status)
+        if self.step is None and status.step_index == DISCOVERY_STEP:
+            self._on_announcement(status)
+            return
+        self._after_status()
+
+    def _after_status(self) -> None:
+        """Lock-step settles steps here; the wall clock needs nothing."""
+
+    def _on_report(self, msg: String) -> None:
+        try:
+            report = decode_agent_report(msg)
+        except MessageError as error:
+            self._reject(REPORT_TOPIC, error.reason, str(error))
+            return
+        if (refusal := self.book.accept_report(report)) is not None:
+            self._reject(REPORT_TOPIC, 'field', refusal)
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        count = self.book.count_rejection(reason)
+        if count <= 3 or count % 100 == 0:
+            self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        return self.book.rejected
+
+    def final_reports_in(self) -> bool:
+        return self.book.final_reports_in()
+
+    # -- watching peers: agents and recorders (the books say when one is lost) ------------------
+
+    def _on_agent_liveliness(self, agent: int, info) -> None:
+        self.book.note_liveliness(
+            agent,
+            alive_count=info.alive_count,
+            not_alive_count_change=info.not_alive_count_change,
+            finished=self.finished,
+            now=time.monotonic(),
+        )
+
+    def _on_recorder_liveliness(self, info) -> None:
+        self.recorders.note_liveliness(
+            alive_count=info.alive_count, not_alive_count_change=info.not_alive_count_change, now=time.monotonic()
+        )
+
+    def _on_recorder(self, msg: String) -> None:
+        """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
+        if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
+            self._reject(RECORDER_TOPIC, 'field', refusal)
+            return
+        self._after_status()
+
+    def _check_lost(self, now: float) -> None:
+        """Stop the run once the recorder or an agent is lost (the books say when that is)."""
+        started, where = self.step is not None, self._where()
+        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(now, started=started, where=where)
+        if error is not None:
+            raise error
+
+    def _where(self) -> str:
+        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
+
+    # -- progress and results -------------------------------------------------------------------
+
+    def _say(self, line: str) -> None:
+        """A line on stdout, where `formation run` shows the progress lines."""
+        with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
+            print(line, flush=True)
+
+    def _print_progress(self) -> None:
+        events = sum(len(book.trigger_times) for book in self.agents.values())
+        try:
+            print(
+                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+                flush=True,
+            )
+        except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
+            self.progress_period = 0.0
+
+    def snapshot_graph(self) -> dict:
+        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
+
+        Taken at the final Step, while every agent is still there (and, for a run that stops
+        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
+        graph = {}
+        for name, namespace in self.get_node_names_and_namespaces():
+            key = f'{namespace.rstrip("/")}/{name}'
+            graph[key] = {
+                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
+                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
+                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
+                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
+            }
+        return graph
+
+    def mark(self, name: str) -> None:
+        """Note the time the run reached `name` (extra.timestamps)."""
+        self._marks[name] = time.monotonic()
+
+    def timestamps(self) -> dict[str, float]:
+        """When this node reached each mark of the run, as Unix times (summary.json
+        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+        final_reports (every agent's final report in, or the wait for them over), delivered (what
+        this node published acknowledged)."""
+        marks = dict(self._marks)
+        if self._finished_at is not None:
+            marks['final_step'] = self._finished_at
+        offset = time.time() - time.monotonic()
+        return {name: at + offset for name, at in marks.items()}
+
+    def _run_extra(self, reached: float) -> dict:
+        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
+        return {
+            'clock': self.clock_mode,
+            'steps': self.steps,
+            'discovery_wall_time': (self._started or self._created) - self._created,
+            'timestamps': self.timestamps(),
+            'reached_time': reached,
+            'failure': self.failure_info,
+            **self._message_counts(),
+        }
+
+    def _message_counts(self) -> dict:
+        """Messages rejected, faults injected, reports missing, and what was published per topic."""
+        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
+
+    def delivery_publishers(self, *, with_steps: bool) -> list:
+        """The writers whose readers must acknowledge everything before the node goes: the tools'
+        topics and, `with_steps`, the Steps."""
+        return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
+
+    # -- what a world supplies (the coordinator's: the robots; the simulator's: the exact one) ----
+
+    PARAMETERS: tuple[ParameterSpec, ...]  # the node's parameters (--help, docs/PARAMETERS.md)
+    COMMAND: str  # its console script
+    PARAMS_FILE: str  # its parameters in a run folder
+    DESCRIPTION: str  # what --help says it is
+    serves_sensing: bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
+    watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
+
+    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+        """The rules between the world's parameters and the scenario, each broken one named."""
+        raise NotImplementedError
+
+    def _clock_mode(self, values: dict) -> str:
+        """'lockstep' or 'realtime', from the parameters (read before anything is set up)."""
+        raise NotImplementedError
+
+    def _setup_world(self) -> None:
+        """The world's publishers (the tools' among `_tool_publishers`) and subscriptions."""
+        raise NotImplementedError
+
+    def _watch_agents(self) -> dict:
+        """Per agent, a subscription whose writer's DDS liveliness is the agent's sign of life
+        (its liveliness events go to `_on_agent_liveliness`)."""
+        raise NotImplementedError
+
+    def _world_gaps(self) -> list[str]:
+        """What discovery still waits for in the world."""
+        raise NotImplementedError
+
+    def _begin(self) -> None:
+        """t = 0: Step 0."""
+        raise NotImplementedError
+
+    def _running_tick(self) -> None:
+        """A tick of the running run: the world's checks, and the final Step at the horizon."""
+        raise NotImplementedError
+
+    @property
+    def reached_time(self) -> float:
+        """The run's time now."""
+        raise NotImplementedError
+
+    def after_final_step(self, executor) -> None:
+        """What the world still waits for after the final Step, before the summary."""
+        raise NotImplementedError
+
+    def flush(self) -> None:
+        """Anything still to publish before the node goes."""
+        raise NotImplementedError
+
+    def record(self) -> RunRecord:
+        """The run as a `RunRecord` (summary.json)."""
+        raise NotImplementedError
