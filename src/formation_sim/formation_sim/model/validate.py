@@ -224,7 +224,10 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             components=[list(c) for c in components[:10]],
         )
 
-    if not _check_scale(scenario, out):
+    with np.errstate(over='ignore', invalid='ignore'):  # out-of-range lengths: `_check_scale` says so
+        capacities = theory.edge_capacities(scenario)
+        errors0 = theory.edge_errors(scenario, scenario.positions)
+    if not _check_scale(scenario, out, capacities, capacities - errors0):
         return report  # every number below would be computed outside double precision's range
 
     feasibility = theory.formation_feasibility(scenario)
@@ -251,8 +254,6 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             worst_edge=[edge.i, edge.j],
         )
 
-    capacities = theory.edge_capacities(scenario)
-    errors0 = theory.edge_errors(scenario, scenario.positions)
     slack_rows = []
     for k, edge in enumerate(scenario.edges):
         d_norm = float(np.linalg.norm(edge.d))
@@ -330,7 +331,7 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
     return report
 
 
-def _check_scale(scenario: Scenario, out: _Collector) -> bool:
+def _check_scale(scenario: Scenario, out: _Collector, capacities: np.ndarray, slacks: np.ndarray) -> bool:
     """Refuse lengths the engine cannot compute with (rule `scale`); True when they are in range."""
     units = (
         'state the scenario in other length units (ETA-1 runs the same with lengths × s, β / s and '
@@ -345,9 +346,6 @@ def _check_scale(scenario: Scenario, out: _Collector) -> bool:
             delta=scenario.delta, limit=LENGTH_MAX,
         )
         return False
-    with np.errstate(over='ignore', invalid='ignore'):
-        capacities = theory.edge_capacities(scenario)
-        slacks = capacities - theory.edge_errors(scenario, scenario.positions)
     for k, edge in enumerate(scenario.edges):
         for name, value in (('Δ-||d_ij||', capacities[k]), ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slacks[k])):
             if 0.0 < value < LENGTH_MIN:
