@@ -590,6 +590,60 @@ def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> No
     assert not bag.exists()
 
 
+@pytest.mark.ros
+def test_the_heartbeat_names_the_watched_topics_until_their_first_message(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A robot run's time keeper starts only once the recorder has had a message on each robot's
+    pose topic (`watched_topics`): its heartbeat lists those still silent."""
+    import rclpy  # noqa: PLC0415
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    from std_msgs.msg import String  # noqa: PLC0415
+
+    from formation_msgs_py.qos import READER_QOS  # noqa: PLC0415
+    from formation_msgs_py.topics import RECORDER_TOPIC  # noqa: PLC0415
+
+    pose, other = '/agent_2/robot/pose', '/other'
+    with (ros_domain(tmp_path, monkeypatch, 147) as context,
+          recorder(tmp_path, f'output:={tmp_path / "bag"}', f"topics:=['{pose}:{STEP_TYPE}', '{other}:{STEP_TYPE}']",
+                   f"watched_topics:=['{pose}']", 'flush_period:=0.1') as process):
+        node = rclpy.create_node('watch_test', context=context)
+        beats: list[dict] = []
+        node.create_subscription(String, RECORDER_TOPIC, lambda msg: beats.append(json.loads(msg.data)), READER_QOS)
+        publishers = {name: node.create_publisher(Float64MultiArray, name, reliable_keep_all()) for name in (pose, other)}
+        wait_for_subscribers(list(publishers.values()), process, tmp_path)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+
+        def beat_after(sent: float) -> dict:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+                if beats and time.monotonic() > sent + 0.5:  # a flush after the message came
+                    return beats[-1]
+            pytest.fail(f'no heartbeat: {recorder_log(tmp_path)}')
+
+        publishers[other].publish(Float64MultiArray(data=[1.0]))
+        assert beat_after(time.monotonic())['silent'] == [pose]
+        publishers[pose].publish(Float64MultiArray(data=[2.0]))
+        assert beat_after(time.monotonic())['silent'] == []
+        process.send_signal(signal.SIGINT)
+        finish(process, tmp_path)
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+@pytest.mark.ros
+def test_watched_topics_must_be_recorded(tmp_path: Path) -> None:
+    bag = tmp_path / 'bag'
+    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', f"topics:=['{STEP}:{STEP_TYPE}']",
+                          '-p', "watched_topics:=['/agent_1/robot/pose']"], capture_output=True, text=True, env=env, timeout=120)  # fmt: skip
+    assert run.returncode == 2, run.stderr
+    assert "parameter 'watched_topics' names topics that are not in 'topics': ['/agent_1/robot/pose']" in run.stderr
+    assert 'Traceback' not in run.stderr and not bag.exists()
+
+
 # --------------------------------------------------------------------------- the run's time
 
 

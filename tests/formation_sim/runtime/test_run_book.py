@@ -117,6 +117,19 @@ def test_a_recorder_heartbeat_gives_its_latest_step_and_a_malformed_one_is_refus
     assert recorders.recorded_steps == {'/formation_recorder': 4}
 
 
+def test_a_recorder_heartbeat_names_the_watched_topics_it_has_not_heard_yet():
+    recorders = RecorderBook()
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": -1, "silent": ["/agent_2/robot/pose"]}') is None
+    assert recorders.silent == {'/r': ['/agent_2/robot/pose']}
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": -1, "silent": []}') is None
+    assert recorders.silent == {'/r': []}
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/q", "step": -1}') is None  # watching nothing
+    assert recorders.silent == {'/r': [], '/q': []}
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": [3]}').endswith("': silent [3]")
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": "/a"}').endswith("': silent '/a'")
+    assert recorders.silent == {'/r': [], '/q': []}
+
+
 def test_saturation_in_the_summary_adds_up_the_agents_reports():
     from dataclasses import dataclass
 

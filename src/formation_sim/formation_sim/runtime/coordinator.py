@@ -204,7 +204,13 @@ class FormationCoordinatorNode(TimeKeeperNode):
             return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}']
         # The first sample (t = 0) needs each robot's pose from before it.
         silent = [i for i, early in self._early.items() if not early]
-        return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}'] if silent else []
+        if silent:
+            return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}']
+        # The recorder too, or its bag would lack a robot's pose before t = 0 (it matched late).
+        if len(self.recorders.silent) < self.extra_subscribers:
+            return [f'a heartbeat from each recorder ({len(self.recorders.silent)} of {self.extra_subscribers})']
+        unheard = sorted({name for topics in self.recorders.silent.values() for name in topics})
+        return [f'robot topics the recorder has had no message on yet: {", ".join(unheard)}'] if unheard else []
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""

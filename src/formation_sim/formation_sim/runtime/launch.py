@@ -255,6 +255,14 @@ class LaunchPlan:
 
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
+    def robot_pose_topics(self) -> list[str]:
+        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
+        only once the recorder has a message on each (its bag then covers t = 0)."""
+        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        return [name for name, _ in self.recorder_topics() if name in poses]
+
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
         all but a robot's own (its poses, and the velocity commands it takes)."""
@@ -300,6 +308,7 @@ class LaunchPlan:
                         # Stopped last, once every writer has left and its messages were
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
+                        **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
                     }
                 }
             }

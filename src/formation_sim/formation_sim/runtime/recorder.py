@@ -98,6 +98,11 @@ RECORDER_PARAMETERS = (
         name='heartbeat_topic', type=STRING, default=RECORDER_TOPIC,
         description="where it says how much it recorded, after every flush and step (a run watches its liveliness; '': none)",
     ),
+    ParameterSpec(
+        name='watched_topics', type=STRING_ARRAY, default=[],
+        description="recorded topics the heartbeat lists as 'silent' until their first message came (a robot run's time "
+        "keeper starts only once the recorder has the robots' poses from before t = 0)",
+    ),
     ParameterSpec(name='drain_quiet', type=DOUBLE, default=0.5, description='on stopping, take messages until none came for this long [s]', **_positive_seconds),
     ParameterSpec(name='drain_limit', type=DOUBLE, default=10.0, description='on stopping, stop taking messages after this long anyway [s]', **_positive_seconds),
 )  # fmt: skip
@@ -188,7 +193,8 @@ class RecorderNode(Node):
     Parameters: `RECORDER_PARAMETERS` (`formation_recorder --help` prints them, docs/PARAMETERS.md
     lists them).  ``heartbeat_topic``: ``{"version": 1, "recorder": NODE, "recorded": N, "step":
     K}`` (std_msgs/String, the protocol's QoS): N messages written so far, the latest step K
-    recorded (-1: none). The simulator keeps its steps at most
+    recorded (-1: none); with ``watched_topics`` also ``"silent": [...]``, those of them that
+    brought no message yet. The simulator keeps its steps at most
     `formation_sim.runtime.sim_node.RECORDER_LAG` ahead of K, and its writer's DDS liveliness
     tells a run the recorder still works.
     """
@@ -218,6 +224,8 @@ class RecorderNode(Node):
         names = [name for name, _ in requested]
         if duplicates := sorted({n for n in names if names.count(n) > 1}):
             problems.append(f"parameter 'topics' names {duplicates} more than once")
+        if unrecorded := sorted(set(values.get('watched_topics') or []) - set(names)):
+            problems.append(f"parameter 'watched_topics' names topics that are not in 'topics': {unrecorded}")
         if values.get('output') == '':
             problems.append("parameter 'output' (string) must name the bag directory to create, got ''")
         if problems:
@@ -227,6 +235,8 @@ class RecorderNode(Node):
         self._clock_topic = values['clock_topic']
         heartbeat_topic = self._heartbeat_topic = values['heartbeat_topic']
         self._drain_quiet = values['drain_quiet']
+        self._watching = bool(values['watched_topics'])
+        self._silent = set(values['watched_topics'])  # watched topics with no message yet
         self._drain_limit = values['drain_limit']
 
         self._qos = QoSProfile(
@@ -301,6 +311,8 @@ class RecorderNode(Node):
     def _beat(self) -> None:
         if self._heartbeat is not None:
             beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self.clock.step_index}
+            if self._watching:
+                beat['silent'] = sorted(self._silent)
             self._heartbeat.publish(self._heartbeat_type(data=json.dumps(beat, separators=(',', ':'))))
 
     def discover(self) -> None:
@@ -333,6 +345,7 @@ class RecorderNode(Node):
 
         def on_message(rawdata: bytes) -> None:
             self.received_count += 1
+            self._silent.discard(name)
             if is_clock:
                 self._on_step(rawdata)
             if record and self.failure is None:

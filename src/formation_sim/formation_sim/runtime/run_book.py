@@ -356,6 +356,7 @@ class RecorderBook:
     def __init__(self) -> None:
         self.alive = 0  # heartbeat writers alive (DDS liveliness)
         self.recorded_steps: dict[str, int] = {}  # recorder node -> the latest step it recorded
+        self.silent: dict[str, list[str]] = {}  # recorder node -> its watched topics with no message yet
         self.lost: tuple[float, str] | None = None  # (monotonic time, how) once one went away
         self.lease_expired = False  # how it went: its lease expired (else its writer was deleted)
 
@@ -370,15 +371,19 @@ class RecorderBook:
             self.lost = (now, how)
 
     def accept_heartbeat(self, text: str) -> str | None:
-        """Take a recorder's heartbeat (JSON: version 1, recorder, step); the reason it is refused, or None."""
+        """Take a recorder's heartbeat (JSON: version 1, recorder, step[, silent]); the reason it is refused, or None."""
         try:
             beat = json.loads(text)
             name, step = str(beat['recorder']), beat['step']
+            silent = beat.get('silent', [])
             if beat.get('version') != 1 or isinstance(step, bool) or not isinstance(step, int):
                 raise ValueError(f'version {beat.get("version")!r}, step {step!r}')
+            if not isinstance(silent, list) or not all(isinstance(topic, str) for topic in silent):
+                raise ValueError(f'silent {silent!r}')
         except (ValueError, KeyError, TypeError) as error:
             return f'recorder heartbeat {text[:80]!r}: {error}'
         self.recorded_steps[name] = max(step, self.recorded_steps.get(name, -1))
+        self.silent[name] = silent
         return None
 
     def lost_error(self, now: float, *, started: bool, where: str) -> RecorderLostError | None:
