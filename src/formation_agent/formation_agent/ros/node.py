@@ -55,10 +55,10 @@ from formation_msgs_py.codec import (
 )
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status, Step
 from formation_msgs_py.qos import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE, PROTOCOL_QOS, READER_QOS
-from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, trigger_info_topic
+from formation_msgs_py.topics import AGENT_NODE, REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
-NODE_NAME = 'formation_agent'
+NODE_NAME = AGENT_NODE
 DELIVERY_TIMEOUT = 4.0
 """Seconds a leaving node waits, at most, for its readers to acknowledge what it published (its
 last messages too: zero command, report): Fast DDS repairs a message lost on the way at the
