@@ -2,4 +2,5 @@
 
 from formation_agent.config import DIRECTORY
 
-print(DIRECTORY)
+if __name__ == '__main__':
+    print(DIRECTORY)
