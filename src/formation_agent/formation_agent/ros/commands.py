@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 from geometry_msgs.msg import Accel, Twist, TwistStamped
 
+from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinematics import yaw
 from formation_agent.core.pose_sensing import PoseBook, PoseError
@@ -81,7 +82,7 @@ class RobotOutput:
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
-            k3=config.gains['k3'] if config.double else None,
+            k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
         self._holonomic = config.robot == 'holonomic'
         self.publisher = node.create_publisher(
