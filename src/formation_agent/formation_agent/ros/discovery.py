@@ -13,7 +13,7 @@ import time
 from collections.abc import Iterator
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP
-from formation_msgs_py.qos import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE
+from formation_msgs_py.middleware import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE
 from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
 
 DISCOVERY_CHECK = 0.1

@@ -49,12 +49,12 @@ from formation_agent.ros.stepping import AgentNodeError, TriggerSchedule, rebase
 from formation_msgs_py.codec import MessageError, decode_step, encode_trigger_info
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
-from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
 __all__ = ['DELIVERY_TIMEOUT', 'NODE_NAME', 'AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError']
 
-NODE_NAME = 'formation_agent'
+NODE_NAME = AGENT_NODE
 DELIVERY_TIMEOUT = 4.0
 """Seconds a leaving node waits, at most, for its readers to acknowledge what it published (its
 last messages too: zero command, report): Fast DDS repairs a message lost on the way at the
