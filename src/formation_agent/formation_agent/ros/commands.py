@@ -22,6 +22,7 @@ from collections.abc import Callable
 
 from geometry_msgs.msg import Accel, Twist
 
+from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
@@ -90,7 +91,7 @@ class RobotOutput:
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
-            k3=config.gains['k3'] if config.double else None,
+            k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
         self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)
         self.publisher = node.create_publisher(

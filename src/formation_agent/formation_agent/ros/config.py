@@ -11,8 +11,10 @@ import math
 from dataclasses import dataclass
 
 from formation_agent.core.commander import Limits
+from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
 from formation_agent.core.kinds.registry import Geometry
+from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 from formation_agent.ros.parameters import (
     DOUBLE,
     DOUBLE_ARRAY,
@@ -47,6 +49,11 @@ AGENT_PARAMETERS = (
     _spec('neighbour_offsets', DOUBLE_ARRAY, 'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]'),
     _spec('delta', DOUBLE, 'communication radius Δ [m]', low=0.0, low_open=True),
     _spec('horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True),
+    _spec('speed_scale', DOUBLE, "speed scale κ (docs/SPEED_SCALE.md): the paper's run in the time s = κt, every "
+          'triggering time divided by κ, commands times κ (eta2: gains κ²k1, κk2, κk3); 1: the paper',
+          default=SCALE_GAINS['speed_scale'], low=SPEED_SCALE_LIMITS[0], high=SPEED_SCALE_LIMITS[1]),
+    _spec('threshold_floor', DOUBLE, "threshold floor c0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
+          '(docs/SPEED_SCALE.md); 0: the paper', default=SCALE_GAINS['threshold_floor'], low=0.0),
     # Robots (README, "Running on robots").
     _spec('sensing', STRING, "where the agent senses: 'service' (the simulator's /agent_<i>/sense) or "
           "'poses' (its own and its neighbours' pose topics)", default='service', choices=SENSING_SOURCES),
@@ -171,7 +178,8 @@ def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
         neighbours={j: tuple(offsets[k * p : (k + 1) * p]) for k, j in enumerate(ids)},
         delta=values['delta'],
         horizon=values['horizon'],
-        gains={name: float(value) for name, value in gains.items()},
+        gains={name: float(value) for name, value in gains.items()}
+        | {name: float(values[name]) for name in SCALE_GAINS},  # κ and c0, for make_agent and the commands
         limits=Limits(
             linear_speed=values['max_linear_speed'],
             angular_speed=values['max_angular_speed'],

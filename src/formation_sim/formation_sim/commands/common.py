@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
 from formation_sim.model.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario, short_repr
 from formation_sim.model.validate import validate_scenario
 from formation_sim.sim.run_folder import RunFolderError, check_report_dir
@@ -53,7 +54,7 @@ NON_NEGATIVE = _number('a finite number >= 0', lambda v: math.isfinite(v) and v 
 POSITIVE_INT = _number('an integer >= 1', lambda v: v >= 1, integer=True)
 NON_NEGATIVE_INT = _number('an integer >= 0', lambda v: v >= 0, integer=True)
 FINITE = _number('a finite number', math.isfinite)
-DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
+DOMAIN_ID = _number(f'an integer in [0, {DOMAIN_ID_MAX}] (a ROS_DOMAIN_ID)', domain_id_ok, integer=True)
 UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
@@ -88,6 +89,7 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
     """SCENARIO, --horizon, --out (default: a new folder under runs/) and --force."""
     add_scenario_argument(parser)
     parser.add_argument('--horizon', type=POSITIVE, default=None, help="final time in seconds (default: the scenario's)")
+    add_scale_arguments(parser)
     parser.add_argument(
         '--out',
         type=Path,
@@ -99,6 +101,25 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
         action='store_true',
         help='replace the earlier run in --out: its files are removed first (files no run writes are never removed)',
     )
+
+
+def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
+    """--speed-scale K and --threshold-floor C, overriding the scenario's gains (docs/SPEED_SCALE.md)."""
+    parser.add_argument(
+        '--speed-scale', type=POSITIVE, default=None, metavar='K',
+        help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
+        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1)",
+    )  # fmt: skip
+    parser.add_argument(
+        '--threshold-floor', type=NON_NEGATIVE, default=None, metavar='C',
+        help="threshold floor c0 >= 0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
+        "(default: the scenario's gains.threshold_floor, 0)",
+    )  # fmt: skip
+
+
+def scale_options(args: argparse.Namespace) -> dict:
+    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`."""
+    return {'speed_scale': getattr(args, 'speed_scale', None), 'threshold_floor': getattr(args, 'threshold_floor', None)}
 
 
 def check_report_argument(command: str, out: Path | None) -> bool:
@@ -113,10 +134,13 @@ def check_report_argument(command: str, out: Path | None) -> bool:
     return True
 
 
-def load_valid_scenario(name: str, command: str) -> Scenario | None:
-    """The scenario, or None after printing why it cannot be run (nothing is started then)."""
+def load_valid_scenario(
+    name: str, command: str, *, speed_scale: float | None = None, threshold_floor: float | None = None
+) -> Scenario | None:
+    """The scenario (with κ and c0 replaced where given), or None after printing why it cannot be
+    run (nothing is started then)."""
     try:
-        scenario = load_scenario(name)
+        scenario = load_scenario(name).with_scale(speed_scale=speed_scale, threshold_floor=threshold_floor)
     except ScenarioError as error:
         refuse(command, error)
         return None
@@ -188,8 +212,8 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         '--executor',
-        choices=('events', 'single'),
-        default='events',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
         help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
         '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
     )

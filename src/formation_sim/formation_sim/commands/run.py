@@ -14,6 +14,7 @@ from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
+    scale_options,
     plan_options,
     refuse,
 )
@@ -58,7 +59,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
-    scenario = load_valid_scenario(args.scenario, 'run')
+    scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
     try:
