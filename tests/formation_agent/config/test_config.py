@@ -33,11 +33,15 @@ def test_the_editable_install_prints_the_folder_of_the_examples():
 
 @pytest.mark.slow
 def test_a_regular_pip_install_has_them_in_the_package_and_in_share(tmp_path):
+    # pip builds the wheel in an isolated environment (setuptools and wheel from the index, as on
+    # any machine `make venv` runs on); --ignore-installed keeps it from uninstalling the .venv's
+    # editable install first. (Installing `wheel` into .venv instead would turn `make venv`'s
+    # editable installs into legacy `setup.py develop` ones, whose scripts go to lib/<package>/.)
     source = tmp_path / 'formation_agent'
     shutil.copytree(REPO / 'src' / 'formation_agent', source, ignore=shutil.ignore_patterns('*.egg-info', '__pycache__', 'build'))
-    prefix = tmp_path / "prefix"  # --ignore-installed: pip must not uninstall the editable install of this .venv
+    prefix = tmp_path / 'prefix'
     install = subprocess.run(
-        [sys.executable, '-m', 'pip', 'install', '-q', '--disable-pip-version-check', '--no-deps', '--no-build-isolation', '--no-index', '--ignore-installed',
+        [sys.executable, '-m', 'pip', 'install', '-q', '--disable-pip-version-check', '--no-deps', '--ignore-installed',
          '--prefix', str(prefix), str(source)],
         capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
