@@ -68,6 +68,13 @@ def run(args: argparse.Namespace) -> int:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
     report = validate_scenario(scenario)
+    if report.ok and args.speed_scale == 'auto':
+        from formation_sim.commands.limits import resolve_speed_scale
+
+        if (resolved := resolve_speed_scale(scenario, args, 'validate')) is None:
+            return EXIT_BAD_INPUT
+        scenario = resolved[0]
+        report = validate_scenario(scenario)
     commands = floor = None
     if report.ok and any(value is not None for value in (args.max_speed, args.max_angular_speed, args.max_acceleration)):
         try:
