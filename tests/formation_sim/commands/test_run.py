@@ -343,3 +343,22 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
     assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
     assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.2
     assert seen['extra']['speed_scale']['source'] == 'observed'
+
+
+def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    started = []
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            started.append(self.scenario.gains.speed_scale)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    # κ = 0.15 keeps robots_lab's speed within 0.22 m/s; its ||u||/l (0.1 m) would exceed 0.5 rad/s
+    arguments = ['run', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '0.5', '--speed-scale', '0.15', '--quiet']
+    assert main([*arguments, '--backend', 'holonomic', '--out', str(tmp_path / 'a')]) == 2
+    assert started == [0.15] and 'beyond' not in capsys.readouterr().err
+    assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2
+    assert started == [0.15] and 'beyond --max-angular-speed 0.5 rad/s' in capsys.readouterr().err

@@ -17,15 +17,17 @@ from formation_sim.model.speed_choice import OBSERVED_MARGIN, LimitsError, Robot
 
 
 def robot_limits(args: argparse.Namespace) -> RobotLimits:
-    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none)."""
+    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none).  A run's
+    holonomic robots (`--backend holonomic`, `--robot holonomic`) do not turn to move: no turn rate."""
 
     def given(name: str) -> float:
         value = getattr(args, name, None)
         return math.inf if value is None else value
 
+    holonomic = 'holonomic' in (getattr(args, 'robot', None), getattr(args, 'backend', None)) and getattr(args, 'robot', None) != 'unicycle'
     return RobotLimits(
         max_speed=given('max_speed'),
-        max_angular_speed=given('max_angular_speed'),
+        max_angular_speed=math.inf if holonomic else given('max_angular_speed'),
         control_point_distance=getattr(args, 'control_point_distance', None) or 0.1,
         max_acceleration=given('max_acceleration'),
     )
@@ -112,7 +114,7 @@ def check_saturation(scenario: Scenario, *, limits: RobotLimits, allow: bool, co
     are none); else the refusal (or, with `allow`, after printing it as a warning, None).
 
     The exact run, not the proofs' bound, decides: the bound of a team set down by hand is many
-    times what any run asks for (robots_lab: 3.8 m/s against 1.16 m/s), and a refusal must be
+    times what any run asks for (robots_lab: 3.9 m/s against 1.16 m/s), and a refusal must be
     about commands the robots would really be sent; the exact run is what they are sent without
     noise, so a run it refuses saturates for certain."""
     from formation_sim.sim.largest_command import choose_speed_scale

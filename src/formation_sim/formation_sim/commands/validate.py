@@ -39,7 +39,9 @@ def register(subparsers) -> None:
         'Theorem 2 (double integrators) and print every number involved. With --max-speed (and '
         '--max-angular-speed, --max-acceleration): the largest command the scenario asks of a robot, '
         'a bound from the proofs where it shows the limits are never reached, else the largest in an '
-        'exact in-process run (which the output names). Exit 0 if valid (warnings allowed) and within '
+        'exact in-process run (which the output names), and the speed scales κ that keep the commands within '
+        'them (guaranteed, observed; --speed-scale auto runs the observed) with the time each needs to '
+        'settle. With --pose-noise: the threshold floor c0 that noise asks for. Exit 0 if valid (warnings allowed) and within '
         'the limits, 1 if a hypothesis is broken or a command exceeds a limit, 2 if the scenario '
         'cannot be read.',
     )
