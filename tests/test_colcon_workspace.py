@@ -80,7 +80,9 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
         assert (share / 'ament_index' / 'resource_index' / 'packages' / package).is_file()
     # The robots' example parameter files (README, "Running on robots").
     config = colcon_install / 'formation_agent' / 'share' / 'formation_agent' / 'config'
-    assert {p.name for p in config.glob('*.params.yaml')} == {'turtlebot3.params.yaml', 'crazyflie.params.yaml'}
+    from formation_agent.core.kinds import KIND_NAMES, robot_kind
+
+    assert {p.name for p in config.glob('*.params.yaml')} == {robot_kind(name).params_file for name in KIND_NAMES}
     site = next(colcon_install.glob('formation_sim/lib/python3*/site-packages'))
     installed = {p.name for p in (site / 'formation_sim' / 'model' / 'scenarios').glob('*.yaml')}
     assert installed >= {'paper_single.yaml', 'paper_double.yaml'}

@@ -268,7 +268,7 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
+        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle|car (what the robots are)'),
         (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
         (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),

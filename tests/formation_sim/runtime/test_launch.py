@@ -131,10 +131,10 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
         (dict(backend='unicycle', robots=RobotOptions(model='holonomic')), "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (dict(backend='holonomic', clock='lockstep'), "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'"),
         (dict(backend='exact', robots=TURTLEBOT3), "robots are options of the robot backends"),
-        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'external'), got 'mujoco'"),
+        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'car', 'external'), got 'mujoco'"),
         (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
-        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance l must be > 0, got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
     ],
 )

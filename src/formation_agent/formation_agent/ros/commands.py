@@ -91,6 +91,7 @@ class RobotOutput:
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
+            wheelbase=config.wheelbase,
             k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
         self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)

@@ -258,6 +258,9 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
         help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
     add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
     add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    add('--wheelbase', type=POSITIVE, default=None, metavar='L', help='car: wheelbase from the rear to the front axle [m]')
+    add('--max-steering-angle', type=POSITIVE, default=math.inf, metavar='PHI',
+        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)')
     add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
     add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
         help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
@@ -284,6 +287,8 @@ def robot_options(args: argparse.Namespace, model: str):
         control_point_distance=args.control_point_distance,
         max_linear_speed=args.max_speed,
         max_angular_speed=args.max_angular_speed,
+        wheelbase=args.wheelbase or 0.0,
+        max_steering_angle=args.max_steering_angle,
         max_linear_acceleration=args.max_acceleration,
         command_rate=args.command_rate,
         pose_type=args.pose_type,

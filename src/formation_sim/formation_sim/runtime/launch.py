@@ -86,6 +86,8 @@ class RobotOptions:
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
+    wheelbase: float = 0.0  # L [m] (car)
+    max_steering_angle: float = math.inf  # φ_max [rad] (car)
     max_linear_acceleration: float = math.inf  # [m/s²] (ETA-2)
     command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
     pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
@@ -106,12 +108,10 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if problems := self.kind_problems(scenario.dimension):
-            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
-            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed)
+            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed, steering=self.max_steering_angle)
         except RobotError as error:
             raise RunError(str(error)) from None
         positive = ('control_point_distance', 'max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
@@ -128,15 +128,21 @@ class RobotOptions:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+        if not (math.isfinite(self.wheelbase) and self.wheelbase >= 0.0):
+            raise RunError(f'wheelbase must be a finite number >= 0, got {self.wheelbase!r}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
 
     @property
     def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance)
+        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
 
     def kind_problems(self, dimension: int) -> list[str]:
         """What the robots' kind says of these options (its dimensions, geometry and limits)."""
         try:
-            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+            limits = KindLimits(
+                linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed, steering_angle=self.max_steering_angle
+            )
         except ValueError:
             return []  # named by the limits' own check
         return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
@@ -152,9 +158,11 @@ class RobotOptions:
             'command_rate': float(self.command_rate),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:  # a car's; none: the default
+            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def robot_parameters(self, scenario: Scenario, agent_id: int) -> dict:
@@ -174,9 +182,11 @@ class RobotOptions:
             'seed': int(self.seed),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:
+            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def to_dict(self) -> dict:
