@@ -10,6 +10,7 @@ holds and summary.json equals the bag).
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -82,6 +83,28 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     comparison = json.loads((tmp_path / 'compare' / 'compare.json').read_text())
     assert comparison['runs']['a']['mode'] == 'robots' and comparison['runs']['b']['mode'] == 'in_process'
     assert comparison['trajectory']['max_deviation'] < 0.0318
+
+
+@pytest.mark.timeout(300)
+def test_a_car_team_forms_its_square_within_its_steering_limit_and_counts_what_it_could_not_follow(tmp_path, capsys):
+    """Cars (F1TENTH-sized: L = 0.33 m, φ_max = 0.42 rad, l = L) start heading along x, so most
+    of the agents' velocities lie outside the cone they can follow: steered to the nearest they can
+    (saturation 'steering'), they still close the formation; every command a car got is drivable."""
+    from formation_sim.bag.io import decode, read_bag
+
+    out = tmp_path / 'car'
+    arguments = ['run', 'robots_square', '--backend', 'car', '--horizon', '4', '--out', str(out), '--domain-id', '41',
+                 '--max-speed', '0.22', '--wheelbase', '0.33', '--max-steering-angle', '0.42',
+                 '--control-point-distance', '0.33', '--quiet', '--no-plot']  # fmt: skip
+    assert main(arguments) == 0, capsys.readouterr().err
+    assert "commands saturated at the robots' limits: steering" in capsys.readouterr().err
+    summary = _assert_a_good_robot_run(out, capsys)
+    steering = summary['extra']['saturation']['by_kind']['steering']
+    assert steering['count'] > 0 and steering['allowed'] == 0.42 < steering['largest_requested'] <= math.pi / 2
+    assert summary['final_formation_error'] < 0.5 * 0.0318  # from 3.2 cm at t = 0
+    kappa = math.tan(0.42) / 0.33
+    commands = [decode(m.rawdata, m.msgtype) for m in read_bag(out / 'bag') if m.topic.endswith('/robot/cmd_vel')]
+    assert commands and all(abs(c.angular.z) <= abs(c.linear.x) * kappa * (1 + 1e-9) for c in commands)
 
 
 @pytest.mark.timeout(300)
