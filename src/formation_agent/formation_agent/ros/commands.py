@@ -3,7 +3,7 @@
 - `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
   (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
   closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
-- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle'): a
+- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle', 'car'): a
   robot's velocity command from `formation_agent.core.commander.RobotCommander` by its kind's
   adapter, of its kind's message type (`command_message`) — a world-frame TwistStamped
   (holonomic) or a body-frame Twist (v, ω) (differential drive, from the robot's heading) —
