@@ -300,7 +300,7 @@ def _theorem2_by_hand(scenario, *, b, reading):
     nu_d0 = k1 / 2 * sum(length0[p] ** 2 / (cap[p] - length0[p]) for p in d) + 0.5 * sum(v @ v for v in q.values())
     k_nu = nu_d0 + n * alpha_d**2 / (8 * b * beta_d)  # k^d_ν
     K = k_nu / k1
-    k_edge = {p: -K + math.sqrt(K * K + 2 * K * cap[p]) for p in d}  # (kijd)
+    k_edge = {p: 2 * K * cap[p] / (K + math.sqrt(K * K + 2 * K * cap[p])) for p in d}  # (kijd), the root without cancellation
     f = {p: (2 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 2 for p in d}  # (fij) at k^d_ij
     gg = {p: 2 * cap[p] ** 2 / (cap[p] - k_edge[p]) ** 3 for p in d}  # (gij)
     h = {p: (3 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 3 for p in d}  # (hij)
