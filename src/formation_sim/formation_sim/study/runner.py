@@ -89,7 +89,7 @@ def _client(scheduler: str | None, workers: int | None):
             raise StudyError(f'--scheduler {scheduler}: cannot connect: {error}') from None
     count = workers or os.cpu_count() or 1
     cluster = LocalCluster(
-        n_workers=count, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+        n_workers=count, threads_per_worker=1, processes=True, dashboard_address=':0', silence_logs=logging.ERROR
     )
     return Client(cluster), cluster
 

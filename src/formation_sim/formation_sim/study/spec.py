@@ -13,10 +13,12 @@ YAML (or a dict with the same shape; docs/STUDY.md has the reference):
         n: {integers: [2, 100]}
         slack: {log_uniform: [0.001, 0.9]}
         graph: {choice: [geometric, star, path, cycle, complete]}
+        # also uniform: [a, b], integers: [i, j], log_integers: [i, j] (log-uniform, rounded)
 
 A block is the product of its grid axes times `draws` (default 1) draws of its distributions; draw
 d of block b uses numpy's default_rng([seed, b, d]) and draws the parameters in name order, so a
-case depends on the SPEC alone. Every value is checked against PARAMETERS (the parameter, the rule
+case depends on the SPEC alone; a team's seed is d unless given, so the grid points of one draw
+share their team (an ETA run and its periodic baseline). Every value is checked against PARAMETERS (the parameter, the rule
 and the value are named); cases identical after normalisation (a `period` is kept only with
 `sampling: periodic`, a graph's `degree` only for `geometric`, ETA-2's gains only for ETA-2) are
 run once. A case's key is a hash of its parameters: the rows of a study are keyed by it.
@@ -73,7 +75,7 @@ PARAMETERS: dict[str, Parameter] = {
     'graph': Parameter('geometric', f'one of {", ".join(GRAPH_FAMILIES)}', lambda v: v in GRAPH_FAMILIES),
     'degree': Parameter(6.0, 'a number > 0 (mean degree of a geometric graph)', lambda v: _is_num(v) and v > 0),
     'slack': Parameter(0.5, 'a number in (0, 1] (least relative slack of (initial))', lambda v: _is_num(v) and 0 < v <= 1),
-    'seed': Parameter(None, 'an integer >= 0 (the team\'s seed; default: the case\'s index in its block)', lambda v: _is_int(v) and v >= 0),
+    'seed': Parameter(None, 'an integer >= 0 (the team\'s seed; default: the number of the draw in its block, from 0)', lambda v: _is_int(v) and v >= 0),
     'delta': Parameter(4.0, 'a number > 0 (Δ)', lambda v: _is_num(v) and v > 0),
     'alpha': Parameter(1.0, 'a number > 0 (α, or α_d for ETA-2)', lambda v: _is_num(v) and v > 0),
     'beta': Parameter(0.5, 'a number in (0, 1): β as a fraction of β0 (ETA-1)', lambda v: _is_num(v) and 0 < v < 1),
@@ -85,7 +87,7 @@ PARAMETERS: dict[str, Parameter] = {
 }
 INTEGERS = ('n', 'p', 'seed')
 ETA2_ONLY = ('beta1', 'k3', 'beta_d', 'max_speed')
-DISTRIBUTIONS = ('uniform', 'log_uniform', 'integers', 'choice')
+DISTRIBUTIONS = ('uniform', 'log_uniform', 'integers', 'log_integers', 'choice')
 TOP_KEYS = ('name', 'seed', 'defaults', 'cases')
 
 
@@ -153,10 +155,10 @@ def _distribution(value: Any, where: str) -> tuple[str, Any] | None:
         return kind, args
     if not (isinstance(args, list) and len(args) == 2 and all(_is_num(a) for a in args) and args[0] <= args[1]):
         raise StudyError(f'{where}.{kind}: must be [low, high] with low <= high, got {short_repr(args)}')
-    if kind == 'log_uniform' and not args[0] > 0:
-        raise StudyError(f'{where}.log_uniform: low must be > 0, got {short_repr(args[0])}')
-    if kind == 'integers' and not all(_is_int(a) for a in args):
-        raise StudyError(f'{where}.integers: must be two integers, got {short_repr(args)}')
+    if kind in ('log_uniform', 'log_integers') and not args[0] > 0:
+        raise StudyError(f'{where}.{kind}: low must be > 0, got {short_repr(args[0])}')
+    if kind in ('integers', 'log_integers') and not all(_is_int(a) for a in args):
+        raise StudyError(f'{where}.{kind}: must be two integers, got {short_repr(args)}')
     return kind, args
 
 
@@ -167,6 +169,8 @@ def _draw(rng: np.random.Generator, kind: str, args: Any) -> Any:
         return float(math.exp(rng.uniform(math.log(args[0]), math.log(args[1]))))
     if kind == 'integers':
         return int(rng.integers(args[0], args[1], endpoint=True))
+    if kind == 'log_integers':  # log-uniform on [low - 1/2, high + 1/2], rounded: every integer can come
+        return int(min(args[1], max(args[0], round(math.exp(rng.uniform(math.log(args[0] - 0.5), math.log(args[1] + 0.5)))))))
     return args[int(rng.integers(len(args)))]
 
 
@@ -202,7 +206,7 @@ def _block_cases(block: dict[str, Any], defaults: dict[str, Any], seed: int, num
         drawn = {name: _draw(rng, *randoms[name]) for name in sorted(randoms)}
         for values in itertools.product(*(axes[name] for name in names)):
             params = {**fixed, **drawn, **dict(zip(names, values))}
-            params.setdefault('seed', len(result))
+            params.setdefault('seed', d)
             result.append(_normalise(params, where))
     return result
 
