@@ -56,7 +56,7 @@ class StudySummary:
             f'{self.cases} cases: {self.already_done} done before, {self.ran} run now, {self.failed} failed in all'
             + ('' if self.complete else f', {self.cases - self.already_done - self.ran} still missing')
             + (' (interrupted: run it again with the same --out to finish)' if self.interrupted else ''),
-            f'wall time {self.wall_time:.1f} s ({self.run_time:.1f} s running) on {self.workers} workers; '
+            f'wall time {self.wall_time:.1f} s ({self.run_time:.1f} s running) on {self.workers} worker{"s" if self.workers != 1 else ""}; '
             f'the runs alone {self.sum_of_runs:.1f} s'
             + ('' if eff is None else f': speed-up {self.sum_of_runs / self.run_time:.2f}, efficiency {eff:.2f} per worker'),
             f'CPU time of the study {self.cpu_hours:.4f} CPU-hours',
