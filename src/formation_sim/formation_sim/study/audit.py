@@ -39,7 +39,7 @@ class EdgeWatch:
     def __init__(self, scenario) -> None:
         self.heads, self.tails, _ = scenario.edge_indices()
         self.delta = scenario.delta
-        self.k3 = scenario.gains.k3 if scenario.dynamics == 'double' else None
+        self.k3 = None  # the world's damping (k3, or κ k3 at a speed scale κ), from the first event
         self.tolerance = TOLERANCE * scenario.delta
         self.checks = 0
         self.largest = 0.0  # the largest length evaluated
@@ -51,6 +51,7 @@ class EdgeWatch:
     def on_event(self, t: float, world, _due) -> None:
         """At an event time, before the due agents trigger: the inputs still those of [last, t]."""
         self._world = world
+        self.k3 = world.damping if world.double else None
         x, q = world.positions, world.velocities
         lengths = np.linalg.norm(x[self.heads] - x[self.tails], axis=1)
         self.checks += lengths.size
