@@ -23,6 +23,7 @@ from geometry_msgs.msg import Accel, Twist, TwistStamped
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinematics import yaw
 from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
     encode_body_velocity,
@@ -71,11 +72,17 @@ class PlantOutput:
 class RobotOutput:
     """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`."""
 
-    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
+    def __init__(
+        self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None],
+        guard: Callable[[float, float], None] | None = None,
+    ) -> None:  # noqa: ANN001  # fmt: skip
+        """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze
+        (`formation_agent.ros.staleness`); `on_failure(error)` once the robot is stopped."""
         self._node = node
         self._config = config
         self._poses = poses
         self._on_failure = on_failure
+        self._guard = guard
         self.commander = RobotCommander(
             drive=config.robot,
             dimension=config.dimension,
@@ -117,13 +124,16 @@ class RobotOutput:
         if self._stopped:
             return
         try:
-            self._send()
-        except PoseError as error:  # its own pose went stale: stop now, then leave
+            wall = time.time()
+            if self._guard is not None:
+                self._guard(wall, wall - self._epoch)
+            self._send(wall)
+        except (PoseError, StaleStateError) as error:  # its own pose, or all it knows, went stale: stop now, then leave
             self.stop()
             self._on_failure(error)
 
-    def _send(self) -> None:
-        wall = time.time()
+    def _send(self, wall: float | None = None) -> None:
+        wall = time.time() if wall is None else wall
         t = self._last_t = max(wall - self._epoch, self._last_t)
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
         if self._holonomic:
