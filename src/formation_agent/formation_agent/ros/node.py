@@ -14,13 +14,16 @@ An agent node touches only what a real robot would have:
 This module holds the protocol.  Two clocks: in lock-step sim time (default) the simulator's Step
 messages say when it is the agent's turn, and the run reproduces the in-process engine bit for
 bit.  In wall-clock mode (Step 0 flagged realtime; robots always) the agent keeps its own timer on
-wall time since the Step's epoch, as a robot would, and triggers at once when its triggering time
-has already passed.  All algorithmic decisions are taken by the core object
-(`formation_agent.core.eta`).
+wall time since the Step's epoch, as a robot would, and triggers at once (from the executor, not
+by recursion) when its triggering time has already passed.  When it triggers:
+`formation_agent.ros.stepping`; its counts, Status and report: `formation_agent.ros.reporting`;
+discovery: `formation_agent.ros.discovery`.  All algorithmic decisions are taken by the core
+object (`formation_agent.core.eta`).
 
 Every way out sends the zero command first (`leave`): the final Step, a lost simulator or
-coordinator (DDS liveliness, exit status 3), SIGINT/SIGTERM (130), a stale pose or any other
-error (1).  Bad messages are refused and counted (`formation_agent.ros.inbox`); faults can be
+coordinator (DDS liveliness, exit status 3), SIGINT/SIGTERM (130), a stale pose, a freeze
+(`formation_agent.ros.staleness`) or any other error (1); an error raised outside the executor's
+reach stops the robot and the triggers at once (`_fail`).  Bad messages are refused and counted (`formation_agent.ros.inbox`); faults can be
 injected for tests (`formation_agent.ros.faults`); parameters: `formation_agent.ros.config`.
 """
 
