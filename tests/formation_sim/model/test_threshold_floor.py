@@ -112,3 +112,16 @@ def test_validate_refuses_an_eta2_floor_whose_ball_leaves_the_capacity_and_warns
     assert [f for level, f in found if level == 'warning' and 'checked on runs only' in f.message]
     report, found = _floor_findings(_near_formation_double(0.005))
     assert report.ok and not [f for level, f in found if level != 'note']
+
+
+def test_eta2_where_the_condition_fails_the_run_is_still_checked_and_holds():
+    """The paper's example with c0 = 0.01: connectivity is not proven (its V_d(0) is too large), so
+    the analysis checks it on the run, and V_d <= B_d(κt), which needs only the edges in range."""
+    scenario = load_scenario('paper_double').with_scale(threshold_floor=0.01, speed_scale=2.0)
+    floor = floor_bounds(scenario)
+    assert not floor.proven and floor.xi is None
+    record = simulate(scenario, horizon=10.0, sample_dt=0.005)
+    series = run_series(record)
+    checks = theorem_checks(record, series, theory_bounds(scenario))
+    assert all(check.ok for check in checks), [c for c in checks if not c.ok]
+    assert [c.name for c in checks][:2] == ['connectivity: ||x_i - x_j|| < Δ', 'V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)']
