@@ -87,8 +87,8 @@ def test_every_missing_parameter_is_named_at_once(ros):
     [
         ({'robot': 'holonomic'}, 'robot: holonomic needs sensing: poses'),
         ({'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.1, 'dimension': 3,
-          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle drives in the plane: dimension must be 2, got 3'),
-        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle needs control_point_distance l > 0'),
+          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3'),
+        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0'),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
         ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 from formation_agent.core.commander import Limits
 from formation_agent.core.eta import SCALE_GAINS
+from formation_agent.core.kinds import KindNames, robot_kind
+from formation_agent.core.kinds.registry import Geometry
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 from formation_agent.ros.parameters import (
     DOUBLE,
@@ -29,7 +31,7 @@ from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
-ROBOTS = ('none', 'holonomic', 'unicycle')
+ROBOTS = KindNames(before=('none',))  # 'none' and every registered robot kind, read at each use
 LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration')
 
 
@@ -62,8 +64,8 @@ AGENT_PARAMETERS = (
     _spec('pose_timeout', DOUBLE, 'sensing: poses — a pose older than this at a trigger (or on the '
           'command timer, for its own robot) stops the agent [s]', default=0.5, low=0.0, low_open=True),
     _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default='world'),
-    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant), 'holonomic' "
-          "(world-frame TwistStamped) or 'unicycle' (body-frame Twist (v, ω), differential drive)",
+    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant) or a robot kind: "
+          + ', '.join(f"'{name}' ({robot_kind(name).summary})" for name in ROBOTS[1:]),
           default='none', choices=ROBOTS),
     _spec('command_topic', STRING, "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)", default=''),
     _spec('control_point_distance', DOUBLE, 'robot: unicycle — distance l of the control point ahead of the '
@@ -147,8 +149,12 @@ class AgentConfig:
 
     @property
     def control_point_offset(self) -> tuple[float, float, float]:
-        """Where the control point sits in the robot's body frame."""
-        return (self.control_point_distance if self.robot == 'unicycle' else 0.0, 0.0, 0.0)
+        """Where the control point sits in the robot's body frame (by its kind; none: the origin)."""
+        return (0.0, 0.0, 0.0) if self.robot == 'none' else robot_kind(self.robot).control_offset(self.geometry)
+
+    @property
+    def geometry(self) -> Geometry:
+        return Geometry(control_point_distance=self.control_point_distance)
 
 
 def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
@@ -225,7 +231,7 @@ def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
         given = [name for name in (*LIMIT_PARAMETERS, 'command_topic') if values[name] not in (math.inf, '')]
         if given:
             problems.append(
-                f"{', '.join(given)} apply to a robot's command adapter (robot: holonomic or unicycle); "
+                f"{', '.join(given)} apply to a robot's command adapter (robot: one of {tuple(ROBOTS[1:])}); "
                 "with robot: none the simulator's plant takes the exact commands"
             )
     if robot not in (None, 'none') and have('sensing') and values['sensing'] != 'poses':
@@ -233,11 +239,23 @@ def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
             f"robot: {robot} needs sensing: poses (the simulator's sensing service reports its own simulated "
             'world, which does not take robot commands)'
         )
-    if robot == 'unicycle':
-        if have('dimension') and values['dimension'] != 2:
-            problems.append(f'robot: unicycle drives in the plane: dimension must be 2, got {values["dimension"]}')
-        if have('control_point_distance') and not values['control_point_distance'] > 0.0:
-            problems.append('robot: unicycle needs control_point_distance l > 0 (the control point ahead of the axle)')
+    if robot not in (None, 'none') and have('control_point_distance'):
+        problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
+    return problems
+
+
+def _kind_problems(robot: str, values: dict) -> list[str]:
+    """What the robot's kind says of the parameters known (formation_agent.core.kinds)."""
+    kind = robot_kind(robot)
+    geometry = Geometry(control_point_distance=values['control_point_distance'])
+    problems = kind.placement_problems(dimension=values.get('dimension'), geometry=geometry)
+    if all(name in values for name in LIMIT_PARAMETERS):
+        limits = Limits(
+            linear_speed=values['max_linear_speed'],
+            angular_speed=values['max_angular_speed'],
+            linear_acceleration=values['max_linear_acceleration'],
+        )
+        problems += kind.drive_problems(geometry=geometry, limits=limits)
     return problems
 
 

@@ -8,7 +8,7 @@
 - the trajectories from `/formation/state` (WorldState: exact positions and velocities at every
   event time and on the sample grid), the horizon and the clock mode from `/formation/step`;
 - messages sent = TriggerInfo messages recorded, sensing calls = `/formation/sensing_log` entries;
-- robot runs (`formation run --backend holonomic | unicycle | external`, no `/formation/state`):
+- robot runs (`formation run --backend <robot kind> | external`, no `/formation/state`):
   the trajectories from the robots' pose topics (`/formation/robots` names which: a simulated
   robot's noise-free `true_odom`, else the measured `odom` or `pose`), run time from their header
   stamps and the epoch of Step 0, sampled as the coordinator samples them

@@ -180,11 +180,14 @@ def paper_example_note(name: str, rules: list[str]) -> str | None:
 
 def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     """What decides a distributed run's processes and their parameters (`formation run`, `formation params`)."""
+    from formation_sim.runtime.launch import BACKENDS, ROBOT_MODELS
+
     parser.add_argument(
         '--backend',
-        choices=('exact', 'holonomic', 'unicycle', 'external'),
+        choices=BACKENDS,
         default='exact',
-        help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
+        help=f"the world: exact (the simulator, default), a robot kind ({', '.join(ROBOT_MODELS)}: simulated robots), "
+        'external (real robots)',
     )
     parser.add_argument(
         '--agents-per-process',
@@ -219,12 +222,12 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.launch import ROBOT_MODELS, RunError
 
     robots = None
     if args.backend != 'exact':
         if args.backend == 'external' and args.robot is None:
-            raise RunError('--backend external needs --robot holonomic|unicycle (what the robots are)')
+            raise RunError(f"--backend external needs --robot {'|'.join(ROBOT_MODELS)} (what the robots are)")
         robots = robot_options(args, args.robot or args.backend)
     return {
         'out_dir': args.out,
@@ -245,12 +248,12 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, RobotOptions
+    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, RobotOptions
 
     defaults = RobotOptions()
-    group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
+    group = parser.add_argument_group(f"robots (backends {', '.join(ROBOT_MODELS)}, external)")
     add = group.add_argument
-    add(model_flag, choices=('holonomic', 'unicycle'), default=None, help="what the robots are (default: the backend's model)")
+    add(model_flag, choices=ROBOT_MODELS, default=None, help="what the robots are (default: the backend's model)")
     add('--control-point-distance', type=POSITIVE, default=defaults.control_point_distance, metavar='L',
         help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
     add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
@@ -268,7 +271,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
     add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
-    add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    add('--initial-heading', type=FINITE, default=None, metavar='RAD',
+        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
     add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
 
 
