@@ -162,7 +162,8 @@ class FormationAgentNode(Node):
             STEP_TOPIC,
             self._on_step,
             READER_QOS,
-            event_callbacks=SubscriptionEventCallbacks(liveliness=self.simulator.on_liveliness),
+            # self.simulator is made after this subscription: looked up when the event comes
+            event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
         )
 
     @property
