@@ -14,14 +14,12 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
-
 import pytest
+
+from formation_agent.config import DIRECTORY as CONFIG  # where the README sends robots: python3 -m formation_agent.config
 
 # Each test on a ROS domain of its own (conftest.py, robot_domain).
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
-CONFIG = Path(__file__).resolve().parents[3] / 'src' / 'formation_agent' / 'config'
 
 
 def _linear(msg):

@@ -380,3 +380,37 @@ def test_command_limits_in_json_and_bad_limits_refused(capsys):
     assert data['commands']['within'] is False
     assert main(['validate', 'robots_square', '--max-speed', '-1']) == 2
     assert 'argument --max-speed: must be a finite number > 0, got -1.0' in capsys.readouterr().err
+
+
+def test_validate_reports_both_speed_scales_and_their_settling_times(capsys):
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.largest_command import measured_command
+
+    # robots_lab is set down 21-30 cm off its corners: at κ = 1 it asks for more than a TurtleBot can do
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '2.84', '--json']) == 1
+    data = json.loads(capsys.readouterr().out)['commands']['speed_scale']
+    asked = measured_command(load_scenario('robots_lab')).max_speed
+    assert data['source'] == 'observed' and math.isclose(data['value'] * asked * 1.25, 0.22, rel_tol=1e-12)
+    assert data['guaranteed']['value'] < data['observed']['value']
+    assert data['settling']['definition'].startswith('first time after which the formation error')
+    assert math.isclose(data['observed']['settle_time'], data['settling']['time_at_1'] / data['value'], rel_tol=1e-12)
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22']) == 1
+    out = capsys.readouterr().out
+    assert f'--speed-scale auto runs κ = {data["value"]:.4g} (observed)' in out
+    assert 'guaranteed: κ = ' in out and 'bound by the speed 0.22 m/s' in out
+
+
+def test_an_acceleration_limit_on_eta1_is_refused_with_the_reason(capsys):
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-acceleration', '1']) == 2
+    assert 'ETA-1 commands velocities (uxsingle) that jump at every event' in capsys.readouterr().err
+
+
+def test_validate_suggests_the_threshold_floor_for_a_pose_noise(capsys):
+    assert main(['validate', 'robots_lab', '--pose-noise', '0.005', '--json']) == 0
+    floor = json.loads(capsys.readouterr().out)['threshold_floor']
+    assert math.isclose(floor['suggested'], 3 * math.sqrt(10) * 0.005, rel_tol=1e-12)  # ω_ij = 2/(3 - 1) = 1, two neighbours
+    assert main(['validate', 'robots_lab', '--pose-noise', '0.005']) == 0
+    out = capsys.readouterr().out
+    assert f'suggested c0 = {floor["suggested"]:.3g}' in out and 'sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²)' in out
+    assert main(['validate', 'robots_lab', '--pose-noise', '0']) == 2
+    assert 'argument --pose-noise: must be a finite number > 0, got 0.0' in capsys.readouterr().err

@@ -538,3 +538,23 @@ def test_nesting_is_bounded_on_both_paths(tmp_path, anchored):
         with pytest.raises(ScenarioError) as caught:
             load_scenario(write(tmp_path, text))
         assert ('nested too deeply' in str(caught.value)) == refused, str(caught.value)[:300]
+
+
+@pytest.mark.parametrize('suffix', ['.yaml', '.json'])
+def test_headings_are_optional_per_agent_and_round_trip_exactly(tmp_path, suffix):
+    from formation_sim.model.scenario import dump_scenario, scenario_to_dict
+
+    lab = load_scenario('robots_lab')
+    assert lab.headings is not None and lab.headings.tolist() == [-1.377, 0.402, -0.155, 1.484]
+    dump_scenario(lab, tmp_path / f'lab{suffix}')
+    assert load_scenario(tmp_path / f'lab{suffix}') == lab
+    assert load_scenario('robots_square').headings is None  # none given: the robots' --initial-heading
+    data = scenario_to_dict(lab)
+    data['agents'][3]['heading'] = math.pi
+    assert scenario_from_dict(data) != lab  # headings are part of the scenario
+    del data['agents'][2]['heading']
+    with pytest.raises(ScenarioError, match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading or none'):
+        scenario_from_dict(data)
+    data['agents'][2]['heading'] = float('nan')
+    with pytest.raises(ScenarioError, match=r'agents\.2\.heading: must be finite, got nan'):
+        scenario_from_dict(data)

@@ -163,3 +163,13 @@ def test_robot_options_reach_the_simulated_robots(tmp_path):
     params = noisy.robot_parameters(load_scenario('robots_square'), 2)
     assert {key: params[key] for key in ('pose_noise', 'pose_latency', 'seed', 'rate')} == {'pose_noise': 0.005, 'pose_latency': 0.02, 'seed': 3, 'rate': 100.0}
     assert np.array_equal(params['position'], [1.015, -0.0075])
+
+
+def test_simulated_robots_start_at_the_scenarios_headings_unless_one_is_given(tmp_path):
+    lab = load_scenario('robots_lab')
+    options = RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': None})
+    assert [options.initial_heading(lab, agent) for agent in lab.agent_ids] == lab.headings.tolist()
+    assert options.initial_heading(load_scenario('robots_square'), 1) == 0.0  # none in the scenario
+    given = RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': 0.5})
+    assert {given.initial_heading(lab, agent) for agent in lab.agent_ids} == {0.5}  # --initial-heading wins
+    assert options.robot_parameters(lab, 3)['yaw'] == -0.155

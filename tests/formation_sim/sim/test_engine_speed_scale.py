@@ -85,3 +85,30 @@ def test_a_scenario_with_a_bad_speed_scale_is_refused_with_its_rule_and_value(ba
     with pytest.raises(ScenarioError, match=r'gains\.speed_scale: must') as caught:
         load_scenario('paper_single').with_scale(speed_scale=bad)
     assert repr(float(bad)) in str(caught.value)
+
+
+@pytest.mark.parametrize('kappa', [0.37, 3.0])
+@pytest.mark.parametrize('name', ['paper_single', 'paper_double'])
+def test_the_theorems_checks_hold_on_a_scaled_run_in_real_time(reference_runs, name, kappa):
+    """The analysis' bounds at κ: rates κβ, ξ_i/κ, V_d of the paper's velocities q/κ; every check
+    that holds for the paper's run holds for the scaled one, and the ratios to the bounds agree."""
+    from formation_sim.analysis.checks import run_series, theorem_checks, theory_bounds
+    from formation_sim.sim.summary import build_summary
+
+    base = SCENARIOS[name]
+    scaled_scenario = base.with_scale(speed_scale=kappa)
+    reference = reference_runs[name]
+    scaled = simulate(scaled_scenario, horizon=HORIZON / kappa, sample_dt=DT / kappa, sample_events=False)
+    bounds = theory_bounds(scaled_scenario)
+    paper = theory_bounds(base)
+    assert bounds.rate == kappa * paper.rate
+    assert bounds.xi == (None if paper.xi is None else {agent: xi / kappa for agent, xi in paper.xi.items()})
+    series, paper_series = run_series(scaled), run_series(reference)
+    count = min(len(series.times), len(paper_series.times)) - 1
+    np.testing.assert_allclose(series.lyapunov[:count], paper_series.lyapunov[:count], rtol=1e-7)
+    got = {c.name: c.ok for c in theorem_checks(scaled, series, bounds)}
+    assert got == {c.name: c.ok for c in theorem_checks(reference, paper_series, paper)}
+    assert all(got.values()), got
+    summary = build_summary(scaled)
+    assert all(entry['holds'] in (True, None) for entry in summary['xi_check'].values())
+    assert summary['theorem_constants']['speed_scale'] == kappa

@@ -271,7 +271,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
     add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
-    add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    add('--initial-heading', type=FINITE, default=None, metavar='RAD',
+        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
     add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
 
 

@@ -304,6 +304,7 @@ class Scenario:
     edges: tuple[Edge, ...]
     gains: SingleGains | DoubleGains
     horizon: float
+    headings: np.ndarray | None = None  # (n,) [rad]: simulated robots' headings at t = 0, or None
 
     def __post_init__(self) -> None:
         _name(self.name)
@@ -346,6 +347,13 @@ class Scenario:
             object.__setattr__(self, 'velocities', _readonly(velocities))
         elif self.velocities is not None:
             raise ScenarioError("velocities: must be absent for dynamics 'single'")
+
+        if self.headings is not None:
+            headings = _float_array(self.headings, 'headings')
+            if headings.shape != (len(ids),):
+                raise ScenarioError(f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}')
+            self._check_finite(headings[:, None], 'heading')
+            object.__setattr__(self, 'headings', _readonly(headings))
 
         expected = SingleGains if self.dynamics == 'single' else DoubleGains
         if not isinstance(self.gains, expected):
@@ -416,6 +424,10 @@ class Scenario:
             and self.edges == other.edges
             and self.gains == other.gains
             and self.horizon == other.horizon
+            and (
+                (self.headings is None and other.headings is None)
+                or (self.headings is not None and other.headings is not None and np.array_equal(self.headings, other.headings))
+            )
         )
 
     __hash__ = None
@@ -526,6 +538,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {len(agents)}')
     velocity_keys = ('position', 'velocity') if dynamics == 'double' else ('position',)
     entries: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+    headings: dict[int, float] = {}
     dimension: int | None = None
     first_agent: int | None = None
     for raw_id, entry in agents.items():
@@ -544,7 +557,9 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
             )
         if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
             raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
-        _check_keys(entry, where, required=velocity_keys)
+        _check_keys(entry, where, required=velocity_keys, optional=('heading',))
+        if 'heading' in entry:
+            headings[agent] = _finite_float(entry['heading'], f'{where}.heading')
         position = _vector(entry['position'], f'{where}.position', size=dimension)
         if dimension is None:
             dimension, first_agent = position.size, agent
@@ -557,6 +572,12 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         )
         entries[agent] = (position, velocity)
     ids = tuple(sorted(entries))
+    if headings and len(headings) != len(ids):
+        missing = [a for a in ids if a not in headings]
+        raise ScenarioError(
+            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
+            'give every agent a heading or none'
+        )
     positions = np.array([entries[a][0] for a in ids])
     velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
 
@@ -590,6 +611,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         edges=tuple(edges),
         gains=gains,
         horizon=horizon,
+        headings=np.array([headings[a] for a in ids]) if headings else None,
     )
 
 
@@ -651,6 +673,8 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         entry = {'position': scenario.positions[k].tolist()}
         if double:
             entry['velocity'] = scenario.velocities[k].tolist()
+        if scenario.headings is not None:
+            entry['heading'] = float(scenario.headings[k])
         agents[agent] = entry
     gains = scenario.gains
     if double:

@@ -93,7 +93,7 @@ class RobotOptions:
     world_frame: str = 'world'
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
-    yaw: float = 0.0  # initial heading of every robot [rad]
+    yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
     pose_noise: float = 0.0  # σ [m]
     yaw_noise: float = 0.0  # σ [rad]
     latency: float = 0.0  # [s] from a pose's measurement to its publication
@@ -122,7 +122,7 @@ class RobotOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
-        if not math.isfinite(self.yaw):
+        if self.yaw is not None and not math.isfinite(self.yaw):
             raise RunError(f'yaw must be finite, got {self.yaw!r}')
         if self.robots_per_process < 1:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
@@ -163,7 +163,7 @@ class RobotOptions:
             'robot_id': int(agent_id),
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
-            'yaw': float(self.yaw),
+            'yaw': self.initial_heading(scenario, agent_id),
             'control_point_distance': float(self.control_point_distance),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
@@ -178,6 +178,14 @@ class RobotOptions:
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
         return params
+
+    def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
+        """A simulated robot's heading at t = 0: `yaw` if given, else the scenario's, else 0."""
+        if self.yaw is not None:
+            return float(self.yaw)
+        if scenario.headings is not None:
+            return float(scenario.headings[scenario.index(agent_id)])
+        return 0.0
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
