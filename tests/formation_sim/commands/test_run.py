@@ -305,7 +305,7 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
 
 
 def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(tmp_path, capsys, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     started = []
 
