@@ -106,7 +106,7 @@ def test_validate_refuses_an_eta2_floor_whose_ball_leaves_the_capacity_and_warns
     base = load_scenario('paper_double')
     report, found = _floor_findings(base.with_scale(threshold_floor=1.0))
     assert not report.ok
-    assert 'ultimate ball' in [f for level, f in found if level == 'error'][0].message
+    assert 'ultimate ball' in next(f for level, f in found if level == 'error').message
     report, found = _floor_findings(base.with_scale(threshold_floor=0.01))
     assert report.ok  # the paper's example: proven only where sup V_d fits, which it does not
     assert [f for level, f in found if level == 'warning' and 'checked on runs only' in f.message]

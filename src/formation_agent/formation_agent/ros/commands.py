@@ -52,7 +52,7 @@ class PlantOutput:
     def saturation(self) -> dict:
         return {}
 
-    def __init__(self, node, config) -> None:  # noqa: ANN001
+    def __init__(self, node, config) -> None:
         double = config.double
         self._encode = encode_acceleration_command if double else encode_velocity_command
         self._zeros = (0.0,) * config.dimension
@@ -64,7 +64,7 @@ class PlantOutput:
     def start(self, epoch: float) -> None:
         self._wall_clock = True
 
-    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+    def publish(self, t: float, control, sensed: SensedState) -> None:
         if not self._stopped:
             self.publisher.publish(self._encode(control))
             self.sent += 1
@@ -81,7 +81,7 @@ class PlantOutput:
 class RobotOutput:
     """robot: a robot kind — velocity commands to the robot, republished at `command_rate`."""
 
-    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
+    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:
         self._node = node
         self._config = config
         self._poses = poses
@@ -113,7 +113,7 @@ class RobotOutput:
     def start(self, epoch: float) -> None:
         self._epoch = epoch
 
-    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+    def publish(self, t: float, control, sensed: SensedState) -> None:
         """The agent's new command at its trigger t: send at once, then keep sending at the command rate."""
         if self._stopped:
             return

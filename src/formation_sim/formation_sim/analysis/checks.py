@@ -41,7 +41,7 @@ class Check:
         return {'name': self.name, 'ok': self.ok, 'detail': self.detail, 'binding': self.binding}
 
 
-ROBOT_BOUNDS_NOTE = 'robots: reported, not guaranteed (noise, latency, saturation and the robots\' dynamics are outside the theorems)'
+ROBOT_BOUNDS_NOTE = "robots: reported, not guaranteed (noise, latency, saturation and the robots' dynamics are outside the theorems)"
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -38,9 +38,9 @@ if TYPE_CHECKING:
 
 def pyplot():
     """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use('Agg')
+    mpl.use('Agg')
     import matplotlib.pyplot as plt
 
     return plt

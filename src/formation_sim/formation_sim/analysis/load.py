@@ -219,7 +219,7 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         info = decode_trigger_info(decode(rawdata, msgtype))
         sender, receiver = int(match.group(1)), int(match.group(2))
         if (info.sender, info.receiver) != (sender, receiver):
-            raise MessageError(f'carries sender {info.sender} and receiver {info.receiver}, not the topic\'s {sender} -> {receiver}')
+            raise MessageError(f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} -> {receiver}")
         got.infos[(info.sender, info.stamp)].append(info.receiver)
         got.info_total += 1
     elif topic == STATE_TOPIC and array:
@@ -255,7 +255,7 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
 
 def _resolve_scenario(got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None) -> tuple[Scenario, str]:
     if got.scenario_text is not None:
-        return scenario_from_yaml(got.scenario_text, source=f'the bag\'s {SCENARIO_TOPIC}'), f'bag topic {SCENARIO_TOPIC}'
+        return scenario_from_yaml(got.scenario_text, source=f"the bag's {SCENARIO_TOPIC}"), f'bag topic {SCENARIO_TOPIC}'
     if run_dir is not None and (run_dir / SCENARIO_FILE).is_file():
         path = run_dir / SCENARIO_FILE
         try:
@@ -279,9 +279,9 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
     """Refuse a scenario that is not the bag's run (analysing it would be meaningless)."""
     first = states[0]
     if tuple(first.agent_ids) != scenario.agent_ids:
-        raise AnalysisError(f'the bag\'s agents {list(first.agent_ids)} are not the scenario\'s {list(scenario.agent_ids)}')
+        raise AnalysisError(f"the bag's agents {list(first.agent_ids)} are not the scenario's {list(scenario.agent_ids)}")
     if first.positions.shape[1] != scenario.dimension:
-        raise AnalysisError(f'the bag\'s states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}')
+        raise AnalysisError(f"the bag's states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}")
     if (first.velocities is None) != (scenario.dynamics == 'single'):
         raise AnalysisError(f'the bag\'s states {"lack" if first.velocities is None else "carry"} velocities; the scenario is {scenario.dynamics!r}')
     if first.time == 0.0:
@@ -432,8 +432,8 @@ def _trigger_times(got: _Collected, scenario: Scenario) -> tuple[dict[int, list[
             duplicated.append(f'{sender} @ {stamp!r}')
         if set(receivers) != expected:
             missing.append(f'{sender} @ {stamp!r} -> {sorted(expected - set(receivers))}')
-    for agent in trigger_times:
-        trigger_times[agent].sort()
+    for times in trigger_times.values():
+        times.sort()
     check = Check(
         name='one TriggerInfo per neighbour per trigger',
         ok=not missing and not duplicated,

@@ -302,7 +302,7 @@ def render_markdown(report: dict[str, Any]) -> str:
     if report['figures']:
         lines += ['', '## Figures', '']
         for title, name in report['figures'].items():
-            if name.endswith('.gif') or name.endswith('.png'):
+            if name.endswith(('.gif', '.png')):
                 lines.append(f'![{title}]({name})')
             else:
                 lines.append(f'- {title}: `{name}`')

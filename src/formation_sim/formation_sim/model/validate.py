@@ -371,7 +371,7 @@ def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None)
     gains = scenario.gains
     name, rate = ('β', gains.beta) if scenario.dynamics == 'single' else ('β_d', gains.beta_d)
     line = (
-        f'speed scale κ = {_g(kappa)}: the paper\'s run in s = κt, every triggering time (and ξ_i) divided by κ, '
+        f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) divided by κ, "
         f'commands × κ' + ('' if scenario.dynamics == 'single' else ' (accelerations × κ², gains κ²k1, κk2, κk3, q(0) → κ q(0))')
         + f'; the threshold decays at κ{name} = {_g(kappa * rate)} per second'
         + ('' if beta0 is None else f', β0 in real time κβ0 = {_g(kappa * beta0)}')

@@ -379,7 +379,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -512,7 +512,7 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:

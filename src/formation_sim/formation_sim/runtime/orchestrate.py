@@ -83,8 +83,17 @@ from formation_sim.runtime.results import (
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
 
 __all__ = [
-    'EXIT_FAILED', 'EXIT_INTERRUPTED', 'EXIT_LOST', 'EXIT_OK', 'BACKENDS',
-    'ChildExit', 'FormationRun', 'RobotOptions', 'RunError', 'RunResult', 'reserve_domain',
+    'BACKENDS',
+    'EXIT_FAILED',
+    'EXIT_INTERRUPTED',
+    'EXIT_LOST',
+    'EXIT_OK',
+    'ChildExit',
+    'FormationRun',
+    'RobotOptions',
+    'RunError',
+    'RunResult',
+    'reserve_domain',
 ]  # fmt: skip
 
 SUMMARY_FILE = 'summary.json'
@@ -185,7 +194,7 @@ class FormationRun:
                 if backend == 'external':
                     raise RunError("backend 'external' needs robots=RobotOptions(model=...): what the robots are")
                 robots = RobotOptions(model=backend)
-            if backend != 'external' and robots.model != backend:
+            if backend not in ('external', robots.model):
                 raise RunError(f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}')
             robots.check(self.scenario)
         elif robots is not None:
