@@ -51,7 +51,7 @@ def _stale_error(book, t):
 
 
 def test_a_pose_whose_writer_left_the_graph_says_when(rig):
-    clock, schedule, book, writers, staleness = rig
+    _clock, _schedule, book, writers, staleness = rig
     book.add(1, _pose(EPOCH + 4.2))
     book.add(2, _pose(EPOCH + 3.466))
     staleness.look(EPOCH + 3.5)
@@ -66,7 +66,7 @@ def test_a_pose_whose_writer_left_the_graph_says_when(rig):
 
 
 def test_a_pose_stale_because_this_agent_ran_late_says_so(rig):
-    clock, schedule, book, writers, staleness = rig
+    _clock, _schedule, book, _writers, staleness = rig
     book.add(1, _pose(EPOCH + 4.2))
     book.add(2, _pose(EPOCH + 3.466))
     staleness.look(EPOCH + 3.5)
@@ -80,7 +80,7 @@ def test_a_pose_stale_because_this_agent_ran_late_says_so(rig):
 
 
 def test_a_pose_stale_while_this_agent_is_punctual_blames_the_feed(rig):
-    clock, schedule, book, writers, staleness = rig
+    _clock, _schedule, book, _writers, staleness = rig
     book.add(1, _pose(EPOCH + 4.2))
     book.add(2, _pose(EPOCH + 3.466))
     staleness.look(EPOCH + 3.5)
@@ -108,7 +108,7 @@ def test_no_command_after_a_freeze_of_the_command_timer_or_of_the_due_trigger():
 
 
 def test_a_trigger_that_fires_long_after_it_was_due_is_refused_once(rig):
-    clock, schedule, book, writers, staleness = rig
+    clock, schedule, _book, _writers, staleness = rig
     schedule.next_time = 1.0
     fired = []
     schedule.arm(lambda: fired.append(True))

@@ -25,7 +25,7 @@ class StaleStateError(RuntimeError):
 
 
 OVERLOADED = 'an overloaded computer?'
-NOT_PUBLISHING = "its writer stalled or was stopped, or its messages are lost?"
+NOT_PUBLISHING = 'its writer stalled or was stopped, or its messages are lost?'
 
 
 class TimerWatch:
@@ -81,7 +81,7 @@ def diagnosis(*, writer: str | None, timer_late: float, timeout: float) -> str:
 def explained(message: str, clause: str) -> str:
     """A PoseError's `message` with `clause` before its last words (': the agent stops')."""
     ending = ': the agent stops'
-    head = message[: -len(ending)] if message.endswith(ending) else message
+    head = message.removesuffix(ending)
     return f'{head}; {clause}{ending}'
 
 
@@ -118,7 +118,7 @@ class Staleness:
     `formation_agent.ros.stepping.TriggerSchedule`.
     """
 
-    def __init__(self, *, book: PoseBook, period: float, count_writers: Callable[[str], int], schedule) -> None:  # noqa: ANN001
+    def __init__(self, *, book: PoseBook, period: float, count_writers: Callable[[str], int], schedule) -> None:
         self.book = book
         self.guard = CommandGuard(agent_id=book.agent_id, period=period, timeout=book.timeout)
         self.writers = WriterWatch({robot: book.topic(robot) for robot in book.robots})
