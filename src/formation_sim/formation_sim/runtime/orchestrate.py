@@ -90,6 +90,9 @@ SUMMARY_FILE = 'summary.json'
 # How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
 # grace, one 0.1 s tick, and margin for a loaded machine (formation_msgs_py.qos.LIVELINESS_LEASE).
 LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
+# On robots, how long the coordinator may take to stop the run on an agent's final report that
+# names its error (it does so at once; margin for a loaded machine).
+AGENT_REPORT_DETECTION = 1.0
 
 
 class FormationRun:
@@ -445,7 +448,10 @@ class FormationRun:
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
-                status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
+                if code in (EXIT_FAILED, EXIT_LOST):  # the time keeper named the first cause and its status
+                    status = code
+                else:
+                    status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
                 return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}', lost
             if lost is None:
@@ -459,10 +465,24 @@ class FormationRun:
                 )
                 if lost is not None and self.progress:
                     self._say(f'{lost.describe()}; stopping the run')
-            if lost is not None and (not lost.name.startswith('agent') or now - lost.exited_at > LOST_DETECTION):
-                # An agent: the time keeper has had the time to detect it and stop by itself.
+            if lost is not None and now - lost.exited_at > self._detection(lost):
+                # The time keeper has had the time to detect it and stop by itself.
                 return lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
             time.sleep(POLL_PERIOD)
+
+    def _detection(self, lost: Child) -> float:
+        """How long the time keeper may take to stop the run by itself after `lost` exited.
+
+        Not an agent (a robot, the recorder): 0, everything stops now.  An agent that named its
+        error: the time keeper stops the run as soon as the agent's final report comes
+        (`AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
+        killed on a robot run: 0, robots must not wait for a liveliness lease (the message names
+        the dead agent's process).  Lock-step: the keeper sees the lease lapse (`LOST_DETECTION`)."""
+        if not lost.name.startswith('agent'):
+            return 0.0
+        if lost.failed_itself:
+            return AGENT_REPORT_DETECTION if self.backend != 'exact' else LOST_DETECTION
+        return 0.0 if self.backend != 'exact' else LOST_DETECTION
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr

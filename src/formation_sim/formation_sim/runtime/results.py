@@ -131,7 +131,7 @@ def summary_of_what_is_known(
     """summary.json when the time keeper left none (killed hard, or it could not write): the
     failure, the last run time and step of its progress, the processes, and the run as far as
     the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
-    from formation_sim.sim.summary import SCHEMA, build_summary
+    from formation_sim.sim.summary import build_summary, unstarted_summary
 
     progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)}
     stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
@@ -157,18 +157,7 @@ def summary_of_what_is_known(
         except (AnalysisError, ValueError) as error:
             notes.append(f'the bag could not be read back: {error}')
     if data is None:
-        data = {
-            'schema': SCHEMA,
-            'scenario': scenario.name,
-            'dynamics': scenario.dynamics,
-            'mode': mode,
-            'horizon': horizon,
-            'n_agents': len(scenario.agent_ids),
-            'dimension': scenario.dimension,
-            'delta': scenario.delta,
-            'wall_time': None,
-            'extra': {},
-        }
+        data = unstarted_summary(scenario, horizon=horizon, mode=mode, extra={})
         source = f'orchestrator: the {keeper.name} left no summary and there is no readable bag'
     data['extra'].update(
         failure=failure,

@@ -19,7 +19,7 @@ from rclpy.duration import Duration
 from formation_sim.runtime.run_book import RecorderBook
 from formation_sim.runtime.time_keeper import TimeKeeperNode
 from formation_sim.sim.files import write_atomically
-from formation_sim.sim.summary import write_summary
+from formation_sim.sim.summary import SUMMARY_FILE, unstarted_summary, write_summary, write_summary_file
 
 GRAPH_FILE = 'graph.json'
 FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final reports
@@ -62,6 +62,16 @@ def _wait_acknowledged(executor, publishers, *, recorders: RecorderBook, timeout
     while pending and recorders.lost is None and time.monotonic() < deadline:
         pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
         executor.spin_once(timeout_sec=0.0)
+
+
+def write_unstarted(node: TimeKeeperNode) -> None:
+    """summary.json of a run that failed before t = 0 (discovery): no samples, its failure and
+    timestamps (the start-up it spent)."""
+    out = Path(node.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    mode = 'distributed' if node.serves_sensing else 'robots'
+    extra = {**node._run_extra(0.0), 'started': False}  # noqa: SLF001 - the time keeper's own extra
+    write_summary_file(unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE)
 
 
 def write_results(node: TimeKeeperNode) -> None:

@@ -118,6 +118,23 @@ def build_summary(record) -> dict:
     }
 
 
+def unstarted_summary(scenario, *, horizon: float, mode: str, extra: dict) -> dict:
+    """The summary of a run that has no samples (it never reached t = 0, or left neither summary
+    nor bag): what was to be run, and `extra` (its failure)."""
+    return {
+        'schema': SCHEMA,
+        'scenario': scenario.name,
+        'dynamics': scenario.dynamics,
+        'mode': mode,
+        'horizon': horizon,
+        'n_agents': len(scenario.agent_ids),
+        'dimension': scenario.dimension,
+        'delta': scenario.delta,
+        'wall_time': None,
+        'extra': extra,
+    }
+
+
 def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int, list[float]]) -> dict:
     """Wall clock: `extra.lateness` and `extra.max_lateness`, per agent trigger time − planned time
     over the triggers whose plan a Status announced (`planned`: agent -> trigger number k ->
