@@ -46,22 +46,35 @@ def stop_agents(node: TimeKeeperNode, executor) -> None:
     node.end_now()
     node.flush()
     collect_final_reports(node, executor)
-    # A live agent's final report says it got the final Step; a lost agent is still matched
-    # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
-    publishers = node.delivery_publishers(with_steps=not node.final_reports_in())
-    # As at the horizon: the bag ends where the summary does.
-    _wait_acknowledged(executor, publishers, recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT)
+    node.mark('final_reports')
+    # A live agent's final report says it got the final Step; a dead agent (or robot) is still
+    # matched as a reader until DDS drops it and would hold an acknowledgement wait up to its
+    # timeout: the recorders' heartbeats say when they have the final Step, the tools' topics
+    # (the recorders' alone) are acknowledged.  As at the horizon: the bag ends where the summary does.
+    _wait_acknowledged(
+        executor, node.delivery_publishers(with_steps=False), recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT,
+        final_step=node.step.index + 1, recorders_expected=node.extra_subscribers,
+    )  # fmt: skip
+    node.mark('delivered')
 
 
-def _wait_acknowledged(executor, publishers, *, recorders: RecorderBook, timeout_sec: float) -> None:
-    """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
-    recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
-    end: what it lacks is counted against the bag after the run)."""
+def _wait_acknowledged(
+    executor, publishers, *, recorders: RecorderBook, timeout_sec: float, final_step: int | None = None, recorders_expected: int = 0
+) -> None:
+    """Wait (bounded) until every reader acknowledged what `publishers` wrote and, with
+    `final_step`, until each of the `recorders_expected` recorders' heartbeats says it recorded
+    that Step; not for a recorder that lost its liveliness meanwhile (a frozen one would hold each
+    wait up to the end: what it lacks is counted against the bag after the run)."""
     deadline = time.monotonic() + timeout_sec
     pending = list(publishers)
-    while pending and recorders.lost is None and time.monotonic() < deadline:
+
+    def recorded() -> bool:
+        steps = recorders.recorded_steps.values()
+        return final_step is None or (len(steps) >= recorders_expected and all(step >= final_step for step in steps))
+
+    while (pending or not recorded()) and recorders.lost is None and time.monotonic() < deadline:
         pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
-        executor.spin_once(timeout_sec=0.0)
+        executor.spin_once(timeout_sec=0.0 if pending else 0.02)
 
 
 def write_unstarted(node: TimeKeeperNode) -> None:

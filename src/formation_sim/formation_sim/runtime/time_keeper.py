@@ -325,7 +325,8 @@ class TimeKeeperNode(Node):
             agent,
             alive_count=info.alive_count,
             not_alive_count_change=info.not_alive_count_change,
-            finished=self.finished,
+            # After a failure's final Step, an agent that dies is lost (no final report to wait for).
+            finished=self.finished and self.failure_info is None,
             now=time.monotonic(),
         )
 
