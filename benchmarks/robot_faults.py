@@ -185,8 +185,13 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         )
         analyze = subprocess.run([*formation, 'analyze', str(out), '--no-figures', '--quiet'], env=env, capture_output=True, text=True, timeout=300)
         report = out / 'analysis' / 'analysis.json'
-        differences = json.loads(report.read_text()).get('differences', []) if report.is_file() else None
-        row.update(analyze=analyze.returncode, differences=None if differences is None else len(differences), analyze_says=analyze.stdout.strip()[-300:])
+        if report.is_file():
+            analysis = json.loads(report.read_text())
+            differences = [d['key'] for d in (analysis.get('summary_json') or {}).get('differences', [])]
+            failing = [c['name'] for c in analysis['bag_checks'] + analysis['theorem_checks'] if not c['ok'] and c.get('binding', True)]
+        else:
+            differences, failing = None, analyze.stderr.strip()[-300:]
+        row.update(analyze=analyze.returncode, differences=differences, failing_checks=failing)
     finally:
         for process in (run, fleet):
             if process is not None and process.poll() is None:

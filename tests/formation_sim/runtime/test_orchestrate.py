@@ -42,6 +42,32 @@ def _last_commands(bag: Path, scenario) -> dict[int, list[float]]:
     return last
 
 
+def _zero_commands_after(bag: Path, since: float, *, agents) -> dict[int, float]:
+    """Per agent, when (Unix time) the recorder received the zero command that ends its command
+    stream after `since` (a wall-clock bag is stamped with the time since Step 0's epoch)."""
+    from formation_msgs_py.codec import decode_step
+    from formation_sim.bag.io import decode, read_bag
+
+    stream: dict[int, list[tuple[float, bool]]] = {agent: [] for agent in agents}
+    epoch = None
+    for message in read_bag(bag):
+        if message.topic == '/formation/step' and epoch is None:
+            epoch = decode_step(decode(message.rawdata, message.msgtype)).epoch
+        for agent in agents:
+            if message.topic == f'/agent_{agent}/robot/cmd_vel':
+                msg = decode(message.rawdata, message.msgtype)
+                twist = msg.twist if message.msgtype.endswith('TwistStamped') else msg
+                values = (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.z)
+                stream[agent].append((message.timestamp_ns * 1e-9, not any(values)))
+    ends = {}
+    for agent, commands in stream.items():
+        after = [(epoch + at, zero) for at, zero in commands if epoch + at >= since]
+        if after and after[-1][1]:
+            k = max((n for n, (_, zero) in enumerate(after) if not zero), default=-1)
+            ends[agent] = after[k + 1][0]
+    return ends
+
+
 def _assert_a_good_robot_run(out: Path, capsys) -> dict:
     from formation_sim.sim.run_folder import RUN_ENTRIES
 
@@ -129,8 +155,9 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
 
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_path):
-    """SIGKILL leaves no zero command: the coordinator sees the agent's liveliness lapse and ends
-    the run; the robot, without commands, stops after its command timeout (0.5 s)."""
+    """SIGKILL leaves no zero command: `formation run` sees the agent's process die and stops the
+    run at once (robots must not wait for a liveliness lease), naming the agent; the robot,
+    without commands, stops after its command timeout (0.5 s)."""
     import threading
 
     from formation_sim.bag.io import decode, read_bag
@@ -160,6 +187,11 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     assert result.exit_status == EXIT_LOST, result.message
     failure = json.loads(result.summary.read_text())['extra']['failure']
     assert failure['kind'] == 'agent_lost' and failure['agents'] == [2] and failure['detected_by'] == 'coordinator, orchestrator', failure
+    assert failure['message'].startswith('agent_2 (pid ') and 'killed by SIGKILL' in failure['message']
+    # Every other robot's zero command within the bound: the coordinator's final Step at most
+    # POLL_PERIOD + a tick after the kill, each agent's zero command on it.
+    ends = _zero_commands_after(result.bag, killed_at, agents=(1, 3, 4))
+    assert set(ends) == {1, 3, 4} and max(ends.values()) - killed_at < 1.0, ends
     # Robot 2 as it truly moved: still after its command timeout (and a tick), to the end of the bag.
     after = []
     for message in read_bag(result.bag):

@@ -510,8 +510,13 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     times = sample_times(end, period, [t for ts in trigger_times.values() for t in ts])
     positions, velocities = trajectory_samples(tracks, scenario.agent_ids, times)
     extra: dict[str, Any] = {'clock': 'realtime', 'reached_time': float(times[-1])}
-    if final:
-        extra['failure'] = None  # as for the exact backend: the final Step marks the end of the run
+    # As for the exact backend: the run publishes its own horizon, and a final Step before it
+    # marks a run that stopped early (why it stopped is summary.json's).
+    asked = scenario.horizon if got.scenario_text is not None else None
+    finished = bool(final) and (asked is None or end == asked)
+    stop = None if finished else {'time': end, 'step': final[-1].index if final else None, 'horizon': asked, 'final_step': bool(final)}
+    if finished:
+        extra['failure'] = None
     if got.statuses:
         extra.update(_lateness(got.statuses, trigger_times))
     extra.update(robots=robots, saturation=saturation_extra(got.reports.get(agent) for agent in scenario.agent_ids))
@@ -526,7 +531,10 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
         wall_time=math.nan,
         extra=extra,
     )
-    return BagRun(bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks)
+    return BagRun(
+        bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
+        horizon=asked, stop=stop,
+    )  # fmt: skip
 
 
 def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:

@@ -296,7 +296,11 @@ class FormationCoordinatorNode(TimeKeeperNode):
         """Before the summary: the poses up to the horizon (each robot's first one past it)."""
         deadline = time.monotonic() + POSES_AFTER_HORIZON
         end = self.reached_time
-        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in self._poses.values()):
+        # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
+        lost = set(self.failure_info['agents']) if self.failure_info and self.failure_info['kind'] == 'robot_lost' else set()
+        lost |= set(self._pose_watch.silent(time.monotonic(), fraction=0.5))
+        waiting = [s for i, s in self._poses.items() if i not in lost]
+        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in waiting):
             executor.spin_once(timeout_sec=0.02)
 
     def flush(self) -> None:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import os
 import signal
 import sys
 import threading
@@ -97,6 +98,20 @@ LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
 AGENT_REPORT_DETECTION = 1.0
 
 
+def _process_started() -> float:
+    """The Unix time the `formation` command's process started (its imports and checks before
+    `FormationRun.run` belong to the run's start-up); for any other caller, now."""
+    main = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else ''
+    if main != 'formation' and not sys.argv[0].endswith(('formation_sim/cli.py', 'formation_sim.cli')):
+        return time.time()
+    try:
+        fields = Path('/proc/self/stat').read_text().rsplit(')', 1)[1].split()
+        boot = next(float(line.split()[1]) for line in Path('/proc/stat').read_text().splitlines() if line.startswith('btime '))
+        return boot + int(fields[19]) / os.sysconf('SC_CLK_TCK')  # field 22, starttime, in clock ticks since boot
+    except (OSError, ValueError, IndexError, StopIteration):
+        return time.time()
+
+
 class FormationRun:
     """One distributed run of a scenario: time keeper, agent processes, recorder (and robots)."""
 
@@ -152,6 +167,7 @@ class FormationRun:
         every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
         children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
         """
+        self._prepared_from = _process_started()  # the `formation` command's start, else now (extra.timeline)
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
             require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
@@ -268,7 +284,9 @@ class FormationRun:
 
     def run(self) -> RunResult:
         started = self._started_at = time.monotonic()
-        self.marks = {'run': time.time()}  # the orchestrator's marks of the run (Unix times; extra.timeline)
+        # The orchestrator's marks of the run (Unix times; extra.timeline): 'prepare' is where the
+        # command began (before run(): its imports, the scenario read and validated).
+        self.marks = {'prepare': self._prepared_from, 'run': time.time()}
         lost: Child | None = None
         with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
@@ -283,7 +301,7 @@ class FormationRun:
             try:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
-                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id)
+                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost))
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
@@ -466,6 +484,13 @@ class FormationRun:
                 # The time keeper has had the time to detect it and stop by itself.
                 return lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
             time.sleep(POLL_PERIOD)
+
+    def _robots_after(self, lost: Child | None) -> float:
+        """How long the simulated robots run on after the stop began: a robot whose agent died
+        without its zero command stops on its command timeout, and the bag shows it."""
+        if lost is None or not lost.name.startswith('agent') or not self.plan.simulated_robots:
+            return 0.0
+        return self.robots.command_timeout + 0.3  # and a few of its ticks
 
     def _detection(self, lost: Child) -> float:
         """How long the time keeper may take to stop the run by itself after `lost` exited.

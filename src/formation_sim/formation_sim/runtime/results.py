@@ -79,17 +79,19 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
 def timeline(keeper: dict[str, float], marks: dict[str, float], *, started: float) -> dict[str, float]:
     """summary.json's extra.timeline: every mark of the run in seconds since `started` (the Unix
     time the run began), in order: the time keeper's (`keeper`, its extra.timestamps) and the
-    orchestrator's (`marks`): spawned (every child started), keeper_exited, stopped (every child
+    orchestrator's (`marks`): prepare (negative: where the `formation` command began), spawned
+    (every child started), keeper_exited, stopped (every child
     gone, the recorder last), checked (the bag checked against the summary)."""
     points = {name: at - started for name, at in {**keeper, **marks}.items() if isinstance(at, (int, float))}
     return dict(sorted(points.items(), key=lambda item: item[1]))
 
 
 def phases(marks: dict[str, float]) -> dict[str, float]:
-    """summary.json's extra.phases from its timeline: `start` (spawn, imports, DDS participants,
+    """summary.json's extra.phases from its timeline: `prepare` (before the run's timeline begins
+    at `run`: the `formation` command's imports, the scenario read and validated), `start` (spawn, imports, DDS participants,
     discovery: up to step 0), `stepping` (step 0 to the final step), `end` (final reports,
     acknowledgements, the summary, every process's exit, the bag closed and checked)."""
-    spans = {'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
+    spans = {'prepare': ('prepare', 'run'), 'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
     return {
         phase: marks[last] - (0.0 if first is None else marks[first])
         for phase, (first, last) in spans.items()
@@ -177,8 +179,8 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
         failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
     if lost is not None:
         failure['process'] = process_info(lost, launched=launched)
-        if failure['kind'] == 'interrupted':  # stopped by us because of that child
-            failure['kind'] = 'process_failed' if lost.failed_itself else 'process_lost'
+        if failure['kind'] == 'interrupted':  # stopped by us because of that child: the first cause
+            failure['kind'], failure['agents'] = _first_cause(lost)
             failure['message'] = lost.describe()
         elif failure['kind'] == 'agent_lost' and lost.failed_itself:
             failure['kind'] = 'agent_failed'
@@ -187,6 +189,17 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
             failure['detected_by'] += ', orchestrator'
     extra['failure'] = failure
     return failure
+
+
+def _first_cause(child: Child) -> tuple[str, list[int]]:
+    """extra.failure's kind and agents for a child that stopped the run: an agent's or a robot's
+    own process (`agent_<i>`, `robot_<i>`) names the agent, any other a process."""
+    kind, _, number = child.name.partition('_')
+    if kind in ('agent', 'robot') and number.isdigit():
+        if kind == 'robot':
+            return 'robot_lost', [int(number)]
+        return ('agent_failed' if child.failed_itself else 'agent_lost'), [int(number)]
+    return ('process_failed' if child.failed_itself else 'process_lost'), []
 
 
 def strangers(topics: dict[str, int], graph_file: Path, own_nodes: set[str], domain_id: int) -> str:

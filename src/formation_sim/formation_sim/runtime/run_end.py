@@ -47,6 +47,7 @@ def stop_agents(node: TimeKeeperNode, executor) -> None:
     node.flush()
     collect_final_reports(node, executor)
     node.mark('final_reports')
+    node.after_final_step(executor)  # as at the horizon: the world up to where the run stopped
     # A live agent's final report says it got the final Step; a dead agent (or robot) is still
     # matched as a reader until DDS drops it and would hold an acknowledgement wait up to its
     # timeout: the recorders' heartbeats say when they have the final Step, the tools' topics
