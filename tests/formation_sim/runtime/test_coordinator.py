@@ -149,6 +149,36 @@ def test_an_agent_that_leaves_on_the_final_step_or_after_it_stops_nothing(coordi
     assert node.failure_info is None
 
 
+def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_no_failure(coordinator, tmp_path):
+    """The race of a robot run's end: the robots stop publishing at the horizon, the final Step is
+    on its way, an agent's command timer finds its own pose stale and the agent leaves naming it.
+    The run reached its horizon: the agent is noted in extra.after_end, and `formation run`
+    excuses its exit status (the agent's zero command went out first)."""
+    import subprocess
+    from pathlib import Path
+
+    from formation_sim.runtime.results import excused_after_end
+    from formation_sim.runtime.supervise import Child
+
+    node = _running(coordinator, horizon=0.5)
+    node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
+    node._on_report(_report(2, 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'))
+    assert node.failure_info is None
+    extra = node._run_extra(node.reached_time)
+    assert extra['failure'] is None and extra['after_end'] == {'2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'}
+    (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
+
+    def child(name: str, returncode: int) -> Child:
+        process = subprocess.Popen(['true'])
+        process.wait()
+        process.returncode = returncode
+        return Child(name=name, process=process, log=Path('/nonexistent'), expected_exit=True)
+
+    failed, note = excused_after_end([child('agent_2', 1), child('agent_3', 1)], tmp_path / 'summary.json')
+    assert [c.name for c in failed] == ['agent_3']  # no report of its failure after the end: a failure
+    assert note.startswith('agent_2 stopped after the run reached its horizon (not a failure of the run): agent 2: the pose')
+
+
 def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
     from formation_sim.runtime.coordinator import _stop_and_write
     from formation_sim.runtime.run_book import DiscoveryError

@@ -74,6 +74,7 @@ from formation_sim.runtime.results import (
     check_recording,
     lost_or_failed,
     describe_phases,
+    excused_after_end,
     phases,
     read_summary,
     recover_bag,
@@ -458,8 +459,9 @@ class FormationRun:
                 self.marks['keeper_exited'] = time.time()
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
+                    failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     if not failed:
-                        return EXIT_OK, '', lost
+                        return EXIT_OK, after_end, lost
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]

@@ -191,6 +191,23 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
     return failure
 
 
+def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], str]:
+    """After a run that reached its horizon: the agent processes that exited with an error the
+    time keeper saw only after its final Step (summary.json `extra.after_end`: a pose gone stale
+    past the end while the Step was on its way, the robot stopped by the agent's zero command) are
+    no failure of the run.  The others, and a note naming the excused ones."""
+    try:
+        after_end = json.loads(summary.read_text(encoding='utf-8')).get('extra', {}).get('after_end') or {}
+    except (OSError, ValueError, AttributeError):
+        after_end = {}
+    excused = [c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end]
+    note = '; '.join(
+        f'{c.name} stopped after the run reached its horizon (not a failure of the run): {after_end[c.name.removeprefix("agent_")]}'
+        for c in excused
+    )
+    return [c for c in failed if c not in excused], note
+
+
 def _first_cause(child: Child) -> tuple[str, list[int]]:
     """extra.failure's kind and agents for a child that stopped the run: an agent's or a robot's
     own process (`agent_<i>`, `robot_<i>`) names the agent, any other a process."""

@@ -135,6 +135,9 @@ class TimeKeeperNode(Node):
         self._finished_at: float | None = None
         self.graph: dict = {}
         self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
+        # Agents that stopped on an error after the final Step at the horizon went out (a pose gone
+        # stale past the end while the Step was on its way): extra.after_end, not a failure.
+        self.after_end: dict[int, str] = {}
         self._setup_world()
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
@@ -299,8 +302,11 @@ class TimeKeeperNode(Node):
         if (refusal := self.book.accept_report(report)) is not None:
             self._reject(REPORT_TOPIC, 'field', refusal)
             return
-        if report.final and report.failure and self.step is not None and not self.finished:
-            self._agent_failed(report.agent, report.failure)
+        if report.final and report.failure and self.step is not None:
+            if not self.finished:
+                self._agent_failed(report.agent, report.failure)
+            elif self.failure_info is None:  # after the run reached its end: no fault of the run
+                self.after_end[report.agent] = report.failure
 
     def _agent_failed(self, agent: int, failure: str) -> None:
         """An agent's final report says it stopped on an error before the end of the run (the
@@ -411,6 +417,7 @@ class TimeKeeperNode(Node):
             'timestamps': self.timestamps(),
             'reached_time': reached,
             'failure': self.failure_info,
+            **({'after_end': {str(i): why for i, why in sorted(self.after_end.items())}} if self.after_end else {}),
             **self._message_counts(),
         }
 
