@@ -84,7 +84,7 @@ from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wa
 from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
-from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
@@ -93,7 +93,6 @@ EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
-POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
 # any reliable pose writer matches (robots' drivers keep ROS's defaults).
@@ -294,7 +293,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
 
     def after_final_step(self, executor) -> None:
         """Before the summary: the poses up to the horizon (each robot's first one past it)."""
-        deadline = time.monotonic() + POSES_AFTER_HORIZON
+        deadline = time.monotonic() + POSES_AFTER_END
         end = self.reached_time
         # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
         lost = set(self.failure_info['agents']) if self.failure_info and self.failure_info['kind'] == 'robot_lost' else set()
@@ -314,7 +313,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
         silent = [i for i, samples in self._poses.items() if not samples]
         if silent:
             raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
-        tracks = {i: PoseTrack.from_samples(samples) for i, samples in self._poses.items()}
+        # Poses stamped up to POSES_AFTER_END past the end, as `formation analyze` reads the bag.
+        tracks = {i: PoseTrack.from_samples([p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,
