@@ -64,7 +64,7 @@ GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
 
 
 def _package_rank(name: str) -> int:
-    return PACKAGES.index(name.split('.')[0])
+    return PACKAGES.index(name.split('.', maxsplit=1)[0])
 
 
 def _sim_layer(name: str) -> int:
@@ -128,7 +128,7 @@ def test_the_rule_catches_an_upward_import(tmp_path) -> None:
 
 ROS_FREE = sorted(name for name in MODULES if not name.startswith(ROS_MODULES))
 
-_BLOCKER = f'''
+_BLOCKER = f"""
 import importlib.abc, sys
 BLOCKED = {ROS_IMPORTS!r}
 class Block(importlib.abc.MetaPathFinder):
@@ -142,7 +142,7 @@ for name in sys.argv[1:]:
     importlib.import_module(name)
     assert not [m for m in sys.modules if m.split('.')[0] in BLOCKED], name
 print('imported', len(sys.argv) - 1)
-'''
+"""
 
 
 def test_ros_free_modules_import_without_rclpy() -> None:

@@ -273,7 +273,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     assert from_bag.record.mode == 'robots'
     checks = {check.name: check for check in from_bag.checks}
     assert [name for name, check in checks.items() if not check.ok] == ["every robot's last command is a stop"]
-    assert checks["every robot's last command is a stop"].detail == '3 robots stopped by their last command; still moving: [\'4: [0.0, 0.0, 0.0, 0.0, 0.0, 0.3]\']'
+    assert checks["every robot's last command is a stop"].detail == "3 robots stopped by their last command; still moving: ['4: [0.0, 0.0, 0.0, 0.0, 0.0, 0.3]']"
     # Agent 4's trigger after the horizon is not a trigger of the run, but its Status counted it.
     assert checks['status counters = bag'].ok and checks['one TriggerInfo per neighbour per trigger'].detail == '20 messages for 10 triggers'
     differences, _ = diff_summaries(bag_summary(from_bag.record), build_summary(record))

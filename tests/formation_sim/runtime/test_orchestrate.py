@@ -123,7 +123,7 @@ def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated
     arguments = ['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164',
                  '--max-speed', '0.05', '--quiet', '--no-plot', *LIGHT]  # fmt: skip
     assert main(arguments) == 0
-    assert 'commands saturated at the robots\' limits: linear_speed' in capsys.readouterr().err
+    assert "commands saturated at the robots' limits: linear_speed" in capsys.readouterr().err
     summary = _assert_a_good_robot_run(out, capsys)
     saturation = summary['extra']['saturation']
     assert saturation['total'] > 0 and saturation['by_kind']['linear_speed']['allowed'] == 0.05

@@ -39,7 +39,7 @@ from formation_agent.core.crossing import PRECISION_HINT, CrossingError
 from formation_agent.core.eta import make_agent
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
-from formation_agent.ros.discovery import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD, Discovery, SimulatorWatch  # noqa: F401
+from formation_agent.ros.discovery import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD, Discovery, SimulatorWatch  # noqa: F401 - re-exported for the node's users
 from formation_agent.ros.faults import FaultInjection, InjectedFaults
 from formation_agent.ros.inbox import Rejections, read_info
 from formation_agent.ros.outbox import Outbox
@@ -76,10 +76,10 @@ class _NodeTimers:
     def __init__(self, node: Node) -> None:
         self._node = node
 
-    def arm(self, delay: float, callback):  # noqa: ANN201
+    def arm(self, delay: float, callback):
         return self._node.create_timer(delay, callback)
 
-    def cancel(self, handle) -> None:  # noqa: ANN001
+    def cancel(self, handle) -> None:
         self._node.destroy_timer(handle)
 
 
@@ -162,7 +162,8 @@ class FormationAgentNode(Node):
             STEP_TOPIC,
             self._on_step,
             READER_QOS,
-            event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),
+            # self.simulator is made after this subscription: looked up when the event comes
+            event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
         )
 
     @property

@@ -147,7 +147,7 @@ class TriggerSchedule:
             self._timers.cancel(handle)
 
 
-def refuse_lock_step(step: Step, *, config, loss: float) -> None:  # noqa: ANN001 - an AgentConfig
+def refuse_lock_step(step: Step, *, config, loss: float) -> None:
     """AgentNodeError if this agent cannot run lock-step `step`: robots run on the wall clock
     only, and lock-step counts every message (one dropped on purpose would stall the run)."""
     if config.wall_clock_only:

@@ -8,7 +8,7 @@
 - the trajectories from `/formation/state` (WorldState: exact positions and velocities at every
   event time and on the sample grid), the horizon and the clock mode from `/formation/step`;
 - messages sent = TriggerInfo messages recorded, sensing calls = `/formation/sensing_log` entries;
-- robot runs (`formation run --backend holonomic | unicycle | external`, no `/formation/state`):
+- robot runs (`formation run --backend <robot kind> | external`, no `/formation/state`):
   the trajectories from the robots' pose topics (`/formation/robots` names which: a simulated
   robot's noise-free `true_odom`, else the measured `odom` or `pose`), run time from their header
   stamps and the epoch of Step 0, sampled as the coordinator samples them
@@ -58,6 +58,7 @@ from formation_msgs_py.topics import (
     STATUS_TOPIC,
     STEP_TOPIC,
 )
+from formation_agent.core.speed_scale import initial_velocities
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
@@ -218,7 +219,7 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         info = decode_trigger_info(decode(rawdata, msgtype))
         sender, receiver = int(match.group(1)), int(match.group(2))
         if (info.sender, info.receiver) != (sender, receiver):
-            raise MessageError(f'carries sender {info.sender} and receiver {info.receiver}, not the topic\'s {sender} -> {receiver}')
+            raise MessageError(f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} -> {receiver}")
         got.infos[(info.sender, info.stamp)].append(info.receiver)
         got.info_total += 1
     elif topic == STATE_TOPIC and array:
@@ -254,7 +255,7 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
 
 def _resolve_scenario(got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None) -> tuple[Scenario, str]:
     if got.scenario_text is not None:
-        return scenario_from_yaml(got.scenario_text, source=f'the bag\'s {SCENARIO_TOPIC}'), f'bag topic {SCENARIO_TOPIC}'
+        return scenario_from_yaml(got.scenario_text, source=f"the bag's {SCENARIO_TOPIC}"), f'bag topic {SCENARIO_TOPIC}'
     if run_dir is not None and (run_dir / SCENARIO_FILE).is_file():
         path = run_dir / SCENARIO_FILE
         try:
@@ -278,22 +279,23 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
     """Refuse a scenario that is not the bag's run (analysing it would be meaningless)."""
     first = states[0]
     if tuple(first.agent_ids) != scenario.agent_ids:
-        raise AnalysisError(f'the bag\'s agents {list(first.agent_ids)} are not the scenario\'s {list(scenario.agent_ids)}')
+        raise AnalysisError(f"the bag's agents {list(first.agent_ids)} are not the scenario's {list(scenario.agent_ids)}")
     if first.positions.shape[1] != scenario.dimension:
-        raise AnalysisError(f'the bag\'s states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}')
+        raise AnalysisError(f"the bag's states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}")
     if (first.velocities is None) != (scenario.dynamics == 'single'):
         raise AnalysisError(f'the bag\'s states {"lack" if first.velocities is None else "carry"} velocities; the scenario is {scenario.dynamics!r}')
     if first.time == 0.0:
+        start_velocities = initial_velocities(scenario.velocities, scenario.speed_scale)  # κ q(0)
         for k, agent in enumerate(scenario.agent_ids):
             if not np.array_equal(first.positions[k], scenario.positions[k]):
                 raise AnalysisError(
                     f'agent {agent} starts at {first.positions[k].tolist()} in the bag but at '
                     f'{scenario.positions[k].tolist()} in the scenario {scenario.name!r}'
                 )
-            if scenario.velocities is not None and not np.array_equal(first.velocities[k], scenario.velocities[k]):
+            if start_velocities is not None and not np.array_equal(first.velocities[k], start_velocities[k]):
                 raise AnalysisError(
                     f'agent {agent} starts with velocity {first.velocities[k].tolist()} in the bag but '
-                    f'{scenario.velocities[k].tolist()} in the scenario {scenario.name!r}'
+                    f'{start_velocities[k].tolist()} in the scenario {scenario.name!r} (at its speed scale)'
                 )
     for sender, _ in got.infos:
         if sender not in scenario.agent_ids:
@@ -430,8 +432,8 @@ def _trigger_times(got: _Collected, scenario: Scenario) -> tuple[dict[int, list[
             duplicated.append(f'{sender} @ {stamp!r}')
         if set(receivers) != expected:
             missing.append(f'{sender} @ {stamp!r} -> {sorted(expected - set(receivers))}')
-    for agent in trigger_times:
-        trigger_times[agent].sort()
+    for times in trigger_times.values():
+        times.sort()
     check = Check(
         name='one TriggerInfo per neighbour per trigger',
         ok=not missing and not duplicated,

@@ -465,7 +465,7 @@ def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> The
     _require(
         state == INSIDE, 'beta',
         f'β = {beta!r} equals β0 = {b0!r} up to rounding ({ROUNDING_ULPS} ulps; validation accepts it): '
-        f'the proof\'s k_V = V0 + nα²/(8β0(β0-β)) is unbounded there',
+        f"the proof's k_V = V0 + nα²/(8β0(β0-β)) is unbounded there",
     )
     _require(0.0 < a < 1.0, 'a', f'the free parameter a must lie in (0, 1), got {a!r}')
     nu0 = tension(scenario, scenario.positions)

@@ -5,7 +5,7 @@ A backend decides who keeps time and what the world is (README, "Running on robo
 | backend | time keeper | world | agents sense | extra processes |
 |---|---|---|---|---|
 | `exact` | simulator (`sim_node`, lock-step or wall clock) | the simulator's exact world | its sensing service | – |
-| `holonomic`, `unicycle` | coordinator (`coordinator`, wall clock) | one simulated robot per agent (`robot_node`) | the robots' poses | the robots |
+| a robot kind (`holonomic`, `unicycle`) | coordinator (`coordinator`, wall clock) | one simulated robot of that kind per agent (`robot_node`) | the robots' poses | the robots |
 | `external` | coordinator | whatever publishes the robots' poses and takes their commands | the robots' poses | – |
 
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
@@ -37,9 +37,11 @@ import yaml
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
 from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, ROBOT_NODE, SIMULATOR_NODE
 from formation_sim.model.scenario import Scenario, dump_scenario
+from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
-BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
+BACKENDS = KindNames(before=('exact',), after=('external',))  # a simulated robot backend per registered robot kind
 DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
 DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
 POSE_TYPES = ('odom', 'pose')
@@ -80,7 +82,7 @@ class RobotOptions:
     position is its control point, `control_point_distance` ahead of the axle.
     """
 
-    model: str = 'unicycle'  # 'holonomic' | 'unicycle' (for `external`: what the robots are)
+    model: str = 'unicycle'  # a robot kind (formation_agent.core.kinds; for `external`: what the robots are)
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
@@ -91,7 +93,7 @@ class RobotOptions:
     world_frame: str = 'world'
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
-    yaw: float = 0.0  # initial heading of every robot [rad]
+    yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
     pose_noise: float = 0.0  # σ [m]
     yaw_noise: float = 0.0  # σ [rad]
     latency: float = 0.0  # [s] from a pose's measurement to its publication
@@ -104,8 +106,8 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if self.model == 'unicycle' and scenario.dimension != 2:
-            raise RunError(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
@@ -120,12 +122,24 @@ class RobotOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
-        if not math.isfinite(self.yaw):
+        if self.yaw is not None and not math.isfinite(self.yaw):
             raise RunError(f'yaw must be finite, got {self.yaw!r}')
         if self.robots_per_process < 1:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+
+    @property
+    def geometry(self) -> Geometry:
+        return Geometry(control_point_distance=self.control_point_distance)
+
+    def kind_problems(self, dimension: int) -> list[str]:
+        """What the robots' kind says of these options (its dimensions, geometry and limits)."""
+        try:
+            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+        except ValueError:
+            return []  # named by the limits' own check
+        return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
 
     def agent_parameters(self) -> dict:
         """What an agent on such a robot is told (formation_agent's robot parameters)."""
@@ -149,7 +163,7 @@ class RobotOptions:
             'robot_id': int(agent_id),
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
-            'yaw': float(self.yaw),
+            'yaw': self.initial_heading(scenario, agent_id),
             'control_point_distance': float(self.control_point_distance),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
@@ -164,6 +178,14 @@ class RobotOptions:
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
         return params
+
+    def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
+        """A simulated robot's heading at t = 0: `yaw` if given, else the scenario's, else 0."""
+        if self.yaw is not None:
+            return float(self.yaw)
+        if scenario.headings is not None:
+            return float(scenario.headings[scenario.index(agent_id)])
+        return 0.0
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -237,7 +259,7 @@ class LaunchPlan:
 
     @property
     def simulated_robots(self) -> bool:
-        return self.backend in ('holonomic', 'unicycle')
+        return self.backend in ROBOT_MODELS
 
     def agent_groups(self) -> list[list[int]]:
         return _groups(list(self.scenario.agent_ids), self.agents_per_process)
@@ -361,7 +383,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -496,7 +518,7 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:
