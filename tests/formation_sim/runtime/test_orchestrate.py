@@ -121,7 +121,7 @@ def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated
     # 0.05 m/s: below the 0.1 m/s the exact run asks for at the start (formation validate).
     out = tmp_path / 'holonomic'
     arguments = ['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164',
-                 '--max-speed', '0.05', '--quiet', '--no-plot', *LIGHT]  # fmt: skip
+                 '--max-speed', '0.05', '--allow-saturation', '--quiet', '--no-plot', *LIGHT]  # fmt: skip
     assert main(arguments) == 0
     assert "commands saturated at the robots' limits: linear_speed" in capsys.readouterr().err
     summary = _assert_a_good_robot_run(out, capsys)
