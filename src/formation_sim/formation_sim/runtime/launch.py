@@ -280,11 +280,15 @@ class LaunchPlan:
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
-        only once the recorder has a message on each (its bag then covers t = 0)."""
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
+        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        run only once the recorder has a message on each (its bag then covers t = 0); robots that
+        publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
+        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -417,6 +421,8 @@ class LaunchPlan:
                 control_point_distance=float(self.robots.control_point_distance),
                 # Simulated robots: the formation as it truly is; real ones: as measured.
                 robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
+                pose_silence=float(self.robots.pose_timeout),
             )
         return params
 
