@@ -39,7 +39,7 @@ def make_node(ros, **changes):
 def test_good_parameters_give_the_agent_its_neighbours(ros):
     node = make_node(ros)
     assert node.config.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
-    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0}
+    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0, 'speed_scale': 1.0, 'threshold_floor': 0.0}  # the paper's
 
 
 @pytest.mark.parametrize(
@@ -58,6 +58,9 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         ({'inject_loss': 1.5}, "parameter 'inject_loss' (double)"),  # rclpy's own range check, [0, 1]
         ({'inject_delay_ms': -1.0}, "parameter 'inject_delay_ms' (double) must be >= 0, got -1.0"),
         ({'inject_jitter_ms': float('nan')}, "parameter 'inject_jitter_ms' (double) must be >= 0, got nan"),
+        ({'speed_scale': 0.0}, "parameter 'speed_scale' (double)"),
+        ({'speed_scale': float('nan')}, "parameter 'speed_scale' (double)"),
+        ({'threshold_floor': float('nan')}, "parameter 'threshold_floor' (double) must be >= 0, got nan"),
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
@@ -84,8 +87,8 @@ def test_every_missing_parameter_is_named_at_once(ros):
     [
         ({'robot': 'holonomic'}, 'robot: holonomic needs sensing: poses'),
         ({'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.1, 'dimension': 3,
-          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle drives in the plane: dimension must be 2, got 3'),
-        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle needs control_point_distance l > 0'),
+          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3'),
+        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0'),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
         ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),
@@ -194,7 +197,7 @@ def test_bad_trigger_information_is_rejected_counted_per_reason_and_never_reache
         assert node.rejected == expected
     assert received == [], 'nothing reaches the core before this agent has triggered'
     assert [(info.sender, info.stamp) for info in node._held] == [(3, 0.0), (2, 0.5)]
-    assert node.info_received == 0
+    assert node.counts.info_received == 0
     report = node.report(final=True)
     assert report.rejected == expected and report.rejected_total == 12 and report.final
 
@@ -266,9 +269,9 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     try:
         step_writer = simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
         deadline = time.monotonic() + 20.0
-        while not node._simulator_seen and time.monotonic() < deadline:
+        while not node.simulator.seen and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        assert node._simulator_seen, 'the step writer never matched'
+        assert node.simulator.seen, 'the step writer never matched'
         node.check()  # alive: nothing to report
         simulator.destroy_publisher(step_writer)  # as its process would on the way out
         with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph'):
@@ -295,7 +298,7 @@ def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its
     node.core = Unresolvable()
     with pytest.raises(PredictionError, match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
                                               r'prediction no longer resolves its threshold .*rule \[precision\]\)$'):
-        node._publish_status(step_index=3, ready=True)
+        node.publish_status(step_index=3, ready=True)
 
 
 @pytest.mark.parametrize(('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)])
@@ -312,12 +315,12 @@ def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_la
     assert (KEEPER_LEASE_GRACE, LOST_GRACE) == (3.0, 0.5)
     node = live_node()
     node.step = Step(index=7, time=1.25, flags=STEP_FLAG_REALTIME if flags == 'realtime' else 0)
-    node._on_simulator_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
-    node._on_simulator_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
-    lost = node._simulator_lost_at
-    node._simulator_lost_at = lost - (patience - 0.05)
+    node.simulator.on_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
+    node.simulator.on_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
+    lost = node.simulator.lost_at
+    node.simulator.lost_at = lost - (patience - 0.05)
     node.check()  # still patient
-    node._simulator_lost_at = lost - (patience + 0.05)
+    node.simulator.lost_at = lost - (patience + 0.05)
     how = 'no sign of life for 1.0 s' if lease_lapsed else 'it left the graph'
     with pytest.raises(PeerLostError, match=rf'agent 1: the simulator \(writer of /formation/step\) is lost after step 7 \(t=1.25\): {how}'):
         node.check()
@@ -416,3 +419,80 @@ def test_the_plant_gets_a_zero_command_on_the_wall_clock_only(ros, live_node, wa
     finally:
         executor.remove_node(node)
     assert [(msg.linear.x, msg.linear.y) for msg in received] == [(0.5, -0.25)] + [(0.0, 0.0)] * wall_clock
+
+
+# -- the wall clock ------------------------------------------------------------------------------
+
+
+class _BehindCore:
+    """A core whose next triggering time has always passed by the time it is asked (a computer
+    that cannot keep up with the triggering times)."""
+
+    ready = True
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+
+    def trigger(self, t, sensed):
+        from formation_agent.core.eta import TriggerOutput
+
+        self.times.append(t)
+        return TriggerOutput(time=t, control=(0.0, 0.0), infos=())
+
+    def receive(self, info) -> None:
+        raise AssertionError('no neighbour talks in this test')
+
+    def next_trigger_time(self, horizon):
+        return self.times[-1] - 1e-4
+
+
+class _InstantSensing:
+    """Sensing answered at once, in the caller's stack, as poses are (`PoseSensing`)."""
+
+    def __init__(self) -> None:
+        self.epoch = None
+
+    def start(self, epoch) -> None:
+        self.epoch = epoch
+
+    def gaps(self):
+        return []
+
+    def request(self, on_sensed) -> None:
+        from formation_msgs_py.types import SensedState
+
+        t = time.time() - self.epoch
+        on_sensed(lambda: SensedState(agent=1, stamp=t, rel_positions={2: (0.0, 0.0), 3: (0.0, 0.0)}))
+
+
+def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live_node):
+    """Issue 19: a unicycle square whose agents were always behind their triggering times died of
+    'maximum recursion depth exceeded' (each past-due trigger called the next one).  Now each runs
+    from the executor: thousands in a row, the agent alive, its Status finite."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.codec import decode_status, encode_step
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.topics import STATUS_TOPIC
+
+    node = live_node()
+    node.core, node.sensing = _BehindCore(), _InstantSensing()
+    statuses = []
+    node.create_subscription(type(node.status_publisher.msg_type()), STATUS_TOPIC, lambda m: statuses.append(decode_status(m)), PROTOCOL_QOS)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        node._on_step(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=time.time())))
+        deadline = time.monotonic() + 120.0
+        while len(node.core.times) < 3000 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+            node.check()
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.remove_node(node)
+    times = node.core.times
+    assert len(times) >= 3000 and node.failure is None
+    assert times == sorted(times) and node.counts.triggers == len(times)
+    assert statuses and all(math.isfinite(s.last_planned) and s.last_planned <= s.next_time + 1e-4 for s in statuses)

@@ -119,7 +119,7 @@ def test_omega_is_the_gradient_weight_of_the_tension():
     c = 1.5
     rel = np.array([0.3, -0.4])
     step = 1e-7
-    nu = lambda v: np.dot(v, v) / (c - np.linalg.norm(v))  # noqa: E731
+    nu = lambda v: np.dot(v, v) / (c - np.linalg.norm(v))  # noqa: E731 - the formula as the proof writes it
     gradient = np.array([(nu(rel + step * e) - nu(rel - step * e)) / (2 * step) for e in np.eye(2)])
     np.testing.assert_allclose(gradient, theory.f_ij(0.5, capacity=c) * rel, rtol=1e-7)
 
@@ -226,7 +226,7 @@ def test_theorem1_constant_c_by_hand(single):
     k = c.k_edge
     f = {p: theory.f_ij(k[p], capacity=capacities[p]) for p in k}
     g = {p: theory.g_ij(k[p], capacity=capacities[p]) for p in k}
-    edge = lambda i, j: (min(i, j), max(i, j))  # noqa: E731
+    edge = lambda i, j: (min(i, j), max(i, j))  # noqa: E731 - a one-line helper beside its use
     F = {i: sum(f[edge(i, j)] for j in single.neighbours(i)) for i in single.agent_ids}
     for i in single.agent_ids:
         expected = sum(

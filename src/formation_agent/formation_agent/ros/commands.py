@@ -3,10 +3,11 @@
 - `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
   (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
   closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
-- `RobotOutput` ('holonomic', 'unicycle'): a robot's velocity command from
-  `formation_agent.core.commander.RobotCommander` — a world-frame TwistStamped (holonomic) or a
-  body-frame Twist (v, ω) (differential drive, from the robot's heading) — within the robot's
-  limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
+- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle'): a
+  robot's velocity command from `formation_agent.core.commander.RobotCommander` by its kind's
+  adapter, of its kind's message type (`command_message`) — a world-frame TwistStamped
+  (holonomic) or a body-frame Twist (v, ω) (differential drive, from the robot's heading) —
+  within the robot's limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
   heading, ETA-2's velocity reference on time).
 
 `stop()` sends the zero command (once; nothing after it).  The node calls it on every way out:
@@ -15,14 +16,18 @@ the final Step, a lost peer, SIGINT/SIGTERM, a stale pose, any exception.
 
 from __future__ import annotations
 
+import importlib
 import time
 from collections.abc import Callable
 
-from geometry_msgs.msg import Accel, Twist, TwistStamped
+from geometry_msgs.msg import Accel, Twist
 
+from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
+from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
 from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
     encode_body_velocity,
@@ -31,6 +36,12 @@ from formation_msgs_py.codec import (
 )
 from formation_msgs_py.qos import PROTOCOL_QOS, ROBOT_COMMAND_QOS
 from formation_msgs_py.types import SensedState
+
+
+def command_message(kind: RobotKind) -> type:
+    """The ROS message class of a kind's command, from its type name ('geometry_msgs/msg/Twist')."""
+    package, _, name = kind.command_type.rpartition('/')
+    return getattr(importlib.import_module(package.replace('/', '.')), name)
 
 
 class PlantOutput:
@@ -42,7 +53,7 @@ class PlantOutput:
     def saturation(self) -> dict:
         return {}
 
-    def __init__(self, node, config) -> None:  # noqa: ANN001
+    def __init__(self, node, config) -> None:
         double = config.double
         self._encode = encode_acceleration_command if double else encode_velocity_command
         self._zeros = (0.0,) * config.dimension
@@ -54,7 +65,7 @@ class PlantOutput:
     def start(self, epoch: float) -> None:
         self._wall_clock = True
 
-    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+    def publish(self, t: float, control, sensed: SensedState) -> None:
         if not self._stopped:
             self.publisher.publish(self._encode(control))
             self.sent += 1
@@ -69,23 +80,29 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`."""
+    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`."""
 
-    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
+    def __init__(
+        self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None],
+        guard: Callable[[float, float], None] | None = None,
+    ) -> None:  # fmt: skip
+        """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze
+        (`formation_agent.ros.staleness`); `on_failure(error)` once the robot is stopped."""
         self._node = node
         self._config = config
         self._poses = poses
         self._on_failure = on_failure
+        self._guard = guard
         self.commander = RobotCommander(
             drive=config.robot,
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
-            k3=config.gains['k3'] if config.double else None,
+            k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
-        self._holonomic = config.robot == 'holonomic'
+        self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)
         self.publisher = node.create_publisher(
-            TwistStamped if self._holonomic else Twist, config.robot_command_topic, ROBOT_COMMAND_QOS
+            command_message(self.commander.kind), config.robot_command_topic, ROBOT_COMMAND_QOS
         )
         self._epoch = 0.0
         self._last_t = 0.0  # the latest time a command was computed for (the clock may step back)
@@ -103,7 +120,7 @@ class RobotOutput:
     def start(self, epoch: float) -> None:
         self._epoch = epoch
 
-    def publish(self, t: float, control, sensed: SensedState) -> None:  # noqa: ANN001
+    def publish(self, t: float, control, sensed: SensedState) -> None:
         """The agent's new command at its trigger t: send at once, then keep sending at the command rate."""
         if self._stopped:
             return
@@ -117,16 +134,19 @@ class RobotOutput:
         if self._stopped:
             return
         try:
-            self._send()
-        except PoseError as error:  # its own pose went stale: stop now, then leave
+            wall = time.time()
+            if self._guard is not None:
+                self._guard(wall, wall - self._epoch)
+            self._send(wall)
+        except (PoseError, StaleStateError) as error:  # its own pose, or all it knows, went stale: stop now, then leave
             self.stop()
             self._on_failure(error)
 
-    def _send(self) -> None:
-        wall = time.time()
+    def _send(self, wall: float | None = None) -> None:
+        wall = time.time() if wall is None else wall
         t = self._last_t = max(wall - self._epoch, self._last_t)
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
-        if self._holonomic:
+        if self._world_frame:
             velocity = self.commander.command(t)
             self.publisher.publish(encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall))
         else:
@@ -140,7 +160,7 @@ class RobotOutput:
         if self._timer is not None:
             self._node.destroy_timer(self._timer)
             self._timer = None
-        if self._holonomic:
+        if self._world_frame:
             zero = (0.0,) * self._config.dimension
             self.publisher.publish(encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time()))
         else:

@@ -14,9 +14,11 @@ from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
+    scale_options,
     plan_options,
     refuse,
 )
+from formation_sim.commands.limits import check_saturation, robot_limits
 
 
 def register(subparsers) -> None:
@@ -25,8 +27,8 @@ def register(subparsers) -> None:
         help='run the team as ROS 2 processes (one node per agent, a simulator or robots, recorder)',
         description='Distributed run over ROS 2, every agent its own node talking only to its neighbours. '
         'Backend exact (default): a simulator node holds the exact world and the sensing services, and '
-        'time advances in lock-step from event to event. Backends holonomic and unicycle: one simulated '
-        'robot per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
+        'time advances in lock-step from event to event. A backend named after a robot kind (holonomic, '
+        'unicycle; formation_agent.core.kinds): one simulated robot of that kind per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
         'external: the coordinator, agents and recorder only; the robots are whatever publishes '
         '/agent_<i>/robot/pose (or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). '
         'Writes summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
@@ -50,6 +52,13 @@ def register(subparsers) -> None:
         help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
         'process announcing itself to every other: for large teams (BENCHMARKS.md)',
     )
+    parser.add_argument(
+        '--allow-saturation',
+        action='store_true',
+        help='robot backends: run even when the exact run asks for commands beyond --max-speed, --max-angular-speed or '
+        '--max-acceleration (refused by default, exit 2: clipped commands are outside the theorems; --speed-scale auto '
+        'slows the team until they fit)',
+    )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -58,13 +67,22 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
-    scenario = load_valid_scenario(args.scenario, 'run')
+    scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
     try:
+        options = plan_options(args)
+    except RunError as error:
+        return refuse('run', error)
+    if options['robots'] is not None:
+        horizon = scenario.horizon if args.horizon is None else args.horizon
+        refusal = check_saturation(scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation)
+        if refusal is not None:
+            return refuse('run', refusal)
+    try:
         result = FormationRun(
             scenario,
-            **plan_options(args),
+            **options,
             domain_id=args.domain_id,
             progress=not args.quiet,
             timeout=args.timeout,

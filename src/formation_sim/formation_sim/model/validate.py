@@ -13,6 +13,9 @@ precision     double precision resolves the initial slack: one ulp of x_i - x_j 
 alpha         α > 0 (Theorem 1)                                                         error
 beta          0 < β < β0 = ρ2(DD^T)/Δ0 (Theorem 1)                                       error;
               warning above 0.95 β0
+rounding      β, β1, k3 or β_d above its computed bound (β0, 4/(k2+sqrt(k1²+k2²)), the    warning
+              rates) by at most gains.ROUNDING_ULPS ulps of it: the bound's rounding, so the
+              gain is taken as equal to it and accepted (`gains.against_bound`)
 remark        β (or β1) above 4/(n(n-1)Δ) (Remark 3.2): agents cannot certify it alone  warning
 alpha_d       α_d > 0 (Theorem 2)                                                       error
 beta1         0 < β1 <= β0 (riccatti)                                                   error
@@ -27,6 +30,11 @@ scale         Δ <= LENGTH_MAX, and every capacity Δ - ||d_ij|| and positive in
               >= LENGTH_MIN: the certified search divides by fourth powers of the distance
               to Δ, which must stay normal doubles (`_check_scale`); the other rules are
               not evaluated then (their numbers would be overflow or underflow)
+speed_scale   κ != 1: the paper's run in s = κt; the rates and times it implies, in seconds  note
+threshold_floor  c0 > 0 (docs/SPEED_SCALE.md): ETA-1 c0 < β0 min(Δ-||d_ij||) sqrt(2/n)    error;
+              ETA-2 the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) within min(Δ-||d_ij||)  error,
+              and 2 sqrt(sup V_d/λmin(P)) below it, without which connectivity is only      warning
+              checked on runs (formation_sim.model.threshold_floor)
 parameters    Δ, the horizon, the agents' gains and every d_ij are 0 or normal doubles     error
               (|x| >= 2.2e-308): agents receive them as ROS parameters, and rcl's parameter
               file parser reads a subnormal number as text (the agent then cannot start)
@@ -45,10 +53,21 @@ from typing import Any
 import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
-from formation_agent.core.eta import ALGORITHM_GAINS
+from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
 from formation_sim.model import theory
-from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
+from formation_sim.model.gains import (
+    OUTSIDE,
+    ROUNDING,
+    ROUNDING_ULPS,
+    against_bound,
+    k3_upper_bound,
+    k4_value,
+    riccati_holds,
+    riccati_lhs,
+    ulps_above,
+)
 from formation_sim.model.scenario import Scenario
+from formation_sim.model.threshold_floor import floor_bounds
 
 NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
 SLACK_WARNING_FRACTION = 0.05  # warn when (initial) holds with less than this relative slack
@@ -175,6 +194,16 @@ def _apart(a: float, b: float) -> tuple[str, str]:
         if left != right or a == b:
             return left, right
     return repr(a), repr(b)  # pragma: no cover - 17 digits tell any two doubles apart
+
+
+def _rounding(out: _Collector, name: str, value: float, bound_name: str, bound: float) -> None:
+    """The warning for a gain accepted because it exceeds its computed bound by rounding only."""
+    out.warning(
+        'rounding', 'gains',
+        f'{name} = {value!r} is {ulps_above(value, bound)} ulp(s) above {bound_name} = {bound!r}, within '
+        f'the rounding margin of {ROUNDING_ULPS} ulps of a computed bound: taken as equal to it',
+        value=value, bound=bound, margin_ulps=ROUNDING_ULPS,
+    )
 
 
 def _edge(edge) -> str:
@@ -327,8 +356,69 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
         _check_single(scenario, out, beta0)
     else:
         _check_double(scenario, out, beta0)
+    _check_speed_scale(scenario, out, beta0)
+    if report.ok:
+        _check_threshold_floor(scenario, out)
     _check_parameters(scenario, out)
     return report
+
+
+def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
+    """κ changes none of the hypotheses (they are the paper's, in s = κt): a note with the real-time numbers."""
+    kappa = scenario.speed_scale
+    if kappa == 1.0:
+        return
+    gains = scenario.gains
+    name, rate = ('β', gains.beta) if scenario.dynamics == 'single' else ('β_d', gains.beta_d)
+    line = (
+        f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) divided by κ, "
+        f'commands × κ' + ('' if scenario.dynamics == 'single' else ' (accelerations × κ², gains κ²k1, κk2, κk3, q(0) → κ q(0))')
+        + f'; the threshold decays at κ{name} = {_g(kappa * rate)} per second'
+        + ('' if beta0 is None else f', β0 in real time κβ0 = {_g(kappa * beta0)}')
+    )
+    out.note('speed_scale', 'gains', line, speed_scale=kappa, rate=kappa * rate, beta0=None if beta0 is None else kappa * beta0)
+
+
+def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
+    """The floor's connectivity condition (formation_sim.model.threshold_floor, docs/SPEED_SCALE.md)."""
+    c0 = scenario.gains.threshold_floor
+    if c0 == 0.0:
+        return
+    try:
+        floor = floor_bounds(scenario)
+    except theory.TheoryError:
+        return  # a hypothesis the rules above report
+    if floor.theorem == 1 and not floor.proven:
+        out.error(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)} breaks {floor.condition}: connectivity is not guaranteed',
+            threshold_floor=c0, limit=floor.limit,
+        )
+        return
+    c_min = floor.limit if floor.theorem == 2 else None
+    if floor.theorem == 2 and not floor.ball < c_min:
+        out.error(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)}: the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) = {_g(floor.ball)} '
+            f'is not within min(Δ-||d_ij||) = {_g(c_min)}: even ultimately nothing keeps the edges in range',
+            threshold_floor=c0, ball=floor.ball, limit=c_min,
+        )
+        return
+    if not floor.proven:
+        out.warning(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)}: connectivity is proven only if {floor.condition.replace(" < ", " were below ")}; '
+            'it is not, so connectivity is checked on runs only (docs/SPEED_SCALE.md)',
+            threshold_floor=c0, value=floor.value, limit=floor.limit,
+        )
+    kappa = scenario.speed_scale
+    xi = '' if floor.xi is None else f', inter-event times >= {_g(min(floor.xi.values()) / kappa)} s'
+    out.note(
+        'threshold_floor', 'gains',
+        f'threshold floor c0 = {_g(c0)}: V ultimately <= {_g(floor.ultimate)}, formation error ultimately <= '
+        f'{_g(floor.ball)}{xi}' + (f' ({floor.condition})' if floor.proven else ''),
+        **floor.to_dict(),
+    )
 
 
 def _check_scale(scenario: Scenario, out: _Collector, capacities: np.ndarray, slacks: np.ndarray) -> bool:
@@ -366,7 +456,7 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
     smallest = sys.float_info.min  # rcl's parser (strtod) flags a subnormal result as out of range
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
     carried = [('scenario', 'communication_radius', scenario.delta), ('scenario', 'horizon', scenario.horizon)]
-    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in ALGORITHM_GAINS[algorithm]]
+    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)]
     carried += [(_edge(edge), f'd[{k}]', float(value)) for edge in scenario.edges for k, value in enumerate(edge.d)]
     for subject, key, value in carried:
         if value != 0.0 and abs(value) < smallest:
@@ -471,12 +561,15 @@ def _check_single(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         out.error('alpha', 'gains', f'α must be > 0, got α = {_g(alpha)}', alpha=alpha)
     if beta0 is None:
         return
-    if not 0.0 < beta < beta0:
+    state = against_bound(beta, beta0, strict=True)
+    if not beta > 0.0 or state == OUTSIDE:
         shown_beta, shown_beta0 = _apart(beta, beta0)
         out.error(
             'beta', 'gains', f'0 < β < β0 = {shown_beta0} required, got β = {shown_beta}',
             beta=beta, beta0=beta0,
         )
+    elif state == ROUNDING:
+        _rounding(out, 'β', beta, 'β0', beta0)
     elif beta > NEAR_EDGE_FRACTION * beta0:
         out.warning(
             'beta', 'gains',
@@ -495,10 +588,13 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         out.error('alpha_d', 'gains', f'α_d must be > 0, got α_d = {_g(gains.alpha_d)}',
                   alpha_d=gains.alpha_d)
     if beta0 is not None:
-        if not 0.0 < beta1 <= beta0:
+        state = against_bound(beta1, beta0, strict=False)
+        if not beta1 > 0.0 or state == OUTSIDE:
             shown_beta1, shown_beta0 = _apart(beta1, beta0)
             out.error('beta1', 'gains', f'0 < β1 <= β0 = {shown_beta0} required, got β1 = {shown_beta1}',
                       beta1=beta1, beta0=beta0)
+        elif state == ROUNDING:
+            _rounding(out, 'β1', beta1, 'β0', beta0)
         if beta1 > 0.0:
             _check_remark(scenario, out, 'β1', beta1)
 
@@ -527,7 +623,8 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         )
     upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
     k4 = k4_value(k1, k2, k3)
-    if not 0.0 < k3 < upper:
+    state = against_bound(k3, upper, strict=True)
+    if not k3 > 0.0 or state == OUTSIDE:
         shown_k3, shown_upper = _apart(k3, upper)
         out.error(
             'k3', 'gains',
@@ -536,7 +633,9 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             k3=k3, k3_upper_bound=upper, k4=k4,
         )
         return
-    if k3 > NEAR_EDGE_FRACTION * upper:
+    if state == ROUNDING:
+        _rounding(out, 'k3', k3, '4/(k2+sqrt(k1²+k2²))', upper)
+    elif k3 > NEAR_EDGE_FRACTION * upper:
         out.warning(
             'k3', 'gains',
             f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
@@ -550,7 +649,8 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         f'(2-k4)/λmax(P) = {_g(bound_corrected)} (what the proof supports)',
         k4=k4, beta_d_bound_paper=bound_paper, beta_d_bound_corrected=bound_corrected,
     )
-    if not 0.0 < beta_d < bound_paper:
+    state = against_bound(beta_d, bound_paper, strict=True)
+    if not beta_d > 0.0 or state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_paper)
         out.error(
             'beta_d', 'gains',
@@ -558,14 +658,19 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             beta_d=beta_d, bound=bound_paper,
         )
         return
-    if beta_d > NEAR_EDGE_FRACTION * bound_paper:
+    if state == ROUNDING:
+        _rounding(out, 'β_d', beta_d, '(2-k4) ρ2(P)', bound_paper)
+    elif beta_d > NEAR_EDGE_FRACTION * bound_paper:
         out.warning(
             'beta_d', 'gains',
             f'β_d = {_g(beta_d)} is {100.0 * beta_d / bound_paper:.1f} % of (2-k4) ρ2(P) = '
             f'{_g(bound_paper)}',
             beta_d=beta_d, bound=bound_paper,
         )
-    if not beta_d < bound_corrected:
+    state = against_bound(beta_d, bound_corrected, strict=True)
+    if state == ROUNDING:
+        _rounding(out, 'β_d', beta_d, '(2-k4)/λmax(P)', bound_corrected)
+    elif state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_corrected)
         out.warning(
             'beta_d_corrected', 'gains',

@@ -5,7 +5,7 @@ A backend decides who keeps time and what the world is (README, "Running on robo
 | backend | time keeper | world | agents sense | extra processes |
 |---|---|---|---|---|
 | `exact` | simulator (`sim_node`, lock-step or wall clock) | the simulator's exact world | its sensing service | – |
-| `holonomic`, `unicycle` | coordinator (`coordinator`, wall clock) | one simulated robot per agent (`robot_node`) | the robots' poses | the robots |
+| a robot kind (`holonomic`, `unicycle`) | coordinator (`coordinator`, wall clock) | one simulated robot of that kind per agent (`robot_node`) | the robots' poses | the robots |
 | `external` | coordinator | whatever publishes the robots' poses and takes their commands | the robots' poses | – |
 
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
@@ -34,14 +34,18 @@ from pathlib import Path
 
 import yaml
 
+from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
+from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, ROBOT_NODE, SIMULATOR_NODE
 from formation_sim.model.scenario import Scenario, dump_scenario
+from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
-BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
+BACKENDS = KindNames(before=('exact',), after=('external',))  # a simulated robot backend per registered robot kind
 DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
 DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
 POSE_TYPES = ('odom', 'pose')
-DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
+DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
@@ -78,7 +82,7 @@ class RobotOptions:
     position is its control point, `control_point_distance` ahead of the axle.
     """
 
-    model: str = 'unicycle'  # 'holonomic' | 'unicycle' (for `external`: what the robots are)
+    model: str = 'unicycle'  # a robot kind (formation_agent.core.kinds; for `external`: what the robots are)
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
@@ -89,7 +93,7 @@ class RobotOptions:
     world_frame: str = 'world'
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
-    yaw: float = 0.0  # initial heading of every robot [rad]
+    yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
     pose_noise: float = 0.0  # σ [m]
     yaw_noise: float = 0.0  # σ [rad]
     latency: float = 0.0  # [s] from a pose's measurement to its publication
@@ -102,8 +106,8 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if self.model == 'unicycle' and scenario.dimension != 2:
-            raise RunError(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
@@ -118,12 +122,24 @@ class RobotOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
-        if not math.isfinite(self.yaw):
+        if self.yaw is not None and not math.isfinite(self.yaw):
             raise RunError(f'yaw must be finite, got {self.yaw!r}')
         if self.robots_per_process < 1:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+
+    @property
+    def geometry(self) -> Geometry:
+        return Geometry(control_point_distance=self.control_point_distance)
+
+    def kind_problems(self, dimension: int) -> list[str]:
+        """What the robots' kind says of these options (its dimensions, geometry and limits)."""
+        try:
+            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+        except ValueError:
+            return []  # named by the limits' own check
+        return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
 
     def agent_parameters(self) -> dict:
         """What an agent on such a robot is told (formation_agent's robot parameters)."""
@@ -147,7 +163,7 @@ class RobotOptions:
             'robot_id': int(agent_id),
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
-            'yaw': float(self.yaw),
+            'yaw': self.initial_heading(scenario, agent_id),
             'control_point_distance': float(self.control_point_distance),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
@@ -162,6 +178,14 @@ class RobotOptions:
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
         return params
+
+    def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
+        """A simulated robot's heading at t = 0: `yaw` if given, else the scenario's, else 0."""
+        if self.yaw is not None:
+            return float(self.yaw)
+        if scenario.headings is not None:
+            return float(scenario.headings[scenario.index(agent_id)])
+        return 0.0
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -235,7 +259,7 @@ class LaunchPlan:
 
     @property
     def simulated_robots(self) -> bool:
-        return self.backend in ('holonomic', 'unicycle')
+        return self.backend in ROBOT_MODELS
 
     def agent_groups(self) -> list[list[int]]:
         return _groups(list(self.scenario.agent_ids), self.agents_per_process)
@@ -256,11 +280,15 @@ class LaunchPlan:
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
-        only once the recorder has a message on each (its bag then covers t = 0)."""
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
+        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        run only once the recorder has a message on each (its bag then covers t = 0); robots that
+        publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
+        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -273,7 +301,6 @@ class LaunchPlan:
 
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
-        from formation_agent.ros.node import NODE_NAME
         from formation_msgs_py.topics import agent_namespace
         from formation_sim.runtime.coordinator import COORDINATOR_FILE
         from formation_sim.runtime.sim_node import SIMULATOR_FILE, agent_parameters
@@ -286,7 +313,7 @@ class LaunchPlan:
         injected = {f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()}
         on_robots = self.robots.agent_parameters() if self.robots is not None else {}
         agents = {
-            f'{agent_namespace(i)}/{NODE_NAME}': {
+            f'{agent_namespace(i)}/{AGENT_NODE}': {
                 'ros__parameters': {
                     **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
                     **injected,
@@ -321,11 +348,10 @@ class LaunchPlan:
     def write_robot_inputs(self) -> Path:
         """robots.params.yaml: every simulated robot's parameters, keyed by its node name."""
         from formation_msgs_py.topics import agent_namespace
-        from formation_sim.runtime.robot_node import NODE_NAME
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
         robots = {
-            f'{agent_namespace(i)}/{NODE_NAME}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
+            f'{agent_namespace(i)}/{ROBOT_NODE}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
             for i in self.scenario.agent_ids
         }
         path = self.out_dir / ROBOTS_FILE
@@ -357,7 +383,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -371,7 +397,7 @@ class LaunchPlan:
 
     @property
     def _keeper_node(self) -> str:
-        return '/formation_simulator' if self.backend == 'exact' else '/formation_coordinator'
+        return f'/{SIMULATOR_NODE}' if self.backend == 'exact' else f'/{COORDINATOR_NODE}'
 
     def keeper_parameters(self, scenario_file: Path) -> dict:
         """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`, `coordinator.COORDINATOR_PARAMETERS`)."""
@@ -395,6 +421,8 @@ class LaunchPlan:
                 control_point_distance=float(self.robots.control_point_distance),
                 # Simulated robots: the formation as it truly is; real ones: as measured.
                 robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
+                pose_silence=float(self.robots.pose_timeout),
             )
         return params
 
@@ -448,12 +476,12 @@ def discovery_server_program() -> str:
 def free_udp_port(domain_id: int) -> int:
     """A UDP port free on this machine now, outside the RTPS ports of ROS domain `domain_id`
     (7400 + 250 d + [0, 250)), for the run's discovery server."""
-    first = 7400 + 250 * domain_id
+    ports = domain_ports(domain_id)
     while True:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             probe.bind(('127.0.0.1', 0))
             port = probe.getsockname()[1]
-        if not first <= port < first + 250:
+        if port not in ports:
             return port
 
 
@@ -474,14 +502,8 @@ def _write_yaml(path: Path, data: dict) -> None:
 # -- ROS domain -----------------------------------------------------------------------------------
 
 
-def _domain_ports(domain_id: int) -> tuple[int, int]:
-    """Fast DDS unicast ports of participant 0 in `domain_id` (RTPS port mapping)."""
-    base = 7400 + 250 * domain_id
-    return base + 10, base + 11
-
-
 def _ports_free(domain_id: int) -> bool:
-    for port in _domain_ports(domain_id):
+    for port in participant0_ports(domain_id):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             try:
                 probe.bind(('', port))
@@ -496,12 +518,12 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:
-        if not 0 <= domain_id <= high:
-            raise RunError(f'domain id must lie in [0, {high}], got {domain_id}')
+        if not domain_id_ok(domain_id):
+            raise RunError(f'domain id must lie in [0, {DOMAIN_ID_MAX}], got {domain_id}')
         candidates = [domain_id]
     else:
         candidates = list(range(low, high + 1))

@@ -67,6 +67,7 @@ from formation_msgs_py.topics import (
     REPORT_TOPIC,
     SCENARIO_TOPIC,
     SENSING_LOG_TOPIC,
+    SIMULATOR_NODE,
     STATE_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
@@ -101,7 +102,7 @@ SIMULATOR_PARAMETERS = (
     *TIME_KEEPER_PARAMETERS,
     ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
     ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
-    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description='a lock-step step not settled after this many seconds ends the run, naming every agent\'s last Status'),
+    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description="a lock-step step not settled after this many seconds ends the run, naming every agent's last Status"),
 )  # fmt: skip
 """The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
 
@@ -167,6 +168,9 @@ def agent_parameters(scenario: Scenario, agent_id: int, *, horizon: float, extra
         'delta': float(scenario.delta),
         'horizon': float(horizon),
         'extra_subscribers': int(extra_subscribers),
+        # κ and c0 (docs/SPEED_SCALE.md): the agent derives its real-time gains from them
+        'speed_scale': float(gains.speed_scale),
+        'threshold_floor': float(gains.threshold_floor),
     }
     if scenario.dynamics == 'single':
         params.update(algorithm='eta1', alpha=float(gains.alpha), beta=float(gains.beta))
@@ -189,14 +193,14 @@ class FormationSimulatorNode(TimeKeeperNode):
     watched_writer = 'command'
 
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
-        super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name='formation_simulator')
+        super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name=SIMULATOR_NODE)
 
     PARAMETERS = SIMULATOR_PARAMETERS
     COMMAND = 'formation_sim'
     PARAMS_FILE = SIMULATOR_FILE
     DESCRIPTION = (
-        'The simulator of a formation run (formation run, backend exact): the exact world, every agent\'s sensing '
-        'service, the lock-step clock (or the wall clock), the tools\' topics; writes summary.json and graph.json '
+        "The simulator of a formation run (formation run, backend exact): the exact world, every agent's sensing "
+        "service, the lock-step clock (or the wall clock), the tools' topics; writes summary.json and graph.json "
         'into out_dir.'
     )
 
@@ -215,7 +219,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         # The agents' threshold, the very same floats, to stop where the engine stops.
         self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=scenario.velocities)
+        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=self.world.velocities)
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
