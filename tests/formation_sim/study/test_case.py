@@ -88,7 +88,7 @@ def test_the_audit_counts_a_violated_bound():
     series = run_series(record)
     bounds = theory_bounds(scenario)
     honest = theorem_audit(record, series, bounds)
-    tight = dataclasses.replace(bounds, k_V=bounds.k_V * 1e-12, xi={a: 1.0 for a in bounds.xi})  # every gap of a 1 s run is below 1 s
+    tight = dataclasses.replace(bounds, k_V=bounds.k_V * 1e-12, xi=dict.fromkeys(bounds.xi, 1.0))  # every gap of a 1 s run is below 1 s
     broken = theorem_audit(record, series, tight)
     assert honest['conv_violations'] == honest['zeno_violations'] == 0
     assert broken['conv_violations'] > 0 and broken['conv_margin'] < 0
@@ -112,3 +112,14 @@ def test_baselines_have_rows_without_an_audit(sampling):
         assert row['total_events'] == 5 * 11  # every agent at t = 0, 0.1, ..., 1.0 (the horizon)
     else:
         assert row['total_events'] == 0 and row['sensing_calls'] > 0
+
+
+def test_a_case_at_a_speed_scale_runs_the_same_events_in_scaled_time():
+    """κ = 0.5: the paper's run, every triggering time / κ (docs/SPEED_SCALE.md), audited the same."""
+    plain, scaled = _cases({'n': 5, 'graph': 'path', 'speed_scale': [1.0, 0.5]})
+    assert scenario_of(scaled).gains.speed_scale == 0.5 and scenario_of(plain).gains.speed_scale == 1.0
+    slow = dataclasses.replace(scaled, params={**scaled.params, 'horizon': 2.0})
+    a, b = run_case(plain), run_case(slow)
+    assert b['status'] == 'ok' and b['total_events'] == a['total_events']
+    assert b['min_inter_event_time'] == pytest.approx(2.0 * a['min_inter_event_time'], rel=1e-9)
+    assert b['conn_violations'] == b['conv_violations'] == b['zeno_violations'] == 0

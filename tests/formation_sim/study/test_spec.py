@@ -88,3 +88,15 @@ def test_shipped_studies_expand(tmp_path):
     (tmp_path / 'bad.yaml').write_text('name: x\ncases: [{n: 3, p: 0}]\n')
     with pytest.raises(StudyError, match=r'bad.yaml: cases\[0\].p: must be an integer in \[1, 10\]'):
         load_study(tmp_path / 'bad.yaml')
+
+
+def test_the_speed_scale_and_the_threshold_floor_are_parameters_that_keep_old_keys():
+    plain = build_study(_spec({'n': 4}))
+    scaled = build_study(_spec({'n': 4, 'speed_scale': [1.0, 0.5], 'threshold_floor': [0.0, 0.01]}))
+    assert len(scaled.cases) == 4
+    assert scaled.cases[0].key == plain.cases[0].key  # κ = 1, c0 = 0: the key of a SPEC without them
+    assert len({c.key for c in scaled.cases}) == 4
+    with pytest.raises(StudyError, match=r'cases\[0\].speed_scale: must be a number > 0 \(the speed scale κ'):
+        build_study(_spec({'n': 4, 'speed_scale': 0}))
+    with pytest.raises(StudyError, match=r'cases\[0\].threshold_floor: must be a number >= 0'):
+        build_study(_spec({'n': 4, 'threshold_floor': -1.0}))

@@ -63,3 +63,24 @@ def test_a_folder_of_another_study_or_of_other_files_is_refused(tmp_path):
     (tmp_path / 'c').write_text('')
     with pytest.raises(StudyError, match='is a file, not a folder'):
         StudyFolder(tmp_path / 'c', _study())
+
+
+def test_a_folder_of_an_earlier_version_reads_with_the_new_parameters_at_their_defaults(tmp_path):
+    study = _study()
+    folder = StudyFolder(tmp_path, study)
+    folder.open()
+    first, second = (run_case(case) for case in study.cases)
+    folder.append(first)
+    folder.close()
+    path = tmp_path / ROWS_FILE
+    lines = path.read_text().splitlines()
+    drop = [COLUMNS.index('speed_scale'), COLUMNS.index('threshold_floor')]
+    old = '\n'.join(','.join(c for k, c in enumerate(line.split(',')) if k not in drop) for line in lines) + '\n'
+    path.write_text(old)  # as a study folder written before the two parameters existed
+    assert read_rows(tmp_path) == [first]
+    again = StudyFolder(tmp_path, study)
+    again.open()  # rewritten once with today's columns
+    again.append(second)
+    again.close()
+    assert read_rows(tmp_path) == [first, second]
+    assert tuple(path.read_text().splitlines()[0].split(',')) == COLUMNS

@@ -11,6 +11,7 @@ TIMING columns.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import socket
@@ -47,10 +48,14 @@ def scenario_of(case: Case):
         options['beta'] = p['beta']
     if p['graph'] == 'geometric':
         options['degree'] = p['degree']
-    return random_scenario(
+    scenario = random_scenario(
         n=p['n'], seed=p['seed'], dynamics='single' if single else 'double', dimension=p['p'], slack=p['slack'],
         delta=p['delta'], horizon=p['horizon'], alpha=p['alpha'], graph=p['graph'], name=f'case-{case.key}', **options,
     )  # fmt: skip
+    if p['speed_scale'] == 1.0 and p['threshold_floor'] == 0.0:
+        return scenario
+    gains = dataclasses.replace(scenario.gains, speed_scale=p['speed_scale'], threshold_floor=p['threshold_floor'])
+    return scenario.replace(gains=gains)
 
 
 def check_case(case: Case) -> str | None:
@@ -131,7 +136,7 @@ def run_case(case: Case) -> dict[str, Any]:
         scenario = scenario_of(case)
         row.update(_scenario_numbers(scenario))
         row.update(_run_numbers(case, scenario))
-    except Exception as error:  # a failed case is a row, never the end of the study
+    except Exception as error:  # noqa: BLE001 - a failed case is a row, never the end of the study
         row['status'] = 'failed'
         row['error'] = f'{type(error).__name__}: {error}'.strip() or traceback.format_exc(limit=1)
     row['wall_time'] = time.perf_counter() - wall

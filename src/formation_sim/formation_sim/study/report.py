@@ -24,11 +24,11 @@ from formation_sim.study.store import ROWS_FILE, read_rows
 
 GUARANTEES = (
     ('connectivity: ‖x_i − x_j‖ < Δ at every instant', 'conn'),
-    ('convergence: V, error within the proof\'s bound at every event', 'conv'),
+    ("convergence: V, error within the proof's bound at every event", 'conv'),
     ('Zeno: t_{k+1} - t_k >= ξ_i', 'zeno'),
     ('Theorem 2 rate as printed: V_d < k^d_V e^{-2β_d t} (printed chain)', 'printed'),
 )
-TEAM_COLUMNS = ('algorithm', 'n', 'p', 'graph', 'degree', 'slack', 'seed', 'delta', 'alpha', 'beta', 'beta1', 'k3', 'beta_d', 'max_speed', 'horizon')
+TEAM_COLUMNS = ('algorithm', 'n', 'p', 'graph', 'degree', 'slack', 'seed', 'delta', 'alpha', 'beta', 'beta1', 'k3', 'beta_d', 'max_speed', 'horizon', 'speed_scale', 'threshold_floor')
 
 
 def audit_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -101,9 +101,9 @@ def markdown(columns: tuple[str, ...], table: list[dict[str, Any]]) -> str:
 
 
 def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use('Agg')
+    mpl.use('Agg')
     import matplotlib.pyplot as plt
 
     event = [r for r in rows if r['status'] == 'ok' and r['sampling'] == 'event']
@@ -148,7 +148,7 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.scatter([r['n'] for r in audited], [r['max_edge_exact'] / r['delta'] for r in audited], s=8)
         ax.axhline(1.0, color='r', lw=0.8, label='Δ')
-        ax.set(xlabel='n (agents)', ylabel='largest ||x_i - x_j|| / Δ', title='Largest edge against Δ')
+        ax.set(xlabel='n (agents)', ylabel='largest edge length / Δ (exact between events)', title='Largest edge against Δ')
         ax.legend()
         save(fig, 'edge_vs_delta.png')
     return names

@@ -184,7 +184,7 @@ def _run(client, todo, folder: StudyFolder, tally: _Tally, say, on_row) -> None:
         case = by_key[future.key.removeprefix('case-')]
         try:
             row = future.result()
-        except Exception as error:  # the worker died each time it ran the case (KilledWorker), ...
+        except Exception as error:  # noqa: BLE001 - the worker died each time it ran the case (KilledWorker), ...
             row = failed_row(case, f'{type(error).__name__}: {error}')
         future.release()  # forgotten by the scheduler: never recomputed if its worker dies later
         if not folder.append(row):

@@ -57,6 +57,19 @@ def _is_num(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
 
 
+def _scale_ok(name: str, value: Any) -> bool:
+    """κ or c0 within formation_agent.core.speed_scale's rules (the scenario's own check)."""
+    from formation_agent.core.speed_scale import ScaleError, check_speed_scale, check_threshold_floor
+
+    if not _is_num(value):
+        return False
+    try:
+        (check_speed_scale if name == 'speed_scale' else check_threshold_floor)(value)
+    except ScaleError:
+        return False
+    return True
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One case parameter: its default (None: unset), its rule as text and the test of a value."""
@@ -69,22 +82,27 @@ class Parameter:
 PARAMETERS: dict[str, Parameter] = {
     'algorithm': Parameter('eta1', f'one of {", ".join(ALGORITHMS)}', lambda v: v in ALGORITHMS),
     'sampling': Parameter('event', f'one of {", ".join(SAMPLINGS)}', lambda v: v in SAMPLINGS),
-    'period': Parameter(None, 'a number > 0 (the periodic baseline\'s period [s])', lambda v: _is_num(v) and v > 0),
+    'period': Parameter(None, "a number > 0 (the periodic baseline's period [s])", lambda v: _is_num(v) and v > 0),
     'n': Parameter(None, 'an integer >= 2 (agents)', lambda v: _is_int(v) and v >= 2),
     'p': Parameter(2, 'an integer in [1, 10] (dimension)', lambda v: _is_int(v) and 1 <= v <= 10),
     'graph': Parameter('geometric', f'one of {", ".join(GRAPH_FAMILIES)}', lambda v: v in GRAPH_FAMILIES),
     'degree': Parameter(6.0, 'a number > 0 (mean degree of a geometric graph)', lambda v: _is_num(v) and v > 0),
     'slack': Parameter(0.5, 'a number in (0, 1] (least relative slack of (initial))', lambda v: _is_num(v) and 0 < v <= 1),
-    'seed': Parameter(None, 'an integer >= 0 (the team\'s seed; default: the number of the draw in its block, from 0)', lambda v: _is_int(v) and v >= 0),
+    'seed': Parameter(None, "an integer >= 0 (the team's seed; default: the number of the draw in its block, from 0)", lambda v: _is_int(v) and v >= 0),
     'delta': Parameter(4.0, 'a number > 0 (Δ)', lambda v: _is_num(v) and v > 0),
     'alpha': Parameter(1.0, 'a number > 0 (α, or α_d for ETA-2)', lambda v: _is_num(v) and v > 0),
     'beta': Parameter(0.5, 'a number in (0, 1): β as a fraction of β0 (ETA-1)', lambda v: _is_num(v) and 0 < v < 1),
     'beta1': Parameter(1.0, 'a number in (0, 1]: β1 as a fraction of β0 (ETA-2)', lambda v: _is_num(v) and 0 < v <= 1),
-    'k3': Parameter(None, 'a number in (0, 1): k3 as a fraction of 4/(k2+sqrt(k1²+k2²)) (ETA-2; default the paper\'s, 1/2)', lambda v: _is_num(v) and 0 < v < 1),
+    'k3': Parameter(None, "a number in (0, 1): k3 as a fraction of 4/(k2+sqrt(k1²+k2²)) (ETA-2; default the paper's, 1/2)", lambda v: _is_num(v) and 0 < v < 1),
     'beta_d': Parameter(None, 'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half the smaller bound)', lambda v: _is_num(v) and 0 < v < 1),
     'max_speed': Parameter(1.0, 'a number >= 0 (bound on |q_i(0)|, ETA-2)', lambda v: _is_num(v) and v >= 0),
     'horizon': Parameter(5.0, 'a number > 0 [s]', lambda v: _is_num(v) and v > 0),
+    'speed_scale': Parameter(1.0, "a number > 0 (the speed scale κ; docs/SPEED_SCALE.md; 1 is the paper's)", lambda v: _scale_ok('speed_scale', v)),
+    'threshold_floor': Parameter(0.0, "a number >= 0 (the threshold floor c0; docs/SPEED_SCALE.md; 0 is the paper's)", lambda v: _scale_ok('threshold_floor', v)),
 }
+# Parameters added after studies were run: at their default they stay out of a case's key, so the
+# cases (and study folders) of earlier SPECs keep their keys.
+LATE_PARAMETERS = ('speed_scale', 'threshold_floor')
 INTEGERS = ('n', 'p', 'seed')
 ETA2_ONLY = ('beta1', 'k3', 'beta_d', 'max_speed')
 DISTRIBUTIONS = ('uniform', 'log_uniform', 'integers', 'log_integers', 'choice')
@@ -212,8 +230,10 @@ def _block_cases(block: dict[str, Any], defaults: dict[str, Any], seed: int, num
 
 
 def case_key(params: dict[str, Any]) -> str:
-    """16 hex digits of the SHA-256 of the parameters' canonical JSON."""
-    text = json.dumps(params, sort_keys=True, allow_nan=False)
+    """16 hex digits of the SHA-256 of the parameters' canonical JSON (LATE_PARAMETERS at their
+    default left out)."""
+    keyed = {k: v for k, v in params.items() if not (k in LATE_PARAMETERS and v == PARAMETERS[k].default)}
+    text = json.dumps(keyed, sort_keys=True, allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

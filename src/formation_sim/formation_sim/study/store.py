@@ -19,7 +19,7 @@ from typing import Any
 
 from formation_sim.sim.files import write_atomically
 from formation_sim.study.case import COLUMNS
-from formation_sim.study.spec import Study, StudyError
+from formation_sim.study.spec import PARAMETERS, Study, StudyError
 
 ROWS_FILE = 'rows.csv'
 STUDY_FILE = 'study.json'
@@ -66,9 +66,15 @@ def read_rows(folder: str | Path) -> list[dict[str, Any]]:
     header = next(reader, None)
     if header is None:
         return []
-    if tuple(header) != COLUMNS:
-        raise StudyError(f'{path}: its columns are not those of this version ({len(header)} against {len(COLUMNS)}); use another --out')
-    rows = [{column: _value(column, cell) for column, cell in zip(header, cells)} for cells in reader]
+    unknown = sorted(set(header) - set(COLUMNS))
+    if unknown:
+        raise StudyError(f"{path}: column {unknown[0]!r} is not one of this version's; use another --out")
+    # A folder of an earlier version lacks the parameters added since: their defaults, as its cases ran.
+    missing = {column: PARAMETERS[column].default if column in PARAMETERS else None for column in COLUMNS if column not in header}
+    rows = []
+    for cells in reader:
+        values = {column: _value(column, cell) for column, cell in zip(header, cells)}
+        rows.append({column: values[column] if column in values else missing[column] for column in COLUMNS})
     return sorted(rows, key=lambda row: row['case'])
 
 
@@ -104,6 +110,9 @@ class StudyFolder:
         path = self.folder / ROWS_FILE
         if not path.exists():
             write_atomically(path, _line(COLUMNS))
+        elif path.read_text().split('\n', 1)[0] != _line(COLUMNS).rstrip('\n'):
+            # Written by an earlier version (fewer columns): rewritten whole with today's, once.
+            write_atomically(path, ''.join([_line(COLUMNS), *(_line([_cell(row[c]) for c in COLUMNS]) for row in self.rows)]))
         with path.open('rb+') as handle:
             data = handle.read()
             if not data.endswith(b'\n'):
