@@ -65,6 +65,8 @@ def _bad_input(tmp_path):
         (['simulate', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
         (['simulate', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
         (['simulate', 'paper_single', '--period', 'nan'], 'argument --period: must be a finite number > 0, got nan'),
+        (['study', str(tmp_path / 'no_spec.yaml'), '--out', str(tmp_path / 'x')], 'cannot read the SPEC'),
+        (['study', 'report'], 'report: the study folder is required'),
         (['run', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
         (['run', 'paper_single', '--out', str(tmp_path / 'a_run'), '--force', '--domain-id', '100', '--sample-dt', '1e-12'], 'asks for 1e+13 samples'),
         (['run', 'paper_single', '--agents-per-process', '1.5'], "argument --agents-per-process: must be an integer >= 1 or 'auto', got '1.5'"),

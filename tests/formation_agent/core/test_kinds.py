@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -114,13 +113,10 @@ def test_a_kind_is_registered_once_under_a_free_name(sluggish):
 
 
 def test_every_built_in_kind_has_its_example_parameter_file():
-    from pathlib import Path
-
     import yaml
 
-    import formation_agent
+    from formation_agent.config import DIRECTORY as config  # the installed examples (python3 -m formation_agent.config)
 
-    config = Path(formation_agent.__file__).resolve().parents[1] / 'config'
     for name in KIND_NAMES:
         kind = robot_kind(name)
         params = yaml.safe_load((config / kind.params_file).read_text())['/**']['ros__parameters']

@@ -162,7 +162,7 @@ class AgentConfig:
         return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
 
 
-def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
+def read_config(node) -> AgentConfig:
     """Every parameter of `node`, checked; one ParameterError names every problem."""
     values, problems = read_parameters(node, AGENT_PARAMETERS)
     algorithm = values.get('algorithm')
@@ -202,7 +202,7 @@ def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
     )  # fmt: skip
 
 
-def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
+def _rules(node, values: dict) -> list[str]:
     """The rules between parameters (each checked only when its parameters are good)."""
     problems = []
 

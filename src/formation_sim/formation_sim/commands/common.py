@@ -58,7 +58,7 @@ DOMAIN_ID = _number(f'an integer in [0, {DOMAIN_ID_MAX}] (a ROS_DOMAIN_ID)', dom
 UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
-def POSITIVE_INT_OR_AUTO(text: str) -> int | str:  # noqa: N802 - an argparse type, named as the others
+def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
     """An integer >= 1, or 'auto'."""
     if text == 'auto':
         return text
@@ -146,7 +146,7 @@ def load_valid_scenario(
         return None
     report = validate_scenario(scenario)
     if not report.ok:
-        print(f'formation {command}: the scenario breaks the theorems\' hypotheses; nothing was run.', file=sys.stderr)
+        print(f"formation {command}: the scenario breaks the theorems' hypotheses; nothing was run.", file=sys.stderr)
         print(report.format(), file=sys.stderr)
         return None
     for warning in report.warnings:
@@ -214,7 +214,7 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
         '--executor',
         choices=EXECUTORS,
         default=DEFAULT_EXECUTOR,
-        help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
+        help='rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, '
         '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
     )
     add_robot_arguments(parser, model_flag='--robot')
@@ -274,7 +274,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
     add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
-    add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
+    add('--initial-heading', type=FINITE, default=None, metavar='RAD',
+        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
     add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
 
 

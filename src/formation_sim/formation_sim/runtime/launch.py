@@ -95,7 +95,7 @@ class RobotOptions:
     world_frame: str = 'world'
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
-    yaw: float = 0.0  # initial heading of every robot [rad]
+    yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
     pose_noise: float = 0.0  # σ [m]
     yaw_noise: float = 0.0  # σ [rad]
     latency: float = 0.0  # [s] from a pose's measurement to its publication
@@ -122,7 +122,7 @@ class RobotOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
-        if not math.isfinite(self.yaw):
+        if self.yaw is not None and not math.isfinite(self.yaw):
             raise RunError(f'yaw must be finite, got {self.yaw!r}')
         if self.robots_per_process < 1:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
@@ -171,7 +171,7 @@ class RobotOptions:
             'robot_id': int(agent_id),
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
-            'yaw': float(self.yaw),
+            'yaw': self.initial_heading(scenario, agent_id),
             'control_point_distance': float(self.control_point_distance),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
@@ -188,6 +188,14 @@ class RobotOptions:
         if self.wheelbase > 0.0:
             params['wheelbase'] = float(self.wheelbase)
         return params
+
+    def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
+        """A simulated robot's heading at t = 0: `yaw` if given, else the scenario's, else 0."""
+        if self.yaw is not None:
+            return float(self.yaw)
+        if scenario.headings is not None:
+            return float(scenario.headings[scenario.index(agent_id)])
+        return 0.0
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -282,11 +290,15 @@ class LaunchPlan:
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
-        only once the recorder has a message on each (its bag then covers t = 0)."""
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
+        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        run only once the recorder has a message on each (its bag then covers t = 0); robots that
+        publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
+        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -381,7 +393,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -419,6 +431,8 @@ class LaunchPlan:
                 control_point_distance=float(self.robots.control_point_distance),
                 # Simulated robots: the formation as it truly is; real ones: as measured.
                 robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
+                pose_silence=float(self.robots.pose_timeout),
             )
         return params
 
@@ -514,7 +528,7 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:

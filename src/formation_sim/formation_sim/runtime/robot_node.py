@@ -202,11 +202,13 @@ class SimulatedRobotNode(Node):
             self.robot.set_command(due[1])
             return
         held = self.robot.command
-        if held is not None and not held.is_zero and self._last_command_at is not None:
-            if now - self._last_command_at > self.command_timeout + self.command_latency:
-                self.timeouts += 1
-                self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
-                self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
+        if (
+            held is not None and not held.is_zero and self._last_command_at is not None
+            and now - self._last_command_at > self.command_timeout + self.command_latency
+        ):
+            self.timeouts += 1
+            self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
+            self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
 
     # -- ticks ----------------------------------------------------------------------------------
 

@@ -249,6 +249,11 @@ def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: 
     )
 
 
+POSES_AFTER_END = 1.0
+"""[s] A robot run's formation is sampled from poses stamped up to this long past its end: the
+coordinator waits at most this long for them, and `formation analyze` ignores later ones."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class PoseTrack:
     """One robot's recorded poses: run times, increasing, with the scenario position at each and,
