@@ -41,15 +41,15 @@ def _time(load, path: Path) -> float:
 def child(folder: Path, paths: list[Path]) -> None:
     """Time the revision in `folder` on `paths`; one JSON line: seconds per path."""
     use_revision(folder)
-    from formation_sim.model.scenario import load_scenario  # noqa: PLC0415 - the revision's, after use_revision
+    from formation_sim.model.scenario import load_scenario
 
     assert Path(sys.modules['formation_sim'].__file__).is_relative_to(folder)
     print(json.dumps([_time(load_scenario, path) for path in paths]))
 
 
 def _teams(sizes: list[int], folder: Path) -> list[dict]:
-    from formation_sim.model.generate import random_scenario  # noqa: PLC0415 - after the argument check
-    from formation_sim.model.scenario import dump_scenario  # noqa: PLC0415
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.model.scenario import dump_scenario
 
     teams = []
     for n in sizes:
@@ -63,9 +63,9 @@ def _teams(sizes: list[int], folder: Path) -> list[dict]:
 
 
 def run(sizes: list[int], before: str, repeats: int) -> dict:
-    import yaml  # noqa: PLC0415
+    import yaml
 
-    from formation_sim.model.scenario import load_scenario  # noqa: PLC0415
+    from formation_sim.model.scenario import load_scenario
 
     with tempfile.TemporaryDirectory(prefix='bench_yaml_') as tmp:
         folder = Path(tmp)
@@ -75,7 +75,7 @@ def run(sizes: list[int], before: str, repeats: int) -> dict:
         times: dict[str, list[list[float]]] = {'now': [], 'before': [], 'libyaml': []}
         for _ in range(repeats):
             times['now'].append([_time(load_scenario, path) for path in paths])
-            times['libyaml'].append([_time(lambda p: yaml.load(p.read_text(), Loader=yaml.CSafeLoader), path) for path in paths])  # noqa: S506 - CSafeLoader
+            times['libyaml'].append([_time(lambda p: yaml.load(p.read_text(), Loader=yaml.CSafeLoader), path) for path in paths])
             out = subprocess.run(
                 [sys.executable, __file__, '--child', str(folder / 'before'), *map(str, paths)],
                 check=True, capture_output=True, text=True,
@@ -125,7 +125,7 @@ def main() -> int:
     result = run(args.n, args.before, args.repeats)
     text = markdown(result)
     print(text)
-    out = HERE / 'results' / f'{dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S")}-yaml'
+    out = HERE / 'results' / f'{dt.datetime.now(dt.UTC).strftime("%Y%m%d-%H%M%S")}-yaml'
     out.with_suffix('.json').write_text(json.dumps(result, indent=1) + '\n')
     out.with_suffix('.md').write_text(text + '\n')
     return 0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import pytest
 
 from formation_sim.cli import main
@@ -125,7 +127,7 @@ def _write(tmp_path, label, edits):
 class _NoProcesses:
     """Stands in for subprocess.Popen: any attempt to start a process fails the test."""
 
-    started: list = []
+    started: ClassVar[list] = []
 
     def __init__(self, args, *rest, **options):
         _NoProcesses.started.append(args)
@@ -206,7 +208,7 @@ def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch
 
 
 def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     seen = {}
 
@@ -268,7 +270,7 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
+        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle|car (what the robots are)'),
         (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
         (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
@@ -303,7 +305,7 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
 
 
 def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(tmp_path, capsys, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     started = []
 

@@ -460,7 +460,7 @@ def test_a_large_team_in_json_reads_back_exactly(tmp_path):
 
 
 def test_a_folder_is_named_as_such():
-    with pytest.raises(ScenarioError, match="is a folder, not a scenario file"):
+    with pytest.raises(ScenarioError, match='is a folder, not a scenario file'):
         load_scenario('.')
 
 

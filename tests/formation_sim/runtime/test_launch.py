@@ -70,11 +70,11 @@ def test_a_discovery_server_starts_first_and_every_other_child_is_its_client(tmp
     assert plan.environment(150, extra_env={})['ROS_DISCOVERY_SERVER'] == '127.0.0.1:40123'
     assert plan.process_count() == simple.process_count() + 1
     across = dataclasses.replace(_plan(tmp_path / 'across', 'exact', discovery='server', localhost_only=False), discovery_port=40123)
-    assert across.discovery_server_process().args[3] == '0.0.0.0'  # clients on other machines reach it
+    assert across.discovery_server_process().args[3] == '0.0.0.0'  # noqa: S104 - clients on other machines reach it
 
 
 def test_a_discovery_server_that_is_not_installed_is_refused_before_anything_exists(tmp_path, monkeypatch):
-    import formation_sim.runtime.launch as launch
+    from formation_sim.runtime import launch
 
     monkeypatch.setattr(launch, 'DISCOVERY_SERVER_PROGRAM', 'no-such-discovery-server')
     with pytest.raises(RunError, match='the discovery server needs no-such-discovery-server .*neither .*/no-such-discovery-server nor'):
@@ -130,11 +130,11 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
         (dict(backend='external'), "backend 'external' needs robots=RobotOptions(model=...)"),
         (dict(backend='unicycle', robots=RobotOptions(model='holonomic')), "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (dict(backend='holonomic', clock='lockstep'), "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'"),
-        (dict(backend='exact', robots=TURTLEBOT3), "robots are options of the robot backends"),
-        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'external'), got 'mujoco'"),
+        (dict(backend='exact', robots=TURTLEBOT3), 'robots are options of the robot backends'),
+        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'car', 'external'), got 'mujoco'"),
         (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
-        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance l must be > 0, got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
     ],
 )

@@ -36,7 +36,7 @@ endpoint of the ROS graph it knows (1000 agents: ~20 000), where a match count i
 class ServiceSensing:
     """The simulator's sensing service: one request per trigger, answered asynchronously."""
 
-    def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
+    def __init__(self, node) -> None:
         self._client = node.create_client(Trigger, 'sense')
         self._name = node.resolve_service_name('sense')
         self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
@@ -65,7 +65,7 @@ class ServiceSensing:
 class PoseSensing:
     """The robots' pose topics: the latest pose of this robot and of each neighbour."""
 
-    def __init__(self, node, config, *, reject: Callable[[str, str, str], None]) -> None:  # noqa: ANN001
+    def __init__(self, node, config, *, reject: Callable[[str, str, str], None]) -> None:
         self._config = config
         self._reject = reject
         self.book = PoseBook(
@@ -86,7 +86,7 @@ class PoseSensing:
             for robot in self.book.robots
         ]
 
-    def _on_pose(self, msg, robot: int) -> None:  # noqa: ANN001
+    def _on_pose(self, msg, robot: int) -> None:
         topic = self._config.robot_pose_topic(robot)
         try:
             pose = self._decode(msg)

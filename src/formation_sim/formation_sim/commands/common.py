@@ -58,7 +58,7 @@ DOMAIN_ID = _number(f'an integer in [0, {DOMAIN_ID_MAX}] (a ROS_DOMAIN_ID)', dom
 UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
-def POSITIVE_INT_OR_AUTO(text: str) -> int | str:  # noqa: N802 - an argparse type, named as the others
+def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
     """An integer >= 1, or 'auto'."""
     if text == 'auto':
         return text
@@ -160,7 +160,7 @@ def load_valid_scenario(
         return None
     report = validate_scenario(scenario)
     if not report.ok:
-        print(f'formation {command}: the scenario breaks the theorems\' hypotheses; nothing was run.', file=sys.stderr)
+        print(f"formation {command}: the scenario breaks the theorems' hypotheses; nothing was run.", file=sys.stderr)
         print(report.format(), file=sys.stderr)
         return None
     for warning in report.warnings:
@@ -228,7 +228,7 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
         '--executor',
         choices=EXECUTORS,
         default=DEFAULT_EXECUTOR,
-        help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
+        help='rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, '
         '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
     )
     add_robot_arguments(parser, model_flag='--robot')
@@ -272,6 +272,9 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
         help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
     add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
     add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    add('--wheelbase', type=POSITIVE, default=None, metavar='L', help='car: wheelbase from the rear to the front axle [m]')
+    add('--max-steering-angle', type=POSITIVE, default=math.inf, metavar='PHI',
+        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)')
     add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
     add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
         help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
@@ -299,6 +302,8 @@ def robot_options(args: argparse.Namespace, model: str):
         control_point_distance=args.control_point_distance,
         max_linear_speed=args.max_speed,
         max_angular_speed=args.max_angular_speed,
+        wheelbase=args.wheelbase or 0.0,
+        max_steering_angle=args.max_steering_angle,
         max_linear_acceleration=args.max_acceleration,
         command_rate=args.command_rate,
         pose_type=args.pose_type,

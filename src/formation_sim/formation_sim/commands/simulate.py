@@ -50,7 +50,7 @@ def register(subparsers) -> None:
         help='which states the trajectory keeps: events = the whole team at every event time and on '
         'the grid; grid = on the grid, at t = 0 and at the horizon; none = at t = 0 and the horizon '
         f'only. Default auto: events for teams of up to {AUTO_EVENTS_MAX_AGENTS} agents, grid for '
-        'larger ones (every event sample holds the whole team). The summary\'s edge maxima cover '
+        "larger ones (every event sample holds the whole team). The summary's edge maxima cover "
         'every triggering time either way',
     )
     baseline = parser.add_mutually_exclusive_group()
@@ -62,7 +62,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         '--tolerance', type=POSITIVE, default=None,
-        help='relative margin at which a crossing counts as reached (default: the agents\' own, 1e-12)',
+        help="relative margin at which a crossing counts as reached (default: the agents' own, 1e-12)",
     )  # fmt: skip
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')

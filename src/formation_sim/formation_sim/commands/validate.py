@@ -173,7 +173,7 @@ def _noise_floor(scenario, args: argparse.Namespace) -> dict:
         f'threshold floor for a pose noise σ = {args.pose_noise:g} m:',
         f'  suggested c0 = {floor:.3g} (gains.threshold_floor, or --threshold-floor {floor:.3g})',
         f'  {formula}',
-        '  what one trigger\'s noisy sensing puts into e_i' + (' (E_i)' if scenario.dynamics == 'double' else '')
+        "  what one trigger's noisy sensing puts into e_i" + (' (E_i)' if scenario.dynamics == 'double' else '')
         + ', per axis [1σ]: ' + ', '.join(f'{agent}: {value:.3g}' for agent, value in per_agent.items()),
     ]
     gains = scenario.gains
@@ -181,8 +181,8 @@ def _noise_floor(scenario, args: argparse.Namespace) -> dict:
     if present < floor:
         below = 0.0 if alpha + present <= floor else math.log(alpha / (floor - present)) / beta  # paper's time
         lines.append(
-            f'  the scenario\'s c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} from t = {below / kappa:.4g} s on '
-            f'(κ = {kappa:g}; horizon {scenario.horizon:g} s): from then on the noise alone can set off triggers, each trigger\'s '
+            f"  the scenario's c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} from t = {below / kappa:.4g} s on "
+            f"(κ = {kappa:g}; horizon {scenario.horizon:g} s): from then on the noise alone can set off triggers, each trigger's "
             'noise the next (the longer the run, the more events)'
         )
     if scenario.dynamics == 'single':

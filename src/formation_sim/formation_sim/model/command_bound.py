@@ -110,7 +110,7 @@ def command_bound(scenario: Scenario) -> CommandBound:
     acceleration = per_agent(f * (gains.k1 * k_edge + 2.0 * gains.k2 * q_max)) + gains.k3 * q_max
     return CommandBound(
         source='theory',
-        speed={i: kappa * q_max for i in ids},
+        speed=dict.fromkeys(ids, kappa * q_max),
         acceleration=dict(zip(ids, (kappa * kappa * acceleration).tolist())),
         reference='Theorem 2 (i): ||q_i|| <= sqrt(2 k^d_ν); ||u^d_i - k3 q_i|| <= Σ_j f_ij(k^d_ij)(k1 k^d_ij + 2 k2 sqrt(2 k^d_ν)) + k3 sqrt(2 k^d_ν) from (uxdouble), (wij), (kijd)'
         + ('' if kappa == 1.0 else f'; times κ = {kappa:g} (speed) and κ² (acceleration)'),

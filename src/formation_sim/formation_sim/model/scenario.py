@@ -20,7 +20,8 @@ import numbers
 from pathlib import Path
 import re
 import reprlib
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 import yaml
@@ -80,7 +81,7 @@ class _ShortRepr(reprlib.Repr):
 _SHORT_REPR = _ShortRepr()
 
 
-def short_repr(value: Any) -> str:  # noqa: ANN401
+def short_repr(value: Any) -> str:
     """repr(value), cut to a sensible length: what error messages quote of a user's value."""
     return _SHORT_REPR.repr(value)
 
@@ -396,6 +397,7 @@ class Scenario:
         object.__setattr__(self, 'edges', edges)
         object.__setattr__(self, '_index', index)
         object.__setattr__(self, '_neighbours', None)  # built on first use
+        object.__setattr__(self, '_edge_indices', None)  # likewise
 
     def _check_finite(self, array: np.ndarray, what: str) -> None:
         bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
@@ -461,11 +463,13 @@ class Scenario:
 
     def edge_indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows of i, rows of j, d_ij stacked as (m, p)) over `edges`, for vectorised formulas."""
-        m = len(self.edges)
-        heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
-        tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
-        d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
-        return heads, tails, d
+        if self._edge_indices is None:  # built once: per-sample formulas call it (run_series, theory)
+            m = len(self.edges)
+            heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
+            tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
+            d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
+            object.__setattr__(self, '_edge_indices', (heads, tails, d))
+        return tuple(array.copy() for array in self._edge_indices)
 
     def replace(self, **changes: Any) -> Scenario:
         """A copy with some fields changed (checked again)."""
@@ -820,7 +824,7 @@ def _count_nodes(text: str) -> None:
                 opened.append((event.anchor, nodes))
                 nodes += 1
                 if len(opened) > _YAML_DEPTH_LIMIT:
-                    raise _TooDeep()
+                    raise _TooDeep
             elif kind in ends:
                 anchor, before = opened.pop()
                 if anchor is not None:
@@ -846,7 +850,7 @@ _PLAIN_TAGS = frozenset(f'tag:yaml.org,2002:{name}' for name in ('str', 'int', '
 _NO_KEY = object()
 
 
-def _read_plain(text: str) -> Any:  # noqa: ANN401 - whatever the document holds
+def _read_plain(text: str) -> Any:
     """The document in `text` built straight from libyaml's events, for documents of plain
     mappings, sequences and untagged scalars (every scenario file `dump_scenario` writes): each
     scalar resolved and constructed by the loader's own resolver and constructors, the nodes
@@ -858,7 +862,7 @@ def _read_plain(text: str) -> Any:  # noqa: ANN401 - whatever the document holds
         loader.dispose()
 
 
-def _build_plain(loader: _CLoader) -> Any:  # noqa: ANN401, C901, PLR0912 - one loop over the events, kept together for speed
+def _build_plain(loader: _CLoader) -> Any:
     get, resolve, constructors = loader.get_event, loader.resolve, loader.yaml_constructors
     scalar, stream_end, document_end = yaml.ScalarEvent, yaml.StreamEndEvent, yaml.DocumentEndEvent
     starts, ends = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
@@ -879,7 +883,7 @@ def _build_plain(loader: _CLoader) -> Any:  # noqa: ANN401, C901, PLR0912 - one 
             opened.pop()
             continue
         if event.anchor is not None or event.tag is not None:
-            raise _NotPlain()
+            raise _NotPlain
         nodes += 1
         if nodes > MAX_YAML_NODES:
             raise _TooManyNodes(event.start_mark, None)
@@ -889,7 +893,7 @@ def _build_plain(loader: _CLoader) -> Any:  # noqa: ANN401, C901, PLR0912 - one 
             if value is _NO_KEY:
                 tag = resolve(scalar_node, event.value, event.implicit)
                 if tag not in _PLAIN_TAGS:
-                    raise _NotPlain()
+                    raise _NotPlain
                 try:
                     value = constructors[tag](loader, scalar_node(tag, event.value, event.start_mark, event.end_mark))
                 except yaml.constructor.ConstructorError as error:
@@ -898,7 +902,7 @@ def _build_plain(loader: _CLoader) -> Any:  # noqa: ANN401, C901, PLR0912 - one 
         elif kind in starts:
             value = {} if kind is mapping_start else []
         else:
-            raise _NotPlain()
+            raise _NotPlain
         if not opened:
             root = value
         else:
@@ -912,19 +916,19 @@ def _build_plain(loader: _CLoader) -> Any:  # noqa: ANN401, C901, PLR0912 - one 
             elif kind is scalar and value not in container:
                 parent[1] = value
             else:
-                raise _NotPlain()  # a collection as a key, or a duplicate key: the full loader names it
+                raise _NotPlain  # a collection as a key, or a duplicate key: the full loader names it
         if kind is not scalar:
             opened.append([value, _NO_KEY])
             if len(opened) > _YAML_DEPTH_LIMIT:
-                raise _TooDeep()
+                raise _TooDeep
     if type(get()) is not stream_end:
-        raise _NotPlain()  # a second document
+        raise _NotPlain  # a second document
     if first_error is not None:
         raise first_error
     return root
 
 
-def _load_yaml(text: str) -> Any:  # noqa: ANN401 - whatever the document holds
+def _load_yaml(text: str) -> Any:
     """The document in `text`, parsed by libyaml (C): plain documents in one pass over its events
     (`_read_plain`), others counted (`_count_nodes`), composed by libyaml and constructed with
     `_Checks`. A document libyaml cannot read is read again by the pure-Python `_Loader`, for the
@@ -1083,7 +1087,7 @@ def dump_scenario_json_text(scenario: Scenario) -> str:
     """`scenario` as JSON text, one agent and one edge a line, that reads back exactly (floats keep every bit)."""
     data = scenario_to_dict(scenario)
 
-    def text(value: Any) -> str:  # noqa: ANN401
+    def text(value: Any) -> str:
         return json.dumps(value, allow_nan=False, ensure_ascii=False)
 
     head = ''.join(f'{text(key)}: {text(data[key])},\n' for key in ('name', 'dynamics', 'communication_radius', 'horizon'))
@@ -1137,7 +1141,7 @@ def _json_int(text: str) -> int:
         raise _HugeJsonInteger(len(text.lstrip('-'))) from None
 
 
-def _parse_json(text: str, source: str) -> Any:  # noqa: ANN401
+def _parse_json(text: str, source: str) -> Any:
     """The JSON document of a scenario file; any fault as a ScenarioError naming the file and where.
 
     NaN and Infinity, which json reads, reach scenario_from_dict as numbers and are refused there

@@ -211,8 +211,8 @@ class SpeedScaleChoice:
             if value is None:
                 lines.append(f'  guaranteed: none: {self.guaranteed_missing}')
                 continue
-            how = ('from the proofs\' bound on the commands' if value.source == 'guaranteed'
-                   else f'from the exact run\'s largest commands, each kept {value.margin:g}× below its limit (not a guarantee)')  # fmt: skip
+            how = ("from the proofs' bound on the commands" if value.source == 'guaranteed'
+                   else f"from the exact run's largest commands, each kept {value.margin:g}× below its limit (not a guarantee)")  # fmt: skip
             if not math.isfinite(value.value):
                 lines.append(f'  {value.source}: any κ ({value.binding}; {how})')
                 continue

@@ -86,6 +86,8 @@ class RobotOptions:
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
+    wheelbase: float = 0.0  # L [m] (car)
+    max_steering_angle: float = math.inf  # φ_max [rad] (car)
     max_linear_acceleration: float = math.inf  # [m/s²] (ETA-2)
     command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
     pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
@@ -106,12 +108,10 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if problems := self.kind_problems(scenario.dimension):
-            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
-            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed)
+            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed, steering=self.max_steering_angle)
         except RobotError as error:
             raise RunError(str(error)) from None
         positive = ('control_point_distance', 'max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
@@ -128,15 +128,21 @@ class RobotOptions:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+        if not (math.isfinite(self.wheelbase) and self.wheelbase >= 0.0):
+            raise RunError(f'wheelbase must be a finite number >= 0, got {self.wheelbase!r}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
 
     @property
     def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance)
+        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
 
     def kind_problems(self, dimension: int) -> list[str]:
         """What the robots' kind says of these options (its dimensions, geometry and limits)."""
         try:
-            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+            limits = KindLimits(
+                linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed, steering_angle=self.max_steering_angle
+            )
         except ValueError:
             return []  # named by the limits' own check
         return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
@@ -152,9 +158,11 @@ class RobotOptions:
             'command_rate': float(self.command_rate),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:  # a car's; none: the default
+            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def robot_parameters(self, scenario: Scenario, agent_id: int) -> dict:
@@ -174,9 +182,11 @@ class RobotOptions:
             'seed': int(self.seed),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:
+            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
@@ -280,11 +290,15 @@ class LaunchPlan:
         return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
-        only once the recorder has a message on each (its bag then covers t = 0)."""
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
+        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        run only once the recorder has a message on each (its bag then covers t = 0); robots that
+        publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
+        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -379,7 +393,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -417,6 +431,8 @@ class LaunchPlan:
                 control_point_distance=float(self.robots.control_point_distance),
                 # Simulated robots: the formation as it truly is; real ones: as measured.
                 robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
+                pose_silence=float(self.robots.pose_timeout),
             )
         return params
 
@@ -512,7 +528,7 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:
