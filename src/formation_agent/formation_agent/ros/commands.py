@@ -22,7 +22,7 @@ from geometry_msgs.msg import Accel, Twist, TwistStamped
 
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinematics import yaw
-from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.core.pose_sensing import PoseError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
     encode_body_velocity,
@@ -69,9 +69,13 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`."""
+    """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`.
 
-    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
+    `poses.fresh(robot, t=, now=)` gives its own robot's latest pose or raises PoseError
+    (`formation_agent.ros.sensing.PoseSensing`: taken from its reader at each command).
+    """
+
+    def __init__(self, node, config, poses, *, on_failure: Callable[[Exception], None]) -> None:  # noqa: ANN001
         self._node = node
         self._config = config
         self._poses = poses

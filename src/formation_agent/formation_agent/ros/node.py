@@ -142,7 +142,7 @@ class FormationAgentNode(Node):
         if config.robot == 'none':
             self.output = PlantOutput(self, config)
         else:
-            self.output = RobotOutput(self, config, self.sensing.book, on_failure=self._fail)
+            self.output = RobotOutput(self, config, self.sensing, on_failure=self._fail)
             if not config.double and math.isfinite(config.limits.linear_acceleration):
                 self.get_logger().warning(
                     'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
@@ -199,6 +199,10 @@ class FormationAgentNode(Node):
         self._next_announcement = 0.0
         self._next_discovery_log = self._created + DISCOVERY_LOG_AFTER
         self._discovery = self.create_timer(DISCOVERY_CHECK, self._announce)
+
+    def destroy_node(self) -> None:
+        self.sensing.close()  # pose sensing's readers live on a node of their own
+        super().destroy_node()
 
     @property
     def rejected(self) -> dict[str, int]:

@@ -114,6 +114,38 @@ SPECS = (
 )  # fmt: skip
 
 
+class OdometryMessage:
+    """One `nav_msgs/Odometry` refilled at every tick (pose in `frame`, twist in the body frame,
+    REP 105; the covariance of the noise set once): building a new message each time was a third
+    of a robot's CPU (issue 19; publishing serialises it, so reusing it is safe)."""
+
+    def __init__(self, *, frame: str, child_frame: str, sigma: tuple[float, float]) -> None:
+        msg = self.msg = Odometry()
+        msg.header.frame_id = frame
+        msg.child_frame_id = child_frame
+        covariance = [0.0] * 36
+        for k in range(3):
+            covariance[7 * k] = sigma[0] ** 2
+        covariance[35] = sigma[1] ** 2
+        msg.pose.covariance = covariance
+
+    def fill(self, stamp: float, position: np.ndarray, yaw: float, linear: np.ndarray, angular: float) -> Odometry:
+        msg = self.msg
+        seconds = math.floor(stamp)
+        msg.header.stamp.sec = int(seconds)
+        msg.header.stamp.nanosec = min(999_999_999, round((stamp - seconds) * 1e9))
+        where = msg.pose.pose.position
+        where.x = float(position[0])
+        where.y = float(position[1]) if position.size > 1 else 0.0
+        where.z = float(position[2]) if position.size > 2 else 0.0
+        q = msg.pose.pose.orientation
+        q.x, q.y, q.z, q.w = quaternion_from_yaw(yaw)
+        twist = msg.twist.twist
+        twist.linear.x, twist.linear.y, twist.linear.z = float(linear[0]), float(linear[1]), float(linear[2])
+        twist.angular.z = float(angular)
+        return msg
+
+
 class SimulatedRobotNode(Node):
     """One kinematic robot (holonomic or unicycle) at a fixed rate, talking only poses and commands."""
 
@@ -154,6 +186,10 @@ class SimulatedRobotNode(Node):
         self.commands_received = 0
         self.commands_refused = 0
         self.timeouts = 0  # times the robot stopped because commands stopped coming
+        self._truth = OdometryMessage(frame=self.world_frame, child_frame=self.body_frame, sigma=(0.0, 0.0))
+        self._measured = OdometryMessage(
+            frame=self.world_frame, child_frame=self.body_frame, sigma=(self.noise.position_sigma, self.noise.yaw_sigma)
+        )
         self._last_tick = time.time()
         self._timer = self.create_timer(1.0 / float(p['rate']), self._tick)
 
@@ -208,12 +244,11 @@ class SimulatedRobotNode(Node):
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self._body_twist()
         if self._truth_pub is not None:
-            self._truth_pub.publish(self._odometry(now, position, yaw, linear, angular, sigma=(0.0, 0.0)))
+            self._truth_pub.publish(self._truth.fill(now, position, yaw, linear, angular))
         measured, measured_yaw = self.noise.measure(position, yaw)
         self._measurements.append((now, measured, measured_yaw, linear, angular))
         while self._measurements and self._measurements[0][0] + self.pose_latency <= now:
-            stamp, where, heading, body_linear, body_angular = self._measurements.popleft()
-            odometry = self._odometry(stamp, where, heading, body_linear, body_angular, sigma=(self.noise.position_sigma, self.noise.yaw_sigma))
+            odometry = self._measured.fill(*self._measurements.popleft())
             self._odom_pub.publish(odometry)
             if self._pose_pub.get_subscription_count():  # most readers take the odometry
                 self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
@@ -229,30 +264,6 @@ class SimulatedRobotNode(Node):
         world[: self.robot.dimension] = self.robot.world_velocity()
         c, s = math.cos(self.robot.yaw), math.sin(self.robot.yaw)
         return np.array([c * world[0] + s * world[1], -s * world[0] + c * world[1], world[2]]), angular
-
-    def _odometry(self, stamp: float, position: np.ndarray, yaw: float, linear: np.ndarray, angular: float, *, sigma) -> Odometry:
-        msg = Odometry()
-        seconds = math.floor(stamp)
-        msg.header.stamp.sec = int(seconds)
-        msg.header.stamp.nanosec = min(999_999_999, round((stamp - seconds) * 1e9))
-        msg.header.frame_id = self.world_frame
-        msg.child_frame_id = self.body_frame
-        pose = msg.pose.pose
-        where = np.zeros(3)
-        where[: position.size] = position
-        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in where)
-        q = quaternion_from_yaw(yaw)
-        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
-        position_variance, yaw_variance = sigma[0] ** 2, sigma[1] ** 2
-        covariance = [0.0] * 36
-        for k in range(3):
-            covariance[7 * k] = position_variance
-        covariance[35] = yaw_variance
-        msg.pose.covariance = covariance
-        msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.linear.z = (float(v) for v in linear)
-        msg.twist.twist.angular.z = float(angular)
-        return msg
-
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
