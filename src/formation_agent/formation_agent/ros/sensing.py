@@ -71,9 +71,12 @@ class ServiceSensing:
         """Nothing of its own to destroy (its client is the node's)."""
 
 
-POSE_TAKE_DEPTH = 2
-"""Poses a pose reader keeps, newest last (keep last): the latest, and the one before it for
-ETA-2's velocity from PoseStamped differences (`PoseBook`).  Older poses are never looked at."""
+def pose_take_depth(config) -> int:  # noqa: ANN001
+    """Poses a pose reader keeps (keep last): the latest only, or also the one before it where
+    ETA-2's velocity comes from PoseStamped differences (`PoseBook`).  Older poses are never
+    looked at; a deeper history would only cost decoding (the command timer takes its own
+    robot's poses at 50 Hz while a robot publishes at 100 Hz)."""
+    return 2 if config.double and config.pose_type == 'pose' else 1
 
 
 class PoseReaders:
@@ -81,7 +84,7 @@ class PoseReaders:
 
     The readers belong to a node of their own that no executor spins (`formation_agent_poses`,
     in the agent's namespace; same context, so the same DDS participant): no callback runs and
-    nothing is decoded when a pose arrives.  DDS keeps the newest POSE_TAKE_DEPTH per topic;
+    nothing is decoded when a pose arrives.  DDS keeps the newest one or two per topic (`pose_take_depth`);
     `take(robot)` decodes those and hands them to the `PoseBook` (refusals counted as before).
     A robot publishing at 100 Hz costs its agent nothing between the agent's own triggering
     times and command ticks (before: every pose of itself and of each neighbour was decoded in
@@ -102,7 +105,7 @@ class PoseReaders:
             parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)],
         )
         qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=POSE_TAKE_DEPTH, reliability=ROBOT_POSE_QOS.reliability,
+            history=HistoryPolicy.KEEP_LAST, depth=pose_take_depth(config), reliability=ROBOT_POSE_QOS.reliability,
             durability=ROBOT_POSE_QOS.durability,
         )  # fmt: skip
         # ... so the topics are resolved by the agent's node: remapping applies as to any of its topics.
@@ -110,7 +113,7 @@ class PoseReaders:
         self._subs = {robot: self.node.create_subscription(kind, topic, _never, qos) for robot, topic in self.topics.items()}
 
     def take(self, robot: int) -> None:
-        """Every pose of `robot` waiting in its reader (at most POSE_TAKE_DEPTH), oldest first, into the book."""
+        """Every pose of `robot` waiting in its reader (at most `pose_take_depth`), oldest first, into the book."""
         sub = self._subs[robot]
         while True:
             with sub.handle:

@@ -221,7 +221,7 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, RobotOptions
+    from formation_sim.runtime.launch import POSE_TYPES, ROBOTS_PER_PROCESS, RobotOptions
 
     defaults = RobotOptions()
     group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
@@ -245,7 +245,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
     add('--initial-heading', type=FINITE, default=0.0, metavar='RAD', help='simulated robots: heading at t = 0 (default 0)')
-    add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+    add('--robots-per-process', type=POSITIVE_INT, default=ROBOTS_PER_PROCESS, metavar='K',
+        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})')
 
 
 def robot_options(args: argparse.Namespace, model: str):

@@ -45,6 +45,7 @@ DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
+ROBOTS_PER_PROCESS = 8  # simulated robots sharing a process by default: 4 robots in one cost 11 % of a core, in four 18 % (BENCHMARKS.md, "CPU of a robot run")
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
@@ -96,7 +97,14 @@ class RobotOptions:
     command_latency: float = 0.0  # [s] from a command's arrival to its effect
     command_timeout: float = 0.5  # [s] a robot without commands for this long stops
     seed: int = 0
-    robots_per_process: int = 1
+    robots_per_process: int = ROBOTS_PER_PROCESS
+
+    @property
+    def odometry_is_truth(self) -> bool:
+        """A simulated robot without noise and latency publishes its exact state as its odometry:
+        then it publishes no `true_odom` (what a real robot publishes, odometry, and half the
+        messages), and the formation is measured on `odom`, the same floats."""
+        return self.pose_noise == 0.0 and self.yaw_noise == 0.0 and self.latency == 0.0
 
     def check(self, scenario: Scenario) -> None:
         """Raise RunError naming the first option that cannot work with `scenario`."""
@@ -157,6 +165,7 @@ class RobotOptions:
             'command_timeout': float(self.command_timeout),
             'seed': int(self.seed),
             'world_frame': self.world_frame,
+            'publish_truth': not self.odometry_is_truth,
         }
         for name in ('max_linear_speed', 'max_angular_speed'):
             if math.isfinite(getattr(self, name)):
@@ -253,7 +262,18 @@ class LaunchPlan:
             return formation_topics(self.scenario)
         from formation_sim.runtime.coordinator import robot_run_topics
 
-        return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
+        return robot_run_topics(
+            self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type,
+            truth=self.robot_trajectory == 'true_odom',
+        )  # fmt: skip
+
+    @property
+    def robot_trajectory(self) -> str:
+        """The robot topic the formation is measured on: a simulated robot's exact state (`true_odom`,
+        or `odom` where that is exact: `RobotOptions.odometry_is_truth`); a real robot's as measured."""
+        if not self.simulated_robots:
+            return self.robots.pose_type
+        return 'odom' if self.robots.odometry_is_truth else 'true_odom'
 
     def robot_pose_topics(self) -> list[str]:
         """The recorded topics the robots publish their poses on: the time keeper starts a robot run
@@ -393,8 +413,7 @@ class LaunchPlan:
                 backend=self.backend,
                 robot=self.robots.model,
                 control_point_distance=float(self.robots.control_point_distance),
-                # Simulated robots: the formation as it truly is; real ones: as measured.
-                robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                robot_trajectory=self.robot_trajectory,
             )
         return params
 
