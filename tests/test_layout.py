@@ -152,6 +152,18 @@ def test_ros_free_modules_import_without_rclpy() -> None:
     assert run.stdout.strip() == f'imported {len(ROS_FREE)}'
 
 
+# Modules of the ROS layers that hold no node and must import without ROS all the same: the run's
+# books are tested, and read by tools, on machines without ROS.
+ROS_FREE_IN_ROS_LAYERS = ('formation_sim.runtime.run_book',)
+
+
+@pytest.mark.parametrize('name', ROS_FREE_IN_ROS_LAYERS)
+def test_books_of_the_ros_layers_import_without_rclpy(name: str) -> None:
+    assert name.startswith(ROS_MODULES) and name in MODULES
+    run = subprocess.run([sys.executable, '-c', _BLOCKER, name], capture_output=True, text=True, timeout=120, check=False)
+    assert run.returncode == 0, run.stderr[-3000:]
+
+
 def test_the_blocker_blocks() -> None:
     run = subprocess.run([sys.executable, '-c', _BLOCKER, 'formation_agent.ros.node'], capture_output=True, text=True, timeout=120, check=False)
     assert run.returncode != 0 and 'rclpy is blocked' in run.stderr

@@ -4,7 +4,8 @@ and their encoding over standard Jazzy types.
 - `types`: `TriggerInfo` (what an agent broadcasts at its triggering times), `SensedState`
   (what its sensing service returns) and `RobotPose` (a robot's pose as it arrives);
   `lockstep`: `Step`, `Status`, `WorldState`, `AgentReport` (with `Saturation`) and the reasons
-  a message is rejected; `topics`: every topic and service name.
+  a message is rejected; `topics`: every topic, service and node name; `middleware`: ROS domain
+  ids and their ports, executors, the liveliness lease and graces.
 - `codec` (rclpy message classes, imported lazily): encoders and decoders; `qos` (rclpy): the
   protocol's quality of service.
 

@@ -9,27 +9,13 @@ from __future__ import annotations
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
-LIVELINESS_LEASE = 1.0
-"""Seconds without a sign of life after which DDS declares a writer of the protocol lost.
-
-Liveliness is asserted by DDS itself (AUTOMATIC), not by Python code, so a busy agent stays alive
-and only a dead process, or a network that no longer reaches it, is declared lost.  Every node of
-a run must use the same lease: a reader asking for a shorter lease than its writer offers does
-not match it.
-"""
-
-LOST_GRACE = 0.5
-"""Seconds a node waits after a peer is declared lost before acting, so that what the peer sent
-before it left (already delivered, not yet taken) is handled first."""
-
-KEEPER_LEASE_GRACE = 3.0
-"""Seconds a lock-step agent waits after its time keeper's lease lapsed (its writer still in the
-graph) before leaving. Nothing moves while the keeper is silent, and a keeper that is briefly
-unable to assert its liveliness must be left the time to end the run itself: after a SIGKILLed
-agent, Fast DDS's shared-memory port health check stalled the keeper's writers for ~1.4 s here,
-its neighbours left too, and the run reported them lost along with the dead one. Longer than the
-keeper's own LIVELINESS_LEASE + LOST_GRACE toward a lost agent; on the wall clock (robots) an
-agent keeps LOST_GRACE, since there its robot would go on moving."""
+# The leases and graces every node of a run agrees on live in the ROS-free middleware module, so
+# that a ROS-free book (formation_sim.runtime.run_book) can use them; re-exported here.
+from formation_msgs_py.middleware import (
+    KEEPER_LEASE_GRACE as KEEPER_LEASE_GRACE,
+    LIVELINESS_LEASE as LIVELINESS_LEASE,
+    LOST_GRACE as LOST_GRACE,
+)
 
 # Every message of the protocol matters, and a reader that matches a writer late must still get
 # what was written before: reliable + transient local.  Depth bounds what may be outstanding; the

@@ -1,4 +1,4 @@
-"""Names of every topic and service of a run: the one place they are spelled (ROS-free).
+"""Names of every topic, service and node of a run: the one place they are spelled (ROS-free).
 
 Agent-side names are absolute defaults; the agent node resolves them in its own namespace
 `/agent_<i>`, so a robot integration can remap them (docs/MESSAGES.md).
@@ -17,6 +17,14 @@ MARKERS_TOPIC = '/formation/markers'  # Foxglove view (tools only)
 RECORDER_TOPIC = '/formation/recorder'  # the recorder's heartbeat: its liveliness is its sign of life
 CLOCK_TOPIC = '/clock'
 ROBOTS_TOPIC = '/formation/robots'  # what the robots of a robot run are (JSON, once; tools only)
+
+# Node names: the time keepers and the recorder in the root namespace, agents and simulated robots
+# each in its agent's namespace (agent_namespace(i)/AGENT_NODE).
+SIMULATOR_NODE = 'formation_simulator'
+COORDINATOR_NODE = 'formation_coordinator'
+RECORDER_NODE = 'formation_recorder'
+AGENT_NODE = 'formation_agent'
+ROBOT_NODE = 'simulated_robot'
 
 
 def agent_namespace(agent_id: int) -> str:

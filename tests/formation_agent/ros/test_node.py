@@ -194,7 +194,7 @@ def test_bad_trigger_information_is_rejected_counted_per_reason_and_never_reache
         assert node.rejected == expected
     assert received == [], 'nothing reaches the core before this agent has triggered'
     assert [(info.sender, info.stamp) for info in node._held] == [(3, 0.0), (2, 0.5)]
-    assert node.info_received == 0
+    assert node.counts.info_received == 0
     report = node.report(final=True)
     assert report.rejected == expected and report.rejected_total == 12 and report.final
 
@@ -266,9 +266,9 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     try:
         step_writer = simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
         deadline = time.monotonic() + 20.0
-        while not node._simulator_seen and time.monotonic() < deadline:
+        while not node.simulator.seen and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        assert node._simulator_seen, 'the step writer never matched'
+        assert node.simulator.seen, 'the step writer never matched'
         node.check()  # alive: nothing to report
         simulator.destroy_publisher(step_writer)  # as its process would on the way out
         with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph'):
@@ -295,7 +295,7 @@ def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its
     node.core = Unresolvable()
     with pytest.raises(PredictionError, match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
                                               r'prediction no longer resolves its threshold .*rule \[precision\]\)$'):
-        node._publish_status(step_index=3, ready=True)
+        node.publish_status(step_index=3, ready=True)
 
 
 @pytest.mark.parametrize(('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)])
@@ -312,12 +312,12 @@ def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_la
     assert (KEEPER_LEASE_GRACE, LOST_GRACE) == (3.0, 0.5)
     node = live_node()
     node.step = Step(index=7, time=1.25, flags=STEP_FLAG_REALTIME if flags == 'realtime' else 0)
-    node._on_simulator_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
-    node._on_simulator_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
-    lost = node._simulator_lost_at
-    node._simulator_lost_at = lost - (patience - 0.05)
+    node.simulator.on_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
+    node.simulator.on_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
+    lost = node.simulator.lost_at
+    node.simulator.lost_at = lost - (patience - 0.05)
     node.check()  # still patient
-    node._simulator_lost_at = lost - (patience + 0.05)
+    node.simulator.lost_at = lost - (patience + 0.05)
     how = 'no sign of life for 1.0 s' if lease_lapsed else 'it left the graph'
     with pytest.raises(PeerLostError, match=rf'agent 1: the simulator \(writer of /formation/step\) is lost after step 7 \(t=1.25\): {how}'):
         node.check()

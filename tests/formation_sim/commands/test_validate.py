@@ -53,7 +53,7 @@ def test_json_output(capsys):
 
 
 def test_invalid_scenario_exits_1(tmp_path, capsys):
-    path = write(tmp_path, GOOD.replace('beta: 0.1', 'beta: 1.0'))  # β = β0 = 1
+    path = write(tmp_path, GOOD.replace('beta: 0.1', 'beta: 1.1'))  # β > β0 = 1
     assert main(['validate', path]) == 1
     out = capsys.readouterr().out
     assert 'INVALID' in out and '[beta] gains' in out and 'β0 = 1' in out
@@ -147,7 +147,7 @@ CATALOGUE = [
     ('Δ 1e308', edit('communication_radius: 4.0', 'communication_radius: 1e308'), 1, ['[scale] scenario: Δ = 1e+308 is above 1.80925e+75 (2^250)']),
     ('Δ 1e-300', edit('communication_radius: 4.0', 'communication_radius: 4e-300'), 1, ['[edge_length] edge (1, 2)']),
     ('-0.0 breaking (initial)', edit('[2.0, 4.0]', '[-0.0, 4.0]'), 1, ['[initial] edge (1, 2): ||x_i(0)-x_j(0)-d_ij|| = 3.64005 is not below Δ-||d_ij|| = 2']),
-    ('β a hair above β0', edit('beta: 1.0', 'beta: 1.5000000000000002'), 1, ['0 < β < β0 = 1.5 required, got β = 1.5000000000000002']),
+    ('β a hair above β0', edit('beta: 1.0', 'beta: 1.500000000000001'), 1, ['0 < β < β0 = 1.5 required, got β = 1.500000000000001']),
     # -- YAML features
     ('alias bomb', BOMB + PAPER.replace('horizon: 10.0', 'horizon: *i').replace('name: case\n', ''), 2, ['more than 300000 nodes with its aliases expanded', 'an alias bomb?']),
     ('recursive alias', edit('[2.0, 4.0]', '&r [*r]'), 2, ['agents.1.position[0]: expected a number, got [[[[...]]]]']),
@@ -244,7 +244,7 @@ JSON_CATALOGUE = [
     ('nan spelled as text', edit_json('"alpha": 10.0', '"alpha": "nan"'), 2, ["gains.alpha: expected a number, got 'nan'"]),
     ('true for a number', edit_json('"alpha": 10.0', '"alpha": true'), 2, ['gains.alpha: expected a number, got True']),
     ('subnormal α', edit_json('"alpha": 10.0', '"alpha": 5e-324'), 1, ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double']),
-    ('β a hair above β0', edit_json('"beta": 1.0', '"beta": 1.5000000000000002'), 1, ['0 < β < β0 = 1.5 required, got β = 1.5000000000000002']),
+    ('β a hair above β0', edit_json('"beta": 1.0', '"beta": 1.500000000000001'), 1, ['0 < β < β0 = 1.5 required, got β = 1.500000000000001']),
     # -- the schema, as for YAML
     ('a list', '[1, 2]', 2, ['scenario: expected a mapping, got [1, 2]']),
     ('unknown key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"extra": 1,'), 2, ["scenario: unknown key 'extra'"]),

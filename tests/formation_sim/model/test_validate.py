@@ -79,7 +79,7 @@ BROKEN = [
      'edge_length', 'edge (1, 2)', ['||d_ij|| = 4.5', 'Δ = 4']),
     ('initial broken', 'single', _position(3, [4.3, 5.5]), 'initial', 'edge (2, 3)', ['(initial)', 'Δ-||d_ij|| = 1.17157']),
     ('alpha zero', 'single', _gain('alpha', 0.0), 'alpha', 'gains', ['α = 0']),
-    ('beta at beta0', 'single', _gain('beta', 1.5), 'beta', 'gains', ['β0 = 1.5', 'β = 1.5']),
+    ('beta above beta0', 'single', _gain('beta', 1.6), 'beta', 'gains', ['β0 = 1.5', 'β = 1.6']),
     ('beta negative', 'single', _gain('beta', -0.1), 'beta', 'gains', ['β = -0.1']),
     ('alpha_d negative', 'double', _gain('alpha_d', -1.0), 'alpha_d', 'gains', ['α_d = -1']),
     ('beta1 above beta0', 'double', _gain('beta1', 1.6), 'beta1', 'gains', ['β0 = 1.5', 'β1 = 1.6']),
@@ -108,6 +108,8 @@ def test_broken_hypotheses_give_named_errors(label, dynamics, change, rule, subj
 
 NEAR_EDGE = [
     ('beta near beta0', 'single', _gain('beta', 1.45), 'beta'),
+    # β < β0 with β = β0 as computed: equal up to the bound's rounding, accepted with a warning.
+    ('beta at beta0', 'single', _gain('beta', 1.5), 'rounding'),
     ('k3 near its bound', 'double', lambda d: d['gains'].update(k3=1.2, beta_d=0.001), 'k3'),
     ('beta_d near printed bound', 'double', lambda d: d['gains'].update(k3=0.6053, beta_d=1.08), 'beta_d'),
     ('beta_d above corrected bound', 'double', _gain('beta_d', 0.5), 'beta_d_corrected'),
@@ -180,8 +182,9 @@ def test_zero_capacity_edge_reports_without_nan():
 @pytest.mark.parametrize(
     ('edits', 'expected'),
     [
-        # β a hair above β0 = 1.5: 6 digits would read "β0 = 1.5 required, got β = 1.5".
-        ({'beta': 1.5000000000000002}, '0 < β < β0 = 1.5 required, got β = 1.5000000000000002'),
+        # β a hair above β0 = 1.5 and its rounding margin (5 ulps): 6 digits would read
+        # "β0 = 1.5 required, got β = 1.5".
+        ({'beta': 1.500000000000001}, '0 < β < β0 = 1.5 required, got β = 1.500000000000001'),
         # ||d_ij|| a hair above Δ = 4: "||d_ij|| = 4 is not below Δ = 4" before.
         ({'d12': [0.0, -4.000000000000001]}, '||d_ij|| = 4.000000000000001 is not below Δ = 4 (Assumption 1)'),
         # ||d_ij|| = Δ exactly: equal values print alike, and rightly so.
@@ -427,3 +430,85 @@ def test_double_integrator_slack_floor_counts_velocities(tight_edge):
     assert finding.values['floor'] == pytest.approx(floor, rel=1e-9)
     assert 'α_d = 10' in finding.message
     assert not _precision_errors(validate_scenario(tight_edge('paper_double', 3e-3)))
+
+
+# -- gains on a computed bound: its rounding is not a reason to refuse ------------------------------
+
+
+def _held_out_team(beta1_of):
+    """A random ETA-2 team (not the paper's round numbers) with β1 = beta1_of(β0 as computed)."""
+    import math
+
+    from formation_sim.model import theory
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.model.scenario import scenario_to_dict
+
+    base = random_scenario(n=5, seed=2, dynamics='double', horizon=0.5)
+    beta0 = theory.beta0(base)
+    data = scenario_to_dict(base)
+    data['gains'] = {**data['gains'], 'beta1': beta1_of(beta0, math), 'k3': 'paper'}
+    return scenario_from_dict(data), beta0
+
+
+@pytest.mark.parametrize('ulps', [0, 1, 2])
+def test_beta1_on_beta0_up_to_rounding_is_accepted_with_a_warning_naming_the_margin(ulps):
+    from formation_sim.model.gains import ROUNDING_ULPS
+
+    def nudged(beta0, math):
+        for _ in range(ulps):
+            beta0 = math.nextafter(beta0, math.inf)
+        return beta0
+
+    scenario, beta0 = _held_out_team(nudged)
+    assert scenario.gains.beta1 > beta0 or ulps == 0
+    report = validate_scenario(scenario)
+    assert report.ok, [f.message for f in report.errors]
+    rounding = [w for w in report.warnings if w.rule == 'rounding']
+    if ulps == 0:
+        assert rounding == []  # β1 <= β0 holds as computed
+        return
+    assert len(rounding) == 1, rounding
+    message = rounding[0].message
+    assert f'β1 = {scenario.gains.beta1!r} is {ulps} ulp(s) above β0 = {beta0!r}' in message
+    assert f'rounding margin of {ROUNDING_ULPS} ulps' in message
+    assert rounding[0].values['margin_ulps'] == ROUNDING_ULPS
+    from formation_sim.model import theory
+
+    assert theory.theorem_constants(scenario).k_V is not None  # the proof's chain goes through
+
+
+def test_beta1_above_beta0_by_more_than_rounding_is_refused():
+    scenario, beta0 = _held_out_team(lambda beta0, math: beta0 * (1.0 + 1e-9))
+    report = validate_scenario(scenario)
+    assert [(f.rule, f.subject) for f in report.errors] == [('beta1', 'gains')]
+    assert report.errors[0].values == {'beta1': scenario.gains.beta1, 'beta0': beta0}
+
+
+def test_beta1_one_ulp_above_beta0_simulates(tmp_path, capsys):
+    import math
+
+    from formation_sim.cli import main
+    from formation_sim.model.scenario import dump_scenario
+
+    scenario, _ = _held_out_team(lambda beta0, m: math.nextafter(beta0, math.inf))
+    path = tmp_path / 'team.yaml'
+    dump_scenario(scenario, path)
+    assert main(['simulate', str(path), '--out', str(tmp_path / 'run'), '--no-plot']) == 0, capsys.readouterr()
+    summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
+    assert summary['total_events'] > 0 and summary['theorem_constants'].get('error') is None, summary
+
+
+def test_a_strict_bound_met_up_to_rounding_is_accepted_and_beyond_it_refused(paper_scenario_dict):
+    import math
+
+    from formation_sim.model import theory
+    from formation_sim.model.theory import TheoryError
+
+    beta0 = 1.5  # the paper's example, exactly
+    accepted = scenario_from_dict(paper_scenario_dict('single', beta=math.nextafter(beta0, math.inf)))
+    report = validate_scenario(accepted)
+    assert report.ok and 'rounding' in {w.rule for w in report.warnings}
+    with pytest.raises(TheoryError, match=r'unbounded'):  # β = β0: the proof's constants do not exist
+        theory.theorem_constants(accepted)
+    refused = scenario_from_dict(paper_scenario_dict('single', beta=beta0 * (1.0 + 1e-9)))
+    assert [f.rule for f in validate_scenario(refused).errors] == ['beta']

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from formation_msgs_py.codec import MessageError, decode_trigger_info
 from formation_msgs_py.lockstep import (
     REJECT_DIMENSION,
     REJECT_DUPLICATE,
@@ -16,6 +17,7 @@ from formation_msgs_py.lockstep import (
     REJECT_SENDER,
     REJECT_TIME_BACKWARDS,
 )
+from formation_msgs_py.topics import trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
 
@@ -56,3 +58,24 @@ def implausible(
     if info.stamp == last_stamp:
         return REJECT_DUPLICATE, f'agent {sender} already sent information stamped t={last_stamp!r}'
     return None
+
+
+def read_info(
+    msg, *, sender: int, agent_id: int, algorithm: str, dimension: int, heard: dict[int, float], reject: Rejections
+) -> TriggerInfo | None:  # noqa: ANN001 - a Float64MultiArray
+    """The triggering information in `msg` from `sender`, or None if it is refused (`reject`ed);
+    `heard` (sender -> stamp of its last accepted information) is updated."""
+    topic = trigger_info_topic(sender, agent_id)
+    try:
+        info = decode_trigger_info(msg)
+    except MessageError as error:
+        reject(topic, error.reason, str(error))
+        return None
+    problem = implausible(
+        info, sender=sender, agent_id=agent_id, algorithm=algorithm, dimension=dimension, last_stamp=heard.get(sender)
+    )
+    if problem is not None:
+        reject(topic, *problem)
+        return None
+    heard[sender] = info.stamp
+    return info

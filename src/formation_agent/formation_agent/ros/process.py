@@ -12,20 +12,19 @@ from typing import NoReturn
 
 from rclpy.executors import SingleThreadedExecutor
 
+from formation_msgs_py.middleware import EXECUTORS
+
 EXIT_BAD_INPUT = 2
 """Exit status of a node refused its parameters (every problem named on stderr; nothing started)."""
 
 EXIT_PEER_LOST = 3
 """Exit status of a node that left because a peer it depends on was lost."""
 
-EXECUTORS = ('events', 'single')
-"""Executors a node process can spin: rclpy's EventsExecutor (default) or SingleThreadedExecutor.
-
-The SingleThreadedExecutor rebuilds its wait set in Python on every spin; on a 2-core machine
-that was most of the simulator's time per lock-step step (BENCHMARKS.md).  The EventsExecutor
-(rclpy.experimental, C++) dispatches each message as it comes.  It has no guard conditions, so
-the nodes use none.
-"""
+# EXECUTORS (formation_msgs_py.middleware): rclpy's EventsExecutor (default) or the
+# SingleThreadedExecutor. The SingleThreadedExecutor rebuilds its wait set in Python on every spin;
+# on a 2-core machine that was most of the simulator's time per lock-step step (BENCHMARKS.md).
+# The EventsExecutor (rclpy.experimental, C++) dispatches each message as it comes. It has no
+# guard conditions, so the nodes use none.
 
 
 def make_executor(kind: str, *, context=None):

@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
 from formation_sim.model.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario, short_repr
 from formation_sim.model.validate import validate_scenario
 from formation_sim.sim.run_folder import RunFolderError, check_report_dir
@@ -53,7 +54,7 @@ NON_NEGATIVE = _number('a finite number >= 0', lambda v: math.isfinite(v) and v 
 POSITIVE_INT = _number('an integer >= 1', lambda v: v >= 1, integer=True)
 NON_NEGATIVE_INT = _number('an integer >= 0', lambda v: v >= 0, integer=True)
 FINITE = _number('a finite number', math.isfinite)
-DOMAIN_ID = _number('an integer in [0, 232] (a ROS_DOMAIN_ID)', lambda v: 0 <= v <= 232, integer=True)
+DOMAIN_ID = _number(f'an integer in [0, {DOMAIN_ID_MAX}] (a ROS_DOMAIN_ID)', domain_id_ok, integer=True)
 UNIT_FRACTION = _number('a number in (0, 1]', lambda v: 0.0 < v <= 1.0)
 
 
@@ -185,8 +186,8 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         '--executor',
-        choices=('events', 'single'),
-        default='events',
+        choices=EXECUTORS,
+        default=DEFAULT_EXECUTOR,
         help="rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, "
         '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
     )

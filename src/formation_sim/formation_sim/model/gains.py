@@ -14,9 +14,35 @@ import numpy as np
 C_MATRIX = np.array([[0.0, 1.0], [0.0, 0.0]])
 B_MATRIX = np.array([[0.0], [1.0]])
 
+# A user's value compared with a computed bound (β0 = ρ2(DD^T)/Δ0, an eigenvalue ratio; k3's range;
+# the rate bounds (2-k4) ρ2(P), (2-k4)/λmax(P)) may sit on the bound as the user computed it and
+# still be a few ulps off ours: within ROUNDING_ULPS ulps of the bound it is taken as equal to it
+# (accepted, with a warning naming the margin); by more, the bound decides. One place: `against_bound`.
+ROUNDING_ULPS = 4
+INSIDE, ROUNDING, OUTSIDE = 'inside', 'rounding', 'outside'
+# (riccatti)'s margin: its left side is 0 for P = riccati_solution(β1) (equality), so it is compared
+# with 0 up to this fraction of max(1, |P|): its rounding scales with β1 |P|², not with ulps of a bound.
+RICCATI_TOLERANCE = 1e-9
+
 
 class GainsError(ValueError):
     """Gains outside what (riccatti) or Theorem 2 can take (the message names the rule and value)."""
+
+
+def against_bound(value: float, bound: float, *, strict: bool) -> str:
+    """INSIDE if value < bound (strict) or value <= bound holds as computed; ROUNDING if it fails by
+    at most ROUNDING_ULPS ulps of the bound (the rounding of a computed bound: taken as equal);
+    OUTSIDE otherwise, also when either is NaN or the bound is infinite."""
+    if value < bound or (not strict and value <= bound):
+        return INSIDE
+    if math.isfinite(bound) and value <= bound + ROUNDING_ULPS * math.ulp(bound):
+        return ROUNDING
+    return OUTSIDE
+
+
+def ulps_above(value: float, bound: float) -> int:
+    """How many ulps of `bound` `value` lies above it (0 at equality): the margin a warning names."""
+    return round((value - bound) / math.ulp(bound))
 
 
 def riccati_solution(beta1: float) -> np.ndarray:
@@ -41,7 +67,7 @@ def riccati_lhs(P, beta1: float) -> np.ndarray:
     return 0.5 * (P @ C_MATRIX + C_MATRIX.T @ P) - beta1 * (P @ B_MATRIX @ B_MATRIX.T @ P) + 2.0 * np.eye(2)
 
 
-def riccati_holds(P, beta1: float, *, tolerance: float = 1e-9) -> bool:
+def riccati_holds(P, beta1: float, *, tolerance: float = RICCATI_TOLERANCE) -> bool:
     """P > 0 and (riccatti) <= 0 up to `tolerance` (relative to the size of P)."""
     P = np.asarray(P, dtype=float)
     scale = max(1.0, float(np.abs(P).max()))

@@ -32,7 +32,15 @@ from scipy.sparse.csgraph import connected_components
 import scipy.sparse.linalg as spla
 
 from formation_agent.core.tension import omega, omega_prime, weight_gain
-from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds
+from formation_sim.model.gains import (
+    INSIDE,
+    OUTSIDE,
+    ROUNDING_ULPS,
+    against_bound,
+    k3_upper_bound,
+    k4_value,
+    riccati_holds,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from formation_sim.model.scenario import Scenario
@@ -452,7 +460,13 @@ def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> The
     b0 = common.fields['beta0']
     alpha, beta = scenario.gains.alpha, scenario.gains.beta
     _require(alpha > 0.0, 'alpha', f'α > 0 required, got {alpha!r}')
-    _require(0.0 < beta < b0, 'beta', f'0 < β < β0 = {b0!r} required, got β = {beta!r}')
+    state = against_bound(beta, b0, strict=True)
+    _require(beta > 0.0 and state != OUTSIDE, 'beta', f'0 < β < β0 = {b0!r} required, got β = {beta!r}')
+    _require(
+        state == INSIDE, 'beta',
+        f'β = {beta!r} equals β0 = {b0!r} up to rounding ({ROUNDING_ULPS} ulps; validation accepts it): '
+        f'the proof\'s k_V = V0 + nα²/(8β0(β0-β)) is unbounded there',
+    )
     _require(0.0 < a < 1.0, 'a', f'the free parameter a must lie in (0, 1), got {a!r}')
     nu0 = tension(scenario, scenario.positions)
     k_nu = nu0 + n * alpha * alpha / (8.0 * a * beta)  # (kν)
@@ -488,18 +502,18 @@ def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None)
     k1, k2, k3 = gains.k1, gains.k2, gains.k3
     alpha_d, beta_d, beta1 = gains.alpha_d, gains.beta_d, gains.beta1
     _require(alpha_d > 0.0, 'alpha_d', f'α_d > 0 required, got {alpha_d!r}')
-    _require(0.0 < beta1 <= b0, 'beta1', f'0 < β1 <= β0 = {b0!r} required, got β1 = {beta1!r}')
+    _require(beta1 > 0.0 and against_bound(beta1, b0, strict=False) != OUTSIDE, 'beta1', f'0 < β1 <= β0 = {b0!r} required, got β1 = {beta1!r}')
     _require(k1 > 0.0 and k2 > 0.0, 'k1_k2', f'k1, k2 > 0 required, got k1={k1!r}, k2={k2!r}')
     _require(riccati_holds(gains.P, beta1), 'riccati', f'P = {gains.P.tolist()} must satisfy (riccatti)')
     upper = k3_upper_bound(k1, k2)
-    _require(0.0 < k3 < upper, 'k3', f'0 < k3 < {upper!r} required, got k3 = {k3!r}')
+    _require(k3 > 0.0 and against_bound(k3, upper, strict=True) != OUTSIDE, 'k3', f'0 < k3 < {upper!r} required, got k3 = {k3!r}')
     k4 = k4_value(k1, k2, k3)
     eigenvalues = np.linalg.eigvalsh(gains.P)
     rho2_p, lam_max_p = float(eigenvalues.min()), float(eigenvalues.max())
     bound_paper = (2.0 - k4) * rho2_p
     bound_corrected = (2.0 - k4) / lam_max_p
     _require(
-        0.0 < beta_d < bound_paper,
+        beta_d > 0.0 and against_bound(beta_d, bound_paper, strict=True) != OUTSIDE,  # at it up to rounding: the chain gives no decay bound
         'beta_d',
         f'0 < β_d < (2-k4) ρ2(P) = {bound_paper!r} required, got β_d = {beta_d!r}',
     )

@@ -13,6 +13,9 @@ precision     double precision resolves the initial slack: one ulp of x_i - x_j 
 alpha         α > 0 (Theorem 1)                                                         error
 beta          0 < β < β0 = ρ2(DD^T)/Δ0 (Theorem 1)                                       error;
               warning above 0.95 β0
+rounding      β, β1, k3 or β_d above its computed bound (β0, 4/(k2+sqrt(k1²+k2²)), the    warning
+              rates) by at most gains.ROUNDING_ULPS ulps of it: the bound's rounding, so the
+              gain is taken as equal to it and accepted (`gains.against_bound`)
 remark        β (or β1) above 4/(n(n-1)Δ) (Remark 3.2): agents cannot certify it alone  warning
 alpha_d       α_d > 0 (Theorem 2)                                                       error
 beta1         0 < β1 <= β0 (riccatti)                                                   error
@@ -47,7 +50,17 @@ import numpy as np
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS
 from formation_sim.model import theory
-from formation_sim.model.gains import k3_upper_bound, k4_value, riccati_holds, riccati_lhs
+from formation_sim.model.gains import (
+    OUTSIDE,
+    ROUNDING,
+    ROUNDING_ULPS,
+    against_bound,
+    k3_upper_bound,
+    k4_value,
+    riccati_holds,
+    riccati_lhs,
+    ulps_above,
+)
 from formation_sim.model.scenario import Scenario
 
 NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
@@ -175,6 +188,16 @@ def _apart(a: float, b: float) -> tuple[str, str]:
         if left != right or a == b:
             return left, right
     return repr(a), repr(b)  # pragma: no cover - 17 digits tell any two doubles apart
+
+
+def _rounding(out: _Collector, name: str, value: float, bound_name: str, bound: float) -> None:
+    """The warning for a gain accepted because it exceeds its computed bound by rounding only."""
+    out.warning(
+        'rounding', 'gains',
+        f'{name} = {value!r} is {ulps_above(value, bound)} ulp(s) above {bound_name} = {bound!r}, within '
+        f'the rounding margin of {ROUNDING_ULPS} ulps of a computed bound: taken as equal to it',
+        value=value, bound=bound, margin_ulps=ROUNDING_ULPS,
+    )
 
 
 def _edge(edge) -> str:
@@ -471,12 +494,15 @@ def _check_single(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         out.error('alpha', 'gains', f'α must be > 0, got α = {_g(alpha)}', alpha=alpha)
     if beta0 is None:
         return
-    if not 0.0 < beta < beta0:
+    state = against_bound(beta, beta0, strict=True)
+    if not beta > 0.0 or state == OUTSIDE:
         shown_beta, shown_beta0 = _apart(beta, beta0)
         out.error(
             'beta', 'gains', f'0 < β < β0 = {shown_beta0} required, got β = {shown_beta}',
             beta=beta, beta0=beta0,
         )
+    elif state == ROUNDING:
+        _rounding(out, 'β', beta, 'β0', beta0)
     elif beta > NEAR_EDGE_FRACTION * beta0:
         out.warning(
             'beta', 'gains',
@@ -495,10 +521,13 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         out.error('alpha_d', 'gains', f'α_d must be > 0, got α_d = {_g(gains.alpha_d)}',
                   alpha_d=gains.alpha_d)
     if beta0 is not None:
-        if not 0.0 < beta1 <= beta0:
+        state = against_bound(beta1, beta0, strict=False)
+        if not beta1 > 0.0 or state == OUTSIDE:
             shown_beta1, shown_beta0 = _apart(beta1, beta0)
             out.error('beta1', 'gains', f'0 < β1 <= β0 = {shown_beta0} required, got β1 = {shown_beta1}',
                       beta1=beta1, beta0=beta0)
+        elif state == ROUNDING:
+            _rounding(out, 'β1', beta1, 'β0', beta0)
         if beta1 > 0.0:
             _check_remark(scenario, out, 'β1', beta1)
 
@@ -527,7 +556,8 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         )
     upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
     k4 = k4_value(k1, k2, k3)
-    if not 0.0 < k3 < upper:
+    state = against_bound(k3, upper, strict=True)
+    if not k3 > 0.0 or state == OUTSIDE:
         shown_k3, shown_upper = _apart(k3, upper)
         out.error(
             'k3', 'gains',
@@ -536,7 +566,9 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             k3=k3, k3_upper_bound=upper, k4=k4,
         )
         return
-    if k3 > NEAR_EDGE_FRACTION * upper:
+    if state == ROUNDING:
+        _rounding(out, 'k3', k3, '4/(k2+sqrt(k1²+k2²))', upper)
+    elif k3 > NEAR_EDGE_FRACTION * upper:
         out.warning(
             'k3', 'gains',
             f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
@@ -550,7 +582,8 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         f'(2-k4)/λmax(P) = {_g(bound_corrected)} (what the proof supports)',
         k4=k4, beta_d_bound_paper=bound_paper, beta_d_bound_corrected=bound_corrected,
     )
-    if not 0.0 < beta_d < bound_paper:
+    state = against_bound(beta_d, bound_paper, strict=True)
+    if not beta_d > 0.0 or state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_paper)
         out.error(
             'beta_d', 'gains',
@@ -558,14 +591,19 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             beta_d=beta_d, bound=bound_paper,
         )
         return
-    if beta_d > NEAR_EDGE_FRACTION * bound_paper:
+    if state == ROUNDING:
+        _rounding(out, 'β_d', beta_d, '(2-k4) ρ2(P)', bound_paper)
+    elif beta_d > NEAR_EDGE_FRACTION * bound_paper:
         out.warning(
             'beta_d', 'gains',
             f'β_d = {_g(beta_d)} is {100.0 * beta_d / bound_paper:.1f} % of (2-k4) ρ2(P) = '
             f'{_g(bound_paper)}',
             beta_d=beta_d, bound=bound_paper,
         )
-    if not beta_d < bound_corrected:
+    state = against_bound(beta_d, bound_corrected, strict=True)
+    if state == ROUNDING:
+        _rounding(out, 'β_d', beta_d, '(2-k4)/λmax(P)', bound_corrected)
+    elif state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_corrected)
         out.warning(
             'beta_d_corrected', 'gains',

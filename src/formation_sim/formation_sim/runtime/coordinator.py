@@ -55,6 +55,7 @@ from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_st
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
+    COORDINATOR_NODE,
     REPORT_TOPIC,
     ROBOTS_TOPIC,
     SCENARIO_TOPIC,
@@ -141,7 +142,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
     )
 
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
-        super().__init__(node_name='formation_coordinator', scenario=scenario, parameter_overrides=parameter_overrides, context=context)
+        super().__init__(node_name=COORDINATOR_NODE, scenario=scenario, parameter_overrides=parameter_overrides, context=context)
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""

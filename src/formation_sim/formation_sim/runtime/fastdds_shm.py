@@ -23,6 +23,8 @@ import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from formation_msgs_py.middleware import domain_ports
+
 SHM_DIR = Path('/dev/shm')
 
 # fastrtps_<hex> or fastrtps_port<N>, with the lock file `_el` or the semaphore `sem.…_mutex`.
@@ -82,12 +84,8 @@ def mapped_by_anyone(paths: Iterable[str]) -> set[str]:
 
 def domain_port_files(domain_id: int) -> set[str]:
     """The port files of ROS domain `domain_id` (RTPS ports 7400 + 250 d + [0, 250)) in /dev/shm."""
-    first = 7400 + 250 * domain_id
-    return {
-        str(path)
-        for path in SHM_DIR.iterdir()
-        if (match := _PORT_FILE.match(path.name)) and first <= int(match[1]) < first + 250
-    }
+    ports = domain_ports(domain_id)
+    return {str(path) for path in SHM_DIR.iterdir() if (match := _PORT_FILE.match(path.name)) and int(match[1]) in ports}
 
 
 @contextlib.contextmanager

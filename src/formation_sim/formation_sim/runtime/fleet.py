@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, domain_id_ok
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.runtime.launch import LOG_DIR, LaunchPlan, RobotOptions, RunError
 from formation_sim.runtime.supervise import POLL_PERIOD, Supervisor
@@ -40,8 +41,8 @@ class RobotFleet:
         extra_env: dict[str, str] | None = None,
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-        if not 0 <= domain_id <= 232:
-            raise RunError(f'domain id must lie in [0, 232], got {domain_id}')
+        if not domain_id_ok(domain_id):
+            raise RunError(f'domain id must lie in [0, {DOMAIN_ID_MAX}], got {domain_id}')
         robots.check(self.scenario)
         self.out_dir = None if out_dir is None else Path(out_dir)
         self.force = force
@@ -55,7 +56,7 @@ class RobotFleet:
         self.extra_env = dict(extra_env or {})
         self.plan = LaunchPlan(
             scenario=self.scenario, backend=robots.model, out_dir=self.out_dir, horizon=self.scenario.horizon,
-            clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor='events',
+            clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor=DEFAULT_EXECUTOR,
             step_listeners=0, inject={}, robots=robots, localhost_only=localhost_only,
         )  # fmt: skip
         self.supervisor: Supervisor | None = None

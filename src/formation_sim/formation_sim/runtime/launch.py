@@ -34,6 +34,8 @@ from pathlib import Path
 
 import yaml
 
+from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
+from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, ROBOT_NODE, SIMULATOR_NODE
 from formation_sim.model.scenario import Scenario, dump_scenario
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
@@ -41,7 +43,7 @@ BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
 DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
 DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
 POSE_TYPES = ('odom', 'pose')
-DOMAIN_RANGE = (100, 232)  # ids whose Fast DDS ports all fit below 65536
+DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
@@ -293,7 +295,6 @@ class LaunchPlan:
 
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
-        from formation_agent.ros.node import NODE_NAME
         from formation_msgs_py.topics import agent_namespace
         from formation_sim.runtime.coordinator import COORDINATOR_FILE
         from formation_sim.runtime.sim_node import SIMULATOR_FILE, agent_parameters
@@ -306,7 +307,7 @@ class LaunchPlan:
         injected = {f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()}
         on_robots = self.robots.agent_parameters() if self.robots is not None else {}
         agents = {
-            f'{agent_namespace(i)}/{NODE_NAME}': {
+            f'{agent_namespace(i)}/{AGENT_NODE}': {
                 'ros__parameters': {
                     **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
                     **injected,
@@ -341,11 +342,10 @@ class LaunchPlan:
     def write_robot_inputs(self) -> Path:
         """robots.params.yaml: every simulated robot's parameters, keyed by its node name."""
         from formation_msgs_py.topics import agent_namespace
-        from formation_sim.runtime.robot_node import NODE_NAME
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
         robots = {
-            f'{agent_namespace(i)}/{NODE_NAME}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
+            f'{agent_namespace(i)}/{ROBOT_NODE}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
             for i in self.scenario.agent_ids
         }
         path = self.out_dir / ROBOTS_FILE
@@ -391,7 +391,7 @@ class LaunchPlan:
 
     @property
     def _keeper_node(self) -> str:
-        return '/formation_simulator' if self.backend == 'exact' else '/formation_coordinator'
+        return f'/{SIMULATOR_NODE}' if self.backend == 'exact' else f'/{COORDINATOR_NODE}'
 
     def keeper_parameters(self, scenario_file: Path) -> dict:
         """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`, `coordinator.COORDINATOR_PARAMETERS`)."""
@@ -467,12 +467,12 @@ def discovery_server_program() -> str:
 def free_udp_port(domain_id: int) -> int:
     """A UDP port free on this machine now, outside the RTPS ports of ROS domain `domain_id`
     (7400 + 250 d + [0, 250)), for the run's discovery server."""
-    first = 7400 + 250 * domain_id
+    ports = domain_ports(domain_id)
     while True:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             probe.bind(('127.0.0.1', 0))
             port = probe.getsockname()[1]
-        if not first <= port < first + 250:
+        if port not in ports:
             return port
 
 
@@ -493,14 +493,8 @@ def _write_yaml(path: Path, data: dict) -> None:
 # -- ROS domain -----------------------------------------------------------------------------------
 
 
-def _domain_ports(domain_id: int) -> tuple[int, int]:
-    """Fast DDS unicast ports of participant 0 in `domain_id` (RTPS port mapping)."""
-    base = 7400 + 250 * domain_id
-    return base + 10, base + 11
-
-
 def _ports_free(domain_id: int) -> bool:
-    for port in _domain_ports(domain_id):
+    for port in participant0_ports(domain_id):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
             try:
                 probe.bind(('', port))
@@ -519,8 +513,8 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:
-        if not 0 <= domain_id <= high:
-            raise RunError(f'domain id must lie in [0, {high}], got {domain_id}')
+        if not domain_id_ok(domain_id):
+            raise RunError(f'domain id must lie in [0, {DOMAIN_ID_MAX}], got {domain_id}')
         candidates = [domain_id]
     else:
         candidates = list(range(low, high + 1))

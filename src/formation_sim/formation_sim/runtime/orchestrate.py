@@ -41,6 +41,8 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
+from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
+from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, RECORDER_NODE, ROBOT_NODE, SIMULATOR_NODE, agent_namespace
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
 from formation_sim.sim.engine import EngineError, check_sample_dt
@@ -110,7 +112,7 @@ class FormationRun:
         sample_period: float = 0.01,
         timeout: float | None = None,
         clock: str | None = None,
-        executor: str = 'events',
+        executor: str = DEFAULT_EXECUTOR,
         stop_timeouts: tuple[float, float] = (5.0, 3.0),
         validate: bool = True,
         inject: dict[str, float] | None = None,
@@ -191,8 +193,6 @@ class FormationRun:
         self.backend = backend
         self.robots = robots
         self.clock = clock
-        from formation_agent.ros.process import EXECUTORS
-
         if executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
         self.executor = executor
@@ -362,14 +362,11 @@ class FormationRun:
 
     def _strangers(self, topics: dict[str, int], domain_id: int) -> str:
         """'; nodes outside the run wrote on them: …', as graph.json saw them."""
-        from formation_agent.ros.node import NODE_NAME
-        from formation_msgs_py.topics import agent_namespace
         from formation_sim.runtime.run_end import GRAPH_FILE
-        from formation_sim.runtime.robot_node import NODE_NAME as ROBOT_NODE_NAME
 
-        own = {'/formation_simulator', '/formation_coordinator', '/formation_recorder'}
+        own = {f'/{SIMULATOR_NODE}', f'/{COORDINATOR_NODE}', f'/{RECORDER_NODE}'}
         for i in self.scenario.agent_ids:
-            own |= {f'{agent_namespace(i)}/{NODE_NAME}', f'{agent_namespace(i)}/{ROBOT_NODE_NAME}'}
+            own |= {f'{agent_namespace(i)}/{AGENT_NODE}', f'{agent_namespace(i)}/{ROBOT_NODE}'}
         return strangers(topics, self.out_dir / GRAPH_FILE, own, domain_id)
 
     @contextlib.contextmanager

@@ -57,7 +57,7 @@ from formation_agent.ros.parameters import (
     read_parameters,
 )
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
-from formation_msgs_py.topics import RECORDER_TOPIC, STEP_TOPIC
+from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
 from formation_sim.bag.io import BagError, BagWriter, TopicSpecError, UnknownMessageTypeError, check_msgtype, jazzy_typestore
 from formation_sim.runtime.bag_qos import offered_qos
 
@@ -68,7 +68,7 @@ if TYPE_CHECKING:
     from rclpy.executors import Executor
 
 DEFAULT_CLOCK_TOPIC = STEP_TOPIC
-NODE_NAME = 'formation_recorder'
+NODE_NAME = RECORDER_NODE
 # /formation/step carries std_msgs/Float64MultiArray data = [version, step_index, time, flags, epoch, ...]
 # (formation_msgs_py.codec.encode_step); flags and epoch are optional for other clock topics.
 _STEP_INDEX = 1

@@ -41,6 +41,7 @@ from pathlib import Path
 
 from typing import TYPE_CHECKING
 
+from formation_msgs_py.topics import AGENT_NODE, RECORDER_NODE, SIMULATOR_NODE
 from formation_sim.bag.io import BagError, UnknownMessageTypeError, read_bag
 from formation_sim.runtime.bag_qos import replay_offer
 from formation_sim.runtime.recorder import import_message_class
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
     from rclpy.qos import QoSProfile
 
 CLOCK_TOPIC = '/clock'
-RUN_NODES = ('formation_simulator', 'formation_agent', 'formation_recorder')  # the nodes of a formation run
+RUN_NODES = (SIMULATOR_NODE, AGENT_NODE, RECORDER_NODE)  # the nodes of a formation run
 GRAPH_WAIT = 1.5  # seconds to discover a run already on the domain before publishing anything
 
 

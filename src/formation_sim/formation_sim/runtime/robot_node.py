@@ -58,6 +58,7 @@ from formation_agent.ros.parameters import (
 )
 from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor
 from formation_msgs_py.topics import (
+    ROBOT_NODE,
     agent_namespace,
     robot_command_topic,
     robot_odom_topic,
@@ -75,7 +76,7 @@ from formation_sim.sim.robots import (
     quaternion_from_yaw,
 )
 
-NODE_NAME = 'simulated_robot'
+NODE_NAME = ROBOT_NODE
 
 # A robot's topics keep ROS's default profile (reliable, volatile, keep last 10), what mobile bases
 # and motion-capture bridges use: a command stream supersedes itself, a late joiner wants no old

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
-from formation_msgs_py.qos import LIVELINESS_LEASE, LOST_GRACE
+from formation_msgs_py.middleware import LIVELINESS_LEASE, LOST_GRACE
 from formation_msgs_py.topics import trigger_info_topic
 from formation_sim.sim.summary import lateness_extra, saturation_extra
 

@@ -67,6 +67,7 @@ from formation_msgs_py.topics import (
     REPORT_TOPIC,
     SCENARIO_TOPIC,
     SENSING_LOG_TOPIC,
+    SIMULATOR_NODE,
     STATE_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
@@ -189,7 +190,7 @@ class FormationSimulatorNode(TimeKeeperNode):
     watched_writer = 'command'
 
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
-        super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name='formation_simulator')
+        super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name=SIMULATOR_NODE)
 
     PARAMETERS = SIMULATOR_PARAMETERS
     COMMAND = 'formation_sim'

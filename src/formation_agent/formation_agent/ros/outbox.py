@@ -1,0 +1,53 @@
+"""What an agent node publishes to the run besides commands: triggering information, Status and
+AgentReport, each counted (`formation_agent.ros.reporting.AgentCounts`), and their delivery
+before the node goes away.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.duration import Duration
+from std_msgs.msg import Float64MultiArray, String
+
+from formation_agent.ros.reporting import AgentCounts
+from formation_msgs_py.codec import encode_agent_report, encode_status
+from formation_msgs_py.lockstep import AgentReport, Status
+from formation_msgs_py.qos import PROTOCOL_QOS
+from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC
+
+
+class Outbox:
+    """The agent's writers of triggering information (one per neighbour), Status and report."""
+
+    def __init__(self, node, counts: AgentCounts, neighbour_ids) -> None:  # noqa: ANN001 - the agent node
+        self._node = node
+        self.counts = counts
+        self.info = {j: node.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS) for j in neighbour_ids}
+        self.status = node.create_publisher(Float64MultiArray, STATUS_TOPIC, PROTOCOL_QOS)
+        self.report = node.create_publisher(String, REPORT_TOPIC, PROTOCOL_QOS)
+
+    def publish(self, publisher, msg) -> None:  # noqa: ANN001
+        self._count(publisher)
+        publisher.publish(msg)
+
+    def _count(self, publisher) -> None:  # noqa: ANN001
+        """Count what a recorder must hold: everything from step 0 on, when it is matched for sure
+        (the simulator starts step 0 only once every agent has matched all its listeners)."""
+        self.counts.count_published(publisher.topic_name, started=self._node.step is not None)
+
+    def publish_status(self, status: Status) -> None:
+        self.publish(self.status, encode_status(status))
+
+    def publish_report(self, report: AgentReport) -> None:
+        self.counts.report_due = False
+        self.counts.final_sent = report.final
+        self._count(self.report)  # a report counts itself
+        self.report.publish(encode_agent_report(report))
+
+    def wait_for_delivery(self, deadline: float, *others) -> None:  # noqa: ANN002 - more publishers
+        """Let reliable writers hand over what they still hold before the node goes away (until
+        `deadline`, time.monotonic())."""
+        pending = [self.status, self.report, *others, *self.info.values()]
+        while pending and time.monotonic() < deadline:
+            pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]

@@ -1,0 +1,184 @@
+"""When an agent triggers, ROS-free: its triggering schedule in lock-step and on the wall clock.
+
+`TriggerSchedule` holds the agent's next triggering time t^i_{k+1} (the one its Status reports),
+the trigger in progress (its sensing asked for, not yet answered) and the last one.  In lock-step
+the simulator's Steps say when it is the agent's turn (`check_step`, exact floats); on the wall
+clock (`start`) a one-shot timer fires at epoch + t^i_{k+1} (`arm`), through the node's timers
+(`Timers`: any object that arms and cancels one-shot callbacks).  Information that arrives for an
+instant the agent is due at waits for its own trigger (`holds`; docs/DESIGN.md, "Time and
+exactness"); wall-clock information that crossed the agent's own later trigger is re-anchored at
+it (`rebased`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+from formation_msgs_py.lockstep import Step
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+
+class AgentNodeError(ValueError):
+    """A violation of the lock-step protocol seen by an agent."""
+
+
+class Timers(Protocol):
+    """One-shot callbacks, as a node's timers give them (`arm` returns a handle for `cancel`)."""
+
+    def arm(self, delay: float, callback: Callable[[], None]) -> object: ...
+
+    def cancel(self, handle: object) -> None: ...
+
+
+class TriggerSchedule:
+    """An agent's triggering times: t^i_{k+1} to come, the trigger in progress, the last one."""
+
+    def __init__(self, *, agent_id: int, timers: Timers, clock: Callable[[], float] = time.time) -> None:
+        self.agent_id = agent_id
+        self._timers = timers
+        self._clock = clock  # Unix time (the wall clock's epoch is one)
+        self.next_time = 0.0  # t^i_1 = 0
+        self.last_trigger = -math.inf
+        self.planned = 0.0  # the time the trigger in progress (or the last one) was planned for
+        self.sensing = False  # a sensing request is in flight
+        self.epoch: float | None = None  # wall clock: Unix time of t = 0
+        self.stopped = False  # no trigger ever again
+        self.heard: dict[int, float] = {}  # sender -> stamp of its last accepted information
+        self.due_neighbours: tuple[int, ...] = ()  # lock-step: neighbours due at the current step
+        self._timer = None
+        self._armed = 0  # the arming the live timer belongs to
+
+    @property
+    def wall_clock(self) -> bool:
+        return self.epoch is not None
+
+    def start(self, epoch: float) -> None:
+        """On the wall clock from `epoch` (Unix time of t = 0) on."""
+        self.epoch = epoch
+
+    # -- lock-step ------------------------------------------------------------------------------
+
+    def check_step(self, step: Step) -> bool:
+        """Whether lock-step `step` is this agent's turn; AgentNodeError if the simulator skipped
+        the agent's triggering time or lists it wrongly."""
+        if step.time > self.next_time:
+            raise AgentNodeError(
+                f'agent {self.agent_id}: step {step.index} at t={step.time!r} skips its triggering time '
+                f'{self.next_time!r}'
+            )
+        due = step.time == self.next_time  # the exact float this agent reported
+        if due != (self.agent_id in step.due):
+            raise AgentNodeError(
+                f'agent {self.agent_id}: step {step.index} at t={step.time!r} lists due agents {list(step.due)}, '
+                f'but this agent reported its next triggering time {self.next_time!r}'
+            )
+        return due
+
+    def complete_at(self, step: Step) -> bool:
+        """Lock-step: the agent has all it will get at `step` — its own trigger if it is due, and
+        the information of every neighbour the Step lists as due (which may arrive before the
+        Step itself); information stamped at a later step waits for that Step."""
+        if self.sensing or (step.time == self.next_time and self.last_trigger < step.time):
+            return False  # due: its own trigger comes first
+        if any(self.heard.get(j) != step.time for j in self.due_neighbours):
+            return False
+        return all(stamp <= step.time for stamp in self.heard.values())
+
+    def holds(self, stamp: float) -> bool:
+        """Whether information stamped `stamp` must wait for this agent's own trigger: one is in
+        flight, or (lock-step) the agent triggers at that instant itself — its own sensing comes
+        first, then the neighbours' information."""
+        due = self.epoch is None and self.next_time > self.last_trigger  # not yet triggered at
+        return self.sensing or (due and stamp >= self.next_time)
+
+    # -- triggers -------------------------------------------------------------------------------
+
+    def begin(self) -> bool:
+        """Start a trigger (its sensing is asked for next): False while one is in flight or once
+        the agent stopped."""
+        self.cancel()
+        if self.sensing or self.stopped:
+            return False
+        self.sensing = True
+        self.planned = self.next_time
+        return True
+
+    def triggered(self, t: float) -> None:
+        """The trigger in progress happened at t."""
+        self.sensing = False
+        self.last_trigger = t
+
+    def abandon(self) -> None:
+        """The trigger in progress is dropped (the agent finished while sensing)."""
+        self.sensing = False
+
+    def stop(self) -> None:
+        """No trigger from now on (a timer already queued finds the schedule stopped)."""
+        self.stopped = True
+        self.cancel()
+
+    # -- the wall clock -------------------------------------------------------------------------
+
+    def delay(self) -> float | None:
+        """Wall clock: seconds until t^i_{k+1} (≤ 0: past due); None if none is planned."""
+        if self.stopped or self.epoch is None or not math.isfinite(self.next_time):
+            return None
+        return self.epoch + self.next_time - self._clock()
+
+    def arm(self, fire: Callable[[], None], delay: float) -> None:
+        """`fire` in `delay` seconds (once), replacing any trigger armed before."""
+        self.cancel()
+        self._armed += 1
+        armed = self._armed
+        self._timer = self._timers.arm(delay, lambda: self._fire(armed, fire))
+
+    def _fire(self, armed: int, fire: Callable[[], None]) -> None:
+        if armed != self._armed or self._timer is None:
+            return  # cancelled after its callback was queued
+        self.cancel()
+        fire()
+
+    def cancel(self) -> None:
+        if self._timer is not None:
+            handle, self._timer = self._timer, None
+            self._timers.cancel(handle)
+
+
+def refuse_lock_step(step: Step, *, config, loss: float) -> None:  # noqa: ANN001 - an AgentConfig
+    """AgentNodeError if this agent cannot run lock-step `step`: robots run on the wall clock
+    only, and lock-step counts every message (one dropped on purpose would stall the run)."""
+    if config.wall_clock_only:
+        raise AgentNodeError(
+            f'agent {config.agent_id}: sensing: {config.sensing} with robot: {config.robot} runs on the '
+            f'wall clock (Step 0 flagged realtime), but step {step.index} is lock-step'
+        )
+    if loss > 0.0:
+        raise AgentNodeError(
+            f'agent {config.agent_id}: inject_loss={loss!r} needs wall-clock mode '
+            '(lock-step waits for every message sent; a dropped one stalls the run)'
+        )
+
+
+def rebased(info: TriggerInfo, *, sensed: SensedState, at: float) -> TriggerInfo:
+    """Late information re-anchored at the receiver's own last trigger `at`, where it sensed `sensed`.
+
+    The neighbour's new input has acted since info.stamp, but what it did is already in what
+    this agent sensed at its trigger (exact); from then on both inputs are constant. So the
+    edge is anchored at the trigger with the sensed relative state and the neighbour's new
+    input, which is exactly what a prediction from that instant needs.
+    """
+    j = info.sender
+    rel_velocity = None
+    if sensed.rel_velocities is not None:
+        rel_velocity = tuple(-v for v in sensed.rel_velocities[j])
+    return TriggerInfo(
+        sender=j,
+        receiver=sensed.agent,
+        stamp=at,
+        control=info.control,
+        rel_position=tuple(-v for v in sensed.rel_positions[j]),  # x_j - x_i, exact negation
+        rel_velocity=rel_velocity,
+    )

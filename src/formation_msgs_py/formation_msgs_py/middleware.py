@@ -1,0 +1,64 @@
+"""What every ROS process of a run agrees on besides its messages (ROS-free): the ROS domain ids a
+run may use, the ports Fast DDS takes in a domain, the rclpy executors a node process spins, and
+the liveliness lease and graces of the protocol (its QoS profiles: formation_msgs_py.qos).
+
+The one place these are spelled: the `formation` command (ROS-free) checks its arguments against
+them, the runtime (rclpy) reserves domains and cleans shared memory with them, the node processes
+pick their executor by these names.
+"""
+
+from __future__ import annotations
+
+# ROS_DOMAIN_ID: Fast DDS maps domain d to the UDP ports RTPS_PORT_BASE + RTPS_DOMAIN_GAIN d + …;
+# 232 is the ROS 2 documentation's largest id on Linux (there, participant p's unicast ports
+# 7400 + 250 d + 10 + 2p (+1) stay below 65536 for p <= 62).
+DOMAIN_ID_MAX = 232
+RTPS_PORT_BASE = 7400
+RTPS_DOMAIN_GAIN = 250  # ports of one domain: [base + gain d, base + gain (d + 1))
+UNICAST_OFFSET = 10  # participant 0's unicast discovery port: base + gain d + 10 (metatraffic), + 11 (user)
+
+EXECUTORS = ('events', 'single')
+"""Executors a node process can spin: rclpy's EventsExecutor (default) or SingleThreadedExecutor."""
+DEFAULT_EXECUTOR = EXECUTORS[0]
+
+
+def domain_id_ok(domain_id: int) -> bool:
+    """Whether `domain_id` is a ROS_DOMAIN_ID a run may use: 0 <= d <= DOMAIN_ID_MAX."""
+    return 0 <= domain_id <= DOMAIN_ID_MAX
+
+
+def domain_ports(domain_id: int) -> range:
+    """The RTPS ports of ROS domain `domain_id` (7400 + 250 d + [0, 250)) under Fast DDS' port mapping."""
+    first = RTPS_PORT_BASE + RTPS_DOMAIN_GAIN * domain_id
+    return range(first, first + RTPS_DOMAIN_GAIN)
+
+
+def participant0_ports(domain_id: int) -> tuple[int, int]:
+    """The unicast ports (metatraffic, user) of participant 0 in `domain_id`: free when no run uses it."""
+    first = domain_ports(domain_id).start + UNICAST_OFFSET
+    return first, first + 1
+
+
+# -- liveliness (formation_msgs_py.qos builds the profiles with these) ------------------------------
+
+LIVELINESS_LEASE = 1.0
+"""Seconds without a sign of life after which DDS declares a writer of the protocol lost.
+
+Liveliness is asserted by DDS itself (AUTOMATIC), not by Python code, so a busy agent stays alive
+and only a dead process, or a network that no longer reaches it, is declared lost.  Every node of
+a run must use the same lease: a reader asking for a shorter lease than its writer offers does
+not match it.
+"""
+
+LOST_GRACE = 0.5
+"""Seconds a node waits after a peer is declared lost before acting, so that what the peer sent
+before it left (already delivered, not yet taken) is handled first."""
+
+KEEPER_LEASE_GRACE = 3.0
+"""Seconds a lock-step agent waits after its time keeper's lease lapsed (its writer still in the
+graph) before leaving. Nothing moves while the keeper is silent, and a keeper that is briefly
+unable to assert its liveliness must be left the time to end the run itself: after a SIGKILLed
+agent, Fast DDS's shared-memory port health check stalled the keeper's writers for ~1.4 s here,
+its neighbours left too, and the run reported them lost along with the dead one. Longer than the
+keeper's own LIVELINESS_LEASE + LOST_GRACE toward a lost agent; on the wall clock (robots) an
+agent keeps LOST_GRACE, since there its robot would go on moving."""

@@ -1,0 +1,41 @@
+"""An agent's counts, Status and AgentReport without a node."""
+
+from __future__ import annotations
+
+import math
+
+from formation_agent.ros.reporting import AgentCounts
+from formation_msgs_py.codec import decode_agent_report, decode_status, encode_agent_report, encode_status
+from formation_msgs_py.lockstep import DISCOVERY_STEP
+
+
+def test_a_status_tells_the_next_time_only_once_it_is_defined_and_round_trips():
+    counts = AgentCounts(agent_id=3)
+    counts.triggered(0.0)
+    counts.commands_sent += 1
+    counts.info_sent += 2
+    counts.received(late=False)
+    counts.status_due = True
+    waiting = counts.status(step_index=4, ready=False, next_time=0.75, planned=0.0)
+    assert waiting.next_time == math.inf and not counts.status_due
+    ready = counts.status(step_index=4, ready=True, next_time=0.75, planned=0.5)
+    assert (ready.next_time, ready.last_planned, ready.triggers, ready.commands_sent, ready.info_sent, ready.info_received) == (
+        0.75, 0.5, 1, 1, 2, 1,
+    )  # fmt: skip
+    assert decode_status(encode_status(ready)) == ready
+    assert counts.status(step_index=DISCOVERY_STEP, ready=False, next_time=0.0, planned=0.0).next_time == 0.0
+
+
+def test_the_report_counts_what_was_published_from_step_0_on_and_itself():
+    counts = AgentCounts(agent_id=3)
+    counts.count_published('/formation/status', started=False)  # discovery: a recorder may not be there yet
+    counts.count_published('/formation/status', started=True)
+    counts.received(late=True)
+    assert counts.report_due and counts.late_infos == 1
+    report = counts.report(
+        final=True, failure='agent 3: stopped', rejected={'sender': 2}, dropped=1, delayed=0, robot_commands=0,
+        saturation={}, plant=('/agent_3/cmd_vel', 4),
+    )  # fmt: skip
+    assert report.published == {'/formation/status': 1, '/agent_3/cmd_vel': 4}
+    assert (report.late, report.failure, report.rejected, report.final) == (1, 'agent 3: stopped', {'sender': 2}, True)
+    assert decode_agent_report(encode_agent_report(report)) == report

@@ -1,0 +1,126 @@
+"""The trigger schedule without a node: lock-step turns, information held for the agent's own
+trigger, the wall clock's one-shot timers (cancelled ones never fire), late information re-based."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from formation_agent.ros.stepping import AgentNodeError, TriggerSchedule, rebased
+from formation_msgs_py.lockstep import Step
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+
+class FakeTimers:
+    """One-shot timers run by hand: `due()` lists the callbacks whose time has come, as an executor
+    would queue them; a cancelled timer's callback may still be queued (EventsExecutor)."""
+
+    def __init__(self, clock) -> None:
+        self.clock = clock
+        self.live: dict[int, tuple[float, object]] = {}
+        self._next = 0
+
+    def arm(self, delay, callback):
+        self._next += 1
+        self.live[self._next] = (self.clock.now + delay, callback)
+        return self._next
+
+    def cancel(self, handle) -> None:
+        del self.live[handle]
+
+    def due(self) -> list:
+        return [callback for at, callback in sorted(self.live.values(), key=lambda entry: entry[0]) if at <= self.clock.now]
+
+
+class Clock:
+    def __init__(self, now: float = 1000.0) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def clock():
+    return Clock()
+
+
+@pytest.fixture
+def schedule(clock):
+    return TriggerSchedule(agent_id=2, timers=FakeTimers(clock), clock=clock)
+
+
+def test_a_lock_step_turn_is_the_exact_float_the_agent_reported(schedule):
+    schedule.next_time = 0.1 + 0.2
+    assert schedule.check_step(Step(index=3, time=0.1 + 0.2, due=(1, 2)))
+    assert not schedule.check_step(Step(index=3, time=0.25, due=(1,)))
+    with pytest.raises(AgentNodeError, match=r'agent 2: step 4 at t=0.4 skips its triggering time 0.30000000000000004'):
+        schedule.check_step(Step(index=4, time=0.4, due=(2,)))
+    with pytest.raises(AgentNodeError, match=r'step 4 at t=0.3 lists due agents \[2\], but this agent reported'):
+        schedule.check_step(Step(index=4, time=0.3, due=(2,)))  # one ulp before its time
+    with pytest.raises(AgentNodeError, match=r'lists due agents \[1\], but this agent reported its next triggering time 0.30000000000000004'):
+        schedule.check_step(Step(index=4, time=0.1 + 0.2, due=(1,)))
+
+
+def test_information_for_the_instant_the_agent_is_due_waits_for_its_own_trigger(schedule):
+    schedule.next_time = 0.5
+    assert schedule.holds(0.5) and schedule.holds(0.7) and not schedule.holds(0.25)
+    assert schedule.begin() and schedule.sensing and schedule.planned == 0.5
+    assert not schedule.begin(), 'one trigger at a time'
+    assert schedule.holds(0.25), 'while sensing everything waits'
+    schedule.triggered(0.5)
+    assert not schedule.holds(0.5) and schedule.last_trigger == 0.5
+    schedule.start(epoch=1000.0)
+    schedule.next_time = 2.0
+    assert not schedule.holds(2.0), 'the wall clock holds information only while sensing'
+
+
+def test_a_lock_step_status_waits_for_the_own_trigger_and_every_due_neighbour(schedule):
+    schedule.next_time = 1.0
+    step = Step(index=5, time=1.0, due=(2, 3))
+    schedule.due_neighbours = (3,)
+    assert not schedule.complete_at(step), 'due: its own trigger first'
+    schedule.begin()
+    schedule.triggered(1.0)
+    schedule.next_time = 1.5
+    assert not schedule.complete_at(step), "neighbour 3's information is missing"
+    schedule.heard[3] = 1.0
+    assert schedule.complete_at(step)
+    schedule.heard[4] = 1.25
+    assert not schedule.complete_at(step), 'information of a later step waits for that step'
+
+
+def test_a_stopped_schedule_never_triggers_again(schedule, clock):
+    schedule.start(epoch=clock.now)
+    fired = []
+    schedule.arm(lambda: fired.append(clock.now), 0.0)
+    queued = schedule._timers.due()
+    schedule.stop()
+    for callback in queued:  # the executor's last spin
+        callback()
+    assert fired == [] and not schedule.begin() and schedule.delay() is None
+
+
+def test_a_timer_cancelled_after_its_callback_was_queued_does_not_fire(schedule, clock):
+    schedule.start(epoch=clock.now)
+    fired = []
+    schedule.next_time = 0.5
+    schedule.arm(lambda: fired.append('first'), schedule.delay())
+    clock.now += 0.5
+    queued = schedule._timers.due()
+    schedule.next_time = math.inf  # a re-plan: no trigger before the horizon
+    schedule.cancel()
+    assert schedule.delay() is None
+    for callback in queued:
+        callback()
+    assert fired == []
+
+
+def test_late_information_is_re_anchored_at_the_own_trigger_by_exact_negation():
+    sensed = SensedState(agent=1, stamp=2.5, rel_positions={3: (0.1, -0.30000000000000004)},
+                         rel_velocities={3: (1e-17, 0.0)}, velocity=(0.0, 0.0))  # fmt: skip
+    info = TriggerInfo(sender=3, receiver=1, stamp=2.0, control=(0.5, 0.25), rel_position=(9.0, 9.0), rel_velocity=(9.0, 9.0))
+    late = rebased(info, sensed=sensed, at=2.5)
+    assert late == TriggerInfo(sender=3, receiver=1, stamp=2.5, control=(0.5, 0.25), rel_position=(-0.1, 0.30000000000000004),
+                               rel_velocity=(-1e-17, -0.0))  # fmt: skip
