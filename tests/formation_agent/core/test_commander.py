@@ -83,9 +83,9 @@ def test_eta1_commands_are_the_agents_and_eta2_follows_its_reference():
 @pytest.mark.parametrize(
     ('options', 'complaint'),
     [
-        ({'drive': 'tank', 'dimension': 2}, "drive must be one of ('holonomic', 'unicycle'), got 'tank'"),
-        ({'drive': 'unicycle', 'dimension': 3, 'distance': 0.1}, 'needs dimension 2 and a distance l > 0, got dimension 3'),
-        ({'drive': 'unicycle', 'dimension': 2}, 'got dimension 2 and l = 0.0'),
+        ({'drive': 'tank', 'dimension': 2}, "drive must be one of ('holonomic', 'unicycle'"),
+        ({'drive': 'unicycle', 'dimension': 3, 'distance': 0.1}, 'a unicycle moves in the plane: dimension p must be 2, got 3'),
+        ({'drive': 'unicycle', 'dimension': 2}, 'control_point_distance l must be > 0, got 0.0'),
     ],
 )
 def test_a_commander_that_cannot_drive_is_refused(options, complaint):

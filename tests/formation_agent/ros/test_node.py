@@ -39,7 +39,7 @@ def make_node(ros, **changes):
 def test_good_parameters_give_the_agent_its_neighbours(ros):
     node = make_node(ros)
     assert node.config.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
-    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0}
+    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0, 'speed_scale': 1.0, 'threshold_floor': 0.0}  # the paper's
 
 
 @pytest.mark.parametrize(
@@ -58,6 +58,9 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         ({'inject_loss': 1.5}, "parameter 'inject_loss' (double)"),  # rclpy's own range check, [0, 1]
         ({'inject_delay_ms': -1.0}, "parameter 'inject_delay_ms' (double) must be >= 0, got -1.0"),
         ({'inject_jitter_ms': float('nan')}, "parameter 'inject_jitter_ms' (double) must be >= 0, got nan"),
+        ({'speed_scale': 0.0}, "parameter 'speed_scale' (double)"),
+        ({'speed_scale': float('nan')}, "parameter 'speed_scale' (double)"),
+        ({'threshold_floor': float('nan')}, "parameter 'threshold_floor' (double) must be >= 0, got nan"),
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
@@ -84,8 +87,8 @@ def test_every_missing_parameter_is_named_at_once(ros):
     [
         ({'robot': 'holonomic'}, 'robot: holonomic needs sensing: poses'),
         ({'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.1, 'dimension': 3,
-          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle drives in the plane: dimension must be 2, got 3'),
-        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle needs control_point_distance l > 0'),
+          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3'),
+        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0'),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
         ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),

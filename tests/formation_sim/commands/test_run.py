@@ -18,6 +18,10 @@ BAD_RUN_ARGUMENTS = [
     (['--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
     (['--timeout', 'soon'], "argument --timeout: must be a finite number > 0, got 'soon'"),
     (['--sample-dt', '1e-9'], 'the sample spacing 1e-09 s asks for 1e+10 samples'),
+    (['--speed-scale', '0'], 'argument --speed-scale: must be a finite number > 0, got 0.0'),
+    (['--speed-scale', 'inf'], 'argument --speed-scale: must be a finite number > 0, got inf'),
+    (['--speed-scale', '1e-9'], 'gains.speed_scale: must lie in [1e-06, 1e+06]'),
+    (['--threshold-floor', '-0.1'], 'argument --threshold-floor: must be a finite number >= 0, got -0.1'),
 ]
 
 

@@ -151,7 +151,7 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
         (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'external'), got 'mujoco'"),
         (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
-        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance l must be > 0, got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
     ],
 )
@@ -170,7 +170,7 @@ def test_unicycles_need_a_planar_scenario(tmp_path, paper_scenario_dict):
         edge['d'] = [*edge['d'], 0.0]
     path = tmp_path / 'space.yaml'
     path.write_text(yaml.safe_dump(data))
-    with pytest.raises(RunError, match='unicycles move in the plane: the scenario must have p = 2, got p = 3'):
+    with pytest.raises(RunError, match='a unicycle moves in the plane: dimension p must be 2, got 3'):
         FormationRun(path, out_dir=tmp_path / 'run', backend='unicycle')
     assert FormationRun(path, out_dir=tmp_path / 'run', backend='holonomic').plan.robots.model == 'holonomic'
 

@@ -82,9 +82,9 @@ def test_limits_clip_commands_as_a_base_does_and_count_them():
 def test_a_unicycle_is_placed_by_its_control_point():
     robot = make_robot('unicycle', scenario_position=[1.0, 1.0], yaw=math.pi / 2, control_point_distance=0.1, limits=Limits())
     assert np.allclose(robot.position, [1.0, 0.9])
-    assert np.allclose(robot.scenario_position(0.1), [1.0, 1.0])
+    assert np.allclose(robot.scenario_position(), [1.0, 1.0])
     assert np.allclose(axle_position(control_point([0.4, -0.3], 2.0, 0.25), 2.0, 0.25), [0.4, -0.3])
-    with pytest.raises(RobotError, match='plane'):
+    with pytest.raises(RobotError, match='a unicycle moves in the plane: dimension p must be 2, got 3'):
         make_robot('unicycle', scenario_position=[1.0, 1.0, 0.0], yaw=0.0, control_point_distance=0.1, limits=Limits())
 
 

@@ -6,8 +6,9 @@
 - `crossing`: the certified search for the first t with ||e_i(t)|| = α e^{-βt}.
 - `tension`: ω_ij and its derivatives (the edge-tension weights); `closed_form`: the ETA-2
   closed-loop motion without cancellation.
-- On robots (README, "Running on robots"): `kinematics` (control points, the unicycle's
-  diffeomorphism), `pose_sensing` (`PoseBook`: SensedState from poses, stale poses refused),
+- On robots (README, "Running on robots"): `kinds` (the registry of robot kinds: each kind's
+  control point, command adapter, message type, limits and simulated model), `limits` (`Limits`,
+  saturation counts), `kinematics` (control points, the unicycle's diffeomorphism), `pose_sensing` (`PoseBook`: SensedState from poses, stale poses refused),
   `velocity_reference` (ETA-2's q_i(t) for velocity-commanded robots), `commander`
   (`RobotCommander`: velocity commands within a robot's `Limits`, clips counted).
 """
@@ -23,4 +24,5 @@ __all__ = lazy_exports(globals(), {
     'pose_sensing': ('PoseBook', 'PoseError'),
     'velocity_reference': ('VelocityReference',),
     'commander': ('Limits', 'RobotCommander', 'SaturationLog'),
+    'kinds': ('KIND_NAMES', 'RobotKind', 'register', 'robot_kind'),
 })  # fmt: skip

@@ -2,93 +2,36 @@
 
 The agent's command is the velocity its control point should have: u_i (ETA-1, eq. uxsingle),
 or for ETA-2 the velocity reference q_i(t) driven by u^d_i (`velocity_reference`).  A holonomic
-robot takes it as is (a world-frame velocity); a differential-drive robot gets (v, ω) from the
+robot's kind (`formation_agent.core.kinds`) turns it into the robot's command: a holonomic robot
+takes it as is (a world-frame velocity); a differential-drive robot gets (v, ω) from the
 diffeomorphism of `kinematics`.
 
 Limits (README, "Running on robots"): the theorems assume none, so every clip is counted per kind
 (`formation_msgs_py.lockstep.SATURATION_KINDS`) with the largest value asked for, and reported.
 
-- Speed of a holonomic robot: the velocity is scaled down to `linear_speed`, keeping its direction.
-- Differential drive: (v, ω) are scaled down by one common factor until |v| <= `linear_speed`
-  and |ω| <= `angular_speed`.  Both are linear in u, so this is the command for a scaled-down u:
-  the control point keeps its direction of travel and only slows down (clipping v and ω apart
-  would turn it off course).
+- Speed and turn rate: the kind's adapter (`formation_agent.core.limits`): a holonomic velocity is
+  scaled down to `linear_speed` keeping its direction; a differential drive's (v, ω) by one
+  common factor until |v| <= `linear_speed` and |ω| <= `angular_speed`.  Both are linear in u,
+  so this is the command for a scaled-down u: the control point keeps its direction of travel and
+  only slows down (clipping v and ω apart would turn it off course).
 - Acceleration (ETA-2): the velocity reference's acceleration is held to `linear_acceleration`
   (`velocity_reference`); counted once per trigger from which it acts.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
-from formation_agent.core.kinematics import unicycle_velocity
+from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, robot_kind
+from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity, limit_world_velocity
 from formation_agent.core.velocity_reference import VelocityReference
-from formation_msgs_py.lockstep import (
-    SATURATION_ANGULAR_SPEED,
-    SATURATION_LINEAR_ACCELERATION,
-    SATURATION_LINEAR_SPEED,
-    Saturation,
-)
+from formation_msgs_py.lockstep import SATURATION_LINEAR_ACCELERATION
 
-DRIVES = ('holonomic', 'unicycle')
+__all__ = ['DRIVES', 'Limits', 'RobotCommander', 'SaturationLog', 'limit_body_velocity', 'limit_world_velocity']
 
-
-@dataclass(frozen=True, kw_only=True)
-class Limits:
-    """A robot's limits; inf: none."""
-
-    linear_speed: float = math.inf  # m/s
-    angular_speed: float = math.inf  # rad/s (differential drive)
-    linear_acceleration: float = math.inf  # m/s² (ETA-2's velocity reference)
-
-    def __post_init__(self) -> None:
-        for name in ('linear_speed', 'angular_speed', 'linear_acceleration'):
-            value = getattr(self, name)
-            if not value > 0.0:  # also refuses NaN
-                raise ValueError(f'limit {name} must be > 0 (inf: none), got {value!r}')
-
-
-class SaturationLog:
-    """Clipped commands per kind: how many, the largest value asked for, the limit."""
-
-    def __init__(self) -> None:
-        self._records: dict[str, Saturation] = {}
-
-    def note(self, kind: str, requested: float, allowed: float) -> None:
-        previous = self._records.get(kind)
-        count = 1 if previous is None else previous.count + 1
-        largest = requested if previous is None else max(previous.largest_requested, requested)
-        self._records[kind] = Saturation(count=count, largest_requested=float(largest), allowed=float(allowed))
-
-    @property
-    def records(self) -> dict[str, Saturation]:
-        return dict(self._records)
-
-
-def limit_world_velocity(u: Sequence[float], limits: Limits, log: SaturationLog) -> np.ndarray:
-    """u scaled down to the speed limit (direction kept); a clip is noted in `log`."""
-    u = np.asarray(u, dtype=float)
-    speed = float(np.linalg.norm(u))
-    if speed > limits.linear_speed:
-        log.note(SATURATION_LINEAR_SPEED, speed, limits.linear_speed)
-        return u * (limits.linear_speed / speed)
-    return u
-
-
-def limit_body_velocity(v: float, omega: float, limits: Limits, log: SaturationLog) -> tuple[float, float]:
-    """(v, ω) scaled down by one factor to both limits (README: the control point keeps its course)."""
-    scale = 1.0
-    if abs(v) > limits.linear_speed:
-        log.note(SATURATION_LINEAR_SPEED, abs(v), limits.linear_speed)
-        scale = limits.linear_speed / abs(v)
-    if abs(omega) > limits.angular_speed:
-        log.note(SATURATION_ANGULAR_SPEED, abs(omega), limits.angular_speed)
-        scale = min(scale, limits.angular_speed / abs(omega))
-    return v * scale, omega * scale
+DRIVES = KIND_NAMES  # the registered robot kinds (formation_agent.core.kinds), read at each use
 
 
 class RobotCommander:
@@ -102,15 +45,16 @@ class RobotCommander:
     """
 
     def __init__(
-        self, *, drive: str, dimension: int, limits: Limits, distance: float = 0.0, k3: float | None = None
+        self, *, drive: str, dimension: int, limits: Limits, distance: float = 0.0, wheelbase: float = 0.0,
+        k3: float | None = None,
     ) -> None:
         if drive not in DRIVES:
-            raise ValueError(f'drive must be one of {DRIVES}, got {drive!r}')
-        if drive == 'unicycle' and (dimension != 2 or not distance > 0.0):
-            raise ValueError(
-                f'a unicycle drives in the plane about a control point ahead of its axle: it needs dimension 2 '
-                f'and a distance l > 0, got dimension {dimension} and l = {distance!r}'
-            )
+            raise KindError(f'drive must be one of {DRIVES}, got {drive!r}')
+        self.kind = robot_kind(drive)
+        self.geometry = Geometry(control_point_distance=float(distance), wheelbase=float(wheelbase))
+        problems = self.kind.problems(dimension=dimension, geometry=self.geometry, limits=limits)
+        if problems:
+            raise KindError('; '.join(problems))
         self.drive = drive
         self.dimension = dimension
         self.limits = limits
@@ -148,12 +92,8 @@ class RobotCommander:
         return self._desired
 
     def command(self, t: float, heading: float | None = None) -> tuple[float, ...]:
-        """The robot's command at t: (u_1..u_p) world frame (holonomic) or (v, ω) (unicycle)."""
+        """The robot's command at t by its kind's adapter: (u_1..u_p) in the world frame (holonomic)
+        or (v, ω) from the robot's heading (unicycle)."""
         u = self.desired(t)
         self.commands += 1
-        if self.drive == 'holonomic':
-            return tuple(float(c) for c in limit_world_velocity(u, self.limits, self.saturation))
-        if heading is None:
-            raise ValueError('a unicycle command needs the robot heading')
-        v, omega = unicycle_velocity(u, heading, self.distance)
-        return limit_body_velocity(v, omega, self.limits, self.saturation)
+        return self.kind.command(u, heading=heading, geometry=self.geometry, limits=self.limits, log=self.saturation)

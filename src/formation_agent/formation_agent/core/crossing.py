@@ -1,11 +1,14 @@
-"""Certified search for the first time ||e(t)|| reaches α e^{-βt}.
+"""Certified search for the first time ||e(t)|| reaches the threshold θ(t) = c0 + α e^{-βt}.
 
 Step 4 of ETA-1 (step 5 of ETA-2) asks for the *smallest* solution of ||e_i(t)|| = α e^{-βt}.
 Between events e_i(t) is a closed-form function of t, so instead of sampling it on a grid (which
 can step over an early crossing) we walk forward in steps that are proven crossing-free:
 
-With S = e^{βa}/α, the normalised margin φ(t) = e^{-2β(t-a)} - S²||e(t)||² is positive exactly
-while ||e(t)|| < α e^{-βt}. Given bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|| on [a, a+H]:
+With S = 1/θ(a) and r(t) = θ(t)/θ(a) = w + (1 - w) e^{-β(t-a)}, w = c0 S (the floor's share
+of the threshold at a; w = 0 for the paper's threshold, c0 = 0, where S = e^{βa}/α), the
+normalised margin φ(t) = r(t)² - S²||e(t)||² is positive exactly while ||e(t)|| < θ(t). On t >= a,
+0 < r <= 1, |r'| <= (1-w)β and r'' >= 0, so (r²)' lies in [-2β, 0] and (r²)'' in [0, 4β²]. Given
+bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|| on [a, a+H]:
 
     φ''(t) >= -M,  M = 2 S² (E1² + E E2)       so  φ(a+h) >= φ(a) + φ'(a) h - M h²/2,
     |φ'(t)| <= L,  L = 2β + 2 S² E E1           so  φ(a+h) >= φ(a) - L h.
@@ -99,14 +102,14 @@ _RTOL = 4.0 * 2.0**-52  # 4 ulps relative
 
 
 class CrossingSearch:
-    """The certified search for the smallest t >= start with ||e(t)|| >= α e^{-βt}, resumable.
+    """The certified search for the smallest t >= start with ||e(t)|| >= c0 + α e^{-βt}, resumable.
 
     `frontier` is the next point the search will examine; no crossing lies in [start, frontier).
     `result` is None until the search is done, then the crossing time (inf: none up to `limit`).
     """
 
     __slots__ = (
-        'model', 'start', 'alpha', 'beta', 'limit', 'tolerance', 'frontier', 'result', 'steps',
+        'model', 'start', 'alpha', 'beta', 'floor', 'limit', 'tolerance', 'frontier', 'result', 'steps',
         '_span', '_terms', '_norm', '_cover',
     )
 
@@ -120,11 +123,13 @@ class CrossingSearch:
         limit: float,
         tolerance: float = DEFAULT_TOLERANCE,
         initial_step: float = 1e-3,
+        floor: float = 0.0,
     ) -> None:
         self.model = model
         self.start = float(start)
         self.alpha = float(alpha)
         self.beta = float(beta)
+        self.floor = float(floor)  # c0 >= 0 of the threshold c0 + α e^{-βt}
         self.limit = float(limit)
         self.tolerance = float(tolerance)
         self.frontier = self.start
@@ -149,7 +154,7 @@ class CrossingSearch:
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
         a = self.frontier
-        beta, alpha, tolerance = self.beta, self.alpha, self.tolerance
+        beta, alpha, tolerance, floor = self.beta, self.alpha, self.tolerance, self.floor
         terms, bounds = self._terms, self.model.bounds
         span = self._span
         cover_end, bound_e, bound_curv = self._cover
@@ -161,10 +166,13 @@ class CrossingSearch:
                 raise CrossingError(f'no convergence after {MAX_STEPS} certified steps (t={a!r})')
             self.steps += 1
             size_sq, size_rate = terms(a)
-            scale = math.exp(beta * a) / alpha
+            if floor == 0.0:  # S = 1/θ(a), written out as in _scale (this is the hot loop)
+                scale = math.exp(beta * a) / alpha
+            else:
+                scale = 1.0 / (floor + alpha * math.exp(-beta * a))
             s2 = scale * scale
             phi = 1.0 - s2 * size_sq
-            phi_rate = -2.0 * beta - 2.0 * s2 * size_rate
+            phi_rate = -2.0 * beta * (1.0 - floor * scale) - 2.0 * s2 * size_rate  # (r²)'(a) = -2β(1-w)
             if not (math.isfinite(phi) and math.isfinite(phi_rate)):
                 raise CrossingError(
                     f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, e.de/dt = {size_rate!r}'
@@ -211,8 +219,10 @@ class CrossingSearch:
         if phi <= 0.0 or phi_rate >= 0.0:
             return a
         beta = self.beta
-        scale = math.exp(beta * a) / self.alpha
-        margin_a = 1.0 - scale * size  # e^{-β(a - a)} = 1
+        scale = self._scale(a)
+        share = self.floor * scale  # w: r(t) = w + (1 - w) e^{-β(t-a)}
+        fade = 1.0 - share
+        margin_a = 1.0 - scale * size  # r(a) = 1
         if margin_a <= 0.0:
             return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
         width = max(2.0 * phi / -phi_rate, 4.0 * math.ulp(a) if a else 1e-300)
@@ -221,19 +231,27 @@ class CrossingSearch:
             span, bound_e, _, bound_curv = self.model.bounds(a, b - a, size)
             if a + span < b:
                 return a if stuck else None
-        # φ'' <= 4β² + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so [a, b] holds one root.
+        # φ'' <= (r²)'' + 2 S² E E2 <= 4β² + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so
+        # [a, b] holds one root.
         curvature = 4.0 * beta * beta + 2.0 * scale * scale * bound_e * bound_curv
         if not curvature * (b - a) <= -0.5 * phi_rate:  # also False for a NaN or infinite bound
             return a if stuck else None
         norm = self._norm
 
         def margin(t: float) -> float:
-            return math.exp(-beta * (t - a)) - scale * norm(t)
+            return share + fade * math.exp(-beta * (t - a)) - scale * norm(t)  # r(t) - S ||e(t)||
 
         margin_b = margin(b)
         if margin_b >= 0.0:
             return a  # the root proven to lie in (a, b) is below the rounding of the margin
         return _root_in_bracket(margin, a, margin_a, b, margin_b)
+
+    def _scale(self, a: float) -> float:
+        """S = 1/θ(a): e^{βa}/α for the paper's threshold (c0 = 0, as before the floor existed),
+        1/(c0 + α e^{-βa}) with a floor, which stays finite however late a is."""
+        if self.floor == 0.0:
+            return math.exp(self.beta * a) / self.alpha
+        return 1.0 / (self.floor + self.alpha * math.exp(-self.beta * a))
 
 
 def first_crossing(
@@ -245,14 +263,16 @@ def first_crossing(
     limit: float,
     tolerance: float = DEFAULT_TOLERANCE,
     initial_step: float = 1e-3,
+    floor: float = 0.0,
 ) -> float:
-    """Smallest t >= start with ||e(t)|| >= α e^{-βt}; inf if there is none up to `limit`.
+    """Smallest t >= start with ||e(t)|| >= c0 + α e^{-βt} (c0 = `floor`); inf if there is none up to `limit`.
 
-    `tolerance` is the relative margin 1 - ||e||² / (α e^{-βt})² below which a point counts as
+    `tolerance` is the relative margin 1 - ||e||² / θ(t)² below which a point counts as
     reached; the result is then refined to double precision by bracketing.
     """
     return CrossingSearch(
-        model, start=start, alpha=alpha, beta=beta, limit=limit, tolerance=tolerance, initial_step=initial_step
+        model, start=start, alpha=alpha, beta=beta, limit=limit, tolerance=tolerance, initial_step=initial_step,
+        floor=floor,
     ).run()
 
 

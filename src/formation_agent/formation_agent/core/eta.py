@@ -5,7 +5,9 @@ triggering times it is handed what it senses and returns its new input and the t
 information for each neighbour; in between it is handed its neighbours' triggering information.
 From these it predicts every relative state in closed form (eqs. statexixj, statexixjd,
 stateqiqj) and finds its next triggering time as the first crossing of ||e_i(t)|| = α e^{-βt}
-(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`.
+(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`. With a speed
+scale κ and a threshold floor c0 (`formation_agent.core.speed_scale`, docs/SPEED_SCALE.md) the
+agent runs in real time with the gains that module derives, against c0 + α e^{-κβt}.
 
 Per edge the agent keeps an anchor: the time of the edge's last event (its own trigger or the
 neighbour's) and the relative state then, plus the neighbour's current input. Since both inputs
@@ -33,6 +35,14 @@ import numpy as np
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
+from formation_agent.core.speed_scale import (
+    DEFAULT_SPEED_SCALE,
+    DEFAULT_THRESHOLD_FLOOR,
+    ScaleError,
+    Threshold,
+    eta1_gains,
+    eta2_gains,
+)
 from formation_agent.core.tension import (
     curvature_gain,
     edge_capacity,
@@ -106,7 +116,8 @@ class _EventTriggeredAgent:
         self._anchor_y = np.zeros((m, p))  # y_i - y_j = x_i - x_j - d_ij at the anchor
         self._neighbour_control = np.zeros((m, p))
         self._heard = np.zeros(m, dtype=bool)
-        self.control = np.zeros(p)
+        self.control = np.zeros(p)  # the command: u_i (ETA-1) or u^d_i (ETA-2), broadcast and applied
+        self._offset = np.zeros(p)  # its term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1)
         self.last_trigger: float | None = None
         self.last_event = 0.0
         self._search: CrossingSearch | None = None  # the plan from the current knowledge
@@ -124,8 +135,9 @@ class _EventTriggeredAgent:
         self._edge_time = [0.0] * m
         self._edge_y = [zero] * m
         self._edge_u = [zero] * m
-        self._u = zero
-        self._control_norm = 0.0
+        self._u = zero  # the command, padded
+        self._u_offset = zero  # the error's offset, padded
+        self._control_norm = 0.0  # ||offset||
         self._rows: list[tuple[float, ...]] = [()] * m  # one per edge, laid out by `_row`
         self._probe_key: tuple | None = None
         self._probe_value: tuple[float, ...] = ()
@@ -232,13 +244,16 @@ class _EventTriggeredAgent:
         extra = self._sensed_extra(sensed)  # validated before anything changes
         self._anchor_time[:] = t
         self._anchor_y[:] = y
-        control = self._update(y, length, extra)
+        offset = self._update(y, length, extra)
+        control = self._command(offset)
         self.control = np.array(control)
+        self._offset = np.array(offset)
         m = len(self.neighbour_ids)
         self._edge_time = [t] * m
         self._edge_y = [self._pad(row) for row in y]
         self._u = self._pad(control)
-        self._control_norm = math.sqrt(sum(c * c for c in self._u))
+        self._u_offset = self._pad(offset)
+        self._control_norm = math.sqrt(sum(c * c for c in self._u_offset))
         if self._fast:
             self._rows = [self._row(k) for k in range(m)]
         if self.last_trigger is not None and t > self.last_trigger:
@@ -273,6 +288,10 @@ class _EventTriggeredAgent:
 
     def _info_velocity(self, k: int):
         return None
+
+    def _command(self, offset: tuple[float, ...]) -> tuple[float, ...]:
+        """The command from the error's offset (ETA-2: the same; ETA-1: times κ)."""
+        return offset
 
     def _sensed_extra(self, sensed: SensedState):
         return None
@@ -312,15 +331,16 @@ class _EventTriggeredAgent:
             if not self._heard.all():
                 missing = [j for j, heard in zip(self.neighbour_ids, self._heard) if not heard]
                 raise AgentError(f'agent {self.agent_id} has not heard from neighbours {missing} yet')
-            alpha, beta = self._threshold
+            threshold = self._threshold
             # The first trial span only sets how fast the certified steps grow, never what they
             # certify; the agent's own last inter-event time is its natural scale. It depends on
             # the knowledge alone, so a robot and the simulator take the same steps.
             search = CrossingSearch(
                 self,
                 start=self.last_event,
-                alpha=alpha,
-                beta=beta,
+                alpha=threshold.alpha,
+                beta=threshold.beta,
+                floor=threshold.floor,
                 limit=limit,
                 tolerance=self.tolerance,
                 initial_step=max(self._interval or 0.0, _FIRST_SPAN),
@@ -328,10 +348,12 @@ class _EventTriggeredAgent:
             self._search = search
         return search
 
+    _threshold: Threshold
+
     def threshold(self, t: float) -> float:
-        """α e^{-βt} (eq. triggersingle) or α_d e^{-β_d t} (eq. triggerdouble)."""
-        alpha, beta = self._threshold
-        return alpha * math.exp(-beta * t)
+        """α e^{-βt} (eq. triggersingle) or α_d e^{-β_d t} (eq. triggerdouble) at real time t, with
+        the floor c0 and the rates times κ (ETA-2: times κ², the units of the agent's error)."""
+        return self._threshold(t)
 
     # ErrorModel interface (formation_agent.core.crossing) -------------------------------------------
 
@@ -405,15 +427,26 @@ class Eta1Agent(_EventTriggeredAgent):
         alpha: float,
         beta: float,
         tolerance: float = DEFAULT_TOLERANCE,
+        speed_scale: float = DEFAULT_SPEED_SCALE,
+        threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
     ) -> None:
         super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
         self.alpha = _positive('alpha', alpha)
         self.beta = _positive('beta', beta)
-        self._threshold = (self.alpha, self.beta)
+        try:
+            self.speed_scale, self._threshold = eta1_gains(
+                alpha=self.alpha, beta=self.beta, speed_scale=speed_scale, threshold_floor=threshold_floor
+            )
+        except ScaleError as error:
+            raise AgentError(f'agent {agent_id}: {error}') from None
 
     def _update(self, y: list[tuple[float, ...]], length: list[float], extra: None) -> tuple[float, ...]:
-        # u_i = -sum_j ω_ij(t_k) (x_i - x_j - d_ij)(t_k)   (eq. uxsingle)
+        # u_i = -sum_j ω_ij(t_k) (x_i - x_j - d_ij)(t_k)   (eq. uxsingle), the paper's; the command is κ u_i
         return tuple(-v for v in self._weighted_sum(y, length))
+
+    def _command(self, offset: tuple[float, ...]) -> tuple[float, ...]:
+        kappa = self.speed_scale
+        return tuple(kappa * v for v in offset)  # κ u_i (docs/SPEED_SCALE.md); exact at κ = 1
 
     def _state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Predicted y_ij(t) and its constant rate u_i - u_j (eq. statexixj)."""
@@ -422,10 +455,11 @@ class Eta1Agent(_EventTriggeredAgent):
 
     def _vector_error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         # e_i(t) = sum_j ω_ij(t) y_ij(t) - sum_j ω_ij(t_k) y_ij(t_k) = sum_j ω_ij(t) y_ij(t) + u_i
+        # (u_i the paper's: the command over κ)
         y, v = self._state(t)
         r = np.linalg.norm(y, axis=1)
         w = omega(r, self.capacity)
-        e = (w[:, None] * y).sum(axis=0) + self.control
+        e = (w[:, None] * y).sum(axis=0) + self._offset
         # d/dt [ω(r) y] = ω'(r) (y·v / r) y + ω v   (eq. dotei); the first term vanishes at r = 0.
         radial = np.divide((y * v).sum(axis=1), r, out=np.zeros_like(r), where=r > 0.0)
         rate = ((omega_prime(r, self.capacity) * radial)[:, None] * y + w[:, None] * v).sum(axis=0)
@@ -441,7 +475,7 @@ class Eta1Agent(_EventTriggeredAgent):
         curv = float((curvature_gain(reach, self.capacity) * speed * speed).sum())
         size = min(
             size + rate * span,
-            float(np.linalg.norm(self.control)) + float((omega(reach, self.capacity) * reach).sum()),
+            float(np.linalg.norm(self._offset)) + float((omega(reach, self.capacity) * reach).sum()),
         )
         return span, size, rate, curv
 
@@ -490,7 +524,7 @@ class Eta1Agent(_EventTriggeredAgent):
                     cap = limit
         if with_rate:
             self._probe = (radii, cap)
-        u0, u1, u2 = self._u
+        u0, u1, u2 = self._u_offset
         return e0 + u0, e1 + u1, e2 + u2, d0, d1, d2
 
     def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
@@ -530,14 +564,22 @@ class Eta2Agent(_EventTriggeredAgent):
         k2: float,
         k3: float,
         tolerance: float = DEFAULT_TOLERANCE,
+        speed_scale: float = DEFAULT_SPEED_SCALE,
+        threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
     ) -> None:
         super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
         self.alpha_d = _positive('alpha_d', alpha_d)
         self.beta_d = _positive('beta_d', beta_d)
-        self.k1 = _positive('k1', k1)
-        self.k2 = _positive('k2', k2)
-        self.k3 = _positive('k3', k3)
-        self._threshold = (self.alpha_d, self.beta_d)
+        paper = {name: _positive(name, value) for name, value in (('k1', k1), ('k2', k2), ('k3', k3))}
+        try:
+            # k1, k2, k3 below are the real-time gains (κ²k1, κk2, κk3); the threshold is κ² that of
+            # (triggerdouble), decaying at κβ_d (formation_agent.core.speed_scale).
+            (self.k1, self.k2, self.k3), self._threshold = eta2_gains(
+                alpha_d=self.alpha_d, beta_d=self.beta_d, speed_scale=speed_scale, threshold_floor=threshold_floor, **paper
+            )
+        except ScaleError as error:
+            raise AgentError(f'agent {agent_id}: {error}') from None
+        self.speed_scale = float(speed_scale)
         self._anchor_q = np.zeros_like(self._anchor_y)  # q_i - q_j at the anchor
         self._edge_q = [(0.0,) * _FAST_DIMENSION] * len(self.neighbour_ids)
 
@@ -687,7 +729,7 @@ class Eta2Agent(_EventTriggeredAgent):
             probe.append((r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), c))
         if with_rate:
             self._probe = probe
-        v0, v1, v2 = self._u
+        v0, v1, v2 = self._u_offset
         return e0 + v0, e1 + v1, e2 + v2, d0, d1, d2
 
     def _fast_bounds(self, span: float, size: float) -> tuple[float, float, float, float]:
@@ -741,6 +783,9 @@ ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
 }
 """The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
 
+SCALE_GAINS: dict[str, float] = {'speed_scale': DEFAULT_SPEED_SCALE, 'threshold_floor': DEFAULT_THRESHOLD_FLOOR}
+"""The gains both algorithms take optionally, with their defaults (the paper's): κ and c0."""
+
 
 def make_agent(
     *,
@@ -751,7 +796,8 @@ def make_agent(
     gains: Mapping[str, float],
     tolerance: float = DEFAULT_TOLERANCE,
 ) -> Eta1Agent | Eta2Agent:
-    """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored)."""
+    """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored;
+    speed_scale and threshold_floor are optional, SCALE_GAINS)."""
     if algorithm not in ALGORITHM_GAINS:
         raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
     missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
@@ -759,6 +805,7 @@ def make_agent(
         raise AgentError(f'agent {agent_id}: {algorithm} needs the gains {missing}')
     kind = Eta1Agent if algorithm == 'eta1' else Eta2Agent
     chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
+    chosen.update({name: gains.get(name, default) for name, default in SCALE_GAINS.items()})
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
 
 

@@ -3,10 +3,11 @@
 - `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
   (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
   closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
-- `RobotOutput` ('holonomic', 'unicycle'): a robot's velocity command from
-  `formation_agent.core.commander.RobotCommander` — a world-frame TwistStamped (holonomic) or a
-  body-frame Twist (v, ω) (differential drive, from the robot's heading) — within the robot's
-  limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
+- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle'): a
+  robot's velocity command from `formation_agent.core.commander.RobotCommander` by its kind's
+  adapter, of its kind's message type (`command_message`) — a world-frame TwistStamped
+  (holonomic) or a body-frame Twist (v, ω) (differential drive, from the robot's heading) —
+  within the robot's limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
   heading, ETA-2's velocity reference on time).
 
 `stop()` sends the zero command (once; nothing after it).  The node calls it on every way out:
@@ -15,12 +16,15 @@ the final Step, a lost peer, SIGINT/SIGTERM, a stale pose, any exception.
 
 from __future__ import annotations
 
+import importlib
 import time
 from collections.abc import Callable
 
-from geometry_msgs.msg import Accel, Twist, TwistStamped
+from geometry_msgs.msg import Accel, Twist
 
+from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
+from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
 from formation_agent.core.pose_sensing import PoseError
 from formation_msgs_py.codec import (
@@ -31,6 +35,12 @@ from formation_msgs_py.codec import (
 )
 from formation_msgs_py.qos import PROTOCOL_QOS, ROBOT_COMMAND_QOS
 from formation_msgs_py.types import SensedState
+
+
+def command_message(kind: RobotKind) -> type:
+    """The ROS message class of a kind's command, from its type name ('geometry_msgs/msg/Twist')."""
+    package, _, name = kind.command_type.rpartition('/')
+    return getattr(importlib.import_module(package.replace('/', '.')), name)
 
 
 class PlantOutput:
@@ -69,7 +79,7 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: holonomic | unicycle — velocity commands to the robot, republished at `command_rate`.
+    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`.
 
     `poses.fresh(robot, t=, now=)` gives its own robot's latest pose or raises PoseError
     (`formation_agent.ros.sensing.PoseSensing`: taken from its reader at each command).
@@ -85,11 +95,11 @@ class RobotOutput:
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
-            k3=config.gains['k3'] if config.double else None,
+            k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
-        self._holonomic = config.robot == 'holonomic'
+        self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)
         self.publisher = node.create_publisher(
-            TwistStamped if self._holonomic else Twist, config.robot_command_topic, ROBOT_COMMAND_QOS
+            command_message(self.commander.kind), config.robot_command_topic, ROBOT_COMMAND_QOS
         )
         self._epoch = 0.0
         self._last_t = 0.0  # the latest time a command was computed for (the clock may step back)
@@ -130,7 +140,7 @@ class RobotOutput:
         wall = time.time()
         t = self._last_t = max(wall - self._epoch, self._last_t)
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
-        if self._holonomic:
+        if self._world_frame:
             velocity = self.commander.command(t)
             self.publisher.publish(encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall))
         else:
@@ -144,7 +154,7 @@ class RobotOutput:
         if self._timer is not None:
             self._node.destroy_timer(self._timer)
             self._timer = None
-        if self._holonomic:
+        if self._world_frame:
             zero = (0.0,) * self._config.dimension
             self.publisher.publish(encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time()))
         else:

@@ -11,6 +11,10 @@ import math
 from dataclasses import dataclass
 
 from formation_agent.core.commander import Limits
+from formation_agent.core.eta import SCALE_GAINS
+from formation_agent.core.kinds import KindNames, robot_kind
+from formation_agent.core.kinds.registry import Geometry
+from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 from formation_agent.ros.parameters import (
     DOUBLE,
     DOUBLE_ARRAY,
@@ -27,7 +31,7 @@ from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
-ROBOTS = ('none', 'holonomic', 'unicycle')
+ROBOTS = KindNames(before=('none',))  # 'none' and every registered robot kind, read at each use
 LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration')
 
 
@@ -45,6 +49,11 @@ AGENT_PARAMETERS = (
     _spec('neighbour_offsets', DOUBLE_ARRAY, 'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]'),
     _spec('delta', DOUBLE, 'communication radius Δ [m]', low=0.0, low_open=True),
     _spec('horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True),
+    _spec('speed_scale', DOUBLE, "speed scale κ (docs/SPEED_SCALE.md): the paper's run in the time s = κt, every "
+          'triggering time divided by κ, commands times κ (eta2: gains κ²k1, κk2, κk3); 1: the paper',
+          default=SCALE_GAINS['speed_scale'], low=SPEED_SCALE_LIMITS[0], high=SPEED_SCALE_LIMITS[1]),
+    _spec('threshold_floor', DOUBLE, "threshold floor c0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
+          '(docs/SPEED_SCALE.md); 0: the paper', default=SCALE_GAINS['threshold_floor'], low=0.0),
     # Robots (README, "Running on robots").
     _spec('sensing', STRING, "where the agent senses: 'service' (the simulator's /agent_<i>/sense) or "
           "'poses' (its own and its neighbours' pose topics)", default='service', choices=SENSING_SOURCES),
@@ -55,8 +64,8 @@ AGENT_PARAMETERS = (
     _spec('pose_timeout', DOUBLE, 'sensing: poses — a pose older than this at a trigger (or on the '
           'command timer, for its own robot) stops the agent [s]', default=0.5, low=0.0, low_open=True),
     _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default='world'),
-    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant), 'holonomic' "
-          "(world-frame TwistStamped) or 'unicycle' (body-frame Twist (v, ω), differential drive)",
+    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant) or a robot kind: "
+          + ', '.join(f"'{name}' ({robot_kind(name).summary})" for name in ROBOTS[1:]),
           default='none', choices=ROBOTS),
     _spec('command_topic', STRING, "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)", default=''),
     _spec('control_point_distance', DOUBLE, 'robot: unicycle — distance l of the control point ahead of the '
@@ -140,8 +149,12 @@ class AgentConfig:
 
     @property
     def control_point_offset(self) -> tuple[float, float, float]:
-        """Where the control point sits in the robot's body frame."""
-        return (self.control_point_distance if self.robot == 'unicycle' else 0.0, 0.0, 0.0)
+        """Where the control point sits in the robot's body frame (by its kind; none: the origin)."""
+        return (0.0, 0.0, 0.0) if self.robot == 'none' else robot_kind(self.robot).control_offset(self.geometry)
+
+    @property
+    def geometry(self) -> Geometry:
+        return Geometry(control_point_distance=self.control_point_distance)
 
 
 def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
@@ -165,7 +178,8 @@ def read_config(node) -> AgentConfig:  # noqa: ANN001 - an rclpy Node
         neighbours={j: tuple(offsets[k * p : (k + 1) * p]) for k, j in enumerate(ids)},
         delta=values['delta'],
         horizon=values['horizon'],
-        gains={name: float(value) for name, value in gains.items()},
+        gains={name: float(value) for name, value in gains.items()}
+        | {name: float(values[name]) for name in SCALE_GAINS},  # κ and c0, for make_agent and the commands
         limits=Limits(
             linear_speed=values['max_linear_speed'],
             angular_speed=values['max_angular_speed'],
@@ -217,7 +231,7 @@ def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
         given = [name for name in (*LIMIT_PARAMETERS, 'command_topic') if values[name] not in (math.inf, '')]
         if given:
             problems.append(
-                f"{', '.join(given)} apply to a robot's command adapter (robot: holonomic or unicycle); "
+                f"{', '.join(given)} apply to a robot's command adapter (robot: one of {tuple(ROBOTS[1:])}); "
                 "with robot: none the simulator's plant takes the exact commands"
             )
     if robot not in (None, 'none') and have('sensing') and values['sensing'] != 'poses':
@@ -225,11 +239,23 @@ def _rules(node, values: dict) -> list[str]:  # noqa: ANN001
             f"robot: {robot} needs sensing: poses (the simulator's sensing service reports its own simulated "
             'world, which does not take robot commands)'
         )
-    if robot == 'unicycle':
-        if have('dimension') and values['dimension'] != 2:
-            problems.append(f'robot: unicycle drives in the plane: dimension must be 2, got {values["dimension"]}')
-        if have('control_point_distance') and not values['control_point_distance'] > 0.0:
-            problems.append('robot: unicycle needs control_point_distance l > 0 (the control point ahead of the axle)')
+    if robot not in (None, 'none') and have('control_point_distance'):
+        problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
+    return problems
+
+
+def _kind_problems(robot: str, values: dict) -> list[str]:
+    """What the robot's kind says of the parameters known (formation_agent.core.kinds)."""
+    kind = robot_kind(robot)
+    geometry = Geometry(control_point_distance=values['control_point_distance'])
+    problems = kind.placement_problems(dimension=values.get('dimension'), geometry=geometry)
+    if all(name in values for name in LIMIT_PARAMETERS):
+        limits = Limits(
+            linear_speed=values['max_linear_speed'],
+            angular_speed=values['max_angular_speed'],
+            linear_acceleration=values['max_linear_acceleration'],
+        )
+        problems += kind.drive_problems(geometry=geometry, limits=limits)
     return problems
 
 

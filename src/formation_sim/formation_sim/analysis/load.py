@@ -8,7 +8,7 @@
 - the trajectories from `/formation/state` (WorldState: exact positions and velocities at every
   event time and on the sample grid), the horizon and the clock mode from `/formation/step`;
 - messages sent = TriggerInfo messages recorded, sensing calls = `/formation/sensing_log` entries;
-- robot runs (`formation run --backend holonomic | unicycle | external`, no `/formation/state`):
+- robot runs (`formation run --backend <robot kind> | external`, no `/formation/state`):
   the trajectories from the robots' pose topics (`/formation/robots` names which: a simulated
   robot's noise-free `true_odom`, else the measured `odom` or `pose`), run time from their header
   stamps and the epoch of Step 0, sampled as the coordinator samples them
@@ -58,6 +58,7 @@ from formation_msgs_py.topics import (
     STATUS_TOPIC,
     STEP_TOPIC,
 )
+from formation_agent.core.speed_scale import initial_velocities
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
@@ -284,16 +285,17 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
     if (first.velocities is None) != (scenario.dynamics == 'single'):
         raise AnalysisError(f'the bag\'s states {"lack" if first.velocities is None else "carry"} velocities; the scenario is {scenario.dynamics!r}')
     if first.time == 0.0:
+        start_velocities = initial_velocities(scenario.velocities, scenario.speed_scale)  # κ q(0)
         for k, agent in enumerate(scenario.agent_ids):
             if not np.array_equal(first.positions[k], scenario.positions[k]):
                 raise AnalysisError(
                     f'agent {agent} starts at {first.positions[k].tolist()} in the bag but at '
                     f'{scenario.positions[k].tolist()} in the scenario {scenario.name!r}'
                 )
-            if scenario.velocities is not None and not np.array_equal(first.velocities[k], scenario.velocities[k]):
+            if start_velocities is not None and not np.array_equal(first.velocities[k], start_velocities[k]):
                 raise AnalysisError(
                     f'agent {agent} starts with velocity {first.velocities[k].tolist()} in the bag but '
-                    f'{scenario.velocities[k].tolist()} in the scenario {scenario.name!r}'
+                    f'{start_velocities[k].tolist()} in the scenario {scenario.name!r} (at its speed scale)'
                 )
     for sender, _ in got.infos:
         if sender not in scenario.agent_ids:

@@ -89,6 +89,7 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
     """SCENARIO, --horizon, --out (default: a new folder under runs/) and --force."""
     add_scenario_argument(parser)
     parser.add_argument('--horizon', type=POSITIVE, default=None, help="final time in seconds (default: the scenario's)")
+    add_scale_arguments(parser)
     parser.add_argument(
         '--out',
         type=Path,
@@ -100,6 +101,25 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
         action='store_true',
         help='replace the earlier run in --out: its files are removed first (files no run writes are never removed)',
     )
+
+
+def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
+    """--speed-scale K and --threshold-floor C, overriding the scenario's gains (docs/SPEED_SCALE.md)."""
+    parser.add_argument(
+        '--speed-scale', type=POSITIVE, default=None, metavar='K',
+        help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
+        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1)",
+    )  # fmt: skip
+    parser.add_argument(
+        '--threshold-floor', type=NON_NEGATIVE, default=None, metavar='C',
+        help="threshold floor c0 >= 0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
+        "(default: the scenario's gains.threshold_floor, 0)",
+    )  # fmt: skip
+
+
+def scale_options(args: argparse.Namespace) -> dict:
+    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`."""
+    return {'speed_scale': getattr(args, 'speed_scale', None), 'threshold_floor': getattr(args, 'threshold_floor', None)}
 
 
 def check_report_argument(command: str, out: Path | None) -> bool:
@@ -114,10 +134,13 @@ def check_report_argument(command: str, out: Path | None) -> bool:
     return True
 
 
-def load_valid_scenario(name: str, command: str) -> Scenario | None:
-    """The scenario, or None after printing why it cannot be run (nothing is started then)."""
+def load_valid_scenario(
+    name: str, command: str, *, speed_scale: float | None = None, threshold_floor: float | None = None
+) -> Scenario | None:
+    """The scenario (with κ and c0 replaced where given), or None after printing why it cannot be
+    run (nothing is started then)."""
     try:
-        scenario = load_scenario(name)
+        scenario = load_scenario(name).with_scale(speed_scale=speed_scale, threshold_floor=threshold_floor)
     except ScenarioError as error:
         refuse(command, error)
         return None
@@ -157,11 +180,14 @@ def paper_example_note(name: str, rules: list[str]) -> str | None:
 
 def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     """What decides a distributed run's processes and their parameters (`formation run`, `formation params`)."""
+    from formation_sim.runtime.launch import BACKENDS, ROBOT_MODELS
+
     parser.add_argument(
         '--backend',
-        choices=('exact', 'holonomic', 'unicycle', 'external'),
+        choices=BACKENDS,
         default='exact',
-        help='the world: exact (the simulator, default), holonomic or unicycle (simulated robots), external (real robots)',
+        help=f"the world: exact (the simulator, default), a robot kind ({', '.join(ROBOT_MODELS)}: simulated robots), "
+        'external (real robots)',
     )
     parser.add_argument(
         '--agents-per-process',
@@ -196,12 +222,12 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.launch import ROBOT_MODELS, RunError
 
     robots = None
     if args.backend != 'exact':
         if args.backend == 'external' and args.robot is None:
-            raise RunError('--backend external needs --robot holonomic|unicycle (what the robots are)')
+            raise RunError(f"--backend external needs --robot {'|'.join(ROBOT_MODELS)} (what the robots are)")
         robots = robot_options(args, args.robot or args.backend)
     return {
         'out_dir': args.out,
@@ -222,12 +248,12 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, ROBOTS_PER_PROCESS, RobotOptions
+    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, ROBOTS_PER_PROCESS, RobotOptions
 
     defaults = RobotOptions()
-    group = parser.add_argument_group('robots (backends holonomic, unicycle, external)')
+    group = parser.add_argument_group(f"robots (backends {', '.join(ROBOT_MODELS)}, external)")
     add = group.add_argument
-    add(model_flag, choices=('holonomic', 'unicycle'), default=None, help="what the robots are (default: the backend's model)")
+    add(model_flag, choices=ROBOT_MODELS, default=None, help="what the robots are (default: the backend's model)")
     add('--control-point-distance', type=POSITIVE, default=defaults.control_point_distance, metavar='L',
         help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
     add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')

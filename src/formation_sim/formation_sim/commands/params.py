@@ -17,6 +17,7 @@ from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
+    scale_options,
     plan_options,
     refuse,
 )
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun
     from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
 
-    scenario = load_valid_scenario(args.scenario, 'params')
+    scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
     try:

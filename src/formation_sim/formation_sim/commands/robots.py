@@ -51,7 +51,9 @@ def run(args: argparse.Namespace) -> int:
     if scenario is None:
         return EXIT_BAD_INPUT
     if args.model is None:
-        return refuse('robots', '--model holonomic|unicycle is required')
+        from formation_sim.runtime.launch import ROBOT_MODELS
+
+        return refuse('robots', f"--model {'|'.join(ROBOT_MODELS)} is required")
     try:
         fleet = RobotFleet(
             scenario, robots=robot_options(args, args.model), out_dir=args.out, force=args.force, domain_id=args.domain_id,

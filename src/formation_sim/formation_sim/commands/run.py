@@ -14,6 +14,7 @@ from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
+    scale_options,
     plan_options,
     refuse,
 )
@@ -25,8 +26,8 @@ def register(subparsers) -> None:
         help='run the team as ROS 2 processes (one node per agent, a simulator or robots, recorder)',
         description='Distributed run over ROS 2, every agent its own node talking only to its neighbours. '
         'Backend exact (default): a simulator node holds the exact world and the sensing services, and '
-        'time advances in lock-step from event to event. Backends holonomic and unicycle: one simulated '
-        'robot per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
+        'time advances in lock-step from event to event. A backend named after a robot kind (holonomic, '
+        'unicycle; formation_agent.core.kinds): one simulated robot of that kind per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
         'external: the coordinator, agents and recorder only; the robots are whatever publishes '
         '/agent_<i>/robot/pose (or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). '
         'Writes summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
@@ -58,7 +59,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
-    scenario = load_valid_scenario(args.scenario, 'run')
+    scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
     try:

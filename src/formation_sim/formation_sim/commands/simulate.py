@@ -15,6 +15,7 @@ from formation_sim.commands.common import (
     POSITIVE,
     add_run_arguments,
     load_valid_scenario,
+    scale_options,
     refuse,
 )
 
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.sim.samples import TRAJECTORY_DIR, discard_incomplete
     from formation_sim.sim.summary import write_summary
 
-    scenario = load_valid_scenario(args.scenario, 'simulate')
+    scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
     chosen = sample_policy(args, scenario.n)

@@ -12,7 +12,15 @@ import json
 import math
 import sys
 
-from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, POSITIVE, add_scenario_argument
+from formation_sim.commands.common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    POSITIVE,
+    add_scale_arguments,
+    add_scenario_argument,
+    scale_options,
+)
 from formation_sim.model.scenario import ScenarioError, load_scenario
 from formation_sim.model.validate import validate_scenario
 
@@ -34,6 +42,7 @@ def register(subparsers) -> None:
         'cannot be read.',
     )
     add_scenario_argument(parser)
+    add_scale_arguments(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.add_argument('--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]")
     parser.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
@@ -44,7 +53,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario).with_scale(**scale_options(args))
     except ScenarioError as error:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE

@@ -25,6 +25,13 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from formation_agent.core.speed_scale import (
+    DEFAULT_SPEED_SCALE,
+    DEFAULT_THRESHOLD_FLOOR,
+    ScaleError,
+    check_speed_scale,
+    check_threshold_floor,
+)
 from formation_msgs_py.types import MAX_AGENT_ID
 from formation_sim.model.gains import paper_k3, riccati_solution
 
@@ -35,6 +42,8 @@ _TOP_REQUIRED = ('dynamics', 'communication_radius', 'horizon', 'agents', 'edges
 _SINGLE_GAINS = ('alpha', 'beta')
 _DOUBLE_GAINS = ('alpha_d', 'beta_d', 'beta1', 'k3')
 _DOUBLE_OPTIONAL = ('k1', 'k2', 'k0')
+# Both dynamics, optional (docs/SPEED_SCALE.md): the speed scale κ and the threshold floor c0.
+SCALE_KEYS = {'speed_scale': DEFAULT_SPEED_SCALE, 'threshold_floor': DEFAULT_THRESHOLD_FLOOR}
 NAME_LIMIT = 200  # characters of a scenario name (a label in reports, summaries and folder names)
 
 # What a scenario file may hold. A team of 9 000 agents with 3 edges each (2-D) is ~300 000 YAML
@@ -190,14 +199,27 @@ class Edge:
 
 @dataclass(frozen=True, kw_only=True)
 class SingleGains:
-    """ETA-1 gains: threshold α e^{-βt} of (triggersingle)."""
+    """ETA-1 gains: threshold α e^{-βt} of (triggersingle); the speed scale κ and the threshold
+    floor c0 (docs/SPEED_SCALE.md; 1 and 0 are the paper's)."""
 
     alpha: float
     beta: float
+    speed_scale: float = DEFAULT_SPEED_SCALE
+    threshold_floor: float = DEFAULT_THRESHOLD_FLOOR
 
     def __post_init__(self) -> None:
         for key in _SINGLE_GAINS:
             object.__setattr__(self, key, _finite_float(getattr(self, key), f'gains.{key}'))
+        _check_scale_keys(self)
+
+
+def _check_scale_keys(gains) -> None:
+    """κ and c0 of `gains` as floats within their rules (ScenarioError naming the rule and the value)."""
+    try:
+        object.__setattr__(gains, 'speed_scale', check_speed_scale(gains.speed_scale))
+        object.__setattr__(gains, 'threshold_floor', check_threshold_floor(gains.threshold_floor))
+    except ScaleError as error:
+        raise ScenarioError(f'gains.{error}') from None
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -214,10 +236,13 @@ class DoubleGains:
     k1: float
     k2: float
     P: np.ndarray
+    speed_scale: float = DEFAULT_SPEED_SCALE
+    threshold_floor: float = DEFAULT_THRESHOLD_FLOOR
 
     def __post_init__(self) -> None:
         for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2'):
             object.__setattr__(self, key, _finite_float(getattr(self, key), f'gains.{key}'))
+        _check_scale_keys(self)
         matrix = _float_array(self.P, 'gains.P')
         if matrix.shape != (2, 2) or not np.all(np.isfinite(matrix)):
             raise ScenarioError(f'gains.P: expected a finite 2x2 matrix, got {short_repr(self.P)}')
@@ -232,7 +257,8 @@ class DoubleGains:
 
     @classmethod
     def from_riccati(
-        cls, *, alpha_d: float, beta_d: float, beta1: float, k3: float | str
+        cls, *, alpha_d: float, beta_d: float, beta1: float, k3: float | str,
+        speed_scale: float = DEFAULT_SPEED_SCALE, threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
     ) -> DoubleGains:
         """P, k1, k2 solving (riccatti) with equality for this β1; k3='paper' is 2/(k2+sqrt(k1²+k2²))."""
         beta1 = _finite_float(beta1, 'gains.beta1')
@@ -244,7 +270,10 @@ class DoubleGains:
             if k3 != 'paper':
                 raise ScenarioError(f"gains.k3: expected a number or 'paper', got {short_repr(k3)}")
             k3 = paper_k3(k1, k2)
-        return cls(alpha_d=alpha_d, beta_d=beta_d, beta1=beta1, k3=k3, k1=k1, k2=k2, P=matrix)
+        return cls(
+            alpha_d=alpha_d, beta_d=beta_d, beta1=beta1, k3=k3, k1=k1, k2=k2, P=matrix,
+            speed_scale=speed_scale, threshold_floor=threshold_floor,
+        )
 
     @property
     def k0(self) -> float:
@@ -255,7 +284,7 @@ class DoubleGains:
             return NotImplemented
         return all(
             getattr(self, key) == getattr(other, key)
-            for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2')
+            for key in ('alpha_d', 'beta_d', 'beta1', 'k3', 'k1', 'k2', *SCALE_KEYS)
         ) and np.array_equal(self.P, other.P)
 
     __hash__ = None
@@ -430,6 +459,20 @@ class Scenario:
         """A copy with some fields changed (checked again)."""
         return dataclasses.replace(self, **changes)
 
+    def with_scale(self, *, speed_scale: float | None = None, threshold_floor: float | None = None) -> Scenario:
+        """A copy with the speed scale κ and/or the threshold floor c0 replaced (None: kept)."""
+        changes = {
+            key: value for key, value in (('speed_scale', speed_scale), ('threshold_floor', threshold_floor)) if value is not None
+        }
+        if not changes:
+            return self
+        return self.replace(gains=dataclasses.replace(self.gains, **changes))
+
+    @property
+    def speed_scale(self) -> float:
+        """κ (docs/SPEED_SCALE.md): the run is the paper's in the time s = κt."""
+        return self.gains.speed_scale
+
 
 def _id_list(ids: tuple[int, ...]) -> str:
     if len(ids) <= 12:
@@ -551,21 +594,26 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
 
 def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
     raw = _mapping(raw, 'gains')
+    scale = {key: raw[key] for key in SCALE_KEYS if key in raw}
+    for key, value in scale.items():
+        _finite_float(value, f'gains.{key}')
     if dynamics == 'single':
-        unknown = [key for key in raw if key not in _SINGLE_GAINS]
+        unknown = [key for key in raw if key not in _SINGLE_GAINS + tuple(SCALE_KEYS)]
         if unknown:
             raise ScenarioError(
-                f"gains: unknown key {short_repr(unknown[0])} for dynamics 'single' (allowed: alpha, beta)"
+                f"gains: unknown key {short_repr(unknown[0])} for dynamics 'single' "
+                f'(allowed: {", ".join(_SINGLE_GAINS + tuple(SCALE_KEYS))})'
             )
-        _check_keys(raw, 'gains', required=_SINGLE_GAINS)
-        return SingleGains(alpha=raw['alpha'], beta=raw['beta'])
-    unknown = [key for key in raw if key not in _DOUBLE_GAINS + _DOUBLE_OPTIONAL]
+        _check_keys(raw, 'gains', required=_SINGLE_GAINS, optional=tuple(SCALE_KEYS))
+        return SingleGains(alpha=raw['alpha'], beta=raw['beta'], **scale)
+    optional = _DOUBLE_OPTIONAL + tuple(SCALE_KEYS)
+    unknown = [key for key in raw if key not in _DOUBLE_GAINS + optional]
     if unknown:
         raise ScenarioError(
             f"gains: unknown key {short_repr(unknown[0])} for dynamics 'double' "
-            f'(allowed: {", ".join(_DOUBLE_GAINS + _DOUBLE_OPTIONAL)})'
+            f'(allowed: {", ".join(_DOUBLE_GAINS + optional)})'
         )
-    _check_keys(raw, 'gains', required=_DOUBLE_GAINS, optional=_DOUBLE_OPTIONAL)
+    _check_keys(raw, 'gains', required=_DOUBLE_GAINS, optional=optional)
     values = {key: raw[key] for key in ('alpha_d', 'beta_d', 'beta1')}
     for key, value in values.items():
         _finite_float(value, f'gains.{key}')
@@ -577,7 +625,7 @@ def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
     if 'k1' not in raw and 'k2' not in raw:
         if 'k0' in raw:
             raise ScenarioError(f'gains.k0: given ({short_repr(raw["k0"])}) without k1 and k2')
-        return DoubleGains.from_riccati(k3=k3, **values)
+        return DoubleGains.from_riccati(k3=k3, **values, **scale)
     if 'k1' not in raw or 'k2' not in raw:
         given = 'k1' if 'k1' in raw else 'k2'
         raise ScenarioError(
@@ -591,7 +639,7 @@ def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
     k0 = _finite_float(raw['k0'], 'gains.k0') if 'k0' in raw else 2.0 * beta1 * k1 * k2
     if k3 == 'paper':
         k3 = paper_k3(k1, k2)
-    return DoubleGains(k3=k3, k1=k1, k2=k2, P=np.array([[k0, k1], [k1, k2]]), **values)
+    return DoubleGains(k3=k3, k1=k1, k2=k2, P=np.array([[k0, k1], [k1, k2]]), **values, **scale)
 
 
 def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
@@ -615,6 +663,9 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
             gains_dict.update(k1=gains.k1, k2=gains.k2, k0=gains.k0)
     else:
         gains_dict = {'alpha': gains.alpha, 'beta': gains.beta}
+    for key, default in SCALE_KEYS.items():  # written only where not the paper's: older readers keep working
+        if getattr(gains, key) != default:
+            gains_dict[key] = getattr(gains, key)
     return {
         'name': scenario.name,
         'dynamics': scenario.dynamics,

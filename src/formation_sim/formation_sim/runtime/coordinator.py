@@ -1,6 +1,6 @@
 """The coordinator node: opens a run of agent nodes, watches it, ends it, and writes what it saw.
 
-It holds no world.  On robots (`formation run --backend holonomic | unicycle | external`) the
+It holds no world.  On robots (`formation run --backend <robot kind> | external`) the
 robots are the world: agents sense poses and command velocities themselves (README, "Running on
 robots"), and the coordinator only keeps the run's time and books (`run_book.RunBook`):
 
@@ -73,6 +73,7 @@ from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wa
 from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
+from formation_agent.core.kinds import Geometry, KindNames, robot_kind
 from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
@@ -93,9 +94,9 @@ EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample nee
 COORDINATOR_PARAMETERS = (
     *TIME_KEEPER_PARAMETERS,
     ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
-    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle: the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
+    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
     ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
-    ParameterSpec(name='backend', type=STRING, default='external', choices=('holonomic', 'unicycle', 'external'), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
+    ParameterSpec(name='backend', type=STRING, default='external', choices=KindNames(after=('external',)), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
 )  # fmt: skip
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
@@ -111,7 +112,7 @@ def robot_run_topics(
     they have."""
     truth = simulated if truth is None else truth
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
-    command_type = 'geometry_msgs/msg/TwistStamped' if model == 'holonomic' else 'geometry_msgs/msg/Twist'
+    command_type = robot_kind(model).command_type
     topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
     for i in scenario.agent_ids:
         if pose_type == 'pose' or not simulated:
@@ -136,7 +137,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
     COMMAND = 'formation_coordinator'
     PARAMS_FILE = COORDINATOR_FILE
     DESCRIPTION = (
-        'The time keeper of a robot run (formation run --backend holonomic|unicycle|external): opens the run '
+        'The time keeper of a robot run (formation run --backend <robot kind>|external): opens the run '
         'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
         'fault, and writes summary.json and graph.json into out_dir.'
     )
@@ -148,11 +149,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         """The rules between the world's parameters and the scenario (robots)."""
         problems = []
         model = values.get('robot')
-        if model == 'unicycle':
-            if 'control_point_distance' in values and not values['control_point_distance'] > 0.0:
-                problems.append(f"parameter 'control_point_distance' (double) must be > 0 for unicycles, got {values['control_point_distance']!r}")
-            if scenario.dimension != 2:
-                problems.append(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if model is not None and 'control_point_distance' in values:
+            geometry = Geometry(control_point_distance=values['control_point_distance'])
+            problems += robot_kind(model).placement_problems(dimension=scenario.dimension, geometry=geometry)
         if 'sample_period' in values and not values['sample_period'] > 0.0:
             problems.append(f"parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its grid), got {values['sample_period']!r}")
         return problems
@@ -170,7 +169,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'version': 1,
             'backend': self.backend,
             'model': self.robot_model,
-            'control_point_distance': self.control_point_distance if self.robot_model == 'unicycle' else 0.0,
+            # Where the scenario's point sits ahead of the robot's origin, by its kind (a holonomic robot: 0).
+            'control_point_distance': robot_kind(self.robot_model).control_offset(Geometry(control_point_distance=self.control_point_distance))[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
         }

@@ -5,7 +5,7 @@ A backend decides who keeps time and what the world is (README, "Running on robo
 | backend | time keeper | world | agents sense | extra processes |
 |---|---|---|---|---|
 | `exact` | simulator (`sim_node`, lock-step or wall clock) | the simulator's exact world | its sensing service | – |
-| `holonomic`, `unicycle` | coordinator (`coordinator`, wall clock) | one simulated robot per agent (`robot_node`) | the robots' poses | the robots |
+| a robot kind (`holonomic`, `unicycle`) | coordinator (`coordinator`, wall clock) | one simulated robot of that kind per agent (`robot_node`) | the robots' poses | the robots |
 | `external` | coordinator | whatever publishes the robots' poses and takes their commands | the robots' poses | – |
 
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
@@ -37,9 +37,11 @@ import yaml
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
 from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, ROBOT_NODE, SIMULATOR_NODE
 from formation_sim.model.scenario import Scenario, dump_scenario
+from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
-BACKENDS = ('exact', 'holonomic', 'unicycle', 'external')
+BACKENDS = KindNames(before=('exact',), after=('external',))  # a simulated robot backend per registered robot kind
 DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
 DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
 POSE_TYPES = ('odom', 'pose')
@@ -81,7 +83,7 @@ class RobotOptions:
     position is its control point, `control_point_distance` ahead of the axle.
     """
 
-    model: str = 'unicycle'  # 'holonomic' | 'unicycle' (for `external`: what the robots are)
+    model: str = 'unicycle'  # a robot kind (formation_agent.core.kinds; for `external`: what the robots are)
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
@@ -112,8 +114,8 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if self.model == 'unicycle' and scenario.dimension != 2:
-            raise RunError(f'unicycles move in the plane: the scenario must have p = 2, got p = {scenario.dimension}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
@@ -134,6 +136,18 @@ class RobotOptions:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+
+    @property
+    def geometry(self) -> Geometry:
+        return Geometry(control_point_distance=self.control_point_distance)
+
+    def kind_problems(self, dimension: int) -> list[str]:
+        """What the robots' kind says of these options (its dimensions, geometry and limits)."""
+        try:
+            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+        except ValueError:
+            return []  # named by the limits' own check
+        return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
 
     def agent_parameters(self) -> dict:
         """What an agent on such a robot is told (formation_agent's robot parameters)."""
@@ -246,7 +260,7 @@ class LaunchPlan:
 
     @property
     def simulated_robots(self) -> bool:
-        return self.backend in ('holonomic', 'unicycle')
+        return self.backend in ROBOT_MODELS
 
     def agent_groups(self) -> list[list[int]]:
         return _groups(list(self.scenario.agent_ids), self.agents_per_process)

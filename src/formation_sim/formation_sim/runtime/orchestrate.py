@@ -127,9 +127,9 @@ class FormationRun:
 
         `out_dir`: a folder that is new or empty (`formation_sim.sim.run_folder`); None: a new folder
         under runs/ named after the scenario.  `force`: replace the earlier run in `out_dir` (its
-        files are removed when the run starts).  `backend`: 'exact' (the simulator's exact world, default), 'holonomic' or 'unicycle'
-        (simulated robots), 'external' (the robots are whatever publishes their poses and takes
-        their commands); `robots` describes the robots of the last three (default: the backend's
+        files are removed when the run starts).  `backend`: 'exact' (the simulator's exact world, default), a robot kind
+        ('holonomic', 'unicycle', … `formation_agent.core.kinds`: simulated robots of that kind), 'external' (the robots are whatever publishes their poses and takes
+        their commands); `robots` describes the robots of all but 'exact' (default: the backend's
         model with no limits; `external` needs it).  `clock`: 'lockstep' (sim time, exact; the
         default of `exact`) or 'realtime' (wall clock; robots always run on it).  `validate`:
         refuse a scenario that breaks the theorems' hypotheses (ValidationError); False only for
@@ -189,7 +189,7 @@ class FormationRun:
                 raise RunError(f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}')
             robots.check(self.scenario)
         elif robots is not None:
-            raise RunError("robots are options of the robot backends ('holonomic', 'unicycle', 'external'), not of 'exact'")
+            raise RunError(f"robots are options of the robot backends {tuple(BACKENDS[1:])}, not of 'exact'")
         self.backend = backend
         self.robots = robots
         self.clock = clock

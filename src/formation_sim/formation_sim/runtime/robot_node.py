@@ -1,13 +1,15 @@
-"""A simulated robot: what the `holonomic` and `unicycle` backends of `formation run` put under
-each agent, as a swarm stack's simulation backend stands in for its hardware.
+"""A simulated robot: what the robot backends of `formation run` (one per robot kind of
+`formation_agent.core.kinds`: `holonomic`, `unicycle`) put under each agent, as a swarm stack's
+simulation backend stands in for its hardware.
 
 Each robot is its own node (`/agent_<i>/simulated_robot`, its own process by default) and talks to
 its agent only as a real robot would (README, "Running on robots"; names in
 `formation_msgs_py.topics`):
 
-- it takes velocity commands on `/agent_<i>/robot/cmd_vel`: `geometry_msgs/TwistStamped` in the
-  world frame (`header.frame_id` = `world_frame`) for a holonomic robot, `geometry_msgs/Twist`
-  (v = linear.x, ω = angular.z) in its body frame for a unicycle (differential drive);
+- it takes velocity commands on `/agent_<i>/robot/cmd_vel`, of its kind's message type:
+  `geometry_msgs/TwistStamped` in the world frame (`header.frame_id` = `world_frame`) for a
+  holonomic robot, `geometry_msgs/Twist` (v = linear.x, ω = angular.z) in its body frame for a
+  unicycle (differential drive);
 - it publishes its pose at `rate` Hz (100 by default): `geometry_msgs/PoseStamped` on
   `/agent_<i>/robot/pose` and `nav_msgs/Odometry` on `/agent_<i>/robot/odom` (pose in the world
   frame, twist in the body frame, REP 105), with seeded Gaussian noise (`pose_noise`, `yaw_noise`)
@@ -15,8 +17,8 @@ its agent only as a real robot would (README, "Running on robots"; names in
 - for tools only, the noise-free state on `/agent_<i>/robot/true_odom` (the run's summary and
   `formation analyze` measure the formation on it; an agent never reads it).
 
-Between ticks the robot moves exactly under the command it holds (`formation_sim.sim.robots`: a
-straight line, or the closed-form arc of a unicycle); a command takes effect at the first tick
+Between ticks the robot moves exactly under the command it holds (`formation_sim.sim.robots`, by
+its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at the first tick
 at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
 `max_angular_speed` as a real base clips it.  A robot whose commands stop coming (its agent died,
 the network broke) stops after `command_timeout` s, as real bases do.
@@ -37,7 +39,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -45,6 +47,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from formation_agent.ros.commands import command_message
 from formation_agent.ros.parameters import (
     BOOL,
     DOUBLE,
@@ -148,7 +151,7 @@ class OdometryMessage:
 
 
 class SimulatedRobotNode(Node):
-    """One kinematic robot (holonomic or unicycle) at a fixed rate, talking only poses and commands."""
+    """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands."""
 
     def __init__(self, *, namespace: str | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
         super().__init__(NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context)
@@ -173,13 +176,13 @@ class SimulatedRobotNode(Node):
         self.pose_latency = float(p['pose_latency'])
         self.command_latency = float(p['command_latency'])
         self.command_timeout = float(p['command_timeout'])
-        self.holonomic = self.robot.model == 'holonomic'
+        self.world_frame_command = self.robot.world_frame_command  # TwistStamped in the world frame, else Twist (v, ω)
 
         self._pose_pub = self.create_publisher(PoseStamped, robot_pose_topic(self.robot_id), ROBOT_QOS)
         self._odom_pub = self.create_publisher(Odometry, robot_odom_topic(self.robot_id), ROBOT_QOS)
         self._truth_pub = self.create_publisher(Odometry, robot_true_odom_topic(self.robot_id), ROBOT_QOS) if p['publish_truth'] else None
         self._command_sub = self.create_subscription(
-            TwistStamped if self.holonomic else Twist, robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
+            command_message(self.robot.kind), robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
         self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = deque()  # pose_latency queue
@@ -199,12 +202,12 @@ class SimulatedRobotNode(Node):
     def _on_command(self, msg) -> None:
         now = time.time()
         p = self.robot.dimension
-        if self.holonomic:
+        if self.world_frame_command:
             if msg.header.frame_id != self.world_frame:
                 self.commands_refused += 1
                 if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
                     self.get_logger().warning(
-                        f'refused a command in frame {msg.header.frame_id!r}: this holonomic robot takes world-frame '
+                        f'refused a command in frame {msg.header.frame_id!r}: this {self.robot.model} robot takes world-frame '
                         f'velocities in {self.world_frame!r} ({self.commands_refused} refused so far)'
                     )
                 return
@@ -243,7 +246,7 @@ class SimulatedRobotNode(Node):
         self.robot.advance(max(0.0, now - self._last_tick))  # exact, under the command held since the last tick
         self._last_tick = now
         position, yaw = self.robot.position.copy(), self.robot.yaw
-        linear, angular = self._body_twist()
+        linear, angular = self.robot.body_twist()
         if self._truth_pub is not None:
             self._truth_pub.publish(self._truth.fill(now, position, yaw, linear, angular))
         measured, measured_yaw = self.noise.measure(position, yaw)
@@ -255,21 +258,11 @@ class SimulatedRobotNode(Node):
                 self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
         self._take_command(now)  # held from now to the next tick
 
-    def _body_twist(self) -> tuple[np.ndarray, float]:
-        """The velocity in the body frame (REP 105: Odometry's twist is in child_frame_id)."""
-        command = self.robot.command
-        angular = 0.0 if command is None else command.angular
-        if not self.holonomic:
-            return np.array([0.0 if command is None else command.linear[0], 0.0, 0.0]), angular
-        world = np.zeros(3)
-        world[: self.robot.dimension] = self.robot.world_velocity()
-        c, s = math.cos(self.robot.yaw), math.sin(self.robot.yaw)
-        return np.array([c * world[0] + s * world[1], -s * world[0] + c * world[1], world[2]]), angular
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog='formation_robot',
-        description='Simulated kinematic robots (holonomic or unicycle) for formation runs: each takes velocity '
+        description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: each takes velocity '
         'commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
         epilog=parameter_help(SPECS) + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
         '(formation run --backend unicycle writes robots.params.yaml).',

@@ -168,6 +168,9 @@ def agent_parameters(scenario: Scenario, agent_id: int, *, horizon: float, extra
         'delta': float(scenario.delta),
         'horizon': float(horizon),
         'extra_subscribers': int(extra_subscribers),
+        # κ and c0 (docs/SPEED_SCALE.md): the agent derives its real-time gains from them
+        'speed_scale': float(gains.speed_scale),
+        'threshold_floor': float(gains.threshold_floor),
     }
     if scenario.dynamics == 'single':
         params.update(algorithm='eta1', alpha=float(gains.alpha), beta=float(gains.beta))
@@ -216,7 +219,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         # The agents' threshold, the very same floats, to stop where the engine stops.
         self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=scenario.velocities)
+        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=self.world.velocities)
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)

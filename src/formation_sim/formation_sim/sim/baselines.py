@@ -24,6 +24,7 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from formation_agent.core.speed_scale import eta2_gains, initial_velocities
 from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
@@ -104,8 +105,12 @@ def simulate_continuous(
     double = scenario.dynamics == 'double'
     gains = scenario.gains
 
+    kappa = gains.speed_scale  # the paper's controller in the time s = κt (docs/SPEED_SCALE.md)
     if double:
-        k1, k2, k3 = gains.k1, gains.k2, gains.k3
+        (k1, k2, k3), _ = eta2_gains(
+            alpha_d=gains.alpha_d, beta_d=gains.beta_d, k1=gains.k1, k2=gains.k2, k3=gains.k3, speed_scale=kappa,
+            threshold_floor=gains.threshold_floor,
+        )
 
         def rhs(_t: float, state: np.ndarray) -> np.ndarray:
             x, q = state[: n * p].reshape(n, p), state[n * p :].reshape(n, p)
@@ -115,12 +120,13 @@ def simulate_continuous(
             u = -sums.accumulate(w[:, None] * (k1 * y + k2 * q_rel)) - k3 * q
             return np.concatenate([q.ravel(), u.ravel()])
 
-        initial = np.concatenate([np.asarray(scenario.positions, float).ravel(), np.asarray(scenario.velocities, float).ravel()])
+        velocities = initial_velocities(scenario.velocities, kappa)
+        initial = np.concatenate([np.asarray(scenario.positions, float).ravel(), velocities.ravel()])
     else:
 
         def rhs(_t: float, state: np.ndarray) -> np.ndarray:
             y, w = sums.weights(state.reshape(n, p))
-            return (-sums.accumulate(w[:, None] * y)).ravel()  # u_i = -Σ ω y_ij  (uxsingle at t)
+            return (-kappa * sums.accumulate(w[:, None] * y)).ravel()  # u_i = -κ Σ ω y_ij  (uxsingle at t)
 
         initial = np.asarray(scenario.positions, dtype=float).ravel()
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
-from formation_agent.core.eta import ALGORITHM_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
 from formation_sim.sim.world import World
@@ -61,7 +61,7 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
 def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE) -> Eta1Agent | Eta2Agent:
     """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
-    gains = {name: getattr(scenario.gains, name) for name in ALGORITHM_GAINS[algorithm]}
+    gains = {name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)}
     return make_agent(
         algorithm=algorithm,
         agent_id=agent_id,

@@ -1,34 +1,33 @@
-"""Kinematic robots, ROS-free: how the simulated robot backends move, and what a robot's pose means.
+"""Simulated robots, ROS-free: how the simulated robot backends move, and what a robot's pose means.
 
-Two models, each moved exactly under a command held constant between two instants (a base's
-control loop holds its last command over a tick), never with a fixed integration step:
+A robot is of a kind of `formation_agent.core.kinds` (the registry), which holds its model: how a
+base of that kind clips what it is sent and how it moves exactly under a command held constant
+between two instants (a base's control loop holds its last command over a tick), never with a
+fixed integration step — a straight line for a holonomic robot, the closed-form arc for a
+unicycle.  `Robot` keeps the pose, the command held and the count of clipped commands.
 
-- `HolonomicRobot` (omnidirectional base, quadrotor in velocity mode): ẋ = v in the world frame,
-  θ̇ = ω; over a hold of length τ, x ← x + τ v, θ ← θ + τ ω.
-- `UnicycleRobot` (differential drive): ẋ = v cos θ, ẏ = v sin θ, θ̇ = ω with (v, ω) in the body
-  frame; over a hold of length τ it drives the arc
-      x ← x + v τ sinc(ωτ/2) cos(θ + ωτ/2),   y ← y + v τ sinc(ωτ/2) sin(θ + ωτ/2),   θ ← θ + ωτ
-  (sin(θ+ωτ) − sin θ = 2 cos(θ + ωτ/2) sin(ωτ/2), so ω → 0 gives the straight line with no
-  cancellation; sinc(u) = sin(u)/u).
-
-A unicycle's scenario position is its *control point* p = (x, y) + l (cos θ, sin θ), the point l
-ahead of the axle that the near-identity diffeomorphism lets the agent steer like a single
-integrator (README, "Running on robots"; `formation_agent.core.kinematics`, which reads poses
-here as the agents read them); `control_point` places it for a planar pose and `axle_position`
-goes back.  `trajectory_samples` turns recorded pose streams into the samples of a `RunRecord`, the one
-way both the coordinator (summary.json) and `formation analyze` (the bag) read them.
+A robot's scenario position is its kind's *control point* (a unicycle's: p = (x, y) + l (cos θ,
+sin θ), the point l ahead of the axle that the near-identity diffeomorphism lets the agent steer
+like a single integrator; README, "Running on robots"; `formation_agent.core.kinematics`, which
+reads poses here as the agents read them); `control_point` places it for a planar pose and
+`axle_position` goes back.  `trajectory_samples` turns recorded pose streams into the samples of
+a `RunRecord`, the one way both the coordinator (summary.json) and `formation analyze` (the bag)
+read them.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from formation_agent.core import kinematics
+from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, RobotKind, robot_kind
+from formation_agent.core.limits import Limits as KindLimits
 
-ROBOT_MODELS = ('holonomic', 'unicycle')
+ROBOT_MODELS = KIND_NAMES  # the registered robot kinds, read at each use
 
 
 class RobotError(ValueError):
@@ -37,11 +36,9 @@ class RobotError(ValueError):
 
 @dataclass(frozen=True, kw_only=True)
 class Limits:
-    """What the base can do; commands beyond are clipped (and counted) as a real base does.
-
-    Holonomic: the linear velocity is scaled down to `linear` keeping its direction, |ω| clipped.
-    Unicycle: |v| clipped to `linear`, |ω| to `angular` (each on its own, as a TurtleBot3 does).
-    """
+    """What the base can do; commands beyond are clipped (and counted) as a real base does, by its
+    kind's `clip` (holonomic: the velocity scaled down to `linear` keeping its direction, |ω|
+    clipped; unicycle: |v| clipped to `linear`, |ω| to `angular`, each on its own, as a TurtleBot3 does)."""
 
     linear: float = math.inf  # [m/s]
     angular: float = math.inf  # [rad/s]
@@ -51,6 +48,10 @@ class Limits:
             value = getattr(self, name)
             if not value > 0.0:  # also NaN
                 raise RobotError(f'the {name} speed limit must be > 0 (inf: none), got {value!r}')
+
+    def kind_limits(self) -> KindLimits:
+        """These limits as the kinds take them."""
+        return KindLimits(linear_speed=self.linear, angular_speed=self.angular)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,123 +68,87 @@ class Command:
 
 
 @dataclass(kw_only=True)
-class _Robot:
-    """Pose (position, yaw), limits, the command held and how many commands the limits clipped."""
+class Robot:
+    """A robot of kind `model`: its pose (position, yaw), limits, the command held and how many
+    commands the limits clipped; moved exactly by its kind's model."""
 
+    model: str
     position: np.ndarray
     yaw: float = 0.0
     limits: Limits = field(default_factory=Limits)
+    geometry: Geometry = field(default_factory=Geometry)
     command: Command | None = None  # None: standing still
     saturated: int = 0  # commands clipped by the limits
+
+    def __post_init__(self) -> None:
+        try:
+            self.kind: RobotKind = robot_kind(self.model)
+        except KindError as error:
+            raise RobotError(str(error)) from None
+        self.position = np.array(self.position, dtype=float)
+        if self.position.ndim != 1 or self.position.size not in self.kind.dimensions:
+            raise RobotError(
+                f'a {self.model} robot moves in {" or ".join(map(str, self.kind.dimensions))} dimensions: '
+                f'its position has that many values, got {self.position.tolist()}'
+            )
+
+    @property
+    def dimension(self) -> int:
+        return int(self.position.size)
+
+    @property
+    def world_frame_command(self) -> bool:
+        return self.kind.world_frame_command
 
     def advance(self, duration: float) -> None:
         """Move for `duration` seconds under the current command (exact)."""
         if duration < 0.0:
             raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
         if self.command is not None and duration > 0.0:
-            self._move(duration)
+            position, yaw = self.kind.move(self.position, self.yaw, self.command.linear, self.command.angular, duration)
+            self.position, self.yaw = position, wrap_angle(yaw)
 
-    def _hold(self, linear: tuple[float, ...], angular: float, *, clipped: bool) -> Command:
+    def set_command(self, command: Command) -> Command:
+        """Apply `command` from now on, clipped to the limits as its kind's base does; returns what is applied."""
+        size = self.dimension if self.kind.world_frame_command else 1
+        if len(command.linear) != size:
+            what = f'{size} world-frame velocity values' if self.kind.world_frame_command else 'one forward speed v'
+            raise RobotError(f'a {self.model} robot in {self.dimension} dimensions takes {what}, got {list(command.linear)}')
+        linear, angular, clipped = self.kind.clip(
+            tuple(float(v) for v in command.linear), float(command.angular),
+            geometry=self.geometry, limits=self.limits.kind_limits(),
+        )  # fmt: skip
         self.saturated += clipped
         self.command = Command(linear=linear, angular=angular)
         return self.command
 
-    def _move(self, duration: float) -> None:
-        raise NotImplementedError
+    def body_twist(self) -> tuple[np.ndarray, float]:
+        """The velocity in the body frame (3,) and ω (REP 105: Odometry's twist is in child_frame_id)."""
+        if self.command is None:
+            return np.zeros(3), 0.0
+        return self.kind.body_twist(self.command.linear, self.command.angular, self.yaw)
+
+    def scenario_position(self) -> np.ndarray:
+        """The control point: what the scenario places."""
+        return self.position + self.kind.world_offset(self.yaw, self.geometry, self.dimension)
 
 
-@dataclass(kw_only=True)
-class HolonomicRobot(_Robot):
-    """Position (p = 1, 2 or 3) and yaw, moved exactly under piecewise-constant world-frame velocities."""
-
-    model = 'holonomic'
-
-    def __post_init__(self) -> None:
-        self.position = np.array(self.position, dtype=float)
-        if self.position.ndim != 1 or not 1 <= self.position.size <= 3:
-            raise RobotError(f'a holonomic robot has a position of 1 to 3 values, got {self.position.tolist()}')
-
-    @property
-    def dimension(self) -> int:
-        return int(self.position.size)
-
-    def set_command(self, command: Command) -> Command:
-        """Apply `command` from now on, clipped to the limits; returns what is applied."""
-        linear = np.array(command.linear, dtype=float)
-        if linear.size != self.dimension:
-            raise RobotError(f'a holonomic robot in {self.dimension} dimensions takes {self.dimension} velocity values, got {linear.tolist()}')
-        speed = float(np.linalg.norm(linear))
-        clipped = speed > self.limits.linear or abs(command.angular) > self.limits.angular
-        if speed > self.limits.linear:
-            linear = linear * (self.limits.linear / speed)
-        angular = max(-self.limits.angular, min(self.limits.angular, float(command.angular)))
-        return self._hold(tuple(linear.tolist()), angular, clipped=clipped)
-
-    def _move(self, duration: float) -> None:
-        self.position = self.position + duration * np.array(self.command.linear)
-        self.yaw = wrap_angle(self.yaw + duration * self.command.angular)
-
-    def world_velocity(self) -> np.ndarray:
-        return np.zeros(self.dimension) if self.command is None else np.array(self.command.linear)
-
-    def scenario_position(self, control_point_distance: float = 0.0) -> np.ndarray:
-        """The point the scenario places: the robot's own position."""
-        return self.position.copy()
+HolonomicRobot = partial(Robot, model='holonomic')
+UnicycleRobot = partial(Robot, model='unicycle')
 
 
-@dataclass(kw_only=True)
-class UnicycleRobot(_Robot):
-    """Axle position (x, y) and heading θ, moved exactly along arcs under piecewise-constant (v, ω)."""
-
-    model = 'unicycle'
-
-    def __post_init__(self) -> None:
-        self.position = np.array(self.position, dtype=float)
-        if self.position.shape != (2,):
-            raise RobotError(f'a unicycle moves in the plane: its position has 2 values, got {self.position.tolist()}')
-
-    @property
-    def dimension(self) -> int:
-        return 2
-
-    def set_command(self, command: Command) -> Command:
-        if len(command.linear) != 1:
-            raise RobotError(f'a unicycle takes one forward speed v, got {list(command.linear)}')
-        v, w = float(command.linear[0]), float(command.angular)
-        clipped = abs(v) > self.limits.linear or abs(w) > self.limits.angular
-        v = max(-self.limits.linear, min(self.limits.linear, v))
-        w = max(-self.limits.angular, min(self.limits.angular, w))
-        return self._hold((v,), w, clipped=clipped)
-
-    def _move(self, duration: float) -> None:
-        """The exact arc of the current (v, ω) (module docstring)."""
-        v, w = self.command.linear[0], self.command.angular
-        half = 0.5 * w * duration
-        chord = v * duration * np.sinc(half / math.pi)  # np.sinc(u) = sin(πu)/(πu)
-        middle = self.yaw + half
-        self.position = self.position + chord * np.array([math.cos(middle), math.sin(middle)])
-        self.yaw = wrap_angle(self.yaw + w * duration)
-
-    def world_velocity(self) -> np.ndarray:
-        """The axle's velocity in the world frame."""
-        v = 0.0 if self.command is None else self.command.linear[0]
-        return v * np.array([math.cos(self.yaw), math.sin(self.yaw)])
-
-    def scenario_position(self, control_point_distance: float) -> np.ndarray:
-        """The control point, l ahead of the axle: what the scenario places."""
-        return control_point(self.position, self.yaw, control_point_distance)
-
-
-def make_robot(model: str, *, scenario_position, yaw: float, control_point_distance: float, limits: Limits):
-    """A robot whose scenario position (a unicycle's control point) is `scenario_position`."""
-    if model == 'holonomic':
-        return HolonomicRobot(position=scenario_position, yaw=yaw, limits=limits)
-    if model == 'unicycle':
-        position = np.asarray(scenario_position, dtype=float)
-        if position.shape != (2,):
-            raise RobotError(f'a unicycle moves in the plane: the scenario must be 2-D, got position {position.tolist()}')
-        return UnicycleRobot(position=axle_position(position, yaw, control_point_distance), yaw=yaw, limits=limits)
-    raise RobotError(f'robot model must be one of {ROBOT_MODELS}, got {model!r}')
+def make_robot(model: str, *, scenario_position, yaw: float, control_point_distance: float, limits: Limits, wheelbase: float = 0.0) -> Robot:
+    """A robot of kind `model` whose scenario position (its control point) is `scenario_position`."""
+    try:
+        kind = robot_kind(model)
+    except KindError as error:
+        raise RobotError(str(error)) from None
+    geometry = Geometry(control_point_distance=float(control_point_distance), wheelbase=float(wheelbase))
+    point = np.asarray(scenario_position, dtype=float)
+    problems = kind.problems(dimension=point.size, geometry=geometry, limits=limits.kind_limits())
+    if problems:
+        raise RobotError('; '.join(problems))
+    return Robot(model=model, position=kind.origin(point, yaw, geometry), yaw=yaw, limits=limits, geometry=geometry)
 
 
 def wrap_angle(angle: float) -> float:
@@ -248,8 +213,8 @@ def run_time(stamp, epoch: float) -> float:
 
 
 def _control_offset(model: str, control_point_distance: float) -> tuple[float, float, float]:
-    """Where the scenario's point sits in the body frame: l ahead on x (unicycle), the origin (holonomic)."""
-    return (control_point_distance if model == 'unicycle' else 0.0, 0.0, 0.0)
+    """Where the scenario's point sits in the body frame, by the robot's kind (a unicycle's: l ahead on x)."""
+    return robot_kind(model).control_offset(Geometry(control_point_distance=control_point_distance))
 
 
 def _pose(pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:

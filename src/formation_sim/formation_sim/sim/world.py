@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from formation_agent.core import speed_scale
 from formation_agent.core.closed_form import advance_double
 from formation_msgs_py.types import SensedState
 
@@ -50,11 +51,14 @@ class World:
 
     @classmethod
     def from_scenario(cls, scenario) -> World:
-        damping = scenario.gains.k3 if scenario.dynamics == 'double' else None
+        """The scenario's initial state; at a speed scale κ the damping is κ k3 and the velocities
+        start at κ q(0), the scenario's being the paper's (`formation_agent.core.speed_scale`)."""
+        kappa = scenario.gains.speed_scale
+        damping = speed_scale.damping(scenario.gains.k3, kappa) if scenario.dynamics == 'double' else None
         return cls(
             agent_ids=scenario.agent_ids,
             positions=scenario.positions,
-            velocities=scenario.velocities,
+            velocities=speed_scale.initial_velocities(scenario.velocities, kappa),
             damping=damping,
         )
 

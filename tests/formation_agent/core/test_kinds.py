@@ -1,0 +1,152 @@
+"""The registry of robot kinds: a kind defined once is what every consumer sees."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from formation_agent.core.commander import RobotCommander
+from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, KindNames, RobotKind, register, robot_kind, unregister
+from formation_agent.core.limits import Limits, SaturationLog
+
+
+class Sluggish(RobotKind):
+    """A toy kind: a world-frame robot whose base moves at half the velocity it is sent, so its
+    adapter sends 2u (and halves the speed limit); 1-D or 2-D."""
+
+    name = 'sluggish'
+    summary = 'world-frame TwistStamped at half speed (a toy)'
+    command_type = 'geometry_msgs/msg/TwistStamped'
+    world_frame_command = True
+    dimensions = (1, 2)
+
+    def command(self, u, *, heading, geometry, limits, log):
+        u = np.asarray(u, dtype=float)
+        speed = float(np.linalg.norm(u))
+        if speed > limits.linear_speed:
+            log.note('linear_speed', speed, limits.linear_speed)
+            u = u * (limits.linear_speed / speed)
+        return tuple(float(c) for c in 2.0 * u)
+
+    def clip(self, linear, angular, *, geometry, limits):
+        return tuple(linear), float(angular), False
+
+    def move(self, position, yaw, linear, angular, duration):
+        return position + 0.5 * duration * np.array(linear), yaw + duration * angular
+
+    def body_twist(self, linear, angular, yaw):
+        world = np.zeros(3)
+        world[: len(linear)] = 0.5 * np.array(linear)
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c * world[0] + s * world[1], -s * world[0] + c * world[1], world[2]]), angular
+
+
+@pytest.fixture
+def sluggish():
+    kind = register(Sluggish())
+    yield kind
+    unregister(kind.name)
+    assert kind.name not in KIND_NAMES
+
+
+def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
+    from formation_agent.ros.commands import command_message
+    from formation_agent.ros.config import AGENT_PARAMETERS, _kind_problems
+    from formation_sim.cli import build_parser
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS, robot_run_topics
+    from formation_sim.runtime.launch import BACKENDS, RobotOptions
+    from formation_sim.runtime.robot_node import SPECS as ROBOT_SPECS
+    from formation_sim.sim.robots import Command, Limits as BaseLimits, make_robot
+
+    # The command line: a backend, and what external robots or a fleet are.
+    parser = build_parser()
+    run = parser.parse_args(['run', 'robots_square', '--backend', 'sluggish'])
+    assert run.backend == 'sluggish' and 'sluggish' in BACKENDS
+    assert parser.parse_args(['run', 'robots_square', '--backend', 'external', '--robot', 'sluggish']).robot == 'sluggish'
+    assert parser.parse_args(['robots', 'robots_square', '--model', 'sluggish', '--domain-id', '41']).model == 'sluggish'
+    # The nodes' parameters: the agent's `robot`, the simulated robot's `model`, the coordinator's.
+    for specs, name in ((AGENT_PARAMETERS, 'robot'), (ROBOT_SPECS, 'model'), (COORDINATOR_PARAMETERS, 'robot'), (COORDINATOR_PARAMETERS, 'backend')):
+        spec = next(spec for spec in specs if spec.name == name)
+        assert spec.problem('sluggish') is None and 'sluggish' in spec.constraint_text()
+        assert spec.problem('tank') is not None
+    assert _kind_problems('sluggish', {'control_point_distance': 0.0, 'dimension': 3}) == [
+        'a sluggish moves in 1 or 2 dimensions: dimension p must be 1 or 2, got 3'
+    ]
+    # The launch plan and the recorder's topics.
+    scenario = load_scenario('robots_square')
+    RobotOptions(model='sluggish').check(scenario)
+    assert RobotOptions(model='sluggish').agent_parameters()['robot'] == 'sluggish'
+    topics = dict(robot_run_topics(scenario, model='sluggish', simulated=True, pose_type='odom'))
+    assert topics['/agent_1/robot/cmd_vel'] == 'geometry_msgs/msg/TwistStamped'
+    # The agent's command adapter and the simulated robot both come from the kind: the robot
+    # moves its control point with exactly the velocity u the agent asked for.
+    commander = RobotCommander(drive='sluggish', dimension=2, limits=Limits(linear_speed=1.0))
+    u = (0.3, -0.4)
+    commander.set_control(0.0, u)
+    command = commander.command(0.0)
+    robot = make_robot('sluggish', scenario_position=[1.0, 2.0], yaw=0.0, control_point_distance=0.0, limits=BaseLimits())
+    robot.set_command(Command(linear=command, angular=0.0))
+    robot.advance(2.0)
+    assert np.allclose(robot.scenario_position(), [1.6, 1.2], rtol=0, atol=1e-15)
+    assert command_message(sluggish).__name__ == 'TwistStamped'
+
+
+def test_kind_names_are_read_at_each_use(sluggish):
+    backends = KindNames(before=('exact',), after=('external',))
+    assert backends[0] == 'exact' and backends[-1] == 'external' and 'sluggish' in backends
+    assert tuple(backends) == ('exact', *KIND_NAMES, 'external')
+    unregister('sluggish')
+    assert 'sluggish' not in backends
+    register(sluggish)
+
+
+def test_a_kind_is_registered_once_under_a_free_name(sluggish):
+    with pytest.raises(KindError, match="a robot kind needs a name that is new and not one of .*got 'sluggish'"):
+        register(Sluggish())
+    with pytest.raises(KindError, match="a robot kind needs a name .*got 'none'"):
+        register(type('Plant', (Sluggish,), {'name': 'none'})())
+    with pytest.raises(KindError, match=r"robot kind must be one of \('holonomic', 'unicycle'.*got 'tank'"):
+        robot_kind('tank')
+
+
+def test_every_built_in_kind_has_its_example_parameter_file():
+    from pathlib import Path
+
+    import yaml
+
+    import formation_agent
+
+    config = Path(formation_agent.__file__).resolve().parents[1] / 'config'
+    for name in KIND_NAMES:
+        kind = robot_kind(name)
+        params = yaml.safe_load((config / kind.params_file).read_text())['/**']['ros__parameters']
+        assert params['robot'] == name, kind.params_file
+        geometry = Geometry(control_point_distance=params.get('control_point_distance', 0.0))
+        limits = Limits(linear_speed=params.get('max_linear_speed', math.inf), angular_speed=params.get('max_angular_speed', math.inf))
+        assert kind.drive_problems(geometry=geometry, limits=limits) == []
+        assert kind.placement_problems(dimension=None, geometry=geometry) == []
+
+
+@pytest.mark.parametrize('name', ['holonomic', 'unicycle'])
+def test_a_kinds_adapter_and_model_agree_where_no_limit_acts(name):
+    """The command the adapter sends for u, held by the kind's model for a short time, moves the
+    control point by u times that time to first order (the kinematics are exact at the instant)."""
+    kind = robot_kind(name)
+    geometry = Geometry(control_point_distance=0.2)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        u = rng.normal(size=2)
+        yaw = rng.uniform(-math.pi, math.pi)
+        log = SaturationLog()
+        command = kind.command(u, heading=yaw, geometry=geometry, limits=Limits(), log=log)
+        linear, angular = (command, 0.0) if kind.world_frame_command else ((command[0],), command[1])
+        point = np.array([0.5, -0.25])
+        origin = kind.origin(point, yaw, geometry)
+        tau = 1e-6
+        moved, turned = kind.move(origin, yaw, linear, angular, tau)
+        rate = (moved + kind.world_offset(turned, geometry, 2) - point) / tau
+        assert np.allclose(rate, u, atol=1e-5) and log.records == {}
