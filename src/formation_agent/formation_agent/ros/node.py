@@ -358,7 +358,7 @@ class FormationAgentNode(Node):
         )  # fmt: skip
 
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
-        self.outbox.publish_report(self.report(final=final, failure=failure))
+        self.outbox.publish_report(lambda: self.report(final=final, failure=failure))
 
     def _publish_report_if_dirty(self) -> None:
         # Not before step 0: a recorder may not be matched yet, and every report it must hold

@@ -6,6 +6,7 @@ before the node goes away.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 from rclpy.duration import Duration
 from std_msgs.msg import Float64MultiArray, String
@@ -39,10 +40,12 @@ class Outbox:
     def publish_status(self, status: Status) -> None:
         self.publish(self.status, encode_status(status))
 
-    def publish_report(self, report: AgentReport) -> None:
+    def publish_report(self, build: Callable[[], AgentReport]) -> None:
+        """Count the report first, then `build()` it: a report counts itself (its `published`)."""
+        self._count(self.report)
+        report = build()
         self.counts.report_due = False
         self.counts.final_sent = report.final
-        self._count(self.report)  # a report counts itself
         self.report.publish(encode_agent_report(report))
 
     def wait_for_delivery(self, deadline: float, *others) -> None:  # noqa: ANN002 - more publishers
