@@ -26,7 +26,8 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from std_srvs.srv import Trigger
 
 from formation_agent.core.pose_sensing import PoseBook
-from formation_msgs_py.codec import MessageError, decode_odometry, decode_pose_stamped, decode_sensed_state
+from formation_msgs_py.cdr import decode_odometry_cdr, decode_pose_stamped_cdr
+from formation_msgs_py.codec import MessageError, decode_sensed_state
 from formation_msgs_py.qos import ROBOT_POSE_QOS
 from formation_msgs_py.types import RobotPose, SensedState
 
@@ -85,7 +86,8 @@ class PoseReaders:
     The readers belong to a node of their own that no executor spins (`formation_agent_poses`,
     in the agent's namespace; same context, so the same DDS participant): no callback runs and
     nothing is decoded when a pose arrives.  DDS keeps the newest one or two per topic (`pose_take_depth`);
-    `take(robot)` decodes those and hands them to the `PoseBook` (refusals counted as before).
+    `take(robot)` takes those serialized and decodes them with `formation_msgs_py.cdr` (no Python
+    message objects), then hands them to the `PoseBook` (refusals counted as before).
     A robot publishing at 100 Hz costs its agent nothing between the agent's own triggering
     times and command ticks (before: every pose of itself and of each neighbour was decoded in
     a callback, ~300 Odometry messages a second for two neighbours, 12 % of a core per agent).
@@ -94,7 +96,7 @@ class PoseReaders:
     def __init__(self, node, config, book: PoseBook, *, reject: Callable[[str, str, str], None]) -> None:  # noqa: ANN001
         self._book = book
         self._reject = reject
-        kind, self._decode = (PoseStamped, decode_pose_stamped) if config.pose_type == 'pose' else (Odometry, decode_odometry)
+        kind, self._decode = (PoseStamped, decode_pose_stamped_cdr) if config.pose_type == 'pose' else (Odometry, decode_odometry_cdr)
         self.node = rclpy.create_node(
             f'{node.get_name()}_poses',
             namespace=node.get_namespace(),
@@ -110,14 +112,14 @@ class PoseReaders:
         )  # fmt: skip
         # ... so the topics are resolved by the agent's node: remapping applies as to any of its topics.
         self.topics = {robot: node.resolve_topic_name(config.robot_pose_topic(robot)) for robot in book.robots}
-        self._subs = {robot: self.node.create_subscription(kind, topic, _never, qos) for robot, topic in self.topics.items()}
+        self._subs = {robot: self.node.create_subscription(kind, topic, _never, qos, raw=True) for robot, topic in self.topics.items()}
 
     def take(self, robot: int) -> None:
         """Every pose of `robot` waiting in its reader (at most `pose_take_depth`), oldest first, into the book."""
         sub = self._subs[robot]
         while True:
             with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, False)
+                taken = sub.handle.take_message(sub.msg_type, True)  # serialized: decoded by formation_msgs_py.cdr
             if taken is None:
                 return
             try:

@@ -60,6 +60,7 @@ from formation_agent.ros.parameters import (
     parameter_help,
 )
 from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor
+from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
 from formation_msgs_py.topics import (
     ROBOT_NODE,
     agent_namespace,
@@ -118,38 +119,6 @@ SPECS = (
 )  # fmt: skip
 
 
-class OdometryMessage:
-    """One `nav_msgs/Odometry` refilled at every tick (pose in `frame`, twist in the body frame,
-    REP 105; the covariance of the noise set once): building a new message each time was a third
-    of a robot's CPU (issue 19; publishing serialises it, so reusing it is safe)."""
-
-    def __init__(self, *, frame: str, child_frame: str, sigma: tuple[float, float]) -> None:
-        msg = self.msg = Odometry()
-        msg.header.frame_id = frame
-        msg.child_frame_id = child_frame
-        covariance = [0.0] * 36
-        for k in range(3):
-            covariance[7 * k] = sigma[0] ** 2
-        covariance[35] = sigma[1] ** 2
-        msg.pose.covariance = covariance
-
-    def fill(self, stamp: float, position: np.ndarray, yaw: float, linear: np.ndarray, angular: float) -> Odometry:
-        msg = self.msg
-        seconds = math.floor(stamp)
-        msg.header.stamp.sec = int(seconds)
-        msg.header.stamp.nanosec = min(999_999_999, round((stamp - seconds) * 1e9))
-        where = msg.pose.pose.position
-        where.x = float(position[0])
-        where.y = float(position[1]) if position.size > 1 else 0.0
-        where.z = float(position[2]) if position.size > 2 else 0.0
-        q = msg.pose.pose.orientation
-        q.x, q.y, q.z, q.w = quaternion_from_yaw(yaw)
-        twist = msg.twist.twist
-        twist.linear.x, twist.linear.y, twist.linear.z = float(linear[0]), float(linear[1]), float(linear[2])
-        twist.angular.z = float(angular)
-        return msg
-
-
 class SimulatedRobotNode(Node):
     """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands."""
 
@@ -190,8 +159,10 @@ class SimulatedRobotNode(Node):
         self.commands_received = 0
         self.commands_refused = 0
         self.timeouts = 0  # times the robot stopped because commands stopped coming
-        self._truth = OdometryMessage(frame=self.world_frame, child_frame=self.body_frame, sigma=(0.0, 0.0))
-        self._measured = OdometryMessage(
+        # Published as CDR bytes (formation_msgs_py.cdr): building two Odometry messages a tick was
+        # most of a robot's CPU (issue 19).
+        self._truth = OdometryWriter(frame=self.world_frame, child_frame=self.body_frame, sigma=(0.0, 0.0))
+        self._measured = OdometryWriter(
             frame=self.world_frame, child_frame=self.body_frame, sigma=(self.noise.position_sigma, self.noise.yaw_sigma)
         )
         self._last_tick = time.time()
@@ -248,15 +219,22 @@ class SimulatedRobotNode(Node):
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self.robot.body_twist()
         if self._truth_pub is not None:
-            self._truth_pub.publish(self._truth.fill(now, position, yaw, linear, angular))
+            self._truth_pub.publish(self._truth.pack(now, _xyz(position), quaternion_from_yaw(yaw), linear, angular))
         measured, measured_yaw = self.noise.measure(position, yaw)
         self._measurements.append((now, measured, measured_yaw, linear, angular))
         while self._measurements and self._measurements[0][0] + self.pose_latency <= now:
-            odometry = self._measured.fill(*self._measurements.popleft())
-            self._odom_pub.publish(odometry)
+            stamp, where, heading, body_linear, body_angular = self._measurements.popleft()
+            where, orientation = _xyz(where), quaternion_from_yaw(heading)
+            self._odom_pub.publish(self._measured.pack(stamp, where, orientation, body_linear, body_angular))
             if self._pose_pub.get_subscription_count():  # most readers take the odometry
-                self._pose_pub.publish(PoseStamped(header=odometry.header, pose=odometry.pose.pose))
+                self._pose_pub.publish(pack_pose_stamped(stamp, self.world_frame, where, orientation))
         self._take_command(now)  # held from now to the next tick
+
+
+def _xyz(position: np.ndarray) -> tuple[float, float, float]:
+    """A position of 1 to 3 axes as (x, y, z), the axes it lacks 0."""
+    values = [float(v) for v in position] + [0.0, 0.0]
+    return values[0], values[1], values[2]
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
