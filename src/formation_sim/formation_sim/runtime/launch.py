@@ -49,7 +49,7 @@ DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
-ROBOTS_PER_PROCESS = 8  # simulated robots sharing a process by default: 4 robots in one cost 11 % of a core, in four 18 % (BENCHMARKS.md, "CPU of a robot run")
+ROBOTS_PER_PROCESS = 8  # simulated robots sharing a process (and its executor, its DDS participant) by default (BENCHMARKS.md, "CPU of a robot run")
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
