@@ -106,7 +106,6 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
     (result,) = results
     assert result.exit_status == 0, result.message
     assert heard['/formation/step'], 'the final Step never reached a default-QoS reader'
-    assert len(heard['/agent_1/robot/odom']) > 10 * HORIZON / 2  # the hz reader kept taking poses
     summary = json.loads(result.summary.read_text())
     assert summary['extra']['failure'] is None and summary['max_edge_length'] < summary['delta']
     recording = summary['extra']['recording']  # every message the run published, in its bag, and nothing else

@@ -83,7 +83,7 @@ def pose_take_depth(config) -> int:  # noqa: ANN001
 class PoseReaders:
     """Keep-last readers of the robots' pose topics whose messages are taken only when needed.
 
-    The readers belong to a node of their own that no executor spins (`formation_agent_poses`,
+    The readers belong to a node of their own that no executor spins (`_formation_agent_poses`, hidden,
     in the agent's namespace; same context, so the same DDS participant): no callback runs and
     nothing is decoded when a pose arrives.  DDS keeps the newest one or two per topic (`pose_take_depth`);
     `take(robot)` takes those serialized and decodes them with `formation_msgs_py.cdr` (no Python
@@ -98,7 +98,7 @@ class PoseReaders:
         self._reject = reject
         kind, self._decode = (PoseStamped, decode_pose_stamped_cdr) if config.pose_type == 'pose' else (Odometry, decode_odometry_cdr)
         self.node = rclpy.create_node(
-            f'{node.get_name()}_poses',
+            f'_{node.get_name()}_poses',  # hidden ('_'): `ros2 node list` and `ros2 param list` skip it
             namespace=node.get_namespace(),
             context=node.context,
             use_global_arguments=False,  # the agent's node name and remappings are its own ...
