@@ -68,6 +68,16 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
         raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
 
 
+def POSITIVE_OR_AUTO(text: str) -> float | str:  # noqa: N802 - an argparse type, named as the others
+    """A finite number > 0, or 'auto'."""
+    if text == 'auto':
+        return text
+    try:
+        return POSITIVE(text)
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)) from None
+
+
 def bounded_int(low: int, high: int) -> Callable[[str], float]:
     return _number(f'an integer in [{low}, {high}]', lambda v: low <= v <= high, integer=True)
 
@@ -106,9 +116,11 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
 def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
     """--speed-scale K and --threshold-floor C, overriding the scenario's gains (docs/SPEED_SCALE.md)."""
     parser.add_argument(
-        '--speed-scale', type=POSITIVE, default=None, metavar='K',
+        '--speed-scale', type=POSITIVE_OR_AUTO, default=None, metavar='K',
         help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
-        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1)",
+        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1). "
+        "auto: the largest κ that keeps the exact run's commands 1.25 times below the robots' limits "
+        "(--max-speed, --max-angular-speed, --max-acceleration; README, \"Running on robots\")",
     )  # fmt: skip
     parser.add_argument(
         '--threshold-floor', type=NON_NEGATIVE, default=None, metavar='C',
@@ -118,8 +130,10 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def scale_options(args: argparse.Namespace) -> dict:
-    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`."""
-    return {'speed_scale': getattr(args, 'speed_scale', None), 'threshold_floor': getattr(args, 'threshold_floor', None)}
+    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`;
+    `--speed-scale auto` is left to `formation_sim.commands.limits.resolve_speed_scale` (None here)."""
+    speed_scale = getattr(args, 'speed_scale', None)
+    return {'speed_scale': None if speed_scale == 'auto' else speed_scale, 'threshold_floor': getattr(args, 'threshold_floor', None)}
 
 
 def check_report_argument(command: str, out: Path | None) -> bool:
