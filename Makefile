@@ -1,4 +1,4 @@
-# Entry points for a fresh machine: `make demo` and `make test` (both create .venv on first use).
+# Entry points for a fresh machine: `make demo`, `make lint` and `make test` (each creates .venv on first use).
 
 PYTHON3 ?= python3
 VENV := .venv
@@ -14,7 +14,7 @@ PYTEST_ARGS ?= -n auto --dist loadgroup
 
 DEMO_DIR = runs/demo
 
-.PHONY: venv test demo bench clean distclean
+.PHONY: venv lint test demo bench clean distclean
 
 venv: $(STAMP)
 
@@ -25,6 +25,11 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGING)
 	# each other by import, not through PyPI.
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps $(foreach p,$(PACKAGES),-e $(p))
 	touch $(STAMP)
+
+# ruff check with pyproject.toml's rule set (lint only: the tree is not reformatted yet). New
+# violations of the auto-fixable rules: `.venv/bin/ruff check --fix .`
+lint: venv
+	$(VENV)/bin/ruff check .
 
 # pytest exits 5 when it collects no test: not a failure of the code, so report it and pass.
 test: venv

@@ -13,13 +13,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from engine_baseline import use_revision  # noqa: E402
+from engine_baseline import use_revision
 
 
 def main() -> int:
     folder, arguments = Path(sys.argv[1]), sys.argv[2:]
     use_revision(folder)
-    from formation_sim.cli import main as formation  # noqa: PLC0415
+    from formation_sim.cli import main as formation
 
     assert Path(sys.modules['formation_sim'].__file__).is_relative_to(folder), sys.modules['formation_sim'].__file__
     return formation(arguments)

@@ -57,7 +57,7 @@ def largest_period(scenario, horizon: float, target: float, *, start: float = 1.
     period, failed = start, None
     while period >= floor:
         works, outcome = _periodic(scenario, horizon, period, target)
-        tried.append((period, works if works else outcome))
+        tried.append((period, works or outcome))
         if works:
             break
         failed, period = period, period / shrink
@@ -68,7 +68,7 @@ def largest_period(scenario, horizon: float, target: float, *, start: float = 1.
     for _ in range(refine if high is not None else 0):
         middle = math.sqrt(low * high)
         works, outcome = _periodic(scenario, horizon, middle, target)
-        tried.append((middle, works if works else outcome))
+        tried.append((middle, works or outcome))
         if works:
             low, best, record = middle, middle, outcome
         else:

@@ -60,8 +60,8 @@ def _first_module(*names: str):
 def main() -> int:
     rev, case = sys.argv[1], json.loads(sys.argv[2])
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from cases import build_scenario  # noqa: PLC0415
-    from formation_sim.model.scenario import dump_scenario_text  # noqa: PLC0415
+    from cases import build_scenario
+    from formation_sim.model.scenario import dump_scenario_text
 
     scenario_text = dump_scenario_text(build_scenario(case))
     with tempfile.TemporaryDirectory(prefix='bench_baseline_') as tmp:

@@ -69,7 +69,7 @@ def simulate_fixed_step(scenario, *, horizon: float, dt: float = 1e-4) -> NaiveR
     u = -anchor  # t_1 = 0: every agent triggers (uxsingle / the event-triggered part of uxdouble)
     times = {a: [0.0] for a in ids}
     result = NaiveResult(dt=dt, horizon=horizon, reached=horizon, connectivity_lost=None, trigger_times=times)
-    steps = int(math.floor(horizon / dt + 1e-9))
+    steps = math.floor(horizon / dt + 1e-9)
     for k in range(1, steps + 1):
         t = k * dt
         if double:

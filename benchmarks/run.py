@@ -41,7 +41,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from cases import build_scenario, builtin, label, random  # noqa: E402
+from cases import build_scenario, builtin, label, random  # noqa: E402 - benchmarks/ put on sys.path first
 
 # The implementation before the speed work (its parent commit), for the speed-up columns.
 BASELINE_REV = 'fe95009^'
@@ -51,7 +51,7 @@ DOMAINS = itertools.cycle(range(204, 224))
 
 
 def machine() -> dict:
-    import numpy
+    import numpy as np
     import scipy
 
     cpu = next((line.split(':', 1)[1].strip() for line in Path('/proc/cpuinfo').read_text().splitlines() if line.startswith('model name')), '?')
@@ -63,11 +63,11 @@ def machine() -> dict:
         rclpy_version = '?'
     rev = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     return {
-        'date': dt.datetime.now(dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'date': dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M UTC'),
         'nproc': os.cpu_count(),
         'cpu': cpu,
         'python': platform.python_version(),
-        'numpy': numpy.__version__,
+        'numpy': np.__version__,
         'scipy': scipy.__version__,
         'rclpy': rclpy_version,
         'git': rev,
@@ -541,7 +541,7 @@ def main() -> int:
     sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large']
     results: dict = {'machine': machine(), 'sections': sections, 'load': {}}
     args.out.mkdir(parents=True, exist_ok=True)
-    stamp = dt.datetime.now().strftime('%Y%m%d-%H%M%S')
+    stamp = dt.datetime.now(dt.UTC).strftime('%Y%m%d-%H%M%S')
     runs = Path(tempfile.mkdtemp(prefix=f'formation-bench-{stamp}-'))  # run folders (bags, logs): not kept
 
     def progress(text: str) -> None:

@@ -58,7 +58,7 @@ def linear_rates(scenario):
 
 
 def continuous_run(scenario, horizon):
-    heads, tails, d = scenario.edge_indices()
+    heads, tails, _d = scenario.edge_indices()
     capacities = theory.edge_capacities(scenario)
     gains = scenario.gains
     n, p = scenario.n, scenario.dimension
@@ -142,7 +142,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--horizon', type=float, default=30.0)
     parser.add_argument('--no-engine', action='store_true')
-    parser.add_argument('--beta-d', type=float, default=None, help='replace the paper\'s β_d = 1')
+    parser.add_argument('--beta-d', type=float, default=None, help="replace the paper's β_d = 1")
     args = parser.parse_args()
     scenario = load_scenario('paper_double')
     if args.beta_d is not None:

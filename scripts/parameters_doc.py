@@ -39,7 +39,7 @@ def sections() -> list[tuple[str, str, object]]:
     return [
         ('`formation_agent`: node `/agent_<i>/formation_agent`',
          'An agent (`formation_agent.ros.config`), in `agents.params.yaml` keyed by node name. The gains are '
-         "those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, `k3` for eta2.",
+         'those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, `k3` for eta2.',
          (*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2'])),
         ('`formation_sim`: node `/formation_simulator`',
          'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in `simulator.params.yaml`.',

@@ -13,7 +13,7 @@ API = Path(__file__).resolve().parents[1] / 'docs' / 'API.md'
 
 
 def _examples() -> list[str]:
-    return re.findall(r'^```python\n(.*?)^```', API.read_text(), flags=re.M | re.S)
+    return re.findall(r'^```python\n(.*?)^```', API.read_text(), flags=re.MULTILINE | re.DOTALL)
 
 
 def test_the_examples_are_there():

@@ -80,7 +80,16 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
         assert (share / 'ament_index' / 'resource_index' / 'packages' / package).is_file()
     # The robots' example parameter files (README, "Running on robots").
     config = colcon_install / 'formation_agent' / 'share' / 'formation_agent' / 'config'
-    assert {p.name for p in config.glob('*.params.yaml')} == {'turtlebot3.params.yaml', 'crazyflie.params.yaml'}
+    from formation_agent.core.kinds import KIND_NAMES, robot_kind
+
+    examples = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robot kind
+    assert {p.name for p in config.glob('*.params.yaml')} == examples
+    # ... and where the README sends every install: `python3 -m formation_agent.config`
+    probe = subprocess.run([sys.executable, '-m', 'formation_agent.config'], env=install_env(colcon_install),
+                           capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    assert probe.returncode == 0, probe.stderr
+    folder = Path(probe.stdout.strip())
+    assert folder.is_relative_to(colcon_install) and {p.name for p in folder.glob('*.params.yaml')} == examples
     site = next(colcon_install.glob('formation_sim/lib/python3*/site-packages'))
     installed = {p.name for p in (site / 'formation_sim' / 'model' / 'scenarios').glob('*.yaml')}
     assert installed >= {'paper_single.yaml', 'paper_double.yaml'}
@@ -117,7 +126,7 @@ def test_colcon_test_runs_the_package_tests(colcon_install: Path) -> None:
     run = _colcon(root, 'test', '--base-paths', 'src', '--build-base', 'build', '--install-base', 'install',
                   '--packages-select', 'formation_msgs_py', '--event-handlers', 'console_direct+')  # fmt: skip
     assert run.returncode == 0, run.stdout + run.stderr
-    suite = ET.parse(root / 'build' / 'formation_msgs_py' / 'pytest.xml').getroot()
+    suite = ET.parse(root / 'build' / 'formation_msgs_py' / 'pytest.xml').getroot()  # noqa: S314 - colcon's own report
     suite = suite if suite.tag == 'testsuite' else suite.find('testsuite')
     assert int(suite.get('tests')) >= 50
     assert int(suite.get('failures')) == 0 and int(suite.get('errors')) == 0

@@ -1,7 +1,7 @@
 """The architecture, as a rule the imports must keep (docs/DESIGN.md, "Layers").
 
 - Packages depend one way: formation_sim -> formation_agent -> formation_msgs_py.
-- formation_sim's layers: model < sim < bag < analysis < runtime < commands < cli; a module
+- formation_sim's layers: model < sim < bag < analysis < study < runtime < commands < cli; a module
   imports only from its own layer or those before it (function-level imports included).
 - formation_agent.core never imports formation_agent.ros.
 - No import cycle among the project's modules.
@@ -21,7 +21,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
 PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
-SIM_LAYERS = ('progress', 'model', 'sim', 'bag', 'analysis', 'runtime', 'commands', 'cli')
+SIM_LAYERS = ('progress', 'model', 'sim', 'bag', 'analysis', 'study', 'runtime', 'commands', 'cli')
 # Modules that are ROS shells: they may import rclpy at the top.
 ROS_MODULES = ('formation_msgs_py.qos', 'formation_agent.ros', 'formation_sim.runtime')
 ROS_IMPORTS = ('rclpy', 'std_msgs', 'std_srvs', 'geometry_msgs', 'rosgraph_msgs', 'visualization_msgs',
@@ -64,7 +64,7 @@ GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
 
 
 def _package_rank(name: str) -> int:
-    return PACKAGES.index(name.split('.')[0])
+    return PACKAGES.index(name.split('.', maxsplit=1)[0])
 
 
 def _sim_layer(name: str) -> int:
@@ -128,7 +128,7 @@ def test_the_rule_catches_an_upward_import(tmp_path) -> None:
 
 ROS_FREE = sorted(name for name in MODULES if not name.startswith(ROS_MODULES))
 
-_BLOCKER = f'''
+_BLOCKER = f"""
 import importlib.abc, sys
 BLOCKED = {ROS_IMPORTS!r}
 class Block(importlib.abc.MetaPathFinder):
@@ -142,7 +142,7 @@ for name in sys.argv[1:]:
     importlib.import_module(name)
     assert not [m for m in sys.modules if m.split('.')[0] in BLOCKED], name
 print('imported', len(sys.argv) - 1)
-'''
+"""
 
 
 def test_ros_free_modules_import_without_rclpy() -> None:

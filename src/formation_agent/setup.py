@@ -20,9 +20,12 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
         (f'share/{package_name}', ['package.xml']),
-        # Example parameter files for robots (README, "Running on robots").
-        (f'share/{package_name}/config', sorted(glob('config/*.params.yaml'))),
+        # Example parameter files for robots (README, "Running on robots"), also in share/ where ROS
+        # packages keep them (regular and colcon installs; an editable install gets no data_files).
+        (f'share/{package_name}/config', sorted(glob(f'{package_name}/config/*.params.yaml'))),
     ],
+    # ... and inside the package, so that every install has them (`python3 -m formation_agent.config`).
+    package_data={f'{package_name}.config': ['*.params.yaml']},
     # formation_msgs_py and the ROS packages come from the workspace (package.xml), not from PyPI.
     install_requires=['setuptools', 'numpy', 'scipy'],
     # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).

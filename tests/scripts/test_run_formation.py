@@ -5,6 +5,7 @@ from __future__ import annotations
 import runpy
 import sys
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 
@@ -14,7 +15,7 @@ SCRIPT = Path(__file__).resolve().parents[2] / 'scripts' / 'run_formation.py'
 class _Recorded:
     """Stands in for FormationRun: records its arguments, starts nothing."""
 
-    calls: list = []
+    calls: ClassVar[list] = []
 
     def __init__(self, scenario, **options):
         _Recorded.calls.append((scenario, options))
@@ -26,7 +27,7 @@ class _Recorded:
 
 
 def _run_script(monkeypatch, *arguments):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     monkeypatch.setattr(orchestrate, 'FormationRun', _Recorded)
     monkeypatch.setattr(sys, 'argv', [str(SCRIPT), *arguments])

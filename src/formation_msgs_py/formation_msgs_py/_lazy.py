@@ -21,7 +21,7 @@ def lazy_exports(namespace: dict[str, Any], exports: Mapping[str, Sequence[str]]
     package = namespace['__name__']
     where = {name: module for module, names in exports.items() for name in names}
 
-    def __getattr__(name: str) -> Any:  # noqa: ANN401 - whatever the submodule defines
+    def __getattr__(name: str) -> Any:
         module = where.get(name)
         if module is None:
             raise AttributeError(f'module {package!r} has no attribute {name!r}')

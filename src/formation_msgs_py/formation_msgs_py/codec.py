@@ -233,7 +233,7 @@ def _json_vector(name: str, values, p: int | None) -> tuple[float, ...]:
         raise MessageError(f'{name} must be a list of numbers, got {values!r}')
     vector = tuple(_json_number(f'{name}[{k}]', v) for k, v in enumerate(values))
     if not vector or (p is not None and len(vector) != p):
-        raise MessageError(f'{name} has {len(vector)} components, expected {p if p else "at least 1"}')
+        raise MessageError(f'{name} has {len(vector)} components, expected {p or "at least 1"}')
     return vector
 
 

@@ -11,11 +11,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProf
 
 # The leases and graces every node of a run agrees on live in the ROS-free middleware module, so
 # that a ROS-free book (formation_sim.runtime.run_book) can use them; re-exported here.
-from formation_msgs_py.middleware import (
-    KEEPER_LEASE_GRACE as KEEPER_LEASE_GRACE,
-    LIVELINESS_LEASE as LIVELINESS_LEASE,
-    LOST_GRACE as LOST_GRACE,
-)
+from formation_msgs_py.middleware import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE  # noqa: F401 - re-exported
 
 # Every message of the protocol matters, and a reader that matches a writer late must still get
 # what was written before: reliable + transient local.  Depth bounds what may be outstanding; the

@@ -39,7 +39,7 @@ def test_advance_composes_over_split_intervals():
 def test_advance_solves_the_damped_double_integrator():
     # d/dt q = u - k3 q at t: check by a centred difference of the closed form.
     x, q, u, k3, t, h = np.array([0.0]), np.array([2.0]), np.array([1.0]), 0.6, 1.5, 1e-5
-    (xp, qp), (xm, qm), (x0, q0) = (advance_double(x, q, u, k3, t + s) for s in (h, -h, 0.0))
+    (xp, qp), (xm, qm), (_x0, q0) = (advance_double(x, q, u, k3, t + s) for s in (h, -h, 0.0))
     assert (qp - qm) / (2 * h) == pytest.approx(u - k3 * q0, rel=1e-8)
     assert (xp - xm) / (2 * h) == pytest.approx(q0, rel=1e-8)
 

@@ -198,3 +198,36 @@ def test_search_past_the_tolerance_advanced_in_pieces_gives_the_same_float(piece
         if search.advance(float(until)) is not None:
             break
     assert search.run() == whole
+
+
+# --- the threshold floor c0 + α e^{-βt} (docs/SPEED_SCALE.md) ---------------------------------------
+
+
+def test_floored_threshold_meets_a_constant_error_where_the_formula_says():
+    # |e| = 0.5, threshold 0.2 + e^{-t}: the crossing is at t = ln(1/0.3), late in the decay.
+    model = Bump(height=0.5, centre=0.0, width=1e100, ramp=0.0)
+    t = first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0, floor=0.2)
+    assert t == pytest.approx(math.log(1.0 / 0.3), rel=1e-13)
+
+
+def test_an_error_below_the_floor_never_crosses_however_late():
+    # The paper's threshold vanishes and any constant error crosses it; the floor keeps 0.5 < 0.5001
+    # below it for ever, also where e^{βt} overflows a double (t >> 709/β).
+    model = Bump(height=0.5, centre=0.0, width=1e100, ramp=0.0)
+    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=1e4, floor=0.5001) == math.inf
+    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0) == pytest.approx(math.log(2.0), rel=1e-14)
+
+
+@pytest.mark.parametrize('floor', [0.05, 0.4, 1.0])
+def test_with_a_floor_the_narrow_spike_is_still_found_first(floor):
+    # The spike pokes 1e-3 above the floored threshold at t = 1; a later ramp crosses too.
+    alpha, beta = 1.0, 0.5
+    level = floor + alpha * math.exp(-beta * 1.0)
+    model = Bump(height=level * 1.001, centre=1.0, width=1e-4, ramp=0.01)
+    t = first_crossing(model, start=0.0, alpha=alpha, beta=beta, limit=100.0, floor=floor)
+    grid = np.linspace(0.99, 1.01, 2_000_001)
+    z = (grid - model.c) / model.w
+    margin = floor + alpha * np.exp(-beta * grid) - np.abs(model.a * np.exp(-z * z) + model.b * grid)
+    first = grid[1:][np.diff(np.sign(margin)) != 0][0]
+    assert abs(t - first) < 1e-7 and t < 1.0
+    assert abs(model.value(t) / (floor + alpha * math.exp(-beta * t)) - 1.0) < 1e-12

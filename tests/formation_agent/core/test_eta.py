@@ -59,7 +59,7 @@ def test_eta1_next_time_is_where_predicted_error_meets_threshold():
 
     def error(s):
         total = np.zeros(2)
-        for j, d, u_j, rel in ((2, D12, (0.3, -0.2), (-1.5, -3.0)), (3, D13, (-0.1, 0.4), (-2.5, -1.5))):
+        for _j, d, u_j, rel in ((2, D12, (0.3, -0.2), (-1.5, -3.0)), (3, D13, (-0.1, 0.4), (-2.5, -1.5))):
             y0 = np.array(rel) - d
             y = y0 + s * (u1 - np.array(u_j))
             c = 4.0 - np.linalg.norm(d)

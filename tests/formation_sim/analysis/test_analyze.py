@@ -192,7 +192,7 @@ def test_theorem_checks_catch_a_violation(paper_single_record):
     failed = {check.name: check.detail for check in theorem_checks(record, grown, bounds) if not check.ok}
     assert 'formation error < 2 sqrt(k_V) e^{-beta t}' in failed
     assert failed['connectivity: ||x_i - x_j|| < Δ'].startswith('max edge length 6.7082039')  # 2 ||(1.5, 3)||
-    tight = dataclasses.replace(bounds, xi={agent: 1.0 for agent in bounds.xi})
+    tight = dataclasses.replace(bounds, xi=dict.fromkeys(bounds.xi, 1.0))
     failed = {check.name: check.detail for check in theorem_checks(record, series, tight) if not check.ok}
     assert failed['inter-event times >= xi_i (xi)'].startswith('agent 1: ')
 
@@ -223,7 +223,7 @@ def test_the_paper_figure_draws_exactly_the_recorded_events_and_paths(paper_sing
         x = record.sample_positions
         assert np.array_equal(trajectories.rows, np.arange(len(record.sample_times)))  # a small run: every sample
         paths, starts = trajectories.paths.get_segments(), trajectories.starts.get_offsets()
-        for k, agent in enumerate(record.scenario.agent_ids):
+        for k, _agent in enumerate(record.scenario.agent_ids):
             assert np.array_equal(paths[k], x[:, k]) and np.array_equal(paths[k][0], record.scenario.positions[k])
             assert np.array_equal(starts[k], record.scenario.positions[k])
         index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}

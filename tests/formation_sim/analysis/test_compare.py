@@ -57,7 +57,7 @@ def test_triggers_are_matched_index_by_index_and_count_mismatches_named():
 
 def test_trajectories_are_compared_on_the_union_of_sample_times():
     # A samples at 0, 0.5, 1; B at 0, 0.25, 0.75, 1; both move on straight lines, B 0.1 ahead in x.
-    line = lambda t, shift: np.stack([np.stack([t + shift, 0 * t], axis=1), np.stack([2 * t, 1 + 0 * t], axis=1)], axis=1)  # noqa: E731
+    line = lambda t, shift: np.stack([np.stack([t + shift, 0 * t], axis=1), np.stack([2 * t, 1 + 0 * t], axis=1)], axis=1)  # noqa: E731 - a one-line helper beside its use
     ta, tb = np.array([0.0, 0.5, 1.0]), np.array([0.0, 0.25, 0.75, 1.0])
     a = _run_data('A', {1: [0.0], 2: [0.0]}, ta, line(ta, 0.0))
     b = _run_data('B', {1: [0.0], 2: [0.0]}, tb, line(tb, 0.1))

@@ -142,5 +142,5 @@ def test_a_live_marker_array_updated_in_place_equals_a_new_one():
     assert again == fresh
     # And through the wire (colours are float32 there), as messages: CDR padding bytes are not
     # zeroed, so the bytes of two equal messages may differ.
-    wire = lambda message: deserialize_message(serialize_message(message), MarkerArray)  # noqa: E731
+    wire = lambda message: deserialize_message(serialize_message(message), MarkerArray)  # noqa: E731 - a one-line helper beside its use
     assert wire(again) == wire(fresh)

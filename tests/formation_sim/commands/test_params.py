@@ -77,7 +77,7 @@ def test_an_occupied_folder_is_refused_unless_forced(tmp_path, capsys):
 
 def _readme_commands() -> list[str]:
     """The README's block that starts a run by hand (Agents on separate machines)."""
-    block = re.search(r'```bash\n(\s*formation params paper_single .*?)```', README.read_text(), flags=re.S)
+    block = re.search(r'```bash\n(\s*formation params paper_single .*?)```', README.read_text(), flags=re.DOTALL)
     assert block, 'README: the block starting with formation params paper_single is gone'
     return [line.strip() for line in block.group(1).splitlines() if line.strip()]
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import pytest
 
 from formation_sim.cli import main
@@ -18,8 +20,8 @@ BAD_RUN_ARGUMENTS = [
     (['--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
     (['--timeout', 'soon'], "argument --timeout: must be a finite number > 0, got 'soon'"),
     (['--sample-dt', '1e-9'], 'the sample spacing 1e-09 s asks for 1e+10 samples'),
-    (['--speed-scale', '0'], 'argument --speed-scale: must be a finite number > 0, got 0.0'),
-    (['--speed-scale', 'inf'], 'argument --speed-scale: must be a finite number > 0, got inf'),
+    (['--speed-scale', '0'], "argument --speed-scale: must be a finite number > 0 or 'auto', got 0.0"),
+    (['--speed-scale', 'inf'], "argument --speed-scale: must be a finite number > 0 or 'auto', got inf"),
     (['--speed-scale', '1e-9'], 'gains.speed_scale: must lie in [1e-06, 1e+06]'),
     (['--threshold-floor', '-0.1'], 'argument --threshold-floor: must be a finite number >= 0, got -0.1'),
 ]
@@ -125,7 +127,7 @@ def _write(tmp_path, label, edits):
 class _NoProcesses:
     """Stands in for subprocess.Popen: any attempt to start a process fails the test."""
 
-    started: list = []
+    started: ClassVar[list] = []
 
     def __init__(self, args, *rest, **options):
         _NoProcesses.started.append(args)
@@ -206,7 +208,7 @@ def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch
 
 
 def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     seen = {}
 
@@ -268,7 +270,7 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
+        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle|car (what the robots are)'),
         (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
         (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
@@ -278,3 +280,87 @@ def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arg
     assert main(['run', 'robots_square', '--out', str(tmp_path / 'run'), '--quiet', *arguments]) == 2
     assert complaint in capsys.readouterr().err
     assert not (tmp_path / 'run').exists()
+
+
+# -- robot limits: a team whose exact run asks for more than the robots can do is refused ----------
+
+TURTLEBOT3_LIMITS = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
+
+
+def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and_the_remedy(tmp_path, capsys, monkeypatch):
+    import subprocess
+
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.largest_command import measured_command
+
+    monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
+    out = tmp_path / 'run'
+    assert main(['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--out', str(out), '--quiet']) == 2
+    err = capsys.readouterr().err
+    asked = measured_command(load_scenario('robots_lab')).max_speed  # the exact run at κ = 1
+    assert f'asks for {asked:.4g} m/s beyond --max-speed 0.22 m/s' in err
+    assert f'{asked / 0.1:.4g} rad/s beyond --max-angular-speed 2.84 rad/s' in err
+    assert '--speed-scale auto' in err and '--allow-saturation' in err
+    assert not out.exists()  # nothing started, nothing written
+
+
+def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(tmp_path, capsys, monkeypatch):
+    from formation_sim.runtime import orchestrate
+
+    started = []
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            started.append(self.scenario.name)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    arguments = ['--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--quiet']
+    assert main(['run', 'robots_lab', *arguments, '--allow-saturation', '--out', str(tmp_path / 'a')]) == 2
+    err = capsys.readouterr().err
+    assert started == ['robots_lab'] and 'warning: the exact run of robots_lab' in err and 'running anyway' in err
+    # robots_square starts within 1.5 cm of its corners: its exact run asks for 0.10 m/s, no warning
+    assert main(['run', 'robots_square', *arguments, '--out', str(tmp_path / 'b')]) == 2
+    err = capsys.readouterr().err
+    assert started == ['robots_lab', 'robots_square'] and 'beyond' not in err
+    # the exact backend has no robots, hence no limits to check
+    assert main(['run', 'robots_lab', *TURTLEBOT3_LIMITS, '--quiet', '--out', str(tmp_path / 'c')]) == 2
+    assert started[-1] == 'robots_lab'
+
+
+def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tmp_path, capsys, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    seen = {}
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            seen.update(kappa=self.scenario.gains.speed_scale, extra=self.summary_extra)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto', '--quiet']
+    assert main([*arguments, '--out', str(tmp_path / 'a')]) == 2  # the test's stop, after the check passed
+    err = capsys.readouterr().err
+    assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
+    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.2
+    assert seen['extra']['speed_scale']['source'] == 'observed'
+
+
+def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    started = []
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            started.append(self.scenario.gains.speed_scale)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    # κ = 0.15 keeps robots_lab's speed within 0.22 m/s; its ||u||/l (0.1 m) would exceed 0.5 rad/s
+    arguments = ['run', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '0.5', '--speed-scale', '0.15', '--quiet']
+    assert main([*arguments, '--backend', 'holonomic', '--out', str(tmp_path / 'a')]) == 2
+    assert started == [0.15] and 'beyond' not in capsys.readouterr().err
+    assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2
+    assert started == [0.15] and 'beyond --max-angular-speed 0.5 rad/s' in capsys.readouterr().err

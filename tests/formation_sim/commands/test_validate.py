@@ -174,9 +174,9 @@ CATALOGUE = [
     ('id 10^30', rename_agent_3(10**30), 2, ['agent ids are integers in [0, 2147483647]', 'an integer of 31 digits']),
     ('id negative', rename_agent_3(-3), 2, ['agents.-3: agent ids are integers in [0, 2147483647]', 'got -3']),
     ('id float', rename_agent_3(3.5), 2, ['agents.3.5: agent ids are integers', 'got 3.5']),
-    ('id text', rename_agent_3('three'), 2, ["agents.three: agent ids are integers", "got 'three'"]),
+    ('id text', rename_agent_3('three'), 2, ['agents.three: agent ids are integers', "got 'three'"]),
     ('id bool', PAPER.replace('  1: {', '  true: {').replace('i: 1,', 'i: true,'), 2, ['agents.True: agent ids are integers', 'got True']),
-    ('edge id as text', edit('i: 2, j: 3', 'i: "2", j: 3'), 2, ["edges[2].i: agent ids are integers", "got '2'"]),
+    ('edge id as text', edit('i: 2, j: 3', 'i: "2", j: 3'), 2, ['edges[2].i: agent ids are integers', "got '2'"]),
     ('edge to nobody', edit('j: 3, d: [-2.0, 2.0]', 'j: 9, d: [-2.0, 2.0]'), 2, ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)']),
     # -- names
     ('empty name', edit('name: case', "name: ''"), 2, ["name: expected a non-empty string, got ''"]),
@@ -248,15 +248,15 @@ JSON_CATALOGUE = [
     # -- the schema, as for YAML
     ('a list', '[1, 2]', 2, ['scenario: expected a mapping, got [1, 2]']),
     ('unknown key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"extra": 1,'), 2, ["scenario: unknown key 'extra'"]),
-    ('agents null', PAPER_JSON.split('"agents"')[0] + '"agents": null,\n"edges": [],\n"gains": {"alpha": 1.0, "beta": 0.1}\n}', 2, ['agents: expected a mapping, got None']),
+    ('agents null', PAPER_JSON.split('"agents"', maxsplit=1)[0] + '"agents": null,\n"edges": [],\n"gains": {"alpha": 1.0, "beta": 0.1}\n}', 2, ['agents: expected a mapping, got None']),
     ('id 2^31', edit_json('"3": {', '"2147483648": {').replace('"j": 3', '"j": 2147483648'), 2, ['agents.2147483648: agent ids are integers in [0, 2147483647]']),
-    ('id text', edit_json('"3": {', '"three": {'), 2, ["agents.three: agent ids are integers", "got 'three'"]),
-    ('edge id as text', edit_json('"i": 2, "j": 3', '"i": "2", "j": 3'), 2, ["edges[2].i: agent ids are integers", "got '2'"]),
+    ('id text', edit_json('"3": {', '"three": {'), 2, ['agents.three: agent ids are integers', "got 'three'"]),
+    ('edge id as text', edit_json('"i": 2, "j": 3', '"i": "2", "j": 3'), 2, ['edges[2].i: agent ids are integers', "got '2'"]),
     ('edge to nobody', edit_json('"i": 2, "j": 3', '"i": 2, "j": 9'), 2, ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)']),
     ('name of 300 characters', edit_json('"name": "case"', '"name": "' + 'n' * 300 + '"'), 2, ['name: at most 200 printable characters', '(300 characters)']),
     ('mismatched dimensions', edit_json('[2.0, 4.0]', '[2.0, 4.0, 1.0]'), 2, ['agents.2.position: has 2 components, expected 3']),
     ('an edge as a list', edit_json('{"i": 1, "j": 2, "d": [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'), 2, ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]']),
-    ('no edges', PAPER_JSON.split('"edges"')[0] + '"edges": [],\n"gains": {"alpha": 10.0, "beta": 1.0}\n}', 1, ['[connected] graph: the graph has 3 connected components']),
+    ('no edges', PAPER_JSON.split('"edges"', maxsplit=1)[0] + '"edges": [],\n"gains": {"alpha": 10.0, "beta": 1.0}\n}', 1, ['[connected] graph: the graph has 3 connected components']),
 ]
 
 MESSAGE_LIMIT = 2000  # characters: an error quotes values cut short, never their whole expansion
@@ -380,3 +380,37 @@ def test_command_limits_in_json_and_bad_limits_refused(capsys):
     assert data['commands']['within'] is False
     assert main(['validate', 'robots_square', '--max-speed', '-1']) == 2
     assert 'argument --max-speed: must be a finite number > 0, got -1.0' in capsys.readouterr().err
+
+
+def test_validate_reports_both_speed_scales_and_their_settling_times(capsys):
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.largest_command import measured_command
+
+    # robots_lab is set down 21-30 cm off its corners: at κ = 1 it asks for more than a TurtleBot can do
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '2.84', '--json']) == 1
+    data = json.loads(capsys.readouterr().out)['commands']['speed_scale']
+    asked = measured_command(load_scenario('robots_lab')).max_speed
+    assert data['source'] == 'observed' and math.isclose(data['value'] * asked * 1.25, 0.22, rel_tol=1e-12)
+    assert data['guaranteed']['value'] < data['observed']['value']
+    assert data['settling']['definition'].startswith('first time after which the formation error')
+    assert math.isclose(data['observed']['settle_time'], data['settling']['time_at_1'] / data['value'], rel_tol=1e-12)
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22']) == 1
+    out = capsys.readouterr().out
+    assert f'--speed-scale auto runs κ = {data["value"]:.4g} (observed)' in out
+    assert 'guaranteed: κ = ' in out and 'bound by the speed 0.22 m/s' in out
+
+
+def test_an_acceleration_limit_on_eta1_is_refused_with_the_reason(capsys):
+    assert main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-acceleration', '1']) == 2
+    assert 'ETA-1 commands velocities (uxsingle) that jump at every event' in capsys.readouterr().err
+
+
+def test_validate_suggests_the_threshold_floor_for_a_pose_noise(capsys):
+    assert main(['validate', 'robots_lab', '--pose-noise', '0.005', '--json']) == 0
+    floor = json.loads(capsys.readouterr().out)['threshold_floor']
+    assert math.isclose(floor['suggested'], 3 * math.sqrt(10) * 0.005, rel_tol=1e-12)  # ω_ij = 2/(3 - 1) = 1, two neighbours
+    assert main(['validate', 'robots_lab', '--pose-noise', '0.005']) == 0
+    out = capsys.readouterr().out
+    assert f'suggested c0 = {floor["suggested"]:.3g}' in out and 'sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²)' in out
+    assert main(['validate', 'robots_lab', '--pose-noise', '0']) == 2
+    assert 'argument --pose-noise: must be a finite number > 0, got 0.0' in capsys.readouterr().err

@@ -460,5 +460,101 @@ def test_a_large_team_in_json_reads_back_exactly(tmp_path):
 
 
 def test_a_folder_is_named_as_such():
-    with pytest.raises(ScenarioError, match="is a folder, not a scenario file"):
+    with pytest.raises(ScenarioError, match='is a folder, not a scenario file'):
         load_scenario('.')
+
+
+# --------------------------------------------------------------------------- libyaml (C) and PyYAML agree
+
+# Documents for which the loader's fast paths (libyaml's events straight to data; libyaml's composer
+# with the Python constructor) must give exactly what PyYAML's pure-Python loader gives.
+YAML_DOCUMENTS = [
+    PAPER_YAML,
+    '',
+    '# only a comment\n',
+    '---\n',
+    'a: [1e-3, 1E+3, .5, -0.0, +1, 0x1F, 0o17, 017, 1_000, 1:30, 1.5:30, 0b101, 190:20:30]\n',
+    'a: [.inf, -.Inf, .NaN, .nan, nan, inf]\n',
+    'a: [yes, No, on, OFF, true, False, ~, null, Null, "", \'\', "1", \'2.0\', x y, "a\\nb"]\n',
+    'a: {1: x, 1.5: y, false: z, null: w, "1": v}\n',
+    'a: &x [1, 2]\nb: *x\nc: {<<: {d: 1}, e: 2}\n',  # anchors, aliases and a merge key
+    'a: 2001-12-14\nb: 2001-12-14t21:59:43.10-05:00\n',  # timestamps
+    'a: !!binary aGVsbG8=\nb: !!str 1\nc: !!float 1\nd: ! 12\n',  # explicit tags
+    'a: !!set {x, y}\nb: !!omap [{x: 1}]\n',
+    '- [[[1]]]\n- {a: {b: {c: [2]}}}\n',
+    'plain text\n',
+    '"quoted root"\n',
+    '%YAML 1.1\n---\na: 1\n...\n',
+    'a: |\n  two\n  lines\nb: >\n  folded\n  text\n',
+]
+
+
+@pytest.mark.parametrize('text', YAML_DOCUMENTS, ids=range(len(YAML_DOCUMENTS)))
+def test_the_c_loader_reads_what_the_python_loader_reads(text):
+    import yaml
+
+    from formation_sim.model import scenario as module
+
+    expected = yaml.load(text, Loader=module._Loader)  # noqa: S506 - a SafeLoader
+    assert repr(module._load_yaml(text)) == repr(expected)
+    assert repr(module._CLoader(text).get_single_data()) == repr(expected)
+
+
+def test_every_dumped_scenario_takes_the_one_pass_reader_and_reads_back_bit_for_bit():
+    from formation_sim.model import scenario as module
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.model.scenario import dump_scenario_text
+
+    for scenario in (load_scenario('paper_double'), random_scenario(n=50, seed=4, dynamics='double', dimension=3)):
+        text = dump_scenario_text(scenario)
+        data = module._read_plain(text)  # raises _NotPlain if the dump needed the full loader
+        assert scenario_from_dict(data, name=scenario.name) == scenario
+
+
+@pytest.mark.parametrize('anchored', [False, True], ids=['one pass', 'anchors: the composer'])
+def test_the_node_limit_holds_exactly_on_both_paths(tmp_path, anchored):
+    from formation_sim.model.scenario import MAX_YAML_NODES
+
+    # Nodes: the top mapping, key a, its list and its items (the anchored variant: one more key and scalar).
+    extra = 2 if anchored else 0
+    for items, refused in ((MAX_YAML_NODES - 3 - extra, False), (MAX_YAML_NODES - 2 - extra, True)):
+        text = ('b: &b 0\n' if anchored else '') + 'a: [' + ', '.join(['0'] * items) + ']\n'
+        with pytest.raises(ScenarioError) as caught:
+            load_scenario(write(tmp_path, text))
+        message = str(caught.value)
+        assert (f'more than {MAX_YAML_NODES} nodes (at line' in message) == refused, message[:300]
+        if not refused:
+            assert 'unknown key' in message
+
+
+@pytest.mark.parametrize('anchored', [False, True], ids=['one pass', 'anchors: the composer'])
+def test_nesting_is_bounded_on_both_paths(tmp_path, anchored):
+    from formation_sim.model.scenario import _YAML_DEPTH_LIMIT
+
+    prefix = 'b: &b 0\n' if anchored else ''
+    for depth, refused in ((_YAML_DEPTH_LIMIT - 1, False), (_YAML_DEPTH_LIMIT, True)):
+        # The top mapping is one level, the list under `horizon` `depth` more.
+        text = prefix + 'horizon: ' + '[' * depth + ']' * depth + '\n'
+        with pytest.raises(ScenarioError) as caught:
+            load_scenario(write(tmp_path, text))
+        assert ('nested too deeply' in str(caught.value)) == refused, str(caught.value)[:300]
+
+
+@pytest.mark.parametrize('suffix', ['.yaml', '.json'])
+def test_headings_are_optional_per_agent_and_round_trip_exactly(tmp_path, suffix):
+    from formation_sim.model.scenario import dump_scenario, scenario_to_dict
+
+    lab = load_scenario('robots_lab')
+    assert lab.headings is not None and lab.headings.tolist() == [-1.377, 0.402, -0.155, 1.484]
+    dump_scenario(lab, tmp_path / f'lab{suffix}')
+    assert load_scenario(tmp_path / f'lab{suffix}') == lab
+    assert load_scenario('robots_square').headings is None  # none given: the robots' --initial-heading
+    data = scenario_to_dict(lab)
+    data['agents'][3]['heading'] = math.pi
+    assert scenario_from_dict(data) != lab  # headings are part of the scenario
+    del data['agents'][2]['heading']
+    with pytest.raises(ScenarioError, match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading or none'):
+        scenario_from_dict(data)
+    data['agents'][2]['heading'] = float('nan')
+    with pytest.raises(ScenarioError, match=r'agents\.2\.heading: must be finite, got nan'):
+        scenario_from_dict(data)

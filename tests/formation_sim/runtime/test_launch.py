@@ -70,11 +70,11 @@ def test_a_discovery_server_starts_first_and_every_other_child_is_its_client(tmp
     assert plan.environment(150, extra_env={})['ROS_DISCOVERY_SERVER'] == '127.0.0.1:40123'
     assert plan.process_count() == simple.process_count() + 1
     across = dataclasses.replace(_plan(tmp_path / 'across', 'exact', discovery='server', localhost_only=False), discovery_port=40123)
-    assert across.discovery_server_process().args[3] == '0.0.0.0'  # clients on other machines reach it
+    assert across.discovery_server_process().args[3] == '0.0.0.0'  # noqa: S104 - clients on other machines reach it
 
 
 def test_a_discovery_server_that_is_not_installed_is_refused_before_anything_exists(tmp_path, monkeypatch):
-    import formation_sim.runtime.launch as launch
+    from formation_sim.runtime import launch
 
     monkeypatch.setattr(launch, 'DISCOVERY_SERVER_PROGRAM', 'no-such-discovery-server')
     with pytest.raises(RunError, match='the discovery server needs no-such-discovery-server .*neither .*/no-such-discovery-server nor'):
@@ -147,11 +147,11 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
         (dict(backend='external'), "backend 'external' needs robots=RobotOptions(model=...)"),
         (dict(backend='unicycle', robots=RobotOptions(model='holonomic')), "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (dict(backend='holonomic', clock='lockstep'), "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'"),
-        (dict(backend='exact', robots=TURTLEBOT3), "robots are options of the robot backends"),
-        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'external'), got 'mujoco'"),
+        (dict(backend='exact', robots=TURTLEBOT3), 'robots are options of the robot backends'),
+        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'car', 'external'), got 'mujoco'"),
         (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
-        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance l must be > 0, got 0.0'),
+        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
         (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
     ],
 )
@@ -180,3 +180,13 @@ def test_robot_options_reach_the_simulated_robots(tmp_path):
     params = noisy.robot_parameters(load_scenario('robots_square'), 2)
     assert {key: params[key] for key in ('pose_noise', 'pose_latency', 'seed', 'rate')} == {'pose_noise': 0.005, 'pose_latency': 0.02, 'seed': 3, 'rate': 100.0}
     assert np.array_equal(params['position'], [1.015, -0.0075])
+
+
+def test_simulated_robots_start_at_the_scenarios_headings_unless_one_is_given(tmp_path):
+    lab = load_scenario('robots_lab')
+    options = RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': None})
+    assert [options.initial_heading(lab, agent) for agent in lab.agent_ids] == lab.headings.tolist()
+    assert options.initial_heading(load_scenario('robots_square'), 1) == 0.0  # none in the scenario
+    given = RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': 0.5})
+    assert {given.initial_heading(lab, agent) for agent in lab.agent_ids} == {0.5}  # --initial-heading wins
+    assert options.robot_parameters(lab, 3)['yaw'] == -0.155

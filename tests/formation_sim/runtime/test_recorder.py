@@ -324,7 +324,7 @@ def recorder_command() -> list[str]:
 @contextlib.contextmanager
 def ros_domain(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain_id: int):
     """A private ROS domain for this test: environment for children and a context for us."""
-    import rclpy  # noqa: PLC0415
+    import rclpy
 
     env = {'ROS_DOMAIN_ID': str(domain_id), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
            'ROS_LOG_DIR': str(tmp_path / 'ros_log'), 'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}
@@ -375,7 +375,7 @@ def stop(process: subprocess.Popen, sig: signal.Signals, tmp_path: Path) -> None
 
 
 def reliable_keep_all():
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: PLC0415
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
                       reliability=ReliabilityPolicy.RELIABLE)
@@ -386,8 +386,8 @@ def reliable_keep_all():
 def test_live_recording_keeps_every_message_in_order(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: signal.Signals, domain_id: int
 ) -> None:
-    import rclpy  # noqa: PLC0415
-    from rclpy.duration import Duration  # noqa: PLC0415
+    import rclpy
+    from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
     count = 40
@@ -430,8 +430,8 @@ def test_live_recording_keeps_every_message_in_order(
 def test_live_prefix_discovery_with_node_clock(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import rclpy  # noqa: PLC0415
-    from rclpy.duration import Duration  # noqa: PLC0415
+    import rclpy
+    from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
     started_ns = time.time_ns()
@@ -491,8 +491,8 @@ def test_drain_keeps_messages_that_arrive_after_a_lull(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A burst right before SIGINT and one 0.3 s after it (a loaded publisher's late messages)."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.duration import Duration  # noqa: PLC0415
+    import rclpy
+    from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
     # A quiet period well above the lull, so a loaded test machine cannot make this flaky.
@@ -520,7 +520,7 @@ def test_drain_keeps_messages_that_arrive_after_a_lull(
 def test_drain_ends_at_its_limit_while_messages_keep_coming(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import rclpy  # noqa: PLC0415
+    import rclpy
 
     bag = tmp_path / 'bag'
     with (ros_domain(tmp_path, monkeypatch, 141) as context,
@@ -552,8 +552,8 @@ def test_drain_ends_at_its_limit_while_messages_keep_coming(
 def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import rclpy  # noqa: PLC0415
-    from rclpy.duration import Duration  # noqa: PLC0415
+    import rclpy
+    from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
     with (ros_domain(tmp_path, monkeypatch, 142) as context,
@@ -596,12 +596,12 @@ def test_the_heartbeat_names_the_watched_topics_until_their_first_message(
 ) -> None:
     """A robot run's time keeper starts only once the recorder has had a message on each robot's
     pose topic (`watched_topics`): its heartbeat lists those still silent."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
-    from std_msgs.msg import String  # noqa: PLC0415
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
 
-    from formation_msgs_py.qos import READER_QOS  # noqa: PLC0415
-    from formation_msgs_py.topics import RECORDER_TOPIC  # noqa: PLC0415
+    from formation_msgs_py.qos import READER_QOS
+    from formation_msgs_py.topics import RECORDER_TOPIC
 
     pose, other = '/agent_2/robot/pose', '/other'
     with (ros_domain(tmp_path, monkeypatch, 147) as context,
@@ -722,9 +722,9 @@ def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_
 @pytest.mark.ros
 def test_each_topic_keeps_the_qos_its_publishers_offered(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """As rosbag2 records them: one profile per publisher, transient local stays transient local."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.duration import Duration  # noqa: PLC0415
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy  # noqa: PLC0415
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
     bag = tmp_path / 'bag'
     latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE,
@@ -756,7 +756,7 @@ def _bag_of_a_run(bag: Path) -> dict[str, list]:
     """Per topic, its (bag time, message) in bag order, after checking what every run's bag must
     hold: the run's QoS on every topic (the scenario latched), Jazzy's distro and type hashes,
     stamps that never decrease on a topic."""
-    from mcap.reader import make_reader  # noqa: PLC0415
+    from mcap.reader import make_reader
 
     info = metadata(bag)
     assert info['ros_distro'] == 'jazzy'
@@ -778,7 +778,7 @@ def _bag_of_a_run(bag: Path) -> dict[str, list]:
 
 
 def _trigger_infos(messages: dict[str, list]):
-    from formation_msgs_py.codec import decode_trigger_info  # noqa: PLC0415
+    from formation_msgs_py.codec import decode_trigger_info
 
     return [(stamp, decode_trigger_info(msg)) for name, stamped in messages.items() if '/trigger_info/' in name for stamp, msg in stamped]
 
@@ -790,7 +790,7 @@ def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None
 
 
 def _epoch(messages: dict[str, list]) -> float:
-    from formation_msgs_py.codec import decode_step  # noqa: PLC0415
+    from formation_msgs_py.codec import decode_step
 
     return decode_step(messages[STEP][0][1]).epoch
 
@@ -799,7 +799,7 @@ def _epoch(messages: dict[str, list]) -> float:
 @pytest.mark.slow
 @pytest.mark.xdist_group('formation_distributed')
 def test_a_lock_step_bag_is_stamped_with_sim_time(distributed_single_run) -> None:
-    from formation_msgs_py.codec import decode_step  # noqa: PLC0415
+    from formation_msgs_py.codec import decode_step
 
     messages = _bag_of_a_run(distributed_single_run.bag)
     steps = [(stamp, decode_step(msg)) for stamp, msg in messages[STEP]]
@@ -811,7 +811,7 @@ def test_a_lock_step_bag_is_stamped_with_sim_time(distributed_single_run) -> Non
 
 
 def _run_with_bag(tmp_path: Path, scenario, domain_id: int, **options):
-    from formation_sim.runtime.orchestrate import FormationRun  # noqa: PLC0415
+    from formation_sim.runtime.orchestrate import FormationRun
 
     result = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=domain_id, progress=False, timeout=240.0, **options).run()
     assert result.ok, result.message
@@ -823,8 +823,8 @@ def _run_with_bag(tmp_path: Path, scenario, domain_id: int, **options):
 @pytest.mark.xdist_group('formation_distributed')
 @pytest.mark.timeout(300)
 def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: Path) -> None:
-    from formation_msgs_py.codec import decode_status  # noqa: PLC0415
-    from formation_msgs_py.lockstep import DISCOVERY_STEP  # noqa: PLC0415
+    from formation_msgs_py.codec import decode_status
+    from formation_msgs_py.lockstep import DISCOVERY_STEP
 
     horizon = 3.0
     scenario = Path(__file__).parents[3] / 'benchmarks' / 'gentle_square.yaml'
@@ -845,7 +845,7 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
 @pytest.mark.xdist_group('formation_distributed')
 @pytest.mark.timeout(300)
 def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: Path) -> None:
-    from formation_sim.runtime.launch import RobotOptions  # noqa: PLC0415
+    from formation_sim.runtime.launch import RobotOptions
 
     horizon = 3.0
     messages = _run_with_bag(tmp_path, 'robots_square', 46, horizon=horizon, backend='holonomic', robots=RobotOptions(model='holonomic'))

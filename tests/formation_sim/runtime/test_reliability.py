@@ -509,7 +509,7 @@ def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_
     if (out / 'summary.json').exists():
         assert 'extra' in json.loads((out / 'summary.json').read_text())
     else:
-        assert "summary.json could not be written: [Errno 28] No space left on device" in done.stderr
+        assert 'summary.json could not be written: [Errno 28] No space left on device' in done.stderr
     bag = out / 'bag'
     if not (bag / 'metadata.yaml').exists():  # not recovered: the damage is named
         assert 'its bag could not be recovered' in done.stderr and 'free space, then recover it again' in done.stderr

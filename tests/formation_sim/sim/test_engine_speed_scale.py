@@ -85,3 +85,48 @@ def test_a_scenario_with_a_bad_speed_scale_is_refused_with_its_rule_and_value(ba
     with pytest.raises(ScenarioError, match=r'gains\.speed_scale: must') as caught:
         load_scenario('paper_single').with_scale(speed_scale=bad)
     assert repr(float(bad)) in str(caught.value)
+
+
+@pytest.mark.parametrize('kappa', [0.37, 3.0])
+@pytest.mark.parametrize('name', ['paper_single', 'paper_double'])
+def test_the_theorems_checks_hold_on_a_scaled_run_in_real_time(reference_runs, name, kappa):
+    """The analysis' bounds at κ: rates κβ, ξ_i/κ, V_d of the paper's velocities q/κ; every check
+    that holds for the paper's run holds for the scaled one, and the ratios to the bounds agree."""
+    from formation_sim.analysis.checks import run_series, theorem_checks, theory_bounds
+    from formation_sim.sim.summary import build_summary
+
+    base = SCENARIOS[name]
+    scaled_scenario = base.with_scale(speed_scale=kappa)
+    reference = reference_runs[name]
+    scaled = simulate(scaled_scenario, horizon=HORIZON / kappa, sample_dt=DT / kappa, sample_events=False)
+    bounds = theory_bounds(scaled_scenario)
+    paper = theory_bounds(base)
+    assert bounds.rate == kappa * paper.rate
+    assert bounds.xi == (None if paper.xi is None else {agent: xi / kappa for agent, xi in paper.xi.items()})
+    series, paper_series = run_series(scaled), run_series(reference)
+    count = min(len(series.times), len(paper_series.times)) - 1
+    np.testing.assert_allclose(series.lyapunov[:count], paper_series.lyapunov[:count], rtol=1e-7)
+    got = {c.name: c.ok for c in theorem_checks(scaled, series, bounds)}
+    assert got == {c.name: c.ok for c in theorem_checks(reference, paper_series, paper)}
+    assert all(got.values()), got
+    summary = build_summary(scaled)
+    assert all(entry['holds'] in (True, None) for entry in summary['xi_check'].values())
+    assert summary['theorem_constants']['speed_scale'] == kappa
+
+
+def test_a_robots_velocity_reference_at_kappa_follows_the_scaled_world():
+    """ETA-2 on a velocity-commanded robot: the reference q_i(t) with damping κk3 (what the agent
+    node gives its RobotCommander), started at κ q(0) and fed the agent's u^d, is the exact world's."""
+    from formation_agent.core.speed_scale import damping
+    from formation_agent.core.velocity_reference import VelocityReference
+
+    kappa = 2.5
+    scenario = load_scenario('paper_double').with_scale(speed_scale=kappa)
+    events = []  # (t, velocities, controls): the hook runs before the agents due at t trigger
+    simulate(scenario, horizon=0.4, sample_dt=0.0, on_event=lambda t, world, due: events.append((t, world.velocities, world.controls)))
+    k = scenario.index(1)
+    reference = VelocityReference(k3=damping(scenario.gains.k3, kappa), velocity=kappa * scenario.velocities[k], time=0.0)
+    assert len(events) > 20
+    for (before, _, _), (t, velocities, controls) in zip(events, events[1:]):
+        reference.update(before, controls[k])  # the command in force on (before, t]
+        np.testing.assert_allclose(reference.velocity(t), velocities[k], rtol=1e-9, atol=1e-12)

@@ -39,3 +39,37 @@ def test_the_measured_eta1_command_is_the_largest_u_i_at_the_triggers():
     measured = measured_command(scenario, horizon=horizon)
     for agent in scenario.agent_ids:
         assert math.isclose(measured.speed[agent], largest[agent], rel_tol=1e-9), agent
+
+
+def test_the_settling_time_is_where_a_dense_run_comes_down_to_five_percent_for_good():
+    from formation_sim.sim.largest_command import measured_run, settling
+
+    scenario = load_scenario('robots_lab')
+    _, record = measured_run(scenario, horizon=3.0)  # samples at the events only
+    found = settling(scenario, record)
+    assert found.resolution == 'exact' and 0.0 < found.time < 3.0
+    dense = simulate(scenario, horizon=3.0, sample_dt=1e-4)  # the same event chain, sampled densely
+    heads, tails, d = scenario.edge_indices()
+    positions = np.asarray(dense.sample_positions)
+    errors = np.linalg.norm(positions[:, heads] - positions[:, tails] - d, axis=2).max(axis=1)
+    threshold = 0.05 * errors[0]
+    assert math.isclose(errors[0], found.initial_error, rel_tol=1e-12)
+    times = np.asarray(dense.sample_times)
+    last_above = times[np.flatnonzero(errors > threshold)[-1]]
+    assert last_above <= found.time <= last_above + 1e-4 + 1e-12
+    assert errors[times > found.time].max() <= threshold * (1 + 1e-12)
+
+
+def test_the_observed_kappa_keeps_the_exact_runs_largest_command_by_the_margin_below_the_limits():
+    from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits
+    from formation_sim.sim.largest_command import choose_speed_scale
+
+    scenario = load_scenario('robots_lab')
+    limits = RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1)
+    choice = choose_speed_scale(scenario, limits=limits)
+    largest = measured_command(scenario).max_speed  # κ = 1: 1.16 m/s, far beyond a TurtleBot's 0.22
+    assert largest > 1.0
+    assert math.isclose(choice.value * largest * OBSERVED_MARGIN, 0.22, rel_tol=1e-12)
+    assert choice.value * largest / 0.1 < 2.84  # the turn rate ||u||/l fits too
+    assert choice.guaranteed.value < choice.value  # the proofs' bound is looser than any run
+    assert math.isclose(choice.observed.settle_time * choice.value, choice.settling.time, rel_tol=1e-12)

@@ -73,7 +73,7 @@ def test_force_never_removes_files_no_run_writes(tmp_path):
     (run / 'thesis.tex').write_text('mine')
     with pytest.raises(RunFolderError) as caught:
         clear_out_dir(run, force=True)
-    assert f'{run} holds thesis.tex, which no run writes; --force replaces only an earlier run\'s files' in str(caught.value)
+    assert f"{run} holds thesis.tex, which no run writes; --force replaces only an earlier run's files" in str(caught.value)
     assert sorted(p.name for p in run.iterdir()) == ['bag', 'summary.json', 'thesis.tex']
 
 

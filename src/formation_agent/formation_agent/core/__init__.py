@@ -3,7 +3,9 @@
 - `eta`: `Eta1Agent` (ETA-1) and `Eta2Agent` (ETA-2): sense-and-broadcast at a trigger, receive
   a neighbour's triggering information, predict the neighbours' relative states in closed form
   ((statexixj), (statexixjd), (stateqiqj)) and find the next triggering time.
-- `crossing`: the certified search for the first t with ||e_i(t)|| = α e^{-βt}.
+- `crossing`: the certified search for the first t with ||e_i(t)|| = c0 + α e^{-βt}.
+- `speed_scale`: the speed scale κ and the threshold floor c0: the real-time gains of the agents,
+  the exact world and a robot's velocity reference, derived in one place (docs/SPEED_SCALE.md).
 - `tension`: ω_ij and its derivatives (the edge-tension weights); `closed_form`: the ETA-2
   closed-loop motion without cancellation.
 - On robots (README, "Running on robots"): `kinds` (the registry of robot kinds: each kind's
@@ -20,6 +22,7 @@ __all__ = lazy_exports(globals(), {
     'crossing': ('CrossingError', 'CrossingSearch', 'DEFAULT_TOLERANCE', 'ErrorModel', 'MAX_STEPS', 'PRECISION_HINT', 'first_crossing'),
     'tension': ('omega', 'omega_prime', 'omega_second'),
     'closed_form': ('advance_double',),
+    'speed_scale': ('ScaleError', 'Threshold', 'check_speed_scale', 'check_threshold_floor', 'eta1_gains', 'eta2_gains'),
     'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
     'pose_sensing': ('PoseBook', 'PoseError'),
     'velocity_reference': ('VelocityReference',),

@@ -109,8 +109,20 @@ class CrossingSearch:
     """
 
     __slots__ = (
-        'model', 'start', 'alpha', 'beta', 'floor', 'limit', 'tolerance', 'frontier', 'result', 'steps',
-        '_span', '_terms', '_norm', '_cover',
+        '_cover',
+        '_norm',
+        '_span',
+        '_terms',
+        'alpha',
+        'beta',
+        'floor',
+        'frontier',
+        'limit',
+        'model',
+        'result',
+        'start',
+        'steps',
+        'tolerance',
     )
 
     def __init__(

@@ -520,8 +520,7 @@ class Eta1Agent(_EventTriggeredAgent):
             radii.append(r)
             if speed > 0.0:
                 limit = _GAP_FRACTION * gap / speed  # _span_within_capacity
-                if limit < cap:
-                    cap = limit
+                cap = min(cap, limit)
         if with_rate:
             self._probe = (radii, cap)
         u0, u1, u2 = self._u_offset

@@ -34,7 +34,7 @@ every DISCOVERY_LOG_PERIOD seconds."""
 class Discovery:
     """The discovery of one agent node (`node`: a FormationAgentNode), until its step 0."""
 
-    def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
+    def __init__(self, node) -> None:
         self._node = node
         self._created = time.monotonic()
         self._announced: bool | None = None  # the readiness of the last discovery Status
@@ -116,7 +116,7 @@ class SimulatorWatch:
         self.lost_at: float | None = None  # time.monotonic() when its writer was last seen alive
         self.lease_expired = False
 
-    def on_liveliness(self, info) -> None:  # noqa: ANN001 - rclpy's QoSLivelinessChangedInfo
+    def on_liveliness(self, info) -> None:
         if info.alive_count > 0:
             self.seen = True
             self.lost_at = None
@@ -124,7 +124,7 @@ class SimulatorWatch:
             self.lost_at = time.monotonic()
             self.lease_expired = info.not_alive_count_change > 0  # else: writer deleted
 
-    def lost(self, step, *, finished: bool) -> str | None:  # noqa: ANN001 - the last Step or None
+    def lost(self, step, *, finished: bool) -> str | None:
         """Why the simulator counts as lost now (after its grace), or None."""
         if self.lost_at is None or finished:
             return None

@@ -65,7 +65,7 @@ class InjectedFaults:
     report).  Delayed messages wait in a line on a one-shot node timer.
     """
 
-    def __init__(self, node, injection: FaultInjection, *, hand_on: Callable, changed: Callable[[], None]) -> None:  # noqa: ANN001
+    def __init__(self, node, injection: FaultInjection, *, hand_on: Callable, changed: Callable[[], None]) -> None:
         self._node = node
         self.injection = injection
         self._hand_on = hand_on
@@ -77,7 +77,7 @@ class InjectedFaults:
         self._seq = 0
         self._timer = None
 
-    def arrive(self, msg, sender: int) -> None:  # noqa: ANN001
+    def arrive(self, msg, sender: int) -> None:
         if not self.injection.active:
             self._hand_on(msg, sender)
             return

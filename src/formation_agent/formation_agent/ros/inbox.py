@@ -24,7 +24,7 @@ from formation_msgs_py.types import TriggerInfo
 class Rejections:
     """Messages refused, per reason; logged sparingly."""
 
-    def __init__(self, logger, *, changed: Callable[[], None]) -> None:  # noqa: ANN001 - an rclpy logger
+    def __init__(self, logger, *, changed: Callable[[], None]) -> None:
         self._logger = logger
         self._changed = changed
         self.counts: dict[str, int] = {}
@@ -62,7 +62,7 @@ def implausible(
 
 def read_info(
     msg, *, sender: int, agent_id: int, algorithm: str, dimension: int, heard: dict[int, float], reject: Rejections
-) -> TriggerInfo | None:  # noqa: ANN001 - a Float64MultiArray
+) -> TriggerInfo | None:
     """The triggering information in `msg` from `sender`, or None if it is refused (`reject`ed);
     `heard` (sender -> stamp of its last accepted information) is updated."""
     topic = trigger_info_topic(sender, agent_id)

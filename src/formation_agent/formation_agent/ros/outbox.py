@@ -5,8 +5,8 @@ before the node goes away.
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from collections.abc import Callable
 
 from rclpy.duration import Duration
 from std_msgs.msg import Float64MultiArray, String
@@ -21,18 +21,18 @@ from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC
 class Outbox:
     """The agent's writers of triggering information (one per neighbour), Status and report."""
 
-    def __init__(self, node, counts: AgentCounts, neighbour_ids) -> None:  # noqa: ANN001 - the agent node
+    def __init__(self, node, counts: AgentCounts, neighbour_ids) -> None:
         self._node = node
         self.counts = counts
         self.info = {j: node.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS) for j in neighbour_ids}
         self.status = node.create_publisher(Float64MultiArray, STATUS_TOPIC, PROTOCOL_QOS)
         self.report = node.create_publisher(String, REPORT_TOPIC, PROTOCOL_QOS)
 
-    def publish(self, publisher, msg) -> None:  # noqa: ANN001
+    def publish(self, publisher, msg) -> None:
         self._count(publisher)
         publisher.publish(msg)
 
-    def _count(self, publisher) -> None:  # noqa: ANN001
+    def _count(self, publisher) -> None:
         """Count what a recorder must hold: everything from step 0 on, when it is matched for sure
         (the simulator starts step 0 only once every agent has matched all its listeners)."""
         self.counts.count_published(publisher.topic_name, started=self._node.step is not None)
@@ -40,15 +40,15 @@ class Outbox:
     def publish_status(self, status: Status) -> None:
         self.publish(self.status, encode_status(status))
 
-    def publish_report(self, build: Callable[[], AgentReport]) -> None:
-        """Count the report first, then `build()` it: a report counts itself (its `published`)."""
-        self._count(self.report)
-        report = build()
+    def publish_report(self, report: AgentReport) -> None:
         self.counts.report_due = False
         self.counts.final_sent = report.final
+        self._count(self.report)  # a report counts itself (it was built before this count)
+        if (counted := self.counts.published.get(REPORT_TOPIC)) is not None:
+            report = dataclasses.replace(report, published={**report.published, REPORT_TOPIC: counted})
         self.report.publish(encode_agent_report(report))
 
-    def wait_for_delivery(self, deadline: float, *others) -> None:  # noqa: ANN002 - more publishers
+    def wait_for_delivery(self, deadline: float, *others) -> None:
         """Let reliable writers hand over what they still hold before the node goes away (until
         `deadline`, time.monotonic())."""
         pending = [self.status, self.report, *others, *self.info.values()]

@@ -101,15 +101,14 @@ class ParameterSpec:
             read_only=True,  # read once at start: a change later would not be seen
         )
         # ROS ranges are inclusive; a strict bound is checked here and only written in words.
-        if self.type in (DOUBLE, DOUBLE_ARRAY) and not (self.low_open or self.high_open):
-            if self.low is not None and self.high is not None:
-                descriptor.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)]
-        if self.type in (INTEGER, INTEGER_ARRAY) and not (self.low_open or self.high_open):
-            if self.low is not None and self.high is not None:
-                descriptor.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+        closed = not (self.low_open or self.high_open) and self.low is not None and self.high is not None
+        if self.type in (DOUBLE, DOUBLE_ARRAY) and closed:
+            descriptor.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)]
+        if self.type in (INTEGER, INTEGER_ARRAY) and closed:
+            descriptor.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
         return descriptor
 
-    def problem(self, value: Any) -> str | None:  # noqa: ANN401 - a parameter's value
+    def problem(self, value: Any) -> str | None:
         """Why `value` breaks this spec's range or choices, or None."""
         if self.choices:
             return None if value in self.choices else f'must be {self.constraint_text()}, got {_quote(value)}'
@@ -131,12 +130,12 @@ def _number(value: float) -> str:
     return repr(float(value))
 
 
-def _quote(value: Any) -> str:  # noqa: ANN401
+def _quote(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= _QUOTE_LIMIT else text[: _QUOTE_LIMIT - 1] + '…'
 
 
-def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:  # noqa: ANN001 - an rclpy Node
+def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]:
     """Declare every spec on `node` (idempotent), read and check all; raise one ParameterError."""
     values, problems = read_parameters(node, specs)
     if problems:
@@ -144,7 +143,7 @@ def declare_parameters(node, specs: Sequence[ParameterSpec]) -> dict[str, Any]: 
     return values
 
 
-def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any], list[str]]:  # noqa: ANN001
+def read_parameters(node, specs: Sequence[ParameterSpec]) -> tuple[dict[str, Any], list[str]]:
     """Declare every spec on `node` (idempotent) and read it: the good values, and a problem per bad one.
 
     For nodes whose later parameters depend on earlier ones (which gains an algorithm takes): they

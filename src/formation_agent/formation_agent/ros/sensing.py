@@ -43,7 +43,7 @@ endpoint of the ROS graph it knows (1000 agents: ~20 000), where a match count i
 class ServiceSensing:
     """The simulator's sensing service: one request per trigger, answered asynchronously."""
 
-    def __init__(self, node) -> None:  # noqa: ANN001 - the agent node
+    def __init__(self, node) -> None:
         self._client = node.create_client(Trigger, 'sense')
         self._name = node.resolve_service_name('sense')
         self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
@@ -144,7 +144,7 @@ def _never(msg) -> None:  # noqa: ANN001 - no executor spins the readers' node
 class PoseSensing:
     """The robots' pose topics: the latest pose of this robot and of each neighbour, read when used."""
 
-    def __init__(self, node, config, *, reject: Callable[[str, str, str], None]) -> None:  # noqa: ANN001
+    def __init__(self, node, config, *, reject: Callable[[str, str, str], None]) -> None:
         self._config = config
         self.book = PoseBook(
             agent_id=config.agent_id,

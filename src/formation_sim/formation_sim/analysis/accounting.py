@@ -82,7 +82,7 @@ def recorded_counts(bag: str | Path) -> dict[str, int]:
         for connection, _, rawdata in reader.messages(connections=status) if status else ():  # [] reads all
             try:
                 announced = decode_status(decode(rawdata, connection.msgtype)).step_index == DISCOVERY_STEP
-            except (MessageError, Exception):  # noqa: BLE001 - junk CDR fails in several ways
+            except (MessageError, Exception):  # noqa: BLE001, S112 - junk CDR fails in several ways
                 continue  # not a Status of the run: left in the count (and found foreign)
             counts[STATUS_TOPIC] -= announced
     return counts

@@ -15,7 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from formation_agent.core.speed_scale import paper_velocities, real_duration, real_rate
 from formation_sim.model import theory
+from formation_sim.model.threshold_floor import FloorBounds, floor_bounds
 from formation_sim.sim.record import RunRecord
 from formation_sim.model.scenario import Scenario
 
@@ -39,7 +41,7 @@ class Check:
         return {'name': self.name, 'ok': self.ok, 'detail': self.detail, 'binding': self.binding}
 
 
-ROBOT_BOUNDS_NOTE = 'robots: reported, not guaranteed (noise, latency, saturation and the robots\' dynamics are outside the theorems)'
+ROBOT_BOUNDS_NOTE = "robots: reported, not guaranteed (noise, latency, saturation and the robots' dynamics are outside the theorems)"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,6 +70,8 @@ def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -
     tau = theory.formation_feasibility(scenario).tau
     double = scenario.dynamics == 'double'
     q = record.sample_velocities
+    if double and scenario.speed_scale != 1.0:
+        q = paper_velocities(q, scenario.speed_scale)  # ν_d, V_d of the paper's time (docs/SPEED_SCALE.md)
     count = len(record.sample_times)
     tension = np.empty(count)
     lyapunov = np.empty(count)
@@ -94,16 +98,20 @@ def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -
 
 @dataclass(frozen=True, kw_only=True)
 class TheoryBounds:
-    """What Theorem 1 (single) or Theorem 2 (double, corrected chain) guarantees for a scenario."""
+    """What Theorem 1 (single) or Theorem 2 (double, corrected chain) guarantees for a scenario, in
+    real time: at a speed scale κ the rates are κβ (κβ_d) and ξ_i/κ (docs/SPEED_SCALE.md). With a
+    threshold floor c0 > 0 the guarantees are the floor's (`floor`, formation_sim.model.threshold_floor)."""
 
     theorem: int
-    rate: float  # β (Theorem 1) or β_d (Theorem 2)
-    k_nu: float  # ν(t) <= k_ν (kν), or ν_d(t) <= k^d_ν
+    rate: float  # κβ (Theorem 1) or κβ_d (Theorem 2), per real second
+    k_nu: float | None  # ν(t) <= k_ν (kν), or ν_d(t) <= k^d_ν (None: no bound, ETA-2 with a floor)
     k_V: float | None  # V(t) < k_V e^{-2 rate t} (kV), or V_d < k^d_V e^{-2 β_d t} (kVd, corrected)
     error_gain: float | None  # ||y_i - y_j|| < error_gain e^{-rate t} (lengthysV) / (yiyj)
-    edge_bounds: dict[tuple[int, int], float]  # ||x_i - x_j|| <= k_ij + ||d_ij|| < Δ
-    xi: dict[int, float] | None  # (xi) / (xid): t_{k+1} - t_k >= ξ_i
+    edge_bounds: dict[tuple[int, int], float] | None  # ||x_i - x_j|| <= k_ij + ||d_ij|| < Δ
+    xi: dict[int, float] | None  # (xi) / (xid): t_{k+1} - t_k >= ξ_i (seconds)
     note: str
+    speed_scale: float = 1.0
+    floor: FloorBounds | None = None  # with a threshold floor c0 > 0: its bounds, in the paper's time
     # Theorem 2 only: k^d_V and the error gain of the chain as printed (rate (2-k4)ρ2(P)), drawn
     # for comparison; docs/THEOREM2.md shows where the paper's example leaves them.
     printed_k_V: float | None = None
@@ -114,17 +122,22 @@ def theory_bounds(scenario: Scenario) -> TheoryBounds:
     """The proof constants as bounds; raises theory.TheoryError outside the theorems' hypotheses."""
     constants = theory.theorem_constants(scenario)
     norms = {edge.pair: float(np.linalg.norm(edge.d)) for edge in scenario.edges}
+    kappa = scenario.speed_scale
+    if (floor := floor_bounds(scenario)) is not None:
+        return _floor_bounds(scenario, floor, norms)
     edge_bounds = {pair: k + norms[pair] for pair, k in constants.k_edge.items()}
+    xi = None if constants.xi is None else {agent: real_duration(v, kappa) for agent, v in constants.xi.items()}
     if constants.theorem == 1:
         return TheoryBounds(
             theorem=1,
-            rate=scenario.gains.beta,
+            speed_scale=kappa,
+            rate=real_rate(scenario.gains.beta, kappa),
             k_nu=constants.k_nu,
             k_V=constants.k_V,
             error_gain=2.0 * math.sqrt(constants.k_V),  # (lengthysV): ||y_i-y_j||² < 4 k_V e^{-2βt}
             edge_bounds=edge_bounds,
-            xi=constants.xi,
-            note='Theorem 1',
+            xi=xi,
+            note='Theorem 1' + _scale_note(kappa),
         )
     chain = constants.corrected_chain
     gain = None if chain.k_V is None else 2.0 * math.sqrt(chain.z_gain * chain.k_V)  # (yiyj), corrected
@@ -132,15 +145,46 @@ def theory_bounds(scenario: Scenario) -> TheoryBounds:
     printed_gain = None if printed.k_V is None else 2.0 * math.sqrt(printed.z_gain * printed.k_V)
     return TheoryBounds(
         theorem=2,
-        rate=scenario.gains.beta_d,
+        speed_scale=kappa,
+        rate=real_rate(scenario.gains.beta_d, kappa),
         k_nu=constants.k_nu,
         k_V=chain.k_V,
         error_gain=gain,
         edge_bounds=edge_bounds,
-        xi=chain.xi,
-        note='Theorem 2, corrected chain (docs/THEOREM2.md)' + ('' if chain.holds else ': β_d is not below (2-k4)/λmax(P), no decay bound'),
+        xi=xi,
+        note='Theorem 2, corrected chain (docs/THEOREM2.md)'
+        + ('' if chain.holds else ': β_d is not below (2-k4)/λmax(P), no decay bound')
+        + _scale_note(kappa),
         printed_k_V=printed.k_V,
         printed_error_gain=printed_gain,
+    )
+
+
+def _scale_note(kappa: float) -> str:
+    return '' if kappa == 1.0 else f'; speed scale κ = {kappa:g}: rates × κ, ξ_i / κ (docs/SPEED_SCALE.md)'
+
+
+def _floor_bounds(scenario: Scenario, floor: FloorBounds, norms: dict) -> TheoryBounds:
+    """The threshold floor's guarantees as TheoryBounds (docs/SPEED_SCALE.md, "The threshold floor")."""
+    kappa = scenario.speed_scale
+    proven = floor.proven
+    note = (
+        f'Theorem {floor.theorem} with the threshold floor c0 = {floor.floor:g}: '
+        + (f'connectivity proven ({floor.condition})' if proven else f'connectivity not proven ({floor.condition} fails): checked on the run only')
+        + f'; V ultimately <= {floor.ultimate:.4g}, formation error <= {floor.ball:.4g}'
+        + _scale_note(kappa)
+    )
+    return TheoryBounds(
+        theorem=floor.theorem,
+        speed_scale=kappa,
+        rate=real_rate(floor.rate, kappa),
+        k_nu=floor.k_nu,
+        k_V=None,
+        error_gain=None,
+        edge_bounds=None if floor.k_edge is None else {pair: k + norms[pair] for pair, k in floor.k_edge.items()},
+        xi=None if floor.xi is None else {agent: real_duration(v, kappa) for agent, v in floor.xi.items()},
+        note=note,
+        floor=floor,
     )
 
 
@@ -175,15 +219,19 @@ def _theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | No
     checks = [Check(name='connectivity: ||x_i - x_j|| < Δ', ok=longest < delta, detail=f'max edge length {longest!r} vs Δ = {delta!r}')]
     if bounds is None:
         return checks
-    over = []
-    for column, edge in enumerate(scenario.edges):
-        top = float(series.edge_lengths[:, column].max())
-        if not top <= bounds.edge_bounds[edge.pair]:
-            over.append(f'{edge.i}-{edge.j}: {top!r} > {bounds.edge_bounds[edge.pair]!r}')
-    checks.append(Check(name='edge lengths <= k_ij + ||d_ij|| (kij)', ok=not over, detail='; '.join(over) or 'every edge within its bound'))
-    top_nu = float(series.tension.max())
-    checks.append(Check(name='tension <= k_nu (knu)', ok=top_nu <= bounds.k_nu, detail=f'max {top_nu!r} vs k_nu = {bounds.k_nu!r}'))
+    if bounds.edge_bounds is not None:
+        over = []
+        for column, edge in enumerate(scenario.edges):
+            top = float(series.edge_lengths[:, column].max())
+            if not top <= bounds.edge_bounds[edge.pair]:
+                over.append(f'{edge.i}-{edge.j}: {top!r} > {bounds.edge_bounds[edge.pair]!r}')
+        checks.append(Check(name='edge lengths <= k_ij + ||d_ij|| (kij)', ok=not over, detail='; '.join(over) or 'every edge within its bound'))
+    if bounds.k_nu is not None:
+        top_nu = float(series.tension.max())
+        checks.append(Check(name='tension <= k_nu (knu)', ok=top_nu <= bounds.k_nu, detail=f'max {top_nu!r} vs k_nu = {bounds.k_nu!r}'))
     t = series.times
+    if bounds.floor is not None:
+        return checks + _floor_checks(record, series, bounds)
     if bounds.k_V is not None:
         ratio = series.lyapunov / (bounds.k_V * np.exp(-2.0 * bounds.rate * t))
         worst = int(np.argmax(ratio))
@@ -200,6 +248,34 @@ def _theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | No
                 if not gap >= bounds.xi[agent]:
                     below.append(f'agent {agent}: {gap!r} < {bounds.xi[agent]!r}')
         checks.append(Check(name='inter-event times >= xi_i (xi)', ok=not below, detail='; '.join(below) or 'every agent'))
+    return checks
+
+
+def _floor_checks(record: RunRecord, series: Series, bounds: TheoryBounds) -> list[Check]:
+    """With a threshold floor: V <= B(κt), the error within 2 sqrt(z B(κt)), inter-event times >= ξ_i.
+
+    B bounds V wherever the edges stay within their capacities (ω_ij >= 2/Δ0 needs nothing else),
+    which the connectivity check verifies on the run when the floor's condition does not prove it."""
+    floor, t = bounds.floor, series.times
+    envelope = floor.lyapunov_bound(bounds.speed_scale * t)
+    # B is a bound on the exact V; the samples' V carries the rounding of the states.
+    ratio = series.lyapunov / (envelope * (1.0 + 1e-9) + 1e-300)
+    worst = int(np.argmax(ratio))
+    checks = [Check(name='V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)', ok=bool(ratio[worst] <= 1.0),
+                    detail=f'largest V / B {ratio[worst]:.3g} at t = {float(t[worst])!r}; B -> {floor.ultimate:.4g}')]  # fmt: skip
+    error_bound = 2.0 * np.sqrt(floor.z_gain * envelope)
+    ratio = series.formation_error / (error_bound * (1.0 + 1e-9) + 1e-300)
+    worst = int(np.argmax(ratio))
+    checks.append(Check(name='formation error <= 2 sqrt(z B(κt)) (threshold floor)', ok=bool(ratio[worst] <= 1.0),
+                        detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= {floor.ball:.4g}'))  # fmt: skip
+    if bounds.xi is not None:
+        below = []
+        for agent, times in record.trigger_times.items():
+            if len(times) > 1:
+                gap = float(np.diff(times).min())
+                if not gap >= bounds.xi[agent]:
+                    below.append(f'agent {agent}: {gap!r} < {bounds.xi[agent]!r}')
+        checks.append(Check(name='inter-event times >= c0 / c_i (threshold floor)', ok=not below, detail='; '.join(below) or 'every agent'))
     return checks
 
 

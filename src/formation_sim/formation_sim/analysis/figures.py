@@ -38,9 +38,9 @@ if TYPE_CHECKING:
 
 def pyplot():
     """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use('Agg')
+    mpl.use('Agg')
     import matplotlib.pyplot as plt
 
     return plt
@@ -219,7 +219,7 @@ def plot_edge_lengths(
         room = scenario.delta - series.edge_lengths[:, column]
         positive = room > 0.0
         (lines[f'room {edge.i}-{edge.j}'],) = margin_ax.semilogy(series.times[positive], room[positive], color=colour, lw=1.0)
-        if bounds is not None and len(scenario.edges) <= 12:
+        if bounds is not None and bounds.edge_bounds is not None and len(scenario.edges) <= 12:
             guaranteed = scenario.delta - bounds.edge_bounds[edge.pair]
             if guaranteed > 0.0:
                 lines[f'bound {edge.i}-{edge.j}'] = margin_ax.axhline(guaranteed, color=colour, ls=':', lw=1.0)
@@ -240,6 +240,10 @@ def plot_formation_error(ax: Axes, series: Series, bounds: TheoryBounds | None, 
         (lines['envelope'],) = ax.semilogy(t, series.formation_error[0] * np.exp(-rate * t), 'b--', lw=1.0, label=f'$e(0)\\,e^{{-{rate:g}t}}$')
     if bounds is not None and bounds.error_gain is not None:
         (lines['bound'],) = ax.semilogy(t, bounds.error_gain * np.exp(-bounds.rate * t), 'r:', lw=1.2, label='$2\\sqrt{k_V}\\,e^{-\\beta t}$ (theorem)')
+    if bounds is not None and bounds.floor is not None:  # the threshold floor's bound (docs/SPEED_SCALE.md)
+        floor = bounds.floor
+        bound = 2.0 * np.sqrt(floor.z_gain * floor.lyapunov_bound(bounds.speed_scale * t))
+        (lines['bound'],) = ax.semilogy(t, bound, 'r:', lw=1.2, label='$2\\sqrt{z B(\\kappa t)}$ (threshold floor)')
     if bounds is not None and bounds.printed_error_gain is not None:
         (lines['printed bound'],) = ax.semilogy(t, bounds.printed_error_gain * np.exp(-bounds.rate * t), 'm-.', lw=1.0, label='bound of the proof as printed')
     ax.set_xlabel('t [s]')
@@ -291,7 +295,9 @@ def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: 
     lines = {}
     (lines['tension'],) = ax_tension.semilogy(t, series.tension, 'k', lw=1.2, label=name_nu)
     (lines['lyapunov'],) = ax_lyapunov.semilogy(t, series.lyapunov, 'k', lw=1.2, label=name_v)
-    if bounds is not None:
+    if bounds is not None and bounds.floor is not None:
+        (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.floor.lyapunov_bound(bounds.speed_scale * t), 'r:', lw=1.2, label='$B(\\kappa t)$ (threshold floor)')
+    if bounds is not None and bounds.k_nu is not None:
         lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k^d_\\nu$' if double else '$k_\\nu$ (kν)')
         if bounds.k_V is not None:
             (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.k_V * np.exp(-2.0 * bounds.rate * t), 'r:', lw=1.2, label='$k_V e^{-2\\beta t}$ (kV)')

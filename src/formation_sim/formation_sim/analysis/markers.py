@@ -297,7 +297,7 @@ _DEFAULTS: dict[tuple[int, str], tuple[Any, Any]] = {}
 
 
 def _default_base(name: str):
-    if name == 'string' or name == 'wstring':
+    if name in ('string', 'wstring'):
         return ''
     if name == 'bool':
         return False

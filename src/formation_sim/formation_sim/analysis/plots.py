@@ -17,9 +17,9 @@ FIGURE_FILE = 'formation.png'
 
 
 def _pyplot():
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use('Agg')
+    mpl.use('Agg')
     import matplotlib.pyplot as plt
 
     return plt

@@ -166,6 +166,8 @@ def build_report(
                 'theorem': bounds.theorem,
                 'note': bounds.note,
                 'rate': bounds.rate,
+                'speed_scale': bounds.speed_scale,
+                'threshold_floor': None if bounds.floor is None else bounds.floor.to_dict(),
                 'k_nu': bounds.k_nu,
                 'k_V': bounds.k_V,
                 'error_gain': bounds.error_gain,
@@ -300,7 +302,7 @@ def render_markdown(report: dict[str, Any]) -> str:
     if report['figures']:
         lines += ['', '## Figures', '']
         for title, name in report['figures'].items():
-            if name.endswith('.gif') or name.endswith('.png'):
+            if name.endswith(('.gif', '.png')):
                 lines.append(f'![{title}]({name})')
             else:
                 lines.append(f'- {title}: `{name}`')

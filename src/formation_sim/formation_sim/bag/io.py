@@ -76,7 +76,7 @@ def jazzy_typestore() -> Typestore:
 def check_msgtype(msgtype: str) -> None:
     """Raise UnknownMessageTypeError unless `msgtype` reads 'package/msg/Type'."""
     parts = msgtype.split('/')
-    if len(parts) != 3 or parts[1] != 'msg' or not all(parts):  # noqa: PLR2004
+    if len(parts) != 3 or parts[1] != 'msg' or not all(parts):
         msg = f"message type {msgtype!r} is not of the form 'package/msg/Type'"
         raise UnknownMessageTypeError(msg)
 
@@ -94,7 +94,7 @@ def type_hash(msgtype: str, *, definition: str | None = None, typestore: Typesto
     return (typestore if typestore is not None else jazzy_typestore()).hash_rihs01(msgtype)
 
 
-def _duration(time: Any) -> dict[str, int]:  # noqa: ANN401 - rosbags' QosTime
+def _duration(time: Any) -> dict[str, int]:
     return {'sec': int(time.sec), 'nsec': int(time.nsec)}
 
 
@@ -114,7 +114,7 @@ def qos_profile_dict(qos: Qos) -> dict[str, Any]:
     }
 
 
-def _dump(data: Any) -> str:  # noqa: ANN401
+def _dump(data: Any) -> str:
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=False, allow_unicode=True)
 
 
@@ -417,7 +417,7 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
         raise BagReadError(f'{path}: cannot read the bag: {error}') from None
 
 
-def decode(rawdata: bytes, msgtype: str, *, typestore: Typestore | None = None) -> Any:  # noqa: ANN401
+def decode(rawdata: bytes, msgtype: str, *, typestore: Typestore | None = None) -> Any:
     """Deserialize CDR `rawdata` of `msgtype` into a rosbags message object."""
     store = typestore if typestore is not None else jazzy_typestore()
     if msgtype not in store.fielddefs:

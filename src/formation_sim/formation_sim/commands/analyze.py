@@ -25,7 +25,7 @@ def register(subparsers) -> None:
         'messages, trajectories from /formation/state, or on robots from their pose topics) and recompute every metric of summary.json, '
         'check them against Theorems 1/2, and write analysis.md, analysis.json, the figures (the '
         "paper's Fig. 1/2 style, edge lengths, formation error, inter-event times, energy) and an "
-        'animation. Differences from the run\'s summary.json are listed. Exit 0: all checks hold; '
+        "animation. Differences from the run's summary.json are listed. Exit 0: all checks hold; "
         '1: a check fails or the bag differs from summary.json; 2: cannot analyse.',
     )
     parser.add_argument('run', metavar='RUN_DIR_OR_BAG', type=Path, help='run folder (with bag/), bag folder or .mcap file')
@@ -34,7 +34,7 @@ def register(subparsers) -> None:
         '--scenario',
         default=None,
         metavar='NAME_OR_YAML',
-        help='the run\'s scenario, used only if neither the bag (/formation/scenario) nor its run folder (scenario.yaml) holds it',
+        help="the run's scenario, used only if neither the bag (/formation/scenario) nor its run folder (scenario.yaml) holds it",
     )
     parser.add_argument('--markers', action='store_true', help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove')
     parser.add_argument('--no-figures', action='store_true', help='report only')

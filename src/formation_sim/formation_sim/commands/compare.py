@@ -26,7 +26,7 @@ def register(subparsers) -> None:
     parser.add_argument('run_a', metavar='RUN_A', type=Path, help='run folder, bag or summary.json')
     parser.add_argument('run_b', metavar='RUN_B', type=Path, help='run folder, bag or summary.json')
     parser.add_argument('--out', type=Path, default=None, help='output folder (default: RUN_A/compare-<name of RUN_B>)')
-    parser.add_argument('--scenario', default=None, metavar='NAME_OR_YAML', help="scenario for bags that do not hold it (see formation analyze)")
+    parser.add_argument('--scenario', default=None, metavar='NAME_OR_YAML', help='scenario for bags that do not hold it (see formation analyze)')
     parser.add_argument('--label-a', default=None, help='name of run A in the report (default: its mode)')
     parser.add_argument('--label-b', default=None, help='name of run B in the report (default: its mode)')
     parser.add_argument('--tolerance', type=NON_NEGATIVE, default=None, metavar='T', help='exit 1 unless event counts are equal and every deviation is <= T')

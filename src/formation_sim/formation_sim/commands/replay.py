@@ -15,8 +15,8 @@ def register(subparsers) -> None:
         help='republish a bag on ROS with its original timing (like ros2 bag play --clock)',
         description='Republish every message of a rosbag2 bag byte for byte (raw CDR) on its topic, '
         'at its recorded time scaled by --rate, and publish /clock from the bag timestamps (unless '
-        'the bag recorded /clock itself). QoS: what each topic\'s publishers offered when it was recorded '
-        '(the bag\'s offered_qos_profiles, as ros2 bag play does: a transient-local topic is latched for '
+        "the bag recorded /clock itself). QoS: what each topic's publishers offered when it was recorded "
+        "(the bag's offered_qos_profiles, as ros2 bag play does: a transient-local topic is latched for "
         'late joiners), else reliable and transient local; history keep all (reliable readers lose nothing, '
         'even with --as-fast-as-possible) or keep last --depth.',
     )

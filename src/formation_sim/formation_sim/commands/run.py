@@ -18,6 +18,7 @@ from formation_sim.commands.common import (
     plan_options,
     refuse,
 )
+from formation_sim.commands.limits import check_saturation, resolve_speed_scale, robot_limits
 
 
 def register(subparsers) -> None:
@@ -51,6 +52,13 @@ def register(subparsers) -> None:
         help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
         'process announcing itself to every other: for large teams (BENCHMARKS.md)',
     )
+    parser.add_argument(
+        '--allow-saturation',
+        action='store_true',
+        help='robot backends: run even when the exact run asks for commands beyond --max-speed, --max-angular-speed or '
+        '--max-acceleration (refused by default, exit 2: clipped commands are outside the theorems; --speed-scale auto '
+        'slows the team until they fit)',
+    )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -62,15 +70,28 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
+    if (resolved := resolve_speed_scale(scenario, args, 'run')) is None:
+        return EXIT_BAD_INPUT
+    scenario, chosen = resolved
+    try:
+        options = plan_options(args)
+    except RunError as error:
+        return refuse('run', error)
+    if options['robots'] is not None:
+        horizon = scenario.horizon if args.horizon is None else args.horizon
+        refusal = check_saturation(scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation)
+        if refusal is not None:
+            return refuse('run', refusal)
     try:
         result = FormationRun(
             scenario,
-            **plan_options(args),
+            **options,
             domain_id=args.domain_id,
             progress=not args.quiet,
             timeout=args.timeout,
             localhost_only=not args.network,
             discovery='server' if args.discovery_server else 'simple',
+            summary_extra=None if chosen is None else {'speed_scale': chosen},
         ).run()
     except RunError as error:
         return refuse('run', error)

@@ -22,11 +22,13 @@ from formation_sim.commands.common import (
     scale_options,
 )
 from formation_sim.model.scenario import ScenarioError, load_scenario
+from formation_sim.model.speed_choice import LimitsError, RobotLimits, check_limits_apply, omega_at_formation, scenario_noise_floor
 from formation_sim.model.validate import validate_scenario
 
 EXIT_VALID = EXIT_OK
 EXIT_INVALID = EXIT_FAILED
 EXIT_UNREADABLE = EXIT_BAD_INPUT
+DEFAULT_POSE_PERIOD = 0.01  # [s]: the simulated robots' 100 Hz
 
 
 def register(subparsers) -> None:
@@ -37,7 +39,9 @@ def register(subparsers) -> None:
         'Theorem 2 (double integrators) and print every number involved. With --max-speed (and '
         '--max-angular-speed, --max-acceleration): the largest command the scenario asks of a robot, '
         'a bound from the proofs where it shows the limits are never reached, else the largest in an '
-        'exact in-process run (which the output names). Exit 0 if valid (warnings allowed) and within '
+        'exact in-process run (which the output names), and the speed scales κ that keep the commands within '
+        'them (guaranteed, observed; --speed-scale auto runs the observed) with the time each needs to '
+        'settle. With --pose-noise: the threshold floor c0 that noise asks for. Exit 0 if valid (warnings allowed) and within '
         'the limits, 1 if a hypothesis is broken or a command exceeds a limit, 2 if the scenario '
         'cannot be read.',
     )
@@ -48,6 +52,14 @@ def register(subparsers) -> None:
     parser.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
     parser.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L', help='unicycles: the control point l ahead of the axle [m] (default 0.1)')
     parser.add_argument('--max-acceleration', type=POSITIVE, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
+    parser.add_argument(
+        '--pose-noise', type=POSITIVE, default=None, metavar='SIGMA',
+        help='σ of the robots\' position noise [m]: suggest the threshold floor c0 that keeps the noise from triggering (README, "Running on robots")',
+    )  # fmt: skip
+    parser.add_argument(
+        '--pose-period', type=POSITIVE, default=DEFAULT_POSE_PERIOD, metavar='DT',
+        help=f'ETA-2 with --pose-noise: the time between two poses a velocity is differenced from [s] (default {DEFAULT_POSE_PERIOD:g}, 100 Hz)',
+    )  # fmt: skip
     parser.set_defaults(func=run)
 
 
@@ -58,18 +70,34 @@ def run(args: argparse.Namespace) -> int:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
     report = validate_scenario(scenario)
-    commands = None
+    if report.ok and args.speed_scale == 'auto':
+        from formation_sim.commands.limits import resolve_speed_scale
+
+        if (resolved := resolve_speed_scale(scenario, args, 'validate')) is None:
+            return EXIT_BAD_INPUT
+        scenario = resolved[0]
+        report = validate_scenario(scenario)
+    commands = floor = None
     if report.ok and any(value is not None for value in (args.max_speed, args.max_angular_speed, args.max_acceleration)):
-        commands = _commands(scenario, args)
+        try:
+            commands = _commands(scenario, args)
+        except LimitsError as error:
+            print(f'formation validate: error: {error}', file=sys.stderr)
+            return EXIT_BAD_INPUT
+    if report.ok and args.pose_noise is not None:
+        floor = _noise_floor(scenario, args)
     if args.json:
         data = report.to_dict()
         if commands is not None:
             data['commands'] = commands
+        if floor is not None:
+            data['threshold_floor'] = floor
         print(json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False))
     else:
         print(report.format())
-        if commands is not None:
-            print('\n'.join(commands['lines']))
+        for part in (commands, floor):
+            if part is not None:
+                print('\n'.join(part['lines']))
     if not report.ok:
         return EXIT_INVALID
     return EXIT_INVALID if commands is not None and not commands['within'] else EXIT_VALID
@@ -77,7 +105,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _commands(scenario, args: argparse.Namespace) -> dict:
     """The largest commands against the limits given: the numbers, the verdict, the lines to print."""
-    from formation_sim.sim.largest_command import largest_command
+    from formation_sim.sim.largest_command import choose_speed_scale, largest_command
+
+    limits = _limits(args)
+    check_limits_apply(limits, scenario.dynamics)  # refused before any run: e.g. an acceleration limit on ETA-1
 
     turn_as_speed = math.inf if args.max_angular_speed is None else args.max_angular_speed * args.control_point_distance
     speed_limit = min(math.inf if args.max_speed is None else args.max_speed, turn_as_speed)
@@ -109,4 +140,52 @@ def _commands(scenario, args: argparse.Namespace) -> dict:
     if answer.dotyi is not None:
         lines.append(f'  (dotyi) as printed bounds it by {max(answer.dotyi.values()):.4g} m/s')
     lines.append('  per agent [m/s]: ' + ', '.join(f'{agent}: {value:.4g}' for agent, value in answer.speed.items()))
-    return {'within': within, 'guaranteed': guaranteed, 'largest': answer.to_dict(), 'theory_too_loose': None if loose is None else loose.to_dict(), 'lines': lines}
+    choice = choose_speed_scale(scenario, limits=limits)
+    lines.extend(choice.lines())
+    return {
+        'within': within,
+        'guaranteed': guaranteed,
+        'largest': answer.to_dict(),
+        'theory_too_loose': None if loose is None else loose.to_dict(),
+        'speed_scale': choice.to_dict(),
+        'lines': lines,
+    }
+
+
+def _limits(args: argparse.Namespace) -> RobotLimits:
+    def given(value: float | None) -> float:
+        return math.inf if value is None else value
+
+    return RobotLimits(
+        max_speed=given(args.max_speed),
+        max_angular_speed=given(args.max_angular_speed),
+        control_point_distance=args.control_point_distance,
+        max_acceleration=given(args.max_acceleration),
+    )
+
+
+def _noise_floor(scenario, args: argparse.Namespace) -> dict:
+    """The threshold floor c0 a pose noise σ asks for (`formation_sim.model.speed_choice.noise_floor`)."""
+    kappa = getattr(scenario.gains, 'speed_scale', 1.0)
+    floor, per_agent, formula = scenario_noise_floor(scenario, pose_noise=args.pose_noise, pose_period=args.pose_period, speed_scale=kappa)
+    present = getattr(scenario.gains, 'threshold_floor', 0.0)
+    lines = [
+        f'threshold floor for a pose noise σ = {args.pose_noise:g} m:',
+        f'  suggested c0 = {floor:.3g} (gains.threshold_floor, or --threshold-floor {floor:.3g})',
+        f'  {formula}',
+        "  what one trigger's noisy sensing puts into e_i" + (' (E_i)' if scenario.dynamics == 'double' else '')
+        + ', per axis [1σ]: ' + ', '.join(f'{agent}: {value:.3g}' for agent, value in per_agent.items()),
+    ]
+    gains = scenario.gains
+    alpha, beta = (gains.alpha, gains.beta) if scenario.dynamics == 'single' else (gains.alpha_d, gains.beta_d)
+    if present < floor:
+        below = 0.0 if alpha + present <= floor else math.log(alpha / (floor - present)) / beta  # paper's time
+        lines.append(
+            f"  the scenario's c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} from t = {below / kappa:.4g} s on "
+            f"(κ = {kappa:g}; horizon {scenario.horizon:g} s): from then on the noise alone can set off triggers, each trigger's "
+            'noise the next (the longer the run, the more events)'
+        )
+    if scenario.dynamics == 'single':
+        reach = min(sum(omega_at_formation(scenario, agent)) for agent in scenario.agent_ids)
+        lines.append(f'  a floor costs accuracy: the formation settles to about c0 / min_i Σ_j ω_ij = {floor / reach:.3g} m or better')
+    return {'suggested': floor, 'per_agent': {str(a): v for a, v in per_agent.items()}, 'formula': formula, 'scenario_floor': present, 'lines': lines}

@@ -4,7 +4,8 @@
   and out, the built-ins `paper_single` and `paper_double` (Section 5).
 - `gains`: P from (riccatti), the range of k3, k4 and β_d (Theorem 2).
 - `theory`: graph quantities (D, L, ρ2, β0), feasibility (Φ), ν, V, and the proofs' constants
-  (k_ν, k_ij, k_V, c_i, ξ_i and their ETA-2 counterparts).
+  (k_ν, k_ij, k_V, c_i, ξ_i and their ETA-2 counterparts); `threshold_floor`: what a floor c0 > 0
+  under the threshold still guarantees (docs/SPEED_SCALE.md).
 - `validate`: every hypothesis of the theorems, with the numbers; `generate`: random valid teams.
 """
 
@@ -18,6 +19,7 @@ __all__ = lazy_exports(globals(), {
     ),
     'gains': ('GainsError', 'paper_k3', 'riccati_solution'),
     'theory': ('TheoremConstants', 'TheoryError', 'beta0', 'formation_feasibility', 'theorem_constants'),
+    'threshold_floor': ('FloorBounds', 'floor_bounds'),
     'validate': ('Finding', 'ValidationError', 'ValidationReport', 'require_valid', 'validate_scenario'),
     'generate': ('GenerateError', 'random_scenario'),
 })  # fmt: skip

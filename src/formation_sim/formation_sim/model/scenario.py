@@ -20,7 +20,8 @@ import numbers
 from pathlib import Path
 import re
 import reprlib
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 import yaml
@@ -80,7 +81,7 @@ class _ShortRepr(reprlib.Repr):
 _SHORT_REPR = _ShortRepr()
 
 
-def short_repr(value: Any) -> str:  # noqa: ANN401
+def short_repr(value: Any) -> str:
     """repr(value), cut to a sensible length: what error messages quote of a user's value."""
     return _SHORT_REPR.repr(value)
 
@@ -303,6 +304,7 @@ class Scenario:
     edges: tuple[Edge, ...]
     gains: SingleGains | DoubleGains
     horizon: float
+    headings: np.ndarray | None = None  # (n,) [rad]: simulated robots' headings at t = 0, or None
 
     def __post_init__(self) -> None:
         _name(self.name)
@@ -346,6 +348,13 @@ class Scenario:
         elif self.velocities is not None:
             raise ScenarioError("velocities: must be absent for dynamics 'single'")
 
+        if self.headings is not None:
+            headings = _float_array(self.headings, 'headings')
+            if headings.shape != (len(ids),):
+                raise ScenarioError(f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}')
+            self._check_finite(headings[:, None], 'heading')
+            object.__setattr__(self, 'headings', _readonly(headings))
+
         expected = SingleGains if self.dynamics == 'single' else DoubleGains
         if not isinstance(self.gains, expected):
             raise ScenarioError(
@@ -388,6 +397,7 @@ class Scenario:
         object.__setattr__(self, 'edges', edges)
         object.__setattr__(self, '_index', index)
         object.__setattr__(self, '_neighbours', None)  # built on first use
+        object.__setattr__(self, '_edge_indices', None)  # likewise
 
     def _check_finite(self, array: np.ndarray, what: str) -> None:
         bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
@@ -415,6 +425,10 @@ class Scenario:
             and self.edges == other.edges
             and self.gains == other.gains
             and self.horizon == other.horizon
+            and (
+                (self.headings is None and other.headings is None)
+                or (self.headings is not None and other.headings is not None and np.array_equal(self.headings, other.headings))
+            )
         )
 
     __hash__ = None
@@ -449,11 +463,13 @@ class Scenario:
 
     def edge_indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows of i, rows of j, d_ij stacked as (m, p)) over `edges`, for vectorised formulas."""
-        m = len(self.edges)
-        heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
-        tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
-        d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
-        return heads, tails, d
+        if self._edge_indices is None:  # built once: per-sample formulas call it (run_series, theory)
+            m = len(self.edges)
+            heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
+            tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
+            d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
+            object.__setattr__(self, '_edge_indices', (heads, tails, d))
+        return tuple(array.copy() for array in self._edge_indices)
 
     def replace(self, **changes: Any) -> Scenario:
         """A copy with some fields changed (checked again)."""
@@ -525,6 +541,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {len(agents)}')
     velocity_keys = ('position', 'velocity') if dynamics == 'double' else ('position',)
     entries: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+    headings: dict[int, float] = {}
     dimension: int | None = None
     first_agent: int | None = None
     for raw_id, entry in agents.items():
@@ -543,7 +560,9 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
             )
         if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
             raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
-        _check_keys(entry, where, required=velocity_keys)
+        _check_keys(entry, where, required=velocity_keys, optional=('heading',))
+        if 'heading' in entry:
+            headings[agent] = _finite_float(entry['heading'], f'{where}.heading')
         position = _vector(entry['position'], f'{where}.position', size=dimension)
         if dimension is None:
             dimension, first_agent = position.size, agent
@@ -556,6 +575,12 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         )
         entries[agent] = (position, velocity)
     ids = tuple(sorted(entries))
+    if headings and len(headings) != len(ids):
+        missing = [a for a in ids if a not in headings]
+        raise ScenarioError(
+            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
+            'give every agent a heading or none'
+        )
     positions = np.array([entries[a][0] for a in ids])
     velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
 
@@ -589,6 +614,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         edges=tuple(edges),
         gains=gains,
         horizon=horizon,
+        headings=np.array([headings[a] for a in ids]) if headings else None,
     )
 
 
@@ -650,6 +676,8 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         entry = {'position': scenario.positions[k].tolist()}
         if double:
             entry['velocity'] = scenario.velocities[k].tolist()
+        if scenario.headings is not None:
+            entry['heading'] = float(scenario.headings[k])
         agents[agent] = entry
     gains = scenario.gains
     if double:
@@ -689,34 +717,17 @@ class _TooManyNodes(yaml.YAMLError):
         self.alias = alias  # the alias being expanded when the count ran over, if any
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader that rejects duplicate keys, reads 1e-3 (YAML 1.2 style) as a float and counts nodes.
+class _TooDeep(yaml.YAMLError):
+    """The document nests collections deeper than _YAML_DEPTH_LIMIT."""
 
-    Composing counts every node, an alias as all the nodes it repeats, and stops at
-    MAX_YAML_NODES: an alias bomb is refused before anything walks its expansion.
-    """
 
-    def __init__(self, stream) -> None:
-        super().__init__(stream)
-        self._nodes = 0
-        self._anchor_sizes: dict[str, int] = {}  # anchor -> nodes in the subtree it names
+# Nesting a YAML scenario file may have (a scenario nests 4 levels). libyaml composes and the
+# constructor builds recursively: the limit keeps a file of 4 MB of '[' from reaching either.
+_YAML_DEPTH_LIMIT = 100
 
-    def compose_node(self, parent, index):
-        event = self.peek_event()
-        if isinstance(event, yaml.AliasEvent):
-            self._count(self._anchor_sizes.get(event.anchor, 1), event, alias=event.anchor)
-            return super().compose_node(parent, index)
-        before = self._nodes
-        self._count(1, event, alias=None)
-        node = super().compose_node(parent, index)
-        if event.anchor is not None:
-            self._anchor_sizes[event.anchor] = self._nodes - before
-        return node
 
-    def _count(self, nodes: int, event, *, alias: str | None) -> None:
-        self._nodes += nodes
-        if self._nodes > MAX_YAML_NODES:
-            raise _TooManyNodes(event.start_mark, alias)
+class _Checks:
+    """What both loaders add to PyYAML's safe constructor: duplicate keys refused, huge integers named."""
 
     def construct_mapping(self, node, deep=False):
         seen: set[Any] = set()
@@ -747,17 +758,202 @@ class _Loader(yaml.SafeLoader):
             ) from None
 
 
-_Loader.add_constructor('tag:yaml.org,2002:int', _Loader.construct_yaml_int)
-_Loader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$'),
-    list('-+0123456789.'),
-)
+class _Loader(_Checks, yaml.SafeLoader):
+    """The pure-Python SafeLoader with `_Checks`, counting nodes as it composes (see `_count_nodes`).
+
+    It reads a document only after libyaml failed on it (`_load_yaml`): its error messages, with
+    line and column, are the ones a user has always got.
+    """
+
+    def __init__(self, stream) -> None:
+        super().__init__(stream)
+        self._nodes = 0
+        self._anchor_sizes: dict[str, int] = {}  # anchor -> nodes in the subtree it names
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            self._count(self._anchor_sizes.get(event.anchor, 1), event, alias=event.anchor)
+            return super().compose_node(parent, index)
+        before = self._nodes
+        self._count(1, event, alias=None)
+        node = super().compose_node(parent, index)
+        if event.anchor is not None:
+            self._anchor_sizes[event.anchor] = self._nodes - before
+        return node
+
+    def _count(self, nodes: int, event, *, alias: str | None) -> None:
+        self._nodes += nodes
+        if self._nodes > MAX_YAML_NODES:
+            raise _TooManyNodes(event.start_mark, alias)
+
+
+class _CLoader(_Checks, yaml.CSafeLoader):
+    """libyaml's parser and composer (C) with the safe constructor and `_Checks` (Python)."""
+
+
+_YAML_FLOAT = re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$')
+for _loader in (_Loader, _CLoader):
+    _loader.add_constructor('tag:yaml.org,2002:int', _Checks.construct_yaml_int)
+    _loader.add_implicit_resolver('tag:yaml.org,2002:float', _YAML_FLOAT, list('-+0123456789.'))  # 1e-3 (YAML 1.2)
+
+
+def _count_nodes(text: str) -> None:
+    """Refuse `text` before anything is composed: more than MAX_YAML_NODES nodes, every alias counted
+    as all the nodes it repeats (an alias bomb of a few hundred bytes expands to billions), or
+    collections nested deeper than _YAML_DEPTH_LIMIT.
+
+    libyaml (C) delivers the events; the count is `_Loader.compose_node`'s, event for event, so both
+    refuse the same documents at the same place. A syntax error is raised as libyaml words it.
+    """
+    parser = yaml.CSafeLoader(text)
+    scalar, alias, stream_end = yaml.ScalarEvent, yaml.AliasEvent, yaml.StreamEndEvent
+    starts, ends = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    nodes = 0
+    sizes: dict[str, int] = {}  # anchor -> nodes in the subtree it names
+    opened: list[tuple[str | None, int]] = []  # the collections being read: (anchor, nodes before it)
+    try:
+        while True:
+            event = parser.get_event()
+            kind = type(event)
+            if kind is scalar:
+                nodes += 1
+                if event.anchor is not None:
+                    sizes[event.anchor] = 1
+            elif kind in starts:
+                opened.append((event.anchor, nodes))
+                nodes += 1
+                if len(opened) > _YAML_DEPTH_LIMIT:
+                    raise _TooDeep
+            elif kind in ends:
+                anchor, before = opened.pop()
+                if anchor is not None:
+                    sizes[anchor] = nodes - before
+            elif kind is alias:
+                nodes += sizes.get(event.anchor, 1)  # 1 while the anchor is still open (a recursive alias)
+                if nodes > MAX_YAML_NODES:
+                    raise _TooManyNodes(event.start_mark, event.anchor)
+            elif kind is stream_end:
+                return
+            if nodes > MAX_YAML_NODES:
+                raise _TooManyNodes(event.start_mark, None)
+    finally:
+        parser.dispose()
+
+
+class _NotPlain(Exception):
+    """The document uses what `_read_plain` leaves to the full loader: an anchor or alias, an explicit
+    tag, a merge key, a key that is not a scalar, a duplicate key, a second document."""
+
+
+_PLAIN_TAGS = frozenset(f'tag:yaml.org,2002:{name}' for name in ('str', 'int', 'float', 'bool', 'null'))
+_NO_KEY = object()
+
+
+def _read_plain(text: str) -> Any:
+    """The document in `text` built straight from libyaml's events, for documents of plain
+    mappings, sequences and untagged scalars (every scenario file `dump_scenario` writes): each
+    scalar resolved and constructed by the loader's own resolver and constructors, the nodes
+    counted and the nesting bounded as `_count_nodes` does. Raises _NotPlain for anything else."""
+    loader = _CLoader(text)
+    try:
+        return _build_plain(loader)
+    finally:
+        loader.dispose()
+
+
+def _build_plain(loader: _CLoader) -> Any:
+    get, resolve, constructors = loader.get_event, loader.resolve, loader.yaml_constructors
+    scalar, stream_end, document_end = yaml.ScalarEvent, yaml.StreamEndEvent, yaml.DocumentEndEvent
+    starts, ends = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    scalar_node, mapping_start = yaml.ScalarNode, yaml.MappingStartEvent
+    cache: dict[tuple, Any] = {}  # (text, implicit) -> constructed value: keys repeat on every line
+    first_error: yaml.YAMLError | None = None  # raised once the whole document is read, as PyYAML would
+    opened: list[list] = []  # [container, pending key] of the collections being read
+    root, nodes = None, 0
+    get()  # StreamStartEvent
+    if type(get()) is stream_end:
+        return None  # an empty file
+    while True:
+        event = get()
+        kind = type(event)
+        if kind is document_end:
+            break
+        if kind in ends:
+            opened.pop()
+            continue
+        if event.anchor is not None or event.tag is not None:
+            raise _NotPlain
+        nodes += 1
+        if nodes > MAX_YAML_NODES:
+            raise _TooManyNodes(event.start_mark, None)
+        if kind is scalar:
+            key = (event.value, event.implicit)
+            value = cache.get(key, _NO_KEY)
+            if value is _NO_KEY:
+                tag = resolve(scalar_node, event.value, event.implicit)
+                if tag not in _PLAIN_TAGS:
+                    raise _NotPlain
+                try:
+                    value = constructors[tag](loader, scalar_node(tag, event.value, event.start_mark, event.end_mark))
+                except yaml.constructor.ConstructorError as error:
+                    first_error, value = first_error or error, None
+                cache[key] = value
+        elif kind in starts:
+            value = {} if kind is mapping_start else []
+        else:
+            raise _NotPlain
+        if not opened:
+            root = value
+        else:
+            parent = opened[-1]
+            container = parent[0]
+            if type(container) is list:
+                container.append(value)
+            elif parent[1] is not _NO_KEY:
+                container[parent[1]] = value
+                parent[1] = _NO_KEY
+            elif kind is scalar and value not in container:
+                parent[1] = value
+            else:
+                raise _NotPlain  # a collection as a key, or a duplicate key: the full loader names it
+        if kind is not scalar:
+            opened.append([value, _NO_KEY])
+            if len(opened) > _YAML_DEPTH_LIMIT:
+                raise _TooDeep
+    if type(get()) is not stream_end:
+        raise _NotPlain  # a second document
+    if first_error is not None:
+        raise first_error
+    return root
+
+
+def _load_yaml(text: str) -> Any:
+    """The document in `text`, parsed by libyaml (C): plain documents in one pass over its events
+    (`_read_plain`), others counted (`_count_nodes`), composed by libyaml and constructed with
+    `_Checks`. A document libyaml cannot read is read again by the pure-Python `_Loader`, for the
+    error message it has always given."""
+    try:
+        try:
+            return _read_plain(text)
+        except _NotPlain:
+            pass
+        _count_nodes(text)
+        loader = _CLoader(text)
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except (_TooManyNodes, _TooDeep, yaml.constructor.ConstructorError):
+        raise  # the constructor is the same Python code in both loaders, and so is its message
+    except yaml.YAMLError:
+        pass  # libyaml words syntax errors its own way
+    return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
 
 
 def _parse_yaml(text: str, source: str) -> Any:
     try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
+        return _load_yaml(text)
     except _TooManyNodes as error:
         where = f'line {error.mark.line + 1}, column {error.mark.column + 1}'
         cause = (
@@ -770,7 +966,7 @@ def _parse_yaml(text: str, source: str) -> Any:
             f'{source}: the YAML document holds more than {MAX_YAML_NODES} nodes {cause}; a scenario file '
             f'holds at most {MAX_YAML_NODES} (about 9 000 agents): refused. Larger teams: {_LARGER_TEAMS}'
         ) from None
-    except RecursionError:
+    except (_TooDeep, RecursionError):
         raise ScenarioError(f'{source}: malformed YAML: nested too deeply (a scenario nests 4 levels)') from None
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
@@ -891,7 +1087,7 @@ def dump_scenario_json_text(scenario: Scenario) -> str:
     """`scenario` as JSON text, one agent and one edge a line, that reads back exactly (floats keep every bit)."""
     data = scenario_to_dict(scenario)
 
-    def text(value: Any) -> str:  # noqa: ANN401
+    def text(value: Any) -> str:
         return json.dumps(value, allow_nan=False, ensure_ascii=False)
 
     head = ''.join(f'{text(key)}: {text(data[key])},\n' for key in ('name', 'dynamics', 'communication_radius', 'horizon'))
@@ -945,7 +1141,7 @@ def _json_int(text: str) -> int:
         raise _HugeJsonInteger(len(text.lstrip('-'))) from None
 
 
-def _parse_json(text: str, source: str) -> Any:  # noqa: ANN401
+def _parse_json(text: str, source: str) -> Any:
     """The JSON document of a scenario file; any fault as a ScenarioError naming the file and where.
 
     NaN and Infinity, which json reads, reach scenario_from_dict as numbers and are refused there

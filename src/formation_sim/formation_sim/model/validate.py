@@ -30,6 +30,11 @@ scale         Δ <= LENGTH_MAX, and every capacity Δ - ||d_ij|| and positive in
               >= LENGTH_MIN: the certified search divides by fourth powers of the distance
               to Δ, which must stay normal doubles (`_check_scale`); the other rules are
               not evaluated then (their numbers would be overflow or underflow)
+speed_scale   κ != 1: the paper's run in s = κt; the rates and times it implies, in seconds  note
+threshold_floor  c0 > 0 (docs/SPEED_SCALE.md): ETA-1 c0 < β0 min(Δ-||d_ij||) sqrt(2/n)    error;
+              ETA-2 the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) within min(Δ-||d_ij||)  error,
+              and 2 sqrt(sup V_d/λmin(P)) below it, without which connectivity is only      warning
+              checked on runs (formation_sim.model.threshold_floor)
 parameters    Δ, the horizon, the agents' gains and every d_ij are 0 or normal doubles     error
               (|x| >= 2.2e-308): agents receive them as ROS parameters, and rcl's parameter
               file parser reads a subnormal number as text (the agent then cannot start)
@@ -48,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
-from formation_agent.core.eta import ALGORITHM_GAINS
+from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
 from formation_sim.model import theory
 from formation_sim.model.gains import (
     OUTSIDE,
@@ -62,6 +67,7 @@ from formation_sim.model.gains import (
     ulps_above,
 )
 from formation_sim.model.scenario import Scenario
+from formation_sim.model.threshold_floor import floor_bounds
 
 NEAR_EDGE_FRACTION = 0.95  # warn when a gain is above this fraction of its bound
 SLACK_WARNING_FRACTION = 0.05  # warn when (initial) holds with less than this relative slack
@@ -350,8 +356,69 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
         _check_single(scenario, out, beta0)
     else:
         _check_double(scenario, out, beta0)
+    _check_speed_scale(scenario, out, beta0)
+    if report.ok:
+        _check_threshold_floor(scenario, out)
     _check_parameters(scenario, out)
     return report
+
+
+def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
+    """κ changes none of the hypotheses (they are the paper's, in s = κt): a note with the real-time numbers."""
+    kappa = scenario.speed_scale
+    if kappa == 1.0:
+        return
+    gains = scenario.gains
+    name, rate = ('β', gains.beta) if scenario.dynamics == 'single' else ('β_d', gains.beta_d)
+    line = (
+        f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) divided by κ, "
+        f'commands × κ' + ('' if scenario.dynamics == 'single' else ' (accelerations × κ², gains κ²k1, κk2, κk3, q(0) → κ q(0))')
+        + f'; the threshold decays at κ{name} = {_g(kappa * rate)} per second'
+        + ('' if beta0 is None else f', β0 in real time κβ0 = {_g(kappa * beta0)}')
+    )
+    out.note('speed_scale', 'gains', line, speed_scale=kappa, rate=kappa * rate, beta0=None if beta0 is None else kappa * beta0)
+
+
+def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
+    """The floor's connectivity condition (formation_sim.model.threshold_floor, docs/SPEED_SCALE.md)."""
+    c0 = scenario.gains.threshold_floor
+    if c0 == 0.0:
+        return
+    try:
+        floor = floor_bounds(scenario)
+    except theory.TheoryError:
+        return  # a hypothesis the rules above report
+    if floor.theorem == 1 and not floor.proven:
+        out.error(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)} breaks {floor.condition}: connectivity is not guaranteed',
+            threshold_floor=c0, limit=floor.limit,
+        )
+        return
+    c_min = floor.limit if floor.theorem == 2 else None
+    if floor.theorem == 2 and not floor.ball < c_min:
+        out.error(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)}: the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) = {_g(floor.ball)} '
+            f'is not within min(Δ-||d_ij||) = {_g(c_min)}: even ultimately nothing keeps the edges in range',
+            threshold_floor=c0, ball=floor.ball, limit=c_min,
+        )
+        return
+    if not floor.proven:
+        out.warning(
+            'threshold_floor', 'gains',
+            f'threshold floor c0 = {_g(c0)}: connectivity is proven only if {floor.condition.replace(" < ", " were below ")}; '
+            'it is not, so connectivity is checked on runs only (docs/SPEED_SCALE.md)',
+            threshold_floor=c0, value=floor.value, limit=floor.limit,
+        )
+    kappa = scenario.speed_scale
+    xi = '' if floor.xi is None else f', inter-event times >= {_g(min(floor.xi.values()) / kappa)} s'
+    out.note(
+        'threshold_floor', 'gains',
+        f'threshold floor c0 = {_g(c0)}: V ultimately <= {_g(floor.ultimate)}, formation error ultimately <= '
+        f'{_g(floor.ball)}{xi}' + (f' ({floor.condition})' if floor.proven else ''),
+        **floor.to_dict(),
+    )
 
 
 def _check_scale(scenario: Scenario, out: _Collector, capacities: np.ndarray, slacks: np.ndarray) -> bool:
@@ -389,7 +456,7 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
     smallest = sys.float_info.min  # rcl's parser (strtod) flags a subnormal result as out of range
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
     carried = [('scenario', 'communication_radius', scenario.delta), ('scenario', 'horizon', scenario.horizon)]
-    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in ALGORITHM_GAINS[algorithm]]
+    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)]
     carried += [(_edge(edge), f'd[{k}]', float(value)) for edge in scenario.edges for k, value in enumerate(edge.d)]
     for subject, key, value in carried:
         if value != 0.0 and abs(value) < smallest:

@@ -43,7 +43,7 @@ def bag_qos(profile: QoSProfile) -> Qos:
     )
 
 
-def offered_qos(node, topic: str) -> list[Qos]:  # noqa: ANN001 - an rclpy Node
+def offered_qos(node, topic: str) -> list[Qos]:
     """The profile each publisher of `topic` that `node` sees offers."""
     return [bag_qos(info.qos_profile) for info in node.get_publishers_info_by_topic(topic)]
 
@@ -61,7 +61,7 @@ def replay_offer(profiles: Sequence[Qos], *, depth: int | None = None) -> QoSPro
         return None
     recorded = profiles[0]
 
-    def policy(enum, value):  # noqa: ANN001, ANN202 - an rclpy policy enum, a rosbags one
+    def policy(enum, value):
         known = value.name in enum.__members__ and value.name != 'UNKNOWN'
         return enum[value.name] if known else enum.SYSTEM_DEFAULT
 

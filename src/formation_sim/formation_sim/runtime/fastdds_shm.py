@@ -25,7 +25,7 @@ from pathlib import Path
 
 from formation_msgs_py.middleware import domain_ports
 
-SHM_DIR = Path('/dev/shm')
+SHM_DIR = Path('/dev/shm')  # noqa: S108 - where Fast DDS keeps its segments, not a temporary file of ours
 
 # fastrtps_<hex> or fastrtps_port<N>, with the lock file `_el` or the semaphore `sem.…_mutex`.
 _FILE = re.compile(r'^(?:sem\.)?(fastrtps_(?:port\d+|[0-9a-f]+))(?:_el|_mutex)?$')

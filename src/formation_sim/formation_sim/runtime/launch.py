@@ -87,6 +87,8 @@ class RobotOptions:
     control_point_distance: float = 0.1  # l [m]
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
+    wheelbase: float = 0.0  # L [m] (car)
+    max_steering_angle: float = math.inf  # φ_max [rad] (car)
     max_linear_acceleration: float = math.inf  # [m/s²] (ETA-2)
     command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
     pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
@@ -94,7 +96,7 @@ class RobotOptions:
     world_frame: str = 'world'
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
-    yaw: float = 0.0  # initial heading of every robot [rad]
+    yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
     pose_noise: float = 0.0  # σ [m]
     yaw_noise: float = 0.0  # σ [rad]
     latency: float = 0.0  # [s] from a pose's measurement to its publication
@@ -114,12 +116,10 @@ class RobotOptions:
         """Raise RunError naming the first option that cannot work with `scenario`."""
         if self.model not in ROBOT_MODELS:
             raise RunError(f'robot model must be one of {ROBOT_MODELS}, got {self.model!r}')
-        if problems := self.kind_problems(scenario.dimension):
-            raise RunError('; '.join(problems))
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
-            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed)
+            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed, steering=self.max_steering_angle)
         except RobotError as error:
             raise RunError(str(error)) from None
         positive = ('control_point_distance', 'max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
@@ -130,21 +130,27 @@ class RobotOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise RunError(f'{name} must be a finite number >= 0, got {value!r}')
-        if not math.isfinite(self.yaw):
+        if self.yaw is not None and not math.isfinite(self.yaw):
             raise RunError(f'yaw must be finite, got {self.yaw!r}')
         if self.robots_per_process < 1:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
+        if not (math.isfinite(self.wheelbase) and self.wheelbase >= 0.0):
+            raise RunError(f'wheelbase must be a finite number >= 0, got {self.wheelbase!r}')
+        if problems := self.kind_problems(scenario.dimension):
+            raise RunError('; '.join(problems))
 
     @property
     def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance)
+        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
 
     def kind_problems(self, dimension: int) -> list[str]:
         """What the robots' kind says of these options (its dimensions, geometry and limits)."""
         try:
-            limits = KindLimits(linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed)
+            limits = KindLimits(
+                linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed, steering_angle=self.max_steering_angle
+            )
         except ValueError:
             return []  # named by the limits' own check
         return robot_kind(self.model).problems(dimension=dimension, geometry=self.geometry, limits=limits)
@@ -160,9 +166,11 @@ class RobotOptions:
             'command_rate': float(self.command_rate),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:  # a car's; none: the default
+            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def robot_parameters(self, scenario: Scenario, agent_id: int) -> dict:
@@ -171,7 +179,7 @@ class RobotOptions:
             'robot_id': int(agent_id),
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
-            'yaw': float(self.yaw),
+            'yaw': self.initial_heading(scenario, agent_id),
             'control_point_distance': float(self.control_point_distance),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
@@ -183,10 +191,20 @@ class RobotOptions:
             'world_frame': self.world_frame,
             'publish_truth': not self.odometry_is_truth,
         }
-        for name in ('max_linear_speed', 'max_angular_speed'):
+        for name in ('max_linear_speed', 'max_angular_speed', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
+        if self.wheelbase > 0.0:
+            params['wheelbase'] = float(self.wheelbase)
         return params
+
+    def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
+        """A simulated robot's heading at t = 0: `yaw` if given, else the scenario's, else 0."""
+        if self.yaw is not None:
+            return float(self.yaw)
+        if scenario.headings is not None:
+            return float(scenario.headings[scenario.index(agent_id)])
+        return 0.0
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -292,11 +310,15 @@ class LaunchPlan:
         return 'odom' if self.robots.odometry_is_truth else 'true_odom'
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded topics the robots publish their poses on: the time keeper starts a robot run
-        only once the recorder has a message on each (its bag then covers t = 0)."""
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
+        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        run only once the recorder has a message on each (its bag then covers t = 0); robots that
+        publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
+        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -391,7 +413,7 @@ class LaunchPlan:
         (ROS_DISCOVERY_SERVER) and learns of the others from it alone, instead of every participant
         announcing itself to every other.  It listens on this machine only, unless the run's
         discovery reaches the network (then on every interface, for clients elsewhere)."""
-        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'
+        address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
         return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
 
@@ -428,6 +450,8 @@ class LaunchPlan:
                 robot=self.robots.model,
                 control_point_distance=float(self.robots.control_point_distance),
                 robot_trajectory=self.robot_trajectory,
+                # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
+                pose_silence=float(self.robots.pose_timeout),
             )
         return params
 
@@ -523,7 +547,7 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
 
     With `domain_id` the caller pins the id; it is still locked against other runs.
     """
-    lock_dir = lock_dir or Path('/tmp/formation_domains')
+    lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
     low, high = DOMAIN_RANGE
     if domain_id is not None:

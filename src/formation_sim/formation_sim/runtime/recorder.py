@@ -203,7 +203,7 @@ class RecorderNode(Node):
         self,
         *,
         parameter_overrides: list[Parameter] | None = None,
-        context=None,  # noqa: ANN001 - an rclpy Context
+        context=None,
         node_name: str = NODE_NAME,
     ) -> None:
         """Declare and check the parameters (one ParameterError names every problem), open the bag."""

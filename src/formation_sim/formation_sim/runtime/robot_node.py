@@ -103,6 +103,8 @@ SPECS = (
     ParameterSpec(name='rate', type=DOUBLE, default=100.0, low=0.0, low_open=True, description='ticks (pose publications) per second [Hz]'),
     ParameterSpec(name='max_linear_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='speed limit [m/s]'),
     ParameterSpec(name='max_angular_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='turn-rate limit [rad/s]'),
+    ParameterSpec(name='wheelbase', type=DOUBLE, default=0.0, low=0.0, description='car: wheelbase L from the rear axle to the front axle [m]'),
+    ParameterSpec(name='max_steering_angle', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='car: steering limit φ_max [rad]'),
     ParameterSpec(name='pose_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on each position axis [m]'),
     ParameterSpec(name='yaw_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on the heading [rad]'),
     ParameterSpec(
@@ -134,7 +136,10 @@ class SimulatedRobotNode(Node):
                 scenario_position=p['position'],
                 yaw=float(p['yaw']),
                 control_point_distance=float(p['control_point_distance']),
-                limits=Limits(linear=float(p['max_linear_speed']), angular=float(p['max_angular_speed'])),
+                wheelbase=float(p['wheelbase']),
+                limits=Limits(
+                    linear=float(p['max_linear_speed']), angular=float(p['max_angular_speed']), steering=float(p['max_steering_angle'])
+                ),
             )
             self.noise = PoseNoise(
                 position_sigma=float(p['pose_noise']), yaw_sigma=float(p['yaw_noise']), seed=int(p['seed']), robot_id=self.robot_id
@@ -205,11 +210,13 @@ class SimulatedRobotNode(Node):
             self.robot.set_command(due[1])
             return
         held = self.robot.command
-        if held is not None and not held.is_zero and self._last_command_at is not None:
-            if now - self._last_command_at > self.command_timeout + self.command_latency:
-                self.timeouts += 1
-                self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
-                self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
+        if (
+            held is not None and not held.is_zero and self._last_command_at is not None
+            and now - self._last_command_at > self.command_timeout + self.command_latency
+        ):
+            self.timeouts += 1
+            self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
+            self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
 
     # -- ticks ----------------------------------------------------------------------------------
 

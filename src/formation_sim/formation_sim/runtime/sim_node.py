@@ -102,7 +102,7 @@ SIMULATOR_PARAMETERS = (
     *TIME_KEEPER_PARAMETERS,
     ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
     ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
-    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description='a lock-step step not settled after this many seconds ends the run, naming every agent\'s last Status'),
+    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description="a lock-step step not settled after this many seconds ends the run, naming every agent's last Status"),
 )  # fmt: skip
 """The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
 
@@ -199,8 +199,8 @@ class FormationSimulatorNode(TimeKeeperNode):
     COMMAND = 'formation_sim'
     PARAMS_FILE = SIMULATOR_FILE
     DESCRIPTION = (
-        'The simulator of a formation run (formation run, backend exact): the exact world, every agent\'s sensing '
-        'service, the lock-step clock (or the wall clock), the tools\' topics; writes summary.json and graph.json '
+        "The simulator of a formation run (formation run, backend exact): the exact world, every agent's sensing "
+        "service, the lock-step clock (or the wall clock), the tools' topics; writes summary.json and graph.json "
         'into out_dir.'
     )
 

@@ -1,10 +1,15 @@
 """The largest command a scenario will ask for: the proofs' bound where it settles the question,
-else the largest in an exact in-process run (`formation validate --max-speed`).
+else the largest in an exact in-process run (`formation validate --max-speed`); and the speed scale
+κ that keeps the commands within a robot's limits (`choose_speed_scale`, `--speed-scale auto`).
 
 `largest_command(scenario, max_speed=V)` returns the bound of `formation_sim.model.command_bound`
 when the theorems' hypotheses hold and it is within V (a guarantee); otherwise it runs the exact
 engine to the horizon and returns the largest command of that run (what this run asks for, not a
 guarantee: other starting points may ask for more), saying which.
+
+`choose_speed_scale(scenario, limits=...)` runs the exact engine once at κ = 1 and hands its
+largest commands, its settling time and the proofs' bound to the pure arithmetic of
+`formation_sim.model.speed_choice` (which explains both values of κ).
 """
 
 from __future__ import annotations
@@ -16,16 +21,37 @@ import numpy as np
 from formation_sim.model import theory
 from formation_sim.model.command_bound import CommandBound, command_bound
 from formation_sim.model.scenario import Scenario
+from formation_sim.model.speed_choice import (
+    OBSERVED_MARGIN,
+    SETTLE_FRACTION,
+    RobotLimits,
+    Settling,
+    SpeedScaleChoice,
+    check_limits_apply,
+    linear_crossing,
+    scale_choice,
+    settling_time,
+)
 from formation_sim.sim.engine import simulate
+from formation_sim.sim.record import RunRecord
+
+DOUBLE_GRID = 0.01
+"""ETA-2 moves along curves between events: its settling time is known to this sample spacing [s, κ = 1]."""
 
 
 def measured_command(scenario: Scenario, *, horizon: float | None = None) -> CommandBound:
-    """The largest command of each agent in an exact run (ETA-1: ||u_i(t_k)|| over its triggers;
+    """The largest command of each agent in an exact run (`measured_run`)."""
+    return measured_run(scenario, horizon=horizon)[0]
+
+
+def measured_run(scenario: Scenario, *, horizon: float | None = None) -> tuple[CommandBound, RunRecord]:
+    """(the largest command of each agent in an exact run (ETA-1: ||u_i(t_k)|| over its triggers;
     ETA-2: ||q_i|| and ||u^d_i - k3 q_i|| over the run).
 
     Exact, not sampled: ETA-1 commands change only at events; between events an ETA-2 velocity
     moves on the segment from q_i(t_k) towards u^d_i / k3 and its derivative shrinks as e^{-k3 τ},
-    so both norms are largest at event times, where the engine stops anyway."""
+    so both norms are largest at event times, where the engine stops anyway.  The record samples
+    every event time and the horizon (ETA-2: also a 0.01 s grid, for its settling time)."""
     double = scenario.dynamics == 'double'
     n = scenario.n
     speed = np.zeros(n)
@@ -43,9 +69,9 @@ def measured_command(scenario: Scenario, *, horizon: float | None = None) -> Com
         if not double:
             np.maximum(speed, controls, out=speed)
         elif velocity is not None:  # the segment that began at the previous event
-            np.maximum(acceleration, np.linalg.norm(world.controls - scenario.gains.k3 * velocity, axis=1), out=acceleration)
+            np.maximum(acceleration, np.linalg.norm(world.controls - world.damping * velocity, axis=1), out=acceleration)  # κ k3 at κ
 
-    record = simulate(scenario, horizon=horizon, sample_dt=None, on_event=on_event)
+    record = simulate(scenario, horizon=horizon, sample_dt=DOUBLE_GRID if double else None, on_event=on_event)
     note(seen['world'], seen.get('velocity'))  # the controls set at the last event
     if double:  # the record samples every event time and the horizon
         speed = np.linalg.norm(record.sample_velocities, axis=2).max(axis=0)
@@ -55,7 +81,7 @@ def measured_command(scenario: Scenario, *, horizon: float | None = None) -> Com
         speed=dict(zip(ids, speed.tolist())),
         acceleration=dict(zip(ids, acceleration.tolist())) if double else None,
         reference=f'the exact in-process run to t = {record.horizon:g} ({record.total_events} events): what this run asks for, not a guarantee',
-    )
+    ), record
 
 
 def largest_command(scenario: Scenario, *, max_speed: float = math.inf, max_acceleration: float = math.inf, horizon: float | None = None) -> tuple[CommandBound, CommandBound | None]:
@@ -70,3 +96,58 @@ def largest_command(scenario: Scenario, *, max_speed: float = math.inf, max_acce
     if within:
         return bound, None
     return measured_command(scenario, horizon=horizon), bound
+
+
+def unit_scale(scenario: Scenario) -> Scenario:
+    """The scenario at κ = 1 (the paper's time); itself when it is already."""
+    return scenario.with_scale(speed_scale=1.0) if scenario.gains.speed_scale != 1.0 else scenario
+
+
+def settling(scenario: Scenario, record: RunRecord, *, fraction: float = SETTLE_FRACTION) -> Settling:
+    """When the run of `record` reached `fraction` of its initial formation error for good (exact for
+    ETA-1, whose positions are linear between the event samples; to the grid for ETA-2)."""
+    times = np.asarray(record.sample_times, dtype=float)
+    positions = np.asarray(record.sample_positions, dtype=float)
+    heads, tails, d = scenario.edge_indices()
+    edge_errors = positions[:, heads, :] - positions[:, tails, :] - d  # (K, m, p)
+    errors = np.linalg.norm(edge_errors, axis=2).max(axis=1)
+    threshold = fraction * float(errors[0])
+
+    def crossing(k: int) -> float:
+        return linear_crossing(edge_errors[k], edge_errors[k + 1], t0=float(times[k]), t1=float(times[k + 1]), threshold=threshold)
+
+    single = scenario.dynamics == 'single'
+    return Settling(
+        initial_error=float(errors[0]),
+        time=settling_time(times, errors, threshold=threshold, segment_crossing=crossing if single else None),
+        run_horizon=float(record.horizon),
+        fraction=fraction,
+        resolution='exact' if single else f'the {DOUBLE_GRID:g} s sample grid and the events (κ = 1)',
+    )
+
+
+def choose_speed_scale(
+    scenario: Scenario, *, limits: RobotLimits, margin: float = OBSERVED_MARGIN, paper_horizon: float | None = None
+) -> SpeedScaleChoice:
+    """Both speed scales κ for `limits` (`formation_sim.model.speed_choice`): the guaranteed one from
+    the proofs' bound, the observed one from the exact run at κ = 1 to `paper_horizon` (default
+    the scenario's horizon: all a run at any κ <= 1 covers of the paper's time), with the time each
+    needs to settle.  LimitsError if the limits do not apply to this scenario."""
+    check_limits_apply(limits, scenario.dynamics)
+    paper = unit_scale(scenario)
+    run_horizon = float(scenario.horizon if paper_horizon is None else paper_horizon)
+    observed, record = measured_run(paper, horizon=run_horizon)
+    try:
+        bound = command_bound(paper)
+        theory_speeds: tuple[float, float | None] | str = (bound.max_speed, bound.max_acceleration)
+    except theory.TheoryError as error:
+        theory_speeds = str(error)
+    return scale_choice(
+        limits=limits,
+        dynamics=scenario.dynamics,
+        theory=theory_speeds,
+        observed=(observed.max_speed, observed.max_acceleration),
+        settling=settling(paper, record),
+        horizon=scenario.horizon,
+        margin=margin,
+    )

@@ -29,6 +29,7 @@ hold `trajectory.npz` (arrays `agent_ids`, `times`, `positions`[, `velocities`])
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import struct
@@ -287,10 +288,8 @@ class TrajectoryWriter:
     def abandon(self) -> None:
         """Close the files, leaving what was written as `trajectory.incomplete/` (a run that stopped)."""
         for handle in self._files.values():
-            try:
+            with contextlib.suppress(OSError):
                 handle.close()
-            except OSError:
-                pass
         self._files = {}
 
 

@@ -14,11 +14,11 @@ Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as
 | `max_edge_length` | the largest `max_length` (must stay < Δ: connectivity preserved) |
 | `final_formation_error` | max over edges of ||x_i - x_j - d_ij|| at the horizon |
 | `final_positions`, `final_velocities` | agent -> vector (velocities null for single integrators) |
-| `theorem_constants` | `formation_sim.model.theory.TheoremConstants.to_dict()`, or {"error": ...} |
-| `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii) |
+| `theorem_constants` | `formation_sim.model.theory.TheoremConstants.to_dict()` (the paper's time s = κt), with `speed_scale` κ when not 1 and `threshold_floor` (`formation_sim.model.threshold_floor.FloorBounds.to_dict()`) when c0 > 0; or {"error": ...} |
+| `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii), or c0/c_i with a threshold floor; ξ in seconds (ξ_i / κ) |
 | `wall_time` | seconds the run took |
 | `extra` | implementation-specific details (e.g. the distributed run's domain id) |
-| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it (kind: agent_lost, agent_failed, recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
+| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process][, followed]} — what stopped it first (`followed`: agent -> the error of each agent that then stopped on its own) (kind: agent_lost, agent_failed, robot_lost (a robot whose poses stopped), recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
 | `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.analysis.accounting`) |
 | `extra.summary_source`, `extra.processes` | only when `formation run` wrote the summary because the simulator could not: how, and every process's exit |
 | `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
@@ -39,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from formation_agent.core.speed_scale import real_duration
 from formation_sim.model import theory
+from formation_sim.model.threshold_floor import floor_bounds
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
@@ -76,6 +78,12 @@ def build_summary(record) -> dict:
         constants = theory.theorem_constants(scenario)
         constants_dict = constants.to_dict()
         xi = constants.xi
+        if (floor := floor_bounds(scenario)) is not None:  # c0 > 0: the floor's guarantees
+            constants_dict['threshold_floor'] = floor.to_dict()
+            xi = floor.xi
+        if scenario.speed_scale != 1.0:  # the constants are the paper's time; ξ_i in seconds is ξ_i / κ
+            constants_dict['speed_scale'] = scenario.speed_scale
+            xi = None if xi is None else {agent: real_duration(v, scenario.speed_scale) for agent, v in xi.items()}
     except ValueError as err:
         constants_dict = {'error': str(err)}
         xi = None
@@ -115,6 +123,23 @@ def build_summary(record) -> dict:
         'xi_check': xi_check,
         'wall_time': record.wall_time,
         'extra': record.extra,
+    }
+
+
+def unstarted_summary(scenario, *, horizon: float, mode: str, extra: dict) -> dict:
+    """The summary of a run that has no samples (it never reached t = 0, or left neither summary
+    nor bag): what was to be run, and `extra` (its failure)."""
+    return {
+        'schema': SCHEMA,
+        'scenario': scenario.name,
+        'dynamics': scenario.dynamics,
+        'mode': mode,
+        'horizon': horizon,
+        'n_agents': len(scenario.agent_ids),
+        'dimension': scenario.dimension,
+        'delta': scenario.delta,
+        'wall_time': None,
+        'extra': extra,
     }
 
 

@@ -154,7 +154,7 @@ class KindNames(Sequence):
     def _names(self) -> tuple[str, ...]:
         return (*self.before, *_KINDS, *self.after)
 
-    def __getitem__(self, index):  # noqa: ANN001, ANN204 - Sequence's
+    def __getitem__(self, index):
         return self._names()[index]
 
     def __len__(self) -> int:
