@@ -29,6 +29,7 @@ Run it under the machine's ROS lock (`flock /tmp/ros-tests.lock ...`): it starts
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -175,7 +176,8 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         _, err = run.communicate(timeout=120)
         exited = time.monotonic() - fault_at
         if fault == 'pose_cut':
-            os.kill(victim, signal.SIGCONT)
+            with contextlib.suppress(ProcessLookupError):  # formation run stopped it (SIGINT with SIGCONT)
+                os.kill(victim, signal.SIGCONT)
         time.sleep(0.5)  # the last commands and poses on their way
         last_zero, moving = observer.last_zero_after(fault_at)
         lines = [line for line in err.splitlines() if line.startswith('[formation run]')]

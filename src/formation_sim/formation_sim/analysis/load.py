@@ -459,6 +459,20 @@ def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
     return Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or "every agent's last Status counts what the bag holds")
 
 
+def _robot_poses(bag: Path, got: _Collected, scenario: Scenario, *, trajectory: str, model: str, distance: float, epoch: float) -> dict:
+    """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order."""
+    poses = {}
+    for agent in scenario.agent_ids:
+        poses[agent] = []
+        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
+            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
+            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
+    missing = [agent for agent, samples in poses.items() if not samples]
+    if missing:
+        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    return poses
+
+
 def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
     """A robot run rebuilt from its bag: trajectories from the pose topics (module docstring)."""
     robots = got.robots
@@ -474,15 +488,7 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     epoch = start[0].epoch
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
     checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
-    poses = {}
-    for agent in scenario.agent_ids:
-        poses[agent] = []
-        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
-            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
-            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
-    missing = [agent for agent, samples in poses.items() if not samples]
-    if missing:
-        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    poses = _robot_poses(bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch)
     if final:
         end = final[-1].time
     else:
