@@ -117,7 +117,7 @@ class Observer:
 
 
 def _pids(*words: str) -> list[int]:
-    """Processes whose command line holds every one of `words`, in order of appearance."""
+    """Processes whose command line holds every one of `words`."""
     found = []
     for entry in Path('/proc').iterdir():
         if not entry.name.isdigit():
@@ -126,7 +126,8 @@ def _pids(*words: str) -> list[int]:
             args = (entry / 'cmdline').read_bytes().decode(errors='replace').split('\0')
         except OSError:
             continue
-        if all(any(word == arg or word in arg for arg in args) for word in words):
+        # A path or a module: within an argument; anything else (an id): an argument of its own.
+        if all(any(word == arg or (('/' in word or '.' in word) and word in arg) for arg in args) for word in words):
             found.append(int(entry.name))
     return found
 

@@ -291,6 +291,13 @@ class LaunchPlan:
         poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
+    def endless_topics(self) -> list[str]:
+        """The recorded topics of robots that outlive the run (external ones: their poses)."""
+        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        return [name for name, _ in self.recorder_topics() if name in poses]
+
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
         all but a robot's own (its poses, and the velocity commands it takes)."""
@@ -336,6 +343,8 @@ class LaunchPlan:
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
                         **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
+                        # External robots publish on after the run: their poses must not hold the drain up.
+                        **({'endless_topics': self.endless_topics()} if self.backend == 'external' else {}),
                     }
                 }
             }
