@@ -81,7 +81,7 @@ def _bad_input(tmp_path):
         (['params', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
         (['params', 'robots_square', '--backend', 'external', '--out', str(tmp_path / 'x')], '--backend external needs --robot holonomic|unicycle'),
         (['params', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
-        (['robots', 'robots_square', '--domain-id', '42'], '--model holonomic|unicycle is required'),
+        (['robots', 'robots_square', '--domain-id', '42'], '--model holonomic|unicycle|car is required'),
         (['robots', 'robots_square', '--model', 'unicycle', '--domain-id', '42', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
         (['no_such_command'], "invalid choice: 'no_such_command'"),
         (['validate', 'paper_single', '--no-such-option'], 'unrecognized arguments: --no-such-option'),
