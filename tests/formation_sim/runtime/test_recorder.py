@@ -884,11 +884,11 @@ def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path:
     epoch = _epoch(messages)
     _assert_received_soon_after_their_trigger(messages)
     # A pose's bag time is when it came, since the epoch: right after its measurement (header stamp).
-    poses = messages['/agent_1/robot/true_odom']
+    poses = messages['/agent_1/robot/odom']
     measured = [(stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses]
     assert all(t < 0.05 for stamp, t in measured if stamp == 0)  # stamped 0: measured before the run began
     lags = [stamp / 1e9 - t for stamp, t in measured if stamp > 0]
     assert len(lags) > 100 * horizon / 2 and min(lags) >= -1e-3 and max(lags) < 0.5, (min(lags), max(lags))
     offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(tmp_path / 'run' / 'bag')['topics_with_message_count']}
-    assert {p['durability'] for p in offered['/agent_1/robot/true_odom']} == {'volatile'}  # as the robot offers it
+    assert {p['durability'] for p in offered['/agent_1/robot/odom']} == {'volatile'}  # as the robot offers it
     assert {p['durability'] for p in offered['/formation/robots']} == {'transient_local'}

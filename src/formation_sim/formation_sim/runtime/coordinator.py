@@ -112,19 +112,25 @@ COORDINATOR_PARAMETERS = (
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
 
-def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
+def robot_run_topics(
+    scenario: Scenario, *, model: str, simulated: bool, pose_type: str, truth: bool | None = None
+) -> list[tuple[str, str]]:
     """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
     triggering information, and per robot the poses its agents read (`pose_type`), its command
-    and, simulated, its noise-free state (real robots: both pose topics, whichever they have)."""
+    and the topic the formation is measured on: with `truth` (default: simulated) a simulated
+    robot's noise-free `true_odom`, else its `odom` (a noise-free simulated robot's odometry is
+    exact: `launch.RobotOptions.odometry_is_truth`); real robots: both pose topics, whichever
+    they have."""
+    truth = simulated if truth is None else truth
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
     command_type = robot_kind(model).command_type
     topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
     for i in scenario.agent_ids:
         if pose_type == 'pose' or not simulated:
             topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
-        if pose_type == 'odom' or not simulated:
+        if pose_type == 'odom' or not simulated or not truth:
             topics.append((robot_odom_topic(i), odometry))
-        if simulated:
+        if truth:
             topics.append((robot_true_odom_topic(i), odometry))
         topics.append((robot_command_topic(i), command_type))
         topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]

@@ -38,20 +38,24 @@ class RobotError(ValueError):
 class Limits:
     """What the base can do; commands beyond are clipped (and counted) as a real base does, by its
     kind's `clip` (holonomic: the velocity scaled down to `linear` keeping its direction, |ω|
-    clipped; unicycle: |v| clipped to `linear`, |ω| to `angular`, each on its own, as a TurtleBot3 does)."""
+    clipped; unicycle: |v| clipped to `linear`, |ω| to `angular`, each on its own, as a TurtleBot3
+    does; car: also |ω| to |v| tan(`steering`) / L)."""
 
     linear: float = math.inf  # [m/s]
     angular: float = math.inf  # [rad/s]
+    steering: float = math.inf  # [rad] φ_max (car)
 
     def __post_init__(self) -> None:
         for name in ('linear', 'angular'):
             value = getattr(self, name)
             if not value > 0.0:  # also NaN
                 raise RobotError(f'the {name} speed limit must be > 0 (inf: none), got {value!r}')
+        if not self.steering > 0.0:
+            raise RobotError(f'the steering limit must be > 0 (inf: none), got {self.steering!r}')
 
     def kind_limits(self) -> KindLimits:
         """These limits as the kinds take them."""
-        return KindLimits(linear_speed=self.linear, angular_speed=self.angular)
+        return KindLimits(linear_speed=self.linear, angular_speed=self.angular, steering_angle=self.steering)
 
 
 @dataclass(frozen=True, kw_only=True)
