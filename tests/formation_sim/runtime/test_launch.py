@@ -152,11 +152,13 @@ def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_ty
         plan = _plan(folder, backend, robots)
         plan.write_inputs()
         recorder = yaml.safe_load((folder / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
-        truth = ['/agent_1/robot/true_odom'] if backend == 'unicycle' else []
-        assert [topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')] == sorted([f'/agent_1/robot/{pose_type}', *truth])
-        recorded = {entry.split(':')[0] for entry in recorder['topics']}
-        assert (f'/agent_1/robot/{other}' in recorded) == (backend == 'external')
         coordinator = yaml.safe_load((folder / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+        # What the agents read, and what the coordinator measures the formation on.
+        read = {f'/agent_1/robot/{pose_type}', f'/agent_1/robot/{coordinator["robot_trajectory"]}'}
+        assert sorted(topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')) == sorted(read)
+        recorded = {entry.split(':')[0] for entry in recorder['topics']}
+        if backend == 'external':  # both kinds recorded, whichever the robots have
+            assert f'/agent_1/robot/{other}' in recorded and f'/agent_1/robot/{other}' not in recorder['watched_topics']
         assert coordinator['pose_silence'] == robots.pose_timeout
 
 
