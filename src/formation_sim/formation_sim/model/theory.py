@@ -389,7 +389,9 @@ def _require(condition: bool, rule: str, message: str) -> None:
 def _edge_bound(k_nu_scaled: float, capacities: np.ndarray) -> np.ndarray:
     # (kij) / (kijd): the positive root of l² + 2K l - 2K c = 0 from ν_ij <= 2K. The paper's
     # ν_ij <= 2ν is loose (ν sums each edge once, so ν_ij <= ν) but valid; kept as printed.
-    return -k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * capacities)
+    # Written as 2Kc / (K + sqrt(K² + 2Kc)): -K + sqrt(...) cancels for K >> c and rounded to
+    # l >= c (a false TheoryError) for teams with large k_ν (α² n / β of 1e8 and more).
+    return 2.0 * k_nu_scaled * capacities / (k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * capacities))
 
 
 def _per_agent_sum(n: int, heads, tails, values) -> np.ndarray:
