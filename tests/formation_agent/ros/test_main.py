@@ -160,7 +160,8 @@ def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
 
 @pytest.mark.parametrize(
     ('name', 'robot', 'pose_type', 'allowed'),
-    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5})],
+    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5}),
+     ('car', 'car', 'odom', {'linear_speed': 1.0, 'steering': 0.42})],
 )  # fmt: skip
 def test_the_example_parameter_files_make_the_documented_robot(bench, agent_process, name, robot, pose_type, allowed):
     """README's one command per robot: the team's file, then the robot's example file from config/."""

@@ -93,7 +93,7 @@ def test_every_missing_parameter_is_named_at_once(ros):
         ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),
         ({'sensing': 'poses', 'world_frame': ''}, "world_frame must name a frame, got ''"),
-        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', got 'tank'"),
+        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', 'car', got 'tank'"),
     ],
 )  # fmt: skip
 def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
@@ -457,6 +457,9 @@ class _InstantSensing:
 
     def gaps(self):
         return []
+
+    def close(self) -> None:
+        """Nothing to destroy (PoseSensing destroys its readers' node)."""
 
     def request(self, on_sensed) -> None:
         from formation_msgs_py.types import SensedState

@@ -10,6 +10,7 @@ holds and summary.json equals the bag).
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -117,6 +118,28 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
 
 
 @pytest.mark.timeout(300)
+def test_a_car_team_forms_its_square_within_its_steering_limit_and_counts_what_it_could_not_follow(tmp_path, capsys):
+    """Cars (F1TENTH-sized: L = 0.33 m, φ_max = 0.42 rad, l = L) start heading along x, so most
+    of the agents' velocities lie outside the cone they can follow: steered to the nearest they can
+    (saturation 'steering'), they still close the formation; every command a car got is drivable."""
+    from formation_sim.bag.io import decode, read_bag
+
+    out = tmp_path / 'car'
+    arguments = ['run', 'robots_square', '--backend', 'car', '--horizon', '4', '--out', str(out), '--domain-id', '41',
+                 '--max-speed', '0.22', '--wheelbase', '0.33', '--max-steering-angle', '0.42',
+                 '--control-point-distance', '0.33', '--quiet', '--no-plot']  # fmt: skip
+    assert main(arguments) == 0, capsys.readouterr().err
+    assert "commands saturated at the robots' limits: steering" in capsys.readouterr().err
+    summary = _assert_a_good_robot_run(out, capsys)
+    steering = summary['extra']['saturation']['by_kind']['steering']
+    assert steering['count'] > 0 and steering['allowed'] == 0.42 < steering['largest_requested'] <= math.pi / 2
+    assert summary['final_formation_error'] < 0.5 * 0.0318  # from 3.2 cm at t = 0
+    kappa = math.tan(0.42) / 0.33
+    commands = [decode(m.rawdata, m.msgtype) for m in read_bag(out / 'bag') if m.topic.endswith('/robot/cmd_vel')]
+    assert commands and all(abs(c.angular.z) <= abs(c.linear.x) * kappa * (1 + 1e-9) for c in commands)
+
+
+@pytest.mark.timeout(300)
 def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated(tmp_path, capsys):
     # 0.05 m/s: below the 0.1 m/s the exact run asks for at the start (formation validate).
     out = tmp_path / 'holonomic'
@@ -199,10 +222,10 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     # POLL_PERIOD + a tick after the kill, each agent's zero command on it.
     ends = _zero_commands_after(result.bag, killed_at, agents=(1, 3, 4))
     assert set(ends) == {1, 3, 4} and max(ends.values()) - killed_at < 1.0, ends
-    # Robot 2 as it truly moved: still after its command timeout (and a tick), to the end of the bag.
+    # Robot 2 as it truly moved (its odometry, exact without noise): still after its command timeout (and a tick), to the end of the bag.
     after = []
     for message in read_bag(result.bag):
-        if message.topic == '/agent_2/robot/true_odom':
+        if message.topic == '/agent_2/robot/odom':
             msg = decode(message.rawdata, message.msgtype)
             stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
             if stamp > killed_at + 0.5 + 0.2:

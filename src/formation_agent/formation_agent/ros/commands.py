@@ -3,7 +3,7 @@
 - `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
   (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
   closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
-- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle'): a
+- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle', 'car'): a
   robot's velocity command from `formation_agent.core.commander.RobotCommander` by its kind's
   adapter, of its kind's message type (`command_message`) — a world-frame TwistStamped
   (holonomic) or a body-frame Twist (v, ω) (differential drive, from the robot's heading) —
@@ -26,7 +26,7 @@ from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
-from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
@@ -80,10 +80,14 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`."""
+    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`.
+
+    `poses.fresh(robot, t=, now=)` gives its own robot's latest pose or raises PoseError
+    (`formation_agent.ros.sensing.PoseSensing`: taken from its reader at each command).
+    """
 
     def __init__(
-        self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None],
+        self, node, config, poses, *, on_failure: Callable[[Exception], None],
         guard: Callable[[float, float], None] | None = None,
     ) -> None:  # fmt: skip
         """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze
@@ -98,6 +102,7 @@ class RobotOutput:
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
+            wheelbase=config.wheelbase,
             k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
         self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)

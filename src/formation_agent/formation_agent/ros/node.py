@@ -102,7 +102,7 @@ def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
         node.get_logger().warning(
             'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
         )
-    return RobotOutput(node, config, node.sensing.book, on_failure=node._fail, guard=node.staleness.check_command)
+    return RobotOutput(node, config, node.sensing, on_failure=node._fail, guard=node.staleness.check_command)
 
 
 class FormationAgentNode(Node):
@@ -187,6 +187,10 @@ class FormationAgentNode(Node):
             # self.simulator is made after this subscription: looked up when the event comes
             event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
         )
+
+    def destroy_node(self) -> None:
+        self.sensing.close()  # pose sensing's readers live on a node of their own
+        super().destroy_node()
 
     @property
     def rejected(self) -> dict[str, int]:

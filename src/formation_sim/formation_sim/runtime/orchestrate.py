@@ -150,6 +150,7 @@ class FormationRun:
         backend: str = 'exact',
         robots: RobotOptions | None = None,
         discovery: str = 'simple',
+        summary_extra: dict | None = None,
     ) -> None:
         """Check everything that can be checked before any process starts or anything on disk changes.
 
@@ -176,6 +177,8 @@ class FormationRun:
         `discovery`: 'simple' (Fast DDS's simple discovery, every participant announces itself to
         every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
         children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
+        `summary_extra`: entries added to summary.json's `extra` as given (`formation run
+        --speed-scale auto` records the κ it chose and why: `speed_scale`).
         """
         self._prepared_from = _process_started()  # the `formation` command's start, else now (extra.timeline)
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -225,6 +228,7 @@ class FormationRun:
         if executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
         self.executor = executor
+        self.summary_extra = dict(summary_extra or {})  # recorded in summary.json's extra as given (e.g. speed_scale)
         self.inject = dict(inject or {})
         if unknown := set(self.inject) - set(INJECT_KEYS):
             raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
@@ -350,6 +354,7 @@ class FormationRun:
             extra = data.setdefault('extra', {})
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
+            extra.update(self.summary_extra)
             from formation_sim.sim.summary import write_summary_file
 
             try:

@@ -84,7 +84,7 @@ def write_unstarted(node: TimeKeeperNode) -> None:
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     mode = 'distributed' if node.serves_sensing else 'robots'
-    extra = {**node._run_extra(0.0), 'started': False}  # noqa: SLF001 - the time keeper's own extra
+    extra = {**node._run_extra(0.0), 'started': False}
     write_summary_file(unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE)
 
 
