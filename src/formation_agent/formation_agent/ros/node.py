@@ -105,6 +105,16 @@ def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
     return RobotOutput(node, config, node.sensing, on_failure=node._fail, guard=node.staleness.check_command)
 
 
+def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> AgentReport:
+    """The agent's AgentReport: its counts, what it refused, injected and clipped."""
+    output = node.output
+    plant = (output.publisher.topic_name, output.sent) if isinstance(output, PlantOutput) else None
+    return node.counts.report(
+        final=final, failure=failure, rejected=node.reject.counts, dropped=node.faults.dropped, delayed=node.faults.delayed,
+        robot_commands=output.robot_commands, saturation=output.saturation, plant=plant,
+    )  # fmt: skip
+
+
 class FormationAgentNode(Node):
     """One agent: senses, commands and broadcasts at its triggering times, listens to neighbours."""
 
@@ -374,12 +384,7 @@ class FormationAgentNode(Node):
     # -- reports and leaving ----------------------------------------------------------------------
 
     def report(self, *, final: bool = False, failure: str | None = None) -> AgentReport:
-        plant = (self.output.publisher.topic_name, self.output.sent) if isinstance(self.output, PlantOutput) else None
-        return self.counts.report(
-            final=final, failure=failure, rejected=self.reject.counts, dropped=self.faults.dropped,
-            delayed=self.faults.delayed, robot_commands=self.output.robot_commands, saturation=self.output.saturation,
-            plant=plant,
-        )  # fmt: skip
+        return _report(self, final=final, failure=failure)
 
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
         self.outbox.publish_report(self.report(final=final, failure=failure))
