@@ -29,6 +29,7 @@ Run it under the machine's ROS lock (`flock /tmp/ros-tests.lock ...`): it starts
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -116,7 +117,7 @@ class Observer:
 
 
 def _pids(*words: str) -> list[int]:
-    """Processes whose command line holds every one of `words`, in order of appearance."""
+    """Processes whose command line holds every one of `words`."""
     found = []
     for entry in Path('/proc').iterdir():
         if not entry.name.isdigit():
@@ -125,7 +126,8 @@ def _pids(*words: str) -> list[int]:
             args = (entry / 'cmdline').read_bytes().decode(errors='replace').split('\0')
         except OSError:
             continue
-        if all(any(word == arg or word in arg for arg in args) for word in words):
+        # A path or a module: within an argument; anything else (an id): an argument of its own.
+        if all(any(word == arg or (('/' in word or '.' in word) and word in arg) for arg in args) for word in words):
             found.append(int(entry.name))
     return found
 
@@ -175,7 +177,8 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         _, err = run.communicate(timeout=120)
         exited = time.monotonic() - fault_at
         if fault == 'pose_cut':
-            os.kill(victim, signal.SIGCONT)
+            with contextlib.suppress(ProcessLookupError):  # formation run stopped it (SIGINT with SIGCONT)
+                os.kill(victim, signal.SIGCONT)
         time.sleep(0.5)  # the last commands and poses on their way
         last_zero, moving = observer.last_zero_after(fault_at)
         lines = [line for line in err.splitlines() if line.startswith('[formation run]')]

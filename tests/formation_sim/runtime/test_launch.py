@@ -141,6 +141,27 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
     assert '/agent_1/robot/cmd_vel:geometry_msgs/msg/TwistStamped' in recorder['topics']
 
 
+@pytest.mark.parametrize('pose_type', ['odom', 'pose'])
+def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_type):
+    """An external team that publishes only odometry (or only PoseStamped) starts: the recorder
+    records both kinds, whichever the robots have, but step 0 waits only for the kind the agents
+    read (before, an odometry-only team never started: a DiscoveryError after 120 s)."""
+    other = {'odom': 'pose', 'pose': 'odom'}[pose_type]
+    for backend, robots in (('external', RobotOptions(model='unicycle', pose_type=pose_type)), ('unicycle', RobotOptions(model='unicycle', pose_type=pose_type))):
+        folder = tmp_path / f'{backend}_{pose_type}'
+        plan = _plan(folder, backend, robots)
+        plan.write_inputs()
+        recorder = yaml.safe_load((folder / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
+        coordinator = yaml.safe_load((folder / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+        # What the agents read, and what the coordinator measures the formation on.
+        read = {f'/agent_1/robot/{pose_type}', f'/agent_1/robot/{coordinator["robot_trajectory"]}'}
+        assert sorted(topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')) == sorted(read)
+        recorded = {entry.split(':')[0] for entry in recorder['topics']}
+        if backend == 'external':  # both kinds recorded, whichever the robots have
+            assert f'/agent_1/robot/{other}' in recorded and f'/agent_1/robot/{other}' not in recorder['watched_topics']
+        assert coordinator['pose_silence'] == robots.pose_timeout
+
+
 @pytest.mark.parametrize(
     ('options', 'complaint'),
     [

@@ -549,6 +549,38 @@ def test_drain_ends_at_its_limit_while_messages_keep_coming(
 
 
 @pytest.mark.ros
+def test_messages_of_an_endless_topic_do_not_hold_the_drain_up(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """External robots publish their poses on after the run: the recorder records them while it
+    drains but ends once the run's own topics are quiet (before, Ctrl-C on an external run waited
+    out the 5 s stop timeout: `drain cut short by a second stop signal after 5.04 s`)."""
+    import rclpy
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 35) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']", f"endless_topics:=['{STEP}']",
+                   'drain_quiet:=0.5', 'drain_limit:=30.0') as process):
+        node = rclpy.create_node('drain_endless_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 10)
+        process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        deadline = signalled + 60
+        while process.poll() is None and time.monotonic() < deadline:  # never quiet for 0.5 s
+            published += publish_steps(publisher, len(published), 1)
+            time.sleep(0.05)
+        waited = time.monotonic() - signalled
+        finish(process, tmp_path)
+        node.destroy_node()
+
+    assert waited < 30.0 and 'drained' in recorder_log(tmp_path) and 'drain limit reached' not in recorder_log(tmp_path)
+    recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
+    assert len(recorded) >= 10 and recorded == published[: len(recorded)]
+
+
+@pytest.mark.ros
 def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -85,7 +85,7 @@ from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeper
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, poses_for_end, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
@@ -184,6 +184,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'control_point_distance': robot_kind(self.robot_model).control_offset(Geometry(control_point_distance=self.control_point_distance))[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
+            'pose_silence': self.parameter_values['pose_silence'],  # poses silent this long at the end are not sampled past it
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
@@ -319,8 +320,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         silent = [i for i, samples in self._poses.items() if not samples]
         if silent:
             raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
-        # Poses stamped up to POSES_AFTER_END past the end, as `formation analyze` reads the bag.
-        tracks = {i: PoseTrack.from_samples([p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]) for i, samples in self._poses.items()}
+        # As `formation analyze` reads the bag: not long past the end, not a robot silent at it.
+        silence = self.robots['pose_silence']
+        tracks = {i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,

@@ -310,15 +310,22 @@ class LaunchPlan:
         return 'odom' if self.robots.odometry_is_truth else 'true_odom'
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
-        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and the one the
+        coordinator measures the formation on (`robot_trajectory`).  The time keeper starts a robot
         run only once the recorder has a message on each (its bag then covers t = 0); robots that
         publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
-        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        by_name = {'pose': robot_pose_topic, 'odom': robot_odom_topic, 'true_odom': robot_true_odom_topic}
+        kinds = (by_name[self.robots.pose_type], by_name[self.robot_trajectory])  # the agents', the coordinator's
         poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
+        return [name for name, _ in self.recorder_topics() if name in poses]
+
+    def endless_topics(self) -> list[str]:
+        """The recorded topics of robots that outlive the run (external ones: their poses)."""
+        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -366,6 +373,8 @@ class LaunchPlan:
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
                         **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
+                        # External robots publish on after the run: their poses must not hold the drain up.
+                        **({'endless_topics': self.endless_topics()} if self.backend == 'external' else {}),
                     }
                 }
             }
