@@ -269,7 +269,7 @@ class FormationAgentNode(Node):
             self._fail(error)
 
     def _trigger(self, sensed_getter) -> None:
-        if self.finished:  # the final step came while sensing (the horizon, or a failed run)
+        if self.finished or self.schedule.stopped:  # the final step or a stop came while sensing
             self.schedule.abandon()
             return
         sensed = sensed_getter()
