@@ -60,10 +60,13 @@ class Observer:
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node('robot_fault_observer', context=self.context)
         self.commands: dict[int, list[tuple[float, bool]]] = {i: [] for i in ROBOTS}  # (arrival, zero)
-        self.poses: dict[int, list[tuple[float, float, float]]] = {i: [] for i in ROBOTS}  # (arrival, x, y)
+        # (arrival, x, y) per source: the noise-free true_odom, else the odometry (a noise-free
+        # simulated robot publishes no true_odom: its odometry is exact)
+        self.sources: dict[str, dict[int, list[tuple[float, float, float]]]] = {'true_odom': {i: [] for i in ROBOTS}, 'odom': {i: [] for i in ROBOTS}}
         for i in ROBOTS:
             self.node.create_subscription(Twist, f'/agent_{i}/robot/cmd_vel', lambda m, i=i: self._command(i, m), 100)
-            self.node.create_subscription(Odometry, f'/agent_{i}/robot/true_odom', lambda m, i=i: self._pose(i, m), 100)
+            for source in self.sources:
+                self.node.create_subscription(Odometry, f'/agent_{i}/robot/{source}', lambda m, i=i, s=source: self._pose(s, i, m), 100)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -77,9 +80,14 @@ class Observer:
     def _command(self, i: int, msg) -> None:
         self.commands[i].append((time.monotonic(), msg.linear.x == 0.0 and msg.angular.z == 0.0))
 
-    def _pose(self, i: int, msg) -> None:
+    def _pose(self, source: str, i: int, msg) -> None:
         p = msg.pose.pose.position
-        self.poses[i].append((time.monotonic(), p.x, p.y))
+        self.sources[source][i].append((time.monotonic(), p.x, p.y))
+
+    @property
+    def poses(self) -> dict[int, list[tuple[float, float, float]]]:
+        truth = self.sources['true_odom']
+        return truth if any(truth.values()) else self.sources['odom']
 
     def driving(self) -> bool:
         return all(any(not zero for _, zero in self.commands[i]) for i in ROBOTS)
@@ -107,12 +115,13 @@ class Observer:
 
     def largest_motion_after(self, fault: float) -> float:
         largest = 0.0
+        poses = self.poses
         for i in ROBOTS:
-            before = [(x, y) for at, x, y in self.poses[i] if at <= fault]
+            before = [(x, y) for at, x, y in poses[i] if at <= fault]
             if not before:
                 continue
             x0, y0 = before[-1]
-            largest = max([largest, *(math.hypot(x - x0, y - y0) for at, x, y in self.poses[i] if at > fault)])
+            largest = max([largest, *(math.hypot(x - x0, y - y0) for at, x, y in poses[i] if at > fault)])
         return largest
 
 
@@ -146,13 +155,15 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
     fleet = None
     if backend == 'external':
         fleet = subprocess.Popen(
-            [*formation, 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain_id), '--out', str(fleet_out)],
+            [*formation, 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain_id), '--out', str(fleet_out), '--robots-per-process', '1'],
             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
         )  # fmt: skip
     observer = Observer(domain_id)
     run_args = ['run', 'robots_square', '--backend', backend, '--horizon', str(horizon), '--out', str(out), '--domain-id', str(domain_id), '--no-plot']
     if backend == 'external':
         run_args += ['--robot', 'unicycle']
+    else:  # a fault hits one robot: each its own process
+        run_args += ['--robots-per-process', '1']
     run = subprocess.Popen([*formation, *run_args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
     row = {'backend': backend, 'fault': fault}
     try:
