@@ -80,7 +80,9 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
         assert (share / 'ament_index' / 'resource_index' / 'packages' / package).is_file()
     # The robots' example parameter files (README, "Running on robots").
     config = colcon_install / 'formation_agent' / 'share' / 'formation_agent' / 'config'
-    examples = {'turtlebot3.params.yaml', 'crazyflie.params.yaml'}
+    from formation_agent.core.kinds import KIND_NAMES, robot_kind
+
+    examples = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robot kind
     assert {p.name for p in config.glob('*.params.yaml')} == examples
     # ... and where the README sends every install: `python3 -m formation_agent.config`
     probe = subprocess.run([sys.executable, '-m', 'formation_agent.config'], env=install_env(colcon_install),

@@ -1,7 +1,7 @@
 """The architecture, as a rule the imports must keep (docs/DESIGN.md, "Layers").
 
 - Packages depend one way: formation_sim -> formation_agent -> formation_msgs_py.
-- formation_sim's layers: model < sim < bag < analysis < runtime < commands < cli; a module
+- formation_sim's layers: model < sim < bag < analysis < study < runtime < commands < cli; a module
   imports only from its own layer or those before it (function-level imports included).
 - formation_agent.core never imports formation_agent.ros.
 - No import cycle among the project's modules.
@@ -21,7 +21,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
 PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
-SIM_LAYERS = ('progress', 'model', 'sim', 'bag', 'analysis', 'runtime', 'commands', 'cli')
+SIM_LAYERS = ('progress', 'model', 'sim', 'bag', 'analysis', 'study', 'runtime', 'commands', 'cli')
 # Modules that are ROS shells: they may import rclpy at the top.
 ROS_MODULES = ('formation_msgs_py.qos', 'formation_agent.ros', 'formation_sim.runtime')
 ROS_IMPORTS = ('rclpy', 'std_msgs', 'std_srvs', 'geometry_msgs', 'rosgraph_msgs', 'visualization_msgs',

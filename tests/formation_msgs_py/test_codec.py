@@ -322,7 +322,7 @@ def test_agent_report_carries_saturation_and_failure_exactly():
     assert decode_agent_report(msg) == report
     unclipped = AgentReport(agent=2, final=False, rejected={}, saturation={'linear_speed': Saturation(count=0, largest_requested=0.0, allowed=1.0)})
     assert json.loads(encode_agent_report(unclipped).data)['saturation'] == {}
-    assert set(SATURATION_KINDS) == {'linear_speed', 'angular_speed', 'linear_acceleration'}
+    assert set(SATURATION_KINDS) == {'linear_speed', 'angular_speed', 'linear_acceleration', 'steering'}
 
 
 _V3 = '"robot_commands":0,"saturation":{},"failure":null,"published":{}'

@@ -42,14 +42,14 @@ BAD = {
                       ["parameter 'scenario' (string) is required", "parameter 'clock_mode' (string) must be one of 'lockstep', 'realtime', got 'fast'",
                        "parameter 'stall_timeout' (double) must be > 0, got 0.0"]),
     'formation_coordinator': (['-p', 'scenario:=robots_square', '-p', 'robot:=tank', '-p', 'robot_trajectory:=gps', '-p', 'horizon:=-3.0'],
-                              ["parameter 'robot' (string) must be one of 'holonomic', 'unicycle', got 'tank'",
+                              ["parameter 'robot' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
                                "parameter 'robot_trajectory' (string) must be one of 'true_odom', 'odom', 'pose', got 'gps'",
                                "parameter 'horizon' (double) must be >= 0, finite, got -3.0"]),
     'formation_recorder': (['-p', 'drain_limit:=-1.0', '-p', "topics:=['nameless']"],
                            ["parameter 'output' (string) is required", "parameter 'drain_limit' (double) must be > 0, finite, got -1.0",
                             "parameter 'topics': topic spec 'nameless' is not of the form '/name:package/msg/Type'"]),
     'formation_robot': (['-p', 'model:=tank', '-p', 'seed:=-1'],
-                        ["parameter 'robot_id' (int) is required", "parameter 'model' (string) must be one of 'holonomic', 'unicycle', got 'tank'",
+                        ["parameter 'robot_id' (int) is required", "parameter 'model' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
                          "parameter 'seed' (int) must be >= 0, got -1"]),
 }  # fmt: skip
 

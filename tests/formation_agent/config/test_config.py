@@ -14,7 +14,9 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[3]
-EXAMPLES = {'turtlebot3.params.yaml', 'crazyflie.params.yaml'}
+from formation_agent.core.kinds import KIND_NAMES, robot_kind
+
+EXAMPLES = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robot kind
 
 
 def _config_folder(env: dict[str, str] | None = None) -> Path:

@@ -72,7 +72,7 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
         spec = next(spec for spec in specs if spec.name == name)
         assert spec.problem('sluggish') is None and 'sluggish' in spec.constraint_text()
         assert spec.problem('tank') is not None
-    assert _kind_problems('sluggish', {'control_point_distance': 0.0, 'dimension': 3}) == [
+    assert _kind_problems('sluggish', {'control_point_distance': 0.0, 'wheelbase': 0.0, 'dimension': 3}) == [
         'a sluggish moves in 1 or 2 dimensions: dimension p must be 1 or 2, got 3'
     ]
     # The launch plan and the recorder's topics.
@@ -121,8 +121,12 @@ def test_every_built_in_kind_has_its_example_parameter_file():
         kind = robot_kind(name)
         params = yaml.safe_load((config / kind.params_file).read_text())['/**']['ros__parameters']
         assert params['robot'] == name, kind.params_file
-        geometry = Geometry(control_point_distance=params.get('control_point_distance', 0.0))
-        limits = Limits(linear_speed=params.get('max_linear_speed', math.inf), angular_speed=params.get('max_angular_speed', math.inf))
+        geometry = Geometry(control_point_distance=params.get('control_point_distance', 0.0), wheelbase=params.get('wheelbase', 0.0))
+        limits = Limits(
+            linear_speed=params.get('max_linear_speed', math.inf),
+            angular_speed=params.get('max_angular_speed', math.inf),
+            steering_angle=params.get('max_steering_angle', math.inf),
+        )
         assert kind.drive_problems(geometry=geometry, limits=limits) == []
         assert kind.placement_problems(dimension=None, geometry=geometry) == []
 

@@ -42,9 +42,13 @@ def _run_until_commanding(bench, agent_process, **parameters):
 
 
 def _assert_stopped(rig, agent, *, status, failure):
-    """The last command is all zeros, nothing came after the exit, and the final report says why."""
+    """The last command is all zeros, none but zeros after the first zero (the stop), and the final
+    report says why."""
     _, last = rig.commands[-1]
     assert _linear(last) == (0.0,) * 6, f'last command {last}'
+    zero = (0.0,) * 6
+    first_zero = next(k for k, (_, msg) in enumerate(rig.commands) if _linear(msg) == zero)
+    assert all(_linear(msg) == zero for _, msg in rig.commands[first_zero:]), 'a non-zero command after the stop'
     assert last.header.frame_id == 'world'
     finals = [report for report in rig.reports if report.final]
     assert len(finals) == 1, rig.reports
@@ -85,8 +89,40 @@ def test_a_stale_own_pose_stops_the_robot(bench, agent_process):
     assert rig.wait_for_exit(agent) == 1
     line = _named(agent.stderr)
     assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), line
-    assert '(pose_timeout 0.3 s): the agent stops' in line and 'Traceback' not in agent.stderr
+    assert "(pose_timeout 0.3 s); its writer is alive and this agent's timer ran 0.0" in line, line
+    assert line.endswith(': the agent stops') and 'Traceback' not in agent.stderr
     _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.3')
+
+
+def test_a_pose_whose_writer_left_the_graph_says_when(bench, agent_process):
+    """A robot's driver that went away is told from a stalled one: its writer left the graph."""
+    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=0.3)
+    rig.silent.add(1)
+    rig.node.destroy_publisher(rig._pose_pubs.pop(1))
+    assert rig.wait_for_exit(agent) == 1
+    line = _named(agent.stderr)
+    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), line
+    assert '(pose_timeout 0.3 s); its writer left the graph at t=' in line and line.endswith(': the agent stops'), line
+    _assert_stopped(rig, agent, status=1, failure='its writer left the graph at t=')
+
+
+def test_a_frozen_agent_sends_no_command_after_it_resumes(bench, agent_process):
+    """Issue 19: an agent stopped for 2 s (SIGSTOP, SIGCONT) resumes with its timers 2 s late and
+    every pose it holds 2 s old; whatever runs first, it sends only the zero command, and says why."""
+    rig, agent = _run_until_commanding(bench, agent_process)
+    agent.signal(signal.SIGSTOP)
+    rig.spin_for(0.2)  # what it sent before the stop has arrived
+    frozen = len(rig.commands)
+    rig.spin_for(2.0)
+    assert len(rig.commands) == frozen, 'a stopped process sends nothing'
+    agent.signal(signal.SIGCONT)
+    assert rig.wait_for_exit(agent) == 1
+    after = [_linear(msg) for _, msg in rig.commands[frozen:]]
+    assert after and all(command == (0.0,) * 6 for command in after), after
+    line = _named(agent.stderr)
+    assert any(words in line for words in ('s late', 'after it was due', 's old')), line
+    assert line.endswith(': the agent stops') and 'Traceback' not in agent.stderr, line
+    _assert_stopped(rig, agent, status=1, failure='the agent stops')
 
 
 def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_process):
@@ -101,7 +137,8 @@ def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_proces
     assert rig.wait_for_exit(agent) == 1
     line = _named(agent.stderr)
     assert line.startswith('formation_agent: agent 1: the pose of robot 2 on /agent_2/robot/pose is '), line
-    assert '(pose_timeout 0.5 s): the agent stops' in line
+    assert "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran " in line, line
+    assert line.endswith('(its writer stalled or was stopped, or its messages are lost?): the agent stops'), line
     _assert_stopped(rig, agent, status=1, failure='the pose of robot 2 on /agent_2/robot/pose is')
 
 
@@ -123,7 +160,8 @@ def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
 
 @pytest.mark.parametrize(
     ('name', 'robot', 'pose_type', 'allowed'),
-    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5})],
+    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5}),
+     ('car', 'car', 'odom', {'linear_speed': 1.0, 'steering': 0.42})],
 )  # fmt: skip
 def test_the_example_parameter_files_make_the_documented_robot(bench, agent_process, name, robot, pose_type, allowed):
     """README's one command per robot: the team's file, then the robot's example file from config/."""

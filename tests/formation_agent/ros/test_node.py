@@ -93,7 +93,7 @@ def test_every_missing_parameter_is_named_at_once(ros):
         ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),
         ({'sensing': 'poses', 'world_frame': ''}, "world_frame must name a frame, got ''"),
-        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', got 'tank'"),
+        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', 'car', got 'tank'"),
     ],
 )  # fmt: skip
 def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
@@ -419,3 +419,83 @@ def test_the_plant_gets_a_zero_command_on_the_wall_clock_only(ros, live_node, wa
     finally:
         executor.remove_node(node)
     assert [(msg.linear.x, msg.linear.y) for msg in received] == [(0.5, -0.25)] + [(0.0, 0.0)] * wall_clock
+
+
+# -- the wall clock ------------------------------------------------------------------------------
+
+
+class _BehindCore:
+    """A core whose next triggering time has always passed by the time it is asked (a computer
+    that cannot keep up with the triggering times)."""
+
+    ready = True
+
+    def __init__(self) -> None:
+        self.times: list[float] = []
+
+    def trigger(self, t, sensed):
+        from formation_agent.core.eta import TriggerOutput
+
+        self.times.append(t)
+        return TriggerOutput(time=t, control=(0.0, 0.0), infos=())
+
+    def receive(self, info) -> None:
+        raise AssertionError('no neighbour talks in this test')
+
+    def next_trigger_time(self, horizon):
+        return self.times[-1] - 1e-4
+
+
+class _InstantSensing:
+    """Sensing answered at once, in the caller's stack, as poses are (`PoseSensing`)."""
+
+    def __init__(self) -> None:
+        self.epoch = None
+
+    def start(self, epoch) -> None:
+        self.epoch = epoch
+
+    def gaps(self):
+        return []
+
+    def close(self) -> None:
+        """Nothing to destroy (PoseSensing destroys its readers' node)."""
+
+    def request(self, on_sensed) -> None:
+        from formation_msgs_py.types import SensedState
+
+        t = time.time() - self.epoch
+        on_sensed(lambda: SensedState(agent=1, stamp=t, rel_positions={2: (0.0, 0.0), 3: (0.0, 0.0)}))
+
+
+def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live_node):
+    """Issue 19: a unicycle square whose agents were always behind their triggering times died of
+    'maximum recursion depth exceeded' (each past-due trigger called the next one).  Now each runs
+    from the executor: thousands in a row, the agent alive, its Status finite."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.codec import decode_status, encode_step
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.topics import STATUS_TOPIC
+
+    node = live_node()
+    node.core, node.sensing = _BehindCore(), _InstantSensing()
+    statuses = []
+    node.create_subscription(type(node.status_publisher.msg_type()), STATUS_TOPIC, lambda m: statuses.append(decode_status(m)), PROTOCOL_QOS)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        node._on_step(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=time.time())))
+        deadline = time.monotonic() + 120.0
+        while len(node.core.times) < 3000 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+            node.check()
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.remove_node(node)
+    times = node.core.times
+    assert len(times) >= 3000 and node.failure is None
+    assert times == sorted(times) and node.counts.triggers == len(times)
+    assert statuses and all(math.isfinite(s.last_planned) and s.last_planned <= s.next_time + 1e-4 for s in statuses)

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from formation_agent.ros.reporting import AgentCounts
+from formation_agent.ros.stepping import AgentNodeError
 from formation_msgs_py.codec import decode_agent_report, decode_status, encode_agent_report, encode_status
 from formation_msgs_py.lockstep import DISCOVERY_STEP
 
@@ -24,6 +27,8 @@ def test_a_status_tells_the_next_time_only_once_it_is_defined_and_round_trips():
     )  # fmt: skip
     assert decode_status(encode_status(ready)) == ready
     assert counts.status(step_index=DISCOVERY_STEP, ready=False, next_time=0.0, planned=0.0).next_time == 0.0
+    with pytest.raises(AgentNodeError, match=r'agent 3: last_planned must be finite \(docs/MESSAGES.md, "Status"\), got inf'):
+        counts.status(step_index=5, ready=True, next_time=math.inf, planned=math.inf)
 
 
 def test_the_report_counts_what_was_published_from_step_0_on_and_itself():

@@ -94,7 +94,7 @@ def test_a_lock_step_status_waits_for_the_own_trigger_and_every_due_neighbour(sc
 def test_a_stopped_schedule_never_triggers_again(schedule, clock):
     schedule.start(epoch=clock.now)
     fired = []
-    schedule.arm(lambda: fired.append(clock.now), 0.0)
+    assert schedule.arm(lambda: fired.append(clock.now))
     queued = schedule._timers.due()
     schedule.stop()
     for callback in queued:  # the executor's last spin
@@ -106,15 +106,49 @@ def test_a_timer_cancelled_after_its_callback_was_queued_does_not_fire(schedule,
     schedule.start(epoch=clock.now)
     fired = []
     schedule.next_time = 0.5
-    schedule.arm(lambda: fired.append('first'), schedule.delay())
+    schedule.arm(lambda: fired.append('first'))
     clock.now += 0.5
     queued = schedule._timers.due()
     schedule.next_time = math.inf  # a re-plan: no trigger before the horizon
     schedule.cancel()
     assert schedule.delay() is None
-    for callback in queued:
+    for callback in queued:  # rclpy's EventsExecutor runs a destroyed timer's queued callback
         callback()
-    assert fired == []
+    assert fired == [] and schedule.planned == 0.0 and not schedule.sensing, 'no trigger planned for t = inf'
+
+
+def test_thousands_of_past_due_triggers_in_a_row_run_from_the_executor_not_by_recursion(schedule, clock):
+    """An agent whose computer cannot keep up: every trigger plans its next one at a time already
+    past (issue 19: a unicycle square died of RecursionError).  Arming a past time never calls the
+    trigger itself; the executor runs it, at a constant stack depth, as often as it is asked."""
+    import sys
+
+    def depth() -> int:
+        frame, n = sys._getframe(), 0
+        while frame is not None:
+            frame, n = frame.f_back, n + 1
+        return n
+
+    schedule.start(epoch=clock.now)
+    depths = []
+
+    def trigger():
+        assert schedule.begin()
+        clock.now += 0.001  # sensing and the core take a millisecond
+        schedule.triggered(clock.now - schedule.epoch)
+        schedule.next_time = schedule.last_trigger - 0.0005  # the next time has already passed
+        depths.append(depth())
+        assert schedule.arm(trigger)  # the re-plan: armed, not run
+
+    schedule.next_time = 0.0
+    assert schedule.arm(trigger) and depths == []
+    executor = schedule._timers
+    for _ in range(5000):  # the executor's spins
+        (callback,) = executor.due()
+        callback()
+    assert len(depths) == 5000 and len(set(depths)) == 1
+    # Due half a millisecond before it was planned: its timer is late only from the re-plan on.
+    assert schedule.trigger_late(clock.now) == 0.0 and schedule.lateness(clock.now + 0.25) == 0.25
 
 
 def test_late_information_is_re_anchored_at_the_own_trigger_by_exact_negation():

@@ -10,7 +10,7 @@ from formation_sim.cli import main
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['robots_square'], '--model holonomic|unicycle is required'),
+        (['robots_square'], '--model holonomic|unicycle|car is required'),
         (['robots_square', '--model', 'unicycle', '--domain-id', '300'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300'),
         (['robots_square', '--model', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
         (['robots_square', '--model', 'holonomic', '--max-speed', '0'], 'argument --max-speed: must be a finite number > 0, got 0.0'),

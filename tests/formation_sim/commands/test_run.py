@@ -20,8 +20,8 @@ BAD_RUN_ARGUMENTS = [
     (['--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
     (['--timeout', 'soon'], "argument --timeout: must be a finite number > 0, got 'soon'"),
     (['--sample-dt', '1e-9'], 'the sample spacing 1e-09 s asks for 1e+10 samples'),
-    (['--speed-scale', '0'], 'argument --speed-scale: must be a finite number > 0, got 0.0'),
-    (['--speed-scale', 'inf'], 'argument --speed-scale: must be a finite number > 0, got inf'),
+    (['--speed-scale', '0'], "argument --speed-scale: must be a finite number > 0 or 'auto', got 0.0"),
+    (['--speed-scale', 'inf'], "argument --speed-scale: must be a finite number > 0 or 'auto', got inf"),
     (['--speed-scale', '1e-9'], 'gains.speed_scale: must lie in [1e-06, 1e+06]'),
     (['--threshold-floor', '-0.1'], 'argument --threshold-floor: must be a finite number >= 0, got -0.1'),
 ]
@@ -270,7 +270,7 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle (what the robots are)'),
+        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle|car (what the robots are)'),
         (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
         (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
         (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
@@ -326,3 +326,41 @@ def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the
     # the exact backend has no robots, hence no limits to check
     assert main(['run', 'robots_lab', *TURTLEBOT3_LIMITS, '--quiet', '--out', str(tmp_path / 'c')]) == 2
     assert started[-1] == 'robots_lab'
+
+
+def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tmp_path, capsys, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    seen = {}
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            seen.update(kappa=self.scenario.gains.speed_scale, extra=self.summary_extra)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto', '--quiet']
+    assert main([*arguments, '--out', str(tmp_path / 'a')]) == 2  # the test's stop, after the check passed
+    err = capsys.readouterr().err
+    assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
+    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.2
+    assert seen['extra']['speed_scale']['source'] == 'observed'
+
+
+def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
+    import formation_sim.runtime.orchestrate as orchestrate
+
+    started = []
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            started.append(self.scenario.gains.speed_scale)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    # κ = 0.15 keeps robots_lab's speed within 0.22 m/s; its ||u||/l (0.1 m) would exceed 0.5 rad/s
+    arguments = ['run', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '0.5', '--speed-scale', '0.15', '--quiet']
+    assert main([*arguments, '--backend', 'holonomic', '--out', str(tmp_path / 'a')]) == 2
+    assert started == [0.15] and 'beyond' not in capsys.readouterr().err
+    assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2
+    assert started == [0.15] and 'beyond --max-angular-speed 0.5 rad/s' in capsys.readouterr().err

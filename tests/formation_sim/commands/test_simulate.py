@@ -196,3 +196,30 @@ def test_a_run_that_fails_leaves_no_folder_and_no_samples(tmp_path, capsys):
     err = capsys.readouterr().err
     assert 'rounding, not the dynamics, decides the events' in err and 'Traceback' not in err
     assert not out.exists()  # the samples streamed so far went with it
+
+
+def test_speed_scale_auto_chooses_kappa_from_the_limits_and_records_it(tmp_path, capsys):
+    import json
+    import math
+
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.largest_command import measured_command
+
+    out = tmp_path / 'lab'
+    assert main(['simulate', 'robots_lab', '--speed-scale', 'auto', '--max-speed', '0.22', '--max-angular-speed', '2.84',
+                 '--horizon', '20', '--out', str(out), '--quiet', '--no-plot']) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    summary = json.loads((out / 'summary.json').read_text())
+    chosen = summary['extra']['speed_scale']
+    assert chosen['source'] == 'observed' and 'speed 0.22 m/s' in chosen['binding'] and chosen['margin'] == 1.25
+    kappa = chosen['value']
+    assert f'--speed-scale auto: κ = {kappa:.4g} (observed' in err
+    # the engine at that κ (scale's implementation) asks for exactly the limit over the margin
+    scaled = measured_command(load_scenario('robots_lab').with_scale(speed_scale=kappa), horizon=20.0)
+    assert math.isclose(scaled.max_speed * 1.25, 0.22, rel_tol=1e-9)
+    # without limits there is nothing to choose from
+    assert main(['simulate', 'robots_lab', '--speed-scale', 'auto', '--out', str(tmp_path / 'none'), '--quiet']) == 2
+    assert '--speed-scale auto: a speed scale from the limits needs at least one of --max-speed' in capsys.readouterr().err
+    assert not (tmp_path / 'none').exists()
+    assert main(['simulate', 'robots_lab', '--speed-scale', 'fast', '--out', str(tmp_path / 'bad'), '--quiet']) == 2
+    assert "argument --speed-scale: must be a finite number > 0 or 'auto', got 'fast'" in capsys.readouterr().err

@@ -85,3 +85,40 @@ def test_ten_thousand_agents():
 def test_bad_parameters(kwargs, fragment):
     with pytest.raises(GenerateError, match=fragment):
         random_scenario(**kwargs)
+
+
+@pytest.mark.parametrize('graph', ['star', 'path', 'cycle', 'complete'])
+@pytest.mark.parametrize('dynamics', ['single', 'double'])
+def test_graph_families_are_valid_teams_of_their_shape(graph, dynamics):
+    n = 9
+    s = random_scenario(n=n, seed=3, dynamics=dynamics, dimension=2, slack=0.3, graph=graph)
+    pairs = {e.pair for e in s.edges}
+    expected = {
+        'star': {(1, j) for j in range(2, n + 1)},
+        'path': {(i, i + 1) for i in range(1, n)},
+        'cycle': {(i, i + 1) for i in range(1, n)} | {(1, n)},
+        'complete': {(i, j) for i in range(1, n + 1) for j in range(i + 1, n + 1)},
+    }[graph]
+    assert pairs == expected
+    report = validate_scenario(s)
+    assert report.ok, [f.format() for f in report.errors]
+    assert np.all(np.linalg.norm([e.d for e in s.edges], axis=1) <= 0.75 * s.delta * (1 + 1e-12))
+    errors, capacities = theory.edge_errors(s, s.positions), theory.edge_capacities(s)
+    assert np.max(errors / capacities) == pytest.approx(0.7, rel=1e-9)
+
+
+def test_gain_fractions_and_their_defaults():
+    default = random_scenario(n=12, seed=4, dynamics='double')
+    assert random_scenario(n=12, seed=4, dynamics='double', graph='geometric', beta1=1.0) == default  # the rule, bit for bit
+    s = random_scenario(n=12, seed=4, dynamics='double', beta1=0.5, k3=0.25, beta_d=0.9)
+    beta0 = theory.beta0(s)
+    assert s.gains.beta1 == pytest.approx(0.5 * beta0) and s.gains.k3 == pytest.approx(0.25 * gains.k3_upper_bound(s.gains.k1, s.gains.k2))
+    assert s.gains.beta_d == pytest.approx(0.9 * gains.beta_d_bound_paper(s.gains))
+    single = random_scenario(n=12, seed=4, beta=0.99)
+    assert single.gains.beta == pytest.approx(0.99 * theory.beta0(single))
+    with pytest.raises(GenerateError, match=r'a cycle needs n >= 3 agents, got n = 2'):
+        random_scenario(n=2, seed=0, graph='cycle')
+    with pytest.raises(GenerateError, match=r"graph must be one of geometric, star, path, cycle, complete, got 'tree'"):
+        random_scenario(n=4, seed=0, graph='tree')
+    with pytest.raises(GenerateError, match=r'beta is a fraction of its bound in \(0, 1\), got 1.0'):
+        random_scenario(n=4, seed=0, beta=1.0)

@@ -300,7 +300,7 @@ def _theorem2_by_hand(scenario, *, b, reading):
     nu_d0 = k1 / 2 * sum(length0[p] ** 2 / (cap[p] - length0[p]) for p in d) + 0.5 * sum(v @ v for v in q.values())
     k_nu = nu_d0 + n * alpha_d**2 / (8 * b * beta_d)  # k^d_ν
     K = k_nu / k1
-    k_edge = {p: -K + math.sqrt(K * K + 2 * K * cap[p]) for p in d}  # (kijd)
+    k_edge = {p: 2 * K * cap[p] / (K + math.sqrt(K * K + 2 * K * cap[p])) for p in d}  # (kijd), the root without cancellation
     f = {p: (2 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 2 for p in d}  # (fij) at k^d_ij
     gg = {p: 2 * cap[p] ** 2 / (cap[p] - k_edge[p]) ** 3 for p in d}  # (gij)
     h = {p: (3 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 3 for p in d}  # (hij)
@@ -474,3 +474,19 @@ def test_continuous_single_obeys_theorem1_rate(single):
     sol = solve_ivp(rhs, (0, 3.0), y0.ravel(), method='DOP853', rtol=1e-11, atol=1e-14, t_eval=times)
     v = np.array([0.5 * np.sum((s.reshape(3, 2) - s.reshape(3, 2).mean(0)) ** 2) for s in sol.y.T])
     assert np.all(v <= v[0] * np.exp(-2 * 1.5 * times) * (1 + 1e-9))
+
+
+def test_edge_bounds_stay_inside_the_range_for_large_k_nu():
+    """(kij) for k_ν >> Δ: the root is taken without cancellation (the audit's teams with α = 123,
+    β = 8e-4 had k_ν ≈ 3e8, and -K + sqrt(K² + 2Kc) rounded to l >= c: a false TheoryError)."""
+    from formation_sim.model.generate import random_scenario
+
+    s = random_scenario(n=58, seed=5, graph='path', slack=0.395, alpha=123.0, beta=0.8)
+    c = theory.theorem_constants(s)
+    assert c.k_nu > 1e8
+    capacities = dict(zip([e.pair for e in s.edges], theory.edge_capacities(s)))
+    for pair, k in c.k_edge.items():
+        cap = capacities[pair]
+        assert 0.0 < k < cap
+        assert k * k / (cap - k) == pytest.approx(2.0 * c.k_nu, rel=1e-6)  # ν_ij(k_ij) = 2 k_ν
+    assert all(x > 0 for x in c.xi.values())

@@ -91,6 +91,114 @@ def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
         node._running_tick()
 
 
+def _report(agent: int, failure: str | None):
+    from formation_msgs_py.codec import encode_agent_report
+    from formation_msgs_py.lockstep import AgentReport
+
+    return encode_agent_report(AgentReport(agent=agent, final=True, rejected={}, failure=failure))
+
+
+def _running(coordinator, **parameters):
+    """A coordinator 0.5 s into its run, every robot heard just now."""
+    node = coordinator(**parameters)
+    _start(node, time.time() - 0.5)
+    for agent in node.scenario.agent_ids:
+        node._on_pose(_odometry(agent, 0.5, epoch=node._epoch), agent)
+    return node
+
+
+def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator):
+    from formation_sim.runtime.run_book import RobotLostError
+
+    node = _running(coordinator, pose_silence=0.5)
+    node._running_tick()  # every robot heard: the run goes on
+    node._pose_watch.heard[2] -= 0.6  # robot 2's latest pose came 0.6 s before the others'
+    with pytest.raises(RobotLostError, match=r'^robot 2 lost at t=0\.5\d* \(step 0\): no pose on /agent_2/robot/true_odom for more than 0\.5 s'):
+        node._running_tick()
+
+
+def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_is_named_first(coordinator):
+    from formation_sim.runtime.run_book import AgentFailedError, RobotLostError
+
+    node = _running(coordinator, pose_silence=0.5)
+    with pytest.raises(AgentFailedError, match=r'^agent 1 stopped at t=0\.5\d* \(step 0\): the pose of robot 1 is 0\.51 s old; the run stops$'):
+        node._on_report(_report(1, 'the pose of robot 1 is 0.51 s old'))
+    node = _running(coordinator, pose_silence=0.5)
+    node._pose_watch.heard[2] -= 0.3  # half the silence: robot 2's poses stopped first
+    with pytest.raises(RobotLostError, match=r'^robot 2 lost at t=0\.5'):
+        node._on_report(_report(1, 'the pose of robot 2 is 0.51 s old'))
+    node.book.accept_report(decode_report(_report(3, 'the pose of robot 2 is 0.52 s old')))
+    node.fail(RobotLostError('robot 2 lost', agents=[2]))
+    node.note_what_followed()
+    assert node.failure_info['kind'] == 'robot_lost' and node.failure_info['agents'] == [2]
+    assert node.failure_info['followed'] == {'1': 'the pose of robot 2 is 0.51 s old', '3': 'the pose of robot 2 is 0.52 s old'}
+    assert node.failure_info['message'] == 'robot 2 lost; then agents 1, 3 stopped: the pose of robot 2 is 0.51 s old'
+
+
+def decode_report(msg):
+    from formation_msgs_py.codec import decode_agent_report
+
+    return decode_agent_report(msg)
+
+
+def test_an_agent_that_leaves_on_the_final_step_or_after_it_stops_nothing(coordinator):
+    node = _running(coordinator)
+    node._on_report(_report(1, None))  # its final report at the end: no failure
+    node.end_now()
+    node._on_report(_report(2, 'stopped by a signal'))  # after the final Step: the run has ended
+    assert node.failure_info is None
+
+
+def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_no_failure(coordinator, tmp_path):
+    """The race of a robot run's end: the robots stop publishing at the horizon, the final Step is
+    on its way, an agent's command timer finds its own pose stale and the agent leaves naming it.
+    The run reached its horizon: the agent is noted in extra.after_end, and `formation run`
+    excuses its exit status (the agent's zero command went out first)."""
+    import subprocess
+    from pathlib import Path
+
+    from formation_sim.runtime.results import excused_after_end
+    from formation_sim.runtime.supervise import Child
+
+    node = _running(coordinator, horizon=0.5)
+    node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
+    node._on_report(_report(2, 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'))
+    assert node.failure_info is None
+    extra = node._run_extra(node.reached_time)
+    assert extra['failure'] is None and extra['after_end'] == {'2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'}
+    (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
+
+    def child(name: str, returncode: int) -> Child:
+        process = subprocess.Popen(['true'])
+        process.wait()
+        process.returncode = returncode
+        return Child(name=name, process=process, log=Path('/nonexistent'), expected_exit=True)
+
+    failed, note = excused_after_end([child('agent_2', 1), child('agent_3', 1)], tmp_path / 'summary.json')
+    assert [c.name for c in failed] == ['agent_3']  # no report of its failure after the end: a failure
+    assert note.startswith('agent_2 stopped after the run reached its horizon (not a failure of the run): agent 2: the pose')
+
+
+def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
+    from formation_sim.runtime.coordinator import _stop_and_write
+    from formation_sim.runtime.run_book import DiscoveryError
+
+    node = _running(coordinator)
+    node.end_now()
+    node.end_now()
+    assert node.published['/formation/step'] == 1
+    node = coordinator(out_dir=str(tmp_path), discovery_timeout=0.01)
+    time.sleep(0.02)  # the discovery timeout passes (not a synchronisation: the timeout is the input)
+    with pytest.raises(DiscoveryError) as caught:
+        node._tick()
+    _stop_and_write(node, None, caught.value)
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    assert summary['mode'] == 'robots' and summary['extra']['started'] is False
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'discovery' and failure['message'].startswith('discovery did not complete within 0.01 s; still missing: ')
+    assert 'node_created' in summary['extra']['timestamps'] and 'step0' not in summary['extra']['timestamps']
+
+
 def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coordinator, tmp_path):
     from geometry_msgs.msg import Twist, Vector3
     from rclpy.serialization import serialize_message

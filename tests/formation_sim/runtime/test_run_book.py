@@ -158,3 +158,37 @@ def test_saturation_in_the_summary_adds_up_the_agents_reports():
         'by_agent': {'1': {'linear_speed': 3}, '2': {'linear_speed': 2}},
     }
     assert saturation_extra([None]) == {'total': 0, 'by_kind': {}, 'by_agent': {}}
+
+
+def test_a_robot_silent_while_the_others_publish_is_lost_and_a_coordinator_that_slept_loses_none():
+    from formation_sim.runtime.run_book import ALL_SILENT_AFTER, PoseWatch, RobotLostError
+
+    watch = PoseWatch([1, 2, 3, 4], silence=0.5)
+    assert watch.silent(100.0) == []  # nothing heard yet (discovery)
+    for robot in (1, 2, 3, 4):
+        watch.note(robot, now=100.0, t=1.0)
+    for robot in (1, 2, 4):  # robot 3 stops; the others go on
+        watch.note(robot, now=100.6, t=1.6)
+    assert watch.silent(100.6) == [3]
+    assert watch.silent(100.6, fraction=2.0) == []
+    error = watch.error([3], now=100.6, where='at t=1.6', topics='/agent_3/robot/true_odom')
+    assert isinstance(error, RobotLostError) and error.kind == 'robot_lost' and error.agents == [3]
+    assert str(error).startswith('robot 3 lost at t=1.6: no pose on /agent_3/robot/true_odom for more than 0.5 s, while the other robots still published')
+    assert 'robot 3 at t=1.000 (0.60 s before)' in str(error)
+    # A coordinator not scheduled for a while finds every robot equally old: none is lost ...
+    watch = PoseWatch([1, 2], silence=0.5)
+    watch.note(1, now=10.0, t=0.0)
+    watch.note(2, now=10.0, t=0.0)
+    assert watch.silent(10.0 + 0.5 + ALL_SILENT_AFTER) == []
+    # ... unless all stay silent beyond the silence and ALL_SILENT_AFTER: every driver gone.
+    assert watch.silent(10.0 + 0.5 + ALL_SILENT_AFTER + 0.01) == [1, 2]
+
+
+def test_failures_are_the_agents_whose_final_report_names_an_error():
+    from formation_msgs_py.lockstep import AgentReport
+
+    book = RunBook(load_scenario('robots_square'), realtime=True, serves_sensing=False)
+    book.accept_report(AgentReport(agent=1, final=True, rejected={}, failure='the pose of robot 2 is 0.6 s old'))
+    book.accept_report(AgentReport(agent=2, final=False, rejected={}, failure='not final yet'))
+    book.accept_report(AgentReport(agent=3, final=True, rejected={}))
+    assert book.failures() == {1: 'the pose of robot 2 is 0.6 s old'}

@@ -112,3 +112,21 @@ def test_the_theorems_checks_hold_on_a_scaled_run_in_real_time(reference_runs, n
     summary = build_summary(scaled)
     assert all(entry['holds'] in (True, None) for entry in summary['xi_check'].values())
     assert summary['theorem_constants']['speed_scale'] == kappa
+
+
+def test_a_robots_velocity_reference_at_kappa_follows_the_scaled_world():
+    """ETA-2 on a velocity-commanded robot: the reference q_i(t) with damping κk3 (what the agent
+    node gives its RobotCommander), started at κ q(0) and fed the agent's u^d, is the exact world's."""
+    from formation_agent.core.speed_scale import damping
+    from formation_agent.core.velocity_reference import VelocityReference
+
+    kappa = 2.5
+    scenario = load_scenario('paper_double').with_scale(speed_scale=kappa)
+    events = []  # (t, velocities, controls): the hook runs before the agents due at t trigger
+    simulate(scenario, horizon=0.4, sample_dt=0.0, on_event=lambda t, world, due: events.append((t, world.velocities, world.controls)))
+    k = scenario.index(1)
+    reference = VelocityReference(k3=damping(scenario.gains.k3, kappa), velocity=kappa * scenario.velocities[k], time=0.0)
+    assert len(events) > 20
+    for (before, _, _), (t, velocities, controls) in zip(events, events[1:]):
+        reference.update(before, controls[k])  # the command in force on (before, t]
+        np.testing.assert_allclose(reference.velocity(t), velocities[k], rtol=1e-9, atol=1e-12)

@@ -1,5 +1,6 @@
-"""Example parameter files for robots (README, "Running on robots"): `turtlebot3.params.yaml`
-(differential drive) and `crazyflie.params.yaml` (holonomic, ETA-2).
+"""Example parameter files for robots (README, "Running on robots"), one per robot kind
+(`RobotKind.params_file`, `formation_agent.core.kinds`): `turtlebot3.params.yaml` (unicycle,
+differential drive), `crazyflie.params.yaml` (holonomic, ETA-2) and `car.params.yaml` (car).
 
 They ship inside the package, so every install has them beside this file: a pip install, regular
 or editable (`make venv`), and colcon.  `python3 -m formation_agent.config` prints the folder:

@@ -3,7 +3,7 @@
 - `PlantOutput` ('none'): the agent's command as is to the simulator's plant — u_i on `cmd_vel`
   (geometry_msgs/Twist, eq. uxsingle) or u^d_i on `cmd_accel` (geometry_msgs/Accel); the plant
   closes -k3 q_i(t) of (uxdouble) itself.  Published at triggers only.
-- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle'): a
+- `RobotOutput` (a robot kind of `formation_agent.core.kinds`: 'holonomic', 'unicycle', 'car'): a
   robot's velocity command from `formation_agent.core.commander.RobotCommander` by its kind's
   adapter, of its kind's message type (`command_message`) — a world-frame TwistStamped
   (holonomic) or a body-frame Twist (v, ω) (differential drive, from the robot's heading) —
@@ -26,7 +26,8 @@ from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
-from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.core.pose_sensing import PoseError
+from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
     encode_body_velocity,
@@ -79,18 +80,29 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`."""
+    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`.
 
-    def __init__(self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None]) -> None:
+    `poses.fresh(robot, t=, now=)` gives its own robot's latest pose or raises PoseError
+    (`formation_agent.ros.sensing.PoseSensing`: taken from its reader at each command).
+    """
+
+    def __init__(
+        self, node, config, poses, *, on_failure: Callable[[Exception], None],
+        guard: Callable[[float, float], None] | None = None,
+    ) -> None:  # fmt: skip
+        """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze
+        (`formation_agent.ros.staleness`); `on_failure(error)` once the robot is stopped."""
         self._node = node
         self._config = config
         self._poses = poses
         self._on_failure = on_failure
+        self._guard = guard
         self.commander = RobotCommander(
             drive=config.robot,
             dimension=config.dimension,
             limits=config.limits,
             distance=config.control_point_distance,
+            wheelbase=config.wheelbase,
             k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
         )
         self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)
@@ -127,13 +139,16 @@ class RobotOutput:
         if self._stopped:
             return
         try:
-            self._send()
-        except PoseError as error:  # its own pose went stale: stop now, then leave
+            wall = time.time()
+            if self._guard is not None:
+                self._guard(wall, wall - self._epoch)
+            self._send(wall)
+        except (PoseError, StaleStateError) as error:  # its own pose, or all it knows, went stale: stop now, then leave
             self.stop()
             self._on_failure(error)
 
-    def _send(self) -> None:
-        wall = time.time()
+    def _send(self, wall: float | None = None) -> None:
+        wall = time.time() if wall is None else wall
         t = self._last_t = max(wall - self._epoch, self._last_t)
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
         if self._world_frame:

@@ -32,7 +32,7 @@ from formation_msgs_py.types import MAX_AGENT_ID
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
 ROBOTS = KindNames(before=('none',))  # 'none' and every registered robot kind, read at each use
-LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration')
+LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle')
 
 
 def _spec(name, kind, description, **options) -> ParameterSpec:
@@ -74,6 +74,10 @@ AGENT_PARAMETERS = (
           default=math.inf, low=0.0, low_open=True),
     _spec('max_angular_speed', DOUBLE, 'robot: unicycle — turn rate limit [rad/s] (inf: none)',
           default=math.inf, low=0.0, low_open=True),
+    _spec('wheelbase', DOUBLE, 'robot: car — wheelbase L from the rear axle to the steered front axle [m]',
+          default=0.0, low=0.0),
+    _spec('max_steering_angle', DOUBLE, 'robot: car — steering limit φ_max [rad], in (0, π/2): |ω| <= |v| tan φ_max / L '
+          '(inf: none, for the other kinds)', default=math.inf, low=0.0, low_open=True),
     _spec('max_linear_acceleration', DOUBLE, 'robot: ETA-2 — acceleration limit of the velocity reference '
           '[m/s²] (inf: none)', default=math.inf, low=0.0, low_open=True),
     _spec('command_rate', DOUBLE, 'robot: rate at which the velocity command is recomputed and republished [Hz]',
@@ -121,6 +125,7 @@ class AgentConfig:
     robot: str
     command_topic: str
     control_point_distance: float
+    wheelbase: float
     limits: Limits
     command_rate: float
     extra_subscribers: int
@@ -154,7 +159,7 @@ class AgentConfig:
 
     @property
     def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance)
+        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
 
 
 def read_config(node) -> AgentConfig:
@@ -184,12 +189,13 @@ def read_config(node) -> AgentConfig:
             linear_speed=values['max_linear_speed'],
             angular_speed=values['max_angular_speed'],
             linear_acceleration=values['max_linear_acceleration'],
+            steering_angle=values['max_steering_angle'],
         ),
         **{
             name: values[name]
             for name in (
                 'sensing', 'pose_type', 'pose_topic', 'pose_timeout', 'world_frame', 'robot', 'command_topic',
-                'control_point_distance', 'command_rate', 'extra_subscribers',
+                'control_point_distance', 'wheelbase', 'command_rate', 'extra_subscribers',
                 'inject_loss', 'inject_delay_ms', 'inject_jitter_ms', 'inject_seed',
             )
         },
@@ -239,7 +245,7 @@ def _rules(node, values: dict) -> list[str]:
             f"robot: {robot} needs sensing: poses (the simulator's sensing service reports its own simulated "
             'world, which does not take robot commands)'
         )
-    if robot not in (None, 'none') and have('control_point_distance'):
+    if robot not in (None, 'none') and have('control_point_distance', 'wheelbase'):
         problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
     return problems
 
@@ -247,13 +253,14 @@ def _rules(node, values: dict) -> list[str]:
 def _kind_problems(robot: str, values: dict) -> list[str]:
     """What the robot's kind says of the parameters known (formation_agent.core.kinds)."""
     kind = robot_kind(robot)
-    geometry = Geometry(control_point_distance=values['control_point_distance'])
+    geometry = Geometry(control_point_distance=values['control_point_distance'], wheelbase=values['wheelbase'])
     problems = kind.placement_problems(dimension=values.get('dimension'), geometry=geometry)
     if all(name in values for name in LIMIT_PARAMETERS):
         limits = Limits(
             linear_speed=values['max_linear_speed'],
             angular_speed=values['max_angular_speed'],
             linear_acceleration=values['max_linear_acceleration'],
+            steering_angle=values['max_steering_angle'],
         )
         problems += kind.drive_problems(geometry=geometry, limits=limits)
     return problems

@@ -37,7 +37,14 @@ from formation_agent.ros.faults import FaultInjectionError
 from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError, PredictionError
 from formation_agent.ros.parameters import ParameterError, read_parameters
 from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
+from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.topics import agent_namespace
+
+
+SIGNAL_DELIVERY_TIMEOUT = 1.0
+"""Seconds the nodes of a process stopped by SIGINT/SIGTERM wait, at most, for their last messages
+(the zero command first) to be acknowledged: a stopped agent exits within 2 s, acknowledged or
+not (DELIVERY_TIMEOUT for every other way out)."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -140,7 +147,7 @@ def main(args: Sequence[str] | None = None) -> int:
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = EXIT_PEER_LOST, str(error)
-        except (PoseError, PredictionError) as error:  # the poses or double precision failed it: said in full
+        except (PoseError, StaleStateError, PredictionError) as error:  # poses, a freeze or double precision: said in full
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = 1, str(error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
@@ -151,7 +158,8 @@ def main(args: Sequence[str] | None = None) -> int:
                 traceback.print_exc(file=sys.stderr)
                 status, failure = 1, str(error)
         finally:
-            deadline = time.monotonic() + DELIVERY_TIMEOUT  # one for every node of the process
+            patience = SIGNAL_DELIVERY_TIMEOUT if status == 130 else DELIVERY_TIMEOUT
+            deadline = time.monotonic() + patience  # one for every node of the process
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)

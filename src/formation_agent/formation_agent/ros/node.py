@@ -14,13 +14,16 @@ An agent node touches only what a real robot would have:
 This module holds the protocol.  Two clocks: in lock-step sim time (default) the simulator's Step
 messages say when it is the agent's turn, and the run reproduces the in-process engine bit for
 bit.  In wall-clock mode (Step 0 flagged realtime; robots always) the agent keeps its own timer on
-wall time since the Step's epoch, as a robot would, and triggers at once when its triggering time
-has already passed.  All algorithmic decisions are taken by the core object
-(`formation_agent.core.eta`).
+wall time since the Step's epoch, as a robot would, and triggers at once (from the executor, not
+by recursion) when its triggering time has already passed.  When it triggers:
+`formation_agent.ros.stepping`; its counts, Status and report: `formation_agent.ros.reporting`;
+discovery: `formation_agent.ros.discovery`.  All algorithmic decisions are taken by the core
+object (`formation_agent.core.eta`).
 
 Every way out sends the zero command first (`leave`): the final Step, a lost simulator or
-coordinator (DDS liveliness, exit status 3), SIGINT/SIGTERM (130), a stale pose or any other
-error (1).  Bad messages are refused and counted (`formation_agent.ros.inbox`); faults can be
+coordinator (DDS liveliness, exit status 3), SIGINT/SIGTERM (130), a stale pose, a freeze
+(`formation_agent.ros.staleness`) or any other error (1); an error raised outside the executor's
+reach stops the robot and the triggers at once (`_fail`).  Bad messages are refused and counted (`formation_agent.ros.inbox`); faults can be
 injected for tests (`formation_agent.ros.faults`); parameters: `formation_agent.ros.config`.
 """
 
@@ -37,6 +40,7 @@ from std_msgs.msg import Float64MultiArray
 
 from formation_agent.core.crossing import PRECISION_HINT, CrossingError
 from formation_agent.core.eta import make_agent
+from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
 from formation_agent.ros.discovery import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD, Discovery, SimulatorWatch  # noqa: F401 - re-exported for the node's users
@@ -45,6 +49,7 @@ from formation_agent.ros.inbox import Rejections, read_info
 from formation_agent.ros.outbox import Outbox
 from formation_agent.ros.reporting import AgentCounts
 from formation_agent.ros.sensing import PoseSensing, ServiceSensing
+from formation_agent.ros.staleness import Staleness
 from formation_agent.ros.stepping import AgentNodeError, TriggerSchedule, rebased, refuse_lock_step
 from formation_msgs_py.codec import MessageError, decode_step, encode_trigger_info
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Step
@@ -60,6 +65,10 @@ DELIVERY_TIMEOUT = 4.0
 last messages too: zero command, report): Fast DDS repairs a message lost on the way at the
 writer's next heartbeat (every 3 s by default, 0.1 s in a run: `formation_sim.runtime`'s
 fastdds_profile.xml), and a recorder must get it before the writer is gone."""
+
+WRITER_LOOK_PERIOD = 0.2
+"""Seconds between an agent's looks at whether its pose topics still have writers (sensing from
+poses): when a pose goes stale, its message says since when a topic has none (`Staleness`)."""
 
 
 class PeerLostError(RuntimeError):
@@ -81,6 +90,29 @@ class _NodeTimers:
 
     def cancel(self, handle) -> None:
         self._node.destroy_timer(handle)
+
+
+def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
+    """Where the agent's commands go (parameter `robot`): a simulator's plant, or a robot whose
+    commands the agent's `Staleness` guards."""
+    config = node.config
+    if config.robot == 'none':
+        return PlantOutput(node, config)
+    if not config.double and math.isfinite(config.limits.linear_acceleration):
+        node.get_logger().warning(
+            'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
+        )
+    return RobotOutput(node, config, node.sensing, on_failure=node._fail, guard=node.staleness.check_command)
+
+
+def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> AgentReport:
+    """The agent's AgentReport: its counts, what it refused, injected and clipped."""
+    output = node.output
+    plant = (output.publisher.topic_name, output.sent) if isinstance(output, PlantOutput) else None
+    return node.counts.report(
+        final=final, failure=failure, rejected=node.reject.counts, dropped=node.faults.dropped, delayed=node.faults.delayed,
+        robot_commands=output.robot_commands, saturation=output.saturation, plant=plant,
+    )  # fmt: skip
 
 
 class FormationAgentNode(Node):
@@ -125,14 +157,14 @@ class FormationAgentNode(Node):
         )  # fmt: skip
         self.faults = InjectedFaults(self, injection, hand_on=self._on_info, changed=self.counts.changed)
         self.sensing = PoseSensing(self, config, reject=self.reject) if config.sensing == 'poses' else ServiceSensing(self)
-        if config.robot == 'none':
-            self.output = PlantOutput(self, config)
-        else:
-            self.output = RobotOutput(self, config, self.sensing.book, on_failure=self._fail)
-            if not config.double and math.isfinite(config.limits.linear_acceleration):
-                self.get_logger().warning(
-                    'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
-                )
+        self.staleness = None
+        if config.sensing == 'poses':
+            self.staleness = Staleness(
+                book=self.sensing.book, period=1.0 / config.command_rate, count_writers=self.count_publishers,
+                schedule=self.schedule,
+            )  # fmt: skip
+            self._writer_looks = self.create_timer(WRITER_LOOK_PERIOD, lambda: self.staleness.look(time.time()))
+        self.output = _make_output(self)
         self._create_endpoints()
         self.step: Step | None = None
         self.finished = False
@@ -166,14 +198,23 @@ class FormationAgentNode(Node):
             event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
         )
 
+    def destroy_node(self) -> None:
+        self.sensing.close()  # pose sensing's readers live on a node of their own
+        super().destroy_node()
+
     @property
     def rejected(self) -> dict[str, int]:
         return self.reject.counts
 
     def _fail(self, error: Exception) -> None:
-        """Keep the first error raised outside the executor's reach for `check` to raise."""
+        """The stop decision for an error raised outside the executor's reach: the zero command at
+        once and no trigger after it (a timer or callback already queued finds the agent stopped);
+        the first error is kept for `check` to raise, a stale pose explained (`Staleness`)."""
+        self.schedule.stop()
+        self.output.stop()
         if self.failure is None:
-            self.failure = error
+            stale = self.staleness is not None and isinstance(error, PoseError)
+            self.failure = self.staleness.explain(error, time.time()) if stale else error
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""
@@ -224,6 +265,9 @@ class FormationAgentNode(Node):
         if self.finished or not self.schedule.begin():
             self.schedule.cancel()
             return
+        if self.staleness is not None and (stale := self.staleness.trigger_refusal(time.time())) is not None:
+            self._fail(stale)  # after a freeze: the zero command, not one from state that old
+            return
         self.sensing.request(self._on_sensed)
 
     def _on_sensed(self, sensed) -> None:
@@ -235,7 +279,7 @@ class FormationAgentNode(Node):
             self._fail(error)
 
     def _trigger(self, sensed_getter) -> None:
-        if self.finished:  # the final step came while sensing (the horizon, or a failed run)
+        if self.finished or self.schedule.stopped:  # the final step or a stop came while sensing
             self.schedule.abandon()
             return
         sensed = sensed_getter()
@@ -316,18 +360,11 @@ class FormationAgentNode(Node):
             self.publish_status(step_index=step.index, ready=True)
 
     def _replan(self) -> None:
-        """Wall clock: report the next triggering time and set a timer for it (or trigger now)."""
+        """Wall clock: report the next triggering time and set a timer for it."""
         self.publish_status(step_index=self.step.index, ready=True)
         self.schedule.cancel()
-        if not self.core.ready or self.finished:
-            return
-        delay = self.schedule.delay()
-        if delay is None:
-            return
-        if delay <= 0.0:
-            self._sense_now()  # already due: trigger at once
-        else:
-            self.schedule.arm(self._sense_now, delay)
+        if self.core.ready and not self.finished:
+            self.schedule.arm(self._sense_now)  # past due: at once, from the executor
 
     def publish_status(self, *, step_index: int, ready: bool) -> None:
         """The agent's Status at `step_index` (DISCOVERY_STEP: its readiness during discovery)."""
@@ -347,12 +384,7 @@ class FormationAgentNode(Node):
     # -- reports and leaving ----------------------------------------------------------------------
 
     def report(self, *, final: bool = False, failure: str | None = None) -> AgentReport:
-        plant = (self.output.publisher.topic_name, self.output.sent) if isinstance(self.output, PlantOutput) else None
-        return self.counts.report(
-            final=final, failure=failure, rejected=self.reject.counts, dropped=self.faults.dropped,
-            delayed=self.faults.delayed, robot_commands=self.output.robot_commands, saturation=self.output.saturation,
-            plant=plant,
-        )  # fmt: skip
+        return _report(self, final=final, failure=failure)
 
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
         self.outbox.publish_report(self.report(final=final, failure=failure))

@@ -5,6 +5,7 @@ before the node goes away.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from rclpy.duration import Duration
@@ -42,7 +43,9 @@ class Outbox:
     def publish_report(self, report: AgentReport) -> None:
         self.counts.report_due = False
         self.counts.final_sent = report.final
-        self._count(self.report)  # a report counts itself
+        self._count(self.report)  # a report counts itself (it was built before this count)
+        if (counted := self.counts.published.get(REPORT_TOPIC)) is not None:
+            report = dataclasses.replace(report, published={**report.published, REPORT_TOPIC: counted})
         self.report.publish(encode_agent_report(report))
 
     def wait_for_delivery(self, deadline: float, *others) -> None:

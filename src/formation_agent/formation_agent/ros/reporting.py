@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from formation_agent.ros.stepping import AgentNodeError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 
 
@@ -51,7 +52,9 @@ class AgentCounts:
 
     def status(self, *, step_index: int, ready: bool, next_time: float, planned: float) -> Status:
         """The Status at `step_index`: `next_time` only once it is defined (ready, or 0 during
-        discovery); +inf otherwise."""
+        discovery), +inf otherwise; `planned` (last_planned) always finite."""
+        if not math.isfinite(planned):  # a trigger is planned only for a finite time
+            raise AgentNodeError(f'agent {self.agent_id}: last_planned must be finite (docs/MESSAGES.md, "Status"), got {planned!r}')
         self.status_due = False
         defined = ready or step_index == DISCOVERY_STEP
         return Status(

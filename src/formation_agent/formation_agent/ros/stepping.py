@@ -49,6 +49,11 @@ class TriggerSchedule:
         self.heard: dict[int, float] = {}  # sender -> stamp of its last accepted information
         self.due_neighbours: tuple[int, ...] = ()  # lock-step: neighbours due at the current step
         self._timer = None
+        # Wall clock: the Unix time the armed trigger is due at, or was armed at if that is later
+        # (a time already past when planned: its timer is late from then on, not before).
+        self._due_at: float | None = None
+        self.fired_late: float | None = None  # how late the last armed trigger fired (until taken)
+        self._last_late = 0.0  # how late the last armed trigger fired
         self._armed = 0  # the arming the live timer belongs to
 
     @property
@@ -128,20 +133,42 @@ class TriggerSchedule:
             return None
         return self.epoch + self.next_time - self._clock()
 
-    def arm(self, fire: Callable[[], None], delay: float) -> None:
-        """`fire` in `delay` seconds (once), replacing any trigger armed before."""
+    def arm(self, fire: Callable[[], None]) -> bool:
+        """Wall clock: `fire` at t^i_{k+1} (once), replacing any trigger armed before; False if
+        none is planned.  A time already past is armed too, with no delay: the trigger then runs
+        from the executor like any other, after what it has queued (news, the command timer, a
+        stop signal), never by recursion from the trigger before it — a computer that cannot keep
+        up with the triggering times triggers as often as it can, not ever deeper."""
         self.cancel()
+        delay = self.delay()
+        if delay is None:
+            return False
         self._armed += 1
         armed = self._armed
-        self._timer = self._timers.arm(delay, lambda: self._fire(armed, fire))
+        self._due_at = max(self.epoch + self.next_time, self._clock())
+        self._timer = self._timers.arm(max(delay, 0.0), lambda: self._fire(armed, fire))
+        return True
+
+    def trigger_late(self, now: float) -> float | None:
+        """Wall clock: how late the armed trigger's timer is at `now` (Unix time; < 0: not due
+        yet); None if none is armed."""
+        return None if self._due_at is None else now - self._due_at
+
+    def lateness(self, now: float) -> float:
+        """How late this agent's trigger timer runs at `now`: the armed one, else the one that
+        fired last (0 if neither is late)."""
+        late = self.trigger_late(now)
+        return max(0.0, self._last_late if late is None else late)
 
     def _fire(self, armed: int, fire: Callable[[], None]) -> None:
         if armed != self._armed or self._timer is None:
             return  # cancelled after its callback was queued
+        self.fired_late = self._last_late = self._clock() - self._due_at
         self.cancel()
         fire()
 
     def cancel(self) -> None:
+        self._due_at = None
         if self._timer is not None:
             handle, self._timer = self._timer, None
             self._timers.cancel(handle)

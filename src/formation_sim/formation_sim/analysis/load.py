@@ -64,7 +64,7 @@ from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
-from formation_sim.sim.robots import PoseTrack, RobotError, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import PoseTrack, odometry_sample, poses_for_end, pose_sample, sample_times, trajectory_samples
 from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra, saturation_extra
 
 
@@ -459,6 +459,20 @@ def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
     return Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or "every agent's last Status counts what the bag holds")
 
 
+def _robot_poses(bag: Path, got: _Collected, scenario: Scenario, *, trajectory: str, model: str, distance: float, epoch: float) -> dict:
+    """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order."""
+    poses = {}
+    for agent in scenario.agent_ids:
+        poses[agent] = []
+        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
+            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
+            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
+    missing = [agent for agent, samples in poses.items() if not samples]
+    if missing:
+        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    return poses
+
+
 def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
     """A robot run rebuilt from its bag: trajectories from the pose topics (module docstring)."""
     robots = got.robots
@@ -474,29 +488,26 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     epoch = start[0].epoch
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
     checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
-    tracks, missing = {}, []
-    for agent in scenario.agent_ids:
-        samples = []
-        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
-            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
-            samples.append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
-        try:
-            tracks[agent] = PoseTrack.from_samples(samples)
-        except RobotError:
-            missing.append(agent)
-    if missing:
-        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
-    trigger_times, triggers_check = _trigger_times(got, scenario)
-    all_counts = {agent: len(times) for agent, times in trigger_times.items()}
+    poses = _robot_poses(bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch)
     if final:
         end = final[-1].time
     else:
-        end = min(track.times[-1] for track in tracks.values())
+        end = min(max(sample.time for sample in samples) for samples in poses.values())
         checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}'))
+    # As the coordinator: no pose stamped long past the end, nor one of a robot silent at the end
+    # (frozen, resumed later: held at its last pose before the end in both).
+    silence = robots.get('pose_silence')
+    tracks = {agent: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for agent, samples in poses.items()}
+    trigger_times, triggers_check = _trigger_times(got, scenario)
+    all_counts = {agent: len(times) for agent, times in trigger_times.items()}
     # The coordinator counts the triggers up to where the run ended (and samples them).
     trigger_times = {agent: [t for t in times if t <= end] for agent, times in trigger_times.items()}
     checks.append(triggers_check)
     uncovered = [agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)]
+    # A run that stopped early because a robot's poses stopped has none of it at its end: named,
+    # not binding (summary.json holds its last pose there too); poses missing at t = 0 always are.
+    stopped_early = bool(final) and got.scenario_text is not None and end != scenario.horizon
+    silent_at_end = [agent for agent in uncovered if tracks[agent].times[0] <= 0.0]
     checks.append(
         Check(
             name='poses cover the run',
@@ -504,6 +515,7 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
             detail=f'every robot has {trajectory} poses from before t = 0 to after t = {end!r}'
             if not uncovered
             else f'robots {uncovered} lack poses at the start or the end (their first or last pose is held there)',
+            binding=not (stopped_early and uncovered == silent_at_end),
         )
     )
     checks.append(_last_commands_check(got, scenario))
@@ -512,8 +524,13 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     times = sample_times(end, period, [t for ts in trigger_times.values() for t in ts])
     positions, velocities = trajectory_samples(tracks, scenario.agent_ids, times)
     extra: dict[str, Any] = {'clock': 'realtime', 'reached_time': float(times[-1])}
-    if final:
-        extra['failure'] = None  # as for the exact backend: the final Step marks the end of the run
+    # As for the exact backend: the run publishes its own horizon, and a final Step before it
+    # marks a run that stopped early (why it stopped is summary.json's).
+    asked = scenario.horizon if got.scenario_text is not None else None
+    finished = bool(final) and (asked is None or end == asked)
+    stop = None if finished else {'time': end, 'step': final[-1].index if final else None, 'horizon': asked, 'final_step': bool(final)}
+    if finished:
+        extra['failure'] = None
     if got.statuses:
         extra.update(_lateness(got.statuses, trigger_times))
     extra.update(robots=robots, saturation=saturation_extra(got.reports.get(agent) for agent in scenario.agent_ids))
@@ -528,7 +545,10 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
         wall_time=math.nan,
         extra=extra,
     )
-    return BagRun(bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks)
+    return BagRun(
+        bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
+        horizon=asked, stop=stop,
+    )  # fmt: skip
 
 
 def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:

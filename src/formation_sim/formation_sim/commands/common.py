@@ -68,6 +68,16 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
         raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
 
 
+def POSITIVE_OR_AUTO(text: str) -> float | str:  # noqa: N802 - an argparse type, named as the others
+    """A finite number > 0, or 'auto'."""
+    if text == 'auto':
+        return text
+    try:
+        return POSITIVE(text)
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)) from None
+
+
 def bounded_int(low: int, high: int) -> Callable[[str], float]:
     return _number(f'an integer in [{low}, {high}]', lambda v: low <= v <= high, integer=True)
 
@@ -106,9 +116,11 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
 def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
     """--speed-scale K and --threshold-floor C, overriding the scenario's gains (docs/SPEED_SCALE.md)."""
     parser.add_argument(
-        '--speed-scale', type=POSITIVE, default=None, metavar='K',
+        '--speed-scale', type=POSITIVE_OR_AUTO, default=None, metavar='K',
         help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
-        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1)",
+        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1). "
+        "auto: the largest κ that keeps the exact run's commands 1.25 times below the robots' limits "
+        "(--max-speed, --max-angular-speed, --max-acceleration; README, \"Running on robots\")",
     )  # fmt: skip
     parser.add_argument(
         '--threshold-floor', type=NON_NEGATIVE, default=None, metavar='C',
@@ -118,8 +130,10 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def scale_options(args: argparse.Namespace) -> dict:
-    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`."""
-    return {'speed_scale': getattr(args, 'speed_scale', None), 'threshold_floor': getattr(args, 'threshold_floor', None)}
+    """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`;
+    `--speed-scale auto` is left to `formation_sim.commands.limits.resolve_speed_scale` (None here)."""
+    speed_scale = getattr(args, 'speed_scale', None)
+    return {'speed_scale': None if speed_scale == 'auto' else speed_scale, 'threshold_floor': getattr(args, 'threshold_floor', None)}
 
 
 def check_report_argument(command: str, out: Path | None) -> bool:
@@ -248,7 +262,7 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, RobotOptions
+    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, ROBOTS_PER_PROCESS, RobotOptions
 
     defaults = RobotOptions()
     group = parser.add_argument_group(f"robots (backends {', '.join(ROBOT_MODELS)}, external)")
@@ -258,6 +272,9 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
         help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
     add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
     add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
+    add('--wheelbase', type=POSITIVE, default=None, metavar='L', help='car: wheelbase from the rear to the front axle [m]')
+    add('--max-steering-angle', type=POSITIVE, default=math.inf, metavar='PHI',
+        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)')
     add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
     add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
         help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
@@ -273,7 +290,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
     add('--initial-heading', type=FINITE, default=None, metavar='RAD',
         help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
-    add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+    add('--robots-per-process', type=POSITIVE_INT, default=ROBOTS_PER_PROCESS, metavar='K',
+        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})')
 
 
 def robot_options(args: argparse.Namespace, model: str):
@@ -285,6 +303,8 @@ def robot_options(args: argparse.Namespace, model: str):
         control_point_distance=args.control_point_distance,
         max_linear_speed=args.max_speed,
         max_angular_speed=args.max_angular_speed,
+        wheelbase=args.wheelbase or 0.0,
+        max_steering_angle=args.max_steering_angle,
         max_linear_acceleration=args.max_acceleration,
         command_rate=args.command_rate,
         pose_type=args.pose_type,

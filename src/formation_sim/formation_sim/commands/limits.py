@@ -11,28 +11,83 @@ import argparse
 import math
 import sys
 
-from formation_sim.model.scenario import Scenario
+from formation_sim.commands.common import POSITIVE, refuse
+from formation_sim.model.scenario import Scenario, ScenarioError
 from formation_sim.model.speed_choice import OBSERVED_MARGIN, LimitsError, RobotLimits, SpeedScaleChoice
 
 
 def robot_limits(args: argparse.Namespace) -> RobotLimits:
-    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none)."""
+    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none).  A run's
+    holonomic robots (`--backend holonomic`, `--robot holonomic`) do not turn to move: no turn rate."""
 
     def given(name: str) -> float:
         value = getattr(args, name, None)
         return math.inf if value is None else value
 
+    holonomic = 'holonomic' in (getattr(args, 'robot', None), getattr(args, 'backend', None)) and getattr(args, 'robot', None) != 'unicycle'
     return RobotLimits(
         max_speed=given('max_speed'),
-        max_angular_speed=given('max_angular_speed'),
+        max_angular_speed=math.inf if holonomic else given('max_angular_speed'),
         control_point_distance=getattr(args, 'control_point_distance', None) or 0.1,
         max_acceleration=given('max_acceleration'),
     )
 
 
+AUTO = 'auto'
+
+
 def speed_scale_of(scenario: Scenario) -> float:
     """The scenario's speed scale κ (1: the paper's time)."""
-    return float(getattr(scenario.gains, 'speed_scale', 1.0))
+    return float(scenario.gains.speed_scale)
+
+
+def add_limit_arguments(parser: argparse.ArgumentParser) -> None:
+    """The robots' limits, for a command that has no robots but may choose κ from them (`simulate`)."""
+    group = parser.add_argument_group('robot limits (for --speed-scale auto)')
+    group.add_argument('--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]")
+    group.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
+    group.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L',
+                       help='unicycles: the control point l ahead of the axle [m] (default 0.1)')  # fmt: skip
+    group.add_argument('--max-acceleration', type=POSITIVE, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
+
+
+def resolve_speed_scale(scenario: Scenario, args: argparse.Namespace, command: str) -> tuple[Scenario, dict | None] | None:
+    """`--speed-scale auto`: (the scenario at the observed κ of `choose_speed_scale` for the parsed
+    limits, what to record in summary.json's extra.speed_scale), after saying so on stderr; any
+    other value: (the scenario, None).  None after printing why auto cannot choose (nothing started)."""
+    from formation_sim.sim.largest_command import choose_speed_scale
+
+    if getattr(args, 'speed_scale', None) != AUTO:
+        return scenario, None
+    try:
+        limits = robot_limits(args)
+        horizon = scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
+        choice = choose_speed_scale(scenario.replace(horizon=horizon), limits=limits)
+    except LimitsError as error:
+        refuse(command, f'--speed-scale auto: {error}')
+        return None
+    kappa = choice.value
+    try:
+        scaled = scenario.with_scale(speed_scale=kappa)
+    except ScenarioError as error:  # κ outside the rule speed_scale: the limits cannot be met
+        refuse(command, f'--speed-scale auto: the limits ask for κ = {kappa:.4g}, which cannot be run: {error}')
+        return None
+    observed = choice.observed
+    settle = observed.settle_time
+    print(
+        f'formation {command}: --speed-scale auto: κ = {kappa:.4g} ({choice.source}: the exact run at κ = 1 asks for '
+        f'{observed.speed:.4g} m/s' + ('' if observed.acceleration is None else f', {observed.acceleration:.4g} m/s²')
+        + f', kept {observed.margin:g}× below the {observed.binding}'
+        + (f'; {100 * choice.settling.fraction:g} % of the formation error after {settle:.3g} s' if math.isfinite(settle) else '')
+        + (f', beyond the horizon {horizon:g} s' if math.isfinite(settle) and settle > horizon else '')
+        + ')',
+        file=sys.stderr,
+    )
+    record = {'value': kappa, 'source': choice.source, 'binding': observed.binding, 'margin': observed.margin,
+              'limits': choice.limits.to_dict(), 'guaranteed': None if choice.guaranteed is None else choice.guaranteed.value}  # fmt: skip
+    if record['guaranteed'] is not None and not math.isfinite(record['guaranteed']):
+        record['guaranteed'] = None
+    return scaled, record
 
 
 def exceeded(choice: SpeedScaleChoice, kappa: float) -> list[str]:
@@ -59,7 +114,7 @@ def check_saturation(scenario: Scenario, *, limits: RobotLimits, allow: bool, co
     are none); else the refusal (or, with `allow`, after printing it as a warning, None).
 
     The exact run, not the proofs' bound, decides: the bound of a team set down by hand is many
-    times what any run asks for (robots_lab: 3.8 m/s against 1.16 m/s), and a refusal must be
+    times what any run asks for (robots_lab: 3.9 m/s against 1.16 m/s), and a refusal must be
     about commands the robots would really be sent; the exact run is what they are sent without
     noise, so a run it refuses saturates for certain."""
     from formation_sim.sim.largest_command import choose_speed_scale
@@ -68,7 +123,7 @@ def check_saturation(scenario: Scenario, *, limits: RobotLimits, allow: bool, co
         return None
     kappa = speed_scale_of(scenario)
     try:
-        choice = choose_speed_scale(scenario, limits=limits, horizon=kappa * scenario.horizon)
+        choice = choose_speed_scale(scenario, limits=limits, paper_horizon=kappa * scenario.horizon)
     except LimitsError as error:
         return str(error)
     found = exceeded(choice, kappa)

@@ -47,6 +47,11 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
+    from formation_sim.commands.limits import resolve_speed_scale
+
+    if (resolved := resolve_speed_scale(scenario, args, 'params')) is None:
+        return EXIT_BAD_INPUT
+    scenario = resolved[0]  # the agents' parameter files carry κ
     try:
         plan = FormationRun(scenario, **plan_options(args)).plan  # every argument checked, nothing touched yet
         out = claim_out_dir(args.out, scenario_name=scenario.name, kind='params', force=args.force)

@@ -18,7 +18,7 @@ from formation_sim.commands.common import (
     plan_options,
     refuse,
 )
-from formation_sim.commands.limits import check_saturation, robot_limits
+from formation_sim.commands.limits import check_saturation, resolve_speed_scale, robot_limits
 
 
 def register(subparsers) -> None:
@@ -70,6 +70,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
+    if (resolved := resolve_speed_scale(scenario, args, 'run')) is None:
+        return EXIT_BAD_INPUT
+    scenario, chosen = resolved
     try:
         options = plan_options(args)
     except RunError as error:
@@ -88,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
             timeout=args.timeout,
             localhost_only=not args.network,
             discovery='server' if args.discovery_server else 'simple',
+            summary_extra=None if chosen is None else {'speed_scale': chosen},
         ).run()
     except RunError as error:
         return refuse('run', error)

@@ -18,6 +18,7 @@ from formation_sim.commands.common import (
     scale_options,
     refuse,
 )
+from formation_sim.commands.limits import add_limit_arguments, resolve_speed_scale
 
 
 DEFAULT_SAMPLE_DT = 0.01
@@ -65,6 +66,7 @@ def register(subparsers) -> None:
     )  # fmt: skip
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
+    add_limit_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -98,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
+    if (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
+        return EXIT_BAD_INPUT
+    scenario, auto_scale = resolved
     chosen = sample_policy(args, scenario.n)
     if isinstance(chosen, str):
         return refuse('simulate', chosen)
@@ -144,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
         with contextlib.suppress(OSError):
             out.rmdir()  # the run folder made for this run, empty again
         return EXIT_FAILED
+    if auto_scale is not None:
+        record.extra['speed_scale'] = auto_scale
     try:
         summary_path = write_summary(record, out)
         figure = None if args.no_plot else plot_run(record, out)

@@ -39,7 +39,9 @@ def register(subparsers) -> None:
         'Theorem 2 (double integrators) and print every number involved. With --max-speed (and '
         '--max-angular-speed, --max-acceleration): the largest command the scenario asks of a robot, '
         'a bound from the proofs where it shows the limits are never reached, else the largest in an '
-        'exact in-process run (which the output names). Exit 0 if valid (warnings allowed) and within '
+        'exact in-process run (which the output names), and the speed scales κ that keep the commands within '
+        'them (guaranteed, observed; --speed-scale auto runs the observed) with the time each needs to '
+        'settle. With --pose-noise: the threshold floor c0 that noise asks for. Exit 0 if valid (warnings allowed) and within '
         'the limits, 1 if a hypothesis is broken or a command exceeds a limit, 2 if the scenario '
         'cannot be read.',
     )
@@ -68,6 +70,13 @@ def run(args: argparse.Namespace) -> int:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
     report = validate_scenario(scenario)
+    if report.ok and args.speed_scale == 'auto':
+        from formation_sim.commands.limits import resolve_speed_scale
+
+        if (resolved := resolve_speed_scale(scenario, args, 'validate')) is None:
+            return EXIT_BAD_INPUT
+        scenario = resolved[0]
+        report = validate_scenario(scenario)
     commands = floor = None
     if report.ok and any(value is not None for value in (args.max_speed, args.max_angular_speed, args.max_acceleration)):
         try:

@@ -19,6 +19,11 @@ gives the bound, so `formation validate --max-speed V` can say the limits are ne
 
 A unicycle steered at its control point l ahead of the axle turns at |ω| <= ||u|| / l (the
 diffeomorphism: ω = (-sin θ u_x + cos θ u_y) / l), so the same bound bounds its turn rate.
+
+At a speed scale κ (docs/SPEED_SCALE.md) the run is the paper's in the time s = κt: the proofs
+bound the paper's commands, and the robot's are κ times them (ETA-2: its velocity κ q_i, its
+acceleration κ² (u^d_i − k3 q_i)); `command_bound` reports the robot's.  With a threshold floor
+c0 > 0 the proofs do not apply (ν is no longer bounded by them): TheoryError.
 """
 
 from __future__ import annotations
@@ -67,7 +72,14 @@ class CommandBound:
 
 
 def command_bound(scenario: Scenario) -> CommandBound:
-    """The proofs' bound on every agent's command; raises theory.TheoryError outside the hypotheses."""
+    """The proofs' bound on every agent's command at the scenario's speed scale κ; raises
+    theory.TheoryError outside the hypotheses, or with a threshold floor c0 > 0."""
+    if scenario.gains.threshold_floor > 0.0:
+        raise theory.TheoryError(
+            f'the proofs bound the commands for the threshold α e^(-βt) of (triggersingle)/(triggerdouble); with a floor '
+            f'c0 = {scenario.gains.threshold_floor:g} they bound neither ν nor the commands'
+        )
+    kappa = scenario.gains.speed_scale
     constants = theory.theorem_constants(scenario)
     capacities = theory.edge_capacities(scenario)
     k_edge = np.array([constants.k_edge[edge.pair] for edge in scenario.edges])
@@ -87,17 +99,19 @@ def command_bound(scenario: Scenario) -> CommandBound:
         dotyi = scenario.gains.alpha + per_agent(2.0 * f * root)  # (dotyi)
         return CommandBound(
             source='theory',
-            speed=dict(zip(ids, speed.tolist())),
+            speed=dict(zip(ids, (kappa * speed).tolist())),
             acceleration=None,
-            reference='Theorem 1: ||u_i|| <= Σ_j f_ij(k_ij) min(k_ij, 2 sqrt(k_V)) from (uxsingle), (wij), (lengthys), (lengthysV); (dotyi) for comparison',
-            dotyi=dict(zip(ids, dotyi.tolist())),
+            reference='Theorem 1: ||u_i|| <= Σ_j f_ij(k_ij) min(k_ij, 2 sqrt(k_V)) from (uxsingle), (wij), (lengthys), (lengthysV); (dotyi) for comparison'
+            + ('' if kappa == 1.0 else f'; times κ = {kappa:g}'),
+            dotyi=dict(zip(ids, (kappa * dotyi).tolist())),
         )
     gains = scenario.gains
     q_max = math.sqrt(2.0 * constants.k_nu)  # Theorem 2 (i): ½ Σ ||q_i||² <= ν_d <= k^d_ν
     acceleration = per_agent(f * (gains.k1 * k_edge + 2.0 * gains.k2 * q_max)) + gains.k3 * q_max
     return CommandBound(
         source='theory',
-        speed=dict.fromkeys(ids, q_max),
-        acceleration=dict(zip(ids, acceleration.tolist())),
-        reference='Theorem 2 (i): ||q_i|| <= sqrt(2 k^d_ν); ||u^d_i - k3 q_i|| <= Σ_j f_ij(k^d_ij)(k1 k^d_ij + 2 k2 sqrt(2 k^d_ν)) + k3 sqrt(2 k^d_ν) from (uxdouble), (wij), (kijd)',
+        speed=dict.fromkeys(ids, kappa * q_max),
+        acceleration=dict(zip(ids, (kappa * kappa * acceleration).tolist())),
+        reference='Theorem 2 (i): ||q_i|| <= sqrt(2 k^d_ν); ||u^d_i - k3 q_i|| <= Σ_j f_ij(k^d_ij)(k1 k^d_ij + 2 k2 sqrt(2 k^d_ν)) + k3 sqrt(2 k^d_ν) from (uxdouble), (wij), (kijd)'
+        + ('' if kappa == 1.0 else f'; times κ = {kappa:g} (speed) and κ² (acceleration)'),
     )

@@ -397,6 +397,7 @@ class Scenario:
         object.__setattr__(self, 'edges', edges)
         object.__setattr__(self, '_index', index)
         object.__setattr__(self, '_neighbours', None)  # built on first use
+        object.__setattr__(self, '_edge_indices', None)  # likewise
 
     def _check_finite(self, array: np.ndarray, what: str) -> None:
         bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
@@ -462,11 +463,13 @@ class Scenario:
 
     def edge_indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows of i, rows of j, d_ij stacked as (m, p)) over `edges`, for vectorised formulas."""
-        m = len(self.edges)
-        heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
-        tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
-        d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
-        return heads, tails, d
+        if self._edge_indices is None:  # built once: per-sample formulas call it (run_series, theory)
+            m = len(self.edges)
+            heads = np.fromiter((self._index[e.i] for e in self.edges), dtype=np.intp, count=m)
+            tails = np.fromiter((self._index[e.j] for e in self.edges), dtype=np.intp, count=m)
+            d = np.array([e.d for e in self.edges], dtype=float).reshape(m, self.dimension)
+            object.__setattr__(self, '_edge_indices', (heads, tails, d))
+        return tuple(array.copy() for array in self._edge_indices)
 
     def replace(self, **changes: Any) -> Scenario:
         """A copy with some fields changed (checked again)."""

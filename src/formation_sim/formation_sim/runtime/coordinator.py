@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 import traceback
@@ -68,13 +69,23 @@ from formation_msgs_py.topics import (
     trigger_info_topic,
 )
 from formation_sim.model.scenario import Scenario
-from formation_sim.runtime.run_book import AgentLostError, ConnectivityLostError, CoordinatorError, RecorderLostError, ids_text
-from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results
+from formation_sim.runtime.run_book import (
+    AgentFailedError,
+    AgentLostError,
+    ConnectivityLostError,
+    CoordinatorError,
+    DiscoveryError,
+    PoseWatch,
+    RecorderLostError,
+    RobotLostError,
+    ids_text,
+)
+from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results, write_unstarted
 from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, poses_for_end, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
@@ -83,7 +94,6 @@ EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
 EXIT_INTERRUPTED = 130
 
-POSES_AFTER_HORIZON = 1.0  # at most this long [s] the coordinator waits for a pose past the horizon
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
 # any reliable pose writer matches (robots' drivers keep ROS's defaults).
@@ -96,24 +106,31 @@ COORDINATOR_PARAMETERS = (
     ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
     ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
     ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
+    ParameterSpec(name='pose_silence', type=DOUBLE, default=0.5, low=0.0, low_open=True, high=math.inf, high_open=True, description="a robot whose poses on robot_trajectory stop for this long while the other robots' still come is lost: the run stops at once [s] (formation run: the agents' pose_timeout)"),
     ParameterSpec(name='backend', type=STRING, default='external', choices=KindNames(after=('external',)), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
 )  # fmt: skip
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
 
-def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
+def robot_run_topics(
+    scenario: Scenario, *, model: str, simulated: bool, pose_type: str, truth: bool | None = None
+) -> list[tuple[str, str]]:
     """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
     triggering information, and per robot the poses its agents read (`pose_type`), its command
-    and, simulated, its noise-free state (real robots: both pose topics, whichever they have)."""
+    and the topic the formation is measured on: with `truth` (default: simulated) a simulated
+    robot's noise-free `true_odom`, else its `odom` (a noise-free simulated robot's odometry is
+    exact: `launch.RobotOptions.odometry_is_truth`); real robots: both pose topics, whichever
+    they have."""
+    truth = simulated if truth is None else truth
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
     command_type = robot_kind(model).command_type
     topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
     for i in scenario.agent_ids:
         if pose_type == 'pose' or not simulated:
             topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
-        if pose_type == 'odom' or not simulated:
+        if pose_type == 'odom' or not simulated or not truth:
             topics.append((robot_odom_topic(i), odometry))
-        if simulated:
+        if truth:
             topics.append((robot_true_odom_topic(i), odometry))
         topics.append((robot_command_topic(i), command_type))
         topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
@@ -167,6 +184,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'control_point_distance': robot_kind(self.robot_model).control_offset(Geometry(control_point_distance=self.control_point_distance))[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
+            'pose_silence': self.parameter_values['pose_silence'],  # poses silent this long at the end are not sampled past it
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
@@ -182,6 +200,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
             for i in self.scenario.agent_ids
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
+        self._pose_watch = PoseWatch(self.scenario.agent_ids, silence=self.parameter_values['pose_silence'])
+        self._horizon_timer = None
 
     def _watch_agents(self) -> dict:
         """Each agent's triggering information to its first neighbour: its triggering times (one
@@ -221,22 +241,53 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._publish(self._step_pub, encode_step(self.step))
         for agent, early in self._early.items():
             self._poses[agent] = [self._sample(msg) for msg in early]
+        now = time.monotonic()
+        for agent in self._poses:  # each robot was heard (discovery waited for its first pose)
+            self._pose_watch.note(agent, now=now, t=0.0)
+        # The final Step at the horizon on the dot, not at the next tick: an agent whose last
+        # trigger is due just before it must not wait for the run's end.
+        self._horizon_timer = self.create_timer(max(self.horizon - (time.time() - self._epoch), 1e-3), self._at_horizon)
+
+    def _at_horizon(self) -> None:
+        self._horizon_timer.cancel()
+        if not self.finished:
+            self._running_tick()
+            if not self.finished:  # the timer fired a hair early: the horizon is now
+                self._end_at_horizon()
 
     def _running_tick(self) -> None:
         t = self.reached_time
+        self._check_robots()
         latest = [samples[-1] if samples else None for samples in self._poses.values()]
         if all(sample is not None for sample in latest):
             self.book.check_connectivity(t, np.array([sample.position for sample in latest]))
         if t >= self.horizon:
             self._end_at_horizon()
 
+    def _check_robots(self, *, fraction: float = 1.0) -> None:
+        """Stop the run at once when a robot's poses stopped (RobotLostError, exit status 3)."""
+        silent = self._pose_watch.silent(time.monotonic(), fraction=fraction)
+        if silent:
+            raise self._pose_watch.error(silent, now=time.monotonic(), where=self._where(), topics=self._pose_topics(silent))
+
+    def _pose_topics(self, robots: list[int]) -> str:
+        topic = {'true_odom': robot_true_odom_topic, 'odom': robot_odom_topic, 'pose': robot_pose_topic}[self.trajectory_source]
+        return ', '.join(topic(i) for i in robots)
+
+    def _agent_failed(self, agent: int, failure: str) -> None:
+        """An agent stopped on an error: the run stops at once.  The first cause is a robot whose
+        poses stopped, if one has been silent for half the silence already (the agent's stale
+        pose followed from it), else the agent's error."""
+        self._check_robots(fraction=0.5)
+        raise AgentFailedError(f'agent {agent} stopped {self._where()}: {failure}; the run stops', agents=[agent])
+
     def _end_at_horizon(self) -> None:
         self._finished_at = time.monotonic()
-        self.graph = self.snapshot_graph()
         self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
-        self._publish(self._step_pub, encode_step(self.step))
+        self._publish(self._step_pub, encode_step(self.step))  # first: the robots stop now
         self.finished = True
         self._reached = self.horizon
+        self.graph = self.snapshot_graph()  # the agents are still there: they leave after their final reports
 
     @property
     def reached_time(self) -> float:
@@ -249,9 +300,13 @@ class FormationCoordinatorNode(TimeKeeperNode):
 
     def after_final_step(self, executor) -> None:
         """Before the summary: the poses up to the horizon (each robot's first one past it)."""
-        deadline = time.monotonic() + POSES_AFTER_HORIZON
+        deadline = time.monotonic() + POSES_AFTER_END
         end = self.reached_time
-        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in self._poses.values()):
+        # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
+        lost = set(self.failure_info['agents']) if self.failure_info and self.failure_info['kind'] == 'robot_lost' else set()
+        lost |= set(self._pose_watch.silent(time.monotonic(), fraction=0.5))
+        waiting = [s for i, s in self._poses.items() if i not in lost]
+        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in waiting):
             executor.spin_once(timeout_sec=0.02)
 
     def flush(self) -> None:
@@ -265,7 +320,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         silent = [i for i, samples in self._poses.items() if not samples]
         if silent:
             raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
-        tracks = {i: PoseTrack.from_samples(samples) for i, samples in self._poses.items()}
+        # As `formation analyze` reads the bag: not long past the end, not a robot silent at it.
+        silence = self.robots['pose_silence']
+        tracks = {i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,
@@ -302,11 +359,18 @@ class FormationCoordinatorNode(TimeKeeperNode):
         if self.step is None:  # before t = 0: the last few, for the first sample
             self._early[agent].append(msg)
             return
-        self._poses[agent].append(self._sample(msg))
+        sample = self._sample(msg)
+        self._poses[agent].append(sample)
+        self._pose_watch.note(agent, now=time.monotonic(), t=sample.time)
 
     def _sample(self, msg) -> RobotSample:
         sample = odometry_sample if isinstance(msg, Odometry) else pose_sample
         return sample(msg, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch)
+
+
+# What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
+LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
+NAMED_ERRORS = (*LOST_ERRORS, AgentFailedError, ConnectivityLostError, DiscoveryError)
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -344,6 +408,8 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] 
                 stop.check()
                 if node.failure is not None:
                     raise node.failure
+            if node.failure is not None:  # it sent its final Step at once
+                raise node.failure
             collect_final_reports(node, executor)
             node.mark('final_reports')
             node.after_final_step(executor)
@@ -366,10 +432,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] 
                 _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
             _tell(f'formation_sim: {error}')
-            if not isinstance(error, (AgentLostError, RecorderLostError, ConnectivityLostError)):
+            if not isinstance(error, NAMED_ERRORS):
                 with contextlib.suppress(OSError):
                     traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, (AgentLostError, RecorderLostError)) else EXIT_FAILED
+            status = EXIT_AGENT_LOST if isinstance(error, LOST_ERRORS) else EXIT_FAILED
             _stop_and_write(node, executor, error)
         finally:
             if node is not None:
@@ -390,10 +456,13 @@ def _stop_and_write(node: TimeKeeperNode | None, executor, error: BaseException)
             stop_agents(node, executor)
         except Exception as problem:  # noqa: BLE001 - the original failure is what matters
             _tell(f'formation_sim: could not stop the agents: {problem}')
-    if node.step is None or not node.out_dir:
+        node.note_what_followed()
+        if node.failure_info is not None and 'followed' in node.failure_info:
+            _tell(f'formation_sim: {node.failure_info["message"]}')
+    if not node.out_dir:
         return
     try:
-        write_results(node)
+        write_results(node) if node.step is not None else write_unstarted(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
         _tell(f'formation_sim: could not write the partial results: {problem}')
 

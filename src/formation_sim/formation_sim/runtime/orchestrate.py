@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import os
 import signal
 import sys
 import threading
@@ -73,6 +74,7 @@ from formation_sim.runtime.results import (
     check_recording,
     lost_or_failed,
     describe_phases,
+    excused_after_end,
     phases,
     read_summary,
     recover_bag,
@@ -101,6 +103,23 @@ SUMMARY_FILE = 'summary.json'
 # How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
 # grace, one 0.1 s tick, and margin for a loaded machine (formation_msgs_py.qos.LIVELINESS_LEASE).
 LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
+# On robots, how long the coordinator may take to stop the run on an agent's final report that
+# names its error (it does so at once; margin for a loaded machine).
+AGENT_REPORT_DETECTION = 1.0
+
+
+def _process_started() -> float:
+    """The Unix time the `formation` command's process started (its imports and checks before
+    `FormationRun.run` belong to the run's start-up); for any other caller, now."""
+    main = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else ''
+    if main != 'formation' and not sys.argv[0].endswith(('formation_sim/cli.py', 'formation_sim.cli')):
+        return time.time()
+    try:
+        fields = Path('/proc/self/stat').read_text().rsplit(')', 1)[1].split()
+        boot = next(float(line.split()[1]) for line in Path('/proc/stat').read_text().splitlines() if line.startswith('btime '))
+        return boot + int(fields[19]) / os.sysconf('SC_CLK_TCK')  # field 22, starttime, in clock ticks since boot
+    except (OSError, ValueError, IndexError, StopIteration):
+        return time.time()
 
 
 class FormationRun:
@@ -131,6 +150,7 @@ class FormationRun:
         backend: str = 'exact',
         robots: RobotOptions | None = None,
         discovery: str = 'simple',
+        summary_extra: dict | None = None,
     ) -> None:
         """Check everything that can be checked before any process starts or anything on disk changes.
 
@@ -157,7 +177,10 @@ class FormationRun:
         `discovery`: 'simple' (Fast DDS's simple discovery, every participant announces itself to
         every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
         children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
+        `summary_extra`: entries added to summary.json's `extra` as given (`formation run
+        --speed-scale auto` records the κ it chose and why: `speed_scale`).
         """
+        self._prepared_from = _process_started()  # the `formation` command's start, else now (extra.timeline)
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
             require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
@@ -205,6 +228,7 @@ class FormationRun:
         if executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
         self.executor = executor
+        self.summary_extra = dict(summary_extra or {})  # recorded in summary.json's extra as given (e.g. speed_scale)
         self.inject = dict(inject or {})
         if unknown := set(self.inject) - set(INJECT_KEYS):
             raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
@@ -274,7 +298,9 @@ class FormationRun:
 
     def run(self) -> RunResult:
         started = self._started_at = time.monotonic()
-        self.marks = {'run': time.time()}  # the orchestrator's marks of the run (Unix times; extra.timeline)
+        # The orchestrator's marks of the run (Unix times; extra.timeline): 'prepare' is where the
+        # command began (before run(): its imports, the scenario read and validated).
+        self.marks = {'prepare': self._prepared_from, 'run': time.time()}
         lost: Child | None = None
         with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
@@ -289,7 +315,7 @@ class FormationRun:
             try:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
-                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id)
+                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost))
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
@@ -328,6 +354,7 @@ class FormationRun:
             extra = data.setdefault('extra', {})
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
+            extra.update(self.summary_extra)
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -446,12 +473,16 @@ class FormationRun:
                 self.marks['keeper_exited'] = time.time()
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
+                    failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     if not failed:
-                        return EXIT_OK, '', lost
+                        return EXIT_OK, after_end, lost
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
-                status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code == EXIT_LOST or code < 0 else EXIT_FAILED
+                if code in (EXIT_FAILED, EXIT_LOST):  # the time keeper named the first cause and its status
+                    status = code
+                else:
+                    status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
                 seen = '' if lost is None else f'{lost.describe()}; '
                 return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}', lost
             if lost is None:
@@ -465,10 +496,31 @@ class FormationRun:
                 )
                 if lost is not None and self.progress:
                     self._say(f'{lost.describe()}; stopping the run')
-            if lost is not None and (not lost.name.startswith('agent') or now - lost.exited_at > LOST_DETECTION):
-                # An agent: the time keeper has had the time to detect it and stop by itself.
+            if lost is not None and now - lost.exited_at > self._detection(lost):
+                # The time keeper has had the time to detect it and stop by itself.
                 return lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
             time.sleep(POLL_PERIOD)
+
+    def _robots_after(self, lost: Child | None) -> float:
+        """How long the simulated robots run on after the stop began: a robot whose agent died
+        without its zero command stops on its command timeout, and the bag shows it."""
+        if lost is None or not lost.name.startswith('agent') or not self.plan.simulated_robots:
+            return 0.0
+        return self.robots.command_timeout + 0.3  # and a few of its ticks
+
+    def _detection(self, lost: Child) -> float:
+        """How long the time keeper may take to stop the run by itself after `lost` exited.
+
+        Not an agent (a robot, the recorder): 0, everything stops now.  An agent that named its
+        error: the time keeper stops the run as soon as the agent's final report comes
+        (`AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
+        killed on a robot run: 0, robots must not wait for a liveliness lease (the message names
+        the dead agent's process).  Lock-step: the keeper sees the lease lapse (`LOST_DETECTION`)."""
+        if not lost.name.startswith('agent'):
+            return 0.0
+        if lost.failed_itself:
+            return AGENT_REPORT_DETECTION if self.backend != 'exact' else LOST_DETECTION
+        return 0.0 if self.backend != 'exact' else LOST_DETECTION
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr

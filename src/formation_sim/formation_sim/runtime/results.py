@@ -79,17 +79,19 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
 def timeline(keeper: dict[str, float], marks: dict[str, float], *, started: float) -> dict[str, float]:
     """summary.json's extra.timeline: every mark of the run in seconds since `started` (the Unix
     time the run began), in order: the time keeper's (`keeper`, its extra.timestamps) and the
-    orchestrator's (`marks`): spawned (every child started), keeper_exited, stopped (every child
+    orchestrator's (`marks`): prepare (negative: where the `formation` command began), spawned
+    (every child started), keeper_exited, stopped (every child
     gone, the recorder last), checked (the bag checked against the summary)."""
     points = {name: at - started for name, at in {**keeper, **marks}.items() if isinstance(at, (int, float))}
     return dict(sorted(points.items(), key=lambda item: item[1]))
 
 
 def phases(marks: dict[str, float]) -> dict[str, float]:
-    """summary.json's extra.phases from its timeline: `start` (spawn, imports, DDS participants,
+    """summary.json's extra.phases from its timeline: `prepare` (before the run's timeline begins
+    at `run`: the `formation` command's imports, the scenario read and validated), `start` (spawn, imports, DDS participants,
     discovery: up to step 0), `stepping` (step 0 to the final step), `end` (final reports,
     acknowledgements, the summary, every process's exit, the bag closed and checked)."""
-    spans = {'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
+    spans = {'prepare': ('prepare', 'run'), 'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
     return {
         phase: marks[last] - (0.0 if first is None else marks[first])
         for phase, (first, last) in spans.items()
@@ -131,7 +133,7 @@ def summary_of_what_is_known(
     """summary.json when the time keeper left none (killed hard, or it could not write): the
     failure, the last run time and step of its progress, the processes, and the run as far as
     the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
-    from formation_sim.sim.summary import SCHEMA, build_summary
+    from formation_sim.sim.summary import build_summary, unstarted_summary
 
     progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)}
     stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
@@ -157,18 +159,7 @@ def summary_of_what_is_known(
         except (AnalysisError, ValueError) as error:
             notes.append(f'the bag could not be read back: {error}')
     if data is None:
-        data = {
-            'schema': SCHEMA,
-            'scenario': scenario.name,
-            'dynamics': scenario.dynamics,
-            'mode': mode,
-            'horizon': horizon,
-            'n_agents': len(scenario.agent_ids),
-            'dimension': scenario.dimension,
-            'delta': scenario.delta,
-            'wall_time': None,
-            'extra': {},
-        }
+        data = unstarted_summary(scenario, horizon=horizon, mode=mode, extra={})
         source = f'orchestrator: the {keeper.name} left no summary and there is no readable bag'
     data['extra'].update(
         failure=failure,
@@ -188,8 +179,8 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
         failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
     if lost is not None:
         failure['process'] = process_info(lost, launched=launched)
-        if failure['kind'] == 'interrupted':  # stopped by us because of that child
-            failure['kind'] = 'process_failed' if lost.failed_itself else 'process_lost'
+        if failure['kind'] == 'interrupted':  # stopped by us because of that child: the first cause
+            failure['kind'], failure['agents'] = _first_cause(lost)
             failure['message'] = lost.describe()
         elif failure['kind'] == 'agent_lost' and lost.failed_itself:
             failure['kind'] = 'agent_failed'
@@ -198,6 +189,34 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
             failure['detected_by'] += ', orchestrator'
     extra['failure'] = failure
     return failure
+
+
+def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], str]:
+    """After a run that reached its horizon: the agent processes that exited with an error the
+    time keeper saw only after its final Step (summary.json `extra.after_end`: a pose gone stale
+    past the end while the Step was on its way, the robot stopped by the agent's zero command) are
+    no failure of the run.  The others, and a note naming the excused ones."""
+    try:
+        after_end = json.loads(summary.read_text(encoding='utf-8')).get('extra', {}).get('after_end') or {}
+    except (OSError, ValueError, AttributeError):
+        after_end = {}
+    excused = [c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end]
+    note = '; '.join(
+        f'{c.name} stopped after the run reached its horizon (not a failure of the run): {after_end[c.name.removeprefix("agent_")]}'
+        for c in excused
+    )
+    return [c for c in failed if c not in excused], note
+
+
+def _first_cause(child: Child) -> tuple[str, list[int]]:
+    """extra.failure's kind and agents for a child that stopped the run: an agent's or a robot's
+    own process (`agent_<i>`, `robot_<i>`) names the agent, any other a process."""
+    kind, _, number = child.name.partition('_')
+    if kind in ('agent', 'robot') and number.isdigit():
+        if kind == 'robot':
+            return 'robot_lost', [int(number)]
+        return ('agent_failed' if child.failed_itself else 'agent_lost'), [int(number)]
+    return ('process_failed' if child.failed_itself else 'process_lost'), []
 
 
 def strangers(topics: dict[str, int], graph_file: Path, own_nodes: set[str], domain_id: int) -> str:
@@ -225,6 +244,19 @@ def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
         notes.append(f'the bag could not be checked against what the run published: {error}')
         return None
-    result = dataclasses.replace(result, foreign={topic: n for topic, n in result.foreign.items() if topic in counted})
+    foreign = {topic: n for topic, n in result.foreign.items() if topic in counted}
+    # An agent that died sent no final report: what it published is uncounted, not foreign (on
+    # its own topics, and on the shared ones, where its messages cannot be told from others').
+    missing = data['extra'].get('reports_missing') or []
+    if missing:
+        own = tuple(f'/agent_{agent}/' for agent in missing)
+        uncounted = {topic: n for topic, n in foreign.items() if topic.startswith(own) or not topic.startswith('/agent_')}
+        if uncounted:
+            notes.append(
+                f'{sum(uncounted.values())} messages in the bag are uncounted: agents {missing} sent no final report '
+                f'({", ".join(f"{topic} {n}" for topic, n in sorted(uncounted.items()))})'
+            )
+        foreign = {topic: n for topic, n in foreign.items() if topic not in uncounted}
+    result = dataclasses.replace(result, foreign=foreign)
     data['extra']['recording'] = result.to_dict()
     return result

@@ -14,6 +14,7 @@ Every way a run can stop early is a `CoordinatorError` whose `kind` becomes
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,6 +65,27 @@ class AgentLostError(CoordinatorError):
     """One or more agents stopped showing signs of life (or left) before the end of the run."""
 
     kind = 'agent_lost'
+
+    def __init__(self, message: str, *, agents: list[int]) -> None:
+        super().__init__(message)
+        self.agents = agents
+
+
+class RobotLostError(CoordinatorError):
+    """A robot's poses stopped coming (its process or driver died, froze, or lost the network)
+    while the other robots' still came: the run stops at once, every agent with it."""
+
+    kind = 'robot_lost'
+
+    def __init__(self, message: str, *, agents: list[int]) -> None:
+        super().__init__(message)
+        self.agents = agents
+
+
+class AgentFailedError(CoordinatorError):
+    """An agent stopped on an error it named (its final report's `failure`): the run stops at once."""
+
+    kind = 'agent_failed'
 
     def __init__(self, message: str, *, agents: list[int]) -> None:
         super().__init__(message)
@@ -160,6 +182,14 @@ class RunBook:
         if book.report is None or not book.report.final:
             book.report = report
         return None
+
+    def failures(self) -> dict[int, str]:
+        """Agents whose final report says they stopped on an error: agent -> the error."""
+        return {
+            i: book.report.failure
+            for i, book in self.agents.items()
+            if book.report is not None and book.report.final and book.report.failure
+        }
 
     def final_reports_in(self) -> bool:
         """Every agent still alive has sent its final report."""
@@ -394,4 +424,49 @@ class RecorderBook:
             return None
         return RecorderLostError(
             f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+        )
+
+
+ALL_SILENT_AFTER = 1.0  # [s] beyond the silence: every robot silent at once (or the coordinator starved)
+
+
+class PoseWatch:
+    """When each robot's latest pose arrived (robot runs): a robot whose poses stop while the
+    others' still come is lost; its agents' poses of it go stale `silence` s later too.
+
+    A robot's silence is measured against the newest pose of any robot, not against the clock:
+    a coordinator that was not scheduled for a while (a loaded machine) finds every robot's
+    poses waiting in its readers, and must not call them lost.  Every robot silent together for
+    `silence` + ALL_SILENT_AFTER counts as lost too (every driver gone)."""
+
+    def __init__(self, robots, *, silence: float) -> None:
+        self.silence = silence
+        self.heard: dict[int, float | None] = dict.fromkeys(robots)  # robot -> monotonic time of its latest pose
+        self.stamps: dict[int, float] = {}  # robot -> run time of its latest pose
+
+    def note(self, robot: int, *, now: float, t: float) -> None:
+        self.heard[robot] = now
+        self.stamps[robot] = t
+
+    def silent(self, now: float, *, fraction: float = 1.0) -> list[int]:
+        """Robots whose poses stopped `fraction` × the silence ago while others' came (or all)."""
+        heard = {i: at for i, at in self.heard.items() if at is not None}
+        if not heard:
+            return []
+        newest = max(heard.values())
+        limit = fraction * self.silence
+        if now - newest > limit + ALL_SILENT_AFTER:
+            return sorted(heard)
+        return sorted(i for i, at in heard.items() if newest - at > limit)
+
+    def error(self, robots: list[int], *, now: float, where: str, topics: str) -> RobotLostError:
+        """The robots lost, named with their last pose's time and how long they have been silent."""
+        newest = max(now, *(at for at in self.heard.values() if at is not None))
+        last = ', '.join(f'robot {i} at t={self.stamps.get(i, math.nan):.3f} ({newest - self.heard[i]:.2f} s before)' for i in robots)
+        names = f'robot {robots[0]}' if len(robots) == 1 else f'robots {ids_text(robots)}'
+        others = 'every robot at once' if len(robots) == len(self.heard) else 'while the other robots still published'
+        return RobotLostError(
+            f'{names} lost {where}: no pose on {topics} for more than {self.silence:g} s, {others} '
+            f'(last poses: {last}); the run stops',
+            agents=robots,
         )

@@ -19,7 +19,7 @@ from rclpy.duration import Duration
 from formation_sim.runtime.run_book import RecorderBook
 from formation_sim.runtime.time_keeper import TimeKeeperNode
 from formation_sim.sim.files import write_atomically
-from formation_sim.sim.summary import write_summary
+from formation_sim.sim.summary import SUMMARY_FILE, unstarted_summary, write_summary, write_summary_file
 
 GRAPH_FILE = 'graph.json'
 FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final reports
@@ -46,22 +46,46 @@ def stop_agents(node: TimeKeeperNode, executor) -> None:
     node.end_now()
     node.flush()
     collect_final_reports(node, executor)
-    # A live agent's final report says it got the final Step; a lost agent is still matched
-    # as a reader (until DDS drops it) and would only hold the wait up: tools' topics only.
-    publishers = node.delivery_publishers(with_steps=not node.final_reports_in())
-    # As at the horizon: the bag ends where the summary does.
-    _wait_acknowledged(executor, publishers, recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT)
+    node.mark('final_reports')
+    node.after_final_step(executor)  # as at the horizon: the world up to where the run stopped
+    # A live agent's final report says it got the final Step; a dead agent (or robot) is still
+    # matched as a reader until DDS drops it and would hold an acknowledgement wait up to its
+    # timeout: the recorders' heartbeats say when they have the final Step, the tools' topics
+    # (the recorders' alone) are acknowledged.  As at the horizon: the bag ends where the summary does.
+    _wait_acknowledged(
+        executor, node.delivery_publishers(with_steps=False), recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT,
+        final_step=node.step.index + 1, recorders_expected=node.extra_subscribers,
+    )  # fmt: skip
+    node.mark('delivered')
 
 
-def _wait_acknowledged(executor, publishers, *, recorders: RecorderBook, timeout_sec: float) -> None:
-    """Wait (bounded) until every reader acknowledged what `publishers` wrote; not for a
-    recorder that lost its liveliness meanwhile (a frozen one would hold each wait up to the
-    end: what it lacks is counted against the bag after the run)."""
+def _wait_acknowledged(
+    executor, publishers, *, recorders: RecorderBook, timeout_sec: float, final_step: int | None = None, recorders_expected: int = 0
+) -> None:
+    """Wait (bounded) until every reader acknowledged what `publishers` wrote and, with
+    `final_step`, until each of the `recorders_expected` recorders' heartbeats says it recorded
+    that Step; not for a recorder that lost its liveliness meanwhile (a frozen one would hold each
+    wait up to the end: what it lacks is counted against the bag after the run)."""
     deadline = time.monotonic() + timeout_sec
     pending = list(publishers)
-    while pending and recorders.lost is None and time.monotonic() < deadline:
+
+    def recorded() -> bool:
+        steps = recorders.recorded_steps.values()
+        return final_step is None or (len(steps) >= recorders_expected and all(step >= final_step for step in steps))
+
+    while (pending or not recorded()) and recorders.lost is None and time.monotonic() < deadline:
         pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
-        executor.spin_once(timeout_sec=0.0)
+        executor.spin_once(timeout_sec=0.0 if pending else 0.02)
+
+
+def write_unstarted(node: TimeKeeperNode) -> None:
+    """summary.json of a run that failed before t = 0 (discovery): no samples, its failure and
+    timestamps (the start-up it spent)."""
+    out = Path(node.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    mode = 'distributed' if node.serves_sensing else 'robots'
+    extra = {**node._run_extra(0.0), 'started': False}
+    write_summary_file(unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE)
 
 
 def write_results(node: TimeKeeperNode) -> None:

@@ -163,13 +163,18 @@ class Supervisor:
             time.sleep(POLL_PERIOD)
         return [c for c in leaving if not c.alive() and c.process.returncode != 0]
 
-    def stop(self, timeouts: tuple[float, float], *, domain_id: int) -> list[str]:
+    def stop(self, timeouts: tuple[float, float], *, domain_id: int, robots_after: float = 0.0) -> list[str]:
         """Stop the children still alive, the recorder last; then remove their shm files (the list).
 
-        Each gets SIGINT, then SIGTERM, then SIGKILL (`timeouts`).  The time keeper, the agents
-        and the robots go first: they flush what they published to the recorder before they exit
+        Each gets SIGINT, then SIGTERM, then SIGKILL (`timeouts`).  The time keeper and the agents
+        go first, then the simulated robots (which take the agents' zero commands and publish
+        their poses up to the end of the run): they flush what they published to the recorder before they exit
         (a message dropped on the way is only repaired at a writer's next heartbeat, after up to
         3 s), and the recorder, still recording meanwhile, then drains and closes its bag.
+
+        `robots_after`: the simulated robots run at least this long after the stop began (a robot
+        whose agent was killed gets no zero command: the bag shows it stopping on its own
+        command timeout).
 
         A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
         that mapped one of its ports keeps the port's reference (the file outlives both).  Once
@@ -177,7 +182,12 @@ class Supervisor:
         if their owner is dead (`fastdds_shm.remove_orphans`); after a death by a signal, so do
         the dead port files of the run's own domain (a port mapped after the last look).
         """
-        self._stop([c for c in self.children if c.name != 'recorder'], timeouts)
+        robots = [c for c in self.children if c.name.startswith('robot')]
+        began = time.monotonic()
+        self._stop([c for c in self.children if c.name != 'recorder' and c not in robots], timeouts)
+        while robots and time.monotonic() < began + robots_after:  # a robot left without commands stops by itself first
+            time.sleep(POLL_PERIOD)
+        self._stop(robots, timeouts)  # after their agents: they take the zero commands, their poses end the bag
         self._stop([c for c in self.children if c.name == 'recorder'], timeouts)
         for child in self.children:
             with contextlib.suppress(subprocess.TimeoutExpired):

@@ -135,6 +135,9 @@ class TimeKeeperNode(Node):
         self._finished_at: float | None = None
         self.graph: dict = {}
         self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
+        # Agents that stopped on an error after the final Step at the horizon went out (a pose gone
+        # stale past the end while the Step was on its way): extra.after_end, not a failure.
+        self.after_end: dict[int, str] = {}
         self._setup_world()
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
@@ -220,14 +223,18 @@ class TimeKeeperNode(Node):
 
     def end_now(self) -> None:
         """The run stops early at this instant (after step 0): a final Step sends the agents home."""
+        if self.finished:  # the final Step went out already (at once, when the run failed)
+            return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
         if self._finished_at is None:
             self._finished_at = time.monotonic()
-        if not self.graph:  # the graph as it is now, before the final Step sends the agents home
+        if not self.graph and not self.realtime:  # the graph as it is now, before the final Step sends the agents home
             self.graph = self.snapshot_graph()
         self.finished = True
         self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
+        if not self.graph:  # on the wall clock (robots), the final Step first: the agents leave after their reports
+            self.graph = self.snapshot_graph()
 
     def fail(self, error: BaseException) -> None:
         """Note why the run stops early (extra.failure of the summary)."""
@@ -250,6 +257,20 @@ class TimeKeeperNode(Node):
         }
         if isinstance(error, ConnectivityLostError):
             self.failure_info.update(edge=list(error.edge), length=error.length)
+
+    def note_what_followed(self) -> None:
+        """After the first cause: the agents that then stopped on errors of their own (their
+        final reports), in `extra.failure.followed` and after the first cause in its message."""
+        info = self.failure_info
+        if info is None or info['kind'] == 'interrupted':  # every agent was stopped by the signal too
+            return
+        followed = {i: why for i, why in self.book.failures().items() if i not in info['agents']}
+        if not followed:
+            return
+        info['followed'] = {str(i): why for i, why in followed.items()}
+        agents = sorted(followed)
+        names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {ids_text(agents)}'
+        info['message'] += f'; then {names} stopped: {followed[agents[0]]}'
 
     # -- the agents' messages -------------------------------------------------------------------
 
@@ -280,6 +301,16 @@ class TimeKeeperNode(Node):
             return
         if (refusal := self.book.accept_report(report)) is not None:
             self._reject(REPORT_TOPIC, 'field', refusal)
+            return
+        if report.final and report.failure and self.step is not None:
+            if not self.finished:
+                self._agent_failed(report.agent, report.failure)
+            elif self.failure_info is None:  # after the run reached its end: no fault of the run
+                self.after_end[report.agent] = report.failure
+
+    def _agent_failed(self, agent: int, failure: str) -> None:
+        """An agent's final report says it stopped on an error before the end of the run (the
+        world decides what follows; lock-step: its liveliness or the stall timeout)."""
 
     def _reject(self, topic: str, reason: str, detail: str) -> None:
         count = self.book.count_rejection(reason)
@@ -300,7 +331,8 @@ class TimeKeeperNode(Node):
             agent,
             alive_count=info.alive_count,
             not_alive_count_change=info.not_alive_count_change,
-            finished=self.finished,
+            # After a failure's final Step, an agent that dies is lost (no final report to wait for).
+            finished=self.finished and self.failure_info is None,
             now=time.monotonic(),
         )
 
@@ -385,6 +417,7 @@ class TimeKeeperNode(Node):
             'timestamps': self.timestamps(),
             'reached_time': reached,
             'failure': self.failure_info,
+            **({'after_end': {str(i): why for i, why in sorted(self.after_end.items())}} if self.after_end else {}),
             **self._message_counts(),
         }
 

@@ -14,7 +14,6 @@ largest commands, its settling time and the proofs' bound to the pure arithmetic
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -70,7 +69,7 @@ def measured_run(scenario: Scenario, *, horizon: float | None = None) -> tuple[C
         if not double:
             np.maximum(speed, controls, out=speed)
         elif velocity is not None:  # the segment that began at the previous event
-            np.maximum(acceleration, np.linalg.norm(world.controls - scenario.gains.k3 * velocity, axis=1), out=acceleration)
+            np.maximum(acceleration, np.linalg.norm(world.controls - world.damping * velocity, axis=1), out=acceleration)  # κ k3 at κ
 
     record = simulate(scenario, horizon=horizon, sample_dt=DOUBLE_GRID if double else None, on_event=on_event)
     note(seen['world'], seen.get('velocity'))  # the controls set at the last event
@@ -101,10 +100,7 @@ def largest_command(scenario: Scenario, *, max_speed: float = math.inf, max_acce
 
 def unit_scale(scenario: Scenario) -> Scenario:
     """The scenario at κ = 1 (the paper's time); itself when it is already."""
-    gains = scenario.gains
-    if getattr(gains, 'speed_scale', 1.0) == 1.0:
-        return scenario
-    return dataclasses.replace(scenario, gains=dataclasses.replace(gains, speed_scale=1.0))
+    return scenario.with_scale(speed_scale=1.0) if scenario.gains.speed_scale != 1.0 else scenario
 
 
 def settling(scenario: Scenario, record: RunRecord, *, fraction: float = SETTLE_FRACTION) -> Settling:
@@ -130,17 +126,18 @@ def settling(scenario: Scenario, record: RunRecord, *, fraction: float = SETTLE_
     )
 
 
-def choose_speed_scale(scenario: Scenario, *, limits: RobotLimits, margin: float = OBSERVED_MARGIN, horizon: float | None = None) -> SpeedScaleChoice:
+def choose_speed_scale(
+    scenario: Scenario, *, limits: RobotLimits, margin: float = OBSERVED_MARGIN, paper_horizon: float | None = None
+) -> SpeedScaleChoice:
     """Both speed scales κ for `limits` (`formation_sim.model.speed_choice`): the guaranteed one from
-    the proofs' bound, the observed one from the exact run at κ = 1 to `horizon` (the scenario's),
-    with the time each needs to settle.  LimitsError if the limits do not apply to this scenario."""
+    the proofs' bound, the observed one from the exact run at κ = 1 to `paper_horizon` (default
+    the scenario's horizon: all a run at any κ <= 1 covers of the paper's time), with the time each
+    needs to settle.  LimitsError if the limits do not apply to this scenario."""
     check_limits_apply(limits, scenario.dynamics)
     paper = unit_scale(scenario)
-    run_horizon = float(scenario.horizon if horizon is None else horizon)
+    run_horizon = float(scenario.horizon if paper_horizon is None else paper_horizon)
     observed, record = measured_run(paper, horizon=run_horizon)
     try:
-        if getattr(paper.gains, 'threshold_floor', 0.0) > 0.0:
-            raise theory.TheoryError('the proofs bound the commands for the threshold α e^{-βt}; a floor c0 > 0 leaves ν unbounded by them')
         bound = command_bound(paper)
         theory_speeds: tuple[float, float | None] | str = (bound.max_speed, bound.max_acceleration)
     except theory.TheoryError as error:
@@ -151,6 +148,6 @@ def choose_speed_scale(scenario: Scenario, *, limits: RobotLimits, margin: float
         theory=theory_speeds,
         observed=(observed.max_speed, observed.max_acceleration),
         settling=settling(paper, record),
-        horizon=run_horizon,
+        horizon=scenario.horizon,
         margin=margin,
     )

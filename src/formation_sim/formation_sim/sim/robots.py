@@ -38,20 +38,24 @@ class RobotError(ValueError):
 class Limits:
     """What the base can do; commands beyond are clipped (and counted) as a real base does, by its
     kind's `clip` (holonomic: the velocity scaled down to `linear` keeping its direction, |ω|
-    clipped; unicycle: |v| clipped to `linear`, |ω| to `angular`, each on its own, as a TurtleBot3 does)."""
+    clipped; unicycle: |v| clipped to `linear`, |ω| to `angular`, each on its own, as a TurtleBot3
+    does; car: also |ω| to |v| tan(`steering`) / L)."""
 
     linear: float = math.inf  # [m/s]
     angular: float = math.inf  # [rad/s]
+    steering: float = math.inf  # [rad] φ_max (car)
 
     def __post_init__(self) -> None:
         for name in ('linear', 'angular'):
             value = getattr(self, name)
             if not value > 0.0:  # also NaN
                 raise RobotError(f'the {name} speed limit must be > 0 (inf: none), got {value!r}')
+        if not self.steering > 0.0:
+            raise RobotError(f'the steering limit must be > 0 (inf: none), got {self.steering!r}')
 
     def kind_limits(self) -> KindLimits:
         """These limits as the kinds take them."""
-        return KindLimits(linear_speed=self.linear, angular_speed=self.angular)
+        return KindLimits(linear_speed=self.linear, angular_speed=self.angular, steering_angle=self.steering)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -243,6 +247,25 @@ def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: 
         position=kinematics.control_point(position, orientation, offset)[:dimension],
         velocity=kinematics.control_point_velocity(orientation, linear, angular, offset)[:dimension],
     )
+
+
+POSES_AFTER_END = 1.0
+"""[s] A robot run's formation is sampled from poses stamped up to this long past its end: the
+coordinator waits at most this long for them, and `formation analyze` ignores later ones."""
+
+
+def poses_for_end(samples: list, end: float, *, silence: float | None = None) -> list:
+    """The poses a robot run's formation is sampled from, `end` its end: those stamped at most
+    POSES_AFTER_END past it and, when the robot's poses had stopped more than `silence` before
+    the first one after it (a robot frozen or cut off at the end, resumed later), none after it.
+    The coordinator (summary.json) and `formation analyze` (the bag) both cut so, whenever each
+    got the later poses."""
+    kept = [p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]
+    before = [p.time for p in kept if p.time <= end]
+    after = [p.time for p in kept if p.time > end]
+    if silence is not None and before and after and min(after) - max(before) > silence:
+        kept = [p for p in kept if p.time <= end]
+    return kept
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -18,7 +18,7 @@ Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as
 | `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii), or c0/c_i with a threshold floor; ξ in seconds (ξ_i / κ) |
 | `wall_time` | seconds the run took |
 | `extra` | implementation-specific details (e.g. the distributed run's domain id) |
-| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process]} — what stopped it (kind: agent_lost, agent_failed, recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
+| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process][, followed]} — what stopped it first (`followed`: agent -> the error of each agent that then stopped on its own) (kind: agent_lost, agent_failed, robot_lost (a robot whose poses stopped), recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
 | `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.analysis.accounting`) |
 | `extra.summary_source`, `extra.processes` | only when `formation run` wrote the summary because the simulator could not: how, and every process's exit |
 | `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
@@ -123,6 +123,23 @@ def build_summary(record) -> dict:
         'xi_check': xi_check,
         'wall_time': record.wall_time,
         'extra': record.extra,
+    }
+
+
+def unstarted_summary(scenario, *, horizon: float, mode: str, extra: dict) -> dict:
+    """The summary of a run that has no samples (it never reached t = 0, or left neither summary
+    nor bag): what was to be run, and `extra` (its failure)."""
+    return {
+        'schema': SCHEMA,
+        'scenario': scenario.name,
+        'dynamics': scenario.dynamics,
+        'mode': mode,
+        'horizon': horizon,
+        'n_agents': len(scenario.agent_ids),
+        'dimension': scenario.dimension,
+        'delta': scenario.delta,
+        'wall_time': None,
+        'extra': extra,
     }
 
 
