@@ -72,7 +72,7 @@ class ServiceSensing:
         """Nothing of its own to destroy (its client is the node's)."""
 
 
-def pose_take_depth(config) -> int:  # noqa: ANN001
+def pose_take_depth(config) -> int:
     """Poses a pose reader keeps (keep last): the latest only, or also the one before it where
     ETA-2's velocity comes from PoseStamped differences (`PoseBook`).  Older poses are never
     looked at; a deeper history would only cost decoding (the command timer takes its own
@@ -93,7 +93,7 @@ class PoseReaders:
     a callback, ~300 Odometry messages a second for two neighbours: 8 % of a core per agent, 4 % now).
     """
 
-    def __init__(self, node, config, book: PoseBook, *, reject: Callable[[str, str, str], None]) -> None:  # noqa: ANN001
+    def __init__(self, node, config, book: PoseBook, *, reject: Callable[[str, str, str], None]) -> None:
         self._book = book
         self._reject = reject
         kind, self._decode = (PoseStamped, decode_pose_stamped_cdr) if config.pose_type == 'pose' else (Odometry, decode_odometry_cdr)
@@ -137,7 +137,7 @@ class PoseReaders:
         self.node.destroy_node()
 
 
-def _never(msg) -> None:  # noqa: ANN001 - no executor spins the readers' node
+def _never(msg) -> None:
     raise AssertionError('pose readers are taken on demand, never spun')
 
 

@@ -68,7 +68,7 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
         raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
 
 
-def POSITIVE_OR_AUTO(text: str) -> float | str:  # noqa: N802 - an argparse type, named as the others
+def POSITIVE_OR_AUTO(text: str) -> float | str:
     """A finite number > 0, or 'auto'."""
     if text == 'auto':
         return text
