@@ -136,7 +136,7 @@ def test_a_car_cannot_turn_in_place_and_steers_at_most_its_limit(ros, executor):
     moving = [msg for msg in probe.truth if msg.twist.twist.linear.x == v]
     assert len(moving) >= 5 and all(msg.twist.twist.angular.z == turn for msg in moving)
     for a, b in zip(moving, moving[1:]):  # the bicycle's arc at the steering limit
-        (xa, ya, ta), (xb, yb, tb) = _state(a), _state(b)
+        (xa, ya, ta), (xb, yb, _) = _state(a), _state(b)
         tau = _stamp(b) - _stamp(a)
         expected = (xa + v / turn * (math.sin(ta + turn * tau) - math.sin(ta)), ya - v / turn * (math.cos(ta + turn * tau) - math.cos(ta)))
         assert np.allclose((xb, yb), expected, atol=1e-7)
