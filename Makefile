@@ -48,7 +48,7 @@ bench: venv
 	@if [ -f benchmarks/run.py ]; then $(PY) benchmarks/run.py; else echo "no benchmarks yet (benchmarks/run.py is missing)"; fi
 
 clean:
-	rm -rf runs ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache
+	rm -rf runs ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache .ruff_cache
 	find src tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	find src -name '*.egg-info' -type d -prune -exec rm -rf {} +
 

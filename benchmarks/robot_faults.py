@@ -29,6 +29,7 @@ Run it under the machine's ROS lock (`flock /tmp/ros-tests.lock ...`): it starts
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -59,10 +60,13 @@ class Observer:
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node('robot_fault_observer', context=self.context)
         self.commands: dict[int, list[tuple[float, bool]]] = {i: [] for i in ROBOTS}  # (arrival, zero)
-        self.poses: dict[int, list[tuple[float, float, float]]] = {i: [] for i in ROBOTS}  # (arrival, x, y)
+        # (arrival, x, y) per source: the noise-free true_odom, else the odometry (a noise-free
+        # simulated robot publishes no true_odom: its odometry is exact)
+        self.sources: dict[str, dict[int, list[tuple[float, float, float]]]] = {'true_odom': {i: [] for i in ROBOTS}, 'odom': {i: [] for i in ROBOTS}}
         for i in ROBOTS:
             self.node.create_subscription(Twist, f'/agent_{i}/robot/cmd_vel', lambda m, i=i: self._command(i, m), 100)
-            self.node.create_subscription(Odometry, f'/agent_{i}/robot/true_odom', lambda m, i=i: self._pose(i, m), 100)
+            for source in self.sources:
+                self.node.create_subscription(Odometry, f'/agent_{i}/robot/{source}', lambda m, i=i, s=source: self._pose(s, i, m), 100)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -76,9 +80,14 @@ class Observer:
     def _command(self, i: int, msg) -> None:
         self.commands[i].append((time.monotonic(), msg.linear.x == 0.0 and msg.angular.z == 0.0))
 
-    def _pose(self, i: int, msg) -> None:
+    def _pose(self, source: str, i: int, msg) -> None:
         p = msg.pose.pose.position
-        self.poses[i].append((time.monotonic(), p.x, p.y))
+        self.sources[source][i].append((time.monotonic(), p.x, p.y))
+
+    @property
+    def poses(self) -> dict[int, list[tuple[float, float, float]]]:
+        truth = self.sources['true_odom']
+        return truth if any(truth.values()) else self.sources['odom']
 
     def driving(self) -> bool:
         return all(any(not zero for _, zero in self.commands[i]) for i in ROBOTS)
@@ -106,17 +115,18 @@ class Observer:
 
     def largest_motion_after(self, fault: float) -> float:
         largest = 0.0
+        poses = self.poses
         for i in ROBOTS:
-            before = [(x, y) for at, x, y in self.poses[i] if at <= fault]
+            before = [(x, y) for at, x, y in poses[i] if at <= fault]
             if not before:
                 continue
             x0, y0 = before[-1]
-            largest = max([largest, *(math.hypot(x - x0, y - y0) for at, x, y in self.poses[i] if at > fault)])
+            largest = max([largest, *(math.hypot(x - x0, y - y0) for at, x, y in poses[i] if at > fault)])
         return largest
 
 
 def _pids(*words: str) -> list[int]:
-    """Processes whose command line holds every one of `words`, in order of appearance."""
+    """Processes whose command line holds every one of `words`."""
     found = []
     for entry in Path('/proc').iterdir():
         if not entry.name.isdigit():
@@ -125,7 +135,8 @@ def _pids(*words: str) -> list[int]:
             args = (entry / 'cmdline').read_bytes().decode(errors='replace').split('\0')
         except OSError:
             continue
-        if all(any(word == arg or word in arg for arg in args) for word in words):
+        # A path or a module: within an argument; anything else (an id): an argument of its own.
+        if all(any(word == arg or (('/' in word or '.' in word) and word in arg) for arg in args) for word in words):
             found.append(int(entry.name))
     return found
 
@@ -144,13 +155,15 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
     fleet = None
     if backend == 'external':
         fleet = subprocess.Popen(
-            [*formation, 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain_id), '--out', str(fleet_out)],
+            [*formation, 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain_id), '--out', str(fleet_out), '--robots-per-process', '1'],
             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
         )  # fmt: skip
     observer = Observer(domain_id)
     run_args = ['run', 'robots_square', '--backend', backend, '--horizon', str(horizon), '--out', str(out), '--domain-id', str(domain_id), '--no-plot']
     if backend == 'external':
         run_args += ['--robot', 'unicycle']
+    else:  # a fault hits one robot: each its own process
+        run_args += ['--robots-per-process', '1']
     run = subprocess.Popen([*formation, *run_args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
     row = {'backend': backend, 'fault': fault}
     try:
@@ -175,7 +188,8 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         _, err = run.communicate(timeout=120)
         exited = time.monotonic() - fault_at
         if fault == 'pose_cut':
-            os.kill(victim, signal.SIGCONT)
+            with contextlib.suppress(ProcessLookupError):  # formation run stopped it (SIGINT with SIGCONT)
+                os.kill(victim, signal.SIGCONT)
         time.sleep(0.5)  # the last commands and poses on their way
         last_zero, moving = observer.last_zero_after(fault_at)
         lines = [line for line in err.splitlines() if line.startswith('[formation run]')]

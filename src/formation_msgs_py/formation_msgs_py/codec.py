@@ -610,16 +610,32 @@ def stamp_seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def _pose_fields(what: str, pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
-    position = (float(pose.position.x), float(pose.position.y), float(pose.position.z))
-    o = pose.orientation
-    orientation = (float(o.x), float(o.y), float(o.z), float(o.w))
+def pose_values(what: str, position: Sequence[float], orientation: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """A pose's position (3) and orientation (x, y, z, w), checked (finite, a unit quaternion
+    give or take its sender's rounding) and the quaternion normalised; for the decoders of
+    messages and of serialized bytes (`formation_msgs_py.cdr`) alike."""
+    position = tuple(float(v) for v in position)
+    orientation = tuple(float(c) for c in orientation)
     _check_finite(f'{what} position', position)
     _check_finite(f'{what} orientation', orientation)
     norm = math.sqrt(sum(c * c for c in orientation))
     if not 0.5 < norm < 2.0:  # a unit quaternion, give or take its sender's rounding
         raise MessageError(f'{what}: orientation must be a unit quaternion, got {orientation} (norm {norm!r})')
     return position, tuple(c / norm for c in orientation)
+
+
+def twist_values(linear: Sequence[float], angular: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """An odometry's body twist (linear, angular: 3 each), checked finite."""
+    linear = tuple(float(v) for v in linear)
+    angular = tuple(float(v) for v in angular)
+    _check_finite('odometry twist linear', linear)
+    _check_finite('odometry twist angular', angular)
+    return linear, angular
+
+
+def _pose_fields(what: str, pose) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    o = pose.orientation
+    return pose_values(what, (pose.position.x, pose.position.y, pose.position.z), (o.x, o.y, o.z, o.w))
 
 
 def decode_pose_stamped(msg) -> RobotPose:
@@ -632,10 +648,9 @@ def decode_odometry(msg) -> RobotPose:
     """nav_msgs/Odometry -> RobotPose with the body-frame twist (REP 105)."""
     position, orientation = _pose_fields('odometry pose', msg.pose.pose)
     twist = msg.twist.twist
-    linear = (float(twist.linear.x), float(twist.linear.y), float(twist.linear.z))
-    angular = (float(twist.angular.x), float(twist.angular.y), float(twist.angular.z))
-    _check_finite('odometry twist linear', linear)
-    _check_finite('odometry twist angular', angular)
+    linear, angular = twist_values(
+        (twist.linear.x, twist.linear.y, twist.linear.z), (twist.angular.x, twist.angular.y, twist.angular.z)
+    )
     return RobotPose(
         stamp=stamp_seconds(msg.header.stamp), frame=msg.header.frame_id, position=position, orientation=orientation,
         linear=linear, angular=angular,

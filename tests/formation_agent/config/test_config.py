@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[3]
 from formation_agent.core.kinds import KIND_NAMES, robot_kind
+
+REPO = Path(__file__).resolve().parents[3]
 
 EXAMPLES = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robot kind
 

@@ -458,6 +458,9 @@ class _InstantSensing:
     def gaps(self):
         return []
 
+    def close(self) -> None:
+        """Nothing to destroy (PoseSensing destroys its readers' node)."""
+
     def request(self, on_sensed) -> None:
         from formation_msgs_py.types import SensedState
 

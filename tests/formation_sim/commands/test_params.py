@@ -55,7 +55,7 @@ def test_robot_backends_write_the_coordinators_and_the_robots_files(tmp_path, ca
     robot = yaml.safe_load((out / 'robots.params.yaml').read_text())['/agent_4/simulated_robot']['ros__parameters']
     assert robot['robot_id'] == 4 and robot['max_linear_speed'] == 0.22
     printed = capsys.readouterr().out
-    assert f'formation_robot --robots 1 --ros-args --params-file {out / "robots.params.yaml"}' in printed
+    assert f'formation_robot --robots 1,2,3,4 --ros-args --params-file {out / "robots.params.yaml"}' in printed  # 8 robots to a process by default
     assert 'formation_recorder' not in printed
     assert main(['params', 'robots_square', '--backend', 'external', '--robot', 'holonomic', '--out', str(tmp_path / 'external')]) == 0
     assert not (tmp_path / 'external' / 'robots.params.yaml').exists()  # the robots are real ones

@@ -329,7 +329,7 @@ def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the
 
 
 def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tmp_path, capsys, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     seen = {}
 
@@ -348,7 +348,7 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
 
 
 def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
-    import formation_sim.runtime.orchestrate as orchestrate
+    from formation_sim.runtime import orchestrate
 
     started = []
 

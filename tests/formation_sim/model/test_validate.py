@@ -496,6 +496,15 @@ def test_beta1_one_ulp_above_beta0_simulates(tmp_path, capsys):
     assert main(['simulate', str(path), '--out', str(tmp_path / 'run'), '--no-plot']) == 0, capsys.readouterr()
     summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
     assert summary['total_events'] > 0 and summary['theorem_constants'].get('error') is None, summary
+    # One ulp of β1 moves P by rounding only: the same events as with β1 = β0, at the same times
+    # to rounding (the run is 0.5 s long).
+    from formation_sim.sim.engine import simulate
+
+    at_beta0, _ = _held_out_team(lambda beta0, m: beta0)
+    nudged, on_beta0 = simulate(scenario, sample_dt=None), simulate(at_beta0, sample_dt=None)
+    assert nudged.total_events == on_beta0.total_events > 0
+    for agent, times in on_beta0.trigger_times.items():
+        assert np.allclose(nudged.trigger_times[agent], times, rtol=0.0, atol=1e-12), agent
 
 
 def test_a_strict_bound_met_up_to_rounding_is_accepted_and_beyond_it_refused(paper_scenario_dict):

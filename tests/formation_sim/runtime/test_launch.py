@@ -93,7 +93,7 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
     assert 'formation_sim.runtime.coordinator' in next(spec for spec in specs if spec.keeper).args
     coordinator = yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters']
     assert coordinator['robot'] == 'unicycle' and coordinator['backend'] == 'unicycle'
-    assert coordinator['robot_trajectory'] == 'true_odom'  # simulated: the formation as it truly is
+    assert coordinator['robot_trajectory'] == 'odom'  # simulated without noise or latency: its odometry is exact
     robots = yaml.safe_load(paths['robots'].read_text())
     scenario = load_scenario('robots_square')
     for agent in scenario.agent_ids:
@@ -101,6 +101,7 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
         assert params['model'] == 'unicycle' and params['max_linear_speed'] == 0.22 and params['max_angular_speed'] == 2.84
         # The robot node puts its axle l behind `position` along `yaw`: here the scenario point itself.
         assert params['position'] == scenario.positions[scenario.index(agent)].tolist() and params['yaw'] == math.pi / 2
+        assert params['publish_truth'] is False  # its odometry is the truth: no second copy
     agents = yaml.safe_load(paths['agents'].read_text())['/agent_3/formation_agent']['ros__parameters']
     assert {key: agents[key] for key in ('sensing', 'pose_type', 'robot', 'control_point_distance', 'max_linear_speed', 'max_angular_speed', 'world_frame')} == {
         'sensing': 'poses', 'pose_type': 'odom', 'robot': 'unicycle', 'control_point_distance': 0.1,
@@ -110,8 +111,24 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
     recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
     assert 'clock_topic' not in recorder  # the Step topic: bag time is the run's time, as on the exact backend
     recorded = {spec.split(':')[0] for spec in recorder['topics']}
-    assert {'/agent_2/robot/cmd_vel', '/agent_2/robot/odom', '/agent_2/robot/true_odom', '/formation/robots'} <= recorded
+    assert {'/agent_2/robot/cmd_vel', '/agent_2/robot/odom', '/formation/robots'} <= recorded
     assert '/agent_2/robot/pose' not in recorded  # the agents read odometry
+    assert '/agent_2/robot/true_odom' not in recorded  # not published: odom is exact
+    assert recorder['watched_topics'] == [f'/agent_{i}/robot/odom' for i in scenario.agent_ids]
+
+
+@pytest.mark.parametrize(('noise', 'pose_type'), [({'pose_noise': 0.005}, 'odom'), ({'yaw_noise': 0.01}, 'odom'), ({'latency': 0.02}, 'pose')])
+def test_simulated_robots_whose_odometry_is_not_exact_publish_their_truth_and_the_formation_is_measured_on_it(tmp_path, noise, pose_type):
+    plan = _plan(tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), **noise, 'pose_type': pose_type}))
+    paths = plan.write_inputs()
+    assert yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters']['robot_trajectory'] == 'true_odom'
+    robots = yaml.safe_load(paths['robots'].read_text())
+    assert all(params['ros__parameters']['publish_truth'] is True for params in robots.values())
+    recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
+    recorded = {spec.split(':')[0] for spec in recorder['topics']}
+    sensed = '/agent_2/robot/pose' if pose_type == 'pose' else '/agent_2/robot/odom'
+    assert {'/agent_2/robot/true_odom', sensed} <= recorded  # the truth, and what the agents read
+    assert recorder['watched_topics'] == [t for t in recorder['watched_topics'] if t.startswith('/agent_')] and len(recorder['watched_topics']) == 8
 
 
 def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_agents_read(tmp_path):
@@ -122,6 +139,27 @@ def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_
     assert coordinator['robot_trajectory'] == 'pose' and coordinator['backend'] == 'external'
     recorder = yaml.safe_load((tmp_path / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
     assert '/agent_1/robot/cmd_vel:geometry_msgs/msg/TwistStamped' in recorder['topics']
+
+
+@pytest.mark.parametrize('pose_type', ['odom', 'pose'])
+def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_type):
+    """An external team that publishes only odometry (or only PoseStamped) starts: the recorder
+    records both kinds, whichever the robots have, but step 0 waits only for the kind the agents
+    read (before, an odometry-only team never started: a DiscoveryError after 120 s)."""
+    other = {'odom': 'pose', 'pose': 'odom'}[pose_type]
+    for backend, robots in (('external', RobotOptions(model='unicycle', pose_type=pose_type)), ('unicycle', RobotOptions(model='unicycle', pose_type=pose_type))):
+        folder = tmp_path / f'{backend}_{pose_type}'
+        plan = _plan(folder, backend, robots)
+        plan.write_inputs()
+        recorder = yaml.safe_load((folder / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
+        coordinator = yaml.safe_load((folder / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+        # What the agents read, and what the coordinator measures the formation on.
+        read = {f'/agent_1/robot/{pose_type}', f'/agent_1/robot/{coordinator["robot_trajectory"]}'}
+        assert sorted(topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')) == sorted(read)
+        recorded = {entry.split(':')[0] for entry in recorder['topics']}
+        if backend == 'external':  # both kinds recorded, whichever the robots have
+            assert f'/agent_1/robot/{other}' in recorded and f'/agent_1/robot/{other}' not in recorder['watched_topics']
+        assert coordinator['pose_silence'] == robots.pose_timeout
 
 
 @pytest.mark.parametrize(

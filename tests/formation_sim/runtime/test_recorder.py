@@ -549,6 +549,38 @@ def test_drain_ends_at_its_limit_while_messages_keep_coming(
 
 
 @pytest.mark.ros
+def test_messages_of_an_endless_topic_do_not_hold_the_drain_up(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """External robots publish their poses on after the run: the recorder records them while it
+    drains but ends once the run's own topics are quiet (before, Ctrl-C on an external run waited
+    out the 5 s stop timeout: `drain cut short by a second stop signal after 5.04 s`)."""
+    import rclpy
+
+    bag = tmp_path / 'bag'
+    with (ros_domain(tmp_path, monkeypatch, 35) as context,
+          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']", f"endless_topics:=['{STEP}']",
+                   'drain_quiet:=0.5', 'drain_limit:=30.0') as process):
+        node = rclpy.create_node('drain_endless_test', context=context)
+        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
+        wait_for_subscribers([publisher], process, tmp_path)
+        published = publish_steps(publisher, 0, 10)
+        process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        deadline = signalled + 60
+        while process.poll() is None and time.monotonic() < deadline:  # never quiet for 0.5 s
+            published += publish_steps(publisher, len(published), 1)
+            time.sleep(0.05)
+        waited = time.monotonic() - signalled
+        finish(process, tmp_path)
+        node.destroy_node()
+
+    assert waited < 30.0 and 'drained' in recorder_log(tmp_path) and 'drain limit reached' not in recorder_log(tmp_path)
+    recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
+    assert len(recorded) >= 10 and recorded == published[: len(recorded)]
+
+
+@pytest.mark.ros
 def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -852,11 +884,11 @@ def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path:
     epoch = _epoch(messages)
     _assert_received_soon_after_their_trigger(messages)
     # A pose's bag time is when it came, since the epoch: right after its measurement (header stamp).
-    poses = messages['/agent_1/robot/true_odom']
+    poses = messages['/agent_1/robot/odom']
     measured = [(stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses]
     assert all(t < 0.05 for stamp, t in measured if stamp == 0)  # stamped 0: measured before the run began
     lags = [stamp / 1e9 - t for stamp, t in measured if stamp > 0]
     assert len(lags) > 100 * horizon / 2 and min(lags) >= -1e-3 and max(lags) < 0.5, (min(lags), max(lags))
     offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(tmp_path / 'run' / 'bag')['topics_with_message_count']}
-    assert {p['durability'] for p in offered['/agent_1/robot/true_odom']} == {'volatile'}  # as the robot offers it
+    assert {p['durability'] for p in offered['/agent_1/robot/odom']} == {'volatile'}  # as the robot offers it
     assert {p['durability'] for p in offered['/formation/robots']} == {'transient_local'}

@@ -112,6 +112,36 @@ def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop
     assert probe.poses and probe.odom and probe.odom[-1].child_frame_id == 'agent_1/base_link'
 
 
+def test_a_car_cannot_turn_in_place_and_steers_at_most_its_limit(ros, executor):
+    from geometry_msgs.msg import Twist, Vector3
+
+    robot = _robot(ros, robot_id=3, model='car', position=[0.0, 0.0], yaw=0.0, control_point_distance=0.33, wheelbase=0.33,
+                   max_steering_angle=0.42, command_timeout=5.0)  # fmt: skip
+    probe = _Probe(ros, 3, holonomic=False)
+    executor.add_node(robot)
+    executor.add_node(probe.node)
+    _spin(executor, 30.0, until=lambda: probe.commands.get_subscription_count() > 0 and len(probe.truth) > 2)
+    start = _state(probe.truth[-1])
+    assert np.allclose(start, (-0.33, 0.0, 0.0))  # placed by its control point, on the front axle
+
+    probe.commands.publish(Twist(angular=Vector3(z=1.0)))  # a turn in place: no car can
+    _spin(executor, 0.3)
+    assert robot.robot.saturated == 1 and robot.robot.command.angular == 0.0
+    assert np.allclose(_state(probe.truth[-1]), start)  # it did not move
+
+    v, turn = 0.2, 0.2 * math.tan(0.42) / 0.33  # the sharpest turn at v: |ω| = |v| tan φ_max / L
+    probe.commands.publish(Twist(linear=Vector3(x=v), angular=Vector3(z=1.0)))
+    _spin(executor, 0.5)
+    assert robot.robot.saturated == 2
+    moving = [msg for msg in probe.truth if msg.twist.twist.linear.x == v]
+    assert len(moving) >= 5 and all(msg.twist.twist.angular.z == turn for msg in moving)
+    for a, b in zip(moving, moving[1:]):  # the bicycle's arc at the steering limit
+        (xa, ya, ta), (xb, yb, _) = _state(a), _state(b)
+        tau = _stamp(b) - _stamp(a)
+        expected = (xa + v / turn * (math.sin(ta + turn * tau) - math.sin(ta)), ya - v / turn * (math.cos(ta + turn * tau) - math.cos(ta)))
+        assert np.allclose((xb, yb), expected, atol=1e-7)
+
+
 def test_a_holonomic_robot_takes_world_frame_commands_only_and_publishes_noisy_late_poses(ros, executor):
     from geometry_msgs.msg import TwistStamped
 

@@ -149,3 +149,18 @@ def test_tracks_are_sampled_by_interpolation_held_at_their_ends():
 def test_the_sample_grid_holds_the_horizon_and_every_event():
     times = sample_times(0.05, 0.02, events=[0.013, 0.04, 0.07])
     assert times.tolist() == [0.0, 0.013, 0.02, 0.04, 0.05]
+
+
+def test_the_poses_sampled_at_a_runs_end_skip_a_robot_resumed_after_a_freeze_and_poses_long_past_it():
+    from formation_sim.sim.robots import POSES_AFTER_END, RobotSample, poses_for_end
+
+    def track(*times):
+        return [RobotSample(time=t, position=np.array([t, 0.0]), velocity=None) for t in times]
+
+    steady = track(3.98, 3.99, 4.0, 4.01, 4.0 + POSES_AFTER_END + 0.01)
+    assert [p.time for p in poses_for_end(steady, 4.0, silence=0.5)] == [3.98, 3.99, 4.0, 4.01]
+    # Frozen at t = 3.4, resumed at t = 4.7: the pose after the end comes 1.3 s after the last
+    # before it, more than the silence: held at t = 3.4 (the coordinator may or may not have got it).
+    frozen = track(3.39, 3.4, 4.7, 4.71)
+    assert [p.time for p in poses_for_end(frozen, 4.0, silence=0.5)] == [3.39, 3.4]
+    assert [p.time for p in poses_for_end(frozen, 4.0, silence=None)] == [3.39, 3.4, 4.7, 4.71]  # a bag without it

@@ -26,7 +26,7 @@ from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
-from formation_agent.core.pose_sensing import PoseBook, PoseError
+from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.codec import (
     encode_acceleration_command,
@@ -80,10 +80,14 @@ class PlantOutput:
 
 
 class RobotOutput:
-    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`."""
+    """robot: a robot kind — velocity commands to the robot, republished at `command_rate`.
+
+    `poses.fresh(robot, t=, now=)` gives its own robot's latest pose or raises PoseError
+    (`formation_agent.ros.sensing.PoseSensing`: taken from its reader at each command).
+    """
 
     def __init__(
-        self, node, config, poses: PoseBook, *, on_failure: Callable[[Exception], None],
+        self, node, config, poses, *, on_failure: Callable[[Exception], None],
         guard: Callable[[float, float], None] | None = None,
     ) -> None:  # fmt: skip
         """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze

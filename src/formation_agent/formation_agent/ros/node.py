@@ -102,7 +102,17 @@ def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
         node.get_logger().warning(
             'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
         )
-    return RobotOutput(node, config, node.sensing.book, on_failure=node._fail, guard=node.staleness.check_command)
+    return RobotOutput(node, config, node.sensing, on_failure=node._fail, guard=node.staleness.check_command)
+
+
+def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> AgentReport:
+    """The agent's AgentReport: its counts, what it refused, injected and clipped."""
+    output = node.output
+    plant = (output.publisher.topic_name, output.sent) if isinstance(output, PlantOutput) else None
+    return node.counts.report(
+        final=final, failure=failure, rejected=node.reject.counts, dropped=node.faults.dropped, delayed=node.faults.delayed,
+        robot_commands=output.robot_commands, saturation=output.saturation, plant=plant,
+    )  # fmt: skip
 
 
 class FormationAgentNode(Node):
@@ -188,6 +198,10 @@ class FormationAgentNode(Node):
             event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
         )
 
+    def destroy_node(self) -> None:
+        self.sensing.close()  # pose sensing's readers live on a node of their own
+        super().destroy_node()
+
     @property
     def rejected(self) -> dict[str, int]:
         return self.reject.counts
@@ -265,7 +279,7 @@ class FormationAgentNode(Node):
             self._fail(error)
 
     def _trigger(self, sensed_getter) -> None:
-        if self.finished:  # the final step came while sensing (the horizon, or a failed run)
+        if self.finished or self.schedule.stopped:  # the final step or a stop came while sensing
             self.schedule.abandon()
             return
         sensed = sensed_getter()
@@ -370,12 +384,7 @@ class FormationAgentNode(Node):
     # -- reports and leaving ----------------------------------------------------------------------
 
     def report(self, *, final: bool = False, failure: str | None = None) -> AgentReport:
-        plant = (self.output.publisher.topic_name, self.output.sent) if isinstance(self.output, PlantOutput) else None
-        return self.counts.report(
-            final=final, failure=failure, rejected=self.reject.counts, dropped=self.faults.dropped,
-            delayed=self.faults.delayed, robot_commands=self.output.robot_commands, saturation=self.output.saturation,
-            plant=plant,
-        )  # fmt: skip
+        return _report(self, final=final, failure=failure)
 
     def _publish_report(self, *, final: bool = False, failure: str | None = None) -> None:
         self.outbox.publish_report(self.report(final=final, failure=failure))

@@ -64,7 +64,7 @@ from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
-from formation_sim.sim.robots import POSES_AFTER_END, PoseTrack, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import PoseTrack, odometry_sample, poses_for_end, pose_sample, sample_times, trajectory_samples
 from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra, saturation_extra
 
 
@@ -459,6 +459,20 @@ def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
     return Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or "every agent's last Status counts what the bag holds")
 
 
+def _robot_poses(bag: Path, got: _Collected, scenario: Scenario, *, trajectory: str, model: str, distance: float, epoch: float) -> dict:
+    """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order."""
+    poses = {}
+    for agent in scenario.agent_ids:
+        poses[agent] = []
+        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
+            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
+            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
+    missing = [agent for agent, samples in poses.items() if not samples]
+    if missing:
+        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    return poses
+
+
 def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
     """A robot run rebuilt from its bag: trajectories from the pose topics (module docstring)."""
     robots = got.robots
@@ -474,23 +488,16 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     epoch = start[0].epoch
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
     checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
-    poses = {}
-    for agent in scenario.agent_ids:
-        poses[agent] = []
-        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
-            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
-            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
-    missing = [agent for agent, samples in poses.items() if not samples]
-    if missing:
-        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+    poses = _robot_poses(bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch)
     if final:
         end = final[-1].time
     else:
         end = min(max(sample.time for sample in samples) for samples in poses.values())
         checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}'))
-    # As the coordinator: no pose stamped later than POSES_AFTER_END past the end (a robot frozen
-    # at the end, resumed later, is held at its last pose before it in both).
-    tracks = {agent: PoseTrack.from_samples([p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]) for agent, samples in poses.items()}
+    # As the coordinator: no pose stamped long past the end, nor one of a robot silent at the end
+    # (frozen, resumed later: held at its last pose before the end in both).
+    silence = robots.get('pose_silence')
+    tracks = {agent: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for agent, samples in poses.items()}
     trigger_times, triggers_check = _trigger_times(got, scenario)
     all_counts = {agent: len(times) for agent, times in trigger_times.items()}
     # The coordinator counts the triggers up to where the run ended (and samples them).

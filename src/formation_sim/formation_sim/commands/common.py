@@ -68,7 +68,7 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
         raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
 
 
-def POSITIVE_OR_AUTO(text: str) -> float | str:  # noqa: N802 - an argparse type, named as the others
+def POSITIVE_OR_AUTO(text: str) -> float | str:
     """A finite number > 0, or 'auto'."""
     if text == 'auto':
         return text
@@ -262,7 +262,7 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, RobotOptions
+    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, ROBOTS_PER_PROCESS, RobotOptions
 
     defaults = RobotOptions()
     group = parser.add_argument_group(f"robots (backends {', '.join(ROBOT_MODELS)}, external)")
@@ -290,7 +290,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
     add('--initial-heading', type=FINITE, default=None, metavar='RAD',
         help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
-    add('--robots-per-process', type=POSITIVE_INT, default=1, metavar='K', help='simulated robots sharing one process (default 1)')
+    add('--robots-per-process', type=POSITIVE_INT, default=ROBOTS_PER_PROCESS, metavar='K',
+        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})')
 
 
 def robot_options(args: argparse.Namespace, model: str):

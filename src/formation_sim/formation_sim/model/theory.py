@@ -18,6 +18,11 @@ Conventions and corrections (equation labels are the paper's):
   1/λmin(P). Both readings are computed (`Theorem2Chain`); see docs/THEOREM2.md for the evidence.
 * (dotqie)/(dotqi) are garbled in print; the bound meant is ||q_i' - q_j'|| < c^q_ij e^{-β_d t}.
 * The derivative of V_d has "(PC + CP^T)/2" and "E(T)"; meant are (PC + C^T P)/2 and E(t).
+
+Every constant here is of the paper's time s: a run at speed scale κ (docs/SPEED_SCALE.md) is the
+paper's at s = κt, so its rates are κβ, κβ_d and its inter-event bounds ξ_i/κ in seconds (the
+analysis and the summary convert); with a threshold floor c0 > 0 the guarantees are those of
+`formation_sim.model.threshold_floor`.
 """
 
 from __future__ import annotations
@@ -522,7 +527,7 @@ def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None)
     b = k3 * DEFAULT_B_FRACTION if b is None else float(b)
     _require(0.0 < b < k3, 'b', f'the free parameter b must lie in (0, k3 = {k3!r}), got {b!r}')
 
-    velocities = scenario.velocities
+    velocities = scenario.velocities  # the paper's q_p(0): a run at speed scale κ starts at κ q(0) (docs/SPEED_SCALE.md)
     nu0 = tension_double(scenario, scenario.positions, velocities)
     k_nu = nu0 + n * alpha_d * alpha_d / (8.0 * b * beta_d)  # k^d_ν
     k_edge = _edge_bound(k_nu / k1, capacities)  # (kijd)

@@ -496,7 +496,7 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
     ulp_y = np.spacing(np.abs(y).max(axis=1))
     if scenario.velocities is None:
         speed = ulp_q = np.zeros(len(heads))
-    else:
+    else:  # the paper's q_p(0) and E_i: at a speed scale κ error and threshold are both × κ² (docs/SPEED_SCALE.md)
         q = scenario.velocities[heads] - scenario.velocities[tails]
         speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
 

@@ -85,7 +85,7 @@ from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeper
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, poses_for_end, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
@@ -112,19 +112,25 @@ COORDINATOR_PARAMETERS = (
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
 
-def robot_run_topics(scenario: Scenario, *, model: str, simulated: bool, pose_type: str) -> list[tuple[str, str]]:
+def robot_run_topics(
+    scenario: Scenario, *, model: str, simulated: bool, pose_type: str, truth: bool | None = None
+) -> list[tuple[str, str]]:
     """Every topic of a robot run with its type, as a recorder wants them: the protocol, the
     triggering information, and per robot the poses its agents read (`pose_type`), its command
-    and, simulated, its noise-free state (real robots: both pose topics, whichever they have)."""
+    and the topic the formation is measured on: with `truth` (default: simulated) a simulated
+    robot's noise-free `true_odom`, else its `odom` (a noise-free simulated robot's odometry is
+    exact: `launch.RobotOptions.odometry_is_truth`); real robots: both pose topics, whichever
+    they have."""
+    truth = simulated if truth is None else truth
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
     command_type = robot_kind(model).command_type
     topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
     for i in scenario.agent_ids:
         if pose_type == 'pose' or not simulated:
             topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
-        if pose_type == 'odom' or not simulated:
+        if pose_type == 'odom' or not simulated or not truth:
             topics.append((robot_odom_topic(i), odometry))
-        if simulated:
+        if truth:
             topics.append((robot_true_odom_topic(i), odometry))
         topics.append((robot_command_topic(i), command_type))
         topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
@@ -178,6 +184,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'control_point_distance': robot_kind(self.robot_model).control_offset(Geometry(control_point_distance=self.control_point_distance))[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
+            'pose_silence': self.parameter_values['pose_silence'],  # poses silent this long at the end are not sampled past it
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
@@ -313,8 +320,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         silent = [i for i, samples in self._poses.items() if not samples]
         if silent:
             raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
-        # Poses stamped up to POSES_AFTER_END past the end, as `formation analyze` reads the bag.
-        tracks = {i: PoseTrack.from_samples([p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]) for i, samples in self._poses.items()}
+        # As `formation analyze` reads the bag: not long past the end, not a robot silent at it.
+        silence = self.robots['pose_silence']
+        tracks = {i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for i, samples in self._poses.items()}
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,

@@ -49,6 +49,7 @@ DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
+ROBOTS_PER_PROCESS = 8  # simulated robots sharing a process (and its executor, its DDS participant) by default (BENCHMARKS.md, "CPU of a robot run")
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
@@ -102,7 +103,14 @@ class RobotOptions:
     command_latency: float = 0.0  # [s] from a command's arrival to its effect
     command_timeout: float = 0.5  # [s] a robot without commands for this long stops
     seed: int = 0
-    robots_per_process: int = 1
+    robots_per_process: int = ROBOTS_PER_PROCESS
+
+    @property
+    def odometry_is_truth(self) -> bool:
+        """A simulated robot without noise and latency publishes its exact state as its odometry:
+        then it publishes no `true_odom` (what a real robot publishes, odometry, and half the
+        messages), and the formation is measured on `odom`, the same floats."""
+        return self.pose_noise == 0.0 and self.yaw_noise == 0.0 and self.latency == 0.0
 
     def check(self, scenario: Scenario) -> None:
         """Raise RunError naming the first option that cannot work with `scenario`."""
@@ -181,6 +189,7 @@ class RobotOptions:
             'command_timeout': float(self.command_timeout),
             'seed': int(self.seed),
             'world_frame': self.world_frame,
+            'publish_truth': not self.odometry_is_truth,
         }
         for name in ('max_linear_speed', 'max_angular_speed', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):
@@ -287,18 +296,36 @@ class LaunchPlan:
             return formation_topics(self.scenario)
         from formation_sim.runtime.coordinator import robot_run_topics
 
-        return robot_run_topics(self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type)
+        return robot_run_topics(
+            self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type,
+            truth=self.robot_trajectory == 'true_odom',
+        )  # fmt: skip
+
+    @property
+    def robot_trajectory(self) -> str:
+        """The robot topic the formation is measured on: a simulated robot's exact state (`true_odom`,
+        or `odom` where that is exact: `RobotOptions.odometry_is_truth`); a real robot's as measured."""
+        if not self.simulated_robots:
+            return self.robots.pose_type
+        return 'odom' if self.robots.odometry_is_truth else 'true_odom'
 
     def robot_pose_topics(self) -> list[str]:
-        """The recorded pose topics the run reads: the agents' (`pose_type`) and, simulated, the
-        noise-free one the coordinator measures the formation on.  The time keeper starts a robot
+        """The recorded pose topics the run reads: the agents' (`pose_type`) and the one the
+        coordinator measures the formation on (`robot_trajectory`).  The time keeper starts a robot
         run only once the recorder has a message on each (its bag then covers t = 0); robots that
         publish only the other kind (an external team with odometry alone) must not hold it up."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        read = robot_pose_topic if self.robots.pose_type == 'pose' else robot_odom_topic
-        kinds = (read, robot_true_odom_topic) if self.simulated_robots else (read,)
+        by_name = {'pose': robot_pose_topic, 'odom': robot_odom_topic, 'true_odom': robot_true_odom_topic}
+        kinds = (by_name[self.robots.pose_type], by_name[self.robot_trajectory])  # the agents', the coordinator's
         poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
+        return [name for name, _ in self.recorder_topics() if name in poses]
+
+    def endless_topics(self) -> list[str]:
+        """The recorded topics of robots that outlive the run (external ones: their poses)."""
+        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+
+        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
@@ -346,6 +373,8 @@ class LaunchPlan:
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
                         **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
+                        # External robots publish on after the run: their poses must not hold the drain up.
+                        **({'endless_topics': self.endless_topics()} if self.backend == 'external' else {}),
                     }
                 }
             }
@@ -429,8 +458,7 @@ class LaunchPlan:
                 backend=self.backend,
                 robot=self.robots.model,
                 control_point_distance=float(self.robots.control_point_distance),
-                # Simulated robots: the formation as it truly is; real ones: as measured.
-                robot_trajectory='true_odom' if self.simulated_robots else self.robots.pose_type,
+                robot_trajectory=self.robot_trajectory,
                 # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
                 pose_silence=float(self.robots.pose_timeout),
             )

@@ -103,6 +103,11 @@ RECORDER_PARAMETERS = (
         description="recorded topics the heartbeat lists as 'silent' until their first message came (a robot run's time "
         "keeper starts only once the recorder has the robots' poses from before t = 0)",
     ),
+    ParameterSpec(
+        name='endless_topics', type=STRING_ARRAY, default=[],
+        description="recorded topics whose writers outlive the run (external robots' poses): on stopping, their "
+        'messages are recorded but do not hold the drain up',
+    ),
     ParameterSpec(name='drain_quiet', type=DOUBLE, default=0.5, description='on stopping, take messages until none came for this long [s]', **_positive_seconds),
     ParameterSpec(name='drain_limit', type=DOUBLE, default=10.0, description='on stopping, stop taking messages after this long anyway [s]', **_positive_seconds),
 )  # fmt: skip
@@ -235,6 +240,8 @@ class RecorderNode(Node):
         self._clock_topic = values['clock_topic']
         heartbeat_topic = self._heartbeat_topic = values['heartbeat_topic']
         self._drain_quiet = values['drain_quiet']
+        self._endless = frozenset(values['endless_topics'])
+        self.run_count = 0  # messages received on topics that end with the run (not endless ones)
         self._watching = bool(values['watched_topics'])
         self._silent = set(values['watched_topics'])  # watched topics with no message yet
         self._drain_limit = values['drain_limit']
@@ -345,6 +352,8 @@ class RecorderNode(Node):
 
         def on_message(rawdata: bytes) -> None:
             self.received_count += 1
+            if name not in self._endless:
+                self.run_count += 1
             self._silent.discard(name)
             if is_clock:
                 self._on_step(rawdata)
@@ -412,14 +421,16 @@ class RecorderNode(Node):
     def drain(self, executor: Executor, *, interrupted: Callable[[], bool] = lambda: False) -> float:
         """Take the messages still in flight; return the seconds spent.
 
-        Spins until no message came for ``drain_quiet`` s: under load, messages the publishers
+        Spins until no message came for ``drain_quiet`` s (on a topic that is not one of
+        ``endless_topics``, whose writers go on): under load, messages the publishers
         sent before they stopped can arrive well after the queue first looks empty. Ends anyway
         after ``drain_limit`` s (a publisher that never stops), or once `interrupted()` is true;
         even then it takes the messages already queued.
         """
         started = time.monotonic()
         last_arrival = started
-        seen = first = self.received_count
+        first = self.received_count
+        seen = self.run_count
         ending = ''
         while not ending:
             now = time.monotonic()
@@ -434,8 +445,8 @@ class RecorderNode(Node):
             else:
                 # At most 0.1 s per wait, so that a second signal ends the drain promptly.
                 executor.spin_once(timeout_sec=min(quiet_left, limit_left, 0.1))
-                if self.received_count != seen:
-                    seen = self.received_count
+                if self.run_count != seen:
+                    seen = self.run_count
                     last_arrival = time.monotonic()
         if ending == 'interrupted':  # still take what is queued already (bounded by the limit)
             while time.monotonic() - started < self._drain_limit:

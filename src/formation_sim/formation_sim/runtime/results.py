@@ -244,6 +244,19 @@ def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
         notes.append(f'the bag could not be checked against what the run published: {error}')
         return None
-    result = dataclasses.replace(result, foreign={topic: n for topic, n in result.foreign.items() if topic in counted})
+    foreign = {topic: n for topic, n in result.foreign.items() if topic in counted}
+    # An agent that died sent no final report: what it published is uncounted, not foreign (on
+    # its own topics, and on the shared ones, where its messages cannot be told from others').
+    missing = data['extra'].get('reports_missing') or []
+    if missing:
+        own = tuple(f'/agent_{agent}/' for agent in missing)
+        uncounted = {topic: n for topic, n in foreign.items() if topic.startswith(own) or not topic.startswith('/agent_')}
+        if uncounted:
+            notes.append(
+                f'{sum(uncounted.values())} messages in the bag are uncounted: agents {missing} sent no final report '
+                f'({", ".join(f"{topic} {n}" for topic, n in sorted(uncounted.items()))})'
+            )
+        foreign = {topic: n for topic, n in foreign.items() if topic not in uncounted}
+    result = dataclasses.replace(result, foreign=foreign)
     data['extra']['recording'] = result.to_dict()
     return result

@@ -254,6 +254,20 @@ POSES_AFTER_END = 1.0
 coordinator waits at most this long for them, and `formation analyze` ignores later ones."""
 
 
+def poses_for_end(samples: list, end: float, *, silence: float | None = None) -> list:
+    """The poses a robot run's formation is sampled from, `end` its end: those stamped at most
+    POSES_AFTER_END past it and, when the robot's poses had stopped more than `silence` before
+    the first one after it (a robot frozen or cut off at the end, resumed later), none after it.
+    The coordinator (summary.json) and `formation analyze` (the bag) both cut so, whenever each
+    got the later poses."""
+    kept = [p for p in samples if p.time <= end + POSES_AFTER_END] or samples[:1]
+    before = [p.time for p in kept if p.time <= end]
+    after = [p.time for p in kept if p.time > end]
+    if silence is not None and before and after and min(after) - max(before) > silence:
+        kept = [p for p in kept if p.time <= end]
+    return kept
+
+
 @dataclass(frozen=True, kw_only=True)
 class PoseTrack:
     """One robot's recorded poses: run times, increasing, with the scenario position at each and,

@@ -1,0 +1,268 @@
+"""What a robot run costs in CPU, per kind of process: now and at the code before (issue 19).
+
+    .venv/bin/python benchmarks/cpu.py [--horizon 30] [--repeats 1] [--profile DIR] [--out DIR]
+
+Runs `formation run robots_square --backend unicycle` (4 agents, 4 simulated robots, the
+coordinator, the recorder) as a process of its own, with the working tree's packages and with
+those of BASELINE_REV (`startup.Baseline`, first on the path of the command and of every process
+it starts), alternating.  A watcher samples utime + stime (/proc/<pid>/stat) of every process
+under the command every SAMPLE_PERIOD s, by kind (its command line), and reports each kind's CPU
+as a fraction of one core:
+
+- `stepping`: over the run's steady state, from STEADY_AFTER s after step 0 to STEADY_BEFORE s
+  before the final Step (summary.json extra.timeline, counted from the command's start: the run
+  begins within a second of it), what a robot's computer pays while the team moves;
+- `life`: over each process's whole life (imports, discovery, the end included), per second of
+  the command's wall time.
+
+Per agent and per simulated robot: the kind's total divided by the number of agents or robots
+(robots may share a process).  `--profile DIR` runs every child under cProfile (a sitecustomize
+on PYTHONPATH; the main thread's CPU time, `time.thread_time`, where the executor runs every
+callback; written when the process exits) and prints each kind's top
+functions by cumulative and own time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pstats
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from startup import Baseline, command  # noqa: E402
+
+BASELINE_REV = 'da90a99'  # main when issue 19's CPU work began
+SCENARIO = 'robots_square'
+SAMPLE_PERIOD = 0.25
+STEADY_AFTER = 3.0
+STEADY_BEFORE = 1.0
+TICKS = os.sysconf('SC_CLK_TCK')
+
+KINDS = (  # (marker in the command line, kind)
+    ('formation_agent.ros.main', 'agents'),
+    ('formation_sim.runtime.robot_node', 'robots'),
+    ('formation_sim.runtime.coordinator', 'coordinator'),
+    ('formation_sim.runtime.recorder', 'recorder'),
+)
+
+_PROFILE_HOOK = """
+import atexit, cProfile, os, sys, time
+_folder = os.environ.get('FORMATION_CPU_PROFILE')
+_kind = next((k for m, k in {kinds!r} if any(m in a for a in sys.argv + getattr(sys, 'orig_argv', []))), None)
+if _folder and _kind:
+    _profile = cProfile.Profile(time.thread_time)  # CPU of the main thread (the callbacks), not wall time
+    _profile.enable()
+    atexit.register(lambda: (_profile.disable(), _profile.dump_stats(os.path.join(_folder, f'{{_kind}}-{{os.getpid()}}.prof'))))
+"""
+
+
+class CpuWatch(threading.Thread):
+    """utime + stime of every descendant process, by kind, every SAMPLE_PERIOD s."""
+
+    def __init__(self, root_pid: int) -> None:
+        super().__init__(daemon=True)
+        self.root = root_pid
+        self.samples: dict[int, list[tuple[float, float]]] = {}  # pid -> [(unix time, cpu seconds)]
+        self.kinds: dict[int, str] = {}
+        self._halt = threading.Event()
+
+    def run(self) -> None:
+        while not self._halt.is_set():
+            now = time.time()
+            for pid, (kind, cpu) in _descendants(self.root).items():
+                self.kinds[pid] = kind
+                self.samples.setdefault(pid, []).append((now, cpu))
+            self._halt.wait(SAMPLE_PERIOD)
+
+    def stop(self) -> None:
+        self._halt.set()
+        self.join()
+
+    def cpu_between(self, start: float, end: float) -> dict[str, float]:
+        """CPU seconds each kind used between two Unix times (linear between samples)."""
+        used: dict[str, float] = {}
+        for pid, series in self.samples.items():
+            used[self.kinds[pid]] = used.get(self.kinds[pid], 0.0) + _at(series, end) - _at(series, start)
+        return used
+
+    def cpu_life(self) -> dict[str, float]:
+        used: dict[str, float] = {}
+        for pid, series in self.samples.items():
+            used[self.kinds[pid]] = used.get(self.kinds[pid], 0.0) + series[-1][1]
+        return used
+
+
+def _at(series: list[tuple[float, float]], when: float) -> float:
+    if when <= series[0][0]:
+        return series[0][1] if when >= series[0][0] - SAMPLE_PERIOD else 0.0
+    for (t0, c0), (t1, c1) in zip(series, series[1:]):
+        if t0 <= when <= t1:
+            return c0 + (c1 - c0) * (when - t0) / (t1 - t0)
+    return series[-1][1]
+
+
+def _descendants(root: int) -> dict[int, tuple[str, float]]:
+    parents, found = {}, {}
+    stats = {}
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            fields = stat.rsplit(')', 1)[1].split()
+            parents[int(entry.name)] = int(fields[1])
+            stats[int(entry.name)] = (entry, (int(fields[11]) + int(fields[12])) / TICKS)
+        except (OSError, ValueError, IndexError):
+            continue
+    for pid, (entry, cpu) in stats.items():
+        ancestor, ours = pid, False
+        for _ in range(8):
+            ancestor = parents.get(ancestor, 0)
+            if ancestor == root:
+                ours = True
+                break
+            if ancestor <= 1:
+                break
+        if not ours:
+            continue
+        try:
+            line = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+        except OSError:
+            continue
+        kind = next((kind for marker, kind in KINDS if marker in line), None)
+        if kind is not None:
+            found[pid] = (kind, cpu)
+    return found
+
+
+def measure(*, baseline: Baseline | None, out: Path, horizon: float, domain_id: int, profile: Path | None) -> dict:
+    """One run: each kind's CPU as a fraction of one core, stepping and over its life."""
+    run_dir = out / 'run'
+    argv = [*command(baseline), 'run', SCENARIO, '--backend', 'unicycle', '--horizon', repr(horizon), '--out', str(run_dir),
+            '--force', '--domain-id', str(domain_id), '--no-plot']  # fmt: skip
+    env = dict(os.environ)
+    if profile is not None:
+        hook = Path(tempfile.mkdtemp(prefix='bench_cpu_hook_'))
+        (hook / 'sitecustomize.py').write_text(_PROFILE_HOOK.format(kinds=KINDS))
+        profile.mkdir(parents=True, exist_ok=True)
+        env.update(FORMATION_CPU_PROFILE=str(profile), PYTHONPATH=os.pathsep.join(filter(None, [str(hook), env.get('PYTHONPATH')])))
+    began = time.time()
+    process = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    watch = CpuWatch(process.pid)
+    watch.start()
+    try:
+        _, stderr = process.communicate(timeout=horizon + 300.0)
+    finally:
+        watch.stop()
+    ended = time.time()
+    row: dict = {
+        'code': 'now' if baseline is None else f'before ({baseline.rev})',
+        'exit_status': process.returncode,
+        'message': (stderr.strip().splitlines() or [''])[-1][:300],
+        'wall_s': ended - began,
+        'processes': {kind: sum(1 for k in watch.kinds.values() if k == kind) for _, kind in KINDS},
+    }
+    life = watch.cpu_life()
+    row['life'] = {kind: life.get(kind, 0.0) / row['wall_s'] for _, kind in KINDS}
+    summary = run_dir / 'summary.json'
+    if summary.is_file():
+        marks = json.loads(summary.read_text())['extra'].get('timeline', {})
+        if 'step0' in marks and 'final_step' in marks:
+            start, end = began + marks['step0'] + STEADY_AFTER, began + marks['final_step'] - STEADY_BEFORE
+            used = watch.cpu_between(start, end)
+            row['stepping_window_s'] = end - start
+            row['stepping'] = {kind: used.get(kind, 0.0) / (end - start) for _, kind in KINDS}
+    return row
+
+
+def per_unit(row: dict, key: str, n: int) -> dict:
+    """Fractions of a core: per agent, per robot, the coordinator, the recorder, and the total."""
+    shares = row.get(key)
+    if not shares:
+        return {}
+    return {
+        'agent': shares['agents'] / n, 'robot': shares['robots'] / n, 'coordinator': shares['coordinator'],
+        'recorder': shares['recorder'], 'total': sum(shares.values()),
+    }  # fmt: skip
+
+
+def table(rows: list[dict], n: int) -> str:
+    lines = [
+        '| code | window | per agent | per simulated robot | coordinator | recorder | total | processes |',
+        '|---|---|---|---|---|---|---|---|',
+    ]
+    for code in dict.fromkeys(r['code'] for r in rows):
+        done = [r for r in rows if r['code'] == code and r['exit_status'] == 0]
+        for key in ('stepping', 'life'):
+            units = [per_unit(r, key, n) for r in done if r.get(key)]
+            if not units:
+                continue
+            median = {name: statistics.median(u[name] for u in units) for name in units[0]}
+            processes = ', '.join(f'{k} {v}' for k, v in done[0]['processes'].items())
+            lines.append(
+                f'| {code} | {key} | {median["agent"]:.1%} | {median["robot"]:.1%} | {median["coordinator"]:.1%} | '
+                f'{median["recorder"]:.1%} | {median["total"]:.1%} | {processes} |'
+            )
+    return '\n'.join(lines)
+
+
+def print_profiles(folder: Path, *, top: int) -> None:
+    for kind in dict.fromkeys(kind for _, kind in KINDS):
+        files = sorted(str(p) for p in folder.glob(f'{kind}-*.prof'))
+        if not files:
+            continue
+        stats = pstats.Stats(*files, stream=sys.stdout)
+        print(f'\n===== {kind} ({len(files)} processes): by own time')
+        stats.sort_stats('tottime').print_stats(top)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--horizon', type=float, default=30.0)
+    parser.add_argument('--repeats', type=int, default=1)
+    parser.add_argument('--domain-id', type=int, default=180, help='ROS_DOMAIN_ID of the first run (then +1 per run)')
+    parser.add_argument('--out', type=Path, default=None, help='where the runs go (default: a temporary folder)')
+    parser.add_argument('--only', choices=('now', 'before'), default=None, help='one code only')
+    parser.add_argument('--profile', type=Path, default=None, help='cProfile every child into this folder (now only)')
+    parser.add_argument('--top', type=int, default=25)
+    options = parser.parse_args()
+    from formation_sim.model.scenario import load_scenario
+
+    n = len(load_scenario(SCENARIO).agent_ids)
+    out = options.out or Path(tempfile.mkdtemp(prefix='bench_cpu_'))
+    codes = ['now'] if options.profile else [c for c in ('before', 'now') if options.only in (None, c)]
+    baseline = Baseline(BASELINE_REV) if 'before' in codes else None
+    rows, domain = [], options.domain_id
+    try:
+        for k in range(options.repeats):
+            for code in codes:
+                print(f'{code} ({k + 1}/{options.repeats}) ...', file=sys.stderr, flush=True)
+                row = measure(baseline=baseline if code == 'before' else None, out=out / f'{code}-{k}', horizon=options.horizon,
+                              domain_id=domain, profile=options.profile)  # fmt: skip
+                domain += 1
+                rows.append(row)
+                print(json.dumps(row), file=sys.stderr, flush=True)
+    finally:
+        if baseline is not None:
+            baseline.close()
+    print(f'robots_square, unicycle backend, horizon {options.horizon:g} s, {n} agents; fractions of one core')
+    print(table(rows, n))
+    (out / 'cpu.json').write_text(json.dumps(rows, indent=1))
+    if options.profile:
+        print_profiles(options.profile, top=options.top)
+    return 0 if all(r['exit_status'] == 0 for r in rows) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,85 @@
+"""formation_msgs_py.cdr: robot poses as CDR bytes, against rclpy's own serialization."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message, serialize_message
+
+from formation_msgs_py.cdr import OdometryWriter, decode_odometry_cdr, decode_pose_stamped_cdr, pack_pose_stamped
+from formation_msgs_py.codec import MessageError, decode_odometry, decode_pose_stamped
+
+FRAMES = [('world', 'agent_1/base_link'), ('', ''), ('map', 'a'), ('odom', 'robot_12/base_footprint_x')]
+
+
+def _odometry(stamp, frame, child, position, orientation, linear, angular_z, sigma) -> Odometry:
+    msg = Odometry()
+    seconds = math.floor(stamp)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(seconds), min(999_999_999, round((stamp - seconds) * 1e9))
+    msg.header.frame_id, msg.child_frame_id = frame, child
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = position
+    o.x, o.y, o.z, o.w = orientation
+    covariance = [0.0] * 36
+    for k in range(3):
+        covariance[7 * k] = sigma[0] ** 2
+    covariance[35] = sigma[1] ** 2
+    msg.pose.covariance = covariance
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z = linear
+    t.angular.z = angular_z
+    return msg
+
+
+@pytest.mark.parametrize(('frame', 'child'), FRAMES)
+def test_the_odometry_writer_packs_what_rclpy_serializes_and_reads_back(frame, child):
+    rng = np.random.default_rng(len(frame) + 7 * len(child))
+    writer = OdometryWriter(frame=frame, child_frame=child, sigma=(0.005, 0.01))
+    for _ in range(200):
+        stamp = float(rng.uniform(0, 2e9))
+        position, linear = tuple(rng.normal(size=3)), tuple(rng.normal(size=3))
+        q = rng.normal(size=4)
+        orientation = tuple(q / np.linalg.norm(q))
+        angular = float(rng.normal())
+        expected = _odometry(stamp, frame, child, position, orientation, linear, angular, (0.005, 0.01))
+        packed = writer.pack(stamp, position, orientation, linear, angular)
+        # The same length and layout (rclpy leaves alignment padding unset: compare what it reads).
+        assert len(packed) == len(serialize_message(expected)) and deserialize_message(packed, Odometry) == expected
+        pose = PoseStamped(header=expected.header, pose=expected.pose.pose)
+        packed = pack_pose_stamped(stamp, frame, position, orientation)
+        assert len(packed) == len(serialize_message(pose)) and deserialize_message(packed, PoseStamped) == pose
+
+
+@pytest.mark.parametrize(('frame', 'child'), FRAMES)
+def test_decoding_serialized_poses_equals_decoding_the_messages(frame, child):
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        q = rng.normal(size=4)
+        odometry = _odometry(float(rng.uniform(0, 2e9)), frame, child, tuple(rng.normal(size=3)), tuple(q / np.linalg.norm(q) * 1.01),
+                             tuple(rng.normal(size=3)), float(rng.normal()), (0.0, 0.0))  # fmt: skip
+        data = serialize_message(odometry)
+        assert decode_odometry_cdr(data) == decode_odometry(deserialize_message(data, Odometry))
+        pose = PoseStamped(header=odometry.header, pose=odometry.pose.pose)
+        data = serialize_message(pose)
+        assert decode_pose_stamped_cdr(data) == decode_pose_stamped(deserialize_message(data, PoseStamped))
+
+
+def test_bad_bytes_are_refused_with_the_rule_and_bad_values_as_the_message_decoders_refuse_them():
+    good = serialize_message(_odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0)))
+    for cut in (0, 3, 12, 30, len(good) - 1):
+        with pytest.raises(MessageError, match='bytes') as caught:
+            decode_odometry_cdr(good[:cut])
+        assert caught.value.reason == 'length'
+    with pytest.raises(MessageError, match='not a little-endian CDR message'):
+        decode_odometry_cdr(b'\x00\x00\x00\x00' + good[4:])  # big endian
+    nan = _odometry(12.5, 'world', 'b', (math.nan, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
+    with pytest.raises(MessageError, match=r'odometry pose position\[0\] must be finite') as caught:
+        decode_odometry_cdr(serialize_message(nan))
+    assert caught.value.reason == 'non_finite'
+    flat = _odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 0.1), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
+    with pytest.raises(MessageError, match='orientation must be a unit quaternion'):
+        decode_odometry_cdr(serialize_message(flat))
