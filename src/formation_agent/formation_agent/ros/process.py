@@ -7,7 +7,6 @@ import contextlib
 import os
 import signal
 import sys
-import threading
 from typing import NoReturn
 
 from rclpy.executors import SingleThreadedExecutor
@@ -38,6 +37,26 @@ def make_executor(kind: str, *, context=None):
     raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
 
 
+class SignalFlag:
+    """A flag a signal handler may set: an assignment, no lock.
+
+    `threading.Event.set()` takes a lock; a second signal whose handler runs while the first
+    handler is inside it (SIGTERM from the kernel on the orchestrator's death, then another) waits
+    for that lock forever in the main thread: an agent of a killed run lived on, deadlocked.
+    """
+
+    __slots__ = ('_set',)
+
+    def __init__(self) -> None:
+        self._set = False
+
+    def set(self) -> None:
+        self._set = True
+
+    def is_set(self) -> bool:
+        return self._set
+
+
 class StopSignals:
     """SIGINT and SIGTERM as a flag that the spin loop turns into KeyboardInterrupt between spins.
 
@@ -50,7 +69,7 @@ class StopSignals:
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
-        self.received = threading.Event()
+        self.received = SignalFlag()
         self._previous: dict = {}
 
     def __enter__(self) -> StopSignals:

@@ -40,7 +40,6 @@ import json
 import math
 import signal
 import sys
-import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -514,11 +513,11 @@ def main(args: Sequence[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from formation_agent.ros.process import EXIT_BAD_INPUT, make_executor
+    from formation_agent.ros.process import EXIT_BAD_INPUT, SignalFlag, make_executor
 
     argv = list(args if args is not None else sys.argv)
     _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts (exit 0)
-    stop = threading.Event()
+    stop = SignalFlag()  # set by a signal handler: no lock (threading.Event's could deadlock)
     requests = 0  # the first stop signal starts the drain, a second one ends it
 
     def request_stop(signum: int, frame: FrameType | None) -> None:
