@@ -233,3 +233,65 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     assert after, f'the bag holds no pose of robot 2 after its timeout (killed at {killed_at}): {failure}'
     assert all(vx == 0.0 and vy == 0.0 for vx, vy, _, _ in after)
     assert len({(x, y) for _, _, x, y in after}) == 1
+
+
+@pytest.mark.timeout(300)
+def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_refused_before_any_command(tmp_path, capsys):
+    """Issue 18: robot 1 stands 1.5 m off its corner (robots_square: Δ − ‖d_ij‖ = 1 m): the run
+    reads where the robots are, refuses before Step 0 naming the edge and its numbers (exit 4),
+    summary.json says so, and no robot was ever sent a non-zero command."""
+    import threading
+
+    from formation_sim.bag.io import decode, read_bag
+    from formation_sim.runtime.fleet import RobotFleet
+    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.orchestrate import EXIT_REFUSED, FormationRun
+
+    domain = 46
+    square = load_scenario('robots_square')
+    positions = [list(p) for p in square.positions]
+    positions[square.agent_ids.index(1)] = [-1.5, 0.0]  # 1.5 m from its corner at (0, 0)
+    fleet = RobotFleet(
+        square.replace(positions=positions), robots=RobotOptions(model='unicycle'), out_dir=tmp_path / 'fleet', domain_id=domain,
+        extra_env={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')},
+    )  # fmt: skip
+    statuses = []
+    worker = threading.Thread(target=lambda: statuses.append(fleet.run(duration=200.0)))
+    worker.start()
+    try:
+        result = FormationRun(
+            'robots_square', out_dir=tmp_path / 'external', horizon=3.0, domain_id=domain, progress=False, timeout=240.0,
+            backend='external', robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
+        ).run()  # fmt: skip
+    finally:
+        fleet.stop()
+        worker.join(timeout=60.0)
+    assert statuses == [0], fleet.died
+    assert result.exit_status == EXIT_REFUSED, result.message
+    # Edge (1,2): x_1 − x_2 − d_12 = (−1.5 − 1.015 + 1, 0.0075), 1.52 m; edge (4,1): 1.49 m.
+    assert 'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)' in result.message
+    assert 'edge (4,1): the measured ‖x_4 − x_1 − d_41‖ = 1.49 m' in result.message
+    assert 'the run does not start' in result.message
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'initial_condition' and failure['agents'] == [1, 2] and failure['step'] is None, failure
+    assert [b['edge'] for b in failure['breaches']] == [[1, 2], [4, 1]]
+    assert summary['extra']['started'] is False and summary['extra']['steps'] == 0
+    measured = summary['extra']['measured_start']
+    assert measured['largest_agent'] == 1 and abs(measured['largest_distance'] - 1.5) < 1e-6, measured
+    # The bag: no Step at all, and every command a robot received (if any) was zero.
+    commands, steps = [], 0
+    for message in read_bag(result.bag):
+        if message.topic == '/formation/step':
+            steps += 1
+        elif message.topic.endswith('/robot/cmd_vel'):
+            msg = decode(message.rawdata, message.msgtype)
+            twist = msg.twist if message.msgtype.endswith('TwistStamped') else msg
+            commands.append((twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z))
+    assert steps == 0
+    assert not any(any(c) for c in commands), commands
+    # `formation analyze` of a run that never stepped: it says why, and that there is nothing to analyse.
+    capsys.readouterr()
+    status = main(['analyze', str(result.out_dir), '--no-figures'])
+    out = capsys.readouterr()
+    assert status == 2 and 'the run did not start (no Step 0; extra.failure initial_condition: edge (1,2)' in out.err, (status, out)

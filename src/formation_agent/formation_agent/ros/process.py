@@ -19,6 +19,10 @@ EXIT_BAD_INPUT = 2
 EXIT_PEER_LOST = 3
 """Exit status of a node that left because a peer it depends on was lost."""
 
+EXIT_REFUSED = 4
+"""Exit status of a robot run's time keeper that refused to start: the robots' measured start
+breaks a hypothesis (no Step 0, no command was sent)."""
+
 # EXECUTORS (formation_msgs_py.middleware): rclpy's EventsExecutor (default) or the
 # SingleThreadedExecutor. The SingleThreadedExecutor rebuilds its wait set in Python on every spin;
 # on a 2-core machine that was most of the simulator's time per lock-step step (BENCHMARKS.md).

@@ -7,6 +7,7 @@ bag differs from summary.json (the report says where), 2 the run cannot be analy
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -51,6 +52,25 @@ def default_out_dir(location) -> Path:
     return location.bag.parent / f'{location.bag.name}_analysis'
 
 
+def _refuse_unstarted(summary: Path | None) -> None:
+    """A run that never reached Step 0 (discovery failed, or the robots' measured start broke the
+    initial condition): no trajectory to check; its summary.json says why."""
+    from formation_sim.analysis.load import AnalysisError
+
+    if summary is None:
+        return
+    try:
+        extra = json.loads(summary.read_text(encoding='utf-8')).get('extra') or {}
+    except (OSError, ValueError, AttributeError):
+        return  # the bag is what is analysed: a damaged summary is reported as a difference
+    if isinstance(extra, dict) and extra.get('started') is False:
+        failure = extra.get('failure') or {}
+        raise AnalysisError(
+            f'{summary.parent}: the run did not start (no Step 0; extra.failure {failure.get("kind")}: '
+            f'{failure.get("message")}): there is no run to analyse'
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis import figures
     from formation_sim.analysis.checks import run_series, theory_bounds
@@ -66,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_UNREADABLE
     try:
         location = locate(args.run)
+        _refuse_unstarted(location.summary)
         if location.bag is None:
             raise AnalysisError(f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)')
         reading = Progress(f'reading {location.bag}', enabled=show)

@@ -33,7 +33,8 @@ def register(subparsers) -> None:
         '/agent_<i>/robot/pose (or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). '
         'Writes summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
         epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started, nothing on disk '
-        'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 130 interrupted. A run '
+        'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 4 on robots, the '
+        "robots' measured start breaks the initial condition on an edge (no Step 0, no command was sent); 130 interrupted. A run "
         'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')

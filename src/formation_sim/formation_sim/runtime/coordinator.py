@@ -5,7 +5,9 @@ robots are the world: agents sense poses and command velocities themselves (READ
 robots"), and the coordinator only keeps the run's time and books (`run_book.RunBook`):
 
 - **opens the run** once every agent is connected (discovery, docs/MESSAGES.md): Step 0 at
-  t = 0 in wall-clock mode, carrying the epoch every agent times its triggers from;
+  t = 0 in wall-clock mode, carrying the epoch every agent times its triggers from; but first it
+  checks where the robots are (`formation_sim.model.measured_start`): measured control points
+  that break the initial condition (initial) on an edge refuse the run before any Step or command;
 - **watches** every agent's Status and reports, and its sign of life: the DDS liveliness of its
   triggering-information writer (the one to its first neighbour, on which it also reads the
   agent's triggering times); and the robots' poses, stopping the run at the first edge that
@@ -24,7 +26,7 @@ simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares with
 and the agents' sensing services; this module adds the robots' world, and `main()` of both time
 keepers, which ends the run through `run_end` (final reports, delivery, the agents stopped
 early, summary.json and graph.json).  Exit status: 0 done, 1 failed, 3 an agent or the recorder
-lost, 130 interrupted.
+lost, 4 the robots' measured start breaks the initial condition (no Step 0, no command), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
-from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, EXIT_REFUSED, StopSignals, exit_process, make_executor
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
@@ -68,6 +70,7 @@ from formation_msgs_py.topics import (
     robot_true_odom_topic,
     trigger_info_topic,
 )
+from formation_sim.model.measured_start import MeasuredStart, check_measured_start
 from formation_sim.model.scenario import Scenario
 from formation_sim.runtime.run_book import (
     AgentFailedError,
@@ -75,6 +78,7 @@ from formation_sim.runtime.run_book import (
     ConnectivityLostError,
     CoordinatorError,
     DiscoveryError,
+    InitialConditionError,
     PoseWatch,
     RecorderLostError,
     RobotLostError,
@@ -202,6 +206,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
         self._pose_watch = PoseWatch(self.scenario.agent_ids, silence=self.parameter_values['pose_silence'])
         self._horizon_timer = None
+        self.measured_start: MeasuredStart | None = None
 
     def _watch_agents(self) -> dict:
         """Each agent's triggering information to its first neighbour: its triggering times (one
@@ -232,6 +237,21 @@ class FormationCoordinatorNode(TimeKeeperNode):
             return [f'a heartbeat from each recorder ({len(self.recorders.silent)} of {self.extra_subscribers})']
         unheard = sorted({name for topics in self.recorders.silent.values() for name in topics})
         return [f'robot topics the recorder has had no message on yet: {", ".join(unheard)}'] if unheard else []
+
+    def _check_start(self) -> str:
+        """Before step 0: where the robots are (each one's latest pose, its control point) must meet
+        the initial condition (initial) on every edge, or the run does not start: nothing was sent."""
+        latest = [self._sample(self._early[i][-1]).position for i in self.scenario.agent_ids]
+        self.measured_start = start = check_measured_start(self.scenario, latest)
+        if not start.ok:
+            first = start.breaches[0]
+            breaches = [breach.to_dict() for breach in start.breaches]
+            raise InitialConditionError(start.message(), agents=[first.i, first.j], breaches=breaches)
+        agent, largest = start.largest
+        return f'measured start within {largest:.3g} m of the scenario (agent {agent}); '
+
+    def _world_extra(self) -> dict:
+        return {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""
@@ -370,7 +390,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
 LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
-NAMED_ERRORS = (*LOST_ERRORS, AgentFailedError, ConnectivityLostError, DiscoveryError)
+NAMED_ERRORS = (*LOST_ERRORS, AgentFailedError, ConnectivityLostError, DiscoveryError, InitialConditionError)
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -381,7 +401,7 @@ def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
         + f'\n\nExample: {node_class.COMMAND} --ros-args --params-file DIR/{node_class.PARAMS_FILE} '
         '(formation params SCENARIO --out DIR writes it)\n'
         'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
-        '3 an agent or the recorder was lost; 130 interrupted.',
+        "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition (nothing was sent); 130 interrupted.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
 
@@ -435,7 +455,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] 
             if not isinstance(error, NAMED_ERRORS):
                 with contextlib.suppress(OSError):
                     traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, LOST_ERRORS) else EXIT_FAILED
+            status = EXIT_AGENT_LOST if isinstance(error, LOST_ERRORS) else EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
             _stop_and_write(node, executor, error)
         finally:
             if node is not None:

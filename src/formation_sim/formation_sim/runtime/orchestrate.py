@@ -42,6 +42,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
+from formation_agent.ros.process import EXIT_REFUSED  # 4: the robots' measured start broke a hypothesis, nothing was sent
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
 from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, RECORDER_NODE, ROBOT_NODE, SIMULATOR_NODE, agent_namespace
 from formation_sim.model.scenario import Scenario, load_scenario
@@ -90,6 +91,7 @@ __all__ = [
     'EXIT_INTERRUPTED',
     'EXIT_LOST',
     'EXIT_OK',
+    'EXIT_REFUSED',
     'ChildExit',
     'FormationRun',
     'RobotOptions',
@@ -479,7 +481,7 @@ class FormationRun:
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
-                if code in (EXIT_FAILED, EXIT_LOST):  # the time keeper named the first cause and its status
+                if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED):  # the time keeper named the first cause and its status
                     status = code
                 else:
                     status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED

@@ -35,7 +35,7 @@ class RunResult:
     out_dir: Path
     summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
     bag: Path | None  # DIR/bag, None if not recorded or not readable
-    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 130 interrupted
+    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (formation_agent.ros.process.EXIT_REFUSED) the robots' start refused; 130 interrupted
     domain_id: int
     wall_time: float
     children: tuple[ChildExit, ...] = ()

@@ -55,6 +55,18 @@ class ConnectivityLostError(CoordinatorError):
         self.length = length
 
 
+class InitialConditionError(CoordinatorError):
+    """The robots' measured start breaks the initial condition (initial) on an edge: the run does
+    not start (no Step 0, no command)."""
+
+    kind = 'initial_condition'
+
+    def __init__(self, message: str, *, agents: list[int], breaches: list[dict]) -> None:
+        super().__init__(message)
+        self.agents = agents
+        self.breaches = breaches
+
+
 class RecorderLostError(CoordinatorError):
     """A recorder stopped showing signs of life (or left) before the end of the run."""
 

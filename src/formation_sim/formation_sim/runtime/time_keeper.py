@@ -38,6 +38,7 @@ from formation_sim.runtime.run_book import (
     ConnectivityLostError,
     CoordinatorError,
     DiscoveryError,
+    InitialConditionError,
     RecorderBook,
     RunBook,
     ids_text,
@@ -215,9 +216,10 @@ class TimeKeeperNode(Node):
         return gaps + self._world_gaps()
 
     def _start(self) -> None:
+        note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
         self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
-            self._say(f'progress discovery done in {self._started - self._created:.1f} s; t=0 ({self.clock_mode})')
+            self._say(f'progress discovery done in {self._started - self._created:.1f} s; {note}t=0 ({self.clock_mode})')
         self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
         self._begin()
 
@@ -257,6 +259,8 @@ class TimeKeeperNode(Node):
         }
         if isinstance(error, ConnectivityLostError):
             self.failure_info.update(edge=list(error.edge), length=error.length)
+        if isinstance(error, InitialConditionError):
+            self.failure_info.update(breaches=error.breaches)
 
     def note_what_followed(self) -> None:
         """After the first cause: the agents that then stopped on errors of their own (their
@@ -417,6 +421,7 @@ class TimeKeeperNode(Node):
             'timestamps': self.timestamps(),
             'reached_time': reached,
             'failure': self.failure_info,
+            **self._world_extra(),
             **({'after_end': {str(i): why for i, why in sorted(self.after_end.items())}} if self.after_end else {}),
             **self._message_counts(),
         }
@@ -459,6 +464,15 @@ class TimeKeeperNode(Node):
     def _world_gaps(self) -> list[str]:
         """What discovery still waits for in the world."""
         raise NotImplementedError
+
+    def _check_start(self) -> str:
+        """Before step 0, with everything connected: raise if the world breaks a hypothesis (nothing
+        was sent yet); else a note for the progress line ('' or ending in '; ')."""
+        return ''
+
+    def _world_extra(self) -> dict:
+        """summary.json's `extra` of the world, also for a run that did not start."""
+        return {}
 
     def _begin(self) -> None:
         """t = 0: Step 0."""
