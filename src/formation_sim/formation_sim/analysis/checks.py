@@ -241,13 +241,7 @@ def _theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | No
         worst = int(np.argmax(ratio))
         checks.append(Check(name='formation error < 2 sqrt(k_V) e^{-beta t}', ok=bool(ratio[worst] < 1.0), detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}'))
     if bounds.xi is not None:
-        below = []
-        for agent, times in record.trigger_times.items():
-            if len(times) > 1:
-                gap = float(np.diff(times).min())
-                if not gap >= bounds.xi[agent]:
-                    below.append(f'agent {agent}: {gap!r} < {bounds.xi[agent]!r}')
-        checks.append(Check(name='inter-event times >= xi_i (xi)', ok=not below, detail='; '.join(below) or 'every agent'))
+        checks.append(_inter_event_check(record, bounds.xi, name='inter-event times >= xi_i (xi)'))
     return checks
 
 
@@ -269,14 +263,19 @@ def _floor_checks(record: RunRecord, series: Series, bounds: TheoryBounds) -> li
     checks.append(Check(name='formation error <= 2 sqrt(z B(κt)) (threshold floor)', ok=bool(ratio[worst] <= 1.0),
                         detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= {floor.ball:.4g}'))  # fmt: skip
     if bounds.xi is not None:
-        below = []
-        for agent, times in record.trigger_times.items():
-            if len(times) > 1:
-                gap = float(np.diff(times).min())
-                if not gap >= bounds.xi[agent]:
-                    below.append(f'agent {agent}: {gap!r} < {bounds.xi[agent]!r}')
-        checks.append(Check(name='inter-event times >= c0 / c_i (threshold floor)', ok=not below, detail='; '.join(below) or 'every agent'))
+        checks.append(_inter_event_check(record, bounds.xi, name='inter-event times >= c0 / c_i (threshold floor)'))
     return checks
+
+
+def _inter_event_check(record, xi, *, name: str) -> Check:
+    """Every agent's least inter-event time against its lower bound xi[agent] (no Zeno behaviour)."""
+    below = []
+    for agent, times in record.trigger_times.items():
+        if len(times) > 1:
+            gap = float(np.diff(times).min())
+            if not gap >= xi[agent]:
+                below.append(f'agent {agent}: {gap!r} < {xi[agent]!r}')
+    return Check(name=name, ok=not below, detail='; '.join(below) or 'every agent')
 
 
 def inter_event_stats(record: RunRecord, xi: dict[int, float] | None) -> dict[str, dict[str, Any]]:
