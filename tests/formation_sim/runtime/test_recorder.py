@@ -516,6 +516,16 @@ def test_drain_keeps_messages_that_arrive_after_a_lull(
     assert 'drained' in recorder_log(tmp_path)
 
 
+def _steps_until_exit(process, publisher, published: list) -> float:
+    """A step every 0.05 s (appended to `published`) until the recorder exits; the seconds it took."""
+    signalled = time.monotonic()
+    deadline = signalled + 60
+    while process.poll() is None and time.monotonic() < deadline:
+        published += publish_steps(publisher, len(published), 1)
+        time.sleep(0.05)
+    return time.monotonic() - signalled
+
+
 @pytest.mark.ros
 def test_drain_ends_at_its_limit_while_messages_keep_coming(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -531,13 +541,7 @@ def test_drain_ends_at_its_limit_while_messages_keep_coming(
         wait_for_subscribers([publisher], process, tmp_path)
         published = publish_steps(publisher, 0, 10)
         process.send_signal(signal.SIGINT)
-        signalled = time.monotonic()
-        # Never quiet for 0.5 s: a step every 0.05 s until the recorder gives up.
-        deadline = signalled + 60
-        while process.poll() is None and time.monotonic() < deadline:
-            published += publish_steps(publisher, len(published), 1)
-            time.sleep(0.05)
-        waited = time.monotonic() - signalled
+        waited = _steps_until_exit(process, publisher, published)  # never quiet for 0.5 s
         finish(process, tmp_path)
         node.destroy_node()
 
@@ -566,12 +570,7 @@ def test_messages_of_an_endless_topic_do_not_hold_the_drain_up(
         wait_for_subscribers([publisher], process, tmp_path)
         published = publish_steps(publisher, 0, 10)
         process.send_signal(signal.SIGINT)
-        signalled = time.monotonic()
-        deadline = signalled + 60
-        while process.poll() is None and time.monotonic() < deadline:  # never quiet for 0.5 s
-            published += publish_steps(publisher, len(published), 1)
-            time.sleep(0.05)
-        waited = time.monotonic() - signalled
+        waited = _steps_until_exit(process, publisher, published)  # never quiet for 0.5 s
         finish(process, tmp_path)
         node.destroy_node()
 

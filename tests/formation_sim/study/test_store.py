@@ -31,14 +31,19 @@ def test_rows_read_back_to_the_bit_and_a_row_is_written_once(tmp_path):
     assert json.loads((tmp_path / 's' / STUDY_FILE).read_text())['digest'] == study.digest
 
 
-def test_a_cut_last_line_is_dropped_and_the_study_goes_on(tmp_path):
+def _folder_with_first_row(tmp_path):
+    """A study folder at tmp_path holding the first of the study's two rows; the second not appended."""
     study = _study()
     folder = StudyFolder(tmp_path, study)
     folder.open()
     first, second = (run_case(case) for case in study.cases)
     folder.append(first)
     folder.close()
-    path = tmp_path / ROWS_FILE
+    return study, first, second, tmp_path / ROWS_FILE
+
+
+def test_a_cut_last_line_is_dropped_and_the_study_goes_on(tmp_path):
+    study, first, second, path = _folder_with_first_row(tmp_path)
     whole = path.read_text()
     path.write_text(whole + whole.splitlines()[1][:40])  # a row cut by a kill mid-write
     assert [r['key'] for r in read_rows(tmp_path)] == [first['key']]
@@ -66,13 +71,7 @@ def test_a_folder_of_another_study_or_of_other_files_is_refused(tmp_path):
 
 
 def test_a_folder_of_an_earlier_version_reads_with_the_new_parameters_at_their_defaults(tmp_path):
-    study = _study()
-    folder = StudyFolder(tmp_path, study)
-    folder.open()
-    first, second = (run_case(case) for case in study.cases)
-    folder.append(first)
-    folder.close()
-    path = tmp_path / ROWS_FILE
+    study, first, second, path = _folder_with_first_row(tmp_path)
     lines = path.read_text().splitlines()
     drop = [COLUMNS.index('speed_scale'), COLUMNS.index('threshold_floor')]
     old = '\n'.join(','.join(c for k, c in enumerate(line.split(',')) if k not in drop) for line in lines) + '\n'
