@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import fcntl
 import os
 
 import pytest
@@ -79,3 +81,34 @@ def ros(request, tmp_path_factory):
         yield context
     finally:
         rclpy.shutdown(context=context)
+
+
+@pytest.fixture(autouse=True)
+def _share_of_the_machine(request, tmp_path_factory):
+    """A test marked `alone` measures a wall-clock bound of the system (a safety stop's latency,
+    a service's answer time): no other ROS test of the session runs beside it.  ROS tests share
+    the machine with each other.
+
+    Two locks in the session's base folder (shared by pytest-xdist's workers): every ROS test
+    takes the gate, then the machine (shared, or exclusive when alone), then lets the gate go; an
+    alone test that waits for the machine holds the gate, so the other worker cannot start ROS
+    test after ROS test in front of it.  The bound itself is the system's: the test measures the
+    run as on a machine that runs it, not one that also runs the other half of the suite.
+    """
+    marks = {mark.name for mark in request.node.iter_markers()}
+    if not marks & {'ros', 'alone'}:
+        yield
+        return
+    folder = tmp_path_factory.getbasetemp().parent
+    with open(folder / 'formation-tests.gate', 'a') as gate, open(folder / 'formation-tests.machine', 'a') as machine:
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(machine, fcntl.LOCK_EX if 'alone' in marks else fcntl.LOCK_SH)
+        finally:
+            fcntl.flock(gate, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                fcntl.flock(machine, fcntl.LOCK_UN)
+

@@ -33,7 +33,7 @@ setup(
     zip_safe=True,
     entry_points={
         'console_scripts': [
-            'formation_agent = formation_agent.ros.main:main',
+            'formation_agent = formation_agent.ros.main:entry_point',
         ],
     },
 )

@@ -29,10 +29,10 @@ setup(
     entry_points={
         'console_scripts': [
             'formation = formation_sim.cli:main',
-            'formation_sim = formation_sim.runtime.sim_node:main',
-            'formation_recorder = formation_sim.runtime.recorder:main',
-            'formation_robot = formation_sim.runtime.robot_node:main',
-            'formation_coordinator = formation_sim.runtime.coordinator:main',
+            'formation_sim = formation_sim.runtime.sim_node:entry_point',
+            'formation_recorder = formation_sim.runtime.recorder:entry_point',
+            'formation_robot = formation_sim.runtime.robot_node:entry_point',
+            'formation_coordinator = formation_sim.runtime.coordinator:entry_point',
         ],
     },
 )

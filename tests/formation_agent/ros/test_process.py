@@ -53,3 +53,33 @@ def test_a_flag_is_clear_until_set() -> None:
     assert not flag.is_set()
     flag.set()
     assert flag.is_set()
+
+
+_HANGING_SHUTDOWN = """
+import time
+from formation_agent.ros.process import shutdown_guard
+status = 7
+with shutdown_guard('formation_test', lambda: status, bound=0.5):
+    time.sleep(60)  # a shutdown that never returns
+"""
+
+
+def test_a_shutdown_that_hangs_leaves_within_the_bound_with_the_status_and_says_so() -> None:
+    import subprocess
+
+    # (without the guard the block sleeps 60 s, and the run below times out)
+    done = subprocess.run([sys.executable, '-c', _HANGING_SHUTDOWN], capture_output=True, text=True, timeout=30)
+    assert done.returncode == 7, done.stderr
+    first, *stacks = done.stderr.splitlines()
+    assert first == 'formation_test: shutting rclpy down took more than 0.5 s; leaving without it (stacks below)'
+    assert any('line 6' in line for line in stacks), done.stderr  # the main thread's stack: where it hung
+
+
+def test_a_shutdown_that_ends_in_time_leaves_no_watchdog_behind() -> None:
+    import threading
+
+    from formation_agent.ros.process import shutdown_guard
+
+    with shutdown_guard('formation_test', lambda: 7, bound=0.05):
+        pass
+    assert not any(thread.name == 'shutdown_guard' for thread in threading.enumerate())

@@ -41,6 +41,7 @@ def _call(executor, client, request) -> tuple[object, float]:
     return future.result(), time.monotonic() - began
 
 
+@pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
 @pytest.mark.timeout(300)
 def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_parameter_calls(ros, tmp_path):
     from geometry_msgs.msg import Twist

@@ -182,6 +182,7 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
     assert (tmp_path / 'fleet' / 'robots.params.yaml').is_file()
 
 
+@pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_path):
     """SIGKILL leaves no zero command: `formation run` sees the agent's process die and stops the

@@ -871,6 +871,7 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
                 assert name == '/formation/scenario' or (name == '/formation/status' and decode_status(msg).step_index == DISCOVERY_STEP), name
 
 
+@pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.xdist_group('formation_distributed')

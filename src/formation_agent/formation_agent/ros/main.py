@@ -24,6 +24,7 @@ import sys
 import time
 import traceback
 from collections.abc import Sequence
+from typing import NoReturn
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -36,7 +37,7 @@ from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
 from formation_agent.ros.faults import FaultInjectionError
 from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError, PredictionError
 from formation_agent.ros.parameters import ParameterError, read_parameters
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor
+from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor, shutdown_guard
 from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.topics import agent_namespace
 
@@ -163,10 +164,19 @@ def main(args: Sequence[str] | None = None) -> int:
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)
-                node.destroy_node()
-            rclpy.try_shutdown()
+            with shutdown_guard('formation_agent', lambda: status):
+                for node in nodes:
+                    node.destroy_node()
+                rclpy.try_shutdown()
     return status
 
 
-if __name__ == '__main__':
+def entry_point() -> NoReturn:
+    """The `formation_agent` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
     exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()

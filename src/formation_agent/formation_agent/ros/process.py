@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import faulthandler
 import os
 import signal
 import sys
+import threading
+from collections.abc import Callable, Iterator
 from typing import NoReturn
 
 from rclpy.executors import SingleThreadedExecutor
@@ -22,6 +25,10 @@ EXIT_PEER_LOST = 3
 EXIT_REFUSED = 4
 """Exit status of a robot run's time keeper that refused to start: the robots' measured start
 breaks a hypothesis (no Step 0, no command was sent)."""
+
+SHUTDOWN_BOUND = 10.0
+"""How long a node process may take to destroy its nodes and shut rclpy down [s] before it leaves
+without them (`shutdown_guard`): every command has gone out by then, a process must still end."""
 
 # EXECUTORS (formation_msgs_py.middleware): rclpy's EventsExecutor (default) or the
 # SingleThreadedExecutor. The SingleThreadedExecutor rebuilds its wait set in Python on every spin;
@@ -107,3 +114,34 @@ def exit_process(status: int) -> NoReturn:
         with contextlib.suppress(Exception):
             stream.flush()
     os._exit(status)
+
+
+@contextlib.contextmanager
+def shutdown_guard(command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND) -> Iterator[None]:
+    """Leave the process with `status()` if the block (destroying the nodes, rclpy's shutdown)
+    has not ended within `bound` seconds, after one line naming it and every thread's stack on
+    stderr (the run's log).
+
+    Fast DDS can block in a participant's shutdown (a peer killed while it held a shared-memory
+    port's lock): a node that has sent its last command and said why it stopped must still exit,
+    or the run that started it waits for it.
+    """
+    done = threading.Event()
+
+    def leave() -> None:
+        if done.wait(bound):
+            return
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f'{command}: shutting rclpy down took more than {bound:g} s; leaving without it (stacks below)\n')
+            sys.stderr.flush()
+            faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        os._exit(status())
+
+    watchdog = threading.Thread(target=leave, name='shutdown_guard', daemon=True)
+    watchdog.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watchdog.join()
+

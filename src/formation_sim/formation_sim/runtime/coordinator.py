@@ -40,6 +40,7 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Sequence
+from typing import NoReturn
 
 import numpy as np
 import rclpy
@@ -53,7 +54,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
-from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, EXIT_REFUSED, StopSignals, exit_process, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, EXIT_REFUSED, StopSignals, exit_process, make_executor, shutdown_guard
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
@@ -458,9 +459,10 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] 
             status = EXIT_AGENT_LOST if isinstance(error, LOST_ERRORS) else EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
             _stop_and_write(node, executor, error)
         finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+            with shutdown_guard(node_class.COMMAND, lambda: status):
+                if node is not None:
+                    node.destroy_node()
+                rclpy.try_shutdown()
     return status
 
 
@@ -493,5 +495,12 @@ def _tell(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
 
-if __name__ == '__main__':
+def entry_point() -> NoReturn:
+    """The `formation_coordinator` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
     exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()

@@ -44,7 +44,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from types import FrameType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from formation_agent.ros.parameters import (
     DOUBLE,
@@ -233,7 +233,9 @@ class RecorderNode(Node):
         if values.get('output') == '':
             problems.append("parameter 'output' (string) must name the bag directory to create, got ''")
         if problems:
-            raise ParameterError(self.get_fully_qualified_name(), problems)
+            name = self.get_fully_qualified_name()
+            self.destroy_node()  # nothing of it outlives the refusal
+            raise ParameterError(name, problems)
         output = values['output']
         self._prefix = values['prefix']
         self._clock_topic = values['clock_topic']
@@ -513,7 +515,7 @@ def main(args: Sequence[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from formation_agent.ros.process import EXIT_BAD_INPUT, SignalFlag, make_executor
+    from formation_agent.ros.process import EXIT_BAD_INPUT, SignalFlag, make_executor, shutdown_guard
 
     argv = list(args if args is not None else sys.argv)
     _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts (exit 0)
@@ -553,8 +555,10 @@ def main(args: Sequence[str] | None = None) -> int:
         if node is not None:
             with contextlib.suppress(RecorderError):
                 node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with shutdown_guard('formation_recorder', lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0):
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if node is not None and node.failure is not None:
@@ -564,7 +568,14 @@ def main(args: Sequence[str] | None = None) -> int:
     return 0
 
 
-if __name__ == '__main__':
+def entry_point() -> NoReturn:
+    """The `formation_recorder` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
     from formation_agent.ros.process import exit_process
 
     exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()

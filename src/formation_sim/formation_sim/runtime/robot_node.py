@@ -36,6 +36,7 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Sequence
+from typing import NoReturn
 
 import numpy as np
 import rclpy
@@ -60,7 +61,7 @@ from formation_agent.ros.parameters import (
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor
+from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor, shutdown_guard
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
 from formation_msgs_py.topics import (
     ROBOT_NODE,
@@ -306,10 +307,19 @@ def main(args: Sequence[str] | None = None) -> int:
                     f'commands received {node.commands_received}, refused {node.commands_refused}, '
                     f'clipped by the limits {node.robot.saturated}, stops on timeout {node.timeouts}'
                 )
-                node.destroy_node()
-            rclpy.try_shutdown()
+            with shutdown_guard('formation_robot', lambda: status):
+                for node in nodes:
+                    node.destroy_node()
+                rclpy.try_shutdown()
     return status
 
 
-if __name__ == '__main__':
+def entry_point() -> NoReturn:
+    """The `formation_robot` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
     exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()

@@ -37,6 +37,7 @@ import json
 import math
 import time
 from collections.abc import Sequence
+from typing import NoReturn
 
 import numpy as np
 from geometry_msgs.msg import Accel, PoseArray, Twist
@@ -501,5 +502,12 @@ def main(args: Sequence[str] | None = None) -> int:
     return coordinator.main(args, node_class=FormationSimulatorNode)
 
 
-if __name__ == '__main__':
+def entry_point() -> NoReturn:
+    """The `formation_sim` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
     exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()

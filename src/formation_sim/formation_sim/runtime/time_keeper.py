@@ -88,7 +88,9 @@ class TimeKeeperNode(Node):
                 problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
             problems += self._world_problems(values, scenario)
         if problems:
-            raise ParameterError(self.get_fully_qualified_name(), problems)
+            name = self.get_fully_qualified_name()
+            self.destroy_node()  # nothing of it outlives the refusal
+            raise ParameterError(name, problems)
         self.parameter_values = values
         self.out_dir = values['out_dir']
         self.sample_period = values['sample_period']
