@@ -41,8 +41,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/analysis/report.py', 'render_markdown'): 95,
     ('formation_sim/commands/analyze.py', 'run'): 92,
     ('formation_sim/commands/simulate.py', 'run'): 87,
-    ('formation_sim/model/scenario.py', 'Scenario.__post_init__'): 92,
-    ('formation_sim/model/scenario.py', 'scenario_from_dict'): 92,
 }  # fmt: skip
 
 

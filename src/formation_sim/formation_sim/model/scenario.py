@@ -327,6 +327,24 @@ class Scenario:
         object.__setattr__(self, 'agent_ids', ids)
         index = {agent: k for k, agent in enumerate(ids)}
 
+        positions = self._set_states(ids)
+
+        expected = SingleGains if self.dynamics == 'single' else DoubleGains
+        if not isinstance(self.gains, expected):
+            raise ScenarioError(
+                f'gains: dynamics {short_repr(self.dynamics)} needs {expected.__name__}, '
+                f'got {type(self.gains).__name__}'
+            )
+
+        edges = _checked_edges(self.edges, ids=ids, index=index, p=positions.shape[1])
+        object.__setattr__(self, 'edges', edges)
+        object.__setattr__(self, '_index', index)
+        object.__setattr__(self, '_neighbours', None)  # built on first use
+        object.__setattr__(self, '_edge_indices', None)  # likewise
+
+    def _set_states(self, ids: tuple[int, ...]) -> np.ndarray:
+        """Positions, velocities (double) and headings (if any), checked against the agents `ids` and
+        set read-only; the positions."""
         positions = _float_array(self.positions, 'positions')
         if positions.ndim != 2 or positions.shape[0] != len(ids) or positions.shape[1] < 1:
             raise ScenarioError(
@@ -354,50 +372,7 @@ class Scenario:
                 raise ScenarioError(f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}')
             self._check_finite(headings[:, None], 'heading')
             object.__setattr__(self, 'headings', _readonly(headings))
-
-        expected = SingleGains if self.dynamics == 'single' else DoubleGains
-        if not isinstance(self.gains, expected):
-            raise ScenarioError(
-                f'gains: dynamics {short_repr(self.dynamics)} needs {expected.__name__}, '
-                f'got {type(self.gains).__name__}'
-            )
-
-        edges = tuple(self.edges)
-        p = positions.shape[1]
-        first_seen: dict[tuple[int, int], int] = {}
-        for k, edge in enumerate(edges):
-            if not isinstance(edge, Edge):
-                raise ScenarioError(f'edges[{k}]: expected an Edge, got {short_repr(edge)}')
-            i, j = edge.i, edge.j
-            if i not in index or j not in index:
-                role, agent = ('i', i) if i not in index else ('j', j)
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): {role}={agent} is not an agent (agents: {_id_list(ids)})'
-                )
-            if edge.d.shape != (p,):
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): d has {edge.d.size} components, expected {p} (the '
-                    f'dimension p of the positions): {edge.d.tolist()}'
-                )
-            key = (i, j) if i < j else (j, i)
-            seen = first_seen.setdefault(key, k)
-            if seen != k:
-                other = edges[seen]
-                # Seen from the first listing's orientation, the second one asks for this d.
-                implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
-                agreement = (
-                    'they agree'
-                    if np.array_equal(implied, other.d)
-                    else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
-                )
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
-                    f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
-                )
-        object.__setattr__(self, 'edges', edges)
-        object.__setattr__(self, '_index', index)
-        object.__setattr__(self, '_neighbours', None)  # built on first use
-        object.__setattr__(self, '_edge_indices', None)  # likewise
+        return positions
 
     def _check_finite(self, array: np.ndarray, what: str) -> None:
         bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
@@ -490,6 +465,43 @@ class Scenario:
         return self.gains.speed_scale
 
 
+def _checked_edges(edges, *, ids: tuple[int, ...], index: dict[int, int], p: int) -> tuple[Edge, ...]:
+    """The scenario's edges as a tuple, each between two of its agents (`ids`; `index`: their
+    places), with d in R^p, and listed once."""
+    edges = tuple(edges)
+    first_seen: dict[tuple[int, int], int] = {}
+    for k, edge in enumerate(edges):
+        if not isinstance(edge, Edge):
+            raise ScenarioError(f'edges[{k}]: expected an Edge, got {short_repr(edge)}')
+        i, j = edge.i, edge.j
+        if i not in index or j not in index:
+            role, agent = ('i', i) if i not in index else ('j', j)
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): {role}={agent} is not an agent (agents: {_id_list(ids)})'
+            )
+        if edge.d.shape != (p,):
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): d has {edge.d.size} components, expected {p} (the '
+                f'dimension p of the positions): {edge.d.tolist()}'
+            )
+        key = (i, j) if i < j else (j, i)
+        seen = first_seen.setdefault(key, k)
+        if seen != k:
+            other = edges[seen]
+            # Seen from the first listing's orientation, the second one asks for this d.
+            implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
+            agreement = (
+                'they agree'
+                if np.array_equal(implied, other.d)
+                else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
+            )
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
+                f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
+            )
+    return edges
+
+
 def _id_list(ids: tuple[int, ...]) -> str:
     if len(ids) <= 12:
         return ', '.join(map(str, ids))
@@ -536,7 +548,40 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     delta = _positive(data['communication_radius'], 'communication_radius', 'Δ')
     horizon = _positive(data['horizon'], 'horizon', 'the horizon')
 
-    agents = _mapping(data['agents'], 'agents')
+    entries, headings, dimension = _agents_from_dict(data['agents'], dynamics)
+    ids = tuple(sorted(entries))
+    if headings and len(headings) != len(ids):
+        missing = [a for a in ids if a not in headings]
+        raise ScenarioError(
+            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
+            'give every agent a heading or none'
+        )
+    positions = np.array([entries[a][0] for a in ids])
+    velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
+
+    edges = _edges_from_dict(data['edges'], ids=ids, dimension=dimension)
+
+    gains = _gains_from_dict(data['gains'], dynamics)
+    return Scenario(
+        name=scenario_name,
+        dynamics=dynamics,
+        delta=delta,
+        agent_ids=ids,
+        positions=positions,
+        velocities=velocities,
+        edges=tuple(edges),
+        gains=gains,
+        horizon=horizon,
+        headings=np.array([headings[a] for a in ids]) if headings else None,
+    )
+
+
+def _agents_from_dict(
+    raw: Any, dynamics: str
+) -> tuple[dict[int, tuple[np.ndarray, np.ndarray | None]], dict[int, float], int | None]:
+    """The scenario's `agents` mapping: per agent its position and velocity (double), the headings
+    given, and the dimension p."""
+    agents = _mapping(raw, 'agents')
     if len(agents) < 2:
         raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {len(agents)}')
     velocity_keys = ('position', 'velocity') if dynamics == 'double' else ('position',)
@@ -574,17 +619,11 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
             else None
         )
         entries[agent] = (position, velocity)
-    ids = tuple(sorted(entries))
-    if headings and len(headings) != len(ids):
-        missing = [a for a in ids if a not in headings]
-        raise ScenarioError(
-            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
-            'give every agent a heading or none'
-        )
-    positions = np.array([entries[a][0] for a in ids])
-    velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
+    return entries, headings, dimension
 
-    raw_edges = data['edges']
+
+def _edges_from_dict(raw_edges: Any, *, ids: tuple[int, ...], dimension: int | None) -> list[Edge]:
+    """The scenario's `edges` list, each edge between two of the agents `ids`, with d in R^p."""
     if not isinstance(raw_edges, list):
         raise ScenarioError(f'edges: expected a list of {{i, j, d}}, got {short_repr(raw_edges)}')
     edges = []
@@ -596,26 +635,13 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         j = _agent_id(raw['j'], f'{where}.j')
         where = f'edges[{k}] ({i}, {j})'
         for role, agent in (('i', i), ('j', j)):
-            if agent not in entries:
+            if agent not in ids:
                 raise ScenarioError(f'{where}: {role}={agent} is not an agent (agents: {_id_list(ids)})')
         if i == j:
             raise ScenarioError(f'{where}: i = j = {i} is a self-loop')
         d = _vector(raw['d'], f'{where}.d', size=dimension)
         edges.append(Edge(i=i, j=j, d=d))
-
-    gains = _gains_from_dict(data['gains'], dynamics)
-    return Scenario(
-        name=scenario_name,
-        dynamics=dynamics,
-        delta=delta,
-        agent_ids=ids,
-        positions=positions,
-        velocities=velocities,
-        edges=tuple(edges),
-        gains=gains,
-        horizon=horizon,
-        headings=np.array([headings[a] for a in ids]) if headings else None,
-    )
+    return edges
 
 
 def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
