@@ -37,7 +37,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/runtime/time_keeper.py', 'TimeKeeperNode'): 439,
     ('formation_sim/runtime/time_keeper.py', 'TimeKeeperNode.__init__'): 82,
     # Older pure units, long by a list of checks or steps in order; to be split.
-    ('formation_sim/commands/simulate.py', 'run'): 87,
 }  # fmt: skip
 
 
