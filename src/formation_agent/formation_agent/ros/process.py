@@ -1,4 +1,7 @@
-"""Node processes: which executor spins them, how SIGINT/SIGTERM stop them, how they exit."""
+"""Node processes: which executor spins them, how SIGINT/SIGTERM stop them, how they exit.
+
+Imports no rclpy at module level: the orchestrator (`formation run`, `formation robots`) uses its
+exit statuses and SignalFlag without loading ROS."""
 
 from __future__ import annotations
 
@@ -11,8 +14,6 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from typing import NoReturn
-
-from rclpy.executors import SingleThreadedExecutor
 
 from formation_msgs_py.middleware import EXECUTORS
 
@@ -44,6 +45,8 @@ def make_executor(kind: str, *, context=None):
 
         return EventsExecutor(context=context)
     if kind == 'single':
+        from rclpy.executors import SingleThreadedExecutor
+
         return SingleThreadedExecutor(context=context)
     raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
 
