@@ -12,6 +12,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from typing import NoReturn
 
@@ -84,6 +85,7 @@ class StopSignals:
 
     def __init__(self) -> None:
         self.received = SignalFlag()
+        self.received_at: float | None = None  # time.monotonic() of the first stop signal
         self._previous: dict = {}
 
     def __enter__(self) -> StopSignals:
@@ -95,6 +97,8 @@ class StopSignals:
             signal.signal(sig, handler)
 
     def _on_signal(self, signum, frame) -> None:
+        if self.received_at is None:  # assignments only: no lock in a handler
+            self.received_at = time.monotonic()
         self.received.set()
 
     def check(self) -> None:
