@@ -46,4 +46,4 @@ def test_the_wait_for_acknowledgements_ends_when_a_moving_deadline_passes() -> N
 def test_a_fixed_deadline_bounds_the_wait() -> None:
     outbox = Outbox(_Node(), AgentCounts(agent_id=1), neighbour_ids=(2,))
     outbox.wait_for_delivery(time.monotonic() + 0.05)
-    assert 1 <= outbox.status.waits and outbox.info[2].waits == outbox.status.waits
+    assert outbox.status.waits >= 1 and outbox.info[2].waits == outbox.status.waits
