@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-from formation_agent.ros.process import EXIT_REFUSED  # 4: the robots' measured start broke a hypothesis, nothing was sent
+from formation_agent.ros.process import EXIT_REFUSED, SignalFlag  # 4: the robots' measured start broke a hypothesis, nothing was sent
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
 from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, RECORDER_NODE, ROBOT_NODE, SIMULATOR_NODE, agent_namespace
 from formation_sim.model.scenario import Scenario, load_scenario
@@ -285,7 +285,7 @@ class FormationRun:
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
         self.marks: dict[str, float] = {}
-        self._interrupted = threading.Event()
+        self._interrupted = SignalFlag()  # set in a signal handler: no lock (process.SignalFlag)
         self._started_at = 0.0
 
     def _environment(self, domain_id: int, processes: int | None = None) -> dict[str, str]:
