@@ -217,9 +217,8 @@ class FormationSimulatorNode(TimeKeeperNode):
         """The exact world, its sampler and the tools' view of it."""
         scenario = self.scenario
         self.world = World.from_scenario(scenario)
-        # The agents' threshold, the very same floats, to stop where the engine stops.
-        self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
-        self._floor_edges = FloorEdges.of(scenario)
+        # The agents' threshold (the very same floats) and the edges of the rounding floor: stop where the engine stops.
+        self._threshold_model, self._floor_edges = build_agent(scenario, scenario.agent_ids[0]), FloorEdges.of(scenario)
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
         start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=self.world.velocities)
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
