@@ -27,11 +27,8 @@ ALLOWED: dict[tuple[str, str], int] = {
     # formation_agent.core.eta: the agent base class holds the shared trigger logic of ETA-1 and
     # ETA-2 (receive, trigger, search); its subclasses carry the unrolled hot loops, bit-exact.
     ('formation_agent/core/eta.py', '_EventTriggeredAgent'): 337,
-    # The runtime's nodes and FormationRun: their tests start ROS processes; split them with those
-    # tests run, not blind.
-    ('formation_sim/runtime/orchestrate.py', 'FormationRun'): 407,
-    ('formation_sim/runtime/orchestrate.py', 'FormationRun.__init__'): 160,
-    ('formation_sim/runtime/orchestrate.py', 'FormationRun.run'): 93,
+    # The runtime's nodes: their tests start ROS processes; split them with those tests run, not
+    # blind.
     ('formation_sim/runtime/recorder.py', 'RecorderNode'): 303,
     ('formation_sim/runtime/recorder.py', 'RecorderNode.__init__'): 88,
     ('formation_sim/runtime/sim_node.py', 'FormationSimulatorNode'): 309,
