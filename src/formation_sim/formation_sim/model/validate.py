@@ -493,9 +493,10 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
     Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
     prediction moves in steps of one ulp of y_ij, and each such step moves the triggering error
     by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
-    k2 f_ij ulp(q_i - q_j); `theory.rounding_step`). Near the threshold the computed error then stands still for a while
-    at some margin φ > tolerance, and the certified search walks such a plateau in steps of
-    about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α tolerance). It gives
+    k2 f_ij ulp(q_i - q_j); `theory.rounding_step`). Near the threshold the computed error then
+    stands still for a while at some margin φ > tolerance, and the certified search walks such a
+    plateau in steps of about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α
+    tolerance). It gives
     up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
     σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
     ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
