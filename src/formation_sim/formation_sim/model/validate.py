@@ -493,14 +493,14 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
     Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
     prediction moves in steps of one ulp of y_ij, and each such step moves the triggering error
     by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
-    k2 f_ij ulp(q_i - q_j)). Near the threshold the computed error then stands still for a while
+    k2 f_ij ulp(q_i - q_j); `theory.rounding_step`). Near the threshold the computed error then stands still for a while
     at some margin φ > tolerance, and the certified search walks such a plateau in steps of
     about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α tolerance). It gives
     up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
     σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
     ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
     (Late in a run the threshold itself shrinks toward the rounding of the states: the engine's
-    rounding floor stops the run there.)
+    rounding floor, the same ρ with the ulp of the positions, stops the run there.)
     """
     gains = scenario.gains
     if scenario.dynamics == 'single':
@@ -519,13 +519,11 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
         speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
 
     def error_step(k: int, sigma: float) -> float:
-        ratio = float(capacities[k]) / sigma  # g, h, f through c/σ: no overflow for any finite Δ
-        step = k1 * (2.0 * ratio * ratio / sigma) * float(ulp_y[k])
-        if k2 > 0.0:
-            if speed[k] > 0.0:
-                step += k2 * ((2.0 * ratio + 1.0) / (sigma * sigma)) * float(speed[k] * ulp_y[k])
-            step += k2 * ((ratio + 1.0) / sigma) * float(ulp_q[k])
-        return step
+        return float(
+            theory.rounding_step(
+                float(capacities[k]), sigma, float(ulp_y[k]), k1=k1, k2=k2, speed=float(speed[k]), ulp_q=float(ulp_q[k])
+            )
+        )
 
     limit = PRECISION_LIMIT * threshold
     for k, edge in enumerate(scenario.edges):
