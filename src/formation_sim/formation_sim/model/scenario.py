@@ -605,6 +605,11 @@ def _agents_from_dict(
             )
         if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
             raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
+        if 'position' not in entry:
+            raise ScenarioError(
+                f'{where}: position missing (robots set down by hand: `formation measure` writes their '
+                'positions from their poses)'
+            )
         _check_keys(entry, where, required=velocity_keys, optional=('heading',))
         if 'heading' in entry:
             headings[agent] = _finite_float(entry['heading'], f'{where}.heading')
@@ -1058,26 +1063,29 @@ def file_kind(path: str | Path) -> str:
     return 'JSON' if Path(path).suffix.lower() == JSON_SUFFIX else 'YAML'
 
 
-def scenario_from_text(text: str, *, kind: str, source: str, name: str) -> Scenario:
-    """The scenario in `text` (a file's content, `kind` 'JSON' or 'YAML'), checked as `load_scenario`
-    checks a file: size, syntax, schema; `name` if the text has none; errors name `source`."""
+def _parsed(text: str, *, kind: str, source: str) -> Any:
+    """The data in `text` (size and syntax checked, the schema not yet)."""
     size = len(text.encode('utf-8'))
     if size > _size_limit(kind):
         raise _too_large(source, size, kind)
-    data = _parse_json(text, source) if kind == 'JSON' else _parse_yaml(text, source)
+    return _parse_json(text, source) if kind == 'JSON' else _parse_yaml(text, source)
+
+
+def scenario_from_text(text: str, *, kind: str, source: str, name: str) -> Scenario:
+    """The scenario in `text` (a file's content, `kind` 'JSON' or 'YAML'), checked as `load_scenario`
+    checks a file: size, syntax, schema; `name` if the text has none; errors name `source`."""
+    data = _parsed(text, kind=kind, source=source)
     try:
         return scenario_from_dict(data, name=name)
     except ScenarioError as error:
         raise ScenarioError(f'{source}: {error}') from None
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a file: JSON
-    if its name ends in .json, YAML otherwise."""
+def _scenario_source(name_or_path: str | Path) -> tuple[str, str, str, str]:
+    """(text, kind, source, name) of a built-in scenario or a file (ScenarioError if neither)."""
     if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
         resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
-        text = resource.read_text(encoding='utf-8')
-        return scenario_from_text(text, kind='YAML', source=f'built-in scenario {short_repr(name_or_path)}', name=name_or_path)
+        return resource.read_text(encoding='utf-8'), 'YAML', f'built-in scenario {short_repr(name_or_path)}', name_or_path
     named = bool(str(name_or_path).strip())  # Path('') would be the current folder
     path = Path(name_or_path)
     if named and path.is_dir():
@@ -1088,7 +1096,22 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             f'({", ".join(builtin_scenarios())})'
         )
     kind = file_kind(path)
-    return scenario_from_text(_read_text(path, kind=kind), kind=kind, source=str(path), name=path.stem)
+    return _read_text(path, kind=kind), kind, str(path), path.stem
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a file: JSON
+    if its name ends in .json, YAML otherwise."""
+    text, kind, source, name = _scenario_source(name_or_path)
+    return scenario_from_text(text, kind=kind, source=source, name=name)
+
+
+def load_scenario_data(name_or_path: str | Path) -> tuple[Any, str, str]:
+    """A scenario's data as its file holds it, size and syntax checked but not its schema (so
+    that agents may lack their positions: `formation measure` fills them in); with the name it
+    gets when the data has none, and the source its errors name."""
+    text, kind, source, name = _scenario_source(name_or_path)
+    return _parsed(text, kind=kind, source=source), name, source
 
 
 class _Dumper(yaml.SafeDumper):
