@@ -74,8 +74,10 @@ def _raw(msg) -> bytes:
 
 
 def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
+    from formation_sim.runtime.time_keeper import discovery_gaps
+
     node = coordinator()
-    gaps = node._discovery_gaps()
+    gaps = discovery_gaps(node)
     assert 'agents whose triggering-information writer is not matched: 1, 2, 3, 4' in gaps
     assert 'robots whose robot/true_odom writer is not matched (not running, or a best-effort writer): 1, 2, 3, 4' in gaps
     assert '/formation/robots readers 0/1' not in gaps  # no recorder asked for
@@ -175,12 +177,13 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
     from formation_sim.runtime.results import excused_after_end
     from formation_sim.runtime.supervise import Child
+    from formation_sim.runtime.time_keeper import run_extra
 
     node = _running(coordinator, horizon=0.5)
     node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
     node._on_report(_report(2, 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'))
     assert node.failure_info is None
-    extra = node._run_extra(node.reached_time)
+    extra = run_extra(node, node.reached_time)
     assert extra['failure'] is None and extra['after_end'] == {'2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'}
     (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
 

@@ -35,6 +35,7 @@ def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
 
     from formation_msgs_py.codec import encode_agent_report
     from formation_msgs_py.lockstep import AgentReport
+    from formation_sim.runtime.time_keeper import message_counts
 
     node = simulator()
     node._on_status(Float64MultiArray(data=[1.0, 2.0, 0.0]))  # too short
@@ -46,7 +47,7 @@ def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
 
     node._on_report(encode_agent_report(AgentReport(agent=2, final=True, rejected={'sender': 3}, dropped=4)))
     node._on_report(encode_agent_report(AgentReport(agent=2, final=False, rejected={})))  # after the final one
-    counts = node._message_counts()
+    counts = message_counts(node)
     assert counts['rejected_messages'] == {
         'total': 3 + 4,
         'by_reason': {'field': 2, 'length': 1, 'sender': 3, 'version': 1},
@@ -99,9 +100,10 @@ def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator)
 
 def test_discovery_says_what_it_still_waits_for(simulator):
     from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
+    from formation_sim.runtime.time_keeper import discovery_gaps
 
     node = simulator()  # alone in its domain: no agent has matched anything
-    gaps = node._discovery_gaps()
+    gaps = discovery_gaps(node)
     assert '/formation/step readers 0/3' in gaps
     assert '/formation/status writers 0/3' in gaps
     assert 'agents whose command writer is not matched: 1, 2, 3' in gaps
@@ -109,7 +111,7 @@ def test_discovery_says_what_it_still_waits_for(simulator):
     ready = dict(step_index=DISCOVERY_STEP, next_time=0.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
     node.agents[2].status = Status(agent=2, **ready)
     node.agents[3].lost = (0.0, 'no sign of life')
-    gaps = node._discovery_gaps()
+    gaps = discovery_gaps(node)
     assert 'agents not ready (their own endpoints unmatched): 1, 3' in gaps
     assert 'agents whose liveliness lease expired: 3' in gaps
     assert not node._connected()

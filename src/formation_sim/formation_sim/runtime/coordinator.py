@@ -87,7 +87,7 @@ from formation_sim.runtime.run_book import (
     ids_text,
 )
 from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results, write_unstarted
-from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
+from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
@@ -312,7 +312,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._publish(self._step_pub, encode_step(self.step))  # first: the robots stop now
         self.finished = True
         self._reached = self.horizon
-        self.graph = self.snapshot_graph()  # the agents are still there: they leave after their final reports
+        self.graph = graph_of(self)  # the agents are still there: they leave after their final reports
 
     @property
     def reached_time(self) -> float:
@@ -359,7 +359,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             sensing_calls=sum(map(len, trigger_times.values())),
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
-                **self._run_extra(end),
+                **run_extra(self, end),
                 **self.book.lateness(trigger_times),
                 'robots': self.robots,
                 'saturation': self.book.saturation(),

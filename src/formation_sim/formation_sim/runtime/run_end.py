@@ -17,7 +17,7 @@ import rclpy
 from rclpy.duration import Duration
 
 from formation_sim.runtime.run_book import RecorderBook
-from formation_sim.runtime.time_keeper import TimeKeeperNode
+from formation_sim.runtime.time_keeper import TimeKeeperNode, run_extra
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.summary import SUMMARY_FILE, unstarted_summary, write_summary, write_summary_file
 
@@ -84,7 +84,7 @@ def write_unstarted(node: TimeKeeperNode) -> None:
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     mode = 'distributed' if node.serves_sensing else 'robots'
-    extra = {**node._run_extra(0.0), 'started': False}
+    extra = {**run_extra(node, 0.0), 'started': False}
     write_summary_file(unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE)
 
 

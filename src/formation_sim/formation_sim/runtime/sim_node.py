@@ -90,7 +90,7 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     RecorderLostError,
     StallError,
 )
-from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
+from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.engine import FloorEdges, Sampler, build_agent, due_twice, rounding_floor
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
@@ -327,7 +327,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             self.world.advance(self.horizon)
             self._sampler.event()
             self._finished_at = time.monotonic()
-            self.graph = self.snapshot_graph()
+            self.graph = graph_of(self)
             self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
             self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
@@ -431,7 +431,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             self.world.advance(self.horizon)
             self._sampler.event()
             self._finished_at = time.monotonic()
-            self.graph = self.snapshot_graph()
+            self.graph = graph_of(self)
             self.finished = True
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
             self.publish_samples()
@@ -492,7 +492,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
-                **self._run_extra(self.world.time),
+                **run_extra(self, self.world.time),
                 **(self.book.lateness({i: book.trigger_times for i, book in self.agents.items()}) if self.realtime else {}),
             },
         )

@@ -61,7 +61,75 @@ TIME_KEEPER_PARAMETERS = (
 """What the coordinator and the simulator share."""
 
 
-class TimeKeeperNode(Node):
+class WorldHooks:
+    """What a world supplies to the time keeper (the coordinator's: the robots; the simulator's:
+    the exact one): the class attributes and methods each subclass of `TimeKeeperNode` sets or
+    overrides; those that raise NotImplementedError it must."""
+
+    PARAMETERS: tuple[ParameterSpec, ...]  # the node's parameters (--help, docs/PARAMETERS.md)
+    COMMAND: str  # its console script
+    PARAMS_FILE: str  # its parameters in a run folder
+    DESCRIPTION: str  # what --help says it is
+    serves_sensing: bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
+    watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
+
+    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+        """The rules between the world's parameters and the scenario, each broken one named."""
+        raise NotImplementedError
+
+    def _clock_mode(self, values: dict) -> str:
+        """'lockstep' or 'realtime', from the parameters (read before anything is set up)."""
+        raise NotImplementedError
+
+    def _setup_world(self) -> None:
+        """The world's publishers (the tools' among `_tool_publishers`) and subscriptions."""
+        raise NotImplementedError
+
+    def _watch_agents(self) -> dict:
+        """Per agent, a subscription whose writer's DDS liveliness is the agent's sign of life
+        (its liveliness events go to `_on_agent_liveliness`)."""
+        raise NotImplementedError
+
+    def _world_gaps(self) -> list[str]:
+        """What discovery still waits for in the world."""
+        raise NotImplementedError
+
+    def _check_start(self) -> str:
+        """Before step 0, with everything connected: raise if the world breaks a hypothesis (nothing
+        was sent yet); else a note for the progress line ('' or ending in '; ')."""
+        return ''
+
+    def _world_extra(self) -> dict:
+        """summary.json's `extra` of the world, also for a run that did not start."""
+        return {}
+
+    def _begin(self) -> None:
+        """t = 0: Step 0."""
+        raise NotImplementedError
+
+    def _running_tick(self) -> None:
+        """A tick of the running run: the world's checks, and the final Step at the horizon."""
+        raise NotImplementedError
+
+    @property
+    def reached_time(self) -> float:
+        """The run's time now."""
+        raise NotImplementedError
+
+    def after_final_step(self, executor) -> None:
+        """What the world still waits for after the final Step, before the summary."""
+        raise NotImplementedError
+
+    def flush(self) -> None:
+        """Anything still to publish before the node goes."""
+        raise NotImplementedError
+
+    def record(self) -> RunRecord:
+        """The run as a `RunRecord` (summary.json)."""
+        raise NotImplementedError
+
+
+class TimeKeeperNode(WorldHooks, Node):
     """The life cycle of a distributed run: discovery, step 0, the run watched, its end; the world
     is a subclass's."""
 
@@ -155,11 +223,11 @@ class TimeKeeperNode(Node):
         elif now - self._created > self.discovery_timeout:
             raise DiscoveryError(
                 f'discovery did not complete within {self.discovery_timeout} s; still missing: '
-                + '; '.join(self._discovery_gaps())
+                + '; '.join(discovery_gaps(self))
             )
         elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
             self._next_discovery_progress = now + self.progress_period
-            self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(self._discovery_gaps()))
+            self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(discovery_gaps(self)))
 
     def _on_announcement(self, status) -> None:
         """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
@@ -173,33 +241,7 @@ class TimeKeeperNode(Node):
                 self._start()
 
     def _connected(self) -> bool:
-        return not self._discovery_gaps()
-
-    def _discovery_gaps(self) -> list[str]:
-        """What discovery still waits for (empty: step 0 can go)."""
-        n, extra = len(self.agents), self.extra_subscribers
-        gaps = []
-
-        def count(what: str, have: int, want: int) -> None:
-            if have < want:
-                gaps.append(f'{what} {have}/{want}')
-
-        count(f'{STEP_TOPIC} readers', self._step_pub.get_subscription_count(), n + extra + self.step_listeners)
-        for pub in self._tool_publishers:
-            count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
-        count(f'{STATUS_TOPIC} writers', self._status_sub.get_publisher_count(), n)
-        count(f'{REPORT_TOPIC} writers', self._report_sub.get_publisher_count(), n)
-        count(f'{RECORDER_TOPIC} writers (recorders)', self._recorder_sub.get_publisher_count(), extra)
-        unmatched = [i for i, sub in self._agent_writers.items() if sub.get_publisher_count() < 1]
-        expired = [i for i, book in self.agents.items() if book.lost is not None]
-        for what, agents in (
-            (f'agents whose {self.watched_writer} writer is not matched', unmatched),
-            ('agents whose liveliness lease expired', expired),
-            ('agents not ready (their own endpoints unmatched)', self.book.not_ready()),
-        ):
-            if agents:
-                gaps.append(f'{what}: {ids_text(agents)}')
-        return gaps + self._world_gaps()
+        return not discovery_gaps(self)
 
     def _start(self) -> None:
         note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
@@ -218,11 +260,11 @@ class TimeKeeperNode(Node):
         if self._finished_at is None:
             self._finished_at = time.monotonic()
         if not self.graph and not self.realtime:  # the graph as it is now, before the final Step sends the agents home
-            self.graph = self.snapshot_graph()
+            self.graph = graph_of(self)
         self.finished = True
         self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
         if not self.graph:  # on the wall clock (robots), the final Step first: the agents leave after their reports
-            self.graph = self.snapshot_graph()
+            self.graph = graph_of(self)
 
     def fail(self, error: BaseException) -> None:
         """Note why the run stops early (extra.failure of the summary)."""
@@ -366,124 +408,14 @@ class TimeKeeperNode(Node):
         except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
             self.progress_period = 0.0
 
-    def snapshot_graph(self) -> dict:
-        """Publishers, subscriptions, services and clients of every node in the graph (graph.json).
-
-        Taken at the final Step, while every agent is still there (and, for a run that stops
-        early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
-        graph = {}
-        for name, namespace in self.get_node_names_and_namespaces():
-            key = f'{namespace.rstrip("/")}/{name}'
-            graph[key] = {
-                'publishers': sorted(t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)),
-                'subscriptions': sorted(t for t, _ in self.get_subscriber_names_and_types_by_node(name, namespace)),
-                'services': sorted(s for s, _ in self.get_service_names_and_types_by_node(name, namespace)),
-                'clients': sorted(s for s, _ in self.get_client_names_and_types_by_node(name, namespace)),
-            }
-        return graph
-
     def mark(self, name: str) -> None:
         """Note the time the run reached `name` (extra.timestamps)."""
         self._marks[name] = time.monotonic()
-
-    def timestamps(self) -> dict[str, float]:
-        """When this node reached each mark of the run, as Unix times (summary.json
-        extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
-        agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
-        final_reports (every agent's final report in, or the wait for them over), delivered (what
-        this node published acknowledged)."""
-        marks = dict(self._marks)
-        if self._finished_at is not None:
-            marks['final_step'] = self._finished_at
-        offset = time.time() - time.monotonic()
-        return {name: at + offset for name, at in marks.items()}
-
-    def _run_extra(self, reached: float) -> dict:
-        """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
-        return {
-            'clock': self.clock_mode,
-            'steps': self.steps,
-            'discovery_wall_time': (self._started or self._created) - self._created,
-            'timestamps': self.timestamps(),
-            'reached_time': reached,
-            'failure': self.failure_info,
-            **self._world_extra(),
-            **({'after_end': {str(i): why for i, why in sorted(self.after_end.items())}} if self.after_end else {}),
-            **self._message_counts(),
-        }
-
-    def _message_counts(self) -> dict:
-        """Messages rejected, faults injected, reports missing, and what was published per topic."""
-        return {**self.book.message_counts(), 'published': self.book.published(self.published)}
 
     def delivery_publishers(self, *, with_steps: bool) -> list:
         """The writers whose readers must acknowledge everything before the node goes: the tools'
         topics and, `with_steps`, the Steps."""
         return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
-
-    # -- what a world supplies (the coordinator's: the robots; the simulator's: the exact one) ----
-
-    PARAMETERS: tuple[ParameterSpec, ...]  # the node's parameters (--help, docs/PARAMETERS.md)
-    COMMAND: str  # its console script
-    PARAMS_FILE: str  # its parameters in a run folder
-    DESCRIPTION: str  # what --help says it is
-    serves_sensing: bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
-    watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
-
-    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
-        """The rules between the world's parameters and the scenario, each broken one named."""
-        raise NotImplementedError
-
-    def _clock_mode(self, values: dict) -> str:
-        """'lockstep' or 'realtime', from the parameters (read before anything is set up)."""
-        raise NotImplementedError
-
-    def _setup_world(self) -> None:
-        """The world's publishers (the tools' among `_tool_publishers`) and subscriptions."""
-        raise NotImplementedError
-
-    def _watch_agents(self) -> dict:
-        """Per agent, a subscription whose writer's DDS liveliness is the agent's sign of life
-        (its liveliness events go to `_on_agent_liveliness`)."""
-        raise NotImplementedError
-
-    def _world_gaps(self) -> list[str]:
-        """What discovery still waits for in the world."""
-        raise NotImplementedError
-
-    def _check_start(self) -> str:
-        """Before step 0, with everything connected: raise if the world breaks a hypothesis (nothing
-        was sent yet); else a note for the progress line ('' or ending in '; ')."""
-        return ''
-
-    def _world_extra(self) -> dict:
-        """summary.json's `extra` of the world, also for a run that did not start."""
-        return {}
-
-    def _begin(self) -> None:
-        """t = 0: Step 0."""
-        raise NotImplementedError
-
-    def _running_tick(self) -> None:
-        """A tick of the running run: the world's checks, and the final Step at the horizon."""
-        raise NotImplementedError
-
-    @property
-    def reached_time(self) -> float:
-        """The run's time now."""
-        raise NotImplementedError
-
-    def after_final_step(self, executor) -> None:
-        """What the world still waits for after the final Step, before the summary."""
-        raise NotImplementedError
-
-    def flush(self) -> None:
-        """Anything still to publish before the node goes."""
-        raise NotImplementedError
-
-    def record(self) -> RunRecord:
-        """The run as a `RunRecord` (summary.json)."""
-        raise NotImplementedError
 
 
 def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
@@ -506,3 +438,79 @@ def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tupl
         node.destroy_node()  # nothing of it outlives the refusal
         raise ParameterError(name, problems)
     return values, scenario
+
+
+def graph_of(node) -> dict:
+    """Publishers, subscriptions, services and clients of every node in the graph `node` sees
+    (graph.json).
+
+    Taken at the final Step, while every agent is still there (and, for a run that stops
+    early, when it stops), not at step 0: 1000 agents' graph takes seconds to walk."""
+    graph = {}
+    for name, namespace in node.get_node_names_and_namespaces():
+        key = f'{namespace.rstrip("/")}/{name}'
+        graph[key] = {
+            'publishers': sorted(t for t, _ in node.get_publisher_names_and_types_by_node(name, namespace)),
+            'subscriptions': sorted(t for t, _ in node.get_subscriber_names_and_types_by_node(name, namespace)),
+            'services': sorted(s for s, _ in node.get_service_names_and_types_by_node(name, namespace)),
+            'clients': sorted(s for s, _ in node.get_client_names_and_types_by_node(name, namespace)),
+        }
+    return graph
+
+
+def discovery_gaps(node: TimeKeeperNode) -> list[str]:
+    """What discovery of `node`'s run still waits for (empty: step 0 can go)."""
+    n, extra = len(node.agents), node.extra_subscribers
+    gaps = []
+
+    def count(what: str, have: int, want: int) -> None:
+        if have < want:
+            gaps.append(f'{what} {have}/{want}')
+
+    count(f'{STEP_TOPIC} readers', node._step_pub.get_subscription_count(), n + extra + node.step_listeners)
+    for pub in node._tool_publishers:
+        count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
+    count(f'{STATUS_TOPIC} writers', node._status_sub.get_publisher_count(), n)
+    count(f'{REPORT_TOPIC} writers', node._report_sub.get_publisher_count(), n)
+    count(f'{RECORDER_TOPIC} writers (recorders)', node._recorder_sub.get_publisher_count(), extra)
+    unmatched = [i for i, sub in node._agent_writers.items() if sub.get_publisher_count() < 1]
+    expired = [i for i, book in node.agents.items() if book.lost is not None]
+    for what, agents in (
+        (f'agents whose {node.watched_writer} writer is not matched', unmatched),
+        ('agents whose liveliness lease expired', expired),
+        ('agents not ready (their own endpoints unmatched)', node.book.not_ready()),
+    ):
+        if agents:
+            gaps.append(f'{what}: {ids_text(agents)}')
+    return gaps + node._world_gaps()
+
+
+def run_timestamps(node: TimeKeeperNode) -> dict[str, float]:
+    """When the time keeper `node` reached each mark of the run, as Unix times (summary.json
+    extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+    agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+    final_reports (every agent's final report in, or the wait for them over), delivered (what
+    this node published acknowledged)."""
+    marks = dict(node._marks)
+    if node._finished_at is not None:
+        marks['final_step'] = node._finished_at
+    offset = time.time() - time.monotonic()
+    return {name: at + offset for name, at in marks.items()}
+
+def run_extra(node: TimeKeeperNode, reached: float) -> dict:
+    """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
+    return {
+        'clock': node.clock_mode,
+        'steps': node.steps,
+        'discovery_wall_time': (node._started or node._created) - node._created,
+        'timestamps': run_timestamps(node),
+        'reached_time': reached,
+        'failure': node.failure_info,
+        **node._world_extra(),
+        **({'after_end': {str(i): why for i, why in sorted(node.after_end.items())}} if node.after_end else {}),
+        **message_counts(node),
+    }
+
+def message_counts(node: TimeKeeperNode) -> dict:
+    """Messages rejected, faults injected, reports missing, and what was published per topic."""
+    return {**node.book.message_counts(), 'published': node.book.published(node.published)}
