@@ -55,7 +55,7 @@ def long_run_scenario(tmp_path_factory) -> str:
     """A scenario file whose distributed run is still stepping when a test stops or kills part of it.
 
     Section 5's single-integrator example with β = 0.05 up to t = 600: ~3 000 events, tens of
-    seconds of lock-step. (The example itself, β = 1, stops at the rounding floor at t ≈ 35 after
+    seconds of lock-step. (The example itself, β = 1, stops at the rounding floor at t ≈ 34.4 after
     about a second of stepping: a kill that comes later meets a finished run.)
     """
     import yaml

@@ -10,7 +10,14 @@ from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 
-from formation_msgs_py.cdr import OdometryWriter, decode_odometry_cdr, decode_pose_stamped_cdr, pack_pose_stamped
+from formation_msgs_py.cdr import (
+    OdometryWriter,
+    decode_odometry_cdr,
+    decode_pose_stamped_cdr,
+    odometry_fields,
+    pack_pose_stamped,
+    pose_stamped_fields,
+)
 from formation_msgs_py.codec import MessageError, decode_odometry, decode_pose_stamped
 
 FRAMES = [('world', 'agent_1/base_link'), ('', ''), ('map', 'a'), ('odom', 'robot_12/base_footprint_x')]
@@ -83,3 +90,31 @@ def test_bad_bytes_are_refused_with_the_rule_and_bad_values_as_the_message_decod
     flat = _odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 0.1), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
     with pytest.raises(MessageError, match='orientation must be a unit quaternion'):
         decode_odometry_cdr(serialize_message(flat))
+
+
+@pytest.mark.parametrize(('frame', 'child'), FRAMES)
+def test_the_fields_of_serialized_poses_are_the_messages_fields_bit_for_bit_and_unchecked(frame, child):
+    """What the coordinator samples from raw poses: the fields rclpy (or a bag reader) gives, as sent."""
+    rng = np.random.default_rng(5)
+    for k in range(100):
+        q = rng.normal(size=4)
+        position = (math.nan, 1.0, 2.0) if k == 0 else tuple(rng.normal(size=3))  # values unchecked, as sent
+        odometry = _odometry(float(rng.uniform(0, 2e9)), frame, child, position, tuple(q / np.linalg.norm(q) * 1.01),
+                             tuple(rng.normal(size=3)), float(rng.normal()), (0.003, 0.0))  # fmt: skip
+        odometry.twist.twist.angular.x, odometry.twist.twist.angular.y = rng.normal(size=2)
+        sec, nanosec, pose, twist = odometry_fields(serialize_message(odometry))
+        p, o, t = odometry.pose.pose.position, odometry.pose.pose.orientation, odometry.twist.twist
+        assert (sec, nanosec) == (odometry.header.stamp.sec, odometry.header.stamp.nanosec)
+        expected = (p.x, p.y, p.z, o.x, o.y, o.z, o.w)
+        assert np.array_equal(pose, expected, equal_nan=True)
+        assert twist == (t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z)
+        stamped = PoseStamped(header=odometry.header, pose=odometry.pose.pose)
+        sec, nanosec, pose = pose_stamped_fields(serialize_message(stamped))
+        assert (sec, nanosec) == (odometry.header.stamp.sec, odometry.header.stamp.nanosec)
+        assert np.array_equal(pose, expected, equal_nan=True)
+    good = serialize_message(odometry)
+    for cut in (0, 12, len(good) - 1):
+        with pytest.raises(MessageError, match='bytes') as caught:
+            odometry_fields(good[:cut])
+        assert caught.value.reason == 'length'
+

@@ -58,6 +58,8 @@ def _bad_input(tmp_path):
         (['replay', missing, '--domain-id', '233'], 'argument --domain-id: must be an integer in [0, 232]'),
         (['topics', '--wait', '-1'], 'argument --wait: must be a finite number >= 0, got -1.0'),
         (['topics', '--domain-id', 'x'], "argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 'x'"),
+        (['measure', 'robots_lab', '--robot', 'unicycle', '--out', str(tmp_path / 'a_file')], 'a_file: exists; choose a new file'),
+        (['measure', 'robots_lab', '--robot', 'tank', '--out', str(tmp_path / 'm.yaml')], "argument --robot: invalid choice: 'tank'"),
         (['echo', 'not a topic'], 'argument TOPIC: Invalid topic name'),
         (['echo', '/formation/step', '--count', '0'], 'argument --count: must be an integer >= 1, got 0'),
         (['echo', '/formation/step', '--timeout', 'inf'], 'argument --timeout: must be a finite number > 0, got inf'),

@@ -97,11 +97,16 @@ def pack_pose_stamped(stamp: float, frame: str, position: Sequence[float], orien
 
 
 def _header(data: bytes, what: str) -> tuple[float, str, int]:
+    sec, nanosec, frame, end = _stamp_and_frame(data, what)
+    return sec + nanosec * 1e-9, frame, end
+
+
+def _stamp_and_frame(data: bytes, what: str) -> tuple[int, int, str, int]:
     if len(data) < _HEADER + _STAMP.size + 4 or data[:2] != ENCAPSULATION[:2]:
         raise MessageError(f'{what}: {len(data)} bytes are not a little-endian CDR message', reason=REJECT_LENGTH)
     sec, nanosec = _STAMP.unpack_from(data, _HEADER)
     frame, end = _read_string(data, _HEADER + _STAMP.size, what)
-    return sec + nanosec * 1e-9, frame, end
+    return sec, nanosec, frame, end
 
 
 def _need(data: bytes, end: int, what: str) -> None:
@@ -131,3 +136,25 @@ def decode_pose_stamped_cdr(data: bytes) -> RobotPose:
     values = _POSE.unpack_from(data, pose_at)
     position, orientation = pose_values('pose', values[:3], values[3:])
     return RobotPose(stamp=stamp, frame=frame, position=position, orientation=orientation)
+
+
+def odometry_fields(data: bytes) -> tuple[int, int, tuple[float, ...], tuple[float, ...]]:
+    """Serialized nav_msgs/Odometry -> (stamp sec, stamp nanosec, pose: position x y z and
+    orientation x y z w, twist: linear x y z and angular x y z), the values as sent, unchecked:
+    what a reader of the bag gets from the same message, field for field."""
+    sec, nanosec, _, end = _stamp_and_frame(data, 'odometry')
+    _, end = _read_string(data, end, 'odometry child_frame_id')
+    pose_at = _align8(end)
+    twist_at = pose_at + _POSE.size + _COVARIANCE.size
+    _need(data, twist_at + _TWIST.size + _COVARIANCE.size, 'odometry')
+    return sec, nanosec, _POSE.unpack_from(data, pose_at), _TWIST.unpack_from(data, twist_at)
+
+
+def pose_stamped_fields(data: bytes) -> tuple[int, int, tuple[float, ...]]:
+    """Serialized geometry_msgs/PoseStamped -> (stamp sec, stamp nanosec, pose: position x y z
+    and orientation x y z w), the values as sent, unchecked."""
+    sec, nanosec, _, end = _stamp_and_frame(data, 'pose')
+    pose_at = _align8(end)
+    _need(data, pose_at + _POSE.size, 'pose')
+    return sec, nanosec, _POSE.unpack_from(data, pose_at)
+

@@ -256,3 +256,27 @@ def test_a_node_without_an_agent_says_how_to_name_one(tmp_path, robot_domain):
     message = done.stderr.strip().splitlines()[-1]
     assert message.startswith("formation_agent: /agent_1/formation_agent: parameter 'algorithm' (string) is required")
     assert 'agent_id' not in message
+
+
+def test_a_stop_signal_while_the_agents_wait_for_acknowledgements_brings_their_deadline_forward(monkeypatch):
+    """A dead reader never acknowledges: without the signal an agent waits DELIVERY_TIMEOUT; once
+    `formation run` stops it, SIGNAL_DELIVERY_TIMEOUT from the signal at most."""
+    import importlib
+
+    from formation_agent.ros.node import DELIVERY_TIMEOUT
+    from formation_agent.ros.process import StopSignals
+
+    agent_main = importlib.import_module('formation_agent.ros.main')
+    now = [100.0]
+    monkeypatch.setattr(agent_main.time, 'monotonic', lambda: now[0])
+    stop = StopSignals()
+    deadline = agent_main._delivery_deadline(stop, interrupted=False)
+    assert deadline() == 100.0 + DELIVERY_TIMEOUT
+    now[0] = 100.5
+    stop._on_signal(signal.SIGINT, None)
+    assert deadline() == 100.5 + agent_main.SIGNAL_DELIVERY_TIMEOUT < 100.0 + DELIVERY_TIMEOUT
+    now[0] = 100.7
+    stop._on_signal(signal.SIGTERM, None)  # a second signal: the first one counts
+    assert deadline() == 100.5 + agent_main.SIGNAL_DELIVERY_TIMEOUT
+    # Stopped by the signal in the first place: SIGNAL_DELIVERY_TIMEOUT from the start of the wait.
+    assert agent_main._delivery_deadline(stop, interrupted=True)() == 100.7 + agent_main.SIGNAL_DELIVERY_TIMEOUT

@@ -214,7 +214,7 @@ def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
 
     class Recorded(orchestrate.FormationRun):
         def run(self):
-            seen['localhost_only'] = self.localhost_only
+            seen['localhost_only'] = self.options.localhost_only
             raise orchestrate.RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
@@ -335,7 +335,7 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
 
     class Recorded(orchestrate.FormationRun):
         def run(self):
-            seen.update(kappa=self.scenario.gains.speed_scale, extra=self.summary_extra)
+            seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
             raise orchestrate.RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)

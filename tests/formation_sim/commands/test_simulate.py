@@ -192,7 +192,7 @@ def test_auto_keeps_event_samples_for_small_teams_only(tmp_path, capsys, monkeyp
 
 def test_a_run_that_fails_leaves_no_folder_and_no_samples(tmp_path, capsys):
     out = tmp_path / 'run'
-    assert main(['simulate', 'paper_single', '--horizon', '200', '--out', str(out), '--no-plot']) == 1  # stops at t ≈ 35
+    assert main(['simulate', 'paper_single', '--horizon', '200', '--out', str(out), '--no-plot']) == 1  # stops at t ≈ 34.4
     err = capsys.readouterr().err
     assert 'rounding, not the dynamics, decides the events' in err and 'Traceback' not in err
     assert not out.exists()  # the samples streamed so far went with it

@@ -114,6 +114,27 @@ def test_edge_functions(c):
         assert np.all(np.diff(values) > 0)  # increasing, as the proofs use
 
 
+@pytest.mark.parametrize('k1, k2', [(1.0, 0.0), (1.1547, 1.4502)])
+def test_rounding_step_is_the_error_moved_by_one_ulp_of_the_relative_states(k1, k2):
+    # (k1 g_ij + k2 h_ij ||q_ij||) ulp(y) + k2 f_ij ulp(q): what `precision` and the engine's rounding
+    # floor compare with the threshold, written through c/σ; against (fij), (gij), (hij) at l = c - σ.
+    c = 1.5
+    sigma = np.array([1e-3, 0.2, 1.0, 1.5])
+    ulp_y, speed, ulp_q = np.spacing(7.5), 0.3, np.spacing(2.0)
+    step = theory.rounding_step(c, sigma, ulp_y, k1=k1, k2=k2, speed=speed, ulp_q=ulp_q)
+    l = c - sigma
+    expected = (k1 * theory.g_ij(l, capacity=c) + k2 * theory.h_ij(l, capacity=c) * speed) * ulp_y
+    expected += k2 * theory.f_ij(l, capacity=c) * ulp_q
+    np.testing.assert_allclose(step, expected, rtol=1e-12)
+    # In other length units (lengths, ulps × 2^k; k1, k2 × 2^k and speeds × 2^k, time kept) the
+    # step is 2^k times this one, exactly: it has the units of the threshold (α_d; α has none).
+    for k in (-40, 40):
+        s = 2.0**k
+        scaled = theory.rounding_step(c * s, sigma * s, ulp_y * s, k1=k1 * s if k2 else k1, k2=k2 * s, speed=speed * s,
+                                      ulp_q=ulp_q * s)
+        assert np.array_equal(scaled, step * (s if k2 else 1.0))
+
+
 def test_omega_is_the_gradient_weight_of_the_tension():
     # ∂ν_ij/∂y_i = ω_ij (y_i - y_j) with ν_ij = l²/(c - l).
     c = 1.5

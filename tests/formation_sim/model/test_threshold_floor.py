@@ -69,7 +69,7 @@ def test_the_floors_guarantees_hold_on_exact_runs(case):
 def test_the_floor_lets_a_run_outlast_the_rounding_of_the_vanishing_threshold():
     scenario = load_scenario('paper_single')
     with pytest.raises(EngineError, match='ulps'):
-        simulate(scenario, horizon=60.0, sample_dt=0.0)  # the paper's threshold reaches rounding near t = 35
+        simulate(scenario, horizon=60.0, sample_dt=0.0)  # the paper's threshold reaches rounding near t = 34.4
     floored = scenario.with_scale(threshold_floor=1e-3)
     record = simulate(floored, horizon=60.0, sample_dt=0.0)
     xi = floor_bounds(floored).xi

@@ -66,6 +66,13 @@ def _odometry(agent: int, t: float, *, epoch: float = EPOCH):
     return msg
 
 
+def _raw(msg) -> bytes:
+    """A message as the coordinator's raw pose readers take it: its serialized bytes."""
+    from rclpy.serialization import serialize_message
+
+    return serialize_message(msg)
+
+
 def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
     node = coordinator()
     gaps = node._discovery_gaps()
@@ -82,13 +89,22 @@ def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
     _start(node, time.time() - 0.5)
     scenario = node.scenario
     for agent in scenario.agent_ids:
-        node._on_pose(_odometry(agent, 0.4, epoch=node._epoch), agent)
+        node._on_pose(_raw(_odometry(agent, 0.4, epoch=node._epoch)), agent)
     node._running_tick()  # the poses above: every edge shorter than Δ = 2
     far = _odometry(3, 0.45, epoch=node._epoch)
     far.pose.pose.position.x = 3.0  # robot 3's control point more than 2 m from its neighbours
-    node._on_pose(far, 3)
+    node._on_pose(_raw(far), 3)
     with pytest.raises(ConnectivityLostError, match=r'edge \(2, 3\) reached the communication radius at t=0\.5'):
         node._running_tick()
+
+
+def test_a_pose_that_is_not_its_message_is_rejected_and_counted_not_sampled(coordinator):
+    node = coordinator()
+    _start(node, time.time() - 0.5)
+    good = _raw(_odometry(1, 0.4, epoch=node._epoch))
+    node._on_pose(good[:40], 1)  # cut short: no Odometry
+    node._on_pose(good, 1)
+    assert node.rejected == {'length': 1} and len(node._poses[1]) == 1
 
 
 def _report(agent: int, failure: str | None):
@@ -103,7 +119,7 @@ def _running(coordinator, **parameters):
     node = coordinator(**parameters)
     _start(node, time.time() - 0.5)
     for agent in node.scenario.agent_ids:
-        node._on_pose(_odometry(agent, 0.5, epoch=node._epoch), agent)
+        node._on_pose(_raw(_odometry(agent, 0.5, epoch=node._epoch)), agent)
     return node
 
 
@@ -224,7 +240,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
             handler(msg)
 
     for agent in scenario.agent_ids:  # poses before t = 0 reach the coordinator during discovery
-        arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, -0.013), lambda m, a=agent: node._on_pose(m, a))
+        arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, -0.013), lambda m, a=agent: node._on_pose(_raw(m), a))
     _start(node, EPOCH)
     arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(node.step))
     arrive('/formation/scenario', 'std_msgs/msg/String', String(data=dump_scenario_text(scenario.replace(horizon=horizon))))
@@ -233,7 +249,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     for k in range(-1, 108):  # 100 Hz, stamps a little off the grid
         t = k * 0.01 + 0.0031
         for agent in scenario.agent_ids:
-            arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, t), lambda m, a=agent: node._on_pose(m, a))
+            arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, t), lambda m, a=agent: node._on_pose(_raw(m), a))
         for agent, times in triggers.items():
             for number, stamp in enumerate(times, start=1):
                 if t - 0.01 < stamp <= t:

@@ -162,7 +162,7 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, steppin
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'interrupted' and result.failure == failure
-    assert 0.0 < summary['extra']['reached_time'] == failure['time'] < run.horizon
+    assert 0.0 < summary['extra']['reached_time'] == failure['time'] < run.options.horizon
     assert summary['total_events'] > 0
 
 

@@ -99,7 +99,7 @@ def _outsider_with_run(name: str, domain_id: int, run):
     from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
     from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
 
-    assert run.step_listeners == 1
+    assert run.options.step_listeners == 1
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node(name, context=context)

@@ -318,16 +318,26 @@ def test_news_that_puts_an_agent_on_its_threshold_makes_it_trigger_at_that_insta
 
 
 def test_the_run_stops_once_rounding_decides_the_events():
+    # The rule, recomputed from the true states: at the stop the threshold is below 8 rounding
+    # steps of the triggering error, g_ij(0) ulp(largest |x|, |d_ij|) on the edge of least capacity
+    # (it compared with 8 ulps of the largest |x| until that moved with the length unit:
+    # tests/formation_sim/sim/test_engine_rounding_floor.py); at the event before it is not.
     scenario = load_scenario('paper_single')
+    events = []
     with pytest.raises(EngineError, match='from here on rounding, not the dynamics, decides the events') as stop:
-        simulate(scenario, horizon=200.0, sample_dt=None)
+        simulate(scenario, horizon=200.0, sample_dt=None, on_event=lambda t, world, due: events.append((t, world.positions, world)))
     t = float(str(stop.value).split('at t=')[1].split()[0])
-    # The rule, recomputed: the threshold is below 8 ulps of the largest |x| at the stop, and the
-    # run up to just before it ends normally.
-    before = simulate(scenario, horizon=math.nextafter(t, 0.0), sample_dt=None)
-    largest = np.abs(before.sample_positions[-1]).max()
-    assert scenario.gains.alpha * math.exp(-scenario.gains.beta * t) < 8 * np.spacing(largest)
-    assert before.sample_times[-1] == math.nextafter(t, 0.0)
+    before_t, before_x, world = events[-1]  # the last event, and the engine's world, left at the stop
+    assert world.time == t > before_t
+    capacity = float(theory.edge_capacities(scenario).min())
+    offset = max(abs(float(v)) for edge in scenario.edges for v in edge.d)
+
+    def floor(x):
+        return 8 * 2.0 / capacity * float(np.spacing(max(np.abs(x).max(), offset)))
+
+    alpha, beta = scenario.gains.alpha, scenario.gains.beta
+    assert alpha * math.exp(-beta * before_t) >= floor(before_x)
+    assert alpha * math.exp(-beta * t) < floor(world.positions)
 
 
 def test_initial_slack_just_above_the_precision_floor_triggers_on_the_threshold(tight_edge):

@@ -86,7 +86,7 @@ def test_write_summary_of_an_in_memory_record_writes_a_trajectory_that_reads_bac
 def test_a_run_that_fails_leaves_its_samples_named_incomplete_and_readers_refuse_them(tmp_path):
     scenario = load_scenario('paper_single')
     with pytest.raises(EngineError, match='rounding, not the dynamics'):
-        simulate(scenario, horizon=200.0, trajectory_dir=tmp_path)  # stops at t ≈ 35
+        simulate(scenario, horizon=200.0, trajectory_dir=tmp_path)  # stops at t ≈ 34.4
     assert not (tmp_path / TRAJECTORY_DIR).exists()
     assert header_shape(tmp_path / INCOMPLETE_DIR / 'positions.npy') == (0, 3, 2)  # numpy reads it as empty
     with pytest.raises(TrajectoryError, match=f'{INCOMPLETE_DIR}: the run stopped before its trajectory was complete'):

@@ -54,6 +54,28 @@ from formation_agent.core.tension import (
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 
+# Agents of this dimension or less evaluate their prediction in plain floats.
+_FAST_DIMENSION = 3
+
+# First trial span of a search [s] before the agent has an inter-event time of its own, and its
+# least value (the search's former fixed choice).
+_FIRST_SPAN = 1e-3
+
+ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
+    'eta1': ('alpha', 'beta'),
+    'eta2': ('alpha_d', 'beta_d', 'k1', 'k2', 'k3'),
+}
+"""The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
+
+SCALE_GAINS: dict[str, float] = {'speed_scale': DEFAULT_SPEED_SCALE, 'threshold_floor': DEFAULT_THRESHOLD_FLOOR}
+"""The gains both algorithms take optionally, with their defaults (the paper's): κ and c0."""
+
+# A step may use at most this fraction of an edge's gap c - ||y_ij|| (what is left of its capacity
+# c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
+# within a small factor of the local values.
+_GAP_FRACTION = 0.125
+
+
 class AgentError(ValueError):
     """Input the agent cannot accept: bad parameters, malformed or inconsistent information."""
 
@@ -769,23 +791,6 @@ class Eta2Agent(_EventTriggeredAgent):
         return span, min(size + rate * span, self._control_norm + reach_sum), rate, curv
 
 
-# Agents of this dimension or less evaluate their prediction in plain floats.
-_FAST_DIMENSION = 3
-
-# First trial span of a search [s] before the agent has an inter-event time of its own, and its
-# least value (the search's former fixed choice).
-_FIRST_SPAN = 1e-3
-
-ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
-    'eta1': ('alpha', 'beta'),
-    'eta2': ('alpha_d', 'beta_d', 'k1', 'k2', 'k3'),
-}
-"""The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
-
-SCALE_GAINS: dict[str, float] = {'speed_scale': DEFAULT_SPEED_SCALE, 'threshold_floor': DEFAULT_THRESHOLD_FLOOR}
-"""The gains both algorithms take optionally, with their defaults (the paper's): κ and c0."""
-
-
 def make_agent(
     *,
     algorithm: str,
@@ -806,12 +811,6 @@ def make_agent(
     chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
     chosen.update({name: gains.get(name, default) for name, default in SCALE_GAINS.items()})
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
-
-
-# A step may use at most this fraction of an edge's gap c - ||y_ij|| (what is left of its capacity
-# c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
-# within a small factor of the local values.
-_GAP_FRACTION = 0.125
 
 
 def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:

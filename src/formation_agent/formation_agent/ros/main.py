@@ -23,7 +23,7 @@ import contextlib
 import sys
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NoReturn
 
 import rclpy
@@ -159,8 +159,7 @@ def main(args: Sequence[str] | None = None) -> int:
                 traceback.print_exc(file=sys.stderr)
                 status, failure = 1, str(error)
         finally:
-            patience = SIGNAL_DELIVERY_TIMEOUT if status == 130 else DELIVERY_TIMEOUT
-            deadline = time.monotonic() + patience  # one for every node of the process
+            deadline = _delivery_deadline(stop, interrupted=status == 130)  # one for every node of the process
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)
@@ -169,6 +168,23 @@ def main(args: Sequence[str] | None = None) -> int:
                     node.destroy_node()
                 rclpy.try_shutdown()
     return status
+
+
+def _delivery_deadline(stop: StopSignals, *, interrupted: bool) -> Callable[[], float]:
+    """Until when (time.monotonic()) the nodes of a leaving process wait for their last messages to
+    be acknowledged: DELIVERY_TIMEOUT from now, SIGNAL_DELIVERY_TIMEOUT if a stop signal made them
+    leave or comes while they wait (`formation run` stops the agents once the run's end is
+    recorded; a reader that died with its process never acknowledges, and is matched until DDS
+    drops it)."""
+    began = time.monotonic()
+    patience = SIGNAL_DELIVERY_TIMEOUT if interrupted else DELIVERY_TIMEOUT
+
+    def deadline() -> float:
+        if stop.received_at is None:
+            return began + patience
+        return min(began + patience, max(began, stop.received_at) + SIGNAL_DELIVERY_TIMEOUT)
+
+    return deadline
 
 
 def entry_point() -> NoReturn:

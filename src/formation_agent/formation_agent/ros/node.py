@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -395,10 +396,11 @@ class FormationAgentNode(Node):
         if self.counts.report_due and not self.finished and self.step is not None:
             self._publish_report()
 
-    def leave(self, *, failure: str | None = None, deadline: float | None = None) -> None:
+    def leave(self, *, failure: str | None = None, deadline: float | Callable[[], float] | None = None) -> None:
         """On the way out, whatever the reason: the zero command, the final report if not yet sent
         (with `failure`, why the agent stops early), and the delivery of everything it published
-        (until `deadline`, time.monotonic(); default DELIVERY_TIMEOUT from now)."""
+        (until `deadline`, time.monotonic(), or what the callable says now; default
+        DELIVERY_TIMEOUT from now)."""
         if not rclpy.ok(context=self.context):
             return  # a context shut down by someone else cannot publish
         self.finished = True
@@ -408,7 +410,7 @@ class FormationAgentNode(Node):
             self._publish_report(final=True, failure=failure)
         self.wait_for_delivery(time.monotonic() + DELIVERY_TIMEOUT if deadline is None else deadline)
 
-    def wait_for_delivery(self, deadline: float) -> None:
+    def wait_for_delivery(self, deadline: float | Callable[[], float]) -> None:
         """Let reliable writers hand over what they still hold before the node goes away (until
         `deadline`, time.monotonic())."""
         self.outbox.wait_for_delivery(deadline, self.output.publisher)

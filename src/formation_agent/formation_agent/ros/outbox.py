@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 from rclpy.duration import Duration
 from std_msgs.msg import Float64MultiArray, String
@@ -48,9 +49,11 @@ class Outbox:
             report = dataclasses.replace(report, published={**report.published, REPORT_TOPIC: counted})
         self.report.publish(encode_agent_report(report))
 
-    def wait_for_delivery(self, deadline: float, *others) -> None:
+    def wait_for_delivery(self, deadline: float | Callable[[], float], *others) -> None:
         """Let reliable writers hand over what they still hold before the node goes away (until
-        `deadline`, time.monotonic())."""
+        `deadline`, time.monotonic(); a callable is asked again between waits, so that a stop
+        signal can bring it forward: a dead reader never acknowledges)."""
+        limit = deadline if callable(deadline) else lambda: deadline
         pending = [self.status, self.report, *others, *self.info.values()]
-        while pending and time.monotonic() < deadline:
+        while pending and time.monotonic() < limit():
             pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]

@@ -1,4 +1,7 @@
-"""Node processes: which executor spins them, how SIGINT/SIGTERM stop them, how they exit."""
+"""Node processes: which executor spins them, how SIGINT/SIGTERM stop them, how they exit.
+
+Imports no rclpy at module level: the orchestrator (`formation run`, `formation robots`) uses its
+exit statuses and SignalFlag without loading ROS."""
 
 from __future__ import annotations
 
@@ -9,10 +12,9 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from typing import NoReturn
-
-from rclpy.executors import SingleThreadedExecutor
 
 from formation_msgs_py.middleware import EXECUTORS
 
@@ -44,6 +46,8 @@ def make_executor(kind: str, *, context=None):
 
         return EventsExecutor(context=context)
     if kind == 'single':
+        from rclpy.executors import SingleThreadedExecutor
+
         return SingleThreadedExecutor(context=context)
     raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
 
@@ -81,6 +85,7 @@ class StopSignals:
 
     def __init__(self) -> None:
         self.received = SignalFlag()
+        self.received_at: float | None = None  # time.monotonic() of the first stop signal
         self._previous: dict = {}
 
     def __enter__(self) -> StopSignals:
@@ -92,6 +97,8 @@ class StopSignals:
             signal.signal(sig, handler)
 
     def _on_signal(self, signum, frame) -> None:
+        if self.received_at is None:  # assignments only: no lock in a handler
+            self.received_at = time.monotonic()
         self.received.set()
 
     def check(self) -> None:

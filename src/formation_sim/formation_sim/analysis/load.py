@@ -333,18 +333,8 @@ def load_bag_run(
     _check_scenario_matches(found, got, states)
     checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
 
-    # Samples: one per distinct time (a repeat of a time must repeat the state).
-    times, positions, velocities, repeats = [], [], [], []
-    for state in states:
-        if times and state.time == times[-1]:
-            if not np.array_equal(state.positions, positions[-1]):
-                repeats.append(state.time)
-            continue
-        times.append(state.time)
-        positions.append(np.asarray(state.positions, dtype=float))
-        if state.velocities is not None:
-            velocities.append(np.asarray(state.velocities, dtype=float))
-    checks.append(Check(name='state samples', ok=not repeats, detail=f'{len(times)} samples' + (f'; different states at the same time {repeats[:5]}' if repeats else '')))
+    times, positions, velocities, samples_check = _state_samples(states)
+    checks.append(samples_check)
 
     trigger_times, triggers_check = _trigger_times(got, found)
     checks.append(triggers_check)
@@ -367,26 +357,11 @@ def load_bag_run(
 
     sensing_calls = len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
     if SENSING_LOG_TOPIC in got.topics:
-        logged: dict[int, list[float]] = defaultdict(list)
-        for agent, t in got.sensing:
-            logged[agent].append(t)
-        # A run that stopped early may have answered a sensing whose trigger the stop cut short.
-        cut = {agent: sorted(logged.get(agent, [])) for agent in found.agent_ids}
-        if stop is not None:
-            cut = {agent: times[:-1] if times and times[-1] == horizon and times[:-1] == trigger_times[agent] else times for agent, times in cut.items()}
-        differing = [agent for agent in found.agent_ids if cut[agent] != trigger_times[agent]]
-        checks.append(Check(name='sensing log = triggers', ok=not differing, detail='every trigger sensed once at its time' if not differing else f'agents {differing} sensed at other times than they triggered'))
+        checks.append(_sensing_check(got, found, trigger_times, stopped=stop is not None, horizon=horizon))
     if got.commands:
         differing = [agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])]
         checks.append(Check(name='one command per trigger', ok=not differing, detail='yes' if not differing else f'agents {differing}: commands {dict(got.commands)}'))
-    extra: dict[str, Any] = {}
-    if steps:
-        extra['clock'] = 'realtime' if realtime else 'lockstep'
-        if finished and not realtime:
-            extra['steps'] = final[-1].index  # lock-step: one Step per advance of the world
-        extra['reached_time'] = times[-1]  # the simulator samples the world where it stops
-        if finished:
-            extra['failure'] = None  # the run reached its horizon (why one stopped is not in a bag)
+    extra = _clock_extra(final, realtime=realtime, finished=finished, reached=times[-1]) if steps else {}
     if got.statuses:
         checks.append(_status_check(got, {agent: len(times) for agent, times in trigger_times.items()}))
         if realtime:
@@ -407,6 +382,46 @@ def load_bag_run(
         bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
         horizon=asked, stop=stop,
     )  # fmt: skip
+
+
+def _state_samples(states: list) -> tuple[list[float], list[np.ndarray], list[np.ndarray], Check]:
+    """Samples: one per distinct time (a repeat of a time must repeat the state); that check."""
+    times, positions, velocities, repeats = [], [], [], []
+    for state in states:
+        if times and state.time == times[-1]:
+            if not np.array_equal(state.positions, positions[-1]):
+                repeats.append(state.time)
+            continue
+        times.append(state.time)
+        positions.append(np.asarray(state.positions, dtype=float))
+        if state.velocities is not None:
+            velocities.append(np.asarray(state.velocities, dtype=float))
+    check = Check(name='state samples', ok=not repeats, detail=f'{len(times)} samples' + (f'; different states at the same time {repeats[:5]}' if repeats else ''))
+    return times, positions, velocities, check
+
+
+def _sensing_check(got, found: Scenario, trigger_times: dict[int, list[float]], *, stopped: bool, horizon: float) -> Check:
+    """The sensing log against the triggers: every trigger sensed once, at its time."""
+    logged: dict[int, list[float]] = defaultdict(list)
+    for agent, t in got.sensing:
+        logged[agent].append(t)
+    # A run that stopped early may have answered a sensing whose trigger the stop cut short.
+    cut = {agent: sorted(logged.get(agent, [])) for agent in found.agent_ids}
+    if stopped:
+        cut = {agent: times[:-1] if times and times[-1] == horizon and times[:-1] == trigger_times[agent] else times for agent, times in cut.items()}
+    differing = [agent for agent in found.agent_ids if cut[agent] != trigger_times[agent]]
+    return Check(name='sensing log = triggers', ok=not differing, detail='every trigger sensed once at its time' if not differing else f'agents {differing} sensed at other times than they triggered')
+
+
+def _clock_extra(final: list, *, realtime: bool, finished: bool, reached: float) -> dict[str, Any]:
+    """What a run with Steps says of its clock (RunRecord.extra)."""
+    extra: dict[str, Any] = {'clock': 'realtime' if realtime else 'lockstep'}
+    if finished and not realtime:
+        extra['steps'] = final[-1].index  # lock-step: one Step per advance of the world
+    extra['reached_time'] = reached  # the simulator samples the world where it stops
+    if finished:
+        extra['failure'] = None  # the run reached its horizon (why one stopped is not in a bag)
+    return extra
 
 
 def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:

@@ -250,6 +250,28 @@ def render_markdown(report: dict[str, Any]) -> str:
         '## Theorem checks (at every sample)',
         '',
     ]
+    lines += _theory_lines(report)
+    lines += _check_table(report['theorem_checks'])
+    lines += ['', '## Bag consistency', '']
+    lines += _check_table(report['bag_checks'])
+    lines += ['', '| topic | type | messages |', '|---|---|---|']
+    for name, info in report['topics'].items():
+        lines.append(f'| `{name}` | {info["type"]} | {info["messages"]} |')
+    lines += ['', '## The bag against summary.json', '']
+    lines += _summary_json_lines(report['summary_json'])
+    if report['figures']:
+        lines += ['', '## Figures', '']
+        for title, name in report['figures'].items():
+            if name.endswith(('.gif', '.png')):
+                lines.append(f'![{title}]({name})')
+            else:
+                lines.append(f'- {title}: `{name}`')
+    return '\n'.join(lines) + '\n'
+
+
+def _theory_lines(report: dict[str, Any]) -> list[str]:
+    """The proof constants of the theorem checks (or why there are none)."""
+    lines: list[str] = []
     if report['theory']:
         theory_info = report['theory']
         lines.append(
@@ -267,14 +289,12 @@ def render_markdown(report: dict[str, Any]) -> str:
         lines.append('')
     elif report['theory_error']:
         lines += [f'No proof constants: {report["theory_error"]}', '']
-    lines += _check_table(report['theorem_checks'])
-    lines += ['', '## Bag consistency', '']
-    lines += _check_table(report['bag_checks'])
-    lines += ['', '| topic | type | messages |', '|---|---|---|']
-    for name, info in report['topics'].items():
-        lines.append(f'| `{name}` | {info["type"]} | {info["messages"]} |')
-    lines += ['', '## The bag against summary.json', '']
-    comparison = report['summary_json']
+    return lines
+
+
+def _summary_json_lines(comparison: dict[str, Any] | None) -> list[str]:
+    """The bag against summary.json: equal, or the values that differ."""
+    lines: list[str] = []
     if comparison is None:
         lines.append('No summary.json next to the bag.')
     elif comparison['equal']:
@@ -299,14 +319,7 @@ def render_markdown(report: dict[str, Any]) -> str:
             lines.append(f'| … {len(differences) - limit} more (see the JSON report) | | |')
         for note in comparison.get('notes', []):
             lines += ['', f'Note: {note}.']
-    if report['figures']:
-        lines += ['', '## Figures', '']
-        for title, name in report['figures'].items():
-            if name.endswith(('.gif', '.png')):
-                lines.append(f'![{title}]({name})')
-            else:
-                lines.append(f'- {title}: `{name}`')
-    return '\n'.join(lines) + '\n'
+    return lines
 
 
 def describe_stop(stop: dict[str, Any]) -> str:

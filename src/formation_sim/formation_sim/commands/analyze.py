@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis import figures
     from formation_sim.analysis.checks import run_series, theory_bounds
     from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
-    from formation_sim.analysis.report import build_report, describe_stop, write_report
+    from formation_sim.analysis.report import build_report, write_report
     from formation_sim.model import theory
     from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
     from formation_sim.progress import Progress
@@ -138,28 +138,39 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet:
         print(markdown)
     else:
-        summary = report['summary']
-        print(
-            f'{record.scenario.name}: {summary["total_events"]} events, {summary["messages_sent"]} messages, '
-            f'max edge length {summary["max_edge_length"]:.6g} (Δ = {record.scenario.delta:g}), '
-            f'final formation error {summary["final_formation_error"]:.3g}',
-            file=sys.stderr,
+        _print_findings(
+            record, report, failed=failed, unmet=unmet, differs=differs, markdown=markdown, data=data, out=out, written=written
         )
-        if report['run']['stopped']:
-            print(f'the run stopped early {describe_stop(report["run"]["stopped"])}', file=sys.stderr)
-        if report['summary_json'] is not None:
-            state = 'equals the bag' if not differs else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
-            print(f'summary.json {state}', file=sys.stderr)
-        for name in failed:
-            print(f'check failed: {name}', file=sys.stderr)
-        for name in unmet:
-            print(f'not guaranteed here and not met: {name}', file=sys.stderr)
-        saturation = record.extra.get('saturation')
-        if saturation and saturation.get('total'):
-            kinds = ', '.join(f'{kind} {entry["count"]}' for kind, entry in saturation['by_kind'].items())
-            print(f'saturated commands: {saturation["total"]} ({kinds}); the theorems assume none', file=sys.stderr)
-        print(f'report:  {markdown}')
-        print(f'json:    {data}')
-        for title, name in written.items():
-            print(f'{title}: {out / name}')
     return EXIT_FINDINGS if failed or differs else EXIT_OK
+
+
+def _print_findings(
+    record, report: dict, *, failed: list[str], unmet: list[str], differs: bool, markdown, data, out, written: dict[str, str]
+) -> None:
+    """What `formation analyze` found, on stderr, and the files it wrote, on stdout."""
+    from formation_sim.analysis.report import describe_stop
+
+    summary = report['summary']
+    print(
+        f'{record.scenario.name}: {summary["total_events"]} events, {summary["messages_sent"]} messages, '
+        f'max edge length {summary["max_edge_length"]:.6g} (Δ = {record.scenario.delta:g}), '
+        f'final formation error {summary["final_formation_error"]:.3g}',
+        file=sys.stderr,
+    )
+    if report['run']['stopped']:
+        print(f'the run stopped early {describe_stop(report["run"]["stopped"])}', file=sys.stderr)
+    if report['summary_json'] is not None:
+        state = 'equals the bag' if not differs else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
+        print(f'summary.json {state}', file=sys.stderr)
+    for name in failed:
+        print(f'check failed: {name}', file=sys.stderr)
+    for name in unmet:
+        print(f'not guaranteed here and not met: {name}', file=sys.stderr)
+    saturation = record.extra.get('saturation')
+    if saturation and saturation.get('total'):
+        kinds = ', '.join(f'{kind} {entry["count"]}' for kind, entry in saturation['by_kind'].items())
+        print(f'saturated commands: {saturation["total"]} ({kinds}); the theorems assume none', file=sys.stderr)
+    print(f'report:  {markdown}')
+    print(f'json:    {data}')
+    for title, name in written.items():
+        print(f'{title}: {out / name}')

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.plots import plot_run
     from formation_sim.sim.engine import EngineError, check_sample_dt, simulate
     from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
-    from formation_sim.sim.samples import TRAJECTORY_DIR, discard_incomplete
+    from formation_sim.sim.samples import TRAJECTORY_DIR
     from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
@@ -137,18 +137,7 @@ def run(args: argparse.Namespace) -> int:
                 progress=progress,
             )
     except (EngineError, ValueError, ArithmeticError, OSError) as error:
-        # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;
-        # OSError: the trajectory could not be written (a full disk)
-        kind = (
-            '' if isinstance(error, (EngineError, ValueError))
-            else 'cannot write the trajectory: ' if isinstance(error, OSError)
-            else f'{type(error).__name__} (a number left the range of doubles): '
-        )  # fmt: skip
-        print(f'\nformation simulate: error: {kind}{error}', file=sys.stderr)
-        discard_incomplete(out)  # a failed run's samples are no result
-        with contextlib.suppress(OSError):
-            out.rmdir()  # the run folder made for this run, empty again
-        return EXIT_FAILED
+        return _run_failed(error, out)
     if auto_scale is not None:
         record.extra['speed_scale'] = auto_scale
     try:
@@ -177,3 +166,22 @@ def run(args: argparse.Namespace) -> int:
     if figure is not None:
         print(f'figure:     {figure}')
     return EXIT_OK
+
+
+def _run_failed(error: Exception, out: Path) -> int:
+    """A run that failed: the error said, its run folder emptied and removed; the exit status."""
+    from formation_sim.sim.engine import EngineError
+    from formation_sim.sim.samples import discard_incomplete
+
+    # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;
+    # OSError: the trajectory could not be written (a full disk)
+    kind = (
+        '' if isinstance(error, (EngineError, ValueError))
+        else 'cannot write the trajectory: ' if isinstance(error, OSError)
+        else f'{type(error).__name__} (a number left the range of doubles): '
+    )  # fmt: skip
+    print(f'\nformation simulate: error: {kind}{error}', file=sys.stderr)
+    discard_incomplete(out)  # a failed run's samples are no result
+    with contextlib.suppress(OSError):
+        out.rmdir()  # the run folder made for this run, empty again
+    return EXIT_FAILED

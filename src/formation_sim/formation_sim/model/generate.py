@@ -132,26 +132,10 @@ def random_scenario(
     half the bound), beta_d of the printed (2-k4)ρ2(P) in (0, 1) (None: half the smaller of the
     printed and the corrected bound) (double).
     """
-    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
-        raise GenerateError(f'n must be an integer >= 2, got {n!r}')
-    if dynamics not in ('single', 'double'):
-        raise GenerateError(f"dynamics must be 'single' or 'double', got {dynamics!r}")
-    if isinstance(dimension, bool) or not isinstance(dimension, int) or dimension < 1:
-        raise GenerateError(f'dimension must be an integer >= 1, got {dimension!r}')
-    if not 0.0 < slack <= 1.0:
-        raise GenerateError(f'slack must lie in (0, 1], got {slack!r}')
-    if graph not in GRAPH_FAMILIES:
-        raise GenerateError(f'graph must be one of {", ".join(GRAPH_FAMILIES)}, got {graph!r}')
-    if graph == 'cycle' and n < 3:
-        raise GenerateError(f'a cycle needs n >= 3 agents, got n = {n}')
-    for label, value, closed in (('beta', beta, False), ('beta1', beta1, True), ('k3', k3, False), ('beta_d', beta_d, False)):
-        if value is not None and not (0.0 < value < 1.0 or (closed and value == 1.0)):
-            raise GenerateError(f'{label} is a fraction of its bound in (0, {"1]" if closed else "1)"}, got {value!r}')
-    for label, value in (('delta', delta), ('degree', degree), ('horizon', horizon), ('alpha', alpha)):
-        if not (math.isfinite(value) and value > 0.0):
-            raise GenerateError(f'{label} must be finite and > 0, got {value!r}')
-    if not (math.isfinite(max_speed) and max_speed >= 0.0):
-        raise GenerateError(f'max_speed must be finite and >= 0, got {max_speed!r}')
+    _check_arguments(
+        n=n, dynamics=dynamics, dimension=dimension, slack=slack, graph=graph, beta=beta, beta1=beta1, k3=k3,
+        beta_d=beta_d, delta=delta, degree=degree, horizon=horizon, alpha=alpha, max_speed=max_speed,
+    )
 
     rng = np.random.default_rng(seed)
     reach = REACH_FRACTION * delta
@@ -191,6 +175,32 @@ def random_scenario(
     if dynamics == 'single':
         return scenario.replace(gains=SingleGains(alpha=alpha, beta=beta * beta0))
     return scenario.replace(gains=_double_gains(alpha=alpha, beta1=beta1 * beta0, k3=k3, beta_d=beta_d))
+
+
+def _check_arguments(
+    *, n, dynamics, dimension, slack, graph, beta, beta1, k3, beta_d, delta, degree, horizon, alpha, max_speed
+) -> None:
+    """random_scenario's arguments, each against its rule (GenerateError names the first broken)."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise GenerateError(f'n must be an integer >= 2, got {n!r}')
+    if dynamics not in ('single', 'double'):
+        raise GenerateError(f"dynamics must be 'single' or 'double', got {dynamics!r}")
+    if isinstance(dimension, bool) or not isinstance(dimension, int) or dimension < 1:
+        raise GenerateError(f'dimension must be an integer >= 1, got {dimension!r}')
+    if not 0.0 < slack <= 1.0:
+        raise GenerateError(f'slack must lie in (0, 1], got {slack!r}')
+    if graph not in GRAPH_FAMILIES:
+        raise GenerateError(f'graph must be one of {", ".join(GRAPH_FAMILIES)}, got {graph!r}')
+    if graph == 'cycle' and n < 3:
+        raise GenerateError(f'a cycle needs n >= 3 agents, got n = {n}')
+    for label, value, closed in (('beta', beta, False), ('beta1', beta1, True), ('k3', k3, False), ('beta_d', beta_d, False)):
+        if value is not None and not (0.0 < value < 1.0 or (closed and value == 1.0)):
+            raise GenerateError(f'{label} is a fraction of its bound in (0, {"1]" if closed else "1)"}, got {value!r}')
+    for label, value in (('delta', delta), ('degree', degree), ('horizon', horizon), ('alpha', alpha)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise GenerateError(f'{label} must be finite and > 0, got {value!r}')
+    if not (math.isfinite(max_speed) and max_speed >= 0.0):
+        raise GenerateError(f'max_speed must be finite and >= 0, got {max_speed!r}')
 
 
 def _double_gains(*, alpha: float, beta1: float, k3: float | None, beta_d: float | None) -> DoubleGains:

@@ -327,6 +327,24 @@ class Scenario:
         object.__setattr__(self, 'agent_ids', ids)
         index = {agent: k for k, agent in enumerate(ids)}
 
+        positions = self._set_states(ids)
+
+        expected = SingleGains if self.dynamics == 'single' else DoubleGains
+        if not isinstance(self.gains, expected):
+            raise ScenarioError(
+                f'gains: dynamics {short_repr(self.dynamics)} needs {expected.__name__}, '
+                f'got {type(self.gains).__name__}'
+            )
+
+        edges = _checked_edges(self.edges, ids=ids, index=index, p=positions.shape[1])
+        object.__setattr__(self, 'edges', edges)
+        object.__setattr__(self, '_index', index)
+        object.__setattr__(self, '_neighbours', None)  # built on first use
+        object.__setattr__(self, '_edge_indices', None)  # likewise
+
+    def _set_states(self, ids: tuple[int, ...]) -> np.ndarray:
+        """Positions, velocities (double) and headings (if any), checked against the agents `ids` and
+        set read-only; the positions."""
         positions = _float_array(self.positions, 'positions')
         if positions.ndim != 2 or positions.shape[0] != len(ids) or positions.shape[1] < 1:
             raise ScenarioError(
@@ -354,50 +372,7 @@ class Scenario:
                 raise ScenarioError(f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}')
             self._check_finite(headings[:, None], 'heading')
             object.__setattr__(self, 'headings', _readonly(headings))
-
-        expected = SingleGains if self.dynamics == 'single' else DoubleGains
-        if not isinstance(self.gains, expected):
-            raise ScenarioError(
-                f'gains: dynamics {short_repr(self.dynamics)} needs {expected.__name__}, '
-                f'got {type(self.gains).__name__}'
-            )
-
-        edges = tuple(self.edges)
-        p = positions.shape[1]
-        first_seen: dict[tuple[int, int], int] = {}
-        for k, edge in enumerate(edges):
-            if not isinstance(edge, Edge):
-                raise ScenarioError(f'edges[{k}]: expected an Edge, got {short_repr(edge)}')
-            i, j = edge.i, edge.j
-            if i not in index or j not in index:
-                role, agent = ('i', i) if i not in index else ('j', j)
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): {role}={agent} is not an agent (agents: {_id_list(ids)})'
-                )
-            if edge.d.shape != (p,):
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): d has {edge.d.size} components, expected {p} (the '
-                    f'dimension p of the positions): {edge.d.tolist()}'
-                )
-            key = (i, j) if i < j else (j, i)
-            seen = first_seen.setdefault(key, k)
-            if seen != k:
-                other = edges[seen]
-                # Seen from the first listing's orientation, the second one asks for this d.
-                implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
-                agreement = (
-                    'they agree'
-                    if np.array_equal(implied, other.d)
-                    else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
-                )
-                raise ScenarioError(
-                    f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
-                    f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
-                )
-        object.__setattr__(self, 'edges', edges)
-        object.__setattr__(self, '_index', index)
-        object.__setattr__(self, '_neighbours', None)  # built on first use
-        object.__setattr__(self, '_edge_indices', None)  # likewise
+        return positions
 
     def _check_finite(self, array: np.ndarray, what: str) -> None:
         bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
@@ -490,6 +465,43 @@ class Scenario:
         return self.gains.speed_scale
 
 
+def _checked_edges(edges, *, ids: tuple[int, ...], index: dict[int, int], p: int) -> tuple[Edge, ...]:
+    """The scenario's edges as a tuple, each between two of its agents (`ids`; `index`: their
+    places), with d in R^p, and listed once."""
+    edges = tuple(edges)
+    first_seen: dict[tuple[int, int], int] = {}
+    for k, edge in enumerate(edges):
+        if not isinstance(edge, Edge):
+            raise ScenarioError(f'edges[{k}]: expected an Edge, got {short_repr(edge)}')
+        i, j = edge.i, edge.j
+        if i not in index or j not in index:
+            role, agent = ('i', i) if i not in index else ('j', j)
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): {role}={agent} is not an agent (agents: {_id_list(ids)})'
+            )
+        if edge.d.shape != (p,):
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): d has {edge.d.size} components, expected {p} (the '
+                f'dimension p of the positions): {edge.d.tolist()}'
+            )
+        key = (i, j) if i < j else (j, i)
+        seen = first_seen.setdefault(key, k)
+        if seen != k:
+            other = edges[seen]
+            # Seen from the first listing's orientation, the second one asks for this d.
+            implied = edge.d if (other.i, other.j) == (i, j) else -edge.d
+            agreement = (
+                'they agree'
+                if np.array_equal(implied, other.d)
+                else f'and they disagree: d = {other.d.tolist()} there, {implied.tolist()} here'
+            )
+            raise ScenarioError(
+                f'edges[{k}] ({i}, {j}): duplicates edges[{seen}] ({other.i}, {other.j}), {agreement} '
+                f'(as d_{other.i}{other.j}); list each undirected edge once (d_ji = -d_ij is implied)'
+            )
+    return edges
+
+
 def _id_list(ids: tuple[int, ...]) -> str:
     if len(ids) <= 12:
         return ', '.join(map(str, ids))
@@ -536,7 +548,40 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     delta = _positive(data['communication_radius'], 'communication_radius', 'Δ')
     horizon = _positive(data['horizon'], 'horizon', 'the horizon')
 
-    agents = _mapping(data['agents'], 'agents')
+    entries, headings, dimension = _agents_from_dict(data['agents'], dynamics)
+    ids = tuple(sorted(entries))
+    if headings and len(headings) != len(ids):
+        missing = [a for a in ids if a not in headings]
+        raise ScenarioError(
+            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
+            'give every agent a heading or none'
+        )
+    positions = np.array([entries[a][0] for a in ids])
+    velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
+
+    edges = _edges_from_dict(data['edges'], ids=ids, dimension=dimension)
+
+    gains = _gains_from_dict(data['gains'], dynamics)
+    return Scenario(
+        name=scenario_name,
+        dynamics=dynamics,
+        delta=delta,
+        agent_ids=ids,
+        positions=positions,
+        velocities=velocities,
+        edges=tuple(edges),
+        gains=gains,
+        horizon=horizon,
+        headings=np.array([headings[a] for a in ids]) if headings else None,
+    )
+
+
+def _agents_from_dict(
+    raw: Any, dynamics: str
+) -> tuple[dict[int, tuple[np.ndarray, np.ndarray | None]], dict[int, float], int | None]:
+    """The scenario's `agents` mapping: per agent its position and velocity (double), the headings
+    given, and the dimension p."""
+    agents = _mapping(raw, 'agents')
     if len(agents) < 2:
         raise ScenarioError(f'agents: the formation problem needs at least 2 agents, got {len(agents)}')
     velocity_keys = ('position', 'velocity') if dynamics == 'double' else ('position',)
@@ -560,6 +605,11 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
             )
         if dynamics == 'double' and 'velocity' not in entry and 'position' in entry:
             raise ScenarioError(f"{where}: velocity missing (dynamics is 'double')")
+        if 'position' not in entry:
+            raise ScenarioError(
+                f'{where}: position missing (robots set down by hand: `formation measure` writes their '
+                'positions from their poses)'
+            )
         _check_keys(entry, where, required=velocity_keys, optional=('heading',))
         if 'heading' in entry:
             headings[agent] = _finite_float(entry['heading'], f'{where}.heading')
@@ -574,17 +624,11 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
             else None
         )
         entries[agent] = (position, velocity)
-    ids = tuple(sorted(entries))
-    if headings and len(headings) != len(ids):
-        missing = [a for a in ids if a not in headings]
-        raise ScenarioError(
-            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
-            'give every agent a heading or none'
-        )
-    positions = np.array([entries[a][0] for a in ids])
-    velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
+    return entries, headings, dimension
 
-    raw_edges = data['edges']
+
+def _edges_from_dict(raw_edges: Any, *, ids: tuple[int, ...], dimension: int | None) -> list[Edge]:
+    """The scenario's `edges` list, each edge between two of the agents `ids`, with d in R^p."""
     if not isinstance(raw_edges, list):
         raise ScenarioError(f'edges: expected a list of {{i, j, d}}, got {short_repr(raw_edges)}')
     edges = []
@@ -596,26 +640,13 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         j = _agent_id(raw['j'], f'{where}.j')
         where = f'edges[{k}] ({i}, {j})'
         for role, agent in (('i', i), ('j', j)):
-            if agent not in entries:
+            if agent not in ids:
                 raise ScenarioError(f'{where}: {role}={agent} is not an agent (agents: {_id_list(ids)})')
         if i == j:
             raise ScenarioError(f'{where}: i = j = {i} is a self-loop')
         d = _vector(raw['d'], f'{where}.d', size=dimension)
         edges.append(Edge(i=i, j=j, d=d))
-
-    gains = _gains_from_dict(data['gains'], dynamics)
-    return Scenario(
-        name=scenario_name,
-        dynamics=dynamics,
-        delta=delta,
-        agent_ids=ids,
-        positions=positions,
-        velocities=velocities,
-        edges=tuple(edges),
-        gains=gains,
-        horizon=horizon,
-        headings=np.array([headings[a] for a in ids]) if headings else None,
-    )
+    return edges
 
 
 def _gains_from_dict(raw: Any, dynamics: str) -> SingleGains | DoubleGains:
@@ -1032,26 +1063,29 @@ def file_kind(path: str | Path) -> str:
     return 'JSON' if Path(path).suffix.lower() == JSON_SUFFIX else 'YAML'
 
 
-def scenario_from_text(text: str, *, kind: str, source: str, name: str) -> Scenario:
-    """The scenario in `text` (a file's content, `kind` 'JSON' or 'YAML'), checked as `load_scenario`
-    checks a file: size, syntax, schema; `name` if the text has none; errors name `source`."""
+def _parsed(text: str, *, kind: str, source: str) -> Any:
+    """The data in `text` (size and syntax checked, the schema not yet)."""
     size = len(text.encode('utf-8'))
     if size > _size_limit(kind):
         raise _too_large(source, size, kind)
-    data = _parse_json(text, source) if kind == 'JSON' else _parse_yaml(text, source)
+    return _parse_json(text, source) if kind == 'JSON' else _parse_yaml(text, source)
+
+
+def scenario_from_text(text: str, *, kind: str, source: str, name: str) -> Scenario:
+    """The scenario in `text` (a file's content, `kind` 'JSON' or 'YAML'), checked as `load_scenario`
+    checks a file: size, syntax, schema; `name` if the text has none; errors name `source`."""
+    data = _parsed(text, kind=kind, source=source)
     try:
         return scenario_from_dict(data, name=name)
     except ScenarioError as error:
         raise ScenarioError(f'{source}: {error}') from None
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a file: JSON
-    if its name ends in .json, YAML otherwise."""
+def _scenario_source(name_or_path: str | Path) -> tuple[str, str, str, str]:
+    """(text, kind, source, name) of a built-in scenario or a file (ScenarioError if neither)."""
     if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
         resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
-        text = resource.read_text(encoding='utf-8')
-        return scenario_from_text(text, kind='YAML', source=f'built-in scenario {short_repr(name_or_path)}', name=name_or_path)
+        return resource.read_text(encoding='utf-8'), 'YAML', f'built-in scenario {short_repr(name_or_path)}', name_or_path
     named = bool(str(name_or_path).strip())  # Path('') would be the current folder
     path = Path(name_or_path)
     if named and path.is_dir():
@@ -1062,7 +1096,22 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             f'({", ".join(builtin_scenarios())})'
         )
     kind = file_kind(path)
-    return scenario_from_text(_read_text(path, kind=kind), kind=kind, source=str(path), name=path.stem)
+    return _read_text(path, kind=kind), kind, str(path), path.stem
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A built-in scenario by name (a str equal to one of `builtin_scenarios()`), else a file: JSON
+    if its name ends in .json, YAML otherwise."""
+    text, kind, source, name = _scenario_source(name_or_path)
+    return scenario_from_text(text, kind=kind, source=source, name=name)
+
+
+def load_scenario_data(name_or_path: str | Path) -> tuple[Any, str, str]:
+    """A scenario's data as its file holds it, size and syntax checked but not its schema (so
+    that agents may lack their positions: `formation measure` fills them in); with the name it
+    gets when the data has none, and the source its errors name."""
+    text, kind, source, name = _scenario_source(name_or_path)
+    return _parsed(text, kind=kind, source=source), name, source
 
 
 class _Dumper(yaml.SafeDumper):

@@ -220,6 +220,26 @@ def h_ij(l, *, capacity):
     return omega_prime(l, c)
 
 
+def rounding_step(capacity, slack, ulp_y, *, k1=1.0, k2=0.0, speed=0.0, ulp_q=0.0):
+    """How far one rounding step of an edge's relative state moves the triggering error.
+
+    ETA-1: e_i = Σ_j ω_ij y_ij + u_i, and y -> ω(||y||) y has derivative at most g_ij (gij), so an
+    ulp of y_ij moves e_i by up to ρ = g_ij ulp(y_ij). ETA-2: E_i = Σ_j ω_ij (k1 y_ij + k2 q_ij) +
+    u^d_i (triggerdouble) moves by (k1 g_ij + k2 h_ij ||q_ij||) ulp(y_ij) + k2 f_ij ulp(q_ij)
+    (hij), (fij). ρ has the units of the threshold. Written through c/σ, with the slack
+    σ = c - ||y_ij|| (c = `capacity`, Δ - ||d_ij||): g = 2c²/σ³, h = (2c + σ)/σ³, f = (c + σ)/σ²,
+    so no intermediate overflows for any finite Δ. Elementwise on arrays (edges); `k2` a number.
+    The one place of this formula: the `precision` rule of `formation_sim.model.validate` (at
+    t = 0) and the engine's rounding floor (`formation_sim.sim.engine.rounding_floor`, at every event).
+    """
+    ratio = capacity / slack
+    step = k1 * (2.0 * ratio * ratio / slack) * ulp_y
+    if k2 > 0.0:
+        step = step + k2 * ((2.0 * ratio + 1.0) / (slack * slack)) * (speed * ulp_y)
+        step = step + k2 * ((ratio + 1.0) / slack) * ulp_q
+    return step
+
+
 # --------------------------------------------------------------------------- ν, V
 
 

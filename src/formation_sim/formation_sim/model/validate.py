@@ -228,8 +228,32 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
     """Every hypothesis of the theorem for `scenario.dynamics`, with the numbers."""
     report = ValidationReport(scenario=scenario.name, dynamics=scenario.dynamics)
     out = _Collector(report)
-    n, m = scenario.n, len(scenario.edges)
+    connected = _check_graph(scenario, out)
 
+    with np.errstate(over='ignore', invalid='ignore'):  # out-of-range lengths: `_check_scale` says so
+        capacities = theory.edge_capacities(scenario)
+        errors0 = theory.edge_errors(scenario, scenario.positions)
+    if not _check_scale(scenario, out, capacities, capacities - errors0):
+        return report  # every number below would be computed outside double precision's range
+
+    _check_feasible(scenario, out)
+    _check_initial(scenario, out, capacities, errors0)
+    _check_precision(scenario, out, capacities, errors0)
+    beta0 = _beta0(scenario, out, connected=connected, capacities=capacities)
+    if scenario.dynamics == 'single':
+        _check_single(scenario, out, beta0)
+    else:
+        _check_double(scenario, out, beta0)
+    _check_speed_scale(scenario, out, beta0)
+    if report.ok:
+        _check_threshold_floor(scenario, out)
+    _check_parameters(scenario, out)
+    return report
+
+
+def _check_graph(scenario: Scenario, out: _Collector) -> bool:
+    """The graph's size and whether it is connected (an error when not); whether it is."""
+    n, m = scenario.n, len(scenario.edges)
     components = theory.graph_components(scenario)
     connected = len(components) == 1
     out.note(
@@ -252,13 +276,12 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             component_sizes=sizes,
             components=[list(c) for c in components[:10]],
         )
+    return connected
 
-    with np.errstate(over='ignore', invalid='ignore'):  # out-of-range lengths: `_check_scale` says so
-        capacities = theory.edge_capacities(scenario)
-        errors0 = theory.edge_errors(scenario, scenario.positions)
-    if not _check_scale(scenario, out, capacities, capacities - errors0):
-        return report  # every number below would be computed outside double precision's range
 
+def _check_feasible(scenario: Scenario, out: _Collector) -> None:
+    """Assumption 1: some τ has τ_i - τ_j = d_ij on every edge (least squares, with its residual)."""
+    m = len(scenario.edges)
     feasibility = theory.formation_feasibility(scenario)
     worst = int(np.argmax(feasibility.edge_residuals)) if m else None
     if feasibility.feasible:
@@ -283,6 +306,9 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             worst_edge=[edge.i, edge.j],
         )
 
+
+def _check_initial(scenario: Scenario, out: _Collector, capacities: np.ndarray, errors0: np.ndarray) -> None:
+    """Per edge: ||d_ij|| < Δ (Assumption 1) and (initial), with each edge's slack."""
     slack_rows = []
     for k, edge in enumerate(scenario.edges):
         d_norm = float(np.linalg.norm(edge.d))
@@ -333,8 +359,9 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             edges=slack_rows,
         )
 
-    _check_precision(scenario, out, capacities, errors0)
 
+def _beta0(scenario: Scenario, out: _Collector, *, connected: bool, capacities: np.ndarray) -> float | None:
+    """β0 = ρ2(DD^T)/Δ0 with its note (None when the graph is not connected or has no capacity)."""
     beta0 = None
     if connected and capacities.size and capacities.max() > 0.0:
         lam2 = theory.algebraic_connectivity(scenario)
@@ -351,16 +378,7 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
             beta0=beta0,
             remark_bound=remark,
         )
-
-    if scenario.dynamics == 'single':
-        _check_single(scenario, out, beta0)
-    else:
-        _check_double(scenario, out, beta0)
-    _check_speed_scale(scenario, out, beta0)
-    if report.ok:
-        _check_threshold_floor(scenario, out)
-    _check_parameters(scenario, out)
-    return report
+    return beta0
 
 
 def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
@@ -475,14 +493,15 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
     Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
     prediction moves in steps of one ulp of y_ij, and each such step moves the triggering error
     by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
-    k2 f_ij ulp(q_i - q_j)). Near the threshold the computed error then stands still for a while
-    at some margin φ > tolerance, and the certified search walks such a plateau in steps of
-    about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α tolerance). It gives
+    k2 f_ij ulp(q_i - q_j); `theory.rounding_step`). Near the threshold the computed error then
+    stands still for a while at some margin φ > tolerance, and the certified search walks such a
+    plateau in steps of about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α
+    tolerance). It gives
     up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
     σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
     ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
     (Late in a run the threshold itself shrinks toward the rounding of the states: the engine's
-    rounding floor stops the run there.)
+    rounding floor, the same ρ with the ulp of the positions, stops the run there.)
     """
     gains = scenario.gains
     if scenario.dynamics == 'single':
@@ -501,13 +520,11 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
         speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
 
     def error_step(k: int, sigma: float) -> float:
-        ratio = float(capacities[k]) / sigma  # g, h, f through c/σ: no overflow for any finite Δ
-        step = k1 * (2.0 * ratio * ratio / sigma) * float(ulp_y[k])
-        if k2 > 0.0:
-            if speed[k] > 0.0:
-                step += k2 * ((2.0 * ratio + 1.0) / (sigma * sigma)) * float(speed[k] * ulp_y[k])
-            step += k2 * ((ratio + 1.0) / sigma) * float(ulp_q[k])
-        return step
+        return float(
+            theory.rounding_step(
+                float(capacities[k]), sigma, float(ulp_y[k]), k1=k1, k2=k2, speed=float(speed[k]), ulp_q=float(ulp_q[k])
+            )
+        )
 
     limit = PRECISION_LIMIT * threshold
     for k, edge in enumerate(scenario.edges):
@@ -598,6 +615,33 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
         if beta1 > 0.0:
             _check_remark(scenario, out, 'β1', beta1)
 
+    rho2_p, lam_max_p = _check_riccati(out, gains, beta1)
+    upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
+    k4 = k4_value(k1, k2, k3)
+    state = against_bound(k3, upper, strict=True)
+    if not k3 > 0.0 or state == OUTSIDE:
+        shown_k3, shown_upper = _apart(k3, upper)
+        out.error(
+            'k3', 'gains',
+            f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {shown_upper} required (k4 < 2), got k3 = {shown_k3}, '
+            f'k4 = {_g(k4)}',
+            k3=k3, k3_upper_bound=upper, k4=k4,
+        )
+        return
+    if state == ROUNDING:
+        _rounding(out, 'k3', k3, '4/(k2+sqrt(k1²+k2²))', upper)
+    elif k3 > NEAR_EDGE_FRACTION * upper:
+        out.warning(
+            'k3', 'gains',
+            f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
+            k3=k3, k3_upper_bound=upper, k4=k4,
+        )
+    _check_beta_d(out, beta_d=beta_d, k4=k4, rho2_p=rho2_p, lam_max_p=lam_max_p)
+
+
+def _check_riccati(out: _Collector, gains, beta1: float) -> tuple[float, float]:
+    """P and k1, k2 > 0 against (riccatti) for this β1; P's eigenvalues ρ2(P), λmax(P)."""
+    k1, k2 = gains.k1, gains.k2
     eigenvalues = np.linalg.eigvalsh(gains.P)
     rho2_p, lam_max_p = float(eigenvalues.min()), float(eigenvalues.max())
     lhs = riccati_lhs(gains.P, beta1)
@@ -621,26 +665,11 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             f'for β1 = {_g(beta1)}',
             rho2_P=rho2_p, riccati_max_eigenvalue=lhs_max, beta1=beta1,
         )
-    upper = k3_upper_bound(k1, k2) if k1 > 0.0 and k2 > 0.0 else math.nan
-    k4 = k4_value(k1, k2, k3)
-    state = against_bound(k3, upper, strict=True)
-    if not k3 > 0.0 or state == OUTSIDE:
-        shown_k3, shown_upper = _apart(k3, upper)
-        out.error(
-            'k3', 'gains',
-            f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {shown_upper} required (k4 < 2), got k3 = {shown_k3}, '
-            f'k4 = {_g(k4)}',
-            k3=k3, k3_upper_bound=upper, k4=k4,
-        )
-        return
-    if state == ROUNDING:
-        _rounding(out, 'k3', k3, '4/(k2+sqrt(k1²+k2²))', upper)
-    elif k3 > NEAR_EDGE_FRACTION * upper:
-        out.warning(
-            'k3', 'gains',
-            f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
-            k3=k3, k3_upper_bound=upper, k4=k4,
-        )
+    return rho2_p, lam_max_p
+
+
+def _check_beta_d(out: _Collector, *, beta_d: float, k4: float, rho2_p: float, lam_max_p: float) -> None:
+    """β_d against the printed bound (2-k4) ρ2(P) and against (2-k4)/λmax(P), which the proof supports."""
     bound_paper = (2.0 - k4) * rho2_p
     bound_corrected = (2.0 - k4) / lam_max_p
     out.note(
@@ -680,6 +709,7 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
             f'guaranteed',
             beta_d=beta_d, bound_corrected=bound_corrected, bound_paper=bound_paper,
         )
+
 
 
 def require_valid(scenario: Scenario) -> ValidationReport:

@@ -56,6 +56,7 @@ from std_msgs.msg import Float64MultiArray, String
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
 from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, EXIT_REFUSED, StopSignals, exit_process, make_executor, shutdown_guard
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
+from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import (
@@ -90,7 +91,7 @@ from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeper
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, odometry_sample, pose_sample, poses_for_end, sample_times, trajectory_samples
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, poses_for_end, sample_from_fields, sample_times, trajectory_samples
 
 COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
@@ -193,15 +194,18 @@ class FormationCoordinatorNode(TimeKeeperNode):
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
-        topic, kind = {
-            'true_odom': (robot_true_odom_topic, Odometry),
-            'odom': (robot_odom_topic, Odometry),
-            'pose': (robot_pose_topic, PoseStamped),
+        topic, kind, self._pose_fields = {
+            'true_odom': (robot_true_odom_topic, Odometry, odometry_fields),
+            'odom': (robot_odom_topic, Odometry, odometry_fields),
+            'pose': (robot_pose_topic, PoseStamped, pose_stamped_fields),
         }[self.trajectory_source]
         self._poses: dict[int, list[RobotSample]] = {i: [] for i in self.scenario.agent_ids}
         self._early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.scenario.agent_ids}
+        # Raw: the poses' fields read from their bytes (formation_msgs_py.cdr), not through rclpy's
+        # Python messages, which were most of the coordinator's CPU (400 Odometry a second for 4
+        # robots); the same floats as `formation analyze` reads from the bag (sim.robots.sample_from_fields).
         self._pose_subs = {
-            i: self.create_subscription(kind, topic(i), lambda msg, agent=i: self._on_pose(msg, agent), POSE_READER_QOS)
+            i: self.create_subscription(kind, topic(i), lambda data, agent=i: self._on_pose(data, agent), POSE_READER_QOS, raw=True)
             for i in self.scenario.agent_ids
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
@@ -376,17 +380,24 @@ class FormationCoordinatorNode(TimeKeeperNode):
             stamps.add(info.stamp)
             self.agents[agent].trigger_times.append(info.stamp)
 
-    def _on_pose(self, msg, agent: int) -> None:
-        if self.step is None:  # before t = 0: the last few, for the first sample
-            self._early[agent].append(msg)
+    def _on_pose(self, data: bytes, agent: int) -> None:
+        try:
+            fields = self._pose_fields(data)
+        except MessageError as error:
+            self._reject(self._pose_subs[agent].topic_name, error.reason, str(error))
             return
-        sample = self._sample(msg)
+        if self.step is None:  # before t = 0: the last few, for the first sample
+            self._early[agent].append(fields)
+            return
+        sample = self._sample(fields)
         self._poses[agent].append(sample)
         self._pose_watch.note(agent, now=time.monotonic(), t=sample.time)
 
-    def _sample(self, msg) -> RobotSample:
-        sample = odometry_sample if isinstance(msg, Odometry) else pose_sample
-        return sample(msg, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch)
+    def _sample(self, fields: tuple) -> RobotSample:
+        """A pose's fields (`_pose_fields`: stamp, pose, and the twist of odometry) as a sample."""
+        return sample_from_fields(
+            *fields, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch
+        )
 
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).

@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+from formation_agent.ros.process import SignalFlag
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, domain_id_ok
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.runtime.launch import LOG_DIR, LaunchPlan, RobotOptions, RunError
@@ -61,7 +62,7 @@ class RobotFleet:
         )  # fmt: skip
         self.supervisor: Supervisor | None = None
         self.died: list = []  # robot processes that exited on their own
-        self._stop = threading.Event()
+        self._stop = SignalFlag()  # set in a signal handler: no lock (process.SignalFlag)
 
     def stop(self) -> None:
         self._stop.set()

@@ -33,37 +33,20 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import math
 import os
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 
-from formation_agent.ros.process import EXIT_REFUSED  # 4: the robots' measured start broke a hypothesis, nothing was sent
-from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
+from formation_agent.ros.process import EXIT_REFUSED, SignalFlag  # 4: the robots' measured start broke a hypothesis, nothing was sent
 from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, RECORDER_NODE, ROBOT_NODE, SIMULATOR_NODE, agent_namespace
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
-from formation_sim.sim.engine import EngineError, check_sample_dt
 from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
-from formation_sim.runtime.launch import (
-    BACKENDS,
-    BAG_DIR,
-    DISCOVERY_MODES,
-    DOMAIN_RANGE,
-    INJECT_KEYS,
-    LOG_DIR,
-    LaunchPlan,
-    RobotOptions,
-    RunError,
-    discovery_server_program,
-    free_udp_port,
-    reserve_domain,
-    resolve_agents_per_process,
-)
+from formation_sim.runtime.launch import BACKENDS, BAG_DIR, LOG_DIR, LaunchPlan, RobotOptions, RunError, free_udp_port, reserve_domain
 from formation_sim.runtime.results import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -83,6 +66,7 @@ from formation_sim.runtime.results import (
     summary_of_what_is_known,
     timeline,
 )
+from formation_sim.runtime.run_options import RunOptions
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
 
 __all__ = [
@@ -96,6 +80,7 @@ __all__ = [
     'FormationRun',
     'RobotOptions',
     'RunError',
+    'RunOptions',
     'RunResult',
     'reserve_domain',
 ]  # fmt: skip
@@ -133,164 +118,46 @@ class FormationRun:
         *,
         out_dir: str | Path | None = None,
         force: bool = False,
-        horizon: float | None = None,
-        domain_id: int | None = None,
-        agents_per_process: int | str = 1,
-        record: bool = True,
-        localhost_only: bool = True,
-        progress: bool = True,
-        sample_period: float = 0.01,
-        timeout: float | None = None,
-        clock: str | None = None,
-        executor: str = DEFAULT_EXECUTOR,
-        stop_timeouts: tuple[float, float] = (5.0, 3.0),
         validate: bool = True,
-        inject: dict[str, float] | None = None,
-        launch_prefix: Callable[[str], Sequence[str]] | None = None,
-        extra_env: dict[str, str] | None = None,
-        step_listeners: int = 0,
-        backend: str = 'exact',
-        robots: RobotOptions | None = None,
-        discovery: str = 'simple',
-        summary_extra: dict | None = None,
+        options: RunOptions | None = None,
+        **fields,
     ) -> None:
         """Check everything that can be checked before any process starts or anything on disk changes.
 
-        `out_dir`: a folder that is new or empty (`formation_sim.sim.run_folder`); None: a new folder
-        under runs/ named after the scenario.  `force`: replace the earlier run in `out_dir` (its
-        files are removed when the run starts).  `backend`: 'exact' (the simulator's exact world, default), a robot kind
-        ('holonomic', 'unicycle', … `formation_agent.core.kinds`: simulated robots of that kind), 'external' (the robots are whatever publishes their poses and takes
-        their commands); `robots` describes the robots of all but 'exact' (default: the backend's
-        model with no limits; `external` needs it).  `clock`: 'lockstep' (sim time, exact; the
-        default of `exact`) or 'realtime' (wall clock; robots always run on it).  `validate`:
-        refuse a scenario that breaks the theorems' hypotheses (ValidationError); False only for
-        experiments on purpose outside them.  `inject`: fault injection on the agents' arriving
-        triggering information, keys `loss` (probability), `delay_ms`, `jitter_ms`, `seed` (a test
-        facility; loss needs the wall clock).  `launch_prefix`: child name ('simulator',
-        'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', …) -> command put
-        before its python, e.g. ['ip', 'netns', 'exec', 'host1'] to run it on another network
-        stack.  `extra_env`: variables set for every child (e.g. FASTDDS_BUILTIN_TRANSPORTS).
-        `agents_per_process`: agent nodes sharing one process, or 'auto' (one process per agent
-        up to 24 agents, beyond that the team in at most 6 processes: launch.resolve_agents_per_process).
-        `executor`: the rclpy executor of the time keeper and agent processes, 'events'
-        (rclpy.experimental.EventsExecutor) or 'single' (SingleThreadedExecutor).
-        `step_listeners`: nodes outside the run (a live monitor, a test's fault injector) that
-        must hear every Step: step 0 waits until that many more readers of it are matched.
-        `discovery`: 'simple' (Fast DDS's simple discovery, every participant announces itself to
-        every other) or 'server' (a Fast DDS discovery server, started first as one of the run's
-        children, through which every other child discovers the rest: ROS_DISCOVERY_SERVER).
-        `summary_extra`: entries added to summary.json's `extra` as given (`formation run
-        --speed-scale auto` records the κ it chose and why: `speed_scale`).
+        `out_dir`: a folder that is new or empty (`formation_sim.sim.run_folder`); None: a new
+        folder under runs/ named after the scenario.  `force`: replace the earlier run in `out_dir`
+        (its files are removed when the run starts).  `validate`: refuse a scenario that breaks the
+        theorems' hypotheses (ValidationError); False only for experiments on purpose outside them.
+        How it runs: `options` (`RunOptions`), and any of its fields as keywords over them
+        (`FormationRun('paper_single', horizon=5.0)`); a name that is no option is a TypeError.
         """
         self._prepared_from = _process_started()  # the `formation` command's start, else now (extra.timeline)
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if validate:
             require_valid(self.scenario)  # ValidationError names the rule, the edge or agent, the values
+        self.options = dataclasses.replace(options or RunOptions(), **fields).check(self.scenario)
         self.out_dir = None if out_dir is None else Path(out_dir)
         self.force = force
-        self.horizon = float(self.scenario.horizon if horizon is None else horizon)
-        if not (math.isfinite(self.horizon) and self.horizon >= sys.float_info.min):
-            # (the smallest normal double: a ROS parameter file cannot carry a subnormal one)
-            raise RunError(f'horizon must be a finite number > 0, got {self.horizon!r}')
-        if domain_id is not None and not (isinstance(domain_id, int) and 0 <= domain_id <= DOMAIN_RANGE[1]):
-            raise RunError(f'domain id must lie in [0, {DOMAIN_RANGE[1]}], got {domain_id!r}')
-        try:
-            check_sample_dt(sample_period, horizon=self.horizon, scenario=self.scenario)
-        except EngineError as error:
-            raise RunError(f'sample_period: {error}') from None
-        if backend != 'exact' and not sample_period:
-            raise RunError(f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {sample_period!r}')
-        if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0):
-            raise RunError(f'timeout must be a finite number of seconds > 0, got {timeout!r}')
-        agents_per_process = resolve_agents_per_process(agents_per_process, len(self.scenario.agent_ids))
-        if self.scenario.dimension > 3:
-            raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {self.scenario.dimension}')
-        if backend not in BACKENDS:
-            raise RunError(f'backend must be one of {BACKENDS}, got {backend!r}')
-        on_robots = backend != 'exact'
-        if clock is None:
-            clock = 'realtime' if on_robots else 'lockstep'
-        if clock not in ('lockstep', 'realtime'):
-            raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
-        if on_robots and clock != 'realtime':
-            raise RunError(f'robots run on the wall clock: backend {backend!r} needs clock=realtime, got {clock!r}')
-        if on_robots:
-            if robots is None:
-                if backend == 'external':
-                    raise RunError("backend 'external' needs robots=RobotOptions(model=...): what the robots are")
-                robots = RobotOptions(model=backend)
-            if backend not in ('external', robots.model):
-                raise RunError(f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}')
-            robots.check(self.scenario)
-        elif robots is not None:
-            raise RunError(f"robots are options of the robot backends {tuple(BACKENDS[1:])}, not of 'exact'")
-        self.backend = backend
-        self.robots = robots
-        self.clock = clock
-        if executor not in EXECUTORS:
-            raise RunError(f'executor must be one of {EXECUTORS}, got {executor!r}')
-        self.executor = executor
-        self.summary_extra = dict(summary_extra or {})  # recorded in summary.json's extra as given (e.g. speed_scale)
-        self.inject = dict(inject or {})
-        if unknown := set(self.inject) - set(INJECT_KEYS):
-            raise RunError(f'inject: unknown keys {sorted(unknown)} (known: {list(INJECT_KEYS)})')
-        for key, value in self.inject.items():
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise RunError(f'inject: {key} must be a finite number >= 0, got {value!r}')
-        if self.inject.get('loss', 0.0) > 1.0:
-            raise RunError(f'inject: loss is a probability in [0, 1], got {self.inject["loss"]!r}')
-        if self.inject.get('loss', 0.0) > 0.0 and clock != 'realtime':
-            raise RunError(
-                'inject: loss needs the wall clock (clock=realtime, --real-time): lock-step waits for '
-                'every message sent, so a dropped one stalls the run'
-            )
-        if step_listeners < 0:
-            raise RunError(f'step_listeners must be >= 0, got {step_listeners}')
-        if discovery not in DISCOVERY_MODES:
-            raise RunError(f'discovery must be one of {DISCOVERY_MODES}, got {discovery!r}')
-        if discovery == 'server':
-            discovery_server_program()  # RunError now, before anything starts, if it is not installed
-        self.step_listeners = step_listeners
         if self.out_dir is not None:  # last: every other argument is refused before the folder is looked at
             try:
                 check_out_dir(self.out_dir, force=force)
             except RunFolderError as error:
                 raise RunError(str(error)) from None
-        self.launch_prefix = launch_prefix
-        self.extra_env = dict(extra_env or {})
-        self.domain_id = domain_id
-        self.agents_per_process = agents_per_process
-        self.record = record
-        self.localhost_only = localhost_only
-        self.progress = progress
-        self.sample_period = sample_period
-        self.timeout = timeout
-        self.stop_timeouts = stop_timeouts
+        o = self.options
         self.plan = LaunchPlan(
-            scenario=self.scenario,
-            backend=backend,
-            out_dir=self.out_dir,
-            horizon=self.horizon,
-            clock=clock,
-            record=record,
-            agents_per_process=agents_per_process,
-            sample_period=sample_period,
-            executor=executor,
-            step_listeners=step_listeners,
-            inject=self.inject,
-            robots=robots,
-            discovery=discovery,
-            localhost_only=localhost_only,
-        )
+            scenario=self.scenario, backend=o.backend, out_dir=self.out_dir, horizon=o.horizon, clock=o.clock, record=o.record,
+            agents_per_process=o.agents_per_process, sample_period=o.sample_period, executor=o.executor,
+            step_listeners=o.step_listeners, inject=o.inject, robots=o.robots, discovery=o.discovery, localhost_only=o.localhost_only,
+        )  # fmt: skip
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
         self.marks: dict[str, float] = {}
-        self._interrupted = threading.Event()
+        self._interrupted = SignalFlag()  # set in a signal handler: no lock (process.SignalFlag)
         self._started_at = 0.0
 
     def _environment(self, domain_id: int, processes: int | None = None) -> dict[str, str]:
         """The children's environment (launch.LaunchPlan.environment)."""
-        return self.plan.environment(domain_id, extra_env=self.extra_env)
+        return self.plan.environment(domain_id, extra_env=self.options.extra_env)
 
     @property
     def _children(self) -> list[Child]:
@@ -304,7 +171,7 @@ class FormationRun:
         # command began (before run(): its imports, the scenario read and validated).
         self.marks = {'prepare': self._prepared_from, 'run': time.time()}
         lost: Child | None = None
-        with reserve_domain(self.domain_id) as domain_id, self._signals_trapped():
+        with reserve_domain(self.options.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
                 self.out_dir = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force)
             except RunFolderError as error:
@@ -313,22 +180,59 @@ class FormationRun:
             self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir, discovery_port=port)
             paths = self.plan.write_inputs()
             (self.out_dir / LOG_DIR).mkdir(exist_ok=True)
-            self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.launch_prefix)
+            self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.options.launch_prefix)
             try:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
-                self.removed_shm_files = self._supervisor.stop(self.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost))
+                self.removed_shm_files = self._supervisor.stop(self.options.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost))
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
         notes: list[str] = []  # what the message adds after the failure
         recorder = next((c for c in self._children if c.name == 'recorder'), None)
-        recovered = recover_bag(bag, notes, recorder=recorder) if self.record else False
+        recovered = recover_bag(bag, notes, recorder=recorder) if self.options.record else False
+        status, failure, run_phases = self._write_summary(status, message, lost, domain_id=domain_id, notes=notes)
+        if status == EXIT_OK and not summary.is_file():
+            status = EXIT_FAILED
+            message = message or f'the {self.plan.keeper} exited without writing {summary}'
+        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+            message = failure['message'] + (f'; {message}' if message else '')
+        message = '; '.join([message, *notes] if message else notes)
+        result = RunResult(
+            out_dir=self.out_dir,
+            summary=summary if summary.is_file() else None,
+            bag=bag if (bag / 'metadata.yaml').is_file() else None,
+            exit_status=status,
+            domain_id=domain_id,
+            wall_time=time.monotonic() - started,
+            children=tuple(
+                ChildExit(name=c.name, pid=c.pid, returncode=c.process.returncode, signal_used=c.signal_used)
+                for c in self._children
+            ),
+            message=message,
+            failure=failure,
+            bag_recovered=recovered,
+            phases=run_phases,
+        )
+        if self.options.progress:
+            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
+            spent = f' ({describe_phases(run_phases)})' if run_phases else ''
+            self._say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
+        return result
+
+    def _write_summary(
+        self, status: int, message: str, lost: Child | None, *, domain_id: int, notes: list[str]
+    ) -> tuple[int, dict | None, dict[str, float]]:
+        """summary.json as the run ended (the time keeper's, or what is known), with the failure, the
+        recording's check, the timeline and `summary_extra`: (exit status, extra.failure, phases);
+        what the message should add goes into `notes`."""
+        summary = self.out_dir / SUMMARY_FILE
+        bag = self.out_dir / BAG_DIR
         data = read_summary(summary, notes)
         if data is None and 't=' in self.last_progress:  # it ran, and the time keeper left no summary
             keeper = next(c for c in self._children if c.name == self.plan.keeper)
             data = summary_of_what_is_known(
-                keeper, scenario=self.scenario, horizon=self.horizon, mode='distributed' if self.backend == 'exact' else 'robots',
+                keeper, scenario=self.scenario, horizon=self.options.horizon, mode='distributed' if self.options.backend == 'exact' else 'robots',
                 bag=bag, run_dir=self.out_dir, status=status, last_progress=self.last_progress, children=self._children,
                 launched=self._started_at, notes=notes,
             )  # fmt: skip
@@ -356,7 +260,7 @@ class FormationRun:
             extra = data.setdefault('extra', {})
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
-            extra.update(self.summary_extra)
+            extra.update(self.options.summary_extra)
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -364,37 +268,11 @@ class FormationRun:
             except OSError as error:
                 summary.unlink(missing_ok=True)  # the time keeper's, without the failure: not to be believed
                 notes.append(f'summary.json could not be written: {error}')
-        if status == EXIT_OK and not summary.is_file():
-            status = EXIT_FAILED
-            message = message or f'the {self.plan.keeper} exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
-            message = failure['message'] + (f'; {message}' if message else '')
-        message = '; '.join([message, *notes] if message else notes)
-        result = RunResult(
-            out_dir=self.out_dir,
-            summary=summary if summary.is_file() else None,
-            bag=bag if (bag / 'metadata.yaml').is_file() else None,
-            exit_status=status,
-            domain_id=domain_id,
-            wall_time=time.monotonic() - started,
-            children=tuple(
-                ChildExit(name=c.name, pid=c.pid, returncode=c.process.returncode, signal_used=c.signal_used)
-                for c in self._children
-            ),
-            message=message,
-            failure=failure,
-            bag_recovered=recovered,
-            phases=run_phases,
-        )
-        if self.progress:
-            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
-            spent = f' ({describe_phases(run_phases)})' if run_phases else ''
-            self._say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
-        return result
+        return status, failure, run_phases
 
     def _check_recording(self, data: dict, bag: Path, notes: list[str]):
         """What the run published against what its bag holds (extra.recording); None without a bag."""
-        if not self.record:
+        if not self.options.record:
             return None
         return check_recording(data, bag, self.plan.counted_topics(), notes)
 
@@ -441,16 +319,16 @@ class FormationRun:
             if spec.keeper:
                 keeper = child
         self.marks['spawned'] = time.time()
-        if self.progress:
+        if self.options.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
             server = f', discovery server on port {self.plan.discovery_port}' if self.plan.discovery == 'server' else ''
             self._say(
                 f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent process(es)'
-                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.record else ""}{server} started; '
+                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.options.record else ""}{server} started; '
                 'waiting for discovery'
             )
-        deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        deadline = None if self.options.timeout is None else time.monotonic() + self.options.timeout
         shown = ''
         lost: Child | None = None
         # The children's Fast DDS files, noted while they live (a look at /dev/shm; the children's
@@ -462,8 +340,8 @@ class FormationRun:
                 return EXIT_INTERRUPTED, 'interrupted', lost
             now = time.monotonic()
             if deadline is not None and now > deadline:
-                return EXIT_FAILED, f'timed out after {self.timeout} s', lost
-            if self.progress and self.last_progress != shown:
+                return EXIT_FAILED, f'timed out after {self.options.timeout} s', lost
+            if self.options.progress and self.last_progress != shown:
                 shown = self.last_progress
                 self._say(shown)
             supervisor.note_exits(now)
@@ -474,7 +352,7 @@ class FormationRun:
             if code is not None:
                 self.marks['keeper_exited'] = time.time()
                 if code == 0:
-                    failed = supervisor.wait_for_expected(self.stop_timeouts[0], besides=keeper)
+                    failed = supervisor.wait_for_expected(self.options.stop_timeouts[0], besides=keeper)
                     failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     if not failed:
                         return EXIT_OK, after_end, lost
@@ -496,7 +374,7 @@ class FormationRun:
                     ),
                     None,
                 )
-                if lost is not None and self.progress:
+                if lost is not None and self.options.progress:
                     self._say(f'{lost.describe()}; stopping the run')
             if lost is not None and now - lost.exited_at > self._detection(lost):
                 # The time keeper has had the time to detect it and stop by itself.
@@ -508,7 +386,7 @@ class FormationRun:
         without its zero command stops on its command timeout, and the bag shows it."""
         if lost is None or not lost.name.startswith('agent') or not self.plan.simulated_robots:
             return 0.0
-        return self.robots.command_timeout + 0.3  # and a few of its ticks
+        return self.options.robots.command_timeout + 0.3  # and a few of its ticks
 
     def _detection(self, lost: Child) -> float:
         """How long the time keeper may take to stop the run by itself after `lost` exited.
@@ -521,8 +399,8 @@ class FormationRun:
         if not lost.name.startswith('agent'):
             return 0.0
         if lost.failed_itself:
-            return AGENT_REPORT_DETECTION if self.backend != 'exact' else LOST_DETECTION
-        return 0.0 if self.backend != 'exact' else LOST_DETECTION
+            return AGENT_REPORT_DETECTION if self.options.backend != 'exact' else LOST_DETECTION
+        return 0.0 if self.options.backend != 'exact' else LOST_DETECTION
 
     def _say(self, text: str, *, end: bool = False) -> None:
         stream = sys.stderr

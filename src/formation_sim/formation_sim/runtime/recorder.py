@@ -191,6 +191,30 @@ class RunClock:
         return max(0, run_time + (self._monotonic_ns() if received_ns is None else received_ns) - since)
 
 
+def _requested_topics(values: dict) -> tuple[list[tuple[str, str]], list[str]]:
+    """The recorder's `topics` parameter as (name, type) pairs, and the problems of `topics`,
+    `watched_topics` and `output` (each type importable here and in the Jazzy typestore)."""
+    requested: list[tuple[str, str]] = []
+    problems: list[str] = []
+    for spec in values.get('topics') or []:
+        try:
+            name, msgtype = parse_topic_spec(spec)
+            import_message_class(msgtype)  # recordable: importable here and known to the bag
+            if msgtype not in jazzy_typestore().fielddefs:
+                raise UnknownMessageTypeError(f'message type {msgtype!r} is not in the typestore of ROS 2 Jazzy')
+            requested.append((name, msgtype))
+        except BagError as error:
+            problems.append(f"parameter 'topics': {error}")
+    names = [name for name, _ in requested]
+    if duplicates := sorted({n for n in names if names.count(n) > 1}):
+        problems.append(f"parameter 'topics' names {duplicates} more than once")
+    if unrecorded := sorted(set(values.get('watched_topics') or []) - set(names)):
+        problems.append(f"parameter 'watched_topics' names topics that are not in 'topics': {unrecorded}")
+    if values.get('output') == '':
+        problems.append("parameter 'output' (string) must name the bag directory to create, got ''")
+    return requested, problems
+
+
 class RecorderNode(Node):
     """Record topics into a bag, stamped with the run's time (`RunClock`).
 
@@ -215,23 +239,8 @@ class RecorderNode(Node):
 
         super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
         values, problems = read_parameters(self, RECORDER_PARAMETERS)
-        requested: list[tuple[str, str]] = []
-        for spec in values.get('topics') or []:
-            try:
-                name, msgtype = parse_topic_spec(spec)
-                import_message_class(msgtype)  # recordable: importable here and known to the bag
-                if msgtype not in jazzy_typestore().fielddefs:
-                    raise UnknownMessageTypeError(f'message type {msgtype!r} is not in the typestore of ROS 2 Jazzy')
-                requested.append((name, msgtype))
-            except BagError as error:
-                problems.append(f"parameter 'topics': {error}")
-        names = [name for name, _ in requested]
-        if duplicates := sorted({n for n in names if names.count(n) > 1}):
-            problems.append(f"parameter 'topics' names {duplicates} more than once")
-        if unrecorded := sorted(set(values.get('watched_topics') or []) - set(names)):
-            problems.append(f"parameter 'watched_topics' names topics that are not in 'topics': {unrecorded}")
-        if values.get('output') == '':
-            problems.append("parameter 'output' (string) must name the bag directory to create, got ''")
+        requested, topic_problems = _requested_topics(values)
+        problems += topic_problems
         if problems:
             name = self.get_fully_qualified_name()
             self.destroy_node()  # nothing of it outlives the refusal

@@ -91,7 +91,7 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     StallError,
 )
 from formation_sim.runtime.time_keeper import TIME_KEEPER_PARAMETERS, TimeKeeperNode
-from formation_sim.sim.engine import Sampler, build_agent, due_twice, rounding_floor
+from formation_sim.sim.engine import FloorEdges, Sampler, build_agent, due_twice, rounding_floor
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.world import World
 
@@ -217,8 +217,8 @@ class FormationSimulatorNode(TimeKeeperNode):
         """The exact world, its sampler and the tools' view of it."""
         scenario = self.scenario
         self.world = World.from_scenario(scenario)
-        # The agents' threshold, the very same floats, to stop where the engine stops.
-        self._threshold_model = build_agent(scenario, scenario.agent_ids[0])
+        # The agents' threshold (the very same floats) and the edges of the rounding floor: stop where the engine stops.
+        self._threshold_model, self._floor_edges = build_agent(scenario, scenario.agent_ids[0]), FloorEdges.of(scenario)
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
         start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=self.world.velocities)
         self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
@@ -439,7 +439,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         self._sampler.grid_until(t_next)
         self.world.advance(t_next)
         self._sampler.event()
-        if (problem := rounding_floor(self._threshold_model, self.world)) is not None:
+        if (problem := rounding_floor(self._threshold_model, self.world, self._floor_edges)) is not None:
             raise SimulatorError(problem)
         self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
 

@@ -74,23 +74,7 @@ class TimeKeeperNode(Node):
         context=None,
     ) -> None:
         super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
-        # Every parameter read and every rule checked before anything is set up: one
-        # ParameterError names every problem (the command exits 2, nothing started).
-        specs = [spec for spec in self.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
-        values, problems = read_parameters(self, specs)
-        if scenario is None and 'scenario' in values:
-            try:
-                scenario = load_scenario(values['scenario'])
-            except ScenarioError as error:
-                problems.append(f"parameter 'scenario' (string): {error}")
-        if scenario is not None:
-            if scenario.dimension > 3:
-                problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
-            problems += self._world_problems(values, scenario)
-        if problems:
-            name = self.get_fully_qualified_name()
-            self.destroy_node()  # nothing of it outlives the refusal
-            raise ParameterError(name, problems)
+        values, scenario = _checked_parameters(self, scenario)
         self.parameter_values = values
         self.out_dir = values['out_dir']
         self.sample_period = values['sample_period']
@@ -500,3 +484,25 @@ class TimeKeeperNode(Node):
     def record(self) -> RunRecord:
         """The run as a `RunRecord` (summary.json)."""
         raise NotImplementedError
+
+
+def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
+    """Every parameter of `node` read and every rule checked before anything is set up: one
+    ParameterError names every problem (the command exits 2, nothing started, the node
+    destroyed); else (the values, the scenario)."""
+    specs = [spec for spec in node.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
+    values, problems = read_parameters(node, specs)
+    if scenario is None and 'scenario' in values:
+        try:
+            scenario = load_scenario(values['scenario'])
+        except ScenarioError as error:
+            problems.append(f"parameter 'scenario' (string): {error}")
+    if scenario is not None:
+        if scenario.dimension > 3:
+            problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+        problems += node._world_problems(values, scenario)
+    if problems:
+        name = node.get_fully_qualified_name()
+        node.destroy_node()  # nothing of it outlives the refusal
+        raise ParameterError(name, problems)
+    return values, scenario

@@ -75,6 +75,20 @@ class _EdgeSums:
         return total
 
 
+def _checked_horizon(scenario, *, horizon: float | None, sample_dt: float) -> float:
+    """The run's horizon (the scenario's by default), once it and `sample_dt` are valid."""
+    horizon = float(scenario.horizon if horizon is None else horizon)
+    if not (math.isfinite(horizon) and horizon > 0.0):
+        raise BaselineError(f'horizon must be a finite number > 0, got {horizon!r}')
+    if not (math.isfinite(sample_dt) and sample_dt > 0.0):
+        raise BaselineError(f'sample_dt must be a finite number > 0, got {sample_dt!r}')
+    try:
+        check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
+    except EngineError as error:
+        raise BaselineError(str(error)) from None
+    return horizon
+
+
 def simulate_continuous(
     scenario,
     *,
@@ -90,15 +104,7 @@ def simulate_continuous(
     controller evaluations the integrator needed (n per right-hand-side evaluation), a lower
     bound on what sampling this controller at this accuracy would cost; `extra` has the details.
     """
-    horizon = float(scenario.horizon if horizon is None else horizon)
-    if not (math.isfinite(horizon) and horizon > 0.0):
-        raise BaselineError(f'horizon must be a finite number > 0, got {horizon!r}')
-    if not (math.isfinite(sample_dt) and sample_dt > 0.0):
-        raise BaselineError(f'sample_dt must be a finite number > 0, got {sample_dt!r}')
-    try:
-        check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
-    except EngineError as error:
-        raise BaselineError(str(error)) from None
+    horizon = _checked_horizon(scenario, horizon=horizon, sample_dt=sample_dt)
     started = time.perf_counter()
     sums = _EdgeSums(scenario)
     n, p = np.asarray(scenario.positions).shape

@@ -18,12 +18,14 @@ import heapq
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_sim.model import theory
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
 from formation_sim.sim.world import World
@@ -178,29 +180,76 @@ def _next_event_time(heap, serial, searches, horizon: float) -> float:
 
 
 ROUNDING_FLOOR_ULPS = 8.0
-"""A run stops once the threshold is this many ulps of the states (see `rounding_floor`)."""
+"""A run stops once the threshold is below this many rounding steps of the triggering error (`rounding_floor`)."""
 
 
-def rounding_floor(agent, world: World) -> str | None:
+@dataclass(frozen=True)
+class FloorEdges:
+    """What `rounding_floor` needs of the team's edges, computed once per run (`of`): the least
+    capacity Δ - ||d_ij|| (and its edge (i, j)) and the largest |component| of the d_ij."""
+
+    capacity: float
+    pair: tuple[int, int]
+    offset: float
+
+    @classmethod
+    def of(cls, scenario) -> FloorEdges:
+        capacities = theory.edge_capacities(scenario)
+        k = int(np.argmin(capacities))
+        _, _, d = scenario.edge_indices()
+        return cls(capacity=float(capacities[k]), pair=scenario.edges[k].pair, offset=float(np.abs(d).max()))
+
+
+def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
     """Why the event chain can no longer be trusted at `world.time`, or None.
 
-    The threshold α e^{-βt} (α_d e^{-β_d t}) decays without end, the rounding of the states
-    does not: once the threshold is a few ulps of the largest position or velocity, whether an
-    agent triggers is decided by rounding, and the events come ever faster (paper_single with
-    β = 1: 6-7 events per second until t ≈ 37, then 19 000 in its 45th second).  Both the
-    engine and the distributed simulator stop there, with this message, at the same event.
+    The threshold α e^{-βt} (α_d e^{-β_d t}) decays without end, the rounding of the states does
+    not. A relative state y_ij = x_i - x_j - d_ij is computed from the positions, so it is rounded
+    at about u = ulp(max |x_i|, |d_ij|) (largest components over the team) however small it gets,
+    and one such step moves the triggering error by ρ = g_ij u ((gij); ETA-2: (k1 g_ij + k2 h_ij
+    ||q_ij||) u + k2 f_ij ulp(max |q_i|), with the agent's real-time k1, k2): the rounding step the
+    `precision` rule bounds at t = 0 (`theory.rounding_step`), in the units of the threshold. Once
+    the threshold is below ROUNDING_FLOOR_ULPS such steps, whether an agent triggers is decided by
+    rounding, and the events come ever faster (paper_single with β = 1: 6-7 events per second
+    until t ≈ 37, then 19 000 in its 45th second). Both the engine and the distributed simulator
+    stop there, with this message, at the same event.
+
+    ρ is taken at the formation (y_ij = 0, q_ij = 0: g_ij = f_ij = 2/(Δ - ||d_ij||), largest on the
+    edge of least capacity), which is where the threshold reaches rounding: it bounds the
+    formation error, so by then ||y_ij|| is at rounding level too and g_ij(||y_ij||) = g_ij(0)
+    to 1e-9 (tests/formation_sim/sim/test_engine_rounding_floor.py checks it at paper_double's
+    stop). That keeps the rule O(n) at every event, like the lengths' ulps it replaces (~1 µs more
+    a call, measured).
+
+    ρ and the threshold have the same units, so the stop does not move when the run is stated in
+    other length units (lengths × 2^k; ETA-1 times × 2^k and β / 2^k, e_i having no unit; ETA-2
+    k1, k2, α_d and the velocities × 2^k). Comparing the threshold with ulps of the states, as
+    before, stopped paper_single in units of 2^40 at t/2^40 = 7.42 instead of its horizon 10.
+    Measured on the paper's examples, before → now: paper_single and paper_double with their
+    horizons (10 s) run to the end, as before; with a horizon of 60 s paper_single stops at
+    t = 35.245 → 34.364 (threshold 1.19e-14 < 8 × 1.52e-15 on edge (2, 3)), paper_double at
+    t = 34.898 → 34.241 (1.35e-14 < 8 × 1.75e-15).
     """
+    x = world.positions
+    ulp_y = float(np.spacing(max(float(np.abs(x).max()), edges.offset)))
+    c = edges.capacity
+    q = world.velocities
+    if q is None:
+        step = theory.rounding_step(c, c, ulp_y)
+    else:
+        ulp_q = float(np.spacing(np.abs(q).max()))
+        step = theory.rounding_step(c, c, ulp_y, k1=agent.k1, k2=agent.k2, ulp_q=ulp_q)
+    floor = ROUNDING_FLOOR_ULPS * step
     t = world.time
     threshold = agent.threshold(t)
-    scale = float(np.abs(world.positions).max())
-    if world.velocities is not None:
-        scale = max(scale, float(np.abs(world.velocities).max()))
-    floor = ROUNDING_FLOOR_ULPS * float(np.spacing(scale))
     if threshold >= floor:
         return None
+    i, j = edges.pair
+    how = 'g_ij × ulp, (gij)' if q is None else 'k1 g_ij × ulp + k2 f_ij × ulp(q), (gij) (fij)'
     return (
-        f'at t={t!r} the triggering threshold {threshold:.3g} is below {ROUNDING_FLOOR_ULPS:g} ulps ({floor:.3g}) '
-        f'of the states (largest |component| {scale:.3g}): from here on rounding, not the dynamics, decides '
+        f'at t={t!r} the triggering threshold {threshold:.3g} is below {ROUNDING_FLOOR_ULPS:g} ulps of the '
+        f'triggering error ({floor:.3g}): one ulp of the states ({ulp_y:.3g}) moves it by up to {step:.3g} '
+        f'({how} at the formation, on edge ({i}, {j})); from here on rounding, not the dynamics, decides '
         'the events; shorten the horizon or lower beta'
     )
 
@@ -309,9 +358,10 @@ def _run(
     steps = 0
     sampler.event(force=True)  # t = 0
     some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
+    floor_edges = FloorEdges.of(scenario)
     while True:
         sampler.event(due=due)
-        if period is None and (problem := rounding_floor(some_agent, world)) is not None:
+        if period is None and (problem := rounding_floor(some_agent, world, floor_edges)) is not None:
             raise EngineError(problem)
         if on_event is not None:
             on_event(t, world, due)

@@ -18,6 +18,7 @@ read them.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -209,11 +210,14 @@ class RobotSample:
 
 
 def run_time(stamp, epoch: float) -> float:
-    """A header stamp (builtin_interfaces/Time) as run time: seconds since the epoch.
+    """A header stamp (builtin_interfaces/Time) as run time: seconds since the epoch."""
+    return _run_time(stamp.sec, stamp.nanosec, epoch)
 
-    (sec − epoch) first: two numbers near 1.7e9 subtract exactly, and the nanoseconds keep their
-    precision (sec + nanosec·1e-9 alone rounds to ~0.2 µs)."""
-    return (stamp.sec - epoch) + stamp.nanosec * 1e-9
+
+def _run_time(sec: int, nanosec: int, epoch: float) -> float:
+    """(sec − epoch) first: two numbers near 1.7e9 subtract exactly, and the nanoseconds keep
+    their precision (sec + nanosec·1e-9 alone rounds to ~0.2 µs)."""
+    return (sec - epoch) + nanosec * 1e-9
 
 
 def _control_offset(model: str, control_point_distance: float) -> tuple[float, float, float]:
@@ -221,32 +225,53 @@ def _control_offset(model: str, control_point_distance: float) -> tuple[float, f
     return robot_kind(model).control_offset(Geometry(control_point_distance=control_point_distance))
 
 
-def _pose(pose) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+def _pose(pose) -> tuple[float, float, float, float, float, float, float]:
     p, q = pose.position, pose.orientation
-    return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
+    return (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+
+
+def _twist(twist) -> tuple[float, float, float, float, float, float]:
+    return (twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z)
+
+
+def sample_from_fields(
+    sec: int, nanosec: int, pose: Sequence[float], twist: Sequence[float] | None = None, *,
+    model: str, dimension: int, control_point_distance: float, epoch: float,
+) -> RobotSample:  # fmt: skip
+    """A pose as a `RobotSample`, from its fields: the header stamp (sec, nanosec), the pose
+    (position x y z, orientation x y z w) and, from odometry, the body-frame twist (linear x y z,
+    angular x y z; REP 105), giving the control point's world velocity R (v + ω × offset).
+
+    The one computation behind `pose_sample`, `odometry_sample` (rclpy or rosbags messages:
+    `formation analyze`) and the coordinator's raw poses (`formation_msgs_py.cdr`): the same
+    floats from the same message, whichever way it was read."""
+    offset = _control_offset(model, control_point_distance)
+    position, orientation = pose[:3], pose[3:]
+    time = _run_time(sec, nanosec, epoch)
+    point = kinematics.control_point(position, orientation, offset)[:dimension]
+    if twist is None:
+        return RobotSample(time=time, position=point)
+    velocity = kinematics.control_point_velocity(orientation, twist[:3], twist[3:], offset)[:dimension]
+    return RobotSample(time=time, position=point, velocity=velocity)
 
 
 def pose_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
     """A `geometry_msgs/PoseStamped` (an rclpy or rosbags message) as a `RobotSample`: the control
     point as the agents compute it (`formation_agent.core.kinematics`)."""
-    position, orientation = _pose(msg.pose)
-    point = kinematics.control_point(position, orientation, _control_offset(model, control_point_distance))
-    return RobotSample(time=run_time(msg.header.stamp, epoch), position=point[:dimension])
+    stamp = msg.header.stamp
+    return sample_from_fields(
+        stamp.sec, stamp.nanosec, _pose(msg.pose), model=model, dimension=dimension, control_point_distance=control_point_distance, epoch=epoch
+    )
 
 
 def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
     """A `nav_msgs/Odometry` (pose in the world frame, twist in the body frame, REP 105) as a
     `RobotSample` with the control point's world velocity R (v + ω × offset)."""
-    position, orientation = _pose(msg.pose.pose)
-    offset = _control_offset(model, control_point_distance)
-    twist = msg.twist.twist
-    linear = (twist.linear.x, twist.linear.y, twist.linear.z)
-    angular = (twist.angular.x, twist.angular.y, twist.angular.z)
-    return RobotSample(
-        time=run_time(msg.header.stamp, epoch),
-        position=kinematics.control_point(position, orientation, offset)[:dimension],
-        velocity=kinematics.control_point_velocity(orientation, linear, angular, offset)[:dimension],
-    )
+    stamp = msg.header.stamp
+    return sample_from_fields(
+        stamp.sec, stamp.nanosec, _pose(msg.pose.pose), _twist(msg.twist.twist),
+        model=model, dimension=dimension, control_point_distance=control_point_distance, epoch=epoch,
+    )  # fmt: skip
 
 
 POSES_AFTER_END = 1.0
