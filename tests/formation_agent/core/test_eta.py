@@ -371,3 +371,21 @@ def test_first_span_follows_the_last_inter_event_time():
     rel = {j: tuple(agent.offsets[k]) for k, j in enumerate(agent.neighbour_ids)}  # in formation
     agent.trigger(0.25, _sensed(1, rel, t=0.25))
     assert agent.trigger_search(10.0)._span == 0.25
+
+
+def test_each_algorithm_supplies_every_hook_the_shared_base_calls():
+    """eta._AgentHooks declares what _EventTriggeredAgent calls and never defines: both ETAs define
+    each of them, and the base class none (it would hide a missing one)."""
+    import inspect
+
+    from formation_agent.core import eta
+
+    hooks = {name for name, member in vars(eta._AgentHooks).items() if inspect.isfunction(member)} | set(eta._AgentHooks.__annotations__)
+    assert hooks == {'_update', '_row', '_fast_probe', '_threshold'}
+    assert not hooks & set(vars(eta._EventTriggeredAgent))
+    base = inspect.getsource(eta._EventTriggeredAgent)
+    assert all(f'self.{hook}(' in base for hook in hooks)  # each declared hook is called by the base
+    for agent in (eta.Eta1Agent, eta.Eta2Agent):
+        methods = {name for name in hooks if name in vars(agent)}
+        assert methods == hooks - {'_threshold'}, agent
+        assert 'self._threshold = ' in inspect.getsource(agent.__init__) or 'self._threshold =' in inspect.getsource(agent)

@@ -27,7 +27,7 @@ both paths against independent formulas.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,7 +96,31 @@ def _positive(name: str, value: float) -> float:
     return value
 
 
-class _EventTriggeredAgent:
+class _AgentHooks:
+    """What ETA-1 and ETA-2 each supply to `_EventTriggeredAgent` (Eta1Agent, Eta2Agent): the
+    base class calls these and never defines them."""
+
+    _threshold: Callable[[float], float]
+    """The triggering threshold at time t: α e^{-βt} (ETA-1), α_d e^{-β_d t} (ETA-2), each with
+    its speed scale and floor (`eta1_gains`, `eta2_gains`)."""
+
+    def _update(self, y: list[tuple[float, ...]], length: list[float], extra) -> tuple[float, ...]:
+        """At a triggering time, from the sensed relative states y_ij, their lengths and `extra`
+        (ETA-2: the relative velocities; ETA-1: None): the new control (uxsingle) / (uxdouble)."""
+        raise NotImplementedError
+
+    def _row(self, k: int) -> tuple[float, ...]:
+        """Edge k as the plain-float hot path reads it (its last event, the relative state there
+        and what moves it until the edge's next event)."""
+        raise NotImplementedError
+
+    def _fast_probe(self, t: float, *, with_rate: bool = True) -> tuple:
+        """The measurement error e(t) and, `with_rate`, ė(t), padded to three components, on the
+        plain-float hot path."""
+        raise NotImplementedError
+
+
+class _EventTriggeredAgent(_AgentHooks):
     """Bookkeeping shared by ETA-1 and ETA-2: neighbours, anchors, caching of the next time."""
 
     algorithm = ''
