@@ -12,7 +12,8 @@ import yaml
 from formation_sim.cli import main
 from formation_sim.model.scenario import load_scenario, scenario_to_dict
 
-DOMAIN_ID = 92
+DOMAIN_ID = 92  # the silent-robot test on SILENT_DOMAIN_ID: pytest-xdist may run the two side by side
+SILENT_DOMAIN_ID = 94
 L = 0.1  # the control point ahead of the axle [m]
 
 # Where each robot of robots_lab stands (its axle) and faces: set down by hand, nowhere near the file's.
@@ -21,7 +22,8 @@ AXLES = {1: (0.31, -0.12, 0.4), 2: (1.22, 0.05, 2.0), 3: (1.07, 1.18, -2.5), 4: 
 
 @pytest.fixture
 def robots():
-    """Robots 1-4 publishing their odometry (`AXLES`) at 20 Hz, until the test ends; `silent` ids publish nothing."""
+    """`robots(domain=..., silent=())`: robots 1-4 publishing their odometry (`AXLES`) at 20 Hz on
+    ROS domain `domain` until the test ends; `silent` ids publish nothing."""
     import rclpy
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
@@ -30,14 +32,14 @@ def robots():
     from formation_msgs_py.topics import robot_odom_topic
     from formation_sim.sim.robots import quaternion_from_yaw
 
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    node = rclpy.create_node('fake_robots', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    started = []
+    running = []
 
-    def start(*, silent=()):
+    def start(*, domain: int, silent=()):
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = rclpy.create_node('fake_robots', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
         publishers = {i: node.create_publisher(Odometry, robot_odom_topic(i), ROBOT_POSE_QOS) for i in AXLES if i not in silent}
 
         def publish():
@@ -52,19 +54,19 @@ def robots():
         node.create_timer(0.05, publish)
         thread = threading.Thread(target=executor.spin, daemon=True)
         thread.start()
-        started.append(thread)
+        running.append((context, node, executor, thread))
 
     yield start
-    executor.shutdown()
-    for thread in started:
+    for context, node, executor, thread in running:
+        executor.shutdown()
         thread.join(timeout=5.0)
-    node.destroy_node()
-    rclpy.try_shutdown(context=context)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 @pytest.mark.ros
 def test_a_team_set_down_by_hand_gets_its_measured_control_points_and_headings(robots, tmp_path, capsys):
-    robots()
+    robots(domain=DOMAIN_ID)
     out = tmp_path / 'measured.yaml'
     assert main(['measure', 'robots_lab', '--robot', 'unicycle', '--domain-id', str(DOMAIN_ID), '--out', str(out)]) == 0
     measured, original = load_scenario(out), load_scenario('robots_lab')
@@ -84,9 +86,9 @@ def test_positions_may_be_missing_and_a_silent_robot_is_named(robots, tmp_path, 
     data['agents'] = {i: {} for i in data['agents']}  # no positions, no headings
     team = tmp_path / 'team.yaml'
     team.write_text(yaml.safe_dump(data))
-    robots(silent=(3,))
+    robots(domain=SILENT_DOMAIN_ID, silent=(3,))
     out = tmp_path / 'measured.yaml'
-    assert main(['measure', str(team), '--robot', 'unicycle', '--domain-id', str(DOMAIN_ID), '--timeout', '2', '--out', str(out)]) == 1
+    assert main(['measure', str(team), '--robot', 'unicycle', '--domain-id', str(SILENT_DOMAIN_ID), '--timeout', '2', '--out', str(out)]) == 1
     assert 'no pose within 2 s from robots 3 (topics /agent_<i>/robot/odom' in capsys.readouterr().err
     assert not out.exists()
 
