@@ -204,14 +204,13 @@ class Supervisor:
             alive = [c for c in children if c.alive()]
             if not alive:
                 break
-            for child in alive:  # every signal first: the time keeper's final Step stops the robots
+            for child in alive:  # what it maps now: a child that stops unmaps what its dead peers left
+                child.shm_files |= held_files(child.pid)
                 child.signal_used = sig.name
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(child.pid, sig)  # the group we created for it, nothing else
                     if sig == signal.SIGINT:
                         os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
-            for child in alive:  # then what each maps while it stops (it removes its own files on a clean exit)
-                child.shm_files |= held_files(child.pid)
             limit = time.monotonic() + wait
             while any(c.alive() for c in alive) and time.monotonic() < limit:
                 time.sleep(0.05)
