@@ -527,24 +527,31 @@ def _steps_until_exit(process, publisher, published: list) -> float:
     return time.monotonic() - signalled
 
 
-@pytest.mark.ros
-def test_drain_ends_at_its_limit_while_messages_keep_coming(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def _drained_under_steps(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain: int, name: str, *parameters: str) -> tuple[float, list[bytes]]:
+    """A recorder of the Steps into tmp_path/bag (with `parameters`) gets ten Steps, SIGINT, then
+    a Step every 0.05 s until it exits (never quiet for 0.5 s): (seconds from the signal to its
+    exit, the Steps published)."""
     import rclpy
 
-    bag = tmp_path / 'bag'
-    with (ros_domain(tmp_path, monkeypatch, 141) as context,
-          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
-                   'drain_quiet:=0.5', 'drain_limit:=1.5') as process):
-        node = rclpy.create_node('drain_limit_test', context=context)
+    with (ros_domain(tmp_path, monkeypatch, domain) as context,
+          recorder(tmp_path, f'output:={tmp_path / "bag"}', f"topics:=['{STEP}:{STEP_TYPE}']", *parameters) as process):
+        node = rclpy.create_node(name, context=context)
         publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
         wait_for_subscribers([publisher], process, tmp_path)
         published = publish_steps(publisher, 0, 10)
         process.send_signal(signal.SIGINT)
-        waited = _steps_until_exit(process, publisher, published)  # never quiet for 0.5 s
+        waited = _steps_until_exit(process, publisher, published)
         finish(process, tmp_path)
         node.destroy_node()
+    return waited, published
+
+
+@pytest.mark.ros
+def test_drain_ends_at_its_limit_while_messages_keep_coming(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    bag = tmp_path / 'bag'
+    waited, published = _drained_under_steps(tmp_path, monkeypatch, 141, 'drain_limit_test', 'drain_quiet:=0.5', 'drain_limit:=1.5')
 
     assert 1.5 <= waited < 30.0
     assert 'drain limit reached' in recorder_log(tmp_path)
@@ -560,20 +567,10 @@ def test_messages_of_an_endless_topic_do_not_hold_the_drain_up(
     """External robots publish their poses on after the run: the recorder records them while it
     drains but ends once the run's own topics are quiet (before, Ctrl-C on an external run waited
     out the 5 s stop timeout: `drain cut short by a second stop signal after 5.04 s`)."""
-    import rclpy
-
     bag = tmp_path / 'bag'
-    with (ros_domain(tmp_path, monkeypatch, 35) as context,
-          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']", f"endless_topics:=['{STEP}']",
-                   'drain_quiet:=0.5', 'drain_limit:=30.0') as process):
-        node = rclpy.create_node('drain_endless_test', context=context)
-        publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
-        wait_for_subscribers([publisher], process, tmp_path)
-        published = publish_steps(publisher, 0, 10)
-        process.send_signal(signal.SIGINT)
-        waited = _steps_until_exit(process, publisher, published)  # never quiet for 0.5 s
-        finish(process, tmp_path)
-        node.destroy_node()
+    waited, published = _drained_under_steps(
+        tmp_path, monkeypatch, 35, 'drain_endless_test', f"endless_topics:=['{STEP}']", 'drain_quiet:=0.5', 'drain_limit:=30.0'
+    )
 
     assert waited < 30.0 and 'drained' in recorder_log(tmp_path) and 'drain limit reached' not in recorder_log(tmp_path)
     recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
