@@ -26,10 +26,11 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGING)
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps $(foreach p,$(PACKAGES),-e $(p))
 	touch $(STAMP)
 
-# ruff check with pyproject.toml's rule set (lint only: the tree is not reformatted yet). New
-# violations of the auto-fixable rules: `.venv/bin/ruff check --fix .`
+# ruff with pyproject.toml's rule set and format. To fix what they report:
+# `.venv/bin/ruff format . && .venv/bin/ruff check --fix .`
 lint: venv
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 # pytest exits 5 when it collects no test: not a failure of the code, so report it and pass.
 test: venv

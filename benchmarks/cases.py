@@ -16,7 +16,8 @@ def build_scenario(case: dict):
         scenario = random_scenario(n=case['n'], seed=case['seed'], dynamics=case['dynamics'])
     if 'beta' in case:
         scenario = scenario.replace(
-            gains=SingleGains(alpha=scenario.gains.alpha, beta=case['beta']), name=f'{scenario.name}_beta{case["beta"]:g}'
+            gains=SingleGains(alpha=scenario.gains.alpha, beta=case['beta']),
+            name=f'{scenario.name}_beta{case["beta"]:g}',
         )
     return scenario
 

@@ -44,7 +44,12 @@ def scenario_files(folder: Path, case: dict) -> tuple[Path, Path]:
 
 def measure_process(command: list[str], log: Path) -> dict:
     """Wall time, peak RSS (MiB) and exit status of `command`, through `peak_rss.py`; its output in `log`."""
-    done = subprocess.run([sys.executable, str(HERE / 'peak_rss.py'), str(log), '--', *command], capture_output=True, text=True, check=True)
+    done = subprocess.run(
+        [sys.executable, str(HERE / 'peak_rss.py'), str(log), '--', *command],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(done.stdout)
 
 
@@ -56,9 +61,16 @@ def run_process(command: list[str], out: Path) -> dict:
         row['error'] = log.read_text(errors='replace')[-500:]
         return row
     summary = json.loads((out / 'summary.json').read_text())
-    row.update(engine_wall_s=summary['wall_time'], events=summary['total_events'], trigger_times=summary['trigger_times'])
+    row.update(
+        engine_wall_s=summary['wall_time'],
+        events=summary['total_events'],
+        trigger_times=summary['trigger_times'],
+    )
     row['ratio'] = row['wall_s'] / summary['wall_time']
-    row['trajectory_mib'] = sum(path.stat().st_size for path in out.rglob('*') if path.is_file() and path.name != 'formation.png') / 2**20
+    row['trajectory_mib'] = (
+        sum(path.stat().st_size for path in out.rglob('*') if path.is_file() and path.name != 'formation.png')
+        / 2**20
+    )
     return row
 
 
@@ -69,24 +81,58 @@ def measure_case(case: dict, *, repeats: int, baseline_folder: Path | None, work
     for repeat in range(repeats):
         for key, extra in (('now', []), ('now_no_plot', ['--no-plot'])):
             out = work / f'{key}-{repeat}'
-            rows[key].append(run_process([sys.executable, '-m', 'formation_sim.cli', 'simulate', str(json_path), '--out', str(out), '--quiet', *extra], out))
+            rows[key].append(
+                run_process(
+                    [
+                        sys.executable,
+                        '-m',
+                        'formation_sim.cli',
+                        'simulate',
+                        str(json_path),
+                        '--out',
+                        str(out),
+                        '--quiet',
+                        *extra,
+                    ],
+                    out,
+                )
+            )
             shutil.rmtree(out, ignore_errors=True)
         if baseline_folder is not None:
             out = work / f'before-{repeat}'
-            command = [sys.executable, str(HERE / 'cli_baseline.py'), str(baseline_folder), 'simulate', str(yaml_path), '--out', str(out), '--quiet']
+            command = [
+                sys.executable,
+                str(HERE / 'cli_baseline.py'),
+                str(baseline_folder),
+                'simulate',
+                str(yaml_path),
+                '--out',
+                str(out),
+                '--quiet',
+            ]
             rows['before'].append(run_process(command, out))
             shutil.rmtree(out, ignore_errors=True)
     if baseline_folder is None and case.get('api_baseline'):
         for repeat in range(case.get('api_repeats', 1)):
             log = work / f'api-{repeat}.log'
-            command = [sys.executable, str(HERE / 'engine_baseline.py'), CLI_BASELINE_REV, json.dumps({**case, 'engine': {'sample_events': False}})]
+            command = [
+                sys.executable,
+                str(HERE / 'engine_baseline.py'),
+                CLI_BASELINE_REV,
+                json.dumps({**case, 'engine': {'sample_events': False}}),
+            ]
             process = measure_process(command, log)
             engine = json.loads(log.read_text().strip().splitlines()[-1])
             # The process (scenario built from the case, the revision's engine) and the engine's own wall time.
-            rows['before'].append({
-                'wall_s': process['wall_s'], 'peak_rss_mib': process['peak_rss_mib'], 'engine_wall_s': engine['wall_s'],
-                'ratio': process['wall_s'] / engine['wall_s'], 'events': engine['events'],
-            })  # fmt: skip
+            rows['before'].append(
+                {
+                    'wall_s': process['wall_s'],
+                    'peak_rss_mib': process['peak_rss_mib'],
+                    'engine_wall_s': engine['wall_s'],
+                    'ratio': process['wall_s'] / engine['wall_s'],
+                    'events': engine['events'],
+                }
+            )
     result = {'case': case, 'repeats': repeats, 'runs': rows}
     for key, runs in rows.items():
         done = [run for run in runs if run.get('exit', 0) == 0]
@@ -116,7 +162,14 @@ def measure(cases: list[dict], *, repeats: int, progress) -> list[dict]:
             progress(f'cli n={case["n"]} T={case["horizon"]}')
             work = Path(tmp) / f'n{case["n"]}'
             work.mkdir()
-            results.append(measure_case(case, repeats=repeats, baseline_folder=None if case.get('api_baseline') else baseline, work=work))
+            results.append(
+                measure_case(
+                    case,
+                    repeats=repeats,
+                    baseline_folder=None if case.get('api_baseline') else baseline,
+                    work=work,
+                )
+            )
             shutil.rmtree(work, ignore_errors=True)
     return results
 

@@ -21,7 +21,9 @@ def main() -> int:
     use_revision(folder)
     from formation_sim.cli import main as formation
 
-    assert Path(sys.modules['formation_sim'].__file__).is_relative_to(folder), sys.modules['formation_sim'].__file__
+    assert Path(sys.modules['formation_sim'].__file__).is_relative_to(folder), sys.modules[
+        'formation_sim'
+    ].__file__
     return formation(arguments)
 
 

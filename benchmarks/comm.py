@@ -51,7 +51,16 @@ def _periodic(scenario, horizon: float, period: float, target: float):
     return True, record
 
 
-def largest_period(scenario, horizon: float, target: float, *, start: float = 1.0, shrink: float = 2.0, refine: int = 4, floor: float = 1e-5):
+def largest_period(
+    scenario,
+    horizon: float,
+    target: float,
+    *,
+    start: float = 1.0,
+    shrink: float = 2.0,
+    refine: int = 4,
+    floor: float = 1e-5,
+):
     """Largest period that works (see the module docstring); (period, record, tried)."""
     tried = []
     period, failed = start, None
@@ -117,4 +126,11 @@ def compare(scenario, *, horizon: float, level: float = 1e-3) -> dict:
         'final_error': _final_error(continuous),
         'convergence_time': convergence_time(continuous, level),
     }
-    return {'scenario': scenario.name, 'n': scenario.n, 'horizon': horizon, 'level': level, 'rows': rows, 'wall_s': time.perf_counter() - started}
+    return {
+        'scenario': scenario.name,
+        'n': scenario.n,
+        'horizon': horizon,
+        'level': level,
+        'rows': rows,
+        'wall_s': time.perf_counter() - started,
+    }

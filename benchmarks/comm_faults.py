@@ -112,15 +112,21 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
             f'{"–" if lateness is None else f"{1000 * lateness:.0f} ms"} |'
         )
     lines.append('')
-    lines.append('Medians over the completed runs (dropped / delayed: over all runs); max edge length: the worst completed run.')
+    lines.append(
+        'Medians over the completed runs (dropped / delayed: over all runs); max edge length: the worst completed run.'
+    )
     return '\n'.join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--out', type=Path, default=Path('runs') / f'comm_faults-{time.strftime("%Y%m%d-%H%M%S")}')
+    parser.add_argument(
+        '--out', type=Path, default=Path('runs') / f'comm_faults-{time.strftime("%Y%m%d-%H%M%S")}'
+    )
     parser.add_argument('--seeds', type=int, default=3, help='runs per setting (seeds 0, 1, ...)')
-    parser.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)')
+    parser.add_argument(
+        '--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)'
+    )
     args = parser.parse_args(argv)
 
     scenario = load_scenario(SCENARIO)
@@ -135,7 +141,11 @@ def main(argv: list[str] | None = None) -> int:
             status = 'ok' if row['ok'] else f'FAILED: {row["message"][:160]}'
             print(f'{label:26s} seed {seed}: {status}', file=sys.stderr, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / 'comm_faults.json').write_text(json.dumps({'reference': reference['final_formation_error'], 'results': results}, indent=1, default=str))
+    (args.out / 'comm_faults.json').write_text(
+        json.dumps(
+            {'reference': reference['final_formation_error'], 'results': results}, indent=1, default=str
+        )
+    )
     print(table(results, reference))
     return 0
 

@@ -146,19 +146,39 @@ def _descendants(root: int) -> dict[int, tuple[str, float]]:
     return found
 
 
-def measure(*, baseline: Baseline | None, out: Path, horizon: float, domain_id: int, profile: Path | None) -> dict:
+def measure(
+    *, baseline: Baseline | None, out: Path, horizon: float, domain_id: int, profile: Path | None
+) -> dict:
     """One run: each kind's CPU as a fraction of one core, stepping and over its life."""
     run_dir = out / 'run'
-    argv = [*command(baseline), 'run', SCENARIO, '--backend', 'unicycle', '--horizon', repr(horizon), '--out', str(run_dir),
-            '--force', '--domain-id', str(domain_id), '--no-plot']  # fmt: skip
+    argv = [
+        *command(baseline),
+        'run',
+        SCENARIO,
+        '--backend',
+        'unicycle',
+        '--horizon',
+        repr(horizon),
+        '--out',
+        str(run_dir),
+        '--force',
+        '--domain-id',
+        str(domain_id),
+        '--no-plot',
+    ]
     env = dict(os.environ)
     if profile is not None:
         hook = Path(tempfile.mkdtemp(prefix='bench_cpu_hook_'))
         (hook / 'sitecustomize.py').write_text(_PROFILE_HOOK.format(kinds=KINDS))
         profile.mkdir(parents=True, exist_ok=True)
-        env.update(FORMATION_CPU_PROFILE=str(profile), PYTHONPATH=os.pathsep.join(filter(None, [str(hook), env.get('PYTHONPATH')])))
+        env.update(
+            FORMATION_CPU_PROFILE=str(profile),
+            PYTHONPATH=os.pathsep.join(filter(None, [str(hook), env.get('PYTHONPATH')])),
+        )
     began = time.time()
-    process = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    process = subprocess.Popen(
+        argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
     watch = CpuWatch(process.pid)
     watch.start()
     try:
@@ -192,9 +212,12 @@ def per_unit(row: dict, key: str, n: int) -> dict:
     if not shares:
         return {}
     return {
-        'agent': shares['agents'] / n, 'robot': shares['robots'] / n, 'coordinator': shares['coordinator'],
-        'recorder': shares['recorder'], 'total': sum(shares.values()),
-    }  # fmt: skip
+        'agent': shares['agents'] / n,
+        'robot': shares['robots'] / n,
+        'coordinator': shares['coordinator'],
+        'recorder': shares['recorder'],
+        'total': sum(shares.values()),
+    }
 
 
 def table(rows: list[dict], n: int) -> str:
@@ -231,10 +254,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--horizon', type=float, default=30.0)
     parser.add_argument('--repeats', type=int, default=1)
-    parser.add_argument('--domain-id', type=int, default=180, help='ROS_DOMAIN_ID of the first run (then +1 per run)')
-    parser.add_argument('--out', type=Path, default=None, help='where the runs go (default: a temporary folder)')
+    parser.add_argument(
+        '--domain-id', type=int, default=180, help='ROS_DOMAIN_ID of the first run (then +1 per run)'
+    )
+    parser.add_argument(
+        '--out', type=Path, default=None, help='where the runs go (default: a temporary folder)'
+    )
     parser.add_argument('--only', choices=('now', 'before'), default=None, help='one code only')
-    parser.add_argument('--profile', type=Path, default=None, help='cProfile every child into this folder (now only)')
+    parser.add_argument(
+        '--profile', type=Path, default=None, help='cProfile every child into this folder (now only)'
+    )
     parser.add_argument('--top', type=int, default=25)
     options = parser.parse_args()
     from formation_sim.model.scenario import load_scenario
@@ -248,15 +277,22 @@ def main() -> int:
         for k in range(options.repeats):
             for code in codes:
                 print(f'{code} ({k + 1}/{options.repeats}) ...', file=sys.stderr, flush=True)
-                row = measure(baseline=baseline if code == 'before' else None, out=out / f'{code}-{k}', horizon=options.horizon,
-                              domain_id=domain, profile=options.profile)  # fmt: skip
+                row = measure(
+                    baseline=baseline if code == 'before' else None,
+                    out=out / f'{code}-{k}',
+                    horizon=options.horizon,
+                    domain_id=domain,
+                    profile=options.profile,
+                )
                 domain += 1
                 rows.append(row)
                 print(json.dumps(row), file=sys.stderr, flush=True)
     finally:
         if baseline is not None:
             baseline.close()
-    print(f'robots_square, unicycle backend, horizon {options.horizon:g} s, {n} agents; fractions of one core')
+    print(
+        f'robots_square, unicycle backend, horizon {options.horizon:g} s, {n} agents; fractions of one core'
+    )
     print(table(rows, n))
     (out / 'cpu.json').write_text(json.dumps(rows, indent=1))
     if options.profile:

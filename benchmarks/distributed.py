@@ -38,7 +38,9 @@ def _children(*, descendants: bool = False) -> dict[int, str]:
         try:
             stat = (entry / 'stat').read_text()
             parents[int(entry.name)] = int(stat.rsplit(')', 1)[1].split()[1])
-            commands[int(entry.name)] = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+            commands[int(entry.name)] = (
+                (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode(errors='replace')
+            )
         except (OSError, ValueError, IndexError):
             continue
 

@@ -33,7 +33,9 @@ PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
 def materialise(rev: str, folder: Path) -> None:
     """The three packages of git revision `rev` under `folder/src/<package>/`."""
     paths = [f'src/{package}/{package}' for package in PACKAGES]
-    archive = subprocess.run(['git', 'archive', '--format=tar', rev, *paths], cwd=ROOT, check=True, capture_output=True).stdout
+    archive = subprocess.run(
+        ['git', 'archive', '--format=tar', rev, *paths], cwd=ROOT, check=True, capture_output=True
+    ).stdout
     with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
         tar.extractall(folder, filter='data')
 
@@ -43,7 +45,9 @@ def use_revision(folder: Path) -> None:
     for name in [m for m in sys.modules if m.split('.')[0] in PACKAGES]:
         del sys.modules[name]  # from here on, every formation module is the revision's
     # Editable installs resolve what the revision lacks from the working tree: take them out of the way.
-    sys.meta_path[:] = [finder for finder in sys.meta_path if not getattr(finder, '__module__', '').startswith('__editable__')]
+    sys.meta_path[:] = [
+        finder for finder in sys.meta_path if not getattr(finder, '__module__', '').startswith('__editable__')
+    ]
     for package in PACKAGES:
         sys.path.insert(0, str(Path(folder) / 'src' / package))
 
@@ -75,7 +79,11 @@ def main() -> int:
         record = engine.simulate(scenario, horizon=case['horizon'], **case.get('engine', {'sample_dt': None}))
         cpu = time.process_time() - cpu
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(json.dumps({'events': record.total_events, 'wall_s': record.wall_time, 'cpu_s': cpu, 'peak_rss_mib': peak}))
+    print(
+        json.dumps(
+            {'events': record.total_events, 'wall_s': record.wall_time, 'cpu_s': cpu, 'peak_rss_mib': peak}
+        )
+    )
     return 0
 
 

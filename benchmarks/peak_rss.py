@@ -34,7 +34,15 @@ def main() -> int:
                 os._exit(127)
         _, status, usage = os.wait4(pid, 0)
         wall = time.perf_counter() - started
-    print(json.dumps({'wall_s': wall, 'peak_rss_mib': usage.ru_maxrss / 1024, 'exit': os.waitstatus_to_exitcode(status)}))
+    print(
+        json.dumps(
+            {
+                'wall_s': wall,
+                'peak_rss_mib': usage.ru_maxrss / 1024,
+                'exit': os.waitstatus_to_exitcode(status),
+            }
+        )
+    )
     return 0
 
 

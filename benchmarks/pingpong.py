@@ -118,7 +118,13 @@ def _ping(count: int, payload: int, kind: str) -> dict:
             'mean_s': statistics.fmean(ordered),
         }
 
-    return {'count': count, 'payload_doubles': payload, 'executor': kind, 'topic': stats(topic), 'service': stats(service)}
+    return {
+        'count': count,
+        'payload_doubles': payload,
+        'executor': kind,
+        'topic': stats(topic),
+        'service': stats(service),
+    }
 
 
 def environment(domain_id: int, log_dir: str) -> dict[str, str]:
@@ -139,14 +145,30 @@ def measure(*, domain_id: int, count: int = 2000, payload: int = 10, executor: s
     with tempfile.TemporaryDirectory(prefix='bench_pingpong_') as logs:
         env = environment(domain_id, logs)
         server = subprocess.Popen(
-            [sys.executable, here, '--serve', '600', '--executor', executor], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            [sys.executable, here, '--serve', '600', '--executor', executor],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
             start_new_session=True,
-        )  # fmt: skip
+        )
         try:
             out = subprocess.run(
-                [sys.executable, here, '--ping', str(count), '--payload', str(payload), '--executor', executor],
-                env=env, capture_output=True, text=True, timeout=600, check=True,
-            )  # fmt: skip
+                [
+                    sys.executable,
+                    here,
+                    '--ping',
+                    str(count),
+                    '--payload',
+                    str(payload),
+                    '--executor',
+                    executor,
+                ],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=600,
+                check=True,
+            )
         finally:
             server.terminate()
             try:
@@ -162,9 +184,13 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--domain-id', type=int, default=201)
     parser.add_argument('--count', type=int, default=2000)
-    parser.add_argument('--payload', type=int, default=10, help='doubles per message (a TriggerInfo of p = 2 has 10)')
     parser.add_argument(
-        '--executor', choices=('single', 'events'), default='single',
+        '--payload', type=int, default=10, help='doubles per message (a TriggerInfo of p = 2 has 10)'
+    )
+    parser.add_argument(
+        '--executor',
+        choices=('single', 'events'),
+        default='single',
         help="rclpy executor: 'single' (SingleThreadedExecutor, what the nodes use) or 'events' (rclpy.experimental.EventsExecutor)",
     )
     parser.add_argument('--serve', type=float, default=None, help=argparse.SUPPRESS)
@@ -175,7 +201,12 @@ def main() -> int:
     if args.ping is not None:
         print(json.dumps(_ping(args.ping, args.payload, args.executor)))
         return 0
-    print(json.dumps(measure(domain_id=args.domain_id, count=args.count, payload=args.payload, executor=args.executor), indent=1))
+    print(
+        json.dumps(
+            measure(domain_id=args.domain_id, count=args.count, payload=args.payload, executor=args.executor),
+            indent=1,
+        )
+    )
     return 0
 
 

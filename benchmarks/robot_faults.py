@@ -62,11 +62,18 @@ class Observer:
         self.commands: dict[int, list[tuple[float, bool]]] = {i: [] for i in ROBOTS}  # (arrival, zero)
         # (arrival, x, y) per source: the noise-free true_odom, else the odometry (a noise-free
         # simulated robot publishes no true_odom: its odometry is exact)
-        self.sources: dict[str, dict[int, list[tuple[float, float, float]]]] = {'true_odom': {i: [] for i in ROBOTS}, 'odom': {i: [] for i in ROBOTS}}
+        self.sources: dict[str, dict[int, list[tuple[float, float, float]]]] = {
+            'true_odom': {i: [] for i in ROBOTS},
+            'odom': {i: [] for i in ROBOTS},
+        }
         for i in ROBOTS:
-            self.node.create_subscription(Twist, f'/agent_{i}/robot/cmd_vel', lambda m, i=i: self._command(i, m), 100)
+            self.node.create_subscription(
+                Twist, f'/agent_{i}/robot/cmd_vel', lambda m, i=i: self._command(i, m), 100
+            )
             for source in self.sources:
-                self.node.create_subscription(Odometry, f'/agent_{i}/robot/{source}', lambda m, i=i, s=source: self._pose(s, i, m), 100)
+                self.node.create_subscription(
+                    Odometry, f'/agent_{i}/robot/{source}', lambda m, i=i, s=source: self._pose(s, i, m), 100
+                )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -136,7 +143,10 @@ def _pids(*words: str) -> list[int]:
         except OSError:
             continue
         # A path or a module: within an argument; anything else (an id): an argument of its own.
-        if all(any(word == arg or (('/' in word or '.' in word) and word in arg) for arg in args) for word in words):
+        if all(
+            any(word == arg or (('/' in word or '.' in word) and word in arg) for arg in args)
+            for word in words
+        ):
             found.append(int(entry.name))
     return found
 
@@ -155,16 +165,50 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
     fleet = None
     if backend == 'external':
         fleet = subprocess.Popen(
-            [*formation, 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain_id), '--out', str(fleet_out), '--robots-per-process', '1'],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-        )  # fmt: skip
+            [
+                *formation,
+                'robots',
+                'robots_square',
+                '--model',
+                'unicycle',
+                '--domain-id',
+                str(domain_id),
+                '--out',
+                str(fleet_out),
+                '--robots-per-process',
+                '1',
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
     observer = Observer(domain_id)
-    run_args = ['run', 'robots_square', '--backend', backend, '--horizon', str(horizon), '--out', str(out), '--domain-id', str(domain_id), '--no-plot']
+    run_args = [
+        'run',
+        'robots_square',
+        '--backend',
+        backend,
+        '--horizon',
+        str(horizon),
+        '--out',
+        str(out),
+        '--domain-id',
+        str(domain_id),
+        '--no-plot',
+    ]
     if backend == 'external':
         run_args += ['--robot', 'unicycle']
     else:  # a fault hits one robot: each its own process
         run_args += ['--robots-per-process', '1']
-    run = subprocess.Popen([*formation, *run_args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    run = subprocess.Popen(
+        [*formation, *run_args],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     row = {'backend': backend, 'fault': fault}
     try:
         limit = time.monotonic() + 120.0
@@ -182,7 +226,10 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
                 time.sleep(2.0)
                 os.kill(victim, signal.SIGCONT)
         elif fault == 'agent_kill':
-            os.kill(_one(('formation_agent.ros.main', '--agents', str(out / 'agents.params.yaml'), str(VICTIM))), signal.SIGKILL)
+            os.kill(
+                _one(('formation_agent.ros.main', '--agents', str(out / 'agents.params.yaml'), str(VICTIM))),
+                signal.SIGKILL,
+            )
         elif fault == 'ctrl_c':
             os.killpg(run.pid, signal.SIGINT)
         _, err = run.communicate(timeout=120)
@@ -194,15 +241,29 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         last_zero, moving = observer.last_zero_after(fault_at)
         lines = [line for line in err.splitlines() if line.startswith('[formation run]')]
         row.update(
-            last_zero=last_zero, still_moving=moving, motion=observer.largest_motion_after(fault_at),
-            status=run.returncode, message=lines[-1].split(': ', 1)[-1] if lines else err.strip()[-200:], exited=exited,
+            last_zero=last_zero,
+            still_moving=moving,
+            motion=observer.largest_motion_after(fault_at),
+            status=run.returncode,
+            message=lines[-1].split(': ', 1)[-1] if lines else err.strip()[-200:],
+            exited=exited,
         )
-        analyze = subprocess.run([*formation, 'analyze', str(out), '--no-figures', '--quiet'], env=env, capture_output=True, text=True, timeout=300)
+        analyze = subprocess.run(
+            [*formation, 'analyze', str(out), '--no-figures', '--quiet'],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         report = out / 'analysis' / 'analysis.json'
         if report.is_file():
             analysis = json.loads(report.read_text())
             differences = [d['key'] for d in (analysis.get('summary_json') or {}).get('differences', [])]
-            failing = [c['name'] for c in analysis['bag_checks'] + analysis['theorem_checks'] if not c['ok'] and c.get('binding', True)]
+            failing = [
+                c['name']
+                for c in analysis['bag_checks'] + analysis['theorem_checks']
+                if not c['ok'] and c.get('binding', True)
+            ]
         else:
             differences, failing = None, analyze.stderr.strip()[-300:]
         row.update(analyze=analyze.returncode, differences=differences, failing_checks=failing)
@@ -229,7 +290,14 @@ def main(argv: list[str] | None = None) -> int:
         folder = args.keep or temporary
         for backend in args.backends:
             for fault in args.faults:
-                row = measure(backend, fault, domain_id=args.domain_id, folder=Path(folder), horizon=args.horizon, after=args.after)
+                row = measure(
+                    backend,
+                    fault,
+                    domain_id=args.domain_id,
+                    folder=Path(folder),
+                    horizon=args.horizon,
+                    after=args.after,
+                )
                 print(json.dumps(row), flush=True)
                 if args.json:
                     with args.json.open('a') as handle:

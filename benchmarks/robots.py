@@ -49,19 +49,47 @@ def _trajectory(out: Path, label: str, scenario) -> RunData:
     samples = load_trajectory(out)
     times, positions = np.asarray(samples.times, dtype=float), np.asarray(samples.positions, dtype=float)
     return RunData(
-        label=label, source=str(out), scenario=scenario.name, dynamics=scenario.dynamics, mode='', horizon=float(times[-1]),
-        agent_ids=scenario.agent_ids, edges=[], trigger_times={}, messages_sent=0, sensing_calls=0, times=times, positions=positions,
-    )  # fmt: skip
+        label=label,
+        source=str(out),
+        scenario=scenario.name,
+        dynamics=scenario.dynamics,
+        mode='',
+        horizon=float(times[-1]),
+        agent_ids=scenario.agent_ids,
+        edges=[],
+        trigger_times={},
+        messages_sent=0,
+        sensing_calls=0,
+        times=times,
+        positions=positions,
+    )
 
 
-def run_once(out: Path, backend: str, clock: str | None, robot: dict | None, *, seed: int, horizon: float, domain_id: int | None) -> dict:
+def run_once(
+    out: Path,
+    backend: str,
+    clock: str | None,
+    robot: dict | None,
+    *,
+    seed: int,
+    horizon: float,
+    domain_id: int | None,
+) -> dict:
     robots = None
     if robot is not None:
         robots = RobotOptions(model=backend, seed=seed, **LIMITS, **robot)
     result = FormationRun(
-        SCENARIO, out_dir=out, horizon=horizon, domain_id=domain_id, record=False, progress=False, timeout=horizon + 300.0,
-        backend=backend, clock=clock, robots=robots,
-    ).run()  # fmt: skip
+        SCENARIO,
+        out_dir=out,
+        horizon=horizon,
+        domain_id=domain_id,
+        record=False,
+        progress=False,
+        timeout=horizon + 300.0,
+        backend=backend,
+        clock=clock,
+        robots=robots,
+    ).run()
     row, summary = result_row(result)
     if summary is not None:
         saturation = summary['extra'].get('saturation')
@@ -98,26 +126,42 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--out', type=Path, default=Path('runs') / f'robots_bench-{time.strftime("%Y%m%d-%H%M%S")}')
+    parser.add_argument(
+        '--out', type=Path, default=Path('runs') / f'robots_bench-{time.strftime("%Y%m%d-%H%M%S")}'
+    )
     parser.add_argument('--runs', type=int, default=3, help='runs per setting (robot seeds 0, 1, ...)')
     parser.add_argument('--horizon', type=float, default=30.0)
-    parser.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)')
+    parser.add_argument(
+        '--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)'
+    )
     args = parser.parse_args(argv)
 
     scenario = load_scenario(SCENARIO)
     exact = simulate(scenario, horizon=args.horizon)
     reference = build_summary(exact)
     reference_run = RunData(
-        label='exact', source='in process', scenario=scenario.name, dynamics=scenario.dynamics, mode='in_process',
-        horizon=args.horizon, agent_ids=scenario.agent_ids, edges=[], trigger_times={}, messages_sent=0, sensing_calls=0,
-        times=exact.sample_times, positions=exact.sample_positions,
-    )  # fmt: skip
+        label='exact',
+        source='in process',
+        scenario=scenario.name,
+        dynamics=scenario.dynamics,
+        mode='in_process',
+        horizon=args.horizon,
+        agent_ids=scenario.agent_ids,
+        edges=[],
+        trigger_times={},
+        messages_sent=0,
+        sensing_calls=0,
+        times=exact.sample_times,
+        positions=exact.sample_positions,
+    )
     results: dict[str, list[dict]] = {}
     for label, backend, clock, robot in SETTINGS:
         rows = results.setdefault(label, [])
         for seed in range(1 if backend == 'exact' and clock == 'lockstep' else args.runs):
             out = args.out / f'{backend}-{clock or ("noisy" if robot else "clean")}-{seed}'
-            row = run_once(out, backend, clock, robot, seed=seed, horizon=args.horizon, domain_id=args.domain_id)
+            row = run_once(
+                out, backend, clock, robot, seed=seed, horizon=args.horizon, domain_id=args.domain_id
+            )
             if row['ok']:
                 deviation = compare_trajectories(_trajectory(out, label, scenario), reference_run)
                 row['distance_from_exact'] = deviation.max_deviation
@@ -125,7 +169,9 @@ def main(argv: list[str] | None = None) -> int:
             status = 'ok' if row['ok'] else f'FAILED: {row["message"][:200]}'
             print(f'{label:30s} run {seed}: {status}', file=sys.stderr, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / 'robots.json').write_text(json.dumps({'reference': reference, 'results': results}, indent=1, default=str))
+    (args.out / 'robots.json').write_text(
+        json.dumps({'reference': reference, 'results': results}, indent=1, default=str)
+    )
     print(table(results, reference))
     return 0
 

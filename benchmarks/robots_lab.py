@@ -45,14 +45,24 @@ SPEED = 0.22  # [m/s] a TurtleBot3's; the car runs at the same speed, hence at t
 KINDS = {
     'unicycle': {'max_linear_speed': SPEED, 'max_angular_speed': 2.84, 'control_point_distance': 0.1},
     'holonomic': {'max_linear_speed': SPEED},
-    'car': {'max_linear_speed': SPEED, 'wheelbase': 0.33, 'max_steering_angle': 0.42, 'control_point_distance': 0.33},
+    'car': {
+        'max_linear_speed': SPEED,
+        'wheelbase': 0.33,
+        'max_steering_angle': 0.42,
+        'control_point_distance': 0.33,
+    },
 }
 LATENCY = 0.02  # [s] with every noisy setting
 ERRORS = (0.05, 0.01)  # [m] the formation errors whose times the table shows
 
 # name: (label, backend, pose noise σ [m], threshold floor as suggested for σ)
 SETTINGS: dict[str, tuple[str, str, float, bool]] = {
-    'exact': ('exact, in process (`formation simulate`)', 'exact', 0.0, False),  # the reference, not run by --only
+    'exact': (
+        'exact, in process (`formation simulate`)',
+        'exact',
+        0.0,
+        False,
+    ),  # the reference, not run by --only
     'unicycle': ('unicycle', 'unicycle', 0.0, False),
     'unicycle-5mm': ('unicycle, σ = 5 mm, 20 ms', 'unicycle', 0.005, False),
     'holonomic': ('holonomic', 'holonomic', 0.0, False),
@@ -65,7 +75,14 @@ SETTINGS: dict[str, tuple[str, str, float, bool]] = {
 }
 TABLES = {
     'backends': ['exact', 'unicycle', 'unicycle-5mm', 'holonomic', 'holonomic-5mm', 'car', 'car-5mm'],
-    'threshold floor (unicycle)': ['exact', 'unicycle', 'unicycle-2mm', 'unicycle-2mm-floor', 'unicycle-5mm', 'unicycle-5mm-floor'],
+    'threshold floor (unicycle)': [
+        'exact',
+        'unicycle',
+        'unicycle-2mm',
+        'unicycle-2mm-floor',
+        'unicycle-5mm',
+        'unicycle-5mm-floor',
+    ],
 }
 
 
@@ -75,9 +92,15 @@ def planned(name: str, *, horizon: float, seed: int) -> tuple[Scenario, dict, Ro
     _, backend, sigma, floor = SETTINGS[name]
     limits = KINDS[backend]
     args = argparse.Namespace(
-        speed_scale='auto', backend=backend, robot=None, horizon=horizon, max_speed=limits['max_linear_speed'],
-        max_angular_speed=limits.get('max_angular_speed'), control_point_distance=limits.get('control_point_distance'), max_acceleration=None,
-    )  # fmt: skip
+        speed_scale='auto',
+        backend=backend,
+        robot=None,
+        horizon=horizon,
+        max_speed=limits['max_linear_speed'],
+        max_angular_speed=limits.get('max_angular_speed'),
+        control_point_distance=limits.get('control_point_distance'),
+        max_acceleration=None,
+    )
     resolved = resolve_speed_scale(load_scenario(SCENARIO), args, 'run')
     if resolved is None:
         raise SystemExit(f'{name}: --speed-scale auto cannot choose (above)')
@@ -85,7 +108,9 @@ def planned(name: str, *, horizon: float, seed: int) -> tuple[Scenario, dict, Ro
     if floor:
         c0, _, _ = scenario_noise_floor(scenario, pose_noise=sigma, speed_scale=scenario.speed_scale)
         scenario = scenario.with_scale(threshold_floor=c0)
-    robots = RobotOptions(model=backend, seed=seed, pose_noise=sigma, latency=LATENCY if sigma > 0.0 else 0.0, **limits)
+    robots = RobotOptions(
+        model=backend, seed=seed, pose_noise=sigma, latency=LATENCY if sigma > 0.0 else 0.0, **limits
+    )
     return scenario, chosen, robots
 
 
@@ -94,11 +119,18 @@ def measured(record) -> dict:
     largest speed of a control point (differences of the samples: 10 ms apart, and the events)."""
     series = run_series(record)
     times = series.times
-    reached = {f'time_to_{error:g}': settling_time(times, series.formation_error, threshold=error) for error in ERRORS}
+    reached = {
+        f'time_to_{error:g}': settling_time(times, series.formation_error, threshold=error)
+        for error in ERRORS
+    }
     steps = np.diff(times)
     moves = np.linalg.norm(np.diff(np.asarray(record.sample_positions, dtype=float), axis=0), axis=2)
     speeds = moves[steps > 1e-4] / steps[steps > 1e-4, None]
-    return {**reached, 'largest_speed': float(speeds.max()), 'final_formation_error': float(series.formation_error[-1])}
+    return {
+        **reached,
+        'largest_speed': float(speeds.max()),
+        'final_formation_error': float(series.formation_error[-1]),
+    }
 
 
 def reference(horizon: float) -> dict:
@@ -106,17 +138,32 @@ def reference(horizon: float) -> dict:
     scenario, chosen, _ = planned('holonomic', horizon=horizon, seed=0)
     record = simulate(scenario, horizon=horizon)
     events = sum(len(times) for times in record.trigger_times.values())
-    return {'setting': 'exact', 'ok': True, 'kappa': chosen['value'], 'threshold_floor': 0.0, 'saturated': None, 'total_events': events,
-            **measured(record)}  # fmt: skip
+    return {
+        'setting': 'exact',
+        'ok': True,
+        'kappa': chosen['value'],
+        'threshold_floor': 0.0,
+        'saturated': None,
+        'total_events': events,
+        **measured(record),
+    }
 
 
 def run_setting(name: str, *, out: Path, seed: int, horizon: float, domain_id: int | None) -> dict:
     scenario, chosen, robots = planned(name, horizon=horizon, seed=seed)
     run_dir = out / f'{name}-{seed}'
     result = FormationRun(
-        scenario, out_dir=run_dir, horizon=horizon, domain_id=domain_id, record=False, progress=False, timeout=horizon + 300.0,
-        backend=robots.model, robots=robots, summary_extra={'speed_scale': chosen},
-    ).run()  # fmt: skip
+        scenario,
+        out_dir=run_dir,
+        horizon=horizon,
+        domain_id=domain_id,
+        record=False,
+        progress=False,
+        timeout=horizon + 300.0,
+        backend=robots.model,
+        robots=robots,
+        summary_extra={'speed_scale': chosen},
+    ).run()
     row, summary = result_row(result)
     row.update(setting=name, seed=seed, horizon=horizon, threshold_floor=scenario.gains.threshold_floor)
     if summary is not None and result.ok:
@@ -138,10 +185,19 @@ def _saturated(rows: list[dict]) -> str:
     if rows[0]['saturated'] is None:
         return '–'
     counts = ', '.join(f'{row["saturated"]}' for row in rows)
-    kinds = {kind: max(row['saturated_by_kind'][kind]['largest_requested'] for row in rows if kind in row['saturated_by_kind'])
-             for row in rows for kind in row['saturated_by_kind']}  # fmt: skip
+    kinds = {
+        kind: max(
+            row['saturated_by_kind'][kind]['largest_requested']
+            for row in rows
+            if kind in row['saturated_by_kind']
+        )
+        for row in rows
+        for kind in row['saturated_by_kind']
+    }
     limits = {kind: entry['allowed'] for row in rows for kind, entry in row['saturated_by_kind'].items()}
-    return counts + ''.join(f' ({kind}: up to {value:.3g} / {limits[kind]:g})' for kind, value in kinds.items())
+    return counts + ''.join(
+        f' ({kind}: up to {value:.3g} / {limits[kind]:g})' for kind, value in kinds.items()
+    )
 
 
 def table(rows: dict[str, list[dict]], names: list[str]) -> str:
@@ -178,12 +234,22 @@ def load_rows(out: Path) -> dict[str, list[dict]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--out', type=Path, required=True, help='the benchmark folder (one run folder per setting and seed)')
-    parser.add_argument('--only', default=None, help=f'comma-separated settings to run (default: all): {", ".join(SETTINGS)}')
-    parser.add_argument('--seeds', default='0', help='comma-separated robot seeds, one run per setting and seed (default: 0)')
+    parser.add_argument(
+        '--out', type=Path, required=True, help='the benchmark folder (one run folder per setting and seed)'
+    )
+    parser.add_argument(
+        '--only', default=None, help=f'comma-separated settings to run (default: all): {", ".join(SETTINGS)}'
+    )
+    parser.add_argument(
+        '--seeds', default='0', help='comma-separated robot seeds, one run per setting and seed (default: 0)'
+    )
     parser.add_argument('--horizon', type=float, default=60.0)
-    parser.add_argument('--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)')
-    parser.add_argument('--table', action='store_true', help='run nothing: print the tables of the runs in --out')
+    parser.add_argument(
+        '--domain-id', type=int, default=None, help='ROS_DOMAIN_ID for every run (default: a free one)'
+    )
+    parser.add_argument(
+        '--table', action='store_true', help='run nothing: print the tables of the runs in --out'
+    )
     args = parser.parse_args(argv)
     names = [name for name in SETTINGS if name != 'exact'] if args.only is None else args.only.split(',')
     unknown = [name for name in names if name not in SETTINGS or name == 'exact']
@@ -193,7 +259,9 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         for name in names:
             for seed in map(int, args.seeds.split(',')):
-                row = run_setting(name, out=args.out, seed=seed, horizon=args.horizon, domain_id=args.domain_id)
+                row = run_setting(
+                    name, out=args.out, seed=seed, horizon=args.horizon, domain_id=args.domain_id
+                )
                 status = 'ok' if row['ok'] else f'FAILED: {row["message"][:200]}'
                 print(f'{name:20s} run {seed}: {status}', file=sys.stderr, flush=True)
     rows = load_rows(args.out)

@@ -54,14 +54,23 @@ def machine() -> dict:
     import numpy as np
     import scipy
 
-    cpu = next((line.split(':', 1)[1].strip() for line in Path('/proc/cpuinfo').read_text().splitlines() if line.startswith('model name')), '?')
+    cpu = next(
+        (
+            line.split(':', 1)[1].strip()
+            for line in Path('/proc/cpuinfo').read_text().splitlines()
+            if line.startswith('model name')
+        ),
+        '?',
+    )
     try:
         from importlib.metadata import version
 
         rclpy_version = version('rclpy')
     except Exception:  # noqa: BLE001 - informative only
         rclpy_version = '?'
-    rev = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    rev = subprocess.run(
+        ['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
     return {
         'date': dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M UTC'),
         'nproc': os.cpu_count(),
@@ -134,8 +143,11 @@ def run_engine(case: dict) -> dict:
     if case.get('baseline'):
         out = subprocess.run(
             [sys.executable, str(HERE / 'engine_baseline.py'), BASELINE_REV, json.dumps(case)],
-            capture_output=True, text=True, timeout=3600, check=True,
-        )  # fmt: skip
+            capture_output=True,
+            text=True,
+            timeout=3600,
+            check=True,
+        )
         base = json.loads(out.stdout.strip().splitlines()[-1])
         row['baseline'] = base
         row['speedup'] = base['wall_s'] / wall
@@ -291,12 +303,22 @@ def run_distributed(case: dict, out: Path, *, record: bool = False) -> dict:
 
     scenario = build_scenario(case)
     row = measure_run(
-        scenario, out_dir=out, horizon=case['horizon'], domain_id=next(DOMAINS),
-        agents_per_process=case['per_process'], record=record, sample_period=case.get('sample_period', 0.01),
+        scenario,
+        out_dir=out,
+        horizon=case['horizon'],
+        domain_id=next(DOMAINS),
+        agents_per_process=case['per_process'],
+        record=record,
+        sample_period=case.get('sample_period', 0.01),
         executor=case.get('executor', 'events'),
-    )  # fmt: skip
+    )
     row['case'] = label(case) + ''.join(
-        note for key, note in (('executor', ' (SingleThreadedExecutor)'), ('sample_period', ' (events only, no samples)')) if key in case
+        note
+        for key, note in (
+            ('executor', ' (SingleThreadedExecutor)'),
+            ('sample_period', ' (events only, no samples)'),
+        )
+        if key in case
     )
     return row
 
@@ -313,11 +335,37 @@ def startup_cases(quick: bool) -> list[dict]:
 
 def large_cases(quick: bool) -> list[dict]:
     if quick:
-        return [{**random(100), 'horizon': 0.5, 'per_process': 25, 'variants': ['simple', 'server'], 'label': 'n=100'}]
+        return [
+            {
+                **random(100),
+                'horizon': 0.5,
+                'per_process': 25,
+                'variants': ['simple', 'server'],
+                'label': 'n=100',
+            }
+        ]
     return [
-        {**random(100), 'horizon': 0.5, 'per_process': 25, 'variants': ['before', 'simple', 'server'], 'label': 'n=100'},
-        {**random(300), 'horizon': 0.2, 'per_process': 50, 'variants': ['before', 'simple', 'server'], 'label': 'n=300'},
-        {**random(1000), 'horizon': 0.05, 'per_process': 'auto', 'variants': ['simple', 'server'], 'label': 'n=1000'},
+        {
+            **random(100),
+            'horizon': 0.5,
+            'per_process': 25,
+            'variants': ['before', 'simple', 'server'],
+            'label': 'n=100',
+        },
+        {
+            **random(300),
+            'horizon': 0.2,
+            'per_process': 50,
+            'variants': ['before', 'simple', 'server'],
+            'label': 'n=300',
+        },
+        {
+            **random(1000),
+            'horizon': 0.05,
+            'per_process': 'auto',
+            'variants': ['simple', 'server'],
+            'label': 'n=1000',
+        },
     ]
 
 
@@ -336,7 +384,9 @@ def issue_bound(results: dict) -> dict:
     calls = per_event.get('/formation/sensing_log', 0.0)
     bound = {'topic_messages_per_event': topic_messages, 'sensing_calls_per_event': calls}
     for key, pingpong in (('single', results['pingpong']), ('events', results['pingpong_events_executor'])):
-        bound[f'{key}_s'] = topic_messages * pingpong['topic']['median_s'] + calls * pingpong['service']['median_s']
+        bound[f'{key}_s'] = (
+            topic_messages * pingpong['topic']['median_s'] + calls * pingpong['service']['median_s']
+        )
     return bound
 
 
@@ -408,9 +458,15 @@ def markdown(results: dict) -> str:
         for r in results['comm']:
             for name, row in r['rows'].items():
                 if name == 'periodic' and row.get('period') is None:
-                    lines.append(f'| {r["case"]} | {_fmt(r["horizon"])} | periodic | none ≥ 1e-5 works | | | | |')
+                    lines.append(
+                        f'| {r["case"]} | {_fmt(r["horizon"])} | periodic | none ≥ 1e-5 works | | | | |'
+                    )
                     continue
-                sensing = row['sensing_calls'] if name != 'continuous' else f'continuous ({row["rhs_evaluations"]} evaluations)'
+                sensing = (
+                    row['sensing_calls']
+                    if name != 'continuous'
+                    else f'continuous ({row["rhs_evaluations"]} evaluations)'
+                )
                 lines.append(
                     f'| {r["case"]} | {_fmt(r["horizon"])} | {name} | {_fmt(row.get("period"))} | {row["messages"]} | {sensing} | '
                     f'{_fmt(row["final_error"])} | {_fmt(row["convergence_time"])} |'
@@ -446,7 +502,9 @@ def markdown(results: dict) -> str:
         ]
         for r in results['distributed']:
             if not r.get('events'):
-                lines.append(f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | failed: {r["message"][:80]} |')
+                lines.append(
+                    f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | failed: {r["message"][:80]} |'
+                )
                 continue
             ms = 1e3 / r['steps_per_s']
             lines.append(
@@ -458,25 +516,38 @@ def markdown(results: dict) -> str:
         lines.append('')
         if 'messages' in results:
             per_step = results['messages']['messages_per_step']
-            lines += ['Messages per lock-step step (3 agents, recorded run, counted in the bag): '
-                      + ', '.join(f'{k} {v:.2f}' for k, v in per_step.items()) + '.', '']
+            lines += [
+                'Messages per lock-step step (3 agents, recorded run, counted in the bag): '
+                + ', '.join(f'{k} {v:.2f}' for k, v in per_step.items())
+                + '.',
+                '',
+            ]
         if 'issue_bound' in results:
             b = results['issue_bound']
             first = next(r for r in results['distributed'] if r.get('events'))
             ms_event = 1e3 * first['stepping_wall_s'] / first['events']
             lines += [
-                f'The issue\'s bound (round trip × messages per event: {b["topic_messages_per_event"]:.2f} topic messages and '
+                f"The issue's bound (round trip × messages per event: {b['topic_messages_per_event']:.2f} topic messages and "
                 f'{b["sensing_calls_per_event"]:.2f} sensing calls per event): {1e3 * b["single_s"]:.2f} ms (SingleThreadedExecutor), '
                 f'{1e3 * b["events_s"]:.2f} ms (EventsExecutor); {first["case"]}: {ms_event:.2f} ms per event = '
                 f'{ms_event / 1e3 / b["single_s"]:.2f}× / {ms_event / 1e3 / b["events_s"]:.2f}×.',
                 '',
             ]
     if 'scenario_load' in results:
-        lines += ['| n | edges | YAML [MiB] | YAML load [s] | JSON [MiB] | JSON load [s] | YAML / JSON |', '|---|---|---|---|---|---|---|']
+        lines += [
+            '| n | edges | YAML [MiB] | YAML load [s] | JSON [MiB] | JSON load [s] | YAML / JSON |',
+            '|---|---|---|---|---|---|---|',
+        ]
         for r in results['scenario_load']:
-            yaml_text = f'refused after {r["yaml_s"]:.2f} s ({r["yaml_refused"]})' if r['yaml_refused'] else f'{r["yaml_s"]:.3g}'
+            yaml_text = (
+                f'refused after {r["yaml_s"]:.2f} s ({r["yaml_refused"]})'
+                if r['yaml_refused']
+                else f'{r["yaml_s"]:.3g}'
+            )
             ratio = '–' if r['yaml_refused'] else f'{r["yaml_s"] / r["json_s"]:.0f}×'
-            lines.append(f'| {r["n"]} | {r["edges"]} | {r["yaml_mib"]:.2f} | {yaml_text} | {r["json_mib"]:.2f} | {r["json_s"]:.3g} | {ratio} |')
+            lines.append(
+                f'| {r["n"]} | {r["edges"]} | {r["yaml_mib"]:.2f} | {yaml_text} | {r["json_mib"]:.2f} | {r["json_s"]:.3g} | {ratio} |'
+            )
         lines.append('')
     if 'cli' in results:
         lines += [*_cli_markdown(results), '']
@@ -495,7 +566,10 @@ def markdown(results: dict) -> str:
         for r in results['startup']['table']:
             if r.get('timeline'):
                 marks = ', '.join(f'{name} {at:.2f}' for name, at in r['timeline'].items())
-                lines += [f'{r["case"]}, {r["code"]}, marks of the run [s since FormationRun.run began, medians]: {marks}.', '']
+                lines += [
+                    f'{r["case"]}, {r["code"]}, marks of the run [s since FormationRun.run began, medians]: {marks}.',
+                    '',
+                ]
     if 'large' in results:
         lines += [
             '| team | code | discovery | agents/process | processes | ok | `formation run` wall [s] | discovery [s] | step 0 at [s] | steps | ms/step | end [s] | agents RSS [MiB] | simulator RSS [MiB] | equal to the engine |',
@@ -508,7 +582,9 @@ def markdown(results: dict) -> str:
             simulator = r['memory_mib'].get('simulator', {}).get('max')
             head = f'| {r["case"]} T={r["horizon"]:g} | {code} | {discovery} | {r["per_process"]} | {r["processes"]} |'
             if not r.get('events'):
-                lines.append(f'{head} no: {r["message"][:120]} | {r["total_wall_s"]:.0f} | | | | | | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | – |')
+                lines.append(
+                    f'{head} no: {r["message"][:120]} | {r["total_wall_s"]:.0f} | | | | | | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | – |'
+                )
                 continue
             timeline = r.get('timeline') or {}
             phases = r.get('phases') or {}
@@ -519,7 +595,10 @@ def markdown(results: dict) -> str:
             )
         lines.append('')
     if 'long' in results:
-        lines += ['| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |', '|---|---|---|---|---|---|---|']
+        lines += [
+            '| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |',
+            '|---|---|---|---|---|---|---|',
+        ]
         for r in results['long']:
             lines.append(
                 f'| {r["case"]} | {_fmt(r["horizon"])} | {"yes" if r["ok"] else r["message"][:90]} | {r.get("events", "–")} | '
@@ -531,11 +610,29 @@ def markdown(results: dict) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description='Benchmarks (see BENCHMARKS.md).')
-    parser.add_argument('--only', nargs='+', choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large'), default=None)
-    parser.add_argument('--repeats', type=int, default=5, help='startup: runs of each case and code (default 5)')
+    parser.add_argument(
+        '--only',
+        nargs='+',
+        choices=('engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large'),
+        default=None,
+    )
+    parser.add_argument(
+        '--repeats', type=int, default=5, help='startup: runs of each case and code (default 5)'
+    )
     parser.add_argument('--quick', action='store_true', help='small cases, one repeat (a smoke run)')
-    parser.add_argument('--three-agents', action='store_true', help='distributed: only the 3-agent cases (the lock-step target)')
-    parser.add_argument('--cli-agents', type=int, nargs='+', default=None, metavar='N', help='cli: only the teams of these sizes (1000, 3000, 10000)')
+    parser.add_argument(
+        '--three-agents',
+        action='store_true',
+        help='distributed: only the 3-agent cases (the lock-step target)',
+    )
+    parser.add_argument(
+        '--cli-agents',
+        type=int,
+        nargs='+',
+        default=None,
+        metavar='N',
+        help='cli: only the teams of these sizes (1000, 3000, 10000)',
+    )
     parser.add_argument('--out', type=Path, default=HERE / 'results')
     args = parser.parse_args()
     sections = args.only or ['engine', 'naive', 'comm', 'distributed', 'long', 'cli', 'startup', 'large']
@@ -592,8 +689,12 @@ def main() -> int:
             results['distributed'].append(run_distributed(case, runs / f'dist-{len(results["distributed"])}'))
             save()
         progress('distributed, recorded (messages per step)')
-        recorded = run_distributed({**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}, runs / 'recorded', record=True)
-        results['messages'] = {k: recorded.get(k) for k in ('messages_per_event', 'messages_per_step', 'events', 'steps')}
+        recorded = run_distributed(
+            {**builtin('paper_single'), 'horizon': 10.0, 'per_process': 1}, runs / 'recorded', record=True
+        )
+        results['messages'] = {
+            k: recorded.get(k) for k in ('messages_per_event', 'messages_per_step', 'events', 'steps')
+        }
         results['issue_bound'] = issue_bound(results)
         save()
     if 'long' in sections:
@@ -613,7 +714,9 @@ def main() -> int:
 
         results['load']['cli'] = [load()]
         progress('scenario load times')
-        cases = [case for case in cli_cases(args.quick) if args.cli_agents is None or case['n'] in args.cli_agents]
+        cases = [
+            case for case in cli_cases(args.quick) if args.cli_agents is None or case['n'] in args.cli_agents
+        ]
         results['scenario_load'] = load_times([case['n'] for case in cases])
         save()
         results['cli'] = measure(cases, repeats=1 if args.quick else 3, progress=progress)
@@ -623,7 +726,13 @@ def main() -> int:
         from startup import summarise, time_to_first_result
 
         results['load']['startup'] = [load()]
-        rows = time_to_first_result(startup_cases(args.quick), repeats=1 if args.quick else args.repeats, runs=runs, domains=DOMAINS, progress=progress)
+        rows = time_to_first_result(
+            startup_cases(args.quick),
+            repeats=1 if args.quick else args.repeats,
+            runs=runs,
+            domains=DOMAINS,
+            progress=progress,
+        )
         results['startup'] = {'runs': rows, 'table': summarise(rows)}
         results['load']['startup'].append(load())
         save()
@@ -631,7 +740,9 @@ def main() -> int:
         from startup import large_teams
 
         results['load']['large'] = [load()]
-        results['large'] = large_teams(large_cases(args.quick), runs=runs, domains=DOMAINS, progress=progress, timeout=900.0)
+        results['large'] = large_teams(
+            large_cases(args.quick), runs=runs, domains=DOMAINS, progress=progress, timeout=900.0
+        )
         results['load']['large'].append(load())
         save()
     save()

@@ -68,9 +68,15 @@ def command(baseline: Baseline | None) -> list[str]:
 
 
 def formation_run(
-    scenario, *, out: Path, horizon: float, domain_id: int, baseline: Baseline | None = None, extra: tuple[str, ...] = (),
+    scenario,
+    *,
+    out: Path,
+    horizon: float,
+    domain_id: int,
+    baseline: Baseline | None = None,
+    extra: tuple[str, ...] = (),
     timeout: float = 3600.0,
-) -> dict:  # fmt: skip
+) -> dict:
     """One `formation run` of `scenario` (written to a YAML file) into `out`: the measurements."""
     from distributed import _MemoryWatch
 
@@ -80,8 +86,19 @@ def formation_run(
     path = out / f'{scenario.name}.yaml'
     dump_scenario(scenario, path)
     run_dir = out / 'run'
-    argv = [*command(baseline), 'run', str(path), '--horizon', repr(horizon), '--out', str(run_dir), '--force',
-            '--domain-id', str(domain_id), *extra]  # fmt: skip
+    argv = [
+        *command(baseline),
+        'run',
+        str(path),
+        '--horizon',
+        repr(horizon),
+        '--out',
+        str(run_dir),
+        '--force',
+        '--domain-id',
+        str(domain_id),
+        *extra,
+    ]
     watch = _MemoryWatch(descendants=True)
     watch.start()
     started = time.monotonic()
@@ -97,7 +114,10 @@ def formation_run(
         'exit_status': done.returncode,
         'total_wall_s': time.monotonic() - started,
         'message': (done.stderr.strip().splitlines() or [''])[-1][:300],
-        'memory_mib': {role: {'processes': len(peaks), 'sum': sum(peaks) / 1024, 'max': max(peaks) / 1024} for role, peaks in memory.items()},
+        'memory_mib': {
+            role: {'processes': len(peaks), 'sum': sum(peaks) / 1024, 'max': max(peaks) / 1024}
+            for role, peaks in memory.items()
+        },
     }
     summary_path = run_dir / 'summary.json'
     if not summary_path.is_file():
@@ -146,8 +166,14 @@ def time_to_first_result(cases: list[dict], *, repeats: int, runs: Path, domains
                 for code in (baseline, None):
                     name = 'now' if code is None else 'before'
                     progress(f'startup {scenario.name} T={case["horizon"]} {name} ({k + 1}/{repeats})')
-                    row = formation_run(scenario, out=runs / f'startup-{scenario.name}-{name}-{k}', horizon=case['horizon'],
-                                        domain_id=next(domains), baseline=code, extra=tuple(case.get('extra', ())))  # fmt: skip
+                    row = formation_run(
+                        scenario,
+                        out=runs / f'startup-{scenario.name}-{name}-{k}',
+                        horizon=case['horizon'],
+                        domain_id=next(domains),
+                        baseline=code,
+                        extra=tuple(case.get('extra', ())),
+                    )
                     row.pop('trigger_times', None)
                     row['case'] = case['label']
                     rows.append(row)
@@ -168,12 +194,18 @@ def summarise(rows: list[dict]) -> list[dict]:
             medians[code] = entry = {'case': case, 'code': code, 'runs': len(done)}
             for key in ('total_wall_s', 'stepping_s', 'outside_stepping_s', 'discovery_s'):
                 entry[key] = statistics.median(r[key] for r in done)
-            entry['outside_over_stepping'] = statistics.median(r['outside_stepping_s'] / r['stepping_s'] for r in done)
+            entry['outside_over_stepping'] = statistics.median(
+                r['outside_stepping_s'] / r['stepping_s'] for r in done
+            )
             phases = [r['phases'] for r in done if r.get('phases')]
             if phases:
-                entry['phases'] = {key: statistics.median(p[key] for p in phases if key in p) for key in phases[0]}
+                entry['phases'] = {
+                    key: statistics.median(p[key] for p in phases if key in p) for key in phases[0]
+                }
                 marks = [r['timeline'] for r in done]
-                entry['timeline'] = {key: statistics.median(m[key] for m in marks if key in m) for key in marks[0]}
+                entry['timeline'] = {
+                    key: statistics.median(m[key] for m in marks if key in m) for key in marks[0]
+                }
         now = medians.get('now')
         before = next((v for k, v in medians.items() if k != 'now'), None)
         if now and before:
@@ -196,16 +228,37 @@ def large_teams(cases: list[dict], *, runs: Path, domains, progress, timeout: fl
                 if variant == 'before':
                     baseline = baseline or Baseline()
                     code = baseline
-                extra = ['--no-record', '--no-plot', '--agents-per-process', str(case['per_process']), '--timeout', repr(timeout)]
+                extra = [
+                    '--no-record',
+                    '--no-plot',
+                    '--agents-per-process',
+                    str(case['per_process']),
+                    '--timeout',
+                    repr(timeout),
+                ]
                 if variant == 'server':
                     extra.append('--discovery-server')
-                progress(f'large n={len(scenario.agent_ids)} T={case["horizon"]} {variant} ({case["per_process"]} per process)')
-                row = formation_run(scenario, out=runs / f'large-{len(scenario.agent_ids)}-{variant}', horizon=case['horizon'],
-                                    domain_id=next(domains), baseline=code, extra=tuple(extra), timeout=timeout + 300.0)  # fmt: skip
+                progress(
+                    f'large n={len(scenario.agent_ids)} T={case["horizon"]} {variant} ({case["per_process"]} per process)'
+                )
+                row = formation_run(
+                    scenario,
+                    out=runs / f'large-{len(scenario.agent_ids)}-{variant}',
+                    horizon=case['horizon'],
+                    domain_id=next(domains),
+                    baseline=code,
+                    extra=tuple(extra),
+                    timeout=timeout + 300.0,
+                )
                 row.update(equal_to_engine(row, scenario, case['horizon']))
                 n = len(scenario.agent_ids)
                 per_process = resolve_agents_per_process(case['per_process'], n)
-                row.update(case=case['label'], variant=variant, per_process=per_process, processes=-(-n // per_process))
+                row.update(
+                    case=case['label'],
+                    variant=variant,
+                    per_process=per_process,
+                    processes=-(-n // per_process),
+                )
                 rows.append(row)
     finally:
         if baseline is not None:

@@ -34,19 +34,31 @@ from formation_sim.study.spec import build_study  # noqa: E402
 def spec(cases: int) -> dict:
     """Random ETA-1 and ETA-2 teams of 3 to 12 agents over 0.5 s: tens of milliseconds each."""
     half = cases // 2
-    common = {'n': {'integers': [3, 12]}, 'p': {'integers': [1, 3]}, 'graph': {'choice': ['geometric', 'star', 'path', 'cycle']},
-              'slack': {'uniform': [0.1, 0.9]}, 'alpha': 10.0}  # fmt: skip
-    return {'name': 'bench', 'seed': 11, 'defaults': {'horizon': 0.5}, 'cases': [
-        {'draws': half, 'algorithm': 'eta1', **common},
-        {'draws': cases - half, 'algorithm': 'eta2', **common},
-    ]}  # fmt: skip
+    common = {
+        'n': {'integers': [3, 12]},
+        'p': {'integers': [1, 3]},
+        'graph': {'choice': ['geometric', 'star', 'path', 'cycle']},
+        'slack': {'uniform': [0.1, 0.9]},
+        'alpha': 10.0,
+    }
+    return {
+        'name': 'bench',
+        'seed': 11,
+        'defaults': {'horizon': 0.5},
+        'cases': [
+            {'draws': half, 'algorithm': 'eta1', **common},
+            {'draws': cases - half, 'algorithm': 'eta2', **common},
+        ],
+    }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cases', type=int, default=500)
     parser.add_argument('--workers', type=int, nargs='+', default=[2])
-    parser.add_argument('--sample', type=int, default=100, help='cases run one after the other in this process')
+    parser.add_argument(
+        '--sample', type=int, default=100, help='cases run one after the other in this process'
+    )
     parser.add_argument('--json', type=Path, default=None)
     args = parser.parse_args()
     study = build_study(spec(args.cases))
@@ -57,7 +69,10 @@ def main() -> int:
     for case in sample:
         run_case(case)
     sequential = (time.perf_counter() - started) * len(study.cases) / len(sample)
-    print(f'sequential, in this process: {len(sample)} cases, {sequential:.1f} s extrapolated to {len(study.cases)}', flush=True)
+    print(
+        f'sequential, in this process: {len(sample)} cases, {sequential:.1f} s extrapolated to {len(study.cases)}',
+        flush=True,
+    )
     results = []
     for workers in args.workers:
         with tempfile.TemporaryDirectory() as folder:
@@ -66,11 +81,17 @@ def main() -> int:
             total = time.perf_counter() - began
         speedup = summary.sum_of_runs / summary.run_time
         result = {
-            'workers': workers, 'cases': summary.ran, 'failed': summary.failed, 'wall_total': total,
-            'run_phase': summary.run_time, 'sum_of_rows': summary.sum_of_runs, 'speedup': speedup,
-            'efficiency': speedup / workers, 'sequential_estimate': sequential,
+            'workers': workers,
+            'cases': summary.ran,
+            'failed': summary.failed,
+            'wall_total': total,
+            'run_phase': summary.run_time,
+            'sum_of_rows': summary.sum_of_runs,
+            'speedup': speedup,
+            'efficiency': speedup / workers,
+            'sequential_estimate': sequential,
             'efficiency_vs_sequential': sequential / summary.run_time / workers,
-        }  # fmt: skip
+        }
         results.append(result)
         print(json.dumps(result), flush=True)
     print(f'load average after: {os.getloadavg()}', flush=True)

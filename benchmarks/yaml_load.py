@@ -58,7 +58,15 @@ def _teams(sizes: list[int], folder: Path) -> list[dict]:
             files = {kind: folder / f'{dynamics}_{n}.{kind}' for kind in ('yaml', 'json')}
             for path in files.values():
                 dump_scenario(scenario, path)
-            teams.append({'n': n, 'dynamics': dynamics, 'edges': len(scenario.edges), 'files': files, 'scenario': scenario})
+            teams.append(
+                {
+                    'n': n,
+                    'dynamics': dynamics,
+                    'edges': len(scenario.edges),
+                    'files': files,
+                    'scenario': scenario,
+                }
+            )
     return teams
 
 
@@ -75,25 +83,43 @@ def run(sizes: list[int], before: str, repeats: int) -> dict:
         times: dict[str, list[list[float]]] = {'now': [], 'before': [], 'libyaml': []}
         for _ in range(repeats):
             times['now'].append([_time(load_scenario, path) for path in paths])
-            times['libyaml'].append([_time(lambda p: yaml.load(p.read_text(), Loader=yaml.CSafeLoader), path) for path in paths])
+            times['libyaml'].append(
+                [_time(lambda p: yaml.load(p.read_text(), Loader=yaml.CSafeLoader), path) for path in paths]
+            )
             out = subprocess.run(
                 [sys.executable, __file__, '--child', str(folder / 'before'), *map(str, paths)],
-                check=True, capture_output=True, text=True,
-            ).stdout  # fmt: skip
+                check=True,
+                capture_output=True,
+                text=True,
+            ).stdout
             times['before'].append(json.loads(out.strip().splitlines()[-1]))
         for team in teams:  # the current loader reads back exactly what was written
-            assert load_scenario(team['files']['yaml']) == team['scenario'] == load_scenario(team['files']['json'])
+            assert (
+                load_scenario(team['files']['yaml'])
+                == team['scenario']
+                == load_scenario(team['files']['json'])
+            )
         rows = []
         for k, team in enumerate(teams):
-            median = {label: [statistics.median(r[2 * k + j] for r in runs) for j in (0, 1)] for label, runs in times.items()}
-            rows.append({
-                'n': team['n'], 'dynamics': team['dynamics'], 'edges': team['edges'],
-                'yaml_bytes': team['files']['yaml'].stat().st_size, 'json_bytes': team['files']['json'].stat().st_size,
-                'yaml_s': median['now'][0], 'json_s': median['now'][1],
-                'before_yaml_s': median['before'][0], 'before_json_s': median['before'][1],
-                'libyaml_s': median['libyaml'][0],
-                'walls': {label: [r[2 * k: 2 * k + 2] for r in runs] for label, runs in times.items()},
-            })  # fmt: skip
+            median = {
+                label: [statistics.median(r[2 * k + j] for r in runs) for j in (0, 1)]
+                for label, runs in times.items()
+            }
+            rows.append(
+                {
+                    'n': team['n'],
+                    'dynamics': team['dynamics'],
+                    'edges': team['edges'],
+                    'yaml_bytes': team['files']['yaml'].stat().st_size,
+                    'json_bytes': team['files']['json'].stat().st_size,
+                    'yaml_s': median['now'][0],
+                    'json_s': median['now'][1],
+                    'before_yaml_s': median['before'][0],
+                    'before_json_s': median['before'][1],
+                    'libyaml_s': median['libyaml'][0],
+                    'walls': {label: [r[2 * k : 2 * k + 2] for r in runs] for label, runs in times.items()},
+                }
+            )
     return {'before': before, 'repeats': repeats, 'load_average': os.getloadavg(), 'rows': rows}
 
 

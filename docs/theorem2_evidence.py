@@ -90,7 +90,10 @@ def continuous_run(scenario, horizon):
     errors = np.array([np.linalg.norm(dy[heads] - dy[tails], axis=1).max() for dy in dys])
     P = gains.P
     lyap = 0.5 * np.array(
-        [P[0, 0] * np.sum(a * a) + 2 * P[0, 1] * np.sum(a * b) + P[1, 1] * np.sum(b * b) for a, b in zip(dys, dqs)]
+        [
+            P[0, 0] * np.sum(a * a) + 2 * P[0, 1] * np.sum(a * b) + P[1, 1] * np.sum(b * b)
+            for a, b in zip(dys, dqs)
+        ]
     )
     return times, errors, lyap
 
@@ -123,7 +126,9 @@ def first_violations(times, errors, lyap, k_v, beta_d):
 def report(label, times, errors, lyap, windows, beta_d, claimed_v_rate, k_v=None):
     print(f'\n{label}')
     print('  window      slope log(max edge error)   slope log(V_d)')
-    for (s, e, se), (_, _, sv) in zip(window_slopes(times, errors, windows), window_slopes(times, lyap, windows)):
+    for (s, e, se), (_, _, sv) in zip(
+        window_slopes(times, errors, windows), window_slopes(times, lyap, windows)
+    ):
         print(f'  [{s:4.0f},{e:4.0f})   {se:10.4f}                 {sv:10.4f}')
     growth = lyap * np.exp(2.0 * beta_d * times)
     marks = [t for t in (0, 5, 10, 15, 20, 25, 30, 40) if t <= times[-1]]
@@ -134,8 +139,10 @@ def report(label, times, errors, lyap, windows, beta_d, claimed_v_rate, k_v=None
         print(f'  V_d(t) > V_d(0) e^{{-{claimed_v_rate:.4f} t}} first at t = {times[over[0]]:.2f}')
     if k_v is not None:
         t_v, t_e = first_violations(times, errors, lyap, k_v, beta_d)
-        print(f'  with the printed k^d_V = {k_v:.6g}: V_d >= k^d_V e^(-2 β_d t) first at t = {t_v}, '
-              f'max ||y_i-y_j|| >= 2 sqrt(k^d_V) e^(-β_d t) first at t = {t_e}')
+        print(
+            f'  with the printed k^d_V = {k_v:.6g}: V_d >= k^d_V e^(-2 β_d t) first at t = {t_v}, '
+            f'max ||y_i-y_j|| >= 2 sqrt(k^d_V) e^(-β_d t) first at t = {t_e}'
+        )
 
 
 def main() -> None:
@@ -153,25 +160,51 @@ def main() -> None:
     printed, corrected = (2 - k4) * eig[0], (2 - k4) / eig[1]
     print(f'k1 = {gains.k1:.6f}, k2 = {gains.k2:.6f}, k3 = {gains.k3:.10f}, k4 = {k4:.6f}')
     print(f'P eigenvalues: ρ2(P) = {eig[0]:.6f}, λmax(P) = {eig[1]:.6f}')
-    print(f'β_d = {gains.beta_d}; printed bound (2-k4)ρ2(P) = {printed:.6f}; corrected (2-k4)/λmax(P) = {corrected:.6f}')
+    print(
+        f'β_d = {gains.beta_d}; printed bound (2-k4)ρ2(P) = {printed:.6f}; corrected (2-k4)/λmax(P) = {corrected:.6f}'
+    )
     lap_eigs, rates, _ = linear_rates(scenario)
-    print(f'L_ω at the formation: eigenvalues {np.round(lap_eigs, 6).tolist()}, mode decay rates {np.round(rates, 6).tolist()}')
-    print(f'slowest linear rate σ = {min(rates):.6f}: formation error ~ e^(-σt), V_d ~ e^(-2σt) = e^(-{2 * min(rates):.6f} t)')
+    print(
+        f'L_ω at the formation: eigenvalues {np.round(lap_eigs, 6).tolist()}, mode decay rates {np.round(rates, 6).tolist()}'
+    )
+    print(
+        f'slowest linear rate σ = {min(rates):.6f}: formation error ~ e^(-σt), V_d ~ e^(-2σt) = e^(-{2 * min(rates):.6f} t)'
+    )
 
     paper_k_v = theory.theorem_constants(scenario).paper_chain.k_V
     print(f'k^d_V as printed (kVd): {paper_k_v:.6g}')
     windows = [(t, t + 5.0) for t in np.arange(5.0, args.horizon, 5.0)]
     times, errors, lyap = continuous_run(scenario, args.horizon)
     # With E = 0 the printed proof gives V_d' <= -2 (2-k4) ρ2(P) V_d, i.e. V_d <= V_d(0) e^{-2(2-k4)ρ2(P) t}.
-    report('continuous controller (E = 0), solve_ivp DOP853 rtol 1e-12', times, errors, lyap, windows,
-           gains.beta_d, 2 * printed, paper_k_v)
+    report(
+        'continuous controller (E = 0), solve_ivp DOP853 rtol 1e-12',
+        times,
+        errors,
+        lyap,
+        windows,
+        gains.beta_d,
+        2 * printed,
+        paper_k_v,
+    )
     if not args.no_engine:
         record, times, errors, lyap = engine_run(scenario, args.horizon)
-        report(f'ETA-2, formation_sim.sim.engine.simulate ({record.total_events} events)', times, errors, lyap,
-               windows, gains.beta_d, 0.0, paper_k_v)
-        print('  events per 5 s window: ' + ', '.join(
-            f'[{s:.0f},{s + 5:.0f}): {sum(1 for ts in record.trigger_times.values() for t in ts if s <= t < s + 5)}'
-            for s in np.arange(0.0, args.horizon, 5.0)))
+        report(
+            f'ETA-2, formation_sim.sim.engine.simulate ({record.total_events} events)',
+            times,
+            errors,
+            lyap,
+            windows,
+            gains.beta_d,
+            0.0,
+            paper_k_v,
+        )
+        print(
+            '  events per 5 s window: '
+            + ', '.join(
+                f'[{s:.0f},{s + 5:.0f}): {sum(1 for ts in record.trigger_times.values() for t in ts if s <= t < s + 5)}'
+                for s in np.arange(0.0, args.horizon, 5.0)
+            )
+        )
 
 
 if __name__ == '__main__':

@@ -37,23 +37,33 @@ def sections() -> list[tuple[str, str, object]]:
     from formation_sim.runtime.sim_node import SIMULATOR_PARAMETERS
 
     return [
-        ('`formation_agent`: node `/agent_<i>/formation_agent`',
-         'An agent (`formation_agent.ros.config`), in `agents.params.yaml` keyed by node name. The gains are '
-         'those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, `k3` for eta2.',
-         (*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2'])),
-        ('`formation_sim`: node `/formation_simulator`',
-         'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in `simulator.params.yaml`.',
-         SIMULATOR_PARAMETERS),
-        ('`formation_coordinator`: node `/formation_coordinator`',
-         'The time keeper of robot runs (`formation_sim.runtime.coordinator`), in `coordinator.params.yaml`.',
-         COORDINATOR_PARAMETERS),
-        ('`formation_recorder`: node `/formation_recorder`',
-         'The recorder (`formation_sim.runtime.recorder`), in `recorder.params.yaml`.',
-         RECORDER_PARAMETERS),
-        ('`formation_robot`: node `/agent_<i>/simulated_robot`',
-         'A simulated robot (`formation_sim.runtime.robot_node`), in `robots.params.yaml` keyed by node name.',
-         ROBOT_PARAMETERS),
-    ]  # fmt: skip
+        (
+            '`formation_agent`: node `/agent_<i>/formation_agent`',
+            'An agent (`formation_agent.ros.config`), in `agents.params.yaml` keyed by node name. The gains are '
+            'those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, `k3` for eta2.',
+            (*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2']),
+        ),
+        (
+            '`formation_sim`: node `/formation_simulator`',
+            'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in `simulator.params.yaml`.',
+            SIMULATOR_PARAMETERS,
+        ),
+        (
+            '`formation_coordinator`: node `/formation_coordinator`',
+            'The time keeper of robot runs (`formation_sim.runtime.coordinator`), in `coordinator.params.yaml`.',
+            COORDINATOR_PARAMETERS,
+        ),
+        (
+            '`formation_recorder`: node `/formation_recorder`',
+            'The recorder (`formation_sim.runtime.recorder`), in `recorder.params.yaml`.',
+            RECORDER_PARAMETERS,
+        ),
+        (
+            '`formation_robot`: node `/agent_<i>/simulated_robot`',
+            'A simulated robot (`formation_sim.runtime.robot_node`), in `robots.params.yaml` keyed by node name.',
+            ROBOT_PARAMETERS,
+        ),
+    ]
 
 
 def render() -> str:
@@ -67,7 +77,9 @@ def render() -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--check', action='store_true', help='exit 1 if docs/PARAMETERS.md is not what the specs say')
+    parser.add_argument(
+        '--check', action='store_true', help='exit 1 if docs/PARAMETERS.md is not what the specs say'
+    )
     args = parser.parse_args()
     text = render()
     if args.check:

@@ -15,9 +15,18 @@ from formation_sim.runtime.orchestrate import FormationRun, RunError
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('scenario', nargs='?', default='paper_single', help='built-in name (paper_single, paper_double) or YAML file (default paper_single)')
-    parser.add_argument('--horizon', type=float, default=None, help="final time in seconds (default: the scenario's)")
-    parser.add_argument('--out', default=None, help='output folder, new or empty (default: a new folder under runs/)')
+    parser.add_argument(
+        'scenario',
+        nargs='?',
+        default='paper_single',
+        help='built-in name (paper_single, paper_double) or YAML file (default paper_single)',
+    )
+    parser.add_argument(
+        '--horizon', type=float, default=None, help="final time in seconds (default: the scenario's)"
+    )
+    parser.add_argument(
+        '--out', default=None, help='output folder, new or empty (default: a new folder under runs/)'
+    )
     parser.add_argument('--force', action='store_true', help='replace the earlier run in --out')
     args = parser.parse_args()
 

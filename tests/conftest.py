@@ -100,7 +100,10 @@ def _share_of_the_machine(request, tmp_path_factory):
         yield
         return
     folder = tmp_path_factory.getbasetemp().parent
-    with open(folder / 'formation-tests.gate', 'a') as gate, open(folder / 'formation-tests.machine', 'a') as machine:
+    with (
+        open(folder / 'formation-tests.gate', 'a') as gate,
+        open(folder / 'formation-tests.machine', 'a') as machine,
+    ):
         fcntl.flock(gate, fcntl.LOCK_EX)
         try:
             fcntl.flock(machine, fcntl.LOCK_EX if 'alone' in marks else fcntl.LOCK_SH)
@@ -111,4 +114,3 @@ def _share_of_the_machine(request, tmp_path_factory):
         finally:
             with contextlib.suppress(OSError):
                 fcntl.flock(machine, fcntl.LOCK_UN)
-

@@ -19,7 +19,9 @@ def _examples() -> list[str]:
 def test_the_examples_are_there():
     blocks = _examples()
     assert len(blocks) >= 8
-    assert any('FormationRun' in block for block in blocks) and any('load_bag_run' in block for block in blocks)
+    assert any('FormationRun' in block for block in blocks) and any(
+        'load_bag_run' in block for block in blocks
+    )
 
 
 @pytest.mark.ros
@@ -33,7 +35,15 @@ def test_every_example_runs_as_written(tmp_path, monkeypatch):
         'PATH': '/usr/bin:/bin',
         'HOME': str(tmp_path),
     }
-    run = subprocess.run([sys.executable, '-c', program], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=400, check=False)
+    run = subprocess.run(
+        [sys.executable, '-c', program],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=400,
+        check=False,
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     assert (tmp_path / 'api_example' / 'single' / 'fig1.png').stat().st_size > 1000
     assert (tmp_path / 'api_example' / 'distributed' / 'bag' / 'metadata.yaml').is_file()

@@ -36,7 +36,9 @@ def _colcon(root: Path, *args: str) -> subprocess.CompletedProcess:
     colcon = Path(sys.executable).with_name('colcon')
     assert colcon.exists(), f'{colcon} is missing: run `make venv` (requirements-dev.txt)'
     env = dict(os.environ, COLCON_HOME=str(root / 'colcon_home'), COLCON_LOG_PATH=str(root / 'log'))
-    return subprocess.run([str(colcon), *args], cwd=root, env=env, capture_output=True, text=True, timeout=600, check=False)
+    return subprocess.run(
+        [str(colcon), *args], cwd=root, env=env, capture_output=True, text=True, timeout=600, check=False
+    )
 
 
 @pytest.fixture(scope='module')
@@ -48,11 +50,24 @@ def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """
     root = tmp_path_factory.mktemp('colcon_ws')
     for name in PACKAGES:
-        shutil.copytree(WORKSPACE_SRC / name, root / 'src' / name,
-                        ignore=shutil.ignore_patterns('*.egg-info', '__pycache__'))
+        shutil.copytree(
+            WORKSPACE_SRC / name,
+            root / 'src' / name,
+            ignore=shutil.ignore_patterns('*.egg-info', '__pycache__'),
+        )
     (root / 'tests').symlink_to(REPO / 'tests')
-    build = _colcon(root, 'build', '--base-paths', 'src', '--build-base', 'build', '--install-base', 'install',
-                    '--event-handlers', 'console_direct+')  # fmt: skip
+    build = _colcon(
+        root,
+        'build',
+        '--base-paths',
+        'src',
+        '--build-base',
+        'build',
+        '--install-base',
+        'install',
+        '--event-handlers',
+        'console_direct+',
+    )
     assert build.returncode == 0, build.stdout + build.stderr
     return root / 'install'
 
@@ -85,11 +100,19 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
     examples = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robot kind
     assert {p.name for p in config.glob('*.params.yaml')} == examples
     # ... and where the README sends every install: `python3 -m formation_agent.config`
-    probe = subprocess.run([sys.executable, '-m', 'formation_agent.config'], env=install_env(colcon_install),
-                           capture_output=True, text=True, timeout=120, check=False)  # fmt: skip
+    probe = subprocess.run(
+        [sys.executable, '-m', 'formation_agent.config'],
+        env=install_env(colcon_install),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert probe.returncode == 0, probe.stderr
     folder = Path(probe.stdout.strip())
-    assert folder.is_relative_to(colcon_install) and {p.name for p in folder.glob('*.params.yaml')} == examples
+    assert (
+        folder.is_relative_to(colcon_install) and {p.name for p in folder.glob('*.params.yaml')} == examples
+    )
     site = next(colcon_install.glob('formation_sim/lib/python3*/site-packages'))
     installed = {p.name for p in (site / 'formation_sim' / 'model' / 'scenarios').glob('*.yaml')}
     assert installed >= {'paper_single.yaml', 'paper_double.yaml'}
@@ -98,11 +121,18 @@ def test_colcon_installs_the_ament_layout(colcon_install: Path) -> None:
 @pytest.mark.slow
 def test_colcon_install_is_what_python_imports(colcon_install: Path) -> None:
     probe = subprocess.run(
-        [sys.executable, '-c',
-         'import formation_msgs_py.types, formation_agent.core.closed_form, formation_sim.runtime.recorder as r;'
-         'print(r.__file__)'],
-        env=install_env(colcon_install), capture_output=True, text=True, timeout=120,
-        check=False)
+        [
+            sys.executable,
+            '-c',
+            'import formation_msgs_py.types, formation_agent.core.closed_form, formation_sim.runtime.recorder as r;'
+            'print(r.__file__)',
+        ],
+        env=install_env(colcon_install),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert probe.returncode == 0, probe.stderr
     assert Path(probe.stdout.strip()).is_relative_to(colcon_install)
 
@@ -110,8 +140,14 @@ def test_colcon_install_is_what_python_imports(colcon_install: Path) -> None:
 @pytest.mark.slow
 def test_colcon_installed_formation_command_runs(colcon_install: Path) -> None:
     formation = colcon_install / 'formation_sim' / 'lib' / 'formation_sim' / 'formation'
-    run = subprocess.run([str(formation), '--help'], env=install_env(colcon_install),
-                         capture_output=True, text=True, timeout=120, check=False)
+    run = subprocess.run(
+        [str(formation), '--help'],
+        env=install_env(colcon_install),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     assert 'simulate' in run.stdout
 
@@ -123,8 +159,20 @@ def test_colcon_test_runs_the_package_tests(colcon_install: Path) -> None:
     import xml.etree.ElementTree as ET
 
     root = colcon_install.parent
-    run = _colcon(root, 'test', '--base-paths', 'src', '--build-base', 'build', '--install-base', 'install',
-                  '--packages-select', 'formation_msgs_py', '--event-handlers', 'console_direct+')  # fmt: skip
+    run = _colcon(
+        root,
+        'test',
+        '--base-paths',
+        'src',
+        '--build-base',
+        'build',
+        '--install-base',
+        'install',
+        '--packages-select',
+        'formation_msgs_py',
+        '--event-handlers',
+        'console_direct+',
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     suite = ET.parse(root / 'build' / 'formation_msgs_py' / 'pytest.xml').getroot()  # noqa: S314 - colcon's own report
     suite = suite if suite.tag == 'testsuite' else suite.find('testsuite')

@@ -24,8 +24,18 @@ PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
 SIM_LAYERS = ('progress', 'model', 'sim', 'bag', 'analysis', 'study', 'runtime', 'commands', 'cli')
 # Modules that are ROS shells: they may import rclpy at the top.
 ROS_MODULES = ('formation_msgs_py.qos', 'formation_agent.ros', 'formation_sim.runtime')
-ROS_IMPORTS = ('rclpy', 'std_msgs', 'std_srvs', 'geometry_msgs', 'rosgraph_msgs', 'visualization_msgs',
-               'builtin_interfaces', 'nav_msgs', 'sensor_msgs', 'rcl_interfaces')  # fmt: skip
+ROS_IMPORTS = (
+    'rclpy',
+    'std_msgs',
+    'std_srvs',
+    'geometry_msgs',
+    'rosgraph_msgs',
+    'visualization_msgs',
+    'builtin_interfaces',
+    'nav_msgs',
+    'sensor_msgs',
+    'rcl_interfaces',
+)
 
 
 def _modules() -> dict[str, Path]:
@@ -73,7 +83,11 @@ def _sim_layer(name: str) -> int:
 
 
 def test_the_module_list_is_complete() -> None:
-    assert {'formation_agent.core.eta', 'formation_sim.model.scenario', 'formation_sim.runtime.sim_node'} <= set(MODULES)
+    assert {
+        'formation_agent.core.eta',
+        'formation_sim.model.scenario',
+        'formation_sim.runtime.sim_node',
+    } <= set(MODULES)
     assert all(GRAPH[name] for name in ('formation_sim.sim.engine', 'formation_agent.ros.node'))
 
 
@@ -85,14 +99,22 @@ def test_packages_depend_one_way() -> None:
 def test_formation_sim_layers_import_only_downward() -> None:
     upward = [
         f'{a} ({SIM_LAYERS[_sim_layer(a)] if _sim_layer(a) < len(SIM_LAYERS) else "face"}) -> {b}'
-        for a, targets in GRAPH.items() if a.startswith('formation_sim.')
-        for b in targets if b.startswith('formation_sim.') and _sim_layer(b) > _sim_layer(a)
-    ]  # fmt: skip
+        for a, targets in GRAPH.items()
+        if a.startswith('formation_sim.')
+        for b in targets
+        if b.startswith('formation_sim.') and _sim_layer(b) > _sim_layer(a)
+    ]
     assert not upward, upward
 
 
 def test_the_agent_core_never_imports_its_ros_shell() -> None:
-    wrong = [(a, b) for a, targets in GRAPH.items() if a.startswith('formation_agent.core') for b in targets if b.startswith('formation_agent.ros')]
+    wrong = [
+        (a, b)
+        for a, targets in GRAPH.items()
+        if a.startswith('formation_agent.core')
+        for b in targets
+        if b.startswith('formation_agent.ros')
+    ]
     assert not wrong, wrong
 
 
@@ -105,7 +127,7 @@ def test_no_import_cycle() -> None:
         stack.append(name)
         for target in sorted(GRAPH[name]):
             if state.get(target) == 1:
-                return stack[stack.index(target):] + [target]
+                return stack[stack.index(target) :] + [target]
             if target not in state and (cycle := visit(target)):
                 return cycle
         stack.pop()
@@ -147,7 +169,9 @@ print('imported', len(sys.argv) - 1)
 
 def test_ros_free_modules_import_without_rclpy() -> None:
     assert len(ROS_FREE) > 40 and 'formation_sim.analysis.figures' in ROS_FREE
-    run = subprocess.run([sys.executable, '-c', _BLOCKER, *ROS_FREE], capture_output=True, text=True, timeout=300, check=False)
+    run = subprocess.run(
+        [sys.executable, '-c', _BLOCKER, *ROS_FREE], capture_output=True, text=True, timeout=300, check=False
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     assert run.stdout.strip() == f'imported {len(ROS_FREE)}'
 
@@ -155,22 +179,37 @@ def test_ros_free_modules_import_without_rclpy() -> None:
 # Modules of the ROS layers that hold no node and must import without ROS all the same: the run's
 # books are tested, and read by tools, on machines without ROS; the orchestrators start and watch
 # node processes and load no ROS themselves (an rclpy process costs ~65 MB and 0.3-0.6 s).
-ROS_FREE_IN_ROS_LAYERS = ('formation_sim.runtime.run_book', 'formation_agent.ros.process', 'formation_sim.runtime.orchestrate', 'formation_sim.runtime.fleet')
+ROS_FREE_IN_ROS_LAYERS = (
+    'formation_sim.runtime.run_book',
+    'formation_agent.ros.process',
+    'formation_sim.runtime.orchestrate',
+    'formation_sim.runtime.fleet',
+)
 
 
 @pytest.mark.parametrize('name', ROS_FREE_IN_ROS_LAYERS)
 def test_books_of_the_ros_layers_import_without_rclpy(name: str) -> None:
     assert name.startswith(ROS_MODULES) and name in MODULES
-    run = subprocess.run([sys.executable, '-c', _BLOCKER, name], capture_output=True, text=True, timeout=120, check=False)
+    run = subprocess.run(
+        [sys.executable, '-c', _BLOCKER, name], capture_output=True, text=True, timeout=120, check=False
+    )
     assert run.returncode == 0, run.stderr[-3000:]
 
 
 def test_the_blocker_blocks() -> None:
-    run = subprocess.run([sys.executable, '-c', _BLOCKER, 'formation_agent.ros.node'], capture_output=True, text=True, timeout=120, check=False)
+    run = subprocess.run(
+        [sys.executable, '-c', _BLOCKER, 'formation_agent.ros.node'],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert run.returncode != 0 and 'rclpy is blocked' in run.stderr
 
 
-@pytest.mark.parametrize('package', sorted(name for name, path in MODULES.items() if path.name == '__init__.py'))
+@pytest.mark.parametrize(
+    'package', sorted(name for name, path in MODULES.items() if path.name == '__init__.py')
+)
 def test_every_exported_name_resolves(package: str) -> None:
     module = importlib.import_module(package)
     for name in getattr(module, '__all__', ()):

@@ -90,7 +90,9 @@ def test_every_module_without_a_mirror_is_in_the_table() -> None:
 
 def test_the_table_names_only_modules_without_a_mirror() -> None:
     extra = sorted(set(TABLE) - unmirrored())
-    assert not extra, f'{SECTION!r} names modules that have a mirror test now, or that are gone: delete their rows: {extra}'
+    assert not extra, (
+        f'{SECTION!r} names modules that have a mirror test now, or that are gone: delete their rows: {extra}'
+    )
 
 
 def test_every_row_names_test_files_that_exist() -> None:

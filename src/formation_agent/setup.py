@@ -13,9 +13,7 @@ setup(
     license='Apache-2.0',
     python_requires='>=3.11',
     # Namespace search: a subpackage is shipped whether or not it has an __init__.py.
-    packages=find_namespace_packages(
-        include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']
-    ),
+    packages=find_namespace_packages(include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']),
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
@@ -31,9 +29,5 @@ setup(
     # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).
     extras_require={'test': ['pytest']},
     zip_safe=True,
-    entry_points={
-        'console_scripts': [
-            'formation_agent = formation_agent.ros.main:entry_point',
-        ],
-    },
+    entry_points={'console_scripts': ['formation_agent = formation_agent.ros.main:entry_point']},
 )

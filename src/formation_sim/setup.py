@@ -11,9 +11,7 @@ setup(
     license='Apache-2.0',
     python_requires='>=3.11',
     # Namespace search: a subpackage is shipped whether or not it has an __init__.py.
-    packages=find_namespace_packages(
-        include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']
-    ),
+    packages=find_namespace_packages(include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']),
     package_data={package_name: ['model/scenarios/*.yaml', 'runtime/fastdds_profile.xml']},
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
@@ -33,6 +31,6 @@ setup(
             'formation_recorder = formation_sim.runtime.recorder:entry_point',
             'formation_robot = formation_sim.runtime.robot_node:entry_point',
             'formation_coordinator = formation_sim.runtime.coordinator:entry_point',
-        ],
+        ]
     },
 )

@@ -26,7 +26,10 @@ FRAMES = [('world', 'agent_1/base_link'), ('', ''), ('map', 'a'), ('odom', 'robo
 def _odometry(stamp, frame, child, position, orientation, linear, angular_z, sigma) -> Odometry:
     msg = Odometry()
     seconds = math.floor(stamp)
-    msg.header.stamp.sec, msg.header.stamp.nanosec = int(seconds), min(999_999_999, round((stamp - seconds) * 1e9))
+    msg.header.stamp.sec, msg.header.stamp.nanosec = (
+        int(seconds),
+        min(999_999_999, round((stamp - seconds) * 1e9)),
+    )
     msg.header.frame_id, msg.child_frame_id = frame, child
     p, o = msg.pose.pose.position, msg.pose.pose.orientation
     p.x, p.y, p.z = position
@@ -55,10 +58,15 @@ def test_the_odometry_writer_packs_what_rclpy_serializes_and_reads_back(frame, c
         expected = _odometry(stamp, frame, child, position, orientation, linear, angular, (0.005, 0.01))
         packed = writer.pack(stamp, position, orientation, linear, angular)
         # The same length and layout (rclpy leaves alignment padding unset: compare what it reads).
-        assert len(packed) == len(serialize_message(expected)) and deserialize_message(packed, Odometry) == expected
+        assert (
+            len(packed) == len(serialize_message(expected))
+            and deserialize_message(packed, Odometry) == expected
+        )
         pose = PoseStamped(header=expected.header, pose=expected.pose.pose)
         packed = pack_pose_stamped(stamp, frame, position, orientation)
-        assert len(packed) == len(serialize_message(pose)) and deserialize_message(packed, PoseStamped) == pose
+        assert (
+            len(packed) == len(serialize_message(pose)) and deserialize_message(packed, PoseStamped) == pose
+        )
 
 
 @pytest.mark.parametrize(('frame', 'child'), FRAMES)
@@ -66,8 +74,16 @@ def test_decoding_serialized_poses_equals_decoding_the_messages(frame, child):
     rng = np.random.default_rng(3)
     for _ in range(100):
         q = rng.normal(size=4)
-        odometry = _odometry(float(rng.uniform(0, 2e9)), frame, child, tuple(rng.normal(size=3)), tuple(q / np.linalg.norm(q) * 1.01),
-                             tuple(rng.normal(size=3)), float(rng.normal()), (0.0, 0.0))  # fmt: skip
+        odometry = _odometry(
+            float(rng.uniform(0, 2e9)),
+            frame,
+            child,
+            tuple(rng.normal(size=3)),
+            tuple(q / np.linalg.norm(q) * 1.01),
+            tuple(rng.normal(size=3)),
+            float(rng.normal()),
+            (0.0, 0.0),
+        )
         data = serialize_message(odometry)
         assert decode_odometry_cdr(data) == decode_odometry(deserialize_message(data, Odometry))
         pose = PoseStamped(header=odometry.header, pose=odometry.pose.pose)
@@ -76,18 +92,24 @@ def test_decoding_serialized_poses_equals_decoding_the_messages(frame, child):
 
 
 def test_bad_bytes_are_refused_with_the_rule_and_bad_values_as_the_message_decoders_refuse_them():
-    good = serialize_message(_odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0)))
+    good = serialize_message(
+        _odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
+    )
     for cut in (0, 3, 12, 30, len(good) - 1):
         with pytest.raises(MessageError, match='bytes') as caught:
             decode_odometry_cdr(good[:cut])
         assert caught.value.reason == 'length'
     with pytest.raises(MessageError, match='not a little-endian CDR message'):
         decode_odometry_cdr(b'\x00\x00\x00\x00' + good[4:])  # big endian
-    nan = _odometry(12.5, 'world', 'b', (math.nan, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
+    nan = _odometry(
+        12.5, 'world', 'b', (math.nan, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0)
+    )
     with pytest.raises(MessageError, match=r'odometry pose position\[0\] must be finite') as caught:
         decode_odometry_cdr(serialize_message(nan))
     assert caught.value.reason == 'non_finite'
-    flat = _odometry(12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 0.1), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0))
+    flat = _odometry(
+        12.5, 'world', 'b', (1.0, 2.0, 0.0), (0.0, 0.0, 0.0, 0.1), (0.1, 0.0, 0.0), 0.2, (0.0, 0.0)
+    )
     with pytest.raises(MessageError, match='orientation must be a unit quaternion'):
         decode_odometry_cdr(serialize_message(flat))
 
@@ -99,8 +121,16 @@ def test_the_fields_of_serialized_poses_are_the_messages_fields_bit_for_bit_and_
     for k in range(100):
         q = rng.normal(size=4)
         position = (math.nan, 1.0, 2.0) if k == 0 else tuple(rng.normal(size=3))  # values unchecked, as sent
-        odometry = _odometry(float(rng.uniform(0, 2e9)), frame, child, position, tuple(q / np.linalg.norm(q) * 1.01),
-                             tuple(rng.normal(size=3)), float(rng.normal()), (0.003, 0.0))  # fmt: skip
+        odometry = _odometry(
+            float(rng.uniform(0, 2e9)),
+            frame,
+            child,
+            position,
+            tuple(q / np.linalg.norm(q) * 1.01),
+            tuple(rng.normal(size=3)),
+            float(rng.normal()),
+            (0.003, 0.0),
+        )
         odometry.twist.twist.angular.x, odometry.twist.twist.angular.y = rng.normal(size=2)
         sec, nanosec, pose, twist = odometry_fields(serialize_message(odometry))
         p, o, t = odometry.pose.pose.position, odometry.pose.pose.orientation, odometry.twist.twist
@@ -117,4 +147,3 @@ def test_the_fields_of_serialized_poses_are_the_messages_fields_bit_for_bit_and_
         with pytest.raises(MessageError, match='bytes') as caught:
             odometry_fields(good[:cut])
         assert caught.value.reason == 'length'
-

@@ -209,10 +209,22 @@ def _response(text: str, success: bool = True):
         ('{"version":1,"agent":1,"rel_positions":{}}', "missing field 'stamp'"),
         ('{"version":1,"agent":true,"stamp":0.0,"rel_positions":{}}', 'agent must be an integer id'),
         ('{"version":1,"agent":1,"stamp":NaN,"rel_positions":{}}', 'stamp must be finite'),
-        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"x":[1.0]}}', "neighbour id 'x' is not an integer"),
-        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0],"3":[1.0,2.0]}}', 'rel_positions[3] has 2 components, expected 1'),
-        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":["a"]}}', 'rel_positions[2][0] must be a number'),
-        ('{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0]},"velocity":[0.0]}', 'rel_velocities and velocity come together'),
+        (
+            '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"x":[1.0]}}',
+            "neighbour id 'x' is not an integer",
+        ),
+        (
+            '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0],"3":[1.0,2.0]}}',
+            'rel_positions[3] has 2 components, expected 1',
+        ),
+        (
+            '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":["a"]}}',
+            'rel_positions[2][0] must be a number',
+        ),
+        (
+            '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0]},"velocity":[0.0]}',
+            'rel_velocities and velocity come together',
+        ),
         (
             '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0]},"rel_velocities":{"3":[0.0]},"velocity":[0.0]}',
             'rel_velocities for [3] but rel_positions for [2]',
@@ -279,7 +291,10 @@ def test_malformed_status_is_rejected(values, complaint):
 
 
 def test_malformed_step_is_rejected():
-    with pytest.raises(MessageError, match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\] and the due agent ids, got 3"):
+    with pytest.raises(
+        MessageError,
+        match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\] and the due agent ids, got 3",
+    ):
         decode_step(_array([1, 0, 0.0]))
     with pytest.raises(MessageError, match='must be finite'):
         decode_step(_array([1, 0, math.inf, 0, 0.0]))
@@ -289,15 +304,22 @@ def test_malformed_step_is_rejected():
         decode_step(_array([1, 0, 0.0, 0.5, 0.0]))
     with pytest.raises(MessageError, match='step 4 due agent must be an integer, got 2.5'):
         decode_step(_array([1, 4, 0.0, 0, 0.0, 1, 2.5]))
-    with pytest.raises(MessageError, match=r'step 4: due agent ids must be sorted and distinct, got \[3, 3\]'):
+    with pytest.raises(
+        MessageError, match=r'step 4: due agent ids must be sorted and distinct, got \[3, 3\]'
+    ):
         decode_step(_array([1, 4, 0.0, 0, 0.0, 3, 3]))
 
 
 def test_agent_report_round_trips_and_omits_zero_counts():
     report = AgentReport(
-        agent=4, final=True, rejected={'sender': 2, 'time_backwards': 1}, dropped=7, delayed=30, late=1,
+        agent=4,
+        final=True,
+        rejected={'sender': 2, 'time_backwards': 1},
+        dropped=7,
+        delayed=30,
+        late=1,
         published={'/agent_4/cmd_vel': 12, '/formation/status': 30},
-    )  # fmt: skip
+    )
     msg = through_wire(encode_agent_report(report))
     assert '"rejected":{"sender":2,"time_backwards":1}' in msg.data
     assert decode_agent_report(msg) == report
@@ -313,14 +335,23 @@ def test_agent_report_carries_saturation_and_failure_exactly():
         'angular_speed': Saturation(count=3, largest_requested=3.0000000000000004, allowed=2.84),
     }
     report = AgentReport(
-        agent=2, final=True, rejected={}, robot_commands=1500, saturation=clipped,
+        agent=2,
+        final=True,
+        rejected={},
+        robot_commands=1500,
+        saturation=clipped,
         failure='agent 2: the pose of robot 3 on /agent_3/robot/pose is 0.734 s old',
-    )  # fmt: skip
+    )
     msg = through_wire(encode_agent_report(report))
     assert json.loads(msg.data)['version'] == AGENT_REPORT_VERSION == 3
     assert '"linear_speed":{"count":12,"largest_requested":0.41000000000000003,"allowed":0.22}' in msg.data
     assert decode_agent_report(msg) == report
-    unclipped = AgentReport(agent=2, final=False, rejected={}, saturation={'linear_speed': Saturation(count=0, largest_requested=0.0, allowed=1.0)})
+    unclipped = AgentReport(
+        agent=2,
+        final=False,
+        rejected={},
+        saturation={'linear_speed': Saturation(count=0, largest_requested=0.0, allowed=1.0)},
+    )
     assert json.loads(encode_agent_report(unclipped).data)['saturation'] == {}
     assert set(SATURATION_KINDS) == {'linear_speed', 'angular_speed', 'linear_acceleration', 'steering'}
 
@@ -333,24 +364,60 @@ _V3 = '"robot_commands":0,"saturation":{},"failure":null,"published":{}'
     [
         ('[1]', 'must be a JSON object'),
         ('{"version":2}', 'version 2 is not supported (expected 3)'),
-        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,' + _V3 + '}', "missing fields ['late']"),
-        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0,' + _V3 + '}', 'dropped must be a count'),
-        ('{"version":3,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0,' + _V3 + '}', "rejected['x'] must be a count"),
-        ('{"version":3,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,' + _V3 + ',"z":1}', "unknown fields ['z']"),
-        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"warp":{"count":1,"largest_requested":2.0,"allowed":1.0}},"failure":null,"published":{}}', "saturation['warp']: unknown kind"),
-        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"linear_speed":{"count":1,"largest_requested":2.0}},"failure":null,"published":{}}', "must hold exactly ['count', 'largest_requested', 'allowed']"),
-        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{"linear_speed":{"count":1,"largest_requested":Infinity,"allowed":1.0}},"failure":null,"published":{}}', 'largest_requested must be finite'),
-        ('{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{},"failure":7,"published":{}}', 'failure must be null or a string, got 7'),
-        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{},"failure":null,"published":{"/t":-2}}', "published['/t'] must be a count"),
-        ('{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
-         '"saturation":{},"failure":null,"published":[]}', 'published malformed'),
+        (
+            '{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,' + _V3 + '}',
+            "missing fields ['late']",
+        ),
+        (
+            '{"version":3,"agent":1,"final":false,"rejected":{},"dropped":-1,"delayed":0,"late":0,'
+            + _V3
+            + '}',
+            'dropped must be a count',
+        ),
+        (
+            '{"version":3,"agent":1,"final":false,"rejected":{"x":1.5},"dropped":0,"delayed":0,"late":0,'
+            + _V3
+            + '}',
+            "rejected['x'] must be a count",
+        ),
+        (
+            '{"version":3,"agent":1,"final":0,"rejected":{},"dropped":0,"delayed":0,"late":0,'
+            + _V3
+            + ',"z":1}',
+            "unknown fields ['z']",
+        ),
+        (
+            '{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{"warp":{"count":1,"largest_requested":2.0,"allowed":1.0}},"failure":null,"published":{}}',
+            "saturation['warp']: unknown kind",
+        ),
+        (
+            '{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{"linear_speed":{"count":1,"largest_requested":2.0}},"failure":null,"published":{}}',
+            "must hold exactly ['count', 'largest_requested', 'allowed']",
+        ),
+        (
+            '{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{"linear_speed":{"count":1,"largest_requested":Infinity,"allowed":1.0}},"failure":null,"published":{}}',
+            'largest_requested must be finite',
+        ),
+        (
+            '{"version":3,"agent":1,"final":true,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{},"failure":7,"published":{}}',
+            'failure must be null or a string, got 7',
+        ),
+        (
+            '{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{},"failure":null,"published":{"/t":-2}}',
+            "published['/t'] must be a count",
+        ),
+        (
+            '{"version":3,"agent":1,"final":false,"rejected":{},"dropped":0,"delayed":0,"late":0,"robot_commands":0,'
+            '"saturation":{},"failure":null,"published":[]}',
+            'published malformed',
+        ),
     ],
-)  # fmt: skip
+)
 def test_malformed_agent_report_is_rejected(text, complaint):
     from std_msgs.msg import String
 
@@ -365,7 +432,9 @@ def test_world_state_round_trips_bit_for_bit(double):
     positions = rng.normal(size=(3, 2))
     positions[0, 0] = -0.0
     velocities = rng.normal(size=(3, 2)) if double else None
-    state = WorldState(time=9.999999999999998, agent_ids=(1, 2, 5), positions=positions, velocities=velocities)
+    state = WorldState(
+        time=9.999999999999998, agent_ids=(1, 2, 5), positions=positions, velocities=velocities
+    )
     back = decode_world_state(through_wire(encode_world_state(state)))
     assert back.agent_ids == state.agent_ids
     assert bits(back.positions.ravel()) == bits(positions.ravel())
@@ -411,7 +480,9 @@ def test_pose_array_pads_missing_axes():
 # -- robots ---------------------------------------------------------------------------------------
 
 
-def _pose_stamped(position=(1.0, 2.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0), frame='world', stamp=(1700000000, 250000000)):
+def _pose_stamped(
+    position=(1.0, 2.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0), frame='world', stamp=(1700000000, 250000000)
+):
     from geometry_msgs.msg import PoseStamped
 
     msg = PoseStamped()
@@ -437,14 +508,21 @@ def test_robot_poses_decode_with_stamp_frame_and_body_twist():
     odom.twist.twist.linear.x = 0.22
     odom.twist.twist.angular.z = -2.84
     decoded = decode_odometry(through_wire(odom))
-    assert decoded.linear == (0.22, 0.0, 0.0) and decoded.angular == (0.0, 0.0, -2.84) and decoded.frame == 'world'
+    assert (
+        decoded.linear == (0.22, 0.0, 0.0)
+        and decoded.angular == (0.0, 0.0, -2.84)
+        and decoded.frame == 'world'
+    )
 
 
 @pytest.mark.parametrize(
     ('changes', 'complaint'),
     [
         ({'position': (math.nan, 0.0, 0.0)}, 'pose position[0] must be finite, got nan'),
-        ({'orientation': (0.0, 0.0, 0.0, 0.0)}, 'pose: orientation must be a unit quaternion, got (0.0, 0.0, 0.0, 0.0)'),
+        (
+            {'orientation': (0.0, 0.0, 0.0, 0.0)},
+            'pose: orientation must be a unit quaternion, got (0.0, 0.0, 0.0, 0.0)',
+        ),
         ({'orientation': (0.0, 0.0, 0.0, math.inf)}, 'pose orientation[3] must be finite, got inf'),
     ],
 )
@@ -457,7 +535,10 @@ def test_a_pose_that_cannot_be_a_pose_is_refused(changes, complaint):
 def test_robot_commands_carry_their_frame_and_values_bit_for_bit():
     velocity = (0.1 + 0.2, -1e-300)
     msg = through_wire(encode_world_velocity(velocity, frame_id='world', stamp=1700000000.5))
-    assert msg.header.frame_id == 'world' and (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1700000000, 500000000)
+    assert msg.header.frame_id == 'world' and (msg.header.stamp.sec, msg.header.stamp.nanosec) == (
+        1700000000,
+        500000000,
+    )
     assert (msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z) == (0.1 + 0.2, -1e-300, 0.0)
     body = through_wire(encode_body_velocity(0.22, -2.84))
     assert (body.linear.x, body.linear.y, body.angular.z, body.angular.x) == (0.22, 0.0, -2.84, 0.0)

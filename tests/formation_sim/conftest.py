@@ -115,8 +115,13 @@ def small_disk(tmp_path):
             pytest.skip('mounting a small tmpfs needs root (CI runs as root)')
         folder = tmp_path / f'disk{len(mounted)}'
         folder.mkdir()
-        done = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={int(megabytes * 1024)}k', 'tmpfs', str(folder)],
-                              capture_output=True, text=True, check=False, timeout=30)  # fmt: skip
+        done = subprocess.run(
+            ['mount', '-t', 'tmpfs', '-o', f'size={int(megabytes * 1024)}k', 'tmpfs', str(folder)],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=30,
+        )
         if done.returncode != 0:
             pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
         mounted.append(folder)
@@ -154,7 +159,11 @@ def paper_single_record() -> RunRecord:
 
 
 def _write_run_bag(
-    record: RunRecord, path: Path, *, scenario_topic: bool = False, drop: set[tuple[int, int, int]] | None = None,
+    record: RunRecord,
+    path: Path,
+    *,
+    scenario_topic: bool = False,
+    drop: set[tuple[int, int, int]] | None = None,
     asked_horizon: float | None = None,
 ) -> Path:
     """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger).
@@ -187,28 +196,54 @@ def _write_run_bag(
 
     array = 'std_msgs/msg/Float64MultiArray'
     if scenario_topic:
-        asked = scenario.replace(horizon=record.horizon if asked_horizon is None else asked_horizon)  # as the simulator publishes it
-        add(0.0, '/formation/scenario', 'std_msgs/msg/String', String(data=yaml.safe_dump(scenario_to_dict(asked), sort_keys=False)))
+        asked = scenario.replace(
+            horizon=record.horizon if asked_horizon is None else asked_horizon
+        )  # as the simulator publishes it
+        add(
+            0.0,
+            '/formation/scenario',
+            'std_msgs/msg/String',
+            String(data=yaml.safe_dump(scenario_to_dict(asked), sort_keys=False)),
+        )
     events = sorted({t for times in record.trigger_times.values() for t in times})
     for index, t in enumerate(events):
         add(t, '/formation/step', array, encode_step(Step(index=index, time=t)))
-    add(record.horizon, '/formation/step', array, encode_step(Step(index=len(events), time=record.horizon, flags=STEP_FLAG_FINAL)))
+    add(
+        record.horizon,
+        '/formation/step',
+        array,
+        encode_step(Step(index=len(events), time=record.horizon, flags=STEP_FLAG_FINAL)),
+    )
     for agent, times in record.trigger_times.items():
         for k, t in enumerate(times):
-            log = json.dumps({'version': 1, 'agent': agent, 'step': events.index(t), 'time': t}, separators=(',', ':'))
+            log = json.dumps(
+                {'version': 1, 'agent': agent, 'step': events.index(t), 'time': t}, separators=(',', ':')
+            )
             add(t, '/formation/sensing_log', 'std_msgs/msg/String', String(data=log))
             add(t, f'/agent_{agent}/cmd_vel', 'geometry_msgs/msg/Twist', Twist())
             for j in scenario.neighbours(agent):
                 if drop and (agent, j, k) in drop:
                     continue
-                info = TriggerInfo(sender=agent, receiver=j, stamp=t, control=(0.0,) * p, rel_position=(0.0,) * p)
+                info = TriggerInfo(
+                    sender=agent, receiver=j, stamp=t, control=(0.0,) * p, rel_position=(0.0,) * p
+                )
                 add(t, f'/agent_{agent}/trigger_info/to_{j}', array, encode_trigger_info(info))
     velocities = record.sample_velocities
     for k, t in enumerate(record.sample_times):
-        state = WorldState(time=float(t), agent_ids=scenario.agent_ids, positions=record.sample_positions[k], velocities=None if velocities is None else velocities[k])
+        state = WorldState(
+            time=float(t),
+            agent_ids=scenario.agent_ids,
+            positions=record.sample_positions[k],
+            velocities=None if velocities is None else velocities[k],
+        )
         add(float(t), '/formation/state', array, encode_world_state(state))
         seconds = round(float(t) * 1e9)
-        add(float(t), '/clock', 'rosgraph_msgs/msg/Clock', Clock(clock=Time(sec=seconds // 10**9, nanosec=seconds % 10**9)))
+        add(
+            float(t),
+            '/clock',
+            'rosgraph_msgs/msg/Clock',
+            Clock(clock=Time(sec=seconds // 10**9, nanosec=seconds % 10**9)),
+        )
     messages.sort(key=lambda m: (m[0], m[1]))
     with BagWriter(path) as bag:
         for _, _, topic, msgtype, _ in messages:
@@ -242,7 +277,14 @@ def distributed_single_run(tmp_path_factory) -> DistributedRun:
     scenario = load_scenario('paper_single')
     horizon = 2.0
     root = tmp_path_factory.mktemp('distributed_single')
-    result = FormationRun(scenario, out_dir=root / 'run', horizon=horizon, domain_id=DISTRIBUTED_DOMAIN, progress=False, timeout=240.0).run()
+    result = FormationRun(
+        scenario,
+        out_dir=root / 'run',
+        horizon=horizon,
+        domain_id=DISTRIBUTED_DOMAIN,
+        progress=False,
+        timeout=240.0,
+    ).run()
     assert result.ok, result.message
     assert result.bag is not None
     reference = simulate(scenario, horizon=horizon)

@@ -41,50 +41,147 @@ def _bad_input(tmp_path):
     return [
         (['validate', missing], 'no such scenario file and not a built-in scenario'),
         (['validate', str(tmp_path)], 'is a folder, not a scenario file'),
-        (['generate', '--agents', '3', '--out', str(tmp_path / 'a_run' / 'summary.json')], 'summary.json exists; nothing was changed'),
-        (['generate', '--agents', '3', '--slack', '0', '--out', str(tmp_path / 'x.json')], 'argument --slack: must be a number in (0, 1], got 0.0'),
-        (['simulate', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
+        (
+            ['generate', '--agents', '3', '--out', str(tmp_path / 'a_run' / 'summary.json')],
+            'summary.json exists; nothing was changed',
+        ),
+        (
+            ['generate', '--agents', '3', '--slack', '0', '--out', str(tmp_path / 'x.json')],
+            'argument --slack: must be a number in (0, 1], got 0.0',
+        ),
+        (
+            ['simulate', 'paper_single', '--sample-dt', '-1'],
+            'argument --sample-dt: must be a finite number >= 0, got -1.0',
+        ),
         (['simulate', 'no_such_scenario'], 'no such scenario file'),
-        (['run', 'paper_single', '--timeout', '-5'], 'argument --timeout: must be a finite number > 0, got -5.0'),
-        (['run', 'paper_single', '--out', str(tmp_path / 'x'), '--domain-id', '999'], 'argument --domain-id: must be an integer in [0, 232]'),
+        (
+            ['run', 'paper_single', '--timeout', '-5'],
+            'argument --timeout: must be a finite number > 0, got -5.0',
+        ),
+        (
+            ['run', 'paper_single', '--out', str(tmp_path / 'x'), '--domain-id', '999'],
+            'argument --domain-id: must be an integer in [0, 232]',
+        ),
         (['recover', missing], 'is not a directory'),
         (['recover', str(tmp_path / 'empty')], 'expected exactly one .mcap file, found []'),
         (['analyze', missing], 'missing: no such file or folder'),
         (['analyze', missing, '--fps', '0'], 'argument --fps: must be an integer in [1, 100], got 0'),
         (['compare', missing, missing], 'missing: no such file or folder'),
-        (['compare', missing, missing, '--tolerance', '-1'], 'argument --tolerance: must be a finite number >= 0, got -1.0'),
+        (
+            ['compare', missing, missing, '--tolerance', '-1'],
+            'argument --tolerance: must be a finite number >= 0, got -1.0',
+        ),
         (['replay', missing], missing),
         (['replay', missing, '--rate', '-2'], 'argument --rate: must be a finite number >= 0, got -2.0'),
         (['replay', missing, '--domain-id', '233'], 'argument --domain-id: must be an integer in [0, 232]'),
         (['topics', '--wait', '-1'], 'argument --wait: must be a finite number >= 0, got -1.0'),
-        (['topics', '--domain-id', 'x'], "argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 'x'"),
-        (['measure', 'robots_lab', '--robot', 'unicycle', '--out', str(tmp_path / 'a_file')], 'a_file: exists; choose a new file'),
-        (['measure', 'robots_lab', '--robot', 'tank', '--out', str(tmp_path / 'm.yaml')], "argument --robot: invalid choice: 'tank'"),
+        (
+            ['topics', '--domain-id', 'x'],
+            "argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 'x'",
+        ),
+        (
+            ['measure', 'robots_lab', '--robot', 'unicycle', '--out', str(tmp_path / 'a_file')],
+            'a_file: exists; choose a new file',
+        ),
+        (
+            ['measure', 'robots_lab', '--robot', 'tank', '--out', str(tmp_path / 'm.yaml')],
+            "argument --robot: invalid choice: 'tank'",
+        ),
         (['echo', 'not a topic'], 'argument TOPIC: Invalid topic name'),
         (['echo', '/formation/step', '--count', '0'], 'argument --count: must be an integer >= 1, got 0'),
-        (['echo', '/formation/step', '--timeout', 'inf'], 'argument --timeout: must be a finite number > 0, got inf'),
+        (
+            ['echo', '/formation/step', '--timeout', 'inf'],
+            'argument --timeout: must be a finite number > 0, got inf',
+        ),
         (['simulate', 'paper_single', '--out', str(tmp_path / 'a_file')], 'a_file is a file, not a folder'),
-        (['simulate', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
-        (['simulate', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
-        (['simulate', 'paper_single', '--period', 'nan'], 'argument --period: must be a finite number > 0, got nan'),
+        (
+            ['simulate', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')],
+            'a_file is a file, so no folder can be made under it',
+        ),
+        (
+            ['simulate', 'paper_single', '--out', str(tmp_path / 'a_run')],
+            'a_run already holds an earlier run (summary.json)',
+        ),
+        (
+            ['simulate', 'paper_single', '--period', 'nan'],
+            'argument --period: must be a finite number > 0, got nan',
+        ),
         (['study', str(tmp_path / 'no_spec.yaml'), '--out', str(tmp_path / 'x')], 'cannot read the SPEC'),
         (['study', 'report'], 'report: the study folder is required'),
-        (['run', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')], 'a_file is a file, so no folder can be made under it'),
-        (['run', 'paper_single', '--out', str(tmp_path / 'a_run'), '--force', '--domain-id', '100', '--sample-dt', '1e-12'], 'asks for 1e+13 samples'),
-        (['run', 'paper_single', '--agents-per-process', '1.5'], "argument --agents-per-process: must be an integer >= 1 or 'auto', got '1.5'"),
-        (['analyze', missing, '--out', str(tmp_path / 'a_run')], 'a_run holds a run (summary.json or bag/) whose files the report would overwrite'),
-        (['compare', missing, missing, '--out', str(tmp_path / 'a_run')], 'whose files the report would overwrite'),
+        (
+            ['run', 'paper_single', '--out', str(tmp_path / 'a_file' / 'run')],
+            'a_file is a file, so no folder can be made under it',
+        ),
+        (
+            [
+                'run',
+                'paper_single',
+                '--out',
+                str(tmp_path / 'a_run'),
+                '--force',
+                '--domain-id',
+                '100',
+                '--sample-dt',
+                '1e-12',
+            ],
+            'asks for 1e+13 samples',
+        ),
+        (
+            ['run', 'paper_single', '--agents-per-process', '1.5'],
+            "argument --agents-per-process: must be an integer >= 1 or 'auto', got '1.5'",
+        ),
+        (
+            ['analyze', missing, '--out', str(tmp_path / 'a_run')],
+            'a_run holds a run (summary.json or bag/) whose files the report would overwrite',
+        ),
+        (
+            ['compare', missing, missing, '--out', str(tmp_path / 'a_run')],
+            'whose files the report would overwrite',
+        ),
         (['replay', missing, '--depth', '0'], 'argument --depth: must be an integer >= 1, got 0'),
-        (['echo', '/formation/step', '--domain-id', '233'], 'argument --domain-id: must be an integer in [0, 232]'),
+        (
+            ['echo', '/formation/step', '--domain-id', '233'],
+            'argument --domain-id: must be an integer in [0, 232]',
+        ),
         (['validate', ''], "'': no such scenario file"),
-        (['validate', 'robots_square', '--max-speed', '0'], 'argument --max-speed: must be a finite number > 0, got 0.0'),
-        (['run', 'robots_square', '--backend', 'external'], '--backend external needs --robot holonomic|unicycle'),
-        (['run', 'robots_square', '--backend', 'unicycle', '--latency', '-0.02'], 'argument --latency: must be a finite number >= 0, got -0.02'),
-        (['params', 'paper_single', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
-        (['params', 'robots_square', '--backend', 'external', '--out', str(tmp_path / 'x')], '--backend external needs --robot holonomic|unicycle'),
-        (['params', 'paper_single', '--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
+        (
+            ['validate', 'robots_square', '--max-speed', '0'],
+            'argument --max-speed: must be a finite number > 0, got 0.0',
+        ),
+        (
+            ['run', 'robots_square', '--backend', 'external'],
+            '--backend external needs --robot holonomic|unicycle',
+        ),
+        (
+            ['run', 'robots_square', '--backend', 'unicycle', '--latency', '-0.02'],
+            'argument --latency: must be a finite number >= 0, got -0.02',
+        ),
+        (
+            ['params', 'paper_single', '--out', str(tmp_path / 'a_run')],
+            'a_run already holds an earlier run (summary.json)',
+        ),
+        (
+            ['params', 'robots_square', '--backend', 'external', '--out', str(tmp_path / 'x')],
+            '--backend external needs --robot holonomic|unicycle',
+        ),
+        (
+            ['params', 'paper_single', '--sample-dt', '-1'],
+            'argument --sample-dt: must be a finite number >= 0, got -1.0',
+        ),
         (['robots', 'robots_square', '--domain-id', '42'], '--model holonomic|unicycle|car is required'),
-        (['robots', 'robots_square', '--model', 'unicycle', '--domain-id', '42', '--out', str(tmp_path / 'a_run')], 'a_run already holds an earlier run (summary.json)'),
+        (
+            [
+                'robots',
+                'robots_square',
+                '--model',
+                'unicycle',
+                '--domain-id',
+                '42',
+                '--out',
+                str(tmp_path / 'a_run'),
+            ],
+            'a_run already holds an earlier run (summary.json)',
+        ),
         (['no_such_command'], "invalid choice: 'no_such_command'"),
         (['validate', 'paper_single', '--no-such-option'], 'unrecognized arguments: --no-such-option'),
         ([], 'COMMAND'),
@@ -107,8 +204,14 @@ def test_bad_input_exits_2_in_every_command(tmp_path, capsys):
         captured = capsys.readouterr()
         assert complaint in captured.err, (arguments, captured.err)
         assert 'Traceback' not in captured.err
-    assert not (tmp_path / 'x').exists() and sorted(p.name for p in tmp_path.iterdir()) == ['a_file', 'a_run', 'empty']
-    assert [p.name for p in (tmp_path / 'a_run').iterdir()] == ['summary.json'] and not list((tmp_path / 'empty').iterdir())
+    assert not (tmp_path / 'x').exists() and sorted(p.name for p in tmp_path.iterdir()) == [
+        'a_file',
+        'a_run',
+        'empty',
+    ]
+    assert [p.name for p in (tmp_path / 'a_run').iterdir()] == ['summary.json'] and not list(
+        (tmp_path / 'empty').iterdir()
+    )
 
 
 @pytest.mark.timeout(300)
@@ -117,7 +220,11 @@ def test_a_real_formation_process_exits_2_on_bad_input(tmp_path, command):
     arguments, complaint = next(case for case in _bad_input(tmp_path) if case[0] and case[0][0] == command)
     done = subprocess.run(
         [sys.executable, '-m', 'formation_sim.cli', *arguments],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        cwd=tmp_path,
     )
     assert done.returncode == 2, done.stderr
     assert complaint in done.stderr and 'Traceback' not in done.stderr

@@ -35,45 +35,93 @@ def _specs(command: str):
 
 # Per command: ROS arguments with several bad or missing parameters, and what the error must say.
 BAD = {
-    'formation_agent': (['-r', '__ns:=/agent_1', '-p', 'delta:=-1.0', '-p', 'algorithm:=eta3'],
-                        ["parameter 'delta' (double) must be > 0, got -1.0", "parameter 'algorithm' (string) must be one of 'eta1', 'eta2', got 'eta3'",
-                         "parameter 'horizon' (double) is required"]),
-    'formation_sim': (['-p', 'clock_mode:=fast', '-p', 'stall_timeout:=0.0'],
-                      ["parameter 'scenario' (string) is required", "parameter 'clock_mode' (string) must be one of 'lockstep', 'realtime', got 'fast'",
-                       "parameter 'stall_timeout' (double) must be > 0, got 0.0"]),
-    'formation_coordinator': (['-p', 'scenario:=robots_square', '-p', 'robot:=tank', '-p', 'robot_trajectory:=gps', '-p', 'horizon:=-3.0'],
-                              ["parameter 'robot' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
-                               "parameter 'robot_trajectory' (string) must be one of 'true_odom', 'odom', 'pose', got 'gps'",
-                               "parameter 'horizon' (double) must be >= 0, finite, got -3.0"]),
-    'formation_recorder': (['-p', 'drain_limit:=-1.0', '-p', "topics:=['nameless']"],
-                           ["parameter 'output' (string) is required", "parameter 'drain_limit' (double) must be > 0, finite, got -1.0",
-                            "parameter 'topics': topic spec 'nameless' is not of the form '/name:package/msg/Type'"]),
-    'formation_robot': (['-p', 'model:=tank', '-p', 'seed:=-1'],
-                        ["parameter 'robot_id' (int) is required", "parameter 'model' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
-                         "parameter 'seed' (int) must be >= 0, got -1"]),
-}  # fmt: skip
+    'formation_agent': (
+        ['-r', '__ns:=/agent_1', '-p', 'delta:=-1.0', '-p', 'algorithm:=eta3'],
+        [
+            "parameter 'delta' (double) must be > 0, got -1.0",
+            "parameter 'algorithm' (string) must be one of 'eta1', 'eta2', got 'eta3'",
+            "parameter 'horizon' (double) is required",
+        ],
+    ),
+    'formation_sim': (
+        ['-p', 'clock_mode:=fast', '-p', 'stall_timeout:=0.0'],
+        [
+            "parameter 'scenario' (string) is required",
+            "parameter 'clock_mode' (string) must be one of 'lockstep', 'realtime', got 'fast'",
+            "parameter 'stall_timeout' (double) must be > 0, got 0.0",
+        ],
+    ),
+    'formation_coordinator': (
+        [
+            '-p',
+            'scenario:=robots_square',
+            '-p',
+            'robot:=tank',
+            '-p',
+            'robot_trajectory:=gps',
+            '-p',
+            'horizon:=-3.0',
+        ],
+        [
+            "parameter 'robot' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
+            "parameter 'robot_trajectory' (string) must be one of 'true_odom', 'odom', 'pose', got 'gps'",
+            "parameter 'horizon' (double) must be >= 0, finite, got -3.0",
+        ],
+    ),
+    'formation_recorder': (
+        ['-p', 'drain_limit:=-1.0', '-p', "topics:=['nameless']"],
+        [
+            "parameter 'output' (string) is required",
+            "parameter 'drain_limit' (double) must be > 0, finite, got -1.0",
+            "parameter 'topics': topic spec 'nameless' is not of the form '/name:package/msg/Type'",
+        ],
+    ),
+    'formation_robot': (
+        ['-p', 'model:=tank', '-p', 'seed:=-1'],
+        [
+            "parameter 'robot_id' (int) is required",
+            "parameter 'model' (string) must be one of 'holonomic', 'unicycle', 'car', got 'tank'",
+            "parameter 'seed' (int) must be >= 0, got -1",
+        ],
+    ),
+}
 
 
 def _command(name: str) -> list[str]:
     script = Path(sys.executable).with_name(name)
     if script.exists():  # the console script of the installed package
         return [str(script)]
-    module = {'formation_agent': 'formation_agent.ros.main', 'formation_sim': 'formation_sim.runtime.sim_node',
-              'formation_coordinator': 'formation_sim.runtime.coordinator', 'formation_recorder': 'formation_sim.runtime.recorder',
-              'formation_robot': 'formation_sim.runtime.robot_node'}[name]  # fmt: skip
+    module = {
+        'formation_agent': 'formation_agent.ros.main',
+        'formation_sim': 'formation_sim.runtime.sim_node',
+        'formation_coordinator': 'formation_sim.runtime.coordinator',
+        'formation_recorder': 'formation_sim.runtime.recorder',
+        'formation_robot': 'formation_sim.runtime.robot_node',
+    }[name]
     return [sys.executable, '-m', module]
 
 
 def _env(tmp_path: Path) -> dict[str, str]:
-    return {**os.environ, 'ROS_DOMAIN_ID': str(DOMAIN_ID), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    return {
+        **os.environ,
+        'ROS_DOMAIN_ID': str(DOMAIN_ID),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+    }
 
 
 def test_the_document_is_what_the_nodes_declare():
-    done = subprocess.run([sys.executable, str(SCRIPT), '--check'], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), '--check'], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr
     text = (ROOT / 'docs' / 'PARAMETERS.md').read_text()
     for command in BAD:
-        documented = {line.split('`')[1] for line in text.split(f'`{command}`: node', 1)[1].split('\n## ', 1)[0].splitlines() if line.startswith('| `')}
+        documented = {
+            line.split('`')[1]
+            for line in text.split(f'`{command}`: node', 1)[1].split('\n## ', 1)[0].splitlines()
+            if line.startswith('| `')
+        }
         assert documented == {spec.name for spec in _specs(command)}, command
         assert all(spec.description for spec in _specs(command))
 
@@ -91,7 +139,13 @@ def test_help_lists_every_parameter(command):
 @pytest.mark.parametrize('command', sorted(BAD))
 def test_bad_parameters_are_named_at_once_without_a_traceback(command, tmp_path):
     arguments, complaints = BAD[command]
-    done = subprocess.run([*_command(command), '--ros-args', *arguments], capture_output=True, text=True, env=_env(tmp_path), timeout=60)
+    done = subprocess.run(
+        [*_command(command), '--ros-args', *arguments],
+        capture_output=True,
+        text=True,
+        env=_env(tmp_path),
+        timeout=60,
+    )
     assert done.returncode == 2, done.stderr
     assert 'Traceback' not in done.stderr and done.stderr.startswith(f'{command}: ')
     for complaint in complaints:
@@ -108,14 +162,21 @@ def test_the_parameter_services_describe_each_parameter(tmp_path):
 
     from formation_sim.runtime.recorder import RECORDER_PARAMETERS
 
-    recorder = subprocess.Popen([*_command('formation_recorder'), '--ros-args', '-p', f'output:={tmp_path / "bag"}'],
-                                env=_env(tmp_path), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    recorder = subprocess.Popen(
+        [*_command('formation_recorder'), '--ros-args', '-p', f'output:={tmp_path / "bag"}'],
+        env=_env(tmp_path),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID)
     node = rclpy.create_node('describer', context=context)
     try:
         client = AsyncParameterClient(node, '/formation_recorder')
-        assert client.wait_for_services(timeout_sec=60.0), recorder.stderr.read() if recorder.poll() is not None else 'no services'
+        assert client.wait_for_services(timeout_sec=60.0), (
+            recorder.stderr.read() if recorder.poll() is not None else 'no services'
+        )
         future = client.describe_parameters([spec.name for spec in RECORDER_PARAMETERS])
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
@@ -130,6 +191,10 @@ def test_the_parameter_services_describe_each_parameter(tmp_path):
         recorder.wait(timeout=60)
     for spec in RECORDER_PARAMETERS:
         descriptor = described[spec.name]
-        assert (descriptor.type, descriptor.description, descriptor.additional_constraints) == (spec.type.value, spec.description, spec.constraint_text())
+        assert (descriptor.type, descriptor.description, descriptor.additional_constraints) == (
+            spec.type.value,
+            spec.description,
+            spec.constraint_text(),
+        )
         assert descriptor.read_only
     assert described['flush_period'].additional_constraints == '> 0, finite'

@@ -23,7 +23,9 @@ class _Recorded:
     def run(self):
         from formation_sim.runtime.orchestrate import RunResult
 
-        return RunResult(out_dir=Path('runs/x'), summary=None, bag=None, exit_status=0, domain_id=100, wall_time=0.0)
+        return RunResult(
+            out_dir=Path('runs/x'), summary=None, bag=None, exit_status=0, domain_id=100, wall_time=0.0
+        )
 
 
 def _run_script(monkeypatch, *arguments):

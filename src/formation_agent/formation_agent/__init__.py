@@ -11,7 +11,17 @@ A robot needs only this package and `formation_msgs_py`. The names below are the
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'core.eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
-    'core.crossing': ('CrossingError', 'CrossingSearch', 'first_crossing'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'core.eta': (
+            'ALGORITHM_GAINS',
+            'AgentError',
+            'Eta1Agent',
+            'Eta2Agent',
+            'TriggerOutput',
+            'make_agent',
+        ),
+        'core.crossing': ('CrossingError', 'CrossingSearch', 'first_crossing'),
+    },
+)

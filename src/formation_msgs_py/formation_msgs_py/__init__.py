@@ -14,17 +14,42 @@ Everything here but `codec` and `qos` imports without ROS.
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'types': ('MAX_AGENT_ID', 'RobotPose', 'SensedState', 'TriggerInfo'),
-    'lockstep': (
-        'AgentReport', 'Saturation', 'Status', 'Step', 'WorldState',
-        'DISCOVERY_STEP', 'STEP_FLAG_FINAL', 'STEP_FLAG_REALTIME', 'REJECT_REASONS', 'SATURATION_KINDS',
-    ),
-    'topics': (
-        'STEP_TOPIC', 'STATUS_TOPIC', 'REPORT_TOPIC', 'STATE_TOPIC', 'GROUND_TRUTH_TOPIC',
-        'SENSING_LOG_TOPIC', 'SCENARIO_TOPIC', 'MARKERS_TOPIC', 'CLOCK_TOPIC', 'ROBOTS_TOPIC',
-        'agent_namespace', 'trigger_info_topic', 'sense_service', 'command_topic',
-        'robot_pose_topic', 'robot_odom_topic', 'robot_command_topic', 'robot_true_odom_topic',
-    ),
-    'codec': ('MessageError',),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'types': ('MAX_AGENT_ID', 'RobotPose', 'SensedState', 'TriggerInfo'),
+        'lockstep': (
+            'AgentReport',
+            'Saturation',
+            'Status',
+            'Step',
+            'WorldState',
+            'DISCOVERY_STEP',
+            'STEP_FLAG_FINAL',
+            'STEP_FLAG_REALTIME',
+            'REJECT_REASONS',
+            'SATURATION_KINDS',
+        ),
+        'topics': (
+            'STEP_TOPIC',
+            'STATUS_TOPIC',
+            'REPORT_TOPIC',
+            'STATE_TOPIC',
+            'GROUND_TRUTH_TOPIC',
+            'SENSING_LOG_TOPIC',
+            'SCENARIO_TOPIC',
+            'MARKERS_TOPIC',
+            'CLOCK_TOPIC',
+            'ROBOTS_TOPIC',
+            'agent_namespace',
+            'trigger_info_topic',
+            'sense_service',
+            'command_topic',
+            'robot_pose_topic',
+            'robot_odom_topic',
+            'robot_command_topic',
+            'robot_true_odom_topic',
+        ),
+        'codec': ('MessageError',),
+    },
+)

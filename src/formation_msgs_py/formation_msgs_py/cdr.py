@@ -51,7 +51,10 @@ def _read_string(data: bytes, offset: int, what: str) -> tuple[str, int]:
     (length,) = _LENGTH.unpack_from(data, offset)
     end = offset + 4 + length
     if length < 1 or end > len(data) or data[end - 1] != 0:
-        raise MessageError(f'{what}: a string of {length} bytes does not fit a message of {len(data)} bytes', reason=REJECT_LENGTH)
+        raise MessageError(
+            f'{what}: a string of {length} bytes does not fit a message of {len(data)} bytes',
+            reason=REJECT_LENGTH,
+        )
     return data[offset + 4 : end - 1].decode(errors='replace'), end
 
 
@@ -75,25 +78,46 @@ class OdometryWriter:
         self._twist_covariance = _COVARIANCE.pack(*[0.0] * 36)
 
     def pack(
-        self, stamp: float, position: Sequence[float], orientation: Sequence[float], linear: Sequence[float], angular_z: float
+        self,
+        stamp: float,
+        position: Sequence[float],
+        orientation: Sequence[float],
+        linear: Sequence[float],
+        angular_z: float,
     ) -> bytes:
         """Unix time `stamp`, the pose (position x y z, quaternion x y z w), the body twist (linear
         x y z, angular z)."""
         seconds = math.floor(stamp)
         nanoseconds = min(999_999_999, round((stamp - seconds) * 1e9))
-        return b''.join((
-            ENCAPSULATION, _STAMP.pack(int(seconds), nanoseconds), self._strings,
-            _POSE.pack(*position, *orientation), self._pose_covariance,
-            _TWIST.pack(*linear, 0.0, 0.0, angular_z), self._twist_covariance,
-        ))  # fmt: skip
+        return b''.join(
+            (
+                ENCAPSULATION,
+                _STAMP.pack(int(seconds), nanoseconds),
+                self._strings,
+                _POSE.pack(*position, *orientation),
+                self._pose_covariance,
+                _TWIST.pack(*linear, 0.0, 0.0, angular_z),
+                self._twist_covariance,
+            )
+        )
 
 
-def pack_pose_stamped(stamp: float, frame: str, position: Sequence[float], orientation: Sequence[float]) -> bytes:
+def pack_pose_stamped(
+    stamp: float, frame: str, position: Sequence[float], orientation: Sequence[float]
+) -> bytes:
     """A `geometry_msgs/PoseStamped` as CDR bytes (Unix time `stamp`)."""
     seconds = math.floor(stamp)
     nanoseconds = min(999_999_999, round((stamp - seconds) * 1e9))
     strings, end = _string(frame, _STAMP.size)
-    return b''.join((ENCAPSULATION, _STAMP.pack(int(seconds), nanoseconds), strings, b'\x00' * (-end % 8), _POSE.pack(*position, *orientation)))
+    return b''.join(
+        (
+            ENCAPSULATION,
+            _STAMP.pack(int(seconds), nanoseconds),
+            strings,
+            b'\x00' * (-end % 8),
+            _POSE.pack(*position, *orientation),
+        )
+    )
 
 
 def _header(data: bytes, what: str) -> tuple[float, str, int]:
@@ -103,7 +127,9 @@ def _header(data: bytes, what: str) -> tuple[float, str, int]:
 
 def _stamp_and_frame(data: bytes, what: str) -> tuple[int, int, str, int]:
     if len(data) < _HEADER + _STAMP.size + 4 or data[:2] != ENCAPSULATION[:2]:
-        raise MessageError(f'{what}: {len(data)} bytes are not a little-endian CDR message', reason=REJECT_LENGTH)
+        raise MessageError(
+            f'{what}: {len(data)} bytes are not a little-endian CDR message', reason=REJECT_LENGTH
+        )
     sec, nanosec = _STAMP.unpack_from(data, _HEADER)
     frame, end = _read_string(data, _HEADER + _STAMP.size, what)
     return sec, nanosec, frame, end
@@ -125,7 +151,9 @@ def decode_odometry_cdr(data: bytes) -> RobotPose:
     position, orientation = pose_values('odometry pose', values[:3], values[3:])
     twist = _TWIST.unpack_from(data, twist_at)
     linear, angular = twist_values(twist[:3], twist[3:])
-    return RobotPose(stamp=stamp, frame=frame, position=position, orientation=orientation, linear=linear, angular=angular)
+    return RobotPose(
+        stamp=stamp, frame=frame, position=position, orientation=orientation, linear=linear, angular=angular
+    )
 
 
 def decode_pose_stamped_cdr(data: bytes) -> RobotPose:
@@ -157,4 +185,3 @@ def pose_stamped_fields(data: bytes) -> tuple[int, int, tuple[float, ...]]:
     pose_at = _align8(end)
     _need(data, pose_at + _POSE.size, 'pose')
     return sec, nanosec, _POSE.unpack_from(data, pose_at)
-

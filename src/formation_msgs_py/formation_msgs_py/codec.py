@@ -78,7 +78,8 @@ def _as_int(name: str, value: float, *, low: int, high: int) -> int:
 def _check_version(what: str, value: float) -> None:
     if value != LAYOUT_VERSION:
         raise MessageError(
-            f'{what}: layout version {value!r} is not supported (expected {LAYOUT_VERSION})', reason=REJECT_VERSION
+            f'{what}: layout version {value!r} is not supported (expected {LAYOUT_VERSION})',
+            reason=REJECT_VERSION,
         )
 
 
@@ -89,7 +90,9 @@ def _float_array(fields: Sequence[tuple[str, Sequence[float]]]):
     data = array('d')
     for _, values in fields:
         data.extend(values)  # array('d') converts ints and numpy floats to float64 exactly
-    return Float64MultiArray(layout=_layout(tuple((label, len(values)) for label, values in fields)), data=data)
+    return Float64MultiArray(
+        layout=_layout(tuple((label, len(values)) for label, values in fields)), data=data
+    )
 
 
 @functools.lru_cache(maxsize=256)
@@ -203,7 +206,8 @@ def encode_sensed_state(state: SensedState):
     }
     if state.rel_velocities is not None:
         body['rel_velocities'] = {
-            str(j): _vector_json(f'sensed q_{state.agent} - q_{j}', v) for j, v in state.rel_velocities.items()
+            str(j): _vector_json(f'sensed q_{state.agent} - q_{j}', v)
+            for j, v in state.rel_velocities.items()
         }
     if state.velocity is not None:
         body['velocity'] = _vector_json(f'sensed q_{state.agent}', state.velocity)
@@ -264,7 +268,9 @@ def decode_sensed_state(response) -> SensedState:
     if not isinstance(body, dict):
         raise MessageError(f'sensed state must be a JSON object, got {response.message[:80]!r}')
     if body.get('version') != LAYOUT_VERSION:
-        raise MessageError(f'sensed state: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})')
+        raise MessageError(
+            f'sensed state: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})'
+        )
     unknown = set(body) - {'version', 'agent', 'stamp', 'rel_positions', 'rel_velocities', 'velocity'}
     if unknown:
         raise MessageError(f'sensed state: unknown fields {sorted(unknown)}')
@@ -308,7 +314,9 @@ _STEP_LABELS = ('version', 'step_index', 'time', 'flags', 'epoch')
 def encode_step(step: Step):
     _check_finite(f'step {step.index} time and epoch', [step.time, step.epoch])
     values = [LAYOUT_VERSION, step.index, step.time, step.flags, step.epoch]
-    return _float_array([*((label, [value]) for label, value in zip(_STEP_LABELS, values)), ('due', step.due)])
+    return _float_array(
+        [*((label, [value]) for label, value in zip(_STEP_LABELS, values)), ('due', step.due)]
+    )
 
 
 def decode_step(msg) -> Step:
@@ -378,7 +386,8 @@ def decode_status(msg) -> Status:
     next_time = data[3]
     if math.isnan(next_time) or next_time == -math.inf:
         raise MessageError(
-            f'status of agent {agent}: next_time must be a time or +inf, got {next_time!r}', reason=REJECT_NON_FINITE
+            f'status of agent {agent}: next_time must be a time or +inf, got {next_time!r}',
+            reason=REJECT_NON_FINITE,
         )
     counters = [
         _as_int(f'status of agent {agent} {label}', value, low=0, high=_MAX_COUNT)
@@ -411,7 +420,16 @@ AGENT_REPORT_VERSION = 3
 """Version of the AgentReport JSON: 2 added `robot_commands`, `saturation` and `failure`; 3 `published`."""
 
 _REPORT_COUNTERS = ('dropped', 'delayed', 'late', 'robot_commands')
-_REPORT_FIELDS = ('version', 'agent', 'final', 'rejected', *_REPORT_COUNTERS, 'saturation', 'failure', 'published')
+_REPORT_FIELDS = (
+    'version',
+    'agent',
+    'final',
+    'rejected',
+    *_REPORT_COUNTERS,
+    'saturation',
+    'failure',
+    'published',
+)
 _SATURATION_FIELDS = ('count', 'largest_requested', 'allowed')
 
 
@@ -459,7 +477,11 @@ def _decode_saturation(agent: int, table) -> dict[str, Saturation]:
         values = [_json_number(f'{what} {name}', clipped[name]) for name in _SATURATION_FIELDS[1:]]
         if any(value < 0.0 for value in values):
             raise MessageError(f'{what}: largest_requested and allowed must be >= 0, got {values}')
-        saturation[kind] = Saturation(count=_json_count(f'{what} count', clipped['count']), largest_requested=values[0], allowed=values[1])
+        saturation[kind] = Saturation(
+            count=_json_count(f'{what} count', clipped['count']),
+            largest_requested=values[0],
+            allowed=values[1],
+        )
     return saturation
 
 
@@ -484,21 +506,31 @@ def decode_agent_report(msg) -> AgentReport:
     if missing := known - set(body):
         raise MessageError(f'agent report: missing fields {sorted(missing)}')
     agent = _json_count('agent report agent', body['agent'])
-    if agent > _MAX_ID or not isinstance(body['final'], bool) or not all(
-        isinstance(body[name], dict) for name in ('rejected', 'published')
+    if (
+        agent > _MAX_ID
+        or not isinstance(body['final'], bool)
+        or not all(isinstance(body[name], dict) for name in ('rejected', 'published'))
     ):
         raise MessageError(f'agent report: agent, final, rejected or published malformed: {text[:120]!r}')
     if body['failure'] is not None and not isinstance(body['failure'], str):
-        raise MessageError(f'agent report of agent {agent}: failure must be null or a string, got {body["failure"]!r}')
+        raise MessageError(
+            f'agent report of agent {agent}: failure must be null or a string, got {body["failure"]!r}'
+        )
     rejected, published = (
-        {str(key): _json_count(f'agent report of agent {agent} {name}[{key!r}]', n) for key, n in body[name].items()}
+        {
+            str(key): _json_count(f'agent report of agent {agent} {name}[{key!r}]', n)
+            for key, n in body[name].items()
+        }
         for name in ('rejected', 'published')
     )
     return AgentReport(
         agent=agent,
         final=body['final'],
         rejected=rejected,
-        **{name: _json_count(f'agent report of agent {agent} {name}', body[name]) for name in _REPORT_COUNTERS},
+        **{
+            name: _json_count(f'agent report of agent {agent} {name}', body[name])
+            for name in _REPORT_COUNTERS
+        },
         saturation=_decode_saturation(agent, body['saturation']),
         failure=body['failure'],
         published=published,
@@ -526,7 +558,9 @@ def encode_world_state(state: WorldState):
     if state.velocities is not None:
         velocities = np.asarray(state.velocities, dtype=float)
         if velocities.shape != positions.shape:
-            raise MessageError(f'world state: velocities {velocities.shape} do not match positions {positions.shape}')
+            raise MessageError(
+                f'world state: velocities {velocities.shape} do not match positions {positions.shape}'
+            )
         fields.append(('velocities', velocities.ravel().tolist()))
     return _float_array(fields)
 
@@ -543,9 +577,12 @@ def decode_world_state(msg) -> WorldState:
     expected = 5 + n + (1 + double) * n * p
     if len(data) != expected:
         raise MessageError(
-            f'world state: n={n}, p={p}, double={double} needs {expected} values, got {len(data)}', reason=REJECT_LENGTH
+            f'world state: n={n}, p={p}, double={double} needs {expected} values, got {len(data)}',
+            reason=REJECT_LENGTH,
         )
-    ids = tuple(_as_int(f'world state agent_ids[{k}]', v, low=0, high=_MAX_ID) for k, v in enumerate(data[5 : 5 + n]))
+    ids = tuple(
+        _as_int(f'world state agent_ids[{k}]', v, low=0, high=_MAX_ID) for k, v in enumerate(data[5 : 5 + n])
+    )
     start = 5 + n
     positions = np.array(data[start : start + n * p]).reshape(n, p)
     velocities = np.array(data[start + n * p :]).reshape(n, p) if double else None
@@ -610,7 +647,9 @@ def stamp_seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def pose_values(what: str, position: Sequence[float], orientation: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def pose_values(
+    what: str, position: Sequence[float], orientation: Sequence[float]
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """A pose's position (3) and orientation (x, y, z, w), checked (finite, a unit quaternion
     give or take its sender's rounding) and the quaternion normalised; for the decoders of
     messages and of serialized bytes (`formation_msgs_py.cdr`) alike."""
@@ -620,11 +659,15 @@ def pose_values(what: str, position: Sequence[float], orientation: Sequence[floa
     _check_finite(f'{what} orientation', orientation)
     norm = math.sqrt(sum(c * c for c in orientation))
     if not 0.5 < norm < 2.0:  # a unit quaternion, give or take its sender's rounding
-        raise MessageError(f'{what}: orientation must be a unit quaternion, got {orientation} (norm {norm!r})')
+        raise MessageError(
+            f'{what}: orientation must be a unit quaternion, got {orientation} (norm {norm!r})'
+        )
     return position, tuple(c / norm for c in orientation)
 
 
-def twist_values(linear: Sequence[float], angular: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def twist_values(
+    linear: Sequence[float], angular: Sequence[float]
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """An odometry's body twist (linear, angular: 3 each), checked finite."""
     linear = tuple(float(v) for v in linear)
     angular = tuple(float(v) for v in angular)
@@ -641,7 +684,12 @@ def _pose_fields(what: str, pose) -> tuple[tuple[float, ...], tuple[float, ...]]
 def decode_pose_stamped(msg) -> RobotPose:
     """geometry_msgs/PoseStamped -> RobotPose (no twist)."""
     position, orientation = _pose_fields('pose', msg.pose)
-    return RobotPose(stamp=stamp_seconds(msg.header.stamp), frame=msg.header.frame_id, position=position, orientation=orientation)
+    return RobotPose(
+        stamp=stamp_seconds(msg.header.stamp),
+        frame=msg.header.frame_id,
+        position=position,
+        orientation=orientation,
+    )
 
 
 def decode_odometry(msg) -> RobotPose:
@@ -652,9 +700,13 @@ def decode_odometry(msg) -> RobotPose:
         (twist.linear.x, twist.linear.y, twist.linear.z), (twist.angular.x, twist.angular.y, twist.angular.z)
     )
     return RobotPose(
-        stamp=stamp_seconds(msg.header.stamp), frame=msg.header.frame_id, position=position, orientation=orientation,
-        linear=linear, angular=angular,
-    )  # fmt: skip
+        stamp=stamp_seconds(msg.header.stamp),
+        frame=msg.header.frame_id,
+        position=position,
+        orientation=orientation,
+        linear=linear,
+        angular=angular,
+    )
 
 
 def encode_world_velocity(velocity: Sequence[float], *, frame_id: str, stamp: float):
@@ -663,7 +715,8 @@ def encode_world_velocity(velocity: Sequence[float], *, frame_id: str, stamp: fl
     from std_msgs.msg import Header
 
     return TwistStamped(
-        header=Header(stamp=ros_time(stamp), frame_id=frame_id), twist=Twist(linear=_vector3('world velocity', velocity))
+        header=Header(stamp=ros_time(stamp), frame_id=frame_id),
+        twist=Twist(linear=_vector3('world velocity', velocity)),
     )
 
 

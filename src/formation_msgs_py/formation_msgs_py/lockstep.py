@@ -46,8 +46,15 @@ REJECT_REASONS = (
 SATURATION_LINEAR_SPEED = 'linear_speed'  # m/s: world-frame speed (holonomic), |v| (unicycle)
 SATURATION_ANGULAR_SPEED = 'angular_speed'  # rad/s: |ω| (unicycle)
 SATURATION_LINEAR_ACCELERATION = 'linear_acceleration'  # m/s²: ||dq/dt|| of the ETA-2 velocity reference
-SATURATION_STEERING = 'steering'  # rad: the steering angle a car would need for (v, ω), atan(L |ω| / |v|) (π/2 at v = 0)
-SATURATION_KINDS = (SATURATION_LINEAR_SPEED, SATURATION_ANGULAR_SPEED, SATURATION_LINEAR_ACCELERATION, SATURATION_STEERING)
+SATURATION_STEERING = (
+    'steering'  # rad: the steering angle a car would need for (v, ω), atan(L |ω| / |v|) (π/2 at v = 0)
+)
+SATURATION_KINDS = (
+    SATURATION_LINEAR_SPEED,
+    SATURATION_ANGULAR_SPEED,
+    SATURATION_LINEAR_ACCELERATION,
+    SATURATION_STEERING,
+)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -18,15 +18,24 @@ The names below are the most used ones; each is imported on first use.
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'model.scenario': ('Scenario', 'ScenarioError', 'builtin_scenarios', 'dump_scenario', 'load_scenario'),
-    'model.validate': ('ValidationError', 'require_valid', 'validate_scenario'),
-    'model.generate': ('random_scenario',),
-    'model.theory': ('theorem_constants',),
-    'sim.engine': ('simulate',),
-    'sim.record': ('RunRecord',),
-    'sim.summary': ('load_record', 'load_summary', 'write_summary'),
-    'bag.io': ('read_bag',),
-    'analysis.load': ('load_bag_run',),
-    'runtime.orchestrate': ('FormationRun', 'RunResult'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'model.scenario': (
+            'Scenario',
+            'ScenarioError',
+            'builtin_scenarios',
+            'dump_scenario',
+            'load_scenario',
+        ),
+        'model.validate': ('ValidationError', 'require_valid', 'validate_scenario'),
+        'model.generate': ('random_scenario',),
+        'model.theory': ('theorem_constants',),
+        'sim.engine': ('simulate',),
+        'sim.record': ('RunRecord',),
+        'sim.summary': ('load_record', 'load_summary', 'write_summary'),
+        'bag.io': ('read_bag',),
+        'analysis.load': ('load_bag_run',),
+        'runtime.orchestrate': ('FormationRun', 'RunResult'),
+    },
+)

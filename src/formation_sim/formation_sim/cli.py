@@ -15,7 +15,22 @@ import sys
 from importlib import metadata
 
 # One entry per subcommand module, in help order.
-COMMANDS: tuple[str, ...] = ('validate', 'generate', 'simulate', 'study', 'measure', 'run', 'params', 'robots', 'recover', 'analyze', 'compare', 'replay', 'topics', 'echo')
+COMMANDS: tuple[str, ...] = (
+    'validate',
+    'generate',
+    'simulate',
+    'study',
+    'measure',
+    'run',
+    'params',
+    'robots',
+    'recover',
+    'analyze',
+    'compare',
+    'replay',
+    'topics',
+    'echo',
+)
 
 
 PACKAGES = ('formation_sim', 'formation_agent', 'formation_msgs_py')

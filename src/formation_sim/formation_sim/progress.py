@@ -14,7 +14,9 @@ class Progress:
     at most every `period` * 10 seconds so logs stay short. `close()` prints the final state.
     """
 
-    def __init__(self, label: str, *, stream: TextIO | None = None, period: float = 0.5, enabled: bool = True) -> None:
+    def __init__(
+        self, label: str, *, stream: TextIO | None = None, period: float = 0.5, enabled: bool = True
+    ) -> None:
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
         self.enabled = enabled

@@ -21,7 +21,14 @@ EXAMPLES = {robot_kind(name).params_file for name in KIND_NAMES}  # one per robo
 
 
 def _config_folder(env: dict[str, str] | None = None) -> Path:
-    done = subprocess.run([sys.executable, '-m', 'formation_agent.config'], capture_output=True, text=True, timeout=60, env=env, check=False)
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_agent.config'],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return Path(done.stdout.strip())
 
@@ -41,15 +48,35 @@ def test_a_regular_pip_install_has_them_in_the_package_and_in_share(tmp_path):
     # editable install first. (Installing `wheel` into .venv instead would turn `make venv`'s
     # editable installs into legacy `setup.py develop` ones, whose scripts go to lib/<package>/.)
     source = tmp_path / 'formation_agent'
-    shutil.copytree(REPO / 'src' / 'formation_agent', source, ignore=shutil.ignore_patterns('*.egg-info', '__pycache__', 'build'))
+    shutil.copytree(
+        REPO / 'src' / 'formation_agent',
+        source,
+        ignore=shutil.ignore_patterns('*.egg-info', '__pycache__', 'build'),
+    )
     prefix = tmp_path / 'prefix'
     install = subprocess.run(
-        [sys.executable, '-m', 'pip', 'install', '-q', '--disable-pip-version-check', '--no-deps', '--ignore-installed',
-         '--prefix', str(prefix), str(source)],
-        capture_output=True, text=True, timeout=300, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            '-m',
+            'pip',
+            'install',
+            '-q',
+            '--disable-pip-version-check',
+            '--no-deps',
+            '--ignore-installed',
+            '--prefix',
+            str(prefix),
+            str(source),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert install.returncode == 0, install.stdout + install.stderr
-    assert {path.name for path in (prefix / 'share' / 'formation_agent' / 'config').glob('*.params.yaml')} == EXAMPLES
+    assert {
+        path.name for path in (prefix / 'share' / 'formation_agent' / 'config').glob('*.params.yaml')
+    } == EXAMPLES
     site = next(prefix.glob('lib/python3*/site-packages'))
     env = dict(os.environ, PYTHONPATH=f'{site}{os.pathsep}{REPO / "src" / "formation_msgs_py"}')
     env.pop('PYTHONSAFEPATH', None)

@@ -44,7 +44,9 @@ def test_advance_solves_the_damped_double_integrator():
     assert (xp - xm) / (2 * h) == pytest.approx(q0, rel=1e-8)
 
 
-@pytest.mark.parametrize('z', [0.0, 1e-300, 1e-12, 3.7e-9, 1e-6, 2.5e-4, 0.0123, 0.05, 0.0999, -0.0999, -1e-7])
+@pytest.mark.parametrize(
+    'z', [0.0, 1e-300, 1e-12, 3.7e-9, 1e-6, 2.5e-4, 0.0123, 0.05, 0.0999, -0.0999, -1e-7]
+)
 def test_scalar_series_is_accurate_to_an_ulp(z):
     # The agents' plain-float path uses a shorter, unrolled series below SERIES_LIMIT.
     assert abs(z) < SERIES_LIMIT

@@ -23,7 +23,9 @@ def test_a_holonomic_speed_is_scaled_to_the_limit_keeping_its_direction():
     limits = Limits(linear_speed=0.22)
     assert np.array_equal(limit_world_velocity([0.1, -0.15], limits, log), [0.1, -0.15])  # 0.18 m/s: below
     clipped = limit_world_velocity([0.3, 0.4], limits, log)
-    assert np.allclose(clipped, [0.132, 0.176], rtol=1e-15) and np.linalg.norm(clipped) == pytest.approx(0.22, rel=1e-15)
+    assert np.allclose(clipped, [0.132, 0.176], rtol=1e-15) and np.linalg.norm(clipped) == pytest.approx(
+        0.22, rel=1e-15
+    )
     limit_world_velocity([0.0, -7.5], limits, log)
     limit_world_velocity([0.0, 0.22], limits, log)  # at the limit: not clipped
     assert log.records == {'linear_speed': Saturation(count=2, largest_requested=7.5, allowed=0.22)}
@@ -58,7 +60,9 @@ def test_a_clipped_unicycle_keeps_its_control_point_on_course():
         assert 0.0 < scale <= 1.0 + 1e-12 and np.allclose(moved, scale * u, atol=1e-12)
     assert commander.commands == 100
     records = commander.saturation.records
-    assert records['linear_speed'].count + records['angular_speed'].count >= 100 - 5  # almost all asked too much
+    assert (
+        records['linear_speed'].count + records['angular_speed'].count >= 100 - 5
+    )  # almost all asked too much
 
 
 def test_eta1_commands_are_the_agents_and_eta2_follows_its_reference():
@@ -84,7 +88,10 @@ def test_eta1_commands_are_the_agents_and_eta2_follows_its_reference():
     ('options', 'complaint'),
     [
         ({'drive': 'tank', 'dimension': 2}, "drive must be one of ('holonomic', 'unicycle'"),
-        ({'drive': 'unicycle', 'dimension': 3, 'distance': 0.1}, 'a unicycle moves in the plane: dimension p must be 2, got 3'),
+        (
+            {'drive': 'unicycle', 'dimension': 3, 'distance': 0.1},
+            'a unicycle moves in the plane: dimension p must be 2, got 3',
+        ),
         ({'drive': 'unicycle', 'dimension': 2}, 'control_point_distance l must be > 0, got 0.0'),
     ],
 )

@@ -112,7 +112,9 @@ def test_search_advanced_in_pieces_gives_the_same_float(pieces):
 def test_search_reports_no_crossing_up_to_its_limit():
     from formation_agent.core.crossing import CrossingSearch
 
-    search = CrossingSearch(Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1), start=0.0, alpha=1.0, beta=0.0, limit=5.0)
+    search = CrossingSearch(
+        Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1), start=0.0, alpha=1.0, beta=0.0, limit=5.0
+    )
     assert search.advance(2.0) is None
     assert search.frontier > 2.0
     assert search.run() == math.inf
@@ -165,11 +167,17 @@ class ThreeRoots:
         # |P^(k)(s)| <= sum_m |c_m| |s|^m over the span, with the chain rule's 1/τ^k.
         top = max(abs(a), abs(a + span)) / self.tau
         p0, p1, p2 = (
-            sum(abs(c) * top**m for m, c in enumerate(self.poly.deriv(k).coef)) / self.tau**k for k in range(3)
+            sum(abs(c) * top**m for m, c in enumerate(self.poly.deriv(k).coef)) / self.tau**k
+            for k in range(3)
         )
         low = math.sqrt(1.0 - self.margin0 * p0)  # ||e|| >= low on the span
         rate = self.margin0 * p1 / (2 * low)
-        return span, math.sqrt(1.0 + self.margin0 * p0), rate, self.margin0 * p2 / (2 * low) + rate * rate / low
+        return (
+            span,
+            math.sqrt(1.0 + self.margin0 * p0),
+            rate,
+            self.margin0 * p2 / (2 * low) + rate * rate / low,
+        )
 
 
 def test_polishing_bracket_with_three_roots_gives_the_first():
@@ -215,7 +223,9 @@ def test_an_error_below_the_floor_never_crosses_however_late():
     # below it for ever, also where e^{βt} overflows a double (t >> 709/β).
     model = Bump(height=0.5, centre=0.0, width=1e100, ramp=0.0)
     assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=1e4, floor=0.5001) == math.inf
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0) == pytest.approx(math.log(2.0), rel=1e-14)
+    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0) == pytest.approx(
+        math.log(2.0), rel=1e-14
+    )
 
 
 @pytest.mark.parametrize('floor', [0.05, 0.4, 1.0])

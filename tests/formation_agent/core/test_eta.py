@@ -30,7 +30,12 @@ def _sensed(agent, rel, t=0.0, **extra):
 
 def _info(sender, receiver, t, control, rel, rel_velocity=None):
     return TriggerInfo(
-        sender=sender, receiver=receiver, stamp=t, control=tuple(control), rel_position=tuple(rel), rel_velocity=rel_velocity
+        sender=sender,
+        receiver=receiver,
+        stamp=t,
+        control=tuple(control),
+        rel_position=tuple(rel),
+        rel_velocity=rel_velocity,
     )
 
 
@@ -189,7 +194,9 @@ def test_bad_parameters_are_named(overrides, message):
 
 
 def test_eta2_information_without_relative_velocity_is_rejected():
-    agent = Eta2Agent(agent_id=1, neighbours={2: D12}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=1.0, k2=1.0, k3=0.5)
+    agent = Eta2Agent(
+        agent_id=1, neighbours={2: D12}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=1.0, k2=1.0, k3=0.5
+    )
     with pytest.raises(AgentError, match='lacks rel_velocity'):
         agent.receive(_info(2, 1, 0.0, (0.0, 0.0), (1.5, 3.0)))
 
@@ -268,7 +275,10 @@ def _agent_with_knowledge(kind, seed, p, alpha=0.5):
     extra = {}
     if kind == 'eta2':
         qs = rng.uniform(-0.3, 0.3, (m, p))
-        extra = dict(rel_velocities={j: tuple(qs[k]) for k, j in enumerate(ids)}, velocity=tuple(rng.uniform(-0.3, 0.3, p)))
+        extra = dict(
+            rel_velocities={j: tuple(qs[k]) for k, j in enumerate(ids)},
+            velocity=tuple(rng.uniform(-0.3, 0.3, p)),
+        )
     out = agent.trigger(0.0, _sensed(1, rel, **extra))
     edges = []
     y_msg = small(m)
@@ -277,9 +287,7 @@ def _agent_with_knowledge(kind, seed, p, alpha=0.5):
         u_j = rng.uniform(-0.5, 0.5, p)
         q_j = rng.uniform(-0.3, 0.3, p)
         rel_j = -(y_msg[k] + d[k])  # x_j - x_i as the message carries it
-        agent.receive(
-            _info(j, 1, stamp, u_j, rel_j, rel_velocity=None if kind == 'eta1' else tuple(-q_j))
-        )
+        agent.receive(_info(j, 1, stamp, u_j, rel_j, rel_velocity=None if kind == 'eta1' else tuple(-q_j)))
         edges.append((stamp, y_msg[k], q_j, u_j, caps[k]))
     knowledge = dict(control=np.array(out.control), edges=edges, gains=gains)
     return agent, knowledge
@@ -318,7 +326,9 @@ def test_fast_bounds_hold_over_their_span(kind, seed, p):
         if math.isfinite(bound_curv):
             h = h_span / 400
             for s in grid[1:-1:10]:
-                second = (_reference(kind, s + h, knowledge)[1] - _reference(kind, s - h, knowledge)[1]) / (2 * h)
+                second = (_reference(kind, s + h, knowledge)[1] - _reference(kind, s - h, knowledge)[1]) / (
+                    2 * h
+                )
                 assert np.linalg.norm(second) <= bound_curv * (1 + 1e-6) + 1e-9
 
 
@@ -360,7 +370,9 @@ def test_four_dimensional_agents_use_numpy_and_trigger_on_the_threshold():
         ],
         gains=None,
     )
-    assert np.linalg.norm(_reference('eta1', t, knowledge)[0]) / agent.threshold(t) == pytest.approx(1.0, rel=1e-9)
+    assert np.linalg.norm(_reference('eta1', t, knowledge)[0]) / agent.threshold(t) == pytest.approx(
+        1.0, rel=1e-9
+    )
 
 
 def test_first_span_follows_the_last_inter_event_time():
@@ -380,7 +392,9 @@ def test_each_algorithm_supplies_every_hook_the_shared_base_calls():
 
     from formation_agent.core import eta
 
-    hooks = {name for name, member in vars(eta._AgentHooks).items() if inspect.isfunction(member)} | set(eta._AgentHooks.__annotations__)
+    hooks = {name for name, member in vars(eta._AgentHooks).items() if inspect.isfunction(member)} | set(
+        eta._AgentHooks.__annotations__
+    )
     assert hooks == {'_update', '_row', '_fast_probe', '_threshold'}
     assert not hooks & set(vars(eta._EventTriggeredAgent))
     base = inspect.getsource(eta._EventTriggeredAgent)
@@ -388,4 +402,6 @@ def test_each_algorithm_supplies_every_hook_the_shared_base_calls():
     for agent in (eta.Eta1Agent, eta.Eta2Agent):
         methods = {name for name in hooks if name in vars(agent)}
         assert methods == hooks - {'_threshold'}, agent
-        assert 'self._threshold = ' in inspect.getsource(agent.__init__) or 'self._threshold =' in inspect.getsource(agent)
+        assert 'self._threshold = ' in inspect.getsource(
+            agent.__init__
+        ) or 'self._threshold =' in inspect.getsource(agent)

@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 
 from formation_agent.core.commander import RobotCommander
-from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, KindNames, RobotKind, register, robot_kind, unregister
+from formation_agent.core.kinds import (
+    KIND_NAMES,
+    Geometry,
+    KindError,
+    KindNames,
+    RobotKind,
+    register,
+    robot_kind,
+    unregister,
+)
 from formation_agent.core.limits import Limits, SaturationLog
 
 
@@ -65,10 +74,21 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     parser = build_parser()
     run = parser.parse_args(['run', 'robots_square', '--backend', 'sluggish'])
     assert run.backend == 'sluggish' and 'sluggish' in BACKENDS
-    assert parser.parse_args(['run', 'robots_square', '--backend', 'external', '--robot', 'sluggish']).robot == 'sluggish'
-    assert parser.parse_args(['robots', 'robots_square', '--model', 'sluggish', '--domain-id', '41']).model == 'sluggish'
+    assert (
+        parser.parse_args(['run', 'robots_square', '--backend', 'external', '--robot', 'sluggish']).robot
+        == 'sluggish'
+    )
+    assert (
+        parser.parse_args(['robots', 'robots_square', '--model', 'sluggish', '--domain-id', '41']).model
+        == 'sluggish'
+    )
     # The nodes' parameters: the agent's `robot`, the simulated robot's `model`, the coordinator's.
-    for specs, name in ((AGENT_PARAMETERS, 'robot'), (ROBOT_SPECS, 'model'), (COORDINATOR_PARAMETERS, 'robot'), (COORDINATOR_PARAMETERS, 'backend')):
+    for specs, name in (
+        (AGENT_PARAMETERS, 'robot'),
+        (ROBOT_SPECS, 'model'),
+        (COORDINATOR_PARAMETERS, 'robot'),
+        (COORDINATOR_PARAMETERS, 'backend'),
+    ):
         spec = next(spec for spec in specs if spec.name == name)
         assert spec.problem('sluggish') is None and 'sluggish' in spec.constraint_text()
         assert spec.problem('tank') is not None
@@ -87,7 +107,9 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     u = (0.3, -0.4)
     commander.set_control(0.0, u)
     command = commander.command(0.0)
-    robot = make_robot('sluggish', scenario_position=[1.0, 2.0], yaw=0.0, control_point_distance=0.0, limits=BaseLimits())
+    robot = make_robot(
+        'sluggish', scenario_position=[1.0, 2.0], yaw=0.0, control_point_distance=0.0, limits=BaseLimits()
+    )
     robot.set_command(Command(linear=command, angular=0.0))
     robot.advance(2.0)
     assert np.allclose(robot.scenario_position(), [1.6, 1.2], rtol=0, atol=1e-15)
@@ -104,7 +126,9 @@ def test_kind_names_are_read_at_each_use(sluggish):
 
 
 def test_a_kind_is_registered_once_under_a_free_name(sluggish):
-    with pytest.raises(KindError, match="a robot kind needs a name that is new and not one of .*got 'sluggish'"):
+    with pytest.raises(
+        KindError, match="a robot kind needs a name that is new and not one of .*got 'sluggish'"
+    ):
         register(Sluggish())
     with pytest.raises(KindError, match="a robot kind needs a name .*got 'none'"):
         register(type('Plant', (Sluggish,), {'name': 'none'})())
@@ -115,13 +139,18 @@ def test_a_kind_is_registered_once_under_a_free_name(sluggish):
 def test_every_built_in_kind_has_its_example_parameter_file():
     import yaml
 
-    from formation_agent.config import DIRECTORY as config  # the installed examples (python3 -m formation_agent.config)
+    from formation_agent.config import (
+        DIRECTORY as config,
+    )  # the installed examples (python3 -m formation_agent.config)
 
     for name in KIND_NAMES:
         kind = robot_kind(name)
         params = yaml.safe_load((config / kind.params_file).read_text())['/**']['ros__parameters']
         assert params['robot'] == name, kind.params_file
-        geometry = Geometry(control_point_distance=params.get('control_point_distance', 0.0), wheelbase=params.get('wheelbase', 0.0))
+        geometry = Geometry(
+            control_point_distance=params.get('control_point_distance', 0.0),
+            wheelbase=params.get('wheelbase', 0.0),
+        )
         limits = Limits(
             linear_speed=params.get('max_linear_speed', math.inf),
             angular_speed=params.get('max_angular_speed', math.inf),

@@ -26,11 +26,13 @@ from formation_agent.core.kinematics import (
 def _matrix(q):
     """The rotation matrix of a unit quaternion (x, y, z, w), from the textbook formula."""
     x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _heading(theta):
@@ -46,7 +48,9 @@ def test_rotation_and_yaw_agree_with_the_rotation_matrix():
         assert np.allclose(rotate(q, v), _matrix(q) @ v, rtol=0, atol=1e-14)
     for theta in (-3.0, -1.0, 0.0, 0.5, 2.0, 3.1):
         assert yaw(_heading(theta)) == pytest.approx(theta, abs=1e-15)
-        assert np.allclose(rotate(_heading(theta), (1.0, 0.0, 0.0)), (math.cos(theta), math.sin(theta), 0.0), atol=1e-15)
+        assert np.allclose(
+            rotate(_heading(theta), (1.0, 0.0, 0.0)), (math.cos(theta), math.sin(theta), 0.0), atol=1e-15
+        )
 
 
 def test_the_diffeomorphism_inverts_the_control_point_map():
@@ -64,8 +68,13 @@ def test_odometry_twist_gives_the_control_point_velocity():
     rng = np.random.default_rng(3)
     for _ in range(50):
         theta, v, omega, distance = rng.uniform(-3, 3), rng.normal(), rng.normal(), rng.uniform(0.05, 0.5)
-        velocity = control_point_velocity(_heading(theta), (v, 0.0, 0.0), (0.0, 0.0, omega), (distance, 0.0, 0.0))
-        assert np.allclose(velocity[:2], control_point_rate(v, omega, theta, distance), atol=1e-14) and velocity[2] == 0.0
+        velocity = control_point_velocity(
+            _heading(theta), (v, 0.0, 0.0), (0.0, 0.0, omega), (distance, 0.0, 0.0)
+        )
+        assert (
+            np.allclose(velocity[:2], control_point_rate(v, omega, theta, distance), atol=1e-14)
+            and velocity[2] == 0.0
+        )
     point = control_point((1.0, 2.0, 0.0), _heading(math.pi / 2), (0.1, 0.0, 0.0))
     assert np.allclose(point, (1.0, 2.1, 0.0), atol=1e-15)
 
@@ -78,7 +87,9 @@ def _drive(u, theta0, distance, horizon):
         return [v * math.cos(state[2]), v * math.sin(state[2]), omega]
 
     times = np.linspace(0.0, horizon, 201)
-    solution = solve_ivp(rate, (0.0, horizon), [0.3, -0.2, theta0], method='DOP853', rtol=1e-12, atol=1e-12, t_eval=times)
+    solution = solve_ivp(
+        rate, (0.0, horizon), [0.3, -0.2, theta0], method='DOP853', rtol=1e-12, atol=1e-12, t_eval=times
+    )
     assert solution.success
     return times, solution.y
 

@@ -15,21 +15,34 @@ NOW = 1_700_000_000.0  # wall time of the trigger
 
 def _book(*, offset=(0.0, 0.0, 0.0), dimension=2, timeout=0.5):
     return PoseBook(
-        agent_id=1, neighbour_ids=(2, 3), dimension=dimension, offset=offset, world_frame='world', timeout=timeout,
+        agent_id=1,
+        neighbour_ids=(2, 3),
+        dimension=dimension,
+        offset=offset,
+        world_frame='world',
+        timeout=timeout,
         topic=lambda robot: f'/agent_{robot}/robot/pose',
-    )  # fmt: skip
+    )
 
 
 def _pose(x, y, theta=0.0, *, age=0.01, frame='world', linear=None, angular=None):
     return RobotPose(
-        stamp=NOW - age, frame=frame, position=(x, y, 0.0),
-        orientation=(0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)), linear=linear, angular=angular,
-    )  # fmt: skip
+        stamp=NOW - age,
+        frame=frame,
+        position=(x, y, 0.0),
+        orientation=(0.0, 0.0, math.sin(theta / 2), math.cos(theta / 2)),
+        linear=linear,
+        angular=angular,
+    )
 
 
 def test_relative_positions_are_those_of_the_control_points():
     book = _book(offset=(0.1, 0.0, 0.0))  # unicycles, l = 0.1 m
-    for robot, pose in ((1, _pose(0.0, 0.0, 0.0)), (2, _pose(1.0, 0.0, math.pi / 2)), (3, _pose(0.0, -1.0, math.pi))):
+    for robot, pose in (
+        (1, _pose(0.0, 0.0, 0.0)),
+        (2, _pose(1.0, 0.0, math.pi / 2)),
+        (3, _pose(0.0, -1.0, math.pi)),
+    ):
         assert book.add(robot, pose) is None
     sensed = book.sense(t=4.25, now=NOW, velocities=False)
     assert (sensed.agent, sensed.stamp, sensed.velocity, sensed.rel_velocities) == (1, 4.25, None, None)
@@ -86,12 +99,16 @@ def test_missing_and_future_poses_are_refused():
     book = _book()
     book.add(1, _pose(0.0, 0.0))
     assert book.add(3, _pose(0.0, 1.0, frame='map')) == (
-        'frame', "pose of robot 3 in frame 'map', not the world frame 'world'"
+        'frame',
+        "pose of robot 3 in frame 'map', not the world frame 'world'",
     )
     book.add(2, _pose(1.0, 0.0, age=-0.75))  # stamped ahead of this machine's clock
     assert not book.has_all()
-    with pytest.raises(PoseError, match=r'robot 2 on /agent_2/robot/pose is stamped 0.750 s in the future at t=0.000 '
-                                       r'\(pose_timeout 0.5 s; are the clocks synchronised\?\)'):
+    with pytest.raises(
+        PoseError,
+        match=r'robot 2 on /agent_2/robot/pose is stamped 0.750 s in the future at t=0.000 '
+        r'\(pose_timeout 0.5 s; are the clocks synchronised\?\)',
+    ):
         book.sense(t=0.0, now=NOW, velocities=False)
     book = _book()
     book.add(1, _pose(0.0, 0.0))
@@ -109,6 +126,7 @@ def test_a_pose_older_than_the_one_held_is_refused():
     book = _book()
     book.add(1, _pose(0.0, 0.0, age=0.01))
     assert book.add(1, _pose(5.0, 0.0, age=0.02)) == (
-        'time_backwards', f'pose of robot 1 stamped {NOW - 0.02!r}, before the one held ({NOW - 0.01!r})'
+        'time_backwards',
+        f'pose of robot 1 stamped {NOW - 0.02!r}, before the one held ({NOW - 0.01!r})',
     )
     assert book.fresh(1, t=0.0, now=NOW).position == (0.0, 0.0, 0.0)

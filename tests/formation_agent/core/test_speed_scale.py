@@ -25,14 +25,25 @@ def test_a_bad_threshold_floor_is_refused_with_its_rule_and_value(bad):
     with pytest.raises(ScaleError, match=r'^threshold_floor: must be a finite number >= 0'):
         check_threshold_floor(bad)
     with pytest.raises(AgentError, match='threshold_floor'):
-        Eta2Agent(agent_id=1, neighbours={2: (1.0, 0.0)}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=1.0, k2=1.0, k3=1.0,
-                  threshold_floor=bad)  # fmt: skip
+        Eta2Agent(
+            agent_id=1,
+            neighbours={2: (1.0, 0.0)},
+            delta=4.0,
+            alpha_d=1.0,
+            beta_d=0.1,
+            k1=1.0,
+            k2=1.0,
+            k3=1.0,
+            threshold_floor=bad,
+        )
 
 
 def test_eta2_agent_runs_the_scaled_gains():
     """u^d = -κ²k1 Σ ω y - κk2 Σ ω q (damping κk3): the paper's controller in the time s = κt."""
     kappa = 0.37
-    common = dict(agent_id=1, neighbours={2: (1.0, 0.0)}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=2.0, k2=3.0, k3=0.5)
+    common = dict(
+        agent_id=1, neighbours={2: (1.0, 0.0)}, delta=4.0, alpha_d=1.0, beta_d=0.1, k1=2.0, k2=3.0, k3=0.5
+    )
     agent = Eta2Agent(**common, speed_scale=kappa)
     assert (agent.k1, agent.k2, agent.k3) == (kappa * kappa * 2.0, kappa * 3.0, kappa * 0.5)
     assert agent.threshold(2.0) == pytest.approx(kappa * kappa * math.exp(-kappa * 0.1 * 2.0), rel=1e-15)

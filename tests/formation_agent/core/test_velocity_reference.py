@@ -39,7 +39,9 @@ def _limited_rate(k3, u, a):
     return rate
 
 
-@pytest.mark.parametrize(('q0', 'u'), [([1.0, -2.0], [4.0, 0.0]), ([0.0, 0.0], [0.0, -3.0]), ([0.2, 0.1], [0.1, 0.0])])
+@pytest.mark.parametrize(
+    ('q0', 'u'), [([1.0, -2.0], [4.0, 0.0]), ([0.0, 0.0], [0.0, -3.0]), ([0.2, 0.1], [0.1, 0.0])]
+)
 def test_the_acceleration_limit_holds_exactly_and_matches_the_saturated_dynamics(q0, u):
     k3, a = 0.6, 0.5
     q0, u = np.array(q0), np.array(u)
@@ -47,17 +49,30 @@ def test_the_acceleration_limit_holds_exactly_and_matches_the_saturated_dynamics
     requested = reference.update(0.0, u)
     assert requested == pytest.approx(float(np.linalg.norm(u - k3 * q0)), rel=1e-15)
     times = np.linspace(0.0, 12.0, 241)
-    solution = solve_ivp(_limited_rate(k3, u, a), (0.0, 12.0), q0, method='DOP853', rtol=1e-12, atol=1e-12, t_eval=times, max_step=0.01)
+    solution = solve_ivp(
+        _limited_rate(k3, u, a),
+        (0.0, 12.0),
+        q0,
+        method='DOP853',
+        rtol=1e-12,
+        atol=1e-12,
+        t_eval=times,
+        max_step=0.01,
+    )
     ours = np.array([reference.velocity(t) for t in times])
     assert np.abs(ours - solution.y.T).max() < 1e-8
     # ||dq/dt|| <= a everywhere (central differences of the exact reference).
     h = 1e-6
-    rates = [np.linalg.norm(reference.velocity(t + h) - reference.velocity(t - h)) / (2 * h) for t in times[1:]]
+    rates = [
+        np.linalg.norm(reference.velocity(t + h) - reference.velocity(t - h)) / (2 * h) for t in times[1:]
+    ]
     assert max(rates) <= a * (1 + 1e-6)
     if requested > a:  # held at the limit, along a fixed direction, until (|w0| - a) / (k3 a)
         switch = (requested - a) / (k3 * a)
         assert rates[0] == pytest.approx(a, rel=1e-6)
-        assert np.allclose(reference.velocity(switch), q0 + a * switch * (u - k3 * q0) / requested, atol=1e-15)
+        assert np.allclose(
+            reference.velocity(switch), q0 + a * switch * (u - k3 * q0) / requested, atol=1e-15
+        )
 
 
 def test_bad_gains_are_refused():

@@ -55,7 +55,13 @@ class AgentProcess:
     """`formation_agent` for agent 1 in its own process; stdout/stderr kept in files."""
 
     def __init__(
-        self, tmp_path: Path, domain_id: int, *, python_prelude: str | None = None, params_files: tuple[Path, ...] = (), **parameters
+        self,
+        tmp_path: Path,
+        domain_id: int,
+        *,
+        python_prelude: str | None = None,
+        params_files: tuple[Path, ...] = (),
+        **parameters,
     ) -> None:
         self.params_file = tmp_path / 'agent_1.params.yaml'
         values = {**TEAM, **parameters}
@@ -71,7 +77,9 @@ class AgentProcess:
         self.stdout_path = tmp_path / 'agent_1.out'
         self.stderr_path = tmp_path / 'agent_1.err'
         with open(self.stdout_path, 'w') as out, open(self.stderr_path, 'w') as err:
-            self.process = subprocess.Popen(command, stdout=out, stderr=err, env=agent_environment(domain_id, tmp_path / 'ros_log'))
+            self.process = subprocess.Popen(
+                command, stdout=out, stderr=err, env=agent_environment(domain_id, tmp_path / 'ros_log')
+            )
 
     @property
     def stderr(self) -> str:
@@ -114,29 +122,42 @@ class Bench:
         self.executor.add_node(self.node)
         self.pose_type = pose_type
         # Robot states: position (x, y), heading θ, body twist (v, ω) for Odometry.
-        self.robots = {1: {'xy': (0.0, 0.0), 'theta': 0.0, 'twist': (0.0, 0.0)}, 2: {'xy': (0.5, 0.3), 'theta': 0.0, 'twist': (0.0, 0.0)}}
+        self.robots = {
+            1: {'xy': (0.0, 0.0), 'theta': 0.0, 'twist': (0.0, 0.0)},
+            2: {'xy': (0.5, 0.3), 'theta': 0.0, 'twist': (0.0, 0.0)},
+        }
         self.silent: set[int] = set()  # robots whose poses stopped
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         kind, topic = (PoseStamped, robot_pose_topic) if pose_type == 'pose' else (Odometry, robot_odom_topic)
         self._pose_kind = kind
-        self._pose_pubs = {robot: self.node.create_publisher(kind, topic(robot), reliable) for robot in self.robots}
+        self._pose_pubs = {
+            robot: self.node.create_publisher(kind, topic(robot), reliable) for robot in self.robots
+        }
         self._pose_timer = self.node.create_timer(0.01, self._publish_poses)
         self.commands: list[tuple[float, object]] = []  # (arrival wall time, message)
         command_kind = TwistStamped if robot == 'holonomic' else Twist
         self._command_sub = self.node.create_subscription(
-            command_kind, robot_command_topic(1), lambda msg: self.commands.append((time.time(), msg)), QoSProfile(depth=1000)
+            command_kind,
+            robot_command_topic(1),
+            lambda msg: self.commands.append((time.time(), msg)),
+            QoSProfile(depth=1000),
         )
         self.step_pub = self.node.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
         self.statuses = []
         self.reports = []
         self._status_sub = self.node.create_subscription(
-            Float64MultiArray, STATUS_TOPIC, lambda msg: self.statuses.append(decode_status(msg)), PROTOCOL_QOS
+            Float64MultiArray,
+            STATUS_TOPIC,
+            lambda msg: self.statuses.append(decode_status(msg)),
+            PROTOCOL_QOS,
         )
         self._report_sub = self.node.create_subscription(
             String, REPORT_TOPIC, lambda msg: self.reports.append(decode_agent_report(msg)), PROTOCOL_QOS
         )
         self.infos = []
-        self._info_sub = self.node.create_subscription(Float64MultiArray, trigger_info_topic(1, 2), self.infos.append, PROTOCOL_QOS)
+        self._info_sub = self.node.create_subscription(
+            Float64MultiArray, trigger_info_topic(1, 2), self.infos.append, PROTOCOL_QOS
+        )
         self.info_pub = self.node.create_publisher(Float64MultiArray, trigger_info_topic(2, 1), PROTOCOL_QOS)
         self.epoch: float | None = None
 
@@ -153,7 +174,10 @@ class Bench:
             msg.header.frame_id = 'world'
             pose = msg.pose if self.pose_type == 'pose' else msg.pose.pose
             pose.position.x, pose.position.y = state['xy']
-            pose.orientation.z, pose.orientation.w = math.sin(state['theta'] / 2), math.cos(state['theta'] / 2)
+            pose.orientation.z, pose.orientation.w = (
+                math.sin(state['theta'] / 2),
+                math.cos(state['theta'] / 2),
+            )
             if self.pose_type == 'odom':
                 msg.child_frame_id = f'robot_{robot}'
                 msg.twist.twist.linear.x, msg.twist.twist.angular.z = state['twist']
@@ -177,11 +201,14 @@ class Bench:
         from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_REALTIME, Step
 
         self.spin_until(
-            lambda: any(s.step_index == DISCOVERY_STEP and s.ready for s in self.statuses), timeout=timeout,
+            lambda: any(s.step_index == DISCOVERY_STEP and s.ready for s in self.statuses),
+            timeout=timeout,
             what='agent 1 to be connected (Status ready during discovery)',
-        )  # fmt: skip
+        )
         self.epoch = time.time()
-        self.step_pub.publish(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self.epoch)))
+        self.step_pub.publish(
+            encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self.epoch))
+        )
         return self.epoch
 
     def finish(self) -> None:
@@ -189,7 +216,9 @@ class Bench:
         from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 
         t = time.time() - self.epoch
-        self.step_pub.publish(encode_step(Step(index=1, time=t, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self.epoch)))
+        self.step_pub.publish(
+            encode_step(Step(index=1, time=t, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self.epoch))
+        )
 
     def send_info(self, info) -> None:
         from formation_msgs_py.codec import encode_trigger_info
@@ -225,7 +254,9 @@ def robot_domain() -> int:
                 handle.close()
             return
         if time.monotonic() > deadline:
-            pytest.fail(f'every ROS domain in {DOMAIN_POOL.start}-{DOMAIN_POOL.stop - 1} stayed in use for 300 s')
+            pytest.fail(
+                f'every ROS domain in {DOMAIN_POOL.start}-{DOMAIN_POOL.stop - 1} stayed in use for 300 s'
+            )
         time.sleep(0.5)
 
 

@@ -54,7 +54,10 @@ def test_a_unicycle_gets_the_diffeomorphisms_body_velocity(bench, agent_process)
     rig, (v, omega) = _drive(bench, agent_process)
     commands = _commands(rig)
     assert len(commands) >= 5 and abs(v) > 0.05 and abs(omega) > 0.5
-    assert all(command == pytest.approx((v, omega), rel=1e-12, abs=1e-15) for command in commands), (commands[0], (v, omega))
+    assert all(command == pytest.approx((v, omega), rel=1e-12, abs=1e-15) for command in commands), (
+        commands[0],
+        (v, omega),
+    )
     (_, last), (final,) = rig.commands[-1], [report for report in rig.reports if report.final]
     assert (last.linear.x, last.linear.y, last.angular.z) == (0.0, 0.0, 0.0)
     assert final.saturation == {} and final.robot_commands == len(commands)
@@ -72,7 +75,10 @@ def test_a_unicycle_beyond_its_limits_is_scaled_down_and_the_clips_reported(benc
         if requested > allowed:
             clipped = final.saturation[kind]
             assert clipped.count == len(commands)
-            assert clipped.largest_requested == pytest.approx(requested, rel=1e-12) and clipped.allowed == allowed
+            assert (
+                clipped.largest_requested == pytest.approx(requested, rel=1e-12)
+                and clipped.allowed == allowed
+            )
         else:
             assert kind not in final.saturation
 
@@ -90,11 +96,22 @@ def test_eta2_on_a_holonomic_robot_follows_its_velocity_reference_from_odometry(
     # What agent 1 senses: the twists rotated into the world frame (holonomic: the origin is the control point).
     q1 = 0.1 * np.array([math.cos(0.3), math.sin(0.3)])
     q2 = 0.05 * np.array([math.cos(-1.2), math.sin(-1.2)])
-    agent_core = Eta2Agent(agent_id=1, neighbours={2: (-1.0, 0.0)}, delta=4.0, alpha_d=10.0, beta_d=1.0, k1=1.0, k2=1.0, k3=k3)
-    sensed = SensedState(agent=1, stamp=0.0, rel_positions={2: (-0.5, -0.3)}, rel_velocities={2: tuple(q1 - q2)}, velocity=tuple(q1))
+    agent_core = Eta2Agent(
+        agent_id=1, neighbours={2: (-1.0, 0.0)}, delta=4.0, alpha_d=10.0, beta_d=1.0, k1=1.0, k2=1.0, k3=k3
+    )
+    sensed = SensedState(
+        agent=1,
+        stamp=0.0,
+        rel_positions={2: (-0.5, -0.3)},
+        rel_velocities={2: tuple(q1 - q2)},
+        velocity=tuple(q1),
+    )
     rest = np.array(agent_core.trigger(0.0, sensed).control) / k3  # where (stateqiqj) goes: u^d / k3
     samples = [
-        (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, np.array([msg.twist.linear.x, msg.twist.linear.y]))
+        (
+            msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
+            np.array([msg.twist.linear.x, msg.twist.linear.y]),
+        )
         for _, msg in rig.commands[:-1]
     ]
     # From any command to any later one: q(b) - u^d/k3 = (q(a) - u^d/k3) e^{-k3 (b - a)} (stamps to the ns).

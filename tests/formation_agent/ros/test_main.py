@@ -16,7 +16,9 @@ import sys
 import time
 import pytest
 
-from formation_agent.config import DIRECTORY as CONFIG  # where the README sends robots: python3 -m formation_agent.config
+from formation_agent.config import (
+    DIRECTORY as CONFIG,
+)  # where the README sends robots: python3 -m formation_agent.config
 
 # Each test on a ROS domain of its own (conftest.py, robot_domain).
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -48,7 +50,9 @@ def _assert_stopped(rig, agent, *, status, failure):
     assert _linear(last) == (0.0,) * 6, f'last command {last}'
     zero = (0.0,) * 6
     first_zero = next(k for k, (_, msg) in enumerate(rig.commands) if _linear(msg) == zero)
-    assert all(_linear(msg) == zero for _, msg in rig.commands[first_zero:]), 'a non-zero command after the stop'
+    assert all(_linear(msg) == zero for _, msg in rig.commands[first_zero:]), (
+        'a non-zero command after the stop'
+    )
     assert last.header.frame_id == 'world'
     finals = [report for report in rig.reports if report.final]
     assert len(finals) == 1, rig.reports
@@ -88,7 +92,9 @@ def test_a_stale_own_pose_stops_the_robot(bench, agent_process):
     rig.silent.add(1)
     assert rig.wait_for_exit(agent) == 1
     line = _named(agent.stderr)
-    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), line
+    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), (
+        line
+    )
     assert "(pose_timeout 0.3 s); its writer is alive and this agent's timer ran 0.0" in line, line
     assert line.endswith(': the agent stops') and 'Traceback' not in agent.stderr
     _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.3')
@@ -101,8 +107,12 @@ def test_a_pose_whose_writer_left_the_graph_says_when(bench, agent_process):
     rig.node.destroy_publisher(rig._pose_pubs.pop(1))
     assert rig.wait_for_exit(agent) == 1
     line = _named(agent.stderr)
-    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), line
-    assert '(pose_timeout 0.3 s); its writer left the graph at t=' in line and line.endswith(': the agent stops'), line
+    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), (
+        line
+    )
+    assert '(pose_timeout 0.3 s); its writer left the graph at t=' in line and line.endswith(
+        ': the agent stops'
+    ), line
     _assert_stopped(rig, agent, status=1, failure='its writer left the graph at t=')
 
 
@@ -138,7 +148,9 @@ def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_proces
     line = _named(agent.stderr)
     assert line.startswith('formation_agent: agent 1: the pose of robot 2 on /agent_2/robot/pose is '), line
     assert "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran " in line, line
-    assert line.endswith('(its writer stalled or was stopped, or its messages are lost?): the agent stops'), line
+    assert line.endswith('(its writer stalled or was stopped, or its messages are lost?): the agent stops'), (
+        line
+    )
     _assert_stopped(rig, agent, status=1, failure='the pose of robot 2 on /agent_2/robot/pose is')
 
 
@@ -160,10 +172,15 @@ def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
 
 @pytest.mark.parametrize(
     ('name', 'robot', 'pose_type', 'allowed'),
-    [('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}), ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5}),
-     ('car', 'car', 'odom', {'linear_speed': 1.0, 'steering': 0.42})],
-)  # fmt: skip
-def test_the_example_parameter_files_make_the_documented_robot(bench, agent_process, name, robot, pose_type, allowed):
+    [
+        ('turtlebot3', 'unicycle', 'odom', {'linear_speed': 0.22, 'angular_speed': 2.84}),
+        ('crazyflie', 'holonomic', 'pose', {'linear_speed': 0.5}),
+        ('car', 'car', 'odom', {'linear_speed': 1.0, 'steering': 0.42}),
+    ],
+)
+def test_the_example_parameter_files_make_the_documented_robot(
+    bench, agent_process, name, robot, pose_type, allowed
+):
     """README's one command per robot: the team's file, then the robot's example file from config/."""
     rig = bench(robot=robot, pose_type=pose_type)
     rig.robots[2]['xy'] = (3.0, 0.3)  # far from its place: the agent asks for more than the robot can do
@@ -208,24 +225,62 @@ def test_an_agent_waiting_in_discovery_says_what_it_waits_for_again_and_again(ag
 
 
 def test_help_prints_the_parameter_table():
-    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--help'], capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_agent.ros.main', '--help'],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 0 and done.stderr == ''
-    table = done.stdout[done.stdout.index('parameters (--ros-args'):].splitlines()[1:]
+    table = done.stdout[done.stdout.index('parameters (--ros-args') :].splitlines()[1:]
     names = [line.split()[0] for line in table]
-    for name in ('agent_id', 'sensing', 'pose_type', 'pose_timeout', 'robot', 'control_point_distance', 'max_linear_speed',
-                 'max_angular_speed', 'max_linear_acceleration', 'command_rate', 'world_frame', 'alpha', 'k3'):
+    for name in (
+        'agent_id',
+        'sensing',
+        'pose_type',
+        'pose_timeout',
+        'robot',
+        'control_point_distance',
+        'max_linear_speed',
+        'max_angular_speed',
+        'max_linear_acceleration',
+        'command_rate',
+        'world_frame',
+        'alpha',
+        'k3',
+    ):
         assert name in names, name
     row = table[names.index('pose_timeout')].split()
     assert row[1:4] == ['double', '0.5', '>'] and row[4] == '0'
 
 
 def test_missing_parameters_are_named_at_once_without_a_traceback(tmp_path, robot_domain):
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(robot_domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': str(robot_domain),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path),
+    }
     done = subprocess.run(
-        [sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '-r', '__ns:=/agent_1', '-p', 'agent_id:=1',
-         '-p', 'algorithm:=eta1', '-p', 'robot:=unicycle'],
-        capture_output=True, text=True, timeout=60, env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            '-m',
+            'formation_agent.ros.main',
+            '--ros-args',
+            '-r',
+            '__ns:=/agent_1',
+            '-p',
+            'agent_id:=1',
+            '-p',
+            'algorithm:=eta1',
+            '-p',
+            'robot:=unicycle',
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
     assert done.returncode == 2, done.stderr
     assert 'Traceback' not in done.stderr
     message = done.stderr.strip().splitlines()[-1]
@@ -242,19 +297,45 @@ def test_a_node_without_an_agent_says_how_to_name_one(tmp_path, robot_domain):
 
     team = tmp_path / 'agents.params.yaml'
     team.write_text(yaml.safe_dump({'/agent_1/formation_agent': {'ros__parameters': {'agent_id': 1}}}))
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(robot_domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path)}
-    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '--params-file', str(team)],
-                          capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': str(robot_domain),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path),
+    }
+    done = subprocess.run(
+        [sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '--params-file', str(team)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
     assert done.returncode == 2 and 'Traceback' not in done.stderr
     message = done.stderr.strip().splitlines()[-1]
     assert message.startswith("formation_agent: /formation_agent: parameter 'agent_id' (int) is required")
     assert message.endswith('name the agent with --agents i, -r __ns:=/agent_<i> or -p agent_id:=i')
     # Named by its id, the node moves to /agent_1 and the file's section applies (then it misses the rest).
-    done = subprocess.run([sys.executable, '-m', 'formation_agent.ros.main', '--ros-args', '--params-file', str(team), '-p', 'agent_id:=1'],
-                          capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    done = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'formation_agent.ros.main',
+            '--ros-args',
+            '--params-file',
+            str(team),
+            '-p',
+            'agent_id:=1',
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
     assert done.returncode == 2
     message = done.stderr.strip().splitlines()[-1]
-    assert message.startswith("formation_agent: /agent_1/formation_agent: parameter 'algorithm' (string) is required")
+    assert message.startswith(
+        "formation_agent: /agent_1/formation_agent: parameter 'algorithm' (string) is required"
+    )
     assert 'agent_id' not in message
 
 
@@ -279,4 +360,6 @@ def test_a_stop_signal_while_the_agents_wait_for_acknowledgements_brings_their_d
     stop._on_signal(signal.SIGTERM, None)  # a second signal: the first one counts
     assert deadline() == 100.5 + agent_main.SIGNAL_DELIVERY_TIMEOUT
     # Stopped by the signal in the first place: SIGNAL_DELIVERY_TIMEOUT from the start of the wait.
-    assert agent_main._delivery_deadline(stop, interrupted=True)() == 100.7 + agent_main.SIGNAL_DELIVERY_TIMEOUT
+    assert (
+        agent_main._delivery_deadline(stop, interrupted=True)() == 100.7 + agent_main.SIGNAL_DELIVERY_TIMEOUT
+    )

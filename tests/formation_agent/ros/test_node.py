@@ -31,7 +31,9 @@ def make_node(ros, **changes):
 
     values = {**GOOD, **changes}
     overrides = [Parameter(name, value=value) for name, value in values.items() if value is not None]
-    node = FormationAgentNode(namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False)
+    node = FormationAgentNode(
+        namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False
+    )
     node.destroy_node()
     return node
 
@@ -39,7 +41,12 @@ def make_node(ros, **changes):
 def test_good_parameters_give_the_agent_its_neighbours(ros):
     node = make_node(ros)
     assert node.config.neighbours == {2: (0.0, -2.0), 3: (-2.0, 0.0)}
-    assert node.config.gains == {'alpha': 10.0, 'beta': 1.0, 'speed_scale': 1.0, 'threshold_floor': 0.0}  # the paper's
+    assert node.config.gains == {
+        'alpha': 10.0,
+        'beta': 1.0,
+        'speed_scale': 1.0,
+        'threshold_floor': 0.0,
+    }  # the paper's
 
 
 @pytest.mark.parametrize(
@@ -49,7 +56,10 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         ({'beta': None}, "parameter 'beta' (double) is required"),
         ({'algorithm': 'eta3'}, "parameter 'algorithm' (string) must be one of 'eta1', 'eta2', got 'eta3'"),
         ({'dimension': 4}, "parameter 'dimension' (int)"),  # rclpy's own range check, [1, 3]
-        ({'neighbour_offsets': [0.0, -2.0, -2.0]}, 'neighbour_offsets must hold dimension * len(neighbour_ids) = 2 * 2 values'),
+        (
+            {'neighbour_offsets': [0.0, -2.0, -2.0]},
+            'neighbour_offsets must hold dimension * len(neighbour_ids) = 2 * 2 values',
+        ),
         ({'neighbour_ids': [2, 2]}, 'neighbour_ids repeat an id: [2, 2]'),
         ({'neighbour_ids': [1, 2]}, 'neighbour_ids hold the agent itself (1)'),
         ({'horizon': float('inf')}, 'horizon must be a finite number > 0, got inf'),
@@ -86,16 +96,33 @@ def test_every_missing_parameter_is_named_at_once(ros):
     ('changes', 'complaint'),
     [
         ({'robot': 'holonomic'}, 'robot: holonomic needs sensing: poses'),
-        ({'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.1, 'dimension': 3,
-          'neighbour_offsets': [0.0] * 6}, 'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3'),
-        ({'robot': 'unicycle', 'sensing': 'poses'}, 'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0'),
+        (
+            {
+                'robot': 'unicycle',
+                'sensing': 'poses',
+                'control_point_distance': 0.1,
+                'dimension': 3,
+                'neighbour_offsets': [0.0] * 6,
+            },
+            'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3',
+        ),
+        (
+            {'robot': 'unicycle', 'sensing': 'poses'},
+            'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0',
+        ),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
-        ({'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0}, "parameter 'max_linear_speed' (double) must be > 0, got 0.0"),
+        (
+            {'robot': 'holonomic', 'sensing': 'poses', 'max_linear_speed': 0.0},
+            "parameter 'max_linear_speed' (double) must be > 0, got 0.0",
+        ),
         ({'sensing': 'poses', 'pose_topic': '/vrpn/cf/pose'}, "pose_topic must hold '{id}'"),
         ({'sensing': 'poses', 'world_frame': ''}, "world_frame must name a frame, got ''"),
-        ({'robot': 'tank'}, "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', 'car', got 'tank'"),
+        (
+            {'robot': 'tank'},
+            "parameter 'robot' (string) must be one of 'none', 'holonomic', 'unicycle', 'car', got 'tank'",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
     from formation_agent.ros.parameters import ParameterError
 
@@ -107,10 +134,24 @@ def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, co
 def test_robot_parameters_have_their_documented_defaults(ros):
     node = make_node(ros)
     config = node.config
-    assert (config.sensing, config.pose_type, config.pose_timeout, config.robot, config.world_frame) == ('service', 'pose', 0.5, 'none', 'world')
+    assert (config.sensing, config.pose_type, config.pose_timeout, config.robot, config.world_frame) == (
+        'service',
+        'pose',
+        0.5,
+        'none',
+        'world',
+    )
     assert (config.command_rate, config.control_point_distance) == (50.0, 0.0)
-    assert math.inf == config.limits.linear_speed == config.limits.angular_speed == config.limits.linear_acceleration
-    assert config.robot_pose_topic(3) == '/agent_3/robot/pose' and config.robot_command_topic == '/agent_1/robot/cmd_vel'
+    assert (
+        math.inf
+        == config.limits.linear_speed
+        == config.limits.angular_speed
+        == config.limits.linear_acceleration
+    )
+    assert (
+        config.robot_pose_topic(3) == '/agent_3/robot/pose'
+        and config.robot_command_topic == '/agent_1/robot/cmd_vel'
+    )
     odom = make_node(ros, sensing='poses', pose_type='odom').config
     assert odom.robot_pose_topic(3) == '/agent_3/robot/odom'
     vrpn = make_node(ros, sensing='poses', pose_topic='/vrpn/cf{id}/pose').config
@@ -130,7 +171,9 @@ def live_node(ros):
     def build(**changes):
         values = {**GOOD, **changes}
         overrides = [Parameter(name, value=value) for name, value in values.items()]
-        node = FormationAgentNode(namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False)
+        node = FormationAgentNode(
+            namespace='agent_1', context=ros, parameter_overrides=overrides, start_parameter_services=False
+        )
         nodes.append(node)
         return node
 
@@ -165,7 +208,14 @@ def _info(sender=2, receiver=1, stamp=0.0, control=(0.5, -0.5), rel_position=(1.
     from formation_msgs_py.codec import encode_trigger_info
     from formation_msgs_py.types import TriggerInfo
 
-    info = TriggerInfo(sender=sender, receiver=receiver, stamp=stamp, control=control, rel_position=rel_position, rel_velocity=rel_velocity)
+    info = TriggerInfo(
+        sender=sender,
+        receiver=receiver,
+        stamp=stamp,
+        control=control,
+        rel_position=rel_position,
+        rel_velocity=rel_velocity,
+    )
     return encode_trigger_info(info)
 
 
@@ -233,7 +283,9 @@ def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
             executor.spin_once(timeout_sec=0.02)
     finally:
         executor.remove_node(node)
-    assert node.faults.delayed == 5 and node.rejected == {}, 'a delayed message out of order would be time_backwards'
+    assert node.faults.delayed == 5 and node.rejected == {}, (
+        'a delayed message out of order would be time_backwards'
+    )
     assert [info.stamp for info in node._held] == [0.1 * k for k in range(5)]
 
 
@@ -274,7 +326,10 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         assert node.simulator.seen, 'the step writer never matched'
         node.check()  # alive: nothing to report
         simulator.destroy_publisher(step_writer)  # as its process would on the way out
-        with pytest.raises(PeerLostError, match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph'):
+        with pytest.raises(
+            PeerLostError,
+            match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph',
+        ):
             while time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)
                 node.check()
@@ -296,13 +351,20 @@ def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its
 
     node = live_node()
     node.core = Unresolvable()
-    with pytest.raises(PredictionError, match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
-                                              r'prediction no longer resolves its threshold .*rule \[precision\]\)$'):
+    with pytest.raises(
+        PredictionError,
+        match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
+        r'prediction no longer resolves its threshold .*rule \[precision\]\)$',
+    ):
         node.publish_status(step_index=3, ready=True)
 
 
-@pytest.mark.parametrize(('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)])
-def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_lapsed(live_node, flags, lease_lapsed, patience):
+@pytest.mark.parametrize(
+    ('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)]
+)
+def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_lapsed(
+    live_node, flags, lease_lapsed, patience
+):
     """In lock-step nothing moves while the simulator is silent: an agent gives a lapsed lease
     KEEPER_LEASE_GRACE before it leaves (the simulator ends the run itself); a writer that left
     the graph, or the wall clock (a robot would go on moving), gets LOST_GRACE."""
@@ -316,20 +378,27 @@ def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_la
     node = live_node()
     node.step = Step(index=7, time=1.25, flags=STEP_FLAG_REALTIME if flags == 'realtime' else 0)
     node.simulator.on_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
-    node.simulator.on_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0))
+    node.simulator.on_liveliness(
+        SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0)
+    )
     lost = node.simulator.lost_at
     node.simulator.lost_at = lost - (patience - 0.05)
     node.check()  # still patient
     node.simulator.lost_at = lost - (patience + 0.05)
     how = 'no sign of life for 1.0 s' if lease_lapsed else 'it left the graph'
-    with pytest.raises(PeerLostError, match=rf'agent 1: the simulator \(writer of /formation/step\) is lost after step 7 \(t=1.25\): {how}'):
+    with pytest.raises(
+        PeerLostError,
+        match=rf'agent 1: the simulator \(writer of /formation/step\) is lost after step 7 \(t=1.25\): {how}',
+    ):
         node.check()
 
 
 # -- discovery ---------------------------------------------------------------------------------------
 
 
-def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simulator_is_there(ros, live_node, fake_simulator):
+def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simulator_is_there(
+    ros, live_node, fake_simulator
+):
     from geometry_msgs.msg import Twist
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray, String
@@ -357,7 +426,11 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
     executor.add_node(node)
     try:
         simulator.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
-        for topic, kind in ((STATUS_TOPIC, Float64MultiArray), (REPORT_TOPIC, String), ('/agent_1/cmd_vel', Twist)):
+        for topic, kind in (
+            (STATUS_TOPIC, Float64MultiArray),
+            (REPORT_TOPIC, String),
+            ('/agent_1/cmd_vel', Twist),
+        ):
             simulator.create_subscription(kind, topic, lambda msg: None, READER_QOS)
         simulator.create_service(Trigger, '/agent_1/sense', lambda request, response: response)
         deadline = time.monotonic() + 20.0
@@ -386,8 +459,11 @@ def test_robot_modes_refuse_lock_step(live_node):
     from formation_msgs_py.lockstep import Step
 
     node = live_node(sensing='poses', robot='holonomic')
-    with pytest.raises(AgentNodeError, match=r'agent 1: sensing: poses with robot: holonomic runs on the wall clock '
-                                             r'\(Step 0 flagged realtime\), but step 0 is lock-step'):
+    with pytest.raises(
+        AgentNodeError,
+        match=r'agent 1: sensing: poses with robot: holonomic runs on the wall clock '
+        r'\(Step 0 flagged realtime\), but step 0 is lock-step',
+    ):
         node._on_step(encode_step(Step(index=0, time=0.0)))
 
 
@@ -482,7 +558,12 @@ def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live
     node = live_node()
     node.core, node.sensing = _BehindCore(), _InstantSensing()
     statuses = []
-    node.create_subscription(type(node.status_publisher.msg_type()), STATUS_TOPIC, lambda m: statuses.append(decode_status(m)), PROTOCOL_QOS)
+    node.create_subscription(
+        type(node.status_publisher.msg_type()),
+        STATUS_TOPIC,
+        lambda m: statuses.append(decode_status(m)),
+        PROTOCOL_QOS,
+    )
     executor = SingleThreadedExecutor(context=ros)
     executor.add_node(node)
     try:
@@ -498,4 +579,6 @@ def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live
     times = node.core.times
     assert len(times) >= 3000 and node.failure is None
     assert times == sorted(times) and node.counts.triggers == len(times)
-    assert statuses and all(math.isfinite(s.last_planned) and s.last_planned <= s.next_time + 1e-4 for s in statuses)
+    assert statuses and all(
+        math.isfinite(s.last_planned) and s.last_planned <= s.next_time + 1e-4 for s in statuses
+    )

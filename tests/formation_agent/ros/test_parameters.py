@@ -14,10 +14,27 @@ def _specs():
 
     return (
         ParameterSpec(name='agent_id', type=INTEGER, description="this agent's id", low=0, high=2**31 - 1),
-        ParameterSpec(name='delta', type=DOUBLE, description='communication radius Δ [m]', low=0.0, low_open=True),
-        ParameterSpec(name='loss', type=DOUBLE, description='drop probability', default=0.0, low=0.0, high=1.0),
-        ParameterSpec(name='offsets', type=DOUBLE_ARRAY, description='d_ij per neighbour', default=[0.0], low=-10.0, high=10.0),
-        ParameterSpec(name='robot', type=STRING, description='command adapter', default='none', choices=('none', 'unicycle')),
+        ParameterSpec(
+            name='delta', type=DOUBLE, description='communication radius Δ [m]', low=0.0, low_open=True
+        ),
+        ParameterSpec(
+            name='loss', type=DOUBLE, description='drop probability', default=0.0, low=0.0, high=1.0
+        ),
+        ParameterSpec(
+            name='offsets',
+            type=DOUBLE_ARRAY,
+            description='d_ij per neighbour',
+            default=[0.0],
+            low=-10.0,
+            high=10.0,
+        ),
+        ParameterSpec(
+            name='robot',
+            type=STRING,
+            description='command adapter',
+            default='none',
+            choices=('none', 'unicycle'),
+        ),
     )
 
 
@@ -37,7 +54,13 @@ def test_good_parameters_are_read_with_their_defaults(ros):
         values = declare_parameters(node, _specs())
     finally:
         node.destroy_node()
-    assert values == {'agent_id': 3, 'delta': 4.0, 'loss': 0.0, 'offsets': pytest.approx([0.0]), 'robot': 'none'}
+    assert values == {
+        'agent_id': 3,
+        'delta': 4.0,
+        'loss': 0.0,
+        'offsets': pytest.approx([0.0]),
+        'robot': 'none',
+    }
 
 
 def test_every_problem_is_named_in_one_error(ros):

@@ -68,10 +68,14 @@ def test_a_shutdown_that_hangs_leaves_within_the_bound_with_the_status_and_says_
     import subprocess
 
     # (without the guard the block sleeps 60 s, and the run below times out)
-    done = subprocess.run([sys.executable, '-c', _HANGING_SHUTDOWN], capture_output=True, text=True, timeout=30)
+    done = subprocess.run(
+        [sys.executable, '-c', _HANGING_SHUTDOWN], capture_output=True, text=True, timeout=30
+    )
     assert done.returncode == 7, done.stderr
     first, *stacks = done.stderr.splitlines()
-    assert first == 'formation_test: shutting rclpy down took more than 0.5 s; leaving without it (stacks below)'
+    assert (
+        first == 'formation_test: shutting rclpy down took more than 0.5 s; leaving without it (stacks below)'
+    )
     assert any('line 6' in line for line in stacks), done.stderr  # the main thread's stack: where it hung
 
 

@@ -22,12 +22,19 @@ def test_a_status_tells_the_next_time_only_once_it_is_defined_and_round_trips():
     waiting = counts.status(step_index=4, ready=False, next_time=0.75, planned=0.0)
     assert waiting.next_time == math.inf and not counts.status_due
     ready = counts.status(step_index=4, ready=True, next_time=0.75, planned=0.5)
-    assert (ready.next_time, ready.last_planned, ready.triggers, ready.commands_sent, ready.info_sent, ready.info_received) == (
-        0.75, 0.5, 1, 1, 2, 1,
-    )  # fmt: skip
+    assert (
+        ready.next_time,
+        ready.last_planned,
+        ready.triggers,
+        ready.commands_sent,
+        ready.info_sent,
+        ready.info_received,
+    ) == (0.75, 0.5, 1, 1, 2, 1)
     assert decode_status(encode_status(ready)) == ready
     assert counts.status(step_index=DISCOVERY_STEP, ready=False, next_time=0.0, planned=0.0).next_time == 0.0
-    with pytest.raises(AgentNodeError, match=r'agent 3: last_planned must be finite \(docs/MESSAGES.md, "Status"\), got inf'):
+    with pytest.raises(
+        AgentNodeError, match=r'agent 3: last_planned must be finite \(docs/MESSAGES.md, "Status"\), got inf'
+    ):
         counts.status(step_index=5, ready=True, next_time=math.inf, planned=math.inf)
 
 
@@ -38,9 +45,20 @@ def test_the_report_counts_what_was_published_from_step_0_on_and_itself():
     counts.received(late=True)
     assert counts.report_due and counts.late_infos == 1
     report = counts.report(
-        final=True, failure='agent 3: stopped', rejected={'sender': 2}, dropped=1, delayed=0, robot_commands=0,
-        saturation={}, plant=('/agent_3/cmd_vel', 4),
-    )  # fmt: skip
+        final=True,
+        failure='agent 3: stopped',
+        rejected={'sender': 2},
+        dropped=1,
+        delayed=0,
+        robot_commands=0,
+        saturation={},
+        plant=('/agent_3/cmd_vel', 4),
+    )
     assert report.published == {'/formation/status': 1, '/agent_3/cmd_vel': 4}
-    assert (report.late, report.failure, report.rejected, report.final) == (1, 'agent 3: stopped', {'sender': 2}, True)
+    assert (report.late, report.failure, report.rejected, report.final) == (
+        1,
+        'agent 3: stopped',
+        {'sender': 2},
+        True,
+    )
     assert decode_agent_report(encode_agent_report(report)) == report

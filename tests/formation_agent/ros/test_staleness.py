@@ -23,9 +23,14 @@ class NoTimers:
 
 def _book() -> PoseBook:
     return PoseBook(
-        agent_id=1, neighbour_ids=(2,), dimension=2, offset=(0.0, 0.0, 0.0), world_frame='world', timeout=0.5,
+        agent_id=1,
+        neighbour_ids=(2,),
+        dimension=2,
+        offset=(0.0, 0.0, 0.0),
+        world_frame='world',
+        timeout=0.5,
         topic=lambda robot: f'/agent_{robot}/robot/odom',
-    )  # fmt: skip
+    )
 
 
 def _pose(stamp: float) -> RobotPose:
@@ -85,7 +90,10 @@ def test_a_pose_stale_while_this_agent_is_punctual_blames_the_feed(rig):
     book.add(2, _pose(EPOCH + 3.466))
     staleness.look(EPOCH + 3.5)
     message = str(staleness.explain(_stale_error(book, 4.2), EPOCH + 4.2))
-    assert "its writer is alive and this agent's timer ran 0.000 s late (its writer stalled or was stopped" in message
+    assert (
+        "its writer is alive and this agent's timer ran 0.000 s late (its writer stalled or was stopped"
+        in message
+    )
 
 
 def test_a_topic_that_never_had_a_writer_is_named():
@@ -99,9 +107,12 @@ def test_no_command_after_a_freeze_of_the_command_timer_or_of_the_due_trigger():
     guard = CommandGuard(agent_id=4, period=0.02, timeout=0.5)
     guard.check(EPOCH, t=0.0, trigger_late=None)
     guard.check(EPOCH + 0.5, t=0.5, trigger_late=0.5)  # 0.48 s late, due 0.5 s ago: still within
-    with pytest.raises(StaleStateError, match=r'^agent 4: at t=2.520 its command timer ran 2.000 s late \(pose_timeout 0.5 s; '
-                                              r'the process was stopped, or an overloaded computer\): no command from state '
-                                              r'that old: the agent stops$'):  # fmt: skip
+    with pytest.raises(
+        StaleStateError,
+        match=r'^agent 4: at t=2.520 its command timer ran 2.000 s late \(pose_timeout 0.5 s; '
+        r'the process was stopped, or an overloaded computer\): no command from state '
+        r'that old: the agent stops$',
+    ):
         guard.check(EPOCH + 2.52, t=2.52, trigger_late=None)
     with pytest.raises(StaleStateError, match=r'its trigger has been due for 0.700 s \(pose_timeout 0.5 s; '):
         guard.check(EPOCH + 2.54, t=2.54, trigger_late=0.7)
@@ -116,5 +127,7 @@ def test_a_trigger_that_fires_long_after_it_was_due_is_refused_once(rig):
     schedule._fire(schedule._armed, lambda: fired.append(True))
     refusal = staleness.trigger_refusal(clock[0])
     assert fired == [True] and refusal is not None
-    assert str(refusal).startswith('agent 1: at t=3.000 its trigger came 2.000 s after it was due (pose_timeout 0.5 s;')
+    assert str(refusal).startswith(
+        'agent 1: at t=3.000 its trigger came 2.000 s after it was due (pose_timeout 0.5 s;'
+    )
     assert staleness.trigger_refusal(clock[0]) is None, 'taken once'

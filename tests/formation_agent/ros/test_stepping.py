@@ -30,7 +30,11 @@ class FakeTimers:
         del self.live[handle]
 
     def due(self) -> list:
-        return [callback for at, callback in sorted(self.live.values(), key=lambda entry: entry[0]) if at <= self.clock.now]
+        return [
+            callback
+            for at, callback in sorted(self.live.values(), key=lambda entry: entry[0])
+            if at <= self.clock.now
+        ]
 
 
 class Clock:
@@ -55,11 +59,18 @@ def test_a_lock_step_turn_is_the_exact_float_the_agent_reported(schedule):
     schedule.next_time = 0.1 + 0.2
     assert schedule.check_step(Step(index=3, time=0.1 + 0.2, due=(1, 2)))
     assert not schedule.check_step(Step(index=3, time=0.25, due=(1,)))
-    with pytest.raises(AgentNodeError, match=r'agent 2: step 4 at t=0.4 skips its triggering time 0.30000000000000004'):
+    with pytest.raises(
+        AgentNodeError, match=r'agent 2: step 4 at t=0.4 skips its triggering time 0.30000000000000004'
+    ):
         schedule.check_step(Step(index=4, time=0.4, due=(2,)))
-    with pytest.raises(AgentNodeError, match=r'step 4 at t=0.3 lists due agents \[2\], but this agent reported'):
+    with pytest.raises(
+        AgentNodeError, match=r'step 4 at t=0.3 lists due agents \[2\], but this agent reported'
+    ):
         schedule.check_step(Step(index=4, time=0.3, due=(2,)))  # one ulp before its time
-    with pytest.raises(AgentNodeError, match=r'lists due agents \[1\], but this agent reported its next triggering time 0.30000000000000004'):
+    with pytest.raises(
+        AgentNodeError,
+        match=r'lists due agents \[1\], but this agent reported its next triggering time 0.30000000000000004',
+    ):
         schedule.check_step(Step(index=4, time=0.1 + 0.2, due=(1,)))
 
 
@@ -152,9 +163,22 @@ def test_thousands_of_past_due_triggers_in_a_row_run_from_the_executor_not_by_re
 
 
 def test_late_information_is_re_anchored_at_the_own_trigger_by_exact_negation():
-    sensed = SensedState(agent=1, stamp=2.5, rel_positions={3: (0.1, -0.30000000000000004)},
-                         rel_velocities={3: (1e-17, 0.0)}, velocity=(0.0, 0.0))  # fmt: skip
-    info = TriggerInfo(sender=3, receiver=1, stamp=2.0, control=(0.5, 0.25), rel_position=(9.0, 9.0), rel_velocity=(9.0, 9.0))
+    sensed = SensedState(
+        agent=1,
+        stamp=2.5,
+        rel_positions={3: (0.1, -0.30000000000000004)},
+        rel_velocities={3: (1e-17, 0.0)},
+        velocity=(0.0, 0.0),
+    )
+    info = TriggerInfo(
+        sender=3, receiver=1, stamp=2.0, control=(0.5, 0.25), rel_position=(9.0, 9.0), rel_velocity=(9.0, 9.0)
+    )
     late = rebased(info, sensed=sensed, at=2.5)
-    assert late == TriggerInfo(sender=3, receiver=1, stamp=2.5, control=(0.5, 0.25), rel_position=(-0.1, 0.30000000000000004),
-                               rel_velocity=(-1e-17, -0.0))  # fmt: skip
+    assert late == TriggerInfo(
+        sender=3,
+        receiver=1,
+        stamp=2.5,
+        control=(0.5, 0.25),
+        rel_position=(-0.1, 0.30000000000000004),
+        rel_velocity=(-1e-17, -0.0),
+    )

@@ -13,7 +13,9 @@ def _published(bag) -> dict[str, int]:
     return dict(Counter(message.topic for message in read_bag(bag)))
 
 
-def test_a_complete_bag_matches_and_a_lost_message_is_named_with_its_counts(tmp_path, paper_single_record, write_run_bag):
+def test_a_complete_bag_matches_and_a_lost_message_is_named_with_its_counts(
+    tmp_path, paper_single_record, write_run_bag
+):
     complete = write_run_bag(paper_single_record, tmp_path / 'complete')
     published = _published(complete)
     check = check_recording(published, complete)
@@ -47,7 +49,9 @@ def test_messages_beyond_what_the_run_published_are_foreign(tmp_path, paper_sing
     check = check_recording(published, bag)
     assert check.complete
     assert check.foreign == {'/agent_2/trigger_info/to_1': 3, '/clock': _published(bag)['/clock']}
-    assert check.describe_foreign().startswith(f'the bag also holds {3 + _published(bag)["/clock"]} messages from publishers outside the run (')
+    assert check.describe_foreign().startswith(
+        f'the bag also holds {3 + _published(bag)["/clock"]} messages from publishers outside the run ('
+    )
 
 
 def test_the_agents_discovery_announcements_are_not_counted(tmp_path):
@@ -58,17 +62,30 @@ def test_the_agents_discovery_announcements_are_not_counted(tmp_path):
     from std_msgs.msg import Float64MultiArray
 
     def status(step: int) -> bytes:
-        return serialize_message(encode_status(Status(
-            agent=1, step_index=step, next_time=0.0 if step == DISCOVERY_STEP else math.inf, info_sent=0,
-            info_received=0, commands_sent=0, triggers=0, ready=True, last_planned=0.0,
-        )))  # fmt: skip
+        return serialize_message(
+            encode_status(
+                Status(
+                    agent=1,
+                    step_index=step,
+                    next_time=0.0 if step == DISCOVERY_STEP else math.inf,
+                    info_sent=0,
+                    info_received=0,
+                    commands_sent=0,
+                    triggers=0,
+                    ready=True,
+                    last_planned=0.0,
+                )
+            )
+        )
 
     bag = tmp_path / 'bag'
     with BagWriter(bag) as writer:
         writer.add_topic('/formation/status', 'std_msgs/msg/Float64MultiArray')
         for k, step in enumerate([DISCOVERY_STEP] * 5 + [0, 1, 2]):
             writer.write('/formation/status', k, status(step))
-        writer.write('/formation/status', 9, serialize_message(Float64MultiArray(data=[7.0])))  # junk: not the run's
+        writer.write(
+            '/formation/status', 9, serialize_message(Float64MultiArray(data=[7.0]))
+        )  # junk: not the run's
     assert recorded_counts(bag) == {'/formation/status': 4}
     check = check_recording({'/formation/status': 3}, bag)
     assert check.complete and check.foreign == {'/formation/status': 1}

@@ -31,7 +31,9 @@ def test_a_bag_gives_back_the_run_exactly(paper_single_record, write_run_bag, tm
     bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True)
     run = load_bag_run(bag)
     assert run.scenario_source == 'bag topic /formation/scenario'
-    assert run.record.scenario == record.scenario.replace(horizon=record.horizon)  # as the simulator publishes it
+    assert run.record.scenario == record.scenario.replace(
+        horizon=record.horizon
+    )  # as the simulator publishes it
     assert run.horizon == record.horizon and run.stop is None
     assert run.record.trigger_times == record.trigger_times  # floats equal, not close
     assert np.array_equal(run.record.sample_times, record.sample_times)
@@ -73,7 +75,9 @@ def test_a_scenario_that_is_not_the_bags_run_is_refused(paper_single_record, wri
     bag = write_run_bag(paper_single_record, tmp_path / 'bag')
     with pytest.raises(AnalysisError, match="lack velocities; the scenario is 'double'"):
         load_bag_run(bag, scenario='paper_double')
-    moved = paper_single_record.scenario.replace(positions=paper_single_record.scenario.positions + [[0.0, 0.0], [0.0, 0.0], [0.5, 0.0]])
+    moved = paper_single_record.scenario.replace(
+        positions=paper_single_record.scenario.positions + [[0.0, 0.0], [0.0, 0.0], [0.5, 0.0]]
+    )
     with pytest.raises(AnalysisError, match=r'agent 3 starts at \[4.5, 5.5\] in the bag but at \[5.0, 5.5\]'):
         load_bag_run(bag, scenario=moved)
 
@@ -90,7 +94,9 @@ def test_a_lost_message_is_reported_not_hidden(paper_single_record, write_run_ba
     assert run.record.messages_sent == record.messages_sent - 1
 
 
-def test_a_trigger_whose_messages_are_all_lost_is_caught_by_the_sensing_log(paper_single_record, write_run_bag, tmp_path):
+def test_a_trigger_whose_messages_are_all_lost_is_caught_by_the_sensing_log(
+    paper_single_record, write_run_bag, tmp_path
+):
     record = paper_single_record
     bag = write_run_bag(record, tmp_path / 'bag', scenario_topic=True, drop={(1, 2, 1), (1, 3, 1)})
     run = load_bag_run(bag)
@@ -123,7 +129,10 @@ def test_every_differing_key_is_listed_with_both_values(paper_single_record):
     found = {d.key: (d.bag, d.summary) for d in differences}
     assert found == {
         'trigger_times.2[3]': (from_bag['trigger_times']['2'][3], shifted),
-        'trigger_times.3 (length)': (len(from_bag['trigger_times']['3']), len(from_bag['trigger_times']['3']) - 1),
+        'trigger_times.3 (length)': (
+            len(from_bag['trigger_times']['3']),
+            len(from_bag['trigger_times']['3']) - 1,
+        ),
         'messages_sent': (from_bag['messages_sent'], from_bag['messages_sent'] + 1),
         'edges[1].max_length': (from_bag['edges'][1]['max_length'], 9.0),
     }
@@ -179,7 +188,11 @@ def test_theorem_2_on_the_paper_example_gives_connectivity_but_no_decay_bound():
     assert bounds.k_V is None and bounds.error_gain is None and bounds.xi is None
     assert 'no decay bound' in bounds.note
     checks = theorem_checks(record, series, bounds)
-    assert [check.name for check in checks] == ['connectivity: ||x_i - x_j|| < Δ', 'edge lengths <= k_ij + ||d_ij|| (kij)', 'tension <= k_nu (knu)']
+    assert [check.name for check in checks] == [
+        'connectivity: ||x_i - x_j|| < Δ',
+        'edge lengths <= k_ij + ||d_ij|| (kij)',
+        'tension <= k_nu (knu)',
+    ]
     assert all(check.ok for check in checks)
     assert bounds.printed_k_V is not None  # the printed chain, drawn for comparison
 
@@ -188,7 +201,9 @@ def test_theorem_checks_catch_a_violation(paper_single_record):
     record = paper_single_record
     series = run_series(record)
     bounds = theory_bounds(record.scenario)
-    grown = dataclasses.replace(series, formation_error=series.formation_error * 100.0, edge_lengths=series.edge_lengths * 2.0)
+    grown = dataclasses.replace(
+        series, formation_error=series.formation_error * 100.0, edge_lengths=series.edge_lengths * 2.0
+    )
     failed = {check.name: check.detail for check in theorem_checks(record, grown, bounds) if not check.ok}
     assert 'formation error < 2 sqrt(k_V) e^{-beta t}' in failed
     assert failed['connectivity: ||x_i - x_j|| < Δ'].startswith('max edge length 6.7082039')  # 2 ||(1.5, 3)||
@@ -205,7 +220,9 @@ def test_double_integrator_bounds_use_the_corrected_chain():
     bounds = theory_bounds(scenario)
     chain = theory.theorem_constants(scenario).corrected_chain
     assert chain.holds and bounds.theorem == 2 and bounds.rate == 0.1
-    assert bounds.error_gain == pytest.approx(2.0 * math.sqrt(chain.k_V / np.linalg.eigvalsh(scenario.gains.P).min()), rel=1e-12)
+    assert bounds.error_gain == pytest.approx(
+        2.0 * math.sqrt(chain.k_V / np.linalg.eigvalsh(scenario.gains.P).min()), rel=1e-12
+    )
 
 
 # ------------------------------------------------------------------------------------ figures
@@ -221,17 +238,25 @@ def test_the_paper_figure_draws_exactly_the_recorded_events_and_paths(paper_sing
         for agent in record.scenario.agent_ids:
             assert raster.drawn_times(agent) == record.trigger_times[agent]
         x = record.sample_positions
-        assert np.array_equal(trajectories.rows, np.arange(len(record.sample_times)))  # a small run: every sample
+        assert np.array_equal(
+            trajectories.rows, np.arange(len(record.sample_times))
+        )  # a small run: every sample
         paths, starts = trajectories.paths.get_segments(), trajectories.starts.get_offsets()
         for k, _agent in enumerate(record.scenario.agent_ids):
-            assert np.array_equal(paths[k], x[:, k]) and np.array_equal(paths[k][0], record.scenario.positions[k])
+            assert np.array_equal(paths[k], x[:, k]) and np.array_equal(
+                paths[k][0], record.scenario.positions[k]
+            )
             assert np.array_equal(starts[k], record.scenario.positions[k])
         index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}
         edges = trajectories.formation.get_segments()
         assert len(edges) == len(record.scenario.edges)
         for segment, edge in zip(edges, record.scenario.edges):
             assert np.array_equal(segment, x[-1, [index[edge.i], index[edge.j]]])
-        assert [handle.get_label() for handle in fig.axes[0].get_legend().legend_handles] == ['agent 1', 'agent 2', 'agent 3']
+        assert [handle.get_label() for handle in fig.axes[0].get_legend().legend_handles] == [
+            'agent 1',
+            'agent 2',
+            'agent 3',
+        ]
     finally:
         pyplot().close(fig)
 
@@ -239,17 +264,26 @@ def test_the_paper_figure_draws_exactly_the_recorded_events_and_paths(paper_sing
 def test_a_long_run_of_a_large_team_is_drawn_through_evenly_spaced_samples():
     from formation_sim.analysis.figures import FIGURE_POINTS, figure_rows
 
-    times = np.concatenate([np.linspace(0.0, 1e-6, 50_000), np.linspace(1e-6, 2.0, 20_000)[1:]])  # a burst, then calm
+    times = np.concatenate(
+        [np.linspace(0.0, 1e-6, 50_000), np.linspace(1e-6, 2.0, 20_000)[1:]]
+    )  # a burst, then calm
     assert np.array_equal(figure_rows(times, agents=3), np.arange(len(times)))  # few points: all of them
     rows = figure_rows(times, agents=1000)
     assert rows[0] == 0 and rows[-1] == len(times) - 1 and np.all(np.diff(rows) > 0)
     assert len(rows) * 1000 <= FIGURE_POINTS
     gaps = np.diff(times[rows])
-    assert gaps.max() < 2.5 * 2.0 / (FIGURE_POINTS // 1000)  # evenly spread in time, not crowded into the burst
+    assert gaps.max() < 2.5 * 2.0 / (
+        FIGURE_POINTS // 1000
+    )  # evenly spread in time, not crowded into the burst
 
 
 def test_analysis_panels_hold_the_series_and_bounds(paper_single_record):
-    from formation_sim.analysis.figures import plot_energy, plot_formation_error, plot_inter_event_times, pyplot
+    from formation_sim.analysis.figures import (
+        plot_energy,
+        plot_formation_error,
+        plot_inter_event_times,
+        pyplot,
+    )
 
     record = paper_single_record
     series = run_series(record)
@@ -260,9 +294,14 @@ def test_analysis_panels_hold_the_series_and_bounds(paper_single_record):
         error = plot_formation_error(ax_error, series, bounds)
         t = error.lines['bound'].get_xdata()
         assert np.all(series.formation_error < error.lines['bound'].get_ydata())  # Theorem 1 (ii)
-        assert np.allclose(error.lines['envelope'].get_ydata(), series.formation_error[0] * np.exp(-record.scenario.gains.beta * t))
+        assert np.allclose(
+            error.lines['envelope'].get_ydata(),
+            series.formation_error[0] * np.exp(-record.scenario.gains.beta * t),
+        )
         gaps = plot_inter_event_times(ax_gaps, record, bounds.xi)
-        histogram_total = sum(patch.get_path().vertices[:, 1].max() > 0 for patch in ax_gaps.patches)  # one outline per agent
+        histogram_total = sum(
+            patch.get_path().vertices[:, 1].max() > 0 for patch in ax_gaps.patches
+        )  # one outline per agent
         assert histogram_total == len(record.scenario.agent_ids)
         assert sum(g.size for g in gaps.gaps.values()) == record.total_events - len(record.scenario.agent_ids)
         assert {agent: line.get_xdata()[0] for agent, line in gaps.xi_lines.items()} == bounds.xi
@@ -285,7 +324,9 @@ def test_the_animation_has_the_frames_asked_for(paper_single_record, tmp_path):
     targets = np.linspace(0.0, record.sample_times[-1], 7)
     assert np.all(record.sample_times[chosen] <= targets)
     seen = []
-    path = animate(record, tmp_path / 'run.gif', frames=7, progress=lambda done, total: seen.append((done, total)))
+    path = animate(
+        record, tmp_path / 'run.gif', frames=7, progress=lambda done, total: seen.append((done, total))
+    )
     with Image.open(path) as image:
         assert image.n_frames == 7
         assert min(image.size) >= 500  # readable: 7 in at 80 dpi
@@ -309,7 +350,9 @@ def test_the_edge_length_margins_show_the_room_the_theorem_guarantees(paper_sing
             room = plot.lines[f'room {edge.i}-{edge.j}'].get_ydata()
             assert np.array_equal(room, record.scenario.delta - series.edge_lengths[:, column])
             guaranteed = plot.lines[f'bound {edge.i}-{edge.j}'].get_ydata()[0]
-            assert guaranteed == pytest.approx(record.scenario.delta - bounds.edge_bounds[edge.pair], rel=1e-15)
+            assert guaranteed == pytest.approx(
+                record.scenario.delta - bounds.edge_bounds[edge.pair], rel=1e-15
+            )
             assert 0.0 < guaranteed < room.min()
     finally:
         plt.close(fig)
@@ -320,7 +363,12 @@ def test_the_edge_length_margins_show_the_room_the_theorem_guarantees(paper_sing
 
 def _distributed_like(record):
     """The record as the simulator node would report it (mode and the extras a bag holds)."""
-    extra = {'clock': 'lockstep', 'steps': len(_events(record)), 'reached_time': record.horizon, 'failure': None}
+    extra = {
+        'clock': 'lockstep',
+        'steps': len(_events(record)),
+        'reached_time': record.horizon,
+        'failure': None,
+    }
     return dataclasses.replace(record, mode='distributed', extra=extra)
 
 
@@ -335,7 +383,13 @@ def test_analyze_command_reports_agreement_and_each_difference(paper_single_reco
     report = json.loads((run_dir / 'analysis' / 'analysis.json').read_text())
     assert report['summary_json']['equal'] is True
     assert report['summary']['trigger_times'] == {str(a): t for a, t in record.trigger_times.items()}
-    for name in ('formation.png', 'edge_lengths.png', 'formation_error.png', 'inter_event_times.png', 'energy.png'):
+    for name in (
+        'formation.png',
+        'edge_lengths.png',
+        'formation_error.png',
+        'inter_event_times.png',
+        'energy.png',
+    ):
         assert (run_dir / 'analysis' / name).stat().st_size > 1000
 
     data = json.loads(summary.read_text())
@@ -373,12 +427,19 @@ def _damage(bag, how):
     return bag, 'cannot read the bag: File end magic is invalid'
 
 
-DAMAGE = ['recorder killed (no metadata.yaml)', 'random bytes named .mcap', 'random bytes beside metadata.yaml', 'cut short']
+DAMAGE = [
+    'recorder killed (no metadata.yaml)',
+    'random bytes named .mcap',
+    'random bytes beside metadata.yaml',
+    'cut short',
+]
 
 
 @pytest.mark.parametrize('command', ['analyze', 'compare'])
 @pytest.mark.parametrize('how', DAMAGE)
-def test_a_damaged_bag_is_refused_with_exit_2_and_what_to_do(paper_single_record, write_run_bag, tmp_path, capsys, command, how):
+def test_a_damaged_bag_is_refused_with_exit_2_and_what_to_do(
+    paper_single_record, write_run_bag, tmp_path, capsys, command, how
+):
     from formation_sim.cli import main
 
     bag = write_run_bag(paper_single_record, tmp_path / 'run' / 'bag')
@@ -403,7 +464,9 @@ def test_a_damaged_bag_is_refused_with_exit_2_and_what_to_do(paper_single_record
 def test_analyze_arguments_are_checked_before_the_analysis(tmp_path, capsys, arguments, complaint):
     from formation_sim.cli import main
 
-    assert main(['analyze', str(tmp_path / 'nothing_here'), *arguments]) == 2  # refused before the run is even looked for
+    assert (
+        main(['analyze', str(tmp_path / 'nothing_here'), *arguments]) == 2
+    )  # refused before the run is even looked for
     assert complaint in capsys.readouterr().err
 
 
@@ -415,7 +478,9 @@ def test_a_report_never_overwrites_a_run(paper_single_record, write_run_bag, tmp
     write_summary(paper_single_record, other)
     before = sorted(p.name for p in other.iterdir())
     assert main(['analyze', str(tmp_path / 'a'), '--out', str(other), '--quiet']) == 2
-    assert 'holds a run (summary.json or bag/) whose files the report would overwrite' in capsys.readouterr().err
+    assert (
+        'holds a run (summary.json or bag/) whose files the report would overwrite' in capsys.readouterr().err
+    )
     assert sorted(p.name for p in other.iterdir()) == before
 
 
@@ -455,7 +520,11 @@ def test_a_wall_clock_trigger_at_the_horizon_is_explained(paper_single_record, t
     recorded = dataclasses.replace(reported, trigger_times=times)
     run = BagRun(bag=tmp_path / 'bag', record=recorded, scenario_source='test', topics={}, counts={})
     report = build_report(run, series=run_series(recorded), bounds=None, summary_path=summary)
-    assert {d['key'] for d in report['summary_json']['differences']} == {'trigger_times.2 (length)', 'event_counts.2', 'total_events'}
+    assert {d['key'] for d in report['summary_json']['differences']} == {
+        'trigger_times.2 (length)',
+        'event_counts.2',
+        'total_events',
+    }
     (note,) = report['summary_json']['notes']
     assert note.startswith('agents [2] triggered at the horizon t = 1.0 (wall clock)')
 
@@ -464,7 +533,10 @@ def test_the_analysis_api_says_what_it_takes(paper_single_record, write_run_bag,
     from formation_sim.analysis import diff_summaries, load_bag_run, run_series
 
     bag_run = load_bag_run(write_run_bag(paper_single_record, tmp_path / 'bag', scenario_topic=True))
-    with pytest.raises(TypeError, match=r'run_series takes a RunRecord \(a BagRun holds it: pass bag_run.record\), got BagRun'):
+    with pytest.raises(
+        TypeError,
+        match=r'run_series takes a RunRecord \(a BagRun holds it: pass bag_run.record\), got BagRun',
+    ):
         run_series(bag_run)
     with pytest.raises(TypeError, match='from_bag is NoneType'):
         diff_summaries(None, {})
@@ -475,7 +547,9 @@ def test_the_analysis_api_says_what_it_takes(paper_single_record, write_run_bag,
 # ------------------------------------------------------------------------------ runs stopped early
 
 
-def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_named(paper_single_record, write_run_bag, tmp_path, capsys):
+def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_named(
+    paper_single_record, write_run_bag, tmp_path, capsys
+):
     """A run asked for t = 10 that stopped at t = 1 (SIGINT): its bag ends with the final Step the
     simulator sends at the stop, and its summary.json states the horizon asked and the failure."""
     from formation_sim.cli import main
@@ -483,8 +557,18 @@ def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_na
     stopped = _distributed_like(paper_single_record)
     run_dir = tmp_path / 'run'
     write_run_bag(stopped, run_dir / 'bag', scenario_topic=True, asked_horizon=10.0)
-    failure = {'kind': 'interrupted', 'message': 'stopped by a signal (SIGINT/SIGTERM)', 'agents': [], 'time': 1.0, 'step': 123}
-    reported = dataclasses.replace(stopped, horizon=10.0, extra={'clock': 'lockstep', 'steps': 122, 'reached_time': 1.0, 'failure': failure})
+    failure = {
+        'kind': 'interrupted',
+        'message': 'stopped by a signal (SIGINT/SIGTERM)',
+        'agents': [],
+        'time': 1.0,
+        'step': 123,
+    }
+    reported = dataclasses.replace(
+        stopped,
+        horizon=10.0,
+        extra={'clock': 'lockstep', 'steps': 122, 'reached_time': 1.0, 'failure': failure},
+    )
     write_summary(reported, run_dir)
 
     assert main(['analyze', str(run_dir), '--no-figures']) == 0
@@ -492,9 +576,18 @@ def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_na
     stop = 'the run stopped early at t = 1 (step 123), before its horizon 10: interrupted: stopped by a signal (SIGINT/SIGTERM) (summary.json)'
     assert stop in err and 'summary.json equals the bag' in err
     report = json.loads((run_dir / 'analysis' / 'analysis.json').read_text())
-    assert report['run']['stopped'] == {'time': 1.0, 'step': 123, 'horizon': 10.0, 'final_step': True, 'reason': 'interrupted: stopped by a signal (SIGINT/SIGTERM)'}
+    assert report['run']['stopped'] == {
+        'time': 1.0,
+        'step': 123,
+        'horizon': 10.0,
+        'final_step': True,
+        'reason': 'interrupted: stopped by a signal (SIGINT/SIGTERM)',
+    }
     assert report['summary_json']['equal'] and all(check['ok'] for check in report['bag_checks'])
-    assert '**The run stopped early**: at t = 1 (step 123), before its horizon 10' in (run_dir / 'analysis' / 'analysis.md').read_text()
+    assert (
+        '**The run stopped early**: at t = 1 (step 123), before its horizon 10'
+        in (run_dir / 'analysis' / 'analysis.md').read_text()
+    )
 
     # A summary that does not end where the bag does is still a finding.
     data = json.loads((run_dir / 'summary.json').read_text())
@@ -508,7 +601,9 @@ def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_na
 @pytest.mark.slow
 @pytest.mark.xdist_group('formation_distributed')
 @pytest.mark.timeout(300)
-def test_an_interrupted_distributed_run_agrees_with_its_bag(tmp_path, monkeypatch, wait_for_stepping, long_run_scenario, capsys):
+def test_an_interrupted_distributed_run_agrees_with_its_bag(
+    tmp_path, monkeypatch, wait_for_stepping, long_run_scenario, capsys
+):
     """SIGINT mid-run: the simulator sends a final Step at the instant it stopped and the samples up
     to it, counts the triggers whose command was on its way, and every process flushes what it
     published before the recorder closes the bag; then summary.json (messages_sent included) is
@@ -520,7 +615,9 @@ def test_an_interrupted_distributed_run_agrees_with_its_bag(tmp_path, monkeypatc
 
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=69, progress=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario, out_dir=tmp_path / 'run', domain_id=69, progress=False, timeout=240.0
+    )
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
     worker.start()
@@ -532,10 +629,15 @@ def test_an_interrupted_distributed_run_agrees_with_its_bag(tmp_path, monkeypatc
     summary = json.loads(result.summary.read_text())
     assert summary['extra']['recording']['complete'], summary['extra']['recording']
 
-    assert main(['analyze', str(result.out_dir), '--no-figures']) == 0, (result.out_dir / 'analysis' / 'analysis.md').read_text()
+    assert main(['analyze', str(result.out_dir), '--no-figures']) == 0, (
+        result.out_dir / 'analysis' / 'analysis.md'
+    ).read_text()
     err = capsys.readouterr().err
     reached = summary['extra']['reached_time']
-    assert f'the run stopped early at t = {reached:.6g}' in err and 'before its horizon 600: interrupted: ' in err
+    assert (
+        f'the run stopped early at t = {reached:.6g}' in err
+        and 'before its horizon 600: interrupted: ' in err
+    )
     report = json.loads((result.out_dir / 'analysis' / 'analysis.json').read_text())
     assert report['summary_json']['equal'], report['summary_json']['differences']
     assert report['summary']['messages_sent'] == summary['messages_sent']

@@ -45,7 +45,13 @@ def test_triggers_are_matched_index_by_index_and_count_mismatches_named():
     a = _run_data('A', {1: [0.0, 0.25, 0.5], 2: [0.0, 0.3]})
     b = _run_data('B', {1: [0.0, 0.25, 0.5], 2: [0.0, 0.3125, 0.7, 0.9]})
     one, two = compare_triggers(a, b)
-    assert (one.count_a, one.count_b, one.compared, one.max_deviation, one.first_difference) == (3, 3, 3, 0.0, None)
+    assert (one.count_a, one.count_b, one.compared, one.max_deviation, one.first_difference) == (
+        3,
+        3,
+        3,
+        0.0,
+        None,
+    )
     assert (two.count_a, two.count_b, two.compared, two.first_difference) == (2, 4, 2, 1)
     assert two.max_deviation == 0.3125 - 0.3
     report = compare_runs(a, b)
@@ -57,7 +63,9 @@ def test_triggers_are_matched_index_by_index_and_count_mismatches_named():
 
 def test_trajectories_are_compared_on_the_union_of_sample_times():
     # A samples at 0, 0.5, 1; B at 0, 0.25, 0.75, 1; both move on straight lines, B 0.1 ahead in x.
-    line = lambda t, shift: np.stack([np.stack([t + shift, 0 * t], axis=1), np.stack([2 * t, 1 + 0 * t], axis=1)], axis=1)  # noqa: E731 - a one-line helper beside its use
+    def line(t, shift):
+        return np.stack([np.stack([t + shift, 0 * t], axis=1), np.stack([2 * t, 1 + 0 * t], axis=1)], axis=1)
+
     ta, tb = np.array([0.0, 0.5, 1.0]), np.array([0.0, 0.25, 0.75, 1.0])
     a = _run_data('A', {1: [0.0], 2: [0.0]}, ta, line(ta, 0.0))
     b = _run_data('B', {1: [0.0], 2: [0.0]}, tb, line(tb, 0.1))
@@ -134,7 +142,18 @@ def test_distributed_run_against_the_in_process_engine(distributed_single_run, t
 
     run = distributed_single_run
     out = tmp_path / 'compare'
-    code = main(['compare', str(run.out_dir), str(run.reference_dir), '--out', str(out), '--tolerance', '1e-9', '--quiet'])
+    code = main(
+        [
+            'compare',
+            str(run.out_dir),
+            str(run.reference_dir),
+            '--out',
+            str(out),
+            '--tolerance',
+            '1e-9',
+            '--quiet',
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     report = json.loads((out / 'compare.json').read_text())
     assert report['runs']['a']['source'].startswith('bag ')  # the distributed side comes from its bag
@@ -142,6 +161,10 @@ def test_distributed_run_against_the_in_process_engine(distributed_single_run, t
     assert report['events_equal'] and report['count_mismatches'] == []
     assert report['max_trigger_deviation'] < 1e-9  # ETA-1: the lock-step reproduces the engine
     assert report['trajectory']['max_deviation'] < 1e-9
-    assert report['runs']['a']['messages_sent'] == report['runs']['b']['messages_sent'] == run.reference.messages_sent
+    assert (
+        report['runs']['a']['messages_sent']
+        == report['runs']['b']['messages_sent']
+        == run.reference.messages_sent
+    )
     for name in ('overlay_trajectories.png', 'overlay_triggers.png', 'overlay_deviation.png'):
         assert (out / name).stat().st_size > 1000

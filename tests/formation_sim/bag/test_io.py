@@ -19,10 +19,28 @@ POSE, POSE_TYPE = '/agent_1/robot/pose', 'geometry_msgs/msg/PoseStamped'
 INFINITE = QosTime(sec=9223372036, nsec=854775807)  # RMW_DURATION_INFINITE as Jazzy's graph reports it
 
 # What the ROS graph of Jazzy reports for a publisher (history and depth are not discovered).
-LATCHED = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, INFINITE, INFINITE,
-              QosLiveliness.AUTOMATIC, QosTime(sec=1, nsec=0), False)  # fmt: skip
-VOLATILE = Qos(QosHistory.UNKNOWN, 0, QosReliability.BEST_EFFORT, QosDurability.VOLATILE, INFINITE, INFINITE,
-               QosLiveliness.AUTOMATIC, INFINITE, False)  # fmt: skip
+LATCHED = Qos(
+    QosHistory.UNKNOWN,
+    0,
+    QosReliability.RELIABLE,
+    QosDurability.TRANSIENT_LOCAL,
+    INFINITE,
+    INFINITE,
+    QosLiveliness.AUTOMATIC,
+    QosTime(sec=1, nsec=0),
+    False,
+)
+VOLATILE = Qos(
+    QosHistory.UNKNOWN,
+    0,
+    QosReliability.BEST_EFFORT,
+    QosDurability.VOLATILE,
+    INFINITE,
+    INFINITE,
+    QosLiveliness.AUTOMATIC,
+    INFINITE,
+    False,
+)
 
 # The same profiles typed in as rosbag2 Jazzy's metadata.yaml holds them (rosbag2_storage/src/
 # rosbag2_storage/qos.cpp, version 9: policies by name, durations as sec/nsec, in this order).
@@ -66,13 +84,17 @@ def test_metadata_yaml_is_rosbag2_jazzys(tmp_path):
     bag = _write(tmp_path / 'bag')
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert info['version'] == 9 and info['storage_identifier'] == 'mcap' and info['ros_distro'] == 'jazzy'
-    assert info['relative_file_paths'] == ['bag_0.mcap'] and [f['path'] for f in info['files']] == ['bag_0.mcap']
+    assert info['relative_file_paths'] == ['bag_0.mcap'] and [f['path'] for f in info['files']] == [
+        'bag_0.mcap'
+    ]
     assert info['custom_data'] == {'formation_timestamps': 'run time'}
     assert (info['compression_format'], info['compression_mode']) == ('', '')
     topics = {t['topic_metadata']['name']: t for t in info['topics_with_message_count']}
     latched = yaml.safe_load(LATCHED_YAML)
     assert topics[SCENARIO]['topic_metadata']['offered_qos_profiles'] == [latched]
-    assert list(topics[SCENARIO]['topic_metadata']['offered_qos_profiles'][0]) == list(latched)  # rosbag2's key order
+    assert list(topics[SCENARIO]['topic_metadata']['offered_qos_profiles'][0]) == list(
+        latched
+    )  # rosbag2's key order
     assert topics[STEP]['topic_metadata']['offered_qos_profiles'] == [latched, latched]
     assert topics[POSE]['topic_metadata']['offered_qos_profiles'][0]['durability'] == 'volatile'
     assert topics[POSE]['message_count'] == 0  # a topic without messages is in the bag, with its QoS
@@ -84,7 +106,10 @@ def test_metadata_yaml_is_rosbag2_jazzys(tmp_path):
 def test_the_mcap_file_carries_what_rosbag2_storage_mcap_writes(tmp_path):
     bag = _write(tmp_path / 'bag')
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    hashes = {t['topic_metadata']['name']: t['topic_metadata']['type_description_hash'] for t in info['topics_with_message_count']}
+    hashes = {
+        t['topic_metadata']['name']: t['topic_metadata']['type_description_hash']
+        for t in info['topics_with_message_count']
+    }
     with (bag / 'bag_0.mcap').open('rb') as stream:
         reader = make_reader(stream)
         assert reader.get_header().profile == 'ros2'
@@ -94,7 +119,9 @@ def test_the_mcap_file_carries_what_rosbag2_storage_mcap_writes(tmp_path):
         for topic, channel in channels.items():
             assert set(channel.metadata) == {'offered_qos_profiles', 'topic_type_hash'}
             assert channel.metadata['topic_type_hash'] == hashes[topic]
-        assert yaml.safe_load(channels[SCENARIO].metadata['offered_qos_profiles']) == [yaml.safe_load(LATCHED_YAML)]
+        assert yaml.safe_load(channels[SCENARIO].metadata['offered_qos_profiles']) == [
+            yaml.safe_load(LATCHED_YAML)
+        ]
         # rosbag2 reads the bag information from the 'rosbag2' record when metadata.yaml is gone.
         records = {record.name: record.metadata for record in reader.iter_metadata()}
         assert yaml.safe_load(records['rosbag2']['serialized_metadata']) == info
@@ -122,7 +149,10 @@ def test_offered_qos_is_fixed_with_the_first_message(tmp_path):
         assert not bag.has_channel(STEP)
         bag.write(STEP, 0, _string('x'))
         assert bag.has_channel(STEP)
-        with pytest.raises(TopicSpecError, match="'/formation/step' already has messages in the bag: its offered QoS can no longer change"):
+        with pytest.raises(
+            TopicSpecError,
+            match="'/formation/step' already has messages in the bag: its offered QoS can no longer change",
+        ):
             bag.set_offered_qos(STEP, [LATCHED])
         with pytest.raises(TopicSpecError, match="topic '/nowhere' was not added"):
             bag.set_offered_qos('/nowhere', [LATCHED])

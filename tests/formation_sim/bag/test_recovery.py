@@ -12,7 +12,9 @@ import yaml
 
 from formation_sim.bag.recovery import reindex
 
-ARRAY_HASH = 'RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f'  # as rclpy 7.1.6 advertises it
+ARRAY_HASH = (
+    'RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f'  # as rclpy 7.1.6 advertises it
+)
 
 KILLED_WRITER = textwrap.dedent("""
     import os, signal, sys
@@ -39,7 +41,9 @@ def _information(bag):
 
 def test_a_killed_recorders_bag_keeps_its_offered_qos_and_type_hash(tmp_path):
     bag = tmp_path / 'bag'
-    killed = subprocess.run([sys.executable, '-c', KILLED_WRITER, str(bag)], capture_output=True, timeout=120, check=False)
+    killed = subprocess.run(
+        [sys.executable, '-c', KILLED_WRITER, str(bag)], capture_output=True, timeout=120, check=False
+    )
     assert killed.returncode == -signal.SIGKILL, killed.stderr.decode()
 
     recovery = reindex(bag)
@@ -49,9 +53,10 @@ def test_a_killed_recorders_bag_keeps_its_offered_qos_and_type_hash(tmp_path):
     assert info['ros_distro'] == 'jazzy' and info['version'] == 9
     (topic,) = info['topics_with_message_count']
     assert topic['topic_metadata']['type_description_hash'] == ARRAY_HASH
-    assert [(p['reliability'], p['durability'], p['liveliness_lease_duration']) for p in topic['topic_metadata']['offered_qos_profiles']] == [
-        ('reliable', 'transient_local', {'sec': 1, 'nsec': 0})
-    ] * 2
+    assert [
+        (p['reliability'], p['durability'], p['liveliness_lease_duration'])
+        for p in topic['topic_metadata']['offered_qos_profiles']
+    ] == [('reliable', 'transient_local', {'sec': 1, 'nsec': 0})] * 2
 
 
 def test_an_mcap_file_without_type_hashes_gets_them_from_its_schemas(tmp_path):
@@ -61,7 +66,9 @@ def test_an_mcap_file_without_type_hashes_gets_them_from_its_schemas(tmp_path):
 
     bag = tmp_path / 'bag'
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        connection = writer.add_connection('/formation/step', 'std_msgs/msg/Float64MultiArray', typestore=get_typestore(Stores.ROS2_JAZZY))
+        connection = writer.add_connection(
+            '/formation/step', 'std_msgs/msg/Float64MultiArray', typestore=get_typestore(Stores.ROS2_JAZZY)
+        )
         writer.write(connection, 3, bytes(24))
     (bag / 'metadata.yaml').unlink()
 

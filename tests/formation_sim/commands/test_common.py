@@ -18,16 +18,23 @@ def test_the_paper_examples_warnings_are_said_to_be_expected_and_why(capsys):
     assert [line.split(':')[0] for line in lines] == ['warning', 'warning', 'note']
     assert '4.6 %' in lines[0] and 'Remark 3.2' in lines[1]  # formation validate's own words, unchanged
     assert lines[2].startswith("note: these warnings are expected for the paper's example (Section 5)")
-    assert 'edge (2, 3) starts that close to Δ' in lines[2] and "the Remark's bound only limits what an agent can check locally" in lines[2]
+    assert (
+        'edge (2, 3) starts that close to Δ' in lines[2]
+        and "the Remark's bound only limits what an agent can check locally" in lines[2]
+    )
     assert load_valid_scenario('paper_double', 'run') is not None
     assert 'corrected rate condition of Theorem 2' in _warnings(capsys)[-1]
 
 
-def test_other_scenarios_keep_their_warnings_without_the_note(capsys, tmp_path, tight_edge, paper_scenario_dict):
+def test_other_scenarios_keep_their_warnings_without_the_note(
+    capsys, tmp_path, tight_edge, paper_scenario_dict
+):
     from formation_sim.model.scenario import dump_scenario
 
     copy = tmp_path / 'paper_copy.yaml'
-    copy.write_text(yaml.safe_dump(paper_scenario_dict()))  # the paper's values, but not the paper's example by name
+    copy.write_text(
+        yaml.safe_dump(paper_scenario_dict())
+    )  # the paper's values, but not the paper's example by name
     assert load_valid_scenario(str(copy), 'run') is not None
     lines = _warnings(capsys)
     assert len(lines) == 2 and all(line.startswith('warning: ') for line in lines)

@@ -13,7 +13,26 @@ from formation_sim.model.validate import validate_scenario
 @pytest.mark.parametrize('suffix', ['.json', '.yaml'])
 def test_the_file_is_the_generated_team_and_valid(tmp_path, capsys, suffix):
     out = tmp_path / f'team{suffix}'
-    assert main(['generate', '--agents', '40', '--seed', '7', '--dynamics', 'double', '--dimension', '3', '--horizon', '2', '--out', str(out)]) == 0
+    assert (
+        main(
+            [
+                'generate',
+                '--agents',
+                '40',
+                '--seed',
+                '7',
+                '--dynamics',
+                'double',
+                '--dimension',
+                '3',
+                '--horizon',
+                '2',
+                '--out',
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert capsys.readouterr().out.startswith(f'{out}: random_double_n40_seed7, 40 agents, ')
     team = load_scenario(out)
     assert team == random_scenario(n=40, seed=7, dynamics='double', dimension=3, horizon=2.0)
@@ -29,13 +48,17 @@ def test_an_existing_file_is_kept_unless_forced(tmp_path, capsys):
     assert load_scenario(out).n == 5
 
 
-@pytest.mark.parametrize(('arguments', 'complaint'), [
-    (['--agents', '1'], 'argument --agents: a formation needs at least 2 agents, got 1'),
-    (['--agents', '0'], 'argument --agents: must be an integer >= 1, got 0'),
-    (['--agents', '5', '--slack', '1.5'], 'argument --slack: must be a number in (0, 1], got 1.5'),
-    (['--agents', '5', '--degree', '-1'], 'argument --degree: must be a finite number > 0, got -1.0'),
-    (['--agents', '5', '--colour', 'red'], 'unrecognized arguments: --colour red'),
-], ids=['one agent', 'zero agents', 'slack', 'degree', 'unknown'])
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    [
+        (['--agents', '1'], 'argument --agents: a formation needs at least 2 agents, got 1'),
+        (['--agents', '0'], 'argument --agents: must be an integer >= 1, got 0'),
+        (['--agents', '5', '--slack', '1.5'], 'argument --slack: must be a number in (0, 1], got 1.5'),
+        (['--agents', '5', '--degree', '-1'], 'argument --degree: must be a finite number > 0, got -1.0'),
+        (['--agents', '5', '--colour', 'red'], 'unrecognized arguments: --colour red'),
+    ],
+    ids=['one agent', 'zero agents', 'slack', 'degree', 'unknown'],
+)
 def test_bad_arguments_write_nothing(tmp_path, capsys, arguments, complaint):
     out = tmp_path / 'team.json'
     assert main(['generate', *arguments, '--out', str(out)]) == 2

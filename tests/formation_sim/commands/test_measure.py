@@ -40,7 +40,11 @@ def robots():
         node = rclpy.create_node('fake_robots', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        publishers = {i: node.create_publisher(Odometry, robot_odom_topic(i), ROBOT_POSE_QOS) for i in AXLES if i not in silent}
+        publishers = {
+            i: node.create_publisher(Odometry, robot_odom_topic(i), ROBOT_POSE_QOS)
+            for i in AXLES
+            if i not in silent
+        }
 
         def publish():
             for i, publisher in publishers.items():
@@ -68,15 +72,24 @@ def robots():
 def test_a_team_set_down_by_hand_gets_its_measured_control_points_and_headings(robots, tmp_path, capsys):
     robots(domain=DOMAIN_ID)
     out = tmp_path / 'measured.yaml'
-    assert main(['measure', 'robots_lab', '--robot', 'unicycle', '--domain-id', str(DOMAIN_ID), '--out', str(out)]) == 0
+    assert (
+        main(
+            ['measure', 'robots_lab', '--robot', 'unicycle', '--domain-id', str(DOMAIN_ID), '--out', str(out)]
+        )
+        == 0
+    )
     measured, original = load_scenario(out), load_scenario('robots_lab')
     for k, i in enumerate(measured.agent_ids):
         x, y, theta = AXLES[i]
-        assert np.allclose(measured.positions[k], [x + L * math.cos(theta), y + L * math.sin(theta)], rtol=0, atol=1e-12)
+        assert np.allclose(
+            measured.positions[k], [x + L * math.cos(theta), y + L * math.sin(theta)], rtol=0, atol=1e-12
+        )
         assert measured.headings[k] == pytest.approx(theta, abs=1e-12)
     # Everything else is the file's: edges, gains, Δ, horizon.
     kept = {key: value for key, value in scenario_to_dict(original).items() if key not in ('agents', 'name')}
-    assert {key: value for key, value in scenario_to_dict(measured).items() if key not in ('agents', 'name')} == kept
+    assert {
+        key: value for key, value in scenario_to_dict(measured).items() if key not in ('agents', 'name')
+    } == kept
     assert 'robot 3: at ' in capsys.readouterr().out
 
 
@@ -88,7 +101,23 @@ def test_positions_may_be_missing_and_a_silent_robot_is_named(robots, tmp_path, 
     team.write_text(yaml.safe_dump(data))
     robots(domain=SILENT_DOMAIN_ID, silent=(3,))
     out = tmp_path / 'measured.yaml'
-    assert main(['measure', str(team), '--robot', 'unicycle', '--domain-id', str(SILENT_DOMAIN_ID), '--timeout', '2', '--out', str(out)]) == 1
+    assert (
+        main(
+            [
+                'measure',
+                str(team),
+                '--robot',
+                'unicycle',
+                '--domain-id',
+                str(SILENT_DOMAIN_ID),
+                '--timeout',
+                '2',
+                '--out',
+                str(out),
+            ]
+        )
+        == 1
+    )
     assert 'no pose within 2 s from robots 3 (topics /agent_<i>/robot/odom' in capsys.readouterr().err
     assert not out.exists()
 
@@ -100,7 +129,10 @@ def test_a_scenario_without_positions_points_at_formation_measure(tmp_path):
     data['agents'] = {i: {} for i in data['agents']}
     team = tmp_path / 'team.yaml'
     team.write_text(yaml.safe_dump(data))
-    with pytest.raises(ScenarioError, match=r'agents\.1: position missing \(robots set down by hand: `formation measure` writes'):
+    with pytest.raises(
+        ScenarioError,
+        match=r'agents\.1: position missing \(robots set down by hand: `formation measure` writes',
+    ):
         load_scenario(team)
 
 
@@ -109,15 +141,50 @@ def test_an_existing_file_is_never_overwritten_and_bad_input_is_refused(tmp_path
     out.write_text('mine')
     assert main(['measure', 'robots_lab', '--robot', 'unicycle', '--out', str(out)]) == 2
     assert 'exists; choose a new file' in capsys.readouterr().err and out.read_text() == 'mine'
-    assert main(['measure', 'paper_double', '--robot', 'holonomic', '--pose-type', 'pose', '--out', str(tmp_path / 'd.yaml')]) == 2
+    assert (
+        main(
+            [
+                'measure',
+                'paper_double',
+                '--robot',
+                'holonomic',
+                '--pose-type',
+                'pose',
+                '--out',
+                str(tmp_path / 'd.yaml'),
+            ]
+        )
+        == 2
+    )
     assert 'double integrators start with a velocity: read it from odometry' in capsys.readouterr().err
-    assert main(['measure', 'robots_lab', '--robot', 'unicycle', '--control-point-distance', '0', '--out', str(tmp_path / 'e.yaml')]) == 2
+    assert (
+        main(
+            [
+                'measure',
+                'robots_lab',
+                '--robot',
+                'unicycle',
+                '--control-point-distance',
+                '0',
+                '--out',
+                str(tmp_path / 'e.yaml'),
+            ]
+        )
+        == 2
+    )
 
 
 def test_the_measured_start_replaces_positions_and_headings_only():
     from formation_sim.commands.measure import complete
 
-    data = {'agents': {1: {'position': [0.0, 0.0], 'heading': 1.0}, 2: {}}, 'edges': [{'i': 1, 'j': 2, 'd': [1.0, 0.0]}], 'gains': {'alpha': 1.0}}
+    data = {
+        'agents': {1: {'position': [0.0, 0.0], 'heading': 1.0}, 2: {}},
+        'edges': [{'i': 1, 'j': 2, 'd': [1.0, 0.0]}],
+        'gains': {'alpha': 1.0},
+    }
     done = complete(data, {1: ([0.5, 0.25], 0.5, None), 2: ([1.5, 0.0], -0.5, [0.1, 0.0])})
-    assert done['agents'] == {1: {'position': [0.5, 0.25], 'heading': 0.5}, 2: {'position': [1.5, 0.0], 'heading': -0.5, 'velocity': [0.1, 0.0]}}
+    assert done['agents'] == {
+        1: {'position': [0.5, 0.25], 'heading': 0.5},
+        2: {'position': [1.5, 0.0], 'heading': -0.5, 'velocity': [0.1, 0.0]},
+    }
     assert done['edges'] == data['edges'] and data['agents'][2] == {}  # the input is left as it was

@@ -20,7 +20,14 @@ from formation_sim.cli import main
 
 README = Path(__file__).resolve().parents[3] / 'README.md'
 DOMAIN_ID = 49
-PARAMS_FILES = ('scenario.yaml', 'agents.params.yaml', 'recorder.params.yaml', 'simulator.params.yaml', 'coordinator.params.yaml', 'robots.params.yaml')
+PARAMS_FILES = (
+    'scenario.yaml',
+    'agents.params.yaml',
+    'recorder.params.yaml',
+    'simulator.params.yaml',
+    'coordinator.params.yaml',
+    'robots.params.yaml',
+)
 
 
 def _written(folder: Path, run_folder: Path) -> dict[str, str]:
@@ -39,25 +46,76 @@ def test_params_writes_what_formation_run_wrote(distributed_single_run, tmp_path
     run_folder = distributed_single_run.out_dir
     assert main(['params', 'paper_single', '--horizon', '2', '--out', str(tmp_path / 'inputs')]) == 0
     written = _written(tmp_path / 'inputs', run_folder)
-    assert sorted(written) == ['agents.params.yaml', 'recorder.params.yaml', 'scenario.yaml', 'simulator.params.yaml']
+    assert sorted(written) == [
+        'agents.params.yaml',
+        'recorder.params.yaml',
+        'scenario.yaml',
+        'simulator.params.yaml',
+    ]
     assert written == {name: (run_folder / name).read_text() for name in written}
-    assert sorted(p.name for p in (tmp_path / 'inputs').iterdir()) == sorted(written)  # nothing else: no logs, no bag
+    assert sorted(p.name for p in (tmp_path / 'inputs').iterdir()) == sorted(
+        written
+    )  # nothing else: no logs, no bag
     out = capsys.readouterr().out
     assert f'formation_sim --ros-args --params-file {tmp_path / "inputs" / "simulator.params.yaml"}' in out
 
 
 def test_robot_backends_write_the_coordinators_and_the_robots_files(tmp_path, capsys):
     out = tmp_path / 'unicycle'
-    assert main(['params', 'robots_square', '--backend', 'unicycle', '--max-speed', '0.22', '--no-record', '--out', str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ['agents.params.yaml', 'coordinator.params.yaml', 'robots.params.yaml', 'scenario.yaml']
-    coordinator = yaml.safe_load((out / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
-    assert (coordinator['robot'], coordinator['backend'], coordinator['extra_subscribers']) == ('unicycle', 'unicycle', 0)
-    robot = yaml.safe_load((out / 'robots.params.yaml').read_text())['/agent_4/simulated_robot']['ros__parameters']
+    assert (
+        main(
+            [
+                'params',
+                'robots_square',
+                '--backend',
+                'unicycle',
+                '--max-speed',
+                '0.22',
+                '--no-record',
+                '--out',
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert sorted(p.name for p in out.iterdir()) == [
+        'agents.params.yaml',
+        'coordinator.params.yaml',
+        'robots.params.yaml',
+        'scenario.yaml',
+    ]
+    coordinator = yaml.safe_load((out / 'coordinator.params.yaml').read_text())['/formation_coordinator'][
+        'ros__parameters'
+    ]
+    assert (coordinator['robot'], coordinator['backend'], coordinator['extra_subscribers']) == (
+        'unicycle',
+        'unicycle',
+        0,
+    )
+    robot = yaml.safe_load((out / 'robots.params.yaml').read_text())['/agent_4/simulated_robot'][
+        'ros__parameters'
+    ]
     assert robot['robot_id'] == 4 and robot['max_linear_speed'] == 0.22
     printed = capsys.readouterr().out
-    assert f'formation_robot --robots 1,2,3,4 --ros-args --params-file {out / "robots.params.yaml"}' in printed  # 8 robots to a process by default
+    assert (
+        f'formation_robot --robots 1,2,3,4 --ros-args --params-file {out / "robots.params.yaml"}' in printed
+    )  # 8 robots to a process by default
     assert 'formation_recorder' not in printed
-    assert main(['params', 'robots_square', '--backend', 'external', '--robot', 'holonomic', '--out', str(tmp_path / 'external')]) == 0
+    assert (
+        main(
+            [
+                'params',
+                'robots_square',
+                '--backend',
+                'external',
+                '--robot',
+                'holonomic',
+                '--out',
+                str(tmp_path / 'external'),
+            ]
+        )
+        == 0
+    )
     assert not (tmp_path / 'external' / 'robots.params.yaml').exists()  # the robots are real ones
 
 
@@ -71,13 +129,22 @@ def test_an_occupied_folder_is_refused_unless_forced(tmp_path, capsys):
     assert 'already holds an earlier run' in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert main(['params', 'paper_double', '--out', str(out), '--force']) == 0
-    assert not (out / 'summary.json').exists()  # the earlier run's files are gone, as with formation run --force
-    assert yaml.safe_load((out / 'agents.params.yaml').read_text())['/agent_1/formation_agent']['ros__parameters']['algorithm'] == 'eta2'
+    assert not (
+        out / 'summary.json'
+    ).exists()  # the earlier run's files are gone, as with formation run --force
+    assert (
+        yaml.safe_load((out / 'agents.params.yaml').read_text())['/agent_1/formation_agent'][
+            'ros__parameters'
+        ]['algorithm']
+        == 'eta2'
+    )
 
 
 def _readme_commands() -> list[str]:
     """The README's block that starts a run by hand (Agents on separate machines)."""
-    block = re.search(r'```bash\n(\s*formation params paper_single .*?)```', README.read_text(), flags=re.DOTALL)
+    block = re.search(
+        r'```bash\n(\s*formation params paper_single .*?)```', README.read_text(), flags=re.DOTALL
+    )
     assert block, 'README: the block starting with formation params paper_single is gone'
     return [line.strip() for line in block.group(1).splitlines() if line.strip()]
 
@@ -94,9 +161,18 @@ def test_the_readmes_commands_run_a_formation_by_hand(tmp_path):
     from formation_sim.sim.engine import simulate
 
     commands = [command.replace('runs/by-hand', str(tmp_path / 'by-hand')) for command in _readme_commands()]
-    assert [shlex.split(c)[0] for c in commands] == ['formation', 'formation_recorder', 'formation_sim'] + ['formation_agent'] * 3
-    env = with_our_packages({**os.environ, 'ROS_DOMAIN_ID': str(DOMAIN_ID), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-                             'ROS_LOG_DIR': str(tmp_path / 'ros_log'), 'FASTRTPS_DEFAULT_PROFILES_FILE': str(FASTDDS_PROFILE)})  # fmt: skip
+    assert [shlex.split(c)[0] for c in commands] == ['formation', 'formation_recorder', 'formation_sim'] + [
+        'formation_agent'
+    ] * 3
+    env = with_our_packages(
+        {
+            **os.environ,
+            'ROS_DOMAIN_ID': str(DOMAIN_ID),
+            'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+            'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+            'FASTRTPS_DEFAULT_PROFILES_FILE': str(FASTDDS_PROFILE),
+        }
+    )
     bin_dir = Path(sys.executable).parent
 
     def argv(command: str) -> list[str]:
@@ -108,7 +184,11 @@ def test_the_readmes_commands_run_a_formation_by_hand(tmp_path):
     try:
         for k, command in enumerate(commands[1:]):
             log = (tmp_path / f'process{k}.log').open('w')
-            processes.append(subprocess.Popen(argv(command), env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True))
+            processes.append(
+                subprocess.Popen(
+                    argv(command), env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+                )
+            )
         recorder, simulator, *agents = processes
         simulator.wait(timeout=240)
         assert simulator.returncode == 0, (tmp_path / 'process1.log').read_text()

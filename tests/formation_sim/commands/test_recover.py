@@ -38,7 +38,9 @@ KILLED = textwrap.dedent("""
 
 def test_recover_makes_a_killed_recorders_bag_readable(tmp_path, capsys):
     bag, listing = tmp_path / 'bag', tmp_path / 'kept.json'
-    child = subprocess.run([sys.executable, '-c', KILLED, str(bag), str(listing)], capture_output=True, timeout=120, check=False)
+    child = subprocess.run(
+        [sys.executable, '-c', KILLED, str(bag), str(listing)], capture_output=True, timeout=120, check=False
+    )
     assert child.returncode == -signal.SIGKILL, child.stderr.decode()
     assert not (bag / 'metadata.yaml').exists()
     with pytest.raises(Exception):  # noqa: B017 - rosbags refuses a bag without metadata
@@ -54,7 +56,10 @@ def test_recover_makes_a_killed_recorders_bag_readable(tmp_path, capsys):
     # Again on the recovered bag: healthy now, left exactly as it is.
     before = {path.name: path.read_bytes() for path in bag.iterdir()}
     assert main(['recover', str(bag)]) == 0
-    assert 'healthy (metadata.yaml and a complete MCAP file, 20 messages); left as it is' in capsys.readouterr().out
+    assert (
+        'healthy (metadata.yaml and a complete MCAP file, 20 messages); left as it is'
+        in capsys.readouterr().out
+    )
     assert {path.name: path.read_bytes() for path in bag.iterdir()} == before
     assert [m.rawdata for m in read_bag(bag)] == kept
 

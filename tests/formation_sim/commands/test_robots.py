@@ -11,13 +11,24 @@ from formation_sim.cli import main
     ('arguments', 'complaint'),
     [
         (['robots_square'], '--model holonomic|unicycle|car is required'),
-        (['robots_square', '--model', 'unicycle', '--domain-id', '300'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300'),
-        (['robots_square', '--model', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
-        (['robots_square', '--model', 'holonomic', '--max-speed', '0'], 'argument --max-speed: must be a finite number > 0, got 0.0'),
+        (
+            ['robots_square', '--model', 'unicycle', '--domain-id', '300'],
+            'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300',
+        ),
+        (
+            ['robots_square', '--model', 'unicycle', '--pose-noise', '-1'],
+            'argument --pose-noise: must be a finite number >= 0, got -1.0',
+        ),
+        (
+            ['robots_square', '--model', 'holonomic', '--max-speed', '0'],
+            'argument --max-speed: must be a finite number > 0, got 0.0',
+        ),
         (['no_such_scenario', '--model', 'unicycle'], 'no such scenario file and not a built-in scenario'),
     ],
 )
-def test_bad_robot_requests_are_refused_and_start_nothing(tmp_path, capsys, monkeypatch, arguments, complaint):
+def test_bad_robot_requests_are_refused_and_start_nothing(
+    tmp_path, capsys, monkeypatch, arguments, complaint
+):
     import subprocess
 
     def refuse(*args, **options):

@@ -11,9 +11,18 @@ from formation_sim.cli import main
 
 BAD_RUN_ARGUMENTS = [
     # (arguments, what the refusal says): each refused while parsing, before anything starts
-    (['--domain-id', '300'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300'),
-    (['--domain-id', '999'], 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 999'),
-    (['--agents-per-process', '0'], "argument --agents-per-process: must be an integer >= 1 or 'auto', got 0"),
+    (
+        ['--domain-id', '300'],
+        'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 300',
+    ),
+    (
+        ['--domain-id', '999'],
+        'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 999',
+    ),
+    (
+        ['--agents-per-process', '0'],
+        "argument --agents-per-process: must be an integer >= 1 or 'auto', got 0",
+    ),
     (['--horizon', '-1'], 'argument --horizon: must be a finite number > 0, got -1.0'),
     (['--horizon', 'nan'], 'argument --horizon: must be a finite number > 0, got nan'),
     (['--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
@@ -27,8 +36,12 @@ BAD_RUN_ARGUMENTS = [
 ]
 
 
-@pytest.mark.parametrize(('arguments', 'complaint'), BAD_RUN_ARGUMENTS, ids=[' '.join(case[0]) for case in BAD_RUN_ARGUMENTS])
-def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, monkeypatch, arguments, complaint):
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'), BAD_RUN_ARGUMENTS, ids=[' '.join(case[0]) for case in BAD_RUN_ARGUMENTS]
+)
+def test_bad_run_requests_are_refused_with_the_rule_broken(
+    tmp_path, capsys, monkeypatch, arguments, complaint
+):
     import subprocess
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
@@ -41,12 +54,18 @@ def test_bad_run_requests_are_refused_with_the_rule_broken(tmp_path, capsys, mon
 
 def _earlier_run(folder):
     """What `formation simulate` leaves in `folder`; returns its listing with every file's bytes."""
-    assert main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(folder), '--quiet', '--no-plot']) == 0
+    assert (
+        main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(folder), '--quiet', '--no-plot'])
+        == 0
+    )
     return _listing(folder)
 
 
 def _listing(folder):
-    return {path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None for path in sorted(folder.rglob('*'))}
+    return {
+        path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None
+        for path in sorted(folder.rglob('*'))
+    }
 
 
 @pytest.mark.parametrize('force', [False, True], ids=['plain', 'force'])
@@ -60,7 +79,10 @@ def test_the_api_refuses_a_bad_request_before_touching_the_earlier_run(tmp_path,
     for options, complaint in [
         ({'domain_id': 999}, 'domain id must lie in [0, 232], got 999'),
         ({'timeout': -5.0}, 'timeout must be a finite number of seconds > 0, got -5.0'),
-        ({'sample_period': -1.0}, 'the sample spacing must be a finite number >= 0 (0: samples at events only), got -1.0'),
+        (
+            {'sample_period': -1.0},
+            'the sample spacing must be a finite number >= 0 (0: samples at events only), got -1.0',
+        ),
         ({'horizon': 5e-324}, 'horizon must be a finite number > 0, got 5e-324'),
     ]:
         with pytest.raises(RunError) as caught:
@@ -75,7 +97,10 @@ def test_a_folder_holding_a_run_is_refused_and_kept(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
     earlier = _earlier_run(tmp_path / 'run')
     for extra in ([], ['--no-record']):
-        assert main(['run', 'paper_double', '--horizon', '1', '--out', str(tmp_path / 'run'), '--quiet', *extra]) == 2
+        assert (
+            main(['run', 'paper_double', '--horizon', '1', '--out', str(tmp_path / 'run'), '--quiet', *extra])
+            == 2
+        )
         err = capsys.readouterr().err
         assert f'{tmp_path / "run"} already holds an earlier run (summary.json, trajectory/)' in err
         assert 'add --force to replace the earlier run' in err
@@ -113,8 +138,18 @@ gains: {{alpha: 10.0, beta: 1.0}}
 
 INVALID = [
     # (label, edits, rule named, fragment of the message)
-    ('initial condition violated', {'x3': 4.3, 'y3': 5.5, 'd23': '-2.0, 2.0'}, '[initial] edge (2, 3)', '(initial)'),
-    ('infeasible formation', {'x3': 4.5, 'y3': 5.5, 'd23': '-2.0, 2.5'}, '[feasible] formation', 'Assumption 1'),
+    (
+        'initial condition violated',
+        {'x3': 4.3, 'y3': 5.5, 'd23': '-2.0, 2.0'},
+        '[initial] edge (2, 3)',
+        '(initial)',
+    ),
+    (
+        'infeasible formation',
+        {'x3': 4.5, 'y3': 5.5, 'd23': '-2.0, 2.5'},
+        '[feasible] formation',
+        'Assumption 1',
+    ),
 ]
 
 
@@ -135,7 +170,9 @@ class _NoProcesses:
 
 
 @pytest.mark.parametrize(('label', 'edits', 'rule', 'fragment'), INVALID, ids=[case[0] for case in INVALID])
-def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(tmp_path, monkeypatch, label, edits, rule, fragment):
+def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(
+    tmp_path, monkeypatch, label, edits, rule, fragment
+):
     import subprocess
 
     from formation_sim.runtime.orchestrate import FormationRun
@@ -152,7 +189,9 @@ def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(tm
 
 
 @pytest.mark.parametrize(('label', 'edits', 'rule', 'fragment'), INVALID, ids=[case[0] for case in INVALID])
-def test_formation_run_command_refuses_an_invalid_scenario(tmp_path, capsys, monkeypatch, label, edits, rule, fragment):
+def test_formation_run_command_refuses_an_invalid_scenario(
+    tmp_path, capsys, monkeypatch, label, edits, rule, fragment
+):
     import subprocess
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
@@ -173,7 +212,10 @@ def test_formation_run_process_on_an_invalid_scenario_exits_non_zero_and_leaves_
     path = _write(tmp_path, *INVALID[0][:2])
     done = subprocess.run(
         [sys.executable, '-m', 'formation_sim.cli', 'run', str(path), '--out', str(out)],
-        capture_output=True, text=True, timeout=120, check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
     )
     assert done.returncode == 2, done.stderr
     assert '[initial] edge (2, 3)' in done.stderr
@@ -203,7 +245,9 @@ def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # as .ci/run sets it
     network = FormationRun('paper_single', out_dir=tmp_path / 'b', localhost_only=False)._environment(70, 4)
     assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in network  # Jazzy's default: SUBNET
-    pinned = FormationRun('paper_single', out_dir=tmp_path / 'c', extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'})
+    pinned = FormationRun(
+        'paper_single', out_dir=tmp_path / 'c', extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+    )
     assert pinned._environment(70, 4)['FASTDDS_BUILTIN_TRANSPORTS'] == 'UDPv4'
 
 
@@ -230,7 +274,9 @@ def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.timeout(400)
-def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, capsys, paper_scenario_dict, monkeypatch):
+def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(
+    tmp_path, capsys, paper_scenario_dict, monkeypatch
+):
     import json
 
     import yaml
@@ -256,7 +302,22 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
     assert main(['validate', str(path)]) == 0
     capsys.readouterr()
 
-    code = main(['run', str(path), '--horizon', '0.3', '--out', str(out), '--force', '--domain-id', '64', '--quiet', '--timeout', '300'])
+    code = main(
+        [
+            'run',
+            str(path),
+            '--horizon',
+            '0.3',
+            '--out',
+            str(out),
+            '--force',
+            '--domain-id',
+            '64',
+            '--quiet',
+            '--timeout',
+            '300',
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err[-3000:]
     assert captured.out.strip() == str(out)
@@ -267,13 +328,27 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(tmp_path, c
     reference = simulate(load_scenario(path), horizon=0.3)
     assert summary['trigger_times'] == {str(agent): times for agent, times in reference.trigger_times.items()}
     assert sorted(summary['trigger_times']) == ['0', '2147483647', '7']
+
+
 @pytest.mark.parametrize(
     ('arguments', 'complaint'),
     [
-        (['--backend', 'external'], '--backend external needs --robot holonomic|unicycle|car (what the robots are)'),
-        (['--backend', 'unicycle', '--robot', 'holonomic'], "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
-        (['--backend', 'unicycle', '--control-point-distance', '0'], 'argument --control-point-distance: must be a finite number > 0, got 0.0'),
-        (['--backend', 'unicycle', '--pose-noise', '-1'], 'argument --pose-noise: must be a finite number >= 0, got -1.0'),
+        (
+            ['--backend', 'external'],
+            '--backend external needs --robot holonomic|unicycle|car (what the robots are)',
+        ),
+        (
+            ['--backend', 'unicycle', '--robot', 'holonomic'],
+            "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'",
+        ),
+        (
+            ['--backend', 'unicycle', '--control-point-distance', '0'],
+            'argument --control-point-distance: must be a finite number > 0, got 0.0',
+        ),
+        (
+            ['--backend', 'unicycle', '--pose-noise', '-1'],
+            'argument --pose-noise: must be a finite number >= 0, got -1.0',
+        ),
     ],
 )
 def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arguments, complaint):
@@ -287,7 +362,9 @@ def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arg
 TURTLEBOT3_LIMITS = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
 
 
-def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and_the_remedy(tmp_path, capsys, monkeypatch):
+def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and_the_remedy(
+    tmp_path, capsys, monkeypatch
+):
     import subprocess
 
     from formation_sim.model.scenario import load_scenario
@@ -295,7 +372,10 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
     out = tmp_path / 'run'
-    assert main(['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--out', str(out), '--quiet']) == 2
+    assert (
+        main(['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--out', str(out), '--quiet'])
+        == 2
+    )
     err = capsys.readouterr().err
     asked = measured_command(load_scenario('robots_lab')).max_speed  # the exact run at κ = 1
     assert f'asks for {asked:.4g} m/s beyond --max-speed 0.22 m/s' in err
@@ -304,7 +384,9 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
     assert not out.exists()  # nothing started, nothing written
 
 
-def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(tmp_path, capsys, monkeypatch):
+def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(
+    tmp_path, capsys, monkeypatch
+):
     from formation_sim.runtime import orchestrate
 
     started = []
@@ -318,7 +400,11 @@ def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the
     arguments = ['--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--quiet']
     assert main(['run', 'robots_lab', *arguments, '--allow-saturation', '--out', str(tmp_path / 'a')]) == 2
     err = capsys.readouterr().err
-    assert started == ['robots_lab'] and 'warning: the exact run of robots_lab' in err and 'running anyway' in err
+    assert (
+        started == ['robots_lab']
+        and 'warning: the exact run of robots_lab' in err
+        and 'running anyway' in err
+    )
     # robots_square starts within 1.5 cm of its corners: its exact run asks for 0.10 m/s, no warning
     assert main(['run', 'robots_square', *arguments, '--out', str(tmp_path / 'b')]) == 2
     err = capsys.readouterr().err
@@ -339,7 +425,16 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
             raise orchestrate.RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
-    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto', '--quiet']
+    arguments = [
+        'run',
+        'robots_lab',
+        '--backend',
+        'unicycle',
+        *TURTLEBOT3_LIMITS,
+        '--speed-scale',
+        'auto',
+        '--quiet',
+    ]
     assert main([*arguments, '--out', str(tmp_path / 'a')]) == 2  # the test's stop, after the check passed
     err = capsys.readouterr().err
     assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
@@ -359,7 +454,17 @@ def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypa
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     # κ = 0.15 keeps robots_lab's speed within 0.22 m/s; its ||u||/l (0.1 m) would exceed 0.5 rad/s
-    arguments = ['run', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '0.5', '--speed-scale', '0.15', '--quiet']
+    arguments = [
+        'run',
+        'robots_lab',
+        '--max-speed',
+        '0.22',
+        '--max-angular-speed',
+        '0.5',
+        '--speed-scale',
+        '0.15',
+        '--quiet',
+    ]
     assert main([*arguments, '--backend', 'holonomic', '--out', str(tmp_path / 'a')]) == 2
     assert started == [0.15] and 'beyond' not in capsys.readouterr().err
     assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2

@@ -29,7 +29,9 @@ def test_continuous_figure_has_no_raster_and_says_why(scenario):
     assert 'no triggering events' in fig.get_suptitle()
     (ax,) = fig.axes
     assert not ax.get_title().startswith('(a)')  # a lone panel is not labelled
-    paths, formation = (c for c in ax.collections if isinstance(c, LineCollection))  # trajectories, final edges
+    paths, formation = (
+        c for c in ax.collections if isinstance(c, LineCollection)
+    )  # trajectories, final edges
     (starts,) = (c for c in ax.collections if isinstance(c, PathCollection))  # start circles
     assert len(paths.get_segments()) == len(starts.get_offsets()) == scenario.n
     assert len(formation.get_segments()) == len(scenario.edges)
@@ -60,7 +62,10 @@ def test_simulate_writes_the_figure_with_the_panels_of_its_controller(tmp_path, 
 
 
 def _listing(folder):
-    return {path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None for path in sorted(folder.rglob('*'))}
+    return {
+        path.relative_to(folder).as_posix(): path.read_bytes() if path.is_file() else None
+        for path in sorted(folder.rglob('*'))
+    }
 
 
 def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stale(tmp_path, capsys):
@@ -70,16 +75,41 @@ def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stal
     (out / 'analysis' / 'analysis.md').write_text('of the earlier run')
     earlier = _listing(out)
     capsys.readouterr()
-    assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot']) == 2
+    assert (
+        main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot']) == 2
+    )
     err = capsys.readouterr().err
-    assert f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); nothing was changed' in err
+    assert (
+        f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); nothing was changed'
+        in err
+    )
     assert _listing(out) == earlier
-    assert main(['simulate', 'paper_double', '--horizon', '0.3', '--out', str(out), '--quiet', '--no-plot', '--force']) == 0
-    assert sorted(p.name for p in out.iterdir()) == ['summary.json', 'trajectory']  # no old figure, no old analysis
+    assert (
+        main(
+            [
+                'simulate',
+                'paper_double',
+                '--horizon',
+                '0.3',
+                '--out',
+                str(out),
+                '--quiet',
+                '--no-plot',
+                '--force',
+            ]
+        )
+        == 0
+    )
+    assert sorted(p.name for p in out.iterdir()) == [
+        'summary.json',
+        'trajectory',
+    ]  # no old figure, no old analysis
     assert '"dynamics": "double"' in (out / 'summary.json').read_text()
 
 
-def test_without_out_every_run_gets_a_new_folder_under_runs(tmp_path, capsys, monkeypatch, paper_scenario_dict):
+def test_without_out_every_run_gets_a_new_folder_under_runs(
+    tmp_path, capsys, monkeypatch, paper_scenario_dict
+):
     import yaml
 
     monkeypatch.chdir(tmp_path)
@@ -100,25 +130,46 @@ def test_without_out_every_run_gets_a_new_folder_under_runs(tmp_path, capsys, mo
 
 BAD_SIMULATE_ARGUMENTS = [
     (['--sample-dt', '-1'], 'argument --sample-dt: must be a finite number >= 0, got -1.0'),
-    (['--sample-dt', '1e-9'], 'argument --sample-dt: the sample spacing 1e-09 s asks for 1e+10 samples of 6 numbers'),
+    (
+        ['--sample-dt', '1e-9'],
+        'argument --sample-dt: the sample spacing 1e-09 s asks for 1e+10 samples of 6 numbers',
+    ),
     (['--sample-dt', '0', '--continuous'], 'argument --sample-dt: must be > 0 with --continuous'),
     (['--horizon', 'inf'], 'argument --horizon: must be a finite number > 0, got inf'),
     (['--horizon', '0'], 'argument --horizon: must be a finite number > 0, got 0.0'),
     (['--period', '-1'], 'argument --period: must be a finite number > 0, got -1.0'),
     (['--tolerance', '0'], 'argument --tolerance: must be a finite number > 0, got 0.0'),
     (['--period', '0.1', '--continuous'], 'argument --continuous: not allowed with argument --period'),
-    (['--samples', 'all'], "argument --samples: invalid choice: 'all' (choose from 'auto', 'events', 'grid', 'none')"),
-    (['--samples', 'none', '--sample-dt', '0.1'], 'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt 0.1'),
-    (['--samples', 'grid', '--sample-dt', '0'], 'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)'),
-    (['--samples', 'events', '--continuous'], 'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got events'),
+    (
+        ['--samples', 'all'],
+        "argument --samples: invalid choice: 'all' (choose from 'auto', 'events', 'grid', 'none')",
+    ),
+    (
+        ['--samples', 'none', '--sample-dt', '0.1'],
+        'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt 0.1',
+    ),
+    (
+        ['--samples', 'grid', '--sample-dt', '0'],
+        'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)',
+    ),
+    (
+        ['--samples', 'events', '--continuous'],
+        'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got events',
+    ),
 ]
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize(('arguments', 'complaint'), BAD_SIMULATE_ARGUMENTS, ids=[' '.join(case[0]) for case in BAD_SIMULATE_ARGUMENTS])
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    BAD_SIMULATE_ARGUMENTS,
+    ids=[' '.join(case[0]) for case in BAD_SIMULATE_ARGUMENTS],
+)
 def test_bad_arguments_exit_2_and_touch_nothing(tmp_path, capsys, arguments, complaint):
     out = tmp_path / 'run'
-    assert main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(out), '--quiet', '--no-plot']) == 0
+    assert (
+        main(['simulate', 'paper_single', '--horizon', '0.2', '--out', str(out), '--quiet', '--no-plot']) == 0
+    )
     earlier = _listing(out)
     capsys.readouterr()
     for target in (out, tmp_path / 'new'):
@@ -146,24 +197,47 @@ def test_simulate_refuses_an_initial_slack_double_precision_cannot_resolve(tmp_p
 # -- what the trajectory keeps ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(('policy', 'times'), [
-    ('events', None),  # every event time and the grid: the record of the Python API
-    ('grid', [0.0, 0.25, 0.5, 0.75, 1.0]),
-    ('none', [0.0, 1.0]),
-])
+@pytest.mark.parametrize(
+    ('policy', 'times'),
+    [
+        ('events', None),  # every event time and the grid: the record of the Python API
+        ('grid', [0.0, 0.25, 0.5, 0.75, 1.0]),
+        ('none', [0.0, 1.0]),
+    ],
+)
 def test_each_sample_policy_keeps_what_it_says_and_the_same_run(tmp_path, capsys, policy, times):
     scenario = load_scenario('paper_single')
     reference = simulate(scenario, horizon=1.0, sample_dt=0.25)  # in memory, every event time sampled
     out = tmp_path / policy
     grid = [] if policy == 'none' else ['--sample-dt', '0.25']
-    assert main(['simulate', 'paper_single', '--horizon', '1', '--out', str(out), '--samples', policy, *grid, '--no-plot']) == 0
+    assert (
+        main(
+            [
+                'simulate',
+                'paper_single',
+                '--horizon',
+                '1',
+                '--out',
+                str(out),
+                '--samples',
+                policy,
+                *grid,
+                '--no-plot',
+            ]
+        )
+        == 0
+    )
     assert f'samples: {policy}, ' in capsys.readouterr().err
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['extra']['samples'] == policy
-    assert {int(a): t for a, t in summary['trigger_times'].items()} == reference.trigger_times  # sampling never moves an event
+    assert {
+        int(a): t for a, t in summary['trigger_times'].items()
+    } == reference.trigger_times  # sampling never moves an event
     samples = load_trajectory(out)
     if times is None:
-        assert np.array_equal(samples.times, reference.sample_times) and np.array_equal(samples.positions, reference.sample_positions)
+        assert np.array_equal(samples.times, reference.sample_times) and np.array_equal(
+            samples.positions, reference.sample_positions
+        )
     else:
         assert samples.times.tolist() == times
         rows = np.searchsorted(reference.sample_times, times)
@@ -176,23 +250,34 @@ def test_each_sample_policy_keeps_what_it_says_and_the_same_run(tmp_path, capsys
 def reference_edges(record):
     index = {agent: k for k, agent in enumerate(record.scenario.agent_ids)}
     x = record.sample_positions
-    return [float(np.linalg.norm(x[:, index[e.i]] - x[:, index[e.j]], axis=1).max()) for e in record.scenario.edges]
+    return [
+        float(np.linalg.norm(x[:, index[e.i]] - x[:, index[e.j]], axis=1).max())
+        for e in record.scenario.edges
+    ]
 
 
 def test_auto_keeps_event_samples_for_small_teams_only(tmp_path, capsys, monkeypatch):
     import formation_sim.commands.simulate as command
 
-    assert main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'small'), '--no-plot']) == 0
+    assert (
+        main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'small'), '--no-plot'])
+        == 0
+    )
     assert 'samples: events (auto)' in capsys.readouterr().err
     monkeypatch.setattr(command, 'AUTO_EVENTS_MAX_AGENTS', 2)  # three agents count as a large team now
-    assert main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'large'), '--no-plot']) == 0
+    assert (
+        main(['simulate', 'paper_single', '--horizon', '0.5', '--out', str(tmp_path / 'large'), '--no-plot'])
+        == 0
+    )
     assert 'samples: grid (auto), 51 states' in capsys.readouterr().err
     assert json.loads((tmp_path / 'large' / 'summary.json').read_text())['extra']['samples'] == 'grid'
 
 
 def test_a_run_that_fails_leaves_no_folder_and_no_samples(tmp_path, capsys):
     out = tmp_path / 'run'
-    assert main(['simulate', 'paper_single', '--horizon', '200', '--out', str(out), '--no-plot']) == 1  # stops at t ≈ 34.4
+    assert (
+        main(['simulate', 'paper_single', '--horizon', '200', '--out', str(out), '--no-plot']) == 1
+    )  # stops at t ≈ 34.4
     err = capsys.readouterr().err
     assert 'rounding, not the dynamics, decides the events' in err and 'Traceback' not in err
     assert not out.exists()  # the samples streamed so far went with it
@@ -206,20 +291,52 @@ def test_speed_scale_auto_chooses_kappa_from_the_limits_and_records_it(tmp_path,
     from formation_sim.sim.largest_command import measured_command
 
     out = tmp_path / 'lab'
-    assert main(['simulate', 'robots_lab', '--speed-scale', 'auto', '--max-speed', '0.22', '--max-angular-speed', '2.84',
-                 '--horizon', '20', '--out', str(out), '--quiet', '--no-plot']) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                'simulate',
+                'robots_lab',
+                '--speed-scale',
+                'auto',
+                '--max-speed',
+                '0.22',
+                '--max-angular-speed',
+                '2.84',
+                '--horizon',
+                '20',
+                '--out',
+                str(out),
+                '--quiet',
+                '--no-plot',
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     summary = json.loads((out / 'summary.json').read_text())
     chosen = summary['extra']['speed_scale']
-    assert chosen['source'] == 'observed' and 'speed 0.22 m/s' in chosen['binding'] and chosen['margin'] == 1.25
+    assert (
+        chosen['source'] == 'observed' and 'speed 0.22 m/s' in chosen['binding'] and chosen['margin'] == 1.25
+    )
     kappa = chosen['value']
     assert f'--speed-scale auto: κ = {kappa:.4g} (observed' in err
     # the engine at that κ (scale's implementation) asks for exactly the limit over the margin
     scaled = measured_command(load_scenario('robots_lab').with_scale(speed_scale=kappa), horizon=20.0)
     assert math.isclose(scaled.max_speed * 1.25, 0.22, rel_tol=1e-9)
     # without limits there is nothing to choose from
-    assert main(['simulate', 'robots_lab', '--speed-scale', 'auto', '--out', str(tmp_path / 'none'), '--quiet']) == 2
-    assert '--speed-scale auto: a speed scale from the limits needs at least one of --max-speed' in capsys.readouterr().err
+    assert (
+        main(['simulate', 'robots_lab', '--speed-scale', 'auto', '--out', str(tmp_path / 'none'), '--quiet'])
+        == 2
+    )
+    assert (
+        '--speed-scale auto: a speed scale from the limits needs at least one of --max-speed'
+        in capsys.readouterr().err
+    )
     assert not (tmp_path / 'none').exists()
-    assert main(['simulate', 'robots_lab', '--speed-scale', 'fast', '--out', str(tmp_path / 'bad'), '--quiet']) == 2
-    assert "argument --speed-scale: must be a finite number > 0 or 'auto', got 'fast'" in capsys.readouterr().err
+    assert (
+        main(['simulate', 'robots_lab', '--speed-scale', 'fast', '--out', str(tmp_path / 'bad'), '--quiet'])
+        == 2
+    )
+    assert (
+        "argument --speed-scale: must be a finite number > 0 or 'auto', got 'fast'" in capsys.readouterr().err
+    )

@@ -61,11 +61,14 @@ def test_invalid_scenario_exits_1(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)['errors'][0]['rule'] == 'beta'
 
 
-@pytest.mark.parametrize('text, fragment', [
-    (GOOD.replace('[0.0, 2.5]}', '[0.0, 2.5]'), 'malformed YAML at line 8'),
-    (GOOD.replace('horizon: 10.0', 'horizon: 0'), 'horizon'),
-    (GOOD.replace('j: 2', 'j: 9'), 'j=9 is not an agent'),
-])
+@pytest.mark.parametrize(
+    'text, fragment',
+    [
+        (GOOD.replace('[0.0, 2.5]}', '[0.0, 2.5]'), 'malformed YAML at line 8'),
+        (GOOD.replace('horizon: 10.0', 'horizon: 0'), 'horizon'),
+        (GOOD.replace('j: 2', 'j: 9'), 'j=9 is not an agent'),
+    ],
+)
 def test_unreadable_scenario_exits_2_without_traceback(tmp_path, capsys, text, fragment):
     assert main(['validate', write(tmp_path, text)]) == 2
     captured = capsys.readouterr()
@@ -89,7 +92,10 @@ def test_module_entry_point(tmp_path):
     path = write(tmp_path, GOOD.replace('horizon: 10.0', 'horizon: -1'))
     result = subprocess.run(
         [sys.executable, '-m', 'formation_sim.cli', 'validate', path],
-        capture_output=True, text=True, timeout=120, check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
     )
     assert result.returncode == 2
     assert 'horizon' in result.stderr and 'Traceback' not in result.stderr
@@ -107,7 +113,10 @@ def test_a_folder_is_not_reported_as_missing(tmp_path, capsys):
 
 # The built-in paper_single, its comment lines dropped (so line numbers below count from `name`).
 PAPER = ''.join(
-    line for line in (resources.files('formation_sim.model.scenarios') / 'paper_single.yaml').read_text().splitlines(True)
+    line
+    for line in (resources.files('formation_sim.model.scenarios') / 'paper_single.yaml')
+    .read_text()
+    .splitlines(True)
     if not line.startswith('#')
 ).replace('name: paper_single', 'name: case')
 
@@ -129,70 +138,304 @@ BOMB = ''.join(
 CATALOGUE = [
     # (id, file content (str, or bytes as written), exit code, fragments of the message)
     # -- numbers at the edges of a double
-    ('integer beyond a double', edit('beta: 1.0', 'beta: 1' + '0' * 400), 2, ['gains.beta: 100000000000... (an integer of 401 digits) is too large for a double']),
-    ('huge integer in a position', edit('[2.0, 4.0]', '[' + '9' * 400 + ', 4.0]'), 2, ['agents.1.position[0]', 'too large for a double']),
-    ('huge integer in d', edit('d: [0.0, -2.0]', 'd: [0.0, -1' + '0' * 400 + ']'), 2, ['edges[0] (1, 2).d[1]', 'an integer of 401 digits']),
-    ('huge integer as Δ', edit('communication_radius: 4.0', 'communication_radius: 1' + '0' * 400), 2, ['communication_radius', 'too large for a double']),
-    ('integer past int() digits', edit('horizon: 10.0', 'horizon: 1' + '0' * 6000), 2, ['line 4, column 10', 'an integer of 6001 characters is too large for a double']),
+    (
+        'integer beyond a double',
+        edit('beta: 1.0', 'beta: 1' + '0' * 400),
+        2,
+        ['gains.beta: 100000000000... (an integer of 401 digits) is too large for a double'],
+    ),
+    (
+        'huge integer in a position',
+        edit('[2.0, 4.0]', '[' + '9' * 400 + ', 4.0]'),
+        2,
+        ['agents.1.position[0]', 'too large for a double'],
+    ),
+    (
+        'huge integer in d',
+        edit('d: [0.0, -2.0]', 'd: [0.0, -1' + '0' * 400 + ']'),
+        2,
+        ['edges[0] (1, 2).d[1]', 'an integer of 401 digits'],
+    ),
+    (
+        'huge integer as Δ',
+        edit('communication_radius: 4.0', 'communication_radius: 1' + '0' * 400),
+        2,
+        ['communication_radius', 'too large for a double'],
+    ),
+    (
+        'integer past int() digits',
+        edit('horizon: 10.0', 'horizon: 1' + '0' * 6000),
+        2,
+        ['line 4, column 10', 'an integer of 6001 characters is too large for a double'],
+    ),
     ('1e999', edit('horizon: 10.0', 'horizon: 1e999'), 2, ['horizon: must be finite, got inf']),
     ('.nan', edit('alpha: 10.0', 'alpha: .nan'), 2, ['gains.alpha: must be finite, got nan']),
     ('-.inf', edit('[2.0, 4.0]', '[-.inf, 4.0]'), 2, ['agents.1.position[0]: must be finite, got -inf']),
-    ('nan spelled as text', edit('alpha: 10.0', 'alpha: nan'), 2, ["gains.alpha: expected a number, got 'nan'"]),
+    (
+        'nan spelled as text',
+        edit('alpha: 10.0', 'alpha: nan'),
+        2,
+        ["gains.alpha: expected a number, got 'nan'"],
+    ),
     ('yes for a number', edit('alpha: 10.0', 'alpha: yes'), 2, ['gains.alpha: expected a number, got True']),
-    ('subnormal α', edit('alpha: 10.0', 'alpha: 5e-324'), 1, ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double', 'ROS parameter']),
-    ('subnormal β', edit('beta: 1.0', 'beta: 1e-310'), 1, ['[parameters] gains: gains.beta = 1e-310 is a subnormal double']),
-    ('subnormal horizon', edit('horizon: 10.0', 'horizon: 5e-324'), 1, ['[parameters] scenario: horizon = 5e-324 is a subnormal double']),
-    ('subnormal d', edit('d: [0.0, -2.0]', 'd: [1e-320, -2.0]'), 1, ['[parameters] edge (1, 2): d[0] = 1e-320 is a subnormal double']),
+    (
+        'subnormal α',
+        edit('alpha: 10.0', 'alpha: 5e-324'),
+        1,
+        ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double', 'ROS parameter'],
+    ),
+    (
+        'subnormal β',
+        edit('beta: 1.0', 'beta: 1e-310'),
+        1,
+        ['[parameters] gains: gains.beta = 1e-310 is a subnormal double'],
+    ),
+    (
+        'subnormal horizon',
+        edit('horizon: 10.0', 'horizon: 5e-324'),
+        1,
+        ['[parameters] scenario: horizon = 5e-324 is a subnormal double'],
+    ),
+    (
+        'subnormal d',
+        edit('d: [0.0, -2.0]', 'd: [1e-320, -2.0]'),
+        1,
+        ['[parameters] edge (1, 2): d[0] = 1e-320 is a subnormal double'],
+    ),
     ('position 1e308', edit('[2.0, 4.0]', '[1e308, 4.0]'), 1, ['[initial] edge (1, 2)', '(initial)']),
-    ('Δ 1e308', edit('communication_radius: 4.0', 'communication_radius: 1e308'), 1, ['[scale] scenario: Δ = 1e+308 is above 1.80925e+75 (2^250)']),
-    ('Δ 1e-300', edit('communication_radius: 4.0', 'communication_radius: 4e-300'), 1, ['[edge_length] edge (1, 2)']),
-    ('-0.0 breaking (initial)', edit('[2.0, 4.0]', '[-0.0, 4.0]'), 1, ['[initial] edge (1, 2): ||x_i(0)-x_j(0)-d_ij|| = 3.64005 is not below Δ-||d_ij|| = 2']),
-    ('β a hair above β0', edit('beta: 1.0', 'beta: 1.500000000000001'), 1, ['0 < β < β0 = 1.5 required, got β = 1.500000000000001']),
+    (
+        'Δ 1e308',
+        edit('communication_radius: 4.0', 'communication_radius: 1e308'),
+        1,
+        ['[scale] scenario: Δ = 1e+308 is above 1.80925e+75 (2^250)'],
+    ),
+    (
+        'Δ 1e-300',
+        edit('communication_radius: 4.0', 'communication_radius: 4e-300'),
+        1,
+        ['[edge_length] edge (1, 2)'],
+    ),
+    (
+        '-0.0 breaking (initial)',
+        edit('[2.0, 4.0]', '[-0.0, 4.0]'),
+        1,
+        ['[initial] edge (1, 2): ||x_i(0)-x_j(0)-d_ij|| = 3.64005 is not below Δ-||d_ij|| = 2'],
+    ),
+    (
+        'β a hair above β0',
+        edit('beta: 1.0', 'beta: 1.500000000000001'),
+        1,
+        ['0 < β < β0 = 1.5 required, got β = 1.500000000000001'],
+    ),
     # -- YAML features
-    ('alias bomb', BOMB + PAPER.replace('horizon: 10.0', 'horizon: *i').replace('name: case\n', ''), 2, ['more than 300000 nodes with its aliases expanded', 'an alias bomb?']),
-    ('recursive alias', edit('[2.0, 4.0]', '&r [*r]'), 2, ['agents.1.position[0]: expected a number, got [[[[...]]]]']),
-    ('python object tag', edit('horizon: 10.0', "horizon: !!python/object/apply:os.system ['echo hi']"), 2, ['line 4, column 10', "could not determine a constructor for the tag 'tag:yaml.org,2002:python/object/apply:os.system'"]),
-    ('binary tag', edit('horizon: 10.0', 'horizon: !!binary aGVsbG8='), 2, ["horizon: expected a number, got b'hello'"]),
-    ('a date', edit('horizon: 10.0', 'horizon: 2001-12-14'), 2, ['horizon: expected a number, got datetime.date(2001, 12, 14)']),
-    ('duplicate key', edit('  3: {position', '  2: {position'), 2, ['line 8, column 3', 'found duplicate key 2']),
-    ('duplicate id spelled as text', edit('  3: {position', '  "1": {position'), 2, ['agents.1: agent 1 is listed twice']),
-    ('merge key with an unknown key', edit('gains: {alpha: 10.0, beta: 1.0}', 'base: &g {alpha: 10.0}\ngains: {<<: *g, beta: 1.0}'), 2, ["scenario: unknown key 'base'"]),
-    ('unhashable key', edit('  1: {position: [2.0, 4.0]}', '  ? [1, 2]\n  : {position: [2.0, 4.0]}'), 2, ['line 6, column 5', 'found unhashable key']),
+    (
+        'alias bomb',
+        BOMB + PAPER.replace('horizon: 10.0', 'horizon: *i').replace('name: case\n', ''),
+        2,
+        ['more than 300000 nodes with its aliases expanded', 'an alias bomb?'],
+    ),
+    (
+        'recursive alias',
+        edit('[2.0, 4.0]', '&r [*r]'),
+        2,
+        ['agents.1.position[0]: expected a number, got [[[[...]]]]'],
+    ),
+    (
+        'python object tag',
+        edit('horizon: 10.0', "horizon: !!python/object/apply:os.system ['echo hi']"),
+        2,
+        [
+            'line 4, column 10',
+            "could not determine a constructor for the tag 'tag:yaml.org,2002:python/object/apply:os.system'",
+        ],
+    ),
+    (
+        'binary tag',
+        edit('horizon: 10.0', 'horizon: !!binary aGVsbG8='),
+        2,
+        ["horizon: expected a number, got b'hello'"],
+    ),
+    (
+        'a date',
+        edit('horizon: 10.0', 'horizon: 2001-12-14'),
+        2,
+        ['horizon: expected a number, got datetime.date(2001, 12, 14)'],
+    ),
+    (
+        'duplicate key',
+        edit('  3: {position', '  2: {position'),
+        2,
+        ['line 8, column 3', 'found duplicate key 2'],
+    ),
+    (
+        'duplicate id spelled as text',
+        edit('  3: {position', '  "1": {position'),
+        2,
+        ['agents.1: agent 1 is listed twice'],
+    ),
+    (
+        'merge key with an unknown key',
+        edit('gains: {alpha: 10.0, beta: 1.0}', 'base: &g {alpha: 10.0}\ngains: {<<: *g, beta: 1.0}'),
+        2,
+        ["scenario: unknown key 'base'"],
+    ),
+    (
+        'unhashable key',
+        edit('  1: {position: [2.0, 4.0]}', '  ? [1, 2]\n  : {position: [2.0, 4.0]}'),
+        2,
+        ['line 6, column 5', 'found unhashable key'],
+    ),
     ('two documents', PAPER + '---\n' + PAPER, 2, ['line 14, column 1', 'expected a single document']),
     ('empty file', '', 2, ['scenario: expected a mapping, got None']),
     ('a list', '- 1\n- 2\n', 2, ['scenario: expected a mapping, got [1, 2]']),
-    ('tab indentation', edit('  1: {', '\t1: {'), 2, ['line 6, column 1', "found character '\\t' that cannot start any token"]),
+    (
+        'tab indentation',
+        edit('  1: {', '\t1: {'),
+        2,
+        ['line 6, column 1', "found character '\\t' that cannot start any token"],
+    ),
     ('NUL byte', edit('horizon: 10.0', 'horizon: 1\x000'), 2, ['unacceptable character #x0000']),
-    ('nested too deeply', edit('horizon: 10.0', 'horizon: ' + '[' * 5000 + ']' * 5000), 2, ['nested too deeply']),
-    ('non-UTF-8 bytes', PAPER.encode().replace(b'name: case', b'name: ca\xffse'), 2, ['not UTF-8 text: byte 0xff at line 1 (offset 8)']),
+    (
+        'nested too deeply',
+        edit('horizon: 10.0', 'horizon: ' + '[' * 5000 + ']' * 5000),
+        2,
+        ['nested too deeply'],
+    ),
+    (
+        'non-UTF-8 bytes',
+        PAPER.encode().replace(b'name: case', b'name: ca\xffse'),
+        2,
+        ['not UTF-8 text: byte 0xff at line 1 (offset 8)'],
+    ),
     ('10 MB file', '# ' + 'x' * 10_000_000 + '\n', 2, ['10.0 MB; a scenario file holds at most 4.2 MB']),
-    ('100 kB string', edit('horizon: 10.0', 'horizon: ' + 'x' * 100_000), 2, ["horizon: expected a number, got 'xxxxxxxxxxxx", "xxx'"]),
-    ('10 kB key', edit('horizon: 10.0', 'horizon: 10.0\n' + 'k' * 10_000 + ': 1'), 2, ['line 5', "could not find expected ':'"]),
+    (
+        '100 kB string',
+        edit('horizon: 10.0', 'horizon: ' + 'x' * 100_000),
+        2,
+        ["horizon: expected a number, got 'xxxxxxxxxxxx", "xxx'"],
+    ),
+    (
+        '10 kB key',
+        edit('horizon: 10.0', 'horizon: 10.0\n' + 'k' * 10_000 + ': 1'),
+        2,
+        ['line 5', "could not find expected ':'"],
+    ),
     # -- ids
-    ('id 2^31', rename_agent_3(2**31), 2, ['agents.2147483648: agent ids are integers in [0, 2147483647]', 'got 2147483648']),
-    ('id 1e30', rename_agent_3('1e30'), 2, ['agents.1e+30: agent ids are integers in [0, 2147483647]', 'got 1e+30']),
-    ('id 10^30', rename_agent_3(10**30), 2, ['agent ids are integers in [0, 2147483647]', 'an integer of 31 digits']),
-    ('id negative', rename_agent_3(-3), 2, ['agents.-3: agent ids are integers in [0, 2147483647]', 'got -3']),
+    (
+        'id 2^31',
+        rename_agent_3(2**31),
+        2,
+        ['agents.2147483648: agent ids are integers in [0, 2147483647]', 'got 2147483648'],
+    ),
+    (
+        'id 1e30',
+        rename_agent_3('1e30'),
+        2,
+        ['agents.1e+30: agent ids are integers in [0, 2147483647]', 'got 1e+30'],
+    ),
+    (
+        'id 10^30',
+        rename_agent_3(10**30),
+        2,
+        ['agent ids are integers in [0, 2147483647]', 'an integer of 31 digits'],
+    ),
+    (
+        'id negative',
+        rename_agent_3(-3),
+        2,
+        ['agents.-3: agent ids are integers in [0, 2147483647]', 'got -3'],
+    ),
     ('id float', rename_agent_3(3.5), 2, ['agents.3.5: agent ids are integers', 'got 3.5']),
     ('id text', rename_agent_3('three'), 2, ['agents.three: agent ids are integers', "got 'three'"]),
-    ('id bool', PAPER.replace('  1: {', '  true: {').replace('i: 1,', 'i: true,'), 2, ['agents.True: agent ids are integers', 'got True']),
-    ('edge id as text', edit('i: 2, j: 3', 'i: "2", j: 3'), 2, ['edges[2].i: agent ids are integers', "got '2'"]),
-    ('edge to nobody', edit('j: 3, d: [-2.0, 2.0]', 'j: 9, d: [-2.0, 2.0]'), 2, ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)']),
+    (
+        'id bool',
+        PAPER.replace('  1: {', '  true: {').replace('i: 1,', 'i: true,'),
+        2,
+        ['agents.True: agent ids are integers', 'got True'],
+    ),
+    (
+        'edge id as text',
+        edit('i: 2, j: 3', 'i: "2", j: 3'),
+        2,
+        ['edges[2].i: agent ids are integers', "got '2'"],
+    ),
+    (
+        'edge to nobody',
+        edit('j: 3, d: [-2.0, 2.0]', 'j: 9, d: [-2.0, 2.0]'),
+        2,
+        ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)'],
+    ),
     # -- names
     ('empty name', edit('name: case', "name: ''"), 2, ["name: expected a non-empty string, got ''"]),
     ('name a number', edit('name: case', 'name: 42'), 2, ['name: expected a non-empty string, got 42']),
-    ('name of 300 characters', edit('name: case', 'name: ' + 'n' * 300), 2, ['name: at most 200 printable characters', '(300 characters)']),
-    ('name with a line break', edit('name: case', 'name: "a\\nb"'), 2, ["name: at most 200 printable characters (no line breaks or control characters), got 'a\\nb'"]),
+    (
+        'name of 300 characters',
+        edit('name: case', 'name: ' + 'n' * 300),
+        2,
+        ['name: at most 200 printable characters', '(300 characters)'],
+    ),
+    (
+        'name with a line break',
+        edit('name: case', 'name: "a\\nb"'),
+        2,
+        ["name: at most 200 printable characters (no line breaks or control characters), got 'a\\nb'"],
+    ),
     # -- sizes
-    ('no agents', PAPER.split('agents:')[0] + 'agents: {}\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n', 2, ['agents: the formation problem needs at least 2 agents, got 0']),
-    ('one agent', PAPER.split('agents:')[0] + 'agents: {1: {position: [0.0]}}\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n', 2, ['at least 2 agents, got 1']),
-    ('agents null', PAPER.split('agents:')[0] + 'agents:\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n', 2, ['agents: expected a mapping, got None']),
-    ('no edges', PAPER.split('edges:')[0] + 'edges: []\ngains: {alpha: 10.0, beta: 1.0}\n', 1, ['[connected] graph: the graph has 3 connected components']),
-    ('p = 0', edit('[2.0, 4.0]', '[]'), 2, ['agents.1.position: expected a non-empty list of numbers, got []']),
-    ('mismatched dimensions', edit('[2.0, 4.0]', '[2.0, 4.0, 1.0]'), 2, ['agents.2.position: has 2 components, expected 3']),
-    ('d of another dimension', edit('d: [0.0, -2.0]', 'd: [0.0]'), 2, ['edges[0] (1, 2).d: has 1 components, expected 2']),
-    ('gains as a list', edit('gains: {alpha: 10.0, beta: 1.0}', 'gains: [10.0, 1.0]'), 2, ['gains: expected a mapping, got [10.0, 1.0]']),
-    ('an edge as a list', edit('{i: 1, j: 2, d: [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'), 2, ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]']),
+    (
+        'no agents',
+        PAPER.split('agents:')[0] + 'agents: {}\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n',
+        2,
+        ['agents: the formation problem needs at least 2 agents, got 0'],
+    ),
+    (
+        'one agent',
+        PAPER.split('agents:')[0]
+        + 'agents: {1: {position: [0.0]}}\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n',
+        2,
+        ['at least 2 agents, got 1'],
+    ),
+    (
+        'agents null',
+        PAPER.split('agents:')[0] + 'agents:\nedges: []\ngains: {alpha: 1.0, beta: 0.1}\n',
+        2,
+        ['agents: expected a mapping, got None'],
+    ),
+    (
+        'no edges',
+        PAPER.split('edges:')[0] + 'edges: []\ngains: {alpha: 10.0, beta: 1.0}\n',
+        1,
+        ['[connected] graph: the graph has 3 connected components'],
+    ),
+    (
+        'p = 0',
+        edit('[2.0, 4.0]', '[]'),
+        2,
+        ['agents.1.position: expected a non-empty list of numbers, got []'],
+    ),
+    (
+        'mismatched dimensions',
+        edit('[2.0, 4.0]', '[2.0, 4.0, 1.0]'),
+        2,
+        ['agents.2.position: has 2 components, expected 3'],
+    ),
+    (
+        'd of another dimension',
+        edit('d: [0.0, -2.0]', 'd: [0.0]'),
+        2,
+        ['edges[0] (1, 2).d: has 1 components, expected 2'],
+    ),
+    (
+        'gains as a list',
+        edit('gains: {alpha: 10.0, beta: 1.0}', 'gains: [10.0, 1.0]'),
+        2,
+        ['gains: expected a mapping, got [10.0, 1.0]'],
+    ),
+    (
+        'an edge as a list',
+        edit('{i: 1, j: 2, d: [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'),
+        2,
+        ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]'],
+    ),
 ]
 
 # The same problem as a JSON file (the format for large teams), one agent and one edge a line.
@@ -224,52 +467,187 @@ def edit_json(old, new):
 
 JSON_CATALOGUE = [
     # -- syntax, with line and column
-    ('missing comma', edit_json('"horizon": 10.0,', '"horizon": 10.0'), 2, ["malformed JSON at line 6, column 1: Expecting ',' delimiter"]),
-    ('trailing comma', edit_json('"beta": 1.0}', '"beta": 1.0,}'), 2, ['malformed JSON at line 16, column 38: Expecting property name enclosed in double quotes']),
-    ('single quotes', edit_json('"dynamics": "single"', "'dynamics': 'single'"), 2, ['malformed JSON at line 3, column 1']),
+    (
+        'missing comma',
+        edit_json('"horizon": 10.0,', '"horizon": 10.0'),
+        2,
+        ["malformed JSON at line 6, column 1: Expecting ',' delimiter"],
+    ),
+    (
+        'trailing comma',
+        edit_json('"beta": 1.0}', '"beta": 1.0,}'),
+        2,
+        ['malformed JSON at line 16, column 38: Expecting property name enclosed in double quotes'],
+    ),
+    (
+        'single quotes',
+        edit_json('"dynamics": "single"', "'dynamics': 'single'"),
+        2,
+        ['malformed JSON at line 3, column 1'],
+    ),
     ('two documents', PAPER_JSON + PAPER_JSON, 2, ['malformed JSON at line 18, column 1: Extra data']),
     ('empty file', '', 2, ['malformed JSON at line 1, column 1: Expecting value']),
-    ('NUL byte in a string', edit_json('"name": "case"', '"name": "ca\x00se"'), 2, ['malformed JSON at line 2, column 12: Invalid control character']),
-    ('nested too deeply', edit_json('"horizon": 10.0', '"horizon": ' + '[' * 100_000 + ']' * 100_000), 2, ['malformed JSON: nested too deeply']),
-    ('non-UTF-8 bytes', PAPER_JSON.encode().replace(b'"case"', b'"ca\xffse"'), 2, ['not UTF-8 text: byte 0xff at line 2 (offset 13)', 'UTF-8 JSON']),
-    ('40 MB file', lambda: ' ' * 40_000_000 + PAPER_JSON, 2, ['40.0 MB; a JSON scenario file holds at most 33.6 MB: refused']),
+    (
+        'NUL byte in a string',
+        edit_json('"name": "case"', '"name": "ca\x00se"'),
+        2,
+        ['malformed JSON at line 2, column 12: Invalid control character'],
+    ),
+    (
+        'nested too deeply',
+        edit_json('"horizon": 10.0', '"horizon": ' + '[' * 100_000 + ']' * 100_000),
+        2,
+        ['malformed JSON: nested too deeply'],
+    ),
+    (
+        'non-UTF-8 bytes',
+        PAPER_JSON.encode().replace(b'"case"', b'"ca\xffse"'),
+        2,
+        ['not UTF-8 text: byte 0xff at line 2 (offset 13)', 'UTF-8 JSON'],
+    ),
+    (
+        '40 MB file',
+        lambda: ' ' * 40_000_000 + PAPER_JSON,
+        2,
+        ['40.0 MB; a JSON scenario file holds at most 33.6 MB: refused'],
+    ),
     # -- what json.loads would accept silently or differently
-    ('duplicate key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"horizon": 20.0,'), 2, ["malformed JSON: duplicate key 'horizon'", "'communication_radius', 'horizon', 'horizon'"]),
-    ('duplicate agent', edit_json('"3": {"position": [4.5, 5.5]}', '"2": {"position": [4.5, 5.5]}'), 2, ["duplicate key '2' in the object with keys ['1', '2', '2']"]),
+    (
+        'duplicate key',
+        edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"horizon": 20.0,'),
+        2,
+        ["malformed JSON: duplicate key 'horizon'", "'communication_radius', 'horizon', 'horizon'"],
+    ),
+    (
+        'duplicate agent',
+        edit_json('"3": {"position": [4.5, 5.5]}', '"2": {"position": [4.5, 5.5]}'),
+        2,
+        ["duplicate key '2' in the object with keys ['1', '2', '2']"],
+    ),
     ('NaN', edit_json('"alpha": 10.0', '"alpha": NaN'), 2, ['gains.alpha: must be finite, got nan']),
-    ('-Infinity', edit_json('[2.0, 4.0]', '[-Infinity, 4.0]'), 2, ['agents.1.position[0]: must be finite, got -inf']),
+    (
+        '-Infinity',
+        edit_json('[2.0, 4.0]', '[-Infinity, 4.0]'),
+        2,
+        ['agents.1.position[0]: must be finite, got -inf'],
+    ),
     ('1e999', edit_json('"horizon": 10.0', '"horizon": 1e999'), 2, ['horizon: must be finite, got inf']),
-    ('integer beyond a double', edit_json('"beta": 1.0', '"beta": 1' + '0' * 400), 2, ['gains.beta: 100000000000... (an integer of 401 digits) is too large for a double']),
-    ('integer past int() digits', edit_json('"horizon": 10.0', '"horizon": 1' + '0' * 6000), 2, ['an integer of 6001 digits is too large for a double']),
-    ('nan spelled as text', edit_json('"alpha": 10.0', '"alpha": "nan"'), 2, ["gains.alpha: expected a number, got 'nan'"]),
-    ('true for a number', edit_json('"alpha": 10.0', '"alpha": true'), 2, ['gains.alpha: expected a number, got True']),
-    ('subnormal α', edit_json('"alpha": 10.0', '"alpha": 5e-324'), 1, ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double']),
-    ('β a hair above β0', edit_json('"beta": 1.0', '"beta": 1.500000000000001'), 1, ['0 < β < β0 = 1.5 required, got β = 1.500000000000001']),
+    (
+        'integer beyond a double',
+        edit_json('"beta": 1.0', '"beta": 1' + '0' * 400),
+        2,
+        ['gains.beta: 100000000000... (an integer of 401 digits) is too large for a double'],
+    ),
+    (
+        'integer past int() digits',
+        edit_json('"horizon": 10.0', '"horizon": 1' + '0' * 6000),
+        2,
+        ['an integer of 6001 digits is too large for a double'],
+    ),
+    (
+        'nan spelled as text',
+        edit_json('"alpha": 10.0', '"alpha": "nan"'),
+        2,
+        ["gains.alpha: expected a number, got 'nan'"],
+    ),
+    (
+        'true for a number',
+        edit_json('"alpha": 10.0', '"alpha": true'),
+        2,
+        ['gains.alpha: expected a number, got True'],
+    ),
+    (
+        'subnormal α',
+        edit_json('"alpha": 10.0', '"alpha": 5e-324'),
+        1,
+        ['[parameters] gains: gains.alpha = 5e-324 is a subnormal double'],
+    ),
+    (
+        'β a hair above β0',
+        edit_json('"beta": 1.0', '"beta": 1.500000000000001'),
+        1,
+        ['0 < β < β0 = 1.5 required, got β = 1.500000000000001'],
+    ),
     # -- the schema, as for YAML
     ('a list', '[1, 2]', 2, ['scenario: expected a mapping, got [1, 2]']),
-    ('unknown key', edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"extra": 1,'), 2, ["scenario: unknown key 'extra'"]),
-    ('agents null', PAPER_JSON.split('"agents"', maxsplit=1)[0] + '"agents": null,\n"edges": [],\n"gains": {"alpha": 1.0, "beta": 0.1}\n}', 2, ['agents: expected a mapping, got None']),
-    ('id 2^31', edit_json('"3": {', '"2147483648": {').replace('"j": 3', '"j": 2147483648'), 2, ['agents.2147483648: agent ids are integers in [0, 2147483647]']),
-    ('id text', edit_json('"3": {', '"three": {'), 2, ['agents.three: agent ids are integers', "got 'three'"]),
-    ('edge id as text', edit_json('"i": 2, "j": 3', '"i": "2", "j": 3'), 2, ['edges[2].i: agent ids are integers', "got '2'"]),
-    ('edge to nobody', edit_json('"i": 2, "j": 3', '"i": 2, "j": 9'), 2, ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)']),
-    ('name of 300 characters', edit_json('"name": "case"', '"name": "' + 'n' * 300 + '"'), 2, ['name: at most 200 printable characters', '(300 characters)']),
-    ('mismatched dimensions', edit_json('[2.0, 4.0]', '[2.0, 4.0, 1.0]'), 2, ['agents.2.position: has 2 components, expected 3']),
-    ('an edge as a list', edit_json('{"i": 1, "j": 2, "d": [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'), 2, ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]']),
-    ('no edges', PAPER_JSON.split('"edges"', maxsplit=1)[0] + '"edges": [],\n"gains": {"alpha": 10.0, "beta": 1.0}\n}', 1, ['[connected] graph: the graph has 3 connected components']),
+    (
+        'unknown key',
+        edit_json('"horizon": 10.0,', '"horizon": 10.0,\n"extra": 1,'),
+        2,
+        ["scenario: unknown key 'extra'"],
+    ),
+    (
+        'agents null',
+        PAPER_JSON.split('"agents"', maxsplit=1)[0]
+        + '"agents": null,\n"edges": [],\n"gains": {"alpha": 1.0, "beta": 0.1}\n}',
+        2,
+        ['agents: expected a mapping, got None'],
+    ),
+    (
+        'id 2^31',
+        edit_json('"3": {', '"2147483648": {').replace('"j": 3', '"j": 2147483648'),
+        2,
+        ['agents.2147483648: agent ids are integers in [0, 2147483647]'],
+    ),
+    (
+        'id text',
+        edit_json('"3": {', '"three": {'),
+        2,
+        ['agents.three: agent ids are integers', "got 'three'"],
+    ),
+    (
+        'edge id as text',
+        edit_json('"i": 2, "j": 3', '"i": "2", "j": 3'),
+        2,
+        ['edges[2].i: agent ids are integers', "got '2'"],
+    ),
+    (
+        'edge to nobody',
+        edit_json('"i": 2, "j": 3', '"i": 2, "j": 9'),
+        2,
+        ['edges[2] (2, 9): j=9 is not an agent (agents: 1, 2, 3)'],
+    ),
+    (
+        'name of 300 characters',
+        edit_json('"name": "case"', '"name": "' + 'n' * 300 + '"'),
+        2,
+        ['name: at most 200 printable characters', '(300 characters)'],
+    ),
+    (
+        'mismatched dimensions',
+        edit_json('[2.0, 4.0]', '[2.0, 4.0, 1.0]'),
+        2,
+        ['agents.2.position: has 2 components, expected 3'],
+    ),
+    (
+        'an edge as a list',
+        edit_json('{"i": 1, "j": 2, "d": [0.0, -2.0]}', '[1, 2, [0.0, -2.0]]'),
+        2,
+        ['edges[0]: expected a mapping, got [1, 2, [0.0, -2.0]]'],
+    ),
+    (
+        'no edges',
+        PAPER_JSON.split('"edges"', maxsplit=1)[0] + '"edges": [],\n"gains": {"alpha": 10.0, "beta": 1.0}\n}',
+        1,
+        ['[connected] graph: the graph has 3 connected components'],
+    ),
 ]
 
 MESSAGE_LIMIT = 2000  # characters: an error quotes values cut short, never their whole expansion
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize(('label', 'content', 'code', 'fragments'), CATALOGUE, ids=[case[0] for case in CATALOGUE])
+@pytest.mark.parametrize(
+    ('label', 'content', 'code', 'fragments'), CATALOGUE, ids=[case[0] for case in CATALOGUE]
+)
 def test_every_broken_file_gets_a_clear_answer(tmp_path, capsys, label, content, code, fragments):
     _check_clear_answer(tmp_path / 'case.yaml', capsys, label, content, code, fragments)
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize(('label', 'content', 'code', 'fragments'), JSON_CATALOGUE, ids=[case[0] for case in JSON_CATALOGUE])
+@pytest.mark.parametrize(
+    ('label', 'content', 'code', 'fragments'), JSON_CATALOGUE, ids=[case[0] for case in JSON_CATALOGUE]
+)
 def test_every_broken_json_file_gets_a_clear_answer(tmp_path, capsys, label, content, code, fragments):
     _check_clear_answer(tmp_path / 'case.json', capsys, label, content, code, fragments)
 
@@ -290,8 +668,17 @@ def test_a_deeply_nested_json_file_is_refused_in_its_own_process(tmp_path):
     path = tmp_path / 'deep.json'
     path.write_text('{"horizon": ' + '[' * 1_000_000 + ']' * 1_000_000 + '}')
     done = subprocess.run(
-        [sys.executable, '-c', 'import sys; from formation_sim.cli import main; sys.exit(main(sys.argv[1:]))', 'validate', str(path)],
-        capture_output=True, text=True, timeout=60, check=False,
+        [
+            sys.executable,
+            '-c',
+            'import sys; from formation_sim.cli import main; sys.exit(main(sys.argv[1:]))',
+            'validate',
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert done.returncode == 2, done.stderr[-2000:]
     assert 'malformed JSON: nested too deeply' in done.stderr and len(done.stderr) < MESSAGE_LIMIT
@@ -328,7 +715,11 @@ def test_a_byte_order_mark_is_read_as_utf8(tmp_path, capsys, prefix):
 
 def test_merge_keys_and_aliases_in_allowed_places_are_read(tmp_path, capsys):
     path = tmp_path / 'case.yaml'
-    path.write_text(edit('gains: {alpha: 10.0, beta: 1.0}', 'gains: {<<: {alpha: 10.0, beta: 0.5}, beta: 1.0}').replace('d: [0.0, -2.0]', 'd: &down [0.0, -2.0]'))
+    path.write_text(
+        edit('gains: {alpha: 10.0, beta: 1.0}', 'gains: {<<: {alpha: 10.0, beta: 0.5}, beta: 1.0}').replace(
+            'd: [0.0, -2.0]', 'd: &down [0.0, -2.0]'
+        )
+    )
     assert main(['validate', str(path), '--json']) == 0
     report = json.loads(capsys.readouterr().out)
     assert report['ok'] and 'β0 = ρ2/Δ0 = 1.5' in json.dumps(report, ensure_ascii=False)
@@ -343,15 +734,32 @@ def test_the_largest_agent_id_is_accepted(tmp_path):
 def test_an_alias_bomb_costs_neither_time_nor_memory(tmp_path):
     """In its own process with 1 GiB of address space: before the fix this took 1.5 GB and 358 MB of stderr."""
     path = tmp_path / 'bomb.yaml'
-    path.write_text(BOMB + 'j: &j [' + ', '.join(['*i'] * 9) + ']\n' + PAPER.replace('horizon: 10.0', 'horizon: *j').replace('name: case\n', ''))
+    path.write_text(
+        BOMB
+        + 'j: &j ['
+        + ', '.join(['*i'] * 9)
+        + ']\n'
+        + PAPER.replace('horizon: 10.0', 'horizon: *j').replace('name: case\n', '')
+    )
     assert path.stat().st_size < 1000
     limit = 'import resource; resource.setrlimit(resource.RLIMIT_AS, (2**30, 2**30)); '
     done = subprocess.run(
-        [sys.executable, '-c', limit + 'import sys; from formation_sim.cli import main; sys.exit(main(sys.argv[1:]))', 'validate', str(path)],
-        capture_output=True, text=True, timeout=60, check=False,
+        [
+            sys.executable,
+            '-c',
+            limit + 'import sys; from formation_sim.cli import main; sys.exit(main(sys.argv[1:]))',
+            'validate',
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert done.returncode == 2, done.stderr[-2000:]
     assert 'with its aliases expanded' in done.stderr and len(done.stderr) < MESSAGE_LIMIT
+
+
 # -- --max-speed: the largest command a robot is asked for -------------------------------------
 
 
@@ -369,14 +777,19 @@ def test_a_scenario_whose_bound_is_too_loose_is_decided_by_an_exact_run_and_says
     assert main(['validate', 'paper_single', '--max-speed', '0.22']) == 1
     out = capsys.readouterr().out
     assert 'the theory bounds the speed by 5.842e+04 m/s' in out
-    assert 'largest speed: 535.7 m/s EXCEEDS 0.22 m/s (the largest in an exact in-process run, not a guarantee)' in out
+    assert (
+        'largest speed: 535.7 m/s EXCEEDS 0.22 m/s (the largest in an exact in-process run, not a guarantee)'
+        in out
+    )
 
 
 def test_command_limits_in_json_and_bad_limits_refused(capsys):
     assert main(['validate', 'paper_double', '--max-speed', '5', '--max-acceleration', '10', '--json']) == 1
     data = json.loads(capsys.readouterr().out)
     largest = data['commands']['largest']
-    assert largest['source'] == 'exact run' and math.isclose(largest['max_acceleration'], 1208.19, rel_tol=1e-5)
+    assert largest['source'] == 'exact run' and math.isclose(
+        largest['max_acceleration'], 1208.19, rel_tol=1e-5
+    )
     assert data['commands']['within'] is False
     assert main(['validate', 'robots_square', '--max-speed', '-1']) == 2
     assert 'argument --max-speed: must be a finite number > 0, got -1.0' in capsys.readouterr().err
@@ -387,13 +800,17 @@ def test_validate_reports_both_speed_scales_and_their_settling_times(capsys):
     from formation_sim.sim.largest_command import measured_command
 
     # robots_lab is set down 21-30 cm off its corners: at κ = 1 it asks for more than a TurtleBot can do
-    assert main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '2.84', '--json']) == 1
+    assert (
+        main(['validate', 'robots_lab', '--max-speed', '0.22', '--max-angular-speed', '2.84', '--json']) == 1
+    )
     data = json.loads(capsys.readouterr().out)['commands']['speed_scale']
     asked = measured_command(load_scenario('robots_lab')).max_speed
     assert data['source'] == 'observed' and math.isclose(data['value'] * asked * 1.25, 0.22, rel_tol=1e-12)
     assert data['guaranteed']['value'] < data['observed']['value']
     assert data['settling']['definition'].startswith('first time after which the formation error')
-    assert math.isclose(data['observed']['settle_time'], data['settling']['time_at_1'] / data['value'], rel_tol=1e-12)
+    assert math.isclose(
+        data['observed']['settle_time'], data['settling']['time_at_1'] / data['value'], rel_tol=1e-12
+    )
     assert main(['validate', 'robots_lab', '--max-speed', '0.22']) == 1
     out = capsys.readouterr().out
     assert f'--speed-scale auto runs κ = {data["value"]:.4g} (observed)' in out
@@ -408,7 +825,9 @@ def test_an_acceleration_limit_on_eta1_is_refused_with_the_reason(capsys):
 def test_validate_suggests_the_threshold_floor_for_a_pose_noise(capsys):
     assert main(['validate', 'robots_lab', '--pose-noise', '0.005', '--json']) == 0
     floor = json.loads(capsys.readouterr().out)['threshold_floor']
-    assert math.isclose(floor['suggested'], 3 * math.sqrt(10) * 0.005, rel_tol=1e-12)  # ω_ij = 2/(3 - 1) = 1, two neighbours
+    assert math.isclose(
+        floor['suggested'], 3 * math.sqrt(10) * 0.005, rel_tol=1e-12
+    )  # ω_ij = 2/(3 - 1) = 1, two neighbours
     assert main(['validate', 'robots_lab', '--pose-noise', '0.005']) == 0
     out = capsys.readouterr().out
     assert f'suggested c0 = {floor["suggested"]:.3g}' in out and 'sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²)' in out

@@ -11,8 +11,13 @@ from formation_sim.model.scenario import scenario_from_dict, scenario_to_dict
 from formation_sim.model.validate import validate_scenario
 
 CASES = [
-    dict(n=2 + (seed * 7) % 60, seed=seed, dynamics=('single', 'double')[seed % 2], dimension=1 + seed % 3,
-         slack=(0.5, 0.2, 0.9, 0.04)[seed % 4])
+    dict(
+        n=2 + (seed * 7) % 60,
+        seed=seed,
+        dynamics=('single', 'double')[seed % 2],
+        dimension=1 + seed % 3,
+        slack=(0.5, 0.2, 0.9, 0.04)[seed % 4],
+    )
     for seed in range(50)
 ]
 
@@ -73,15 +78,18 @@ def test_ten_thousand_agents():
     assert 0.0 < s.gains.beta < theory.beta0(s)
 
 
-@pytest.mark.parametrize('kwargs, fragment', [
-    (dict(n=1, seed=0), 'n must be an integer >= 2'),
-    (dict(n=5, seed=0, slack=0.0), 'slack'),
-    (dict(n=5, seed=0, slack=1.5), 'slack'),
-    (dict(n=5, seed=0, dynamics='triple'), 'dynamics'),
-    (dict(n=5, seed=0, dimension=0), 'dimension'),
-    (dict(n=5, seed=0, delta=-1.0), 'delta'),
-    (dict(n=5, seed=0, alpha=0.0), 'alpha'),
-])
+@pytest.mark.parametrize(
+    'kwargs, fragment',
+    [
+        (dict(n=1, seed=0), 'n must be an integer >= 2'),
+        (dict(n=5, seed=0, slack=0.0), 'slack'),
+        (dict(n=5, seed=0, slack=1.5), 'slack'),
+        (dict(n=5, seed=0, dynamics='triple'), 'dynamics'),
+        (dict(n=5, seed=0, dimension=0), 'dimension'),
+        (dict(n=5, seed=0, delta=-1.0), 'delta'),
+        (dict(n=5, seed=0, alpha=0.0), 'alpha'),
+    ],
+)
 def test_bad_parameters(kwargs, fragment):
     with pytest.raises(GenerateError, match=fragment):
         random_scenario(**kwargs)
@@ -109,16 +117,22 @@ def test_graph_families_are_valid_teams_of_their_shape(graph, dynamics):
 
 def test_gain_fractions_and_their_defaults():
     default = random_scenario(n=12, seed=4, dynamics='double')
-    assert random_scenario(n=12, seed=4, dynamics='double', graph='geometric', beta1=1.0) == default  # the rule, bit for bit
+    assert (
+        random_scenario(n=12, seed=4, dynamics='double', graph='geometric', beta1=1.0) == default
+    )  # the rule, bit for bit
     s = random_scenario(n=12, seed=4, dynamics='double', beta1=0.5, k3=0.25, beta_d=0.9)
     beta0 = theory.beta0(s)
-    assert s.gains.beta1 == pytest.approx(0.5 * beta0) and s.gains.k3 == pytest.approx(0.25 * gains.k3_upper_bound(s.gains.k1, s.gains.k2))
+    assert s.gains.beta1 == pytest.approx(0.5 * beta0) and s.gains.k3 == pytest.approx(
+        0.25 * gains.k3_upper_bound(s.gains.k1, s.gains.k2)
+    )
     assert s.gains.beta_d == pytest.approx(0.9 * gains.beta_d_bound_paper(s.gains))
     single = random_scenario(n=12, seed=4, beta=0.99)
     assert single.gains.beta == pytest.approx(0.99 * theory.beta0(single))
     with pytest.raises(GenerateError, match=r'a cycle needs n >= 3 agents, got n = 2'):
         random_scenario(n=2, seed=0, graph='cycle')
-    with pytest.raises(GenerateError, match=r"graph must be one of geometric, star, path, cycle, complete, got 'tree'"):
+    with pytest.raises(
+        GenerateError, match=r"graph must be one of geometric, star, path, cycle, complete, got 'tree'"
+    ):
         random_scenario(n=4, seed=0, graph='tree')
     with pytest.raises(GenerateError, match=r'beta is a fraction of its bound in \(0, 1\), got 1.0'):
         random_scenario(n=4, seed=0, beta=1.0)

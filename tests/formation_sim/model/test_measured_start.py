@@ -49,7 +49,9 @@ def test_a_robot_moved_far_off_breaks_its_edges_with_the_numbers():
     assert by_edge[4, 1].error == np.linalg.norm(x4 - x1 - np.array([0.0, 1.0]))
     assert all(b.capacity == 2.0 - 1.0 for b in start.breaches)
     message = start.message()
-    assert message.startswith('edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)')
+    assert message.startswith(
+        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)'
+    )
     assert 'edge (4,1): the measured ‖x_4 − x_1 − d_41‖ = 1.49 m' in message
     assert message.endswith(': the run does not start')
     assert start.largest == (1, 1.5)
@@ -78,7 +80,9 @@ def test_a_unicycle_is_checked_at_its_control_point_not_its_axle():
     scenario = load_scenario('robots_square')
 
     def measured(yaw: float):
-        point = pose_sample(_pose(-0.95, 0.0, yaw), model='unicycle', dimension=2, control_point_distance=0.1, epoch=0.0).position
+        point = pose_sample(
+            _pose(-0.95, 0.0, yaw), model='unicycle', dimension=2, control_point_distance=0.1, epoch=0.0
+        ).position
         return point, check_measured_start(scenario, _moved(scenario, 1, point))
 
     axle = check_measured_start(scenario, _moved(scenario, 1, (-0.95, 0.0)))

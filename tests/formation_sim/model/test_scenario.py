@@ -140,18 +140,21 @@ def awkward_scenario() -> Scenario:
             Edge(i=3, j=42, d=np.array([1.0, 2.0, 3.0])),
         ),
         gains=DoubleGains(
-            alpha_d=0.7, beta_d=1e-3, beta1=2.0 / 3.0, k3=0.123456789012345678,
-            k1=1.1, k2=2.2, P=np.array([[9.75, 1.1], [1.1, 2.2]]),
+            alpha_d=0.7,
+            beta_d=1e-3,
+            beta1=2.0 / 3.0,
+            k3=0.123456789012345678,
+            k1=1.1,
+            k2=2.2,
+            P=np.array([[9.75, 1.1], [1.1, 2.2]]),
         ),
         horizon=12.5,
     )
 
 
-@pytest.mark.parametrize('make', [
-    lambda: load_scenario('paper_single'),
-    lambda: load_scenario('paper_double'),
-    awkward_scenario,
-])
+@pytest.mark.parametrize(
+    'make', [lambda: load_scenario('paper_single'), lambda: load_scenario('paper_double'), awkward_scenario]
+)
 @pytest.mark.parametrize('suffix', ['.yaml', '.json', '.JSON'])
 def test_dict_and_file_round_trips_are_exact(make, tmp_path, suffix):
     s = make()
@@ -200,6 +203,7 @@ def _set(path, value):
         for key in path[:-1]:
             target = target[key]
         target[path[-1]] = value
+
     return mutate
 
 
@@ -209,6 +213,7 @@ def _delete(path):
         for key in path[:-1]:
             target = target[key]
         del target[path[-1]]
+
     return mutate
 
 
@@ -225,20 +230,52 @@ BROKEN_SINGLE = [
     ('horizon zero', _set(('horizon',), 0), ['horizon', 'must be > 0', '0']),
     ('horizon text', _set(('horizon',), 'long'), ['horizon', "expected a number, got 'long'"]),
     ('delta nan', _set(('communication_radius',), float('nan')), ['communication_radius', 'finite']),
-    ('position inf', _set(('agents', 2, 'position'), [1.0, float('inf')]), ['agents.2.position[1]', 'finite']),
+    (
+        'position inf',
+        _set(('agents', 2, 'position'), [1.0, float('inf')]),
+        ['agents.2.position[1]', 'finite'],
+    ),
     ('position text', _set(('agents', 3, 'position'), [1.0, 'x']), ['agents.3.position[1]', "'x'"]),
     ('position bool', _set(('agents', 3, 'position'), [1.0, True]), ['agents.3.position[1]', 'True']),
-    ('position size', _set(('agents', 2, 'position'), [1.0, 2.0, 3.0]), ['agents.2.position', '3 components', 'expected 2']),
-    ('position scalar', _set(('agents', 2, 'position'), 5.0), ['agents.2.position', 'list of numbers', '5.0']),
+    (
+        'position size',
+        _set(('agents', 2, 'position'), [1.0, 2.0, 3.0]),
+        ['agents.2.position', '3 components', 'expected 2'],
+    ),
+    (
+        'position scalar',
+        _set(('agents', 2, 'position'), 5.0),
+        ['agents.2.position', 'list of numbers', '5.0'],
+    ),
     ('velocity for single', _set(('agents', 1, 'velocity'), [0.0, 0.0]), ['agents.1.velocity', "'single'"]),
     ('unknown agent key', _set(('agents', 1, 'colour'), 'red'), ['agents.1', "unknown key 'colour'"]),
-    ('agent id text', _set(('agents', 'four'), {'position': [0.0, 0.0]}), ['agents.four', 'integers in [0, 2147483647]', "'four'"]),
-    ('agent id negative', _set(('agents', -1), {'position': [0.0, 0.0]}), ['agents.-1', 'integers in [0, 2147483647]']),
+    (
+        'agent id text',
+        _set(('agents', 'four'), {'position': [0.0, 0.0]}),
+        ['agents.four', 'integers in [0, 2147483647]', "'four'"],
+    ),
+    (
+        'agent id negative',
+        _set(('agents', -1), {'position': [0.0, 0.0]}),
+        ['agents.-1', 'integers in [0, 2147483647]'],
+    ),
     ('one agent', _set(('agents',), {1: {'position': [0.0, 0.0]}}), ['at least 2 agents']),
-    ('edge to nobody', _append_edge({'i': 1, 'j': 7, 'd': [0.0, 0.0]}), ['edges[3] (1, 7)', 'j=7 is not an agent']),
+    (
+        'edge to nobody',
+        _append_edge({'i': 1, 'j': 7, 'd': [0.0, 0.0]}),
+        ['edges[3] (1, 7)', 'j=7 is not an agent'],
+    ),
     ('self loop', _append_edge({'i': 2, 'j': 2, 'd': [0.0, 0.0]}), ['edges[3] (2, 2)', 'self-loop']),
-    ('duplicate edge', _append_edge({'i': 1, 'j': 2, 'd': [0.0, -2.0]}), ['edges[3] (1, 2)', 'duplicates edges[0] (1, 2)']),
-    ('reversed duplicate', _append_edge({'i': 2, 'j': 1, 'd': [0.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2), they agree', 'd_ji = -d_ij']),
+    (
+        'duplicate edge',
+        _append_edge({'i': 1, 'j': 2, 'd': [0.0, -2.0]}),
+        ['edges[3] (1, 2)', 'duplicates edges[0] (1, 2)'],
+    ),
+    (
+        'reversed duplicate',
+        _append_edge({'i': 2, 'j': 1, 'd': [0.0, 2.0]}),
+        ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2), they agree', 'd_ji = -d_ij'],
+    ),
     ('edge d size', _set(('edges', 1, 'd'), [1.0]), ['edges[1] (1, 3).d', '1 components', 'expected 2']),
     ('edge d nan', _set(('edges', 2, 'd'), [float('nan'), 0.0]), ['edges[2] (2, 3).d[0]', 'finite']),
     ('edge missing d', _delete(('edges', 0, 'd')), ['edges[0]', "missing key 'd'"]),
@@ -250,13 +287,26 @@ BROKEN_SINGLE = [
     ('gain nan', _set(('gains', 'beta'), float('nan')), ['gains.beta', 'finite', 'nan']),
     ('horizon negative', _set(('horizon',), -1.0), ['horizon', 'must be > 0', '-1.0']),
     ('horizon infinite', _set(('horizon',), float('inf')), ['horizon', 'finite', 'inf']),
-    ('d_ji disagreeing with d_ij', _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}), ['edges[3] (2, 1)', 'duplicates edges[0] (1, 2)', 'they disagree: d = [0.0, -2.0] there, [-1.0, -2.0] here', 'd_ji = -d_ij']),
+    (
+        'd_ji disagreeing with d_ij',
+        _append_edge({'i': 2, 'j': 1, 'd': [1.0, 2.0]}),
+        [
+            'edges[3] (2, 1)',
+            'duplicates edges[0] (1, 2)',
+            'they disagree: d = [0.0, -2.0] there, [-1.0, -2.0] here',
+            'd_ji = -d_ij',
+        ],
+    ),
 ]
 
 BROKEN_DOUBLE = [
     ('velocity missing', _delete(('agents', 2, 'velocity')), ['agents.2', 'velocity missing', "'double'"]),
     ('velocity size', _set(('agents', 3, 'velocity'), [1.0]), ['agents.3.velocity', 'expected 2']),
-    ('single gains for double', _set(('gains',), {'alpha': 1.0, 'beta': 1.0}), ["unknown key 'alpha'", "'double'"]),
+    (
+        'single gains for double',
+        _set(('gains',), {'alpha': 1.0, 'beta': 1.0}),
+        ["unknown key 'alpha'", "'double'"],
+    ),
     ('k1 without k2', _set(('gains', 'k1'), 1.0), ['gains.k1', 'without its partner']),
     ('k0 alone', _set(('gains', 'k0'), 1.0), ['gains.k0', 'without k1 and k2']),
     ('beta1 zero', _set(('gains', 'beta1'), 0.0), ['gains.beta1', '> 0', 'riccatti']),
@@ -266,7 +316,9 @@ BROKEN_DOUBLE = [
 BROKEN = [('single', *case) for case in BROKEN_SINGLE] + [('double', *case) for case in BROKEN_DOUBLE]
 
 
-@pytest.mark.parametrize('dynamics, label, mutate, fragments', BROKEN, ids=[f'{b[0]}: {b[1]}' for b in BROKEN])
+@pytest.mark.parametrize(
+    'dynamics, label, mutate, fragments', BROKEN, ids=[f'{b[0]}: {b[1]}' for b in BROKEN]
+)
 def test_broken_scenarios_name_key_and_value(dynamics, label, mutate, fragments, paper_scenario_dict):
     data = paper_scenario_dict(dynamics)
     mutate(data)
@@ -370,7 +422,9 @@ def test_short_repr_cuts_long_values_and_says_how_long():
 
     assert short_repr(-4.5) == '-4.5' and short_repr(5e-324) == '5e-324' and short_repr('four') == "'four'"
     assert short_repr(10**400) == '100000000000... (an integer of 401 digits)'
-    assert short_repr(-(10**20000)).endswith('... (an integer of about 20000 digits)')  # past int -> str's limit
+    assert short_repr(-(10**20000)).endswith(
+        '... (an integer of about 20000 digits)'
+    )  # past int -> str's limit
     assert len(short_repr('x' * 10**6)) <= 80
     nested: list = []
     nested.append(nested)
@@ -381,12 +435,24 @@ def test_short_repr_cuts_long_values_and_says_how_long():
 @pytest.mark.parametrize(
     ('make', 'fragment'),
     [
-        (lambda s: s.replace(positions=[[10**400, 0.0], [1.0, 1.0], [2.0, 2.0]]), 'positions: a value is too large for a double'),
-        (lambda s: s.replace(positions=[['a', 0.0], [1.0, 1.0], [2.0, 2.0]]), "positions: expected numbers, got [['a', 0.0]"),
-        (lambda s: s.replace(agent_ids=(1, 2, 2**31)), 'agent_ids: agent ids are integers in [0, 2147483647]'),
+        (
+            lambda s: s.replace(positions=[[10**400, 0.0], [1.0, 1.0], [2.0, 2.0]]),
+            'positions: a value is too large for a double',
+        ),
+        (
+            lambda s: s.replace(positions=[['a', 0.0], [1.0, 1.0], [2.0, 2.0]]),
+            "positions: expected numbers, got [['a', 0.0]",
+        ),
+        (
+            lambda s: s.replace(agent_ids=(1, 2, 2**31)),
+            'agent_ids: agent ids are integers in [0, 2147483647]',
+        ),
         (lambda s: Edge(i=1, j=2**31, d=np.zeros(2)), 'edge j: agent ids are integers in [0, 2147483647]'),
         (lambda s: s.replace(name='x' * 201), 'name: at most 200 printable characters'),
-        (lambda s: SingleGains(alpha=10**400, beta=1.0), 'gains.alpha: 100000000000... (an integer of 401 digits) is too large for a double'),
+        (
+            lambda s: SingleGains(alpha=10**400, beta=1.0),
+            'gains.alpha: 100000000000... (an integer of 401 digits) is too large for a double',
+        ),
     ],
 )
 def test_programmatic_construction_refuses_what_a_file_would(make, fragment):
@@ -396,10 +462,14 @@ def test_programmatic_construction_refuses_what_a_file_would(make, fragment):
 
 
 def test_the_largest_agent_id_travels():
-    s = load_scenario('paper_single').replace(agent_ids=(1, 2, 2**31 - 1), edges=(
-        Edge(i=1, j=2, d=np.array([0.0, -2.0])), Edge(i=1, j=2**31 - 1, d=np.array([-2.0, 0.0])),
-        Edge(i=2, j=2**31 - 1, d=np.array([-2.0, 2.0])),
-    ))
+    s = load_scenario('paper_single').replace(
+        agent_ids=(1, 2, 2**31 - 1),
+        edges=(
+            Edge(i=1, j=2, d=np.array([0.0, -2.0])),
+            Edge(i=1, j=2**31 - 1, d=np.array([-2.0, 0.0])),
+            Edge(i=2, j=2**31 - 1, d=np.array([-2.0, 2.0])),
+        ),
+    )
     assert scenario_from_dict(scenario_to_dict(s)) == s
 
 
@@ -421,7 +491,9 @@ def test_the_node_limit_counts_alias_expansions_exactly(tmp_path):
         path = write(tmp_path, _aliased(repeats))
         with pytest.raises(ScenarioError) as caught:
             load_scenario(path)
-        assert ('more than 300000 nodes with its aliases expanded' in str(caught.value)) == refused, str(caught.value)[:300]
+        assert ('more than 300000 nodes with its aliases expanded' in str(caught.value)) == refused, str(
+            caught.value
+        )[:300]
         if not refused:
             assert "unknown key 'a'" in str(caught.value)  # read completely, then refused by the schema
 
@@ -446,7 +518,9 @@ def test_json_files_have_their_own_size_limit(tmp_path, monkeypatch):
     monkeypatch.setattr(scenario_module, 'MAX_FILE_BYTES', size - 1)  # the YAML limit does not apply
     assert load_scenario(path).name == 'paper_single'
     monkeypatch.setattr(scenario_module, 'MAX_JSON_BYTES', size - 1)
-    with pytest.raises(ScenarioError, match=r'paper\.json: 0\.0 MB; a JSON scenario file holds at most 0\.0 MB: refused'):
+    with pytest.raises(
+        ScenarioError, match=r'paper\.json: 0\.0 MB; a JSON scenario file holds at most 0\.0 MB: refused'
+    ):
         load_scenario(path)
 
 
@@ -505,7 +579,10 @@ def test_every_dumped_scenario_takes_the_one_pass_reader_and_reads_back_bit_for_
     from formation_sim.model.generate import random_scenario
     from formation_sim.model.scenario import dump_scenario_text
 
-    for scenario in (load_scenario('paper_double'), random_scenario(n=50, seed=4, dynamics='double', dimension=3)):
+    for scenario in (
+        load_scenario('paper_double'),
+        random_scenario(n=50, seed=4, dynamics='double', dimension=3),
+    ):
         text = dump_scenario_text(scenario)
         data = module._read_plain(text)  # raises _NotPlain if the dump needed the full loader
         assert scenario_from_dict(data, name=scenario.name) == scenario
@@ -553,7 +630,10 @@ def test_headings_are_optional_per_agent_and_round_trip_exactly(tmp_path, suffix
     data['agents'][3]['heading'] = math.pi
     assert scenario_from_dict(data) != lab  # headings are part of the scenario
     del data['agents'][2]['heading']
-    with pytest.raises(ScenarioError, match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading or none'):
+    with pytest.raises(
+        ScenarioError,
+        match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading or none',
+    ):
         scenario_from_dict(data)
     data['agents'][2]['heading'] = float('nan')
     with pytest.raises(ScenarioError, match=r'agents\.2\.heading: must be finite, got nan'):

@@ -25,12 +25,22 @@ from formation_sim.model.speed_choice import (
 
 def _choice(limits, *, observed=(2.0, None), theory=(8.0, None), dynamics='single', settle=3.0, margin=1.25):
     settling = Settling(initial_error=0.5, time=settle, run_horizon=60.0)
-    return scale_choice(limits=limits, dynamics=dynamics, theory=theory, observed=observed, settling=settling, horizon=60.0, margin=margin)
+    return scale_choice(
+        limits=limits,
+        dynamics=dynamics,
+        theory=theory,
+        observed=observed,
+        settling=settling,
+        horizon=60.0,
+        margin=margin,
+    )
 
 
 def test_each_kappa_puts_the_binding_command_exactly_at_its_limit_over_the_margin():
     choice = _choice(RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1))
-    assert choice.observed.value * 2.0 * 1.25 == pytest.approx(0.22) and 'speed 0.22' in choice.observed.binding
+    assert (
+        choice.observed.value * 2.0 * 1.25 == pytest.approx(0.22) and 'speed 0.22' in choice.observed.binding
+    )
     assert choice.guaranteed.value * 8.0 == pytest.approx(0.22) and choice.guaranteed.margin == 1.0
     # the time to settle is the κ = 1 time over κ: the slower run takes longer
     assert choice.observed.settle_time == pytest.approx(3.0 / choice.observed.value)
@@ -38,7 +48,10 @@ def test_each_kappa_puts_the_binding_command_exactly_at_its_limit_over_the_margi
     assert choice.value == choice.observed.value and choice.source == 'observed'
     # a slow turn rate binds through ||u|| <= W l
     turn = _choice(RobotLimits(max_speed=0.22, max_angular_speed=1.0, control_point_distance=0.1))
-    assert turn.observed.value * 2.0 * 1.25 / 0.1 == pytest.approx(1.0) and 'turn rate 1 rad/s' in turn.observed.binding
+    assert (
+        turn.observed.value * 2.0 * 1.25 / 0.1 == pytest.approx(1.0)
+        and 'turn rate 1 rad/s' in turn.observed.binding
+    )
 
 
 def test_eta2_acceleration_scales_with_kappa_squared():
@@ -71,7 +84,11 @@ def test_guaranteed_is_missing_with_its_reason_outside_the_proofs():
     ('limits', 'dynamics', 'complaint'),
     [
         (RobotLimits(), 'single', 'needs at least one of --max-speed'),
-        (RobotLimits(max_speed=0.22, max_acceleration=1.0), 'single', 'ETA-1 commands velocities (uxsingle) that jump at every event'),
+        (
+            RobotLimits(max_speed=0.22, max_acceleration=1.0),
+            'single',
+            'ETA-1 commands velocities (uxsingle) that jump at every event',
+        ),
     ],
 )
 def test_limits_no_kappa_can_meet_are_refused(limits, dynamics, complaint):
@@ -107,7 +124,9 @@ def test_linear_crossing_is_where_the_largest_edge_error_comes_down_to_the_thres
         # by brute force: the last grid point above the threshold lies just before t
         last_above = grid[np.flatnonzero(errors > threshold)[-1]]
         assert last_above <= t <= last_above + 1e-4 + 1e-12
-        assert np.linalg.norm(start + (t - 1.0) * (end - start), axis=1).max() == pytest.approx(threshold, rel=1e-9)
+        assert np.linalg.norm(start + (t - 1.0) * (end - start), axis=1).max() == pytest.approx(
+            threshold, rel=1e-9
+        )
 
 
 def test_settling_time_waits_for_the_last_time_above():
@@ -132,12 +151,20 @@ def test_the_noise_floor_is_what_noisy_senses_put_into_e_i_by_the_agent_itself()
     rng = np.random.default_rng(7)
     samples = []
     for _ in range(3000):
-        agent = Eta1Agent(agent_id=1, neighbours=scenario.neighbours(1), delta=scenario.delta, alpha=1.0, beta=0.1)
+        agent = Eta1Agent(
+            agent_id=1, neighbours=scenario.neighbours(1), delta=scenario.delta, alpha=1.0, beta=0.1
+        )
         pose = {k: v + rng.normal(0.0, sigma, 2) for k, v in target.items()}
-        agent.trigger(0.0, SensedState(agent=1, stamp=0.0, rel_positions={j: tuple(pose[1] - pose[j]) for j in (2, 4)}))
+        agent.trigger(
+            0.0, SensedState(agent=1, stamp=0.0, rel_positions={j: tuple(pose[1] - pose[j]) for j in (2, 4)})
+        )
         for j in (2, 4):  # the neighbour's own sense, of fresh poses
             mine, theirs = target[1] + rng.normal(0.0, sigma, 2), target[j] + rng.normal(0.0, sigma, 2)
-            agent.receive(TriggerInfo(sender=j, receiver=1, stamp=0.0, control=(0.0, 0.0), rel_position=tuple(theirs - mine)))
+            agent.receive(
+                TriggerInfo(
+                    sender=j, receiver=1, stamp=0.0, control=(0.0, 0.0), rel_position=tuple(theirs - mine)
+                )
+            )
         samples.append(agent.error(0.0))
     samples = np.array(samples)
     assert samples.std(axis=0) == pytest.approx([per_agent[1]] * 2, rel=0.06)
@@ -148,10 +175,14 @@ def test_the_noise_floor_is_what_noisy_senses_put_into_e_i_by_the_agent_itself()
 def test_eta2_noise_floor_adds_the_velocity_noise_of_pose_differences():
     scenario = load_scenario('robots_lab_double')
     single, _, _ = scenario_noise_floor(load_scenario('robots_lab'), pose_noise=0.005)
-    floor, per_agent, formula = scenario_noise_floor(scenario, pose_noise=0.005, pose_period=0.01, speed_scale=0.5)
+    floor, per_agent, formula = scenario_noise_floor(
+        scenario, pose_noise=0.005, pose_period=0.01, speed_scale=0.5
+    )
     gains = scenario.gains
     w = 2.0 / (scenario.delta - 1.0)
-    assert per_agent[1] == pytest.approx(0.005 * math.sqrt(10) * w * (gains.k1 + gains.k2 * math.sqrt(2) / (0.5 * 0.01)))
+    assert per_agent[1] == pytest.approx(
+        0.005 * math.sqrt(10) * w * (gains.k1 + gains.k2 * math.sqrt(2) / (0.5 * 0.01))
+    )
     assert 'Δt = 0.01 s' in formula and floor > single
     with pytest.raises(LimitsError, match='pose_period'):
         scenario_noise_floor(scenario, pose_noise=0.005)

@@ -26,10 +26,15 @@ def double():
 
 def path_scenario(n: int) -> Scenario:
     return Scenario(
-        name='path', dynamics='single', delta=4.0, agent_ids=tuple(range(n)),
-        positions=np.zeros((n, 1)), velocities=None,
+        name='path',
+        dynamics='single',
+        delta=4.0,
+        agent_ids=tuple(range(n)),
+        positions=np.zeros((n, 1)),
+        velocities=None,
         edges=tuple(Edge(i=k, j=k + 1, d=np.array([1.0])) for k in range(n - 1)),
-        gains=SingleGains(alpha=1.0, beta=1e-9), horizon=1.0,
+        gains=SingleGains(alpha=1.0, beta=1e-9),
+        horizon=1.0,
     )
 
 
@@ -130,8 +135,9 @@ def test_rounding_step_is_the_error_moved_by_one_ulp_of_the_relative_states(k1, 
     # step is 2^k times this one, exactly: it has the units of the threshold (α_d; α has none).
     for k in (-40, 40):
         s = 2.0**k
-        scaled = theory.rounding_step(c * s, sigma * s, ulp_y * s, k1=k1 * s if k2 else k1, k2=k2 * s, speed=speed * s,
-                                      ulp_q=ulp_q * s)
+        scaled = theory.rounding_step(
+            c * s, sigma * s, ulp_y * s, k1=k1 * s if k2 else k1, k2=k2 * s, speed=speed * s, ulp_q=ulp_q * s
+        )
         assert np.array_equal(scaled, step * (s if k2 else 1.0))
 
 
@@ -162,7 +168,9 @@ def test_tension_and_lyapunov_of_the_example(single, double):
     assert theory.tension(single, x) == pytest.approx(expected, rel=1e-14)
     # y = x - τ with τ = (0,0), (0,2), (2,0): y = (2,4), (3.5,5), (2.5,5.5); ½ Σ ||y_i - ȳ||² = 7/6.
     assert theory.lyapunov(single, x) == pytest.approx(7.0 / 6.0, rel=1e-14)
-    assert theory.lyapunov(single, x, tau=np.array([[5.0, 5.0], [5.0, 7.0], [7.0, 5.0]])) == pytest.approx(7.0 / 6.0)
+    assert theory.lyapunov(single, x, tau=np.array([[5.0, 5.0], [5.0, 7.0], [7.0, 5.0]])) == pytest.approx(
+        7.0 / 6.0
+    )
     q = double.velocities
     assert theory.tension_double(double, x, q) == pytest.approx(double.gains.k1 * expected + 0.5 * 12.0)
     # V_d = ½ Σ δz_i^T (P⊗I) δz_i, written out for p = 2.
@@ -170,7 +178,9 @@ def test_tension_and_lyapunov_of_the_example(single, double):
     dy = (x - tau) - (x - tau).mean(axis=0)
     dq = q - q.mean(axis=0)
     P = double.gains.P
-    manual = 0.5 * sum(np.concatenate([a, b]) @ np.kron(P, np.eye(2)) @ np.concatenate([a, b]) for a, b in zip(dy, dq))
+    manual = 0.5 * sum(
+        np.concatenate([a, b]) @ np.kron(P, np.eye(2)) @ np.concatenate([a, b]) for a, b in zip(dy, dq)
+    )
     assert theory.lyapunov_double(double, x, q) == pytest.approx(manual, rel=1e-13)
 
 
@@ -318,10 +328,14 @@ def _theorem2_by_hand(scenario, *, b, reading):
     cap = {pair: delta - np.linalg.norm(v) for pair, v in d.items()}  # Δ - ||d_ij||
     length0 = {(i, j): np.linalg.norm(x[i] - x[j] - d[i, j]) for (i, j) in d}
     # ν_d(Δ, y(0)) = k1/2 Σ_i Σ_{j∈N_i} ||y_i - y_j||² / (Δ - ||d_ij|| - ||y_i - y_j||) + ½ Σ_i ||q_i||²
-    nu_d0 = k1 / 2 * sum(length0[p] ** 2 / (cap[p] - length0[p]) for p in d) + 0.5 * sum(v @ v for v in q.values())
+    nu_d0 = k1 / 2 * sum(length0[p] ** 2 / (cap[p] - length0[p]) for p in d) + 0.5 * sum(
+        v @ v for v in q.values()
+    )
     k_nu = nu_d0 + n * alpha_d**2 / (8 * b * beta_d)  # k^d_ν
     K = k_nu / k1
-    k_edge = {p: 2 * K * cap[p] / (K + math.sqrt(K * K + 2 * K * cap[p])) for p in d}  # (kijd), the root without cancellation
+    k_edge = {
+        p: 2 * K * cap[p] / (K + math.sqrt(K * K + 2 * K * cap[p])) for p in d
+    }  # (kijd), the root without cancellation
     f = {p: (2 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 2 for p in d}  # (fij) at k^d_ij
     gg = {p: 2 * cap[p] ** 2 / (cap[p] - k_edge[p]) ** 3 for p in d}  # (gij)
     h = {p: (3 * cap[p] - k_edge[p]) / (cap[p] - k_edge[p]) ** 3 for p in d}  # (hij)
@@ -354,7 +368,10 @@ def _theorem2_by_hand(scenario, *, b, reading):
     c_q = {(i, j): 2 * alpha_d + 2 * ((k1 + k2) * (F[i] + F[j]) + k3) * math.sqrt(kv) for (i, j) in d}
     # c^d_i = Σ_{j∈N_i} {2 k1 g_ij(k^d_ij) sqrt(k^d_V) + 4 k2 h_ij(k^d_ij) k^d_V + k2 f_ij(k^d_ij) c^q_ij}
     c = {
-        i: sum(2 * k1 * gg[i, j] * math.sqrt(kv) + 4 * k2 * h[i, j] * kv + k2 * f[i, j] * c_q[i, j] for j in neighbours[i])
+        i: sum(
+            2 * k1 * gg[i, j] * math.sqrt(kv) + 4 * k2 * h[i, j] * kv + k2 * f[i, j] * c_q[i, j]
+            for j in neighbours[i]
+        )
         for i in x
     }
     xi = {i: alpha_d / (c[i] + alpha_d * beta_d) for i in x}  # (xid)
@@ -388,6 +405,7 @@ def test_theorem2_constants_by_hand(label, scenario, b):
     c = theory.theorem_constants(scenario, b=b)
     b = c.free_parameter
     assert b == (scenario.gains.k3 / 2 if 'b=' not in label else 0.2 * scenario.gains.k3)
+
     def close(value, expected):  # relative only: ξ^d_i can be 1e-16, below approx's default abs
         return value == pytest.approx(expected, rel=1e-12, abs=0.0)
 
@@ -409,7 +427,10 @@ def test_theorem2_constants_by_hand(label, scenario, b):
             assert close(chain.c[i], hand['c'][i]) and close(chain.xi[i], hand['xi'][i])
     # The top-level constants are the corrected chain's.
     assert (c.k_V, c.c_q, c.c, c.xi) == (
-        c.corrected_chain.k_V, c.corrected_chain.c_q, c.corrected_chain.c, c.corrected_chain.xi
+        c.corrected_chain.k_V,
+        c.corrected_chain.c_q,
+        c.corrected_chain.c,
+        c.corrected_chain.xi,
     )
 
 

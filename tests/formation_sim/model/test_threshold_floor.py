@@ -22,14 +22,20 @@ def _near_formation_double(c0: float):
     base = load_scenario('paper_double')
     tau = theory.formation_feasibility(base).tau
     x = tau + np.array([[0.05, 0.0], [0.0, -0.04], [-0.03, 0.03]])
-    gains = DoubleGains.from_riccati(alpha_d=0.02, beta_d=0.1, beta1=base.gains.beta1, k3='paper', threshold_floor=c0)
+    gains = DoubleGains.from_riccati(
+        alpha_d=0.02, beta_d=0.1, beta1=base.gains.beta1, k3='paper', threshold_floor=c0
+    )
     return base.replace(name='near_double', positions=x, velocities=np.zeros_like(x), gains=gains)
 
 
 CASES = {
     # name: (scenario, κ, horizon of the paper's time)
     'paper_single c0=0.1': (load_scenario('paper_single').with_scale(threshold_floor=0.1), 1.0, 20.0),
-    'paper_single c0=0.5 κ=0.37': (load_scenario('paper_single').with_scale(threshold_floor=0.5, speed_scale=0.37), 0.37, 20.0),
+    'paper_single c0=0.5 κ=0.37': (
+        load_scenario('paper_single').with_scale(threshold_floor=0.5, speed_scale=0.37),
+        0.37,
+        20.0,
+    ),
     'robots_square c0=5mm': (load_scenario('robots_square').with_scale(threshold_floor=0.005), 1.0, 30.0),
     'random single c0=0.02': (random_scenario(n=7, seed=18).with_scale(threshold_floor=0.02), 1.0, 30.0),
     'near double c0=5mm': (_near_formation_double(0.005), 1.0, 30.0),
@@ -63,19 +69,26 @@ def test_the_floors_guarantees_hold_on_exact_runs(case):
     # The analysis' checks say the same, all of them.
     checks = theorem_checks(record, series, theory_bounds(scenario))
     assert all(check.ok for check in checks), [c for c in checks if not c.ok]
-    assert {c.name for c in checks} >= {'V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)', 'inter-event times >= c0 / c_i (threshold floor)'}
+    assert {c.name for c in checks} >= {
+        'V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)',
+        'inter-event times >= c0 / c_i (threshold floor)',
+    }
 
 
 def test_the_floor_lets_a_run_outlast_the_rounding_of_the_vanishing_threshold():
     scenario = load_scenario('paper_single')
     with pytest.raises(EngineError, match='ulps'):
-        simulate(scenario, horizon=60.0, sample_dt=0.0)  # the paper's threshold reaches rounding near t = 34.4
+        simulate(
+            scenario, horizon=60.0, sample_dt=0.0
+        )  # the paper's threshold reaches rounding near t = 34.4
     floored = scenario.with_scale(threshold_floor=1e-3)
     record = simulate(floored, horizon=60.0, sample_dt=0.0)
     xi = floor_bounds(floored).xi
     assert all(float(np.diff(t).min()) >= xi[a] for a, t in record.trigger_times.items())
     late = sum(1 for t in record.trigger_times.values() for s in t if s > 40.0)
-    assert late < 1000  # ~3.6 a second in the last 20 s; the paper's threshold had 19 000 in one second near t = 44
+    assert (
+        late < 1000
+    )  # ~3.6 a second in the last 20 s; the paper's threshold had 19 000 in one second near t = 44
 
 
 def test_a_zero_floor_is_the_paper():
@@ -124,4 +137,7 @@ def test_eta2_where_the_condition_fails_the_run_is_still_checked_and_holds():
     series = run_series(record)
     checks = theorem_checks(record, series, theory_bounds(scenario))
     assert all(check.ok for check in checks), [c for c in checks if not c.ok]
-    assert [c.name for c in checks][:2] == ['connectivity: ||x_i - x_j|| < Δ', 'V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)']
+    assert [c.name for c in checks][:2] == [
+        'connectivity: ||x_i - x_j|| < Δ',
+        'V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)',
+    ]

@@ -70,14 +70,39 @@ def _edge_d(k, value):
 
 BROKEN = [
     # (label, dynamics, change, rule, subject, fragments of the message)
-    ('disconnected', 'single', lambda d: d['edges'].__delitem__(slice(1, 3)) or d['edges'].__setitem__(0, {'i': 1, 'j': 2, 'd': [0.0, -2.0]}),
-     'connected', 'graph', ['2 connected components', 'agent 3']),
+    (
+        'disconnected',
+        'single',
+        lambda d: (
+            d['edges'].__delitem__(slice(1, 3))
+            or d['edges'].__setitem__(0, {'i': 1, 'j': 2, 'd': [0.0, -2.0]})
+        ),
+        'connected',
+        'graph',
+        ['2 connected components', 'agent 3'],
+    ),
     ('infeasible', 'single', _edge_d(2, [-2.0, 2.5]), 'feasible', 'formation', ['residual', 'Assumption 1']),
-    ('too long d', 'single',
-     lambda d: (d['edges'][0].__setitem__('d', [0.0, -4.5]), d['edges'][1].__setitem__('d', [-2.0, 0.0]),
-                d['edges'][2].__setitem__('d', [-2.0, 4.5]), d['agents'][2].__setitem__('position', [2.0, 8.5])),
-     'edge_length', 'edge (1, 2)', ['||d_ij|| = 4.5', 'Δ = 4']),
-    ('initial broken', 'single', _position(3, [4.3, 5.5]), 'initial', 'edge (2, 3)', ['(initial)', 'Δ-||d_ij|| = 1.17157']),
+    (
+        'too long d',
+        'single',
+        lambda d: (
+            d['edges'][0].__setitem__('d', [0.0, -4.5]),
+            d['edges'][1].__setitem__('d', [-2.0, 0.0]),
+            d['edges'][2].__setitem__('d', [-2.0, 4.5]),
+            d['agents'][2].__setitem__('position', [2.0, 8.5]),
+        ),
+        'edge_length',
+        'edge (1, 2)',
+        ['||d_ij|| = 4.5', 'Δ = 4'],
+    ),
+    (
+        'initial broken',
+        'single',
+        _position(3, [4.3, 5.5]),
+        'initial',
+        'edge (2, 3)',
+        ['(initial)', 'Δ-||d_ij|| = 1.17157'],
+    ),
     ('alpha zero', 'single', _gain('alpha', 0.0), 'alpha', 'gains', ['α = 0']),
     ('beta above beta0', 'single', _gain('beta', 1.6), 'beta', 'gains', ['β0 = 1.5', 'β = 1.6']),
     ('beta negative', 'single', _gain('beta', -0.1), 'beta', 'gains', ['β = -0.1']),
@@ -86,13 +111,24 @@ BROKEN = [
     ('k3 too large', 'double', _gain('k3', 1.3), 'k3', 'gains', ['k3 = 1.3', '1.21066']),
     ('k3 zero', 'double', _gain('k3', 0.0), 'k3', 'gains', ['k3 = 0']),
     ('beta_d above printed bound', 'double', _gain('beta_d', 1.2), 'beta_d', 'gains', ['β_d = 1.2', 'ρ2(P)']),
-    ('riccati broken', 'double', lambda d: d['gains'].update(k1=0.5, k2=0.5), 'riccati', 'gains', ['riccatti', 'β1 = 1.5']),
+    (
+        'riccati broken',
+        'double',
+        lambda d: d['gains'].update(k1=0.5, k2=0.5),
+        'riccati',
+        'gains',
+        ['riccatti', 'β1 = 1.5'],
+    ),
     ('k2 negative', 'double', lambda d: d['gains'].update(k1=1.2, k2=-1.5), 'k1_k2', 'gains', ['k2 = -1.5']),
 ]
 
 
-@pytest.mark.parametrize('label, dynamics, change, rule, subject, fragments', BROKEN, ids=[b[0] for b in BROKEN])
-def test_broken_hypotheses_give_named_errors(label, dynamics, change, rule, subject, fragments, paper_scenario_dict):
+@pytest.mark.parametrize(
+    'label, dynamics, change, rule, subject, fragments', BROKEN, ids=[b[0] for b in BROKEN]
+)
+def test_broken_hypotheses_give_named_errors(
+    label, dynamics, change, rule, subject, fragments, paper_scenario_dict
+):
     report = validate_scenario(_edit(paper_scenario_dict, dynamics, change))
     assert not report.ok
     matching = [f for f in report.errors if f.rule == rule and f.subject == subject]
@@ -186,7 +222,10 @@ def test_zero_capacity_edge_reports_without_nan():
         # "β0 = 1.5 required, got β = 1.5".
         ({'beta': 1.500000000000001}, '0 < β < β0 = 1.5 required, got β = 1.500000000000001'),
         # ||d_ij|| a hair above Δ = 4: "||d_ij|| = 4 is not below Δ = 4" before.
-        ({'d12': [0.0, -4.000000000000001]}, '||d_ij|| = 4.000000000000001 is not below Δ = 4 (Assumption 1)'),
+        (
+            {'d12': [0.0, -4.000000000000001]},
+            '||d_ij|| = 4.000000000000001 is not below Δ = 4 (Assumption 1)',
+        ),
         # ||d_ij|| = Δ exactly: equal values print alike, and rightly so.
         ({'d12': [0.0, -4.0]}, '||d_ij|| = 4 is not below Δ = 4 (Assumption 1)'),
     ],
@@ -240,7 +279,17 @@ def test_zero_and_the_smallest_normal_double_are_carried(paper_scenario_dict):
 
 # Doubles that a decimal round trip through YAML could lose, all normal: the parameter file must
 # carry each bit for bit.
-AWKWARD_NORMAL = [0.1, 1.0 / 3.0, -0.0, 2.2250738585072014e-308, 1.7976931348623157e308, np.nextafter(1.0, 2.0), 1e22, -7.5e-300, 123456789.12345679]
+AWKWARD_NORMAL = [
+    0.1,
+    1.0 / 3.0,
+    -0.0,
+    2.2250738585072014e-308,
+    1.7976931348623157e308,
+    np.nextafter(1.0, 2.0),
+    1e22,
+    -7.5e-300,
+    123456789.12345679,
+]
 
 
 @pytest.mark.ros
@@ -283,9 +332,13 @@ def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper
 
     # The rule is needed: a subnormal gain is read back as text.
     data['gains'][gains[0]] = SUBNORMAL
-    broken = FormationRun(scenario_from_dict(data), out_dir=tmp_path / 'broken', validate=False, progress=False)
+    broken = FormationRun(
+        scenario_from_dict(data), out_dir=tmp_path / 'broken', validate=False, progress=False
+    )
     broken.out_dir.mkdir()
-    assert isinstance(_read_with_rcl(broken.plan.write_inputs()['agents'], scenario.agent_ids)[1][gains[0]], str)
+    assert isinstance(
+        _read_with_rcl(broken.plan.write_inputs()['agents'], scenario.agent_ids)[1][gains[0]], str
+    )
 
 
 def _read_with_rcl(path, agent_ids):
@@ -304,8 +357,12 @@ def _read_with_rcl(path, agent_ids):
         read = {}
         for agent in agent_ids:
             node = Node(
-                NODE_NAME, namespace=f'/agent_{agent}', context=context,
-                automatically_declare_parameters_from_overrides=True, start_parameter_services=False, enable_rosout=False,
+                NODE_NAME,
+                namespace=f'/agent_{agent}',
+                context=context,
+                automatically_declare_parameters_from_overrides=True,
+                start_parameter_services=False,
+                enable_rosout=False,
             )
             read[agent] = {name: parameter.value for name, parameter in node._parameters.items()}
             node.destroy_node()
@@ -395,16 +452,24 @@ def test_lengths_outside_what_double_precision_computes_with_are_refused_by_rule
         # Edge (1, 2) of paper_single: Δ = 4, d = (0, -2), x1 - x2 = (-1.5, -3): slack 2 - ||(-1.5, -1)||.
         # Its capacity Δ - ||d|| = 2 is named when it is itself too small, else the slack.
         capacity, slack = 2.0 * 2.0**power, (2.0 - np.hypot(1.5, 1.0)) * 2.0**power
-        name, value = ('Δ-||d_ij||', capacity) if capacity < 2.0**-250 else ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slack)
+        name, value = (
+            ('Δ-||d_ij||', capacity)
+            if capacity < 2.0**-250
+            else ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slack)
+        )
         assert finding.subject == 'edge (1, 2)'
         assert finding.message.startswith(
             f'{name} = {value:.6g} is below {2.0**-250:.6g} (2^-250): the certified search divides by the fourth power of the distance to Δ'
         ), finding.message
     else:
         assert finding.subject == 'scenario'
-        assert finding.message.startswith(f'Δ = {4.0 * 2.0**power:.6g} is above {2.0**250:.6g} (2^250): '), finding.message
-    assert finding.message.endswith('state the scenario in other length units (ETA-1 runs the same with lengths × s, '
-                                    'β / s and time × s: ω_ij scales as 1/s, the commands not at all)')
+        assert finding.message.startswith(f'Δ = {4.0 * 2.0**power:.6g} is above {2.0**250:.6g} (2^250): '), (
+            finding.message
+        )
+    assert finding.message.endswith(
+        'state the scenario in other length units (ETA-1 runs the same with lengths × s, '
+        'β / s and time × s: ω_ij scales as 1/s, the commands not at all)'
+    )
 
 
 def test_double_integrator_slack_floor_counts_velocities(tight_edge):
@@ -421,9 +486,9 @@ def test_double_integrator_slack_floor_counts_velocities(tight_edge):
     ulp_y, ulp_q = np.spacing(np.abs(y).max()), np.spacing(np.abs(q).max())
 
     def step(sigma):
-        return (g.k1 * 2 * c * c / sigma**3 + g.k2 * (2 * c + sigma) / sigma**3 * np.linalg.norm(q)) * ulp_y + (
-            g.k2 * (c + sigma) / sigma**2 * ulp_q
-        )
+        return (
+            g.k1 * 2 * c * c / sigma**3 + g.k2 * (2 * c + sigma) / sigma**3 * np.linalg.norm(q)
+        ) * ulp_y + (g.k2 * (c + sigma) / sigma**2 * ulp_q)
 
     floor = brentq(lambda sigma: step(sigma) - SEARCH_LIMIT * g.alpha_d, 1e-6, c, xtol=1e-15, rtol=1e-13)
     assert finding.values['error_step'] == pytest.approx(step(c - np.linalg.norm(y)), rel=1e-9)
@@ -493,7 +558,9 @@ def test_beta1_one_ulp_above_beta0_simulates(tmp_path, capsys):
     scenario, _ = _held_out_team(lambda beta0, m: math.nextafter(beta0, math.inf))
     path = tmp_path / 'team.yaml'
     dump_scenario(scenario, path)
-    assert main(['simulate', str(path), '--out', str(tmp_path / 'run'), '--no-plot']) == 0, capsys.readouterr()
+    assert main(['simulate', str(path), '--out', str(tmp_path / 'run'), '--no-plot']) == 0, (
+        capsys.readouterr()
+    )
     summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
     assert summary['total_events'] > 0 and summary['theorem_constants'].get('error') is None, summary
     # One ulp of β1 moves P by rounding only: the same events as with β1 = β0, at the same times

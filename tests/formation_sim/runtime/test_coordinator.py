@@ -26,8 +26,17 @@ def coordinator(ros):
     nodes = []
 
     def build(**parameters):
-        defaults = {'robot': 'unicycle', 'control_point_distance': 0.1, 'robot_trajectory': 'true_odom', 'backend': 'unicycle'}
-        node = FormationCoordinatorNode(scenario=load_scenario('robots_square'), parameter_overrides=as_overrides({**defaults, **parameters}), context=ros)
+        defaults = {
+            'robot': 'unicycle',
+            'control_point_distance': 0.1,
+            'robot_trajectory': 'true_odom',
+            'backend': 'unicycle',
+        }
+        node = FormationCoordinatorNode(
+            scenario=load_scenario('robots_square'),
+            parameter_overrides=as_overrides({**defaults, **parameters}),
+            context=ros,
+        )
         nodes.append(node)
         return node
 
@@ -79,7 +88,10 @@ def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
     node = coordinator()
     gaps = discovery_gaps(node)
     assert 'agents whose triggering-information writer is not matched: 1, 2, 3, 4' in gaps
-    assert 'robots whose robot/true_odom writer is not matched (not running, or a best-effort writer): 1, 2, 3, 4' in gaps
+    assert (
+        'robots whose robot/true_odom writer is not matched (not running, or a best-effort writer): 1, 2, 3, 4'
+        in gaps
+    )
     assert '/formation/robots readers 0/1' not in gaps  # no recorder asked for
     assert not node._connected()
 
@@ -96,7 +108,9 @@ def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
     far = _odometry(3, 0.45, epoch=node._epoch)
     far.pose.pose.position.x = 3.0  # robot 3's control point more than 2 m from its neighbours
     node._on_pose(_raw(far), 3)
-    with pytest.raises(ConnectivityLostError, match=r'edge \(2, 3\) reached the communication radius at t=0\.5'):
+    with pytest.raises(
+        ConnectivityLostError, match=r'edge \(2, 3\) reached the communication radius at t=0\.5'
+    ):
         node._running_tick()
 
 
@@ -131,7 +145,10 @@ def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator)
     node = _running(coordinator, pose_silence=0.5)
     node._running_tick()  # every robot heard: the run goes on
     node._pose_watch.heard[2] -= 0.6  # robot 2's latest pose came 0.6 s before the others'
-    with pytest.raises(RobotLostError, match=r'^robot 2 lost at t=0\.5\d* \(step 0\): no pose on /agent_2/robot/true_odom for more than 0\.5 s'):
+    with pytest.raises(
+        RobotLostError,
+        match=r'^robot 2 lost at t=0\.5\d* \(step 0\): no pose on /agent_2/robot/true_odom for more than 0\.5 s',
+    ):
         node._running_tick()
 
 
@@ -139,7 +156,10 @@ def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_i
     from formation_sim.runtime.run_book import AgentFailedError, RobotLostError
 
     node = _running(coordinator, pose_silence=0.5)
-    with pytest.raises(AgentFailedError, match=r'^agent 1 stopped at t=0\.5\d* \(step 0\): the pose of robot 1 is 0\.51 s old; the run stops$'):
+    with pytest.raises(
+        AgentFailedError,
+        match=r'^agent 1 stopped at t=0\.5\d* \(step 0\): the pose of robot 1 is 0\.51 s old; the run stops$',
+    ):
         node._on_report(_report(1, 'the pose of robot 1 is 0.51 s old'))
     node = _running(coordinator, pose_silence=0.5)
     node._pose_watch.heard[2] -= 0.3  # half the silence: robot 2's poses stopped first
@@ -149,8 +169,14 @@ def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_i
     node.fail(RobotLostError('robot 2 lost', agents=[2]))
     node.note_what_followed()
     assert node.failure_info['kind'] == 'robot_lost' and node.failure_info['agents'] == [2]
-    assert node.failure_info['followed'] == {'1': 'the pose of robot 2 is 0.51 s old', '3': 'the pose of robot 2 is 0.52 s old'}
-    assert node.failure_info['message'] == 'robot 2 lost; then agents 1, 3 stopped: the pose of robot 2 is 0.51 s old'
+    assert node.failure_info['followed'] == {
+        '1': 'the pose of robot 2 is 0.51 s old',
+        '3': 'the pose of robot 2 is 0.52 s old',
+    }
+    assert (
+        node.failure_info['message']
+        == 'robot 2 lost; then agents 1, 3 stopped: the pose of robot 2 is 0.51 s old'
+    )
 
 
 def decode_report(msg):
@@ -167,7 +193,9 @@ def test_an_agent_that_leaves_on_the_final_step_or_after_it_stops_nothing(coordi
     assert node.failure_info is None
 
 
-def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_no_failure(coordinator, tmp_path):
+def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_no_failure(
+    coordinator, tmp_path
+):
     """The race of a robot run's end: the robots stop publishing at the horizon, the final Step is
     on its way, an agent's command timer finds its own pose stale and the agent leaves naming it.
     The run reached its horizon: the agent is noted in extra.after_end, and `formation run`
@@ -181,10 +209,17 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
     node = _running(coordinator, horizon=0.5)
     node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
-    node._on_report(_report(2, 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'))
+    node._on_report(
+        _report(
+            2,
+            'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)',
+        )
+    )
     assert node.failure_info is None
     extra = run_extra(node, node.reached_time)
-    assert extra['failure'] is None and extra['after_end'] == {'2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'}
+    assert extra['failure'] is None and extra['after_end'] == {
+        '2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'
+    }
     (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
 
     def child(name: str, returncode: int) -> Child:
@@ -195,7 +230,9 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
     failed, note = excused_after_end([child('agent_2', 1), child('agent_3', 1)], tmp_path / 'summary.json')
     assert [c.name for c in failed] == ['agent_3']  # no report of its failure after the end: a failure
-    assert note.startswith('agent_2 stopped after the run reached its horizon (not a failure of the run): agent 2: the pose')
+    assert note.startswith(
+        'agent_2 stopped after the run reached its horizon (not a failure of the run): agent 2: the pose'
+    )
 
 
 def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
@@ -214,7 +251,9 @@ def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summar
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary['mode'] == 'robots' and summary['extra']['started'] is False
     failure = summary['extra']['failure']
-    assert failure['kind'] == 'discovery' and failure['message'].startswith('discovery did not complete within 0.01 s; still missing: ')
+    assert failure['kind'] == 'discovery' and failure['message'].startswith(
+        'discovery did not complete within 0.01 s; still missing: '
+    )
     assert 'node_created' in summary['extra']['timestamps'] and 'step0' not in summary['extra']['timestamps']
 
 
@@ -243,43 +282,111 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
             handler(msg)
 
     for agent in scenario.agent_ids:  # poses before t = 0 reach the coordinator during discovery
-        arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, -0.013), lambda m, a=agent: node._on_pose(_raw(m), a))
+        arrive(
+            f'/agent_{agent}/robot/true_odom',
+            'nav_msgs/msg/Odometry',
+            _odometry(agent, -0.013),
+            lambda m, a=agent: node._on_pose(_raw(m), a),
+        )
     _start(node, EPOCH)
     arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(node.step))
-    arrive('/formation/scenario', 'std_msgs/msg/String', String(data=dump_scenario_text(scenario.replace(horizon=horizon))))
-    arrive('/formation/robots', 'std_msgs/msg/String', String(data=json.dumps(node.robots, separators=(',', ':'))))
-    triggers = {1: [0.0, 0.31, 0.72], 2: [0.0, 0.5], 3: [0.0, 0.1234567], 4: [0.0, 0.9, 1.02]}  # 1.02: after the horizon
+    arrive(
+        '/formation/scenario',
+        'std_msgs/msg/String',
+        String(data=dump_scenario_text(scenario.replace(horizon=horizon))),
+    )
+    arrive(
+        '/formation/robots',
+        'std_msgs/msg/String',
+        String(data=json.dumps(node.robots, separators=(',', ':'))),
+    )
+    triggers = {
+        1: [0.0, 0.31, 0.72],
+        2: [0.0, 0.5],
+        3: [0.0, 0.1234567],
+        4: [0.0, 0.9, 1.02],
+    }  # 1.02: after the horizon
     for k in range(-1, 108):  # 100 Hz, stamps a little off the grid
         t = k * 0.01 + 0.0031
         for agent in scenario.agent_ids:
-            arrive(f'/agent_{agent}/robot/true_odom', 'nav_msgs/msg/Odometry', _odometry(agent, t), lambda m, a=agent: node._on_pose(_raw(m), a))
+            arrive(
+                f'/agent_{agent}/robot/true_odom',
+                'nav_msgs/msg/Odometry',
+                _odometry(agent, t),
+                lambda m, a=agent: node._on_pose(_raw(m), a),
+            )
         for agent, times in triggers.items():
             for number, stamp in enumerate(times, start=1):
                 if t - 0.01 < stamp <= t:
                     for j in scenario.neighbours(agent):
-                        info = TriggerInfo(sender=agent, receiver=j, stamp=stamp, control=(0.01, -0.02), rel_position=(1.0, 0.0))
+                        info = TriggerInfo(
+                            sender=agent,
+                            receiver=j,
+                            stamp=stamp,
+                            control=(0.01, -0.02),
+                            rel_position=(1.0, 0.0),
+                        )
                         watched = j == min(scenario.neighbours(agent))
-                        arrive(f'/agent_{agent}/trigger_info/to_{j}', 'std_msgs/msg/Float64MultiArray', encode_trigger_info(info),
-                               (lambda m, a=agent: node._on_info(m, a)) if watched else None)  # fmt: skip
-                    status = Status(agent=agent, step_index=0, next_time=math.inf, info_sent=2 * number, info_received=0,
-                                    commands_sent=0, triggers=number, ready=True, last_planned=stamp - 0.004)  # fmt: skip
-                    arrive('/formation/status', 'std_msgs/msg/Float64MultiArray', encode_status(status), node._on_status)
+                        arrive(
+                            f'/agent_{agent}/trigger_info/to_{j}',
+                            'std_msgs/msg/Float64MultiArray',
+                            encode_trigger_info(info),
+                            (lambda m, a=agent: node._on_info(m, a)) if watched else None,
+                        )
+                    status = Status(
+                        agent=agent,
+                        step_index=0,
+                        next_time=math.inf,
+                        info_sent=2 * number,
+                        info_received=0,
+                        commands_sent=0,
+                        triggers=number,
+                        ready=True,
+                        last_planned=stamp - 0.004,
+                    )
+                    arrive(
+                        '/formation/status',
+                        'std_msgs/msg/Float64MultiArray',
+                        encode_status(status),
+                        node._on_status,
+                    )
     node._end_at_horizon()
-    arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(Step(index=1, time=horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=EPOCH)))
+    arrive(
+        '/formation/step',
+        'std_msgs/msg/Float64MultiArray',
+        encode_step(Step(index=1, time=horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=EPOCH)),
+    )
     for agent in scenario.agent_ids:
-        published = {f'/agent_{agent}/trigger_info/to_{j}': len(triggers[agent]) for j in scenario.neighbours(agent)}
+        published = {
+            f'/agent_{agent}/trigger_info/to_{j}': len(triggers[agent]) for j in scenario.neighbours(agent)
+        }
         report = AgentReport(agent=agent, final=True, rejected={}, published=published)
         arrive('/formation/agent_report', 'std_msgs/msg/String', encode_agent_report(report), node._on_report)
         # The robots' last commands (the coordinator does not read them): robot 4 was left turning.
-        arrive(f'/agent_{agent}/robot/cmd_vel', 'geometry_msgs/msg/Twist', Twist(angular=Vector3(z=0.3 if agent == 4 else 0.0)))
+        arrive(
+            f'/agent_{agent}/robot/cmd_vel',
+            'geometry_msgs/msg/Twist',
+            Twist(angular=Vector3(z=0.3 if agent == 4 else 0.0)),
+        )
 
     record = node.record()
-    assert record.mode == 'robots' and record.trigger_times == {1: [0.0, 0.31, 0.72], 2: [0.0, 0.5], 3: [0.0, 0.1234567], 4: [0.0, 0.9]}
-    assert record.sample_times[0] == 0.0 and record.sample_times[-1] == horizon and 0.1234567 in record.sample_times
+    assert record.mode == 'robots' and record.trigger_times == {
+        1: [0.0, 0.31, 0.72],
+        2: [0.0, 0.5],
+        3: [0.0, 0.1234567],
+        4: [0.0, 0.9],
+    }
+    assert (
+        record.sample_times[0] == 0.0
+        and record.sample_times[-1] == horizon
+        and 0.1234567 in record.sample_times
+    )
     # Samples: the control points l = 0.1 ahead of the axles, interpolated between poses.
     k = int(np.flatnonzero(record.sample_times == 0.5)[0])
     x, y, yaw = _axle(2, 0.5)
-    assert np.allclose(record.sample_positions[k, 1], [x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], atol=1e-5)
+    assert np.allclose(
+        record.sample_positions[k, 1], [x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], atol=1e-5
+    )
     lateness = record.extra['lateness']['3']
     assert math.isclose(lateness['max'], 0.004, abs_tol=1e-12)
 
@@ -291,10 +398,18 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     from_bag = load_bag_run(tmp_path / 'bag')
     assert from_bag.record.mode == 'robots'
     checks = {check.name: check for check in from_bag.checks}
-    assert [name for name, check in checks.items() if not check.ok] == ["every robot's last command is a stop"]
-    assert checks["every robot's last command is a stop"].detail == "3 robots stopped by their last command; still moving: ['4: [0.0, 0.0, 0.0, 0.0, 0.0, 0.3]']"
+    assert [name for name, check in checks.items() if not check.ok] == [
+        "every robot's last command is a stop"
+    ]
+    assert (
+        checks["every robot's last command is a stop"].detail
+        == "3 robots stopped by their last command; still moving: ['4: [0.0, 0.0, 0.0, 0.0, 0.0, 0.3]']"
+    )
     # Agent 4's trigger after the horizon is not a trigger of the run, but its Status counted it.
-    assert checks['status counters = bag'].ok and checks['one TriggerInfo per neighbour per trigger'].detail == '20 messages for 10 triggers'
+    assert (
+        checks['status counters = bag'].ok
+        and checks['one TriggerInfo per neighbour per trigger'].detail == '20 messages for 10 triggers'
+    )
     differences, _ = diff_summaries(bag_summary(from_bag.record), build_summary(record))
     assert [d.key for d in differences if d.key != 'wall_time'] == []
 
@@ -302,4 +417,8 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
 def _axle(agent: int, t: float) -> tuple[float, float, float]:
     v, w = 0.05 * agent, 0.3
     yaw = 0.2 * agent + w * t
-    return 0.3 * agent + v / w * (math.sin(yaw) - math.sin(0.2 * agent)), -0.2 * agent - v / w * (math.cos(yaw) - math.cos(0.2 * agent)), yaw
+    return (
+        0.3 * agent + v / w * (math.sin(yaw) - math.sin(0.2 * agent)),
+        -0.2 * agent - v / w * (math.cos(yaw) - math.cos(0.2 * agent)),
+        yaw,
+    )

@@ -23,14 +23,24 @@ TOLERANCE = 1e-9
 def _run(scenario, tmp_path: Path, *, domain_id: int, horizon: float, **options):
     from formation_sim.runtime.orchestrate import FormationRun
 
-    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0, **options)
+    run = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=domain_id,
+        progress=False,
+        timeout=240.0,
+        **options,
+    )
     return run.run()
 
 
 def _assert_same_events(summary: dict, reference) -> None:
     for agent, times in reference.trigger_times.items():
         got = summary['trigger_times'][str(agent)]
-        assert len(got) == len(times), f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        assert len(got) == len(times), (
+            f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        )
         worst = max(abs(a - b) for a, b in zip(got, times))
         assert worst <= TOLERANCE, f'agent {agent}: triggering times differ by up to {worst}'
     assert summary['total_events'] == reference.total_events
@@ -51,10 +61,11 @@ def _assert_agents_isolated(graph: dict, scenario) -> None:
 
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize(
-    ('name', 'horizon', 'domain_id'),
-    [('paper_single', 10.0, 110), ('paper_double', 8.0, 111)],
+    ('name', 'horizon', 'domain_id'), [('paper_single', 10.0, 110), ('paper_double', 8.0, 111)]
 )
-def test_lockstep_run_reproduces_the_in_process_engine(tmp_path, name, horizon, domain_id, bag_trigger_stamps):
+def test_lockstep_run_reproduces_the_in_process_engine(
+    tmp_path, name, horizon, domain_id, bag_trigger_stamps
+):
     scenario = load_scenario(name)
     reference = simulate(scenario, horizon=horizon)
     result = _run(scenario, tmp_path, domain_id=domain_id, horizon=horizon)
@@ -89,8 +100,20 @@ def _assert_timeline(summary: dict, result) -> None:
     """Where the run's time went: every mark in the order the run reaches them, and the phases
     adding up to them; stepping is the simulator's own stepping time."""
     timeline, phases = summary['extra']['timeline'], summary['extra']['phases']
-    order = ['run', 'spawned', 'node_created', 'node_up', 'agents_ready', 'step0', 'final_step', 'final_reports', 'delivered',
-             'keeper_exited', 'stopped', 'checked']  # fmt: skip
+    order = [
+        'run',
+        'spawned',
+        'node_created',
+        'node_up',
+        'agents_ready',
+        'step0',
+        'final_step',
+        'final_reports',
+        'delivered',
+        'keeper_exited',
+        'stopped',
+        'checked',
+    ]
     assert [mark for mark in timeline if mark in order] == order, timeline
     assert timeline['agents_announced'] <= timeline['agents_ready']
     assert all(timeline[a] <= timeline[b] for a, b in zip(order, order[1:])), timeline
@@ -106,7 +129,15 @@ def test_agents_packed_in_one_process_give_the_same_run(tmp_path):
     scenario = load_scenario('paper_single')
     horizon = 3.0
     reference = simulate(scenario, horizon=horizon)
-    result = _run(scenario, tmp_path, domain_id=112, horizon=horizon, agents_per_process=3, record=False, executor='single')
+    result = _run(
+        scenario,
+        tmp_path,
+        domain_id=112,
+        horizon=horizon,
+        agents_per_process=3,
+        record=False,
+        executor='single',
+    )
     assert result.ok, result.message
     assert result.bag is None
     assert [child.name for child in result.children] == ['simulator', 'agents_1-3']
@@ -120,18 +151,40 @@ def test_a_run_discovering_through_a_discovery_server_equals_the_engine(tmp_path
     scenario = load_scenario('paper_single')
     horizon = 3.0
     reference = simulate(scenario, horizon=horizon)
-    run = FormationRun(scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=118, progress=False, timeout=240.0, discovery='server')
+    run = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=118,
+        progress=False,
+        timeout=240.0,
+        discovery='server',
+    )
     result = run.run()
     assert result.ok, result.message
-    assert [child.name for child in result.children] == ['discovery_server', 'recorder', 'simulator', 'agent_1', 'agent_2', 'agent_3']
+    assert [child.name for child in result.children] == [
+        'discovery_server',
+        'recorder',
+        'simulator',
+        'agent_1',
+        'agent_2',
+        'agent_3',
+    ]
     _assert_same_events(json.loads(result.summary.read_text()), reference)
     # Every child was a client of the run's server, which served on that port.
     port = run.plan.discovery_port
     assert run._supervisor.env['ROS_DISCOVERY_SERVER'] == f'127.0.0.1:{port}'
-    assert f'Server Addresses:   UDPv4:[127.0.0.1]:{port}' in (result.out_dir / 'logs' / 'discovery_server.log').read_text()
+    assert (
+        f'Server Addresses:   UDPv4:[127.0.0.1]:{port}'
+        in (result.out_dir / 'logs' / 'discovery_server.log').read_text()
+    )
     # The ROS graph is whole all the same (every node saw every other through the server).
     graph = json.loads((result.out_dir / 'graph.json').read_text())
-    assert set(graph) == {'/formation_simulator', '/formation_recorder', *(f'/agent_{i}/formation_agent' for i in scenario.agent_ids)}
+    assert set(graph) == {
+        '/formation_simulator',
+        '/formation_recorder',
+        *(f'/agent_{i}/formation_agent' for i in scenario.agent_ids),
+    }
     _assert_agents_isolated(graph, scenario)
 
 
@@ -151,7 +204,9 @@ def _alive(pid: int) -> bool:
 def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, stepping_run, long_run_scenario):
     from formation_sim.runtime.orchestrate import FormationRun
 
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=113, progress=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario, out_dir=tmp_path / 'run', domain_id=113, progress=False, timeout=240.0
+    )
     stepping = stepping_run(run)
     run.interrupt()
     result = stepping.result(timeout=60.0)
@@ -173,7 +228,14 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_ru
     from formation_sim.runtime.fastdds_shm import held_files, in_use
     from formation_sim.runtime.orchestrate import FormationRun
 
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=114, progress=False, record=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario,
+        out_dir=tmp_path / 'run',
+        domain_id=114,
+        progress=False,
+        record=False,
+        timeout=240.0,
+    )
     stepping = stepping_run(run)
     victim = next(child for child in run._children if child.name == 'agent_2')
     leftovers = held_files(victim.pid)
@@ -222,7 +284,11 @@ def test_wall_clock_run_triggers_on_agents_own_timers_and_keeps_the_formation(tm
     # Delays of milliseconds do not break this formation: connectivity is kept and the error shrinks.
     assert summary['max_edge_length'] < scenario.delta
     initial_error = max(
-        float(np.linalg.norm(scenario.positions[scenario.index(e.i)] - scenario.positions[scenario.index(e.j)] - e.d))
+        float(
+            np.linalg.norm(
+                scenario.positions[scenario.index(e.i)] - scenario.positions[scenario.index(e.j)] - e.d
+            )
+        )
         for e in scenario.edges
     )
     assert summary['final_formation_error'] < initial_error
@@ -247,7 +313,9 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, stepping_ru
     run.interrupt()
     result = stepping.result(timeout=60.0)
     assert result.exit_status == 130
-    killed = [child for child in run._children if child.process.returncode in (-signal.SIGTERM, -signal.SIGKILL)]
+    killed = [
+        child for child in run._children if child.process.returncode in (-signal.SIGTERM, -signal.SIGKILL)
+    ]
     assert killed, [child.process.returncode for child in run._children]
     files = set().union(*(child.shm_files for child in killed))
     assert files, 'the killed children mapped no Fast DDS shared-memory file'

@@ -20,7 +20,11 @@ pytestmark = pytest.mark.skipif(not SHM_DIR.is_dir(), reason='no /dev/shm here')
 
 
 def _port(number: int) -> list[Path]:
-    files = [SHM_DIR / f'fastrtps_port{number}', SHM_DIR / f'sem.fastrtps_port{number}_mutex', SHM_DIR / f'fastrtps_port{number}_el']
+    files = [
+        SHM_DIR / f'fastrtps_port{number}',
+        SHM_DIR / f'sem.fastrtps_port{number}_mutex',
+        SHM_DIR / f'fastrtps_port{number}_el',
+    ]
     for file in files:
         file.write_bytes(b'\0' * 64)
     return files
@@ -51,7 +55,9 @@ def test_the_files_of_a_dead_owner_go_whole_and_those_held_or_mapped_stay(made):
     handle = mapped[0].open('r+b')  # a peer alive maps a segment whose owner is gone
     view = mmap.mmap(handle.fileno(), 0)
     try:
-        assert in_use(str(path) for path in dead_port + dead_segment + locked + mapped) == {str(path) for path in locked + mapped}
+        assert in_use(str(path) for path in dead_port + dead_segment + locked + mapped) == {
+            str(path) for path in locked + mapped
+        }
         named = [dead_port[0], dead_segment[1], locked[0], mapped[1]]  # any one file names its family
         removed = remove_orphans(str(path) for path in named)
         assert sorted(removed) == sorted(str(path) for path in dead_port + dead_segment)
@@ -62,7 +68,9 @@ def test_the_files_of_a_dead_owner_go_whole_and_those_held_or_mapped_stay(made):
         handle.close()
         os.close(lock)
     # Once their holders are gone, they are left by the dead too; what was not named still stays.
-    assert sorted(remove_orphans([str(locked[1]), str(mapped[0])])) == sorted(str(path) for path in locked + mapped)
+    assert sorted(remove_orphans([str(locked[1]), str(mapped[0])])) == sorted(
+        str(path) for path in locked + mapped
+    )
     assert all(path.exists() for path in unnamed)
 
 
@@ -75,7 +83,10 @@ def test_a_process_holds_its_segment_its_ports_and_their_lock_files(made):
     try:
         held = held_files(os.getpid())
         assert {str(files[0]), str(files[-1])} <= held
-        assert all(Path(path).parent == SHM_DIR and Path(path).name.startswith(('fastrtps_', 'sem.fastrtps_')) for path in held)
+        assert all(
+            Path(path).parent == SHM_DIR and Path(path).name.startswith(('fastrtps_', 'sem.fastrtps_'))
+            for path in held
+        )
     finally:
         view.close()
         handle.close()

@@ -56,9 +56,15 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
     from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(
-        'robots_square', out_dir=tmp_path / 'run', horizon=HORIZON, domain_id=DOMAIN_ID, progress=False, timeout=240.0,
-        backend='unicycle', robots=RobotOptions(model='unicycle'),
-    )  # fmt: skip
+        'robots_square',
+        out_dir=tmp_path / 'run',
+        horizon=HORIZON,
+        domain_id=DOMAIN_ID,
+        progress=False,
+        timeout=240.0,
+        backend='unicycle',
+        robots=RobotOptions(model='unicycle'),
+    )
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     node = Node('inspector', context=ros)
@@ -77,17 +83,30 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
         # `ros2 topic echo --once` on five topics (default QoS), `ros2 topic hz` on odom (kept).
         default = QoSProfile(depth=10)
         topics = {
-            '/agent_1/trigger_info/to_2': Float64MultiArray, '/formation/step': Float64MultiArray,
-            '/agent_1/robot/cmd_vel': Twist, '/agent_1/robot/odom': Odometry, '/formation/status': Float64MultiArray,
-        }  # fmt: skip
+            '/agent_1/trigger_info/to_2': Float64MultiArray,
+            '/formation/step': Float64MultiArray,
+            '/agent_1/robot/cmd_vel': Twist,
+            '/agent_1/robot/odom': Odometry,
+            '/formation/status': Float64MultiArray,
+        }
         heard: dict[str, list] = {topic: [] for topic in topics}
-        readers = {topic: node.create_subscription(kind, topic, heard[topic].append, default) for topic, kind in topics.items()}
+        readers = {
+            topic: node.create_subscription(kind, topic, heard[topic].append, default)
+            for topic, kind in topics.items()
+        }
 
         # `ros2 param describe /agent_1/formation_agent pose_timeout`, and `ros2 param get`.
         describe = node.create_client(DescribeParameters, '/agent_1/formation_agent/describe_parameters')
         get = node.create_client(GetParameters, '/agent_1/formation_agent/get_parameters')
-        _wait(executor, lambda: describe.service_is_ready() and get.service_is_ready(), timeout=10.0, what='parameter services')
-        described, took_describe = _call(executor, describe, DescribeParameters.Request(names=['pose_timeout']))
+        _wait(
+            executor,
+            lambda: describe.service_is_ready() and get.service_is_ready(),
+            timeout=10.0,
+            what='parameter services',
+        )
+        described, took_describe = _call(
+            executor, describe, DescribeParameters.Request(names=['pose_timeout'])
+        )
         got, took_get = _call(executor, get, GetParameters.Request(names=['pose_timeout', 'agent_id']))
         assert took_describe < ANSWER_WITHIN and took_get < ANSWER_WITHIN, (took_describe, took_get)
         (descriptor,) = described.descriptors
@@ -95,11 +114,23 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
         assert [value.double_value for value in got.values[:1]] == [RobotOptions().pose_timeout]
         assert got.values[1].integer_value == 1
 
-        stepping = [topic for topic in topics if topic != '/formation/step']  # Steps: 0 (before we joined) and the final one
-        _wait(executor, lambda: all(heard[topic] for topic in stepping), timeout=HORIZON, what=f'message on each of {stepping}')
+        stepping = [
+            topic for topic in topics if topic != '/formation/step'
+        ]  # Steps: 0 (before we joined) and the final one
+        _wait(
+            executor,
+            lambda: all(heard[topic] for topic in stepping),
+            timeout=HORIZON,
+            what=f'message on each of {stepping}',
+        )
         for topic in stepping[:-1]:  # echo --once: gone after its first message; odom stays, as hz does
             node.destroy_subscription(readers[topic])
-        _wait(executor, lambda: bool(heard['/formation/step']) or not worker.is_alive(), timeout=240.0, what='final Step')
+        _wait(
+            executor,
+            lambda: bool(heard['/formation/step']) or not worker.is_alive(),
+            timeout=240.0,
+            what='final Step',
+        )
     finally:
         worker.join(timeout=240.0)
         executor.shutdown()
@@ -110,5 +141,9 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
     summary = json.loads(result.summary.read_text())
     assert summary['extra']['failure'] is None and summary['max_edge_length'] < summary['delta']
     recording = summary['extra']['recording']  # every message the run published, in its bag, and nothing else
-    assert recording['complete'] and not recording['foreign'] and recording['recorded'] == recording['published'] > 0
+    assert (
+        recording['complete']
+        and not recording['foreign']
+        and recording['recorded'] == recording['published'] > 0
+    )
     assert main(['analyze', str(tmp_path / 'run'), '--no-figures', '--quiet']) == 0

@@ -13,22 +13,40 @@ from formation_sim.model.scenario import load_scenario
 from formation_sim.runtime.launch import RobotOptions, RunError
 from formation_sim.runtime.orchestrate import FormationRun
 
-TURTLEBOT3 = RobotOptions(model='unicycle', control_point_distance=0.1, max_linear_speed=0.22, max_angular_speed=2.84)
+TURTLEBOT3 = RobotOptions(
+    model='unicycle', control_point_distance=0.1, max_linear_speed=0.22, max_angular_speed=2.84
+)
 
 
 def _plan(tmp_path, backend, robots=None, **options):
-    return FormationRun('robots_square', out_dir=tmp_path / 'run', backend=backend, robots=robots, **options).plan
+    return FormationRun(
+        'robots_square', out_dir=tmp_path / 'run', backend=backend, robots=robots, **options
+    ).plan
 
 
 def test_the_exact_backend_is_the_simulator_and_its_agents(tmp_path):
     plan = _plan(tmp_path, 'exact')
     specs = plan.processes(plan.write_inputs())
-    assert [spec.name for spec in specs] == ['recorder', 'simulator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
+    assert [spec.name for spec in specs] == [
+        'recorder',
+        'simulator',
+        'agent_1',
+        'agent_2',
+        'agent_3',
+        'agent_4',
+    ]
     assert [spec.name for spec in specs if spec.keeper] == ['simulator'] and plan.clock == 'lockstep'
-    simulator = yaml.safe_load((tmp_path / 'run' / 'simulator.params.yaml').read_text())['/formation_simulator']['ros__parameters']
+    simulator = yaml.safe_load((tmp_path / 'run' / 'simulator.params.yaml').read_text())[
+        '/formation_simulator'
+    ]['ros__parameters']
     assert specs[1].args[-2:] == ('--params-file', str(tmp_path / 'run' / 'simulator.params.yaml'))
-    assert simulator['clock_mode'] == 'lockstep' and simulator['scenario'] == str((tmp_path / 'run' / 'scenario.yaml').resolve())
-    assert specs[1].command == f'formation_sim --ros-args --params-file {tmp_path / "run" / "simulator.params.yaml"}'
+    assert simulator['clock_mode'] == 'lockstep' and simulator['scenario'] == str(
+        (tmp_path / 'run' / 'scenario.yaml').resolve()
+    )
+    assert (
+        specs[1].command
+        == f'formation_sim --ros-args --params-file {tmp_path / "run" / "simulator.params.yaml"}'
+    )
     agents = yaml.safe_load((tmp_path / 'run' / 'agents.params.yaml').read_text())
     assert 'sensing' not in agents['/agent_1/formation_agent']['ros__parameters']  # the simulator's service
     assert not (tmp_path / 'run' / 'robots.params.yaml').exists()
@@ -41,13 +59,23 @@ def test_auto_packing_keeps_one_process_per_agent_for_small_teams_and_few_proces
     small = FormationRun('paper_single', out_dir=tmp_path / 'small', agents_per_process='auto').plan
     assert small.agent_groups() == [[1], [2], [3]]
     edge = random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO, seed=3)
-    assert FormationRun(edge, out_dir=tmp_path / 'edge', agents_per_process='auto').plan.agents_per_process == 1
-    large = FormationRun(random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO + 1, seed=3), out_dir=tmp_path / 'large', agents_per_process='auto').plan
+    assert (
+        FormationRun(edge, out_dir=tmp_path / 'edge', agents_per_process='auto').plan.agents_per_process == 1
+    )
+    large = FormationRun(
+        random_scenario(n=ONE_PROCESS_PER_AGENT_UP_TO + 1, seed=3),
+        out_dir=tmp_path / 'large',
+        agents_per_process='auto',
+    ).plan
     groups = large.agent_groups()
-    assert 1 < len(groups) <= AUTO_AGENT_PROCESSES and sorted(i for group in groups for i in group) == list(large.scenario.agent_ids)
+    assert 1 < len(groups) <= AUTO_AGENT_PROCESSES and sorted(i for group in groups for i in group) == list(
+        large.scenario.agent_ids
+    )
     assert max(map(len, groups)) == -(-(ONE_PROCESS_PER_AGENT_UP_TO + 1) // AUTO_AGENT_PROCESSES)
     for bad in (0, 'many', 2.5, True):
-        with pytest.raises(RunError, match=f"agents_per_process must be an integer >= 1 or 'auto', got {bad!r}"):
+        with pytest.raises(
+            RunError, match=f"agents_per_process must be an integer >= 1 or 'auto', got {bad!r}"
+        ):
             FormationRun('paper_single', out_dir=tmp_path / 'bad', agents_per_process=bad)
     assert not (tmp_path / 'bad').exists()
 
@@ -66,10 +94,15 @@ def test_a_discovery_server_starts_first_and_every_other_child_is_its_client(tmp
     assert [spec.name for spec in specs if dict(spec.env).get('ROS_SUPER_CLIENT') == 'TRUE'] == ['simulator']
     server = specs[0]
     assert os.access(server.program, os.X_OK) and server.program.endswith('fast-discovery-server')
-    assert server.args == ('--server-id', '0', '--udp-address', '127.0.0.1', '--udp-port', '40123') and not server.expected_exit
+    assert (
+        server.args == ('--server-id', '0', '--udp-address', '127.0.0.1', '--udp-port', '40123')
+        and not server.expected_exit
+    )
     assert plan.environment(150, extra_env={})['ROS_DISCOVERY_SERVER'] == '127.0.0.1:40123'
     assert plan.process_count() == simple.process_count() + 1
-    across = dataclasses.replace(_plan(tmp_path / 'across', 'exact', discovery='server', localhost_only=False), discovery_port=40123)
+    across = dataclasses.replace(
+        _plan(tmp_path / 'across', 'exact', discovery='server', localhost_only=False), discovery_port=40123
+    )
     assert across.discovery_server_process().args[3] == '0.0.0.0'  # noqa: S104 - clients on other machines reach it
 
 
@@ -77,7 +110,10 @@ def test_a_discovery_server_that_is_not_installed_is_refused_before_anything_exi
     from formation_sim.runtime import launch
 
     monkeypatch.setattr(launch, 'DISCOVERY_SERVER_PROGRAM', 'no-such-discovery-server')
-    with pytest.raises(RunError, match='the discovery server needs no-such-discovery-server .*neither .*/no-such-discovery-server nor'):
+    with pytest.raises(
+        RunError,
+        match='the discovery server needs no-such-discovery-server .*neither .*/no-such-discovery-server nor',
+    ):
         _plan(tmp_path, 'exact', discovery='server')
     with pytest.raises(RunError, match="discovery must be one of \\('simple', 'server'\\), got 'multicast'"):
         _plan(tmp_path, 'exact', discovery='multicast')
@@ -85,31 +121,71 @@ def test_a_discovery_server_that_is_not_installed_is_refused_before_anything_exi
 
 
 def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_agent(tmp_path):
-    plan = _plan(tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': math.pi / 2, 'robots_per_process': 2}))
+    plan = _plan(
+        tmp_path,
+        'unicycle',
+        RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': math.pi / 2, 'robots_per_process': 2}),
+    )
     paths = plan.write_inputs()
     specs = plan.processes(paths)
-    assert [spec.name for spec in specs] == ['recorder', 'robots_1-2', 'robots_3-4', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
+    assert [spec.name for spec in specs] == [
+        'recorder',
+        'robots_1-2',
+        'robots_3-4',
+        'coordinator',
+        'agent_1',
+        'agent_2',
+        'agent_3',
+        'agent_4',
+    ]
     assert plan.clock == 'realtime'
     assert 'formation_sim.runtime.coordinator' in next(spec for spec in specs if spec.keeper).args
     coordinator = yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters']
     assert coordinator['robot'] == 'unicycle' and coordinator['backend'] == 'unicycle'
-    assert coordinator['robot_trajectory'] == 'odom'  # simulated without noise or latency: its odometry is exact
+    assert (
+        coordinator['robot_trajectory'] == 'odom'
+    )  # simulated without noise or latency: its odometry is exact
     robots = yaml.safe_load(paths['robots'].read_text())
     scenario = load_scenario('robots_square')
     for agent in scenario.agent_ids:
         params = robots[f'/agent_{agent}/simulated_robot']['ros__parameters']
-        assert params['model'] == 'unicycle' and params['max_linear_speed'] == 0.22 and params['max_angular_speed'] == 2.84
+        assert (
+            params['model'] == 'unicycle'
+            and params['max_linear_speed'] == 0.22
+            and params['max_angular_speed'] == 2.84
+        )
         # The robot node puts its axle l behind `position` along `yaw`: here the scenario point itself.
-        assert params['position'] == scenario.positions[scenario.index(agent)].tolist() and params['yaw'] == math.pi / 2
+        assert (
+            params['position'] == scenario.positions[scenario.index(agent)].tolist()
+            and params['yaw'] == math.pi / 2
+        )
         assert params['publish_truth'] is False  # its odometry is the truth: no second copy
     agents = yaml.safe_load(paths['agents'].read_text())['/agent_3/formation_agent']['ros__parameters']
-    assert {key: agents[key] for key in ('sensing', 'pose_type', 'robot', 'control_point_distance', 'max_linear_speed', 'max_angular_speed', 'world_frame')} == {
-        'sensing': 'poses', 'pose_type': 'odom', 'robot': 'unicycle', 'control_point_distance': 0.1,
-        'max_linear_speed': 0.22, 'max_angular_speed': 2.84, 'world_frame': 'world',
-    }  # fmt: skip
+    assert {
+        key: agents[key]
+        for key in (
+            'sensing',
+            'pose_type',
+            'robot',
+            'control_point_distance',
+            'max_linear_speed',
+            'max_angular_speed',
+            'world_frame',
+        )
+    } == {
+        'sensing': 'poses',
+        'pose_type': 'odom',
+        'robot': 'unicycle',
+        'control_point_distance': 0.1,
+        'max_linear_speed': 0.22,
+        'max_angular_speed': 2.84,
+        'world_frame': 'world',
+    }
     assert 'max_linear_acceleration' not in agents  # no limit given: the agent's default (none)
     recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
-    assert 'clock_topic' not in recorder  # the Step topic: bag time is the run's time, as on the exact backend
+    assert (
+        'clock_topic' not in recorder
+    )  # the Step topic: bag time is the run's time, as on the exact backend
     recorded = {spec.split(':')[0] for spec in recorder['topics']}
     assert {'/agent_2/robot/cmd_vel', '/agent_2/robot/odom', '/formation/robots'} <= recorded
     assert '/agent_2/robot/pose' not in recorded  # the agents read odometry
@@ -117,27 +193,53 @@ def test_a_unicycle_run_places_each_robot_by_its_control_point_and_tells_its_age
     assert recorder['watched_topics'] == [f'/agent_{i}/robot/odom' for i in scenario.agent_ids]
 
 
-@pytest.mark.parametrize(('noise', 'pose_type'), [({'pose_noise': 0.005}, 'odom'), ({'yaw_noise': 0.01}, 'odom'), ({'latency': 0.02}, 'pose')])
-def test_simulated_robots_whose_odometry_is_not_exact_publish_their_truth_and_the_formation_is_measured_on_it(tmp_path, noise, pose_type):
-    plan = _plan(tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), **noise, 'pose_type': pose_type}))
+@pytest.mark.parametrize(
+    ('noise', 'pose_type'),
+    [({'pose_noise': 0.005}, 'odom'), ({'yaw_noise': 0.01}, 'odom'), ({'latency': 0.02}, 'pose')],
+)
+def test_simulated_robots_whose_odometry_is_not_exact_publish_their_truth_and_the_formation_is_measured_on_it(
+    tmp_path, noise, pose_type
+):
+    plan = _plan(
+        tmp_path, 'unicycle', RobotOptions(**{**TURTLEBOT3.to_dict(), **noise, 'pose_type': pose_type})
+    )
     paths = plan.write_inputs()
-    assert yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters']['robot_trajectory'] == 'true_odom'
+    assert (
+        yaml.safe_load(paths['keeper'].read_text())['/formation_coordinator']['ros__parameters'][
+            'robot_trajectory'
+        ]
+        == 'true_odom'
+    )
     robots = yaml.safe_load(paths['robots'].read_text())
     assert all(params['ros__parameters']['publish_truth'] is True for params in robots.values())
     recorder = yaml.safe_load(paths['recorder'].read_text())['/formation_recorder']['ros__parameters']
     recorded = {spec.split(':')[0] for spec in recorder['topics']}
     sensed = '/agent_2/robot/pose' if pose_type == 'pose' else '/agent_2/robot/odom'
     assert {'/agent_2/robot/true_odom', sensed} <= recorded  # the truth, and what the agents read
-    assert recorder['watched_topics'] == [t for t in recorder['watched_topics'] if t.startswith('/agent_')] and len(recorder['watched_topics']) == 8
+    assert (
+        recorder['watched_topics'] == [t for t in recorder['watched_topics'] if t.startswith('/agent_')]
+        and len(recorder['watched_topics']) == 8
+    )
 
 
 def test_an_external_run_starts_no_robot_and_measures_the_formation_on_what_the_agents_read(tmp_path):
     plan = _plan(tmp_path, 'external', RobotOptions(model='holonomic', pose_type='pose'))
     specs = plan.processes(plan.write_inputs())
-    assert [spec.name for spec in specs] == ['recorder', 'coordinator', 'agent_1', 'agent_2', 'agent_3', 'agent_4']
-    coordinator = yaml.safe_load((tmp_path / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+    assert [spec.name for spec in specs] == [
+        'recorder',
+        'coordinator',
+        'agent_1',
+        'agent_2',
+        'agent_3',
+        'agent_4',
+    ]
+    coordinator = yaml.safe_load((tmp_path / 'run' / 'coordinator.params.yaml').read_text())[
+        '/formation_coordinator'
+    ]['ros__parameters']
     assert coordinator['robot_trajectory'] == 'pose' and coordinator['backend'] == 'external'
-    recorder = yaml.safe_load((tmp_path / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
+    recorder = yaml.safe_load((tmp_path / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder'][
+        'ros__parameters'
+    ]
     assert '/agent_1/robot/cmd_vel:geometry_msgs/msg/TwistStamped' in recorder['topics']
 
 
@@ -147,18 +249,30 @@ def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_ty
     records both kinds, whichever the robots have, but step 0 waits only for the kind the agents
     read (before, an odometry-only team never started: a DiscoveryError after 120 s)."""
     other = {'odom': 'pose', 'pose': 'odom'}[pose_type]
-    for backend, robots in (('external', RobotOptions(model='unicycle', pose_type=pose_type)), ('unicycle', RobotOptions(model='unicycle', pose_type=pose_type))):
+    for backend, robots in (
+        ('external', RobotOptions(model='unicycle', pose_type=pose_type)),
+        ('unicycle', RobotOptions(model='unicycle', pose_type=pose_type)),
+    ):
         folder = tmp_path / f'{backend}_{pose_type}'
         plan = _plan(folder, backend, robots)
         plan.write_inputs()
-        recorder = yaml.safe_load((folder / 'run' / 'recorder.params.yaml').read_text())['/formation_recorder']['ros__parameters']
-        coordinator = yaml.safe_load((folder / 'run' / 'coordinator.params.yaml').read_text())['/formation_coordinator']['ros__parameters']
+        recorder = yaml.safe_load((folder / 'run' / 'recorder.params.yaml').read_text())[
+            '/formation_recorder'
+        ]['ros__parameters']
+        coordinator = yaml.safe_load((folder / 'run' / 'coordinator.params.yaml').read_text())[
+            '/formation_coordinator'
+        ]['ros__parameters']
         # What the agents read, and what the coordinator measures the formation on.
         read = {f'/agent_1/robot/{pose_type}', f'/agent_1/robot/{coordinator["robot_trajectory"]}'}
-        assert sorted(topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')) == sorted(read)
+        assert sorted(
+            topic for topic in recorder['watched_topics'] if topic.startswith('/agent_1/')
+        ) == sorted(read)
         recorded = {entry.split(':')[0] for entry in recorder['topics']}
         if backend == 'external':  # both kinds recorded, whichever the robots have
-            assert f'/agent_1/robot/{other}' in recorded and f'/agent_1/robot/{other}' not in recorder['watched_topics']
+            assert (
+                f'/agent_1/robot/{other}' in recorded
+                and f'/agent_1/robot/{other}' not in recorder['watched_topics']
+            )
         assert coordinator['pose_silence'] == robots.pose_timeout
 
 
@@ -166,14 +280,35 @@ def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_ty
     ('options', 'complaint'),
     [
         (dict(backend='external'), "backend 'external' needs robots=RobotOptions(model=...)"),
-        (dict(backend='unicycle', robots=RobotOptions(model='holonomic')), "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'"),
-        (dict(backend='holonomic', clock='lockstep'), "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'"),
+        (
+            dict(backend='unicycle', robots=RobotOptions(model='holonomic')),
+            "backend 'unicycle' simulates unicycle robots, but robots.model is 'holonomic'",
+        ),
+        (
+            dict(backend='holonomic', clock='lockstep'),
+            "robots run on the wall clock: backend 'holonomic' needs clock=realtime, got 'lockstep'",
+        ),
         (dict(backend='exact', robots=TURTLEBOT3), 'robots are options of the robot backends'),
-        (dict(backend='mujoco'), "backend must be one of ('exact', 'holonomic', 'unicycle', 'car', 'external'), got 'mujoco'"),
-        (dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)), 'the linear speed limit must be > 0 (inf: none), got 0.0'),
-        (dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)), 'pose_noise must be a finite number >= 0, got -0.1'),
-        (dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)), 'control_point_distance must be > 0, got 0.0'),
-        (dict(backend='unicycle', robots=RobotOptions(pose_type='tf')), "pose_type must be one of ('odom', 'pose'), got 'tf'"),
+        (
+            dict(backend='mujoco'),
+            "backend must be one of ('exact', 'holonomic', 'unicycle', 'car', 'external'), got 'mujoco'",
+        ),
+        (
+            dict(backend='unicycle', robots=RobotOptions(max_linear_speed=0.0)),
+            'the linear speed limit must be > 0 (inf: none), got 0.0',
+        ),
+        (
+            dict(backend='unicycle', robots=RobotOptions(pose_noise=-0.1)),
+            'pose_noise must be a finite number >= 0, got -0.1',
+        ),
+        (
+            dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)),
+            'control_point_distance must be > 0, got 0.0',
+        ),
+        (
+            dict(backend='unicycle', robots=RobotOptions(pose_type='tf')),
+            "pose_type must be one of ('odom', 'pose'), got 'tf'",
+        ),
     ],
 )
 def test_bad_robot_options_are_refused_before_anything_exists(tmp_path, options, complaint):
@@ -199,7 +334,12 @@ def test_unicycles_need_a_planar_scenario(tmp_path, paper_scenario_dict):
 def test_robot_options_reach_the_simulated_robots(tmp_path):
     noisy = RobotOptions(model='holonomic', pose_noise=0.005, latency=0.02, seed=3)
     params = noisy.robot_parameters(load_scenario('robots_square'), 2)
-    assert {key: params[key] for key in ('pose_noise', 'pose_latency', 'seed', 'rate')} == {'pose_noise': 0.005, 'pose_latency': 0.02, 'seed': 3, 'rate': 100.0}
+    assert {key: params[key] for key in ('pose_noise', 'pose_latency', 'seed', 'rate')} == {
+        'pose_noise': 0.005,
+        'pose_latency': 0.02,
+        'seed': 3,
+        'rate': 100.0,
+    }
     assert np.array_equal(params['position'], [1.015, -0.0075])
 
 

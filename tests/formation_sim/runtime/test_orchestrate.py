@@ -45,7 +45,14 @@ def _last_commands(bag: Path, scenario) -> dict[int, list[float]]:
             if message.topic == f'/agent_{agent}/robot/cmd_vel':
                 msg = decode(message.rawdata, message.msgtype)
                 twist = msg.twist if message.msgtype.endswith('TwistStamped') else msg
-                last[agent] = [twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z]
+                last[agent] = [
+                    twist.linear.x,
+                    twist.linear.y,
+                    twist.linear.z,
+                    twist.angular.x,
+                    twist.angular.y,
+                    twist.angular.z,
+                ]
     return last
 
 
@@ -85,9 +92,15 @@ def _assert_a_good_robot_run(out: Path, capsys) -> dict:
     assert summary['max_edge_length'] < scenario.delta
     assert summary['total_events'] >= len(scenario.agent_ids)
     recording = summary['extra']['recording']  # what the coordinator and agents published, all in the bag
-    assert recording['complete'] and not recording['foreign'] and recording['recorded'] == recording['published'] > 0
+    assert (
+        recording['complete']
+        and not recording['foreign']
+        and recording['recorded'] == recording['published'] > 0
+    )
     last = _last_commands(out / 'bag', scenario)
-    assert set(last) == set(scenario.agent_ids), f'robots without a recorded command: {set(scenario.agent_ids) - set(last)}'
+    assert set(last) == set(scenario.agent_ids), (
+        f'robots without a recorded command: {set(scenario.agent_ids) - set(last)}'
+    )
     assert all(not any(values) for values in last.values()), last
     capsys.readouterr()
     assert main(['analyze', str(out), '--no-figures', '--quiet']) == 0, capsys.readouterr().err
@@ -99,8 +112,25 @@ def _assert_a_good_robot_run(out: Path, capsys) -> dict:
 @pytest.mark.timeout(300)
 def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     out = tmp_path / 'unicycle'
-    arguments = ['run', 'robots_square', '--backend', 'unicycle', '--horizon', '4', '--out', str(out), '--domain-id', '163',
-                 '--max-speed', '0.22', '--max-angular-speed', '2.84', '--quiet', '--no-plot', *LIGHT]  # fmt: skip
+    arguments = [
+        'run',
+        'robots_square',
+        '--backend',
+        'unicycle',
+        '--horizon',
+        '4',
+        '--out',
+        str(out),
+        '--domain-id',
+        '163',
+        '--max-speed',
+        '0.22',
+        '--max-angular-speed',
+        '2.84',
+        '--quiet',
+        '--no-plot',
+        *LIGHT,
+    ]
     assert main(arguments) == 0, capsys.readouterr().err
     summary = _assert_a_good_robot_run(out, capsys)
     # Within the limits by the theory's bound (formation validate --max-speed 0.22): nothing clipped.
@@ -111,31 +141,59 @@ def test_a_unicycle_team_forms_its_square_and_stops(tmp_path, capsys):
     # worth of motion (a fraction of the initial formation error of 3.2 cm).
     exact = tmp_path / 'exact'
     assert main(['simulate', 'robots_square', '--horizon', '4', '--out', str(exact), '--no-plot']) == 0
-    assert main(['compare', str(out), str(exact), '--out', str(tmp_path / 'compare'), '--no-figures', '--quiet']) == 0
+    assert (
+        main(['compare', str(out), str(exact), '--out', str(tmp_path / 'compare'), '--no-figures', '--quiet'])
+        == 0
+    )
     comparison = json.loads((tmp_path / 'compare' / 'compare.json').read_text())
     assert comparison['runs']['a']['mode'] == 'robots' and comparison['runs']['b']['mode'] == 'in_process'
     assert comparison['trajectory']['max_deviation'] < 0.0318
 
 
 @pytest.mark.timeout(300)
-def test_a_car_team_forms_its_square_within_its_steering_limit_and_counts_what_it_could_not_follow(tmp_path, capsys):
+def test_a_car_team_forms_its_square_within_its_steering_limit_and_counts_what_it_could_not_follow(
+    tmp_path, capsys
+):
     """Cars (F1TENTH-sized: L = 0.33 m, φ_max = 0.42 rad, l = L) start heading along x, so most
     of the agents' velocities lie outside the cone they can follow: steered to the nearest they can
     (saturation 'steering'), they still close the formation; every command a car got is drivable."""
     from formation_sim.bag.io import decode, read_bag
 
     out = tmp_path / 'car'
-    arguments = ['run', 'robots_square', '--backend', 'car', '--horizon', '4', '--out', str(out), '--domain-id', '41',
-                 '--max-speed', '0.22', '--wheelbase', '0.33', '--max-steering-angle', '0.42',
-                 '--control-point-distance', '0.33', '--quiet', '--no-plot']  # fmt: skip
+    arguments = [
+        'run',
+        'robots_square',
+        '--backend',
+        'car',
+        '--horizon',
+        '4',
+        '--out',
+        str(out),
+        '--domain-id',
+        '41',
+        '--max-speed',
+        '0.22',
+        '--wheelbase',
+        '0.33',
+        '--max-steering-angle',
+        '0.42',
+        '--control-point-distance',
+        '0.33',
+        '--quiet',
+        '--no-plot',
+    ]
     assert main(arguments) == 0, capsys.readouterr().err
     assert "commands saturated at the robots' limits: steering" in capsys.readouterr().err
     summary = _assert_a_good_robot_run(out, capsys)
     steering = summary['extra']['saturation']['by_kind']['steering']
-    assert steering['count'] > 0 and steering['allowed'] == 0.42 < steering['largest_requested'] <= math.pi / 2
+    assert (
+        steering['count'] > 0 and steering['allowed'] == 0.42 < steering['largest_requested'] <= math.pi / 2
+    )
     assert summary['final_formation_error'] < 0.5 * 0.0318  # from 3.2 cm at t = 0
     kappa = math.tan(0.42) / 0.33
-    commands = [decode(m.rawdata, m.msgtype) for m in read_bag(out / 'bag') if m.topic.endswith('/robot/cmd_vel')]
+    commands = [
+        decode(m.rawdata, m.msgtype) for m in read_bag(out / 'bag') if m.topic.endswith('/robot/cmd_vel')
+    ]
     assert commands and all(abs(c.angular.z) <= abs(c.linear.x) * kappa * (1 + 1e-9) for c in commands)
 
 
@@ -143,8 +201,24 @@ def test_a_car_team_forms_its_square_within_its_steering_limit_and_counts_what_i
 def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated(tmp_path, capsys):
     # 0.05 m/s: below the 0.1 m/s the exact run asks for at the start (formation validate).
     out = tmp_path / 'holonomic'
-    arguments = ['run', 'robots_square', '--backend', 'holonomic', '--horizon', '3', '--out', str(out), '--domain-id', '164',
-                 '--max-speed', '0.05', '--allow-saturation', '--quiet', '--no-plot', *LIGHT]  # fmt: skip
+    arguments = [
+        'run',
+        'robots_square',
+        '--backend',
+        'holonomic',
+        '--horizon',
+        '3',
+        '--out',
+        str(out),
+        '--domain-id',
+        '164',
+        '--max-speed',
+        '0.05',
+        '--allow-saturation',
+        '--quiet',
+        '--no-plot',
+        *LIGHT,
+    ]
     assert main(arguments) == 0
     assert "commands saturated at the robots' limits: linear_speed" in capsys.readouterr().err
     summary = _assert_a_good_robot_run(out, capsys)
@@ -159,17 +233,44 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
     from formation_sim.runtime.orchestrate import FormationRun
 
     domain = 165
-    env = with_our_packages({**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')})
+    env = with_our_packages(
+        {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    )
     robots = subprocess.Popen(
-        [sys.executable, '-m', 'formation_sim.cli', 'robots', 'robots_square', '--model', 'unicycle', '--domain-id', str(domain),
-         '--out', str(tmp_path / 'fleet'), '--duration', '200', '--robots-per-process', '4'],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            '-m',
+            'formation_sim.cli',
+            'robots',
+            'robots_square',
+            '--model',
+            'unicycle',
+            '--domain-id',
+            str(domain),
+            '--out',
+            str(tmp_path / 'fleet'),
+            '--duration',
+            '200',
+            '--robots-per-process',
+            '4',
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         result = FormationRun(
-            'robots_square', out_dir=tmp_path / 'external', horizon=3.0, domain_id=domain, progress=False, timeout=240.0,
-            backend='external', robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
-        ).run()  # fmt: skip
+            'robots_square',
+            out_dir=tmp_path / 'external',
+            horizon=3.0,
+            domain_id=domain,
+            progress=False,
+            timeout=240.0,
+            backend='external',
+            robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
+        ).run()
         assert result.ok, result.message
         assert not [c for c in result.children if c.name.startswith('robot')]  # the run started none
         summary = _assert_a_good_robot_run(result.out_dir, capsys)
@@ -195,14 +296,20 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     run = FormationRun(
-        'robots_square', out_dir=tmp_path / 'run', horizon=60.0, domain_id=166, progress=False, timeout=240.0,
+        'robots_square',
+        out_dir=tmp_path / 'run',
+        horizon=60.0,
+        domain_id=166,
+        progress=False,
+        timeout=240.0,
         # The robot's command timeout is what is tested, not the agents' pose timeout.
-        backend='holonomic', robots=RobotOptions(model='holonomic', pose_timeout=float(TEST_POSE_TIMEOUT)),
+        backend='holonomic',
+        robots=RobotOptions(model='holonomic', pose_timeout=float(TEST_POSE_TIMEOUT)),
         # As robots on their own machines talk: UDP. Over shared memory, a SIGKILLed reader once
         # stalled a neighbour's robot's pose writer for 1.4 s here (Fast DDS's port health check),
         # and that neighbour's agent stopped on its pose timeout too.
         extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
-    )  # fmt: skip
+    )
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()))
     worker.start()
@@ -217,7 +324,11 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     (result,) = results
     assert result.exit_status == EXIT_LOST, result.message
     failure = json.loads(result.summary.read_text())['extra']['failure']
-    assert failure['kind'] == 'agent_lost' and failure['agents'] == [2] and failure['detected_by'] == 'coordinator, orchestrator', failure
+    assert (
+        failure['kind'] == 'agent_lost'
+        and failure['agents'] == [2]
+        and failure['detected_by'] == 'coordinator, orchestrator'
+    ), failure
     assert failure['message'].startswith('agent_2 (pid ') and 'killed by SIGKILL' in failure['message']
     # Every other robot's zero command within the bound: the coordinator's final Step at most
     # POLL_PERIOD + a tick after the kill, each agent's zero command on it.
@@ -230,14 +341,23 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
             msg = decode(message.rawdata, message.msgtype)
             stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
             if stamp > killed_at + 0.5 + 0.2:
-                after.append((msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.pose.pose.position.x, msg.pose.pose.position.y))
+                after.append(
+                    (
+                        msg.twist.twist.linear.x,
+                        msg.twist.twist.linear.y,
+                        msg.pose.pose.position.x,
+                        msg.pose.pose.position.y,
+                    )
+                )
     assert after, f'the bag holds no pose of robot 2 after its timeout (killed at {killed_at}): {failure}'
     assert all(vx == 0.0 and vy == 0.0 for vx, vy, _, _ in after)
     assert len({(x, y) for _, _, x, y in after}) == 1
 
 
 @pytest.mark.timeout(300)
-def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_refused_before_any_command(tmp_path, capsys):
+def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_refused_before_any_command(
+    tmp_path, capsys
+):
     """Issue 18: robot 1 stands 1.5 m off its corner (robots_square: Δ − ‖d_ij‖ = 1 m): the run
     reads where the robots are, refuses before Step 0 naming the edge and its numbers (exit 4),
     summary.json says so, and no robot was ever sent a non-zero command."""
@@ -253,29 +373,43 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
     positions = [list(p) for p in square.positions]
     positions[square.agent_ids.index(1)] = [-1.5, 0.0]  # 1.5 m from its corner at (0, 0)
     fleet = RobotFleet(
-        square.replace(positions=positions), robots=RobotOptions(model='unicycle'), out_dir=tmp_path / 'fleet', domain_id=domain,
+        square.replace(positions=positions),
+        robots=RobotOptions(model='unicycle'),
+        out_dir=tmp_path / 'fleet',
+        domain_id=domain,
         extra_env={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')},
-    )  # fmt: skip
+    )
     statuses = []
     worker = threading.Thread(target=lambda: statuses.append(fleet.run(duration=200.0)))
     worker.start()
     try:
         result = FormationRun(
-            'robots_square', out_dir=tmp_path / 'external', horizon=3.0, domain_id=domain, progress=False, timeout=240.0,
-            backend='external', robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
-        ).run()  # fmt: skip
+            'robots_square',
+            out_dir=tmp_path / 'external',
+            horizon=3.0,
+            domain_id=domain,
+            progress=False,
+            timeout=240.0,
+            backend='external',
+            robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
+        ).run()
     finally:
         fleet.stop()
         worker.join(timeout=60.0)
     assert statuses == [0], fleet.died
     assert result.exit_status == EXIT_REFUSED, result.message
     # Edge (1,2): x_1 − x_2 − d_12 = (−1.5 − 1.015 + 1, 0.0075), 1.52 m; edge (4,1): 1.49 m.
-    assert 'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)' in result.message
+    assert (
+        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)'
+        in result.message
+    )
     assert 'edge (4,1): the measured ‖x_4 − x_1 − d_41‖ = 1.49 m' in result.message
     assert 'the run does not start' in result.message
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
-    assert failure['kind'] == 'initial_condition' and failure['agents'] == [1, 2] and failure['step'] is None, failure
+    assert (
+        failure['kind'] == 'initial_condition' and failure['agents'] == [1, 2] and failure['step'] is None
+    ), failure
     assert [b['edge'] for b in failure['breaches']] == [[1, 2], [4, 1]]
     assert summary['extra']['started'] is False and summary['extra']['steps'] == 0
     measured = summary['extra']['measured_start']
@@ -288,11 +422,23 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
         elif message.topic.endswith('/robot/cmd_vel'):
             msg = decode(message.rawdata, message.msgtype)
             twist = msg.twist if message.msgtype.endswith('TwistStamped') else msg
-            commands.append((twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z))
+            commands.append(
+                (
+                    twist.linear.x,
+                    twist.linear.y,
+                    twist.linear.z,
+                    twist.angular.x,
+                    twist.angular.y,
+                    twist.angular.z,
+                )
+            )
     assert steps == 0
     assert not any(any(c) for c in commands), commands
     # `formation analyze` of a run that never stepped: it says why, and that there is nothing to analyse.
     capsys.readouterr()
     status = main(['analyze', str(result.out_dir), '--no-figures'])
     out = capsys.readouterr()
-    assert status == 2 and 'the run did not start (no Step 0; extra.failure initial_condition: edge (1,2)' in out.err, (status, out)
+    assert (
+        status == 2
+        and 'the run did not start (no Step 0; extra.failure initial_condition: edge (1,2)' in out.err
+    ), (status, out)

@@ -19,7 +19,15 @@ from geometry_msgs.msg import Pose, PoseArray
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
 
-from formation_sim.bag.io import BagWriter, BagError, BagReadError, TopicSpecError, UnknownMessageTypeError, decode, read_bag
+from formation_sim.bag.io import (
+    BagWriter,
+    BagError,
+    BagReadError,
+    TopicSpecError,
+    UnknownMessageTypeError,
+    decode,
+    read_bag,
+)
 from formation_sim.bag.recovery import BagRecoveryError, reindex
 from formation_sim.runtime.recorder import parse_topic_spec
 
@@ -77,7 +85,10 @@ def test_an_unreadable_bag_raises_bag_read_error_naming_the_remedy(tmp_path: Pat
         bag.write(STEP, 0, step_bytes(0))
     mcap = next((tmp_path / 'bag').glob('*.mcap'))
     (tmp_path / 'bag' / 'metadata.yaml').unlink()  # what a SIGKILLed recorder leaves
-    with pytest.raises(BagReadError, match=rf'no metadata.yaml \(it holds {mcap.name}\).*`formation recover {tmp_path / "bag"}` rebuilds it'):
+    with pytest.raises(
+        BagReadError,
+        match=rf'no metadata.yaml \(it holds {mcap.name}\).*`formation recover {tmp_path / "bag"}` rebuilds it',
+    ):
         list(read_bag(tmp_path / 'bag'))
     reindex(tmp_path / 'bag')
     mcap.write_bytes(b'not an mcap file' * 10)
@@ -96,8 +107,7 @@ def test_decode_gives_the_published_values(tmp_path: Path) -> None:
     step, poses = (decode(m.rawdata, m.msgtype) for m in read_bag(tmp_path / 'bag'))
     assert list(step.data) == [1.0, 3.0, 0.1 * 3]
     assert poses.header.frame_id == 'world'
-    assert [(p.position.x, p.position.y) for p in poses.poses] == [(3.0, 0.0), (3.25, -1.5),
-                                                                   (3.5, -3.0)]
+    assert [(p.position.x, p.position.y) for p in poses.poses] == [(3.0, 0.0), (3.25, -1.5), (3.5, -3.0)]
 
 
 def test_metadata_is_version_9_mcap_with_counts(tmp_path: Path) -> None:
@@ -116,11 +126,9 @@ def test_metadata_is_version_9_mcap_with_counts(tmp_path: Path) -> None:
     assert info['message_count'] == 6
     assert info['starting_time']['nanoseconds_since_epoch'] == 1_000
     assert info['duration']['nanoseconds'] == 1_000
-    counts = {t['topic_metadata']['name']: t['message_count']
-              for t in info['topics_with_message_count']}
+    counts = {t['topic_metadata']['name']: t['message_count'] for t in info['topics_with_message_count']}
     assert counts == {STEP: 5, POSES: 1}
-    formats = {t['topic_metadata']['serialization_format']
-               for t in info['topics_with_message_count']}
+    formats = {t['topic_metadata']['serialization_format'] for t in info['topics_with_message_count']}
     assert formats == {'cdr'}
 
 
@@ -191,12 +199,17 @@ KILLED_WRITER = textwrap.dedent("""
 def test_reindex_recovers_a_killed_recorder(tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
     listing = tmp_path / 'flushed.json'
-    run = subprocess.run([sys.executable, '-c', KILLED_WRITER, str(bag), str(listing)],
-                         check=False, capture_output=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, '-c', KILLED_WRITER, str(bag), str(listing)],
+        check=False,
+        capture_output=True,
+        timeout=120,
+    )
     assert run.returncode == -signal.SIGKILL, run.stderr.decode()
     assert not (bag / 'metadata.yaml').exists()
-    flushed = [(STEP, STEP_TYPE, k, bytes.fromhex(data))
-               for k, data in enumerate(json.loads(listing.read_text()))]
+    flushed = [
+        (STEP, STEP_TYPE, k, bytes.fromhex(data)) for k, data in enumerate(json.loads(listing.read_text()))
+    ]
 
     recovery = reindex(bag)
 
@@ -231,11 +244,17 @@ def test_reindex_rebuilds_lost_metadata_as_the_writer_wrote_it(tmp_path: Path) -
     assert not recovery.rewritten
     assert (bag / 'bag_0.mcap').read_bytes() == mcap_bytes
     rebuilt = metadata(bag)
-    for key in ('version', 'storage_identifier', 'relative_file_paths', 'duration',
-                'starting_time', 'message_count', 'topics_with_message_count'):
+    for key in (
+        'version',
+        'storage_identifier',
+        'relative_file_paths',
+        'duration',
+        'starting_time',
+        'message_count',
+        'topics_with_message_count',
+    ):
         assert rebuilt[key] == original[key], key
-    assert [tuple(m) for m in read_bag(bag)] == [
-        (t, mt, 5 + s, d) for t, mt, s, d in written]
+    assert [tuple(m) for m in read_bag(bag)] == [(t, mt, 5 + s, d) for t, mt, s, d in written]
 
 
 def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
@@ -248,7 +267,7 @@ def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
     writer.add_topic(STEP, STEP_TYPE)
     writer.add_topic(POSES, POSES_TYPE)
     for batch in range(4):
-        for topic, msgtype, stamp, data in interleaved(6 * (batch + 1))[12 * batch:]:
+        for topic, msgtype, stamp, data in interleaved(6 * (batch + 1))[12 * batch :]:
             writer.write(topic, stamp, data)
             written.append((topic, msgtype, stamp, data))
         writer.flush()
@@ -272,7 +291,7 @@ def test_reindex_of_a_file_cut_anywhere_keeps_a_prefix(tmp_path: Path) -> None:
             recovered_counts.append(0)
             continue
         recovered = [tuple(m) for m in read_bag(bag)]
-        assert recovered == written[:len(recovered)], cut
+        assert recovered == written[: len(recovered)], cut
         if cut in flushed_at:
             assert len(recovered) == flushed_at[cut], cut
         if cut >= data_end:
@@ -315,6 +334,7 @@ def test_reindex_errors_name_the_problem(tmp_path: Path) -> None:
 
 # --- live recording ------------------------------------------------------------------------------
 
+
 def recorder_command() -> list[str]:
     script = Path(sys.executable).with_name('formation_recorder')
     if script.exists():  # the console script of the installed package
@@ -327,8 +347,12 @@ def ros_domain(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain_id: int):
     """A private ROS domain for this test: environment for children and a context for us."""
     import rclpy
 
-    env = {'ROS_DOMAIN_ID': str(domain_id), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-           'ROS_LOG_DIR': str(tmp_path / 'ros_log'), 'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}
+    env = {
+        'ROS_DOMAIN_ID': str(domain_id),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+        'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp',
+    }
     for key, value in env.items():
         monkeypatch.setenv(key, value)
     context = rclpy.Context()
@@ -344,8 +368,9 @@ def recorder(tmp_path: Path, *parameters: str):
     """Run the recorder with `parameters` (name:=value); kill it if the test leaves it running."""
     arguments = [item for p in parameters for item in ('-p', p)]
     with (tmp_path / 'recorder.log').open('w') as log:
-        process = subprocess.Popen([*recorder_command(), '--ros-args', *arguments],
-                                   stdout=log, stderr=subprocess.STDOUT)
+        process = subprocess.Popen(
+            [*recorder_command(), '--ros-args', *arguments], stdout=log, stderr=subprocess.STDOUT
+        )
         try:
             yield process
         finally:
@@ -378,8 +403,7 @@ def stop(process: subprocess.Popen, sig: signal.Signals, tmp_path: Path) -> None
 def reliable_keep_all():
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
-                      reliability=ReliabilityPolicy.RELIABLE)
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 @pytest.mark.ros
@@ -392,9 +416,12 @@ def test_live_recording_keeps_every_message_in_order(
 
     bag = tmp_path / 'bag'
     count = 40
-    with (ros_domain(tmp_path, monkeypatch, domain_id) as context,
-          recorder(tmp_path, f'output:={bag}',
-                   f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']") as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, domain_id) as context,
+        recorder(
+            tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']"
+        ) as process,
+    ):
         node = rclpy.create_node('live_recording_test', context=context)
         step_pub = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
         poses_pub = node.create_publisher(PoseArray, POSES, reliable_keep_all())
@@ -421,28 +448,31 @@ def test_live_recording_keeps_every_message_in_order(
     assert [m.rawdata for m in recorded if m.topic == POSES] == published_poses
     # Each step is stamped with its own simulation time, data[2] = 0.1 k.
     assert [m.timestamp_ns for m in recorded if m.topic == STEP] == [
-        round(0.1 * k * 1e9) for k in range(count)]
-    hashes = {t['topic_metadata']['name']: t['topic_metadata']['type_description_hash']
-              for t in metadata(bag)['topics_with_message_count']}
+        round(0.1 * k * 1e9) for k in range(count)
+    ]
+    hashes = {
+        t['topic_metadata']['name']: t['topic_metadata']['type_description_hash']
+        for t in metadata(bag)['topics_with_message_count']
+    }
     assert hashes[STEP] == advertised_hash
 
 
 @pytest.mark.ros
-def test_live_prefix_discovery_with_node_clock(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_live_prefix_discovery_with_node_clock(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import rclpy
     from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
     started_ns = time.time_ns()
-    with (ros_domain(tmp_path, monkeypatch, 153) as context,
-          recorder(tmp_path, f'output:={bag}', 'prefix:=/formation/', "clock_topic:=''",
-                   'discovery_period:=0.2') as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, 153) as context,
+        recorder(
+            tmp_path, f'output:={bag}', 'prefix:=/formation/', "clock_topic:=''", 'discovery_period:=0.2'
+        ) as process,
+    ):
         node = rclpy.create_node('prefix_discovery_test', context=context)
         poses_pub = node.create_publisher(PoseArray, POSES, reliable_keep_all())
-        elsewhere_pub = node.create_publisher(Float64MultiArray, '/elsewhere/step',
-                                              reliable_keep_all())
+        elsewhere_pub = node.create_publisher(Float64MultiArray, '/elsewhere/step', reliable_keep_all())
         wait_for_subscribers([poses_pub], process, tmp_path)
         published = []
         for k in range(10):
@@ -497,9 +527,12 @@ def test_drain_keeps_messages_that_arrive_after_a_lull(
 
     bag = tmp_path / 'bag'
     # A quiet period well above the lull, so a loaded test machine cannot make this flaky.
-    with (ros_domain(tmp_path, monkeypatch, 140) as context,
-          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
-                   'drain_quiet:=2.0') as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, 140) as context,
+        recorder(
+            tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']", 'drain_quiet:=2.0'
+        ) as process,
+    ):
         node = rclpy.create_node('drain_lull_test', context=context)
         publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
         wait_for_subscribers([publisher], process, tmp_path)
@@ -527,14 +560,20 @@ def _steps_until_exit(process, publisher, published: list) -> float:
     return time.monotonic() - signalled
 
 
-def _drained_under_steps(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain: int, name: str, *parameters: str) -> tuple[float, list[bytes]]:
+def _drained_under_steps(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain: int, name: str, *parameters: str
+) -> tuple[float, list[bytes]]:
     """A recorder of the Steps into tmp_path/bag (with `parameters`) gets ten Steps, SIGINT, then
     a Step every 0.05 s until it exits (never quiet for 0.5 s): (seconds from the signal to its
     exit, the Steps published)."""
     import rclpy
 
-    with (ros_domain(tmp_path, monkeypatch, domain) as context,
-          recorder(tmp_path, f'output:={tmp_path / "bag"}', f"topics:=['{STEP}:{STEP_TYPE}']", *parameters) as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, domain) as context,
+        recorder(
+            tmp_path, f'output:={tmp_path / "bag"}', f"topics:=['{STEP}:{STEP_TYPE}']", *parameters
+        ) as process,
+    ):
         node = rclpy.create_node(name, context=context)
         publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
         wait_for_subscribers([publisher], process, tmp_path)
@@ -551,7 +590,9 @@ def test_drain_ends_at_its_limit_while_messages_keep_coming(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     bag = tmp_path / 'bag'
-    waited, published = _drained_under_steps(tmp_path, monkeypatch, 141, 'drain_limit_test', 'drain_quiet:=0.5', 'drain_limit:=1.5')
+    waited, published = _drained_under_steps(
+        tmp_path, monkeypatch, 141, 'drain_limit_test', 'drain_quiet:=0.5', 'drain_limit:=1.5'
+    )
 
     assert 1.5 <= waited < 30.0
     assert 'drain limit reached' in recorder_log(tmp_path)
@@ -569,10 +610,20 @@ def test_messages_of_an_endless_topic_do_not_hold_the_drain_up(
     out the 5 s stop timeout: `drain cut short by a second stop signal after 5.04 s`)."""
     bag = tmp_path / 'bag'
     waited, published = _drained_under_steps(
-        tmp_path, monkeypatch, 35, 'drain_endless_test', f"endless_topics:=['{STEP}']", 'drain_quiet:=0.5', 'drain_limit:=30.0'
+        tmp_path,
+        monkeypatch,
+        35,
+        'drain_endless_test',
+        f"endless_topics:=['{STEP}']",
+        'drain_quiet:=0.5',
+        'drain_limit:=30.0',
     )
 
-    assert waited < 30.0 and 'drained' in recorder_log(tmp_path) and 'drain limit reached' not in recorder_log(tmp_path)
+    assert (
+        waited < 30.0
+        and 'drained' in recorder_log(tmp_path)
+        and 'drain limit reached' not in recorder_log(tmp_path)
+    )
     recorded = [m.rawdata for m in read_bag(bag) if m.topic == STEP]
     assert len(recorded) >= 10 and recorded == published[: len(recorded)]
 
@@ -585,9 +636,16 @@ def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
     from rclpy.duration import Duration
 
     bag = tmp_path / 'bag'
-    with (ros_domain(tmp_path, monkeypatch, 142) as context,
-          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}']",
-                   'drain_quiet:=60.0', 'drain_limit:=120.0') as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, 142) as context,
+        recorder(
+            tmp_path,
+            f'output:={bag}',
+            f"topics:=['{STEP}:{STEP_TYPE}']",
+            'drain_quiet:=60.0',
+            'drain_limit:=120.0',
+        ) as process,
+    ):
         node = rclpy.create_node('drain_interrupt_test', context=context)
         publisher = node.create_publisher(Float64MultiArray, STEP, reliable_keep_all())
         wait_for_subscribers([publisher], process, tmp_path)
@@ -608,13 +666,25 @@ def test_a_second_signal_ends_the_drain_and_keeps_what_is_queued(
 @pytest.mark.parametrize('parameter', ['drain_quiet:=0.0', 'drain_limit:=-1.0', 'drain_quiet:=.nan'])
 def test_drain_parameters_must_be_positive(tmp_path: Path, parameter: str) -> None:
     bag = tmp_path / 'bag'
-    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-           'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
-    run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', parameter],
-                         capture_output=True, text=True, env=env, timeout=120)
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': '143',
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+    }
+    run = subprocess.run(
+        [*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', parameter],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     name, value = parameter.split(':=')
     assert run.returncode == 2, run.stderr
-    assert f"parameter '{name}' (double) must be > 0, finite, got {float(value.replace('.nan', 'nan'))!r}" in run.stderr
+    assert (
+        f"parameter '{name}' (double) must be > 0, finite, got {float(value.replace('.nan', 'nan'))!r}"
+        in run.stderr
+    )
     assert 'Traceback' not in run.stderr
     assert not bag.exists()
 
@@ -633,13 +703,25 @@ def test_the_heartbeat_names_the_watched_topics_until_their_first_message(
     from formation_msgs_py.topics import RECORDER_TOPIC
 
     pose, other = '/agent_2/robot/pose', '/other'
-    with (ros_domain(tmp_path, monkeypatch, 147) as context,
-          recorder(tmp_path, f'output:={tmp_path / "bag"}', f"topics:=['{pose}:{STEP_TYPE}', '{other}:{STEP_TYPE}']",
-                   f"watched_topics:=['{pose}']", 'flush_period:=0.1') as process):
+    with (
+        ros_domain(tmp_path, monkeypatch, 147) as context,
+        recorder(
+            tmp_path,
+            f'output:={tmp_path / "bag"}',
+            f"topics:=['{pose}:{STEP_TYPE}', '{other}:{STEP_TYPE}']",
+            f"watched_topics:=['{pose}']",
+            'flush_period:=0.1',
+        ) as process,
+    ):
         node = rclpy.create_node('watch_test', context=context)
         beats: list[dict] = []
-        node.create_subscription(String, RECORDER_TOPIC, lambda msg: beats.append(json.loads(msg.data)), READER_QOS)
-        publishers = {name: node.create_publisher(Float64MultiArray, name, reliable_keep_all()) for name in (pose, other)}
+        node.create_subscription(
+            String, RECORDER_TOPIC, lambda msg: beats.append(json.loads(msg.data)), READER_QOS
+        )
+        publishers = {
+            name: node.create_publisher(Float64MultiArray, name, reliable_keep_all())
+            for name in (pose, other)
+        }
         wait_for_subscribers(list(publishers.values()), process, tmp_path)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
@@ -665,11 +747,33 @@ def test_the_heartbeat_names_the_watched_topics_until_their_first_message(
 @pytest.mark.ros
 def test_watched_topics_must_be_recorded(tmp_path: Path) -> None:
     bag = tmp_path / 'bag'
-    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
-    run = subprocess.run([*recorder_command(), '--ros-args', '-p', f'output:={bag}', '-p', f"topics:=['{STEP}:{STEP_TYPE}']",
-                          '-p', "watched_topics:=['/agent_1/robot/pose']"], capture_output=True, text=True, env=env, timeout=120)  # fmt: skip
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': '143',
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+    }
+    run = subprocess.run(
+        [
+            *recorder_command(),
+            '--ros-args',
+            '-p',
+            f'output:={bag}',
+            '-p',
+            f"topics:=['{STEP}:{STEP_TYPE}']",
+            '-p',
+            "watched_topics:=['/agent_1/robot/pose']",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert run.returncode == 2, run.stderr
-    assert "parameter 'watched_topics' names topics that are not in 'topics': ['/agent_1/robot/pose']" in run.stderr
+    assert (
+        "parameter 'watched_topics' names topics that are not in 'topics': ['/agent_1/robot/pose']"
+        in run.stderr
+    )
     assert 'Traceback' not in run.stderr and not bag.exists()
 
 
@@ -699,8 +803,14 @@ def test_lock_step_messages_are_stamped_with_the_latest_steps_sim_time() -> None
         stamps.append(clock.stamp_ns())
     assert stamps == [0, 550, 250_000_000, 250_000_000, 1_000_000_000]
     assert clock.step_index == 4 and not clock.realtime
-    assert clock.on_step([1.0, 5.0, 2.0]) and clock.stamp_ns() == 2_000_000_000  # [version, step, time] suffices
-    assert not clock.on_step([1.0, 6.0, -1.0]) and not clock.on_step([1.0, 6.0, float('nan')]) and not clock.on_step([1.0])
+    assert (
+        clock.on_step([1.0, 5.0, 2.0]) and clock.stamp_ns() == 2_000_000_000
+    )  # [version, step, time] suffices
+    assert (
+        not clock.on_step([1.0, 6.0, -1.0])
+        and not clock.on_step([1.0, 6.0, float('nan')])
+        and not clock.on_step([1.0])
+    )
     assert clock.stamp_ns() == 2_000_000_000 and clock.step_index == 5  # refused Steps change nothing
 
 
@@ -715,7 +825,9 @@ def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch
     assert clock.stamp_ns() == 0 and not clock.started  # discovery: before the run
     clocks.wall -= 300_000_000
     clocks.advance(-0.015)
-    overtook = clock.received_ns()  # a message of the run that came 15 ms before Step 0 (5 ms after the epoch)
+    overtook = (
+        clock.received_ns()
+    )  # a message of the run that came 15 ms before Step 0 (5 ms after the epoch)
     clocks.advance(-0.3)
     discovery = clock.received_ns()  # one from well before the epoch
     clocks.advance(0.315)
@@ -726,7 +838,9 @@ def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch
     assert clock.stamp_ns() == 1_270_000_000
     clocks.advance(0.5, wall_jump=-3.0)  # NTP steps the wall clock back: bag time goes on
     assert clock.stamp_ns() == 1_770_000_000
-    assert clock.on_step([1.0, 1.0, 8.0, float(STEP_FLAG_FINAL | STEP_FLAG_REALTIME), epoch])  # the final Step
+    assert clock.on_step(
+        [1.0, 1.0, 8.0, float(STEP_FLAG_FINAL | STEP_FLAG_REALTIME), epoch]
+    )  # the final Step
     assert clock.stamp_ns() == 1_770_000_000 and clock.step_index == 1
     clocks.advance(0.01)
     assert clock.stamp_ns() == 1_780_000_000
@@ -737,11 +851,32 @@ def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_
 
     shown = subprocess.run([*recorder_command(), '--help'], capture_output=True, text=True, timeout=60)
     assert shown.returncode == 0 and shown.stderr == ''
-    rows = {line.split()[0] for line in shown.stdout.splitlines() if line.startswith('  ') and not line.startswith('  -')}
+    rows = {
+        line.split()[0]
+        for line in shown.stdout.splitlines()
+        if line.startswith('  ') and not line.startswith('  -')
+    }
     assert rows == {spec.name for spec in RECORDER_PARAMETERS}
-    env = {**os.environ, 'ROS_DOMAIN_ID': '143', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
-    bad = subprocess.run([*recorder_command(), '--ros-args', '-p', 'flush_period:=0.0', '-p', "topics:=['/a:std_msgs/msg/Nope']"],
-                         capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': '143',
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+    }
+    bad = subprocess.run(
+        [
+            *recorder_command(),
+            '--ros-args',
+            '-p',
+            'flush_period:=0.0',
+            '-p',
+            "topics:=['/a:std_msgs/msg/Nope']",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert bad.returncode == 2 and 'Traceback' not in bad.stderr
     assert "parameter 'output' (string) is required" in bad.stderr
     assert "parameter 'flush_period' (double) must be > 0, finite, got 0.0" in bad.stderr
@@ -749,19 +884,32 @@ def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_
 
 
 @pytest.mark.ros
-def test_each_topic_keeps_the_qos_its_publishers_offered(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_each_topic_keeps_the_qos_its_publishers_offered(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """As rosbag2 records them: one profile per publisher, transient local stays transient local."""
     import rclpy
     from rclpy.duration import Duration
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
     bag = tmp_path / 'bag'
-    latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL, liveliness=LivelinessPolicy.AUTOMATIC,
-                         liveliness_lease_duration=Duration(seconds=1.0))  # fmt: skip
-    volatile = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-    with (ros_domain(tmp_path, monkeypatch, 44) as context,
-          recorder(tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']") as process):
+    latched = QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=5,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        liveliness=LivelinessPolicy.AUTOMATIC,
+        liveliness_lease_duration=Duration(seconds=1.0),
+    )
+    volatile = QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    )
+    with (
+        ros_domain(tmp_path, monkeypatch, 44) as context,
+        recorder(
+            tmp_path, f'output:={bag}', f"topics:=['{STEP}:{STEP_TYPE}','{POSES}:{POSES_TYPE}']"
+        ) as process,
+    ):
         node = rclpy.create_node('qos_recording_test', context=context)
         steps = [node.create_publisher(Float64MultiArray, STEP, latched) for _ in range(2)]
         poses = node.create_publisher(PoseArray, POSES, volatile)
@@ -772,9 +920,13 @@ def test_each_topic_keeps_the_qos_its_publishers_offered(tmp_path: Path, monkeyp
         stop(process, signal.SIGINT, tmp_path)
         node.destroy_node()
 
-    offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(bag)['topics_with_message_count']}
+    offered = {
+        t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles']
+        for t in metadata(bag)['topics_with_message_count']
+    }
     assert [(p['reliability'], p['durability'], p['liveliness_lease_duration']) for p in offered[STEP]] == [
-        ('reliable', 'transient_local', {'sec': 1, 'nsec': 0})] * 2  # fmt: skip
+        ('reliable', 'transient_local', {'sec': 1, 'nsec': 0})
+    ] * 2
     assert [(p['reliability'], p['durability']) for p in offered[POSES]] == [('reliable', 'volatile')]
 
 
@@ -793,13 +945,19 @@ def _bag_of_a_run(bag: Path) -> dict[str, list]:
     for name, topic in topics.items():
         assert topic['offered_qos_profiles'], f'{name}: no offered QoS recorded'
         assert topic['type_description_hash'].startswith('RIHS01_'), name
-    assert {p['durability'] for p in topics['/formation/scenario']['offered_qos_profiles']} == {'transient_local'}
+    assert {p['durability'] for p in topics['/formation/scenario']['offered_qos_profiles']} == {
+        'transient_local'
+    }
     with next(bag.glob('*.mcap')).open('rb') as stream:
         channels = make_reader(stream).get_summary().channels.values()
-        assert {c.topic: c.metadata['topic_type_hash'] for c in channels} == {n: t['type_description_hash'] for n, t in topics.items()}
+        assert {c.topic: c.metadata['topic_type_hash'] for c in channels} == {
+            n: t['type_description_hash'] for n, t in topics.items()
+        }
     messages: dict[str, list] = {}
     for message in read_bag(bag):
-        messages.setdefault(message.topic, []).append((message.timestamp_ns, decode(message.rawdata, message.msgtype)))
+        messages.setdefault(message.topic, []).append(
+            (message.timestamp_ns, decode(message.rawdata, message.msgtype))
+        )
     for name, stamped in messages.items():
         stamps = [stamp for stamp, _ in stamped]
         assert stamps == sorted(stamps), f'{name}: time stamps go backwards'
@@ -809,7 +967,12 @@ def _bag_of_a_run(bag: Path) -> dict[str, list]:
 def _trigger_infos(messages: dict[str, list]):
     from formation_msgs_py.codec import decode_trigger_info
 
-    return [(stamp, decode_trigger_info(msg)) for name, stamped in messages.items() if '/trigger_info/' in name for stamp, msg in stamped]
+    return [
+        (stamp, decode_trigger_info(msg))
+        for name, stamped in messages.items()
+        if '/trigger_info/' in name
+        for stamp, msg in stamped
+    ]
 
 
 def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None:
@@ -842,7 +1005,9 @@ def test_a_lock_step_bag_is_stamped_with_sim_time(distributed_single_run) -> Non
 def _run_with_bag(tmp_path: Path, scenario, domain_id: int, **options):
     from formation_sim.runtime.orchestrate import FormationRun
 
-    result = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=domain_id, progress=False, timeout=240.0, **options).run()
+    result = FormationRun(
+        scenario, out_dir=tmp_path / 'run', domain_id=domain_id, progress=False, timeout=240.0, **options
+    ).run()
     assert result.ok, result.message
     return _bag_of_a_run(result.bag)
 
@@ -866,7 +1031,9 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
     for name, stamped in messages.items():
         for stamp, msg in stamped:
             if stamp == 0:
-                assert name == '/formation/scenario' or (name == '/formation/status' and decode_status(msg).step_index == DISCOVERY_STEP), name
+                assert name == '/formation/scenario' or (
+                    name == '/formation/status' and decode_status(msg).step_index == DISCOVERY_STEP
+                ), name
 
 
 @pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
@@ -878,15 +1045,27 @@ def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path:
     from formation_sim.runtime.launch import RobotOptions
 
     horizon = 3.0
-    messages = _run_with_bag(tmp_path, 'robots_square', 46, horizon=horizon, backend='holonomic', robots=RobotOptions(model='holonomic'))
+    messages = _run_with_bag(
+        tmp_path,
+        'robots_square',
+        46,
+        horizon=horizon,
+        backend='holonomic',
+        robots=RobotOptions(model='holonomic'),
+    )
     epoch = _epoch(messages)
     _assert_received_soon_after_their_trigger(messages)
     # A pose's bag time is when it came, since the epoch: right after its measurement (header stamp).
     poses = messages['/agent_1/robot/odom']
-    measured = [(stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses]
+    measured = [
+        (stamp, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - epoch) for stamp, msg in poses
+    ]
     assert all(t < 0.05 for stamp, t in measured if stamp == 0)  # stamped 0: measured before the run began
     lags = [stamp / 1e9 - t for stamp, t in measured if stamp > 0]
     assert len(lags) > 100 * horizon / 2 and min(lags) >= -1e-3 and max(lags) < 0.5, (min(lags), max(lags))
-    offered = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'] for t in metadata(tmp_path / 'run' / 'bag')['topics_with_message_count']}
+    offered = {
+        t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles']
+        for t in metadata(tmp_path / 'run' / 'bag')['topics_with_message_count']
+    }
     assert {p['durability'] for p in offered['/agent_1/robot/odom']} == {'volatile'}  # as the robot offers it
     assert {p['durability'] for p in offered['/formation/robots']} == {'transient_local'}

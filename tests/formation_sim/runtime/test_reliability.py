@@ -36,7 +36,9 @@ TOLERANCE = 1e-9
 def _assert_same_events(summary: dict, reference) -> None:
     for agent, times in reference.trigger_times.items():
         got = summary['trigger_times'][str(agent)]
-        assert len(got) == len(times), f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        assert len(got) == len(times), (
+            f'agent {agent}: {len(got)} events distributed, {len(times)} in process'
+        )
         assert max(abs(a - b) for a, b in zip(got, times)) <= TOLERANCE, f'agent {agent}'
     assert summary['total_events'] == reference.total_events
     assert summary['messages_sent'] == reference.messages_sent
@@ -114,7 +116,9 @@ def _outsider_with_run(name: str, domain_id: int, run):
         steps: list[int] = []
         # Keep-all, as every reader of the protocol: a keep-last 32 history lost Steps 0-4 while
         # this busy test process did not take them for a moment.
-        node.create_subscription(Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg).index), READER_QOS)
+        node.create_subscription(
+            Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg).index), READER_QOS
+        )
         yield _Outsider(publisher=publisher, executor=executor, worker=worker, results=results, steps=steps)
         worker.join()
     finally:
@@ -157,7 +161,13 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
         return Float64MultiArray(data=[float(v) for v in values])
 
     def info(**fields):
-        values = {'sender': 2, 'receiver': 1, 'stamp': 0.0, 'control': (0.5, -0.5), 'rel_position': (1.0, 2.0)}
+        values = {
+            'sender': 2,
+            'receiver': 1,
+            'stamp': 0.0,
+            'control': (0.5, -0.5),
+            'rel_position': (1.0, 2.0),
+        }
         return encode_trigger_info(TriggerInfo(**{**values, **fields}))
 
     bad = [
@@ -169,9 +179,15 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     ]
 
     run = FormationRun(
-        scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
-        inject={'delay_ms': 2.0}, step_listeners=1,
-    )  # fmt: skip
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=domain_id,
+        progress=False,
+        timeout=240.0,
+        inject={'delay_ms': 2.0},
+        step_listeners=1,
+    )
     injected = False
     with _outsider_with_run('bad_message_injector', domain_id, run) as outsider:
         while outsider.worker.is_alive():
@@ -222,11 +238,18 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
     junk = Float64MultiArray(data=[2.0, 1, 2, 1, 1.0, 2, 0.5, -0.5, 1.0, 2.0])  # layout version 2
 
     run = FormationRun(
-        scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=domain_id, progress=False, timeout=240.0,
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=domain_id,
+        progress=False,
+        timeout=240.0,
         step_listeners=1,
-    )  # fmt: skip
+    )
     sent, began, first_step = 0, None, None
-    with _outsider_with_run('junk_flooder', domain_id, run) as outsider:  # the flood is on from the first step
+    with _outsider_with_run(
+        'junk_flooder', domain_id, run
+    ) as outsider:  # the flood is on from the first step
         while outsider.worker.is_alive():
             outsider.executor.spin_once(timeout_sec=0.0)
             if began is None and outsider.steps:
@@ -257,7 +280,9 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
 
 
 @pytest.mark.timeout(300)
-def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario):
+def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(
+    tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario
+):
     from formation_sim.runtime.fastdds_shm import held_files, in_use
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
@@ -288,7 +313,9 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     reference = simulate(scenario, horizon=t_fail)
     for agent, times in reference.trigger_times.items():
         got = summary['trigger_times'][str(agent)]
-        assert got == times[: len(got)] and len(got) >= len([t for t in times if t < t_fail]), f'agent {agent}'
+        assert got == times[: len(got)] and len(got) >= len([t for t in times if t < t_fail]), (
+            f'agent {agent}'
+        )
 
     # The bag was finalised and holds every triggering-information message sent before the
     # failing step, each exactly once and in order — but for what the killed agent had not yet
@@ -299,25 +326,33 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     assert result.bag is not None and not result.bag_recovered
     counts, stamps = bag_trigger_stamps(result.bag)
     steps = sorted({t for times in reference.trigger_times.values() for t in times if t < t_fail})
-    in_flight = set(steps[-(RECORDER_LAG + 1):])
+    in_flight = set(steps[-(RECORDER_LAG + 1) :])
     for i in scenario.agent_ids:
         for j in scenario.neighbours(i):
             before = [t for t in reference.trigger_times[i] if t < t_fail]
             sent = [t for t in stamps[(i, j)] if t < t_fail]
-            assert stamps[(i, j)] == sorted(set(stamps[(i, j)])) and all(t <= t_fail for t in stamps[(i, j)]), f'edge {i}->{j}'
+            assert stamps[(i, j)] == sorted(set(stamps[(i, j)])) and all(
+                t <= t_fail for t in stamps[(i, j)]
+            ), f'edge {i}->{j}'
             if i == 2:  # the victim: a prefix, missing at most its last steps
-                assert sent == before[: len(sent)] and set(before[len(sent):]) <= in_flight, f'edge {i}->{j}'
+                assert sent == before[: len(sent)] and set(before[len(sent) :]) <= in_flight, f'edge {i}->{j}'
             else:
                 assert sent == before, f'edge {i}->{j}'
-    assert counts['/formation/sensing_log'] >= sum(len([t for t in ts if t < t_fail]) for ts in reference.trigger_times.values())
+    assert counts['/formation/sensing_log'] >= sum(
+        len([t for t in ts if t < t_fail]) for ts in reference.trigger_times.values()
+    )
 
 
 @pytest.mark.timeout(300)
-def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_path, ros_env, stepping_run, long_run_scenario):
+def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(
+    tmp_path, ros_env, stepping_run, long_run_scenario
+):
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
     from formation_sim.bag.io import read_bag
 
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0
+    )
     stepping = stepping_run(run)
     time.sleep(1.5)  # past at least two of the recorder's 0.5 s flushes
     recorder = next(child for child in run._children if child.name == 'recorder')
@@ -330,7 +365,11 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(tmp_pa
     assert result.bag_recovered and result.bag is not None
     assert not _wait_until_gone(str(result.out_dir))
     messages = list(read_bag(result.bag))
-    assert {m.topic for m in messages} >= {'/formation/step', '/agent_1/trigger_info/to_2', '/formation/status'}
+    assert {m.topic for m in messages} >= {
+        '/formation/step',
+        '/agent_1/trigger_info/to_2',
+        '/formation/status',
+    }
     assert all(a.timestamp_ns <= b.timestamp_ns for a, b in zip(messages, messages[1:]))
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
@@ -352,7 +391,9 @@ rclpy.shutdown()
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(tmp_path, ros_env, stepping_run, long_run_scenario):
+def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(
+    tmp_path, ros_env, stepping_run, long_run_scenario
+):
     """Every child of a recorded run killed with SIGKILL at once: each segment and port its
     children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
     outside the domain's range; a live participant of another domain and a dead port of nobody
@@ -364,18 +405,27 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
         name = Path(path).name.removeprefix('sem.').removesuffix('_mutex').removesuffix('_el')
         return {SHM_DIR / name, SHM_DIR / f'sem.{name}_mutex', SHM_DIR / f'{name}_el'}
 
-    stranger = [SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}', SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}_el']
+    stranger = [
+        SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}',
+        SHM_DIR / f'fastrtps_port{65380 + os.getpid() % 5}_el',
+    ]
     bystander = subprocess.Popen(
-        [sys.executable, '-c', BYSTANDER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-        env={**os.environ, 'ROS_DOMAIN_ID': '68'}, start_new_session=True,
-    )  # fmt: skip
+        [sys.executable, '-c', BYSTANDER],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, 'ROS_DOMAIN_ID': '68'},
+        start_new_session=True,
+    )
     try:
         for path in stranger:
             path.touch()
         assert bystander.stdout.readline().strip() == 'ready'
         bystanders = held_files(bystander.pid)
         assert bystanders, 'the bystander holds no Fast DDS file'
-        run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=65, progress=False, timeout=240.0)
+        run = FormationRun(
+            long_run_scenario, out_dir=tmp_path / 'run', domain_id=65, progress=False, timeout=240.0
+        )
         stepping = stepping_run(run)
         time.sleep(0.5)
         children = list(run._children)
@@ -386,7 +436,10 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
         assert result.exit_status == EXIT_LOST, result.message
         assert all(child.process.returncode == -signal.SIGKILL for child in run._children)
         ports = {Path(path).name for path in held if 'fastrtps_port' in path}
-        assert any(not 7400 + 250 * 65 <= int(name.split('port')[1].split('_')[0]) < 7400 + 250 * 66 for name in ports), ports
+        assert any(
+            not 7400 + 250 * 65 <= int(name.split('port')[1].split('_')[0]) < 7400 + 250 * 66
+            for name in ports
+        ), ports
         assert any(path.endswith('_el') for path in held), 'no lock file noted'
         family_files = {str(path) for path in set().union(*(family(path) for path in held))}
         # (a port 70xx of a killed child may be taken over at once by a new participant elsewhere)
@@ -407,7 +460,9 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
 
 
 @pytest.mark.timeout(300)
-def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(tmp_path, ros_env, stepping_run, long_run_scenario, bag_trigger_stamps):
+def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was_published(
+    tmp_path, ros_env, stepping_run, long_run_scenario, bag_trigger_stamps
+):
     """SIGSTOP on the recorder mid-run: it acknowledges nothing more, and every keep-last writer
     of the run would overwrite what it has not acknowledged. The simulator sees its heartbeat
     writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
@@ -415,7 +470,9 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     what the run published and the bag lacks."""
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0
+    )
     stepping = stepping_run(run)
     recorder = next(child for child in run._children if child.name == 'recorder')
     os.kill(recorder.pid, signal.SIGSTOP)
@@ -443,11 +500,16 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     assert ('the bag misses' in result.message) == bool(recording['missing']), result.message
     if recording['missing']:
         worst = max(recording['missing'], key=recording['missing'].get)
-        assert f'{worst} {published[worst] - recording["missing"][worst]} of {published[worst]}' in result.message
+        assert (
+            f'{worst} {published[worst] - recording["missing"][worst]} of {published[worst]}'
+            in result.message
+        )
 
 
 @pytest.mark.timeout(300)
-def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_path, ros_env, stepping_run, long_run_scenario):
+def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(
+    tmp_path, ros_env, stepping_run, long_run_scenario
+):
     """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
     with the failure, the last sim time and step of the simulator's progress, every process's
     exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
@@ -486,16 +548,33 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(tmp_pat
 
 
 @pytest.mark.timeout(300)
-def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_env, small_disk, long_run_scenario):
+def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(
+    tmp_path, ros_env, small_disk, long_run_scenario
+):
     """`formation run` into a 2 MB tmpfs: the bag fills it. The recorder names the error and
     leaves; the run stops; what cannot be written (the recovered bag, summary.json) is named and
     absent rather than empty or cut short, and no temporary file is left."""
     out = small_disk(2) / 'run'
     done = subprocess.run(
-        [sys.executable, '-m', 'formation_sim.cli', 'run', long_run_scenario, '--horizon', '20', '--out', str(out),
-         '--domain-id', '64', '--no-plot'],
-        capture_output=True, text=True, timeout=240, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            '-m',
+            'formation_sim.cli',
+            'run',
+            long_run_scenario,
+            '--horizon',
+            '20',
+            '--out',
+            str(out),
+            '--domain-id',
+            '64',
+            '--no-plot',
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=False,
+    )
     assert done.returncode in (1, 3), done.stderr
     assert 'Traceback' not in done.stderr, done.stderr
     assert 'No space left on device' in done.stderr
@@ -505,23 +584,41 @@ def test_a_full_disk_is_named_and_leaves_no_corrupt_or_stray_file(tmp_path, ros_
     for path in files:
         assert path.stat().st_size > 0, f'{path} is empty'
         if path.suffix in ('.json', '.yaml'):
-            (json.loads if path.suffix == '.json' else __import__('yaml').safe_load)(path.read_text())  # complete
+            (json.loads if path.suffix == '.json' else __import__('yaml').safe_load)(
+                path.read_text()
+            )  # complete
     if (out / 'summary.json').exists():
         assert 'extra' in json.loads((out / 'summary.json').read_text())
     else:
         assert 'summary.json could not be written: [Errno 28] No space left on device' in done.stderr
     bag = out / 'bag'
     if not (bag / 'metadata.yaml').exists():  # not recovered: the damage is named
-        assert 'its bag could not be recovered' in done.stderr and 'free space, then recover it again' in done.stderr
+        assert (
+            'its bag could not be recovered' in done.stderr
+            and 'free space, then recover it again' in done.stderr
+        )
         assert sorted(path.name for path in bag.iterdir()) == ['bag_0.mcap']
 
 
 def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> subprocess.Popen:
     process = subprocess.Popen(
-        [sys.executable, '-m', 'formation_sim.cli', 'run', str(scenario), '--out', str(out),
-         '--domain-id', str(domain_id), '--no-plot', *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            '-m',
+            'formation_sim.cli',
+            'run',
+            str(scenario),
+            '--out',
+            str(out),
+            '--domain-id',
+            str(domain_id),
+            '--no-plot',
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     log = out / 'logs' / 'simulator.log'
     deadline = time.monotonic() + 120.0
     while time.monotonic() < deadline:
@@ -534,7 +631,9 @@ def _start_cli_run(scenario: Path, out: Path, domain_id: int, *extra: str) -> su
 
 
 @pytest.mark.timeout(300)
-def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(tmp_path, ros_env, long_run_scenario):
+def test_ctrl_c_on_formation_run_stops_every_process_and_finalises_the_bag(
+    tmp_path, ros_env, long_run_scenario
+):
     from formation_sim.bag.io import read_bag
 
     out = tmp_path / 'run'
@@ -577,9 +676,17 @@ def test_injected_loss_and_delay_happen_and_are_counted(tmp_path, ros_env):
 
     scenario = load_scenario(GENTLE)
     run = FormationRun(
-        scenario, out_dir=tmp_path / 'run', horizon=3.0, domain_id=75, progress=False, timeout=240.0, record=False,
-        agents_per_process=4, clock='realtime', inject={'loss': 0.1, 'delay_ms': 5.0, 'jitter_ms': 5.0, 'seed': 1},
-    )  # fmt: skip
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=3.0,
+        domain_id=75,
+        progress=False,
+        timeout=240.0,
+        record=False,
+        agents_per_process=4,
+        clock='realtime',
+        inject={'loss': 0.1, 'delay_ms': 5.0, 'jitter_ms': 5.0, 'seed': 1},
+    )
     result = run.run()
     summary = json.loads(result.summary.read_text())
     if not result.ok:  # an honest failure, named: not a crash
@@ -605,10 +712,18 @@ def test_two_runs_side_by_side_on_different_domains_do_not_see_each_other(tmp_pa
     scenario = load_scenario('paper_single')
     reference = simulate(scenario, horizon=1.0)
     runs = [
-        FormationRun(scenario, out_dir=tmp_path / f'run{domain_id}', horizon=1.0, domain_id=domain_id, progress=False,
-                     timeout=240.0, record=False, agents_per_process=3)
+        FormationRun(
+            scenario,
+            out_dir=tmp_path / f'run{domain_id}',
+            horizon=1.0,
+            domain_id=domain_id,
+            progress=False,
+            timeout=240.0,
+            record=False,
+            agents_per_process=3,
+        )
         for domain_id in (76, 77)
-    ]  # fmt: skip
+    ]
     started = [_in_background(run) for run in runs]
     for worker, _ in started:
         worker.join(timeout=240.0)
@@ -652,7 +767,21 @@ class _Hosts:
         for k, namespace in enumerate(self.namespaces.values(), start=1):
             self._ip('netns', 'add', namespace)
             self.created.append(namespace)
-            self._ip('link', 'add', 'name', 'eth0', 'netns', namespace, 'type', 'veth', 'peer', 'name', f'port{k}', 'netns', self.switch)
+            self._ip(
+                'link',
+                'add',
+                'name',
+                'eth0',
+                'netns',
+                namespace,
+                'type',
+                'veth',
+                'peer',
+                'name',
+                f'port{k}',
+                'netns',
+                self.switch,
+            )
             self._ip('-n', self.switch, 'link', 'set', f'port{k}', 'master', 'br0', 'up')
             self._ip('-n', namespace, 'addr', 'add', f'{SUBNET}.{k}/24', 'dev', 'eth0')
             self._ip('-n', namespace, 'link', 'set', 'eth0', 'up')
@@ -689,7 +818,9 @@ def hosts():
 
 
 @pytest.mark.timeout(300)
-def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(tmp_path, ros_env, hosts, bag_trigger_stamps):
+def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_engine(
+    tmp_path, ros_env, hosts, bag_trigger_stamps
+):
     """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
     memory), discovery by multicast on the hosts' subnet."""
     from formation_sim.runtime.orchestrate import FormationRun
@@ -699,10 +830,16 @@ def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_eng
     horizon = 2.0
     reference = simulate(scenario, horizon=horizon)
     run = FormationRun(
-        scenario, out_dir=tmp_path / 'run', horizon=horizon, domain_id=78, progress=False, timeout=240.0,
-        localhost_only=False, extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=78,
+        progress=False,
+        timeout=240.0,
+        localhost_only=False,
+        extra_env={'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'},
         launch_prefix=lambda name: ['ip', 'netns', 'exec', hosts.namespaces[place[name]]],
-    )  # fmt: skip
+    )
     worker, results = _in_background(run)
     # Which network stack each child lives on, read while they discover each other over UDP
     # (seconds; stepping to t = 2 then takes well under a second): once all five are started and

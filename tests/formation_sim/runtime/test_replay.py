@@ -32,7 +32,11 @@ def _synthetic_bag(path: Path) -> Path:
         bag.add_topic('/formation/sensing_log', 'std_msgs/msg/String')
         for k in range(120):
             stamp = (k // 5) * 20_000_000  # 5 messages per stamp, 24 stamps over 0.46 s
-            bag.write('/formation/step', stamp, serialize_message(Float64MultiArray(data=[1.0, float(k), stamp / 1e9])))
+            bag.write(
+                '/formation/step',
+                stamp,
+                serialize_message(Float64MultiArray(data=[1.0, float(k), stamp / 1e9])),
+            )
             if k % 2 == 0:
                 twist = Twist()
                 twist.linear.x = float(k)
@@ -71,12 +75,20 @@ class _Checker:
         qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1, reliability=ReliabilityPolicy.RELIABLE)
         self.received: dict[str, list[bytes]] = defaultdict(list)
         for topic, msgtype in types.items():
-            self.node.create_subscription(import_message_class(msgtype), topic, lambda data, topic=topic: self.received[topic].append(bytes(data)), qos, raw=True)
+            self.node.create_subscription(
+                import_message_class(msgtype),
+                topic,
+                lambda data, topic=topic: self.received[topic].append(bytes(data)),
+                qos,
+                raw=True,
+            )
         self.clock: list[int] = []
         if clock:
             from rosgraph_msgs.msg import Clock
 
-            self.node.create_subscription(Clock, '/clock', lambda msg: self.clock.append(msg.clock.sec * 10**9 + msg.clock.nanosec), qos)
+            self.node.create_subscription(
+                Clock, '/clock', lambda msg: self.clock.append(msg.clock.sec * 10**9 + msg.clock.nanosec), qos
+            )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
@@ -104,9 +116,25 @@ class _Checker:
 
 
 def _replay(bag: Path, domain_id: int, tmp_path: Path, *arguments: str) -> subprocess.Popen:
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path / 'ros_log'), RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+    env = dict(
+        os.environ,
+        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+        ROS_LOG_DIR=str(tmp_path / 'ros_log'),
+        RMW_IMPLEMENTATION='rmw_fastrtps_cpp',
+    )
     log = (tmp_path / 'replay.log').open('w')
-    command = [sys.executable, '-m', 'formation_sim.cli', 'replay', str(bag), '--domain-id', str(domain_id), '--wait-for-subscribers', '1', *arguments]
+    command = [
+        sys.executable,
+        '-m',
+        'formation_sim.cli',
+        'replay',
+        str(bag),
+        '--domain-id',
+        str(domain_id),
+        '--wait-for-subscribers',
+        '1',
+        *arguments,
+    ]
     return subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
 
 
@@ -122,7 +150,9 @@ def _finish(process: subprocess.Popen, tmp_path: Path) -> str:
 
 def test_bad_rates_and_unknown_topics_are_refused(tmp_path):
     bag = _synthetic_bag(tmp_path / 'bag')
-    with pytest.raises(ReplayError, match=r'rate must be a finite number >= 0 \(0: as fast as possible\), got -1.0'):
+    with pytest.raises(
+        ReplayError, match=r'rate must be a finite number >= 0 \(0: as fast as possible\), got -1.0'
+    ):
         BagPlayer(None, bag, rate=-1.0)
     with pytest.raises(ReplayError, match=r"topics \['/nope'\] are not in"):
         BagPlayer(None, bag, topics=['/nope'])
@@ -148,7 +178,9 @@ def test_every_message_arrives_once_in_order_with_a_clock(tmp_path, speed):
         log = _finish(process, tmp_path)
         assert process.returncode == 0, log
         for topic, messages in checker.expected.items():
-            assert checker.received[topic] == messages, f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+            assert checker.received[topic] == messages, (
+                f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+            )
         # The bag had no /clock: one per new time stamp, in order.
         assert checker.clock == checker.stamps
     finally:
@@ -169,7 +201,9 @@ def test_a_distributed_runs_bag_replays_completely(distributed_single_run, tmp_p
         assert process.returncode == 0, log
         assert checker.total > 1000
         for topic, messages in checker.expected.items():
-            assert checker.received[topic] == messages, f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+            assert checker.received[topic] == messages, (
+                f'{topic}: {len(checker.received[topic])} received of {len(messages)}'
+            )
     finally:
         checker.close()
 
@@ -178,7 +212,9 @@ def test_a_distributed_runs_bag_replays_completely(distributed_single_run, tmp_p
 @pytest.mark.slow
 @pytest.mark.xdist_group('formation_distributed')
 @pytest.mark.timeout(300)
-def test_replay_refuses_the_domain_of_a_live_run_on_this_machine(tmp_path, monkeypatch, wait_for_stepping, long_run_scenario):
+def test_replay_refuses_the_domain_of_a_live_run_on_this_machine(
+    tmp_path, monkeypatch, wait_for_stepping, long_run_scenario
+):
     """The run holds its domain's lock: the replay is refused before it publishes anything, and
     the run's bag holds only the run's own messages."""
     from formation_sim.cli import main
@@ -188,7 +224,9 @@ def test_replay_refuses_the_domain_of_a_live_run_on_this_machine(tmp_path, monke
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
     domain = REPLAY_DOMAINS['live']
     bag = _synthetic_bag(tmp_path / 'old_bag')  # it has /formation/step and /agent_1/cmd_vel, as the run does
-    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=domain, progress=False, timeout=240.0)
+    run = FormationRun(
+        long_run_scenario, out_dir=tmp_path / 'run', domain_id=domain, progress=False, timeout=240.0
+    )
     results = []
     worker = threading.Thread(target=lambda: results.append(run.run()), daemon=True)
     worker.start()
@@ -196,7 +234,9 @@ def test_replay_refuses_the_domain_of_a_live_run_on_this_machine(tmp_path, monke
         wait_for_stepping(run)
         with pytest.raises(ReplayError) as refused:
             main_replay(bag, domain_id=domain, rate=0.0)
-        assert str(refused.value).startswith(f'ROS domain {domain} is held by another formation run: replaying there would ')
+        assert str(refused.value).startswith(
+            f'ROS domain {domain} is held by another formation run: replaying there would '
+        )
         assert main(['replay', str(bag), '--domain-id', str(domain), '--quiet']) == 2
     finally:
         run.interrupt()
@@ -223,13 +263,18 @@ def test_replay_refuses_a_domain_whose_graph_shows_a_run_elsewhere(tmp_path, mon
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     try:
-        simulator = rclpy.create_node('formation_simulator', context=context)  # as a remote run's would appear
+        simulator = rclpy.create_node(
+            'formation_simulator', context=context
+        )  # as a remote run's would appear
         simulator.create_publisher(Float64MultiArray, '/formation/step', 10)
         with pytest.raises(ReplayError) as refused:
             main_replay(bag, domain_id=domain, rate=0.0)
         message = str(refused.value)
         assert message.startswith(f'ROS domain {domain} has a formation run live (/formation_simulator, ')
-        assert '/formation_simulator (writes /formation/step)' in message and 'choose another --domain-id' in message
+        assert (
+            '/formation_simulator (writes /formation/step)' in message
+            and 'choose another --domain-id' in message
+        )
         simulator.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
@@ -247,12 +292,24 @@ def test_replay_offers_the_recorded_qos_so_the_scenario_is_latched_for_late_join
     from std_msgs.msg import Float64MultiArray, String
 
     forever = QosTime(sec=9223372036, nsec=854775807)
-    latched = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, forever, forever, QosLiveliness.AUTOMATIC, QosTime(1, 0), False)
+    latched = Qos(
+        QosHistory.UNKNOWN,
+        0,
+        QosReliability.RELIABLE,
+        QosDurability.TRANSIENT_LOCAL,
+        forever,
+        forever,
+        QosLiveliness.AUTOMATIC,
+        QosTime(1, 0),
+        False,
+    )
     volatile = latched._replace(durability=QosDurability.VOLATILE, liveliness_lease_duration=forever)
     bag = tmp_path / 'bag'
     with BagWriter(bag) as writer:
         writer.add_topic('/formation/scenario', 'std_msgs/msg/String', offered_qos_profiles=[latched])
-        writer.add_topic('/formation/state', 'std_msgs/msg/Float64MultiArray', offered_qos_profiles=[volatile])
+        writer.add_topic(
+            '/formation/state', 'std_msgs/msg/Float64MultiArray', offered_qos_profiles=[volatile]
+        )
         writer.add_topic('/formation/status', 'std_msgs/msg/Float64MultiArray')  # recorded without QoS
         writer.write('/formation/scenario', 0, serialize_message(String(data='name: latched')))
         writer.write('/formation/state', 1, serialize_message(Float64MultiArray(data=[1.0])))
@@ -277,11 +334,19 @@ def test_replay_offers_the_recorded_qos_so_the_scenario_is_latched_for_late_join
         assert offered['/formation/scenario'].durability == DurabilityPolicy.TRANSIENT_LOCAL
         assert offered['/formation/scenario'].liveliness_lease_duration.nanoseconds == 10**9
         assert offered['/formation/state'].durability == DurabilityPolicy.VOLATILE
-        assert offered['/formation/status'].durability == DurabilityPolicy.TRANSIENT_LOCAL  # none recorded: the player's default
+        assert (
+            offered['/formation/status'].durability == DurabilityPolicy.TRANSIENT_LOCAL
+        )  # none recorded: the player's default
         # A reader that comes after the replay still gets the scenario.
         got = []
-        late.create_subscription(String, '/formation/scenario', got.append,
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        late.create_subscription(
+            String,
+            '/formation/scenario',
+            got.append,
+            QoSProfile(
+                depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+            ),
+        )
         executor = SingleThreadedExecutor(context=contexts[1])
         executor.add_node(late)
         deadline = time.monotonic() + 30

@@ -30,11 +30,24 @@ def _child(name: str, returncode: int, tmp_path: Path, error: str = '') -> Child
         ('recorder', -9, 'process_lost', []),
     ],
 )
-def test_a_child_that_stopped_the_run_is_its_first_cause_by_kind_and_agent(tmp_path, name, returncode, kind, agents):
+def test_a_child_that_stopped_the_run_is_its_first_cause_by_kind_and_agent(
+    tmp_path, name, returncode, kind, agents
+):
     """formation run stops at once when a robot's or (on robots) an agent's process dies: the time
     keeper, stopped by the signal, says 'interrupted'; the summary names the child instead."""
-    data = {'extra': {'failure': {'kind': 'interrupted', 'message': 'stopped by a signal (SIGINT/SIGTERM)', 'agents': [], 'detected_by': 'coordinator'}}}
-    child = _child(name, returncode, tmp_path, error='the pose of robot 2 is 0.6 s old' if returncode > 0 else '')
+    data = {
+        'extra': {
+            'failure': {
+                'kind': 'interrupted',
+                'message': 'stopped by a signal (SIGINT/SIGTERM)',
+                'agents': [],
+                'detected_by': 'coordinator',
+            }
+        }
+    }
+    child = _child(
+        name, returncode, tmp_path, error='the pose of robot 2 is 0.6 s old' if returncode > 0 else ''
+    )
     failure = annotate(data, child, EXIT_INTERRUPTED, '', launched=0.0)
     assert (failure['kind'], failure['agents']) == (kind, agents)
     assert failure['message'].startswith(f'{name} (pid {child.pid}) ') and failure['process']['name'] == name

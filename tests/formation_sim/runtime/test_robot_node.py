@@ -22,14 +22,21 @@ class _Probe:
         from nav_msgs.msg import Odometry
         from rclpy.node import Node
 
-        from formation_msgs_py.topics import robot_command_topic, robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+        from formation_msgs_py.topics import (
+            robot_command_topic,
+            robot_odom_topic,
+            robot_pose_topic,
+            robot_true_odom_topic,
+        )
         from formation_sim.runtime.robot_node import ROBOT_QOS
 
         self.node = Node(f'probe_{robot_id}', context=context, start_parameter_services=False)
         self.truth: list = []
         self.odom: list = []
         self.poses: list = []
-        self.commands = self.node.create_publisher(TwistStamped if holonomic else Twist, robot_command_topic(robot_id), ROBOT_QOS)
+        self.commands = self.node.create_publisher(
+            TwistStamped if holonomic else Twist, robot_command_topic(robot_id), ROBOT_QOS
+        )
         self.node.create_subscription(Odometry, robot_true_odom_topic(robot_id), self.truth.append, ROBOT_QOS)
         self.node.create_subscription(Odometry, robot_odom_topic(robot_id), self.odom.append, ROBOT_QOS)
         self.node.create_subscription(PoseStamped, robot_pose_topic(robot_id), self.poses.append, ROBOT_QOS)
@@ -39,7 +46,11 @@ def _robot(context, **parameters):
     from formation_agent.ros.parameters import as_overrides
     from formation_sim.runtime.robot_node import SimulatedRobotNode
 
-    return SimulatedRobotNode(namespace=f'/agent_{parameters["robot_id"]}', parameter_overrides=as_overrides(parameters), context=context)
+    return SimulatedRobotNode(
+        namespace=f'/agent_{parameters["robot_id"]}',
+        parameter_overrides=as_overrides(parameters),
+        context=context,
+    )
 
 
 def _spin(executor, seconds: float, until=lambda: False) -> None:
@@ -74,7 +85,15 @@ def executor(ros):
 def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop(ros, executor):
     from geometry_msgs.msg import Twist, Vector3
 
-    robot = _robot(ros, robot_id=1, model='unicycle', position=[1.0, 0.5], yaw=0.3, control_point_distance=0.1, command_timeout=0.3)
+    robot = _robot(
+        ros,
+        robot_id=1,
+        model='unicycle',
+        position=[1.0, 0.5],
+        yaw=0.3,
+        control_point_distance=0.1,
+        command_timeout=0.3,
+    )
     probe = _Probe(ros, 1, holonomic=False)
     executor.add_node(robot)
     executor.add_node(probe.node)
@@ -82,7 +101,9 @@ def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop
     assert probe.truth, 'the robot published no odometry'
     # Placed by its control point: the axle is l behind (1.0, 0.5) along θ = 0.3.
     x, y, yaw = _state(probe.truth[0])
-    assert np.allclose([x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], [1.0, 0.5]) and math.isclose(yaw, 0.3)
+    assert np.allclose([x + 0.1 * math.cos(yaw), y + 0.1 * math.sin(yaw)], [1.0, 0.5]) and math.isclose(
+        yaw, 0.3
+    )
 
     v, w = 0.2, 1.5
     probe.commands.publish(Twist(linear=Vector3(x=v), angular=Vector3(z=w)))
@@ -95,7 +116,10 @@ def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop
     for a, b in zip(moving, moving[1:]):
         (xa, ya, ta), (xb, yb, tb) = _state(a), _state(b)
         tau = _stamp(b) - _stamp(a)
-        expected = (xa + v / w * (math.sin(ta + w * tau) - math.sin(ta)), ya - v / w * (math.cos(ta + w * tau) - math.cos(ta)))
+        expected = (
+            xa + v / w * (math.sin(ta + w * tau) - math.sin(ta)),
+            ya - v / w * (math.cos(ta + w * tau) - math.cos(ta)),
+        )
         assert np.allclose((xb, yb), expected, atol=1e-7), (tau, (xb, yb), expected)
         assert math.isclose(math.remainder(tb - ta - w * tau, 2 * math.pi), 0.0, abs_tol=1e-7)
 
@@ -115,8 +139,17 @@ def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop
 def test_a_car_cannot_turn_in_place_and_steers_at_most_its_limit(ros, executor):
     from geometry_msgs.msg import Twist, Vector3
 
-    robot = _robot(ros, robot_id=3, model='car', position=[0.0, 0.0], yaw=0.0, control_point_distance=0.33, wheelbase=0.33,
-                   max_steering_angle=0.42, command_timeout=5.0)  # fmt: skip
+    robot = _robot(
+        ros,
+        robot_id=3,
+        model='car',
+        position=[0.0, 0.0],
+        yaw=0.0,
+        control_point_distance=0.33,
+        wheelbase=0.33,
+        max_steering_angle=0.42,
+        command_timeout=5.0,
+    )
     probe = _Probe(ros, 3, holonomic=False)
     executor.add_node(robot)
     executor.add_node(probe.node)
@@ -138,19 +171,34 @@ def test_a_car_cannot_turn_in_place_and_steers_at_most_its_limit(ros, executor):
     for a, b in zip(moving, moving[1:]):  # the bicycle's arc at the steering limit
         (xa, ya, ta), (xb, yb, _) = _state(a), _state(b)
         tau = _stamp(b) - _stamp(a)
-        expected = (xa + v / turn * (math.sin(ta + turn * tau) - math.sin(ta)), ya - v / turn * (math.cos(ta + turn * tau) - math.cos(ta)))
+        expected = (
+            xa + v / turn * (math.sin(ta + turn * tau) - math.sin(ta)),
+            ya - v / turn * (math.cos(ta + turn * tau) - math.cos(ta)),
+        )
         assert np.allclose((xb, yb), expected, atol=1e-7)
 
 
 def test_a_holonomic_robot_takes_world_frame_commands_only_and_publishes_noisy_late_poses(ros, executor):
     from geometry_msgs.msg import TwistStamped
 
-    robot = _robot(ros, robot_id=2, model='holonomic', position=[0.0, 0.0], pose_noise=0.01, pose_latency=0.05, seed=7,
-                   max_linear_speed=0.22)  # fmt: skip
+    robot = _robot(
+        ros,
+        robot_id=2,
+        model='holonomic',
+        position=[0.0, 0.0],
+        pose_noise=0.01,
+        pose_latency=0.05,
+        seed=7,
+        max_linear_speed=0.22,
+    )
     probe = _Probe(ros, 2, holonomic=True)
     executor.add_node(robot)
     executor.add_node(probe.node)
-    _spin(executor, 30.0, until=lambda: probe.commands.get_subscription_count() > 0 and len(probe.truth) > 2 and probe.odom)
+    _spin(
+        executor,
+        30.0,
+        until=lambda: probe.commands.get_subscription_count() > 0 and len(probe.truth) > 2 and probe.odom,
+    )
 
     wrong = TwistStamped()
     wrong.header.frame_id = 'map'
@@ -166,11 +214,15 @@ def test_a_holonomic_robot_takes_world_frame_commands_only_and_publishes_noisy_l
     _spin(executor, 0.3)
     assert robot.robot.saturated == 1
     moving = [msg for msg in probe.truth if msg.twist.twist.linear.x != 0.0]
-    assert moving and math.isclose(math.hypot(moving[-1].twist.twist.linear.x, moving[-1].twist.twist.linear.y), 0.22)
+    assert moving and math.isclose(
+        math.hypot(moving[-1].twist.twist.linear.x, moving[-1].twist.twist.linear.y), 0.22
+    )
     # Measured poses: stamped with the measurement, published pose_latency later, scattered
     # around the truth of the same instant.
     truth = {_stamp(msg): _state(msg)[:2] for msg in probe.truth}
-    errors = np.array([np.subtract(_state(msg)[:2], truth[_stamp(msg)]) for msg in probe.odom if _stamp(msg) in truth])
+    errors = np.array(
+        [np.subtract(_state(msg)[:2], truth[_stamp(msg)]) for msg in probe.odom if _stamp(msg) in truth]
+    )
     assert len(errors) > 10
     assert 0.004 < errors.std() < 0.02
     assert _stamp(probe.odom[-1]) <= _stamp(probe.truth[-1]) - 0.04  # the latency

@@ -8,11 +8,19 @@ import pytest
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.run_book import AgentLostError, CoordinatorError, RecorderBook, RecorderLostError, RunBook
+from formation_sim.runtime.run_book import (
+    AgentLostError,
+    CoordinatorError,
+    RecorderBook,
+    RecorderLostError,
+    RunBook,
+)
 
 
 def _status(agent: int, **fields) -> Status:
-    values = dict(step_index=0, next_time=1.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
+    values = dict(
+        step_index=0, next_time=1.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True
+    )
     return Status(agent=agent, **{**values, **fields})
 
 
@@ -26,7 +34,9 @@ def test_a_simulator_refuses_triggers_it_never_served_a_coordinator_learns_them_
     assert coordinator.accept_status(_status(2, triggers=1, info_received=1)) is False
     with pytest.raises(CoordinatorError, match='agent 2: status went backwards'):
         coordinator.accept_status(_status(2, triggers=0))
-    with pytest.raises(CoordinatorError, match=r'status from agent 9, which is not in the scenario \[1, 2, 3\]'):
+    with pytest.raises(
+        CoordinatorError, match=r'status from agent 9, which is not in the scenario \[1, 2, 3\]'
+    ):
         coordinator.accept_status(_status(9))
 
 
@@ -45,8 +55,12 @@ def test_agents_lost_together_are_named_together_after_the_grace():
     for agent in (1, 2, 3):
         book.note_liveliness(agent, alive_count=1, not_alive_count_change=0, finished=False, now=0.0)
     book.note_liveliness(2, alive_count=0, not_alive_count_change=1, finished=False, now=10.0)
-    book.note_liveliness(3, alive_count=0, not_alive_count_change=0, finished=False, now=10.2)  # its writer deleted
-    assert book.lost_error(10.4, started=True, where='at t=1.0 (step 0)') is None  # within LOST_GRACE of the first
+    book.note_liveliness(
+        3, alive_count=0, not_alive_count_change=0, finished=False, now=10.2
+    )  # its writer deleted
+    assert (
+        book.lost_error(10.4, started=True, where='at t=1.0 (step 0)') is None
+    )  # within LOST_GRACE of the first
     error = book.lost_error(10.6, started=True, where='at t=1.0 (step 0)')
     assert isinstance(error, AgentLostError) and error.agents == [2, 3]
     assert str(error) == (
@@ -72,8 +86,12 @@ def test_discovery_waits_for_every_agent_ready_and_an_agent_that_speaks_after_it
     book.note_announcement(_status(2, step_index=DISCOVERY_STEP, ready=False))  # a neighbour unmatched again
     book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
     assert not book.all_ready()
-    book.note_liveliness(1, alive_count=0, not_alive_count_change=1, finished=False, now=1.0)  # a lease lapsed (busy machine)
-    book.note_liveliness(3, alive_count=0, not_alive_count_change=0, finished=False, now=1.0)  # a writer deleted
+    book.note_liveliness(
+        1, alive_count=0, not_alive_count_change=1, finished=False, now=1.0
+    )  # a lease lapsed (busy machine)
+    book.note_liveliness(
+        3, alive_count=0, not_alive_count_change=0, finished=False, now=1.0
+    )  # a writer deleted
     book.note_announcement(_status(1, step_index=DISCOVERY_STEP, ready=True))
     book.note_announcement(_status(3, step_index=DISCOVERY_STEP, ready=True))
     assert book.agents[1].lost is None  # it spoke: alive
@@ -86,7 +104,9 @@ def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_for
     recorders = RecorderBook()
     recorders.note_liveliness(alive_count=1, not_alive_count_change=0, now=0.0)
     recorders.note_liveliness(alive_count=0, not_alive_count_change=1, now=5.0)  # its lease expired (frozen)
-    recorders.note_liveliness(alive_count=0, not_alive_count_change=0, now=5.3)  # the first loss is the one kept
+    recorders.note_liveliness(
+        alive_count=0, not_alive_count_change=0, now=5.3
+    )  # the first loss is the one kept
     assert recorders.lost_error(5.5, started=True, where='at t=2.0 (step 7)') is None  # within LOST_GRACE
     error = recorders.lost_error(5.6, started=True, where='at t=2.0 (step 7)')
     assert isinstance(error, RecorderLostError)
@@ -97,7 +117,9 @@ def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_for
     assert recorders.lost_error(9.0, started=False, where='during discovery') is None  # it may come back
     recorders.note_liveliness(alive_count=1, not_alive_count_change=0, now=9.0)  # and it did
     assert recorders.lost is None
-    recorders.note_liveliness(alive_count=0, not_alive_count_change=0, now=10.0)  # its writer deleted: it left
+    recorders.note_liveliness(
+        alive_count=0, not_alive_count_change=0, now=10.0
+    )  # its writer deleted: it left
     assert str(recorders.lost_error(10.6, started=False, where='during discovery')).startswith(
         'the recorder lost during discovery: it left the graph;'
     )
@@ -106,27 +128,44 @@ def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_for
 def test_a_recorder_heartbeat_gives_its_latest_step_and_a_malformed_one_is_refused_with_the_reason():
     recorders = RecorderBook()
     assert recorders.accept_heartbeat('{"version": 1, "recorder": "/formation_recorder", "step": 4}') is None
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/formation_recorder", "step": 3}') is None  # late, out of order
+    assert (
+        recorders.accept_heartbeat('{"version": 1, "recorder": "/formation_recorder", "step": 3}') is None
+    )  # late, out of order
     assert recorders.recorded_steps == {'/formation_recorder': 4}
     assert recorders.accept_heartbeat('{"version": 2, "recorder": "r", "step": 1}') == (
         """recorder heartbeat '{"version": 2, "recorder": "r", "step": 1}': version 2, step 1"""
     )
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "r", "step": true}').endswith('version 1, step True')
-    assert recorders.accept_heartbeat('{"version": 1}') == """recorder heartbeat '{"version": 1}': 'recorder'"""  # the field missing
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "r", "step": true}').endswith(
+        'version 1, step True'
+    )
+    assert (
+        recorders.accept_heartbeat('{"version": 1}') == """recorder heartbeat '{"version": 1}': 'recorder'"""
+    )  # the field missing
     assert recorders.accept_heartbeat('not json').startswith("recorder heartbeat 'not json': Expecting value")
     assert recorders.recorded_steps == {'/formation_recorder': 4}
 
 
 def test_a_recorder_heartbeat_names_the_watched_topics_it_has_not_heard_yet():
     recorders = RecorderBook()
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": -1, "silent": ["/agent_2/robot/pose"]}') is None
+    assert (
+        recorders.accept_heartbeat(
+            '{"version": 1, "recorder": "/r", "step": -1, "silent": ["/agent_2/robot/pose"]}'
+        )
+        is None
+    )
     assert recorders.silent == {'/r': ['/agent_2/robot/pose']}
     assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": -1, "silent": []}') is None
     assert recorders.silent == {'/r': []}
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/q", "step": -1}') is None  # watching nothing
+    assert (
+        recorders.accept_heartbeat('{"version": 1, "recorder": "/q", "step": -1}') is None
+    )  # watching nothing
     assert recorders.silent == {'/r': [], '/q': []}
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": [3]}').endswith("': silent [3]")
-    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": "/a"}').endswith("': silent '/a'")
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": [3]}').endswith(
+        "': silent [3]"
+    )
+    assert recorders.accept_heartbeat('{"version": 1, "recorder": "/r", "step": 0, "silent": "/a"}').endswith(
+        "': silent '/a'"
+    )
     assert recorders.silent == {'/r': [], '/q': []}
 
 
@@ -173,7 +212,9 @@ def test_a_robot_silent_while_the_others_publish_is_lost_and_a_coordinator_that_
     assert watch.silent(100.6, fraction=2.0) == []
     error = watch.error([3], now=100.6, where='at t=1.6', topics='/agent_3/robot/true_odom')
     assert isinstance(error, RobotLostError) and error.kind == 'robot_lost' and error.agents == [3]
-    assert str(error).startswith('robot 3 lost at t=1.6: no pose on /agent_3/robot/true_odom for more than 0.5 s, while the other robots still published')
+    assert str(error).startswith(
+        'robot 3 lost at t=1.6: no pose on /agent_3/robot/true_odom for more than 0.5 s, while the other robots still published'
+    )
     assert 'robot 3 at t=1.000 (0.60 s before)' in str(error)
     # A coordinator not scheduled for a while finds every robot equally old: none is lost ...
     watch = PoseWatch([1, 2], silence=0.5)
@@ -188,7 +229,9 @@ def test_failures_are_the_agents_whose_final_report_names_an_error():
     from formation_msgs_py.lockstep import AgentReport
 
     book = RunBook(load_scenario('robots_square'), realtime=True, serves_sensing=False)
-    book.accept_report(AgentReport(agent=1, final=True, rejected={}, failure='the pose of robot 2 is 0.6 s old'))
+    book.accept_report(
+        AgentReport(agent=1, final=True, rejected={}, failure='the pose of robot 2 is 0.6 s old')
+    )
     book.accept_report(AgentReport(agent=2, final=False, rejected={}, failure='not final yet'))
     book.accept_report(AgentReport(agent=3, final=True, rejected={}))
     assert book.failures() == {1: 'the pose of robot 2 is 0.6 s old'}

@@ -36,8 +36,14 @@ def test_the_options_are_frozen_and_check_returns_new_ones():
         ({'domain_id': 233}, 'domain id must lie in [0, 232], got 233'),
         ({'timeout': -1.0}, 'timeout must be a finite number of seconds > 0, got -1.0'),
         ({'backend': 'tank'}, 'backend must be one of'),
-        ({'clock': 'sundial'}, "clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got 'sundial'"),
-        ({'backend': 'unicycle', 'clock': 'lockstep'}, "robots run on the wall clock: backend 'unicycle' needs clock=realtime, got 'lockstep'"),
+        (
+            {'clock': 'sundial'},
+            "clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got 'sundial'",
+        ),
+        (
+            {'backend': 'unicycle', 'clock': 'lockstep'},
+            "robots run on the wall clock: backend 'unicycle' needs clock=realtime, got 'lockstep'",
+        ),
         ({'robots': RobotOptions(model='unicycle')}, 'robots are options of the robot backends'),
         ({'backend': 'external'}, "backend 'external' needs robots=RobotOptions(model=...)"),
         ({'executor': 'threads'}, 'executor must be one of'),
@@ -56,7 +62,9 @@ def test_each_broken_option_is_named_with_its_value(fields, complaint):
 def test_formation_run_takes_options_and_fields_over_them_and_refuses_unknown_names(tmp_path):
     from formation_sim.runtime.orchestrate import FormationRun
 
-    run = FormationRun('paper_single', out_dir=tmp_path / 'run', options=RunOptions(horizon=3.0, record=False), horizon=2.0)
+    run = FormationRun(
+        'paper_single', out_dir=tmp_path / 'run', options=RunOptions(horizon=3.0, record=False), horizon=2.0
+    )
     assert run.options.horizon == 2.0 and run.options.record is False and run.plan.horizon == 2.0
     with pytest.raises(TypeError, match='horizn'):
         FormationRun('paper_single', out_dir=tmp_path / 'run', horizn=2.0)

@@ -46,7 +46,9 @@ def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
     assert all(book.status is None and book.report is None for book in node.agents.values())
 
     node._on_report(encode_agent_report(AgentReport(agent=2, final=True, rejected={'sender': 3}, dropped=4)))
-    node._on_report(encode_agent_report(AgentReport(agent=2, final=False, rejected={})))  # after the final one
+    node._on_report(
+        encode_agent_report(AgentReport(agent=2, final=False, rejected={}))
+    )  # after the final one
     counts = message_counts(node)
     assert counts['rejected_messages'] == {
         'total': 3 + 4,
@@ -66,8 +68,16 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     scenario = node.scenario
     x = np.array(scenario.positions, dtype=float)
     node._check_connectivity(0.0, x)  # the initial state: every edge shorter than Δ
-    node.agents[3].status = Status(agent=3, step_index=4, next_time=np.inf, info_sent=2, info_received=1,
-                                   commands_sent=1, triggers=1, ready=False)  # fmt: skip
+    node.agents[3].status = Status(
+        agent=3,
+        step_index=4,
+        next_time=np.inf,
+        info_sent=2,
+        info_received=1,
+        commands_sent=1,
+        triggers=1,
+        ready=False,
+    )
     k2, k3 = scenario.index(2), scenario.index(3)
     x[k3] = x[k2] - np.array([0.0, scenario.delta])  # edge (2, 3) exactly at Δ (not < Δ), the others short
     with pytest.raises(ConnectivityLostError) as caught:
@@ -108,7 +118,15 @@ def test_discovery_says_what_it_still_waits_for(simulator):
     assert '/formation/status writers 0/3' in gaps
     assert 'agents whose command writer is not matched: 1, 2, 3' in gaps
     assert 'agents not ready (their own endpoints unmatched): 1, 2, 3' in gaps
-    ready = dict(step_index=DISCOVERY_STEP, next_time=0.0, info_sent=0, info_received=0, commands_sent=0, triggers=0, ready=True)
+    ready = dict(
+        step_index=DISCOVERY_STEP,
+        next_time=0.0,
+        info_sent=0,
+        info_received=0,
+        commands_sent=0,
+        triggers=0,
+        ready=True,
+    )
     node.agents[2].status = Status(agent=2, **ready)
     node.agents[3].lost = (0.0, 'no sign of life')
     gaps = discovery_gaps(node)

@@ -19,17 +19,37 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('format
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize(
     ('name', 'options', 'horizon', 'domain_id'),
-    [('paper_single', ['--speed-scale', '0.5'], 2.0, 20), ('paper_double', ['--speed-scale', '2.5', '--threshold-floor', '0.01'], 0.6, 21)],
+    [
+        ('paper_single', ['--speed-scale', '0.5'], 2.0, 20),
+        ('paper_double', ['--speed-scale', '2.5', '--threshold-floor', '0.01'], 0.6, 21),
+    ],
 )
-def test_a_scaled_lockstep_run_equals_the_engine_bit_for_bit_and_analyzes(tmp_path, name, options, horizon, domain_id):
+def test_a_scaled_lockstep_run_equals_the_engine_bit_for_bit_and_analyzes(
+    tmp_path, name, options, horizon, domain_id
+):
     out = tmp_path / 'run'
-    code = main(['run', name, *options, '--horizon', str(horizon), '--domain-id', str(domain_id),
-                 '--out', str(out), '--quiet', '--no-plot'])  # fmt: skip
+    code = main(
+        [
+            'run',
+            name,
+            *options,
+            '--horizon',
+            str(horizon),
+            '--domain-id',
+            str(domain_id),
+            '--out',
+            str(out),
+            '--quiet',
+            '--no-plot',
+        ]
+    )
     assert code == 0
     kappa = float(options[1])
     floor = float(options[3]) if len(options) > 2 else 0.0
     summary = json.loads((out / 'summary.json').read_text())
-    reference = simulate(load_scenario(name).with_scale(speed_scale=kappa, threshold_floor=floor), horizon=horizon)
+    reference = simulate(
+        load_scenario(name).with_scale(speed_scale=kappa, threshold_floor=floor), horizon=horizon
+    )
     assert reference.total_events > 3 * reference.scenario.n
     got = {int(agent): times for agent, times in summary['trigger_times'].items()}
     assert got == reference.trigger_times  # the same floats

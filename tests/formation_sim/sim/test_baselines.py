@@ -66,7 +66,10 @@ def test_tension_never_grows_and_connectivity_holds(paper_run):
     if record.sample_velocities is None:
         values = [theory.tension(scenario, x) for x in record.sample_positions]
     else:
-        values = [theory.tension_double(scenario, x, q) for x, q in zip(record.sample_positions, record.sample_velocities)]
+        values = [
+            theory.tension_double(scenario, x, q)
+            for x, q in zip(record.sample_positions, record.sample_velocities)
+        ]
     assert all(math.isfinite(v) for v in values)
     assert np.all(np.diff(values) <= 1e-9 * values[0])
     for x in record.sample_positions:
@@ -95,7 +98,9 @@ def test_random_team_converges_to_its_formation():
     assert record.messages_sent == 0 and record.total_events == 0
 
 
-@pytest.mark.parametrize(('kwargs', 'message'), [(dict(horizon=0.0), 'horizon'), (dict(horizon=1.0, sample_dt=-0.1), 'sample_dt')])
+@pytest.mark.parametrize(
+    ('kwargs', 'message'), [(dict(horizon=0.0), 'horizon'), (dict(horizon=1.0, sample_dt=-0.1), 'sample_dt')]
+)
 def test_bad_arguments_are_named(kwargs, message):
     with pytest.raises(BaselineError, match=message):
         simulate_continuous(load_scenario('paper_single'), **kwargs)
@@ -107,7 +112,22 @@ def test_simulate_command_runs_the_continuous_baseline(tmp_path, capsys):
     from formation_sim.cli import main
 
     out = tmp_path / 'run'
-    assert main(['simulate', 'paper_single', '--continuous', '--horizon', '2', '--out', str(out), '--no-plot', '--quiet']) == 0
+    assert (
+        main(
+            [
+                'simulate',
+                'paper_single',
+                '--continuous',
+                '--horizon',
+                '2',
+                '--out',
+                str(out),
+                '--no-plot',
+                '--quiet',
+            ]
+        )
+        == 0
+    )
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['mode'] == 'continuous'
     assert summary['total_events'] == 0 and summary['messages_sent'] == 0

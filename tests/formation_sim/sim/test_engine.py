@@ -58,7 +58,9 @@ class EdgeSums:
     def __call__(self, x, q):
         y = x[self.heads] - x[self.tails] - self.d
         w = _omega(np.linalg.norm(y, axis=1), self.c)[:, None]
-        return self._accumulate(w * y), None if q is None else self._accumulate(w * (q[self.heads] - q[self.tails]))
+        return self._accumulate(w * y), None if q is None else self._accumulate(
+            w * (q[self.heads] - q[self.tails])
+        )
 
     def _accumulate(self, per_edge):
         # Edge (i, j) contributes +ω y_ij to agent i and +ω y_ji = -ω y_ij to agent j.
@@ -217,10 +219,16 @@ def _random_cases():
     return cases
 
 
-@pytest.mark.parametrize('case', _random_cases(), ids=lambda c: f"seed{c['seed']}-{c['dynamics']}-n{c['n']}-p{c['dimension']}")
+@pytest.mark.parametrize(
+    'case', _random_cases(), ids=lambda c: f'seed{c["seed"]}-{c["dynamics"]}-n{c["n"]}-p{c["dimension"]}'
+)
 def test_random_scenarios_keep_every_guarantee(case):
     scenario = random_scenario(
-        n=case['n'], seed=case['seed'], dynamics=case['dynamics'], dimension=case['dimension'], slack=case['slack']
+        n=case['n'],
+        seed=case['seed'],
+        dynamics=case['dynamics'],
+        dimension=case['dimension'],
+        slack=case['slack'],
     )
     horizon = 2.0
     trace = Trace(scenario)
@@ -324,8 +332,15 @@ def test_the_run_stops_once_rounding_decides_the_events():
     # tests/formation_sim/sim/test_engine_rounding_floor.py); at the event before it is not.
     scenario = load_scenario('paper_single')
     events = []
-    with pytest.raises(EngineError, match='from here on rounding, not the dynamics, decides the events') as stop:
-        simulate(scenario, horizon=200.0, sample_dt=None, on_event=lambda t, world, due: events.append((t, world.positions, world)))
+    with pytest.raises(
+        EngineError, match='from here on rounding, not the dynamics, decides the events'
+    ) as stop:
+        simulate(
+            scenario,
+            horizon=200.0,
+            sample_dt=None,
+            on_event=lambda t, world, due: events.append((t, world.positions, world)),
+        )
     t = float(str(stop.value).split('at t=')[1].split()[0])
     before_t, before_x, world = events[-1]  # the last event, and the engine's world, left at the stop
     assert world.time == t > before_t
@@ -361,5 +376,7 @@ def test_a_search_rounding_stalls_is_an_engine_error_naming_the_agent(tight_edge
     # Slack 1e-12 of the capacity (refused by formation validate, rule precision): the rounded
     # prediction of agent 2 stands still below its threshold and the search gives up. The engine
     # says so instead of letting the search's CrossingError through.
-    with pytest.raises(EngineError, match=r'agent 2: no convergence after 200000 certified steps .*\[precision\]'):
+    with pytest.raises(
+        EngineError, match=r'agent 2: no convergence after 200000 certified steps .*\[precision\]'
+    ):
         simulate(tight_edge('paper_single', 1e-12), horizon=1e-20, sample_dt=None)

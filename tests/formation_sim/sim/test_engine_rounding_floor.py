@@ -116,6 +116,10 @@ def _check_the_formation_step_is_the_states(scenario, world):
     speed = np.linalg.norm(q[heads] - q[tails], axis=1)
     ulp_y, ulp_q = np.spacing(max(np.abs(x).max(), edges.offset)), np.spacing(np.abs(q).max())
     gains = scenario.gains
-    at_states = theory.rounding_step(capacities, slack, ulp_y, k1=gains.k1, k2=gains.k2, speed=speed, ulp_q=ulp_q)
-    at_formation = theory.rounding_step(edges.capacity, edges.capacity, ulp_y, k1=gains.k1, k2=gains.k2, ulp_q=ulp_q)
+    at_states = theory.rounding_step(
+        capacities, slack, ulp_y, k1=gains.k1, k2=gains.k2, speed=speed, ulp_q=ulp_q
+    )
+    at_formation = theory.rounding_step(
+        edges.capacity, edges.capacity, ulp_y, k1=gains.k1, k2=gains.k2, ulp_q=ulp_q
+    )
     assert float(at_states.max()) == pytest.approx(at_formation, rel=REL)

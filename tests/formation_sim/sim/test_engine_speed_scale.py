@@ -37,7 +37,9 @@ SCENARIOS = _scenarios()
 
 @pytest.fixture(scope='module')
 def reference_runs():
-    return {name: simulate(s, horizon=HORIZON, sample_dt=DT, sample_events=False) for name, s in SCENARIOS.items()}
+    return {
+        name: simulate(s, horizon=HORIZON, sample_dt=DT, sample_events=False) for name, s in SCENARIOS.items()
+    }
 
 
 @pytest.mark.parametrize('kappa', KAPPAS)
@@ -45,7 +47,9 @@ def reference_runs():
 def test_triggering_times_are_divided_by_kappa_and_paths_kept(reference_runs, name, kappa):
     base = SCENARIOS[name]
     reference = reference_runs[name]
-    scaled = simulate(base.with_scale(speed_scale=kappa), horizon=HORIZON / kappa, sample_dt=DT / kappa, sample_events=False)
+    scaled = simulate(
+        base.with_scale(speed_scale=kappa), horizon=HORIZON / kappa, sample_dt=DT / kappa, sample_events=False
+    )
     assert reference.total_events > 3 * base.n  # the runs hold real event chains
     for agent, times in reference.trigger_times.items():
         # Events within rounding of the horizon may fall on either side of it.
@@ -56,15 +60,24 @@ def test_triggering_times_are_divided_by_kappa_and_paths_kept(reference_runs, na
         np.testing.assert_allclose(got[1:], expected[1:], rtol=REL, atol=0.0, err_msg=f'agent {agent}')
     # Grid samples k·DT/κ against k·DT: positions equal, velocities κ times the paper's.
     count = min(len(reference.sample_times), len(scaled.sample_times)) - 1  # the horizon's sample aside
-    np.testing.assert_allclose(np.asarray(scaled.sample_times[:count]) * kappa, reference.sample_times[:count], rtol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(scaled.sample_times[:count]) * kappa, reference.sample_times[:count], rtol=1e-12
+    )
     scale = float(np.abs(reference.sample_positions).max())
-    np.testing.assert_allclose(scaled.sample_positions[:count], reference.sample_positions[:count], rtol=0.0, atol=REL * scale)
+    np.testing.assert_allclose(
+        scaled.sample_positions[:count], reference.sample_positions[:count], rtol=0.0, atol=REL * scale
+    )
     if base.dynamics == 'double':
         speeds = float(np.abs(reference.sample_velocities).max())
         np.testing.assert_allclose(
-            scaled.sample_velocities[:count], kappa * reference.sample_velocities[:count], rtol=0.0, atol=REL * kappa * speeds
+            scaled.sample_velocities[:count],
+            kappa * reference.sample_velocities[:count],
+            rtol=0.0,
+            atol=REL * kappa * speeds,
         )
-        np.testing.assert_array_equal(scaled.sample_velocities[0], kappa * base.velocities)  # the run starts at κ q(0)
+        np.testing.assert_array_equal(
+            scaled.sample_velocities[0], kappa * base.velocities
+        )  # the run starts at κ q(0)
 
 
 @pytest.mark.parametrize('name', ['paper_single', 'paper_double'])
@@ -76,8 +89,6 @@ def test_kappa_one_and_floor_zero_given_explicitly_are_the_paper_bit_for_bit(nam
     b = simulate(given.replace(name='given'), horizon=2.0, sample_dt=0.1)
     assert a.trigger_times == b.trigger_times
     np.testing.assert_array_equal(a.sample_positions, b.sample_positions)
-
-
 
 
 @pytest.mark.parametrize('bad', [0.0, -1.0, math.nan, math.inf, 1e-7, 2e6])
@@ -123,9 +134,16 @@ def test_a_robots_velocity_reference_at_kappa_follows_the_scaled_world():
     kappa = 2.5
     scenario = load_scenario('paper_double').with_scale(speed_scale=kappa)
     events = []  # (t, velocities, controls): the hook runs before the agents due at t trigger
-    simulate(scenario, horizon=0.4, sample_dt=0.0, on_event=lambda t, world, due: events.append((t, world.velocities, world.controls)))
+    simulate(
+        scenario,
+        horizon=0.4,
+        sample_dt=0.0,
+        on_event=lambda t, world, due: events.append((t, world.velocities, world.controls)),
+    )
     k = scenario.index(1)
-    reference = VelocityReference(k3=damping(scenario.gains.k3, kappa), velocity=kappa * scenario.velocities[k], time=0.0)
+    reference = VelocityReference(
+        k3=damping(scenario.gains.k3, kappa), velocity=kappa * scenario.velocities[k], time=0.0
+    )
     assert len(events) > 20
     for (before, _, _), (t, velocities, controls) in zip(events, events[1:]):
         reference.update(before, controls[k])  # the command in force on (before, t]

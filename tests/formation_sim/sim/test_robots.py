@@ -36,14 +36,18 @@ def _unicycle_ode(v: float, w: float):
     return lambda t, s: [v * math.cos(s[2]), v * math.sin(s[2]), w]
 
 
-@pytest.mark.parametrize(('v', 'w', 'duration'), [(0.22, 2.84, 1.7), (-0.1, 0.3, 5.0), (0.2, -1e-9, 3.0), (0.15, 0.0, 2.0)])
+@pytest.mark.parametrize(
+    ('v', 'w', 'duration'), [(0.22, 2.84, 1.7), (-0.1, 0.3, 5.0), (0.2, -1e-9, 3.0), (0.15, 0.0, 2.0)]
+)
 def test_the_unicycle_drives_the_exact_arc_of_a_held_command(v, w, duration):
     robot = UnicycleRobot(position=[0.3, -1.2], yaw=0.7)
     robot.set_command(Command(linear=(v,), angular=w))
     # In pieces of every length, the closed form composes to the same arc the ODE gives.
     for piece in (0.01, 0.2, duration - 0.21):
         robot.advance(piece)
-    reference = solve_ivp(_unicycle_ode(v, w), (0.0, duration), [0.3, -1.2, 0.7], rtol=1e-12, atol=1e-12, method='DOP853')
+    reference = solve_ivp(
+        _unicycle_ode(v, w), (0.0, duration), [0.3, -1.2, 0.7], rtol=1e-12, atol=1e-12, method='DOP853'
+    )
     x, y, yaw = reference.y[:, -1]
     assert np.allclose(robot.position, [x, y], atol=1e-10)
     assert math.isclose(math.remainder(robot.yaw - yaw, 2 * math.pi), 0.0, abs_tol=1e-10)
@@ -68,11 +72,15 @@ def test_a_holonomic_robot_moves_on_the_straight_line_of_its_world_velocity():
 def test_limits_clip_commands_as_a_base_does_and_count_them():
     holonomic = HolonomicRobot(position=[0.0, 0.0], limits=Limits(linear=0.22, angular=2.84))
     applied = holonomic.set_command(Command(linear=(0.3, 0.4), angular=0.0))  # 0.5 m/s, direction kept
-    assert np.allclose(applied.linear, [0.132, 0.176]) and math.isclose(float(np.linalg.norm(applied.linear)), 0.22)
+    assert np.allclose(applied.linear, [0.132, 0.176]) and math.isclose(
+        float(np.linalg.norm(applied.linear)), 0.22
+    )
     holonomic.set_command(Command(linear=(0.1, 0.1), angular=0.0))
     assert holonomic.saturated == 1
     unicycle = UnicycleRobot(position=[0.0, 0.0], limits=Limits(linear=0.22, angular=2.84))
-    assert unicycle.set_command(Command(linear=(-0.5,), angular=3.0)) == Command(linear=(-0.22,), angular=2.84)
+    assert unicycle.set_command(Command(linear=(-0.5,), angular=3.0)) == Command(
+        linear=(-0.22,), angular=2.84
+    )
     assert unicycle.set_command(Command(linear=(0.1,), angular=-9.0)).angular == -2.84
     assert unicycle.saturated == 2
     with pytest.raises(RobotError, match='must be > 0'):
@@ -80,12 +88,20 @@ def test_limits_clip_commands_as_a_base_does_and_count_them():
 
 
 def test_a_unicycle_is_placed_by_its_control_point():
-    robot = make_robot('unicycle', scenario_position=[1.0, 1.0], yaw=math.pi / 2, control_point_distance=0.1, limits=Limits())
+    robot = make_robot(
+        'unicycle', scenario_position=[1.0, 1.0], yaw=math.pi / 2, control_point_distance=0.1, limits=Limits()
+    )
     assert np.allclose(robot.position, [1.0, 0.9])
     assert np.allclose(robot.scenario_position(), [1.0, 1.0])
     assert np.allclose(axle_position(control_point([0.4, -0.3], 2.0, 0.25), 2.0, 0.25), [0.4, -0.3])
     with pytest.raises(RobotError, match='a unicycle moves in the plane: dimension p must be 2, got 3'):
-        make_robot('unicycle', scenario_position=[1.0, 1.0, 0.0], yaw=0.0, control_point_distance=0.1, limits=Limits())
+        make_robot(
+            'unicycle',
+            scenario_position=[1.0, 1.0, 0.0],
+            yaw=0.0,
+            control_point_distance=0.1,
+            limits=Limits(),
+        )
 
 
 def test_noise_is_seeded_per_robot_and_has_the_asked_spread():
@@ -110,8 +126,12 @@ def test_quaternions_and_stamps():
 
 def _odometry(x, y, yaw, v, w, sec=100, nanosec=0):
     qx, qy, qz, qw = quaternion_from_yaw(yaw)
-    pose = SimpleNamespace(position=SimpleNamespace(x=x, y=y, z=0.0), orientation=SimpleNamespace(x=qx, y=qy, z=qz, w=qw))
-    twist = SimpleNamespace(linear=SimpleNamespace(x=v, y=0.0, z=0.0), angular=SimpleNamespace(x=0.0, y=0.0, z=w))
+    pose = SimpleNamespace(
+        position=SimpleNamespace(x=x, y=y, z=0.0), orientation=SimpleNamespace(x=qx, y=qy, z=qz, w=qw)
+    )
+    twist = SimpleNamespace(
+        linear=SimpleNamespace(x=v, y=0.0, z=0.0), angular=SimpleNamespace(x=0.0, y=0.0, z=w)
+    )
     return SimpleNamespace(
         header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
         pose=SimpleNamespace(pose=pose),
@@ -127,7 +147,10 @@ def test_a_unicycle_pose_is_read_as_its_control_point_and_its_velocity():
     # Axle (0, 0.2) plus l ω (−sin θ, cos θ) = (−0.1, 0).
     assert np.allclose(sample.velocity, [-0.1, 0.2])
     stamped = SimpleNamespace(header=msg.header, pose=msg.pose.pose)
-    assert np.allclose(pose_sample(stamped, model='holonomic', dimension=2, control_point_distance=0.0, epoch=99.0).position, [1.0, 2.0])
+    assert np.allclose(
+        pose_sample(stamped, model='holonomic', dimension=2, control_point_distance=0.0, epoch=99.0).position,
+        [1.0, 2.0],
+    )
 
 
 def test_tracks_are_sampled_by_interpolation_held_at_their_ends():
@@ -163,4 +186,9 @@ def test_the_poses_sampled_at_a_runs_end_skip_a_robot_resumed_after_a_freeze_and
     # before it, more than the silence: held at t = 3.4 (the coordinator may or may not have got it).
     frozen = track(3.39, 3.4, 4.7, 4.71)
     assert [p.time for p in poses_for_end(frozen, 4.0, silence=0.5)] == [3.39, 3.4]
-    assert [p.time for p in poses_for_end(frozen, 4.0, silence=None)] == [3.39, 3.4, 4.7, 4.71]  # a bag without it
+    assert [p.time for p in poses_for_end(frozen, 4.0, silence=None)] == [
+        3.39,
+        3.4,
+        4.7,
+        4.71,
+    ]  # a bag without it

@@ -36,7 +36,10 @@ def test_a_new_or_empty_folder_is_accepted(tmp_path):
     check_out_dir(tmp_path / 'new' / 'deeper')
     (tmp_path / 'empty').mkdir()
     check_out_dir(tmp_path / 'empty')
-    assert claim_out_dir(tmp_path / 'new' / 'deeper', scenario_name='s', kind='run') == tmp_path / 'new' / 'deeper'
+    assert (
+        claim_out_dir(tmp_path / 'new' / 'deeper', scenario_name='s', kind='run')
+        == tmp_path / 'new' / 'deeper'
+    )
     assert (tmp_path / 'new' / 'deeper').is_dir()
 
 
@@ -73,7 +76,10 @@ def test_force_never_removes_files_no_run_writes(tmp_path):
     (run / 'thesis.tex').write_text('mine')
     with pytest.raises(RunFolderError) as caught:
         clear_out_dir(run, force=True)
-    assert f"{run} holds thesis.tex, which no run writes; --force replaces only an earlier run's files" in str(caught.value)
+    assert (
+        f"{run} holds thesis.tex, which no run writes; --force replaces only an earlier run's files"
+        in str(caught.value)
+    )
     assert sorted(p.name for p in run.iterdir()) == ['bag', 'summary.json', 'thesis.tex']
 
 
@@ -81,7 +87,10 @@ def test_a_file_on_the_way_is_refused(tmp_path):
     (tmp_path / 'file').write_text('x')
     with pytest.raises(RunFolderError, match=r'file is a file, not a folder$'):
         check_out_dir(tmp_path / 'file', force=True)
-    with pytest.raises(RunFolderError, match=rf'{re.escape(str(tmp_path / "file"))} is a file, so no folder can be made under it'):
+    with pytest.raises(
+        RunFolderError,
+        match=rf'{re.escape(str(tmp_path / "file"))} is a file, so no folder can be made under it',
+    ):
         check_out_dir(tmp_path / 'file' / 'run')
     assert (tmp_path / 'file').read_text() == 'x'
 
@@ -133,7 +142,9 @@ def test_new_run_folders_stay_inside_runs_and_never_collide(tmp_path):
 def test_concurrent_claims_get_different_folders(tmp_path):
     root = tmp_path / 'runs'
     made: list = []
-    threads = [threading.Thread(target=lambda: made.append(new_run_folder('s', 'run', root=root))) for _ in range(8)]
+    threads = [
+        threading.Thread(target=lambda: made.append(new_run_folder('s', 'run', root=root))) for _ in range(8)
+    ]
     for thread in threads:
         thread.start()
     for thread in threads:
@@ -143,7 +154,9 @@ def test_concurrent_claims_get_different_folders(tmp_path):
 
 def test_a_report_never_overwrites_a_run(tmp_path):
     run = _make_run(tmp_path / 'run', 'summary.json')
-    with pytest.raises(RunFolderError, match=r'holds a run \(summary.json or bag/\) whose files the report would overwrite'):
+    with pytest.raises(
+        RunFolderError, match=r'holds a run \(summary.json or bag/\) whose files the report would overwrite'
+    ):
         check_report_dir(run)
     check_report_dir(tmp_path / 'report')  # new: fine
     check_report_dir(_make_run(tmp_path / 'old_report', 'analysis'))  # an earlier report: rewritten

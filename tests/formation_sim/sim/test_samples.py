@@ -32,7 +32,12 @@ from formation_sim.sim.summary import build_summary, load_record, write_summary
 def _norm_maxima(scenario, positions):
     """Per edge, the largest np.linalg.norm of x_i - x_j over the rows: the summary's formula before streaming."""
     index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
-    return np.array([np.linalg.norm(positions[:, index[e.i]] - positions[:, index[e.j]], axis=1).max() for e in scenario.edges])
+    return np.array(
+        [
+            np.linalg.norm(positions[:, index[e.i]] - positions[:, index[e.j]], axis=1).max()
+            for e in scenario.edges
+        ]
+    )
 
 
 @pytest.mark.parametrize(
@@ -62,17 +67,26 @@ def test_the_trajectory_is_plain_npy_files_that_numpy_reads_alone(tmp_path):
     scenario = load_scenario('paper_double')
     record = simulate(scenario, horizon=1.0, trajectory_dir=tmp_path)
     folder = tmp_path / TRAJECTORY_DIR
-    assert sorted(path.name for path in folder.iterdir()) == ['agent_ids.npy', 'positions.npy', 'times.npy', 'velocities.npy']
+    assert sorted(path.name for path in folder.iterdir()) == [
+        'agent_ids.npy',
+        'positions.npy',
+        'times.npy',
+        'velocities.npy',
+    ]
     times = np.load(folder / 'times.npy')
     positions = np.load(folder / 'positions.npy', mmap_mode='r')
     assert np.load(folder / 'agent_ids.npy').tolist() == [1, 2, 3]
     assert positions.shape == (len(times), 3, 2) == np.load(folder / 'velocities.npy').shape
     assert positions.dtype == np.dtype('<f8') and positions.offset % 64 == 0  # aligned data after the header
     assert times[0] == 0.0 and times[-1] == 1.0 and np.all(np.diff(times) > 0)
-    assert np.array_equal(positions[0], scenario.positions) and np.array_equal(positions[-1], record.sample_positions[-1])
+    assert np.array_equal(positions[0], scenario.positions) and np.array_equal(
+        positions[-1], record.sample_positions[-1]
+    )
 
 
-def test_write_summary_of_an_in_memory_record_writes_a_trajectory_that_reads_back_exactly(tmp_path, paper_single_record):
+def test_write_summary_of_an_in_memory_record_writes_a_trajectory_that_reads_back_exactly(
+    tmp_path, paper_single_record
+):
     write_summary(paper_single_record, tmp_path)
     rebuilt = load_record(tmp_path, paper_single_record.scenario)
     assert rebuilt.samples.path == tmp_path / TRAJECTORY_DIR
@@ -89,7 +103,9 @@ def test_a_run_that_fails_leaves_its_samples_named_incomplete_and_readers_refuse
         simulate(scenario, horizon=200.0, trajectory_dir=tmp_path)  # stops at t ≈ 34.4
     assert not (tmp_path / TRAJECTORY_DIR).exists()
     assert header_shape(tmp_path / INCOMPLETE_DIR / 'positions.npy') == (0, 3, 2)  # numpy reads it as empty
-    with pytest.raises(TrajectoryError, match=f'{INCOMPLETE_DIR}: the run stopped before its trajectory was complete'):
+    with pytest.raises(
+        TrajectoryError, match=f'{INCOMPLETE_DIR}: the run stopped before its trajectory was complete'
+    ):
         load_trajectory(tmp_path)
 
 
@@ -144,11 +160,16 @@ def test_a_run_written_before_the_trajectory_folder_is_still_read(tmp_path, pape
     record = paper_single_record
     # The layout formation simulate wrote before (np.savez_compressed, trajectory.npz).
     np.savez_compressed(
-        tmp_path / 'trajectory.npz', agent_ids=np.array(record.scenario.agent_ids), times=record.sample_times, positions=record.sample_positions
+        tmp_path / 'trajectory.npz',
+        agent_ids=np.array(record.scenario.agent_ids),
+        times=record.sample_times,
+        positions=record.sample_positions,
     )
     samples = load_trajectory(tmp_path)
     assert samples.path is None and samples.velocities is None
-    assert np.array_equal(samples.times, record.sample_times) and np.array_equal(samples.positions, record.sample_positions)
+    assert np.array_equal(samples.times, record.sample_times) and np.array_equal(
+        samples.positions, record.sample_positions
+    )
     assert load_trajectory(tmp_path / 'nothing here') is None
 
 
@@ -193,4 +214,3 @@ def test_edge_lengths_of_some_agents_touch_only_their_edges():
     lengths.add_edges(edges, x[lengths.heads[edges]], x[lengths.tails[edges]])
     expected = [np.linalg.norm(x[0] - x[1]), 0.0, np.linalg.norm(x[1] - x[2])]
     assert lengths.maxima.tolist() == expected
-

@@ -16,11 +16,16 @@ from formation_sim.study.spec import build_study
 
 
 def _cases(*blocks):
-    return build_study({'name': 't', 'seed': 5, 'defaults': {'horizon': 1.0, 'alpha': 10.0}, 'cases': list(blocks)}).cases
+    return build_study(
+        {'name': 't', 'seed': 5, 'defaults': {'horizon': 1.0, 'alpha': 10.0}, 'cases': list(blocks)}
+    ).cases
 
 
 def test_a_case_is_its_random_team_with_the_gains_as_fractions_of_their_bounds():
-    single, double = _cases({'n': 7, 'graph': 'cycle', 'beta': 0.9, 'p': 3}, {'n': 9, 'algorithm': 'eta2', 'graph': 'star', 'beta1': 0.5, 'k3': 0.3, 'beta_d': 0.8})
+    single, double = _cases(
+        {'n': 7, 'graph': 'cycle', 'beta': 0.9, 'p': 3},
+        {'n': 9, 'algorithm': 'eta2', 'graph': 'star', 'beta1': 0.5, 'k3': 0.3, 'beta_d': 0.8},
+    )
     s = scenario_of(single)
     assert s.dynamics == 'single' and s.n == 7 and s.dimension == 3 and len(s.edges) == 7
     assert s.gains.beta == pytest.approx(0.9 * theory.beta0(s), rel=1e-12)
@@ -36,7 +41,9 @@ def test_a_case_is_its_random_team_with_the_gains_as_fractions_of_their_bounds()
 def test_a_case_breaking_a_hypothesis_is_named_with_the_rule():
     (case,) = _cases({'n': 30, 'graph': 'path', 'slack': 0.001, 'alpha': 0.01})
     problem = check_case(case)
-    assert problem.startswith('case 0 (cases[0]: eta1 event n=30 p=2 path seed=0)') and '[precision]' in problem
+    assert (
+        problem.startswith('case 0 (cases[0]: eta1 event n=30 p=2 path seed=0)') and '[precision]' in problem
+    )
 
 
 @pytest.mark.parametrize('algorithm', ['eta1', 'eta2'])
@@ -65,7 +72,9 @@ def test_the_row_agrees_with_the_summary_and_the_analysis_checks(algorithm):
 
 def test_the_edge_watch_finds_the_largest_length_between_events_to_its_tolerance():
     """ETA-2 moves along exponentials between events: the watch's maximum against a fine grid."""
-    (case,) = _cases({'n': 5, 'algorithm': 'eta2', 'graph': 'path', 'slack': 0.05, 'max_speed': 2.0, 'horizon': 0.5})
+    (case,) = _cases(
+        {'n': 5, 'algorithm': 'eta2', 'graph': 'path', 'slack': 0.05, 'max_speed': 2.0, 'horizon': 0.5}
+    )
     scenario = scenario_of(case)
     watch = EdgeWatch(scenario)
     record = simulate(scenario, horizon=0.5, sample_dt=1e-4, on_event=watch.on_event)
@@ -88,7 +97,9 @@ def test_the_audit_counts_a_violated_bound():
     series = run_series(record)
     bounds = theory_bounds(scenario)
     honest = theorem_audit(record, series, bounds)
-    tight = dataclasses.replace(bounds, k_V=bounds.k_V * 1e-12, xi=dict.fromkeys(bounds.xi, 1.0))  # every gap of a 1 s run is below 1 s
+    tight = dataclasses.replace(
+        bounds, k_V=bounds.k_V * 1e-12, xi=dict.fromkeys(bounds.xi, 1.0)
+    )  # every gap of a 1 s run is below 1 s
     broken = theorem_audit(record, series, tight)
     assert honest['conv_violations'] == honest['zeno_violations'] == 0
     assert broken['conv_violations'] > 0 and broken['conv_margin'] < 0

@@ -12,10 +12,17 @@ from formation_sim.study.store import StudyFolder
 
 @pytest.fixture(scope='module')
 def folder(tmp_path_factory):
-    study = build_study({'name': 'r', 'seed': 2, 'defaults': {'horizon': 1.0, 'alpha': 10.0}, 'cases': [
-        {'n': 6, 'algorithm': ['eta1', 'eta2'], 'graph': ['star', 'cycle']},
-        {'n': 6, 'graph': 'star', 'sampling': ['event', 'periodic'], 'period': [0.01, 0.5]},
-    ]})  # fmt: skip
+    study = build_study(
+        {
+            'name': 'r',
+            'seed': 2,
+            'defaults': {'horizon': 1.0, 'alpha': 10.0},
+            'cases': [
+                {'n': 6, 'algorithm': ['eta1', 'eta2'], 'graph': ['star', 'cycle']},
+                {'n': 6, 'graph': 'star', 'sampling': ['event', 'periodic'], 'period': [0.01, 0.5]},
+            ],
+        }
+    )
     path = tmp_path_factory.mktemp('study')
     store = StudyFolder(path, study)
     store.open()
@@ -33,14 +40,20 @@ def test_the_audit_table_adds_up_the_rows(folder):
     assert table[('2', 'Theorem 2 rate as printed')]['runs'] == len(eta2) == 2
     assert ('1', 'Theorem 2 rate as printed') not in table
     one = table[('1', 'Zeno')]
-    assert one['smallest_margin'] == min(r['zeno_margin'] for r in rows if r['algorithm'] == 'eta1' and r['sampling'] == 'event')
-    assert one['violations'] == 0 and one['runs'] == 2  # the second block's event run is the first's star: run once
+    assert one['smallest_margin'] == min(
+        r['zeno_margin'] for r in rows if r['algorithm'] == 'eta1' and r['sampling'] == 'event'
+    )
+    assert (
+        one['violations'] == 0 and one['runs'] == 2
+    )  # the second block's event run is the first's star: run once
 
 
 def test_savings_compare_with_the_cheapest_periodic_run_at_most_as_far_from_formation(folder):
     _, rows = folder
     savings = periodic_savings(rows)
-    eta = next(r for r in rows if r['sampling'] == 'event' and r['graph'] == 'star' and r['algorithm'] == 'eta1')
+    eta = next(
+        r for r in rows if r['sampling'] == 'event' and r['graph'] == 'star' and r['algorithm'] == 'eta1'
+    )
     periodic = [r for r in rows if r['sampling'] == 'periodic' and r['status'] == 'ok']
     good = [r['total_events'] for r in periodic if r['final_formation_error'] <= eta['final_formation_error']]
     assert good  # the period 0.01 s run ends closer to the formation
@@ -55,6 +68,8 @@ def test_the_report_is_written_and_a_folder_without_rows_refused(folder, tmp_pat
     failed = [r for r in rows if r['status'] == 'failed']
     assert len(failed) == 1 and failed[0]['period'] == 0.5 and 'out of its range' in failed[0]['error']
     assert f'{len(rows)} rows, 1 failed.' in text and '![events_vs_n.png](events_vs_n.png)' in text
-    assert {'events_vs_n.png', 'saved_vs_periodic.png', 'inter_event_vs_xi.png', 'edge_vs_delta.png'} <= {p.name for p in (tmp_path / 'report').iterdir()}
+    assert {'events_vs_n.png', 'saved_vs_periodic.png', 'inter_event_vs_xi.png', 'edge_vs_delta.png'} <= {
+        p.name for p in (tmp_path / 'report').iterdir()
+    }
     with pytest.raises(StudyError, match='no rows.csv: not a study folder'):
         write_report(tmp_path / 'report')

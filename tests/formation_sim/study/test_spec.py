@@ -12,10 +12,17 @@ def _spec(*blocks, **top):
 
 
 def test_a_grid_is_the_product_of_its_axes_and_draws_multiply_it():
-    study = build_study(_spec({'n': [3, 4], 'graph': ['star', 'path', 'cycle']}, {'draws': 4, 'n': 5, 'slack': {'log_uniform': [0.01, 0.5]}, 'p': [1, 2]}))
+    study = build_study(
+        _spec(
+            {'n': [3, 4], 'graph': ['star', 'path', 'cycle']},
+            {'draws': 4, 'n': 5, 'slack': {'log_uniform': [0.01, 0.5]}, 'p': [1, 2]},
+        )
+    )
     assert len(study.cases) == 6 + 8
     first = [c.params for c in study.cases[:6]]
-    assert {(p['n'], p['graph']) for p in first} == {(n, g) for n in (3, 4) for g in ('star', 'path', 'cycle')}
+    assert {(p['n'], p['graph']) for p in first} == {
+        (n, g) for n in (3, 4) for g in ('star', 'path', 'cycle')
+    }
     drawn = [c.params['slack'] for c in study.cases[6:]]
     assert all(0.01 <= s <= 0.5 for s in drawn)
     assert drawn[0] == drawn[1] and drawn[0] != drawn[2]  # one draw, then the grid over p
@@ -32,11 +39,26 @@ def test_the_same_spec_gives_the_same_cases_and_another_seed_other_draws():
 
 
 def test_what_does_not_apply_is_dropped_and_equal_cases_run_once():
-    study = build_study(_spec({'n': 4, 'sampling': ['event', 'periodic'], 'period': [0.1, 0.2], 'graph': 'star', 'degree': [3, 6]}))
+    study = build_study(
+        _spec(
+            {
+                'n': 4,
+                'sampling': ['event', 'periodic'],
+                'period': [0.1, 0.2],
+                'graph': 'star',
+                'degree': [3, 6],
+            }
+        )
+    )
     # event x 2 periods x 2 degrees is one case (no period, no degree for a star); periodic: 2.
     assert len(study.cases) == 3
     event = study.cases[0].params
-    assert event['period'] is None and event['degree'] is None and event['beta1'] is None and event['beta'] == 0.5
+    assert (
+        event['period'] is None
+        and event['degree'] is None
+        and event['beta1'] is None
+        and event['beta'] == 0.5
+    )
     double = build_study(_spec({'n': 4, 'algorithm': 'eta2'})).cases[0].params
     assert double['beta'] is None and double['beta1'] == 1.0 and double['max_speed'] == 1.0
     assert set(event) == set(PARAMETERS)
@@ -54,12 +76,18 @@ def test_defaults_apply_to_every_block_and_a_block_wins():
         (_spec({'n': 3}, {'n': 1}), 'cases[1].n: must be an integer >= 2 (agents), got 1'),
         (_spec({'n': 3, 'slack': 1.5}), 'cases[0].slack: must be a number in (0, 1]'),
         (_spec({'n': 3, 'beta': 1.0}), 'cases[0].beta: must be a number in (0, 1): β as a fraction of β0'),
-        (_spec({'n': 3, 'graph': 'tree'}), 'cases[0].graph: must be one of geometric, star, path, cycle, complete'),
+        (
+            _spec({'n': 3, 'graph': 'tree'}),
+            'cases[0].graph: must be one of geometric, star, path, cycle, complete',
+        ),
         (_spec({'n': 2, 'graph': 'cycle'}), 'a cycle needs n >= 3 agents, got n = 2'),
         (_spec({'n': 3, 'sampling': 'periodic'}), 'cases[0].period: sampling: periodic needs a period'),
         (_spec({'n': {'integers': [2, 5]}}), 'cases[0]: draws: K is needed with distributions (n)'),
         (_spec({'draws': 2, 'n': {'normal': [2, 5]}}), 'cases[0].n: a distribution is one of'),
-        (_spec({'draws': 2, 'slack': {'log_uniform': [0, 0.5]}, 'n': 3}), 'cases[0].slack.log_uniform: low must be > 0'),
+        (
+            _spec({'draws': 2, 'slack': {'log_uniform': [0, 0.5]}, 'n': 3}),
+            'cases[0].slack.log_uniform: low must be > 0',
+        ),
         (_spec({'draws': 0, 'n': 3}), 'cases[0].draws: must be an integer >= 1, got 0'),
         (_spec({'n': []}), 'cases[0].n: a grid axis needs at least one value'),
         (_spec({'n': 3}, sed=1), "unknown key 'sed'"),

@@ -12,7 +12,14 @@ from formation_sim.study.store import ROWS_FILE, STUDY_FILE, StudyFolder, read_r
 
 
 def _study(n=3, name='t'):
-    return build_study({'name': name, 'seed': 1, 'defaults': {'horizon': 0.5, 'alpha': 10.0}, 'cases': [{'n': n, 'graph': ['star', 'path']}]})
+    return build_study(
+        {
+            'name': name,
+            'seed': 1,
+            'defaults': {'horizon': 0.5, 'alpha': 10.0},
+            'cases': [{'n': n, 'graph': ['star', 'path']}],
+        }
+    )
 
 
 def test_rows_read_back_to_the_bit_and_a_row_is_written_once(tmp_path):
@@ -59,7 +66,9 @@ def test_a_cut_last_line_is_dropped_and_the_study_goes_on(tmp_path):
 
 def test_a_folder_of_another_study_or_of_other_files_is_refused(tmp_path):
     StudyFolder(tmp_path / 'a', _study()).open()
-    with pytest.raises(StudyError, match=r"holds another study \('t', 2 cases, digest .*; this SPEC: 'u', 2 cases"):
+    with pytest.raises(
+        StudyError, match=r"holds another study \('t', 2 cases, digest .*; this SPEC: 'u', 2 cases"
+    ):
         StudyFolder(tmp_path / 'a', _study(n=4, name='u'))
     (tmp_path / 'b').mkdir()
     (tmp_path / 'b' / 'notes.txt').write_text('mine')
@@ -74,7 +83,10 @@ def test_a_folder_of_an_earlier_version_reads_with_the_new_parameters_at_their_d
     study, first, second, path = _folder_with_first_row(tmp_path)
     lines = path.read_text().splitlines()
     drop = [COLUMNS.index('speed_scale'), COLUMNS.index('threshold_floor')]
-    old = '\n'.join(','.join(c for k, c in enumerate(line.split(',')) if k not in drop) for line in lines) + '\n'
+    old = (
+        '\n'.join(','.join(c for k, c in enumerate(line.split(',')) if k not in drop) for line in lines)
+        + '\n'
+    )
     path.write_text(old)  # as a study folder written before the two parameters existed
     assert read_rows(tmp_path) == [first]
     again = StudyFolder(tmp_path, study)

@@ -17,15 +17,33 @@
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
-    'crossing': ('CrossingError', 'CrossingSearch', 'DEFAULT_TOLERANCE', 'ErrorModel', 'MAX_STEPS', 'PRECISION_HINT', 'first_crossing'),
-    'tension': ('omega', 'omega_prime', 'omega_second'),
-    'closed_form': ('advance_double',),
-    'speed_scale': ('ScaleError', 'Threshold', 'check_speed_scale', 'check_threshold_floor', 'eta1_gains', 'eta2_gains'),
-    'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
-    'pose_sensing': ('PoseBook', 'PoseError'),
-    'velocity_reference': ('VelocityReference',),
-    'commander': ('Limits', 'RobotCommander', 'SaturationLog'),
-    'kinds': ('KIND_NAMES', 'RobotKind', 'register', 'robot_kind'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
+        'crossing': (
+            'CrossingError',
+            'CrossingSearch',
+            'DEFAULT_TOLERANCE',
+            'ErrorModel',
+            'MAX_STEPS',
+            'PRECISION_HINT',
+            'first_crossing',
+        ),
+        'tension': ('omega', 'omega_prime', 'omega_second'),
+        'closed_form': ('advance_double',),
+        'speed_scale': (
+            'ScaleError',
+            'Threshold',
+            'check_speed_scale',
+            'check_threshold_floor',
+            'eta1_gains',
+            'eta2_gains',
+        ),
+        'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
+        'pose_sensing': ('PoseBook', 'PoseError'),
+        'velocity_reference': ('VelocityReference',),
+        'commander': ('Limits', 'RobotCommander', 'SaturationLog'),
+        'kinds': ('KIND_NAMES', 'RobotKind', 'register', 'robot_kind'),
+    },
+)

@@ -29,7 +29,14 @@ from formation_agent.core.limits import Limits, SaturationLog, limit_body_veloci
 from formation_agent.core.velocity_reference import VelocityReference
 from formation_msgs_py.lockstep import SATURATION_LINEAR_ACCELERATION
 
-__all__ = ['DRIVES', 'Limits', 'RobotCommander', 'SaturationLog', 'limit_body_velocity', 'limit_world_velocity']
+__all__ = [
+    'DRIVES',
+    'Limits',
+    'RobotCommander',
+    'SaturationLog',
+    'limit_body_velocity',
+    'limit_world_velocity',
+]
 
 DRIVES = KIND_NAMES  # the registered robot kinds (formation_agent.core.kinds), read at each use
 
@@ -45,7 +52,13 @@ class RobotCommander:
     """
 
     def __init__(
-        self, *, drive: str, dimension: int, limits: Limits, distance: float = 0.0, wheelbase: float = 0.0,
+        self,
+        *,
+        drive: str,
+        dimension: int,
+        limits: Limits,
+        distance: float = 0.0,
+        wheelbase: float = 0.0,
         k3: float | None = None,
     ) -> None:
         if drive not in DRIVES:
@@ -69,13 +82,17 @@ class RobotCommander:
     def started(self) -> bool:
         return self._desired is not None or self._reference is not None
 
-    def set_control(self, t: float, control: Sequence[float], velocity: Sequence[float] | None = None) -> None:
+    def set_control(
+        self, t: float, control: Sequence[float], velocity: Sequence[float] | None = None
+    ) -> None:
         if self.k3 is None:
             self._desired = np.array(control, dtype=float)
             return
         if self._reference is None:
             if velocity is None:
-                raise ValueError('ETA-2: the first control needs the sensed velocity q_i to start the reference')
+                raise ValueError(
+                    'ETA-2: the first control needs the sensed velocity q_i to start the reference'
+                )
             self._reference = VelocityReference(
                 k3=self.k3, velocity=velocity, time=t, max_acceleration=self.limits.linear_acceleration
             )
@@ -96,4 +113,6 @@ class RobotCommander:
         or (v, ω) from the robot's heading (unicycle)."""
         u = self.desired(t)
         self.commands += 1
-        return self.kind.command(u, heading=heading, geometry=self.geometry, limits=self.limits, log=self.saturation)
+        return self.kind.command(
+            u, heading=heading, geometry=self.geometry, limits=self.limits, log=self.saturation
+        )

@@ -219,8 +219,16 @@ class CrossingSearch:
         return self.result
 
     def _finish(
-        self, a: float, phi: float, phi_rate: float, size: float, cover_end: float, bound_e: float, bound_curv: float,
-        *, stuck: bool,
+        self,
+        a: float,
+        phi: float,
+        phi_rate: float,
+        size: float,
+        cover_end: float,
+        bound_e: float,
+        bound_curv: float,
+        *,
+        stuck: bool,
     ) -> float | None:
         """The crossing from a point whose margin is within tolerance; None: step on from a.
 
@@ -283,7 +291,13 @@ def first_crossing(
     reached; the result is then refined to double precision by bracketing.
     """
     return CrossingSearch(
-        model, start=start, alpha=alpha, beta=beta, limit=limit, tolerance=tolerance, initial_step=initial_step,
+        model,
+        start=start,
+        alpha=alpha,
+        beta=beta,
+        limit=limit,
+        tolerance=tolerance,
+        initial_step=initial_step,
         floor=floor,
     ).run()
 

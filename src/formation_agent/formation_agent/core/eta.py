@@ -67,7 +67,10 @@ ALGORITHM_GAINS: dict[str, tuple[str, ...]] = {
 }
 """The gains each algorithm takes, by name (Theorem 1: α, β; Theorem 2: α_d, β_d, k1, k2, k3)."""
 
-SCALE_GAINS: dict[str, float] = {'speed_scale': DEFAULT_SPEED_SCALE, 'threshold_floor': DEFAULT_THRESHOLD_FLOOR}
+SCALE_GAINS: dict[str, float] = {
+    'speed_scale': DEFAULT_SPEED_SCALE,
+    'threshold_floor': DEFAULT_THRESHOLD_FLOOR,
+}
 """The gains both algorithms take optionally, with their defaults (the paper's): κ and c0."""
 
 # A step may use at most this fraction of an edge's gap c - ||y_ij|| (what is left of its capacity
@@ -144,7 +147,9 @@ class _EventTriggeredAgent(_AgentHooks):
         self._neighbour_set = set(self.neighbour_ids)
         offsets = np.array([np.asarray(neighbours[j], dtype=float) for j in self.neighbour_ids])
         if offsets.ndim != 2 or offsets.shape[1] < 1:
-            raise AgentError(f'agent {agent_id}: desired displacements must be vectors of one dimension p >= 1')
+            raise AgentError(
+                f'agent {agent_id}: desired displacements must be vectors of one dimension p >= 1'
+            )
         if not np.all(np.isfinite(offsets)):
             raise AgentError(f'agent {agent_id}: desired displacements are not finite')
         self.offsets = offsets  # d_ij, one row per neighbour
@@ -163,7 +168,9 @@ class _EventTriggeredAgent(_AgentHooks):
         self._neighbour_control = np.zeros((m, p))
         self._heard = np.zeros(m, dtype=bool)
         self.control = np.zeros(p)  # the command: u_i (ETA-1) or u^d_i (ETA-2), broadcast and applied
-        self._offset = np.zeros(p)  # its term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1)
+        self._offset = np.zeros(
+            p
+        )  # its term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1)
         self.last_trigger: float | None = None
         self.last_event = 0.0
         self._search: CrossingSearch | None = None  # the plan from the current knowledge
@@ -276,7 +283,9 @@ class _EventTriggeredAgent(_AgentHooks):
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
         if self.last_trigger is not None and t < self.last_trigger:
-            raise AgentError(f'agent {self.agent_id}: trigger at t={t!r} before its last one at t={self.last_trigger!r}')
+            raise AgentError(
+                f'agent {self.agent_id}: trigger at t={t!r} before its last one at t={self.last_trigger!r}'
+            )
         rel = self._relative_rows(sensed.rel_positions, 'sensed rel_positions')
         # Edge by edge in plain floats (a handful of edges: numpy would cost more than it saves).
         y = [tuple(r - d for r, d in zip(row, offset)) for row, offset in zip(rel, self._offsets)]
@@ -319,7 +328,9 @@ class _EventTriggeredAgent(_AgentHooks):
                 total[d] += w * v
         return total
 
-    def _infos(self, t: float, rel: list[tuple[float, ...]], control: tuple[float, ...]) -> tuple[TriggerInfo, ...]:
+    def _infos(
+        self, t: float, rel: list[tuple[float, ...]], control: tuple[float, ...]
+    ) -> tuple[TriggerInfo, ...]:
         return tuple(
             TriggerInfo(
                 sender=self.agent_id,
@@ -583,7 +594,11 @@ class Eta1Agent(_EventTriggeredAgent):
             gap = c - reach
             gap3 = gap * gap * gap
             rate += 2.0 * c * c / gap3 * speed  # g_ij (eq. gij), (eq. dotnormei)
-            curv += (reach * ((8.0 * c - 2.0 * reach) / (gap3 * gap)) + 3.0 * ((3.0 * c - reach) / gap3)) * speed * speed
+            curv += (
+                (reach * ((8.0 * c - 2.0 * reach) / (gap3 * gap)) + 3.0 * ((3.0 * c - reach) / gap3))
+                * speed
+                * speed
+            )
             reach_sum += (2.0 * c - reach) / (gap * gap) * reach
         return span, min(size + rate * span, self._control_norm + reach_sum), rate, curv
 
@@ -620,7 +635,11 @@ class Eta2Agent(_EventTriggeredAgent):
             # k1, k2, k3 below are the real-time gains (κ²k1, κk2, κk3); the threshold is κ² that of
             # (triggerdouble), decaying at κβ_d (formation_agent.core.speed_scale).
             (self.k1, self.k2, self.k3), self._threshold = eta2_gains(
-                alpha_d=self.alpha_d, beta_d=self.beta_d, speed_scale=speed_scale, threshold_floor=threshold_floor, **paper
+                alpha_d=self.alpha_d,
+                beta_d=self.beta_d,
+                speed_scale=speed_scale,
+                threshold_floor=threshold_floor,
+                **paper,
             )
         except ScaleError as error:
             raise AgentError(f'agent {agent_id}: {error}') from None
@@ -630,7 +649,9 @@ class Eta2Agent(_EventTriggeredAgent):
 
     def _receive_extra(self, k: int, info: TriggerInfo) -> None:
         if info.rel_velocity is None:
-            raise AgentError(f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity')
+            raise AgentError(
+                f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity'
+            )
         q = tuple(-v for v in self._floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
         self._anchor_q[k] = q
         self._edge_q[k] = self._pad(q)
@@ -641,7 +662,9 @@ class Eta2Agent(_EventTriggeredAgent):
     def _sensed_extra(self, sensed: SensedState) -> list[tuple[float, ...]]:
         return self._relative_rows(sensed.rel_velocities, 'sensed rel_velocities')
 
-    def _update(self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]) -> tuple[float, ...]:
+    def _update(
+        self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]
+    ) -> tuple[float, ...]:
         self._anchor_q[:] = extra
         self._sensed_q = extra
         self._edge_q = [self._pad(row) for row in extra]
@@ -717,7 +740,19 @@ class Eta2Agent(_EventTriggeredAgent):
         u, u_j = self._u, self._edge_u[k]
         y0, y1, y2 = self._edge_y[k]
         q0, q1, q2 = self._edge_q[k]
-        return (self._edge_time[k], y0, y1, y2, q0, q1, q2, u[0] - u_j[0], u[1] - u_j[1], u[2] - u_j[2], self._capacity[k])
+        return (
+            self._edge_time[k],
+            y0,
+            y1,
+            y2,
+            q0,
+            q1,
+            q2,
+            u[0] - u_j[0],
+            u[1] - u_j[1],
+            u[2] - u_j[2],
+            self._capacity[k],
+        )
 
     def _closed_form(self, t: float, anchor: float) -> tuple[float, float, float]:
         """(lag, ramp, fade): the factors of the closed-loop motion q' = u^d - k3 q from `anchor`
@@ -771,7 +806,9 @@ class Eta2Agent(_EventTriggeredAgent):
             d0 += f * m0 + w * (k1 * q0 + k2 * a0)
             d1 += f * m1 + w * (k1 * q1 + k2 * a1)
             d2 += f * m2 + w * (k1 * q2 + k2 * a2)
-            probe.append((r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), c))
+            probe.append(
+                (r, math.sqrt(q0 * q0 + q1 * q1 + q2 * q2), math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), c)
+            )
         if with_rate:
             self._probe = probe
         v0, v1, v2 = self._u_offset

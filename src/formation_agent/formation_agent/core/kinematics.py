@@ -51,7 +51,9 @@ def yaw(orientation: Sequence[float]) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def control_point(position: Sequence[float], orientation: Sequence[float], offset: Sequence[float]) -> np.ndarray:
+def control_point(
+    position: Sequence[float], orientation: Sequence[float], offset: Sequence[float]
+) -> np.ndarray:
     """The world position of the point `offset` (body frame, (3,)) of a robot at this pose."""
     return np.asarray(position, dtype=float) + rotate(orientation, offset)
 

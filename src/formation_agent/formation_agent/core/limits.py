@@ -43,7 +43,9 @@ class SaturationLog:
         previous = self._records.get(kind)
         count = 1 if previous is None else previous.count + 1
         largest = requested if previous is None else max(previous.largest_requested, requested)
-        self._records[kind] = Saturation(count=count, largest_requested=float(largest), allowed=float(allowed))
+        self._records[kind] = Saturation(
+            count=count, largest_requested=float(largest), allowed=float(allowed)
+        )
 
     @property
     def records(self) -> dict[str, Saturation]:

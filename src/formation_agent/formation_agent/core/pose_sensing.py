@@ -64,7 +64,9 @@ class PoseBook:
     def add(self, robot: int, pose: RobotPose) -> tuple[str, str] | None:
         """Keep `pose` as the latest of `robot`; or say why not: (reason, detail)."""
         if pose.frame != self.world_frame:
-            detail = f'pose of robot {robot} in frame {pose.frame!r}, not the world frame {self.world_frame!r}'
+            detail = (
+                f'pose of robot {robot} in frame {pose.frame!r}, not the world frame {self.world_frame!r}'
+            )
             self._refused[robot] = detail
             return REJECT_FRAME, detail
         latest = self._latest.get(robot)
@@ -108,7 +110,9 @@ class PoseBook:
 
     def _velocity(self, robot: int, pose: RobotPose, t: float) -> np.ndarray:
         if pose.linear is not None:  # Odometry: the body twist, into the world frame
-            return control_point_velocity(pose.orientation, pose.linear, pose.angular, self.offset)[: self.dimension]
+            return control_point_velocity(pose.orientation, pose.linear, pose.angular, self.offset)[
+                : self.dimension
+            ]
         previous = self._previous.get(robot)
         if previous is None:
             raise PoseError(

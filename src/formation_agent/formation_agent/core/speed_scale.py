@@ -79,7 +79,9 @@ class Threshold:
         return self.floor + self.alpha * math.exp(-self.beta * t)  # + 0.0 is exact: the paper's
 
 
-def eta1_gains(*, alpha: float, beta: float, speed_scale: float, threshold_floor: float) -> tuple[float, Threshold]:
+def eta1_gains(
+    *, alpha: float, beta: float, speed_scale: float, threshold_floor: float
+) -> tuple[float, Threshold]:
     """(command gain, threshold) of ETA-1 at κ: u_i = κ u_p,i, ||e_i|| reaches c0 + α e^{-κβt}."""
     kappa = check_speed_scale(speed_scale)
     floor = check_threshold_floor(threshold_floor)
@@ -87,7 +89,14 @@ def eta1_gains(*, alpha: float, beta: float, speed_scale: float, threshold_floor
 
 
 def eta2_gains(
-    *, alpha_d: float, beta_d: float, k1: float, k2: float, k3: float, speed_scale: float, threshold_floor: float
+    *,
+    alpha_d: float,
+    beta_d: float,
+    k1: float,
+    k2: float,
+    k3: float,
+    speed_scale: float,
+    threshold_floor: float,
 ) -> tuple[tuple[float, float, float], Threshold]:
     """((K1, K2, K3), threshold) of ETA-2 at κ: (κ²k1, κk2, κk3), and κ²(c0 + α_d e^{-κβ_d t})
     on K1 e_i + K2 e_qi = κ² E_i (the paper's E_i of (triggerdouble))."""

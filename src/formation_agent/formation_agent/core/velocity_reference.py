@@ -26,7 +26,9 @@ from formation_agent.core.closed_form import advance_double
 class VelocityReference:
     """q(t) under dq/dt = sat_a(u^d - k3 q), u^d piecewise constant; exact between updates."""
 
-    def __init__(self, *, k3: float, velocity: Sequence[float], time: float, max_acceleration: float = math.inf) -> None:
+    def __init__(
+        self, *, k3: float, velocity: Sequence[float], time: float, max_acceleration: float = math.inf
+    ) -> None:
         if not (math.isfinite(k3) and k3 > 0.0):
             raise ValueError(f'k3 must be a finite number > 0, got {k3!r}')
         if not max_acceleration > 0.0:
@@ -53,7 +55,9 @@ class VelocityReference:
         """q(time), time >= the last update."""
         tau = float(time) - self._time
         if tau < 0.0:
-            raise ValueError(f'velocity reference asked for t={time!r}, before its last update at t={self._time!r}')
+            raise ValueError(
+                f'velocity reference asked for t={time!r}, before its last update at t={self._time!r}'
+            )
         q, u, k3 = self._velocity, self._control, self.k3
         if self._limited_until > self._time:
             w = u - k3 * q

@@ -21,10 +21,19 @@ QoS profiles of the protocol and the robot topics: `formation_msgs_py.qos`.
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError'),
-    'main': ('main',),
-    'config': ('AgentConfig', 'agent_help', 'read_config'),
-    'process': ('EXECUTORS', 'EXIT_BAD_INPUT', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
-    'parameters': ('ParameterError', 'ParameterSpec', 'declare_parameters', 'parameter_help', 'read_parameters'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError'),
+        'main': ('main',),
+        'config': ('AgentConfig', 'agent_help', 'read_config'),
+        'process': ('EXECUTORS', 'EXIT_BAD_INPUT', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
+        'parameters': (
+            'ParameterError',
+            'ParameterSpec',
+            'declare_parameters',
+            'parameter_help',
+            'read_parameters',
+        ),
+    },
+)

@@ -57,7 +57,9 @@ class PlantOutput:
         double = config.double
         self._encode = encode_acceleration_command if double else encode_velocity_command
         self._zeros = (0.0,) * config.dimension
-        self.publisher = node.create_publisher(Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS)
+        self.publisher = node.create_publisher(
+            Accel if double else Twist, 'cmd_accel' if double else 'cmd_vel', PROTOCOL_QOS
+        )
         self._wall_clock = False
         self._stopped = False
         self.sent = 0  # commands published (its report's count of what a recorder must hold)
@@ -87,9 +89,14 @@ class RobotOutput:
     """
 
     def __init__(
-        self, node, config, poses, *, on_failure: Callable[[Exception], None],
+        self,
+        node,
+        config,
+        poses,
+        *,
+        on_failure: Callable[[Exception], None],
         guard: Callable[[float, float], None] | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """`guard(now, t)` before each periodic command: raises StaleStateError after a freeze
         (`formation_agent.ros.staleness`); `on_failure(error)` once the robot is stopped."""
         self._node = node
@@ -143,7 +150,10 @@ class RobotOutput:
             if self._guard is not None:
                 self._guard(wall, wall - self._epoch)
             self._send(wall)
-        except (PoseError, StaleStateError) as error:  # its own pose, or all it knows, went stale: stop now, then leave
+        except (
+            PoseError,
+            StaleStateError,
+        ) as error:  # its own pose, or all it knows, went stale: stop now, then leave
             self.stop()
             self._on_failure(error)
 
@@ -153,7 +163,9 @@ class RobotOutput:
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
         if self._world_frame:
             velocity = self.commander.command(t)
-            self.publisher.publish(encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall))
+            self.publisher.publish(
+                encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall)
+            )
         else:
             self.publisher.publish(encode_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
 
@@ -167,6 +179,8 @@ class RobotOutput:
             self._timer = None
         if self._world_frame:
             zero = (0.0,) * self._config.dimension
-            self.publisher.publish(encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time()))
+            self.publisher.publish(
+                encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
+            )
         else:
             self.publisher.publish(encode_body_velocity(0.0, 0.0))

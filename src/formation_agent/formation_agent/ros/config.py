@@ -41,65 +41,206 @@ def _spec(name, kind, description, **options) -> ParameterSpec:
 
 AGENT_PARAMETERS = (
     # The formation (written per agent by `formation run`, from the scenario).
-    _spec('agent_id', INTEGER, "this agent's id i; the node runs in namespace /agent_<i>", low=0, high=MAX_AGENT_ID),
-    _spec('algorithm', STRING, 'eta1 (single integrators, Theorem 1) or eta2 (double integrators, Theorem 2)',
-          choices=('eta1', 'eta2')),
-    _spec('dimension', INTEGER, 'dimension p of positions (commands travel as geometry_msgs: 1 to 3)', low=1, high=3),
+    _spec(
+        'agent_id',
+        INTEGER,
+        "this agent's id i; the node runs in namespace /agent_<i>",
+        low=0,
+        high=MAX_AGENT_ID,
+    ),
+    _spec(
+        'algorithm',
+        STRING,
+        'eta1 (single integrators, Theorem 1) or eta2 (double integrators, Theorem 2)',
+        choices=('eta1', 'eta2'),
+    ),
+    _spec(
+        'dimension',
+        INTEGER,
+        'dimension p of positions (commands travel as geometry_msgs: 1 to 3)',
+        low=1,
+        high=3,
+    ),
     _spec('neighbour_ids', INTEGER_ARRAY, 'ids j of the neighbours in the graph', low=0, high=MAX_AGENT_ID),
-    _spec('neighbour_offsets', DOUBLE_ARRAY, 'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]'),
+    _spec(
+        'neighbour_offsets',
+        DOUBLE_ARRAY,
+        'desired d_ij = x_i - x_j per neighbour, p values each, in neighbour_ids order [m]',
+    ),
     _spec('delta', DOUBLE, 'communication radius Δ [m]', low=0.0, low_open=True),
-    _spec('horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True),
-    _spec('speed_scale', DOUBLE, "speed scale κ (docs/SPEED_SCALE.md): the paper's run in the time s = κt, every "
-          'triggering time divided by κ, commands times κ (eta2: gains κ²k1, κk2, κk3); 1: the paper',
-          default=SCALE_GAINS['speed_scale'], low=SPEED_SCALE_LIMITS[0], high=SPEED_SCALE_LIMITS[1]),
-    _spec('threshold_floor', DOUBLE, "threshold floor c0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
-          '(docs/SPEED_SCALE.md); 0: the paper', default=SCALE_GAINS['threshold_floor'], low=0.0),
+    _spec(
+        'horizon', DOUBLE, 'end of the run t_end [s]; no trigger is planned after it', low=0.0, low_open=True
+    ),
+    _spec(
+        'speed_scale',
+        DOUBLE,
+        "speed scale κ (docs/SPEED_SCALE.md): the paper's run in the time s = κt, every "
+        'triggering time divided by κ, commands times κ (eta2: gains κ²k1, κk2, κk3); 1: the paper',
+        default=SCALE_GAINS['speed_scale'],
+        low=SPEED_SCALE_LIMITS[0],
+        high=SPEED_SCALE_LIMITS[1],
+    ),
+    _spec(
+        'threshold_floor',
+        DOUBLE,
+        "threshold floor c0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
+        '(docs/SPEED_SCALE.md); 0: the paper',
+        default=SCALE_GAINS['threshold_floor'],
+        low=0.0,
+    ),
     # Robots (README, "Running on robots").
-    _spec('sensing', STRING, "where the agent senses: 'service' (the simulator's /agent_<i>/sense) or "
-          "'poses' (its own and its neighbours' pose topics)", default='service', choices=SENSING_SOURCES),
-    _spec('pose_type', STRING, "sensing: poses — 'pose' (geometry_msgs/PoseStamped, motion capture) or "
-          "'odom' (nav_msgs/Odometry; ETA-2 velocities from its twist)", default='pose', choices=POSE_TYPES),
-    _spec('pose_topic', STRING, "sensing: poses — topic of robot {id}'s poses, e.g. /vrpn/cf{id}/pose "
-          "('': /agent_{id}/robot/pose or /agent_{id}/robot/odom, by pose_type)", default=''),
-    _spec('pose_timeout', DOUBLE, 'sensing: poses — a pose older than this at a trigger (or on the '
-          'command timer, for its own robot) stops the agent [s]', default=0.5, low=0.0, low_open=True),
+    _spec(
+        'sensing',
+        STRING,
+        "where the agent senses: 'service' (the simulator's /agent_<i>/sense) or "
+        "'poses' (its own and its neighbours' pose topics)",
+        default='service',
+        choices=SENSING_SOURCES,
+    ),
+    _spec(
+        'pose_type',
+        STRING,
+        "sensing: poses — 'pose' (geometry_msgs/PoseStamped, motion capture) or "
+        "'odom' (nav_msgs/Odometry; ETA-2 velocities from its twist)",
+        default='pose',
+        choices=POSE_TYPES,
+    ),
+    _spec(
+        'pose_topic',
+        STRING,
+        "sensing: poses — topic of robot {id}'s poses, e.g. /vrpn/cf{id}/pose "
+        "('': /agent_{id}/robot/pose or /agent_{id}/robot/odom, by pose_type)",
+        default='',
+    ),
+    _spec(
+        'pose_timeout',
+        DOUBLE,
+        'sensing: poses — a pose older than this at a trigger (or on the '
+        'command timer, for its own robot) stops the agent [s]',
+        default=0.5,
+        low=0.0,
+        low_open=True,
+    ),
     _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default='world'),
-    _spec('robot', STRING, "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant) or a robot kind: "
-          + ', '.join(f"'{name}' ({robot_kind(name).summary})" for name in ROBOTS[1:]),
-          default='none', choices=ROBOTS),
-    _spec('command_topic', STRING, "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)", default=''),
-    _spec('control_point_distance', DOUBLE, 'robot: unicycle — distance l of the control point ahead of the '
-          'wheel axle [m]; the scenario positions are those of the control points', default=0.0, low=0.0),
-    _spec('max_linear_speed', DOUBLE, 'robot: speed limit [m/s] (inf: none); clips are counted and reported',
-          default=math.inf, low=0.0, low_open=True),
-    _spec('max_angular_speed', DOUBLE, 'robot: unicycle — turn rate limit [rad/s] (inf: none)',
-          default=math.inf, low=0.0, low_open=True),
-    _spec('wheelbase', DOUBLE, 'robot: car — wheelbase L from the rear axle to the steered front axle [m]',
-          default=0.0, low=0.0),
-    _spec('max_steering_angle', DOUBLE, 'robot: car — steering limit φ_max [rad], in (0, π/2): |ω| <= |v| tan φ_max / L '
-          '(inf: none, for the other kinds)', default=math.inf, low=0.0, low_open=True),
-    _spec('max_linear_acceleration', DOUBLE, 'robot: ETA-2 — acceleration limit of the velocity reference '
-          '[m/s²] (inf: none)', default=math.inf, low=0.0, low_open=True),
-    _spec('command_rate', DOUBLE, 'robot: rate at which the velocity command is recomputed and republished [Hz]',
-          default=50.0, low=0.0, low_open=True),
+    _spec(
+        'robot',
+        STRING,
+        "command output: 'none' (cmd_vel/cmd_accel to the simulator's plant) or a robot kind: "
+        + ', '.join(f"'{name}' ({robot_kind(name).summary})" for name in ROBOTS[1:]),
+        default='none',
+        choices=ROBOTS,
+    ),
+    _spec(
+        'command_topic',
+        STRING,
+        "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)",
+        default='',
+    ),
+    _spec(
+        'control_point_distance',
+        DOUBLE,
+        'robot: unicycle — distance l of the control point ahead of the '
+        'wheel axle [m]; the scenario positions are those of the control points',
+        default=0.0,
+        low=0.0,
+    ),
+    _spec(
+        'max_linear_speed',
+        DOUBLE,
+        'robot: speed limit [m/s] (inf: none); clips are counted and reported',
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'max_angular_speed',
+        DOUBLE,
+        'robot: unicycle — turn rate limit [rad/s] (inf: none)',
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'wheelbase',
+        DOUBLE,
+        'robot: car — wheelbase L from the rear axle to the steered front axle [m]',
+        default=0.0,
+        low=0.0,
+    ),
+    _spec(
+        'max_steering_angle',
+        DOUBLE,
+        'robot: car — steering limit φ_max [rad], in (0, π/2): |ω| <= |v| tan φ_max / L '
+        '(inf: none, for the other kinds)',
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'max_linear_acceleration',
+        DOUBLE,
+        'robot: ETA-2 — acceleration limit of the velocity reference [m/s²] (inf: none)',
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'command_rate',
+        DOUBLE,
+        'robot: rate at which the velocity command is recomputed and republished [Hz]',
+        default=50.0,
+        low=0.0,
+        low_open=True,
+    ),
     # Runs and tests.
-    _spec('extra_subscribers', INTEGER, 'listeners besides the protocol peers (a recorder) that must match '
-          'before step 0', default=0, low=0),
-    _spec('inject_loss', DOUBLE, 'test facility: drop probability of arriving triggering information (wall clock)',
-          default=0.0, low=0.0, high=1.0),
-    _spec('inject_delay_ms', DOUBLE, 'test facility: delay of arriving triggering information [ms]', default=0.0, low=0.0),
-    _spec('inject_jitter_ms', DOUBLE, 'test facility: extra uniform delay in [0, jitter] [ms]', default=0.0, low=0.0),
+    _spec(
+        'extra_subscribers',
+        INTEGER,
+        'listeners besides the protocol peers (a recorder) that must match before step 0',
+        default=0,
+        low=0,
+    ),
+    _spec(
+        'inject_loss',
+        DOUBLE,
+        'test facility: drop probability of arriving triggering information (wall clock)',
+        default=0.0,
+        low=0.0,
+        high=1.0,
+    ),
+    _spec(
+        'inject_delay_ms',
+        DOUBLE,
+        'test facility: delay of arriving triggering information [ms]',
+        default=0.0,
+        low=0.0,
+    ),
+    _spec(
+        'inject_jitter_ms',
+        DOUBLE,
+        'test facility: extra uniform delay in [0, jitter] [ms]',
+        default=0.0,
+        low=0.0,
+    ),
     _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0, low=0),
-)  # fmt: skip
+)
 
 GAIN_PARAMETERS = {
     'eta1': (
         _spec('alpha', DOUBLE, 'eta1: threshold gain α of (triggersingle)', low=0.0, low_open=True),
-        _spec('beta', DOUBLE, 'eta1: threshold decay rate β of (triggersingle) [1/s]', low=0.0, low_open=True),
+        _spec(
+            'beta', DOUBLE, 'eta1: threshold decay rate β of (triggersingle) [1/s]', low=0.0, low_open=True
+        ),
     ),
     'eta2': (
         _spec('alpha_d', DOUBLE, 'eta2: threshold gain α_d of (triggerdouble)', low=0.0, low_open=True),
-        _spec('beta_d', DOUBLE, 'eta2: threshold decay rate β_d of (triggerdouble) [1/s]', low=0.0, low_open=True),
+        _spec(
+            'beta_d',
+            DOUBLE,
+            'eta2: threshold decay rate β_d of (triggerdouble) [1/s]',
+            low=0.0,
+            low_open=True,
+        ),
         _spec('k1', DOUBLE, 'eta2: position gain k1 of (uxdouble)', low=0.0, low_open=True),
         _spec('k2', DOUBLE, 'eta2: velocity gain k2 of (uxdouble)', low=0.0, low_open=True),
         _spec('k3', DOUBLE, 'eta2: damping k3 of (uxdouble) [1/s]', low=0.0, low_open=True),
@@ -155,7 +296,9 @@ class AgentConfig:
     @property
     def control_point_offset(self) -> tuple[float, float, float]:
         """Where the control point sits in the robot's body frame (by its kind; none: the origin)."""
-        return (0.0, 0.0, 0.0) if self.robot == 'none' else robot_kind(self.robot).control_offset(self.geometry)
+        return (
+            (0.0, 0.0, 0.0) if self.robot == 'none' else robot_kind(self.robot).control_offset(self.geometry)
+        )
 
     @property
     def geometry(self) -> Geometry:
@@ -194,12 +337,24 @@ def read_config(node) -> AgentConfig:
         **{
             name: values[name]
             for name in (
-                'sensing', 'pose_type', 'pose_topic', 'pose_timeout', 'world_frame', 'robot', 'command_topic',
-                'control_point_distance', 'wheelbase', 'command_rate', 'extra_subscribers',
-                'inject_loss', 'inject_delay_ms', 'inject_jitter_ms', 'inject_seed',
+                'sensing',
+                'pose_type',
+                'pose_topic',
+                'pose_timeout',
+                'world_frame',
+                'robot',
+                'command_topic',
+                'control_point_distance',
+                'wheelbase',
+                'command_rate',
+                'extra_subscribers',
+                'inject_loss',
+                'inject_delay_ms',
+                'inject_jitter_ms',
+                'inject_seed',
             )
         },
-    )  # fmt: skip
+    )
 
 
 def _rules(node, values: dict) -> list[str]:
@@ -253,7 +408,9 @@ def _rules(node, values: dict) -> list[str]:
 def _kind_problems(robot: str, values: dict) -> list[str]:
     """What the robot's kind says of the parameters known (formation_agent.core.kinds)."""
     kind = robot_kind(robot)
-    geometry = Geometry(control_point_distance=values['control_point_distance'], wheelbase=values['wheelbase'])
+    geometry = Geometry(
+        control_point_distance=values['control_point_distance'], wheelbase=values['wheelbase']
+    )
     problems = kind.placement_problems(dimension=values.get('dimension'), geometry=geometry)
     if all(name in values for name in LIMIT_PARAMETERS):
         limits = Limits(

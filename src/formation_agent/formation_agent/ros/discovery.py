@@ -66,7 +66,9 @@ class Discovery:
         for j, subscription in zip(node.neighbour_ids, node.info_subscriptions):
             if subscription.get_publisher_count() < 1:
                 yield f'a writer of {trigger_info_topic(j, node.agent_id)} (agent {j})'
-        yield from readers(node.output.publisher, 'the robot' if node.config.robot != 'none' else 'the simulator')
+        yield from readers(
+            node.output.publisher, 'the robot' if node.config.robot != 'none' else 'the simulator'
+        )
         yield from readers(node.status_publisher, 'the simulator or coordinator')
         yield from readers(node.report_publisher, 'the simulator or coordinator')
         if node.step_subscription.get_publisher_count() < 1:
@@ -137,5 +139,9 @@ class SimulatorWatch:
         if time.monotonic() - self.lost_at <= grace:
             return None
         where = 'during discovery' if step is None else f'after step {step.index} (t={step.time!r})'
-        how = f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)' if self.lease_expired else 'it left the graph'
+        how = (
+            f'no sign of life for {LIVELINESS_LEASE} s (liveliness lease)'
+            if self.lease_expired
+            else 'it left the graph'
+        )
         return f'agent {self.agent_id}: the simulator (writer of {STEP_TOPIC}) is lost {where}: {how}'

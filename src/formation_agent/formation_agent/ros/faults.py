@@ -29,10 +29,14 @@ class FaultInjection:
 
     def __init__(self, *, agent_id: int, loss: float, delay_ms: float, jitter_ms: float, seed: int) -> None:
         if not (math.isfinite(loss) and 0.0 <= loss <= 1.0):
-            raise FaultInjectionError(f'agent {agent_id}: inject_loss must be a probability in [0, 1], got {loss!r}')
+            raise FaultInjectionError(
+                f'agent {agent_id}: inject_loss must be a probability in [0, 1], got {loss!r}'
+            )
         for name, value in (('inject_delay_ms', delay_ms), ('inject_jitter_ms', jitter_ms)):
             if not (math.isfinite(value) and value >= 0.0):
-                raise FaultInjectionError(f'agent {agent_id}: {name} must be a finite number >= 0, got {value!r}')
+                raise FaultInjectionError(
+                    f'agent {agent_id}: {name} must be a finite number >= 0, got {value!r}'
+                )
         self.loss = loss
         self.delay = delay_ms / 1000.0
         self.jitter = jitter_ms / 1000.0
@@ -65,7 +69,9 @@ class InjectedFaults:
     report).  Delayed messages wait in a line on a one-shot node timer.
     """
 
-    def __init__(self, node, injection: FaultInjection, *, hand_on: Callable, changed: Callable[[], None]) -> None:
+    def __init__(
+        self, node, injection: FaultInjection, *, hand_on: Callable, changed: Callable[[], None]
+    ) -> None:
         self._node = node
         self.injection = injection
         self._hand_on = hand_on

@@ -61,7 +61,14 @@ def implausible(
 
 
 def read_info(
-    msg, *, sender: int, agent_id: int, algorithm: str, dimension: int, heard: dict[int, float], reject: Rejections
+    msg,
+    *,
+    sender: int,
+    agent_id: int,
+    algorithm: str,
+    dimension: int,
+    heard: dict[int, float],
+    reject: Rejections,
 ) -> TriggerInfo | None:
     """The triggering information in `msg` from `sender`, or None if it is refused (`reject`ed);
     `heard` (sender -> stamp of its last accepted information) is updated."""
@@ -72,7 +79,12 @@ def read_info(
         reject(topic, error.reason, str(error))
         return None
     problem = implausible(
-        info, sender=sender, agent_id=agent_id, algorithm=algorithm, dimension=dimension, last_stamp=heard.get(sender)
+        info,
+        sender=sender,
+        agent_id=agent_id,
+        algorithm=algorithm,
+        dimension=dimension,
+        last_stamp=heard.get(sender),
     )
     if problem is not None:
         reject(topic, *problem)

@@ -35,9 +35,23 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
 from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode, PeerLostError, PredictionError
+from formation_agent.ros.node import (
+    DELIVERY_TIMEOUT,
+    NODE_NAME,
+    FormationAgentNode,
+    PeerLostError,
+    PredictionError,
+)
 from formation_agent.ros.parameters import ParameterError, read_parameters
-from formation_agent.ros.process import EXECUTORS, EXIT_BAD_INPUT, EXIT_PEER_LOST, StopSignals, exit_process, make_executor, shutdown_guard
+from formation_agent.ros.process import (
+    EXECUTORS,
+    EXIT_BAD_INPUT,
+    EXIT_PEER_LOST,
+    StopSignals,
+    exit_process,
+    make_executor,
+    shutdown_guard,
+)
 from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.topics import agent_namespace
 
@@ -93,7 +107,9 @@ def _build_nodes(options: argparse.Namespace, ros_arguments: Sequence[str]) -> l
     # Packed (large teams): no per-node parameter, type description and /rosout endpoints, which
     # every process of the run would discover (~5 of ~20 endpoints an agent node has); the log
     # still goes to the process's own output.
-    services = [] if not packed else [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)]
+    services = (
+        [] if not packed else [Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)]
+    )
     return [
         FormationAgentNode(
             namespace=agent_namespace(agent_id),
@@ -107,7 +123,10 @@ def _build_nodes(options: argparse.Namespace, ros_arguments: Sequence[str]) -> l
 
 def _missing_id_hint(error: Exception, options: argparse.Namespace) -> str:
     """Why a node without --agents and without a namespace found no agent_id, and what to do."""
-    missing = any(problem.startswith("parameter 'agent_id' (int) is required") for problem in getattr(error, 'problems', ()))
+    missing = any(
+        problem.startswith("parameter 'agent_id' (int) is required")
+        for problem in getattr(error, 'problems', ())
+    )
     if not missing or options.agents:
         return ''
     return (
@@ -142,13 +161,20 @@ def main(args: Sequence[str] | None = None) -> int:
                     node.check()
         except (KeyboardInterrupt, ExternalShutdownException):
             status, failure = 130, 'stopped by a signal'
-        except (ParameterError, FaultInjectionError) as error:  # bad input: every problem named, nothing started
+        except (
+            ParameterError,
+            FaultInjectionError,
+        ) as error:  # bad input: every problem named, nothing started
             print(f'formation_agent: {error}{_missing_id_hint(error, options)}', file=sys.stderr, flush=True)
             status = EXIT_BAD_INPUT
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = EXIT_PEER_LOST, str(error)
-        except (PoseError, StaleStateError, PredictionError) as error:  # poses, a freeze or double precision: said in full
+        except (
+            PoseError,
+            StaleStateError,
+            PredictionError,
+        ) as error:  # poses, a freeze or double precision: said in full
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
             status, failure = 1, str(error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
@@ -159,7 +185,9 @@ def main(args: Sequence[str] | None = None) -> int:
                 traceback.print_exc(file=sys.stderr)
                 status, failure = 1, str(error)
         finally:
-            deadline = _delivery_deadline(stop, interrupted=status == 130)  # one for every node of the process
+            deadline = _delivery_deadline(
+                stop, interrupted=status == 130
+            )  # one for every node of the process
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)

@@ -58,7 +58,14 @@ from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
 
-__all__ = ['DELIVERY_TIMEOUT', 'NODE_NAME', 'AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError']
+__all__ = [
+    'DELIVERY_TIMEOUT',
+    'NODE_NAME',
+    'AgentNodeError',
+    'FormationAgentNode',
+    'PeerLostError',
+    'PredictionError',
+]
 
 NODE_NAME = AGENT_NODE
 DELIVERY_TIMEOUT = 4.0
@@ -111,9 +118,15 @@ def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> Ag
     output = node.output
     plant = (output.publisher.topic_name, output.sent) if isinstance(output, PlantOutput) else None
     return node.counts.report(
-        final=final, failure=failure, rejected=node.reject.counts, dropped=node.faults.dropped, delayed=node.faults.delayed,
-        robot_commands=output.robot_commands, saturation=output.saturation, plant=plant,
-    )  # fmt: skip
+        final=final,
+        failure=failure,
+        rejected=node.reject.counts,
+        dropped=node.faults.dropped,
+        delayed=node.faults.delayed,
+        robot_commands=output.robot_commands,
+        saturation=output.saturation,
+        plant=plant,
+    )
 
 
 class FormationAgentNode(Node):
@@ -145,26 +158,44 @@ class FormationAgentNode(Node):
         config = self.config = read_config(self)
         self.agent_id = config.agent_id
         self.neighbour_ids = config.neighbour_ids
-        self.core = core if core is not None else make_agent(
-            agent_id=config.agent_id, neighbours=config.neighbours, delta=config.delta, algorithm=config.algorithm,
-            gains=config.gains,
-        )  # fmt: skip
+        self.core = (
+            core
+            if core is not None
+            else make_agent(
+                agent_id=config.agent_id,
+                neighbours=config.neighbours,
+                delta=config.delta,
+                algorithm=config.algorithm,
+                gains=config.gains,
+            )
+        )
         self.counts = AgentCounts(agent_id=config.agent_id)
         self.schedule = TriggerSchedule(agent_id=config.agent_id, timers=_NodeTimers(self))
         self.reject = Rejections(self.get_logger(), changed=self.counts.changed)
         injection = FaultInjection(
-            agent_id=config.agent_id, loss=config.inject_loss, delay_ms=config.inject_delay_ms,
-            jitter_ms=config.inject_jitter_ms, seed=config.inject_seed,
-        )  # fmt: skip
+            agent_id=config.agent_id,
+            loss=config.inject_loss,
+            delay_ms=config.inject_delay_ms,
+            jitter_ms=config.inject_jitter_ms,
+            seed=config.inject_seed,
+        )
         self.faults = InjectedFaults(self, injection, hand_on=self._on_info, changed=self.counts.changed)
-        self.sensing = PoseSensing(self, config, reject=self.reject) if config.sensing == 'poses' else ServiceSensing(self)
+        self.sensing = (
+            PoseSensing(self, config, reject=self.reject)
+            if config.sensing == 'poses'
+            else ServiceSensing(self)
+        )
         self.staleness = None
         if config.sensing == 'poses':
             self.staleness = Staleness(
-                book=self.sensing.book, period=1.0 / config.command_rate, count_writers=self.count_publishers,
+                book=self.sensing.book,
+                period=1.0 / config.command_rate,
+                count_writers=self.count_publishers,
                 schedule=self.schedule,
-            )  # fmt: skip
-            self._writer_looks = self.create_timer(WRITER_LOOK_PERIOD, lambda: self.staleness.look(time.time()))
+            )
+            self._writer_looks = self.create_timer(
+                WRITER_LOOK_PERIOD, lambda: self.staleness.look(time.time())
+            )
         self.output = _make_output(self)
         self._create_endpoints()
         self.step: Step | None = None
@@ -196,7 +227,9 @@ class FormationAgentNode(Node):
             self._on_step,
             READER_QOS,
             # self.simulator is made after this subscription: looked up when the event comes
-            event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info: self.simulator.on_liveliness(info)),  # noqa: PLW0108 - see above
+            event_callbacks=SubscriptionEventCallbacks(
+                liveliness=lambda info: self.simulator.on_liveliness(info)  # noqa: PLW0108 - see above
+            ),
         )
 
     def destroy_node(self) -> None:
@@ -325,9 +358,14 @@ class FormationAgentNode(Node):
 
     def _on_info(self, msg: Float64MultiArray, sender: int) -> None:
         info = read_info(
-            msg, sender=sender, agent_id=self.agent_id, algorithm=self.config.algorithm, dimension=self.config.dimension,
-            heard=self.schedule.heard, reject=self.reject,
-        )  # fmt: skip
+            msg,
+            sender=sender,
+            agent_id=self.agent_id,
+            algorithm=self.config.algorithm,
+            dimension=self.config.dimension,
+            heard=self.schedule.heard,
+            reject=self.reject,
+        )
         if info is None:
             return
         if self.schedule.holds(info.stamp):
@@ -357,7 +395,12 @@ class FormationAgentNode(Node):
         last Status still holds.
         """
         step = self.step
-        if step is not None and not self.finished and self.counts.status_due and self.schedule.complete_at(step):
+        if (
+            step is not None
+            and not self.finished
+            and self.counts.status_due
+            and self.schedule.complete_at(step)
+        ):
             self.publish_status(step_index=step.index, ready=True)
 
     def _replan(self) -> None:
@@ -378,7 +421,10 @@ class FormationAgentNode(Node):
                 except CrossingError as error:
                     raise PredictionError(f'agent {self.agent_id}: {error}; {PRECISION_HINT}') from error
         status = self.counts.status(
-            step_index=step_index, ready=ready, next_time=self.schedule.next_time, planned=self.schedule.planned
+            step_index=step_index,
+            ready=ready,
+            next_time=self.schedule.next_time,
+            planned=self.schedule.planned,
         )
         self.outbox.publish_status(status)
 
@@ -396,7 +442,9 @@ class FormationAgentNode(Node):
         if self.counts.report_due and not self.finished and self.step is not None:
             self._publish_report()
 
-    def leave(self, *, failure: str | None = None, deadline: float | Callable[[], float] | None = None) -> None:
+    def leave(
+        self, *, failure: str | None = None, deadline: float | Callable[[], float] | None = None
+    ) -> None:
         """On the way out, whatever the reason: the zero command, the final report if not yet sent
         (with `failure`, why the agent stops early), and the delivery of everything it published
         (until `deadline`, time.monotonic(), or what the callable says now; default
@@ -417,4 +465,6 @@ class FormationAgentNode(Node):
 
 
 if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so instead of doing nothing
-    raise SystemExit('formation_agent.ros.node holds the node; the command is `python -m formation_agent.ros.main` (formation_agent)')
+    raise SystemExit(
+        'formation_agent.ros.node holds the node; the command is `python -m formation_agent.ros.main` (formation_agent)'
+    )

@@ -25,7 +25,10 @@ class Outbox:
     def __init__(self, node, counts: AgentCounts, neighbour_ids) -> None:
         self._node = node
         self.counts = counts
-        self.info = {j: node.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS) for j in neighbour_ids}
+        self.info = {
+            j: node.create_publisher(Float64MultiArray, f'trigger_info/to_{j}', PROTOCOL_QOS)
+            for j in neighbour_ids
+        }
         self.status = node.create_publisher(Float64MultiArray, STATUS_TOPIC, PROTOCOL_QOS)
         self.report = node.create_publisher(String, REPORT_TOPIC, PROTOCOL_QOS)
 

@@ -42,9 +42,14 @@ REQUIRED = object()
 """The default of a parameter that has none: it must be given."""
 
 _TYPE_NAMES = {
-    BOOL: 'bool', INTEGER: 'int', DOUBLE: 'double', STRING: 'string',
-    INTEGER_ARRAY: 'int[]', DOUBLE_ARRAY: 'double[]', STRING_ARRAY: 'string[]',
-}  # fmt: skip
+    BOOL: 'bool',
+    INTEGER: 'int',
+    DOUBLE: 'double',
+    STRING: 'string',
+    INTEGER_ARRAY: 'int[]',
+    DOUBLE_ARRAY: 'double[]',
+    STRING_ARRAY: 'string[]',
+}
 _QUOTE_LIMIT = 80  # characters of a bad value quoted in an error
 
 
@@ -83,7 +88,9 @@ class ParameterSpec:
         # high = inf, open: a finite number (rclpy accepts inf and nan for a double).
         finite = self.high == math.inf and self.high_open
         low = None if self.low is None else f'{"(" if self.low_open else "["}{_number(self.low)}'
-        high = None if self.high is None or finite else f'{_number(self.high)}{")" if self.high_open else "]"}'
+        high = (
+            None if self.high is None or finite else f'{_number(self.high)}{")" if self.high_open else "]"}'
+        )
         if low and high:
             return f'in {low}, {high}'
         if low:
@@ -103,9 +110,13 @@ class ParameterSpec:
         # ROS ranges are inclusive; a strict bound is checked here and only written in words.
         closed = not (self.low_open or self.high_open) and self.low is not None and self.high is not None
         if self.type in (DOUBLE, DOUBLE_ARRAY) and closed:
-            descriptor.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)]
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)
+            ]
         if self.type in (INTEGER, INTEGER_ARRAY) and closed:
-            descriptor.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+            descriptor.integer_range = [
+                IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)
+            ]
         return descriptor
 
     def problem(self, value: Any) -> str | None:
@@ -117,7 +128,9 @@ class ParameterSpec:
         is_array = hasattr(value, '__len__') and not isinstance(value, str)
         for number in value if is_array else (value,):
             too_low = self.low is not None and (number <= self.low if self.low_open else number < self.low)
-            too_high = self.high is not None and (number >= self.high if self.high_open else number > self.high)
+            too_high = self.high is not None and (
+                number >= self.high if self.high_open else number > self.high
+            )
             if too_low or too_high or (isinstance(number, float) and math.isnan(number)):
                 return f'must be {self.constraint_text()}{" (every element)" if is_array else ""}, got {_quote(number)}'
         return None
@@ -195,7 +208,9 @@ def parameter_table(specs: Sequence[ParameterSpec]) -> str:
     lines = ['| parameter | type | default | range | meaning |', '|---|---|---|---|---|']
     for row in _rows(specs):
         name, kind, default, constraint, description = (cell.replace('|', '\\|') for cell in row)
-        lines.append(f'| `{name}` | {kind} | {default if default == "required" else f"`{default}`"} | {constraint} | {description} |')
+        lines.append(
+            f'| `{name}` | {kind} | {default if default == "required" else f"`{default}`"} | {constraint} | {description} |'
+        )
     return '\n'.join(lines)
 
 

@@ -124,7 +124,9 @@ def exit_process(status: int) -> NoReturn:
 
 
 @contextlib.contextmanager
-def shutdown_guard(command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND) -> Iterator[None]:
+def shutdown_guard(
+    command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND
+) -> Iterator[None]:
     """Leave the process with `status()` if the block (destroying the nodes, rclpy's shutdown)
     has not ended within `bound` seconds, after one line naming it and every thread's stack on
     stderr (the run's log).
@@ -139,7 +141,9 @@ def shutdown_guard(command: str, status: Callable[[], int], *, bound: float = SH
         if done.wait(bound):
             return
         with contextlib.suppress(Exception):
-            sys.stderr.write(f'{command}: shutting rclpy down took more than {bound:g} s; leaving without it (stacks below)\n')
+            sys.stderr.write(
+                f'{command}: shutting rclpy down took more than {bound:g} s; leaving without it (stacks below)\n'
+            )
             sys.stderr.flush()
             faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
         os._exit(status())
@@ -151,4 +155,3 @@ def shutdown_guard(command: str, status: Callable[[], int], *, bound: float = SH
     finally:
         done.set()
         watchdog.join()
-

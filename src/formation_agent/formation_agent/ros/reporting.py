@@ -54,7 +54,9 @@ class AgentCounts:
         """The Status at `step_index`: `next_time` only once it is defined (ready, or 0 during
         discovery), +inf otherwise; `planned` (last_planned) always finite."""
         if not math.isfinite(planned):  # a trigger is planned only for a finite time
-            raise AgentNodeError(f'agent {self.agent_id}: last_planned must be finite (docs/MESSAGES.md, "Status"), got {planned!r}')
+            raise AgentNodeError(
+                f'agent {self.agent_id}: last_planned must be finite (docs/MESSAGES.md, "Status"), got {planned!r}'
+            )
         self.status_due = False
         defined = ready or step_index == DISCOVERY_STEP
         return Status(

@@ -96,7 +96,11 @@ class PoseReaders:
     def __init__(self, node, config, book: PoseBook, *, reject: Callable[[str, str, str], None]) -> None:
         self._book = book
         self._reject = reject
-        kind, self._decode = (PoseStamped, decode_pose_stamped_cdr) if config.pose_type == 'pose' else (Odometry, decode_odometry_cdr)
+        kind, self._decode = (
+            (PoseStamped, decode_pose_stamped_cdr)
+            if config.pose_type == 'pose'
+            else (Odometry, decode_odometry_cdr)
+        )
         self.node = rclpy.create_node(
             f'_{node.get_name()}_poses',  # hidden ('_'): `ros2 node list` and `ros2 param list` skip it
             namespace=node.get_namespace(),
@@ -107,19 +111,28 @@ class PoseReaders:
             parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, Parameter.Type.BOOL, False)],
         )
         qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=pose_take_depth(config), reliability=ROBOT_POSE_QOS.reliability,
+            history=HistoryPolicy.KEEP_LAST,
+            depth=pose_take_depth(config),
+            reliability=ROBOT_POSE_QOS.reliability,
             durability=ROBOT_POSE_QOS.durability,
-        )  # fmt: skip
+        )
         # ... so the topics are resolved by the agent's node: remapping applies as to any of its topics.
-        self.topics = {robot: node.resolve_topic_name(config.robot_pose_topic(robot)) for robot in book.robots}
-        self._subs = {robot: self.node.create_subscription(kind, topic, _never, qos, raw=True) for robot, topic in self.topics.items()}
+        self.topics = {
+            robot: node.resolve_topic_name(config.robot_pose_topic(robot)) for robot in book.robots
+        }
+        self._subs = {
+            robot: self.node.create_subscription(kind, topic, _never, qos, raw=True)
+            for robot, topic in self.topics.items()
+        }
 
     def take(self, robot: int) -> None:
         """Every pose of `robot` waiting in its reader (at most `pose_take_depth`), oldest first, into the book."""
         sub = self._subs[robot]
         while True:
             with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, True)  # serialized: decoded by formation_msgs_py.cdr
+                taken = sub.handle.take_message(
+                    sub.msg_type, True
+                )  # serialized: decoded by formation_msgs_py.cdr
             if taken is None:
                 return
             try:
@@ -169,10 +182,14 @@ class PoseSensing:
     def gaps(self) -> list[str]:
         """What sensing still waits for (empty: ready)."""
         if unmatched := self.readers.unmatched():
-            return [f'a writer of the robots\' poses on {", ".join(unmatched)}']
+            return [f"a writer of the robots' poses on {', '.join(unmatched)}"]
         self._take_all()
         missing = self.book.missing()
-        return [f'a first pose on {", ".join(self.readers.topics[robot] for robot in missing)}'] if missing else []
+        return (
+            [f'a first pose on {", ".join(self.readers.topics[robot] for robot in missing)}']
+            if missing
+            else []
+        )
 
     def start(self, epoch: float) -> None:
         self._epoch = epoch

@@ -118,7 +118,9 @@ class Staleness:
     `formation_agent.ros.stepping.TriggerSchedule`.
     """
 
-    def __init__(self, *, book: PoseBook, period: float, count_writers: Callable[[str], int], schedule) -> None:
+    def __init__(
+        self, *, book: PoseBook, period: float, count_writers: Callable[[str], int], schedule
+    ) -> None:
         self.book = book
         self.guard = CommandGuard(agent_id=book.agent_id, period=period, timeout=book.timeout)
         self.writers = WriterWatch({robot: book.topic(robot) for robot in book.robots})
@@ -127,7 +129,9 @@ class Staleness:
 
     def look(self, now: float) -> None:
         """Look at the pose topics' writers (now and then, and when a pose is stale)."""
-        self.writers.look(((robot, self._count_writers(topic)) for robot, topic in self.writers.topics.items()), now)
+        self.writers.look(
+            ((robot, self._count_writers(topic)) for robot, topic in self.writers.topics.items()), now
+        )
 
     def check_command(self, now: float, t: float) -> None:
         """Before a command at `now`: StaleStateError after a freeze (`CommandGuard`)."""
@@ -164,4 +168,6 @@ class Staleness:
         self.look(now)
         late = max(self.guard.timer.late, schedule.lateness(now))
         writer = self.writers.describe(stale, run_time=lambda wall: wall - schedule.epoch)
-        return PoseError(explained(str(error), diagnosis(writer=writer, timer_late=late, timeout=self.book.timeout)))
+        return PoseError(
+            explained(str(error), diagnosis(writer=writer, timer_late=late, timeout=self.book.timeout))
+        )

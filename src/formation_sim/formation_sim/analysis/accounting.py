@@ -62,7 +62,9 @@ class RecordingCheck:
 
     def describe_foreign(self) -> str:
         """'the bag also holds 30 messages from publishers outside the run: /agent_2/trigger_info/to_1 30'."""
-        shown = [f'{topic} {n}' for topic, n in sorted(self.foreign.items(), key=lambda item: -item[1])[:_SHOWN]]
+        shown = [
+            f'{topic} {n}' for topic, n in sorted(self.foreign.items(), key=lambda item: -item[1])[:_SHOWN]
+        ]
         more = f' and {len(self.foreign) - _SHOWN} more topics' if len(self.foreign) > _SHOWN else ''
         return (
             f'the bag also holds {sum(self.foreign.values())} messages from publishers outside the run '
@@ -91,8 +93,14 @@ def recorded_counts(bag: str | Path) -> dict[str, int]:
 def check_recording(published: dict[str, int], bag: str | Path) -> RecordingCheck:
     """Compare what the run published with what the readable bag at `bag` holds."""
     recorded = recorded_counts(bag)
-    missing = {topic: n - recorded.get(topic, 0) for topic, n in published.items() if recorded.get(topic, 0) < n}
-    foreign = {topic: recorded[topic] - published.get(topic, 0) for topic in recorded if recorded[topic] > published.get(topic, 0)}
+    missing = {
+        topic: n - recorded.get(topic, 0) for topic, n in published.items() if recorded.get(topic, 0) < n
+    }
+    foreign = {
+        topic: recorded[topic] - published.get(topic, 0)
+        for topic in recorded
+        if recorded[topic] > published.get(topic, 0)
+    }
     return RecordingCheck(
         published=dict(published),
         recorded=recorded,

@@ -126,7 +126,11 @@ def theory_bounds(scenario: Scenario) -> TheoryBounds:
     if (floor := floor_bounds(scenario)) is not None:
         return _floor_bounds(scenario, floor, norms)
     edge_bounds = {pair: k + norms[pair] for pair, k in constants.k_edge.items()}
-    xi = None if constants.xi is None else {agent: real_duration(v, kappa) for agent, v in constants.xi.items()}
+    xi = (
+        None
+        if constants.xi is None
+        else {agent: real_duration(v, kappa) for agent, v in constants.xi.items()}
+    )
     if constants.theorem == 1:
         return TheoryBounds(
             theorem=1,
@@ -170,7 +174,11 @@ def _floor_bounds(scenario: Scenario, floor: FloorBounds, norms: dict) -> Theory
     proven = floor.proven
     note = (
         f'Theorem {floor.theorem} with the threshold floor c0 = {floor.floor:g}: '
-        + (f'connectivity proven ({floor.condition})' if proven else f'connectivity not proven ({floor.condition} fails): checked on the run only')
+        + (
+            f'connectivity proven ({floor.condition})'
+            if proven
+            else f'connectivity not proven ({floor.condition} fails): checked on the run only'
+        )
         + f'; V ultimately <= {floor.ultimate:.4g}, formation error <= {floor.ball:.4g}'
         + _scale_note(kappa)
     )
@@ -181,7 +189,9 @@ def _floor_bounds(scenario: Scenario, floor: FloorBounds, norms: dict) -> Theory
         k_nu=floor.k_nu,
         k_V=None,
         error_gain=None,
-        edge_bounds=None if floor.k_edge is None else {pair: k + norms[pair] for pair, k in floor.k_edge.items()},
+        edge_bounds=None
+        if floor.k_edge is None
+        else {pair: k + norms[pair] for pair, k in floor.k_edge.items()},
         xi=None if floor.xi is None else {agent: real_duration(v, kappa) for agent, v in floor.xi.items()},
         note=note,
         floor=floor,
@@ -209,14 +219,23 @@ def theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | Non
     checks = _theorem_checks(record, series, bounds)
     if record.mode != 'robots':
         return checks
-    return [checks[0]] + [Check(name=c.name, ok=c.ok, detail=f'{c.detail} ({ROBOT_BOUNDS_NOTE})', binding=False) for c in checks[1:]]
+    return [checks[0]] + [
+        Check(name=c.name, ok=c.ok, detail=f'{c.detail} ({ROBOT_BOUNDS_NOTE})', binding=False)
+        for c in checks[1:]
+    ]
 
 
 def _theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | None) -> list[Check]:
     scenario = record.scenario
     delta = scenario.delta
     longest = float(series.edge_lengths.max())
-    checks = [Check(name='connectivity: ||x_i - x_j|| < Δ', ok=longest < delta, detail=f'max edge length {longest!r} vs Δ = {delta!r}')]
+    checks = [
+        Check(
+            name='connectivity: ||x_i - x_j|| < Δ',
+            ok=longest < delta,
+            detail=f'max edge length {longest!r} vs Δ = {delta!r}',
+        )
+    ]
     if bounds is None:
         return checks
     if bounds.edge_bounds is not None:
@@ -225,21 +244,45 @@ def _theorem_checks(record: RunRecord, series: Series, bounds: TheoryBounds | No
             top = float(series.edge_lengths[:, column].max())
             if not top <= bounds.edge_bounds[edge.pair]:
                 over.append(f'{edge.i}-{edge.j}: {top!r} > {bounds.edge_bounds[edge.pair]!r}')
-        checks.append(Check(name='edge lengths <= k_ij + ||d_ij|| (kij)', ok=not over, detail='; '.join(over) or 'every edge within its bound'))
+        checks.append(
+            Check(
+                name='edge lengths <= k_ij + ||d_ij|| (kij)',
+                ok=not over,
+                detail='; '.join(over) or 'every edge within its bound',
+            )
+        )
     if bounds.k_nu is not None:
         top_nu = float(series.tension.max())
-        checks.append(Check(name='tension <= k_nu (knu)', ok=top_nu <= bounds.k_nu, detail=f'max {top_nu!r} vs k_nu = {bounds.k_nu!r}'))
+        checks.append(
+            Check(
+                name='tension <= k_nu (knu)',
+                ok=top_nu <= bounds.k_nu,
+                detail=f'max {top_nu!r} vs k_nu = {bounds.k_nu!r}',
+            )
+        )
     t = series.times
     if bounds.floor is not None:
         return checks + _floor_checks(record, series, bounds)
     if bounds.k_V is not None:
         ratio = series.lyapunov / (bounds.k_V * np.exp(-2.0 * bounds.rate * t))
         worst = int(np.argmax(ratio))
-        checks.append(Check(name='V < k_V e^{-2 beta t} (kV)', ok=bool(ratio[worst] < 1.0), detail=f'largest V / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}'))
+        checks.append(
+            Check(
+                name='V < k_V e^{-2 beta t} (kV)',
+                ok=bool(ratio[worst] < 1.0),
+                detail=f'largest V / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}',
+            )
+        )
     if bounds.error_gain is not None:
         ratio = series.formation_error / (bounds.error_gain * np.exp(-bounds.rate * t))
         worst = int(np.argmax(ratio))
-        checks.append(Check(name='formation error < 2 sqrt(k_V) e^{-beta t}', ok=bool(ratio[worst] < 1.0), detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}'))
+        checks.append(
+            Check(
+                name='formation error < 2 sqrt(k_V) e^{-beta t}',
+                ok=bool(ratio[worst] < 1.0),
+                detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}',
+            )
+        )
     if bounds.xi is not None:
         checks.append(_inter_event_check(record, bounds.xi, name='inter-event times >= xi_i (xi)'))
     return checks
@@ -255,15 +298,27 @@ def _floor_checks(record: RunRecord, series: Series, bounds: TheoryBounds) -> li
     # B is a bound on the exact V; the samples' V carries the rounding of the states.
     ratio = series.lyapunov / (envelope * (1.0 + 1e-9) + 1e-300)
     worst = int(np.argmax(ratio))
-    checks = [Check(name='V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)', ok=bool(ratio[worst] <= 1.0),
-                    detail=f'largest V / B {ratio[worst]:.3g} at t = {float(t[worst])!r}; B -> {floor.ultimate:.4g}')]  # fmt: skip
+    checks = [
+        Check(
+            name='V <= B(κt) (threshold floor, docs/SPEED_SCALE.md)',
+            ok=bool(ratio[worst] <= 1.0),
+            detail=f'largest V / B {ratio[worst]:.3g} at t = {float(t[worst])!r}; B -> {floor.ultimate:.4g}',
+        )
+    ]
     error_bound = 2.0 * np.sqrt(floor.z_gain * envelope)
     ratio = series.formation_error / (error_bound * (1.0 + 1e-9) + 1e-300)
     worst = int(np.argmax(ratio))
-    checks.append(Check(name='formation error <= 2 sqrt(z B(κt)) (threshold floor)', ok=bool(ratio[worst] <= 1.0),
-                        detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= {floor.ball:.4g}'))  # fmt: skip
+    checks.append(
+        Check(
+            name='formation error <= 2 sqrt(z B(κt)) (threshold floor)',
+            ok=bool(ratio[worst] <= 1.0),
+            detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= {floor.ball:.4g}',
+        )
+    )
     if bounds.xi is not None:
-        checks.append(_inter_event_check(record, bounds.xi, name='inter-event times >= c0 / c_i (threshold floor)'))
+        checks.append(
+            _inter_event_check(record, bounds.xi, name='inter-event times >= c0 / c_i (threshold floor)')
+        )
     return checks
 
 

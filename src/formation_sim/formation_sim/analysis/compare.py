@@ -100,7 +100,7 @@ def load_run(path: str | Path, *, label: str, scenario=None, progress=None) -> R
     source = f'summary {location.summary}'
     if samples is not None:
         times, positions = samples.times, samples.positions
-        source += f" + {samples.path.name + '/' if samples.path is not None else LEGACY_TRAJECTORY_FILE}"
+        source += f' + {samples.path.name + "/" if samples.path is not None else LEGACY_TRAJECTORY_FILE}'
     agent_ids = tuple(sorted(int(agent) for agent in summary['trigger_times']))
     return RunData(
         label=label,
@@ -110,8 +110,12 @@ def load_run(path: str | Path, *, label: str, scenario=None, progress=None) -> R
         mode=summary['mode'],
         horizon=float(summary['horizon']),
         agent_ids=agent_ids,
-        edges=[(int(edge['i']), int(edge['j']), np.asarray(edge['d'], dtype=float)) for edge in summary['edges']],
-        trigger_times={int(agent): [float(t) for t in times_] for agent, times_ in summary['trigger_times'].items()},
+        edges=[
+            (int(edge['i']), int(edge['j']), np.asarray(edge['d'], dtype=float)) for edge in summary['edges']
+        ],
+        trigger_times={
+            int(agent): [float(t) for t in times_] for agent, times_ in summary['trigger_times'].items()
+        },
         messages_sent=int(summary['messages_sent']),
         sensing_calls=int(summary['sensing_calls']),
         times=times,
@@ -180,13 +184,17 @@ def compare_trajectories(a: RunData, b: RunData) -> TrajectoryDeviation | None:
     if a.times is None or b.times is None:
         return None
     if a.positions.shape[1:] != b.positions.shape[1:]:
-        raise CompareError(f'{a.label} has states of shape {a.positions.shape[1:]}, {b.label} {b.positions.shape[1:]}')
+        raise CompareError(
+            f'{a.label} has states of shape {a.positions.shape[1:]}, {b.label} {b.positions.shape[1:]}'
+        )
     start = max(a.times[0], b.times[0])
     end = min(a.times[-1], b.times[-1])
     common = np.union1d(a.times, b.times)
     common = common[(common >= start) & (common <= end)]
     if common.size == 0:
-        raise CompareError(f'the runs share no time span ({a.label}: [{a.times[0]}, {a.times[-1]}], {b.label}: [{b.times[0]}, {b.times[-1]}])')
+        raise CompareError(
+            f'the runs share no time span ({a.label}: [{a.times[0]}, {a.times[-1]}], {b.label}: [{b.times[0]}, {b.times[-1]}])'
+        )
     xa = interpolate(a.times, a.positions, common)
     xb = interpolate(b.times, b.positions, common)
     distance = np.linalg.norm(xa - xb, axis=2)  # (T, n)
@@ -203,12 +211,16 @@ def compare_trajectories(a: RunData, b: RunData) -> TrajectoryDeviation | None:
 
 def _check_comparable(a: RunData, b: RunData) -> list[str]:
     if a.agent_ids != b.agent_ids:
-        raise CompareError(f'the runs have different agents: {a.label} {list(a.agent_ids)}, {b.label} {list(b.agent_ids)}')
+        raise CompareError(
+            f'the runs have different agents: {a.label} {list(a.agent_ids)}, {b.label} {list(b.agent_ids)}'
+        )
     notes = []
     if a.scenario != b.scenario:
         notes.append(f'different scenario names: {a.scenario!r} and {b.scenario!r}')
     if a.horizon != b.horizon:
-        notes.append(f'different horizons: {a.horizon!r} and {b.horizon!r}; trajectories are compared on the common span')
+        notes.append(
+            f'different horizons: {a.horizon!r} and {b.horizon!r}; trajectories are compared on the common span'
+        )
     edges_a = [(i, j) for i, j, _ in a.edges]
     edges_b = [(i, j) for i, j, _ in b.edges]
     if edges_a != edges_b:
@@ -244,7 +256,10 @@ def compare_runs(a: RunData, b: RunData) -> dict[str, Any]:
             },
             'notes': notes,
             'events_equal': not mismatched and a.total_events == b.total_events,
-            'count_mismatches': [f'agent {entry.agent}: {entry.count_a} events in A, {entry.count_b} in B (compared the first {entry.compared})' for entry in mismatched],
+            'count_mismatches': [
+                f'agent {entry.agent}: {entry.count_a} events in A, {entry.count_b} in B (compared the first {entry.compared})'
+                for entry in mismatched
+            ],
             'triggers': [
                 {
                     'agent': entry.agent,
@@ -319,7 +334,7 @@ def render_markdown(report: dict[str, Any]) -> str:
         lines.append('Not compared: a run has no trajectory (summary.json without trajectory/).')
     else:
         lines.append(
-            f'Largest distance between the two runs\' positions of an agent: {cell(trajectory["max_deviation"])} '
+            f"Largest distance between the two runs' positions of an agent: {cell(trajectory['max_deviation'])} "
             f'at t = {cell(trajectory["at_time"])} s, over {trajectory["common_times"]} common times.'
         )
         lines += ['', '| agent | max deviation |', '|---|---|']
@@ -343,8 +358,22 @@ def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 1
         lines = {}
         for k, agent in enumerate(a.agent_ids):
             colour = agent_colour(k)
-            (lines[('a', agent)],) = ax.plot(a.positions[:, k, 0], a.positions[:, k, 1], '-', color=colour, lw=1.4, label=f'agent {agent} A')
-            (lines[('b', agent)],) = ax.plot(b.positions[:, k, 0], b.positions[:, k, 1], '--', color=colour, lw=1.0, label=f'agent {agent} B')
+            (lines[('a', agent)],) = ax.plot(
+                a.positions[:, k, 0],
+                a.positions[:, k, 1],
+                '-',
+                color=colour,
+                lw=1.4,
+                label=f'agent {agent} A',
+            )
+            (lines[('b', agent)],) = ax.plot(
+                b.positions[:, k, 0],
+                b.positions[:, k, 1],
+                '--',
+                color=colour,
+                lw=1.0,
+                label=f'agent {agent} B',
+            )
             ax.plot([a.positions[0, k, 0]], [a.positions[0, k, 1]], 'o', mfc='none', mec=colour, ms=9)
         ax.set_aspect('equal', adjustable='datalim')
         ax.set_title(f'trajectories: A {a.label} (solid), B {b.label} (dashed)', fontsize=9)
@@ -354,14 +383,29 @@ def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 1
     fig, ax = plt.subplots(figsize=(7.0, 0.6 * len(a.agent_ids) + 2.0))
     events = {}
     for k, agent in enumerate(a.agent_ids):
-        (events[('a', agent)],) = ax.eventplot(a.trigger_times[agent], lineoffsets=k + 1 + 0.2, linelengths=0.35, colors=[agent_colour(k)], linewidths=0.7)
-        (events[('b', agent)],) = ax.eventplot(b.trigger_times[agent], lineoffsets=k + 1 - 0.2, linelengths=0.35, colors=[agent_colour(k)], linewidths=0.7, alpha=0.6)
+        (events[('a', agent)],) = ax.eventplot(
+            a.trigger_times[agent],
+            lineoffsets=k + 1 + 0.2,
+            linelengths=0.35,
+            colors=[agent_colour(k)],
+            linewidths=0.7,
+        )
+        (events[('b', agent)],) = ax.eventplot(
+            b.trigger_times[agent],
+            lineoffsets=k + 1 - 0.2,
+            linelengths=0.35,
+            colors=[agent_colour(k)],
+            linewidths=0.7,
+            alpha=0.6,
+        )
     ax.set_yticks(range(1, len(a.agent_ids) + 1))
     ax.set_yticklabels([str(agent) for agent in a.agent_ids])
     ax.set_xlim(0.0, max(a.horizon, b.horizon))
     ax.set_xlabel('t [s]')
     ax.set_ylabel('agent (upper ticks A, lower B)')
-    ax.set_title(f'triggering times: A {a.label} ({a.total_events}), B {b.label} ({b.total_events})', fontsize=9)
+    ax.set_title(
+        f'triggering times: A {a.label} ({a.total_events}), B {b.label} ({b.total_events})', fontsize=9
+    )
     written['triggering times'] = _save(plt, fig, out / 'overlay_triggers.png', dpi, events)
 
     deviation = compare_trajectories(a, b)
@@ -370,13 +414,20 @@ def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 1
         positive = deviation.deviation > 0.0
         lines = {}
         if positive.any():
-            (lines['deviation'],) = ax_dev.semilogy(deviation.times[positive], deviation.deviation[positive], 'k', lw=1.0)
-        ax_dev.set_title(f'max over agents of ||x_A - x_B|| (max {deviation.max_deviation:.3g}; zero values not drawn)', fontsize=9)
+            (lines['deviation'],) = ax_dev.semilogy(
+                deviation.times[positive], deviation.deviation[positive], 'k', lw=1.0
+            )
+        ax_dev.set_title(
+            f'max over agents of ||x_A - x_B|| (max {deviation.max_deviation:.3g}; zero values not drawn)',
+            fontsize=9,
+        )
         ax_dev.set_xlabel('t [s]')
         for key, run, style in (('a', a, '-'), ('b', b, '--')):
             errors = _formation_error(run)
             keep = errors > 0.0
-            (lines[f'error {key}'],) = ax_err.semilogy(run.times[keep], errors[keep], style, lw=1.1, label=f'{key.upper()} {run.label}')
+            (lines[f'error {key}'],) = ax_err.semilogy(
+                run.times[keep], errors[keep], style, lw=1.1, label=f'{key.upper()} {run.label}'
+            )
         ax_err.set_title('formation error max ||x_i - x_j - d_ij||', fontsize=9)
         ax_err.set_xlabel('t [s]')
         ax_err.legend(fontsize=7)
@@ -386,7 +437,10 @@ def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 1
 
 def _formation_error(run: RunData) -> np.ndarray:
     index = {agent: k for k, agent in enumerate(run.agent_ids)}
-    errors = [np.linalg.norm(run.positions[:, index[i]] - run.positions[:, index[j]] - d, axis=1) for i, j, d in run.edges]
+    errors = [
+        np.linalg.norm(run.positions[:, index[i]] - run.positions[:, index[j]] - d, axis=1)
+        for i, j, d in run.edges
+    ]
     return np.max(errors, axis=0)
 
 
@@ -397,12 +451,16 @@ def _save(plt, fig, path: Path, dpi: int, artists) -> tuple[str, Any]:
     return path.name, artists
 
 
-def write_comparison(report: dict[str, Any], out_dir: str | Path, figures: dict[str, Any] | None = None) -> tuple[Path, Path]:
+def write_comparison(
+    report: dict[str, Any], out_dir: str | Path, figures: dict[str, Any] | None = None
+) -> tuple[Path, Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     markdown = render_markdown(report)
     if figures:
-        markdown += '\n## Figures\n\n' + ''.join(f'![{title}]({name})\n' for title, (name, _) in figures.items())
+        markdown += '\n## Figures\n\n' + ''.join(
+            f'![{title}]({name})\n' for title, (name, _) in figures.items()
+        )
         report = {**report, 'figures': {title: name for title, (name, _) in figures.items()}}
     md_path, json_path = out / 'compare.md', out / 'compare.json'
     md_path.write_text(markdown, encoding='utf-8')
@@ -418,4 +476,8 @@ def within(report: dict[str, Any], tolerance: float) -> bool:
     if deviation is not None and not deviation <= tolerance:
         return False
     trajectory = report['trajectory']
-    return trajectory is None or (isinstance(trajectory['max_deviation'], float) and math.isfinite(trajectory['max_deviation']) and trajectory['max_deviation'] <= tolerance)
+    return trajectory is None or (
+        isinstance(trajectory['max_deviation'], float)
+        and math.isfinite(trajectory['max_deviation'])
+        and trajectory['max_deviation'] <= tolerance
+    )

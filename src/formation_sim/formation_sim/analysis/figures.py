@@ -83,14 +83,27 @@ class TrajectoryPlot:
         """One legend entry per agent (made when asked: a legend of 1000 agents is never drawn)."""
         from matplotlib.lines import Line2D
 
-        style, colours, width = self.paths.get_linestyle(), self.paths.get_colors(), self.paths.get_linewidths()
+        style, colours, width = (
+            self.paths.get_linestyle(),
+            self.paths.get_colors(),
+            self.paths.get_linewidths(),
+        )
         return [
-            Line2D([], [], linestyle=style[k % len(style)], color=colours[k], lw=width[k % len(width)], label=label)
+            Line2D(
+                [],
+                [],
+                linestyle=style[k % len(style)],
+                color=colours[k],
+                lw=width[k % len(width)],
+                label=label,
+            )
             for k, label in enumerate(self.labels)
         ]
 
 
-def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', label: str = '', formation: bool = True) -> TrajectoryPlot:
+def plot_trajectories(
+    ax: Axes, record: RunRecord, *, linestyle: str = '-', label: str = '', formation: bool = True
+) -> TrajectoryPlot:
     """Paths of all agents; with p >= 3 the first two coordinates (a projection)."""
     from matplotlib.collections import LineCollection
 
@@ -106,13 +119,18 @@ def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', labe
     else:
         paths = np.stack([np.broadcast_to(times[rows], (scenario.n, len(rows))), x[:, :, 0].T], axis=-1)
         first = np.column_stack([np.full(scenario.n, times[0]), x[0, :, 0]])
-    drawn = ax.add_collection(LineCollection(paths, colors=colours, linestyles=linestyle, linewidths=1.2), autolim=True)
+    drawn = ax.add_collection(
+        LineCollection(paths, colors=colours, linestyles=linestyle, linewidths=1.2), autolim=True
+    )
     starts = ax.scatter(first[:, 0], first[:, 1], s=81, facecolors='none', edgecolors=colours, marker='o')
     polygon = None
     if planar and formation:
         heads, tails, _ = scenario.edge_indices()
         polygon = ax.add_collection(
-            LineCollection(np.stack([x[-1, heads, :2], x[-1, tails, :2]], axis=1), colors='k', linewidths=0.9), autolim=True
+            LineCollection(
+                np.stack([x[-1, heads, :2], x[-1, tails, :2]], axis=1), colors='k', linewidths=0.9
+            ),
+            autolim=True,
         )
     ax.autoscale_view()
     if planar:
@@ -123,7 +141,9 @@ def plot_trajectories(ax: Axes, record: RunRecord, *, linestyle: str = '-', labe
         ax.set_xlabel('t [s]')
         ax.set_ylabel('$x_i$')
     labels = [f'agent {agent}{label}' for agent in scenario.agent_ids]
-    return TrajectoryPlot(axes=ax, planar=planar, rows=rows, paths=drawn, starts=starts, formation=polygon, labels=labels)
+    return TrajectoryPlot(
+        axes=ax, planar=planar, rows=rows, paths=drawn, starts=starts, formation=polygon, labels=labels
+    )
 
 
 # ---------------------------------------------------------------------------- (b) event raster
@@ -140,7 +160,9 @@ class RasterPlot:
         return [float(segment[0, 0]) for segment in self.ticks.get_segments()[self.spans[agent]]]
 
 
-def plot_trigger_raster(ax: Axes, record: RunRecord, *, row_offset: float = 0.0, height: float = 0.8, alpha: float = 1.0) -> RasterPlot:
+def plot_trigger_raster(
+    ax: Axes, record: RunRecord, *, row_offset: float = 0.0, height: float = 0.8, alpha: float = 1.0
+) -> RasterPlot:
     """One row per agent (row k + 1 for the k-th agent, plus `row_offset`), a tick per trigger."""
     from matplotlib.collections import LineCollection
 
@@ -157,7 +179,9 @@ def plot_trigger_raster(ax: Axes, record: RunRecord, *, row_offset: float = 0.0,
         drawn_so_far += times.size
         segments.append(ticks)
         colours.extend([_colour(k)] * times.size)
-    drawn = ax.add_collection(LineCollection(np.concatenate(segments), colors=colours, linewidths=0.7, alpha=alpha))
+    drawn = ax.add_collection(
+        LineCollection(np.concatenate(segments), colors=colours, linewidths=0.7, alpha=alpha)
+    )
     if len(ids) <= 30:
         ax.set_yticks(range(1, len(ids) + 1))
         ax.set_yticklabels([str(agent) for agent in ids])
@@ -174,7 +198,9 @@ def paper_figure(record: RunRecord, *, title: str | None = None) -> tuple[Figure
     fig, (ax_a, ax_b) = plt.subplots(2, 1, figsize=(6.0, 7.5), gridspec_kw={'height_ratios': [3, 1.6]})
     trajectories = plot_trajectories(ax_a, record)
     algorithm = 'ETA-1' if record.scenario.dynamics == 'single' else 'ETA-2'
-    ax_a.set_title(f'(a) trajectories ({algorithm}); o initial positions, final formation in black', fontsize=9)
+    ax_a.set_title(
+        f'(a) trajectories ({algorithm}); o initial positions, final formation in black', fontsize=9
+    )
     if len(record.scenario.agent_ids) <= 12:
         ax_a.legend(handles=trajectories.legend_handles(), loc='best', fontsize=8)
     raster = plot_trigger_raster(ax_b, record)
@@ -194,7 +220,12 @@ class SeriesPlot:
 
 
 def plot_edge_lengths(
-    ax: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None = None, *, margin_ax: Axes | None = None
+    ax: Axes,
+    record: RunRecord,
+    series: Series,
+    bounds: TheoryBounds | None = None,
+    *,
+    margin_ax: Axes | None = None,
 ) -> SeriesPlot:
     """Every ||x_i - x_j|| against Δ; on `margin_ax`, the room left to Δ on a log scale.
 
@@ -205,7 +236,12 @@ def plot_edge_lengths(
     scenario = record.scenario
     lines = {}
     for column, edge in enumerate(scenario.edges):
-        (lines[f'{edge.i}-{edge.j}'],) = ax.plot(series.times, series.edge_lengths[:, column], lw=1.0, label=f'$\\|x_{{{edge.i}}}-x_{{{edge.j}}}\\|$')
+        (lines[f'{edge.i}-{edge.j}'],) = ax.plot(
+            series.times,
+            series.edge_lengths[:, column],
+            lw=1.0,
+            label=f'$\\|x_{{{edge.i}}}-x_{{{edge.j}}}\\|$',
+        )
     lines['delta'] = ax.axhline(scenario.delta, color='r', lw=1.2, label=f'Δ = {scenario.delta:g}')
     ax.set_ylabel('edge length')
     ax.set_title('edge lengths against the communication radius Δ', fontsize=9)
@@ -218,34 +254,65 @@ def plot_edge_lengths(
         colour = lines[f'{edge.i}-{edge.j}'].get_color()
         room = scenario.delta - series.edge_lengths[:, column]
         positive = room > 0.0
-        (lines[f'room {edge.i}-{edge.j}'],) = margin_ax.semilogy(series.times[positive], room[positive], color=colour, lw=1.0)
+        (lines[f'room {edge.i}-{edge.j}'],) = margin_ax.semilogy(
+            series.times[positive], room[positive], color=colour, lw=1.0
+        )
         if bounds is not None and bounds.edge_bounds is not None and len(scenario.edges) <= 12:
             guaranteed = scenario.delta - bounds.edge_bounds[edge.pair]
             if guaranteed > 0.0:
-                lines[f'bound {edge.i}-{edge.j}'] = margin_ax.axhline(guaranteed, color=colour, ls=':', lw=1.0)
+                lines[f'bound {edge.i}-{edge.j}'] = margin_ax.axhline(
+                    guaranteed, color=colour, ls=':', lw=1.0
+                )
     margin_ax.set_xlabel('t [s]')
     margin_ax.set_ylabel('Δ − edge length')
-    margin_ax.set_title('room left to Δ (log scale); dotted: the room (kij) guarantees, Δ − ($k_{ij} + \\|d_{ij}\\|$)', fontsize=9)
+    margin_ax.set_title(
+        'room left to Δ (log scale); dotted: the room (kij) guarantees, Δ − ($k_{ij} + \\|d_{ij}\\|$)',
+        fontsize=9,
+    )
     return SeriesPlot(axes=ax, lines=lines)
 
 
-def plot_formation_error(ax: Axes, series: Series, bounds: TheoryBounds | None, *, rate: float | None = None) -> SeriesPlot:
+def plot_formation_error(
+    ax: Axes, series: Series, bounds: TheoryBounds | None, *, rate: float | None = None
+) -> SeriesPlot:
     """Error on a log scale; `rate` (β or β_d) draws e(0) e^{-rate t} when no bounds are known."""
     t = series.times
     lines = {}
     positive = series.formation_error > 0.0
-    (lines['error'],) = ax.semilogy(t[positive], series.formation_error[positive], 'k', lw=1.2, label='$\\max_{ij}\\|x_i-x_j-d_{ij}\\|$')
+    (lines['error'],) = ax.semilogy(
+        t[positive], series.formation_error[positive], 'k', lw=1.2, label='$\\max_{ij}\\|x_i-x_j-d_{ij}\\|$'
+    )
     rate = bounds.rate if bounds is not None else rate
     if rate is not None:
-        (lines['envelope'],) = ax.semilogy(t, series.formation_error[0] * np.exp(-rate * t), 'b--', lw=1.0, label=f'$e(0)\\,e^{{-{rate:g}t}}$')
+        (lines['envelope'],) = ax.semilogy(
+            t,
+            series.formation_error[0] * np.exp(-rate * t),
+            'b--',
+            lw=1.0,
+            label=f'$e(0)\\,e^{{-{rate:g}t}}$',
+        )
     if bounds is not None and bounds.error_gain is not None:
-        (lines['bound'],) = ax.semilogy(t, bounds.error_gain * np.exp(-bounds.rate * t), 'r:', lw=1.2, label='$2\\sqrt{k_V}\\,e^{-\\beta t}$ (theorem)')
+        (lines['bound'],) = ax.semilogy(
+            t,
+            bounds.error_gain * np.exp(-bounds.rate * t),
+            'r:',
+            lw=1.2,
+            label='$2\\sqrt{k_V}\\,e^{-\\beta t}$ (theorem)',
+        )
     if bounds is not None and bounds.floor is not None:  # the threshold floor's bound (docs/SPEED_SCALE.md)
         floor = bounds.floor
         bound = 2.0 * np.sqrt(floor.z_gain * floor.lyapunov_bound(bounds.speed_scale * t))
-        (lines['bound'],) = ax.semilogy(t, bound, 'r:', lw=1.2, label='$2\\sqrt{z B(\\kappa t)}$ (threshold floor)')
+        (lines['bound'],) = ax.semilogy(
+            t, bound, 'r:', lw=1.2, label='$2\\sqrt{z B(\\kappa t)}$ (threshold floor)'
+        )
     if bounds is not None and bounds.printed_error_gain is not None:
-        (lines['printed bound'],) = ax.semilogy(t, bounds.printed_error_gain * np.exp(-bounds.rate * t), 'm-.', lw=1.0, label='bound of the proof as printed')
+        (lines['printed bound'],) = ax.semilogy(
+            t,
+            bounds.printed_error_gain * np.exp(-bounds.rate * t),
+            'm-.',
+            lw=1.0,
+            label='bound of the proof as printed',
+        )
     ax.set_xlabel('t [s]')
     ax.set_ylabel('formation error')
     ax.set_title('formation error (log scale) against the exponential envelope', fontsize=9)
@@ -273,7 +340,14 @@ def plot_inter_event_times(ax: Axes, record: RunRecord, xi: dict[int, float] | N
     for k, agent in enumerate(ids):
         g = gaps[agent]
         if g.size:
-            ax.hist(g[g > 0.0], bins=bins, histtype='step', color=_colour(k), lw=1.1, label=f'agent {agent} ({g.size})')
+            ax.hist(
+                g[g > 0.0],
+                bins=bins,
+                histtype='step',
+                color=_colour(k),
+                lw=1.1,
+                label=f'agent {agent} ({g.size})',
+            )
     lines = {}
     for k, agent in enumerate(ids):
         if xi and xi.get(agent):
@@ -287,7 +361,9 @@ def plot_inter_event_times(ax: Axes, record: RunRecord, xi: dict[int, float] | N
     return HistogramPlot(axes=ax, gaps=gaps, xi_lines=lines)
 
 
-def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None) -> SeriesPlot:
+def plot_energy(
+    ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: Series, bounds: TheoryBounds | None
+) -> SeriesPlot:
     double = record.scenario.dynamics == 'double'
     t = series.times
     name_nu = '$\\nu_d$' if double else '$\\nu$'
@@ -296,13 +372,33 @@ def plot_energy(ax_tension: Axes, ax_lyapunov: Axes, record: RunRecord, series: 
     (lines['tension'],) = ax_tension.semilogy(t, series.tension, 'k', lw=1.2, label=name_nu)
     (lines['lyapunov'],) = ax_lyapunov.semilogy(t, series.lyapunov, 'k', lw=1.2, label=name_v)
     if bounds is not None and bounds.floor is not None:
-        (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.floor.lyapunov_bound(bounds.speed_scale * t), 'r:', lw=1.2, label='$B(\\kappa t)$ (threshold floor)')
+        (lines['k_V'],) = ax_lyapunov.semilogy(
+            t,
+            bounds.floor.lyapunov_bound(bounds.speed_scale * t),
+            'r:',
+            lw=1.2,
+            label='$B(\\kappa t)$ (threshold floor)',
+        )
     if bounds is not None and bounds.k_nu is not None:
-        lines['k_nu'] = ax_tension.axhline(bounds.k_nu, color='r', ls=':', lw=1.2, label='$k^d_\\nu$' if double else '$k_\\nu$ (kν)')
+        lines['k_nu'] = ax_tension.axhline(
+            bounds.k_nu, color='r', ls=':', lw=1.2, label='$k^d_\\nu$' if double else '$k_\\nu$ (kν)'
+        )
         if bounds.k_V is not None:
-            (lines['k_V'],) = ax_lyapunov.semilogy(t, bounds.k_V * np.exp(-2.0 * bounds.rate * t), 'r:', lw=1.2, label='$k_V e^{-2\\beta t}$ (kV)')
+            (lines['k_V'],) = ax_lyapunov.semilogy(
+                t,
+                bounds.k_V * np.exp(-2.0 * bounds.rate * t),
+                'r:',
+                lw=1.2,
+                label='$k_V e^{-2\\beta t}$ (kV)',
+            )
         if bounds.printed_k_V is not None:
-            (lines['printed k_V'],) = ax_lyapunov.semilogy(t, bounds.printed_k_V * np.exp(-2.0 * bounds.rate * t), 'm-.', lw=1.0, label='$k^d_V e^{-2\\beta_d t}$ as printed (kVd)')
+            (lines['printed k_V'],) = ax_lyapunov.semilogy(
+                t,
+                bounds.printed_k_V * np.exp(-2.0 * bounds.rate * t),
+                'm-.',
+                lw=1.0,
+                label='$k^d_V e^{-2\\beta_d t}$ as printed (kVd)',
+            )
     ax_tension.set_title(f'tension energy {name_nu}', fontsize=9)
     ax_lyapunov.set_title(f'Lyapunov function {name_v}', fontsize=9)
     for ax in (ax_tension, ax_lyapunov):
@@ -323,12 +419,16 @@ FIGURE_FILES = {
 }
 
 
-def write_figures(record: RunRecord, series: Series, bounds: TheoryBounds | None, out_dir: str | Path, *, dpi: int = 100) -> dict[str, str]:
+def write_figures(
+    record: RunRecord, series: Series, bounds: TheoryBounds | None, out_dir: str | Path, *, dpi: int = 100
+) -> dict[str, str]:
     """Every analysis figure as a PNG in `out_dir`; returns title -> file name."""
     plt = pyplot()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rate = record.scenario.gains.beta if record.scenario.dynamics == 'single' else record.scenario.gains.beta_d
+    rate = (
+        record.scenario.gains.beta if record.scenario.dynamics == 'single' else record.scenario.gains.beta_d
+    )
     figures = {}
     fig, _, _ = paper_figure(record)
     figures['formation (paper Fig. 1/2 style)'] = fig
@@ -389,7 +489,11 @@ def animate(
     pairs = [(index[e.i], index[e.j]) for e in scenario.edges]
     tau = theory.formation_feasibility(scenario).tau
     offsets = tau - tau.mean(axis=0)
-    offsets = np.concatenate([offsets, np.zeros_like(offsets)], axis=1)[:, :2] if offsets.shape[1] == 1 else offsets[:, :2]
+    offsets = (
+        np.concatenate([offsets, np.zeros_like(offsets)], axis=1)[:, :2]
+        if offsets.shape[1] == 1
+        else offsets[:, :2]
+    )
     events = np.sort(np.concatenate([np.asarray(v, dtype=float) for v in record.trigger_times.values()]))
     chosen = frame_indices(t, frames=frames)
 
@@ -408,11 +512,35 @@ def animate(
     ax.add_collection(edges)
     agents = ax.scatter(x[0, :, 0], x[0, :, 1], s=60, c=colours, zorder=3)
     # Ids beside the agents, for teams small enough to read them.
-    ids = [ax.annotate(str(agent), x[0, k], xytext=(6, 6), textcoords='offset points', fontsize=9, color=colours[k], zorder=4)
-           for k, agent in enumerate(scenario.agent_ids)] if len(scenario.agent_ids) <= 30 else []  # fmt: skip
-    label = ax.text(0.02, 0.97, '', transform=ax.transAxes, va='top', fontsize=11, family='monospace',
-                    bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': 'none'})  # fmt: skip
-    ax.set_title(f'{scenario.name}: edges green → red as their length nears Δ = {scenario.delta:g}', fontsize=9)
+    ids = (
+        [
+            ax.annotate(
+                str(agent),
+                x[0, k],
+                xytext=(6, 6),
+                textcoords='offset points',
+                fontsize=9,
+                color=colours[k],
+                zorder=4,
+            )
+            for k, agent in enumerate(scenario.agent_ids)
+        ]
+        if len(scenario.agent_ids) <= 30
+        else []
+    )
+    label = ax.text(
+        0.02,
+        0.97,
+        '',
+        transform=ax.transAxes,
+        va='top',
+        fontsize=11,
+        family='monospace',
+        bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': 'none'},
+    )
+    ax.set_title(
+        f'{scenario.name}: edges green → red as their length nears Δ = {scenario.delta:g}', fontsize=9
+    )
 
     def draw(frame: int):
         k = chosen[frame]
@@ -423,7 +551,15 @@ def animate(
         for k_agent, text in enumerate(ids):
             text.xy = now[k_agent]
         edges.set_segments([[now[a], now[b]] for a, b in pairs])
-        edges.set_color([edge_colour(float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])), scenario.delta) for a, b in pairs])
+        edges.set_color(
+            [
+                edge_colour(
+                    float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])),
+                    scenario.delta,
+                )
+                for a, b in pairs
+            ]
+        )
         goal = now.mean(axis=0) + offsets
         desired.set_offsets(goal)
         desired_edges.set_segments([[goal[a], goal[b]] for a, b in pairs])

@@ -64,7 +64,14 @@ from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
-from formation_sim.sim.robots import PoseTrack, odometry_sample, poses_for_end, pose_sample, sample_times, trajectory_samples
+from formation_sim.sim.robots import (
+    PoseTrack,
+    odometry_sample,
+    poses_for_end,
+    pose_sample,
+    sample_times,
+    trajectory_samples,
+)
 from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra, saturation_extra
 
 
@@ -109,7 +116,9 @@ def locate(path: str | Path) -> RunLocation:
             bag = run_dir / BAG_DIR
             return RunLocation(bag=bag if _is_bag(bag) else None, run_dir=run_dir, summary=path)
         else:
-            raise AnalysisError(f'{path}: expected a run folder, a bag folder, a .mcap file or a summary.json')
+            raise AnalysisError(
+                f'{path}: expected a run folder, a bag folder, a .mcap file or a summary.json'
+            )
     elif _is_bag(path):
         bag = path
     elif _is_bag(path / BAG_DIR):
@@ -118,8 +127,14 @@ def locate(path: str | Path) -> RunLocation:
         summary = path / SUMMARY_FILE
         if summary.is_file():
             return RunLocation(bag=None, run_dir=path, summary=summary)
-        raise AnalysisError(f'{path}: neither a bag (metadata.yaml or .mcap), nor a run folder with bag/ or {SUMMARY_FILE}')
-    run_dir = bag.parent if (bag.parent / SUMMARY_FILE).is_file() or (bag.parent / SCENARIO_FILE).is_file() else None
+        raise AnalysisError(
+            f'{path}: neither a bag (metadata.yaml or .mcap), nor a run folder with bag/ or {SUMMARY_FILE}'
+        )
+    run_dir = (
+        bag.parent
+        if (bag.parent / SUMMARY_FILE).is_file() or (bag.parent / SCENARIO_FILE).is_file()
+        else None
+    )
     summary = run_dir / SUMMARY_FILE if run_dir is not None and (run_dir / SUMMARY_FILE).is_file() else None
     return RunLocation(bag=bag, run_dir=run_dir, summary=summary)
 
@@ -139,7 +154,9 @@ class BagRun:
     counts: dict[str, int]  # name -> messages
     checks: list[Check] = field(default_factory=list)
     horizon: float | None = None  # the horizon the run was asked for (from /formation/scenario), if known
-    stop: dict[str, Any] | None = None  # {time, step, horizon, final_step}: where a run that stopped early ended
+    stop: dict[str, Any] | None = (
+        None  # {time, step, horizon, final_step}: where a run that stopped early ended
+    )
 
     @property
     def ok(self) -> bool:
@@ -182,7 +199,9 @@ class _Collected:
     commands: dict[int, int] = field(default_factory=lambda: defaultdict(int))
     problems: list[str] = field(default_factory=list)
     robots: dict | None = None  # /formation/robots: what the robots of a robot run are
-    robot_messages: dict[tuple[int, str], list[tuple[str, bytes]]] = field(default_factory=lambda: defaultdict(list))
+    robot_messages: dict[tuple[int, str], list[tuple[str, bytes]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
     reports: dict[int, Any] = field(default_factory=dict)  # agent -> its latest report (the final one kept)
 
 
@@ -203,9 +222,13 @@ def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
             except MessageError as error:
                 got.problems.append(f'{topic} message {got.counts[topic]}: {error}')
             except Exception as error:  # CDR that does not decode as its type: the message is damaged
-                if not type(error).__module__.startswith('rosbags') and not isinstance(error, (struct.error, IndexError, ValueError)):
+                if not type(error).__module__.startswith('rosbags') and not isinstance(
+                    error, (struct.error, IndexError, ValueError)
+                ):
                     raise
-                got.problems.append(f'{topic} message {got.counts[topic]}: does not decode as {msgtype}: {error}')
+                got.problems.append(
+                    f'{topic} message {got.counts[topic]}: does not decode as {msgtype}: {error}'
+                )
         if progress is not None:
             progress(number, total)
     except BagError as error:
@@ -219,7 +242,9 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         info = decode_trigger_info(decode(rawdata, msgtype))
         sender, receiver = int(match.group(1)), int(match.group(2))
         if (info.sender, info.receiver) != (sender, receiver):
-            raise MessageError(f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} -> {receiver}")
+            raise MessageError(
+                f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} -> {receiver}"
+            )
         got.infos[(info.sender, info.stamp)].append(info.receiver)
         got.info_total += 1
     elif topic == STATE_TOPIC and array:
@@ -253,9 +278,13 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
             got.reports[report.agent] = report
 
 
-def _resolve_scenario(got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None) -> tuple[Scenario, str]:
+def _resolve_scenario(
+    got: _Collected, run_dir: Path | None, fallback: Scenario | str | Path | None
+) -> tuple[Scenario, str]:
     if got.scenario_text is not None:
-        return scenario_from_yaml(got.scenario_text, source=f"the bag's {SCENARIO_TOPIC}"), f'bag topic {SCENARIO_TOPIC}'
+        return scenario_from_yaml(
+            got.scenario_text, source=f"the bag's {SCENARIO_TOPIC}"
+        ), f'bag topic {SCENARIO_TOPIC}'
     if run_dir is not None and (run_dir / SCENARIO_FILE).is_file():
         path = run_dir / SCENARIO_FILE
         try:
@@ -279,11 +308,17 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
     """Refuse a scenario that is not the bag's run (analysing it would be meaningless)."""
     first = states[0]
     if tuple(first.agent_ids) != scenario.agent_ids:
-        raise AnalysisError(f"the bag's agents {list(first.agent_ids)} are not the scenario's {list(scenario.agent_ids)}")
+        raise AnalysisError(
+            f"the bag's agents {list(first.agent_ids)} are not the scenario's {list(scenario.agent_ids)}"
+        )
     if first.positions.shape[1] != scenario.dimension:
-        raise AnalysisError(f"the bag's states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}")
+        raise AnalysisError(
+            f"the bag's states have dimension {first.positions.shape[1]}, the scenario {scenario.dimension}"
+        )
     if (first.velocities is None) != (scenario.dynamics == 'single'):
-        raise AnalysisError(f'the bag\'s states {"lack" if first.velocities is None else "carry"} velocities; the scenario is {scenario.dynamics!r}')
+        raise AnalysisError(
+            f"the bag's states {'lack' if first.velocities is None else 'carry'} velocities; the scenario is {scenario.dynamics!r}"
+        )
     if first.time == 0.0:
         start_velocities = initial_velocities(scenario.velocities, scenario.speed_scale)  # κ q(0)
         for k, agent in enumerate(scenario.agent_ids):
@@ -299,11 +334,15 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
                 )
     for sender, _ in got.infos:
         if sender not in scenario.agent_ids:
-            raise AnalysisError(f'the bag has triggering information from agent {sender}, not an agent of {scenario.name!r}')
+            raise AnalysisError(
+                f'the bag has triggering information from agent {sender}, not an agent of {scenario.name!r}'
+            )
     for (sender, _), receivers in got.infos.items():
         stray = set(receivers) - set(scenario.neighbours(sender))
         if stray:
-            raise AnalysisError(f'the bag has messages {sender} -> {sorted(stray)}, which are not edges of {scenario.name!r}')
+            raise AnalysisError(
+                f'the bag has messages {sender} -> {sorted(stray)}, which are not edges of {scenario.name!r}'
+            )
 
 
 def load_bag_run(
@@ -331,7 +370,13 @@ def load_bag_run(
     found, source = _resolve_scenario(got, run_dir, scenario)
     states = sorted(got.states, key=lambda state: state.time)  # stable: ties keep bag order
     _check_scenario_matches(found, got, states)
-    checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
+    checks = [
+        Check(
+            name='decoding',
+            ok=not got.problems,
+            detail='; '.join(got.problems[:10]) or 'every formation message follows its layout',
+        )
+    ]
 
     times, positions, velocities, samples_check = _state_samples(states)
     checks.append(samples_check)
@@ -347,20 +392,52 @@ def load_bag_run(
     horizon = final[-1].time if final else times[-1]
     asked = found.horizon if got.scenario_text is not None else None  # the run publishes its own horizon
     finished = bool(final) and (asked is None or horizon == asked)
-    stop = None if finished else {'time': horizon, 'step': final[-1].index if final else None, 'horizon': asked, 'final_step': bool(final)}
+    stop = (
+        None
+        if finished
+        else {
+            'time': horizon,
+            'step': final[-1].index if final else None,
+            'horizon': asked,
+            'final_step': bool(final),
+        }
+    )
     if times[-1] != horizon:
-        checks.append(Check(name='final state', ok=False, detail=f'the last state is at t={times[-1]!r}, the run ended at t={horizon!r}'))
+        checks.append(
+            Check(
+                name='final state',
+                ok=False,
+                detail=f'the last state is at t={times[-1]!r}, the run ended at t={horizon!r}',
+            )
+        )
     events = sorted({t for agent_times in trigger_times.values() for t in agent_times})
     sampled = set(times)
     unsampled = [t for t in events if t not in sampled]
-    checks.append(Check(name='a state sample at every event', ok=not unsampled, detail=f'{len(events)} distinct event times' + (f'; without a sample: {unsampled[:5]}' if unsampled else '')))
+    checks.append(
+        Check(
+            name='a state sample at every event',
+            ok=not unsampled,
+            detail=f'{len(events)} distinct event times'
+            + (f'; without a sample: {unsampled[:5]}' if unsampled else ''),
+        )
+    )
 
-    sensing_calls = len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
+    sensing_calls = (
+        len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
+    )
     if SENSING_LOG_TOPIC in got.topics:
         checks.append(_sensing_check(got, found, trigger_times, stopped=stop is not None, horizon=horizon))
     if got.commands:
-        differing = [agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])]
-        checks.append(Check(name='one command per trigger', ok=not differing, detail='yes' if not differing else f'agents {differing}: commands {dict(got.commands)}'))
+        differing = [
+            agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])
+        ]
+        checks.append(
+            Check(
+                name='one command per trigger',
+                ok=not differing,
+                detail='yes' if not differing else f'agents {differing}: commands {dict(got.commands)}',
+            )
+        )
     extra = _clock_extra(final, realtime=realtime, finished=finished, reached=times[-1]) if steps else {}
     if got.statuses:
         checks.append(_status_check(got, {agent: len(times) for agent, times in trigger_times.items()}))
@@ -379,9 +456,15 @@ def load_bag_run(
         extra=extra,
     )
     return BagRun(
-        bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
-        horizon=asked, stop=stop,
-    )  # fmt: skip
+        bag=bag,
+        record=record,
+        scenario_source=source,
+        topics=dict(got.topics),
+        counts=dict(got.counts),
+        checks=checks,
+        horizon=asked,
+        stop=stop,
+    )
 
 
 def _state_samples(states: list) -> tuple[list[float], list[np.ndarray], list[np.ndarray], Check]:
@@ -396,11 +479,18 @@ def _state_samples(states: list) -> tuple[list[float], list[np.ndarray], list[np
         positions.append(np.asarray(state.positions, dtype=float))
         if state.velocities is not None:
             velocities.append(np.asarray(state.velocities, dtype=float))
-    check = Check(name='state samples', ok=not repeats, detail=f'{len(times)} samples' + (f'; different states at the same time {repeats[:5]}' if repeats else ''))
+    check = Check(
+        name='state samples',
+        ok=not repeats,
+        detail=f'{len(times)} samples'
+        + (f'; different states at the same time {repeats[:5]}' if repeats else ''),
+    )
     return times, positions, velocities, check
 
 
-def _sensing_check(got, found: Scenario, trigger_times: dict[int, list[float]], *, stopped: bool, horizon: float) -> Check:
+def _sensing_check(
+    got, found: Scenario, trigger_times: dict[int, list[float]], *, stopped: bool, horizon: float
+) -> Check:
     """The sensing log against the triggers: every trigger sensed once, at its time."""
     logged: dict[int, list[float]] = defaultdict(list)
     for agent, t in got.sensing:
@@ -408,9 +498,20 @@ def _sensing_check(got, found: Scenario, trigger_times: dict[int, list[float]], 
     # A run that stopped early may have answered a sensing whose trigger the stop cut short.
     cut = {agent: sorted(logged.get(agent, [])) for agent in found.agent_ids}
     if stopped:
-        cut = {agent: times[:-1] if times and times[-1] == horizon and times[:-1] == trigger_times[agent] else times for agent, times in cut.items()}
+        cut = {
+            agent: times[:-1]
+            if times and times[-1] == horizon and times[:-1] == trigger_times[agent]
+            else times
+            for agent, times in cut.items()
+        }
     differing = [agent for agent in found.agent_ids if cut[agent] != trigger_times[agent]]
-    return Check(name='sensing log = triggers', ok=not differing, detail='every trigger sensed once at its time' if not differing else f'agents {differing} sensed at other times than they triggered')
+    return Check(
+        name='sensing log = triggers',
+        ok=not differing,
+        detail='every trigger sensed once at its time'
+        if not differing
+        else f'agents {differing} sensed at other times than they triggered',
+    )
 
 
 def _clock_extra(final: list, *, realtime: bool, finished: bool, reached: float) -> dict[str, Any]:
@@ -465,26 +566,52 @@ def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
     for (sender, _), receivers in got.infos.items():
         sent[sender] += len(receivers)
     # Counters only grow: the largest are the agent's final report.
-    last = {agent: max(reports, key=lambda s: (s.info_sent, s.triggers)) for agent, reports in got.statuses.items()}
+    last = {
+        agent: max(reports, key=lambda s: (s.info_sent, s.triggers))
+        for agent, reports in got.statuses.items()
+    }
     wrong = [
         f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {triggers[agent]} / {sent[agent]}'
         for agent, status in last.items()
         if agent in triggers and (status.triggers != triggers[agent] or status.info_sent != sent[agent])
     ]
-    return Check(name='status counters = bag', ok=not wrong, detail='; '.join(wrong) or "every agent's last Status counts what the bag holds")
+    return Check(
+        name='status counters = bag',
+        ok=not wrong,
+        detail='; '.join(wrong) or "every agent's last Status counts what the bag holds",
+    )
 
 
-def _robot_poses(bag: Path, got: _Collected, scenario: Scenario, *, trajectory: str, model: str, distance: float, epoch: float) -> dict:
+def _robot_poses(
+    bag: Path,
+    got: _Collected,
+    scenario: Scenario,
+    *,
+    trajectory: str,
+    model: str,
+    distance: float,
+    epoch: float,
+) -> dict:
     """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order."""
     poses = {}
     for agent in scenario.agent_ids:
         poses[agent] = []
         for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
             sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
-            poses[agent].append(sample(decode(rawdata, msgtype), model=model, dimension=scenario.dimension, control_point_distance=distance, epoch=epoch))
+            poses[agent].append(
+                sample(
+                    decode(rawdata, msgtype),
+                    model=model,
+                    dimension=scenario.dimension,
+                    control_point_distance=distance,
+                    epoch=epoch,
+                )
+            )
     missing = [agent for agent, samples in poses.items() if not samples]
     if missing:
-        raise AnalysisError(f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt')
+        raise AnalysisError(
+            f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt'
+        )
     return poses
 
 
@@ -495,30 +622,53 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
         model, trajectory = robots['model'], robots['trajectory']
         distance, period = float(robots['control_point_distance']), float(robots['sample_period'])
     except (KeyError, TypeError, ValueError) as error:
-        raise AnalysisError(f'{bag}: {ROBOTS_TOPIC} lacks {error} (model, trajectory, control_point_distance, sample_period)') from None
+        raise AnalysisError(
+            f'{bag}: {ROBOTS_TOPIC} lacks {error} (model, trajectory, control_point_distance, sample_period)'
+        ) from None
     steps = got.steps
     start = [step for step in steps if step.index == 0 and step.flags & STEP_FLAG_REALTIME]
     if not start:
-        raise AnalysisError(f'{bag}: no wall-clock Step 0 on {STEP_TOPIC}: the run never started, or its epoch is missing')
+        raise AnalysisError(
+            f'{bag}: no wall-clock Step 0 on {STEP_TOPIC}: the run never started, or its epoch is missing'
+        )
     epoch = start[0].epoch
     final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
-    checks = [Check(name='decoding', ok=not got.problems, detail='; '.join(got.problems[:10]) or 'every formation message follows its layout')]
-    poses = _robot_poses(bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch)
+    checks = [
+        Check(
+            name='decoding',
+            ok=not got.problems,
+            detail='; '.join(got.problems[:10]) or 'every formation message follows its layout',
+        )
+    ]
+    poses = _robot_poses(
+        bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch
+    )
     if final:
         end = final[-1].time
     else:
         end = min(max(sample.time for sample in samples) for samples in poses.values())
-        checks.append(Check(name='final step', ok=False, detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}'))
+        checks.append(
+            Check(
+                name='final step',
+                ok=False,
+                detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}',
+            )
+        )
     # As the coordinator: no pose stamped long past the end, nor one of a robot silent at the end
     # (frozen, resumed later: held at its last pose before the end in both).
     silence = robots.get('pose_silence')
-    tracks = {agent: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for agent, samples in poses.items()}
+    tracks = {
+        agent: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence))
+        for agent, samples in poses.items()
+    }
     trigger_times, triggers_check = _trigger_times(got, scenario)
     all_counts = {agent: len(times) for agent, times in trigger_times.items()}
     # The coordinator counts the triggers up to where the run ended (and samples them).
     trigger_times = {agent: [t for t in times if t <= end] for agent, times in trigger_times.items()}
     checks.append(triggers_check)
-    uncovered = [agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)]
+    uncovered = [
+        agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)
+    ]
     # A run that stopped early because a robot's poses stopped has none of it at its end: named,
     # not binding (summary.json holds its last pose there too); poses missing at t = 0 always are.
     stopped_early = bool(final) and got.scenario_text is not None and end != scenario.horizon
@@ -543,27 +693,46 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     # marks a run that stopped early (why it stopped is summary.json's).
     asked = scenario.horizon if got.scenario_text is not None else None
     finished = bool(final) and (asked is None or end == asked)
-    stop = None if finished else {'time': end, 'step': final[-1].index if final else None, 'horizon': asked, 'final_step': bool(final)}
+    stop = (
+        None
+        if finished
+        else {
+            'time': end,
+            'step': final[-1].index if final else None,
+            'horizon': asked,
+            'final_step': bool(final),
+        }
+    )
     if finished:
         extra['failure'] = None
     if got.statuses:
         extra.update(_lateness(got.statuses, trigger_times))
-    extra.update(robots=robots, saturation=saturation_extra(got.reports.get(agent) for agent in scenario.agent_ids))
+    extra.update(
+        robots=robots, saturation=saturation_extra(got.reports.get(agent) for agent in scenario.agent_ids)
+    )
     record = RunRecord(
         scenario=scenario,
         horizon=end,
         mode='robots',
         trigger_times=trigger_times,
-        samples=Samples(times=times, positions=positions, velocities=velocities if scenario.dynamics == 'double' else None),
+        samples=Samples(
+            times=times, positions=positions, velocities=velocities if scenario.dynamics == 'double' else None
+        ),
         messages_sent=got.info_total,
         sensing_calls=sum(map(len, trigger_times.values())),
         wall_time=math.nan,
         extra=extra,
     )
     return BagRun(
-        bag=bag, record=record, scenario_source=source, topics=dict(got.topics), counts=dict(got.counts), checks=checks,
-        horizon=asked, stop=stop,
-    )  # fmt: skip
+        bag=bag,
+        record=record,
+        scenario_source=source,
+        topics=dict(got.topics),
+        counts=dict(got.counts),
+        checks=checks,
+        horizon=asked,
+        stop=stop,
+    )
 
 
 def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:
@@ -577,7 +746,14 @@ def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:
         msgtype, rawdata = commands[-1]
         msg = decode(rawdata, msgtype)
         twist = msg.twist if msgtype == 'geometry_msgs/msg/TwistStamped' else msg
-        values = [twist.linear.x, twist.linear.y, twist.linear.z, twist.angular.x, twist.angular.y, twist.angular.z]
+        values = [
+            twist.linear.x,
+            twist.linear.y,
+            twist.linear.z,
+            twist.angular.x,
+            twist.angular.y,
+            twist.angular.z,
+        ]
         if any(values):
             moving.append(f'{agent}: {values}')
     detail = f'{len(scenario.agent_ids) - len(silent) - len(moving)} robots stopped by their last command'

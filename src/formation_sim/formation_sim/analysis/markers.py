@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from formation_sim.model.scenario import Scenario
 
 from formation_msgs_py.topics import MARKERS_TOPIC, STATE_TOPIC
+
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 DEFAULT_FRAME = 'world'
 
@@ -133,13 +134,22 @@ class FormationMarkers:
         x = np.asarray(positions, dtype=float)
         n, p = len(self.scenario.agent_ids), self.scenario.dimension
         if x.shape != (n, p):
-            raise MarkerError(f'positions must have shape ({n}, {p}) for agents {list(self.scenario.agent_ids)}, got {x.shape}')
+            raise MarkerError(
+                f'positions must have shape ({n}, {p}) for agents {list(self.scenario.agent_ids)}, got {x.shape}'
+            )
         if not np.all(np.isfinite(x)):
             raise MarkerError('positions must be finite')
         ids = self.scenario.agent_ids
         size = self.agent_diameter
         specs = [
-            MarkerSpec(ns='agents', id=agent, type=SPHERE, scale=(size, size, size), colour=agent_colour(k), position=_as_point(x[k]))
+            MarkerSpec(
+                ns='agents',
+                id=agent,
+                type=SPHERE,
+                scale=(size, size, size),
+                colour=agent_colour(k),
+                position=_as_point(x[k]),
+            )
             for k, agent in enumerate(ids)
         ]
         for k, agent in enumerate(ids):
@@ -196,12 +206,18 @@ class FormationMarkers:
         """The Marker's fields as nested plain values (shared by both adapters)."""
         nanoseconds = _nanoseconds(time)
         return {
-            'header': {'stamp': {'sec': nanoseconds // 1_000_000_000, 'nanosec': nanoseconds % 1_000_000_000}, 'frame_id': self.frame_id},
+            'header': {
+                'stamp': {'sec': nanoseconds // 1_000_000_000, 'nanosec': nanoseconds % 1_000_000_000},
+                'frame_id': self.frame_id,
+            },
             'ns': spec.ns,
             'id': int(spec.id),
             'type': spec.type,
             'action': ADD,
-            'pose': {'position': dict(zip('xyz', spec.position)), 'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}},
+            'pose': {
+                'position': dict(zip('xyz', spec.position)),
+                'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0},
+            },
             'scale': dict(zip('xyz', spec.scale)),
             'color': dict(zip('rgba', spec.colour)),
             'points': [dict(zip('xyz', point)) for point in spec.points],
@@ -219,7 +235,13 @@ class FormationMarkers:
         markers = []
         for spec in specs:
             fields = self._fields(spec, time)
-            marker = Marker(ns=fields['ns'], id=fields['id'], type=fields['type'], action=fields['action'], text=fields['text'])
+            marker = Marker(
+                ns=fields['ns'],
+                id=fields['id'],
+                type=fields['type'],
+                action=fields['action'],
+                text=fields['text'],
+            )
             marker.header.stamp = Time(**fields['header']['stamp'])
             marker.header.frame_id = fields['header']['frame_id']
             for axis, value in fields['pose']['position'].items():
@@ -238,10 +260,11 @@ class FormationMarkers:
         from formation_sim.bag.io import jazzy_typestore
 
         store = typestore if typestore is not None else jazzy_typestore()
-        markers = [build_message(store, 'visualization_msgs/msg/Marker', self._fields(spec, time)) for spec in specs]
+        markers = [
+            build_message(store, 'visualization_msgs/msg/Marker', self._fields(spec, time)) for spec in specs
+        ]
         array = build_message(store, MARKERS_TYPE, {'markers': markers})
         return bytes(store.serialize_cdr(array, MARKERS_TYPE))
-
 
 
 class LiveMarkerArray:
@@ -287,10 +310,20 @@ def _nanoseconds(time: float) -> int:
 # -- rosbags messages from plain values -------------------------------------------------------------
 
 _NUMPY_TYPES = {
-    'bool': np.bool_, 'byte': np.uint8, 'char': np.uint8, 'int8': np.int8, 'uint8': np.uint8,
-    'int16': np.int16, 'uint16': np.uint16, 'int32': np.int32, 'uint32': np.uint32,
-    'int64': np.int64, 'uint64': np.uint64, 'float32': np.float32, 'float64': np.float64,
-}  # fmt: skip
+    'bool': np.bool_,
+    'byte': np.uint8,
+    'char': np.uint8,
+    'int8': np.int8,
+    'uint8': np.uint8,
+    'int16': np.int16,
+    'uint16': np.uint16,
+    'int32': np.int32,
+    'uint32': np.uint32,
+    'int64': np.int64,
+    'uint64': np.uint64,
+    'float32': np.float32,
+    'float64': np.float64,
+}
 
 
 _DEFAULTS: dict[tuple[int, str], tuple[Any, Any]] = {}
@@ -329,7 +362,9 @@ def _build(store, descriptor, value):
         items = [None] * length
     if element[0] == Nodetype.BASE and element[1][0] in _NUMPY_TYPES:
         base = element[1][0]
-        return np.array([_default_base(base) if item is None else item for item in items], dtype=_NUMPY_TYPES[base])
+        return np.array(
+            [_default_base(base) if item is None else item for item in items], dtype=_NUMPY_TYPES[base]
+        )
     return [_build(store, element, item) for item in items]
 
 
@@ -341,7 +376,9 @@ def build_message(store, msgtype: str, values: dict[str, Any]):
     unknown = set(values) - {name for name, _ in fields}
     if unknown:
         raise MarkerError(f'{msgtype} has no fields {sorted(unknown)}')
-    return store.types[msgtype](**{name: _build(store, descriptor, values.get(name)) for name, descriptor in fields})
+    return store.types[msgtype](
+        **{name: _build(store, descriptor, values.get(name)) for name, descriptor in fields}
+    )
 
 
 # -- a copy of a bag with the markers added ---------------------------------------------------------
@@ -402,18 +439,29 @@ def write_bag_with_markers(
     metadata = source / 'metadata.yaml'
     custom = {}
     if metadata.is_file():
-        custom = (yaml.safe_load(metadata.read_text(encoding='utf-8')) or {}).get('rosbag2_bagfile_information', {}).get('custom_data') or {}
+        custom = (yaml.safe_load(metadata.read_text(encoding='utf-8')) or {}).get(
+            'rosbag2_bagfile_information', {}
+        ).get('custom_data') or {}
     copied = added = 0
     with BagWriter(target, typestore=store) as bag:
         for key, value in custom.items():
             bag.set_custom_data(str(key), str(value))
-        bag.set_custom_data('formation_markers', f'{MARKERS_TOPIC} added by formation analyze --markers from {source.resolve()}')
+        bag.set_custom_data(
+            'formation_markers',
+            f'{MARKERS_TOPIC} added by formation analyze --markers from {source.resolve()}',
+        )
         offered = {c.topic: list(getattr(c.ext, 'offered_qos_profiles', [])) for c in connections}
         for connection in connections:
             if connection.topic not in unknown and connection.topic != MARKERS_TOPIC:
-                bag.add_topic(connection.topic, connection.msgtype, offered_qos_profiles=offered[connection.topic])
+                bag.add_topic(
+                    connection.topic, connection.msgtype, offered_qos_profiles=offered[connection.topic]
+                )
         # The simulator's own markers were offered as its state is (reliable, transient local).
-        bag.add_topic(MARKERS_TOPIC, MARKERS_TYPE, offered_qos_profiles=offered.get(MARKERS_TOPIC) or offered.get(state_topic, []))
+        bag.add_topic(
+            MARKERS_TOPIC,
+            MARKERS_TYPE,
+            offered_qos_profiles=offered.get(MARKERS_TOPIC) or offered.get(state_topic, []),
+        )
         for number, message in enumerate(read_bag(source), start=1):
             if message.topic in unknown or message.topic == MARKERS_TOPIC:
                 continue
@@ -422,8 +470,14 @@ def write_bag_with_markers(
             if message.topic == state_topic:
                 state = decode_world_state(decode(message.rawdata, message.msgtype))
                 if tuple(state.agent_ids) != scenario.agent_ids:
-                    raise MarkerError(f'a state of agents {list(state.agent_ids)} in {source}; the scenario has {list(scenario.agent_ids)}')
-                bag.write(MARKERS_TOPIC, message.timestamp_ns, view.to_cdr(view.markers(state.positions), time=state.time, typestore=store))
+                    raise MarkerError(
+                        f'a state of agents {list(state.agent_ids)} in {source}; the scenario has {list(scenario.agent_ids)}'
+                    )
+                bag.write(
+                    MARKERS_TOPIC,
+                    message.timestamp_ns,
+                    view.to_cdr(view.markers(state.positions), time=state.time, typestore=store),
+                )
                 added += 1
             if progress is not None and number % 2000 == 0:
                 progress(number, total)

@@ -37,12 +37,18 @@ def run_figure(record, *, title: str | None = None) -> Figure:
     scenario = record.scenario
     events = record.mode != 'continuous'  # the continuous controller never triggers
     if events:
-        fig, (ax_traj, ax_events) = plt.subplots(2, 1, figsize=(7.0, 9.0), gridspec_kw={'height_ratios': [3, 2]})
+        fig, (ax_traj, ax_events) = plt.subplots(
+            2, 1, figsize=(7.0, 9.0), gridspec_kw={'height_ratios': [3, 2]}
+        )
     else:
         # An empty raster would only say "no events" in a whole panel: the title says it instead.
         fig, ax_traj = plt.subplots(1, 1, figsize=(7.0, 5.6))
     trajectories = plot_trajectories(ax_traj, record)
-    panel = 'trajectories; o initial positions; final formation in black' if trajectories.planar else 'positions over time'
+    panel = (
+        'trajectories; o initial positions; final formation in black'
+        if trajectories.planar
+        else 'positions over time'
+    )
     ax_traj.set_title(f'(a) {panel}' if events else panel)
     if len(scenario.agent_ids) <= 12:
         ax_traj.legend(handles=trajectories.legend_handles(), loc='best', fontsize=8)

@@ -17,7 +17,13 @@ import numpy as np
 
 from formation_msgs_py.topics import STEP_TOPIC
 from formation_sim.sim.record import RunRecord
-from formation_sim.analysis.checks import Series, TheoryBounds, inter_event_stats, printed_chain_ratios, theorem_checks
+from formation_sim.analysis.checks import (
+    Series,
+    TheoryBounds,
+    inter_event_stats,
+    printed_chain_ratios,
+    theorem_checks,
+)
 from formation_sim.analysis.load import BagRun
 from formation_sim.sim.summary import build_summary
 
@@ -56,7 +62,9 @@ def diff_summaries(from_bag: dict, from_file: dict) -> tuple[list[Difference], l
     skipped: list[str] = []
 
     def walk(a: Any, b: Any, key: str) -> None:
-        if (key in NOT_IN_BAG and (a is _MISSING or a is None)) or (key.startswith('extra.') and a is _MISSING):
+        if (key in NOT_IN_BAG and (a is _MISSING or a is None)) or (
+            key.startswith('extra.') and a is _MISSING
+        ):
             skipped.append(key)
             return
         if isinstance(a, dict) and isinstance(b, dict):
@@ -70,7 +78,9 @@ def diff_summaries(from_bag: dict, from_file: dict) -> tuple[list[Difference], l
                 walk(x, y, f'{key}[{k}]')
             return
         if a is _MISSING or b is _MISSING or not _same(a, b):
-            differences.append(Difference(key=key, bag=None if a is _MISSING else a, summary=None if b is _MISSING else b))
+            differences.append(
+                Difference(key=key, bag=None if a is _MISSING else a, summary=None if b is _MISSING else b)
+            )
 
     walk(from_bag, from_file, '')
     return differences, skipped
@@ -157,7 +167,9 @@ def build_report(
                 'delta': scenario.delta,
                 'stopped': stop,
             },
-            'topics': {name: {'type': run.topics[name], 'messages': run.counts[name]} for name in sorted(run.topics)},
+            'topics': {
+                name: {'type': run.topics[name], 'messages': run.counts[name]} for name in sorted(run.topics)
+            },
             'bag_checks': [check.to_dict() for check in run.checks],
             'theorem_checks': [check.to_dict() for check in theorem_checks(record, series, bounds)],
             'theory': None
@@ -174,14 +186,25 @@ def build_report(
                 'xi': bounds.xi,
                 'printed_chain': None
                 if bounds.printed_k_V is None
-                else {'k_V': bounds.printed_k_V, 'error_gain': bounds.printed_error_gain, **printed_chain_ratios(series, bounds)},
+                else {
+                    'k_V': bounds.printed_k_V,
+                    'error_gain': bounds.printed_error_gain,
+                    **printed_chain_ratios(series, bounds),
+                },
             },
             'theory_error': bounds_error,
             'inter_event_times': inter_event_stats(record, None if bounds is None else bounds.xi),
             'series': {
                 'samples': len(t),
-                'formation_error': {'initial': float(series.formation_error[0]), 'final': float(series.formation_error[-1])},
-                'tension': {'initial': float(series.tension[0]), 'max': float(series.tension.max()), 'final': float(series.tension[-1])},
+                'formation_error': {
+                    'initial': float(series.formation_error[0]),
+                    'final': float(series.formation_error[-1]),
+                },
+                'tension': {
+                    'initial': float(series.tension[0]),
+                    'max': float(series.tension.max()),
+                    'final': float(series.tension[-1]),
+                },
                 'lyapunov': {'initial': float(series.lyapunov[0]), 'final': float(series.lyapunov[-1])},
             },
             'summary': summary,
@@ -195,7 +218,9 @@ def _difference_notes(record: RunRecord) -> list[str]:
     """Known reasons for a bag to differ from its summary.json."""
     notes = []
     if record.extra.get('clock') == 'realtime':
-        at_end = [agent for agent, times in record.trigger_times.items() if times and times[-1] >= record.horizon]
+        at_end = [
+            agent for agent, times in record.trigger_times.items() if times and times[-1] >= record.horizon
+        ]
         if at_end:
             notes.append(
                 f'agents {at_end} triggered at the horizon t = {record.horizon!r} (wall clock): summary.json counts '
@@ -229,7 +254,9 @@ def render_markdown(report: dict[str, Any]) -> str:
         '|---|---|---|---|---|---|',
     ]
     for agent, stats in report['inter_event_times'].items():
-        lines.append(f'| {agent} | {stats["events"]} | {_fmt(stats["min"])} | {_fmt(stats["median"])} | {_fmt(stats["max"])} | {_fmt(stats["xi"])} |')
+        lines.append(
+            f'| {agent} | {stats["events"]} | {_fmt(stats["min"])} | {_fmt(stats["median"])} | {_fmt(stats["max"])} | {_fmt(stats["xi"])} |'
+        )
     lines += [
         '',
         f'Total events {summary["total_events"]}, triggering-information messages {summary["messages_sent"]}, '
@@ -239,7 +266,9 @@ def render_markdown(report: dict[str, Any]) -> str:
         '|---|---|---|---|',
     ]
     for edge in summary['edges']:
-        lines.append(f'| {edge["i"]}-{edge["j"]} | {_fmt(edge["max_length"])} | {_fmt(edge["min_range_slack"])} | {_fmt(edge["final_error"])} |')
+        lines.append(
+            f'| {edge["i"]}-{edge["j"]} | {_fmt(edge["max_length"])} | {_fmt(edge["min_range_slack"])} | {_fmt(edge["final_error"])} |'
+        )
     series = report['series']
     lines += [
         '',
@@ -284,7 +313,11 @@ def _theory_lines(report: dict[str, Any]) -> list[str]:
             lines.append(
                 f'For comparison, the chain as printed (rate (2-k4)ρ2(P)): k_V = {_fmt(printed["k_V"])}; '
                 f'V_d reaches {_fmt(printed["max_ratio"])} × its bound k_V e^{{-2β_d t}} (at t = {_fmt(printed["at_time"])} s)'
-                + (f', above it from t = {_fmt(above)} s on (docs/THEOREM2.md).' if above is not None else '; below it throughout.')
+                + (
+                    f', above it from t = {_fmt(above)} s on (docs/THEOREM2.md).'
+                    if above is not None
+                    else '; below it throughout.'
+                )
             )
         lines.append('')
     elif report['theory_error']:
@@ -314,7 +347,9 @@ def _summary_json_lines(comparison: dict[str, Any] | None) -> list[str]:
         ]
         limit = 200
         for difference in differences[:limit]:
-            lines.append(f'| `{difference["key"]}` | {_short(difference["bag"])} | {_short(difference["summary"])} |')
+            lines.append(
+                f'| `{difference["key"]}` | {_short(difference["bag"])} | {_short(difference["summary"])} |'
+            )
         if len(differences) > limit:
             lines.append(f'| … {len(differences) - limit} more (see the JSON report) | | |')
         for note in comparison.get('notes', []):
@@ -324,7 +359,9 @@ def _summary_json_lines(comparison: dict[str, Any] | None) -> list[str]:
 
 def describe_stop(stop: dict[str, Any]) -> str:
     """'at t = 4.97 (step 123), before its horizon 600: interrupted: stopped by a signal (summary.json)'."""
-    where = f'at t = {_fmt(stop["time"])}' + (f' (step {stop["step"]})' if stop.get('step') is not None else '')
+    where = f'at t = {_fmt(stop["time"])}' + (
+        f' (step {stop["step"]})' if stop.get('step') is not None else ''
+    )
     if stop.get('horizon') is not None:
         where += f', before its horizon {_fmt(stop["horizon"])}'
     if not stop.get('final_step'):

@@ -3,7 +3,19 @@
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'io': ('BagError', 'BagMessage', 'BagReadError', 'BagWriter', 'UnknownMessageTypeError', 'decode', 'jazzy_typestore', 'read_bag'),
-    'recovery': ('BagRecoveryError', 'Recovery', 'reindex'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'io': (
+            'BagError',
+            'BagMessage',
+            'BagReadError',
+            'BagWriter',
+            'UnknownMessageTypeError',
+            'decode',
+            'jazzy_typestore',
+            'read_bag',
+        ),
+        'recovery': ('BagRecoveryError', 'Recovery', 'reindex'),
+    },
+)

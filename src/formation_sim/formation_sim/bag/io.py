@@ -259,7 +259,9 @@ class BagWriter:
             raise BagError(msg)
         self._custom_data[str(key)] = value
 
-    def add_topic(self, name: str, msgtype: str, *, offered_qos_profiles: Sequence[Qos] | None = None) -> None:
+    def add_topic(
+        self, name: str, msgtype: str, *, offered_qos_profiles: Sequence[Qos] | None = None
+    ) -> None:
         """Register topic `name` carrying `msgtype` (``package/msg/Type``); repeats are no-ops.
 
         `offered_qos_profiles`: its publishers' QoS (one profile per publisher), if known yet.
@@ -277,7 +279,9 @@ class BagWriter:
         if msgtype not in self._typestore.fielddefs:
             msg = f'message type {msgtype!r} of topic {name!r} is not in the typestore'
             raise UnknownMessageTypeError(msg)
-        self._topics[name] = TopicRecord(name=name, msgtype=msgtype, type_hash=type_hash(msgtype, typestore=self._typestore))
+        self._topics[name] = TopicRecord(
+            name=name, msgtype=msgtype, type_hash=type_hash(msgtype, typestore=self._typestore)
+        )
         if offered_qos_profiles is not None:
             self.set_offered_qos(name, offered_qos_profiles)
 
@@ -310,7 +314,10 @@ class BagWriter:
                 name=topic.msgtype, encoding='ros2msg', data=definition.encode()
             )
         channel = self._channels[topic.name] = self._writer.register_channel(
-            topic=topic.name, message_encoding=topic.serialization_format, schema_id=schema, metadata=topic.channel_metadata()
+            topic=topic.name,
+            message_encoding=topic.serialization_format,
+            schema_id=schema,
+            metadata=topic.channel_metadata(),
         )
         return channel
 
@@ -327,7 +334,9 @@ class BagWriter:
             raise BagError(msg)
         channel = self._channel(record)
         # log time = publish time = the recorder's stamp; sequence 0 (unknown), as rosbag2 writes it.
-        self._writer.add_message(channel_id=channel, log_time=timestamp_ns, data=bytes(data), publish_time=timestamp_ns)
+        self._writer.add_message(
+            channel_id=channel, log_time=timestamp_ns, data=bytes(data), publish_time=timestamp_ns
+        )
         record.message_count += 1
         self._start_ns = min(self._start_ns, timestamp_ns)
         self._end_ns = max(self._end_ns, timestamp_ns)
@@ -412,7 +421,9 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
             for connection, timestamp, rawdata in reader.messages():
                 yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(rawdata))
     except Exception as error:
-        if not type(error).__module__.startswith(('rosbags', 'mcap')) and not isinstance(error, (OSError, struct.error)):
+        if not type(error).__module__.startswith(('rosbags', 'mcap')) and not isinstance(
+            error, (OSError, struct.error)
+        ):
             raise
         raise BagReadError(f'{path}: cannot read the bag: {error}') from None
 

@@ -35,8 +35,6 @@ class BagRecoveryError(BagError):
     """`reindex` found nothing it could turn into a readable bag."""
 
 
-
-
 @dataclass(frozen=True, kw_only=True)
 class Recovery:
     """What `reindex` found and did."""
@@ -182,7 +180,9 @@ def reindex(bag_dir: Path | str) -> Recovery:
         raise BagRecoveryError(msg)
     mcap_path = candidates[0]
     if (healthy := _readable_counts(bag_dir)) is not None:
-        return Recovery(mcap_path=mcap_path, message_counts=healthy, rewritten=False, damaged_copy=None, healthy=True)
+        return Recovery(
+            mcap_path=mcap_path, message_counts=healthy, rewritten=False, damaged_copy=None, healthy=True
+        )
 
     salvage = _salvage(mcap_path)
     if missing := {c.schema_id for c in salvage.channels.values()} - set(salvage.schemas):
@@ -221,7 +221,9 @@ def reindex(bag_dir: Path | str) -> Recovery:
     try:
         write_bag_information(bag_dir, information)
     except OSError as error:
-        done = f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
+        done = (
+            f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
+        )
         msg = f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it again'
         raise BagRecoveryError(msg) from error
 

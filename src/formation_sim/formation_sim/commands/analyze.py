@@ -29,19 +29,29 @@ def register(subparsers) -> None:
         "animation. Differences from the run's summary.json are listed. Exit 0: all checks hold; "
         '1: a check fails or the bag differs from summary.json; 2: cannot analyse.',
     )
-    parser.add_argument('run', metavar='RUN_DIR_OR_BAG', type=Path, help='run folder (with bag/), bag folder or .mcap file')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: RUN_DIR/analysis, or <bag>_analysis)')
+    parser.add_argument(
+        'run', metavar='RUN_DIR_OR_BAG', type=Path, help='run folder (with bag/), bag folder or .mcap file'
+    )
+    parser.add_argument(
+        '--out', type=Path, default=None, help='output folder (default: RUN_DIR/analysis, or <bag>_analysis)'
+    )
     parser.add_argument(
         '--scenario',
         default=None,
         metavar='NAME_OR_YAML',
         help="the run's scenario, used only if neither the bag (/formation/scenario) nor its run folder (scenario.yaml) holds it",
     )
-    parser.add_argument('--markers', action='store_true', help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove')
+    parser.add_argument(
+        '--markers',
+        action='store_true',
+        help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove',
+    )
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--no-animation', action='store_true', help='skip the GIF (the slowest part)')
     parser.add_argument('--frames', type=POSITIVE_INT, default=150, help='animation frames (default 150)')
-    parser.add_argument('--fps', type=bounded_int(1, 100), default=15, help='animation frames per second, 1-100 (default 15)')
+    parser.add_argument(
+        '--fps', type=bounded_int(1, 100), default=15, help='animation frames per second, 1-100 (default 15)'
+    )
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
     parser.set_defaults(func=run)
 
@@ -88,9 +98,13 @@ def run(args: argparse.Namespace) -> int:
         location = locate(args.run)
         _refuse_unstarted(location.summary)
         if location.bag is None:
-            raise AnalysisError(f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)')
+            raise AnalysisError(
+                f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)'
+            )
         reading = Progress(f'reading {location.bag}', enabled=show)
-        bag_run = load_bag_run(location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading)
+        bag_run = load_bag_run(
+            location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading
+        )
         reading.close()
     except AnalysisError as error:
         print(f'formation analyze: error: {error}', file=sys.stderr)
@@ -128,8 +142,18 @@ def run(args: argparse.Namespace) -> int:
         copying.close()
         written['bag with /formation/markers'] = target.name
         if marked.skipped_topics:
-            print(f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}', file=sys.stderr)
-    report = build_report(bag_run, series=series, bounds=bounds, bounds_error=bounds_error, summary_path=location.summary, figures=written)
+            print(
+                f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}',
+                file=sys.stderr,
+            )
+    report = build_report(
+        bag_run,
+        series=series,
+        bounds=bounds,
+        bounds_error=bounds_error,
+        summary_path=location.summary,
+        figures=written,
+    )
     markdown, data = write_report(report, out)
     checks = report['bag_checks'] + report['theorem_checks']
     failed = [check['name'] for check in checks if not check['ok'] and check['binding']]
@@ -139,13 +163,30 @@ def run(args: argparse.Namespace) -> int:
         print(markdown)
     else:
         _print_findings(
-            record, report, failed=failed, unmet=unmet, differs=differs, markdown=markdown, data=data, out=out, written=written
+            record,
+            report,
+            failed=failed,
+            unmet=unmet,
+            differs=differs,
+            markdown=markdown,
+            data=data,
+            out=out,
+            written=written,
         )
     return EXIT_FINDINGS if failed or differs else EXIT_OK
 
 
 def _print_findings(
-    record, report: dict, *, failed: list[str], unmet: list[str], differs: bool, markdown, data, out, written: dict[str, str]
+    record,
+    report: dict,
+    *,
+    failed: list[str],
+    unmet: list[str],
+    differs: bool,
+    markdown,
+    data,
+    out,
+    written: dict[str, str],
 ) -> None:
     """What `formation analyze` found, on stderr, and the files it wrote, on stdout."""
     from formation_sim.analysis.report import describe_stop
@@ -160,7 +201,11 @@ def _print_findings(
     if report['run']['stopped']:
         print(f'the run stopped early {describe_stop(report["run"]["stopped"])}', file=sys.stderr)
     if report['summary_json'] is not None:
-        state = 'equals the bag' if not differs else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
+        state = (
+            'equals the bag'
+            if not differs
+            else f'DIFFERS from the bag in {len(report["summary_json"]["differences"])} values'
+        )
         print(f'summary.json {state}', file=sys.stderr)
     for name in failed:
         print(f'check failed: {name}', file=sys.stderr)
@@ -169,7 +214,9 @@ def _print_findings(
     saturation = record.extra.get('saturation')
     if saturation and saturation.get('total'):
         kinds = ', '.join(f'{kind} {entry["count"]}' for kind, entry in saturation['by_kind'].items())
-        print(f'saturated commands: {saturation["total"]} ({kinds}); the theorems assume none', file=sys.stderr)
+        print(
+            f'saturated commands: {saturation["total"]} ({kinds}); the theorems assume none', file=sys.stderr
+        )
     print(f'report:  {markdown}')
     print(f'json:    {data}')
     for title, name in written.items():

@@ -65,7 +65,9 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
     try:
         return POSITIVE_INT(text)
     except argparse.ArgumentTypeError as error:
-        raise argparse.ArgumentTypeError(str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)) from None
+        raise argparse.ArgumentTypeError(
+            str(error).replace('an integer >= 1', "an integer >= 1 or 'auto'", 1)
+        ) from None
 
 
 def POSITIVE_OR_AUTO(text: str) -> float | str:
@@ -75,7 +77,9 @@ def POSITIVE_OR_AUTO(text: str) -> float | str:
     try:
         return POSITIVE(text)
     except argparse.ArgumentTypeError as error:
-        raise argparse.ArgumentTypeError(str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)) from None
+        raise argparse.ArgumentTypeError(
+            str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)
+        ) from None
 
 
 def bounded_int(low: int, high: int) -> Callable[[str], float]:
@@ -92,13 +96,17 @@ def refuse(command: str, error: Exception | str) -> int:
 
 
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})')
+    parser.add_argument(
+        'scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})'
+    )
 
 
 def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
     """SCENARIO, --horizon, --out (default: a new folder under runs/) and --force."""
     add_scenario_argument(parser)
-    parser.add_argument('--horizon', type=POSITIVE, default=None, help="final time in seconds (default: the scenario's)")
+    parser.add_argument(
+        '--horizon', type=POSITIVE, default=None, help="final time in seconds (default: the scenario's)"
+    )
     add_scale_arguments(parser)
     parser.add_argument(
         '--out',
@@ -116,24 +124,33 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
 def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
     """--speed-scale K and --threshold-floor C, overriding the scenario's gains (docs/SPEED_SCALE.md)."""
     parser.add_argument(
-        '--speed-scale', type=POSITIVE_OR_AUTO, default=None, metavar='K',
+        '--speed-scale',
+        type=POSITIVE_OR_AUTO,
+        default=None,
+        metavar='K',
         help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
         "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1). "
         "auto: the largest κ that keeps the exact run's commands 1.25 times below the robots' limits "
-        "(--max-speed, --max-angular-speed, --max-acceleration; README, \"Running on robots\")",
-    )  # fmt: skip
+        '(--max-speed, --max-angular-speed, --max-acceleration; README, "Running on robots")',
+    )
     parser.add_argument(
-        '--threshold-floor', type=NON_NEGATIVE, default=None, metavar='C',
+        '--threshold-floor',
+        type=NON_NEGATIVE,
+        default=None,
+        metavar='C',
         help="threshold floor c0 >= 0 of c0 + α e^{-κβt}, in the units of the paper's e_i / E_i "
         "(default: the scenario's gains.threshold_floor, 0)",
-    )  # fmt: skip
+    )
 
 
 def scale_options(args: argparse.Namespace) -> dict:
     """The scale overrides of `add_scale_arguments` (None: the scenario's), for `load_valid_scenario`;
     `--speed-scale auto` is left to `formation_sim.commands.limits.resolve_speed_scale` (None here)."""
     speed_scale = getattr(args, 'speed_scale', None)
-    return {'speed_scale': None if speed_scale == 'auto' else speed_scale, 'threshold_floor': getattr(args, 'threshold_floor', None)}
+    return {
+        'speed_scale': None if speed_scale == 'auto' else speed_scale,
+        'threshold_floor': getattr(args, 'threshold_floor', None),
+    }
 
 
 def check_report_argument(command: str, out: Path | None) -> bool:
@@ -160,7 +177,10 @@ def load_valid_scenario(
         return None
     report = validate_scenario(scenario)
     if not report.ok:
-        print(f"formation {command}: the scenario breaks the theorems' hypotheses; nothing was run.", file=sys.stderr)
+        print(
+            f"formation {command}: the scenario breaks the theorems' hypotheses; nothing was run.",
+            file=sys.stderr,
+        )
         print(report.format(), file=sys.stderr)
         return None
     for warning in report.warnings:
@@ -200,7 +220,7 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
         '--backend',
         choices=BACKENDS,
         default='exact',
-        help=f"the world: exact (the simulator, default), a robot kind ({', '.join(ROBOT_MODELS)}: simulated robots), "
+        help=f'the world: exact (the simulator, default), a robot kind ({", ".join(ROBOT_MODELS)}: simulated robots), '
         'external (real robots)',
     )
     parser.add_argument(
@@ -241,7 +261,7 @@ def plan_options(args: argparse.Namespace) -> dict:
     robots = None
     if args.backend != 'exact':
         if args.backend == 'external' and args.robot is None:
-            raise RunError(f"--backend external needs --robot {'|'.join(ROBOT_MODELS)} (what the robots are)")
+            raise RunError(f'--backend external needs --robot {"|".join(ROBOT_MODELS)} (what the robots are)')
         robots = robot_options(args, args.robot or args.backend)
     return {
         'out_dir': args.out,
@@ -265,33 +285,137 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
     from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, ROBOTS_PER_PROCESS, RobotOptions
 
     defaults = RobotOptions()
-    group = parser.add_argument_group(f"robots (backends {', '.join(ROBOT_MODELS)}, external)")
+    group = parser.add_argument_group(f'robots (backends {", ".join(ROBOT_MODELS)}, external)')
     add = group.add_argument
-    add(model_flag, choices=ROBOT_MODELS, default=None, help="what the robots are (default: the backend's model)")
-    add('--control-point-distance', type=POSITIVE, default=defaults.control_point_distance, metavar='L',
-        help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})')
-    add('--max-speed', type=POSITIVE, default=math.inf, metavar='V', help='speed limit of agents and robots [m/s] (default: none)')
-    add('--max-angular-speed', type=POSITIVE, default=math.inf, metavar='W', help='turn-rate limit [rad/s] (default: none)')
-    add('--wheelbase', type=POSITIVE, default=None, metavar='L', help='car: wheelbase from the rear to the front axle [m]')
-    add('--max-steering-angle', type=POSITIVE, default=math.inf, metavar='PHI',
-        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)')
-    add('--max-acceleration', type=POSITIVE, default=math.inf, metavar='A', help='ETA-2 agents: acceleration limit [m/s²] (default: none)')
-    add('--command-rate', type=POSITIVE, default=defaults.command_rate, metavar='HZ',
-        help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})')
-    add('--pose-type', choices=POSE_TYPES, default=defaults.pose_type, help=f'what the agents read (default {defaults.pose_type})')
-    add('--pose-timeout', type=POSITIVE, default=defaults.pose_timeout, metavar='S',
-        help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})')
-    add('--world-frame', default=defaults.world_frame, help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})')
-    add('--pose-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the position noise [m]')
-    add('--yaw-noise', type=NON_NEGATIVE, default=0.0, metavar='SIGMA', help='simulated robots: σ of the heading noise [rad]')
-    add('--latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay of every pose [s]')
-    add('--command-latency', type=NON_NEGATIVE, default=0.0, metavar='S', help='simulated robots: delay before a command acts [s]')
-    add('--robot-seed', type=NON_NEGATIVE_INT, default=0, metavar='N', help='simulated robots: seed of the noise')
-    add('--robot-rate', type=POSITIVE, default=defaults.rate, metavar='HZ', help=f'simulated robots: ticks per second (default {defaults.rate:g})')
-    add('--initial-heading', type=FINITE, default=None, metavar='RAD',
-        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)")
-    add('--robots-per-process', type=POSITIVE_INT, default=ROBOTS_PER_PROCESS, metavar='K',
-        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})')
+    add(
+        model_flag,
+        choices=ROBOT_MODELS,
+        default=None,
+        help="what the robots are (default: the backend's model)",
+    )
+    add(
+        '--control-point-distance',
+        type=POSITIVE,
+        default=defaults.control_point_distance,
+        metavar='L',
+        help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})',
+    )
+    add(
+        '--max-speed',
+        type=POSITIVE,
+        default=math.inf,
+        metavar='V',
+        help='speed limit of agents and robots [m/s] (default: none)',
+    )
+    add(
+        '--max-angular-speed',
+        type=POSITIVE,
+        default=math.inf,
+        metavar='W',
+        help='turn-rate limit [rad/s] (default: none)',
+    )
+    add(
+        '--wheelbase',
+        type=POSITIVE,
+        default=None,
+        metavar='L',
+        help='car: wheelbase from the rear to the front axle [m]',
+    )
+    add(
+        '--max-steering-angle',
+        type=POSITIVE,
+        default=math.inf,
+        metavar='PHI',
+        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)',
+    )
+    add(
+        '--max-acceleration',
+        type=POSITIVE,
+        default=math.inf,
+        metavar='A',
+        help='ETA-2 agents: acceleration limit [m/s²] (default: none)',
+    )
+    add(
+        '--command-rate',
+        type=POSITIVE,
+        default=defaults.command_rate,
+        metavar='HZ',
+        help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})',
+    )
+    add(
+        '--pose-type',
+        choices=POSE_TYPES,
+        default=defaults.pose_type,
+        help=f'what the agents read (default {defaults.pose_type})',
+    )
+    add(
+        '--pose-timeout',
+        type=POSITIVE,
+        default=defaults.pose_timeout,
+        metavar='S',
+        help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})',
+    )
+    add(
+        '--world-frame',
+        default=defaults.world_frame,
+        help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})',
+    )
+    add(
+        '--pose-noise',
+        type=NON_NEGATIVE,
+        default=0.0,
+        metavar='SIGMA',
+        help='simulated robots: σ of the position noise [m]',
+    )
+    add(
+        '--yaw-noise',
+        type=NON_NEGATIVE,
+        default=0.0,
+        metavar='SIGMA',
+        help='simulated robots: σ of the heading noise [rad]',
+    )
+    add(
+        '--latency',
+        type=NON_NEGATIVE,
+        default=0.0,
+        metavar='S',
+        help='simulated robots: delay of every pose [s]',
+    )
+    add(
+        '--command-latency',
+        type=NON_NEGATIVE,
+        default=0.0,
+        metavar='S',
+        help='simulated robots: delay before a command acts [s]',
+    )
+    add(
+        '--robot-seed',
+        type=NON_NEGATIVE_INT,
+        default=0,
+        metavar='N',
+        help='simulated robots: seed of the noise',
+    )
+    add(
+        '--robot-rate',
+        type=POSITIVE,
+        default=defaults.rate,
+        metavar='HZ',
+        help=f'simulated robots: ticks per second (default {defaults.rate:g})',
+    )
+    add(
+        '--initial-heading',
+        type=FINITE,
+        default=None,
+        metavar='RAD',
+        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)",
+    )
+    add(
+        '--robots-per-process',
+        type=POSITIVE_INT,
+        default=ROBOTS_PER_PROCESS,
+        metavar='K',
+        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})',
+    )
 
 
 def robot_options(args: argparse.Namespace, model: str):
@@ -325,7 +449,13 @@ def robot_options(args: argparse.Namespace, model: str):
 
 
 def add_domain_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help="ROS_DOMAIN_ID (default: the environment's)")
+    parser.add_argument(
+        '--domain-id',
+        type=DOMAIN_ID,
+        default=None,
+        metavar='N',
+        help="ROS_DOMAIN_ID (default: the environment's)",
+    )
 
 
 @contextmanager
@@ -343,7 +473,12 @@ def inspection_node(command: str, domain_id: int | None) -> Iterator[Node]:
     rclpy.init(context=context, domain_id=domain_id)
     node = None
     try:
-        node = Node(f'formation_{command}_{os.getpid()}', context=context, start_parameter_services=False, enable_rosout=False)
+        node = Node(
+            f'formation_{command}_{os.getpid()}',
+            context=context,
+            start_parameter_services=False,
+            enable_rosout=False,
+        )
         yield node
     finally:
         if node is not None:

@@ -10,7 +10,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, NON_NEGATIVE, check_report_argument, refuse
+from formation_sim.commands.common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    NON_NEGATIVE,
+    check_report_argument,
+    refuse,
+)
 
 
 def register(subparsers) -> None:
@@ -25,11 +32,24 @@ def register(subparsers) -> None:
     )
     parser.add_argument('run_a', metavar='RUN_A', type=Path, help='run folder, bag or summary.json')
     parser.add_argument('run_b', metavar='RUN_B', type=Path, help='run folder, bag or summary.json')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: RUN_A/compare-<name of RUN_B>)')
-    parser.add_argument('--scenario', default=None, metavar='NAME_OR_YAML', help='scenario for bags that do not hold it (see formation analyze)')
+    parser.add_argument(
+        '--out', type=Path, default=None, help='output folder (default: RUN_A/compare-<name of RUN_B>)'
+    )
+    parser.add_argument(
+        '--scenario',
+        default=None,
+        metavar='NAME_OR_YAML',
+        help='scenario for bags that do not hold it (see formation analyze)',
+    )
     parser.add_argument('--label-a', default=None, help='name of run A in the report (default: its mode)')
     parser.add_argument('--label-b', default=None, help='name of run B in the report (default: its mode)')
-    parser.add_argument('--tolerance', type=NON_NEGATIVE, default=None, metavar='T', help='exit 1 unless event counts are equal and every deviation is <= T')
+    parser.add_argument(
+        '--tolerance',
+        type=NON_NEGATIVE,
+        default=None,
+        metavar='T',
+        help='exit 1 unless event counts are equal and every deviation is <= T',
+    )
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the report path')
     parser.set_defaults(func=run)
@@ -47,7 +67,14 @@ def _default_out(a: Path, b: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.analysis.compare import CompareError, compare_runs, load_run, overlay_figures, within, write_comparison
+    from formation_sim.analysis.compare import (
+        CompareError,
+        compare_runs,
+        load_run,
+        overlay_figures,
+        within,
+        write_comparison,
+    )
     from formation_sim.progress import Progress
 
     if not check_report_argument('compare', args.out):

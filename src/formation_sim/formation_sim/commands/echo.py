@@ -30,8 +30,20 @@ def register(subparsers) -> None:
     )
     add_domain_argument(parser)
     parser.add_argument('--count', type=POSITIVE_INT, default=None, metavar='K', help='exit after K messages')
-    parser.add_argument('--timeout', type=POSITIVE, default=None, metavar='S', help='exit 1 if fewer than --count messages (or none) came within S seconds')
-    parser.add_argument('--wait', type=NON_NEGATIVE, default=10.0, metavar='S', help='wait up to S seconds for a publisher of TOPIC (default 10)')
+    parser.add_argument(
+        '--timeout',
+        type=POSITIVE,
+        default=None,
+        metavar='S',
+        help='exit 1 if fewer than --count messages (or none) came within S seconds',
+    )
+    parser.add_argument(
+        '--wait',
+        type=NON_NEGATIVE,
+        default=10.0,
+        metavar='S',
+        help='wait up to S seconds for a publisher of TOPIC (default 10)',
+    )
     parser.add_argument('--raw', action='store_true', help='do not decode formation layouts')
     parser.set_defaults(func=run)
 
@@ -84,7 +96,10 @@ def _echo(node, args: argparse.Namespace) -> int:
     deadline = None if args.timeout is None else time.monotonic() + args.timeout
     while args.count is None or received < args.count:
         if deadline is not None and time.monotonic() > deadline:
-            print(f'formation echo: {received} message(s) on {args.topic} within {args.timeout} s', file=sys.stderr)
+            print(
+                f'formation echo: {received} message(s) on {args.topic} within {args.timeout} s',
+                file=sys.stderr,
+            )
             return 1
         executor.spin_once(timeout_sec=0.1)
     return 0

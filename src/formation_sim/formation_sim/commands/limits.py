@@ -24,7 +24,10 @@ def robot_limits(args: argparse.Namespace) -> RobotLimits:
         value = getattr(args, name, None)
         return math.inf if value is None else value
 
-    holonomic = 'holonomic' in (getattr(args, 'robot', None), getattr(args, 'backend', None)) and getattr(args, 'robot', None) != 'unicycle'
+    holonomic = (
+        'holonomic' in (getattr(args, 'robot', None), getattr(args, 'backend', None))
+        and getattr(args, 'robot', None) != 'unicycle'
+    )
     return RobotLimits(
         max_speed=given('max_speed'),
         max_angular_speed=math.inf if holonomic else given('max_angular_speed'),
@@ -44,14 +47,35 @@ def speed_scale_of(scenario: Scenario) -> float:
 def add_limit_arguments(parser: argparse.ArgumentParser) -> None:
     """The robots' limits, for a command that has no robots but may choose κ from them (`simulate`)."""
     group = parser.add_argument_group('robot limits (for --speed-scale auto)')
-    group.add_argument('--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]")
-    group.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
-    group.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L',
-                       help='unicycles: the control point l ahead of the axle [m] (default 0.1)')  # fmt: skip
-    group.add_argument('--max-acceleration', type=POSITIVE, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
+    group.add_argument(
+        '--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]"
+    )
+    group.add_argument(
+        '--max-angular-speed',
+        type=POSITIVE,
+        default=None,
+        metavar='W',
+        help='unicycles: their turn-rate limit [rad/s]',
+    )
+    group.add_argument(
+        '--control-point-distance',
+        type=POSITIVE,
+        default=0.1,
+        metavar='L',
+        help='unicycles: the control point l ahead of the axle [m] (default 0.1)',
+    )
+    group.add_argument(
+        '--max-acceleration',
+        type=POSITIVE,
+        default=None,
+        metavar='A',
+        help='ETA-2: the acceleration limit [m/s²]',
+    )
 
 
-def resolve_speed_scale(scenario: Scenario, args: argparse.Namespace, command: str) -> tuple[Scenario, dict | None] | None:
+def resolve_speed_scale(
+    scenario: Scenario, args: argparse.Namespace, command: str
+) -> tuple[Scenario, dict | None] | None:
     """`--speed-scale auto`: (the scenario at the observed κ of `choose_speed_scale` for the parsed
     limits, what to record in summary.json's extra.speed_scale), after saying so on stderr; any
     other value: (the scenario, None).  None after printing why auto cannot choose (nothing started)."""
@@ -70,21 +94,34 @@ def resolve_speed_scale(scenario: Scenario, args: argparse.Namespace, command: s
     try:
         scaled = scenario.with_scale(speed_scale=kappa)
     except ScenarioError as error:  # κ outside the rule speed_scale: the limits cannot be met
-        refuse(command, f'--speed-scale auto: the limits ask for κ = {kappa:.4g}, which cannot be run: {error}')
+        refuse(
+            command, f'--speed-scale auto: the limits ask for κ = {kappa:.4g}, which cannot be run: {error}'
+        )
         return None
     observed = choice.observed
     settle = observed.settle_time
     print(
         f'formation {command}: --speed-scale auto: κ = {kappa:.4g} ({choice.source}: the exact run at κ = 1 asks for '
-        f'{observed.speed:.4g} m/s' + ('' if observed.acceleration is None else f', {observed.acceleration:.4g} m/s²')
+        f'{observed.speed:.4g} m/s'
+        + ('' if observed.acceleration is None else f', {observed.acceleration:.4g} m/s²')
         + f', kept {observed.margin:g}× below the {observed.binding}'
-        + (f'; {100 * choice.settling.fraction:g} % of the formation error after {settle:.3g} s' if math.isfinite(settle) else '')
+        + (
+            f'; {100 * choice.settling.fraction:g} % of the formation error after {settle:.3g} s'
+            if math.isfinite(settle)
+            else ''
+        )
         + (f', beyond the horizon {horizon:g} s' if math.isfinite(settle) and settle > horizon else '')
         + ')',
         file=sys.stderr,
     )
-    record = {'value': kappa, 'source': choice.source, 'binding': observed.binding, 'margin': observed.margin,
-              'limits': choice.limits.to_dict(), 'guaranteed': None if choice.guaranteed is None else choice.guaranteed.value}  # fmt: skip
+    record = {
+        'value': kappa,
+        'source': choice.source,
+        'binding': observed.binding,
+        'margin': observed.margin,
+        'limits': choice.limits.to_dict(),
+        'guaranteed': None if choice.guaranteed is None else choice.guaranteed.value,
+    }
     if record['guaranteed'] is not None and not math.isfinite(record['guaranteed']):
         record['guaranteed'] = None
     return scaled, record
@@ -105,11 +142,15 @@ def exceeded(choice: SpeedScaleChoice, kappa: float) -> list[str]:
         )
     acceleration = choice.observed.acceleration
     if acceleration is not None and kappa * kappa * acceleration > limits.max_acceleration:
-        found.append(f'{kappa * kappa * acceleration:.4g} m/s² beyond --max-acceleration {limits.max_acceleration:g} m/s²')
+        found.append(
+            f'{kappa * kappa * acceleration:.4g} m/s² beyond --max-acceleration {limits.max_acceleration:g} m/s²'
+        )
     return found
 
 
-def check_saturation(scenario: Scenario, *, limits: RobotLimits, allow: bool, command: str = 'run') -> str | None:
+def check_saturation(
+    scenario: Scenario, *, limits: RobotLimits, allow: bool, command: str = 'run'
+) -> str | None:
     """Before a robot run: None if the exact run at the scenario's κ stays within `limits` (or there
     are none); else the refusal (or, with `allow`, after printing it as a warning, None).
 
@@ -131,16 +172,24 @@ def check_saturation(scenario: Scenario, *, limits: RobotLimits, allow: bool, co
         return None
     remedy = (
         f'--speed-scale auto (κ = {choice.value:.4g}: the largest command {OBSERVED_MARGIN:g}× below the limits'
-        + (f', settling to {100 * choice.settling.fraction:g} % in {choice.observed.settle_time:.3g} s' if math.isfinite(choice.observed.settle_time) else '')
+        + (
+            f', settling to {100 * choice.settling.fraction:g} % in {choice.observed.settle_time:.3g} s'
+            if math.isfinite(choice.observed.settle_time)
+            else ''
+        )
         + ')'
     )
     message = (
-        f'the exact run of {scenario.name} at speed scale κ = {kappa:g} asks for ' + '; '.join(found)
+        f'the exact run of {scenario.name} at speed scale κ = {kappa:g} asks for '
+        + '; '.join(found)
         + f': those commands would be clipped, which the theorems do not cover (connectivity and convergence are '
         f'not guaranteed while clipping lasts). Run slower with {remedy}, or add --allow-saturation to run anyway'
     )
     if allow:
-        print(f'formation {command}: warning: {message.replace(", or add --allow-saturation to run anyway", "")} '
-              '(--allow-saturation: running anyway; summary.json extra.saturation counts the clipped commands)', file=sys.stderr)  # fmt: skip
+        print(
+            f'formation {command}: warning: {message.replace(", or add --allow-saturation to run anyway", "")} '
+            '(--allow-saturation: running anyway; summary.json extra.saturation counts the clipped commands)',
+            file=sys.stderr,
+        )
         return None
     return message

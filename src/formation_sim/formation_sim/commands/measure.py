@@ -33,31 +33,75 @@ def register(subparsers) -> None:
         help='write a scenario whose agents start where the robots are (their poses, now)',
         description=__doc__.split('\n\n', 1)[1].replace('\n', ' '),
     )
-    parser.add_argument('scenario', metavar='SCENARIO', help='built-in scenario or file; agent positions may be missing')
+    parser.add_argument(
+        'scenario', metavar='SCENARIO', help='built-in scenario or file; agent positions may be missing'
+    )
     parser.add_argument('--robot', required=True, choices=KIND_NAMES, help='what the robots are (their kind)')
-    parser.add_argument('--pose-type', choices=POSE_TYPES, default='odom', help='the topic read per robot: robot/odom (default) or robot/pose')
-    parser.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L', help='a unicycle or car: l ahead of the axle [m] (default 0.1)')
-    parser.add_argument('--wheelbase', type=POSITIVE, default=None, metavar='W', help="a car's wheelbase [m] (its kind's default otherwise)")
-    parser.add_argument('--timeout', type=POSITIVE, default=10.0, metavar='S', help='wait up to S seconds for every robot (default 10)')
-    parser.add_argument('--out', type=Path, required=True, metavar='FILE', help='the scenario to write (.json or YAML); never overwritten')
+    parser.add_argument(
+        '--pose-type',
+        choices=POSE_TYPES,
+        default='odom',
+        help='the topic read per robot: robot/odom (default) or robot/pose',
+    )
+    parser.add_argument(
+        '--control-point-distance',
+        type=POSITIVE,
+        default=0.1,
+        metavar='L',
+        help='a unicycle or car: l ahead of the axle [m] (default 0.1)',
+    )
+    parser.add_argument(
+        '--wheelbase',
+        type=POSITIVE,
+        default=None,
+        metavar='W',
+        help="a car's wheelbase [m] (its kind's default otherwise)",
+    )
+    parser.add_argument(
+        '--timeout',
+        type=POSITIVE,
+        default=10.0,
+        metavar='S',
+        help='wait up to S seconds for every robot (default 10)',
+    )
+    parser.add_argument(
+        '--out',
+        type=Path,
+        required=True,
+        metavar='FILE',
+        help='the scenario to write (.json or YAML); never overwritten',
+    )
     add_domain_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.model.scenario import ScenarioError, dump_scenario, load_scenario_data, scenario_from_dict
+    from formation_sim.model.scenario import (
+        ScenarioError,
+        dump_scenario,
+        load_scenario_data,
+        scenario_from_dict,
+    )
 
     if args.out.exists():
-        return refuse('measure', f'--out {args.out}: exists; choose a new file (an earlier scenario is never overwritten)')
+        return refuse(
+            'measure',
+            f'--out {args.out}: exists; choose a new file (an earlier scenario is never overwritten)',
+        )
     try:
         data, name, source = load_scenario_data(args.scenario)
         ids, dimension, double = _team(data)
-        geometry = Geometry(control_point_distance=args.control_point_distance, **({'wheelbase': args.wheelbase} if args.wheelbase else {}))
+        geometry = Geometry(
+            control_point_distance=args.control_point_distance,
+            **({'wheelbase': args.wheelbase} if args.wheelbase else {}),
+        )
         problems = robot_kind(args.robot).placement_problems(dimension=dimension, geometry=geometry)
         if problems:
             raise ScenarioError('; '.join(problems))
         if double and args.pose_type == 'pose':
-            raise ScenarioError('double integrators start with a velocity: read it from odometry (--pose-type odom)')
+            raise ScenarioError(
+                'double integrators start with a velocity: read it from odometry (--pose-type odom)'
+            )
     except ScenarioError as error:
         return refuse('measure', error)
     try:
@@ -65,11 +109,15 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 130
     if missing := [i for i in ids if i not in measured]:
-        print(f'formation measure: no pose within {args.timeout:g} s from robots {", ".join(map(str, missing))} '
-              f'(topics /agent_<i>/robot/{args.pose_type}, ROS domain {args.domain_id if args.domain_id is not None else "of the environment"})',
-              file=sys.stderr)  # fmt: skip
+        print(
+            f'formation measure: no pose within {args.timeout:g} s from robots {", ".join(map(str, missing))} '
+            f'(topics /agent_<i>/robot/{args.pose_type}, ROS domain {args.domain_id if args.domain_id is not None else "of the environment"})',
+            file=sys.stderr,
+        )
         return 1
-    starts = {i: _start(fields, args=args, dimension=dimension, double=double) for i, fields in measured.items()}
+    starts = {
+        i: _start(fields, args=args, dimension=dimension, double=double) for i, fields in measured.items()
+    }
     completed = complete(data, starts)
     try:
         scenario = scenario_from_dict(completed, name=name)
@@ -79,7 +127,9 @@ def run(args: argparse.Namespace) -> int:
     for i in ids:
         position, heading, _ = starts[i]
         print(f'robot {i}: at {", ".join(f"{v:.4f}" for v in position)} m, heading {heading:.4f} rad')
-    print(f'wrote {args.out}: `formation validate {args.out}` checks the start, `formation run {args.out} --backend external` runs it')
+    print(
+        f'wrote {args.out}: `formation validate {args.out}` checks the start, `formation run {args.out} --backend external` runs it'
+    )
     return 0
 
 
@@ -88,7 +138,9 @@ def _team(data: Any) -> tuple[list[int], int, bool]:
     from formation_sim.model.scenario import ScenarioError
 
     if not isinstance(data, Mapping) or not isinstance(data.get('agents'), Mapping) or not data['agents']:
-        raise ScenarioError('the scenario needs a mapping `agents` of agent ids (their positions may be missing)')
+        raise ScenarioError(
+            'the scenario needs a mapping `agents` of agent ids (their positions may be missing)'
+        )
     try:
         ids = sorted(int(agent) for agent in data['agents'])
     except (TypeError, ValueError):
@@ -99,12 +151,20 @@ def _team(data: Any) -> tuple[list[int], int, bool]:
     return ids, dimension, data.get('dynamics') == 'double'
 
 
-def _start(fields: tuple, *, args: argparse.Namespace, dimension: int, double: bool) -> tuple[list[float], float, list[float] | None]:
+def _start(
+    fields: tuple, *, args: argparse.Namespace, dimension: int, double: bool
+) -> tuple[list[float], float, list[float] | None]:
     """(the scenario position, the heading, the velocity if ETA-2) from a pose's fields."""
     from formation_agent.core import kinematics
     from formation_sim.sim.robots import sample_from_fields
 
-    sample = sample_from_fields(*fields, model=args.robot, dimension=dimension, control_point_distance=args.control_point_distance, epoch=0.0)
+    sample = sample_from_fields(
+        *fields,
+        model=args.robot,
+        dimension=dimension,
+        control_point_distance=args.control_point_distance,
+        epoch=0.0,
+    )
     pose = fields[2]
     heading = kinematics.yaw(pose[3:])
     velocity = [float(v) for v in sample.velocity] if double else None
@@ -138,7 +198,11 @@ def _read_poses(args: argparse.Namespace, ids: list[int]) -> dict[int, tuple]:
     from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic
     from formation_sim.commands.common import inspection_node
 
-    kind, topic, fields_of = (Odometry, robot_odom_topic, odometry_fields) if args.pose_type == 'odom' else (PoseStamped, robot_pose_topic, pose_stamped_fields)
+    kind, topic, fields_of = (
+        (Odometry, robot_odom_topic, odometry_fields)
+        if args.pose_type == 'odom'
+        else (PoseStamped, robot_pose_topic, pose_stamped_fields)
+    )
     measured: dict[int, tuple] = {}
 
     def take(data: bytes, robot: int) -> None:
@@ -151,7 +215,12 @@ def _read_poses(args: argparse.Namespace, ids: list[int]) -> dict[int, tuple]:
             measured[robot] = fields
 
     with inspection_node('measure', args.domain_id) as node:
-        subscriptions = [node.create_subscription(kind, topic(i), lambda data, robot=i: take(data, robot), ROBOT_POSE_QOS, raw=True) for i in ids]
+        subscriptions = [
+            node.create_subscription(
+                kind, topic(i), lambda data, robot=i: take(data, robot), ROBOT_POSE_QOS, raw=True
+            )
+            for i in ids
+        ]
         executor = SingleThreadedExecutor(context=node.context)
         executor.add_node(node)
         deadline = time.monotonic() + args.timeout

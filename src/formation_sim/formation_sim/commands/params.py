@@ -53,7 +53,9 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     scenario = resolved[0]  # the agents' parameter files carry κ
     try:
-        plan = FormationRun(scenario, **plan_options(args)).plan  # every argument checked, nothing touched yet
+        plan = FormationRun(
+            scenario, **plan_options(args)
+        ).plan  # every argument checked, nothing touched yet
         out = claim_out_dir(args.out, scenario_name=scenario.name, kind='params', force=args.force)
     except (RunError, RunFolderError) as error:
         return refuse('params', error)

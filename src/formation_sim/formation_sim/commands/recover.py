@@ -33,11 +33,15 @@ def run(args: argparse.Namespace) -> int:
     except BagRecoveryError as error:
         return refuse('recover', error)
     if recovery.healthy:
-        print(f'{bag}: healthy (metadata.yaml and a complete MCAP file, {recovery.message_count} messages); left as it is')
+        print(
+            f'{bag}: healthy (metadata.yaml and a complete MCAP file, {recovery.message_count} messages); left as it is'
+        )
         return 0
     if recovery.rewritten:
-        print(f'{bag}: recovered {recovery.message_count} messages into {recovery.mcap_path.name}; '
-              f'the cut-short original is kept as {recovery.damaged_copy.name}')
+        print(
+            f'{bag}: recovered {recovery.message_count} messages into {recovery.mcap_path.name}; '
+            f'the cut-short original is kept as {recovery.damaged_copy.name}'
+        )
     else:
         print(f'{bag}: the MCAP file was complete; metadata.yaml rebuilt ({recovery.message_count} messages)')
     for topic, count in sorted(recovery.message_counts.items()):

@@ -6,7 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import NON_NEGATIVE, NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, add_domain_argument, refuse
+from formation_sim.commands.common import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    add_domain_argument,
+    refuse,
+)
 
 
 def register(subparsers) -> None:
@@ -21,13 +28,26 @@ def register(subparsers) -> None:
         'even with --as-fast-as-possible) or keep last --depth.',
     )
     parser.add_argument('bag', metavar='BAG', type=Path, help='bag folder (or its .mcap file)')
-    parser.add_argument('--rate', type=NON_NEGATIVE, default=1.0, help='speed factor (default 1; 0 = as fast as possible)')
+    parser.add_argument(
+        '--rate', type=NON_NEGATIVE, default=1.0, help='speed factor (default 1; 0 = as fast as possible)'
+    )
     parser.add_argument('--as-fast-as-possible', action='store_true', help='same as --rate 0')
     add_domain_argument(parser)
     parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC', help='replay only these topics')
     parser.add_argument('--no-clock', action='store_true', help='do not publish /clock')
-    parser.add_argument('--depth', type=POSITIVE_INT, default=None, help='keep-last history of this depth instead of keep-all (may drop messages for slow readers)')
-    parser.add_argument('--delay', type=NON_NEGATIVE, default=0.0, metavar='S', help='wait S seconds before the first message (discovery)')
+    parser.add_argument(
+        '--depth',
+        type=POSITIVE_INT,
+        default=None,
+        help='keep-last history of this depth instead of keep-all (may drop messages for slow readers)',
+    )
+    parser.add_argument(
+        '--delay',
+        type=NON_NEGATIVE,
+        default=0.0,
+        metavar='S',
+        help='wait S seconds before the first message (discovery)',
+    )
     parser.add_argument(
         '--wait-for-subscribers',
         type=NON_NEGATIVE_INT,
@@ -35,7 +55,13 @@ def register(subparsers) -> None:
         metavar='K',
         help='wait until every replayed topic has K matched subscribers before starting (timeout --wait-timeout)',
     )
-    parser.add_argument('--wait-timeout', type=POSITIVE, default=30.0, metavar='S', help='give up waiting for subscribers after S seconds (default 30)')
+    parser.add_argument(
+        '--wait-timeout',
+        type=POSITIVE,
+        default=30.0,
+        metavar='S',
+        help='give up waiting for subscribers after S seconds (default 30)',
+    )
     parser.add_argument('--quiet', action='store_true', help='no progress')
     parser.set_defaults(func=run)
 
@@ -66,5 +92,8 @@ def run(args: argparse.Namespace) -> int:
         print(f'warning: {topic} not replayed: {why}', file=sys.stderr)
     if not args.quiet:
         clock = f', {result.clock_messages} /clock' if result.clock_messages else ''
-        print(f'published {result.published} messages on {len(result.per_topic)} topics{clock} in {result.wall_time:.2f} s', file=sys.stderr)
+        print(
+            f'published {result.published} messages on {len(result.per_topic)} topics{clock} in {result.wall_time:.2f} s',
+            file=sys.stderr,
+        )
     return 130 if result.interrupted else 0

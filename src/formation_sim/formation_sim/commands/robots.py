@@ -34,11 +34,28 @@ def register(subparsers) -> None:
         epilog='Exit status: 0 stopped; 2 bad input; 3 a robot process died (see OUT/logs).',
     )
     add_scenario_argument(parser)
-    parser.add_argument('--domain-id', type=DOMAIN_ID, required=True, metavar='N', help='ROS_DOMAIN_ID of the run to serve')
-    parser.add_argument('--out', type=Path, default=None, help='folder for robots.params.yaml and logs, new or empty (default: a new folder runs/<scenario>-robots-<date>-<time>)')
+    parser.add_argument(
+        '--domain-id', type=DOMAIN_ID, required=True, metavar='N', help='ROS_DOMAIN_ID of the run to serve'
+    )
+    parser.add_argument(
+        '--out',
+        type=Path,
+        default=None,
+        help='folder for robots.params.yaml and logs, new or empty (default: a new folder runs/<scenario>-robots-<date>-<time>)',
+    )
     parser.add_argument('--force', action='store_true', help="replace an earlier run's files in --out")
-    parser.add_argument('--duration', type=POSITIVE, default=None, metavar='S', help='stop after this many seconds (default: run until stopped)')
-    parser.add_argument('--network', action='store_true', help='let DDS discovery reach the local network (default: this machine only)')
+    parser.add_argument(
+        '--duration',
+        type=POSITIVE,
+        default=None,
+        metavar='S',
+        help='stop after this many seconds (default: run until stopped)',
+    )
+    parser.add_argument(
+        '--network',
+        action='store_true',
+        help='let DDS discovery reach the local network (default: this machine only)',
+    )
     add_robot_arguments(parser, model_flag='--model')
     parser.set_defaults(func=run)
 
@@ -53,15 +70,22 @@ def run(args: argparse.Namespace) -> int:
     if args.model is None:
         from formation_sim.runtime.launch import ROBOT_MODELS
 
-        return refuse('robots', f"--model {'|'.join(ROBOT_MODELS)} is required")
+        return refuse('robots', f'--model {"|".join(ROBOT_MODELS)} is required')
     try:
         fleet = RobotFleet(
-            scenario, robots=robot_options(args, args.model), out_dir=args.out, force=args.force, domain_id=args.domain_id,
+            scenario,
+            robots=robot_options(args, args.model),
+            out_dir=args.out,
+            force=args.force,
+            domain_id=args.domain_id,
             localhost_only=not args.network,
-        )  # fmt: skip
+        )
     except RunError as error:
         return refuse('robots', error)
-    print(f'{len(scenario.agent_ids)} {args.model} robots in ROS domain {args.domain_id}; Ctrl-C stops them', file=sys.stderr)
+    print(
+        f'{len(scenario.agent_ids)} {args.model} robots in ROS domain {args.domain_id}; Ctrl-C stops them',
+        file=sys.stderr,
+    )
     try:
         status = fleet.run(duration=args.duration)
     except RunError as error:

@@ -39,8 +39,16 @@ def register(subparsers) -> None:
     )
     add_run_arguments(parser, kind='run')
     add_plan_arguments(parser)
-    parser.add_argument('--domain-id', type=DOMAIN_ID, default=None, metavar='N', help='ROS_DOMAIN_ID to use (default: a free one in 100-232)')
-    parser.add_argument('--timeout', type=POSITIVE, default=None, help='give up after this many wall-clock seconds')
+    parser.add_argument(
+        '--domain-id',
+        type=DOMAIN_ID,
+        default=None,
+        metavar='N',
+        help='ROS_DOMAIN_ID to use (default: a free one in 100-232)',
+    )
+    parser.add_argument(
+        '--timeout', type=POSITIVE, default=None, help='give up after this many wall-clock seconds'
+    )
     parser.add_argument(
         '--network',
         action='store_true',
@@ -80,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
         return refuse('run', error)
     if options['robots'] is not None:
         horizon = scenario.horizon if args.horizon is None else args.horizon
-        refusal = check_saturation(scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation)
+        refusal = check_saturation(
+            scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation
+        )
         if refusal is not None:
             return refuse('run', refusal)
     try:
@@ -126,7 +136,12 @@ def _warn_saturation(result) -> None:
         return
     saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
     if saturation and saturation.get('total'):
-        kinds = ', '.join(f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, {entry["allowed"]:g} allowed)'
-                          for kind, entry in saturation['by_kind'].items())  # fmt: skip
-        print(f'warning: {saturation["total"]} commands saturated at the robots\' limits: {kinds}; agents '
-              f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json extra.saturation)', file=sys.stderr)
+        kinds = ', '.join(
+            f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, {entry["allowed"]:g} allowed)'
+            for kind, entry in saturation['by_kind'].items()
+        )
+        print(
+            f"warning: {saturation['total']} commands saturated at the robots' limits: {kinds}; agents "
+            f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json extra.saturation)',
+            file=sys.stderr,
+        )

@@ -23,7 +23,9 @@ from formation_sim.commands.limits import add_limit_arguments, resolve_speed_sca
 
 DEFAULT_SAMPLE_DT = 0.01
 SAMPLE_POLICIES = ('auto', 'events', 'grid', 'none')
-AUTO_EVENTS_MAX_AGENTS = 1000  # above, `auto` keeps the grid only: n = 10 000, T = 2 has 74 000 events of 160 kB
+AUTO_EVENTS_MAX_AGENTS = (
+    1000  # above, `auto` keeps the grid only: n = 10 000, T = 2 has 74 000 events of 160 kB
+)
 
 
 def register(subparsers) -> None:
@@ -54,16 +56,23 @@ def register(subparsers) -> None:
         'every triggering time either way',
     )
     baseline = parser.add_mutually_exclusive_group()
-    baseline.add_argument('--period', type=POSITIVE, default=None, help='baseline: periodic sampling with this period instead of event triggering')
+    baseline.add_argument(
+        '--period',
+        type=POSITIVE,
+        default=None,
+        help='baseline: periodic sampling with this period instead of event triggering',
+    )
     baseline.add_argument(
         '--continuous',
         action='store_true',
         help='baseline: the continuous controller (weights and states at every instant), integrated by scipy (DOP853, rtol 1e-10)',
     )
     parser.add_argument(
-        '--tolerance', type=POSITIVE, default=None,
+        '--tolerance',
+        type=POSITIVE,
+        default=None,
         help="relative margin at which a crossing counts as reached (default: the agents' own, 1e-12)",
-    )  # fmt: skip
+    )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
     add_limit_arguments(parser)
@@ -108,7 +117,9 @@ def run(args: argparse.Namespace) -> int:
         return refuse('simulate', chosen)
     policy, sample_dt = chosen
     try:
-        check_sample_dt(sample_dt, horizon=scenario.horizon if args.horizon is None else args.horizon, scenario=scenario)
+        check_sample_dt(
+            sample_dt, horizon=scenario.horizon if args.horizon is None else args.horizon, scenario=scenario
+        )
     except EngineError as error:
         return refuse('simulate', f'argument --sample-dt: {error}')
     try:
@@ -176,10 +187,12 @@ def _run_failed(error: Exception, out: Path) -> int:
     # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;
     # OSError: the trajectory could not be written (a full disk)
     kind = (
-        '' if isinstance(error, (EngineError, ValueError))
-        else 'cannot write the trajectory: ' if isinstance(error, OSError)
+        ''
+        if isinstance(error, (EngineError, ValueError))
+        else 'cannot write the trajectory: '
+        if isinstance(error, OSError)
         else f'{type(error).__name__} (a number left the range of doubles): '
-    )  # fmt: skip
+    )
     print(f'\nformation simulate: error: {kind}{error}', file=sys.stderr)
     discard_incomplete(out)  # a failed run's samples are no result
     with contextlib.suppress(OSError):

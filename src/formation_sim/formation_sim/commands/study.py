@@ -30,11 +30,28 @@ def register(subparsers) -> None:
         'error); 2 bad input (a SPEC key, range or a case breaking a hypothesis: nothing was run); 130 '
         'interrupted (the rows written are kept).',
     )
-    parser.add_argument('spec', metavar='SPEC', help="the study's YAML file, or the word report followed by DIR")
+    parser.add_argument(
+        'spec', metavar='SPEC', help="the study's YAML file, or the word report followed by DIR"
+    )
     parser.add_argument('folder', metavar='DIR', nargs='?', help='with report: the study folder')
-    parser.add_argument('--out', type=Path, default=None, help='the study folder: new, empty, or one this SPEC ran into before')
-    parser.add_argument('--scheduler', default=None, metavar='tcp://HOST:PORT', help='run on this Dask scheduler instead of a LocalCluster')
-    parser.add_argument('--workers', type=POSITIVE_INT, default=None, help='LocalCluster: worker processes (default: one per core)')
+    parser.add_argument(
+        '--out',
+        type=Path,
+        default=None,
+        help='the study folder: new, empty, or one this SPEC ran into before',
+    )
+    parser.add_argument(
+        '--scheduler',
+        default=None,
+        metavar='tcp://HOST:PORT',
+        help='run on this Dask scheduler instead of a LocalCluster',
+    )
+    parser.add_argument(
+        '--workers',
+        type=POSITIVE_INT,
+        default=None,
+        help='LocalCluster: worker processes (default: one per core)',
+    )
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
     parser.set_defaults(func=run)
 
@@ -43,11 +60,16 @@ def run(args: argparse.Namespace) -> int:
     if args.spec == 'report':
         return _report(args)
     if args.folder is not None:
-        return refuse('study', f'unexpected argument {args.folder!r} (formation study SPEC --out DIR, or formation study report DIR)')
+        return refuse(
+            'study',
+            f'unexpected argument {args.folder!r} (formation study SPEC --out DIR, or formation study report DIR)',
+        )
     if args.out is None:
         return refuse('study', 'argument --out: the study folder is required (rows.csv goes there)')
     if args.scheduler is not None and args.workers is not None:
-        return refuse('study', 'argument --workers: only for the LocalCluster; a --scheduler has its own workers')
+        return refuse(
+            'study', 'argument --workers: only for the LocalCluster; a --scheduler has its own workers'
+        )
     from formation_sim.study.runner import run_study
     from formation_sim.study.spec import StudyError, load_study
 

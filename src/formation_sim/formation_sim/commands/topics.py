@@ -17,8 +17,16 @@ def register(subparsers) -> None:
         'subscribers, and (--verbose) the nodes behind them.',
     )
     add_domain_argument(parser)
-    parser.add_argument('--wait', type=NON_NEGATIVE, default=3.0, metavar='S', help='discovery time at most S seconds (default 3; stops earlier once the graph is stable)')
-    parser.add_argument('--verbose', '-v', action='store_true', help='also list the node of every publisher and subscriber')
+    parser.add_argument(
+        '--wait',
+        type=NON_NEGATIVE,
+        default=3.0,
+        metavar='S',
+        help='discovery time at most S seconds (default 3; stops earlier once the graph is stable)',
+    )
+    parser.add_argument(
+        '--verbose', '-v', action='store_true', help='also list the node of every publisher and subscriber'
+    )
     parser.set_defaults(func=run)
 
 

@@ -22,7 +22,13 @@ from formation_sim.commands.common import (
     scale_options,
 )
 from formation_sim.model.scenario import ScenarioError, load_scenario
-from formation_sim.model.speed_choice import LimitsError, RobotLimits, check_limits_apply, omega_at_formation, scenario_noise_floor
+from formation_sim.model.speed_choice import (
+    LimitsError,
+    RobotLimits,
+    check_limits_apply,
+    omega_at_formation,
+    scenario_noise_floor,
+)
 from formation_sim.model.validate import validate_scenario
 
 EXIT_VALID = EXIT_OK
@@ -48,18 +54,44 @@ def register(subparsers) -> None:
     add_scenario_argument(parser)
     add_scale_arguments(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
-    parser.add_argument('--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]")
-    parser.add_argument('--max-angular-speed', type=POSITIVE, default=None, metavar='W', help='unicycles: their turn-rate limit [rad/s]')
-    parser.add_argument('--control-point-distance', type=POSITIVE, default=0.1, metavar='L', help='unicycles: the control point l ahead of the axle [m] (default 0.1)')
-    parser.add_argument('--max-acceleration', type=POSITIVE, default=None, metavar='A', help='ETA-2: the acceleration limit [m/s²]')
     parser.add_argument(
-        '--pose-noise', type=POSITIVE, default=None, metavar='SIGMA',
+        '--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]"
+    )
+    parser.add_argument(
+        '--max-angular-speed',
+        type=POSITIVE,
+        default=None,
+        metavar='W',
+        help='unicycles: their turn-rate limit [rad/s]',
+    )
+    parser.add_argument(
+        '--control-point-distance',
+        type=POSITIVE,
+        default=0.1,
+        metavar='L',
+        help='unicycles: the control point l ahead of the axle [m] (default 0.1)',
+    )
+    parser.add_argument(
+        '--max-acceleration',
+        type=POSITIVE,
+        default=None,
+        metavar='A',
+        help='ETA-2: the acceleration limit [m/s²]',
+    )
+    parser.add_argument(
+        '--pose-noise',
+        type=POSITIVE,
+        default=None,
+        metavar='SIGMA',
         help='σ of the robots\' position noise [m]: suggest the threshold floor c0 that keeps the noise from triggering (README, "Running on robots")',
-    )  # fmt: skip
+    )
     parser.add_argument(
-        '--pose-period', type=POSITIVE, default=DEFAULT_POSE_PERIOD, metavar='DT',
+        '--pose-period',
+        type=POSITIVE,
+        default=DEFAULT_POSE_PERIOD,
+        metavar='DT',
         help=f'ETA-2 with --pose-noise: the time between two poses a velocity is differenced from [s] (default {DEFAULT_POSE_PERIOD:g}, 100 Hz)',
-    )  # fmt: skip
+    )
     parser.set_defaults(func=run)
 
 
@@ -78,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
         scenario = resolved[0]
         report = validate_scenario(scenario)
     commands = floor = None
-    if report.ok and any(value is not None for value in (args.max_speed, args.max_angular_speed, args.max_acceleration)):
+    if report.ok and any(
+        value is not None for value in (args.max_speed, args.max_angular_speed, args.max_acceleration)
+    ):
         try:
             commands = _commands(scenario, args)
         except LimitsError as error:
@@ -108,19 +142,29 @@ def _commands(scenario, args: argparse.Namespace) -> dict:
     from formation_sim.sim.largest_command import choose_speed_scale, largest_command
 
     limits = _limits(args)
-    check_limits_apply(limits, scenario.dynamics)  # refused before any run: e.g. an acceleration limit on ETA-1
+    check_limits_apply(
+        limits, scenario.dynamics
+    )  # refused before any run: e.g. an acceleration limit on ETA-1
 
-    turn_as_speed = math.inf if args.max_angular_speed is None else args.max_angular_speed * args.control_point_distance
+    turn_as_speed = (
+        math.inf if args.max_angular_speed is None else args.max_angular_speed * args.control_point_distance
+    )
     speed_limit = min(math.inf if args.max_speed is None else args.max_speed, turn_as_speed)
     acceleration_limit = math.inf if args.max_acceleration is None else args.max_acceleration
     answer, loose = largest_command(scenario, max_speed=speed_limit, max_acceleration=acceleration_limit)
     guaranteed = answer.source == 'theory'
-    how = 'a bound from the theory' if guaranteed else 'the largest in an exact in-process run, not a guarantee'
+    how = (
+        'a bound from the theory' if guaranteed else 'the largest in an exact in-process run, not a guarantee'
+    )
     lines = ['commands:']
     if loose is not None:
         lines.append(
             f'  the theory bounds the speed by {loose.max_speed:.4g} m/s'
-            + (f' and the acceleration by {loose.max_acceleration:.4g} m/s²' if loose.max_acceleration is not None else '')
+            + (
+                f' and the acceleration by {loose.max_acceleration:.4g} m/s²'
+                if loose.max_acceleration is not None
+                else ''
+            )
             + ' — beyond the limits, which settles nothing; so an exact run decides'
         )
     checks = []
@@ -128,18 +172,29 @@ def _commands(scenario, args: argparse.Namespace) -> dict:
     if args.max_speed is not None:
         checks.append(('speed', speed, args.max_speed, 'm/s'))
     if args.max_angular_speed is not None:
-        checks.append((f'turn rate (unicycle, l = {args.control_point_distance:g} m: |ω| <= ||u|| / l)', answer.max_turn_rate(args.control_point_distance), args.max_angular_speed, 'rad/s'))
+        checks.append(
+            (
+                f'turn rate (unicycle, l = {args.control_point_distance:g} m: |ω| <= ||u|| / l)',
+                answer.max_turn_rate(args.control_point_distance),
+                args.max_angular_speed,
+                'rad/s',
+            )
+        )
     if args.max_acceleration is not None and answer.max_acceleration is not None:
         checks.append(('acceleration', answer.max_acceleration, args.max_acceleration, 'm/s²'))
     within = True
     for what, value, limit, unit in checks:
         ok = value <= limit
         within &= ok
-        lines.append(f'  largest {what}: {value:.4g} {unit} {"<=" if ok else "EXCEEDS"} {limit:g} {unit} ({how})')
+        lines.append(
+            f'  largest {what}: {value:.4g} {unit} {"<=" if ok else "EXCEEDS"} {limit:g} {unit} ({how})'
+        )
     lines.append(f'  from: {answer.reference}')
     if answer.dotyi is not None:
         lines.append(f'  (dotyi) as printed bounds it by {max(answer.dotyi.values()):.4g} m/s')
-    lines.append('  per agent [m/s]: ' + ', '.join(f'{agent}: {value:.4g}' for agent, value in answer.speed.items()))
+    lines.append(
+        '  per agent [m/s]: ' + ', '.join(f'{agent}: {value:.4g}' for agent, value in answer.speed.items())
+    )
     choice = choose_speed_scale(scenario, limits=limits)
     lines.extend(choice.lines())
     return {
@@ -167,19 +222,27 @@ def _limits(args: argparse.Namespace) -> RobotLimits:
 def _noise_floor(scenario, args: argparse.Namespace) -> dict:
     """The threshold floor c0 a pose noise σ asks for (`formation_sim.model.speed_choice.noise_floor`)."""
     kappa = getattr(scenario.gains, 'speed_scale', 1.0)
-    floor, per_agent, formula = scenario_noise_floor(scenario, pose_noise=args.pose_noise, pose_period=args.pose_period, speed_scale=kappa)
+    floor, per_agent, formula = scenario_noise_floor(
+        scenario, pose_noise=args.pose_noise, pose_period=args.pose_period, speed_scale=kappa
+    )
     present = getattr(scenario.gains, 'threshold_floor', 0.0)
     lines = [
         f'threshold floor for a pose noise σ = {args.pose_noise:g} m:',
         f'  suggested c0 = {floor:.3g} (gains.threshold_floor, or --threshold-floor {floor:.3g})',
         f'  {formula}',
-        "  what one trigger's noisy sensing puts into e_i" + (' (E_i)' if scenario.dynamics == 'double' else '')
-        + ', per axis [1σ]: ' + ', '.join(f'{agent}: {value:.3g}' for agent, value in per_agent.items()),
+        "  what one trigger's noisy sensing puts into e_i"
+        + (' (E_i)' if scenario.dynamics == 'double' else '')
+        + ', per axis [1σ]: '
+        + ', '.join(f'{agent}: {value:.3g}' for agent, value in per_agent.items()),
     ]
     gains = scenario.gains
-    alpha, beta = (gains.alpha, gains.beta) if scenario.dynamics == 'single' else (gains.alpha_d, gains.beta_d)
+    alpha, beta = (
+        (gains.alpha, gains.beta) if scenario.dynamics == 'single' else (gains.alpha_d, gains.beta_d)
+    )
     if present < floor:
-        below = 0.0 if alpha + present <= floor else math.log(alpha / (floor - present)) / beta  # paper's time
+        below = (
+            0.0 if alpha + present <= floor else math.log(alpha / (floor - present)) / beta
+        )  # paper's time
         lines.append(
             f"  the scenario's c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} from t = {below / kappa:.4g} s on "
             f"(κ = {kappa:g}; horizon {scenario.horizon:g} s): from then on the noise alone can set off triggers, each trigger's "
@@ -187,5 +250,13 @@ def _noise_floor(scenario, args: argparse.Namespace) -> dict:
         )
     if scenario.dynamics == 'single':
         reach = min(sum(omega_at_formation(scenario, agent)) for agent in scenario.agent_ids)
-        lines.append(f'  a floor costs accuracy: the formation settles to about c0 / min_i Σ_j ω_ij = {floor / reach:.3g} m or better')
-    return {'suggested': floor, 'per_agent': {str(a): v for a, v in per_agent.items()}, 'formula': formula, 'scenario_floor': present, 'lines': lines}
+        lines.append(
+            f'  a floor costs accuracy: the formation settles to about c0 / min_i Σ_j ω_ij = {floor / reach:.3g} m or better'
+        )
+    return {
+        'suggested': floor,
+        'per_agent': {str(a): v for a, v in per_agent.items()},
+        'formula': formula,
+        'scenario_floor': present,
+        'lines': lines,
+    }

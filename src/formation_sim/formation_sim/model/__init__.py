@@ -11,15 +11,26 @@
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'scenario': (
-        'DoubleGains', 'Edge', 'Scenario', 'ScenarioError', 'SingleGains',
-        'builtin_scenarios', 'dump_scenario', 'dump_scenario_text', 'load_scenario',
-        'scenario_from_dict', 'scenario_to_dict',
-    ),
-    'gains': ('GainsError', 'paper_k3', 'riccati_solution'),
-    'theory': ('TheoremConstants', 'TheoryError', 'beta0', 'formation_feasibility', 'theorem_constants'),
-    'threshold_floor': ('FloorBounds', 'floor_bounds'),
-    'validate': ('Finding', 'ValidationError', 'ValidationReport', 'require_valid', 'validate_scenario'),
-    'generate': ('GenerateError', 'random_scenario'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'scenario': (
+            'DoubleGains',
+            'Edge',
+            'Scenario',
+            'ScenarioError',
+            'SingleGains',
+            'builtin_scenarios',
+            'dump_scenario',
+            'dump_scenario_text',
+            'load_scenario',
+            'scenario_from_dict',
+            'scenario_to_dict',
+        ),
+        'gains': ('GainsError', 'paper_k3', 'riccati_solution'),
+        'theory': ('TheoremConstants', 'TheoryError', 'beta0', 'formation_feasibility', 'theorem_constants'),
+        'threshold_floor': ('FloorBounds', 'floor_bounds'),
+        'validate': ('Finding', 'ValidationError', 'ValidationReport', 'require_valid', 'validate_scenario'),
+        'generate': ('GenerateError', 'random_scenario'),
+    },
+)

@@ -66,7 +66,9 @@ class CommandBound:
             'max_speed': self.max_speed,
             'speed': {str(i): v for i, v in self.speed.items()},
             'max_acceleration': self.max_acceleration,
-            'acceleration': None if self.acceleration is None else {str(i): v for i, v in self.acceleration.items()},
+            'acceleration': None
+            if self.acceleration is None
+            else {str(i): v for i, v in self.acceleration.items()},
             'dotyi': None if self.dotyi is None else {str(i): v for i, v in self.dotyi.items()},
         }
 

@@ -80,7 +80,9 @@ def _connected_points(
     return points, pairs[order]
 
 
-def _family_points(rng: np.random.Generator, n: int, dimension: int, reach: float, graph: str) -> tuple[np.ndarray, np.ndarray]:
+def _family_points(
+    rng: np.random.Generator, n: int, dimension: int, reach: float, graph: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Points and the pairs (i < j, sorted) of a star, path, cycle or complete graph, each pair within reach."""
     if graph == 'path':
         steps = _in_ball(rng, n - 1, dimension)
@@ -133,8 +135,20 @@ def random_scenario(
     printed and the corrected bound) (double).
     """
     _check_arguments(
-        n=n, dynamics=dynamics, dimension=dimension, slack=slack, graph=graph, beta=beta, beta1=beta1, k3=k3,
-        beta_d=beta_d, delta=delta, degree=degree, horizon=horizon, alpha=alpha, max_speed=max_speed,
+        n=n,
+        dynamics=dynamics,
+        dimension=dimension,
+        slack=slack,
+        graph=graph,
+        beta=beta,
+        beta1=beta1,
+        k3=k3,
+        beta_d=beta_d,
+        delta=delta,
+        degree=degree,
+        horizon=horizon,
+        alpha=alpha,
+        max_speed=max_speed,
     )
 
     rng = np.random.default_rng(seed)
@@ -193,9 +207,16 @@ def _check_arguments(
         raise GenerateError(f'graph must be one of {", ".join(GRAPH_FAMILIES)}, got {graph!r}')
     if graph == 'cycle' and n < 3:
         raise GenerateError(f'a cycle needs n >= 3 agents, got n = {n}')
-    for label, value, closed in (('beta', beta, False), ('beta1', beta1, True), ('k3', k3, False), ('beta_d', beta_d, False)):
+    for label, value, closed in (
+        ('beta', beta, False),
+        ('beta1', beta1, True),
+        ('k3', k3, False),
+        ('beta_d', beta_d, False),
+    ):
         if value is not None and not (0.0 < value < 1.0 or (closed and value == 1.0)):
-            raise GenerateError(f'{label} is a fraction of its bound in (0, {"1]" if closed else "1)"}, got {value!r}')
+            raise GenerateError(
+                f'{label} is a fraction of its bound in (0, {"1]" if closed else "1)"}, got {value!r}'
+            )
     for label, value in (('delta', delta), ('degree', degree), ('horizon', horizon), ('alpha', alpha)):
         if not (math.isfinite(value) and value > 0.0):
             raise GenerateError(f'{label} must be finite and > 0, got {value!r}')

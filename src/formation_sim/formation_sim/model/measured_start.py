@@ -90,7 +90,10 @@ class MeasuredStart:
         agent, largest = self.largest
         return {
             'agents': {
-                str(i): {'position': [float(v) for v in self.positions[k]], 'distance': float(self.distances[k])}
+                str(i): {
+                    'position': [float(v) for v in self.positions[k]],
+                    'distance': float(self.distances[k]),
+                }
                 for k, i in enumerate(self.agent_ids)
             },
             'largest_distance': largest,
@@ -107,9 +110,13 @@ def check_measured_start(scenario: Scenario, positions) -> MeasuredStart:
     capacities = theory.edge_capacities(scenario)
     theorem = 2 if scenario.dynamics == 'double' else 1
     breaches = tuple(
-        InitialBreach(i=edge.i, j=edge.j, error=float(errors[k]), capacity=float(capacities[k]), theorem=theorem)
+        InitialBreach(
+            i=edge.i, j=edge.j, error=float(errors[k]), capacity=float(capacities[k]), theorem=theorem
+        )
         for k, edge in enumerate(scenario.edges)
         if not errors[k] < capacities[k]  # (initial), strict; NaN breaks it too
     )
     distances = np.linalg.norm(x - np.asarray(scenario.positions, dtype=float), axis=1)
-    return MeasuredStart(agent_ids=tuple(scenario.agent_ids), positions=x, distances=distances, breaches=breaches)
+    return MeasuredStart(
+        agent_ids=tuple(scenario.agent_ids), positions=x, distances=distances, breaches=breaches
+    )

@@ -74,8 +74,12 @@ class _ShortRepr(reprlib.Repr):
     def repr_int(self, x: int, level: int) -> str:
         if abs(x) < 10**30:
             return repr(x)
-        digits = len(str(abs(x))) if x.bit_length() < 10_000 else f'about {int(x.bit_length() * math.log10(2))}'
-        return f'{str(x)[:12] if x.bit_length() < 10_000 else "-" * (x < 0)}... (an integer of {digits} digits)'
+        digits = (
+            len(str(abs(x))) if x.bit_length() < 10_000 else f'about {int(x.bit_length() * math.log10(2))}'
+        )
+        return (
+            f'{str(x)[:12] if x.bit_length() < 10_000 else "-" * (x < 0)}... (an integer of {digits} digits)'
+        )
 
 
 _SHORT_REPR = _ShortRepr()
@@ -150,7 +154,11 @@ def _vector(value: Any, where: str, *, size: int | None = None) -> np.ndarray:
 def _agent_id(value: Any, where: str) -> int:
     if type(value) is int and 0 <= value <= MAX_AGENT_ID:
         return value
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or not 0 <= value <= MAX_AGENT_ID:
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, numbers.Integral)
+        or not 0 <= value <= MAX_AGENT_ID
+    ):
         raise ScenarioError(
             f'{where}: agent ids are integers in [0, {MAX_AGENT_ID}] (they name topics and travel in '
             f'messages and ROS parameters), got {short_repr(value)}'
@@ -258,13 +266,21 @@ class DoubleGains:
 
     @classmethod
     def from_riccati(
-        cls, *, alpha_d: float, beta_d: float, beta1: float, k3: float | str,
-        speed_scale: float = DEFAULT_SPEED_SCALE, threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
+        cls,
+        *,
+        alpha_d: float,
+        beta_d: float,
+        beta1: float,
+        k3: float | str,
+        speed_scale: float = DEFAULT_SPEED_SCALE,
+        threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
     ) -> DoubleGains:
         """P, k1, k2 solving (riccatti) with equality for this β1; k3='paper' is 2/(k2+sqrt(k1²+k2²))."""
         beta1 = _finite_float(beta1, 'gains.beta1')
         if not beta1 > 0.0:
-            raise ScenarioError(f'gains.beta1: must be > 0 to determine P from (riccatti), got {short_repr(beta1)}')
+            raise ScenarioError(
+                f'gains.beta1: must be > 0 to determine P from (riccatti), got {short_repr(beta1)}'
+            )
         matrix = riccati_solution(beta1)
         k1, k2 = float(matrix[0, 1]), float(matrix[1, 1])
         if isinstance(k3, str):
@@ -272,8 +288,15 @@ class DoubleGains:
                 raise ScenarioError(f"gains.k3: expected a number or 'paper', got {short_repr(k3)}")
             k3 = paper_k3(k1, k2)
         return cls(
-            alpha_d=alpha_d, beta_d=beta_d, beta1=beta1, k3=k3, k1=k1, k2=k2, P=matrix,
-            speed_scale=speed_scale, threshold_floor=threshold_floor,
+            alpha_d=alpha_d,
+            beta_d=beta_d,
+            beta1=beta1,
+            k3=k3,
+            k1=k1,
+            k2=k2,
+            P=matrix,
+            speed_scale=speed_scale,
+            threshold_floor=threshold_floor,
         )
 
     @property
@@ -358,8 +381,7 @@ class Scenario:
             velocities = _float_array(self.velocities, 'velocities')
             if velocities.shape != positions.shape:
                 raise ScenarioError(
-                    f'velocities: expected shape {positions.shape} like the positions, '
-                    f'got {velocities.shape}'
+                    f'velocities: expected shape {positions.shape} like the positions, got {velocities.shape}'
                 )
             self._check_finite(velocities, 'velocity')
             object.__setattr__(self, 'velocities', _readonly(velocities))
@@ -369,7 +391,9 @@ class Scenario:
         if self.headings is not None:
             headings = _float_array(self.headings, 'headings')
             if headings.shape != (len(ids),):
-                raise ScenarioError(f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}')
+                raise ScenarioError(
+                    f'headings: expected one per agent, shape ({len(ids)},), got {headings.shape}'
+                )
             self._check_finite(headings[:, None], 'heading')
             object.__setattr__(self, 'headings', _readonly(headings))
         return positions
@@ -402,7 +426,11 @@ class Scenario:
             and self.horizon == other.horizon
             and (
                 (self.headings is None and other.headings is None)
-                or (self.headings is not None and other.headings is not None and np.array_equal(self.headings, other.headings))
+                or (
+                    self.headings is not None
+                    and other.headings is not None
+                    and np.array_equal(self.headings, other.headings)
+                )
             )
         )
 
@@ -450,10 +478,14 @@ class Scenario:
         """A copy with some fields changed (checked again)."""
         return dataclasses.replace(self, **changes)
 
-    def with_scale(self, *, speed_scale: float | None = None, threshold_floor: float | None = None) -> Scenario:
+    def with_scale(
+        self, *, speed_scale: float | None = None, threshold_floor: float | None = None
+    ) -> Scenario:
         """A copy with the speed scale κ and/or the threshold floor c0 replaced (None: kept)."""
         changes = {
-            key: value for key, value in (('speed_scale', speed_scale), ('threshold_floor', threshold_floor)) if value is not None
+            key: value
+            for key, value in (('speed_scale', speed_scale), ('threshold_floor', threshold_floor))
+            if value is not None
         }
         if not changes:
             return self
@@ -521,12 +553,12 @@ def _check_keys(data: Mapping, where: str, *, required: tuple, optional: tuple =
     allowed = required + optional
     unknown = [key for key in data if key not in allowed]
     if unknown:
-        raise ScenarioError(
-            f'{where}: unknown key {short_repr(unknown[0])} (allowed: {", ".join(allowed)})'
-        )
+        raise ScenarioError(f'{where}: unknown key {short_repr(unknown[0])} (allowed: {", ".join(allowed)})')
     missing = [key for key in required if key not in data]
     if missing:
-        raise ScenarioError(f'{where}: missing key {short_repr(missing[0])} (required: {", ".join(required)})')
+        raise ScenarioError(
+            f'{where}: missing key {short_repr(missing[0])} (required: {", ".join(required)})'
+        )
 
 
 def _positive(value: Any, where: str, what: str) -> float:
@@ -619,9 +651,7 @@ def _agents_from_dict(
         elif position.size != dimension:  # pragma: no cover - _vector already enforces the size
             raise ScenarioError(f'{where}.position: dimension differs from agent {first_agent}')
         velocity = (
-            _vector(entry['velocity'], f'{where}.velocity', size=dimension)
-            if dynamics == 'double'
-            else None
+            _vector(entry['velocity'], f'{where}.velocity', size=dimension) if dynamics == 'double' else None
         )
         entries[agent] = (position, velocity)
     return entries, headings, dimension
@@ -785,7 +815,10 @@ class _Checks:
             return super().construct_yaml_int(node)
         except ValueError:  # beyond Python's 4300 digits for int(str): far beyond any double too
             raise yaml.constructor.ConstructorError(
-                None, None, f'an integer of {len(node.value)} characters is too large for a double', node.start_mark
+                None,
+                None,
+                f'an integer of {len(node.value)} characters is too large for a double',
+                node.start_mark,
             ) from None
 
 
@@ -826,7 +859,9 @@ class _CLoader(_Checks, yaml.CSafeLoader):
 _YAML_FLOAT = re.compile(r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$')
 for _loader in (_Loader, _CLoader):
     _loader.add_constructor('tag:yaml.org,2002:int', _Checks.construct_yaml_int)
-    _loader.add_implicit_resolver('tag:yaml.org,2002:float', _YAML_FLOAT, list('-+0123456789.'))  # 1e-3 (YAML 1.2)
+    _loader.add_implicit_resolver(
+        'tag:yaml.org,2002:float', _YAML_FLOAT, list('-+0123456789.')
+    )  # 1e-3 (YAML 1.2)
 
 
 def _count_nodes(text: str) -> None:
@@ -839,7 +874,10 @@ def _count_nodes(text: str) -> None:
     """
     parser = yaml.CSafeLoader(text)
     scalar, alias, stream_end = yaml.ScalarEvent, yaml.AliasEvent, yaml.StreamEndEvent
-    starts, ends = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    starts, ends = (
+        (yaml.SequenceStartEvent, yaml.MappingStartEvent),
+        (yaml.SequenceEndEvent, yaml.MappingEndEvent),
+    )
     nodes = 0
     sizes: dict[str, int] = {}  # anchor -> nodes in the subtree it names
     opened: list[tuple[str | None, int]] = []  # the collections being read: (anchor, nodes before it)
@@ -896,7 +934,10 @@ def _read_plain(text: str) -> Any:
 def _build_plain(loader: _CLoader) -> Any:
     get, resolve, constructors = loader.get_event, loader.resolve, loader.yaml_constructors
     scalar, stream_end, document_end = yaml.ScalarEvent, yaml.StreamEndEvent, yaml.DocumentEndEvent
-    starts, ends = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    starts, ends = (
+        (yaml.SequenceStartEvent, yaml.MappingStartEvent),
+        (yaml.SequenceEndEvent, yaml.MappingEndEvent),
+    )
     scalar_node, mapping_start = yaml.ScalarNode, yaml.MappingStartEvent
     cache: dict[tuple, Any] = {}  # (text, implicit) -> constructed value: keys repeat on every line
     first_error: yaml.YAMLError | None = None  # raised once the whole document is read, as PyYAML would
@@ -926,7 +967,9 @@ def _build_plain(loader: _CLoader) -> Any:
                 if tag not in _PLAIN_TAGS:
                     raise _NotPlain
                 try:
-                    value = constructors[tag](loader, scalar_node(tag, event.value, event.start_mark, event.end_mark))
+                    value = constructors[tag](
+                        loader, scalar_node(tag, event.value, event.start_mark, event.end_mark)
+                    )
                 except yaml.constructor.ConstructorError as error:
                     first_error, value = first_error or error, None
                 cache[key] = value
@@ -998,7 +1041,9 @@ def _parse_yaml(text: str, source: str) -> Any:
             f'holds at most {MAX_YAML_NODES} (about 9 000 agents): refused. Larger teams: {_LARGER_TEAMS}'
         ) from None
     except (_TooDeep, RecursionError):
-        raise ScenarioError(f'{source}: malformed YAML: nested too deeply (a scenario nests 4 levels)') from None
+        raise ScenarioError(
+            f'{source}: malformed YAML: nested too deeply (a scenario nests 4 levels)'
+        ) from None
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         where = f'line {mark.line + 1}, column {mark.column + 1}' if mark else 'unknown position'
@@ -1015,9 +1060,7 @@ def _parse_yaml(text: str, source: str) -> Any:
 def builtin_scenarios() -> tuple[str, ...]:
     """Names accepted by `load_scenario` besides paths (the YAML files shipped in the package)."""
     folder = resources.files(BUILTIN_PACKAGE)
-    return tuple(
-        sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith('.yaml'))
-    )
+    return tuple(sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith('.yaml')))
 
 
 _LARGER_TEAMS = 'the same schema as JSON (.json, `formation generate`), or Python (scenario_from_dict, formation_sim.generate)'
@@ -1085,7 +1128,12 @@ def _scenario_source(name_or_path: str | Path) -> tuple[str, str, str, str]:
     """(text, kind, source, name) of a built-in scenario or a file (ScenarioError if neither)."""
     if isinstance(name_or_path, str) and name_or_path in builtin_scenarios():
         resource = resources.files(BUILTIN_PACKAGE) / f'{name_or_path}.yaml'
-        return resource.read_text(encoding='utf-8'), 'YAML', f'built-in scenario {short_repr(name_or_path)}', name_or_path
+        return (
+            resource.read_text(encoding='utf-8'),
+            'YAML',
+            f'built-in scenario {short_repr(name_or_path)}',
+            name_or_path,
+        )
     named = bool(str(name_or_path).strip())  # Path('') would be the current folder
     path = Path(name_or_path)
     if named and path.is_dir():
@@ -1139,7 +1187,10 @@ def dump_scenario_json_text(scenario: Scenario) -> str:
     def text(value: Any) -> str:
         return json.dumps(value, allow_nan=False, ensure_ascii=False)
 
-    head = ''.join(f'{text(key)}: {text(data[key])},\n' for key in ('name', 'dynamics', 'communication_radius', 'horizon'))
+    head = ''.join(
+        f'{text(key)}: {text(data[key])},\n'
+        for key in ('name', 'dynamics', 'communication_radius', 'horizon')
+    )
     agents = ',\n'.join(f'  {text(str(agent))}: {text(entry)}' for agent, entry in data['agents'].items())
     edges = ',\n'.join(f'  {text(edge)}' for edge in data['edges'])
     return f'{{\n{head}"agents": {{\n{agents}\n}},\n"edges": [\n{edges}\n],\n"gains": {text(data["gains"])}\n}}\n'
@@ -1199,11 +1250,19 @@ def _parse_json(text: str, source: str) -> Any:
     try:
         return json.loads(text, object_pairs_hook=_json_object, parse_int=_json_int)
     except json.JSONDecodeError as error:
-        raise ScenarioError(f'{source}: malformed JSON at line {error.lineno}, column {error.colno}: {error.msg}') from None
+        raise ScenarioError(
+            f'{source}: malformed JSON at line {error.lineno}, column {error.colno}: {error.msg}'
+        ) from None
     except _DuplicateJsonKey as error:
         keys = short_repr(error.keys)
-        raise ScenarioError(f'{source}: malformed JSON: duplicate key {short_repr(error.key)} in the object with keys {keys}') from None
+        raise ScenarioError(
+            f'{source}: malformed JSON: duplicate key {short_repr(error.key)} in the object with keys {keys}'
+        ) from None
     except _HugeJsonInteger as error:
-        raise ScenarioError(f'{source}: an integer of {error.digits} digits is too large for a double') from None
+        raise ScenarioError(
+            f'{source}: an integer of {error.digits} digits is too large for a double'
+        ) from None
     except RecursionError:
-        raise ScenarioError(f'{source}: malformed JSON: nested too deeply (a scenario nests 4 levels)') from None
+        raise ScenarioError(
+            f'{source}: malformed JSON: nested too deeply (a scenario nests 4 levels)'
+        ) from None

@@ -85,10 +85,15 @@ class RobotLimits:
         """The tighter of V and W·l, as a speed of the control point, and which it is."""
         turn = self.max_angular_speed * self.control_point_distance
         if turn < self.max_speed:
-            return turn, f'turn rate {self.max_angular_speed:g} rad/s (l = {self.control_point_distance:g} m: ||u|| <= W l = {turn:.4g} m/s)'
+            return (
+                turn,
+                f'turn rate {self.max_angular_speed:g} rad/s (l = {self.control_point_distance:g} m: ||u|| <= W l = {turn:.4g} m/s)',
+            )
         return self.max_speed, f'speed {self.max_speed:g} m/s'
 
-    def largest_scale(self, *, speed: float, acceleration: float | None, margin: float = 1.0) -> tuple[float, str]:
+    def largest_scale(
+        self, *, speed: float, acceleration: float | None, margin: float = 1.0
+    ) -> tuple[float, str]:
         """The largest κ with κ m s <= min(V, W l) and κ² m a <= A (m = margin); inf if nothing binds.
 
         Returns (κ, the limit that binds)."""
@@ -103,15 +108,19 @@ class RobotLimits:
         return best, binding
 
     def to_dict(self) -> dict:
-        return {name: (getattr(self, name) if math.isfinite(getattr(self, name)) else None)
-                for name in ('max_speed', 'max_angular_speed', 'control_point_distance', 'max_acceleration')}  # fmt: skip
+        return {
+            name: (getattr(self, name) if math.isfinite(getattr(self, name)) else None)
+            for name in ('max_speed', 'max_angular_speed', 'control_point_distance', 'max_acceleration')
+        }
 
 
 def check_limits_apply(limits: RobotLimits, dynamics: str) -> None:
     """LimitsError when no κ can meet `limits` for this dynamics: none given, or an acceleration
     limit on ETA-1, whose velocity commands (uxsingle) jump at every event."""
     if not limits.any:
-        raise LimitsError('a speed scale from the limits needs at least one of --max-speed, --max-angular-speed, --max-acceleration')
+        raise LimitsError(
+            'a speed scale from the limits needs at least one of --max-speed, --max-angular-speed, --max-acceleration'
+        )
     if dynamics == 'single' and math.isfinite(limits.max_acceleration):
         raise LimitsError(
             f'max_acceleration {limits.max_acceleration:g} m/s²: ETA-1 commands velocities (uxsingle) that jump at '
@@ -203,7 +212,11 @@ class SpeedScaleChoice:
             f'speed scale κ for these limits (κ = 1 asks for up to {self.observed.speed:.4g} m/s'
             + ('' if self.observed.acceleration is None else f', {self.observed.acceleration:.4g} m/s²')
             + f' in the exact run; the formation error {settling.initial_error:.4g} m at t = 0 reaches {fraction} '
-            + (f'at t = {settling.time:.4g} s' if math.isfinite(settling.time) else f'not within the exact run, t <= {settling.run_horizon:g} s')
+            + (
+                f'at t = {settling.time:.4g} s'
+                if math.isfinite(settling.time)
+                else f'not within the exact run, t <= {settling.run_horizon:g} s'
+            )
             + (f', to {settling.resolution}' if settling.resolution != 'exact' else '')
             + '):'
         ]
@@ -211,12 +224,17 @@ class SpeedScaleChoice:
             if value is None:
                 lines.append(f'  guaranteed: none: {self.guaranteed_missing}')
                 continue
-            how = ("from the proofs' bound on the commands" if value.source == 'guaranteed'
-                   else f"from the exact run's largest commands, each kept {value.margin:g}× below its limit (not a guarantee)")  # fmt: skip
+            how = (
+                "from the proofs' bound on the commands"
+                if value.source == 'guaranteed'
+                else f"from the exact run's largest commands, each kept {value.margin:g}× below its limit (not a guarantee)"
+            )
             if not math.isfinite(value.value):
                 lines.append(f'  {value.source}: any κ ({value.binding}; {how})')
                 continue
-            lines.append(f'  {value.source}: κ = {value.value:.4g}, bound by the {value.binding}; {how}; {self._settle_words(value)}')
+            lines.append(
+                f'  {value.source}: κ = {value.value:.4g}, bound by the {value.binding}; {how}; {self._settle_words(value)}'
+            )
         chosen = self.value
         lines.append(f'  --speed-scale auto runs κ = {chosen:.4g} ({self.source})')
         return lines
@@ -250,8 +268,17 @@ def scale_choice(
 
     def value(source: str, speed: float, acceleration: float | None, m: float) -> ScaleValue:
         kappa, binding = limits.largest_scale(speed=speed, acceleration=acceleration, margin=m)
-        return ScaleValue(source=source, value=kappa, binding=binding, speed=speed, acceleration=acceleration,
-                          margin=m, settle_time=settling.at(kappa) if math.isfinite(kappa) else (0.0 if settling.time == 0.0 else math.nan))  # fmt: skip
+        return ScaleValue(
+            source=source,
+            value=kappa,
+            binding=binding,
+            speed=speed,
+            acceleration=acceleration,
+            margin=m,
+            settle_time=settling.at(kappa)
+            if math.isfinite(kappa)
+            else (0.0 if settling.time == 0.0 else math.nan),
+        )
 
     guaranteed = None if isinstance(theory, str) else value('guaranteed', *theory, 1.0)
     return SpeedScaleChoice(
@@ -331,8 +358,12 @@ def noise_floor(
     `weights`: per agent the ω_ij of its edges at the formation.  Returns (c0, s_i per agent, formula)."""
     if not (pose_noise >= 0.0 and math.isfinite(pose_noise)):
         raise LimitsError(f'pose_noise: must be a finite number >= 0, got {pose_noise!r}')
-    if dynamics == 'double' and not (pose_period is not None and pose_period > 0.0 and math.isfinite(pose_period)):
-        raise LimitsError(f'pose_period: ETA-2 senses velocities from two poses Δt apart: Δt must be a number > 0, got {pose_period!r}')
+    if dynamics == 'double' and not (
+        pose_period is not None and pose_period > 0.0 and math.isfinite(pose_period)
+    ):
+        raise LimitsError(
+            f'pose_period: ETA-2 senses velocities from two poses Δt apart: Δt must be a number > 0, got {pose_period!r}'
+        )
     per_agent = {}
     for agent, omegas in weights.items():
         position = pose_noise * math.sqrt(3.0 * sum(w * w for w in omegas) + sum(omegas) ** 2)
@@ -343,13 +374,21 @@ def noise_floor(
     if dynamics == 'single':
         formula = f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, σ = {pose_noise:g} m'
     else:
-        formula = (f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) (k1 + k2 √2/(κ Δt)), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, '
-                   f'σ = {pose_noise:g} m, Δt = {pose_period:g} s, κ = {speed_scale:g}')  # fmt: skip
+        formula = (
+            f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) (k1 + k2 √2/(κ Δt)), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, '
+            f'σ = {pose_noise:g} m, Δt = {pose_period:g} s, κ = {speed_scale:g}'
+        )
     return floor, per_agent, formula
 
 
-def scenario_noise_floor(scenario, *, pose_noise: float, pose_period: float | None = None, speed_scale: float = 1.0,
-                         quantile: float = NOISE_QUANTILE) -> tuple[float, dict[int, float], str]:  # fmt: skip
+def scenario_noise_floor(
+    scenario,
+    *,
+    pose_noise: float,
+    pose_period: float | None = None,
+    speed_scale: float = 1.0,
+    quantile: float = NOISE_QUANTILE,
+) -> tuple[float, dict[int, float], str]:
     """`noise_floor` for `scenario`: ω_ij at the formation, 2/(Δ − ||d_ij||) ((wij) at y_ij = 0)."""
     weights = {agent: omega_at_formation(scenario, agent) for agent in scenario.agent_ids}
     gains = scenario.gains
@@ -368,4 +407,7 @@ def scenario_noise_floor(scenario, *, pose_noise: float, pose_period: float | No
 
 def omega_at_formation(scenario, agent: int) -> list[float]:
     """ω_ij of `agent`'s edges at the formation (y_ij = 0): f_ij(0) = 2/(Δ − ||d_ij||) (fij)."""
-    return [float(omega(0.0, scenario.delta - float(np.linalg.norm(d)))) for d in scenario.neighbours(agent).values()]
+    return [
+        float(omega(0.0, scenario.delta - float(np.linalg.norm(d))))
+        for d in scenario.neighbours(agent).values()
+    ]

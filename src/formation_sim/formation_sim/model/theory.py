@@ -411,7 +411,12 @@ def _edge_bound(k_nu_scaled: float, capacities: np.ndarray) -> np.ndarray:
     # ν_ij <= 2ν is loose (ν sums each edge once, so ν_ij <= ν) but valid; kept as printed.
     # Written as 2Kc / (K + sqrt(K² + 2Kc)): -K + sqrt(...) cancels for K >> c and rounded to
     # l >= c (a false TheoryError) for teams with large k_ν (α² n / β of 1e8 and more).
-    return 2.0 * k_nu_scaled * capacities / (k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * capacities))
+    return (
+        2.0
+        * k_nu_scaled
+        * capacities
+        / (k_nu_scaled + np.sqrt(k_nu_scaled * k_nu_scaled + 2.0 * k_nu_scaled * capacities))
+    )
 
 
 def _per_agent_sum(n: int, heads, tails, values) -> np.ndarray:
@@ -490,7 +495,8 @@ def _theorem1_constants(scenario: Scenario, common: _Common, *, a: float) -> The
     state = against_bound(beta, b0, strict=True)
     _require(beta > 0.0 and state != OUTSIDE, 'beta', f'0 < β < β0 = {b0!r} required, got β = {beta!r}')
     _require(
-        state == INSIDE, 'beta',
+        state == INSIDE,
+        'beta',
         f'β = {beta!r} equals β0 = {b0!r} up to rounding ({ROUNDING_ULPS} ulps; validation accepts it): '
         f"the proof's k_V = V0 + nα²/(8β0(β0-β)) is unbounded there",
     )
@@ -529,33 +535,49 @@ def _theorem2_constants(scenario: Scenario, common: _Common, *, b: float | None)
     k1, k2, k3 = gains.k1, gains.k2, gains.k3
     alpha_d, beta_d, beta1 = gains.alpha_d, gains.beta_d, gains.beta1
     _require(alpha_d > 0.0, 'alpha_d', f'α_d > 0 required, got {alpha_d!r}')
-    _require(beta1 > 0.0 and against_bound(beta1, b0, strict=False) != OUTSIDE, 'beta1', f'0 < β1 <= β0 = {b0!r} required, got β1 = {beta1!r}')
+    _require(
+        beta1 > 0.0 and against_bound(beta1, b0, strict=False) != OUTSIDE,
+        'beta1',
+        f'0 < β1 <= β0 = {b0!r} required, got β1 = {beta1!r}',
+    )
     _require(k1 > 0.0 and k2 > 0.0, 'k1_k2', f'k1, k2 > 0 required, got k1={k1!r}, k2={k2!r}')
     _require(riccati_holds(gains.P, beta1), 'riccati', f'P = {gains.P.tolist()} must satisfy (riccatti)')
     upper = k3_upper_bound(k1, k2)
-    _require(k3 > 0.0 and against_bound(k3, upper, strict=True) != OUTSIDE, 'k3', f'0 < k3 < {upper!r} required, got k3 = {k3!r}')
+    _require(
+        k3 > 0.0 and against_bound(k3, upper, strict=True) != OUTSIDE,
+        'k3',
+        f'0 < k3 < {upper!r} required, got k3 = {k3!r}',
+    )
     k4 = k4_value(k1, k2, k3)
     eigenvalues = np.linalg.eigvalsh(gains.P)
     rho2_p, lam_max_p = float(eigenvalues.min()), float(eigenvalues.max())
     bound_paper = (2.0 - k4) * rho2_p
     bound_corrected = (2.0 - k4) / lam_max_p
     _require(
-        beta_d > 0.0 and against_bound(beta_d, bound_paper, strict=True) != OUTSIDE,  # at it up to rounding: the chain gives no decay bound
+        beta_d > 0.0
+        and against_bound(beta_d, bound_paper, strict=True)
+        != OUTSIDE,  # at it up to rounding: the chain gives no decay bound
         'beta_d',
         f'0 < β_d < (2-k4) ρ2(P) = {bound_paper!r} required, got β_d = {beta_d!r}',
     )
     b = k3 * DEFAULT_B_FRACTION if b is None else float(b)
     _require(0.0 < b < k3, 'b', f'the free parameter b must lie in (0, k3 = {k3!r}), got {b!r}')
 
-    velocities = scenario.velocities  # the paper's q_p(0): a run at speed scale κ starts at κ q(0) (docs/SPEED_SCALE.md)
+    velocities = (
+        scenario.velocities
+    )  # the paper's q_p(0): a run at speed scale κ starts at κ q(0) (docs/SPEED_SCALE.md)
     nu0 = tension_double(scenario, scenario.positions, velocities)
     k_nu = nu0 + n * alpha_d * alpha_d / (8.0 * b * beta_d)  # k^d_ν
     k_edge = _edge_bound(k_nu / k1, capacities)  # (kijd)
     V0 = lyapunov_double(scenario, scenario.positions, velocities, tau=common.tau)
     edges = _Theorem2Edges(
-        f=f_ij(k_edge, capacity=capacities), g=g_ij(k_edge, capacity=capacities), h=h_ij(k_edge, capacity=capacities)
+        f=f_ij(k_edge, capacity=capacities),
+        g=g_ij(k_edge, capacity=capacities),
+        h=h_ij(k_edge, capacity=capacities),
     )
-    paper_chain = _theorem2_chain(scenario, common, edges, V0=V0, reading='paper', rate_bound=bound_paper, z_gain=1.0)
+    paper_chain = _theorem2_chain(
+        scenario, common, edges, V0=V0, reading='paper', rate_bound=bound_paper, z_gain=1.0
+    )
     corrected_chain = _theorem2_chain(
         scenario, common, edges, V0=V0, reading='corrected', rate_bound=bound_corrected, z_gain=1.0 / rho2_p
     )
@@ -593,7 +615,14 @@ class _Theorem2Edges:
 
 
 def _theorem2_chain(
-    scenario: Scenario, common: _Common, edges: _Theorem2Edges, *, V0: float, reading: str, rate_bound: float, z_gain: float
+    scenario: Scenario,
+    common: _Common,
+    edges: _Theorem2Edges,
+    *,
+    V0: float,
+    reading: str,
+    rate_bound: float,
+    z_gain: float,
 ) -> Theorem2Chain:
     """Theorem 2 (ii)-(iii) with the rate bound γ and the factor of (yiyj) of one reading.
 
@@ -601,13 +630,26 @@ def _theorem2_chain(
     z_gain = 1/λmin(P). A reading whose γ does not exceed β_d gives no decay bound (holds=False).
     """
     gains = scenario.gains
-    k1, k2, k3, alpha_d, beta_d, beta1 = gains.k1, gains.k2, gains.k3, gains.alpha_d, gains.beta_d, gains.beta1
+    k1, k2, k3, alpha_d, beta_d, beta1 = (
+        gains.k1,
+        gains.k2,
+        gains.k3,
+        gains.alpha_d,
+        gains.beta_d,
+        gains.beta1,
+    )
     n, heads, tails = common.n, common.heads, common.tails
     if not 0.0 < beta_d < rate_bound:
         return Theorem2Chain(
-            reading=reading, rate_bound=rate_bound, z_gain=z_gain, holds=False,
-            k_V=None, c_q=None, c=None, xi=None,
-        )  # fmt: skip
+            reading=reading,
+            rate_bound=rate_bound,
+            z_gain=z_gain,
+            holds=False,
+            k_V=None,
+            c_q=None,
+            c=None,
+            xi=None,
+        )
     # (kVd) with γ = rate_bound in place of (2-k4)ρ2(P).
     k_V = V0 + n * alpha_d * alpha_d / (8.0 * beta1 * (rate_bound - beta_d))
     # (yiyj): ||z_i-z_j||² <= 4 z_gain V_d.

@@ -109,14 +109,27 @@ def _eta1(scenario, constants, c0: float) -> FloorBounds:
     limit = eta1_floor_limit(b0, c_min, n)
     proven = c0 < limit
     common = dict(
-        theorem=1, floor=c0, value=c0, limit=limit, proven=proven, z_gain=1.0, V0=constants.V0, decay=2.0 * b0,
-        gain=1.0 / (4.0 * b0), n=n, alpha=alpha, rate=beta,
+        theorem=1,
+        floor=c0,
+        value=c0,
+        limit=limit,
+        proven=proven,
+        z_gain=1.0,
+        V0=constants.V0,
+        decay=2.0 * b0,
+        gain=1.0 / (4.0 * b0),
+        n=n,
+        alpha=alpha,
+        rate=beta,
         condition=f'c0 < β0 min(Δ-||d_ij||) sqrt(2/n) = {limit:.6g} (the ultimate ball c0 sqrt(n/2)/β0 within every capacity)',
-        ultimate=n * c0 * c0 / (8.0 * b0 * b0), ball=c0 * math.sqrt(n / 2.0) / b0,
-    )  # fmt: skip
+        ultimate=n * c0 * c0 / (8.0 * b0 * b0),
+        ball=c0 * math.sqrt(n / 2.0) / b0,
+    )
     if not proven:
         return FloorBounds(k_nu=None, k_edge=None, c=None, xi=None, **common)
-    k_nu = _tension_bound(constants.nu0, n=n, m=len(scenario.edges), alpha=alpha, beta=beta, beta0=b0, c0=c0, c_min=c_min)
+    k_nu = _tension_bound(
+        constants.nu0, n=n, m=len(scenario.edges), alpha=alpha, beta=beta, beta0=b0, c0=c0, c_min=c_min
+    )
     # ||y_ij|| within both the tension's bound (kij) and 2 sqrt(sup V), sup V <= max(V0, n θ(0)²/(8β0²)).
     sup_v = max(constants.V0, n * (c0 + alpha) ** 2 / (8.0 * b0 * b0))
     k_edge = np.minimum(theory._edge_bound(k_nu, capacities), 2.0 * math.sqrt(sup_v))
@@ -136,7 +149,9 @@ def _eta1(scenario, constants, c0: float) -> FloorBounds:
     )
 
 
-def _tension_bound(nu0: float, *, n: int, m: int, alpha: float, beta: float, beta0: float, c0: float, c_min: float) -> float:
+def _tension_bound(
+    nu0: float, *, n: int, m: int, alpha: float, beta: float, beta0: float, c0: float, c_min: float
+) -> float:
     """sup ν for ETA-1 with the floor (a = 1/2), the smallest over λ of max(ν0, N_c) + A:
 
     ν' <= -4β0² V + (n/2) θ², θ² <= (1+λ) c0² + (1+1/λ) α² e^{-2βs}; W = ν - A (1 - e^{-2βs}),
@@ -157,7 +172,14 @@ def _tension_bound(nu0: float, *, n: int, m: int, alpha: float, beta: float, bet
 
 def _eta2(scenario, constants, c0: float) -> FloorBounds:
     n, gains = scenario.n, scenario.gains
-    k1, k2, k3, alpha_d, beta_d, beta1 = gains.k1, gains.k2, gains.k3, gains.alpha_d, gains.beta_d, gains.beta1
+    k1, k2, k3, alpha_d, beta_d, beta1 = (
+        gains.k1,
+        gains.k2,
+        gains.k3,
+        gains.alpha_d,
+        gains.beta_d,
+        gains.beta1,
+    )
     capacities = theory.edge_capacities(scenario)
     c_min = float(capacities.min())
     gamma = (2.0 - constants.k4) / constants.lambda_max_P  # the corrected rate (docs/THEOREM2.md)
@@ -167,11 +189,23 @@ def _eta2(scenario, constants, c0: float) -> FloorBounds:
     proven = radius < c_min
     ultimate = n * c0 * c0 / (8.0 * beta1 * gamma)
     common = dict(
-        theorem=2, floor=c0, value=radius, limit=c_min, proven=proven, z_gain=z_gain, V0=constants.V0,
-        decay=2.0 * gamma, gain=1.0 / (4.0 * beta1), n=n, alpha=alpha_d, rate=beta_d, k_nu=None,
+        theorem=2,
+        floor=c0,
+        value=radius,
+        limit=c_min,
+        proven=proven,
+        z_gain=z_gain,
+        V0=constants.V0,
+        decay=2.0 * gamma,
+        gain=1.0 / (4.0 * beta1),
+        n=n,
+        alpha=alpha_d,
+        rate=beta_d,
+        k_nu=None,
         condition=f'2 sqrt(sup V_d / λmin(P)) = {radius:.6g} < min(Δ-||d_ij||) = {c_min:.6g}',
-        ultimate=ultimate, ball=2.0 * math.sqrt(z_gain * ultimate),
-    )  # fmt: skip
+        ultimate=ultimate,
+        ball=2.0 * math.sqrt(z_gain * ultimate),
+    )
     if not proven:
         return FloorBounds(k_edge=None, c=None, xi=None, **common)
     heads, tails, _ = scenario.edge_indices()

@@ -91,8 +91,7 @@ class ValidationError(ValueError):
         first = report.errors[0]
         more = f' (and {len(report.errors) - 1} more errors)' if len(report.errors) > 1 else ''
         super().__init__(
-            f'scenario {report.scenario!r} is invalid: [{first.rule}] {first.subject}: '
-            f'{first.message}{more}'
+            f'scenario {report.scenario!r} is invalid: [{first.rule}] {first.subject}: {first.message}{more}'
         )
 
 
@@ -199,10 +198,13 @@ def _apart(a: float, b: float) -> tuple[str, str]:
 def _rounding(out: _Collector, name: str, value: float, bound_name: str, bound: float) -> None:
     """The warning for a gain accepted because it exceeds its computed bound by rounding only."""
     out.warning(
-        'rounding', 'gains',
+        'rounding',
+        'gains',
         f'{name} = {value!r} is {ulps_above(value, bound)} ulp(s) above {bound_name} = {bound!r}, within '
         f'the rounding margin of {ROUNDING_ULPS} ulps of a computed bound: taken as equal to it',
-        value=value, bound=bound, margin_ulps=ROUNDING_ULPS,
+        value=value,
+        bound=bound,
+        margin_ulps=ROUNDING_ULPS,
     )
 
 
@@ -316,8 +318,15 @@ def _check_initial(scenario: Scenario, out: _Collector, capacities: np.ndarray, 
         slack = capacity - error
         relative = slack / capacity if capacity > 0.0 else -math.inf
         slack_rows.append(
-            dict(i=edge.i, j=edge.j, d_norm=d_norm, capacity=capacity, error=error, slack=slack,
-                 relative_slack=relative)
+            dict(
+                i=edge.i,
+                j=edge.j,
+                d_norm=d_norm,
+                capacity=capacity,
+                error=error,
+                slack=slack,
+                relative_slack=relative,
+            )
         )
         if not capacity > 0.0:
             shown_norm, shown_delta = _apart(d_norm, scenario.delta)
@@ -390,11 +399,23 @@ def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None)
     name, rate = ('β', gains.beta) if scenario.dynamics == 'single' else ('β_d', gains.beta_d)
     line = (
         f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) divided by κ, "
-        f'commands × κ' + ('' if scenario.dynamics == 'single' else ' (accelerations × κ², gains κ²k1, κk2, κk3, q(0) → κ q(0))')
+        f'commands × κ'
+        + (
+            ''
+            if scenario.dynamics == 'single'
+            else ' (accelerations × κ², gains κ²k1, κk2, κk3, q(0) → κ q(0))'
+        )
         + f'; the threshold decays at κ{name} = {_g(kappa * rate)} per second'
         + ('' if beta0 is None else f', β0 in real time κβ0 = {_g(kappa * beta0)}')
     )
-    out.note('speed_scale', 'gains', line, speed_scale=kappa, rate=kappa * rate, beta0=None if beta0 is None else kappa * beta0)
+    out.note(
+        'speed_scale',
+        'gains',
+        line,
+        speed_scale=kappa,
+        rate=kappa * rate,
+        beta0=None if beta0 is None else kappa * beta0,
+    )
 
 
 def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
@@ -408,31 +429,40 @@ def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
         return  # a hypothesis the rules above report
     if floor.theorem == 1 and not floor.proven:
         out.error(
-            'threshold_floor', 'gains',
+            'threshold_floor',
+            'gains',
             f'threshold floor c0 = {_g(c0)} breaks {floor.condition}: connectivity is not guaranteed',
-            threshold_floor=c0, limit=floor.limit,
+            threshold_floor=c0,
+            limit=floor.limit,
         )
         return
     c_min = floor.limit if floor.theorem == 2 else None
     if floor.theorem == 2 and not floor.ball < c_min:
         out.error(
-            'threshold_floor', 'gains',
+            'threshold_floor',
+            'gains',
             f'threshold floor c0 = {_g(c0)}: the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) = {_g(floor.ball)} '
             f'is not within min(Δ-||d_ij||) = {_g(c_min)}: even ultimately nothing keeps the edges in range',
-            threshold_floor=c0, ball=floor.ball, limit=c_min,
+            threshold_floor=c0,
+            ball=floor.ball,
+            limit=c_min,
         )
         return
     if not floor.proven:
         out.warning(
-            'threshold_floor', 'gains',
+            'threshold_floor',
+            'gains',
             f'threshold floor c0 = {_g(c0)}: connectivity is proven only if {floor.condition.replace(" < ", " were below ")}; '
             'it is not, so connectivity is checked on runs only (docs/SPEED_SCALE.md)',
-            threshold_floor=c0, value=floor.value, limit=floor.limit,
+            threshold_floor=c0,
+            value=floor.value,
+            limit=floor.limit,
         )
     kappa = scenario.speed_scale
     xi = '' if floor.xi is None else f', inter-event times >= {_g(min(floor.xi.values()) / kappa)} s'
     out.note(
-        'threshold_floor', 'gains',
+        'threshold_floor',
+        'gains',
         f'threshold floor c0 = {_g(c0)}: V ultimately <= {_g(floor.ultimate)}, formation error ultimately <= '
         f'{_g(floor.ball)}{xi}' + (f' ({floor.condition})' if floor.proven else ''),
         **floor.to_dict(),
@@ -448,21 +478,29 @@ def _check_scale(scenario: Scenario, out: _Collector, capacities: np.ndarray, sl
     found = False
     if scenario.delta > LENGTH_MAX:
         out.error(
-            'scale', 'scenario',
+            'scale',
+            'scenario',
             f'Δ = {_g(scenario.delta)} is above {_g(LENGTH_MAX)} (2^250): squared lengths and the fourth '
             f"powers in the certified search's bounds overflow double precision; {units}",
-            delta=scenario.delta, limit=LENGTH_MAX,
+            delta=scenario.delta,
+            limit=LENGTH_MAX,
         )
         return False
     for k, edge in enumerate(scenario.edges):
-        for name, value in (('Δ-||d_ij||', capacities[k]), ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slacks[k])):
+        for name, value in (
+            ('Δ-||d_ij||', capacities[k]),
+            ('the initial slack Δ-||d_ij||-||x_i(0)-x_j(0)-d_ij||', slacks[k]),
+        ):
             if 0.0 < value < LENGTH_MIN:
                 out.error(
-                    'scale', _edge(edge),
+                    'scale',
+                    _edge(edge),
                     f'{name} = {_g(float(value))} is below {_g(LENGTH_MIN)} (2^-250): the certified search '
                     f'divides by the fourth power of the distance to Δ, which underflows double precision '
                     f'there; {units}',
-                    key=name, value=float(value), limit=LENGTH_MIN,
+                    key=name,
+                    value=float(value),
+                    limit=LENGTH_MIN,
                 )
                 found = True
                 break
@@ -473,21 +511,33 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
     """Every number the agents receive as a ROS parameter (sim_node.agent_parameters) is 0 or normal."""
     smallest = sys.float_info.min  # rcl's parser (strtod) flags a subnormal result as out of range
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
-    carried = [('scenario', 'communication_radius', scenario.delta), ('scenario', 'horizon', scenario.horizon)]
-    carried += [('gains', f'gains.{name}', getattr(scenario.gains, name)) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)]
-    carried += [(_edge(edge), f'd[{k}]', float(value)) for edge in scenario.edges for k, value in enumerate(edge.d)]
+    carried = [
+        ('scenario', 'communication_radius', scenario.delta),
+        ('scenario', 'horizon', scenario.horizon),
+    ]
+    carried += [
+        ('gains', f'gains.{name}', getattr(scenario.gains, name))
+        for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)
+    ]
+    carried += [
+        (_edge(edge), f'd[{k}]', float(value)) for edge in scenario.edges for k, value in enumerate(edge.d)
+    ]
     for subject, key, value in carried:
         if value != 0.0 and abs(value) < smallest:
             out.error(
-                'parameters', subject,
+                'parameters',
+                subject,
                 f'{key} = {value!r} is a subnormal double (0 < |x| < {smallest!r}): agents receive it as a ROS '
                 f"parameter, and rcl's parameter file parser reads it as text, so the agent cannot start; use 0 "
                 f'or a magnitude of at least {smallest!r}',
-                key=key, value=value,
+                key=key,
+                value=value,
             )
 
 
-def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray, errors0: np.ndarray) -> None:
+def _check_precision(
+    scenario: Scenario, out: _Collector, capacities: np.ndarray, errors0: np.ndarray
+) -> None:
     """Refuse an initial slack below what double precision resolves (rule `precision`).
 
     Between events an agent predicts y_ij(t) = x_i - x_j - d_ij in closed form; rounded, the
@@ -522,7 +572,13 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
     def error_step(k: int, sigma: float) -> float:
         return float(
             theory.rounding_step(
-                float(capacities[k]), sigma, float(ulp_y[k]), k1=k1, k2=k2, speed=float(speed[k]), ulp_q=float(ulp_q[k])
+                float(capacities[k]),
+                sigma,
+                float(ulp_y[k]),
+                k1=k1,
+                k2=k2,
+                speed=float(speed[k]),
+                ulp_q=float(ulp_q[k]),
             )
         )
 
@@ -544,7 +600,9 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
                 low, high = (middle, high) if error_step(k, middle) > limit else (low, middle)
             floor = high
         how = (
-            'g_ij × ulp, (gij)' if k2 == 0.0 else '(k1 g_ij + k2 h_ij ||q_i-q_j||) × ulp + k2 f_ij × ulp(q_i-q_j)'
+            'g_ij × ulp, (gij)'
+            if k2 == 0.0
+            else '(k1 g_ij + k2 h_ij ||q_i-q_j||) × ulp + k2 f_ij × ulp(q_i-q_j)'
         )
         out.error(
             'precision',
@@ -554,7 +612,11 @@ def _check_precision(scenario: Scenario, out: _Collector, capacities: np.ndarray
             f'triggering error by {_g(step)} ({how}), {_g(step / threshold)} of the threshold {name} = '
             f'{_g(threshold)}, where the certified search resolves at most {_g(PRECISION_LIMIT)} of it '
             f'(tolerance {_g(DEFAULT_TOLERANCE)} × {MAX_STEPS} steps / 4)',
-            slack=slack, floor=floor, ulp=float(ulp_y[k]), error_step=step, threshold=threshold,
+            slack=slack,
+            floor=floor,
+            ulp=float(ulp_y[k]),
+            error_step=step,
+            threshold=threshold,
             limit=PRECISION_LIMIT,
         )
 
@@ -582,17 +644,22 @@ def _check_single(scenario: Scenario, out: _Collector, beta0: float | None) -> N
     if not beta > 0.0 or state == OUTSIDE:
         shown_beta, shown_beta0 = _apart(beta, beta0)
         out.error(
-            'beta', 'gains', f'0 < β < β0 = {shown_beta0} required, got β = {shown_beta}',
-            beta=beta, beta0=beta0,
+            'beta',
+            'gains',
+            f'0 < β < β0 = {shown_beta0} required, got β = {shown_beta}',
+            beta=beta,
+            beta0=beta0,
         )
     elif state == ROUNDING:
         _rounding(out, 'β', beta, 'β0', beta0)
     elif beta > NEAR_EDGE_FRACTION * beta0:
         out.warning(
-            'beta', 'gains',
+            'beta',
+            'gains',
             f'β = {_g(beta)} is {100.0 * beta / beta0:.1f} % of β0 = {_g(beta0)} '
             f'(above {100.0 * NEAR_EDGE_FRACTION:.0f} %)',
-            beta=beta, beta0=beta0,
+            beta=beta,
+            beta0=beta0,
         )
     if beta > 0.0:
         _check_remark(scenario, out, 'β', beta)
@@ -602,14 +669,20 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
     gains = scenario.gains
     k1, k2, k3, beta1, beta_d = gains.k1, gains.k2, gains.k3, gains.beta1, gains.beta_d
     if not gains.alpha_d > 0.0:
-        out.error('alpha_d', 'gains', f'α_d must be > 0, got α_d = {_g(gains.alpha_d)}',
-                  alpha_d=gains.alpha_d)
+        out.error(
+            'alpha_d', 'gains', f'α_d must be > 0, got α_d = {_g(gains.alpha_d)}', alpha_d=gains.alpha_d
+        )
     if beta0 is not None:
         state = against_bound(beta1, beta0, strict=False)
         if not beta1 > 0.0 or state == OUTSIDE:
             shown_beta1, shown_beta0 = _apart(beta1, beta0)
-            out.error('beta1', 'gains', f'0 < β1 <= β0 = {shown_beta0} required, got β1 = {shown_beta1}',
-                      beta1=beta1, beta0=beta0)
+            out.error(
+                'beta1',
+                'gains',
+                f'0 < β1 <= β0 = {shown_beta0} required, got β1 = {shown_beta1}',
+                beta1=beta1,
+                beta0=beta0,
+            )
         elif state == ROUNDING:
             _rounding(out, 'β1', beta1, 'β0', beta0)
         if beta1 > 0.0:
@@ -622,19 +695,25 @@ def _check_double(scenario: Scenario, out: _Collector, beta0: float | None) -> N
     if not k3 > 0.0 or state == OUTSIDE:
         shown_k3, shown_upper = _apart(k3, upper)
         out.error(
-            'k3', 'gains',
+            'k3',
+            'gains',
             f'0 < k3 < 4/(k2+sqrt(k1²+k2²)) = {shown_upper} required (k4 < 2), got k3 = {shown_k3}, '
             f'k4 = {_g(k4)}',
-            k3=k3, k3_upper_bound=upper, k4=k4,
+            k3=k3,
+            k3_upper_bound=upper,
+            k4=k4,
         )
         return
     if state == ROUNDING:
         _rounding(out, 'k3', k3, '4/(k2+sqrt(k1²+k2²))', upper)
     elif k3 > NEAR_EDGE_FRACTION * upper:
         out.warning(
-            'k3', 'gains',
+            'k3',
+            'gains',
             f'k3 = {_g(k3)} is {100.0 * k3 / upper:.1f} % of its bound {_g(upper)} (k4 = {_g(k4)})',
-            k3=k3, k3_upper_bound=upper, k4=k4,
+            k3=k3,
+            k3_upper_bound=upper,
+            k4=k4,
         )
     _check_beta_d(out, beta_d=beta_d, k4=k4, rho2_p=rho2_p, lam_max_p=lam_max_p)
 
@@ -652,18 +731,25 @@ def _check_riccati(out: _Collector, gains, beta1: float) -> tuple[float, float]:
         f'P = [[{_g(gains.k0)}, {_g(k1)}], [{_g(k1)}, {_g(k2)}]] (k1 = {_g(k1)}, k2 = {_g(k2)}), '
         f'eigenvalues ρ2(P) = {_g(rho2_p)}, λmax(P) = {_g(lam_max_p)}; largest eigenvalue of '
         f'½(PC+C^T P) - β1 PBB^T P + 2I = {_g(lhs_max)}',
-        P=gains.P.tolist(), k1=k1, k2=k2, rho2_P=rho2_p, lambda_max_P=lam_max_p,
+        P=gains.P.tolist(),
+        k1=k1,
+        k2=k2,
+        rho2_P=rho2_p,
+        lambda_max_P=lam_max_p,
         riccati_max_eigenvalue=lhs_max,
     )
     if not (k1 > 0.0 and k2 > 0.0):
         out.error('k1_k2', 'gains', f'k1, k2 > 0 required, got k1 = {_g(k1)}, k2 = {_g(k2)}', k1=k1, k2=k2)
     if not riccati_holds(gains.P, beta1):
         out.error(
-            'riccati', 'gains',
+            'riccati',
+            'gains',
             f'P > 0 with ½(PC+C^T P) - β1 PBB^T P + 2I <= 0 required (riccatti); eigenvalues of P '
             f'{_g(rho2_p)}, {_g(lam_max_p)}, largest eigenvalue of the left side {_g(lhs_max)} '
             f'for β1 = {_g(beta1)}',
-            rho2_P=rho2_p, riccati_max_eigenvalue=lhs_max, beta1=beta1,
+            rho2_P=rho2_p,
+            riccati_max_eigenvalue=lhs_max,
+            beta1=beta1,
         )
     return rho2_p, lam_max_p
 
@@ -673,28 +759,34 @@ def _check_beta_d(out: _Collector, *, beta_d: float, k4: float, rho2_p: float, l
     bound_paper = (2.0 - k4) * rho2_p
     bound_corrected = (2.0 - k4) / lam_max_p
     out.note(
-        'beta_d', 'gains',
+        'beta_d',
+        'gains',
         f'k4 = {_g(k4)}; β_d bounds: (2-k4) ρ2(P) = {_g(bound_paper)} (as printed), '
         f'(2-k4)/λmax(P) = {_g(bound_corrected)} (what the proof supports)',
-        k4=k4, beta_d_bound_paper=bound_paper, beta_d_bound_corrected=bound_corrected,
+        k4=k4,
+        beta_d_bound_paper=bound_paper,
+        beta_d_bound_corrected=bound_corrected,
     )
     state = against_bound(beta_d, bound_paper, strict=True)
     if not beta_d > 0.0 or state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_paper)
         out.error(
-            'beta_d', 'gains',
+            'beta_d',
+            'gains',
             f'0 < β_d < (2-k4) ρ2(P) = {shown_bound} required, got β_d = {shown_beta_d}',
-            beta_d=beta_d, bound=bound_paper,
+            beta_d=beta_d,
+            bound=bound_paper,
         )
         return
     if state == ROUNDING:
         _rounding(out, 'β_d', beta_d, '(2-k4) ρ2(P)', bound_paper)
     elif beta_d > NEAR_EDGE_FRACTION * bound_paper:
         out.warning(
-            'beta_d', 'gains',
-            f'β_d = {_g(beta_d)} is {100.0 * beta_d / bound_paper:.1f} % of (2-k4) ρ2(P) = '
-            f'{_g(bound_paper)}',
-            beta_d=beta_d, bound=bound_paper,
+            'beta_d',
+            'gains',
+            f'β_d = {_g(beta_d)} is {100.0 * beta_d / bound_paper:.1f} % of (2-k4) ρ2(P) = {_g(bound_paper)}',
+            beta_d=beta_d,
+            bound=bound_paper,
         )
     state = against_bound(beta_d, bound_corrected, strict=True)
     if state == ROUNDING:
@@ -702,14 +794,16 @@ def _check_beta_d(out: _Collector, *, beta_d: float, k4: float, rho2_p: float, l
     elif state == OUTSIDE:
         shown_beta_d, shown_bound = _apart(beta_d, bound_corrected)
         out.warning(
-            'beta_d_corrected', 'gains',
+            'beta_d_corrected',
+            'gains',
             f'β_d = {shown_beta_d} is not below (2-k4)/λmax(P) = {shown_bound}, the rate the '
             f'proof of Theorem 2 (ii) supports; the printed bound (2-k4) ρ2(P) = {_g(bound_paper)} '
             f'does not follow from it (docs/THEOREM2.md), so convergence at rate β_d is not '
             f'guaranteed',
-            beta_d=beta_d, bound_corrected=bound_corrected, bound_paper=bound_paper,
+            beta_d=beta_d,
+            bound_corrected=bound_corrected,
+            bound_paper=bound_paper,
         )
-
 
 
 def require_valid(scenario: Scenario) -> ValidationReport:

@@ -54,7 +54,15 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
-from formation_agent.ros.process import EXIT_BAD_INPUT, EXIT_PEER_LOST, EXIT_REFUSED, StopSignals, exit_process, make_executor, shutdown_guard
+from formation_agent.ros.process import (
+    EXIT_BAD_INPUT,
+    EXIT_PEER_LOST,
+    EXIT_REFUSED,
+    StopSignals,
+    exit_process,
+    make_executor,
+    shutdown_guard,
+)
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
@@ -86,14 +94,31 @@ from formation_sim.runtime.run_book import (
     RobotLostError,
     ids_text,
 )
-from formation_sim.runtime.run_end import collect_final_reports, stop_agents, wait_for_delivery, write_results, write_unstarted
+from formation_sim.runtime.run_end import (
+    collect_final_reports,
+    stop_agents,
+    wait_for_delivery,
+    write_results,
+    write_unstarted,
+)
 from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, PoseTrack, RobotSample, poses_for_end, sample_from_fields, sample_times, trajectory_samples
+from formation_sim.sim.robots import (
+    POSES_AFTER_END,
+    ROBOT_MODELS,
+    PoseTrack,
+    RobotSample,
+    poses_for_end,
+    sample_from_fields,
+    sample_times,
+    trajectory_samples,
+)
 
-COORDINATOR_FILE = 'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
+COORDINATOR_FILE = (
+    'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
+)
 TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
 
 EXIT_FAILED = 1
@@ -109,12 +134,45 @@ EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample nee
 
 COORDINATOR_PARAMETERS = (
     *TIME_KEEPER_PARAMETERS,
-    ParameterSpec(name='robot', type=STRING, default='holonomic', choices=ROBOT_MODELS, description='what the robots are'),
-    ParameterSpec(name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, description="unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the scenario's positions are those of the control points)"),
-    ParameterSpec(name='robot_trajectory', type=STRING, default='true_odom', choices=TRAJECTORY_SOURCES, description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read"),
-    ParameterSpec(name='pose_silence', type=DOUBLE, default=0.5, low=0.0, low_open=True, high=math.inf, high_open=True, description="a robot whose poses on robot_trajectory stop for this long while the other robots' still come is lost: the run stops at once [s] (formation run: the agents' pose_timeout)"),
-    ParameterSpec(name='backend', type=STRING, default='external', choices=KindNames(after=('external',)), description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)'),
-)  # fmt: skip
+    ParameterSpec(
+        name='robot',
+        type=STRING,
+        default='holonomic',
+        choices=ROBOT_MODELS,
+        description='what the robots are',
+    ),
+    ParameterSpec(
+        name='control_point_distance',
+        type=DOUBLE,
+        default=0.1,
+        low=0.0,
+        description="unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the scenario's positions are those of the control points)",
+    ),
+    ParameterSpec(
+        name='robot_trajectory',
+        type=STRING,
+        default='true_odom',
+        choices=TRAJECTORY_SOURCES,
+        description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read",
+    ),
+    ParameterSpec(
+        name='pose_silence',
+        type=DOUBLE,
+        default=0.5,
+        low=0.0,
+        low_open=True,
+        high=math.inf,
+        high_open=True,
+        description="a robot whose poses on robot_trajectory stop for this long while the other robots' still come is lost: the run stops at once [s] (formation run: the agents' pose_timeout)",
+    ),
+    ParameterSpec(
+        name='backend',
+        type=STRING,
+        default='external',
+        choices=KindNames(after=('external',)),
+        description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)',
+    ),
+)
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
 
 
@@ -130,7 +188,13 @@ def robot_run_topics(
     truth = simulated if truth is None else truth
     array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
     command_type = robot_kind(model).command_type
-    topics = [(STEP_TOPIC, array), (STATUS_TOPIC, array), (REPORT_TOPIC, string), (SCENARIO_TOPIC, string), (ROBOTS_TOPIC, string)]
+    topics = [
+        (STEP_TOPIC, array),
+        (STATUS_TOPIC, array),
+        (REPORT_TOPIC, string),
+        (SCENARIO_TOPIC, string),
+        (ROBOTS_TOPIC, string),
+    ]
     for i in scenario.agent_ids:
         if pose_type == 'pose' or not simulated:
             topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
@@ -159,8 +223,19 @@ class FormationCoordinatorNode(TimeKeeperNode):
         'fault, and writes summary.json and graph.json into out_dir.'
     )
 
-    def __init__(self, *, scenario: Scenario | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
-        super().__init__(node_name=COORDINATOR_NODE, scenario=scenario, parameter_overrides=parameter_overrides, context=context)
+    def __init__(
+        self,
+        *,
+        scenario: Scenario | None = None,
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,
+    ) -> None:
+        super().__init__(
+            node_name=COORDINATOR_NODE,
+            scenario=scenario,
+            parameter_overrides=parameter_overrides,
+            context=context,
+        )
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""
@@ -170,7 +245,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
             geometry = Geometry(control_point_distance=values['control_point_distance'])
             problems += robot_kind(model).placement_problems(dimension=scenario.dimension, geometry=geometry)
         if 'sample_period' in values and not values['sample_period'] > 0.0:
-            problems.append(f"parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its grid), got {values['sample_period']!r}")
+            problems.append(
+                f"parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its grid), got {values['sample_period']!r}"
+            )
         return problems
 
     def _clock_mode(self, values: dict) -> str:
@@ -187,10 +264,14 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'backend': self.backend,
             'model': self.robot_model,
             # Where the scenario's point sits ahead of the robot's origin, by its kind (a holonomic robot: 0).
-            'control_point_distance': robot_kind(self.robot_model).control_offset(Geometry(control_point_distance=self.control_point_distance))[0],
+            'control_point_distance': robot_kind(self.robot_model).control_offset(
+                Geometry(control_point_distance=self.control_point_distance)
+            )[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
-            'pose_silence': self.parameter_values['pose_silence'],  # poses silent this long at the end are not sampled past it
+            'pose_silence': self.parameter_values[
+                'pose_silence'
+            ],  # poses silent this long at the end are not sampled past it
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
@@ -205,7 +286,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         # Python messages, which were most of the coordinator's CPU (400 Odometry a second for 4
         # robots); the same floats as `formation analyze` reads from the bag (sim.robots.sample_from_fields).
         self._pose_subs = {
-            i: self.create_subscription(kind, topic(i), lambda data, agent=i: self._on_pose(data, agent), POSE_READER_QOS, raw=True)
+            i: self.create_subscription(
+                kind, topic(i), lambda data, agent=i: self._on_pose(data, agent), POSE_READER_QOS, raw=True
+            )
             for i in self.scenario.agent_ids
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
@@ -222,26 +305,36 @@ class FormationCoordinatorNode(TimeKeeperNode):
                 trigger_info_topic(i, min(book.neighbours)),
                 lambda msg, agent=i: self._on_info(msg, agent),
                 READER_QOS,
-                event_callbacks=SubscriptionEventCallbacks(liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)),
+                event_callbacks=SubscriptionEventCallbacks(
+                    liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
+                ),
             )
             for i, book in self.agents.items()
         }
 
     def _world_gaps(self) -> list[str]:
-        topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[self.trajectory_source]
+        topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[
+            self.trajectory_source
+        ]
         # The coordinator reads reliable, as the recorder does, so that both see every pose.
         missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
         if missing:
-            return [f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}']
+            return [
+                f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}'
+            ]
         # The first sample (t = 0) needs each robot's pose from before it.
         silent = [i for i, early in self._early.items() if not early]
         if silent:
             return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}']
         # The recorder too, or its bag would lack a robot's pose before t = 0 (it matched late).
         if len(self.recorders.silent) < self.extra_subscribers:
-            return [f'a heartbeat from each recorder ({len(self.recorders.silent)} of {self.extra_subscribers})']
+            return [
+                f'a heartbeat from each recorder ({len(self.recorders.silent)} of {self.extra_subscribers})'
+            ]
         unheard = sorted({name for topics in self.recorders.silent.values() for name in topics})
-        return [f'robot topics the recorder has had no message on yet: {", ".join(unheard)}'] if unheard else []
+        return (
+            [f'robot topics the recorder has had no message on yet: {", ".join(unheard)}'] if unheard else []
+        )
 
     def _check_start(self) -> str:
         """Before step 0: where the robots are (each one's latest pose, its control point) must meet
@@ -271,7 +364,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
             self._pose_watch.note(agent, now=now, t=0.0)
         # The final Step at the horizon on the dot, not at the next tick: an agent whose last
         # trigger is due just before it must not wait for the run's end.
-        self._horizon_timer = self.create_timer(max(self.horizon - (time.time() - self._epoch), 1e-3), self._at_horizon)
+        self._horizon_timer = self.create_timer(
+            max(self.horizon - (time.time() - self._epoch), 1e-3), self._at_horizon
+        )
 
     def _at_horizon(self) -> None:
         self._horizon_timer.cancel()
@@ -293,10 +388,14 @@ class FormationCoordinatorNode(TimeKeeperNode):
         """Stop the run at once when a robot's poses stopped (RobotLostError, exit status 3)."""
         silent = self._pose_watch.silent(time.monotonic(), fraction=fraction)
         if silent:
-            raise self._pose_watch.error(silent, now=time.monotonic(), where=self._where(), topics=self._pose_topics(silent))
+            raise self._pose_watch.error(
+                silent, now=time.monotonic(), where=self._where(), topics=self._pose_topics(silent)
+            )
 
     def _pose_topics(self, robots: list[int]) -> str:
-        topic = {'true_odom': robot_true_odom_topic, 'odom': robot_odom_topic, 'pose': robot_pose_topic}[self.trajectory_source]
+        topic = {'true_odom': robot_true_odom_topic, 'odom': robot_odom_topic, 'pose': robot_pose_topic}[
+            self.trajectory_source
+        ]
         return ', '.join(topic(i) for i in robots)
 
     def _agent_failed(self, agent: int, failure: str) -> None:
@@ -304,11 +403,15 @@ class FormationCoordinatorNode(TimeKeeperNode):
         poses stopped, if one has been silent for half the silence already (the agent's stale
         pose followed from it), else the agent's error."""
         self._check_robots(fraction=0.5)
-        raise AgentFailedError(f'agent {agent} stopped {self._where()}: {failure}; the run stops', agents=[agent])
+        raise AgentFailedError(
+            f'agent {agent} stopped {self._where()}: {failure}; the run stops', agents=[agent]
+        )
 
     def _end_at_horizon(self) -> None:
         self._finished_at = time.monotonic()
-        self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
+        self.step = Step(
+            index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
+        )
         self._publish(self._step_pub, encode_step(self.step))  # first: the robots stop now
         self.finished = True
         self._reached = self.horizon
@@ -328,7 +431,11 @@ class FormationCoordinatorNode(TimeKeeperNode):
         deadline = time.monotonic() + POSES_AFTER_END
         end = self.reached_time
         # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
-        lost = set(self.failure_info['agents']) if self.failure_info and self.failure_info['kind'] == 'robot_lost' else set()
+        lost = (
+            set(self.failure_info['agents'])
+            if self.failure_info and self.failure_info['kind'] == 'robot_lost'
+            else set()
+        )
         lost |= set(self._pose_watch.silent(time.monotonic(), fraction=0.5))
         waiting = [s for i, s in self._poses.items() if i not in lost]
         while time.monotonic() < deadline and any(not s or s[-1].time < end for s in waiting):
@@ -340,14 +447,21 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def record(self) -> RunRecord:
         """The run as the coordinator saw it (triggers from the agents' messages, formation from the poses)."""
         end = self.reached_time
-        trigger_times = {i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()}
+        trigger_times = {
+            i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()
+        }
         times = sample_times(end, self.sample_period, [t for ts in trigger_times.values() for t in ts])
         silent = [i for i, samples in self._poses.items() if not samples]
         if silent:
-            raise CoordinatorError(f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised')
+            raise CoordinatorError(
+                f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised'
+            )
         # As `formation analyze` reads the bag: not long past the end, not a robot silent at it.
         silence = self.robots['pose_silence']
-        tracks = {i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence)) for i, samples in self._poses.items()}
+        tracks = {
+            i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence))
+            for i, samples in self._poses.items()
+        }
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,
@@ -370,10 +484,16 @@ class FormationCoordinatorNode(TimeKeeperNode):
         try:
             info = decode_trigger_info(msg)
         except MessageError as error:
-            self._reject(trigger_info_topic(agent, min(self.agents[agent].neighbours)), error.reason, str(error))
+            self._reject(
+                trigger_info_topic(agent, min(self.agents[agent].neighbours)), error.reason, str(error)
+            )
             return
         if info.sender != agent:
-            self._reject(trigger_info_topic(agent, info.receiver), 'sender', f'information from agent {info.sender} on the topic of agent {agent}')
+            self._reject(
+                trigger_info_topic(agent, info.receiver),
+                'sender',
+                f'information from agent {info.sender} on the topic of agent {agent}',
+            )
             return
         stamps = self._info_stamps[agent]
         if info.stamp not in stamps:  # a copy replayed after a rematch (transient local) is no new trigger
@@ -396,7 +516,11 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def _sample(self, fields: tuple) -> RobotSample:
         """A pose's fields (`_pose_fields`: stamp, pose, and the twist of odometry) as a sample."""
         return sample_from_fields(
-            *fields, model=self.robot_model, dimension=self.scenario.dimension, control_point_distance=self.control_point_distance, epoch=self._epoch
+            *fields,
+            model=self.robot_model,
+            dimension=self.scenario.dimension,
+            control_point_distance=self.control_point_distance,
+            epoch=self._epoch,
         )
 
 
@@ -418,7 +542,9 @@ def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
     )
 
 
-def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] = FormationCoordinatorNode) -> int:
+def main(
+    args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] = FormationCoordinatorNode
+) -> int:
     """Run one coordinator (or simulator, `node_class`) node until the run ends; its exit status."""
     argv = list(args if args is not None else sys.argv)
     _parser(node_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
@@ -467,7 +593,13 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] 
             if not isinstance(error, NAMED_ERRORS):
                 with contextlib.suppress(OSError):
                     traceback.print_exc(file=sys.stderr)
-            status = EXIT_AGENT_LOST if isinstance(error, LOST_ERRORS) else EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
+            status = (
+                EXIT_AGENT_LOST
+                if isinstance(error, LOST_ERRORS)
+                else EXIT_REFUSED
+                if isinstance(error, InitialConditionError)
+                else EXIT_FAILED
+            )
             _stop_and_write(node, executor, error)
         finally:
             with shutdown_guard(node_class.COMMAND, lambda: status):

@@ -85,7 +85,11 @@ def mapped_by_anyone(paths: Iterable[str]) -> set[str]:
 def domain_port_files(domain_id: int) -> set[str]:
     """The port files of ROS domain `domain_id` (RTPS ports 7400 + 250 d + [0, 250)) in /dev/shm."""
     ports = domain_ports(domain_id)
-    return {str(path) for path in SHM_DIR.iterdir() if (match := _PORT_FILE.match(path.name)) and int(match[1]) in ports}
+    return {
+        str(path)
+        for path in SHM_DIR.iterdir()
+        if (match := _PORT_FILE.match(path.name)) and int(match[1]) in ports
+    }
 
 
 @contextlib.contextmanager

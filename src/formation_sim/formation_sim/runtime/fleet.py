@@ -56,10 +56,20 @@ class RobotFleet:
         self.localhost_only = localhost_only
         self.extra_env = dict(extra_env or {})
         self.plan = LaunchPlan(
-            scenario=self.scenario, backend=robots.model, out_dir=self.out_dir, horizon=self.scenario.horizon,
-            clock='realtime', record=False, agents_per_process=1, sample_period=0.01, executor=DEFAULT_EXECUTOR,
-            step_listeners=0, inject={}, robots=robots, localhost_only=localhost_only,
-        )  # fmt: skip
+            scenario=self.scenario,
+            backend=robots.model,
+            out_dir=self.out_dir,
+            horizon=self.scenario.horizon,
+            clock='realtime',
+            record=False,
+            agents_per_process=1,
+            sample_period=0.01,
+            executor=DEFAULT_EXECUTOR,
+            step_listeners=0,
+            inject={},
+            robots=robots,
+            localhost_only=localhost_only,
+        )
         self.supervisor: Supervisor | None = None
         self.died: list = []  # robot processes that exited on their own
         self._stop = SignalFlag()  # set in a signal handler: no lock (process.SignalFlag)
@@ -70,7 +80,9 @@ class RobotFleet:
     def run(self, *, duration: float | None = None) -> int:
         """Start the robots and keep them until stopped; 0, or 3 if a robot process died."""
         try:
-            out = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='robots', force=self.force)
+            out = claim_out_dir(
+                self.out_dir, scenario_name=self.scenario.name, kind='robots', force=self.force
+            )
         except RunFolderError as error:
             raise RunError(str(error)) from None
         self.plan = dataclasses.replace(self.plan, out_dir=out)
@@ -79,7 +91,11 @@ class RobotFleet:
         env = self.plan.environment(self.domain_id, extra_env=self.extra_env)
         self.supervisor = Supervisor(log_dir=self.plan.out_dir / LOG_DIR, env=env)
         trapped = threading.current_thread() is threading.main_thread()
-        previous = {sig: signal.signal(sig, lambda *_: self._stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} if trapped else {}
+        previous = (
+            {sig: signal.signal(sig, lambda *_: self._stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+            if trapped
+            else {}
+        )
         status = 0
         try:
             for spec in self.plan.robot_processes(params):

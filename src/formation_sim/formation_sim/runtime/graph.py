@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from formation_msgs_py.codec import MessageError, decode_status, decode_step, decode_trigger_info, decode_world_state
+from formation_msgs_py.codec import (
+    MessageError,
+    decode_status,
+    decode_step,
+    decode_trigger_info,
+    decode_world_state,
+)
 from formation_msgs_py.topics import STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
 
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
@@ -125,10 +131,16 @@ def topic_infos(node) -> list[TopicInfo]:
     own = _node_name_of(node)
     result = []
     for name, types in sorted(node.get_topic_names_and_types()):
-        publishers = tuple(sorted(n for n in map(_node_name, node.get_publishers_info_by_topic(name)) if n != own))
-        subscribers = tuple(sorted(n for n in map(_node_name, node.get_subscriptions_info_by_topic(name)) if n != own))
+        publishers = tuple(
+            sorted(n for n in map(_node_name, node.get_publishers_info_by_topic(name)) if n != own)
+        )
+        subscribers = tuple(
+            sorted(n for n in map(_node_name, node.get_subscriptions_info_by_topic(name)) if n != own)
+        )
         if publishers or subscribers:
-            result.append(TopicInfo(name=name, types=tuple(types), publishers=publishers, subscribers=subscribers))
+            result.append(
+                TopicInfo(name=name, types=tuple(types), publishers=publishers, subscribers=subscribers)
+            )
     return result
 
 
@@ -150,7 +162,9 @@ def discover_topics(node, *, wait: float, settle: float = 0.5) -> list[TopicInfo
         now = time.monotonic()
         if current != last:
             last, stable_since = current, now
-        named = not any(UNKNOWN_NODE in name for info in current for name in info.publishers + info.subscribers)
+        named = not any(
+            UNKNOWN_NODE in name for info in current for name in info.publishers + info.subscribers
+        )
         if now >= deadline or (current and named and now - stable_since >= settle):
             return current
         time.sleep(0.05)
@@ -162,7 +176,9 @@ def format_topics(topics: list[TopicInfo], *, verbose: bool = False) -> str:
     width = max(len(topic.name) for topic in topics)
     lines = []
     for topic in topics:
-        lines.append(f'{topic.name:<{width}}  [{", ".join(topic.types)}]  publishers: {len(topic.publishers)}  subscribers: {len(topic.subscribers)}')
+        lines.append(
+            f'{topic.name:<{width}}  [{", ".join(topic.types)}]  publishers: {len(topic.publishers)}  subscribers: {len(topic.subscribers)}'
+        )
         if verbose:
             for role, nodes in (('publisher', topic.publishers), ('subscriber', topic.subscribers)):
                 for name in nodes:

@@ -41,9 +41,16 @@ from formation_agent.core.kinds import Geometry, KindNames, robot_kind
 from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
-BACKENDS = KindNames(before=('exact',), after=('external',))  # a simulated robot backend per registered robot kind
-DISCOVERY_MODES = ('simple', 'server')  # Fast DDS simple discovery (every participant meets every other) or a discovery server
-DISCOVERY_SERVER_PROGRAM = 'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
+BACKENDS = KindNames(
+    before=('exact',), after=('external',)
+)  # a simulated robot backend per registered robot kind
+DISCOVERY_MODES = (
+    'simple',
+    'server',
+)  # Fast DDS simple discovery (every participant meets every other) or a discovery server
+DISCOVERY_SERVER_PROGRAM = (
+    'fast-discovery-server'  # in the ros-fastrtps wheel (bin/), or on PATH (a ROS install)
+)
 POSE_TYPES = ('odom', 'pose')
 DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
@@ -119,10 +126,19 @@ class RobotOptions:
         if self.pose_type not in POSE_TYPES:
             raise RunError(f'pose_type must be one of {POSE_TYPES}, got {self.pose_type!r}')
         try:
-            Limits(linear=self.max_linear_speed, angular=self.max_angular_speed, steering=self.max_steering_angle)
+            Limits(
+                linear=self.max_linear_speed, angular=self.max_angular_speed, steering=self.max_steering_angle
+            )
         except RobotError as error:
             raise RunError(str(error)) from None
-        positive = ('control_point_distance', 'max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
+        positive = (
+            'control_point_distance',
+            'max_linear_acceleration',
+            'command_rate',
+            'pose_timeout',
+            'rate',
+            'command_timeout',
+        )
         for name in positive:
             if not getattr(self, name) > 0.0:
                 raise RunError(f'{name} must be > 0, got {getattr(self, name)!r}')
@@ -149,7 +165,9 @@ class RobotOptions:
         """What the robots' kind says of these options (its dimensions, geometry and limits)."""
         try:
             limits = KindLimits(
-                linear_speed=self.max_linear_speed, angular_speed=self.max_angular_speed, steering_angle=self.max_steering_angle
+                linear_speed=self.max_linear_speed,
+                angular_speed=self.max_angular_speed,
+                steering_angle=self.max_steering_angle,
             )
         except ValueError:
             return []  # named by the limits' own check
@@ -166,7 +184,12 @@ class RobotOptions:
             'command_rate': float(self.command_rate),
             'world_frame': self.world_frame,
         }
-        for name in ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle'):
+        for name in (
+            'max_linear_speed',
+            'max_angular_speed',
+            'max_linear_acceleration',
+            'max_steering_angle',
+        ):
             if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
                 params[name] = float(getattr(self, name))
         if self.wheelbase > 0.0:  # a car's; none: the default
@@ -284,7 +307,11 @@ class LaunchPlan:
         return _groups(list(self.scenario.agent_ids), self.agents_per_process)
 
     def process_count(self) -> int:
-        robots = len(_groups(list(self.scenario.agent_ids), self.robots.robots_per_process)) if self.simulated_robots else 0
+        robots = (
+            len(_groups(list(self.scenario.agent_ids), self.robots.robots_per_process))
+            if self.simulated_robots
+            else 0
+        )
         return len(self.agent_groups()) + 1 + int(self.record) + robots + int(self.discovery == 'server')
 
     # -- inputs ------------------------------------------------------------------------------------
@@ -297,9 +324,12 @@ class LaunchPlan:
         from formation_sim.runtime.coordinator import robot_run_topics
 
         return robot_run_topics(
-            self.scenario, model=self.robots.model, simulated=self.simulated_robots, pose_type=self.robots.pose_type,
+            self.scenario,
+            model=self.robots.model,
+            simulated=self.simulated_robots,
+            pose_type=self.robots.pose_type,
             truth=self.robot_trajectory == 'true_odom',
-        )  # fmt: skip
+        )
 
     @property
     def robot_trajectory(self) -> str:
@@ -317,7 +347,10 @@ class LaunchPlan:
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
         by_name = {'pose': robot_pose_topic, 'odom': robot_odom_topic, 'true_odom': robot_true_odom_topic}
-        kinds = (by_name[self.robots.pose_type], by_name[self.robot_trajectory])  # the agents', the coordinator's
+        kinds = (
+            by_name[self.robots.pose_type],
+            by_name[self.robot_trajectory],
+        )  # the agents', the coordinator's
         poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
         return [name for name, _ in self.recorder_topics() if name in poses]
 
@@ -325,15 +358,28 @@ class LaunchPlan:
         """The recorded topics of robots that outlive the run (external ones: their poses)."""
         from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)}
+        poses = {
+            topic(i)
+            for i in self.scenario.agent_ids
+            for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)
+        }
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
         all but a robot's own (its poses, and the velocity commands it takes)."""
-        from formation_msgs_py.topics import robot_command_topic, robot_odom_topic, robot_pose_topic, robot_true_odom_topic
+        from formation_msgs_py.topics import (
+            robot_command_topic,
+            robot_odom_topic,
+            robot_pose_topic,
+            robot_true_odom_topic,
+        )
 
-        robot = {topic(i) for i in self.scenario.agent_ids for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic, robot_command_topic)}
+        robot = {
+            topic(i)
+            for i in self.scenario.agent_ids
+            for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic, robot_command_topic)
+        }
         return {name for name, _ in self.recorder_topics()} - robot
 
     def write_inputs(self) -> dict[str, Path]:
@@ -347,7 +393,10 @@ class LaunchPlan:
         paths = {'scenario': out / SCENARIO_FILE}
         dump_scenario(self.scenario, paths['scenario'])  # every float kept bit for bit
         extra = 1 if self.record else 0
-        injected = {f'inject_{key}': (int(value) if key == 'seed' else float(value)) for key, value in self.inject.items()}
+        injected = {
+            f'inject_{key}': (int(value) if key == 'seed' else float(value))
+            for key, value in self.inject.items()
+        }
         on_robots = self.robots.agent_parameters() if self.robots is not None else {}
         agents = {
             f'{agent_namespace(i)}/{AGENT_NODE}': {
@@ -362,7 +411,10 @@ class LaunchPlan:
         paths['agents'] = out / AGENTS_FILE
         _write_yaml(paths['agents'], agents)
         paths['keeper'] = out / (SIMULATOR_FILE if self.backend == 'exact' else COORDINATOR_FILE)
-        _write_yaml(paths['keeper'], {self._keeper_node: {'ros__parameters': self.keeper_parameters(paths['scenario'])}})
+        _write_yaml(
+            paths['keeper'],
+            {self._keeper_node: {'ros__parameters': self.keeper_parameters(paths['scenario'])}},
+        )
         if self.record:
             recorder = {
                 '/formation_recorder': {
@@ -390,7 +442,9 @@ class LaunchPlan:
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
         robots = {
-            f'{agent_namespace(i)}/{ROBOT_NODE}': {'ros__parameters': self.robots.robot_parameters(self.scenario, i)}
+            f'{agent_namespace(i)}/{ROBOT_NODE}': {
+                'ros__parameters': self.robots.robot_parameters(self.scenario, i)
+            }
             for i in self.scenario.agent_ids
         }
         path = self.out_dir / ROBOTS_FILE
@@ -405,15 +459,45 @@ class LaunchPlan:
         if self.discovery == 'server':
             specs.append(self.discovery_server_process())
         if self.record:
-            specs.append(ProcessSpec(name='recorder', args=('-m', 'formation_sim.runtime.recorder', '--ros-args', '--params-file', str(paths['recorder'])), expected_exit=False))
+            specs.append(
+                ProcessSpec(
+                    name='recorder',
+                    args=(
+                        '-m',
+                        'formation_sim.runtime.recorder',
+                        '--ros-args',
+                        '--params-file',
+                        str(paths['recorder']),
+                    ),
+                    expected_exit=False,
+                )
+            )
         if self.simulated_robots:
             specs += self.robot_processes(paths['robots'])
         # Through a discovery server a client learns only of the endpoints it shares topics with;
         # the time keeper, which writes every node's endpoints into graph.json, must see them all.
         whole_graph = (('ROS_SUPER_CLIENT', 'TRUE'),) if self.discovery == 'server' else ()
-        specs.append(ProcessSpec(name=self.keeper, args=self._keeper_args(paths), expected_exit=True, keeper=True, env=whole_graph))
+        specs.append(
+            ProcessSpec(
+                name=self.keeper,
+                args=self._keeper_args(paths),
+                expected_exit=True,
+                keeper=True,
+                env=whole_graph,
+            )
+        )
         for group in self.agent_groups():
-            args = ('-m', AGENT_MODULE, '--agents', ','.join(map(str, group)), '--executor', self.executor, '--ros-args', '--params-file', str(paths['agents']))
+            args = (
+                '-m',
+                AGENT_MODULE,
+                '--agents',
+                ','.join(map(str, group)),
+                '--executor',
+                self.executor,
+                '--ros-args',
+                '--params-file',
+                str(paths['agents']),
+            )
             specs.append(ProcessSpec(name=_group_name('agent', group), args=args, expected_exit=True))
         return specs
 
@@ -424,13 +508,23 @@ class LaunchPlan:
         discovery reaches the network (then on every interface, for clients elsewhere)."""
         address = '127.0.0.1' if self.localhost_only else '0.0.0.0'  # noqa: S104 - a network run: clients elsewhere
         args = ('--server-id', '0', '--udp-address', address, '--udp-port', str(self.discovery_port))
-        return ProcessSpec(name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False)
+        return ProcessSpec(
+            name='discovery_server', program=discovery_server_program(), args=args, expected_exit=False
+        )
 
     def robot_processes(self, params_file: Path) -> list[ProcessSpec]:
         """The simulated robots, `robots_per_process` to a process; they run until stopped."""
         specs = []
         for group in _groups(list(self.scenario.agent_ids), self.robots.robots_per_process):
-            args = ('-m', 'formation_sim.runtime.robot_node', '--robots', ','.join(map(str, group)), '--ros-args', '--params-file', str(params_file))
+            args = (
+                '-m',
+                'formation_sim.runtime.robot_node',
+                '--robots',
+                ','.join(map(str, group)),
+                '--ros-args',
+                '--params-file',
+                str(params_file),
+            )
             specs.append(ProcessSpec(name=_group_name('robot', group), args=args, expected_exit=False))
         return specs
 
@@ -465,7 +559,11 @@ class LaunchPlan:
         return params
 
     def _keeper_args(self, paths: dict[str, Path]) -> tuple[str, ...]:
-        module = 'formation_sim.runtime.sim_node' if self.backend == 'exact' else 'formation_sim.runtime.coordinator'
+        module = (
+            'formation_sim.runtime.sim_node'
+            if self.backend == 'exact'
+            else 'formation_sim.runtime.coordinator'
+        )
         return ('-m', module, '--ros-args', '--params-file', str(paths['keeper']))
 
     # -- environment -------------------------------------------------------------------------------
@@ -529,7 +627,9 @@ def with_our_packages(env: dict[str, str]) -> dict[str, str]:
         str(Path(next(iter(importlib.util.find_spec(name).submodule_search_locations))).resolve().parent)
         for name in ('formation_msgs_py', 'formation_agent', 'formation_sim')
     ]
-    env['PYTHONPATH'] = os.pathsep.join(dict.fromkeys(here + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]))
+    env['PYTHONPATH'] = os.pathsep.join(
+        dict.fromkeys(here + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p])
+    )
     return env
 
 

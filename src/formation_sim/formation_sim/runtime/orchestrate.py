@@ -41,12 +41,31 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from formation_agent.ros.process import EXIT_REFUSED, SignalFlag  # 4: the robots' measured start broke a hypothesis, nothing was sent
-from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, RECORDER_NODE, ROBOT_NODE, SIMULATOR_NODE, agent_namespace
+from formation_agent.ros.process import (
+    EXIT_REFUSED,
+    SignalFlag,
+)  # 4: the robots' measured start broke a hypothesis, nothing was sent
+from formation_msgs_py.topics import (
+    AGENT_NODE,
+    COORDINATOR_NODE,
+    RECORDER_NODE,
+    ROBOT_NODE,
+    SIMULATOR_NODE,
+    agent_namespace,
+)
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
 from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
-from formation_sim.runtime.launch import BACKENDS, BAG_DIR, LOG_DIR, LaunchPlan, RobotOptions, RunError, free_udp_port, reserve_domain
+from formation_sim.runtime.launch import (
+    BACKENDS,
+    BAG_DIR,
+    LOG_DIR,
+    LaunchPlan,
+    RobotOptions,
+    RunError,
+    free_udp_port,
+    reserve_domain,
+)
 from formation_sim.runtime.results import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -83,7 +102,7 @@ __all__ = [
     'RunOptions',
     'RunResult',
     'reserve_domain',
-]  # fmt: skip
+]
 
 SUMMARY_FILE = 'summary.json'
 
@@ -103,8 +122,14 @@ def _process_started() -> float:
         return time.time()
     try:
         fields = Path('/proc/self/stat').read_text().rsplit(')', 1)[1].split()
-        boot = next(float(line.split()[1]) for line in Path('/proc/stat').read_text().splitlines() if line.startswith('btime '))
-        return boot + int(fields[19]) / os.sysconf('SC_CLK_TCK')  # field 22, starttime, in clock ticks since boot
+        boot = next(
+            float(line.split()[1])
+            for line in Path('/proc/stat').read_text().splitlines()
+            if line.startswith('btime ')
+        )
+        return boot + int(fields[19]) / os.sysconf(
+            'SC_CLK_TCK'
+        )  # field 22, starttime, in clock ticks since boot
     except (OSError, ValueError, IndexError, StopIteration):
         return time.time()
 
@@ -145,10 +170,21 @@ class FormationRun:
                 raise RunError(str(error)) from None
         o = self.options
         self.plan = LaunchPlan(
-            scenario=self.scenario, backend=o.backend, out_dir=self.out_dir, horizon=o.horizon, clock=o.clock, record=o.record,
-            agents_per_process=o.agents_per_process, sample_period=o.sample_period, executor=o.executor,
-            step_listeners=o.step_listeners, inject=o.inject, robots=o.robots, discovery=o.discovery, localhost_only=o.localhost_only,
-        )  # fmt: skip
+            scenario=self.scenario,
+            backend=o.backend,
+            out_dir=self.out_dir,
+            horizon=o.horizon,
+            clock=o.clock,
+            record=o.record,
+            agents_per_process=o.agents_per_process,
+            sample_period=o.sample_period,
+            executor=o.executor,
+            step_listeners=o.step_listeners,
+            inject=o.inject,
+            robots=o.robots,
+            discovery=o.discovery,
+            localhost_only=o.localhost_only,
+        )
         self._supervisor: Supervisor | None = None
         self.removed_shm_files: list[str] = []
         self.marks: dict[str, float] = {}
@@ -173,25 +209,35 @@ class FormationRun:
         lost: Child | None = None
         with reserve_domain(self.options.domain_id) as domain_id, self._signals_trapped():
             try:  # the domain is ours: only now may the run folder change
-                self.out_dir = claim_out_dir(self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force)
+                self.out_dir = claim_out_dir(
+                    self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force
+                )
             except RunFolderError as error:
                 raise RunError(str(error)) from None
             port = free_udp_port(domain_id) if self.plan.discovery == 'server' else None
             self.plan = dataclasses.replace(self.plan, out_dir=self.out_dir, discovery_port=port)
             paths = self.plan.write_inputs()
             (self.out_dir / LOG_DIR).mkdir(exist_ok=True)
-            self._supervisor = Supervisor(log_dir=self.out_dir / LOG_DIR, env=self._environment(domain_id), launch_prefix=self.options.launch_prefix)
+            self._supervisor = Supervisor(
+                log_dir=self.out_dir / LOG_DIR,
+                env=self._environment(domain_id),
+                launch_prefix=self.options.launch_prefix,
+            )
             try:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
-                self.removed_shm_files = self._supervisor.stop(self.options.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost))
+                self.removed_shm_files = self._supervisor.stop(
+                    self.options.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost)
+                )
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
         notes: list[str] = []  # what the message adds after the failure
         recorder = next((c for c in self._children if c.name == 'recorder'), None)
         recovered = recover_bag(bag, notes, recorder=recorder) if self.options.record else False
-        status, failure, run_phases = self._write_summary(status, message, lost, domain_id=domain_id, notes=notes)
+        status, failure, run_phases = self._write_summary(
+            status, message, lost, domain_id=domain_id, notes=notes
+        )
         if status == EXIT_OK and not summary.is_file():
             status = EXIT_FAILED
             message = message or f'the {self.plan.keeper} exited without writing {summary}'
@@ -217,7 +263,9 @@ class FormationRun:
         if self.options.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             spent = f' ({describe_phases(run_phases)})' if run_phases else ''
-            self._say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
+            self._say(
+                f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True
+            )
         return result
 
     def _write_summary(
@@ -232,10 +280,18 @@ class FormationRun:
         if data is None and 't=' in self.last_progress:  # it ran, and the time keeper left no summary
             keeper = next(c for c in self._children if c.name == self.plan.keeper)
             data = summary_of_what_is_known(
-                keeper, scenario=self.scenario, horizon=self.options.horizon, mode='distributed' if self.options.backend == 'exact' else 'robots',
-                bag=bag, run_dir=self.out_dir, status=status, last_progress=self.last_progress, children=self._children,
-                launched=self._started_at, notes=notes,
-            )  # fmt: skip
+                keeper,
+                scenario=self.scenario,
+                horizon=self.options.horizon,
+                mode='distributed' if self.options.backend == 'exact' else 'robots',
+                bag=bag,
+                run_dir=self.out_dir,
+                status=status,
+                last_progress=self.last_progress,
+                children=self._children,
+                launched=self._started_at,
+                notes=notes,
+            )
         failure = None
         run_phases: dict[str, float] = {}
         if data is not None:
@@ -322,7 +378,11 @@ class FormationRun:
         if self.options.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
-            server = f', discovery server on port {self.plan.discovery_port}' if self.plan.discovery == 'server' else ''
+            server = (
+                f', discovery server on port {self.plan.discovery_port}'
+                if self.plan.discovery == 'server'
+                else ''
+            )
             self._say(
                 f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent process(es)'
                 f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.options.record else ""}{server} started; '
@@ -359,18 +419,30 @@ class FormationRun:
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
-                if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED):  # the time keeper named the first cause and its status
+                if code in (
+                    EXIT_FAILED,
+                    EXIT_LOST,
+                    EXIT_REFUSED,
+                ):  # the time keeper named the first cause and its status
                     status = code
                 else:
-                    status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
+                    status = (
+                        lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
+                    )
                 seen = '' if lost is None else f'{lost.describe()}; '
-                return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}', lost
+                return (
+                    status,
+                    f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}',
+                    lost,
+                )
             if lost is None:
                 lost = next(
                     (
                         c
                         for c in supervisor.children
-                        if c is not keeper and c.exited_at is not None and (c.process.returncode != 0 or not c.expected_exit)
+                        if c is not keeper
+                        and c.exited_at is not None
+                        and (c.process.returncode != 0 or not c.expected_exit)
                     ),
                     None,
                 )

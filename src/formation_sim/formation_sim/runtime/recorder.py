@@ -57,7 +57,14 @@ from formation_agent.ros.parameters import (
 )
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
-from formation_sim.bag.io import BagError, BagWriter, TopicSpecError, UnknownMessageTypeError, check_msgtype, jazzy_typestore
+from formation_sim.bag.io import (
+    BagError,
+    BagWriter,
+    TopicSpecError,
+    UnknownMessageTypeError,
+    check_msgtype,
+    jazzy_typestore,
+)
 from formation_sim.runtime.bag_qos import offered_qos
 
 from rclpy.node import Node
@@ -83,38 +90,83 @@ EARLY_WINDOW = 2.0
 
 _positive_seconds = {'low': 0.0, 'low_open': True, 'high': math.inf, 'high_open': True}
 RECORDER_PARAMETERS = (
-    ParameterSpec(name='output', type=STRING, description='the bag directory to create (it must not exist: a bag is never overwritten)'),
-    ParameterSpec(name='topics', type=STRING_ARRAY, default=[], description="topics recorded from the start, each '/name:package/msg/Type'"),
-    ParameterSpec(name='prefix', type=STRING, default='', description="also record every topic whose name starts with this, found by polling the graph ('': none)"),
     ParameterSpec(
-        name='clock_topic', type=STRING, default=DEFAULT_CLOCK_TOPIC,
+        name='output',
+        type=STRING,
+        description='the bag directory to create (it must not exist: a bag is never overwritten)',
+    ),
+    ParameterSpec(
+        name='topics',
+        type=STRING_ARRAY,
+        default=[],
+        description="topics recorded from the start, each '/name:package/msg/Type'",
+    ),
+    ParameterSpec(
+        name='prefix',
+        type=STRING,
+        default='',
+        description="also record every topic whose name starts with this, found by polling the graph ('': none)",
+    ),
+    ParameterSpec(
+        name='clock_topic',
+        type=STRING,
+        default=DEFAULT_CLOCK_TOPIC,
         description="the run's Step topic (std_msgs/Float64MultiArray [version, step, time, flags, epoch, ...]): bag time is "
         "its sim time in lock-step, the receive time since its epoch on the wall clock ('': the node's clock)",
     ),
-    ParameterSpec(name='discovery_period', type=DOUBLE, default=1.0, description='how often the graph is polled for topics under prefix [s]', **_positive_seconds),
-    ParameterSpec(name='flush_period', type=DOUBLE, default=0.5, description='how often written messages are pushed to the file (what a SIGKILL can lose) [s]', **_positive_seconds),
     ParameterSpec(
-        name='heartbeat_topic', type=STRING, default=RECORDER_TOPIC,
+        name='discovery_period',
+        type=DOUBLE,
+        default=1.0,
+        description='how often the graph is polled for topics under prefix [s]',
+        **_positive_seconds,
+    ),
+    ParameterSpec(
+        name='flush_period',
+        type=DOUBLE,
+        default=0.5,
+        description='how often written messages are pushed to the file (what a SIGKILL can lose) [s]',
+        **_positive_seconds,
+    ),
+    ParameterSpec(
+        name='heartbeat_topic',
+        type=STRING,
+        default=RECORDER_TOPIC,
         description="where it says how much it recorded, after every flush and step (a run watches its liveliness; '': none)",
     ),
     ParameterSpec(
-        name='watched_topics', type=STRING_ARRAY, default=[],
+        name='watched_topics',
+        type=STRING_ARRAY,
+        default=[],
         description="recorded topics the heartbeat lists as 'silent' until their first message came (a robot run's time "
         "keeper starts only once the recorder has the robots' poses from before t = 0)",
     ),
     ParameterSpec(
-        name='endless_topics', type=STRING_ARRAY, default=[],
+        name='endless_topics',
+        type=STRING_ARRAY,
+        default=[],
         description="recorded topics whose writers outlive the run (external robots' poses): on stopping, their "
         'messages are recorded but do not hold the drain up',
     ),
-    ParameterSpec(name='drain_quiet', type=DOUBLE, default=0.5, description='on stopping, take messages until none came for this long [s]', **_positive_seconds),
-    ParameterSpec(name='drain_limit', type=DOUBLE, default=10.0, description='on stopping, stop taking messages after this long anyway [s]', **_positive_seconds),
-)  # fmt: skip
+    ParameterSpec(
+        name='drain_quiet',
+        type=DOUBLE,
+        default=0.5,
+        description='on stopping, take messages until none came for this long [s]',
+        **_positive_seconds,
+    ),
+    ParameterSpec(
+        name='drain_limit',
+        type=DOUBLE,
+        default=10.0,
+        description='on stopping, stop taking messages after this long anyway [s]',
+        **_positive_seconds,
+    ),
+)
 
 
 class RecorderError(BagError):
     """The recorder could not be set up or could not write its bag."""
-
 
 
 def parse_topic_spec(spec: str) -> tuple[str, str]:
@@ -148,7 +200,12 @@ class RunClock:
     `on_step(data)` takes each Step's data; `stamp_ns()` is the time stamp of a message received now.
     """
 
-    def __init__(self, *, monotonic_ns: Callable[[], int] = time.monotonic_ns, wall_ns: Callable[[], int] = time.time_ns) -> None:
+    def __init__(
+        self,
+        *,
+        monotonic_ns: Callable[[], int] = time.monotonic_ns,
+        wall_ns: Callable[[], int] = time.time_ns,
+    ) -> None:
         self._monotonic_ns = monotonic_ns
         self._wall_ns = wall_ns
         self._sim_ns = 0  # lock-step: the latest Step's time
@@ -163,11 +220,18 @@ class RunClock:
 
     def on_step(self, data: Sequence[float]) -> bool:
         """Take a Step's data; False (and nothing changed) unless it holds [version, step, time >= 0, ...]."""
-        if len(data) <= _STEP_TIME_INDEX or not (math.isfinite(data[_STEP_TIME_INDEX]) and data[_STEP_TIME_INDEX] >= 0):
+        if len(data) <= _STEP_TIME_INDEX or not (
+            math.isfinite(data[_STEP_TIME_INDEX]) and data[_STEP_TIME_INDEX] >= 0
+        ):
             return False
         flags = data[_STEP_FLAGS_INDEX] if len(data) > _STEP_FLAGS_INDEX else 0.0
         epoch = data[_STEP_EPOCH_INDEX] if len(data) > _STEP_EPOCH_INDEX else 0.0
-        if math.isfinite(flags) and flags.is_integer() and int(flags) & STEP_FLAG_REALTIME and math.isfinite(epoch):
+        if (
+            math.isfinite(flags)
+            and flags.is_integer()
+            and int(flags) & STEP_FLAG_REALTIME
+            and math.isfinite(epoch)
+        ):
             if self._anchor is None:  # the epoch is the run's t = 0 on every machine's wall clock
                 self._anchor = (self._monotonic_ns(), self._wall_ns() - round(epoch * _NS_PER_S))
         else:
@@ -201,7 +265,9 @@ def _requested_topics(values: dict) -> tuple[list[tuple[str, str]], list[str]]:
             name, msgtype = parse_topic_spec(spec)
             import_message_class(msgtype)  # recordable: importable here and known to the bag
             if msgtype not in jazzy_typestore().fielddefs:
-                raise UnknownMessageTypeError(f'message type {msgtype!r} is not in the typestore of ROS 2 Jazzy')
+                raise UnknownMessageTypeError(
+                    f'message type {msgtype!r} is not in the typestore of ROS 2 Jazzy'
+                )
             requested.append((name, msgtype))
         except BagError as error:
             problems.append(f"parameter 'topics': {error}")
@@ -228,11 +294,7 @@ class RecorderNode(Node):
     """
 
     def __init__(
-        self,
-        *,
-        parameter_overrides: list[Parameter] | None = None,
-        context=None,
-        node_name: str = NODE_NAME,
+        self, *, parameter_overrides: list[Parameter] | None = None, context=None, node_name: str = NODE_NAME
     ) -> None:
         """Declare and check the parameters (one ParameterError names every problem), open the bag."""
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -260,7 +322,9 @@ class RecorderNode(Node):
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
         self.clock = RunClock()
-        self._early: deque[tuple[int, str, bytes]] = deque()  # (received, topic, rawdata) before the first Step
+        self._early: deque[tuple[int, str, bytes]] = (
+            deque()
+        )  # (received, topic, rawdata) before the first Step
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
         self.flushed_count = 0  # messages in the file for sure (as of the last flush)
         self.failure: RecorderError | None = None  # the bag could not be written
@@ -297,9 +361,7 @@ class RecorderNode(Node):
         if self._prefix:
             self._timers.append(self.create_timer(values['discovery_period'], self.discover))
             self.discover()
-        self.get_logger().info(
-            f'recording {sorted(self.bag.topics)} (prefix {self._prefix!r}) into {output}'
-        )
+        self.get_logger().info(f'recording {sorted(self.bag.topics)} (prefix {self._prefix!r}) into {output}')
 
     @property
     def message_count(self) -> int:
@@ -327,7 +389,12 @@ class RecorderNode(Node):
 
     def _beat(self) -> None:
         if self._heartbeat is not None:
-            beat = {'version': 1, 'recorder': self.get_fully_qualified_name(), 'recorded': self.bag.message_count, 'step': self.clock.step_index}
+            beat = {
+                'version': 1,
+                'recorder': self.get_fully_qualified_name(),
+                'recorded': self.bag.message_count,
+                'step': self.clock.step_index,
+            }
             if self._watching:
                 beat['silent'] = sorted(self._silent)
             self._heartbeat.publish(self._heartbeat_type(data=json.dumps(beat, separators=(',', ':'))))
@@ -402,7 +469,9 @@ class RecorderNode(Node):
         """Record the QoS the publishers of `name` offer (before its first message is written)."""
         profiles = offered_qos(self, name)
         if not profiles:
-            self.get_logger().warning(f'{name}: no publisher in the ROS graph yet: its offered QoS is not recorded')
+            self.get_logger().warning(
+                f'{name}: no publisher in the ROS graph yet: its offered QoS is not recorded'
+            )
         self.bag.set_offered_qos(name, profiles)
 
     def _on_step(self, rawdata: bytes) -> None:
@@ -512,7 +581,7 @@ def _parser() -> argparse.ArgumentParser:
         'readable by ros2 bag and rosbags) until SIGINT or SIGTERM, then drain and finalize it.',
         epilog=parameter_help(RECORDER_PARAMETERS)
         + '\n\nExample: formation_recorder --ros-args -p output:=runs/x/bag '
-        "-p \"topics:=['/formation/step:std_msgs/msg/Float64MultiArray']\" -p prefix:=/formation/\n"
+        '-p "topics:=[\'/formation/step:std_msgs/msg/Float64MultiArray\']" -p prefix:=/formation/\n'
         'Exit status: 0 the bag is complete; 1 it could not be written (a full disk); 2 bad parameters '
         '(every problem named, nothing created).',
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -564,7 +633,10 @@ def main(args: Sequence[str] | None = None) -> int:
         if node is not None:
             with contextlib.suppress(RecorderError):
                 node.close()
-        with shutdown_guard('formation_recorder', lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0):
+        with shutdown_guard(
+            'formation_recorder',
+            lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0,
+        ):
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()

@@ -87,7 +87,10 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
     try:
         with Reader(bag) as reader:
             return {
-                connection.topic: (connection.msgtype, list(getattr(connection.ext, 'offered_qos_profiles', [])))
+                connection.topic: (
+                    connection.msgtype,
+                    list(getattr(connection.ext, 'offered_qos_profiles', [])),
+                )
                 for connection in reader.connections
             }
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
@@ -151,23 +154,33 @@ class BagPlayer:
         """Block until every publisher has at least `count` matched subscriptions."""
         deadline = time.monotonic() + timeout
         while True:
-            lacking = [topic for topic, publisher in self.publishers.items() if publisher.get_subscription_count() < count]
+            lacking = [
+                topic
+                for topic, publisher in self.publishers.items()
+                if publisher.get_subscription_count() < count
+            ]
             if not lacking:
                 return
             if self._stop.is_set():
                 return
             if time.monotonic() > deadline:
-                raise ReplayError(f'no {count} subscriber(s) within {timeout} s on {lacking[:10]}{" …" if len(lacking) > 10 else ""}')
+                raise ReplayError(
+                    f'no {count} subscriber(s) within {timeout} s on {lacking[:10]}{" …" if len(lacking) > 10 else ""}'
+                )
             time.sleep(0.05)
 
     def _publish_clock(self, stamp_ns: int) -> None:
         from builtin_interfaces.msg import Time
         from rosgraph_msgs.msg import Clock
 
-        self._clock.publish(Clock(clock=Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)))
+        self._clock.publish(
+            Clock(clock=Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000))
+        )
         self.result.clock_messages += 1
 
-    def play(self, *, progress: Callable[[int, int | None], None] | None = None, total: int | None = None) -> ReplayResult:
+    def play(
+        self, *, progress: Callable[[int, int | None], None] | None = None, total: int | None = None
+    ) -> ReplayResult:
         """Publish every message of the chosen topics; returns counts (also on `stop`)."""
         from rclpy.duration import Duration
 
@@ -244,8 +257,19 @@ def main_replay(
             held.enter_context(reserve_domain(domain))
         except RunError as error:
             raise ReplayError(f'{error}: {hint}') from None
-        return _replay_on(bag, domain, hint, rate=rate, topics=topics, clock=clock, depth=depth, delay=delay,
-                          wait_for_subscribers=wait_for_subscribers, wait_timeout=wait_timeout, progress=progress)  # fmt: skip
+        return _replay_on(
+            bag,
+            domain,
+            hint,
+            rate=rate,
+            topics=topics,
+            clock=clock,
+            depth=depth,
+            delay=delay,
+            wait_for_subscribers=wait_for_subscribers,
+            wait_timeout=wait_timeout,
+            progress=progress,
+        )
 
 
 def live_run_nodes(node, *, wait: float) -> list[str]:
@@ -255,18 +279,35 @@ def live_run_nodes(node, *, wait: float) -> list[str]:
     deadline = time.monotonic() + wait
     while True:
         found = sorted(
-            f'{namespace.rstrip("/")}/{name}' for name, namespace in node.get_node_names_and_namespaces() if name in RUN_NODES
+            f'{namespace.rstrip("/")}/{name}'
+            for name, namespace in node.get_node_names_and_namespaces()
+            if name in RUN_NODES
         )
         writers = node.get_publishers_info_by_topic(STEP_TOPIC)
-        found += [f'{info.node_namespace.rstrip("/")}/{info.node_name} (writes {STEP_TOPIC})' for info in writers]
-        named = all(info.node_name != '_NODE_NAME_UNKNOWN_' for info in writers)  # a writer is seen before its node
+        found += [
+            f'{info.node_namespace.rstrip("/")}/{info.node_name} (writes {STEP_TOPIC})' for info in writers
+        ]
+        named = all(
+            info.node_name != '_NODE_NAME_UNKNOWN_' for info in writers
+        )  # a writer is seen before its node
         if (found and named) or time.monotonic() > deadline:
             return sorted(set(found))
         time.sleep(0.05)
 
 
 def _replay_on(
-    bag: Path, domain: int, hint: str, *, rate, topics, clock, depth, delay, wait_for_subscribers, wait_timeout, progress
+    bag: Path,
+    domain: int,
+    hint: str,
+    *,
+    rate,
+    topics,
+    clock,
+    depth,
+    delay,
+    wait_for_subscribers,
+    wait_timeout,
+    progress,
 ) -> ReplayResult:
     import rclpy
     from rclpy.node import Node

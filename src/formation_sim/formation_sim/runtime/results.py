@@ -41,8 +41,12 @@ class RunResult:
     children: tuple[ChildExit, ...] = ()
     message: str = ''
     failure: dict | None = None  # extra.failure of the summary (what failed, where, when)
-    bag_recovered: bool = False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
-    phases: dict[str, float] = dataclasses.field(default_factory=dict)  # extra.phases: start, stepping, end [s]
+    bag_recovered: bool = (
+        False  # the bag was left unfinished and rebuilt by formation_sim.bag.recovery.reindex
+    )
+    phases: dict[str, float] = dataclasses.field(
+        default_factory=dict
+    )  # extra.phases: start, stepping, end [s]
 
     @property
     def ok(self) -> bool:
@@ -91,7 +95,12 @@ def phases(marks: dict[str, float]) -> dict[str, float]:
     at `run`: the `formation` command's imports, the scenario read and validated), `start` (spawn, imports, DDS participants,
     discovery: up to step 0), `stepping` (step 0 to the final step), `end` (final reports,
     acknowledgements, the summary, every process's exit, the bag closed and checked)."""
-    spans = {'prepare': ('prepare', 'run'), 'start': (None, 'step0'), 'stepping': ('step0', 'final_step'), 'end': ('final_step', 'checked')}
+    spans = {
+        'prepare': ('prepare', 'run'),
+        'start': (None, 'step0'),
+        'stepping': ('step0', 'final_step'),
+        'end': ('final_step', 'checked'),
+    }
     return {
         phase: marks[last] - (0.0 if first is None else marks[first])
         for phase, (first, last) in spans.items()
@@ -127,15 +136,28 @@ def process_info(child: Child, *, launched: float) -> dict:
 
 
 def summary_of_what_is_known(
-    keeper: Child, *, scenario, horizon: float, mode: str, bag: Path, run_dir: Path, status: int, last_progress: str,
-    children: list[Child], launched: float, notes: list[str],
-) -> dict:  # fmt: skip
+    keeper: Child,
+    *,
+    scenario,
+    horizon: float,
+    mode: str,
+    bag: Path,
+    run_dir: Path,
+    status: int,
+    last_progress: str,
+    children: list[Child],
+    launched: float,
+    notes: list[str],
+) -> dict:
     """summary.json when the time keeper left none (killed hard, or it could not write): the
     failure, the last run time and step of its progress, the processes, and the run as far as
     the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
     from formation_sim.sim.summary import build_summary, unstarted_summary
 
-    progress = {key: float(value) for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)}
+    progress = {
+        key: float(value)
+        for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)
+    }
     stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
     killed = keeper.process.returncode is None or keeper.process.returncode < 0
     failure = {
@@ -200,7 +222,9 @@ def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], 
         after_end = json.loads(summary.read_text(encoding='utf-8')).get('extra', {}).get('after_end') or {}
     except (OSError, ValueError, AttributeError):
         after_end = {}
-    excused = [c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end]
+    excused = [
+        c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end
+    ]
     note = '; '.join(
         f'{c.name} stopped after the run reached its horizon (not a failure of the run): {after_end[c.name.removeprefix("agent_")]}'
         for c in excused
@@ -225,8 +249,14 @@ def strangers(topics: dict[str, int], graph_file: Path, own_nodes: set[str], dom
         graph = json.loads(graph_file.read_text(encoding='utf-8'))
     except (OSError, ValueError):
         graph = {}
-    found = sorted(node for node, ends in graph.items() if node not in own_nodes and set(ends.get('publishers', ())) & set(topics))
-    return f'; nodes outside the run wrote on them: {", ".join(found)} (ROS domain {domain_id})' if found else ''
+    found = sorted(
+        node
+        for node, ends in graph.items()
+        if node not in own_nodes and set(ends.get('publishers', ())) & set(topics)
+    )
+    return (
+        f'; nodes outside the run wrote on them: {", ".join(found)} (ROS domain {domain_id})' if found else ''
+    )
 
 
 def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
@@ -250,7 +280,11 @@ def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
     missing = data['extra'].get('reports_missing') or []
     if missing:
         own = tuple(f'/agent_{agent}/' for agent in missing)
-        uncounted = {topic: n for topic, n in foreign.items() if topic.startswith(own) or not topic.startswith('/agent_')}
+        uncounted = {
+            topic: n
+            for topic, n in foreign.items()
+            if topic.startswith(own) or not topic.startswith('/agent_')
+        }
         if uncounted:
             notes.append(
                 f'{sum(uncounted.values())} messages in the bag are uncounted: agents {missing} sent no final report '

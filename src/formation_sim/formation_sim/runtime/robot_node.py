@@ -61,7 +61,13 @@ from formation_agent.ros.parameters import (
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import EXIT_BAD_INPUT, StopSignals, exit_process, make_executor, shutdown_guard
+from formation_agent.ros.process import (
+    EXIT_BAD_INPUT,
+    StopSignals,
+    exit_process,
+    make_executor,
+    shutdown_guard,
+)
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
 from formation_msgs_py.topics import (
     ROBOT_NODE,
@@ -90,44 +96,137 @@ NODE_NAME = ROBOT_NODE
 ROBOT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 SPECS = (
-    ParameterSpec(name='robot_id', type=INTEGER, description='id i of the agent this robot carries', low=0, high=MAX_AGENT_ID),
-    ParameterSpec(name='model', type=STRING, default='unicycle', description='kinematics', choices=ROBOT_MODELS),
     ParameterSpec(
-        name='position', type=DOUBLE_ARRAY,
+        name='robot_id',
+        type=INTEGER,
+        description='id i of the agent this robot carries',
+        low=0,
+        high=MAX_AGENT_ID,
+    ),
+    ParameterSpec(
+        name='model', type=STRING, default='unicycle', description='kinematics', choices=ROBOT_MODELS
+    ),
+    ParameterSpec(
+        name='position',
+        type=DOUBLE_ARRAY,
         description="initial position in the scenario's sense [m] (a unicycle: its control point)",
     ),
     ParameterSpec(name='yaw', type=DOUBLE, default=0.0, description='initial heading θ [rad]'),
     ParameterSpec(
-        name='control_point_distance', type=DOUBLE, default=0.1, low=0.0, low_open=True,
+        name='control_point_distance',
+        type=DOUBLE,
+        default=0.1,
+        low=0.0,
+        low_open=True,
         description='unicycle: distance l of the control point ahead of the axle [m]',
     ),
-    ParameterSpec(name='rate', type=DOUBLE, default=100.0, low=0.0, low_open=True, description='ticks (pose publications) per second [Hz]'),
-    ParameterSpec(name='max_linear_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='speed limit [m/s]'),
-    ParameterSpec(name='max_angular_speed', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='turn-rate limit [rad/s]'),
-    ParameterSpec(name='wheelbase', type=DOUBLE, default=0.0, low=0.0, description='car: wheelbase L from the rear axle to the front axle [m]'),
-    ParameterSpec(name='max_steering_angle', type=DOUBLE, default=math.inf, low=0.0, low_open=True, description='car: steering limit φ_max [rad]'),
-    ParameterSpec(name='pose_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on each position axis [m]'),
-    ParameterSpec(name='yaw_noise', type=DOUBLE, default=0.0, low=0.0, description='σ of the Gaussian noise on the heading [rad]'),
     ParameterSpec(
-        name='pose_latency', type=DOUBLE, default=0.0, low=0.0,
+        name='rate',
+        type=DOUBLE,
+        default=100.0,
+        low=0.0,
+        low_open=True,
+        description='ticks (pose publications) per second [Hz]',
+    ),
+    ParameterSpec(
+        name='max_linear_speed',
+        type=DOUBLE,
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+        description='speed limit [m/s]',
+    ),
+    ParameterSpec(
+        name='max_angular_speed',
+        type=DOUBLE,
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+        description='turn-rate limit [rad/s]',
+    ),
+    ParameterSpec(
+        name='wheelbase',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
+        description='car: wheelbase L from the rear axle to the front axle [m]',
+    ),
+    ParameterSpec(
+        name='max_steering_angle',
+        type=DOUBLE,
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+        description='car: steering limit φ_max [rad]',
+    ),
+    ParameterSpec(
+        name='pose_noise',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
+        description='σ of the Gaussian noise on each position axis [m]',
+    ),
+    ParameterSpec(
+        name='yaw_noise',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
+        description='σ of the Gaussian noise on the heading [rad]',
+    ),
+    ParameterSpec(
+        name='pose_latency',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
         description='delay between a measurement and its publication [s] (stamped with the measurement time)',
     ),
-    ParameterSpec(name='command_latency', type=DOUBLE, default=0.0, low=0.0, description='delay before a command takes effect [s]'),
     ParameterSpec(
-        name='command_timeout', type=DOUBLE, default=0.5, low=0.0, low_open=True,
+        name='command_latency',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
+        description='delay before a command takes effect [s]',
+    ),
+    ParameterSpec(
+        name='command_timeout',
+        type=DOUBLE,
+        default=0.5,
+        low=0.0,
+        low_open=True,
         description='stop when no command has come for this long [s]',
     ),
-    ParameterSpec(name='seed', type=INTEGER, default=0, low=0, description='seed of the pose noise (one stream per robot)'),
-    ParameterSpec(name='world_frame', type=STRING, default='world', description='frame of poses and holonomic commands'),
-    ParameterSpec(name='publish_truth', type=BOOL, default=True, description='also publish the noise-free state on robot/true_odom'),
-)  # fmt: skip
+    ParameterSpec(
+        name='seed',
+        type=INTEGER,
+        default=0,
+        low=0,
+        description='seed of the pose noise (one stream per robot)',
+    ),
+    ParameterSpec(
+        name='world_frame', type=STRING, default='world', description='frame of poses and holonomic commands'
+    ),
+    ParameterSpec(
+        name='publish_truth',
+        type=BOOL,
+        default=True,
+        description='also publish the noise-free state on robot/true_odom',
+    ),
+)
 
 
 class SimulatedRobotNode(Node):
     """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands."""
 
-    def __init__(self, *, namespace: str | None = None, parameter_overrides: list[Parameter] | None = None, context=None) -> None:
-        super().__init__(NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context)
+    def __init__(
+        self,
+        *,
+        namespace: str | None = None,
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,
+    ) -> None:
+        super().__init__(
+            NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context
+        )
         p = declare_parameters(self, SPECS)
         self.robot_id = int(p['robot_id'])
         name = self.get_fully_qualified_name()
@@ -139,11 +238,16 @@ class SimulatedRobotNode(Node):
                 control_point_distance=float(p['control_point_distance']),
                 wheelbase=float(p['wheelbase']),
                 limits=Limits(
-                    linear=float(p['max_linear_speed']), angular=float(p['max_angular_speed']), steering=float(p['max_steering_angle'])
+                    linear=float(p['max_linear_speed']),
+                    angular=float(p['max_angular_speed']),
+                    steering=float(p['max_steering_angle']),
                 ),
             )
             self.noise = PoseNoise(
-                position_sigma=float(p['pose_noise']), yaw_sigma=float(p['yaw_noise']), seed=int(p['seed']), robot_id=self.robot_id
+                position_sigma=float(p['pose_noise']),
+                yaw_sigma=float(p['yaw_noise']),
+                seed=int(p['seed']),
+                robot_id=self.robot_id,
             )
         except RobotError as error:
             raise RobotError(f'{name}: {error}') from None
@@ -152,16 +256,24 @@ class SimulatedRobotNode(Node):
         self.pose_latency = float(p['pose_latency'])
         self.command_latency = float(p['command_latency'])
         self.command_timeout = float(p['command_timeout'])
-        self.world_frame_command = self.robot.world_frame_command  # TwistStamped in the world frame, else Twist (v, ω)
+        self.world_frame_command = (
+            self.robot.world_frame_command
+        )  # TwistStamped in the world frame, else Twist (v, ω)
 
         self._pose_pub = self.create_publisher(PoseStamped, robot_pose_topic(self.robot_id), ROBOT_QOS)
         self._odom_pub = self.create_publisher(Odometry, robot_odom_topic(self.robot_id), ROBOT_QOS)
-        self._truth_pub = self.create_publisher(Odometry, robot_true_odom_topic(self.robot_id), ROBOT_QOS) if p['publish_truth'] else None
+        self._truth_pub = (
+            self.create_publisher(Odometry, robot_true_odom_topic(self.robot_id), ROBOT_QOS)
+            if p['publish_truth']
+            else None
+        )
         self._command_sub = self.create_subscription(
             command_message(self.robot.kind), robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
-        self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = deque()  # pose_latency queue
+        self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = (
+            deque()
+        )  # pose_latency queue
         self._last_command_at: float | None = None  # arrival of the command the robot holds
         self.commands_received = 0
         self.commands_refused = 0
@@ -170,7 +282,9 @@ class SimulatedRobotNode(Node):
         # most of a robot's CPU (issue 19).
         self._truth = OdometryWriter(frame=self.world_frame, child_frame=self.body_frame, sigma=(0.0, 0.0))
         self._measured = OdometryWriter(
-            frame=self.world_frame, child_frame=self.body_frame, sigma=(self.noise.position_sigma, self.noise.yaw_sigma)
+            frame=self.world_frame,
+            child_frame=self.body_frame,
+            sigma=(self.noise.position_sigma, self.noise.yaw_sigma),
         )
         self._last_tick = time.time()
         self._timer = self.create_timer(1.0 / float(p['rate']), self._tick)
@@ -190,7 +304,9 @@ class SimulatedRobotNode(Node):
                     )
                 return
             twist = msg.twist
-            command = Command(linear=(twist.linear.x, twist.linear.y, twist.linear.z)[:p], angular=twist.angular.z)
+            command = Command(
+                linear=(twist.linear.x, twist.linear.y, twist.linear.z)[:p], angular=twist.angular.z
+            )
         else:
             command = Command(linear=(msg.linear.x,), angular=msg.angular.z)
         values = (*command.linear, command.angular)
@@ -212,23 +328,31 @@ class SimulatedRobotNode(Node):
             return
         held = self.robot.command
         if (
-            held is not None and not held.is_zero and self._last_command_at is not None
+            held is not None
+            and not held.is_zero
+            and self._last_command_at is not None
             and now - self._last_command_at > self.command_timeout + self.command_latency
         ):
             self.timeouts += 1
-            self.get_logger().warning(f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})')
+            self.get_logger().warning(
+                f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})'
+            )
             self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
 
     # -- ticks ----------------------------------------------------------------------------------
 
     def _tick(self) -> None:
         now = time.time()
-        self.robot.advance(max(0.0, now - self._last_tick))  # exact, under the command held since the last tick
+        self.robot.advance(
+            max(0.0, now - self._last_tick)
+        )  # exact, under the command held since the last tick
         self._last_tick = now
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self.robot.body_twist()
         if self._truth_pub is not None:
-            self._truth_pub.publish(self._truth.pack(now, _xyz(position), quaternion_from_yaw(yaw), linear, angular))
+            self._truth_pub.publish(
+                self._truth.pack(now, _xyz(position), quaternion_from_yaw(yaw), linear, angular)
+            )
         measured, measured_yaw = self.noise.measure(position, yaw)
         self._measurements.append((now, measured, measured_yaw, linear, angular))
         while self._measurements and self._measurements[0][0] + self.pose_latency <= now:
@@ -251,7 +375,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
         prog='formation_robot',
         description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: each takes velocity '
         'commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
-        epilog=parameter_help(SPECS) + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
+        epilog=parameter_help(SPECS)
+        + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
         '(formation run --backend unicycle writes robots.params.yaml).',
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

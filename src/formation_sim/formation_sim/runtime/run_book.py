@@ -158,7 +158,9 @@ class RunBook:
         a Status no working agent sends (unknown agent, counters going back, too many triggers)."""
         book = self.agents.get(status.agent)
         if book is None:
-            raise CoordinatorError(f'status from agent {status.agent}, which is not in the scenario {sorted(self.agents)}')
+            raise CoordinatorError(
+                f'status from agent {status.agent}, which is not in the scenario {sorted(self.agents)}'
+            )
         previous = book.status
         if previous is not None and (
             status.step_index < previous.step_index
@@ -184,7 +186,9 @@ class RunBook:
             return
         t = book.trigger_times[status.triggers - 1]
         if status.last_planned != t:
-            raise CoordinatorError(f'agent {status.agent} triggered for t={status.last_planned!r} at step time t={t!r}')
+            raise CoordinatorError(
+                f'agent {status.agent} triggered for t={status.last_planned!r} at step time t={t!r}'
+            )
 
     def accept_report(self, report: AgentReport) -> str | None:
         """Take an agent's report; the reason it is refused, or None."""
@@ -205,16 +209,21 @@ class RunBook:
 
     def final_reports_in(self) -> bool:
         """Every agent still alive has sent its final report."""
-        return all(book.report is not None and book.report.final for book in self.agents.values() if book.lost is None)
+        return all(
+            book.report is not None and book.report.final
+            for book in self.agents.values()
+            if book.lost is None
+        )
 
     # -- discovery and lost agents ----------------------------------------------------------------
 
     def not_ready(self) -> list[int]:
         """Agents that have not yet said all their endpoints are matched (discovery)."""
         return [
-            i for i, book in self.agents.items()
+            i
+            for i, book in self.agents.items()
             if book.status is None or book.status.step_index != DISCOVERY_STEP or not book.status.ready
-        ]  # fmt: skip
+        ]
 
     def note_announcement(self, status: Status) -> None:
         """An agent's discovery Status (taken by `accept_status`): announced, ready or not, alive."""
@@ -234,7 +243,9 @@ class RunBook:
         """Every agent's latest discovery Status said its endpoints are matched."""
         return len(self._ready) == len(self.agents)
 
-    def note_liveliness(self, agent: int, *, alive_count: int, not_alive_count_change: int, finished: bool, now: float) -> None:
+    def note_liveliness(
+        self, agent: int, *, alive_count: int, not_alive_count_change: int, finished: bool, now: float
+    ) -> None:
         """A liveliness change of the writer watched for `agent`."""
         book = self.agents[agent]
         if alive_count > 0:
@@ -244,7 +255,11 @@ class RunBook:
             # A lease that expired: the process died or the network lost it.  A writer deleted:
             # the agent left (its process exited) before the end of the run.
             book.lease_expired = not_alive_count_change > 0
-            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)' if book.lease_expired else 'its node left the graph'
+            how = (
+                f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease)'
+                if book.lease_expired
+                else 'its node left the graph'
+            )
             book.lost = (now, how)
 
     def lost_error(self, now: float, *, started: bool, where: str) -> AgentLostError | None:
@@ -292,7 +307,9 @@ class RunBook:
         t_next = min(book.status.next_time for book in self.agents.values())
         if t_next < t:
             laggards = [i for i, book in self.agents.items() if book.status.next_time < t]
-            raise CoordinatorError(f'agents {laggards} ask to trigger at t={t_next!r}, before the current t={t!r}')
+            raise CoordinatorError(
+                f'agents {laggards} ask to trigger at t={t_next!r}, before the current t={t!r}'
+            )
         return t_next, tuple(sorted(i for i, book in self.agents.items() if book.status.next_time == t_next))
 
     def mark_due(self, due, t: float) -> None:
@@ -319,10 +336,15 @@ class RunBook:
         # After t = 0, an agent not ready never heard from some neighbour: its information was
         # lost (it triggers only at events, so nothing repeats it), and the agent waits.
         waiting = [
-            i for i, book in self.agents.items()
+            i
+            for i, book in self.agents.items()
             if book.status is not None and book.status.step_index >= 0 and not book.status.ready
-        ]  # fmt: skip
-        hint = f"; agents {waiting} are still waiting for a neighbour's triggering information (lost?)" if waiting else ''
+        ]
+        hint = (
+            f"; agents {waiting} are still waiting for a neighbour's triggering information (lost?)"
+            if waiting
+            else ''
+        )
         raise ConnectivityLostError(
             f'edge ({edge.i}, {edge.j}) reached the communication radius at t={t!r}: '
             f'||x_{edge.i} - x_{edge.j}|| = {lengths[worst]:.6g} >= Δ = {self.scenario.delta:g}{hint}',
@@ -357,7 +379,11 @@ class RunBook:
     def message_counts(self) -> dict:
         """Rejected messages per reason and agent, and faults injected, from the agents' reports."""
         books = self.agents.values()
-        by_agent = {str(i): dict(book.report.rejected) for i, book in self.agents.items() if book.report and book.report.rejected}
+        by_agent = {
+            str(i): dict(book.report.rejected)
+            for i, book in self.agents.items()
+            if book.report and book.report.rejected
+        }
         by_reason: dict[str, int] = {}
         for counts in (*by_agent.values(), self.rejected):
             for reason, n in counts.items():
@@ -373,10 +399,16 @@ class RunBook:
             'injected_faults': {
                 'dropped': sum(r.dropped for r in reports),
                 'delayed': sum(r.delayed for r in reports),
-                'by_agent': {str(r.agent): {'dropped': r.dropped, 'delayed': r.delayed} for r in reports if r.dropped or r.delayed},
+                'by_agent': {
+                    str(r.agent): {'dropped': r.dropped, 'delayed': r.delayed}
+                    for r in reports
+                    if r.dropped or r.delayed
+                },
             },
             'late_information': sum(r.late for r in reports),
-            'reports_missing': sorted(i for i, book in self.agents.items() if book.report is None or not book.report.final),
+            'reports_missing': sorted(
+                i for i, book in self.agents.items() if book.report is None or not book.report.final
+            ),
         }
 
     def saturation(self) -> dict:
@@ -409,7 +441,11 @@ class RecorderBook:
             self.lost = None
         elif self.lost is None:  # also after the end: no more waiting for its acknowledgements
             self.lease_expired = not_alive_count_change > 0
-            how = f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)' if self.lease_expired else 'it left the graph'
+            how = (
+                f'no sign of life for {LIVELINESS_LEASE} s (DDS liveliness lease: stopped or frozen?)'
+                if self.lease_expired
+                else 'it left the graph'
+            )
             self.lost = (now, how)
 
     def accept_heartbeat(self, text: str) -> str | None:
@@ -453,7 +489,9 @@ class PoseWatch:
 
     def __init__(self, robots, *, silence: float) -> None:
         self.silence = silence
-        self.heard: dict[int, float | None] = dict.fromkeys(robots)  # robot -> monotonic time of its latest pose
+        self.heard: dict[int, float | None] = dict.fromkeys(
+            robots
+        )  # robot -> monotonic time of its latest pose
         self.stamps: dict[int, float] = {}  # robot -> run time of its latest pose
 
     def note(self, robot: int, *, now: float, t: float) -> None:
@@ -474,9 +512,16 @@ class PoseWatch:
     def error(self, robots: list[int], *, now: float, where: str, topics: str) -> RobotLostError:
         """The robots lost, named with their last pose's time and how long they have been silent."""
         newest = max(now, *(at for at in self.heard.values() if at is not None))
-        last = ', '.join(f'robot {i} at t={self.stamps.get(i, math.nan):.3f} ({newest - self.heard[i]:.2f} s before)' for i in robots)
+        last = ', '.join(
+            f'robot {i} at t={self.stamps.get(i, math.nan):.3f} ({newest - self.heard[i]:.2f} s before)'
+            for i in robots
+        )
         names = f'robot {robots[0]}' if len(robots) == 1 else f'robots {ids_text(robots)}'
-        others = 'every robot at once' if len(robots) == len(self.heard) else 'while the other robots still published'
+        others = (
+            'every robot at once'
+            if len(robots) == len(self.heard)
+            else 'while the other robots still published'
+        )
         return RobotLostError(
             f'{names} lost {where}: no pose on {topics} for more than {self.silence:g} s, {others} '
             f'(last poses: {last}); the run stops',

@@ -26,7 +26,9 @@ FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final report
 DELIVERY_TIMEOUT = 5.0  # [s] the longest wait for the readers' acknowledgements
 
 
-def collect_final_reports(node: TimeKeeperNode, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT) -> None:
+def collect_final_reports(
+    node: TimeKeeperNode, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT
+) -> None:
     """After the final step: wait (bounded) for every live agent's last report."""
     deadline = time.monotonic() + timeout_sec
     while not node.final_reports_in() and time.monotonic() < deadline:
@@ -36,7 +38,9 @@ def collect_final_reports(node: TimeKeeperNode, executor, *, timeout_sec: float 
 def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
     """What is left published, wait (bounded) until every reader acknowledged the Steps and the tools' topics."""
     node.flush()
-    _wait_acknowledged(executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec)
+    _wait_acknowledged(
+        executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec
+    )
 
 
 def stop_agents(node: TimeKeeperNode, executor) -> None:
@@ -53,14 +57,24 @@ def stop_agents(node: TimeKeeperNode, executor) -> None:
     # timeout: the recorders' heartbeats say when they have the final Step, the tools' topics
     # (the recorders' alone) are acknowledged.  As at the horizon: the bag ends where the summary does.
     _wait_acknowledged(
-        executor, node.delivery_publishers(with_steps=False), recorders=node.recorders, timeout_sec=DELIVERY_TIMEOUT,
-        final_step=node.step.index + 1, recorders_expected=node.extra_subscribers,
-    )  # fmt: skip
+        executor,
+        node.delivery_publishers(with_steps=False),
+        recorders=node.recorders,
+        timeout_sec=DELIVERY_TIMEOUT,
+        final_step=node.step.index + 1,
+        recorders_expected=node.extra_subscribers,
+    )
     node.mark('delivered')
 
 
 def _wait_acknowledged(
-    executor, publishers, *, recorders: RecorderBook, timeout_sec: float, final_step: int | None = None, recorders_expected: int = 0
+    executor,
+    publishers,
+    *,
+    recorders: RecorderBook,
+    timeout_sec: float,
+    final_step: int | None = None,
+    recorders_expected: int = 0,
 ) -> None:
     """Wait (bounded) until every reader acknowledged what `publishers` wrote and, with
     `final_step`, until each of the `recorders_expected` recorders' heartbeats says it recorded
@@ -71,7 +85,9 @@ def _wait_acknowledged(
 
     def recorded() -> bool:
         steps = recorders.recorded_steps.values()
-        return final_step is None or (len(steps) >= recorders_expected and all(step >= final_step for step in steps))
+        return final_step is None or (
+            len(steps) >= recorders_expected and all(step >= final_step for step in steps)
+        )
 
     while (pending or not recorded()) and recorders.lost is None and time.monotonic() < deadline:
         pending = [pub for pub in pending if not pub.wait_for_all_acked(Duration(seconds=0.05))]
@@ -85,7 +101,9 @@ def write_unstarted(node: TimeKeeperNode) -> None:
     out.mkdir(parents=True, exist_ok=True)
     mode = 'distributed' if node.serves_sensing else 'robots'
     extra = {**run_extra(node, 0.0), 'started': False}
-    write_summary_file(unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE)
+    write_summary_file(
+        unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE
+    )
 
 
 def write_results(node: TimeKeeperNode) -> None:

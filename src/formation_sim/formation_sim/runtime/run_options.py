@@ -89,7 +89,9 @@ class RunOptions:
         _check_numbers(self, scenario, horizon)
         agents_per_process = resolve_agents_per_process(self.agents_per_process, len(scenario.agent_ids))
         if scenario.dimension > 3:
-            raise RunError(f'distributed runs need p <= 3 (geometry_msgs commands), got p = {scenario.dimension}')
+            raise RunError(
+                f'distributed runs need p <= 3 (geometry_msgs commands), got p = {scenario.dimension}'
+            )
         backend, clock, robots = _check_world(self, scenario)
         if self.executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {self.executor!r}')
@@ -101,9 +103,16 @@ class RunOptions:
         if self.discovery == 'server':
             discovery_server_program()  # RunError now, before anything starts, if it is not installed
         return dataclasses.replace(
-            self, horizon=horizon, backend=backend, clock=clock, robots=robots, agents_per_process=agents_per_process,
-            inject=dict(self.inject or {}), extra_env=dict(self.extra_env or {}), summary_extra=dict(self.summary_extra or {}),
-        )  # fmt: skip
+            self,
+            horizon=horizon,
+            backend=backend,
+            clock=clock,
+            robots=robots,
+            agents_per_process=agents_per_process,
+            inject=dict(self.inject or {}),
+            extra_env=dict(self.extra_env or {}),
+            summary_extra=dict(self.summary_extra or {}),
+        )
 
 
 def _check_numbers(options: RunOptions, scenario: Scenario, horizon: float) -> None:
@@ -119,9 +128,13 @@ def _check_numbers(options: RunOptions, scenario: Scenario, horizon: float) -> N
     except EngineError as error:
         raise RunError(f'sample_period: {error}') from None
     if options.backend != 'exact' and not options.sample_period:
-        raise RunError(f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {options.sample_period!r}')
+        raise RunError(
+            f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {options.sample_period!r}'
+        )
     timeout = options.timeout
-    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0):
+    if timeout is not None and not (
+        isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0.0
+    ):
         raise RunError(f'timeout must be a finite number of seconds > 0, got {timeout!r}')
 
 
@@ -133,19 +146,25 @@ def _check_world(options: RunOptions, scenario: Scenario) -> tuple[str, str, Rob
     on_robots = backend != 'exact'
     clock = options.clock if options.clock is not None else 'realtime' if on_robots else 'lockstep'
     if clock not in CLOCKS:
-        raise RunError(f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}")
+        raise RunError(
+            f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}"
+        )
     if not on_robots:
         if robots is not None:
             raise RunError(f"robots are options of the robot backends {tuple(BACKENDS[1:])}, not of 'exact'")
         return backend, clock, None
     if clock != 'realtime':
-        raise RunError(f'robots run on the wall clock: backend {backend!r} needs clock=realtime, got {clock!r}')
+        raise RunError(
+            f'robots run on the wall clock: backend {backend!r} needs clock=realtime, got {clock!r}'
+        )
     if robots is None:
         if backend == 'external':
             raise RunError("backend 'external' needs robots=RobotOptions(model=...): what the robots are")
         robots = RobotOptions(model=backend)
     if backend not in ('external', robots.model):
-        raise RunError(f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}')
+        raise RunError(
+            f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}'
+        )
     robots.check(scenario)
     return backend, clock, robots
 

@@ -101,10 +101,31 @@ SimulatorError = CoordinatorError
 
 SIMULATOR_PARAMETERS = (
     *TIME_KEEPER_PARAMETERS,
-    ParameterSpec(name='clock_mode', type=STRING, default='lockstep', choices=CLOCK_MODES, description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots'),
-    ParameterSpec(name='viz_period', type=DOUBLE, default=0.04, low=0.0, high=math.inf, high_open=True, description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)'),
-    ParameterSpec(name='stall_timeout', type=DOUBLE, default=60.0, low=0.0, low_open=True, description="a lock-step step not settled after this many seconds ends the run, naming every agent's last Status"),
-)  # fmt: skip
+    ParameterSpec(
+        name='clock_mode',
+        type=STRING,
+        default='lockstep',
+        choices=CLOCK_MODES,
+        description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots',
+    ),
+    ParameterSpec(
+        name='viz_period',
+        type=DOUBLE,
+        default=0.04,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)',
+    ),
+    ParameterSpec(
+        name='stall_timeout',
+        type=DOUBLE,
+        default=60.0,
+        low=0.0,
+        low_open=True,
+        description="a lock-step step not settled after this many seconds ends the run, naming every agent's last Status",
+    ),
+)
 """The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
 
 RECORDER_LAG = 2
@@ -157,7 +178,9 @@ def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
     return topics
 
 
-def agent_parameters(scenario: Scenario, agent_id: int, *, horizon: float, extra_subscribers: int = 0) -> dict:
+def agent_parameters(
+    scenario: Scenario, agent_id: int, *, horizon: float, extra_subscribers: int = 0
+) -> dict:
     """ROS parameters of agent `agent_id`'s node (what that agent knows of the scenario)."""
     neighbours = scenario.neighbours(agent_id)
     gains = scenario.gains
@@ -194,7 +217,12 @@ class FormationSimulatorNode(TimeKeeperNode):
     watched_writer = 'command'
 
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
-        super().__init__(scenario=scenario, parameter_overrides=parameter_overrides, context=context, node_name=SIMULATOR_NODE)
+        super().__init__(
+            scenario=scenario,
+            parameter_overrides=parameter_overrides,
+            context=context,
+            node_name=SIMULATOR_NODE,
+        )
 
     PARAMETERS = SIMULATOR_PARAMETERS
     COMMAND = 'formation_sim'
@@ -218,10 +246,20 @@ class FormationSimulatorNode(TimeKeeperNode):
         scenario = self.scenario
         self.world = World.from_scenario(scenario)
         # The agents' threshold (the very same floats) and the edges of the rounding floor: stop where the engine stops.
-        self._threshold_model, self._floor_edges = build_agent(scenario, scenario.agent_ids[0]), FloorEdges.of(scenario)
+        self._threshold_model, self._floor_edges = (
+            build_agent(scenario, scenario.agent_ids[0]),
+            FloorEdges.of(scenario),
+        )
         self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        start = WorldState(time=0.0, agent_ids=scenario.agent_ids, positions=scenario.positions, velocities=self.world.velocities)
-        self._truth_pub = self.create_publisher(PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start)))
+        start = WorldState(
+            time=0.0,
+            agent_ids=scenario.agent_ids,
+            positions=scenario.positions,
+            velocities=self.world.velocities,
+        )
+        self._truth_pub = self.create_publisher(
+            PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start))
+        )
         self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
         self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
         # For tools: a Foxglove view per sample.
@@ -238,7 +276,9 @@ class FormationSimulatorNode(TimeKeeperNode):
             self._markers_pub,
         ]
         self._services = [
-            self.create_service(Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent))
+            self.create_service(
+                Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent)
+            )
             for i in self.agents
         ]
         self.sensing_calls = 0
@@ -294,8 +334,15 @@ class FormationSimulatorNode(TimeKeeperNode):
             raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
 
     def _describe_wait(self) -> str:
-        recorders = f'recorders at steps {self.recorders.recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); ' if self.extra_subscribers else ''
-        return f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}' + self.book.waiting_description()
+        recorders = (
+            f'recorders at steps {self.recorders.recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); '
+            if self.extra_subscribers
+            else ''
+        )
+        return (
+            f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}'
+            + self.book.waiting_description()
+        )
 
     def _recorder_behind(self) -> bool:
         """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
@@ -328,7 +375,9 @@ class FormationSimulatorNode(TimeKeeperNode):
             self._sampler.event()
             self._finished_at = time.monotonic()
             self.graph = graph_of(self)
-            self.step = Step(index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch)
+            self.step = Step(
+                index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
+            )
             self._publish(self._step_pub, encode_step(self.step))
             self.finished = True
         self.publish_samples()
@@ -461,7 +510,10 @@ class FormationSimulatorNode(TimeKeeperNode):
         for k in range(last + 1 - count, last + 1):
             t, x = samples.times[k], samples.positions[k]
             state = WorldState(
-                time=t, agent_ids=self.scenario.agent_ids, positions=x, velocities=samples.velocities[k] if self.double else None
+                time=t,
+                agent_ids=self.scenario.agent_ids,
+                positions=x,
+                velocities=samples.velocities[k] if self.double else None,
             )
             self._publish(self._state_pub, encode_world_state(state))
             if t >= self._next_viz or (self.finished and k == last):
@@ -486,14 +538,20 @@ class FormationSimulatorNode(TimeKeeperNode):
             mode='distributed',
             # A trigger counts once its command has acted on the world (a run stopped early may
             # have sensed for a trigger that never completed).
-            trigger_times={i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()},
+            trigger_times={
+                i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()
+            },
             samples=self._sampler.samples(),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
                 **run_extra(self, self.world.time),
-                **(self.book.lateness({i: book.trigger_times for i, book in self.agents.items()}) if self.realtime else {}),
+                **(
+                    self.book.lateness({i: book.trigger_times for i, book in self.agents.items()})
+                    if self.realtime
+                    else {}
+                ),
             },
         )
 

@@ -25,7 +25,9 @@ from formation_sim.runtime.fastdds_shm import domain_port_files, fastdds_names, 
 from formation_sim.runtime.launch import ProcessSpec
 
 POLL_PERIOD = 0.05  # how often the orchestrator looks at its children [s]
-SHM_LOOK_PERIOD = 2.0  # children's shared-memory files are looked at when /dev/shm changes, or after this long [s]
+SHM_LOOK_PERIOD = (
+    2.0  # children's shared-memory files are looked at when /dev/shm changes, or after this long [s]
+)
 PROGRESS_PREFIX = 'progress '
 
 try:  # looked up here, not in the forked child (a child before exec must take no lock)
@@ -75,7 +77,11 @@ class Child:
                 lines = handle.read().decode(errors='replace').splitlines()
         except OSError:
             return ''
-        named = [line for line in lines if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))]
+        named = [
+            line
+            for line in lines
+            if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))
+        ]
         return named[-1].split(': ', 1)[1] if named else ''
 
     def describe(self) -> str:
@@ -93,7 +99,13 @@ class Child:
 class Supervisor:
     """The children of one run."""
 
-    def __init__(self, *, log_dir: Path, env: dict[str, str], launch_prefix: Callable[[str], Sequence[str]] | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        log_dir: Path,
+        env: dict[str, str],
+        launch_prefix: Callable[[str], Sequence[str]] | None = None,
+    ) -> None:
         self.log_dir = log_dir
         self.env = env
         self.launch_prefix = launch_prefix
@@ -185,9 +197,13 @@ class Supervisor:
         robots = [c for c in self.children if c.name.startswith('robot')]
         began = time.monotonic()
         self._stop([c for c in self.children if c.name != 'recorder' and c not in robots], timeouts)
-        while robots and time.monotonic() < began + robots_after:  # a robot left without commands stops by itself first
+        while (
+            robots and time.monotonic() < began + robots_after
+        ):  # a robot left without commands stops by itself first
             time.sleep(POLL_PERIOD)
-        self._stop(robots, timeouts)  # after their agents: they take the zero commands, their poses end the bag
+        self._stop(
+            robots, timeouts
+        )  # after their agents: they take the zero commands, their poses end the bag
         self._stop([c for c in self.children if c.name == 'recorder'], timeouts)
         for child in self.children:
             with contextlib.suppress(subprocess.TimeoutExpired):

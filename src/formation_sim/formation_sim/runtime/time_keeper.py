@@ -27,7 +27,14 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterError, ParameterSpec, read_parameters
+from formation_agent.ros.parameters import (
+    DOUBLE,
+    INTEGER,
+    STRING,
+    ParameterError,
+    ParameterSpec,
+    read_parameters,
+)
 from formation_agent.ros.process import EXECUTORS
 from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, encode_step
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
@@ -48,16 +55,72 @@ from formation_sim.sim.record import RunRecord
 DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 
 TIME_KEEPER_PARAMETERS = (
-    ParameterSpec(name='scenario', type=STRING, description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)'),
-    ParameterSpec(name='horizon', type=DOUBLE, default=0.0, low=0.0, high=math.inf, high_open=True, description="the run ends at this time [s] (0: the scenario's horizon)"),
-    ParameterSpec(name='out_dir', type=STRING, default='', description="where summary.json and graph.json go ('': nowhere)"),
-    ParameterSpec(name='sample_period', type=DOUBLE, default=0.01, low=0.0, high=math.inf, high_open=True, description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)'),
-    ParameterSpec(name='extra_subscribers', type=INTEGER, default=0, low=0, description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0"),
-    ParameterSpec(name='step_listeners', type=INTEGER, default=0, low=0, description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them'),
-    ParameterSpec(name='progress_period', type=DOUBLE, default=1.0, low=0.0, description='a progress line on stdout every this many seconds (0: none)'),
-    ParameterSpec(name='discovery_timeout', type=DOUBLE, default=120.0, low=0.0, low_open=True, description='give up when the run is not connected after this long [s]'),
-    ParameterSpec(name='executor', type=STRING, default='events', choices=EXECUTORS, description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)'),
-)  # fmt: skip
+    ParameterSpec(
+        name='scenario',
+        type=STRING,
+        description='the scenario: a built-in name or a YAML path (formation run writes DIR/scenario.yaml)',
+    ),
+    ParameterSpec(
+        name='horizon',
+        type=DOUBLE,
+        default=0.0,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description="the run ends at this time [s] (0: the scenario's horizon)",
+    ),
+    ParameterSpec(
+        name='out_dir',
+        type=STRING,
+        default='',
+        description="where summary.json and graph.json go ('': nowhere)",
+    ),
+    ParameterSpec(
+        name='sample_period',
+        type=DOUBLE,
+        default=0.01,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)',
+    ),
+    ParameterSpec(
+        name='extra_subscribers',
+        type=INTEGER,
+        default=0,
+        low=0,
+        description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0",
+    ),
+    ParameterSpec(
+        name='step_listeners',
+        type=INTEGER,
+        default=0,
+        low=0,
+        description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them',
+    ),
+    ParameterSpec(
+        name='progress_period',
+        type=DOUBLE,
+        default=1.0,
+        low=0.0,
+        description='a progress line on stdout every this many seconds (0: none)',
+    ),
+    ParameterSpec(
+        name='discovery_timeout',
+        type=DOUBLE,
+        default=120.0,
+        low=0.0,
+        low_open=True,
+        description='give up when the run is not connected after this long [s]',
+    ),
+    ParameterSpec(
+        name='executor',
+        type=STRING,
+        default='events',
+        choices=EXECUTORS,
+        description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)',
+    ),
+)
 """What the coordinator and the simulator share."""
 
 
@@ -70,7 +133,9 @@ class WorldHooks:
     COMMAND: str  # its console script
     PARAMS_FILE: str  # its parameters in a run folder
     DESCRIPTION: str  # what --help says it is
-    serves_sensing: bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
+    serves_sensing: (
+        bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
+    )
     watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
@@ -164,7 +229,9 @@ class TimeKeeperNode(WorldHooks, Node):
         # For tools: the scenario once (so a bag is self-contained).
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._tool_publishers = [self._scenario_pub]
-        self._status_sub = self.create_subscription(Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS)
+        self._status_sub = self.create_subscription(
+            Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS
+        )
         self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
         # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
         # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
@@ -227,7 +294,10 @@ class TimeKeeperNode(WorldHooks, Node):
             )
         elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
             self._next_discovery_progress = now + self.progress_period
-            self._say(f'progress discovery {now - self._created:.0f} s: waiting for ' + '; '.join(discovery_gaps(self)))
+            self._say(
+                f'progress discovery {now - self._created:.0f} s: waiting for '
+                + '; '.join(discovery_gaps(self))
+            )
 
     def _on_announcement(self, status) -> None:
         """An agent's discovery Status: step 0 goes at once when it was the last one missing."""
@@ -247,8 +317,12 @@ class TimeKeeperNode(WorldHooks, Node):
         note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
         self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
-            self._say(f'progress discovery done in {self._started - self._created:.1f} s; {note}t=0 ({self.clock_mode})')
-        self._publish(self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon))))
+            self._say(
+                f'progress discovery done in {self._started - self._created:.1f} s; {note}t=0 ({self.clock_mode})'
+            )
+        self._publish(
+            self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
+        )
         self._begin()
 
     def end_now(self) -> None:
@@ -259,11 +333,18 @@ class TimeKeeperNode(WorldHooks, Node):
         self._reached = self.reached_time
         if self._finished_at is None:
             self._finished_at = time.monotonic()
-        if not self.graph and not self.realtime:  # the graph as it is now, before the final Step sends the agents home
+        if (
+            not self.graph and not self.realtime
+        ):  # the graph as it is now, before the final Step sends the agents home
             self.graph = graph_of(self)
         self.finished = True
-        self._publish(self._step_pub, encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)))
-        if not self.graph:  # on the wall clock (robots), the final Step first: the agents leave after their reports
+        self._publish(
+            self._step_pub,
+            encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)),
+        )
+        if (
+            not self.graph
+        ):  # on the wall clock (robots), the final Step first: the agents leave after their reports
             self.graph = graph_of(self)
 
     def fail(self, error: BaseException) -> None:
@@ -278,7 +359,8 @@ class TimeKeeperNode(WorldHooks, Node):
             kind = 'error'
         self.failure_info = {
             'kind': kind,
-            'message': str(error) or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+            'message': str(error)
+            or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
             'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
             'time': getattr(error, 'time', self.reached_time),
             'step': None if self.step is None else self.step.index,
@@ -370,7 +452,9 @@ class TimeKeeperNode(WorldHooks, Node):
 
     def _on_recorder_liveliness(self, info) -> None:
         self.recorders.note_liveliness(
-            alive_count=info.alive_count, not_alive_count_change=info.not_alive_count_change, now=time.monotonic()
+            alive_count=info.alive_count,
+            not_alive_count_change=info.not_alive_count_change,
+            now=time.monotonic(),
         )
 
     def _on_recorder(self, msg: String) -> None:
@@ -383,12 +467,18 @@ class TimeKeeperNode(WorldHooks, Node):
     def _check_lost(self, now: float) -> None:
         """Stop the run once the recorder or an agent is lost (the books say when that is)."""
         started, where = self.step is not None, self._where()
-        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(now, started=started, where=where)
+        error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(
+            now, started=started, where=where
+        )
         if error is not None:
             raise error
 
     def _where(self) -> str:
-        return 'during discovery' if self.step is None else f'at t={self.reached_time!r} (step {self.step.index})'
+        return (
+            'during discovery'
+            if self.step is None
+            else f'at t={self.reached_time!r} (step {self.step.index})'
+        )
 
     # -- progress and results -------------------------------------------------------------------
 
@@ -431,7 +521,9 @@ def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tupl
             problems.append(f"parameter 'scenario' (string): {error}")
     if scenario is not None:
         if scenario.dimension > 3:
-            problems.append(f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}')
+            problems.append(
+                f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}'
+            )
         problems += node._world_problems(values, scenario)
     if problems:
         name = node.get_fully_qualified_name()
@@ -451,7 +543,9 @@ def graph_of(node) -> dict:
         key = f'{namespace.rstrip("/")}/{name}'
         graph[key] = {
             'publishers': sorted(t for t, _ in node.get_publisher_names_and_types_by_node(name, namespace)),
-            'subscriptions': sorted(t for t, _ in node.get_subscriber_names_and_types_by_node(name, namespace)),
+            'subscriptions': sorted(
+                t for t, _ in node.get_subscriber_names_and_types_by_node(name, namespace)
+            ),
             'services': sorted(s for s, _ in node.get_service_names_and_types_by_node(name, namespace)),
             'clients': sorted(s for s, _ in node.get_client_names_and_types_by_node(name, namespace)),
         }
@@ -497,6 +591,7 @@ def run_timestamps(node: TimeKeeperNode) -> dict[str, float]:
     offset = time.time() - time.monotonic()
     return {name: at + offset for name, at in marks.items()}
 
+
 def run_extra(node: TimeKeeperNode, reached: float) -> dict:
     """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
     return {
@@ -507,9 +602,14 @@ def run_extra(node: TimeKeeperNode, reached: float) -> dict:
         'reached_time': reached,
         'failure': node.failure_info,
         **node._world_extra(),
-        **({'after_end': {str(i): why for i, why in sorted(node.after_end.items())}} if node.after_end else {}),
+        **(
+            {'after_end': {str(i): why for i, why in sorted(node.after_end.items())}}
+            if node.after_end
+            else {}
+        ),
         **message_counts(node),
     }
+
 
 def message_counts(node: TimeKeeperNode) -> dict:
     """Messages rejected, faults injected, reports missing, and what was published per topic."""

@@ -10,11 +10,14 @@
 
 from formation_msgs_py._lazy import lazy_exports
 
-__all__ = lazy_exports(globals(), {
-    'world': ('World', 'WorldError'),
-    'engine': ('EngineError', 'simulate'),
-    'record': ('RunRecord',),
-    'samples': ('Samples', 'TrajectoryError', 'load_trajectory'),
-    'summary': ('build_summary', 'load_record', 'load_summary', 'write_summary'),
-    'baselines': ('BaselineError', 'simulate_continuous'),
-})  # fmt: skip
+__all__ = lazy_exports(
+    globals(),
+    {
+        'world': ('World', 'WorldError'),
+        'engine': ('EngineError', 'simulate'),
+        'record': ('RunRecord',),
+        'samples': ('Samples', 'TrajectoryError', 'load_trajectory'),
+        'summary': ('build_summary', 'load_record', 'load_summary', 'write_summary'),
+        'baselines': ('BaselineError', 'simulate_continuous'),
+    },
+)

@@ -114,7 +114,12 @@ def simulate_continuous(
     kappa = gains.speed_scale  # the paper's controller in the time s = κt (docs/SPEED_SCALE.md)
     if double:
         (k1, k2, k3), _ = eta2_gains(
-            alpha_d=gains.alpha_d, beta_d=gains.beta_d, k1=gains.k1, k2=gains.k2, k3=gains.k3, speed_scale=kappa,
+            alpha_d=gains.alpha_d,
+            beta_d=gains.beta_d,
+            k1=gains.k1,
+            k2=gains.k2,
+            k3=gains.k3,
+            speed_scale=kappa,
             threshold_floor=gains.threshold_floor,
         )
 

@@ -49,7 +49,9 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
     if sample_dt is None or sample_dt == 0.0:
         return
     if not (isinstance(sample_dt, (int, float)) and math.isfinite(sample_dt) and sample_dt > 0.0):
-        raise EngineError(f'the sample spacing must be a finite number >= 0 (0: samples at events only), got {sample_dt!r}')
+        raise EngineError(
+            f'the sample spacing must be a finite number >= 0 (0: samples at events only), got {sample_dt!r}'
+        )
     per_sample = scenario.n * scenario.dimension * (2 if scenario.dynamics == 'double' else 1)
     values = horizon / sample_dt * per_sample
     if values > MAX_GRID_VALUES:
@@ -124,7 +126,9 @@ class Sampler:
         if self.watch is not None and due:
             edges = self.watch.edges_of([self.world.index(agent) for agent in due])
             self.watch.add_edges(
-                edges, self.world.positions_of(self.watch.heads[edges]), self.world.positions_of(self.watch.tails[edges])
+                edges,
+                self.world.positions_of(self.watch.heads[edges]),
+                self.world.positions_of(self.watch.tails[edges]),
             )
         if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
             return
@@ -313,12 +317,25 @@ def simulate(
     writer = None
     if trajectory_dir is not None:
         writer = TrajectoryWriter(
-            trajectory_dir, agent_ids=scenario.agent_ids, dimension=scenario.dimension, velocities=scenario.dynamics == 'double'
+            trajectory_dir,
+            agent_ids=scenario.agent_ids,
+            dimension=scenario.dimension,
+            velocities=scenario.dynamics == 'double',
         )
     watch = None if sample_events else EdgeLengths(scenario)
     sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch)
     try:
-        messages = _run(scenario, world, agents, sampler, trigger_times, horizon=horizon, period=period, progress=progress, on_event=on_event)
+        messages = _run(
+            scenario,
+            world,
+            agents,
+            sampler,
+            trigger_times,
+            horizon=horizon,
+            period=period,
+            progress=progress,
+            on_event=on_event,
+        )
     except BaseException:
         if writer is not None:
             writer.abandon()  # what was written stays, named trajectory.incomplete
@@ -341,7 +358,16 @@ def simulate(
 
 
 def _run(
-    scenario, world: World, agents: dict, sampler: Sampler, trigger_times: dict[int, list[float]], *, horizon, period, progress, on_event
+    scenario,
+    world: World,
+    agents: dict,
+    sampler: Sampler,
+    trigger_times: dict[int, list[float]],
+    *,
+    horizon,
+    period,
+    progress,
+    on_event,
 ) -> int:
     """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent."""
     messages = 0

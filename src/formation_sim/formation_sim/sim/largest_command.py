@@ -69,7 +69,11 @@ def measured_run(scenario: Scenario, *, horizon: float | None = None) -> tuple[C
         if not double:
             np.maximum(speed, controls, out=speed)
         elif velocity is not None:  # the segment that began at the previous event
-            np.maximum(acceleration, np.linalg.norm(world.controls - world.damping * velocity, axis=1), out=acceleration)  # κ k3 at κ
+            np.maximum(
+                acceleration,
+                np.linalg.norm(world.controls - world.damping * velocity, axis=1),
+                out=acceleration,
+            )  # κ k3 at κ
 
     record = simulate(scenario, horizon=horizon, sample_dt=DOUBLE_GRID if double else None, on_event=on_event)
     note(seen['world'], seen.get('velocity'))  # the controls set at the last event
@@ -84,7 +88,13 @@ def measured_run(scenario: Scenario, *, horizon: float | None = None) -> tuple[C
     ), record
 
 
-def largest_command(scenario: Scenario, *, max_speed: float = math.inf, max_acceleration: float = math.inf, horizon: float | None = None) -> tuple[CommandBound, CommandBound | None]:
+def largest_command(
+    scenario: Scenario,
+    *,
+    max_speed: float = math.inf,
+    max_acceleration: float = math.inf,
+    horizon: float | None = None,
+) -> tuple[CommandBound, CommandBound | None]:
     """(the answer, the theory's bound if it was looked at and did not settle it).
 
     The theory's bound answers when it exists and is within the limits; else the exact run does."""
@@ -92,7 +102,9 @@ def largest_command(scenario: Scenario, *, max_speed: float = math.inf, max_acce
         bound = command_bound(scenario)
     except theory.TheoryError:
         return measured_command(scenario, horizon=horizon), None
-    within = bound.max_speed <= max_speed and (bound.max_acceleration is None or bound.max_acceleration <= max_acceleration)
+    within = bound.max_speed <= max_speed and (
+        bound.max_acceleration is None or bound.max_acceleration <= max_acceleration
+    )
     if within:
         return bound, None
     return measured_command(scenario, horizon=horizon), bound
@@ -114,7 +126,13 @@ def settling(scenario: Scenario, record: RunRecord, *, fraction: float = SETTLE_
     threshold = fraction * float(errors[0])
 
     def crossing(k: int) -> float:
-        return linear_crossing(edge_errors[k], edge_errors[k + 1], t0=float(times[k]), t1=float(times[k + 1]), threshold=threshold)
+        return linear_crossing(
+            edge_errors[k],
+            edge_errors[k + 1],
+            t0=float(times[k]),
+            t1=float(times[k + 1]),
+            threshold=threshold,
+        )
 
     single = scenario.dynamics == 'single'
     return Settling(
@@ -127,7 +145,11 @@ def settling(scenario: Scenario, record: RunRecord, *, fraction: float = SETTLE_
 
 
 def choose_speed_scale(
-    scenario: Scenario, *, limits: RobotLimits, margin: float = OBSERVED_MARGIN, paper_horizon: float | None = None
+    scenario: Scenario,
+    *,
+    limits: RobotLimits,
+    margin: float = OBSERVED_MARGIN,
+    paper_horizon: float | None = None,
 ) -> SpeedScaleChoice:
     """Both speed scales κ for `limits` (`formation_sim.model.speed_choice`): the guaranteed one from
     the proofs' bound, the observed one from the exact run at κ = 1 to `paper_horizon` (default

@@ -110,19 +110,29 @@ class Robot:
         if duration < 0.0:
             raise RobotError(f'time only goes forwards, got a step of {duration!r} s')
         if self.command is not None and duration > 0.0:
-            position, yaw = self.kind.move(self.position, self.yaw, self.command.linear, self.command.angular, duration)
+            position, yaw = self.kind.move(
+                self.position, self.yaw, self.command.linear, self.command.angular, duration
+            )
             self.position, self.yaw = position, wrap_angle(yaw)
 
     def set_command(self, command: Command) -> Command:
         """Apply `command` from now on, clipped to the limits as its kind's base does; returns what is applied."""
         size = self.dimension if self.kind.world_frame_command else 1
         if len(command.linear) != size:
-            what = f'{size} world-frame velocity values' if self.kind.world_frame_command else 'one forward speed v'
-            raise RobotError(f'a {self.model} robot in {self.dimension} dimensions takes {what}, got {list(command.linear)}')
+            what = (
+                f'{size} world-frame velocity values'
+                if self.kind.world_frame_command
+                else 'one forward speed v'
+            )
+            raise RobotError(
+                f'a {self.model} robot in {self.dimension} dimensions takes {what}, got {list(command.linear)}'
+            )
         linear, angular, clipped = self.kind.clip(
-            tuple(float(v) for v in command.linear), float(command.angular),
-            geometry=self.geometry, limits=self.limits.kind_limits(),
-        )  # fmt: skip
+            tuple(float(v) for v in command.linear),
+            float(command.angular),
+            geometry=self.geometry,
+            limits=self.limits.kind_limits(),
+        )
         self.saturated += clipped
         self.command = Command(linear=linear, angular=angular)
         return self.command
@@ -142,7 +152,15 @@ HolonomicRobot = partial(Robot, model='holonomic')
 UnicycleRobot = partial(Robot, model='unicycle')
 
 
-def make_robot(model: str, *, scenario_position, yaw: float, control_point_distance: float, limits: Limits, wheelbase: float = 0.0) -> Robot:
+def make_robot(
+    model: str,
+    *,
+    scenario_position,
+    yaw: float,
+    control_point_distance: float,
+    limits: Limits,
+    wheelbase: float = 0.0,
+) -> Robot:
     """A robot of kind `model` whose scenario position (its control point) is `scenario_position`."""
     try:
         kind = robot_kind(model)
@@ -153,7 +171,9 @@ def make_robot(model: str, *, scenario_position, yaw: float, control_point_dista
     problems = kind.problems(dimension=point.size, geometry=geometry, limits=limits.kind_limits())
     if problems:
         raise RobotError('; '.join(problems))
-    return Robot(model=model, position=kind.origin(point, yaw, geometry), yaw=yaw, limits=limits, geometry=geometry)
+    return Robot(
+        model=model, position=kind.origin(point, yaw, geometry), yaw=yaw, limits=limits, geometry=geometry
+    )
 
 
 def wrap_angle(angle: float) -> float:
@@ -235,9 +255,16 @@ def _twist(twist) -> tuple[float, float, float, float, float, float]:
 
 
 def sample_from_fields(
-    sec: int, nanosec: int, pose: Sequence[float], twist: Sequence[float] | None = None, *,
-    model: str, dimension: int, control_point_distance: float, epoch: float,
-) -> RobotSample:  # fmt: skip
+    sec: int,
+    nanosec: int,
+    pose: Sequence[float],
+    twist: Sequence[float] | None = None,
+    *,
+    model: str,
+    dimension: int,
+    control_point_distance: float,
+    epoch: float,
+) -> RobotSample:
     """A pose as a `RobotSample`, from its fields: the header stamp (sec, nanosec), the pose
     (position x y z, orientation x y z w) and, from odometry, the body-frame twist (linear x y z,
     angular x y z; REP 105), giving the control point's world velocity R (v + ω × offset).
@@ -255,23 +282,39 @@ def sample_from_fields(
     return RobotSample(time=time, position=point, velocity=velocity)
 
 
-def pose_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
+def pose_sample(
+    msg, *, model: str, dimension: int, control_point_distance: float, epoch: float
+) -> RobotSample:
     """A `geometry_msgs/PoseStamped` (an rclpy or rosbags message) as a `RobotSample`: the control
     point as the agents compute it (`formation_agent.core.kinematics`)."""
     stamp = msg.header.stamp
     return sample_from_fields(
-        stamp.sec, stamp.nanosec, _pose(msg.pose), model=model, dimension=dimension, control_point_distance=control_point_distance, epoch=epoch
+        stamp.sec,
+        stamp.nanosec,
+        _pose(msg.pose),
+        model=model,
+        dimension=dimension,
+        control_point_distance=control_point_distance,
+        epoch=epoch,
     )
 
 
-def odometry_sample(msg, *, model: str, dimension: int, control_point_distance: float, epoch: float) -> RobotSample:
+def odometry_sample(
+    msg, *, model: str, dimension: int, control_point_distance: float, epoch: float
+) -> RobotSample:
     """A `nav_msgs/Odometry` (pose in the world frame, twist in the body frame, REP 105) as a
     `RobotSample` with the control point's world velocity R (v + ω × offset)."""
     stamp = msg.header.stamp
     return sample_from_fields(
-        stamp.sec, stamp.nanosec, _pose(msg.pose.pose), _twist(msg.twist.twist),
-        model=model, dimension=dimension, control_point_distance=control_point_distance, epoch=epoch,
-    )  # fmt: skip
+        stamp.sec,
+        stamp.nanosec,
+        _pose(msg.pose.pose),
+        _twist(msg.twist.twist),
+        model=model,
+        dimension=dimension,
+        control_point_distance=control_point_distance,
+        epoch=epoch,
+    )
 
 
 POSES_AFTER_END = 1.0
@@ -331,10 +374,14 @@ def trajectory_samples(
     saw the same poses.
     """
     times = np.asarray(times, dtype=float)
-    positions = np.stack([_interpolate(tracks[i].times, tracks[i].positions, times) for i in agent_ids], axis=1)
+    positions = np.stack(
+        [_interpolate(tracks[i].times, tracks[i].positions, times) for i in agent_ids], axis=1
+    )
     if any(tracks[i].velocities is None for i in agent_ids):
         return positions, (np.gradient(positions, times, axis=0) if len(times) > 1 else None)
-    velocities = np.stack([_interpolate(tracks[i].times, tracks[i].velocities, times) for i in agent_ids], axis=1)
+    velocities = np.stack(
+        [_interpolate(tracks[i].times, tracks[i].velocities, times) for i in agent_ids], axis=1
+    )
     return positions, velocities
 
 

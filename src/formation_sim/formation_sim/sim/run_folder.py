@@ -178,4 +178,3 @@ def check_report_dir(out: Path) -> None:
             f'{out} holds a run (summary.json or bag/) whose files the report would overwrite; '
             f'choose another --out'
         )
-

@@ -42,11 +42,19 @@ import numpy as np
 TRAJECTORY_DIR = 'trajectory'
 INCOMPLETE_DIR = 'trajectory.incomplete'
 LEGACY_TRAJECTORY_FILE = 'trajectory.npz'
-POSITIONS, VELOCITIES, TIMES, AGENT_IDS, EDGE_MAXIMA = 'positions', 'velocities', 'times', 'agent_ids', 'edge_maxima'
+POSITIONS, VELOCITIES, TIMES, AGENT_IDS, EDGE_MAXIMA = (
+    'positions',
+    'velocities',
+    'times',
+    'agent_ids',
+    'edge_maxima',
+)
 
 _HEADER_BYTES = 128  # magic, version, length and the padded dictionary: room for any shape, 64-aligned data
 _BLOCK_VALUES = 1 << 20  # numbers read at a time when scanning all samples (8 MiB)
-_EDGE_BLOCK_VALUES = 1 << 15  # edge components computed at a time (256 kB: they stay in the CPU's cache, 2-3x faster)
+_EDGE_BLOCK_VALUES = (
+    1 << 15
+)  # edge components computed at a time (256 kB: they stay in the CPU's cache, 2-3x faster)
 _WRITE_BUFFER = 1 << 20
 
 
@@ -68,12 +76,16 @@ class Samples:
     path: Path | None = None  # the trajectory folder the arrays are mapped from
 
     @classmethod
-    def from_rows(cls, times, positions, velocities=None, *, edge_maxima: np.ndarray | None = None) -> Samples:
+    def from_rows(
+        cls, times, positions, velocities=None, *, edge_maxima: np.ndarray | None = None
+    ) -> Samples:
         """In memory, from sequences of rows (lists of (n, p) arrays as a sampler collects them)."""
         return cls(
             times=np.array(times, dtype=float),
             positions=np.array(positions, dtype=float),
-            velocities=np.array(velocities, dtype=float) if velocities is not None and len(velocities) else None,
+            velocities=np.array(velocities, dtype=float)
+            if velocities is not None and len(velocities)
+            else None,
             edge_maxima=edge_maxima,
         )
 
@@ -196,7 +208,13 @@ def edge_maxima(scenario, samples: Samples) -> np.ndarray:
 
 def _npy_header(dtype: np.dtype, shape: tuple[int, ...]) -> bytes:
     """An .npy format 1.0 header of exactly _HEADER_BYTES bytes (padded with spaces, as the format allows)."""
-    text = repr({'descr': np.lib.format.dtype_to_descr(np.dtype(dtype)), 'fortran_order': False, 'shape': tuple(shape)})
+    text = repr(
+        {
+            'descr': np.lib.format.dtype_to_descr(np.dtype(dtype)),
+            'fortran_order': False,
+            'shape': tuple(shape),
+        }
+    )
     length = _HEADER_BYTES - 10
     if len(text) + 1 > length:  # pragma: no cover - shapes of a few integers fit in 118 characters
         raise TrajectoryError(f'shape {shape} does not fit the trajectory header')
@@ -296,7 +314,9 @@ class TrajectoryWriter:
 def write_trajectory(samples: Samples, run_dir: str | Path, *, agent_ids) -> Samples:
     """Write in-memory `samples` as `run_dir/trajectory/` (through `trajectory.incomplete/`); the written samples."""
     velocities = samples.velocities is not None
-    writer = TrajectoryWriter(run_dir, agent_ids=agent_ids, dimension=samples.positions.shape[2], velocities=velocities)
+    writer = TrajectoryWriter(
+        run_dir, agent_ids=agent_ids, dimension=samples.positions.shape[2], velocities=velocities
+    )
     try:
         for positions, velocity_rows in samples.blocks():
             writer.append(positions, velocity_rows)
@@ -331,7 +351,11 @@ def read_trajectory(folder: str | Path) -> Samples:
     times = np.array(_load_npy(folder / f'{TIMES}.npy', mmap=False), dtype=float)
     agent_ids = _load_npy(folder / f'{AGENT_IDS}.npy', mmap=False)
     positions = _load_npy(folder / f'{POSITIONS}.npy', mmap=True)
-    velocities = _load_npy(folder / f'{VELOCITIES}.npy', mmap=True) if (folder / f'{VELOCITIES}.npy').exists() else None
+    velocities = (
+        _load_npy(folder / f'{VELOCITIES}.npy', mmap=True)
+        if (folder / f'{VELOCITIES}.npy').exists()
+        else None
+    )
     maxima_path = folder / f'{EDGE_MAXIMA}.npy'
     maxima = np.array(_load_npy(maxima_path, mmap=False), dtype=float) if maxima_path.exists() else None
     expected = (len(times), len(agent_ids))
@@ -340,7 +364,9 @@ def read_trajectory(folder: str | Path) -> Samples:
             f'{folder}: {len(times)} sample times and {len(agent_ids)} agents, but positions of shape {positions.shape}'
         )
     if velocities is not None and velocities.shape != positions.shape:
-        raise TrajectoryError(f'{folder}: velocities of shape {velocities.shape}, positions {positions.shape}')
+        raise TrajectoryError(
+            f'{folder}: velocities of shape {velocities.shape}, positions {positions.shape}'
+        )
     if len(times) == 0:
         raise TrajectoryError(f'{folder}: holds no sample')
     return Samples(times=times, positions=positions, velocities=velocities, edge_maxima=maxima, path=folder)
@@ -377,4 +403,3 @@ def header_shape(path: str | Path) -> tuple[int, ...]:
         np.lib.format.read_magic(handle)
         shape, _, _ = np.lib.format.read_array_header_1_0(handle)
     return tuple(shape)
-

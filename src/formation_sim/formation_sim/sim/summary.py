@@ -58,7 +58,9 @@ def build_summary(record) -> dict:
     index = {agent: k for k, agent in enumerate(ids)}
     final_x = np.asarray(record.sample_positions[-1])
     maxima = edge_maxima(scenario, record.samples)
-    final_errors = [np.linalg.norm(final_x[index[edge.i]] - final_x[index[edge.j]] - edge.d) for edge in scenario.edges]
+    final_errors = [
+        np.linalg.norm(final_x[index[edge.i]] - final_x[index[edge.j]] - edge.d) for edge in scenario.edges
+    ]
     edges = [
         {
             'i': edge.i,
@@ -83,7 +85,11 @@ def build_summary(record) -> dict:
             xi = floor.xi
         if scenario.speed_scale != 1.0:  # the constants are the paper's time; ξ_i in seconds is ξ_i / κ
             constants_dict['speed_scale'] = scenario.speed_scale
-            xi = None if xi is None else {agent: real_duration(v, scenario.speed_scale) for agent, v in xi.items()}
+            xi = (
+                None
+                if xi is None
+                else {agent: real_duration(v, scenario.speed_scale) for agent, v in xi.items()}
+            )
     except ValueError as err:
         constants_dict = {'error': str(err)}
         xi = None
@@ -153,7 +159,10 @@ def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int
         late = [times[k - 1] - when for k, when in sorted(plans.items()) if 0 < k <= len(times)]
         if late:
             per_agent[str(agent)] = {'max': max(late), 'mean': float(np.mean(late))}
-    return {'lateness': per_agent, 'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0)}
+    return {
+        'lateness': per_agent,
+        'max_lateness': max((entry['max'] for entry in per_agent.values()), default=0.0),
+    }
 
 
 def saturation_extra(reports) -> dict:
@@ -168,7 +177,9 @@ def saturation_extra(reports) -> dict:
             if not clipped.count:
                 continue
             total += clipped.count
-            entry = by_kind.setdefault(kind, {'count': 0, 'largest_requested': 0.0, 'allowed': clipped.allowed})
+            entry = by_kind.setdefault(
+                kind, {'count': 0, 'largest_requested': 0.0, 'allowed': clipped.allowed}
+            )
             entry['count'] += clipped.count
             entry['largest_requested'] = max(entry['largest_requested'], clipped.largest_requested)
             by_agent.setdefault(str(report.agent), {})[kind] = clipped.count
@@ -228,4 +239,3 @@ def load_record(run_dir, scenario=None):
         wall_time=summary['wall_time'],
         extra=summary.get('extra', {}),
     )
-

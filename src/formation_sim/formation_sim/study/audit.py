@@ -91,7 +91,9 @@ class EdgeWatch:
             return  # single integrators: a length is convex in s, its largest value is at an end
         bound = np.maximum(f0, f1) + curvature * h * h / 8.0
         for k in np.flatnonzero(bound > self.largest + self.tolerance):
-            self._refine(a[k], None if b is None else b[k], c[k], h, float(f0[k]), float(f1[k]), float(curvature[k]))
+            self._refine(
+                a[k], None if b is None else b[k], c[k], h, float(f0[k]), float(f1[k]), float(curvature[k])
+            )
 
     def _curvature(self, b, c) -> np.ndarray | None:
         """sup ||r''|| over an interval per edge, for ETA-2: ||c - k3 b|| (e^{-k3 s} <= 1)."""
@@ -132,13 +134,17 @@ class EdgeWatch:
         }
 
 
-def _ratio_check(series: Series, k_V: float | None, gain: float | None, rate: float) -> tuple[int, int, float | None]:
+def _ratio_check(
+    series: Series, k_V: float | None, gain: float | None, rate: float
+) -> tuple[int, int, float | None]:
     """(checks, violations, margin) of V < k_V e^{-2 rate t} and error < gain e^{-rate t} at every sample."""
     if k_V is None or gain is None:
         return 0, 0, None
     t = series.times
     decay = np.exp(-rate * t)
-    ratios = np.concatenate([series.lyapunov / (k_V * decay * decay), series.formation_error / (gain * decay)])
+    ratios = np.concatenate(
+        [series.lyapunov / (k_V * decay * decay), series.formation_error / (gain * decay)]
+    )
     return int(ratios.size), int(np.count_nonzero(~(ratios < 1.0))), float(1.0 - ratios.max())
 
 
@@ -150,7 +156,9 @@ def theorem_audit(record, series: Series, bounds: TheoryBounds | None) -> dict[s
     checks, violations, margin = _ratio_check(series, bounds.k_V, bounds.error_gain, bounds.rate)
     out.update(conv_checks=checks, conv_violations=violations, conv_margin=margin)
     if bounds.theorem == 2:
-        checks, violations, margin = _ratio_check(series, bounds.printed_k_V, bounds.printed_error_gain, bounds.rate)
+        checks, violations, margin = _ratio_check(
+            series, bounds.printed_k_V, bounds.printed_error_gain, bounds.rate
+        )
         out.update(printed_checks=checks, printed_violations=violations, printed_margin=margin)
         ratio = series.lyapunov / (bounds.printed_k_V * np.exp(-2.0 * bounds.rate * series.times))
         above = np.flatnonzero(ratio >= 1.0)

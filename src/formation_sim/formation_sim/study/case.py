@@ -26,15 +26,33 @@ from formation_sim.study.spec import PARAMETERS, Case
 CASE_COLUMNS = ('case', 'key', 'block', *PARAMETERS)
 SCENARIO_COLUMNS = ('edges', 'beta0', 'rate', 'xi_min', 'beta_d_bound_paper', 'beta_d_bound_corrected')
 RUN_COLUMNS = (
-    'status', 'error', 'total_events', 'events_per_agent', 'messages_sent', 'sensing_calls', 'min_inter_event_time',
-    'final_formation_error', 'max_edge_length',
-)  # fmt: skip
+    'status',
+    'error',
+    'total_events',
+    'events_per_agent',
+    'messages_sent',
+    'sensing_calls',
+    'min_inter_event_time',
+    'final_formation_error',
+    'max_edge_length',
+)
 AUDIT_COLUMNS = (
-    'conn_checks', 'conn_violations', 'conn_margin', 'max_edge_exact', 'interior_maxima',
-    'conv_checks', 'conv_violations', 'conv_margin',
-    'zeno_checks', 'zeno_violations', 'zeno_margin',
-    'printed_checks', 'printed_violations', 'printed_margin', 'printed_first_violation',
-)  # fmt: skip
+    'conn_checks',
+    'conn_violations',
+    'conn_margin',
+    'max_edge_exact',
+    'interior_maxima',
+    'conv_checks',
+    'conv_violations',
+    'conv_margin',
+    'zeno_checks',
+    'zeno_violations',
+    'zeno_margin',
+    'printed_checks',
+    'printed_violations',
+    'printed_margin',
+    'printed_first_violation',
+)
 TIMING_COLUMNS = ('wall_time', 'cpu_time', 'worker')
 COLUMNS = CASE_COLUMNS + SCENARIO_COLUMNS + RUN_COLUMNS + AUDIT_COLUMNS + TIMING_COLUMNS
 
@@ -43,18 +61,33 @@ def scenario_of(case: Case):
     """The case's team: a random valid scenario of its family, gains and horizon."""
     p = case.params
     single = p['algorithm'] == 'eta1'
-    options = {} if single else {'beta1': p['beta1'], 'k3': p['k3'], 'beta_d': p['beta_d'], 'max_speed': p['max_speed']}
+    options = (
+        {}
+        if single
+        else {'beta1': p['beta1'], 'k3': p['k3'], 'beta_d': p['beta_d'], 'max_speed': p['max_speed']}
+    )
     if single:
         options['beta'] = p['beta']
     if p['graph'] == 'geometric':
         options['degree'] = p['degree']
     scenario = random_scenario(
-        n=p['n'], seed=p['seed'], dynamics='single' if single else 'double', dimension=p['p'], slack=p['slack'],
-        delta=p['delta'], horizon=p['horizon'], alpha=p['alpha'], graph=p['graph'], name=f'case-{case.key}', **options,
-    )  # fmt: skip
+        n=p['n'],
+        seed=p['seed'],
+        dynamics='single' if single else 'double',
+        dimension=p['p'],
+        slack=p['slack'],
+        delta=p['delta'],
+        horizon=p['horizon'],
+        alpha=p['alpha'],
+        graph=p['graph'],
+        name=f'case-{case.key}',
+        **options,
+    )
     if p['speed_scale'] == 1.0 and p['threshold_floor'] == 0.0:
         return scenario
-    gains = dataclasses.replace(scenario.gains, speed_scale=p['speed_scale'], threshold_floor=p['threshold_floor'])
+    gains = dataclasses.replace(
+        scenario.gains, speed_scale=p['speed_scale'], threshold_floor=p['threshold_floor']
+    )
     return scenario.replace(gains=gains)
 
 
@@ -147,7 +180,14 @@ def run_case(case: Case) -> dict[str, Any]:
 
 def failed_row(case: Case, error: str) -> dict[str, Any]:
     """The row of a case that could not run at all (its worker died every time it was tried)."""
-    row = {'case': case.index, 'key': case.key, 'block': case.block, **case.params, 'status': 'failed', 'error': error}
+    row = {
+        'case': case.index,
+        'key': case.key,
+        'block': case.block,
+        **case.params,
+        'status': 'failed',
+        'error': error,
+    }
     return {column: _plain(row.get(column)) for column in COLUMNS}
 
 

@@ -28,7 +28,25 @@ GUARANTEES = (
     ('Zeno: t_{k+1} - t_k >= ξ_i', 'zeno'),
     ('Theorem 2 rate as printed: V_d < k^d_V e^{-2β_d t} (printed chain)', 'printed'),
 )
-TEAM_COLUMNS = ('algorithm', 'n', 'p', 'graph', 'degree', 'slack', 'seed', 'delta', 'alpha', 'beta', 'beta1', 'k3', 'beta_d', 'max_speed', 'horizon', 'speed_scale', 'threshold_floor')
+TEAM_COLUMNS = (
+    'algorithm',
+    'n',
+    'p',
+    'graph',
+    'degree',
+    'slack',
+    'seed',
+    'delta',
+    'alpha',
+    'beta',
+    'beta1',
+    'k3',
+    'beta_d',
+    'max_speed',
+    'horizon',
+    'speed_scale',
+    'threshold_floor',
+)
 
 
 def audit_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -40,15 +58,22 @@ def audit_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             audited = [r for r in mine if r.get(f'{prefix}_checks')]
             if not audited:
                 continue
-            margins = [(r[f'{prefix}_margin'], r['case']) for r in audited if r[f'{prefix}_margin'] is not None]
+            margins = [
+                (r[f'{prefix}_margin'], r['case']) for r in audited if r[f'{prefix}_margin'] is not None
+            ]
             worst = min(margins) if margins else (None, None)
-            table.append({
-                'theorem': theorem, 'guarantee': label, 'runs': len(audited),
-                'checks': sum(r[f'{prefix}_checks'] for r in audited),
-                'violations': sum(r[f'{prefix}_violations'] for r in audited),
-                'runs_violated': sum(1 for r in audited if r[f'{prefix}_violations']),
-                'smallest_margin': worst[0], 'case': worst[1],
-            })  # fmt: skip
+            table.append(
+                {
+                    'theorem': theorem,
+                    'guarantee': label,
+                    'runs': len(audited),
+                    'checks': sum(r[f'{prefix}_checks'] for r in audited),
+                    'violations': sum(r[f'{prefix}_violations'] for r in audited),
+                    'runs_violated': sum(1 for r in audited if r[f'{prefix}_violations']),
+                    'smallest_margin': worst[0],
+                    'case': worst[1],
+                }
+            )
     return table
 
 
@@ -61,12 +86,17 @@ def runs_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         ok = [r for r in group if r['status'] == 'ok']
         events = [r['events_per_agent'] for r in ok if r['events_per_agent'] is not None]
         errors = [r['final_formation_error'] for r in ok if r['final_formation_error'] is not None]
-        table.append({
-            'algorithm': algorithm, 'sampling': sampling, 'runs': len(group), 'failed': len(group) - len(ok),
-            'events_per_agent_median': float(np.median(events)) if events else None,
-            'final_error_median': float(np.median(errors)) if errors else None,
-            'wall_time': sum(r['wall_time'] or 0.0 for r in group),
-        })  # fmt: skip
+        table.append(
+            {
+                'algorithm': algorithm,
+                'sampling': sampling,
+                'runs': len(group),
+                'failed': len(group) - len(ok),
+                'events_per_agent_median': float(np.median(events)) if events else None,
+                'final_error_median': float(np.median(errors)) if errors else None,
+                'wall_time': sum(r['wall_time'] or 0.0 for r in group),
+            }
+        )
     return table
 
 
@@ -80,7 +110,11 @@ def periodic_savings(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], f
     savings = []
     for team in teams.values():
         for eta in team['event']:
-            matching = [r['total_events'] for r in team['periodic'] if r['final_formation_error'] <= eta['final_formation_error']]
+            matching = [
+                r['total_events']
+                for r in team['periodic']
+                if r['final_formation_error'] <= eta['final_formation_error']
+            ]
             if matching:
                 savings.append((eta, 1.0 - eta['total_events'] / min(matching)))
     return savings
@@ -119,7 +153,14 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
     for algorithm, marker in (('eta1', 'o'), ('eta2', 's')):
         chosen = [r for r in event if r['algorithm'] == algorithm]
         if chosen:
-            ax.scatter([r['n'] for r in chosen], [r['events_per_agent'] for r in chosen], s=8, marker=marker, label=algorithm.upper(), alpha=0.6)
+            ax.scatter(
+                [r['n'] for r in chosen],
+                [r['events_per_agent'] for r in chosen],
+                s=8,
+                marker=marker,
+                label=algorithm.upper(),
+                alpha=0.6,
+            )
     ax.set(xlabel='n (agents)', ylabel='events per agent', title='Events against team size')
     ax.legend()
     save(fig, 'events_vs_n.png')
@@ -129,10 +170,16 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.scatter([r['n'] for r, _ in savings], [100.0 * s for _, s in savings], s=10)
         ax.axhline(0.0, color='k', lw=0.5)
-        ax.set(xlabel='n (agents)', ylabel='events saved [%]', title='Against periodic sampling at equal final error')
+        ax.set(
+            xlabel='n (agents)',
+            ylabel='events saved [%]',
+            title='Against periodic sampling at equal final error',
+        )
         save(fig, 'saved_vs_periodic.png')
 
-    pairs = [(r['xi_min'], r['min_inter_event_time']) for r in event if r['xi_min'] and r['min_inter_event_time']]
+    pairs = [
+        (r['xi_min'], r['min_inter_event_time']) for r in event if r['xi_min'] and r['min_inter_event_time']
+    ]
     if pairs:
         fig, ax = plt.subplots(figsize=(6, 4))
         xi, gap = np.array(pairs).T
@@ -148,7 +195,11 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.scatter([r['n'] for r in audited], [r['max_edge_exact'] / r['delta'] for r in audited], s=8)
         ax.axhline(1.0, color='r', lw=0.8, label='Δ')
-        ax.set(xlabel='n (agents)', ylabel='largest edge length / Δ (exact between events)', title='Largest edge against Δ')
+        ax.set(
+            xlabel='n (agents)',
+            ylabel='largest edge length / Δ (exact between events)',
+            title='Largest edge against Δ',
+        )
         ax.legend()
         save(fig, 'edge_vs_delta.png')
     return names
@@ -157,17 +208,49 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
 def report_text(rows: list[dict[str, Any]], figures: list[str]) -> str:
     savings = periodic_savings(rows)
     parts = [
-        '# Study report', '',
-        f'{len(rows)} rows, {sum(r["status"] != "ok" for r in rows)} failed.', '',
-        '## Guarantees of Theorems 1 and 2, event by event', '',
-        markdown(('theorem', 'guarantee', 'runs', 'checks', 'violations', 'runs_violated', 'smallest_margin', 'case'), audit_table(rows)), '',
-        '## Runs', '',
-        markdown(('algorithm', 'sampling', 'runs', 'failed', 'events_per_agent_median', 'final_error_median', 'wall_time'), runs_table(rows)), '',
-    ]  # fmt: skip
+        '# Study report',
+        '',
+        f'{len(rows)} rows, {sum(r["status"] != "ok" for r in rows)} failed.',
+        '',
+        '## Guarantees of Theorems 1 and 2, event by event',
+        '',
+        markdown(
+            (
+                'theorem',
+                'guarantee',
+                'runs',
+                'checks',
+                'violations',
+                'runs_violated',
+                'smallest_margin',
+                'case',
+            ),
+            audit_table(rows),
+        ),
+        '',
+        '## Runs',
+        '',
+        markdown(
+            (
+                'algorithm',
+                'sampling',
+                'runs',
+                'failed',
+                'events_per_agent_median',
+                'final_error_median',
+                'wall_time',
+            ),
+            runs_table(rows),
+        ),
+        '',
+    ]
     if savings:
         values = np.array([s for _, s in savings])
-        parts += [f'Events saved against periodic sampling at equal final error: {len(values)} teams, median {100 * np.median(values):.1f} %, '
-                  f'least {100 * values.min():.1f} %, most {100 * values.max():.1f} %.', '']  # fmt: skip
+        parts += [
+            f'Events saved against periodic sampling at equal final error: {len(values)} teams, median {100 * np.median(values):.1f} %, '
+            f'least {100 * values.min():.1f} %, most {100 * values.max():.1f} %.',
+            '',
+        ]
     parts += [f'![{name}]({name})' for name in figures]
     return '\n'.join(parts) + '\n'
 
@@ -176,7 +259,9 @@ def write_report(folder: str | Path, *, out: str | Path | None = None) -> Path:
     """Write report.md and the figures for the study in `folder` into `out` (default folder/report)."""
     folder = Path(folder)
     if not (folder / ROWS_FILE).exists():
-        raise StudyError(f'{folder}: no {ROWS_FILE}: not a study folder (formation study SPEC --out {folder} makes one)')
+        raise StudyError(
+            f'{folder}: no {ROWS_FILE}: not a study folder (formation study SPEC --out {folder} makes one)'
+        )
     rows = read_rows(folder)
     if not rows:
         raise StudyError(f'{folder / ROWS_FILE}: no rows yet')

@@ -58,7 +58,11 @@ class StudySummary:
             + (' (interrupted: run it again with the same --out to finish)' if self.interrupted else ''),
             f'wall time {self.wall_time:.1f} s ({self.run_time:.1f} s running) on {self.workers} worker{"s" if self.workers != 1 else ""}; '
             f'the runs alone {self.sum_of_runs:.1f} s'
-            + ('' if eff is None else f': speed-up {self.sum_of_runs / self.run_time:.2f}, efficiency {eff:.2f} per worker'),
+            + (
+                ''
+                if eff is None
+                else f': speed-up {self.sum_of_runs / self.run_time:.2f}, efficiency {eff:.2f} per worker'
+            ),
             f'CPU time of the study {self.cpu_hours:.4f} CPU-hours',
         ]
         return '\n'.join(lines)
@@ -89,7 +93,11 @@ def _client(scheduler: str | None, workers: int | None):
             raise StudyError(f'--scheduler {scheduler}: cannot connect: {error}') from None
     count = workers or os.cpu_count() or 1
     cluster = LocalCluster(
-        n_workers=count, threads_per_worker=1, processes=True, dashboard_address=':0', silence_logs=logging.ERROR
+        n_workers=count,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=':0',
+        silence_logs=logging.ERROR,
     )
     return Client(cluster), cluster
 
@@ -103,12 +111,17 @@ def _validate(client, cases) -> None:
         more = f' (and {len(problems) - MAX_LISTED} more)' if len(problems) > MAX_LISTED else ''
         raise StudyError(
             f'{len(problems)} of {len(cases)} cases break a hypothesis of their theorem; nothing was run:\n  '
-            + '\n  '.join(problems[:MAX_LISTED]) + more
+            + '\n  '.join(problems[:MAX_LISTED])
+            + more
         )
 
 
 def _workers(client) -> int:
-    return len(client.scheduler_info(n_workers=-1).get('workers', {})) if hasattr(client, 'scheduler_info') else 1
+    return (
+        len(client.scheduler_info(n_workers=-1).get('workers', {}))
+        if hasattr(client, 'scheduler_info')
+        else 1
+    )
 
 
 def run_study(
@@ -130,7 +143,9 @@ def run_study(
     before = len(folder.done)
     todo = [case for case in study.cases if case.key not in folder.done]
     say = report or (lambda _line: None)
-    say(f'study {study.name!r}: {len(study.cases)} cases, {before} done in {folder.folder}, {len(todo)} to run')
+    say(
+        f'study {study.name!r}: {len(study.cases)} cases, {before} done in {folder.folder}, {len(todo)} to run'
+    )
     tally = _Tally(started=time.perf_counter())
     count, interrupted = 0, False
     if todo:

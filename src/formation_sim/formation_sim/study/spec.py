@@ -54,7 +54,9 @@ def _is_int(v: Any) -> bool:
 
 
 def _is_num(v: Any) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+    return (
+        isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+    )
 
 
 def _scale_ok(name: str, value: Any) -> bool:
@@ -82,23 +84,53 @@ class Parameter:
 PARAMETERS: dict[str, Parameter] = {
     'algorithm': Parameter('eta1', f'one of {", ".join(ALGORITHMS)}', lambda v: v in ALGORITHMS),
     'sampling': Parameter('event', f'one of {", ".join(SAMPLINGS)}', lambda v: v in SAMPLINGS),
-    'period': Parameter(None, "a number > 0 (the periodic baseline's period [s])", lambda v: _is_num(v) and v > 0),
+    'period': Parameter(
+        None, "a number > 0 (the periodic baseline's period [s])", lambda v: _is_num(v) and v > 0
+    ),
     'n': Parameter(None, 'an integer >= 2 (agents)', lambda v: _is_int(v) and v >= 2),
     'p': Parameter(2, 'an integer in [1, 10] (dimension)', lambda v: _is_int(v) and 1 <= v <= 10),
     'graph': Parameter('geometric', f'one of {", ".join(GRAPH_FAMILIES)}', lambda v: v in GRAPH_FAMILIES),
-    'degree': Parameter(6.0, 'a number > 0 (mean degree of a geometric graph)', lambda v: _is_num(v) and v > 0),
-    'slack': Parameter(0.5, 'a number in (0, 1] (least relative slack of (initial))', lambda v: _is_num(v) and 0 < v <= 1),
-    'seed': Parameter(None, "an integer >= 0 (the team's seed; default: the number of the draw in its block, from 0)", lambda v: _is_int(v) and v >= 0),
+    'degree': Parameter(
+        6.0, 'a number > 0 (mean degree of a geometric graph)', lambda v: _is_num(v) and v > 0
+    ),
+    'slack': Parameter(
+        0.5, 'a number in (0, 1] (least relative slack of (initial))', lambda v: _is_num(v) and 0 < v <= 1
+    ),
+    'seed': Parameter(
+        None,
+        "an integer >= 0 (the team's seed; default: the number of the draw in its block, from 0)",
+        lambda v: _is_int(v) and v >= 0,
+    ),
     'delta': Parameter(4.0, 'a number > 0 (Δ)', lambda v: _is_num(v) and v > 0),
     'alpha': Parameter(1.0, 'a number > 0 (α, or α_d for ETA-2)', lambda v: _is_num(v) and v > 0),
-    'beta': Parameter(0.5, 'a number in (0, 1): β as a fraction of β0 (ETA-1)', lambda v: _is_num(v) and 0 < v < 1),
-    'beta1': Parameter(1.0, 'a number in (0, 1]: β1 as a fraction of β0 (ETA-2)', lambda v: _is_num(v) and 0 < v <= 1),
-    'k3': Parameter(None, "a number in (0, 1): k3 as a fraction of 4/(k2+sqrt(k1²+k2²)) (ETA-2; default the paper's, 1/2)", lambda v: _is_num(v) and 0 < v < 1),
-    'beta_d': Parameter(None, 'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half the smaller bound)', lambda v: _is_num(v) and 0 < v < 1),
+    'beta': Parameter(
+        0.5, 'a number in (0, 1): β as a fraction of β0 (ETA-1)', lambda v: _is_num(v) and 0 < v < 1
+    ),
+    'beta1': Parameter(
+        1.0, 'a number in (0, 1]: β1 as a fraction of β0 (ETA-2)', lambda v: _is_num(v) and 0 < v <= 1
+    ),
+    'k3': Parameter(
+        None,
+        "a number in (0, 1): k3 as a fraction of 4/(k2+sqrt(k1²+k2²)) (ETA-2; default the paper's, 1/2)",
+        lambda v: _is_num(v) and 0 < v < 1,
+    ),
+    'beta_d': Parameter(
+        None,
+        'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half the smaller bound)',
+        lambda v: _is_num(v) and 0 < v < 1,
+    ),
     'max_speed': Parameter(1.0, 'a number >= 0 (bound on |q_i(0)|, ETA-2)', lambda v: _is_num(v) and v >= 0),
     'horizon': Parameter(5.0, 'a number > 0 [s]', lambda v: _is_num(v) and v > 0),
-    'speed_scale': Parameter(1.0, "a number > 0 (the speed scale κ; docs/SPEED_SCALE.md; 1 is the paper's)", lambda v: _scale_ok('speed_scale', v)),
-    'threshold_floor': Parameter(0.0, "a number >= 0 (the threshold floor c0; docs/SPEED_SCALE.md; 0 is the paper's)", lambda v: _scale_ok('threshold_floor', v)),
+    'speed_scale': Parameter(
+        1.0,
+        "a number > 0 (the speed scale κ; docs/SPEED_SCALE.md; 1 is the paper's)",
+        lambda v: _scale_ok('speed_scale', v),
+    ),
+    'threshold_floor': Parameter(
+        0.0,
+        "a number >= 0 (the threshold floor c0; docs/SPEED_SCALE.md; 0 is the paper's)",
+        lambda v: _scale_ok('threshold_floor', v),
+    ),
 }
 # Parameters added after studies were run: at their default they stay out of a case's key, so the
 # cases (and study folders) of earlier SPECs keep their keys.
@@ -145,7 +177,9 @@ def _normalise(params: dict[str, Any], where: str) -> dict[str, Any]:
         raise StudyError(f'{where}.n: must be given ({PARAMETERS["n"].rule})')
     if out['sampling'] == 'periodic':
         if out['period'] is None:
-            raise StudyError(f'{where}.period: sampling: periodic needs a period ({PARAMETERS["period"].rule})')
+            raise StudyError(
+                f'{where}.period: sampling: periodic needs a period ({PARAMETERS["period"].rule})'
+            )
     else:
         out['period'] = None
     if out['graph'] != 'geometric':
@@ -165,13 +199,17 @@ def _distribution(value: Any, where: str) -> tuple[str, Any] | None:
     if not isinstance(value, dict):
         return None
     if len(value) != 1 or next(iter(value)) not in DISTRIBUTIONS:
-        raise StudyError(f'{where}: a distribution is one of {{{", ".join(f"{d}: ..." for d in DISTRIBUTIONS)}}}, got {short_repr(value)}')
+        raise StudyError(
+            f'{where}: a distribution is one of {{{", ".join(f"{d}: ..." for d in DISTRIBUTIONS)}}}, got {short_repr(value)}'
+        )
     kind, args = next(iter(value.items()))
     if kind == 'choice':
         if not isinstance(args, list) or not args:
             raise StudyError(f'{where}.choice: must be a non-empty list, got {short_repr(args)}')
         return kind, args
-    if not (isinstance(args, list) and len(args) == 2 and all(_is_num(a) for a in args) and args[0] <= args[1]):
+    if not (
+        isinstance(args, list) and len(args) == 2 and all(_is_num(a) for a in args) and args[0] <= args[1]
+    ):
         raise StudyError(f'{where}.{kind}: must be [low, high] with low <= high, got {short_repr(args)}')
     if kind in ('log_uniform', 'log_integers') and not args[0] > 0:
         raise StudyError(f'{where}.{kind}: low must be > 0, got {short_repr(args[0])}')
@@ -188,18 +226,27 @@ def _draw(rng: np.random.Generator, kind: str, args: Any) -> Any:
     if kind == 'integers':
         return int(rng.integers(args[0], args[1], endpoint=True))
     if kind == 'log_integers':  # log-uniform on [low - 1/2, high + 1/2], rounded: every integer can come
-        return int(min(args[1], max(args[0], round(math.exp(rng.uniform(math.log(args[0] - 0.5), math.log(args[1] + 0.5)))))))
+        return int(
+            min(
+                args[1],
+                max(args[0], round(math.exp(rng.uniform(math.log(args[0] - 0.5), math.log(args[1] + 0.5))))),
+            )
+        )
     return args[int(rng.integers(len(args)))]
 
 
-def _block_cases(block: dict[str, Any], defaults: dict[str, Any], seed: int, number: int) -> list[dict[str, Any]]:
+def _block_cases(
+    block: dict[str, Any], defaults: dict[str, Any], seed: int, number: int
+) -> list[dict[str, Any]]:
     """The normalised parameters of block `number` (grid axes x draws), in order."""
     where = f'cases[{number}]'
     if not isinstance(block, dict):
         raise StudyError(f'{where}: a block is a mapping of parameters, got {short_repr(block)}')
     unknown = sorted(set(block) - set(PARAMETERS) - {'draws'})
     if unknown:
-        raise StudyError(f'{where}: unknown key {unknown[0]!r} (parameters: {", ".join(PARAMETERS)}; and draws)')
+        raise StudyError(
+            f'{where}: unknown key {unknown[0]!r} (parameters: {", ".join(PARAMETERS)}; and draws)'
+        )
     draws = block.get('draws', 1)
     if not (_is_int(draws) and draws >= 1):
         raise StudyError(f'{where}.draws: must be an integer >= 1, got {short_repr(draws)}')
@@ -267,7 +314,12 @@ def build_study(spec: dict[str, Any], *, text: str | None = None) -> Study:
                 seen.add(key)
                 cases.append(Case(index=len(cases), key=key, block=number, params=params))
     digest = hashlib.sha256(''.join(c.key for c in cases).encode()).hexdigest()[:16]
-    return Study(name=name, cases=tuple(cases), digest=digest, text=text if text is not None else json.dumps(spec, sort_keys=True))
+    return Study(
+        name=name,
+        cases=tuple(cases),
+        digest=digest,
+        text=text if text is not None else json.dumps(spec, sort_keys=True),
+    )
 
 
 def load_study(path: str | Path) -> Study:

@@ -70,7 +70,11 @@ def read_rows(folder: str | Path) -> list[dict[str, Any]]:
     if unknown:
         raise StudyError(f"{path}: column {unknown[0]!r} is not one of this version's; use another --out")
     # A folder of an earlier version lacks the parameters added since: their defaults, as its cases ran.
-    missing = {column: PARAMETERS[column].default if column in PARAMETERS else None for column in COLUMNS if column not in header}
+    missing = {
+        column: PARAMETERS[column].default if column in PARAMETERS else None
+        for column in COLUMNS
+        if column not in header
+    }
     rows = []
     for cells in reader:
         values = {column: _value(column, cell) for column, cell in zip(header, cells)}
@@ -96,7 +100,9 @@ class StudyFolder:
                     'nothing was changed; choose another --out'
                 )
         elif self.folder.exists() and any(self.folder.iterdir()):
-            raise StudyError(f'{self.folder} holds files but no {STUDY_FILE}: not a study folder; nothing was changed; choose another --out')
+            raise StudyError(
+                f'{self.folder} holds files but no {STUDY_FILE}: not a study folder; nothing was changed; choose another --out'
+            )
         self.rows = read_rows(self.folder) if marker.exists() else []
         self.done = {row['key'] for row in self.rows}
 
@@ -105,14 +111,23 @@ class StudyFolder:
         self.folder.mkdir(parents=True, exist_ok=True)
         marker = self.folder / STUDY_FILE
         if not marker.exists():
-            record = {'schema': SCHEMA, 'name': self.study.name, 'digest': self.study.digest, 'cases': len(self.study.cases), 'spec': self.study.text}
+            record = {
+                'schema': SCHEMA,
+                'name': self.study.name,
+                'digest': self.study.digest,
+                'cases': len(self.study.cases),
+                'spec': self.study.text,
+            }
             write_atomically(marker, json.dumps(record, indent=1) + '\n')
         path = self.folder / ROWS_FILE
         if not path.exists():
             write_atomically(path, _line(COLUMNS))
         elif path.read_text().split('\n', 1)[0] != _line(COLUMNS).rstrip('\n'):
             # Written by an earlier version (fewer columns): rewritten whole with today's, once.
-            write_atomically(path, ''.join([_line(COLUMNS), *(_line([_cell(row[c]) for c in COLUMNS]) for row in self.rows)]))
+            write_atomically(
+                path,
+                ''.join([_line(COLUMNS), *(_line([_cell(row[c]) for c in COLUMNS]) for row in self.rows)]),
+            )
         with path.open('rb+') as handle:
             data = handle.read()
             if not data.endswith(b'\n'):

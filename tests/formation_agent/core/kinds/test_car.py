@@ -42,9 +42,13 @@ def test_where_the_steering_constraint_is_not_active_the_car_follows_u_exactly()
             continue
         log = SaturationLog()
         v, omega = CAR.command(u, heading=heading, geometry=GEOMETRY, limits=LIMITS, log=log)
-        assert np.allclose(control_point_rate(v, omega, heading, GEOMETRY.control_point_distance), u, rtol=0, atol=1e-14)
+        assert np.allclose(
+            control_point_rate(v, omega, heading, GEOMETRY.control_point_distance), u, rtol=0, atol=1e-14
+        )
         assert abs(omega) <= abs(v) * KAPPA and log.records == {}
-        assert (v, omega) == robot_kind('unicycle').command(u, heading=heading, geometry=GEOMETRY, limits=Limits(), log=log)
+        assert (v, omega) == robot_kind('unicycle').command(
+            u, heading=heading, geometry=GEOMETRY, limits=Limits(), log=log
+        )
         followed += 1
     assert followed > 300  # ψ = 0.42 rad: about 2ψ/π = 27 % of directions
 
@@ -69,7 +73,9 @@ def test_a_u_the_car_cannot_follow_becomes_the_nearest_it_can_and_is_counted():
         for sign_v in (1.0, -1.0):
             for sign_w in (1.0, -1.0):
                 for speed in np.linspace(0.0, 3.0, 31):
-                    edge = control_point_rate(sign_v * speed, sign_w * speed * KAPPA, heading, GEOMETRY.control_point_distance)
+                    edge = control_point_rate(
+                        sign_v * speed, sign_w * speed * KAPPA, heading, GEOMETRY.control_point_distance
+                    )
                     assert np.linalg.norm(u - moved) <= np.linalg.norm(u - edge) + 1e-12
     record = log.records['steering']
     assert record.count == outside > 300 and record.allowed == 0.42
@@ -80,7 +86,11 @@ def test_a_u_the_car_cannot_follow_becomes_the_nearest_it_can_and_is_counted():
 def test_a_sideways_u_drives_forwards_at_the_full_steering_angle():
     log = SaturationLog()
     v, omega = CAR.command(np.array([0.0, 0.2]), heading=0.0, geometry=GEOMETRY, limits=LIMITS, log=log)
-    assert v > 0.0 and omega > 0.0 and math.isclose(math.atan(GEOMETRY.wheelbase * omega / v), 0.42, rel_tol=1e-14)
+    assert (
+        v > 0.0
+        and omega > 0.0
+        and math.isclose(math.atan(GEOMETRY.wheelbase * omega / v), 0.42, rel_tol=1e-14)
+    )
     assert log.records['steering'].largest_requested == math.pi / 2  # a turn in place
     assert steer(0.0, 0.0, distance=0.33, kappa=KAPPA) == (0.0, 0.0)  # standing still is followed
 
@@ -113,13 +123,22 @@ def _bicycle(v: float, phi: float, wheelbase: float):
 def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v, phi, duration):
     from formation_sim.sim.robots import Command, Limits as BaseLimits, make_robot
 
-    robot = make_robot('car', scenario_position=[0.4, -1.0], yaw=0.9, control_point_distance=0.33, wheelbase=0.33, limits=BaseLimits(steering=0.42))
+    robot = make_robot(
+        'car',
+        scenario_position=[0.4, -1.0],
+        yaw=0.9,
+        control_point_distance=0.33,
+        wheelbase=0.33,
+        limits=BaseLimits(steering=0.42),
+    )
     start = robot.position.copy()
     robot.set_command(Command(linear=(v,), angular=v * math.tan(phi) / 0.33))  # what a driver steering φ does
     assert robot.saturated == 0
     for piece in (0.01, 0.5, duration - 0.51):
         robot.advance(piece)
-    reference = solve_ivp(_bicycle(v, phi, 0.33), (0.0, duration), [*start, 0.9], rtol=1e-12, atol=1e-12, method='DOP853')
+    reference = solve_ivp(
+        _bicycle(v, phi, 0.33), (0.0, duration), [*start, 0.9], rtol=1e-12, atol=1e-12, method='DOP853'
+    )
     x, y, yaw = reference.y[:, -1]
     assert np.allclose(robot.position, [x, y], atol=1e-10)
     assert math.isclose(math.remainder(robot.yaw - yaw, 2 * math.pi), 0.0, abs_tol=1e-10)
@@ -128,13 +147,32 @@ def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v
 @pytest.mark.parametrize(
     ('geometry', 'limits', 'complaint'),
     [
-        (Geometry(control_point_distance=0.33), LIMITS, 'a car needs its wheelbase L > 0 [m] (rear to front axle), got 0.0'),
-        (GEOMETRY, Limits(), 'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] (it cannot turn in place), got inf'),
+        (
+            Geometry(control_point_distance=0.33),
+            LIMITS,
+            'a car needs its wheelbase L > 0 [m] (rear to front axle), got 0.0',
+        ),
+        (
+            GEOMETRY,
+            Limits(),
+            'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] (it cannot turn in place), got inf',
+        ),
         (GEOMETRY, Limits(steering_angle=1.6), 'got 1.6'),
         (Geometry(wheelbase=0.33), LIMITS, 'control_point_distance l must be > 0, got 0.0'),
     ],
 )
 def test_a_car_that_cannot_be_driven_is_refused_with_the_rule(geometry, limits, complaint):
-    assert any(complaint in problem for problem in CAR.problems(dimension=2, geometry=geometry, limits=limits))
-    with pytest.raises(KindError, match=complaint.replace('(', r'\(').replace(')', r'\)').replace('[', r'\[').replace(']', r'\]')):
-        RobotCommander(drive='car', dimension=2, limits=limits, distance=geometry.control_point_distance, wheelbase=geometry.wheelbase)
+    assert any(
+        complaint in problem for problem in CAR.problems(dimension=2, geometry=geometry, limits=limits)
+    )
+    with pytest.raises(
+        KindError,
+        match=complaint.replace('(', r'\(').replace(')', r'\)').replace('[', r'\[').replace(']', r'\]'),
+    ):
+        RobotCommander(
+            drive='car',
+            dimension=2,
+            limits=limits,
+            distance=geometry.control_point_distance,
+            wheelbase=geometry.wheelbase,
+        )

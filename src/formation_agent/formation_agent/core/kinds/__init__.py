@@ -25,4 +25,13 @@ from formation_agent.core.kinds.unicycle import Unicycle
 for _kind in (Holonomic(), Unicycle(), Car()):
     register(_kind)
 
-__all__ = ['KIND_NAMES', 'Geometry', 'KindError', 'KindNames', 'RobotKind', 'register', 'robot_kind', 'unregister']
+__all__ = [
+    'KIND_NAMES',
+    'Geometry',
+    'KindError',
+    'KindNames',
+    'RobotKind',
+    'register',
+    'robot_kind',
+    'unregister',
+]

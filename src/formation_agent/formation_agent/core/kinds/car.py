@@ -52,7 +52,9 @@ def steer(v: float, omega: float, *, distance: float, kappa: float) -> tuple[flo
         return v, omega
     psi = math.atan(distance * kappa)  # the cone's half-angle about ±heading
     along = abs(v) * math.cos(psi) + abs(distance * omega) * math.sin(psi)  # u · (the nearest edge) > 0
-    v_edge = math.copysign(along * math.cos(psi), v) if v != 0.0 else along * math.cos(psi)  # sideways: forwards
+    v_edge = (
+        math.copysign(along * math.cos(psi), v) if v != 0.0 else along * math.cos(psi)
+    )  # sideways: forwards
     return v_edge, math.copysign(abs(v_edge) * kappa, omega)
 
 
@@ -70,7 +72,9 @@ class Car(Unicycle):
     def drive_problems(self, *, geometry: Geometry, limits: Limits) -> list[str]:
         problems = []
         if not geometry.wheelbase > 0.0:
-            problems.append(f'a car needs its wheelbase L > 0 [m] (rear to front axle), got {geometry.wheelbase!r}')
+            problems.append(
+                f'a car needs its wheelbase L > 0 [m] (rear to front axle), got {geometry.wheelbase!r}'
+            )
         if not 0.0 < limits.steering_angle < math.pi / 2:
             problems.append(
                 f'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] (it cannot turn in place), '
@@ -78,7 +82,9 @@ class Car(Unicycle):
             )
         return problems
 
-    def command(self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog) -> tuple[float, ...]:
+    def command(
+        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+    ) -> tuple[float, ...]:
         if heading is None:
             raise ValueError('a car command needs the robot heading')
         v, omega = unicycle_velocity(u, heading, geometry.control_point_distance)

@@ -24,7 +24,9 @@ class Holonomic(RobotKind):
     parameters = ()
     params_file = 'crazyflie.params.yaml'
 
-    def command(self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog) -> tuple[float, ...]:
+    def command(
+        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+    ) -> tuple[float, ...]:
         return tuple(float(c) for c in limit_world_velocity(u, limits, log))
 
     def clip(self, linear, angular, *, geometry: Geometry, limits: Limits):

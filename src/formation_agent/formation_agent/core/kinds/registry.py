@@ -53,7 +53,9 @@ class RobotKind:
     name: str = ''
     summary: str = ''  # what it is and what it takes, one line, for help texts
     command_type: str = 'geometry_msgs/msg/Twist'
-    world_frame_command: bool = False  # TwistStamped in the world frame; else Twist (v = linear.x, ω = angular.z)
+    world_frame_command: bool = (
+        False  # TwistStamped in the world frame; else Twist (v = linear.x, ω = angular.z)
+    )
     dimensions: tuple[int, ...] = (2,)  # the dimensions p its control point moves in
     parameters: tuple[str, ...] = ()  # its parameters beyond max_linear_speed (the agent's parameter names)
     params_file: str | None = None  # formation_agent/config/<file>: an example robot's parameters
@@ -62,14 +64,22 @@ class RobotKind:
 
     def problems(self, *, dimension: int | None, geometry: Geometry, limits: Limits) -> list[str]:
         """Why a robot of this kind cannot have these values (each rule broken, with its value)."""
-        return self.placement_problems(dimension=dimension, geometry=geometry) + self.drive_problems(geometry=geometry, limits=limits)
+        return self.placement_problems(dimension=dimension, geometry=geometry) + self.drive_problems(
+            geometry=geometry, limits=limits
+        )
 
     def placement_problems(self, *, dimension: int | None, geometry: Geometry) -> list[str]:
         """Why the scenario's points cannot be this kind's control points: its dimensions (None: not
         known, not checked), its control point."""
         if dimension is not None and dimension not in self.dimensions:
-            where = 'in the plane' if self.dimensions == (2,) else f'in {" or ".join(map(str, self.dimensions))} dimensions'
-            return [f'a {self.name} moves {where}: dimension p must be {" or ".join(map(str, self.dimensions))}, got {dimension}']
+            where = (
+                'in the plane'
+                if self.dimensions == (2,)
+                else f'in {" or ".join(map(str, self.dimensions))} dimensions'
+            )
+            return [
+                f'a {self.name} moves {where}: dimension p must be {" or ".join(map(str, self.dimensions))}, got {dimension}'
+            ]
         return []
 
     def drive_problems(self, *, geometry: Geometry, limits: Limits) -> list[str]:

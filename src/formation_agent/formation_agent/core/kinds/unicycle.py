@@ -24,7 +24,9 @@ from formation_agent.core.kinds.registry import Geometry, RobotKind
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 
 
-def arc(position: np.ndarray, yaw: float, v: float, omega: float, duration: float) -> tuple[np.ndarray, float]:
+def arc(
+    position: np.ndarray, yaw: float, v: float, omega: float, duration: float
+) -> tuple[np.ndarray, float]:
     """The exact arc of (v, ω) held for `duration` from (position, yaw) (module docstring)."""
     half = 0.5 * omega * duration
     chord = v * duration * np.sinc(half / math.pi)  # np.sinc(u) = sin(πu)/(πu)
@@ -53,7 +55,9 @@ class Unicycle(RobotKind):
     def control_offset(self, geometry: Geometry) -> tuple[float, float, float]:
         return (float(geometry.control_point_distance), 0.0, 0.0)
 
-    def command(self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog) -> tuple[float, ...]:
+    def command(
+        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+    ) -> tuple[float, ...]:
         if heading is None:
             raise ValueError(f'a {self.name} command needs the robot heading')
         v, omega = unicycle_velocity(u, heading, geometry.control_point_distance)
