@@ -41,7 +41,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/commands/common.py', 'add_robot_arguments'): 136,
     ('formation_sim/model/generate.py', 'random_scenario'): 83,
     ('formation_sim/model/validate.py', '_check_precision'): 84,
-    ('formation_sim/runtime/coordinator.py', 'FormationCoordinatorNode'): 315,
     ('formation_sim/runtime/launch.py', 'LaunchPlan'): 315,
     ('formation_sim/runtime/orchestrate.py', 'FormationRun'): 347,
     ('formation_sim/runtime/orchestrate.py', 'FormationRun._launch_and_watch'): 86,
