@@ -29,13 +29,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_agent/core/eta.py', '_EventTriggeredAgent'): 345,
     # `ruff format` (the tree was formatted in one commit, every `fmt: skip` removed) took these past
     # the rule: one argument or item per line. Each is to be split along its seams.
-    ('formation_sim/analysis/compare.py', 'overlay_figures'): 87,
-    ('formation_sim/analysis/figures.py', 'animate'): 116,
-    ('formation_sim/analysis/load.py', '_robot_run'): 118,
-    ('formation_sim/analysis/load.py', 'load_bag_run'): 120,
-    ('formation_sim/analysis/report.py', 'build_report'): 90,
-    ('formation_sim/commands/analyze.py', 'run'): 93,
-    ('formation_sim/commands/common.py', 'add_robot_arguments'): 136,
     ('formation_sim/model/generate.py', 'random_scenario'): 83,
     ('formation_sim/model/validate.py', '_check_precision'): 84,
     ('formation_sim/runtime/launch.py', 'LaunchPlan'): 315,
