@@ -147,7 +147,8 @@ rclpy.init()
 node = rclpy.create_node('frozen_robot')
 qos = ROBOT_COMMAND_READER_QOS if sys.argv[1] == 'ours' else QoSProfile(depth=10)
 def taken(msg):
-    print(time.time(), msg.twist.linear.x, msg.twist.linear.y, flush=True)
+    sent = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    print(time.time(), sent, msg.twist.linear.x, msg.twist.linear.y, flush=True)
 node.create_subscription(TwistStamped, '/agent_1/robot/cmd_vel', taken, qos)
 rclpy.spin(node)
 """
@@ -165,7 +166,10 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
 
     def taken():
         lines = (tmp_path / 'robot.out').read_text().splitlines()
-        return [(float(at), (float(x), float(y))) for at, x, y in (line.split() for line in lines)]
+        return [
+            (float(at), float(sent), (float(x), float(y)))
+            for at, sent, x, y in (line.split() for line in lines)
+        ]
 
     with open(tmp_path / 'robot.out', 'w') as out:
         robot = subprocess.Popen(
@@ -202,13 +206,16 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
         stop = [_linear(msg) for _, msg in rig.commands[sent + len(stale) :]]
         assert stop == [zero] * DEFAULT_READER_DEPTH, 'the stop: as many zeros as a default reader keeps'
         rig.spin_until(
-            lambda: any(at > resumed_at for at, _ in taken()),
+            lambda: any(at > resumed_at for at, _, _ in taken()),
             timeout=10.0,
             what='the robot to take a command',
         )
-        # Delivery is in order: a stale command would be taken before the first zero.
-        after = [command for at, command in taken() if at > resumed_at]
-        assert after and all(command == (0.0, 0.0) for command in after), after
+        # What the robot takes after it resumed: none of the commands sent while it was frozen but
+        # the zeros (a command sent just before the freeze, in its reader or callback when the
+        # SIGSTOP came, may still be taken: the one it was acting on).  Stamps: when it was sent.
+        after = [(sent - frozen_at, command) for at, sent, command in taken() if at > resumed_at]
+        meanwhile = [command for sent, command in after if sent > 0.0]
+        assert meanwhile and all(command == (0.0, 0.0) for command in meanwhile), after
     finally:
         robot.kill()
         robot.wait(timeout=10)
