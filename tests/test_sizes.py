@@ -35,7 +35,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/runtime/orchestrate.py', 'FormationRun'): 347,
     ('formation_sim/runtime/orchestrate.py', 'FormationRun._launch_and_watch'): 86,
     ('formation_sim/runtime/time_keeper.py', 'TimeKeeperNode'): 312,
-    ('formation_sim/sim/engine.py', '_run'): 84,
 }
 
 
