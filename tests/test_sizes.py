@@ -27,8 +27,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     # formation_agent.core.eta: the agent base class holds the shared trigger logic of ETA-1 and
     # ETA-2 (receive, trigger, search); its subclasses carry the unrolled hot loops, bit-exact.
     ('formation_agent/core/eta.py', '_EventTriggeredAgent'): 345,
-    # The simulator node: its tests start ROS processes; split it with those tests run, not blind.
-    ('formation_sim/runtime/sim_node.py', 'FormationSimulatorNode'): 344,
     # `ruff format` (the tree was formatted in one commit, every `fmt: skip` removed) took these past
     # the rule: one argument or item per line. Each is to be split along its seams.
     ('formation_sim/runtime/launch.py', 'LaunchPlan'): 315,
