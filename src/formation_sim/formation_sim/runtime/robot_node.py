@@ -69,6 +69,7 @@ from formation_agent.ros.process import (
     shutdown_guard,
 )
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
+from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
 from formation_msgs_py.topics import (
     ROBOT_NODE,
     agent_namespace,
@@ -268,7 +269,10 @@ class SimulatedRobotNode(Node):
             else None
         )
         self._command_sub = self.create_subscription(
-            command_message(self.robot.kind), robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
+            command_message(self.robot.kind),
+            robot_command_topic(self.robot_id),
+            self._on_command,
+            ROBOT_COMMAND_READER_QOS,  # the newest command only: none from before a freeze after it
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
         self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = (
