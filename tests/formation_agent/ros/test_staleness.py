@@ -79,8 +79,8 @@ def test_a_pose_stale_because_this_agent_ran_late_says_so(rig):
     staleness.guard.timer.tick(EPOCH + 4.2)  # the command timer (0.02 s) came 0.62 s late
     message = str(staleness.explain(_stale_error(book, 4.2), EPOCH + 4.2))
     assert message.endswith(
-        "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran 0.620 s late (an overloaded computer?): "
-        'the agent stops'
+        "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran 0.620 s late "
+        '(an overloaded computer?): the agent stops'
     ), message
 
 

@@ -101,13 +101,15 @@ class CommandGuard:
         where = f'agent {self.agent_id}: at t={t:.3f}'
         if late > self.timeout:
             raise StaleStateError(
-                f'{where} its command timer ran {late:.3f} s late (pose_timeout {self.timeout:g} s; the process was '
-                f'stopped, or {OVERLOADED[:-1]}): no command from state that old: the agent stops'
+                f'{where} its command timer ran {late:.3f} s late (pose_timeout {self.timeout:g} s; '
+                f'the process was stopped, or {OVERLOADED[:-1]}): no command from state that old: '
+                'the agent stops'
             )
         if trigger_late is not None and trigger_late > self.timeout:
             raise StaleStateError(
-                f'{where} its trigger has been due for {trigger_late:.3f} s (pose_timeout {self.timeout:g} s; '
-                f"this agent's timer ran {late:.3f} s late, {OVERLOADED}): no command from state that old: the agent stops"
+                f'{where} its trigger has been due for {trigger_late:.3f} s '
+                f"(pose_timeout {self.timeout:g} s; this agent's timer ran {late:.3f} s late, "
+                f'{OVERLOADED}): no command from state that old: the agent stops'
             )
 
 
@@ -146,8 +148,9 @@ class Staleness:
             return None
         t = now - self._schedule.epoch
         return StaleStateError(
-            f'agent {self.book.agent_id}: at t={t:.3f} its trigger came {late:.3f} s after it was due (pose_timeout '
-            f'{timeout:g} s; the process was stopped, or {OVERLOADED[:-1]}): no command from state that old: the agent stops'
+            f'agent {self.book.agent_id}: at t={t:.3f} its trigger came {late:.3f} s after it was due '
+            f'(pose_timeout {timeout:g} s; the process was stopped, or {OVERLOADED[:-1]}): '
+            'no command from state that old: the agent stops'
         )
 
     def explain(self, error: PoseError, now: float) -> PoseError:
