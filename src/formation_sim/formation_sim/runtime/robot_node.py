@@ -223,7 +223,10 @@ class SimulatedRobotNode(Node):
         namespace: str | None = None,
         parameter_overrides: list[Parameter] | None = None,
         context=None,
+        own_timer: bool = True,
     ) -> None:
+        """`own_timer` False: the robot ticks when `tick()` is called (`RobotTicker`: one timer for
+        every robot of a process at its rate, `rate` Hz)."""
         super().__init__(
             NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context
         )
@@ -286,8 +289,9 @@ class SimulatedRobotNode(Node):
             child_frame=self.body_frame,
             sigma=(self.noise.position_sigma, self.noise.yaw_sigma),
         )
+        self.rate = float(p['rate'])
         self._last_tick = time.time()
-        self._timer = self.create_timer(1.0 / float(p['rate']), self._tick)
+        self._timer = self.create_timer(1.0 / self.rate, self.tick) if own_timer else None
 
     # -- commands -------------------------------------------------------------------------------
 
@@ -341,11 +345,11 @@ class SimulatedRobotNode(Node):
 
     # -- ticks ----------------------------------------------------------------------------------
 
-    def _tick(self) -> None:
+    def tick(self) -> None:
+        """Move to now under the command held (exactly), publish, take the command due."""
         now = time.time()
-        self.robot.advance(
-            max(0.0, now - self._last_tick)
-        )  # exact, under the command held since the last tick
+        # Exact, under the command held since the last tick.
+        self.robot.advance(max(0.0, now - self._last_tick))
         self._last_tick = now
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self.robot.body_twist()
@@ -362,6 +366,26 @@ class SimulatedRobotNode(Node):
             if self._pose_pub.get_subscription_count():  # most readers take the odometry
                 self._pose_pub.publish(pack_pose_stamped(stamp, self.world_frame, where, orientation))
         self._take_command(now)  # held from now to the next tick
+
+
+class RobotTicker:
+    """The robots of a process ticked by one timer per rate: a timer of its own per robot woke the
+    executor 400 times a second for 4 robots at 100 Hz (issue 19, BENCHMARKS.md "CPU of a robot
+    run").  Each robot still reads the clock itself (`SimulatedRobotNode.tick`)."""
+
+    def __init__(self, robots: Sequence[SimulatedRobotNode]) -> None:
+        by_rate: dict[float, list[SimulatedRobotNode]] = {}
+        for robot in robots:
+            by_rate.setdefault(robot.rate, []).append(robot)
+        self._timers = [
+            group[0].create_timer(1.0 / rate, lambda group=tuple(group): _tick_all(group))
+            for rate, group in by_rate.items()
+        ]
+
+
+def _tick_all(robots: Sequence[SimulatedRobotNode]) -> None:
+    for robot in robots:
+        robot.tick()
 
 
 def _xyz(position: np.ndarray) -> tuple[float, float, float]:
@@ -402,8 +426,10 @@ def main(args: Sequence[str] | None = None) -> int:
                         SimulatedRobotNode(
                             namespace=agent_namespace(robot_id),
                             parameter_overrides=[Parameter('robot_id', Parameter.Type.INTEGER, robot_id)],
+                            own_timer=False,
                         )
                     )
+                ticker = RobotTicker(nodes)  # noqa: F841 - its timers belong to the nodes
             else:
                 nodes.append(SimulatedRobotNode())
             executor = make_executor('events')
