@@ -68,7 +68,8 @@ from formation_agent.ros.process import (
     make_executor,
     shutdown_guard,
 )
-from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
+from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
+from formation_msgs_py.codec import MessageError
 from formation_msgs_py.topics import (
     ROBOT_NODE,
     agent_namespace,
@@ -270,8 +271,14 @@ class SimulatedRobotNode(Node):
             if p['publish_truth']
             else None
         )
+        # Raw: the command's fields read from its bytes (formation_msgs_py.cdr), not through
+        # rclpy's Python message (issue 19).
         self._command_sub = self.create_subscription(
-            command_message(self.robot.kind), robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
+            command_message(self.robot.kind),
+            robot_command_topic(self.robot_id),
+            self._on_command,
+            ROBOT_QOS,
+            raw=True,
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
         self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = (
@@ -295,31 +302,35 @@ class SimulatedRobotNode(Node):
 
     # -- commands -------------------------------------------------------------------------------
 
-    def _on_command(self, msg) -> None:
+    def _on_command(self, data: bytes) -> None:
         now = time.time()
-        p = self.robot.dimension
-        if self.world_frame_command:
-            if msg.header.frame_id != self.world_frame:
-                self.commands_refused += 1
-                if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
-                    self.get_logger().warning(
-                        f'refused a command in frame {msg.header.frame_id!r}: this {self.robot.model} robot takes world-frame '
-                        f'velocities in {self.world_frame!r} ({self.commands_refused} refused so far)'
-                    )
-                return
-            twist = msg.twist
-            command = Command(
-                linear=(twist.linear.x, twist.linear.y, twist.linear.z)[:p], angular=twist.angular.z
+        try:
+            if self.world_frame_command:
+                frame, twist = twist_stamped_fields(data)
+            else:
+                frame, twist = None, twist_fields(data)
+        except MessageError as error:
+            self._refuse(f'refused a command that is not a {self.robot.kind.command_type}: {error}')
+            return
+        if frame is not None and frame != self.world_frame:
+            self._refuse(
+                f'refused a command in frame {frame!r}: this {self.robot.model} robot takes world-frame '
+                f'velocities in {self.world_frame!r}'
             )
-        else:
-            command = Command(linear=(msg.linear.x,), angular=msg.angular.z)
+            return
+        linear = twist[: self.robot.dimension] if self.world_frame_command else twist[:1]
+        command = Command(linear=linear, angular=twist[5])
         values = (*command.linear, command.angular)
         if not all(math.isfinite(v) for v in values):
-            self.commands_refused += 1
-            self.get_logger().warning(f'refused a command with a non-finite value: {values}')
+            self._refuse(f'refused a command with a non-finite value: {values}')
             return
         self.commands_received += 1
         self._commands.append((now, command))
+
+    def _refuse(self, why: str) -> None:
+        self.commands_refused += 1
+        if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
+            self.get_logger().warning(f'{why} ({self.commands_refused} refused so far)')
 
     def _take_command(self, now: float) -> None:
         """The newest command that has arrived at least `command_latency` ago, else a stop on timeout."""
