@@ -123,7 +123,8 @@ def measure_case(case: dict, *, repeats: int, baseline_folder: Path | None, work
             ]
             process = measure_process(command, log)
             engine = json.loads(log.read_text().strip().splitlines()[-1])
-            # The process (scenario built from the case, the revision's engine) and the engine's own wall time.
+            # The process (scenario built from the case, the revision's engine) and the engine's own
+            # wall time.
             rows['before'].append(
                 {
                     'wall_s': process['wall_s'],

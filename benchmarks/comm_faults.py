@@ -91,7 +91,8 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
         'events | dropped / delayed | max lateness |',
         '|---|---|---|---|---|---|---|---|',
         f'| exact, in process (`formation simulate`) | – | – | {reference["final_formation_error"]:.4f} | '
-        f'{reference["max_edge_length"]:.3f} / {reference["delta"]:g} | {reference["total_events"]} | – | – |',
+        f'{reference["max_edge_length"]:.3f} / {reference["delta"]:g} | '
+        f'{reference["total_events"]} | – | – |',
     ]
     delta = reference['delta']
     for label, rows in results.items():
@@ -113,7 +114,8 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
         )
     lines.append('')
     lines.append(
-        'Medians over the completed runs (dropped / delayed: over all runs); max edge length: the worst completed run.'
+        'Medians over the completed runs (dropped / delayed: over all runs); max edge length: the '
+        'worst completed run.'
     )
     return '\n'.join(lines)
 

@@ -191,7 +191,8 @@ def main() -> int:
         '--executor',
         choices=('single', 'events'),
         default='single',
-        help="rclpy executor: 'single' (SingleThreadedExecutor, what the nodes use) or 'events' (rclpy.experimental.EventsExecutor)",
+        help="rclpy executor: 'single' (SingleThreadedExecutor, what the nodes use) or 'events' "
+        '(rclpy.experimental.EventsExecutor)',
     )
     parser.add_argument('--serve', type=float, default=None, help=argparse.SUPPRESS)
     parser.add_argument('--ping', type=int, default=None, help=argparse.SUPPRESS)

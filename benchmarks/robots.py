@@ -116,8 +116,10 @@ def table(results: dict[str, list[dict]], reference: dict) -> str:
         lateness = median_of(done, 'max_lateness')
         lines.append(
             f'| {label} | {len(done)}/{len(rows)} | {"–" if error is None else f"{error:.2e}"} | '
-            f'{"–" if worst_edge is None else f"{worst_edge:.4f} / {delta:g}"} | {"–" if events is None else f"{events:g}"} | '
-            f'{"–" if saturated is None else f"{saturated:g}"} | {"–" if distance is None else f"{1000 * distance:.1f} mm"} | '
+            f'{"–" if worst_edge is None else f"{worst_edge:.4f} / {delta:g}"} | '
+            f'{"–" if events is None else f"{events:g}"} | '
+            f'{"–" if saturated is None else f"{saturated:g}"} | '
+            f'{"–" if distance is None else f"{1000 * distance:.1f} mm"} | '
             f'{"–" if lateness is None else f"{1000 * lateness:.0f} ms"} |'
         )
     lines += ['', 'Medians over the completed runs; max edge length: the worst completed run.']

@@ -16,7 +16,8 @@ Each run's row is kept in OUT/<setting>-<seed>/row.json, so the settings can run
 a time (`--only`, each a minute or two) and `--table` prints the tables of what is there.
 Wall-clock runs are not reproducible: numbers vary from run to run and with the machine's load.
 
-    .venv/bin/python benchmarks/robots_lab.py --out runs/robots_lab --domain-id N [--only unicycle,car-5mm] [--horizon 60]
+    .venv/bin/python benchmarks/robots_lab.py --out runs/robots_lab --domain-id N \
+        [--only unicycle,car-5mm] [--horizon 60]
     .venv/bin/python benchmarks/robots_lab.py --out runs/robots_lab --table
 """
 
@@ -202,7 +203,8 @@ def _saturated(rows: list[dict]) -> str:
 
 def table(rows: dict[str, list[dict]], names: list[str]) -> str:
     lines = [
-        '| setting | runs done | κ | c0 | largest speed / limit | saturated commands | events | to 5 cm | to 1 cm | final formation error |',
+        '| setting | runs done | κ | c0 | largest speed / limit | saturated commands | events | to '
+        '5 cm | to 1 cm | final formation error |',
         '|---|---|---|---|---|---|---|---|---|---|',
     ]
     for name in names:
@@ -216,9 +218,11 @@ def table(rows: dict[str, list[dict]], names: list[str]) -> str:
         events = ', '.join(str(row['total_events']) for row in done)
         final = ', '.join(f'{1000 * row["final_formation_error"]:.1f}' for row in done)
         lines.append(
-            f'| {SETTINGS[name][0]} | {"–" if name == "exact" else f"{len(done)}/{len(every)}"} | {done[0]["kappa"]:.4g} | {done[0]["threshold_floor"]:.3g} | '
+            f'| {SETTINGS[name][0]} | {"–" if name == "exact" else f"{len(done)}/{len(every)}"} | '
+            f'{done[0]["kappa"]:.4g} | {done[0]["threshold_floor"]:.3g} | '
             f'{speed:.3f} / {SPEED:g} m/s | {_saturated(done)} | {events} | '
-            f'{", ".join(_seconds(row["time_to_0.05"]) for row in done)} | {", ".join(_seconds(row["time_to_0.01"]) for row in done)} | '
+            f'{", ".join(_seconds(row["time_to_0.05"]) for row in done)} | '
+            f'{", ".join(_seconds(row["time_to_0.01"]) for row in done)} | '
             f'{final} mm |'
         )
     return '\n'.join(lines)

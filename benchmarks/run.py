@@ -13,8 +13,9 @@ distributed runs), `cli` (`formation simulate` as a process at n = 1000, 3000, 1
 against the engine's, peak memory, against the code before the streaming record; scenario load
 times, YAML and JSON), `startup` (time to first result of `formation run`: every phase, against the
 code before the start-up work, alternating), `large` (100 to 1000 agents: simple discovery and a
-discovery server, against the code before; `startup.py`). Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the
-repository root holds the tables of a full run with the machine they came from.
+discovery server, against the code before; `startup.py`).
+Results go to benchmarks/results/<date>.json and .md; BENCHMARKS.md at the repository root holds
+the tables of a full run with the machine they came from.
 
 Timing: wall-clock and process CPU time; each engine case is repeated and the median reported.
 The machine is shared, so ratios against baselines measured in the same run are the numbers to
@@ -186,8 +187,10 @@ def cli_cases(quick: bool) -> list[dict]:
 
 def _cli_markdown(results: dict) -> list[str]:
     lines = [
-        '| n | T [s] | events | engine wall [s] | process wall [s] | process / engine | peak RSS [MiB] | trajectory [MiB] | '
-        '--no-plot: process / engine | before: process wall [s] | before: process / engine | before: peak RSS [MiB] | '
+        '| n | T [s] | events | engine wall [s] | process wall [s] | process / engine | peak RSS '
+        '[MiB] | trajectory [MiB] | '
+        '--no-plot: process / engine | before: process wall [s] | before: process / engine | '
+        'before: peak RSS [MiB] | '
         'wall before / now | RSS before / now | same triggering times |',
         '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
     ]
@@ -197,11 +200,15 @@ def _cli_markdown(results: dict) -> list[str]:
         before_wall = before.get('wall_s')
         before_text = f'{_fmt(before_wall)} (Python API, grid samples)' if api else _fmt(before_wall)
         lines.append(
-            f'| {r["case"]["n"]} | {_fmt(r["case"]["horizon"])} | {_fmt(now.get("events"))} | {_fmt(now.get("engine_wall_s"))} | '
-            f'{_fmt(now.get("wall_s"))} | {_fmt(now.get("ratio"), 3)}× | {_fmt(now.get("peak_rss_mib"))} | {_fmt(now.get("trajectory_mib"))} | '
-            f'{_fmt(bare.get("ratio"), 3)}× | {before_text} | {_fmt(before.get("ratio"), 3) + "×" if "ratio" in before else "–"} | '
-            f'{_fmt(before.get("peak_rss_mib"))} | {_fmt(before_wall / now["wall_s"] if before_wall and now.get("wall_s") else None)}× | '
-            f'{_fmt(before["peak_rss_mib"] / now["peak_rss_mib"] if before.get("peak_rss_mib") and now.get("peak_rss_mib") else None)}× | '
+            f'| {r["case"]["n"]} | {_fmt(r["case"]["horizon"])} | {_fmt(now.get("events"))} | '
+            f'{_fmt(now.get("engine_wall_s"))} | '
+            f'{_fmt(now.get("wall_s"))} | {_fmt(now.get("ratio"), 3)}× | '
+            f'{_fmt(now.get("peak_rss_mib"))} | {_fmt(now.get("trajectory_mib"))} | '
+            f'{_fmt(bare.get("ratio"), 3)}× | {before_text} | '
+            f'{_fmt(before.get("ratio"), 3) + "×" if "ratio" in before else "–"} | '
+            f'{_fmt(before.get("peak_rss_mib"))} | '
+            f'{_fmt(before_wall / now["wall_s"] if before_wall and now.get("wall_s") else None)}× | '
+            f'{_fmt(_ratio(before.get("peak_rss_mib"), now.get("peak_rss_mib")))}× | '
             f'{"yes" if r["trigger_times_equal"] else "NO" if r["trigger_times_equal"] is False else "–"} |'
         )
     return lines
@@ -399,6 +406,11 @@ def run_pingpong(count: int, executor: str = 'single') -> dict:
 # -- report -----------------------------------------------------------------------------------
 
 
+def _ratio(before, now):
+    """before / now, or None when either is missing or zero."""
+    return before / now if before and now else None
+
+
 def _fmt(value, digits: int = 3) -> str:
     if value is None:
         return '–'
@@ -414,19 +426,22 @@ def markdown(results: dict) -> str:
     info = results['machine']
     lines += [
         f'Machine: {info["nproc"]} cores, {info["cpu"]}, {info["memory_gib"]} GiB; Python {info["python"]}, '
-        f'numpy {info["numpy"]}, scipy {info["scipy"]}, rclpy {info["rclpy"]}; commit {info["git"]}; {info["date"]}.',
+        f'numpy {info["numpy"]}, scipy {info["scipy"]}, rclpy {info["rclpy"]}; commit '
+        f'{info["git"]}; {info["date"]}.',
         '',
     ]
     if 'engine' in results:
         lines += [
-            '| case | n | mean degree | T [s] | events | wall [s] (median) | events/s | µs/event | µs/(event·(1+d̄)) | before [s] | speed-up |',
+            '| case | n | mean degree | T [s] | events | wall [s] (median) | events/s | µs/event | '
+            'µs/(event·(1+d̄)) | before [s] | speed-up |',
             '|---|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['engine']:
             base = r.get('baseline')
             speedup = f'{r["speedup"]:.1f}×' if base else '–'
             lines.append(
-                f'| {r["case"]} | {r["n"]} | {r["mean_degree"]:.1f} | {_fmt(r["horizon"])} | {r["events"]} | {r["wall_s"]:.3g} | '
+                f'| {r["case"]} | {r["n"]} | {r["mean_degree"]:.1f} | {_fmt(r["horizon"])} | '
+                f'{r["events"]} | {r["wall_s"]:.3g} | '
                 f'{r["events_per_s"]:.0f} | {r["us_per_event"]:.0f} | {r["us_per_event_degree"]:.0f} | '
                 f'{_fmt(base["wall_s"]) if base else "–"} | {speedup} |'
             )
@@ -434,25 +449,31 @@ def markdown(results: dict) -> str:
         if 'engine_recording' in results:
             rec = results['engine_recording']
             lines += [
-                f'Recording cost ({rec["case"]}): trigger times only {rec["lean_wall_s"]:.2f} s; default record (state at every '
-                f'event and every 0.01 s: {rec["full_samples"]} samples, {rec["full_sample_mib"]:.0f} MiB) {rec["full_wall_s"]:.2f} s.',
+                f'Recording cost ({rec["case"]}): trigger times only {rec["lean_wall_s"]:.2f} s; '
+                'default record (state at every '
+                f'event and every 0.01 s: {rec["full_samples"]} samples, '
+                f'{rec["full_sample_mib"]:.0f} MiB) {rec["full_wall_s"]:.2f} s.',
                 '',
             ]
     if 'naive' in results:
         lines += [
-            '| case | T [s] | exact events | exact wall [s] | fixed-step events | fixed-step wall [s] | time ratio | max overshoot | median overshoot | connectivity |',
+            '| case | T [s] | exact events | exact wall [s] | fixed-step events | fixed-step wall '
+            '[s] | time ratio | max overshoot | median overshoot | connectivity |',
             '|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['naive']:
             lines.append(
-                f'| {r["case"]} | {_fmt(r["horizon"])} | {r["exact_events"]} | {r["exact_wall_s"]:.3g} | {r["naive_events"]} | '
-                f'{r["naive_wall_s"]:.3g} | {r["naive_over_exact_time"]:.1f}× | {r["overshoot_max"]:.3g} | {r["overshoot_median"]:.2g} | '
+                f'| {r["case"]} | {_fmt(r["horizon"])} | {r["exact_events"]} | '
+                f'{r["exact_wall_s"]:.3g} | {r["naive_events"]} | '
+                f'{r["naive_wall_s"]:.3g} | {r["naive_over_exact_time"]:.1f}× | '
+                f'{r["overshoot_max"]:.3g} | {r["overshoot_median"]:.2g} | '
                 f'{r["connectivity_lost"] or "kept"} |'
             )
         lines.append('')
     if 'comm' in results:
         lines += [
-            '| case | T [s] | controller | period [s] | messages | sensing calls | final formation error | converged (< 1e-3) at [s] |',
+            '| case | T [s] | controller | period [s] | messages | sensing calls | final formation '
+            'error | converged (< 1e-3) at [s] |',
             '|---|---|---|---|---|---|---|---|',
         ]
         for r in results['comm']:
@@ -468,14 +489,16 @@ def markdown(results: dict) -> str:
                     else f'continuous ({row["rhs_evaluations"]} evaluations)'
                 )
                 lines.append(
-                    f'| {r["case"]} | {_fmt(r["horizon"])} | {name} | {_fmt(row.get("period"))} | {row["messages"]} | {sensing} | '
+                    f'| {r["case"]} | {_fmt(r["horizon"])} | {name} | {_fmt(row.get("period"))} | '
+                    f'{row["messages"]} | {sensing} | '
                     f'{_fmt(row["final_error"])} | {_fmt(row["convergence_time"])} |'
                 )
         lines.append('')
     if 'pingpong' in results:
         p = results['pingpong']
         lines += [
-            f'Bare rclpy round trip between two processes (PROTOCOL_QOS, {p["count"]} each, median / p90): topic '
+            f'Bare rclpy round trip between two processes (PROTOCOL_QOS, {p["count"]} each, median '
+            '/ p90): topic '
             f'{1e3 * p["topic"]["median_s"]:.2f} / {1e3 * p["topic"]["p90_s"]:.2f} ms, service '
             f'{1e3 * p["service"]["median_s"]:.2f} / {1e3 * p["service"]["p90_s"]:.2f} ms.',
             '',
@@ -483,8 +506,10 @@ def markdown(results: dict) -> str:
         if 'pingpong_events_executor' in results:
             e = results['pingpong_events_executor']
             lines += [
-                f'The same with rclpy.experimental.EventsExecutor: topic {1e3 * e["topic"]["median_s"]:.2f} / '
-                f'{1e3 * e["topic"]["p90_s"]:.2f} ms, service {1e3 * e["service"]["median_s"]:.2f} / {1e3 * e["service"]["p90_s"]:.2f} ms.',
+                'The same with rclpy.experimental.EventsExecutor: topic '
+                f'{1e3 * e["topic"]["median_s"]:.2f} / '
+                f'{1e3 * e["topic"]["p90_s"]:.2f} ms, service {1e3 * e["service"]["median_s"]:.2f} '
+                f'/ {1e3 * e["service"]["p90_s"]:.2f} ms.',
                 '',
             ]
     if 'distributed' in results:
@@ -492,25 +517,32 @@ def markdown(results: dict) -> str:
         bound_events = results.get('step_bound_events_s')
         if bound:
             lines += [
-                f'Lower bound per lock-step step (1.5 topic + 1 service round trip): {1e3 * bound:.2f} ms with the '
+                'Lower bound per lock-step step (1.5 topic + 1 service round trip): '
+                f'{1e3 * bound:.2f} ms with the '
                 f'SingleThreadedExecutor, {1e3 * bound_events:.2f} ms with the EventsExecutor.',
                 '',
             ]
         lines += [
-            '| case | agents/process | processes | T [s] | events | steps | stepping wall [s] | events/s | steps/s | ms/step | × bound (single) | × bound (events) | discovery [s] | outside stepping [s] | RSS/agent [MiB] | simulator RSS [MiB] |',
+            '| case | agents/process | processes | T [s] | events | steps | stepping wall [s] | '
+            'events/s | steps/s | ms/step | × bound (single) | × bound (events) | discovery [s] | '
+            'outside stepping [s] | RSS/agent [MiB] | simulator RSS [MiB] |',
             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['distributed']:
             if not r.get('events'):
                 lines.append(
-                    f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | failed: {r["message"][:80]} |'
+                    f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | '
+                    f'{_fmt(r["horizon"])} | failed: {r["message"][:80]} |'
                 )
                 continue
             ms = 1e3 / r['steps_per_s']
             lines.append(
-                f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | {_fmt(r["horizon"])} | {r["events"]} | {r["steps"]} | '
+                f'| {r["case"]} | {r["agents_per_process"]} | {r["processes"]} | '
+                f'{_fmt(r["horizon"])} | {r["events"]} | {r["steps"]} | '
                 f'{r["stepping_wall_s"]:.3g} | {r["events_per_s"]:.1f} | {r["steps_per_s"]:.1f} | {ms:.1f} | '
-                f'{_fmt(ms / 1e3 / bound if bound else None, 2)} | {_fmt(ms / 1e3 / bound_events if bound_events else None, 2)} | {r["discovery_s"]:.2f} | {r["outside_stepping_s"]:.1f} | '
+                f'{_fmt(ms / 1e3 / bound if bound else None, 2)} | '
+                f'{_fmt(ms / 1e3 / bound_events if bound_events else None, 2)} | '
+                f'{r["discovery_s"]:.2f} | {r["outside_stepping_s"]:.1f} | '
                 f'{_fmt(r["memory"]["per_agent_mib"])} | {_fmt(r["memory"]["simulator_peak_mib"])} |'
             )
         lines.append('')
@@ -527,9 +559,12 @@ def markdown(results: dict) -> str:
             first = next(r for r in results['distributed'] if r.get('events'))
             ms_event = 1e3 * first['stepping_wall_s'] / first['events']
             lines += [
-                f"The issue's bound (round trip × messages per event: {b['topic_messages_per_event']:.2f} topic messages and "
-                f'{b["sensing_calls_per_event"]:.2f} sensing calls per event): {1e3 * b["single_s"]:.2f} ms (SingleThreadedExecutor), '
-                f'{1e3 * b["events_s"]:.2f} ms (EventsExecutor); {first["case"]}: {ms_event:.2f} ms per event = '
+                "The issue's bound (round trip × messages per event: "
+                f'{b["topic_messages_per_event"]:.2f} topic messages and '
+                f'{b["sensing_calls_per_event"]:.2f} sensing calls per event): '
+                f'{1e3 * b["single_s"]:.2f} ms (SingleThreadedExecutor), '
+                f'{1e3 * b["events_s"]:.2f} ms (EventsExecutor); {first["case"]}: {ms_event:.2f} ms '
+                'per event = '
                 f'{ms_event / 1e3 / b["single_s"]:.2f}× / {ms_event / 1e3 / b["events_s"]:.2f}×.',
                 '',
             ]
@@ -546,20 +581,24 @@ def markdown(results: dict) -> str:
             )
             ratio = '–' if r['yaml_refused'] else f'{r["yaml_s"] / r["json_s"]:.0f}×'
             lines.append(
-                f'| {r["n"]} | {r["edges"]} | {r["yaml_mib"]:.2f} | {yaml_text} | {r["json_mib"]:.2f} | {r["json_s"]:.3g} | {ratio} |'
+                f'| {r["n"]} | {r["edges"]} | {r["yaml_mib"]:.2f} | {yaml_text} | '
+                f'{r["json_mib"]:.2f} | {r["json_s"]:.3g} | {ratio} |'
             )
         lines.append('')
     if 'cli' in results:
         lines += [*_cli_markdown(results), '']
     if 'startup' in results:
         lines += [
-            '| case | code | runs | `formation run` wall [s] | stepping [s] | outside stepping [s] | outside / stepping | discovery [s] | now / before: wall | now / before: outside |',
+            '| case | code | runs | `formation run` wall [s] | stepping [s] | outside stepping [s] '
+            '| outside / stepping | discovery [s] | now / before: wall | now / before: outside |',
             '|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['startup']['table']:
             lines.append(
-                f'| {r["case"]} | {r["code"]} | {r["runs"]} | {r["total_wall_s"]:.2f} | {r["stepping_s"]:.2f} | {r["outside_stepping_s"]:.2f} | '
-                f'{r["outside_over_stepping"]:.2f} | {_fmt(r["discovery_s"])} | {_fmt(r.get("total_now_over_before"), 2)} | '
+                f'| {r["case"]} | {r["code"]} | {r["runs"]} | {r["total_wall_s"]:.2f} | '
+                f'{r["stepping_s"]:.2f} | {r["outside_stepping_s"]:.2f} | '
+                f'{r["outside_over_stepping"]:.2f} | {_fmt(r["discovery_s"])} | '
+                f'{_fmt(r.get("total_now_over_before"), 2)} | '
                 f'{_fmt(r.get("outside_now_over_before"), 2)} |'
             )
         lines.append('')
@@ -567,12 +606,15 @@ def markdown(results: dict) -> str:
             if r.get('timeline'):
                 marks = ', '.join(f'{name} {at:.2f}' for name, at in r['timeline'].items())
                 lines += [
-                    f'{r["case"]}, {r["code"]}, marks of the run [s since FormationRun.run began, medians]: {marks}.',
+                    f'{r["case"]}, {r["code"]}, marks of the run [s since FormationRun.run began, '
+                    f'medians]: {marks}.',
                     '',
                 ]
     if 'large' in results:
         lines += [
-            '| team | code | discovery | agents/process | processes | ok | `formation run` wall [s] | discovery [s] | step 0 at [s] | steps | ms/step | end [s] | agents RSS [MiB] | simulator RSS [MiB] | equal to the engine |',
+            '| team | code | discovery | agents/process | processes | ok | `formation run` wall '
+            '[s] | discovery [s] | step 0 at [s] | steps | ms/step | end [s] | agents RSS [MiB] | '
+            'simulator RSS [MiB] | equal to the engine |',
             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
         ]
         for r in results['large']:
@@ -580,29 +622,39 @@ def markdown(results: dict) -> str:
             discovery = 'server' if r['variant'] == 'server' else 'simple'
             agents = r['memory_mib'].get('agents', {}).get('sum')
             simulator = r['memory_mib'].get('simulator', {}).get('max')
-            head = f'| {r["case"]} T={r["horizon"]:g} | {code} | {discovery} | {r["per_process"]} | {r["processes"]} |'
+            head = (
+                f'| {r["case"]} T={r["horizon"]:g} | {code} | {discovery} | {r["per_process"]} | '
+                f'{r["processes"]} |'
+            )
             if not r.get('events'):
                 lines.append(
-                    f'{head} no: {r["message"][:120]} | {r["total_wall_s"]:.0f} | | | | | | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | – |'
+                    f'{head} no: {r["message"][:120]} | {r["total_wall_s"]:.0f} | | | | | | '
+                    f'{_fmt(agents, 4)} | {_fmt(simulator, 3)} | – |'
                 )
                 continue
             timeline = r.get('timeline') or {}
             phases = r.get('phases') or {}
             lines.append(
-                f'{head} {"yes" if r["exit_status"] == 0 else "no"} | {r["total_wall_s"]:.1f} | {r["discovery_s"]:.1f} | {_fmt(timeline.get("step0"), 3)} | '
-                f'{r["steps"]} | {1e3 * r["stepping_s"] / r["steps"]:.1f} | {_fmt(phases.get("end"), 3)} | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | '
+                f'{head} {"yes" if r["exit_status"] == 0 else "no"} | {r["total_wall_s"]:.1f} | '
+                f'{r["discovery_s"]:.1f} | {_fmt(timeline.get("step0"), 3)} | '
+                f'{r["steps"]} | {1e3 * r["stepping_s"] / r["steps"]:.1f} | '
+                f'{_fmt(phases.get("end"), 3)} | {_fmt(agents, 4)} | {_fmt(simulator, 3)} | '
                 f'{"yes (max difference 0)" if r.get("equal") else r.get("equal")} |'
             )
         lines.append('')
     if 'long' in results:
         lines += [
-            '| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | simulator peak RSS [MiB] |',
+            '| case | T [s] | ok | events | stepping wall [s] | agent process peak RSS [MiB] | '
+            'simulator peak RSS [MiB] |',
             '|---|---|---|---|---|---|---|',
         ]
         for r in results['long']:
             lines.append(
-                f'| {r["case"]} | {_fmt(r["horizon"])} | {"yes" if r["ok"] else r["message"][:90]} | {r.get("events", "–")} | '
-                f'{_fmt(r.get("stepping_wall_s"))} | {_fmt(r["memory"]["agent_process_peak_mib_median"])} | {_fmt(r["memory"]["simulator_peak_mib"])} |'
+                f'| {r["case"]} | {_fmt(r["horizon"])} | {"yes" if r["ok"] else r["message"][:90]} '
+                f'| {r.get("events", "–")} | '
+                f'{_fmt(r.get("stepping_wall_s"))} | '
+                f'{_fmt(r["memory"]["agent_process_peak_mib_median"])} | '
+                f'{_fmt(r["memory"]["simulator_peak_mib"])} |'
             )
         lines.append('')
     return '\n'.join(lines)

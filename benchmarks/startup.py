@@ -239,7 +239,8 @@ def large_teams(cases: list[dict], *, runs: Path, domains, progress, timeout: fl
                 if variant == 'server':
                     extra.append('--discovery-server')
                 progress(
-                    f'large n={len(scenario.agent_ids)} T={case["horizon"]} {variant} ({case["per_process"]} per process)'
+                    f'large n={len(scenario.agent_ids)} T={case["horizon"]} {variant} '
+                    f'({case["per_process"]} per process)'
                 )
                 row = formation_run(
                     scenario,

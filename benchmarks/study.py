@@ -70,7 +70,8 @@ def main() -> int:
         run_case(case)
     sequential = (time.perf_counter() - started) * len(study.cases) / len(sample)
     print(
-        f'sequential, in this process: {len(sample)} cases, {sequential:.1f} s extrapolated to {len(study.cases)}',
+        f'sequential, in this process: {len(sample)} cases, {sequential:.1f} s extrapolated to '
+        f'{len(study.cases)}',
         flush=True,
     )
     results = []

@@ -125,16 +125,19 @@ def run(sizes: list[int], before: str, repeats: int) -> dict:
 
 def markdown(result: dict) -> str:
     lines = [
-        f'| team | n | YAML [kB] | JSON [kB] | JSON load [s] | YAML load [s] | YAML / JSON | before ({result["before"]}): YAML load [s] '
+        '| team | n | YAML [kB] | JSON [kB] | JSON load [s] | YAML load [s] | YAML / JSON | before '
+        f'({result["before"]}): YAML load [s] '
         '| before: YAML / JSON | libyaml alone [s] | YAML before / now |',
         '|---|---|---|---|---|---|---|---|---|---|---|',
     ]
     for row in result['rows']:
         team = 'ETA-1' if row['dynamics'] == 'single' else 'ETA-2'
         lines.append(
-            f'| {team} | {row["n"]} | {row["yaml_bytes"] / 1e3:.0f} | {row["json_bytes"] / 1e3:.0f} | {row["json_s"]:.3f} '
+            f'| {team} | {row["n"]} | {row["yaml_bytes"] / 1e3:.0f} | {row["json_bytes"] / 1e3:.0f} '
+            f'| {row["json_s"]:.3f} '
             f'| {row["yaml_s"]:.3f} | {row["yaml_s"] / row["json_s"]:.1f}× | {row["before_yaml_s"]:.2f} '
-            f'| {row["before_yaml_s"] / row["before_json_s"]:.1f}× | {row["libyaml_s"]:.3f} | {row["before_yaml_s"] / row["yaml_s"]:.1f}× |'
+            f'| {row["before_yaml_s"] / row["before_json_s"]:.1f}× | {row["libyaml_s"]:.3f} | '
+            f'{row["before_yaml_s"] / row["yaml_s"]:.1f}× |'
         )
     return '\n'.join(lines)
 

@@ -161,14 +161,17 @@ def main() -> None:
     print(f'k1 = {gains.k1:.6f}, k2 = {gains.k2:.6f}, k3 = {gains.k3:.10f}, k4 = {k4:.6f}')
     print(f'P eigenvalues: ρ2(P) = {eig[0]:.6f}, λmax(P) = {eig[1]:.6f}')
     print(
-        f'β_d = {gains.beta_d}; printed bound (2-k4)ρ2(P) = {printed:.6f}; corrected (2-k4)/λmax(P) = {corrected:.6f}'
+        f'β_d = {gains.beta_d}; printed bound (2-k4)ρ2(P) = {printed:.6f}; corrected (2-k4)/λmax(P) '
+        f'= {corrected:.6f}'
     )
     lap_eigs, rates, _ = linear_rates(scenario)
     print(
-        f'L_ω at the formation: eigenvalues {np.round(lap_eigs, 6).tolist()}, mode decay rates {np.round(rates, 6).tolist()}'
+        f'L_ω at the formation: eigenvalues {np.round(lap_eigs, 6).tolist()}, mode decay rates '
+        f'{np.round(rates, 6).tolist()}'
     )
     print(
-        f'slowest linear rate σ = {min(rates):.6f}: formation error ~ e^(-σt), V_d ~ e^(-2σt) = e^(-{2 * min(rates):.6f} t)'
+        f'slowest linear rate σ = {min(rates):.6f}: formation error ~ e^(-σt), V_d ~ e^(-2σt) = '
+        f'e^(-{2 * min(rates):.6f} t)'
     )
 
     paper_k_v = theory.theorem_constants(scenario).paper_chain.k_V
@@ -201,7 +204,8 @@ def main() -> None:
         print(
             '  events per 5 s window: '
             + ', '.join(
-                f'[{s:.0f},{s + 5:.0f}): {sum(1 for ts in record.trigger_times.values() for t in ts if s <= t < s + 5)}'
+                f'[{s:.0f},{s + 5:.0f}): '
+                f'{sum(1 for ts in record.trigger_times.values() for t in ts if s <= t < s + 5)}'
                 for s in np.arange(0.0, args.horizon, 5.0)
             )
         )

@@ -39,18 +39,22 @@ def sections() -> list[tuple[str, str, object]]:
     return [
         (
             '`formation_agent`: node `/agent_<i>/formation_agent`',
-            'An agent (`formation_agent.ros.config`), in `agents.params.yaml` keyed by node name. The gains are '
-            'those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, `k3` for eta2.',
+            'An agent (`formation_agent.ros.config`), in `agents.params.yaml` keyed by node name. '
+            'The gains are '
+            'those of its algorithm: `alpha`, `beta` for eta1; `alpha_d`, `beta_d`, `k1`, `k2`, '
+            '`k3` for eta2.',
             (*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2']),
         ),
         (
             '`formation_sim`: node `/formation_simulator`',
-            'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in `simulator.params.yaml`.',
+            'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in '
+            '`simulator.params.yaml`.',
             SIMULATOR_PARAMETERS,
         ),
         (
             '`formation_coordinator`: node `/formation_coordinator`',
-            'The time keeper of robot runs (`formation_sim.runtime.coordinator`), in `coordinator.params.yaml`.',
+            'The time keeper of robot runs (`formation_sim.runtime.coordinator`), in '
+            '`coordinator.params.yaml`.',
             COORDINATOR_PARAMETERS,
         ),
         (
@@ -60,7 +64,8 @@ def sections() -> list[tuple[str, str, object]]:
         ),
         (
             '`formation_robot`: node `/agent_<i>/simulated_robot`',
-            'A simulated robot (`formation_sim.runtime.robot_node`), in `robots.params.yaml` keyed by node name.',
+            'A simulated robot (`formation_sim.runtime.robot_node`), in `robots.params.yaml` keyed '
+            'by node name.',
             ROBOT_PARAMETERS,
         ),
     ]

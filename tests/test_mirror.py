@@ -117,5 +117,8 @@ def test_the_rule_finds_a_module_without_a_mirror(tmp_path) -> None:
 
 
 def test_the_table_is_read_row_by_row() -> None:
-    text = f'{SECTION}\n\n| module | tested by |\n|---|---|\n| `a.b` | `tests/test_layout.py` (faces) |\n\n## Next\n| `c.d` | x |\n'
+    text = (
+        f'{SECTION}\n\n| module | tested by |\n|---|---|\n| `a.b` | `tests/test_layout.py` (faces) '
+        '|\n\n## Next\n| `c.d` | x |\n'
+    )
     assert table(text) == {'a.b': ' `tests/test_layout.py` (faces) '}

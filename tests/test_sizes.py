@@ -31,7 +31,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/runtime/sim_node.py', 'FormationSimulatorNode'): 344,
     # `ruff format` (the tree was formatted in one commit, every `fmt: skip` removed) took these past
     # the rule: one argument or item per line. Each is to be split along its seams.
-    ('formation_agent/ros/node.py', 'FormationAgentNode'): 333,
     ('formation_sim/analysis/compare.py', 'overlay_figures'): 87,
     ('formation_sim/analysis/figures.py', 'animate'): 116,
     ('formation_sim/analysis/load.py', '_robot_run'): 118,
@@ -41,7 +40,6 @@ ALLOWED: dict[tuple[str, str], int] = {
     ('formation_sim/commands/common.py', 'add_robot_arguments'): 136,
     ('formation_sim/model/generate.py', 'random_scenario'): 83,
     ('formation_sim/model/validate.py', '_check_precision'): 84,
-    ('formation_sim/runtime/coordinator.py', 'FormationCoordinatorNode'): 315,
     ('formation_sim/runtime/launch.py', 'LaunchPlan'): 315,
     ('formation_sim/runtime/orchestrate.py', 'FormationRun'): 347,
     ('formation_sim/runtime/orchestrate.py', 'FormationRun._launch_and_watch'): 86,

@@ -7,8 +7,8 @@
 - `bag_trigger_stamps`: reads a bag's message counts and TriggerInfo stamps per directed edge.
 - `small_disk`: `small_disk(megabytes)` mounts a tmpfs of that size (a disk that fills up);
   root only, skipped otherwise, unmounted after the test.
-- `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker index) and the
-  in-process run of the same scenario, shared by every test that asks for it in a session.
+- `distributed_single_run`: one distributed paper_single run (horizon 2, ROS domain 180 + xdist worker
+  index) and the in-process run of the same scenario, shared by every test that asks for it in a session.
 - `tight_edge`: a paper example whose edge (2, 3) starts with a given fraction of its capacity as slack.
 """
 
@@ -99,7 +99,8 @@ def _tight_edge(name: str, fraction: float):
 
 @pytest.fixture(scope='session')
 def tight_edge():
-    """`tight_edge(name, fraction) -> Scenario`: edge (2, 3) of a paper example with slack `fraction` of its capacity."""
+    """`tight_edge(name, fraction) -> Scenario`: edge (2, 3) of a paper example with slack
+    `fraction` of its capacity."""
     return _tight_edge
 
 
@@ -166,7 +167,8 @@ def _write_run_bag(
     drop: set[tuple[int, int, int]] | None = None,
     asked_horizon: float | None = None,
 ) -> Path:
-    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th trigger).
+    """The bag a distributed run of `record` leaves; `drop` leaves out TriggerInfo (sender, receiver, k-th
+    trigger).
 
     The run ends at record.horizon; `asked_horizon` (default the same) is the horizon it was run
     for, which the scenario topic carries: a later one makes the bag a run stopped early.
@@ -270,7 +272,8 @@ class DistributedRun:
 
 @pytest.fixture(scope='session')
 def distributed_single_run(tmp_path_factory) -> DistributedRun:
-    """paper_single, horizon 2, run once per session (per xdist worker) as ROS processes in domain DISTRIBUTED_DOMAIN."""
+    """paper_single, horizon 2, run once per session (per xdist worker) as ROS processes in domain
+    DISTRIBUTED_DOMAIN."""
     from formation_sim.runtime.orchestrate import FormationRun
     from formation_sim.sim.summary import write_summary
 

@@ -1,4 +1,5 @@
-"""The `formation` command: --version, help, and one exit-code convention for every command (bad input = 2)."""
+"""The `formation` command: --version, help, and one exit-code convention for every command (bad
+input = 2)."""
 
 from __future__ import annotations
 

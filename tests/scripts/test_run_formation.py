@@ -1,4 +1,5 @@
-"""scripts/run_formation.py: runs as the README shows it, with no arguments (the demo's scenario, a new folder)."""
+"""scripts/run_formation.py: runs as the README shows it, with no arguments (the demo's scenario,
+a new folder)."""
 
 from __future__ import annotations
 

@@ -44,7 +44,10 @@ def version_text() -> str:
             versions.append(f'{package} {metadata.version(package)}')
         except metadata.PackageNotFoundError:  # run from a source tree without installing
             versions.append(f'{package} (not installed)')
-    return f'formation {versions[0].split(" ", 1)[1]} ({", ".join(versions)}; Python {platform.python_version()})'
+    return (
+        f'formation {versions[0].split(" ", 1)[1]} ({", ".join(versions)}; Python '
+        f'{platform.python_version()})'
+    )
 
 
 class _Version(argparse.Action):

@@ -195,7 +195,7 @@ def test_the_example_parameter_files_make_the_documented_robot(
 
 
 def test_an_agent_waiting_in_discovery_says_what_it_waits_for_again_and_again(agent_process):
-    from formation_agent.ros.node import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD
+    from formation_agent.ros.discovery import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD
 
     agent = agent_process()  # agent 1, nobody else on its domain: no robot, no coordinator, no agent 2
     deadline = time.monotonic() + DISCOVERY_LOG_AFTER + DISCOVERY_LOG_PERIOD + 30.0

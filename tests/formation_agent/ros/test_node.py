@@ -246,7 +246,7 @@ def test_bad_trigger_information_is_rejected_counted_per_reason_and_never_reache
             expected[reason] = expected.get(reason, 0) + 1
         assert node.rejected == expected
     assert received == [], 'nothing reaches the core before this agent has triggered'
-    assert [(info.sender, info.stamp) for info in node._held] == [(3, 0.0), (2, 0.5)]
+    assert [(info.sender, info.stamp) for info in node.arrivals.held] == [(3, 0.0), (2, 0.5)]
     assert node.counts.info_received == 0
     report = node.report(final=True)
     assert report.rejected == expected and report.rejected_total == 12 and report.final
@@ -264,7 +264,12 @@ def test_fault_injection_drops_everything_at_loss_one(live_node):
     node = live_node(inject_loss=1.0, inject_seed=3)
     for k in range(20):
         node.faults.arrive(_info(stamp=0.1 * k), 2)
-    assert node.faults.dropped == 20 and node.faults.delayed == 0 and node._held == [] and node.rejected == {}
+    assert (
+        node.faults.dropped == 20
+        and node.faults.delayed == 0
+        and node.arrivals.held == []
+        and node.rejected == {}
+    )
 
 
 def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
@@ -273,7 +278,7 @@ def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
     node = live_node(inject_delay_ms=30.0, inject_jitter_ms=20.0)
     for k in range(5):
         node.faults.arrive(_info(stamp=0.1 * k), 2)
-    assert node.faults.delayed == 0 and node._held == []  # still on the wire
+    assert node.faults.delayed == 0 and node.arrivals.held == []  # still on the wire
     executor = SingleThreadedExecutor(context=ros)
     executor.add_node(node)
     try:
@@ -286,7 +291,7 @@ def test_fault_injection_delays_in_order_then_hands_on(ros, live_node):
     assert node.faults.delayed == 5 and node.rejected == {}, (
         'a delayed message out of order would be time_backwards'
     )
-    assert [info.stamp for info in node._held] == [0.1 * k for k in range(5)]
+    assert [info.stamp for info in node.arrivals.held] == [0.1 * k for k in range(5)]
 
 
 def test_injected_faults_are_reproducible_per_seed_and_keep_each_edge_in_order():
@@ -335,28 +340,6 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
                 node.check()
     finally:
         executor.remove_node(node)
-
-
-def test_a_next_trigger_double_precision_cannot_resolve_stops_the_agent_with_its_reason(live_node):
-    """A CrossingError of the core's certified search is named with the agent and the validate rule
-    (as the engine names it), not left to a traceback; main() then stops the agent with status 1."""
-    from formation_agent.core.crossing import CrossingError
-    from formation_agent.ros.node import PredictionError
-
-    class Unresolvable:
-        ready = True
-
-        def next_trigger_time(self, limit):
-            raise CrossingError('no convergence after 100000 certified steps (t=0.5)')
-
-    node = live_node()
-    node.core = Unresolvable()
-    with pytest.raises(
-        PredictionError,
-        match=r'^agent 1: no convergence after 100000 certified steps \(t=0.5\); the rounded '
-        r'prediction no longer resolves its threshold .*rule \[precision\]\)$',
-    ):
-        node.publish_status(step_index=3, ready=True)
 
 
 @pytest.mark.parametrize(

@@ -1,5 +1,6 @@
 """The trigger schedule without a node: lock-step turns, information held for the agent's own
-trigger, the wall clock's one-shot timers (cancelled ones never fire), late information re-based."""
+trigger, the wall clock's one-shot timers (cancelled ones never fire), late information re-based,
+the sensed state checked against the trigger it was asked for."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ import math
 
 import pytest
 
-from formation_agent.ros.stepping import AgentNodeError, TriggerSchedule, rebased
+from formation_agent.ros.reporting import AgentCounts
+from formation_agent.ros.stepping import AgentNodeError, Arrivals, TriggerSchedule, rebased
 from formation_msgs_py.lockstep import Step
 from formation_msgs_py.types import SensedState, TriggerInfo
 
@@ -182,3 +184,68 @@ def test_late_information_is_re_anchored_at_the_own_trigger_by_exact_negation():
         rel_position=(-0.1, 0.30000000000000004),
         rel_velocity=(-1e-17, -0.0),
     )
+
+
+def test_the_sensed_state_must_be_the_agents_own_at_the_trigger_time(schedule):
+    step = Step(index=2, time=0.75, due=(2,))
+    own = SensedState(agent=2, stamp=0.75, rel_positions={1: (0.0, 1.0)})
+    assert schedule.sensed_time(own, step=step) == 0.75
+    with pytest.raises(
+        AgentNodeError, match=r'^agent 2 asked to sense at t=0.75 and got the state of agent 3 at t=0.75$'
+    ):
+        schedule.sensed_time(SensedState(agent=3, stamp=0.75, rel_positions={}), step=step)
+    with pytest.raises(
+        AgentNodeError, match=r'asked to sense at t=0.75 and got the state of agent 2 at t=0.5$'
+    ):
+        schedule.sensed_time(SensedState(agent=2, stamp=0.5, rel_positions={}), step=step)
+    schedule.start(epoch=1000.0)  # the wall clock: the time the world was actually sensed
+    assert schedule.sensed_time(SensedState(agent=2, stamp=0.8125, rel_positions={}), step=step) == 0.8125
+
+
+class Core:
+    def __init__(self) -> None:
+        self.received: list[TriggerInfo] = []
+
+    def receive(self, info: TriggerInfo) -> None:
+        self.received.append(info)
+
+
+def _info(stamp: float, sender: int = 1) -> TriggerInfo:
+    return TriggerInfo(sender=sender, receiver=2, stamp=stamp, control=(0.5, 0.0), rel_position=(1.0, 2.0))
+
+
+def test_information_held_for_the_own_trigger_goes_in_right_after_it_in_arrival_order(schedule):
+    counts, core = AgentCounts(agent_id=2), Core()
+    arrivals = Arrivals(schedule=schedule, counts=counts)
+    schedule.next_time = 0.0  # t^i_1 = 0: due
+    assert not arrivals.arrive(_info(0.0, sender=3), core=core)
+    assert not arrivals.arrive(_info(0.0), core=core)
+    assert core.received == [] and counts.info_received == 0
+    sensed = SensedState(agent=2, stamp=0.0, rel_positions={1: (-1.0, -2.0), 3: (0.0, 0.0)})
+    assert schedule.begin()
+    schedule.triggered(0.0)
+    arrivals.triggered(sensed, core=core)
+    assert core.received == [_info(0.0, sender=3), _info(0.0)], 'as they came, not re-based'
+    assert arrivals.held == [] and arrivals.sensed is sensed
+    assert (counts.info_received, counts.late_infos, counts.report_due) == (2, 0, False)
+    schedule.next_time = 0.5
+    assert arrivals.arrive(_info(0.25), core=core) and core.received[-1] == _info(0.25)
+
+
+def test_wall_clock_information_that_crossed_the_own_trigger_is_re_based_and_counted_late(schedule, clock):
+    counts, core = AgentCounts(agent_id=2), Core()
+    arrivals = Arrivals(schedule=schedule, counts=counts)
+    schedule.start(epoch=clock.now)
+    sensed = SensedState(agent=2, stamp=1.5, rel_positions={1: (0.25, -0.5)})
+    assert schedule.begin()
+    schedule.triggered(1.5)
+    arrivals.triggered(sensed, core=core)
+    schedule.next_time = 2.0
+    assert arrivals.arrive(_info(1.25), core=core)  # sent at 1.25, read after this agent's trigger
+    assert core.received == [rebased(_info(1.25), sensed=sensed, at=1.5)]
+    assert core.received[0].stamp == 1.5 and core.received[0].rel_position == (-0.25, 0.5)
+    assert (counts.info_received, counts.late_infos, counts.report_due) == (1, 1, True)
+    assert arrivals.arrive(_info(1.5), core=core) and core.received[-1] == _info(1.5), (
+        'at the trigger: not late'
+    )
+    assert counts.late_infos == 1

@@ -89,8 +89,8 @@ def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
     gaps = discovery_gaps(node)
     assert 'agents whose triggering-information writer is not matched: 1, 2, 3, 4' in gaps
     assert (
-        'robots whose robot/true_odom writer is not matched (not running, or a best-effort writer): 1, 2, 3, 4'
-        in gaps
+        'robots whose robot/true_odom writer is not matched '
+        '(not running, or a best-effort writer): 1, 2, 3, 4' in gaps
     )
     assert '/formation/robots readers 0/1' not in gaps  # no recorder asked for
     assert not node._connected()
@@ -120,7 +120,7 @@ def test_a_pose_that_is_not_its_message_is_rejected_and_counted_not_sampled(coor
     good = _raw(_odometry(1, 0.4, epoch=node._epoch))
     node._on_pose(good[:40], 1)  # cut short: no Odometry
     node._on_pose(good, 1)
-    assert node.rejected == {'length': 1} and len(node._poses[1]) == 1
+    assert node.rejected == {'length': 1} and len(node.poses.samples[1]) == 1
 
 
 def _report(agent: int, failure: str | None):
@@ -144,10 +144,13 @@ def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator)
 
     node = _running(coordinator, pose_silence=0.5)
     node._running_tick()  # every robot heard: the run goes on
-    node._pose_watch.heard[2] -= 0.6  # robot 2's latest pose came 0.6 s before the others'
+    node.poses.watch.heard[2] -= 0.6  # robot 2's latest pose came 0.6 s before the others'
     with pytest.raises(
         RobotLostError,
-        match=r'^robot 2 lost at t=0\.5\d* \(step 0\): no pose on /agent_2/robot/true_odom for more than 0\.5 s',
+        match=(
+            r'^robot 2 lost at t=0\.5\d* \(step 0\): no pose '
+            r'on /agent_2/robot/true_odom for more than 0\.5 s'
+        ),
     ):
         node._running_tick()
 
@@ -162,7 +165,7 @@ def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_i
     ):
         node._on_report(_report(1, 'the pose of robot 1 is 0.51 s old'))
     node = _running(coordinator, pose_silence=0.5)
-    node._pose_watch.heard[2] -= 0.3  # half the silence: robot 2's poses stopped first
+    node.poses.watch.heard[2] -= 0.3  # half the silence: robot 2's poses stopped first
     with pytest.raises(RobotLostError, match=r'^robot 2 lost at t=0\.5'):
         node._on_report(_report(1, 'the pose of robot 2 is 0.51 s old'))
     node.book.accept_report(decode_report(_report(3, 'the pose of robot 2 is 0.52 s old')))
@@ -212,13 +215,17 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
     node._on_report(
         _report(
             2,
-            'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)',
+            'agent 2: the pose of robot 2 on /agent_2/robot/odom '
+            'is 0.508 s old at t=0.981 (pose_timeout 0.5 s)',
         )
     )
     assert node.failure_info is None
     extra = run_extra(node, node.reached_time)
     assert extra['failure'] is None and extra['after_end'] == {
-        '2': 'agent 2: the pose of robot 2 on /agent_2/robot/odom is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'
+        '2': (
+            'agent 2: the pose of robot 2 on /agent_2/robot/odom '
+            'is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'
+        )
     }
     (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
 

@@ -1,8 +1,9 @@
 """The agent's ROS 2 shell (rclpy): the node and what every node process of the project shares.
 
 - `node`: `FormationAgentNode` (one per agent): the lock-step and wall-clock protocol around the core.
-  Its pieces: `stepping` (`TriggerSchedule`, ROS-free: when the agent triggers), `reporting`
-  (`AgentCounts`, ROS-free: counts, Status, AgentReport) and `outbox` (their writers),
+  Its pieces: `stepping` (`TriggerSchedule`, ROS-free: when the agent triggers; `Arrivals`: what
+  it takes in when), `reporting` (`AgentCounts`, ROS-free: counts, Status, AgentReport) and
+  `outbox` (their writers),
   `discovery` (what discovery waits for; `SimulatorWatch`, the simulator's signs of life),
   `staleness` (ROS-free: a stale pose explained, no command from state older than pose_timeout).
 - `main`: the `formation_agent` command (one or more nodes per process; exit statuses; the zero

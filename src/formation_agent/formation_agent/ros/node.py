@@ -23,8 +23,9 @@ object (`formation_agent.core.eta`).
 Every way out sends the zero command first (`leave`): the final Step, a lost simulator or
 coordinator (DDS liveliness, exit status 3), SIGINT/SIGTERM (130), a stale pose, a freeze
 (`formation_agent.ros.staleness`) or any other error (1); an error raised outside the executor's
-reach stops the robot and the triggers at once (`_fail`).  Bad messages are refused and counted (`formation_agent.ros.inbox`); faults can be
-injected for tests (`formation_agent.ros.faults`); parameters: `formation_agent.ros.config`.
+reach stops the robot and the triggers at once (`_fail`).  Bad messages are refused and counted
+(`formation_agent.ros.inbox`); faults can be injected for tests (`formation_agent.ros.faults`);
+parameters: `formation_agent.ros.config`.
 """
 
 from __future__ import annotations
@@ -39,24 +40,22 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
-from formation_agent.core.crossing import PRECISION_HINT, CrossingError
 from formation_agent.core.eta import make_agent
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
-from formation_agent.ros.discovery import DISCOVERY_LOG_AFTER, DISCOVERY_LOG_PERIOD, Discovery, SimulatorWatch  # noqa: F401 - re-exported for the node's users
+from formation_agent.ros.discovery import Discovery, SimulatorWatch
 from formation_agent.ros.faults import FaultInjection, InjectedFaults
 from formation_agent.ros.inbox import Rejections, read_info
 from formation_agent.ros.outbox import Outbox
-from formation_agent.ros.reporting import AgentCounts
+from formation_agent.ros.reporting import AgentCounts, PredictionError, agent_status
 from formation_agent.ros.sensing import PoseSensing, ServiceSensing
 from formation_agent.ros.staleness import Staleness
-from formation_agent.ros.stepping import AgentNodeError, TriggerSchedule, rebased, refuse_lock_step
+from formation_agent.ros.stepping import AgentNodeError, Arrivals, TriggerSchedule, refuse_lock_step
 from formation_msgs_py.codec import MessageError, decode_step, encode_trigger_info
-from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Step
+from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
-from formation_msgs_py.types import TriggerInfo
 
 __all__ = [
     'DELIVERY_TIMEOUT',
@@ -83,10 +82,6 @@ class PeerLostError(RuntimeError):
     """A peer the agent depends on (the simulator) stopped showing signs of life."""
 
 
-class PredictionError(RuntimeError):
-    """The agent's certified search cannot resolve its next triggering time in double precision."""
-
-
 class _NodeTimers:
     """A node's one-shot timers for `TriggerSchedule` (a timer destroyed once it fired)."""
 
@@ -100,6 +95,42 @@ class _NodeTimers:
         self._node.destroy_timer(handle)
 
 
+def _make_core(config):
+    """The agent's ETA-1 or ETA-2 core (`formation_agent.core.eta`) from its parameters."""
+    return make_agent(
+        agent_id=config.agent_id,
+        neighbours=config.neighbours,
+        delta=config.delta,
+        algorithm=config.algorithm,
+        gains=config.gains,
+    )
+
+
+def _make_faults(node: FormationAgentNode) -> InjectedFaults:
+    """The faults injected on arriving triggering information (parameters inject_*): none by default."""
+    config = node.config
+    injection = FaultInjection(
+        agent_id=config.agent_id,
+        loss=config.inject_loss,
+        delay_ms=config.inject_delay_ms,
+        jitter_ms=config.inject_jitter_ms,
+        seed=config.inject_seed,
+    )
+    return InjectedFaults(node, injection, hand_on=node._on_info, changed=node.counts.changed)
+
+
+def _make_staleness(node: FormationAgentNode) -> Staleness | None:
+    """Sensing from poses: why a pose is stale, and no command after a freeze (None otherwise)."""
+    if node.config.sensing != 'poses':
+        return None
+    return Staleness(
+        book=node.sensing.book,
+        period=1.0 / node.config.command_rate,
+        count_writers=node.count_publishers,
+        schedule=node.schedule,
+    )
+
+
 def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
     """Where the agent's commands go (parameter `robot`): a simulator's plant, or a robot whose
     commands the agent's `Staleness` guards."""
@@ -108,7 +139,8 @@ def _make_output(node: FormationAgentNode) -> PlantOutput | RobotOutput:
         return PlantOutput(node, config)
     if not config.double and math.isfinite(config.limits.linear_acceleration):
         node.get_logger().warning(
-            'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at triggers): ignored'
+            'max_linear_acceleration applies to ETA-2 only (ETA-1 velocity commands change stepwise at '
+            'triggers): ignored'
         )
     return RobotOutput(node, config, node.sensing, on_failure=node._fail, guard=node.staleness.check_command)
 
@@ -158,41 +190,19 @@ class FormationAgentNode(Node):
         config = self.config = read_config(self)
         self.agent_id = config.agent_id
         self.neighbour_ids = config.neighbour_ids
-        self.core = (
-            core
-            if core is not None
-            else make_agent(
-                agent_id=config.agent_id,
-                neighbours=config.neighbours,
-                delta=config.delta,
-                algorithm=config.algorithm,
-                gains=config.gains,
-            )
-        )
+        self.core = core if core is not None else _make_core(config)
         self.counts = AgentCounts(agent_id=config.agent_id)
         self.schedule = TriggerSchedule(agent_id=config.agent_id, timers=_NodeTimers(self))
+        self.arrivals = Arrivals(schedule=self.schedule, counts=self.counts)
         self.reject = Rejections(self.get_logger(), changed=self.counts.changed)
-        injection = FaultInjection(
-            agent_id=config.agent_id,
-            loss=config.inject_loss,
-            delay_ms=config.inject_delay_ms,
-            jitter_ms=config.inject_jitter_ms,
-            seed=config.inject_seed,
-        )
-        self.faults = InjectedFaults(self, injection, hand_on=self._on_info, changed=self.counts.changed)
+        self.faults = _make_faults(self)
         self.sensing = (
             PoseSensing(self, config, reject=self.reject)
             if config.sensing == 'poses'
             else ServiceSensing(self)
         )
-        self.staleness = None
-        if config.sensing == 'poses':
-            self.staleness = Staleness(
-                book=self.sensing.book,
-                period=1.0 / config.command_rate,
-                count_writers=self.count_publishers,
-                schedule=self.schedule,
-            )
+        self.staleness = _make_staleness(self)
+        if self.staleness is not None:
             self._writer_looks = self.create_timer(
                 WRITER_LOOK_PERIOD, lambda: self.staleness.look(time.time())
             )
@@ -201,8 +211,6 @@ class FormationAgentNode(Node):
         self.step: Step | None = None
         self.finished = False
         self.failure: Exception | None = None
-        self._held: list[TriggerInfo] = []  # information stamped at a time this agent is due
-        self._sensed = None  # the last SensedState, to re-base late information
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self.simulator = SimulatorWatch(config.agent_id)
         self._discovery: Discovery | None = Discovery(self)
@@ -317,25 +325,16 @@ class FormationAgentNode(Node):
             self.schedule.abandon()
             return
         sensed = sensed_getter()
-        # Lock-step: the step's exact time; wall clock: when the world was actually sensed.
-        t = sensed.stamp if self.schedule.wall_clock else self.step.time
-        if sensed.agent != self.agent_id or sensed.stamp != t:
-            raise AgentNodeError(
-                f'agent {self.agent_id} asked to sense at t={t!r} and got the state of agent '
-                f'{sensed.agent} at t={sensed.stamp!r}'
-            )
+        t = self.schedule.sensed_time(sensed, step=self.step)
         out = self.core.trigger(t, sensed)
         self.schedule.triggered(t)
-        self._sensed = sensed
         self.counts.triggered(t)
         self.output.publish(t, tuple(float(v) for v in out.control), sensed)
         self.counts.commands_sent += 1
         for info in out.infos:
             self.outbox.publish(self.info_publishers[info.receiver], encode_trigger_info(info))
             self.counts.info_sent += 1
-        held, self._held = self._held, []
-        for info in held:
-            self._receive(info)
+        self.arrivals.triggered(sensed, core=self.core)  # what waited for this trigger
         self._knowledge_changed()
 
     def _knowledge_changed(self) -> None:
@@ -366,23 +365,11 @@ class FormationAgentNode(Node):
             heard=self.schedule.heard,
             reject=self.reject,
         )
-        if info is None:
-            return
-        if self.schedule.holds(info.stamp):
-            # This agent triggers at that instant itself: its own sensing comes first, then the
-            # neighbours' information (DESIGN.md, "Time and exactness"); and its status must not
-            # report the step before it has triggered.
-            self._held.append(info)
-            return
-        self._receive(info)
-        self._knowledge_changed()  # as on a robot: every piece of news re-plans at once
-
-    def _receive(self, info: TriggerInfo) -> None:
-        late = info.stamp < self.schedule.last_trigger  # only on the wall clock: it crossed our trigger
-        if late:
-            info = rebased(info, sensed=self._sensed, at=self.schedule.last_trigger)
-        self.core.receive(info)
-        self.counts.received(late=late)
+        # Held while this agent triggers at that instant itself: its own sensing comes first, then
+        # the neighbours' information (DESIGN.md, "Time and exactness"), and its status must not
+        # report the step before it has triggered.
+        if info is not None and self.arrivals.arrive(info, core=self.core):
+            self._knowledge_changed()  # as on a robot: every piece of news re-plans at once
 
     # -- status -----------------------------------------------------------------------------------
 
@@ -412,19 +399,13 @@ class FormationAgentNode(Node):
 
     def publish_status(self, *, step_index: int, ready: bool) -> None:
         """The agent's Status at `step_index` (DISCOVERY_STEP: its readiness during discovery)."""
-        if step_index != DISCOVERY_STEP:
-            # A next time is only defined once the agent has triggered and heard every neighbour.
-            ready = bool(self.core.ready)
-            if ready:
-                try:
-                    self.schedule.next_time = float(self.core.next_trigger_time(self.config.horizon))
-                except CrossingError as error:
-                    raise PredictionError(f'agent {self.agent_id}: {error}; {PRECISION_HINT}') from error
-        status = self.counts.status(
+        status = agent_status(
+            self.counts,
+            schedule=self.schedule,
+            core=self.core,
             step_index=step_index,
             ready=ready,
-            next_time=self.schedule.next_time,
-            planned=self.schedule.planned,
+            horizon=self.config.horizon,
         )
         self.outbox.publish_status(status)
 
@@ -464,7 +445,8 @@ class FormationAgentNode(Node):
         self.outbox.wait_for_delivery(deadline, self.output.publisher)
 
 
-if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so instead of doing nothing
+if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so, not nothing
     raise SystemExit(
-        'formation_agent.ros.node holds the node; the command is `python -m formation_agent.ros.main` (formation_agent)'
+        'formation_agent.ros.node holds the node; the command is `python -m formation_agent.ros.main` '
+        '(formation_agent)'
     )

@@ -3,15 +3,21 @@
 The counts are totals since the start (docs/MESSAGES.md, "Status" and "AgentReport"): the
 protocol's (triggering information sent and received, commands, triggers) and what a recorder
 must hold (`published`: messages per topic from step 0 on, when every listener is matched for
-sure — the simulator starts step 0 only once every agent has matched all of them).
+sure — the simulator starts step 0 only once every agent has matched all of them).  A Status
+carries the core's next triggering time (`agent_status`).
 """
 
 from __future__ import annotations
 
 import math
 
+from formation_agent.core.crossing import PRECISION_HINT, CrossingError
 from formation_agent.ros.stepping import AgentNodeError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
+
+
+class PredictionError(RuntimeError):
+    """The agent's certified search cannot resolve its next triggering time in double precision."""
 
 
 class AgentCounts:
@@ -100,3 +106,25 @@ class AgentCounts:
             failure=failure,
             published=published,
         )
+
+
+def agent_status(
+    counts: AgentCounts, *, schedule, core, step_index: int, ready: bool, horizon: float
+) -> Status:
+    """The agent's Status at `step_index` (`schedule`: its `TriggerSchedule`).
+
+    During discovery (DISCOVERY_STEP) `ready` is its readiness, as given.  After it the agent is
+    ready once its core is (it has triggered and heard every neighbour), and only then is a next
+    triggering time defined: the core's, within `horizon`, kept in `schedule.next_time`
+    (PredictionError, naming the agent and the rule, when the certified search cannot resolve it).
+    """
+    if step_index != DISCOVERY_STEP:
+        ready = bool(core.ready)
+        if ready:
+            try:
+                schedule.next_time = float(core.next_trigger_time(horizon))
+            except CrossingError as error:
+                raise PredictionError(f'agent {counts.agent_id}: {error}; {PRECISION_HINT}') from error
+    return counts.status(
+        step_index=step_index, ready=ready, next_time=schedule.next_time, planned=schedule.planned
+    )

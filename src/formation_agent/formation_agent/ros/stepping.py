@@ -7,7 +7,7 @@ clock (`start`) a one-shot timer fires at epoch + t^i_{k+1} (`arm`), through the
 (`Timers`: any object that arms and cancels one-shot callbacks).  Information that arrives for an
 instant the agent is due at waits for its own trigger (`holds`; docs/DESIGN.md, "Time and
 exactness"); wall-clock information that crossed the agent's own later trigger is re-anchored at
-it (`rebased`).
+it (`rebased`).  `Arrivals` takes accepted information into the core by these rules.
 """
 
 from __future__ import annotations
@@ -91,6 +91,18 @@ class TriggerSchedule:
         if any(self.heard.get(j) != step.time for j in self.due_neighbours):
             return False
         return all(stamp <= step.time for stamp in self.heard.values())
+
+    def sensed_time(self, sensed: SensedState, *, step: Step) -> float:
+        """The time of the trigger in progress, for which `sensed` came: in lock-step `step`'s
+        exact time, on the wall clock when the world was actually sensed; AgentNodeError if
+        `sensed` is another agent's state or of another time."""
+        t = sensed.stamp if self.wall_clock else step.time
+        if sensed.agent != self.agent_id or sensed.stamp != t:
+            raise AgentNodeError(
+                f'agent {self.agent_id} asked to sense at t={t!r} and got the state of agent '
+                f'{sensed.agent} at t={sensed.stamp!r}'
+            )
+        return t
 
     def holds(self, stamp: float) -> bool:
         """Whether information stamped `stamp` must wait for this agent's own trigger: one is in
@@ -209,3 +221,42 @@ def rebased(info: TriggerInfo, *, sensed: SensedState, at: float) -> TriggerInfo
         rel_position=tuple(-v for v in sensed.rel_positions[j]),  # x_j - x_i, exact negation
         rel_velocity=rel_velocity,
     )
+
+
+class Arrivals:
+    """Accepted triggering information on its way into the agent's core (`core.receive`).
+
+    Information the agent must not take before its own trigger (`TriggerSchedule.holds`) is held
+    and goes in right after that trigger (`triggered`); on the wall clock, information stamped
+    before the agent's last trigger crossed it and is re-anchored there (`rebased`, on what the
+    agent sensed then).  Each piece that goes in is counted (`counts.received(late=...)`).
+    """
+
+    def __init__(self, *, schedule: TriggerSchedule, counts) -> None:
+        self._schedule = schedule
+        self._counts = counts
+        self.held: list[TriggerInfo] = []  # information stamped at a time this agent is due
+        self.sensed: SensedState | None = None  # the last SensedState, to re-base late information
+
+    def arrive(self, info: TriggerInfo, *, core) -> bool:
+        """Take `info` into `core` now, or hold it for the agent's own trigger (False)."""
+        if self._schedule.holds(info.stamp):
+            self.held.append(info)
+            return False
+        self._receive(info, core)
+        return True
+
+    def triggered(self, sensed: SensedState, *, core) -> None:
+        """The agent triggered on `sensed`: what was held for its trigger goes into `core` now."""
+        self.sensed = sensed
+        held, self.held = self.held, []
+        for info in held:
+            self._receive(info, core)
+
+    def _receive(self, info: TriggerInfo, core) -> None:
+        at = self._schedule.last_trigger
+        late = info.stamp < at  # only on the wall clock: it crossed this agent's trigger
+        if late:
+            info = rebased(info, sensed=self.sensed, at=at)
+        core.receive(info)
+        self._counts.received(late=late)

@@ -38,11 +38,9 @@ import math
 import sys
 import time
 import traceback
-from collections import deque
 from collections.abc import Sequence
 from typing import NoReturn
 
-import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
@@ -86,14 +84,13 @@ from formation_sim.runtime.run_book import (
     AgentFailedError,
     AgentLostError,
     ConnectivityLostError,
-    CoordinatorError,
     DiscoveryError,
     InitialConditionError,
-    PoseWatch,
     RecorderLostError,
     RobotLostError,
     ids_text,
 )
+from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses
 from formation_sim.runtime.run_end import (
     collect_final_reports,
     stop_agents,
@@ -105,21 +102,12 @@ from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_P
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_sim.sim.robots import (
-    POSES_AFTER_END,
-    ROBOT_MODELS,
-    PoseTrack,
-    RobotSample,
-    poses_for_end,
-    sample_from_fields,
-    sample_times,
-    trajectory_samples,
-)
+from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
 
 COORDINATOR_FILE = (
     'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 )
-TRAJECTORY_SOURCES = ('true_odom', 'odom', 'pose')  # which robot topic the formation is measured on
+TRAJECTORY_SOURCES = tuple(TRAJECTORY_TOPICS)  # which robot topic the formation is measured on
 
 EXIT_FAILED = 1
 EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
@@ -129,7 +117,6 @@ EXIT_INTERRUPTED = 130
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
 # any reliable pose writer matches (robots' drivers keep ROS's defaults).
 POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
-EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)
 
 
 COORDINATOR_PARAMETERS = (
@@ -146,14 +133,20 @@ COORDINATOR_PARAMETERS = (
         type=DOUBLE,
         default=0.1,
         low=0.0,
-        description="unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the scenario's positions are those of the control points)",
+        description=(
+            'unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the '
+            "scenario's positions are those of the control points)"
+        ),
     ),
     ParameterSpec(
         name='robot_trajectory',
         type=STRING,
         default='true_odom',
         choices=TRAJECTORY_SOURCES,
-        description="the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom or pose the agents read",
+        description=(
+            "the topic the formation is measured on: a simulated robot's noise-free true_odom, or the odom "
+            'or pose the agents read'
+        ),
     ),
     ParameterSpec(
         name='pose_silence',
@@ -163,7 +156,10 @@ COORDINATOR_PARAMETERS = (
         low_open=True,
         high=math.inf,
         high_open=True,
-        description="a robot whose poses on robot_trajectory stop for this long while the other robots' still come is lost: the run stops at once [s] (formation run: the agents' pose_timeout)",
+        description=(
+            "a robot whose poses on robot_trajectory stop for this long while the other robots' still come "
+            "is lost: the run stops at once [s] (formation run: the agents' pose_timeout)"
+        ),
     ),
     ParameterSpec(
         name='backend',
@@ -219,8 +215,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
     PARAMS_FILE = COORDINATOR_FILE
     DESCRIPTION = (
         'The time keeper of a robot run (formation run --backend <robot kind>|external): opens the run '
-        'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon or on a '
-        'fault, and writes summary.json and graph.json into out_dir.'
+        'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon '
+        'or on a fault, and writes summary.json and graph.json into out_dir.'
     )
 
     def __init__(
@@ -246,7 +242,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
             problems += robot_kind(model).placement_problems(dimension=scenario.dimension, geometry=geometry)
         if 'sample_period' in values and not values['sample_period'] > 0.0:
             problems.append(
-                f"parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its grid), got {values['sample_period']!r}"
+                "parameter 'sample_period' (double) must be > 0 on robots (the poses are sampled on its "
+                f'grid), got {values["sample_period"]!r}'
             )
         return problems
 
@@ -275,13 +272,19 @@ class FormationCoordinatorNode(TimeKeeperNode):
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)
-        topic, kind, self._pose_fields = {
-            'true_odom': (robot_true_odom_topic, Odometry, odometry_fields),
-            'odom': (robot_odom_topic, Odometry, odometry_fields),
-            'pose': (robot_pose_topic, PoseStamped, pose_stamped_fields),
-        }[self.trajectory_source]
-        self._poses: dict[int, list[RobotSample]] = {i: [] for i in self.scenario.agent_ids}
-        self._early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.scenario.agent_ids}
+        topic = TRAJECTORY_TOPICS[self.trajectory_source]
+        kind, self._pose_fields = (
+            (PoseStamped, pose_stamped_fields)
+            if self.trajectory_source == 'pose'
+            else (Odometry, odometry_fields)
+        )
+        self.poses = RobotPoses(
+            self.scenario.agent_ids,
+            model=self.robot_model,
+            dimension=self.scenario.dimension,
+            control_point_distance=self.control_point_distance,
+            silence=self.parameter_values['pose_silence'],
+        )
         # Raw: the poses' fields read from their bytes (formation_msgs_py.cdr), not through rclpy's
         # Python messages, which were most of the coordinator's CPU (400 Odometry a second for 4
         # robots); the same floats as `formation analyze` reads from the bag (sim.robots.sample_from_fields).
@@ -292,7 +295,6 @@ class FormationCoordinatorNode(TimeKeeperNode):
             for i in self.scenario.agent_ids
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
-        self._pose_watch = PoseWatch(self.scenario.agent_ids, silence=self.parameter_values['pose_silence'])
         self._horizon_timer = None
         self.measured_start: MeasuredStart | None = None
 
@@ -313,17 +315,16 @@ class FormationCoordinatorNode(TimeKeeperNode):
         }
 
     def _world_gaps(self) -> list[str]:
-        topic = {'true_odom': 'robot/true_odom', 'odom': 'robot/odom', 'pose': 'robot/pose'}[
-            self.trajectory_source
-        ]
+        topic = f'robot/{self.trajectory_source}'
         # The coordinator reads reliable, as the recorder does, so that both see every pose.
         missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
         if missing:
             return [
-                f'robots whose {topic} writer is not matched (not running, or a best-effort writer): {ids_text(missing)}'
+                f'robots whose {topic} writer is not matched (not running, or a best-effort writer): '
+                f'{ids_text(missing)}'
             ]
         # The first sample (t = 0) needs each robot's pose from before it.
-        silent = [i for i, early in self._early.items() if not early]
+        silent = self.poses.unheard()
         if silent:
             return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}']
         # The recorder too, or its bag would lack a robot's pose before t = 0 (it matched late).
@@ -339,7 +340,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def _check_start(self) -> str:
         """Before step 0: where the robots are (each one's latest pose, its control point) must meet
         the initial condition (initial) on every edge, or the run does not start: nothing was sent."""
-        latest = [self._sample(self._early[i][-1]).position for i in self.scenario.agent_ids]
+        latest = self.poses.start_positions(epoch=self._epoch)
         self.measured_start = start = check_measured_start(self.scenario, latest)
         if not start.ok:
             first = start.breaches[0]
@@ -357,11 +358,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._epoch = time.time()
         self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
         self._publish(self._step_pub, encode_step(self.step))
-        for agent, early in self._early.items():
-            self._poses[agent] = [self._sample(msg) for msg in early]
-        now = time.monotonic()
-        for agent in self._poses:  # each robot was heard (discovery waited for its first pose)
-            self._pose_watch.note(agent, now=now, t=0.0)
+        # Each robot was heard (discovery waited for its first pose).
+        self.poses.begin(epoch=self._epoch, now=time.monotonic())
         # The final Step at the horizon on the dot, not at the next tick: an agent whose last
         # trigger is due just before it must not wait for the run's end.
         self._horizon_timer = self.create_timer(
@@ -378,25 +376,21 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def _running_tick(self) -> None:
         t = self.reached_time
         self._check_robots()
-        latest = [samples[-1] if samples else None for samples in self._poses.values()]
-        if all(sample is not None for sample in latest):
-            self.book.check_connectivity(t, np.array([sample.position for sample in latest]))
+        if (latest := self.poses.latest_positions()) is not None:
+            self.book.check_connectivity(t, latest)
         if t >= self.horizon:
             self._end_at_horizon()
 
     def _check_robots(self, *, fraction: float = 1.0) -> None:
         """Stop the run at once when a robot's poses stopped (RobotLostError, exit status 3)."""
-        silent = self._pose_watch.silent(time.monotonic(), fraction=fraction)
+        silent = self.poses.watch.silent(time.monotonic(), fraction=fraction)
         if silent:
-            raise self._pose_watch.error(
+            raise self.poses.watch.error(
                 silent, now=time.monotonic(), where=self._where(), topics=self._pose_topics(silent)
             )
 
     def _pose_topics(self, robots: list[int]) -> str:
-        topic = {'true_odom': robot_true_odom_topic, 'odom': robot_odom_topic, 'pose': robot_pose_topic}[
-            self.trajectory_source
-        ]
-        return ', '.join(topic(i) for i in robots)
+        return ', '.join(TRAJECTORY_TOPICS[self.trajectory_source](i) for i in robots)
 
     def _agent_failed(self, agent: int, failure: str) -> None:
         """An agent stopped on an error: the run stops at once.  The first cause is a robot whose
@@ -432,36 +426,26 @@ class FormationCoordinatorNode(TimeKeeperNode):
         end = self.reached_time
         # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
         lost = (
-            set(self.failure_info['agents'])
+            self.failure_info['agents']
             if self.failure_info and self.failure_info['kind'] == 'robot_lost'
-            else set()
+            else []
         )
-        lost |= set(self._pose_watch.silent(time.monotonic(), fraction=0.5))
-        waiting = [s for i, s in self._poses.items() if i not in lost]
-        while time.monotonic() < deadline and any(not s or s[-1].time < end for s in waiting):
+        waiting = self.poses.expected(lost=lost, now=time.monotonic())
+        while time.monotonic() < deadline and self.poses.behind(waiting, end):
             executor.spin_once(timeout_sec=0.02)
 
     def flush(self) -> None:
         """The robots' world publishes nothing that could wait."""
 
     def record(self) -> RunRecord:
-        """The run as the coordinator saw it (triggers from the agents' messages, formation from the poses)."""
+        """The run as the coordinator saw it (triggers from the agents' messages, formation from the
+        poses)."""
         end = self.reached_time
         trigger_times = {
             i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()
         }
         times = sample_times(end, self.sample_period, [t for ts in trigger_times.values() for t in ts])
-        silent = [i for i, samples in self._poses.items() if not samples]
-        if silent:
-            raise CoordinatorError(
-                f'robots {silent} published no pose on their {self.trajectory_source} topic: the formation cannot be summarised'
-            )
-        # As `formation analyze` reads the bag: not long past the end, not a robot silent at it.
-        silence = self.robots['pose_silence']
-        tracks = {
-            i: PoseTrack.from_samples(poses_for_end(samples, end, silence=silence))
-            for i, samples in self._poses.items()
-        }
+        tracks = self.poses.tracks(end, source=self.trajectory_source)
         positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
         return RunRecord(
             scenario=self.scenario,
@@ -506,22 +490,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
         except MessageError as error:
             self._reject(self._pose_subs[agent].topic_name, error.reason, str(error))
             return
-        if self.step is None:  # before t = 0: the last few, for the first sample
-            self._early[agent].append(fields)
-            return
-        sample = self._sample(fields)
-        self._poses[agent].append(sample)
-        self._pose_watch.note(agent, now=time.monotonic(), t=sample.time)
-
-    def _sample(self, fields: tuple) -> RobotSample:
-        """A pose's fields (`_pose_fields`: stamp, pose, and the twist of odometry) as a sample."""
-        return sample_from_fields(
-            *fields,
-            model=self.robot_model,
-            dimension=self.scenario.dimension,
-            control_point_distance=self.control_point_distance,
-            epoch=self._epoch,
-        )
+        # Before t = 0 (no epoch yet): kept, the last few, for the first sample.
+        self.poses.note(agent, fields, epoch=None if self.step is None else self._epoch, now=time.monotonic())
 
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
@@ -537,7 +507,8 @@ def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
         + f'\n\nExample: {node_class.COMMAND} --ros-args --params-file DIR/{node_class.PARAMS_FILE} '
         '(formation params SCENARIO --out DIR writes it)\n'
         'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
-        "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition (nothing was sent); 130 interrupted.",
+        "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition "
+        '(nothing was sent); 130 interrupted.',
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
 
