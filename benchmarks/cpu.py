@@ -40,7 +40,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from startup import Baseline, command  # noqa: E402
+from startup import Baseline, command  # noqa: E402 - after the sys.path entry above
 
 BASELINE_REV = 'da90a99'  # main when issue 19's CPU work began
 SCENARIO = 'robots_square'

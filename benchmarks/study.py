@@ -26,9 +26,9 @@ HERE = Path(__file__).resolve().parent
 # This folder holds benchmarks/distributed.py, which would shadow the `distributed` package.
 sys.path[:] = [entry for entry in sys.path if Path(entry or '.').resolve() != HERE]
 
-from formation_sim.study.case import run_case  # noqa: E402
-from formation_sim.study.runner import run_study  # noqa: E402
-from formation_sim.study.spec import build_study  # noqa: E402
+from formation_sim.study.case import run_case  # noqa: E402 - after the sys.path fix above
+from formation_sim.study.runner import run_study  # noqa: E402 - after the sys.path fix above
+from formation_sim.study.spec import build_study  # noqa: E402 - after the sys.path fix above
 
 
 def spec(cases: int) -> dict:

@@ -111,7 +111,8 @@ def test_a_recorder_lost_stops_the_run_after_the_grace_and_a_lapsed_lease_is_for
     error = recorders.lost_error(5.6, started=True, where='at t=2.0 (step 7)')
     assert isinstance(error, RecorderLostError)
     assert str(error) == (
-        'the recorder lost at t=2.0 (step 7): no sign of life for 1.0 s (DDS liveliness lease: stopped or frozen?); '
+        'the recorder lost at t=2.0 (step 7): no sign of life '
+        'for 1.0 s (DDS liveliness lease: stopped or frozen?); '
         'what it did not acknowledge is overwritten, so the run stops'
     )
     assert recorders.lost_error(9.0, started=False, where='during discovery') is None  # it may come back
@@ -213,7 +214,8 @@ def test_a_robot_silent_while_the_others_publish_is_lost_and_a_coordinator_that_
     error = watch.error([3], now=100.6, where='at t=1.6', topics='/agent_3/robot/true_odom')
     assert isinstance(error, RobotLostError) and error.kind == 'robot_lost' and error.agents == [3]
     assert str(error).startswith(
-        'robot 3 lost at t=1.6: no pose on /agent_3/robot/true_odom for more than 0.5 s, while the other robots still published'
+        'robot 3 lost at t=1.6: no pose on /agent_3/robot/true_odom '
+        'for more than 0.5 s, while the other robots still published'
     )
     assert 'robot 3 at t=1.000 (0.60 s before)' in str(error)
     # A coordinator not scheduled for a while finds every robot equally old: none is lost ...
@@ -235,3 +237,14 @@ def test_failures_are_the_agents_whose_final_report_names_an_error():
     book.accept_report(AgentReport(agent=2, final=False, rejected={}, failure='not final yet'))
     book.accept_report(AgentReport(agent=3, final=True, rejected={}))
     assert book.failures() == {1: 'the pose of robot 2 is 0.6 s old'}
+
+
+def test_lock_step_waits_for_a_recorder_more_than_the_lag_behind_or_not_heard_yet():
+    recorders = RecorderBook()
+    assert not recorders.behind(9, recorders=0, lag=2)  # no recorder: never
+    assert recorders.behind(0, recorders=1, lag=2)  # its first heartbeat not in yet
+    recorders.accept_heartbeat('{"version": 1, "recorder": "/a", "step": 4}')
+    assert not recorders.behind(6, recorders=1, lag=2) and recorders.behind(7, recorders=1, lag=2)
+    assert recorders.behind(5, recorders=2, lag=2)  # the second recorder not heard yet
+    recorders.accept_heartbeat('{"version": 1, "recorder": "/b", "step": 2}')
+    assert recorders.behind(5, recorders=2, lag=2) and not recorders.behind(4, recorders=2, lag=2)

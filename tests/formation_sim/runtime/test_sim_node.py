@@ -67,7 +67,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     node = simulator()
     scenario = node.scenario
     x = np.array(scenario.positions, dtype=float)
-    node._check_connectivity(0.0, x)  # the initial state: every edge shorter than Δ
+    node._on_sample(0.0, x, None)  # the initial state: every edge shorter than Δ
     node.agents[3].status = Status(
         agent=3,
         step_index=4,
@@ -81,7 +81,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     k2, k3 = scenario.index(2), scenario.index(3)
     x[k3] = x[k2] - np.array([0.0, scenario.delta])  # edge (2, 3) exactly at Δ (not < Δ), the others short
     with pytest.raises(ConnectivityLostError) as caught:
-        node._check_connectivity(1.25, x)
+        node._on_sample(1.25, x, None)
     error = caught.value
     assert (error.time, error.edge, error.length) == (1.25, (2, 3), scenario.delta)
     assert 'edge (2, 3) reached the communication radius at t=1.25' in str(error)

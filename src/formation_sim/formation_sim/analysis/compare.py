@@ -193,7 +193,8 @@ def compare_trajectories(a: RunData, b: RunData) -> TrajectoryDeviation | None:
     common = common[(common >= start) & (common <= end)]
     if common.size == 0:
         raise CompareError(
-            f'the runs share no time span ({a.label}: [{a.times[0]}, {a.times[-1]}], {b.label}: [{b.times[0]}, {b.times[-1]}])'
+            f'the runs share no time span ({a.label}: [{a.times[0]}, {a.times[-1]}], {b.label}: '
+            f'[{b.times[0]}, {b.times[-1]}])'
         )
     xa = interpolate(a.times, a.positions, common)
     xb = interpolate(b.times, b.positions, common)
@@ -219,7 +220,8 @@ def _check_comparable(a: RunData, b: RunData) -> list[str]:
         notes.append(f'different scenario names: {a.scenario!r} and {b.scenario!r}')
     if a.horizon != b.horizon:
         notes.append(
-            f'different horizons: {a.horizon!r} and {b.horizon!r}; trajectories are compared on the common span'
+            f'different horizons: {a.horizon!r} and {b.horizon!r}; trajectories are compared on the '
+            'common span'
         )
     edges_a = [(i, j) for i, j, _ in a.edges]
     edges_b = [(i, j) for i, j, _ in b.edges]
@@ -257,7 +259,8 @@ def compare_runs(a: RunData, b: RunData) -> dict[str, Any]:
             'notes': notes,
             'events_equal': not mismatched and a.total_events == b.total_events,
             'count_mismatches': [
-                f'agent {entry.agent}: {entry.count_a} events in A, {entry.count_b} in B (compared the first {entry.compared})'
+                f'agent {entry.agent}: {entry.count_a} events in A, {entry.count_b} in B (compared the '
+                f'first {entry.compared})'
                 for entry in mismatched
             ],
             'triggers': [
@@ -299,7 +302,8 @@ def render_markdown(report: dict[str, Any]) -> str:
         '|---|---|---|',
         f'| source | {a["source"]} | {b["source"]} |',
         f'| scenario | {a["scenario"]} | {b["scenario"]} |',
-        f'| mode | {a["mode"]}{" (period " + cell(a["period"]) + ")" if a["period"] else ""} | {b["mode"]}{" (period " + cell(b["period"]) + ")" if b["period"] else ""} |',
+        f'| mode | {a["mode"]}{" (period " + cell(a["period"]) + ")" if a["period"] else ""} | '
+        f'{b["mode"]}{" (period " + cell(b["period"]) + ")" if b["period"] else ""} |',
         f'| clock | {cell(a["clock"])} | {cell(b["clock"])} |',
         f'| horizon [s] | {cell(a["horizon"])} | {cell(b["horizon"])} |',
         f'| events | {a["total_events"]} | {b["total_events"]} |',
@@ -324,9 +328,10 @@ def render_markdown(report: dict[str, Any]) -> str:
         '|---|---|---|---|---|---|',
     ]
     for entry in report['triggers']:
+        first = entry['first_difference']
         lines.append(
             f'| {entry["agent"]} | {entry["events_a"]} | {entry["events_b"]} | {entry["compared"]} | '
-            f'{cell(entry["max_deviation"])} | {cell(entry["first_difference"]) if entry["first_difference"] is not None else "none (identical)"} |'
+            f'{cell(entry["max_deviation"])} | {cell(first) if first is not None else "none (identical)"} |'
         )
     lines += ['', '## Trajectories', '']
     trajectory = report['trajectory']
@@ -334,7 +339,8 @@ def render_markdown(report: dict[str, Any]) -> str:
         lines.append('Not compared: a run has no trajectory (summary.json without trajectory/).')
     else:
         lines.append(
-            f"Largest distance between the two runs' positions of an agent: {cell(trajectory['max_deviation'])} "
+            "Largest distance between the two runs' positions of an agent: "
+            f'{cell(trajectory["max_deviation"])} '
             f'at t = {cell(trajectory["at_time"])} s, over {trajectory["common_times"]} common times.'
         )
         lines += ['', '| agent | max deviation |', '|---|---|']
@@ -347,39 +353,42 @@ def render_markdown(report: dict[str, Any]) -> str:
 
 
 def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 100) -> dict[str, Any]:
-    """Trajectories, rasters, deviation and formation error of both runs; returns title -> (file, artists)."""
+    """Trajectories, rasters, deviation and formation error of both runs; returns title -> (file,
+    artists)."""
     plt = pyplot()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Any] = {}
-
     if a.positions is not None and b.positions is not None and a.positions.shape[2] >= 2:
-        fig, ax = plt.subplots(figsize=(6.4, 5.5))
-        lines = {}
-        for k, agent in enumerate(a.agent_ids):
-            colour = agent_colour(k)
-            (lines[('a', agent)],) = ax.plot(
-                a.positions[:, k, 0],
-                a.positions[:, k, 1],
-                '-',
-                color=colour,
-                lw=1.4,
-                label=f'agent {agent} A',
-            )
-            (lines[('b', agent)],) = ax.plot(
-                b.positions[:, k, 0],
-                b.positions[:, k, 1],
-                '--',
-                color=colour,
-                lw=1.0,
-                label=f'agent {agent} B',
-            )
-            ax.plot([a.positions[0, k, 0]], [a.positions[0, k, 1]], 'o', mfc='none', mec=colour, ms=9)
-        ax.set_aspect('equal', adjustable='datalim')
-        ax.set_title(f'trajectories: A {a.label} (solid), B {b.label} (dashed)', fontsize=9)
-        ax.legend(fontsize=7, loc='best')
-        written['trajectories'] = _save(plt, fig, out / 'overlay_trajectories.png', dpi, lines)
+        written['trajectories'] = _overlay_trajectories(plt, a, b, out, dpi)
+    written['triggering times'] = _overlay_triggers(plt, a, b, out, dpi)
+    deviation = compare_trajectories(a, b)
+    if deviation is not None:
+        written['deviation and formation error'] = _overlay_deviation(plt, a, b, deviation, out, dpi)
+    return written
 
+
+def _overlay_trajectories(plt: Any, a: RunData, b: RunData, out: Path, dpi: int) -> tuple[str, Any]:
+    """Both runs' planar paths, A solid and B dashed, one colour per agent."""
+    fig, ax = plt.subplots(figsize=(6.4, 5.5))
+    lines = {}
+    for k, agent in enumerate(a.agent_ids):
+        colour = agent_colour(k)
+        (lines[('a', agent)],) = ax.plot(
+            a.positions[:, k, 0], a.positions[:, k, 1], '-', color=colour, lw=1.4, label=f'agent {agent} A'
+        )
+        (lines[('b', agent)],) = ax.plot(
+            b.positions[:, k, 0], b.positions[:, k, 1], '--', color=colour, lw=1.0, label=f'agent {agent} B'
+        )
+        ax.plot([a.positions[0, k, 0]], [a.positions[0, k, 1]], 'o', mfc='none', mec=colour, ms=9)
+    ax.set_aspect('equal', adjustable='datalim')
+    ax.set_title(f'trajectories: A {a.label} (solid), B {b.label} (dashed)', fontsize=9)
+    ax.legend(fontsize=7, loc='best')
+    return _save(plt, fig, out / 'overlay_trajectories.png', dpi, lines)
+
+
+def _overlay_triggers(plt: Any, a: RunData, b: RunData, out: Path, dpi: int) -> tuple[str, Any]:
+    """Both runs' triggering times per agent, A's ticks above B's."""
     fig, ax = plt.subplots(figsize=(7.0, 0.6 * len(a.agent_ids) + 2.0))
     events = {}
     for k, agent in enumerate(a.agent_ids):
@@ -406,33 +415,35 @@ def overlay_figures(a: RunData, b: RunData, out_dir: str | Path, *, dpi: int = 1
     ax.set_title(
         f'triggering times: A {a.label} ({a.total_events}), B {b.label} ({b.total_events})', fontsize=9
     )
-    written['triggering times'] = _save(plt, fig, out / 'overlay_triggers.png', dpi, events)
+    return _save(plt, fig, out / 'overlay_triggers.png', dpi, events)
 
-    deviation = compare_trajectories(a, b)
-    if deviation is not None:
-        fig, (ax_dev, ax_err) = plt.subplots(2, 1, figsize=(6.4, 6.0))
-        positive = deviation.deviation > 0.0
-        lines = {}
-        if positive.any():
-            (lines['deviation'],) = ax_dev.semilogy(
-                deviation.times[positive], deviation.deviation[positive], 'k', lw=1.0
-            )
-        ax_dev.set_title(
-            f'max over agents of ||x_A - x_B|| (max {deviation.max_deviation:.3g}; zero values not drawn)',
-            fontsize=9,
+
+def _overlay_deviation(
+    plt: Any, a: RunData, b: RunData, deviation: TrajectoryDeviation, out: Path, dpi: int
+) -> tuple[str, Any]:
+    """The runs' largest distance over time above, each run's formation error below."""
+    fig, (ax_dev, ax_err) = plt.subplots(2, 1, figsize=(6.4, 6.0))
+    positive = deviation.deviation > 0.0
+    lines = {}
+    if positive.any():
+        (lines['deviation'],) = ax_dev.semilogy(
+            deviation.times[positive], deviation.deviation[positive], 'k', lw=1.0
         )
-        ax_dev.set_xlabel('t [s]')
-        for key, run, style in (('a', a, '-'), ('b', b, '--')):
-            errors = _formation_error(run)
-            keep = errors > 0.0
-            (lines[f'error {key}'],) = ax_err.semilogy(
-                run.times[keep], errors[keep], style, lw=1.1, label=f'{key.upper()} {run.label}'
-            )
-        ax_err.set_title('formation error max ||x_i - x_j - d_ij||', fontsize=9)
-        ax_err.set_xlabel('t [s]')
-        ax_err.legend(fontsize=7)
-        written['deviation and formation error'] = _save(plt, fig, out / 'overlay_deviation.png', dpi, lines)
-    return written
+    ax_dev.set_title(
+        f'max over agents of ||x_A - x_B|| (max {deviation.max_deviation:.3g}; zero values not drawn)',
+        fontsize=9,
+    )
+    ax_dev.set_xlabel('t [s]')
+    for key, run, style in (('a', a, '-'), ('b', b, '--')):
+        errors = _formation_error(run)
+        keep = errors > 0.0
+        (lines[f'error {key}'],) = ax_err.semilogy(
+            run.times[keep], errors[keep], style, lw=1.1, label=f'{key.upper()} {run.label}'
+        )
+    ax_err.set_title('formation error max ||x_i - x_j - d_ij||', fontsize=9)
+    ax_err.set_xlabel('t [s]')
+    ax_err.legend(fontsize=7)
+    return _save(plt, fig, out / 'overlay_deviation.png', dpi, lines)
 
 
 def _formation_error(run: RunData) -> np.ndarray:

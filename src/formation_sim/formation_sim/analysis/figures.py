@@ -457,7 +457,8 @@ def write_figures(
 
 
 def frame_indices(times: np.ndarray, *, frames: int) -> np.ndarray:
-    """Sample indices for `frames` frames evenly spaced in time: the last sample at or before each frame time."""
+    """Sample indices for `frames` frames evenly spaced in time: the last sample at or before each frame
+    time."""
     times = np.asarray(times, dtype=float)
     targets = np.linspace(times[0], times[-1], max(2, frames))
     return np.clip(np.searchsorted(times, targets, side='right') - 1, 0, len(times) - 1)
@@ -474,29 +475,86 @@ def animate(
 ) -> Path:
     """GIF of the run: agents, their trails, edges coloured by length / Δ, the desired formation."""
     from matplotlib.animation import PillowWriter
-    from matplotlib.collections import LineCollection
-
-    from formation_sim.model import theory
 
     plt = pyplot()
-    scenario = record.scenario
-    x = record.sample_positions
-    if x.shape[2] == 1:  # a line: draw it on the x axis
-        x = np.concatenate([x, np.zeros_like(x)], axis=2)
-    x = x[:, :, :2]
-    t = np.asarray(record.sample_times, dtype=float)
-    index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
-    pairs = [(index[e.i], index[e.j]) for e in scenario.edges]
-    tau = theory.formation_feasibility(scenario).tau
-    offsets = tau - tau.mean(axis=0)
-    offsets = (
-        np.concatenate([offsets, np.zeros_like(offsets)], axis=1)[:, :2]
-        if offsets.shape[1] == 1
-        else offsets[:, :2]
-    )
-    events = np.sort(np.concatenate([np.asarray(v, dtype=float) for v in record.trigger_times.values()]))
-    chosen = frame_indices(t, frames=frames)
+    movie = _Movie.of(record, frames=frames)
+    fig, artists = _movie_artists(plt, record, movie.x)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # The writer directly (not FuncAnimation.save, which renders every frame twice on Agg).
+    writer = PillowWriter(fps=fps)
+    try:
+        with writer.saving(fig, str(path), dpi):
+            for frame in range(len(movie.chosen)):
+                _draw_frame(artists, movie, record, movie.chosen[frame])
+                writer.grab_frame()
+                if progress is not None:
+                    progress(frame + 1, len(movie.chosen))
+    finally:
+        plt.close(fig)
+    return path
 
+
+@dataclass(frozen=True, kw_only=True)
+class _Movie:
+    """What the animation draws, frame by frame: planar samples, edges as index pairs, the desired
+    formation's offsets from its centroid, every event time (sorted) and the frames' samples."""
+
+    x: np.ndarray
+    t: np.ndarray
+    pairs: list[tuple[int, int]]
+    offsets: np.ndarray
+    events: np.ndarray
+    chosen: np.ndarray
+
+    @classmethod
+    def of(cls, record: RunRecord, *, frames: int) -> _Movie:
+        from formation_sim.model import theory
+
+        scenario = record.scenario
+        x = record.sample_positions
+        if x.shape[2] == 1:  # a line: draw it on the x axis
+            x = np.concatenate([x, np.zeros_like(x)], axis=2)
+        x = x[:, :, :2]
+        t = np.asarray(record.sample_times, dtype=float)
+        index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
+        tau = theory.formation_feasibility(scenario).tau
+        offsets = tau - tau.mean(axis=0)
+        offsets = (
+            np.concatenate([offsets, np.zeros_like(offsets)], axis=1)[:, :2]
+            if offsets.shape[1] == 1
+            else offsets[:, :2]
+        )
+        return cls(
+            x=x,
+            t=t,
+            pairs=[(index[e.i], index[e.j]) for e in scenario.edges],
+            offsets=offsets,
+            events=np.sort(
+                np.concatenate([np.asarray(v, dtype=float) for v in record.trigger_times.values()])
+            ),
+            chosen=frame_indices(t, frames=frames),
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class _MovieArtists:
+    """The animation's artists, updated in place by `_draw_frame`."""
+
+    trails: list[Line2D]
+    desired_edges: LineCollection
+    desired: PathCollection
+    edges: LineCollection
+    agents: PathCollection
+    ids: list[Any]
+    label: Any
+
+
+def _movie_artists(plt: Any, record: RunRecord, x: np.ndarray) -> tuple[Figure, _MovieArtists]:
+    """The animation's figure, its axes fitted to every sample, and its artists at t = 0."""
+    from matplotlib.collections import LineCollection
+
+    scenario = record.scenario
     fig, ax = plt.subplots(figsize=(7.0, 7.0))
     span = np.ptp(x.reshape(-1, 2), axis=0).max()
     pad = 0.1 * span + 0.05 * scenario.delta
@@ -541,41 +599,39 @@ def animate(
     ax.set_title(
         f'{scenario.name}: edges green → red as their length nears Δ = {scenario.delta:g}', fontsize=9
     )
+    artists = _MovieArtists(
+        trails=trails,
+        desired_edges=desired_edges,
+        desired=desired,
+        edges=edges,
+        agents=agents,
+        ids=ids,
+        label=label,
+    )
+    return fig, artists
 
-    def draw(frame: int):
-        k = chosen[frame]
-        now = x[k]
-        for a, trail in enumerate(trails):
-            trail.set_data(x[: k + 1, a, 0], x[: k + 1, a, 1])
-        agents.set_offsets(now)
-        for k_agent, text in enumerate(ids):
-            text.xy = now[k_agent]
-        edges.set_segments([[now[a], now[b]] for a, b in pairs])
-        edges.set_color(
-            [
-                edge_colour(
-                    float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])),
-                    scenario.delta,
-                )
-                for a, b in pairs
-            ]
-        )
-        goal = now.mean(axis=0) + offsets
-        desired.set_offsets(goal)
-        desired_edges.set_segments([[goal[a], goal[b]] for a, b in pairs])
-        label.set_text(f't = {t[k]:7.3f} s   events: {int(np.searchsorted(events, t[k], side="right"))}')
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # The writer directly (not FuncAnimation.save, which renders every frame twice on Agg).
-    writer = PillowWriter(fps=fps)
-    try:
-        with writer.saving(fig, str(path), dpi):
-            for frame in range(len(chosen)):
-                draw(frame)
-                writer.grab_frame()
-                if progress is not None:
-                    progress(frame + 1, len(chosen))
-    finally:
-        plt.close(fig)
-    return path
+def _draw_frame(artists: _MovieArtists, movie: _Movie, record: RunRecord, k: int) -> None:
+    """Move every artist to sample `k`: trails up to it, edges coloured by length / Δ."""
+    x = movie.x
+    now = x[k]
+    for a, trail in enumerate(artists.trails):
+        trail.set_data(x[: k + 1, a, 0], x[: k + 1, a, 1])
+    artists.agents.set_offsets(now)
+    for k_agent, text in enumerate(artists.ids):
+        text.xy = now[k_agent]
+    artists.edges.set_segments([[now[a], now[b]] for a, b in movie.pairs])
+    artists.edges.set_color(
+        [
+            edge_colour(
+                float(np.linalg.norm(record.sample_positions[k][a] - record.sample_positions[k][b])),
+                record.scenario.delta,
+            )
+            for a, b in movie.pairs
+        ]
+    )
+    goal = now.mean(axis=0) + movie.offsets
+    artists.desired.set_offsets(goal)
+    artists.desired_edges.set_segments([[goal[a], goal[b]] for a, b in movie.pairs])
+    events = int(np.searchsorted(movie.events, movie.t[k], side='right'))
+    artists.label.set_text(f't = {movie.t[k]:7.3f} s   events: {events}')

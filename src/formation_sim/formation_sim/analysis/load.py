@@ -243,7 +243,8 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         sender, receiver = int(match.group(1)), int(match.group(2))
         if (info.sender, info.receiver) != (sender, receiver):
             raise MessageError(
-                f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} -> {receiver}"
+                f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} "
+                f'-> {receiver}'
             )
         got.infos[(info.sender, info.stamp)].append(info.receiver)
         got.info_total += 1
@@ -317,7 +318,8 @@ def _check_scenario_matches(scenario: Scenario, got: _Collected, states) -> None
         )
     if (first.velocities is None) != (scenario.dynamics == 'single'):
         raise AnalysisError(
-            f"the bag's states {'lack' if first.velocities is None else 'carry'} velocities; the scenario is {scenario.dynamics!r}"
+            f"the bag's states {'lack' if first.velocities is None else 'carry'} velocities; the "
+            f'scenario is {scenario.dynamics!r}'
         )
     if first.time == 0.0:
         start_velocities = initial_velocities(scenario.velocities, scenario.speed_scale)  # κ q(0)
@@ -364,23 +366,15 @@ def load_bag_run(
         return _robot_run(bag, got, found, source)
     if not got.states:
         raise AnalysisError(
-            f'{bag}: no {STATE_TOPIC} messages and no {ROBOTS_TOPIC} (a robot run): the trajectories cannot be '
-            f'rebuilt (topics: {sorted(got.topics)})'
+            f'{bag}: no {STATE_TOPIC} messages and no {ROBOTS_TOPIC} (a robot run): the trajectories '
+            f'cannot be rebuilt (topics: {sorted(got.topics)})'
         )
     found, source = _resolve_scenario(got, run_dir, scenario)
     states = sorted(got.states, key=lambda state: state.time)  # stable: ties keep bag order
     _check_scenario_matches(found, got, states)
-    checks = [
-        Check(
-            name='decoding',
-            ok=not got.problems,
-            detail='; '.join(got.problems[:10]) or 'every formation message follows its layout',
-        )
-    ]
-
+    checks = [_decoding_check(got)]
     times, positions, velocities, samples_check = _state_samples(states)
     checks.append(samples_check)
-
     trigger_times, triggers_check = _trigger_times(got, found)
     checks.append(triggers_check)
 
@@ -391,17 +385,59 @@ def load_bag_run(
     # sends one then too); a bag without one ends where its recording did.
     horizon = final[-1].time if final else times[-1]
     asked = found.horizon if got.scenario_text is not None else None  # the run publishes its own horizon
-    finished = bool(final) and (asked is None or horizon == asked)
+    finished, stop = _ending(final, end=horizon, asked=asked)
+    checks += _sampling_checks(times, trigger_times, horizon=horizon)
+    checks += _message_checks(got, found, trigger_times, stopped=stop is not None, horizon=horizon)
+    extra = _clock_extra(final, realtime=realtime, finished=finished, reached=times[-1]) if steps else {}
+    if got.statuses and realtime:
+        extra.update(_lateness(got.statuses, trigger_times))
+    record = RunRecord(
+        scenario=found,
+        horizon=horizon,
+        mode='distributed' if steps else 'recorded',
+        trigger_times=trigger_times,
+        samples=Samples.from_rows(times, positions, velocities or None),
+        messages_sent=got.info_total,
+        sensing_calls=(
+            len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
+        ),
+        wall_time=math.nan,  # not in a bag
+        extra=extra,
+    )
+    return _bag_run(bag, got, record, source=source, checks=checks, asked=asked, stop=stop)
+
+
+def _decoding_check(got: _Collected) -> Check:
+    """Every formation message decoded as its layout says (the first ten problems named)."""
+    return Check(
+        name='decoding',
+        ok=not got.problems,
+        detail='; '.join(got.problems[:10]) or 'every formation message follows its layout',
+    )
+
+
+def _ending(final: list, *, end: float, asked: float | None) -> tuple[bool, dict[str, Any] | None]:
+    """Whether a run that ended at `end` finished (a final Step at the horizon it was `asked`, if
+    known), and else where it stopped: {time, step, horizon, final_step}."""
+    finished = bool(final) and (asked is None or end == asked)
     stop = (
         None
         if finished
         else {
-            'time': horizon,
+            'time': end,
             'step': final[-1].index if final else None,
             'horizon': asked,
             'final_step': bool(final),
         }
     )
+    return finished, stop
+
+
+def _sampling_checks(
+    times: list[float], trigger_times: dict[int, list[float]], *, horizon: float
+) -> list[Check]:
+    """A state sample where the run ended (when it is not there) and one at every event time."""
+    checks = []
     if times[-1] != horizon:
         checks.append(
             Check(
@@ -421,12 +457,17 @@ def load_bag_run(
             + (f'; without a sample: {unsampled[:5]}' if unsampled else ''),
         )
     )
+    return checks
 
-    sensing_calls = (
-        len(got.sensing) if SENSING_LOG_TOPIC in got.topics else sum(map(len, trigger_times.values()))
-    )
+
+def _message_checks(
+    got: _Collected, found: Scenario, trigger_times: dict[int, list[float]], *, stopped: bool, horizon: float
+) -> list[Check]:
+    """The sensing log, the commands and the agents' Status counters against the triggers, for
+    whichever of them the bag holds."""
+    checks = []
     if SENSING_LOG_TOPIC in got.topics:
-        checks.append(_sensing_check(got, found, trigger_times, stopped=stop is not None, horizon=horizon))
+        checks.append(_sensing_check(got, found, trigger_times, stopped=stopped, horizon=horizon))
     if got.commands:
         differing = [
             agent for agent in found.agent_ids if got.commands.get(agent, 0) != len(trigger_times[agent])
@@ -438,23 +479,21 @@ def load_bag_run(
                 detail='yes' if not differing else f'agents {differing}: commands {dict(got.commands)}',
             )
         )
-    extra = _clock_extra(final, realtime=realtime, finished=finished, reached=times[-1]) if steps else {}
     if got.statuses:
         checks.append(_status_check(got, {agent: len(times) for agent, times in trigger_times.items()}))
-        if realtime:
-            extra.update(_lateness(got.statuses, trigger_times))
+    return checks
 
-    record = RunRecord(
-        scenario=found,
-        horizon=horizon,
-        mode='distributed' if steps else 'recorded',
-        trigger_times=trigger_times,
-        samples=Samples.from_rows(times, positions, velocities or None),
-        messages_sent=got.info_total,
-        sensing_calls=sensing_calls,
-        wall_time=math.nan,  # not in a bag
-        extra=extra,
-    )
+
+def _bag_run(
+    bag: Path,
+    got: _Collected,
+    record: RunRecord,
+    *,
+    source: str,
+    checks: list[Check],
+    asked: float | None,
+    stop: dict[str, Any] | None,
+) -> BagRun:
     return BagRun(
         bag=bag,
         record=record,
@@ -526,7 +565,8 @@ def _clock_extra(final: list, *, realtime: bool, finished: bool, reached: float)
 
 
 def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) -> dict[str, Any]:
-    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the coordinator computes it."""
+    """Wall clock: trigger time - planned time per new trigger (Status.last_planned), as the coordinator
+    computes it."""
     planned: dict[int, dict[int, float]] = {}
     for agent, reports in statuses.items():
         plans, seen = planned.setdefault(agent, {}), 0
@@ -538,7 +578,8 @@ def _lateness(statuses: dict[int, list], trigger_times: dict[int, list[float]]) 
 
 
 def _trigger_times(got: _Collected, scenario: Scenario) -> tuple[dict[int, list[float]], Check]:
-    """Triggering times from the TriggerInfo messages, and the check that each reached every neighbour once."""
+    """Triggering times from the TriggerInfo messages, and the check that each reached every neighbour
+    once."""
     trigger_times: dict[int, list[float]] = {agent: [] for agent in scenario.agent_ids}
     missing, duplicated = [], []
     for (sender, stamp), receivers in got.infos.items():
@@ -571,7 +612,8 @@ def _status_check(got: _Collected, triggers: dict[int, int]) -> Check:
         for agent, reports in got.statuses.items()
     }
     wrong = [
-        f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has {triggers[agent]} / {sent[agent]}'
+        f'agent {agent}: status says {status.triggers} triggers / {status.info_sent} sent, bag has '
+        f'{triggers[agent]} / {sent[agent]}'
         for agent, status in last.items()
         if agent in triggers and (status.triggers != triggers[agent] or status.info_sent != sent[agent])
     ]
@@ -610,7 +652,8 @@ def _robot_poses(
     missing = [agent for agent, samples in poses.items() if not samples]
     if missing:
         raise AnalysisError(
-            f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their trajectories cannot be rebuilt'
+            f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their '
+            'trajectories cannot be rebuilt'
         )
     return poses
 
@@ -618,28 +661,10 @@ def _robot_poses(
 def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
     """A robot run rebuilt from its bag: trajectories from the pose topics (module docstring)."""
     robots = got.robots
-    try:
-        model, trajectory = robots['model'], robots['trajectory']
-        distance, period = float(robots['control_point_distance']), float(robots['sample_period'])
-    except (KeyError, TypeError, ValueError) as error:
-        raise AnalysisError(
-            f'{bag}: {ROBOTS_TOPIC} lacks {error} (model, trajectory, control_point_distance, sample_period)'
-        ) from None
-    steps = got.steps
-    start = [step for step in steps if step.index == 0 and step.flags & STEP_FLAG_REALTIME]
-    if not start:
-        raise AnalysisError(
-            f'{bag}: no wall-clock Step 0 on {STEP_TOPIC}: the run never started, or its epoch is missing'
-        )
-    epoch = start[0].epoch
-    final = [step for step in steps if step.flags & STEP_FLAG_FINAL]
-    checks = [
-        Check(
-            name='decoding',
-            ok=not got.problems,
-            detail='; '.join(got.problems[:10]) or 'every formation message follows its layout',
-        )
-    ]
+    model, trajectory, distance, period = _robots_description(bag, robots)
+    epoch = _robot_epoch(bag, got.steps)
+    final = [step for step in got.steps if step.flags & STEP_FLAG_FINAL]
+    checks = [_decoding_check(got)]
     poses = _robot_poses(
         bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch
     )
@@ -651,7 +676,8 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
             Check(
                 name='final step',
                 ok=False,
-                detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last pose, t={end!r}',
+                detail=f'no final {STEP_TOPIC} message: the run did not finish; taken to end at the last '
+                f'pose, t={end!r}',
             )
         )
     # As the coordinator: no pose stamped long past the end, nor one of a robot silent at the end
@@ -666,23 +692,10 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     # The coordinator counts the triggers up to where the run ended (and samples them).
     trigger_times = {agent: [t for t in times if t <= end] for agent, times in trigger_times.items()}
     checks.append(triggers_check)
-    uncovered = [
-        agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)
-    ]
     # A run that stopped early because a robot's poses stopped has none of it at its end: named,
     # not binding (summary.json holds its last pose there too); poses missing at t = 0 always are.
     stopped_early = bool(final) and got.scenario_text is not None and end != scenario.horizon
-    silent_at_end = [agent for agent in uncovered if tracks[agent].times[0] <= 0.0]
-    checks.append(
-        Check(
-            name='poses cover the run',
-            ok=not uncovered,
-            detail=f'every robot has {trajectory} poses from before t = 0 to after t = {end!r}'
-            if not uncovered
-            else f'robots {uncovered} lack poses at the start or the end (their first or last pose is held there)',
-            binding=not (stopped_early and uncovered == silent_at_end),
-        )
-    )
+    checks.append(_coverage_check(tracks, trajectory=trajectory, end=end, stopped_early=stopped_early))
     checks.append(_last_commands_check(got, scenario))
     if got.statuses:
         checks.append(_status_check(got, all_counts))
@@ -692,17 +705,7 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     # As for the exact backend: the run publishes its own horizon, and a final Step before it
     # marks a run that stopped early (why it stopped is summary.json's).
     asked = scenario.horizon if got.scenario_text is not None else None
-    finished = bool(final) and (asked is None or end == asked)
-    stop = (
-        None
-        if finished
-        else {
-            'time': end,
-            'step': final[-1].index if final else None,
-            'horizon': asked,
-            'final_step': bool(final),
-        }
-    )
+    finished, stop = _ending(final, end=end, asked=asked)
     if finished:
         extra['failure'] = None
     if got.statuses:
@@ -723,15 +726,49 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
         wall_time=math.nan,
         extra=extra,
     )
-    return BagRun(
-        bag=bag,
-        record=record,
-        scenario_source=source,
-        topics=dict(got.topics),
-        counts=dict(got.counts),
-        checks=checks,
-        horizon=asked,
-        stop=stop,
+    return _bag_run(bag, got, record, source=source, checks=checks, asked=asked, stop=stop)
+
+
+def _robots_description(bag: Path, robots: Any) -> tuple[str, str, float, float]:
+    """The robots' model, trajectory topic, control point distance and sample period, from the
+    run's /formation/robots."""
+    try:
+        model, trajectory = robots['model'], robots['trajectory']
+        distance, period = float(robots['control_point_distance']), float(robots['sample_period'])
+    except (KeyError, TypeError, ValueError) as error:
+        raise AnalysisError(
+            f'{bag}: {ROBOTS_TOPIC} lacks {error} (model, trajectory, control_point_distance, sample_period)'
+        ) from None
+    return model, trajectory, distance, period
+
+
+def _robot_epoch(bag: Path, steps: list) -> float:
+    """The run's epoch, from its wall-clock Step 0."""
+    start = [step for step in steps if step.index == 0 and step.flags & STEP_FLAG_REALTIME]
+    if not start:
+        raise AnalysisError(
+            f'{bag}: no wall-clock Step 0 on {STEP_TOPIC}: the run never started, or its epoch is missing'
+        )
+    return start[0].epoch
+
+
+def _coverage_check(
+    tracks: dict[int, PoseTrack], *, trajectory: str, end: float, stopped_early: bool
+) -> Check:
+    """Every robot has poses from t = 0 to the end; a robot silent only at the end of a run that
+    stopped early is named, not binding."""
+    uncovered = [
+        agent for agent, track in tracks.items() if not (track.times[0] <= 0.0 and track.times[-1] >= end)
+    ]
+    silent_at_end = [agent for agent in uncovered if tracks[agent].times[0] <= 0.0]
+    return Check(
+        name='poses cover the run',
+        ok=not uncovered,
+        detail=f'every robot has {trajectory} poses from before t = 0 to after t = {end!r}'
+        if not uncovered
+        else f'robots {uncovered} lack poses at the start or the end (their first or last pose is held '
+        'there)',
+        binding=not (stopped_early and uncovered == silent_at_end),
     )
 
 

@@ -135,22 +135,8 @@ def build_report(
     record = run.record
     scenario = record.scenario
     summary = bag_summary(record, horizon=run.horizon)
-    comparison = None
     stop = None if run.stop is None else {**run.stop, 'reason': None}
-    if summary_path is not None:
-        file_summary = json.loads(Path(summary_path).read_text(encoding='utf-8'))
-        failure = (file_summary.get('extra') or {}).get('failure')
-        if stop is not None and isinstance(failure, dict):
-            stop['reason'] = f'{failure.get("kind")}: {failure.get("message")}'
-        differences, skipped = diff_summaries(summary, file_summary)
-        comparison = {
-            'path': str(summary_path),
-            'equal': not differences,
-            'differences': [difference.to_dict() for difference in differences],
-            'not_in_bag': skipped,
-            'notes': _difference_notes(record) if differences else [],
-        }
-    t = series.times
+    comparison = None if summary_path is None else _summary_comparison(record, summary, summary_path, stop)
     return json_safe(
         {
             'schema': 'formation-analysis/1',
@@ -172,46 +158,74 @@ def build_report(
             },
             'bag_checks': [check.to_dict() for check in run.checks],
             'theorem_checks': [check.to_dict() for check in theorem_checks(record, series, bounds)],
-            'theory': None
-            if bounds is None
-            else {
-                'theorem': bounds.theorem,
-                'note': bounds.note,
-                'rate': bounds.rate,
-                'speed_scale': bounds.speed_scale,
-                'threshold_floor': None if bounds.floor is None else bounds.floor.to_dict(),
-                'k_nu': bounds.k_nu,
-                'k_V': bounds.k_V,
-                'error_gain': bounds.error_gain,
-                'xi': bounds.xi,
-                'printed_chain': None
-                if bounds.printed_k_V is None
-                else {
-                    'k_V': bounds.printed_k_V,
-                    'error_gain': bounds.printed_error_gain,
-                    **printed_chain_ratios(series, bounds),
-                },
-            },
+            'theory': None if bounds is None else _theory_section(series, bounds),
             'theory_error': bounds_error,
             'inter_event_times': inter_event_stats(record, None if bounds is None else bounds.xi),
-            'series': {
-                'samples': len(t),
-                'formation_error': {
-                    'initial': float(series.formation_error[0]),
-                    'final': float(series.formation_error[-1]),
-                },
-                'tension': {
-                    'initial': float(series.tension[0]),
-                    'max': float(series.tension.max()),
-                    'final': float(series.tension[-1]),
-                },
-                'lyapunov': {'initial': float(series.lyapunov[0]), 'final': float(series.lyapunov[-1])},
-            },
+            'series': _series_section(series),
             'summary': summary,
             'summary_json': comparison,
             'figures': figures or {},
         }
     )
+
+
+def _summary_comparison(
+    record: RunRecord, summary: dict, summary_path: Path, stop: dict[str, Any] | None
+) -> dict[str, Any]:
+    """The bag's summary against the run's summary.json; a run that stopped early takes its reason
+    from the file's extra.failure (into `stop`)."""
+    file_summary = json.loads(Path(summary_path).read_text(encoding='utf-8'))
+    failure = (file_summary.get('extra') or {}).get('failure')
+    if stop is not None and isinstance(failure, dict):
+        stop['reason'] = f'{failure.get("kind")}: {failure.get("message")}'
+    differences, skipped = diff_summaries(summary, file_summary)
+    return {
+        'path': str(summary_path),
+        'equal': not differences,
+        'differences': [difference.to_dict() for difference in differences],
+        'not_in_bag': skipped,
+        'notes': _difference_notes(record) if differences else [],
+    }
+
+
+def _theory_section(series: Series, bounds: TheoryBounds) -> dict[str, Any]:
+    """The theorem's constants and bounds, and the printed chain's ratios when it has one."""
+    return {
+        'theorem': bounds.theorem,
+        'note': bounds.note,
+        'rate': bounds.rate,
+        'speed_scale': bounds.speed_scale,
+        'threshold_floor': None if bounds.floor is None else bounds.floor.to_dict(),
+        'k_nu': bounds.k_nu,
+        'k_V': bounds.k_V,
+        'error_gain': bounds.error_gain,
+        'xi': bounds.xi,
+        'printed_chain': None
+        if bounds.printed_k_V is None
+        else {
+            'k_V': bounds.printed_k_V,
+            'error_gain': bounds.printed_error_gain,
+            **printed_chain_ratios(series, bounds),
+        },
+    }
+
+
+def _series_section(series: Series) -> dict[str, Any]:
+    """The formation error, tension and Lyapunov function at the ends of the run (the tension's
+    largest too)."""
+    return {
+        'samples': len(series.times),
+        'formation_error': {
+            'initial': float(series.formation_error[0]),
+            'final': float(series.formation_error[-1]),
+        },
+        'tension': {
+            'initial': float(series.tension[0]),
+            'max': float(series.tension.max()),
+            'final': float(series.tension[-1]),
+        },
+        'lyapunov': {'initial': float(series.lyapunov[0]), 'final': float(series.lyapunov[-1])},
+    }
 
 
 def _difference_notes(record: RunRecord) -> list[str]:
@@ -223,8 +237,9 @@ def _difference_notes(record: RunRecord) -> list[str]:
         ]
         if at_end:
             notes.append(
-                f'agents {at_end} triggered at the horizon t = {record.horizon!r} (wall clock): summary.json counts '
-                'a trigger only once its command has acted on the world before the run ended, which a bag cannot show'
+                f'agents {at_end} triggered at the horizon t = {record.horizon!r} (wall clock): '
+                'summary.json counts a trigger only once its command has acted on the world before the '
+                'run ended, which a bag cannot show'
             )
     return notes
 
@@ -243,8 +258,9 @@ def render_markdown(report: dict[str, Any]) -> str:
     lines = [
         f'# Analysis of `{report["bag"]}`',
         '',
-        f'Scenario **{run["scenario"]}** ({run["dynamics"]} integrators, n = {run["n_agents"]}, p = {run["dimension"]}, '
-        f'Δ = {_fmt(run["delta"])}), {run["mode"]} run, clock {run["clock"] or "—"}, horizon {_fmt(run["horizon"])} s. '
+        f'Scenario **{run["scenario"]}** ({run["dynamics"]} integrators, n = {run["n_agents"]}, '
+        f'p = {run["dimension"]}, Δ = {_fmt(run["delta"])}), {run["mode"]} run, '
+        f'clock {run["clock"] or "—"}, horizon {_fmt(run["horizon"])} s. '
         f'Scenario from: {report["scenario_source"]}. Every number below is recomputed from the bag.',
         '',
         *([f'**The run stopped early**: {describe_stop(run["stopped"])}.', ''] if run.get('stopped') else []),
@@ -255,11 +271,13 @@ def render_markdown(report: dict[str, Any]) -> str:
     ]
     for agent, stats in report['inter_event_times'].items():
         lines.append(
-            f'| {agent} | {stats["events"]} | {_fmt(stats["min"])} | {_fmt(stats["median"])} | {_fmt(stats["max"])} | {_fmt(stats["xi"])} |'
+            f'| {agent} | {stats["events"]} | {_fmt(stats["min"])} | {_fmt(stats["median"])} | '
+            f'{_fmt(stats["max"])} | {_fmt(stats["xi"])} |'
         )
     lines += [
         '',
-        f'Total events {summary["total_events"]}, triggering-information messages {summary["messages_sent"]}, '
+        f'Total events {summary["total_events"]}, triggering-information messages '
+        f'{summary["messages_sent"]}, '
         f'sensing calls {summary["sensing_calls"]}.',
         '',
         '| edge | max length | Δ − max length | final error ‖x_i − x_j − d_ij‖ |',
@@ -267,14 +285,18 @@ def render_markdown(report: dict[str, Any]) -> str:
     ]
     for edge in summary['edges']:
         lines.append(
-            f'| {edge["i"]}-{edge["j"]} | {_fmt(edge["max_length"])} | {_fmt(edge["min_range_slack"])} | {_fmt(edge["final_error"])} |'
+            f'| {edge["i"]}-{edge["j"]} | {_fmt(edge["max_length"])} | {_fmt(edge["min_range_slack"])} '
+            f'| {_fmt(edge["final_error"])} |'
         )
     series = report['series']
     lines += [
         '',
-        f'Formation error: {_fmt(series["formation_error"]["initial"])} at t = 0, {_fmt(series["formation_error"]["final"])} at the horizon. '
-        f'Tension: {_fmt(series["tension"]["initial"])} → max {_fmt(series["tension"]["max"])} → {_fmt(series["tension"]["final"])}. '
-        f'Lyapunov: {_fmt(series["lyapunov"]["initial"])} → {_fmt(series["lyapunov"]["final"])} ({series["samples"]} samples).',
+        f'Formation error: {_fmt(series["formation_error"]["initial"])} at t = 0, '
+        f'{_fmt(series["formation_error"]["final"])} at the horizon. '
+        f'Tension: {_fmt(series["tension"]["initial"])} → max {_fmt(series["tension"]["max"])} → '
+        f'{_fmt(series["tension"]["final"])}. '
+        f'Lyapunov: {_fmt(series["lyapunov"]["initial"])} → {_fmt(series["lyapunov"]["final"])} '
+        f'({series["samples"]} samples).',
         '',
         '## Theorem checks (at every sample)',
         '',
@@ -312,7 +334,8 @@ def _theory_lines(report: dict[str, Any]) -> list[str]:
             above = printed['first_time_above']
             lines.append(
                 f'For comparison, the chain as printed (rate (2-k4)ρ2(P)): k_V = {_fmt(printed["k_V"])}; '
-                f'V_d reaches {_fmt(printed["max_ratio"])} × its bound k_V e^{{-2β_d t}} (at t = {_fmt(printed["at_time"])} s)'
+                f'V_d reaches {_fmt(printed["max_ratio"])} × its bound k_V e^{{-2β_d t}} (at t = '
+                f'{_fmt(printed["at_time"])} s)'
                 + (
                     f', above it from t = {_fmt(above)} s on (docs/THEOREM2.md).'
                     if above is not None

@@ -23,7 +23,8 @@ def register(subparsers) -> None:
         'analyze',
         help='recompute every metric of a run from its bag; report, figures, animation',
         description='Rebuild a run from its rosbag2 bag alone (triggering times from the TriggerInfo '
-        'messages, trajectories from /formation/state, or on robots from their pose topics) and recompute every metric of summary.json, '
+        'messages, trajectories from /formation/state, or on robots from their pose topics) and '
+        'recompute every metric of summary.json, '
         'check them against Theorems 1/2, and write analysis.md, analysis.json, the figures (the '
         "paper's Fig. 1/2 style, edge lengths, formation error, inter-event times, energy) and an "
         "animation. Differences from the run's summary.json are listed. Exit 0: all checks hold; "
@@ -39,12 +40,17 @@ def register(subparsers) -> None:
         '--scenario',
         default=None,
         metavar='NAME_OR_YAML',
-        help="the run's scenario, used only if neither the bag (/formation/scenario) nor its run folder (scenario.yaml) holds it",
+        help=(
+            "the run's scenario, used only if neither the bag (/formation/scenario) nor its run folder "
+            '(scenario.yaml) holds it'
+        ),
     )
     parser.add_argument(
         '--markers',
         action='store_true',
-        help='also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove',
+        help=(
+            'also write OUT/bag_markers: a copy of the bag with /formation/markers (MarkerArray) for Foxglove'
+        ),
     )
     parser.add_argument('--no-figures', action='store_true', help='report only')
     parser.add_argument('--no-animation', action='store_true', help='skip the GIF (the slowest part)')
@@ -82,30 +88,17 @@ def _refuse_unstarted(summary: Path | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.analysis import figures
     from formation_sim.analysis.checks import run_series, theory_bounds
-    from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
-    from formation_sim.analysis.report import build_report, write_report
+    from formation_sim.analysis.load import AnalysisError
+    from formation_sim.analysis.report import build_report
     from formation_sim.model import theory
-    from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
     from formation_sim.progress import Progress
-    from formation_sim.bag.io import BagError
 
     show = not args.quiet
     if not check_report_argument('analyze', args.out):
         return EXIT_UNREADABLE
     try:
-        location = locate(args.run)
-        _refuse_unstarted(location.summary)
-        if location.bag is None:
-            raise AnalysisError(
-                f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, `formation simulate` does not)'
-            )
-        reading = Progress(f'reading {location.bag}', enabled=show)
-        bag_run = load_bag_run(
-            location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading
-        )
-        reading.close()
+        location, bag_run = _load(args, show=show)
     except AnalysisError as error:
         print(f'formation analyze: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
@@ -123,29 +116,12 @@ def run(args: argparse.Namespace) -> int:
         bounds, bounds_error = theory_bounds(record.scenario), None
     except theory.TheoryError as error:
         bounds, bounds_error = None, str(error)
-    written: dict[str, str] = {}
-    if not args.no_figures:
-        written.update(figures.write_figures(record, series, bounds, out))
-        if not args.no_animation:
-            frames = Progress('animation frames', enabled=show)
-            figures.animate(record, out / 'animation.gif', frames=args.frames, fps=args.fps, progress=frames)
-            frames.close()
-            written['animation'] = 'animation.gif'
+    written = {} if args.no_figures else _write_figures(args, record, series, bounds, out, show=show)
     if args.markers:
-        target = out / 'bag_markers'
-        copying = Progress(f'writing {target}', enabled=show)
-        try:
-            marked = write_bag_with_markers(location.bag, target, record.scenario, progress=copying)
-        except (BagError, MarkerError) as error:
-            print(f'formation analyze: error: {error}', file=sys.stderr)
+        marked = _write_markers(location.bag, out, record.scenario, show=show)
+        if marked is None:
             return EXIT_UNREADABLE
-        copying.close()
-        written['bag with /formation/markers'] = target.name
-        if marked.skipped_topics:
-            print(
-                f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}',
-                file=sys.stderr,
-            )
+        written.update(marked)
     report = build_report(
         bag_run,
         series=series,
@@ -154,6 +130,71 @@ def run(args: argparse.Namespace) -> int:
         summary_path=location.summary,
         figures=written,
     )
+    return _conclude(args, record, report, out=out, written=written)
+
+
+def _load(args: argparse.Namespace, *, show: bool):
+    """The run's location and its run rebuilt from the bag; AnalysisError when there is none."""
+    from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+    from formation_sim.progress import Progress
+
+    location = locate(args.run)
+    _refuse_unstarted(location.summary)
+    if location.bag is None:
+        raise AnalysisError(
+            f'{args.run}: no bag found (a run folder needs bag/; `formation run` records one, '
+            '`formation simulate` does not)'
+        )
+    reading = Progress(f'reading {location.bag}', enabled=show)
+    bag_run = load_bag_run(location.bag, run_dir=location.run_dir, scenario=args.scenario, progress=reading)
+    reading.close()
+    return location, bag_run
+
+
+def _write_figures(
+    args: argparse.Namespace, record, series, bounds, out: Path, *, show: bool
+) -> dict[str, str]:
+    """The figures and (unless --no-animation) the animation in `out`: title -> file name."""
+    from formation_sim.analysis import figures
+    from formation_sim.progress import Progress
+
+    written: dict[str, str] = {}
+    written.update(figures.write_figures(record, series, bounds, out))
+    if not args.no_animation:
+        frames = Progress('animation frames', enabled=show)
+        figures.animate(record, out / 'animation.gif', frames=args.frames, fps=args.fps, progress=frames)
+        frames.close()
+        written['animation'] = 'animation.gif'
+    return written
+
+
+def _write_markers(bag: Path, out: Path, scenario, *, show: bool) -> dict[str, str] | None:
+    """OUT/bag_markers, a copy of the bag with /formation/markers: its entry for the report, or
+    None (the error printed) when it cannot be written."""
+    from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
+    from formation_sim.bag.io import BagError
+    from formation_sim.progress import Progress
+
+    target = out / 'bag_markers'
+    copying = Progress(f'writing {target}', enabled=show)
+    try:
+        marked = write_bag_with_markers(bag, target, scenario, progress=copying)
+    except (BagError, MarkerError) as error:
+        print(f'formation analyze: error: {error}', file=sys.stderr)
+        return None
+    copying.close()
+    if marked.skipped_topics:
+        print(
+            f'warning: topics of unknown type left out of {target}: {list(marked.skipped_topics)}',
+            file=sys.stderr,
+        )
+    return {'bag with /formation/markers': target.name}
+
+
+def _conclude(args: argparse.Namespace, record, report: dict, *, out: Path, written: dict[str, str]) -> int:
+    """Write analysis.md and analysis.json, say what was found; the exit code."""
+    from formation_sim.analysis.report import write_report
+
     markdown, data = write_report(report, out)
     checks = report['bag_checks'] + report['theorem_checks']
     failed = [check['name'] for check in checks if not check['ok'] and check['binding']]

@@ -117,7 +117,10 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, kind: str) -> None:
     parser.add_argument(
         '--force',
         action='store_true',
-        help='replace the earlier run in --out: its files are removed first (files no run writes are never removed)',
+        help=(
+            'replace the earlier run in --out: its files are removed first (files no run writes are never '
+            'removed)'
+        ),
     )
 
 
@@ -129,7 +132,8 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar='K',
         help="speed scale κ > 0: the scenario's run κ times faster (< 1: slower), the same paths, every "
-        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's gains.speed_scale, 1). "
+        "triggering time divided by κ; the horizon stays in seconds (default: the scenario's "
+        'gains.speed_scale, 1). '
         "auto: the largest κ that keeps the exact run's commands 1.25 times below the robots' limits "
         '(--max-speed, --max-angular-speed, --max-acceleration; README, "Running on robots")',
     )
@@ -206,30 +210,38 @@ def paper_example_note(name: str, rules: list[str]) -> str | None:
     if name not in PAPER_EXAMPLES or not rules or not set(rules) <= set(PAPER_EXAMPLE_WARNINGS):
         return None
     reasons = '; '.join(PAPER_EXAMPLE_WARNINGS[rule] for rule in dict.fromkeys(rules))
-    return f"note: {'this warning is' if len(rules) == 1 else 'these warnings are'} expected for the paper's example (Section 5), whose values these are: {reasons}"
+    return (
+        f"note: {'this warning is' if len(rules) == 1 else 'these warnings are'} expected for the paper's "
+        f'example (Section 5), whose values these are: {reasons}'
+    )
 
 
 # --------------------------------------------------------------------------- what a run starts
 
 
 def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
-    """What decides a distributed run's processes and their parameters (`formation run`, `formation params`)."""
+    """What decides a distributed run's processes and their parameters (`formation run`, `formation
+    params`)."""
     from formation_sim.runtime.launch import BACKENDS, ROBOT_MODELS
 
     parser.add_argument(
         '--backend',
         choices=BACKENDS,
         default='exact',
-        help=f'the world: exact (the simulator, default), a robot kind ({", ".join(ROBOT_MODELS)}: simulated robots), '
-        'external (real robots)',
+        help=(
+            f'the world: exact (the simulator, default), a robot kind ({", ".join(ROBOT_MODELS)}: simulated '
+            'robots), external (real robots)'
+        ),
     )
     parser.add_argument(
         '--agents-per-process',
         type=POSITIVE_INT_OR_AUTO,
         default=1,
         metavar='K',
-        help='agent nodes sharing one process (default 1: every agent its own process); auto: one each up to 24 agents, '
-        'beyond that the team in at most 6 processes (for large teams: BENCHMARKS.md)',
+        help=(
+            'agent nodes sharing one process (default 1: every agent its own process); auto: one each up to '
+            '24 agents, beyond that the team in at most 6 processes (for large teams: BENCHMARKS.md)'
+        ),
     )
     parser.add_argument('--no-record', action='store_true', help='do not record a bag')
     parser.add_argument(
@@ -248,8 +260,10 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
         '--executor',
         choices=EXECUTORS,
         default=DEFAULT_EXECUTOR,
-        help='rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, default, '
-        '4-5x faster lock-step here) or single (SingleThreadedExecutor)',
+        help=(
+            'rclpy executor of the simulator and agents: events (rclpy.experimental.EventsExecutor, '
+            'default, 4-5x faster lock-step here) or single (SingleThreadedExecutor)'
+        ),
     )
     add_robot_arguments(parser, model_flag='--robot')
 
@@ -282,140 +296,111 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
     """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import POSE_TYPES, ROBOT_MODELS, ROBOTS_PER_PROCESS, RobotOptions
+    from formation_sim.runtime.launch import ROBOT_MODELS, RobotOptions
 
     defaults = RobotOptions()
     group = parser.add_argument_group(f'robots (backends {", ".join(ROBOT_MODELS)}, external)')
-    add = group.add_argument
-    add(
+    group.add_argument(
         model_flag,
         choices=ROBOT_MODELS,
         default=None,
         help="what the robots are (default: the backend's model)",
     )
-    add(
-        '--control-point-distance',
-        type=POSITIVE,
-        default=defaults.control_point_distance,
-        metavar='L',
-        help=f'unicycle: the control point l ahead of the axle [m] (default {defaults.control_point_distance})',
-    )
-    add(
-        '--max-speed',
-        type=POSITIVE,
-        default=math.inf,
-        metavar='V',
-        help='speed limit of agents and robots [m/s] (default: none)',
-    )
-    add(
-        '--max-angular-speed',
-        type=POSITIVE,
-        default=math.inf,
-        metavar='W',
-        help='turn-rate limit [rad/s] (default: none)',
-    )
-    add(
-        '--wheelbase',
-        type=POSITIVE,
-        default=None,
-        metavar='L',
-        help='car: wheelbase from the rear to the front axle [m]',
-    )
-    add(
-        '--max-steering-angle',
-        type=POSITIVE,
-        default=math.inf,
-        metavar='PHI',
-        help='car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)',
-    )
-    add(
-        '--max-acceleration',
-        type=POSITIVE,
-        default=math.inf,
-        metavar='A',
-        help='ETA-2 agents: acceleration limit [m/s²] (default: none)',
-    )
-    add(
+    _add_robot_limits(group, defaults)
+    _add_robot_interface(group, defaults)
+    _add_simulated_robots(group, defaults)
+
+
+def _add_robot_limits(group, defaults) -> None:
+    """A robot's geometry and limits, each a number > 0: (flag, default, metavar, help)."""
+    for flag, default, metavar, text in (
+        (
+            '--control-point-distance',
+            defaults.control_point_distance,
+            'L',
+            'unicycle: the control point l ahead of the axle [m] (default '
+            f'{defaults.control_point_distance})',
+        ),
+        ('--max-speed', math.inf, 'V', 'speed limit of agents and robots [m/s] (default: none)'),
+        ('--max-angular-speed', math.inf, 'W', 'turn-rate limit [rad/s] (default: none)'),
+        ('--wheelbase', None, 'L', 'car: wheelbase from the rear to the front axle [m]'),
+        (
+            '--max-steering-angle',
+            math.inf,
+            'PHI',
+            'car: steering limit φ_max [rad], below π/2 (|ω| <= |v| tan φ_max / wheelbase)',
+        ),
+        ('--max-acceleration', math.inf, 'A', 'ETA-2 agents: acceleration limit [m/s²] (default: none)'),
+    ):
+        group.add_argument(flag, type=POSITIVE, default=default, metavar=metavar, help=text)
+
+
+def _add_robot_interface(group, defaults) -> None:
+    """How agents and robots talk: the command rate, the poses the agents read, the world frame."""
+    from formation_sim.runtime.launch import POSE_TYPES
+
+    group.add_argument(
         '--command-rate',
         type=POSITIVE,
         default=defaults.command_rate,
         metavar='HZ',
         help=f'how often an agent re-sends its velocity command (default {defaults.command_rate:g})',
     )
-    add(
+    group.add_argument(
         '--pose-type',
         choices=POSE_TYPES,
         default=defaults.pose_type,
         help=f'what the agents read (default {defaults.pose_type})',
     )
-    add(
+    group.add_argument(
         '--pose-timeout',
         type=POSITIVE,
         default=defaults.pose_timeout,
         metavar='S',
         help=f'an agent with no pose this recent stops safely (default {defaults.pose_timeout})',
     )
-    add(
+    group.add_argument(
         '--world-frame',
         default=defaults.world_frame,
         help=f'frame of poses and holonomic commands (default {defaults.world_frame!r})',
     )
-    add(
-        '--pose-noise',
-        type=NON_NEGATIVE,
-        default=0.0,
-        metavar='SIGMA',
-        help='simulated robots: σ of the position noise [m]',
-    )
-    add(
-        '--yaw-noise',
-        type=NON_NEGATIVE,
-        default=0.0,
-        metavar='SIGMA',
-        help='simulated robots: σ of the heading noise [rad]',
-    )
-    add(
-        '--latency',
-        type=NON_NEGATIVE,
-        default=0.0,
-        metavar='S',
-        help='simulated robots: delay of every pose [s]',
-    )
-    add(
-        '--command-latency',
-        type=NON_NEGATIVE,
-        default=0.0,
-        metavar='S',
-        help='simulated robots: delay before a command acts [s]',
-    )
-    add(
-        '--robot-seed',
-        type=NON_NEGATIVE_INT,
-        default=0,
-        metavar='N',
-        help='simulated robots: seed of the noise',
-    )
-    add(
-        '--robot-rate',
-        type=POSITIVE,
-        default=defaults.rate,
-        metavar='HZ',
-        help=f'simulated robots: ticks per second (default {defaults.rate:g})',
-    )
-    add(
-        '--initial-heading',
-        type=FINITE,
-        default=None,
-        metavar='RAD',
-        help="simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent `heading`, else 0)",
-    )
-    add(
-        '--robots-per-process',
-        type=POSITIVE_INT,
-        default=ROBOTS_PER_PROCESS,
-        metavar='K',
-        help=f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})',
-    )
+
+
+def _add_simulated_robots(group, defaults) -> None:
+    """What only simulated robots take: noise, latency, seed, rate, heading, packing
+    (flag, type, default, metavar, help)."""
+    from formation_sim.runtime.launch import ROBOTS_PER_PROCESS
+
+    for flag, kind, default, metavar, text in (
+        ('--pose-noise', NON_NEGATIVE, 0.0, 'SIGMA', 'simulated robots: σ of the position noise [m]'),
+        ('--yaw-noise', NON_NEGATIVE, 0.0, 'SIGMA', 'simulated robots: σ of the heading noise [rad]'),
+        ('--latency', NON_NEGATIVE, 0.0, 'S', 'simulated robots: delay of every pose [s]'),
+        ('--command-latency', NON_NEGATIVE, 0.0, 'S', 'simulated robots: delay before a command acts [s]'),
+        ('--robot-seed', NON_NEGATIVE_INT, 0, 'N', 'simulated robots: seed of the noise'),
+        (
+            '--robot-rate',
+            POSITIVE,
+            defaults.rate,
+            'HZ',
+            f'simulated robots: ticks per second (default {defaults.rate:g})',
+        ),
+        (
+            '--initial-heading',
+            FINITE,
+            None,
+            'RAD',
+            "simulated robots: every robot's heading at t = 0 (default: the scenario's per-agent "
+            '`heading`, else 0)',
+        ),
+        (
+            '--robots-per-process',
+            POSITIVE_INT,
+            ROBOTS_PER_PROCESS,
+            'K',
+            f'simulated robots sharing one process (default {ROBOTS_PER_PROCESS})',
+        ),
+    ):
+        group.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
 
 
 def robot_options(args: argparse.Namespace, model: str):

@@ -70,6 +70,7 @@ from formation_agent.ros.process import (
 )
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
 from formation_msgs_py.codec import MessageError
+from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
 from formation_msgs_py.topics import (
     ROBOT_NODE,
     agent_namespace,
@@ -277,7 +278,7 @@ class SimulatedRobotNode(Node):
             command_message(self.robot.kind),
             robot_command_topic(self.robot_id),
             self._on_command,
-            ROBOT_QOS,
+            ROBOT_COMMAND_READER_QOS,  # the newest command only: none from before a freeze after it
             raw=True,
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied

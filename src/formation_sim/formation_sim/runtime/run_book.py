@@ -171,7 +171,8 @@ class RunBook:
             raise CoordinatorError(f'agent {status.agent}: status went backwards from {previous} to {status}')
         if self.serves_sensing and status.triggers > book.expected_triggers:
             raise CoordinatorError(
-                f'agent {status.agent} reports {status.triggers} triggers, but was due {book.expected_triggers} times'
+                f'agent {status.agent} reports {status.triggers} '
+                f'triggers, but was due {book.expected_triggers} times'
             )
         new_trigger = (previous is None or status.triggers > previous.triggers) and status.triggers > 0
         if new_trigger:
@@ -319,7 +320,8 @@ class RunBook:
 
     def waiting_description(self) -> str:
         return '; '.join(
-            f'agent {i}: status {book.status}, expected triggers {book.expected_triggers}, commands received {book.commands_received}'
+            f'agent {i}: status {book.status}, expected triggers '
+            f'{book.expected_triggers}, commands received {book.commands_received}'
             for i, book in self.agents.items()
         )
 
@@ -449,7 +451,8 @@ class RecorderBook:
             self.lost = (now, how)
 
     def accept_heartbeat(self, text: str) -> str | None:
-        """Take a recorder's heartbeat (JSON: version 1, recorder, step[, silent]); the reason it is refused, or None."""
+        """Take a recorder's heartbeat (JSON: version 1, recorder, step[, silent]); the reason it is
+        refused, or None."""
         try:
             beat = json.loads(text)
             name, step = str(beat['recorder']), beat['step']
@@ -464,6 +467,14 @@ class RecorderBook:
         self.silent[name] = silent
         return None
 
+    def behind(self, step: int, *, recorders: int, lag: int) -> bool:
+        """Whether more than `lag` steps before `step` are not yet in the bag of one of the
+        `recorders` the run has (lock-step waits for it; its heartbeat says which step it wrote)."""
+        if recorders < 1:
+            return False
+        recorded = sorted(self.recorded_steps.values())[:recorders]
+        return len(recorded) < recorders or recorded[0] < step - lag
+
     def lost_error(self, now: float, *, started: bool, where: str) -> RecorderLostError | None:
         """The recorder lost, once LOST_GRACE has passed (else None); during discovery a lease that
         expired waits for the recorder to come back, as an agent's does (`RunBook.lost_error`)."""
@@ -471,7 +482,8 @@ class RecorderBook:
         if lost is None or (not started and self.lease_expired) or now - lost[0] <= LOST_GRACE:
             return None
         return RecorderLostError(
-            f'the recorder lost {where}: {lost[1]}; what it did not acknowledge is overwritten, so the run stops'
+            f'the recorder lost {where}: {lost[1]}; what it did '
+            'not acknowledge is overwritten, so the run stops'
         )
 
 

@@ -3,9 +3,10 @@
 A `time_keeper.TimeKeeperNode` (discovery, Step, liveliness, Status and reports, failures; the
 books in `run_book`, summary.json through `run_end`), as the coordinator is, that holds the exact
 `World`, serves every agent's sensing service `/agent_<i>/sense`, applies the commands agents
-publish, and publishes what tools want to see: `/clock` (rounded to ns, for tools
-only), the exact state `/formation/state` and `/formation/ground_truth` at a sample period (pure
-evaluations, the world itself only advances from event to event), and `/formation/sensing_log`.
+publish, and publishes what tools want to see (`sim_view.SimulatorView`): `/clock` (rounded to ns,
+for tools only), the exact state `/formation/state` and `/formation/ground_truth` at a sample
+period (pure evaluations, the world itself only advances from event to event), and
+`/formation/sensing_log`.
 
 Lock-step protocol (docs/MESSAGES.md): after discovery the simulator publishes Step 0 at t = 0;
 every agent due at a step senses, commands, broadcasts and reports a Status; agents that receive
@@ -33,34 +34,20 @@ agent or the recorder lost, 130 interrupted.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Sequence
 from typing import NoReturn
 
 import numpy as np
-from geometry_msgs.msg import Accel, PoseArray, Twist
+from geometry_msgs.msg import Accel, Twist
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.qos import QoSProfile
-from rclpy.serialization import serialize_message
-from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
 
 from formation_agent.ros.process import exit_process
-from formation_msgs_py.codec import (
-    decode_command,
-    encode_pose_array,
-    encode_sensed_state,
-    encode_step,
-    encode_world_state,
-    ros_time,
-    sensing_refusal,
-)
-from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step, WorldState
-from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.codec import decode_command, encode_sensed_state, encode_step, sensing_refusal
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
@@ -76,11 +63,15 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
-from formation_sim.analysis.markers import MARKERS_TYPE, FormationMarkers, LiveMarkerArray
+from formation_sim.analysis.markers import MARKERS_TYPE
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
-from formation_sim.runtime.coordinator import EXIT_AGENT_LOST, EXIT_FAILED, EXIT_INTERRUPTED  # noqa: F401 - the simulator's public names since before the split
+from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's names since before the split
+    EXIT_AGENT_LOST,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+)
 from formation_sim.runtime.run_end import GRAPH_FILE, write_results  # noqa: F401 - likewise
 from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     AgentLostError,
@@ -90,10 +81,11 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     RecorderLostError,
     StallError,
 )
+from formation_sim.runtime.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
 from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
-from formation_sim.sim.engine import FloorEdges, Sampler, build_agent, due_twice, rounding_floor
+from formation_sim.runtime.exact_world import ExactWorld
+from formation_sim.sim.engine import due_twice
 from formation_sim.sim.record import RunRecord
-from formation_sim.sim.world import World
 
 CLOCK_MODES = ('lockstep', 'realtime')
 SIMULATOR_FILE = 'simulator.params.yaml'  # its parameters in a run folder (formation run, formation params)
@@ -123,7 +115,10 @@ SIMULATOR_PARAMETERS = (
         default=60.0,
         low=0.0,
         low_open=True,
-        description="a lock-step step not settled after this many seconds ends the run, naming every agent's last Status",
+        description=(
+            'a lock-step step not settled after this many seconds '
+            "ends the run, naming every agent's last Status"
+        ),
     ),
 )
 """The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
@@ -135,24 +130,6 @@ Lock-step at full speed outruns a recorder (one Python process taking every mess
 2-core machine 3 runs of 4 lost hundreds of view and Status messages, the writers' keep-last
 histories turning over before the recorder had them.  Held within a few steps of it, what is
 outstanding stays far below the writers' depths (24 runs of 24 complete since, views kept deeper)."""
-
-VIEW_HISTORY_BYTES = 16 * 2**20
-
-
-def view_qos(sample) -> QoSProfile:
-    """SIMULATOR_QOS for a view (ground truth, markers) whose messages are like `sample`: as deep,
-    unless its history (kept for late joiners: transient local) would hold more than
-    VIEW_HISTORY_BYTES (a marker array of 300 agents is ~200 KB); never below PROTOCOL_QOS's 32.
-    A shallow history lost views to a recorder a few hundred messages behind (README)."""
-    size = max(1, len(serialize_message(sample)))
-    return QoSProfile(
-        history=SIMULATOR_QOS.history,
-        depth=max(PROTOCOL_QOS.depth, min(SIMULATOR_QOS.depth, VIEW_HISTORY_BYTES // size)),
-        reliability=SIMULATOR_QOS.reliability,
-        durability=SIMULATOR_QOS.durability,
-        liveliness=SIMULATOR_QOS.liveliness,
-        liveliness_lease_duration=SIMULATOR_QOS.liveliness_lease_duration,
-    )
 
 
 def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
@@ -228,8 +205,10 @@ class FormationSimulatorNode(TimeKeeperNode):
     COMMAND = 'formation_sim'
     PARAMS_FILE = SIMULATOR_FILE
     DESCRIPTION = (
-        "The simulator of a formation run (formation run, backend exact): the exact world, every agent's sensing "
-        "service, the lock-step clock (or the wall clock), the tools' topics; writes summary.json and graph.json "
+        'The simulator of a formation run (formation run, '
+        "backend exact): the exact world, every agent's sensing "
+        'service, the lock-step clock (or the wall clock), the '
+        "tools' topics; writes summary.json and graph.json "
         'into out_dir.'
     )
 
@@ -244,36 +223,23 @@ class FormationSimulatorNode(TimeKeeperNode):
     def _setup_world(self) -> None:
         """The exact world, its sampler and the tools' view of it."""
         scenario = self.scenario
-        self.world = World.from_scenario(scenario)
-        # The agents' threshold (the very same floats) and the edges of the rounding floor: stop where the engine stops.
-        self._threshold_model, self._floor_edges = (
-            build_agent(scenario, scenario.agent_ids[0]),
-            FloorEdges.of(scenario),
-        )
-        self._state_pub = self.create_publisher(Float64MultiArray, STATE_TOPIC, SIMULATOR_QOS)
-        start = WorldState(
-            time=0.0,
-            agent_ids=scenario.agent_ids,
-            positions=scenario.positions,
+        # Moved and sampled as the engine does it, stopped where the engine stops.
+        self.exact = ExactWorld(scenario, sample_period=self.sample_period, on_sample=self._on_sample)
+        self.world, self._sampler = self.exact.world, self.exact.sampler
+        self.view = view = SimulatorView(
+            self,
+            scenario=scenario,
             velocities=self.world.velocities,
+            viz_period=self.viz_period,
+            publish=self._publish,
         )
-        self._truth_pub = self.create_publisher(
-            PoseArray, GROUND_TRUTH_TOPIC, view_qos(encode_pose_array(start))
-        )
-        self._log_pub = self.create_publisher(String, SENSING_LOG_TOPIC, SIMULATOR_QOS)
-        self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, SIMULATOR_QOS)
-        # For tools: a Foxglove view per sample.
-        self._markers = FormationMarkers(scenario)
-        self._marker_array = LiveMarkerArray(self._markers)
-        view = self._markers.to_ros(self._markers.markers(scenario.positions), time=0.0)
-        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, view_qos(view))
         self._tool_publishers = [
-            self._state_pub,
-            self._truth_pub,
-            self._log_pub,
-            self._clock_pub,
+            view.state_pub,
+            view.truth_pub,
+            view.log_pub,
+            view.clock_pub,
             self._scenario_pub,
-            self._markers_pub,
+            view.markers_pub,
         ]
         self._services = [
             self.create_service(
@@ -283,9 +249,6 @@ class FormationSimulatorNode(TimeKeeperNode):
         ]
         self.sensing_calls = 0
         self._due: set[int] = set()
-        self._sampler = Sampler(self.world, self.sample_period, on_sample=self._on_sample)
-        self._unpublished = 0  # samples at the end of the record not yet published for tools
-        self._next_viz = 0.0  # sim time of the next ground truth and marker view
         self._last_advance = self._created
 
     def _watch_agents(self) -> dict:
@@ -335,7 +298,8 @@ class FormationSimulatorNode(TimeKeeperNode):
 
     def _describe_wait(self) -> str:
         recorders = (
-            f'recorders at steps {self.recorders.recorded_steps or "none yet"} (RECORDER_LAG {RECORDER_LAG}); '
+            f'recorders at steps {self.recorders.recorded_steps or "none yet"} '
+            f'(RECORDER_LAG {RECORDER_LAG}); '
             if self.extra_subscribers
             else ''
         )
@@ -343,13 +307,6 @@ class FormationSimulatorNode(TimeKeeperNode):
             f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}'
             + self.book.waiting_description()
         )
-
-    def _recorder_behind(self) -> bool:
-        """More than RECORDER_LAG steps are not yet in some recorder's bag (lock-step waits)."""
-        if self.extra_subscribers < 1:
-            return False
-        recorded = sorted(self.recorders.recorded_steps.values())[: self.extra_subscribers]
-        return len(recorded) < self.extra_subscribers or recorded[0] < self.step.index - RECORDER_LAG
 
     # -- wall clock -----------------------------------------------------------------------------
 
@@ -360,19 +317,17 @@ class FormationSimulatorNode(TimeKeeperNode):
     def _realtime_event(self) -> float:
         """Advance the world to now (an event: a sensing or a command arrives)."""
         t = self._wall_time()
-        self._sampler.grid_until(t)
-        self.world.advance(t)
-        self._sampler.event()
+        self.exact.advance(t)
         self.publish_samples()
         self.steps += 1
         return t
 
     def _realtime_tick(self) -> None:
         t = self._wall_time()
-        self._sampler.grid_until(t)
-        if t >= self.horizon:
-            self.world.advance(self.horizon)
-            self._sampler.event()
+        if t < self.horizon:
+            self._sampler.grid_until(t)
+        else:  # the horizon (the wall time is never past it)
+            self.exact.advance(self.horizon)
             self._finished_at = time.monotonic()
             self.graph = graph_of(self)
             self.step = Step(
@@ -390,12 +345,8 @@ class FormationSimulatorNode(TimeKeeperNode):
         book.trigger_times.append(t)
         book.expected_triggers += 1
         self.sensing_calls += 1
-        self._log_sensing(agent, 0, t)
+        self.view.log_sensing(agent, 0, t)
         return encode_sensed_state(self.world.sense(agent, book.neighbours))
-
-    def _log_sensing(self, agent: int, step: int, t: float) -> None:
-        log = {'version': 1, 'agent': agent, 'step': step, 'time': t}
-        self._publish(self._log_pub, String(data=json.dumps(log, separators=(',', ':'))))
 
     # -- lock-step ------------------------------------------------------------------------------
 
@@ -452,7 +403,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         book.sensed_at_step = index
         self.sensing_calls += 1
         sensed = self.world.sense(agent, book.neighbours)
-        self._log_sensing(agent, index, self.world.time)
+        self.view.log_sensing(agent, index, self.world.time)
         return encode_sensed_state(sensed)
 
     def _settled(self) -> bool:
@@ -461,8 +412,8 @@ class FormationSimulatorNode(TimeKeeperNode):
     def _advance_if_settled(self) -> None:
         if self.realtime or self.step is None or self.finished or not self._settled():
             return
-        if self._recorder_behind():
-            return  # the recorder's next heartbeat comes back here
+        if self.recorders.behind(self.step.index, recorders=self.extra_subscribers, lag=RECORDER_LAG):
+            return  # lock-step waits: the recorder's next heartbeat comes back here
         t = self.step.time
         t_next, due = self.book.next_due(t)
         if t_next == t:
@@ -470,57 +421,33 @@ class FormationSimulatorNode(TimeKeeperNode):
             # very instant, in a further step (as the in-process engine does).
             twice = [i for i in due if self.agents[i].trigger_times and self.agents[i].trigger_times[-1] == t]
             if twice:
-                raise SimulatorError(due_twice(twice[0], self._threshold_model, t))
+                raise SimulatorError(due_twice(twice[0], self.exact.threshold_model, t))
             self.steps += 1
             self._publish_step(Step(index=self.step.index + 1, time=t, due=due))
             return
         self.steps += 1
         if t_next > self.horizon:
-            self._sampler.grid_until(self.horizon)
-            self.world.advance(self.horizon)
-            self._sampler.event()
+            self.exact.advance(self.horizon)
             self._finished_at = time.monotonic()
             self.graph = graph_of(self)
             self.finished = True
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
             self.publish_samples()
             return
-        self._sampler.grid_until(t_next)
-        self.world.advance(t_next)
-        self._sampler.event()
-        if (problem := rounding_floor(self._threshold_model, self.world, self._floor_edges)) is not None:
+        self.exact.advance(t_next)
+        if (problem := self.exact.floor_problem()) is not None:
             raise SimulatorError(problem)
         self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
 
     # -- samples (pure evaluations; they never move the world) --------------------------------
 
     def _on_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
-        self._unpublished += 1
-        self._check_connectivity(t, x)
-
-    def _check_connectivity(self, t: float, x: np.ndarray) -> None:
+        """Each sample: every edge checked against Δ (ConnectivityLostError)."""
         self.book.check_connectivity(t, x)
 
     def publish_samples(self) -> None:
-        """For tools: the exact state at every sample not yet published; /clock, ground truth and
-        the marker view at most every `viz_period` of sim time (a view costs ~1 ms)."""
-        count, self._unpublished = self._unpublished, 0
-        samples = self._sampler
-        last = len(samples.times) - 1
-        for k in range(last + 1 - count, last + 1):
-            t, x = samples.times[k], samples.positions[k]
-            state = WorldState(
-                time=t,
-                agent_ids=self.scenario.agent_ids,
-                positions=x,
-                velocities=samples.velocities[k] if self.double else None,
-            )
-            self._publish(self._state_pub, encode_world_state(state))
-            if t >= self._next_viz or (self.finished and k == last):
-                self._next_viz = t + self.viz_period
-                self._publish(self._clock_pub, Clock(clock=ros_time(t)))
-                self._publish(self._truth_pub, encode_pose_array(state))
-                self._publish(self._markers_pub, self._marker_array.update(self._markers.markers(x), time=t))
+        """For tools: the samples not yet published (`SimulatorView.publish_samples`)."""
+        self.view.publish_samples(self._sampler, finished=self.finished)
 
     def flush(self) -> None:
         self.publish_samples()
