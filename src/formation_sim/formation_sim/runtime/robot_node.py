@@ -217,7 +217,11 @@ SPECS = (
 
 
 class SimulatedRobotNode(Node):
-    """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands."""
+    """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands.
+
+    `own_timer` False: the robot ticks when `tick()` is called (`RobotTicker`: one timer for the
+    robots of a process at each rate).
+    """
 
     def __init__(
         self,
@@ -227,8 +231,6 @@ class SimulatedRobotNode(Node):
         context=None,
         own_timer: bool = True,
     ) -> None:
-        """`own_timer` False: the robot ticks when `tick()` is called (`RobotTicker`: one timer for
-        every robot of a process at its rate, `rate` Hz)."""
         super().__init__(
             NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context
         )
@@ -272,8 +274,7 @@ class SimulatedRobotNode(Node):
             if p['publish_truth']
             else None
         )
-        # Raw: the command's fields read from its bytes (formation_msgs_py.cdr), not through
-        # rclpy's Python message (issue 19).
+        # Raw: its fields read from its bytes (formation_msgs_py.cdr), no rclpy message (issue 19).
         self._command_sub = self.create_subscription(
             command_message(self.robot.kind),
             robot_command_topic(self.robot_id),
