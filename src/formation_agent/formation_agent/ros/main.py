@@ -2,8 +2,8 @@
 
 ```
 formation_agent --ros-args -r __ns:=/agent_2 --params-file team.yaml --params-file robot.yaml
-formation_agent --ros-args --params-file agents.params.yaml -p agent_id:=2   # /agent_2 from its id
-formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml   # packed, as `formation run` does
+formation_agent --ros-args --params-file agents.params.yaml -p agent_id:=2  # /agent_2 from its id
+formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml  # packed (`formation run`)
 formation_agent --help                                                      # options and the parameter table
 ```
 
@@ -74,8 +74,10 @@ def _parser() -> argparse.ArgumentParser:
         '--executor',
         choices=EXECUTORS,
         default='events',
-        help='rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single '
-        '(SingleThreadedExecutor)',
+        help=(
+            'rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single '
+            '(SingleThreadedExecutor)'
+        ),
     )
     parser.add_argument(
         '--agents',
@@ -132,8 +134,8 @@ def _missing_id_hint(error: Exception, options: argparse.Namespace) -> str:
         return ''
     return (
         '. A parameter file keyed by node name, as agents.params.yaml is, gives '
-        '/agent_<i>/formation_agent its parameters: name the agent with --agents i, -r __ns:=/agent_<i> '
-        'or -p agent_id:=i'
+        '/agent_<i>/formation_agent its parameters: name the agent with --agents i, '
+        '-r __ns:=/agent_<i> or -p agent_id:=i'
     )
 
 

@@ -112,8 +112,8 @@ class CommandGuard:
         if trigger_late is not None and trigger_late > self.timeout:
             raise StaleStateError(
                 f'{where} its trigger has been due for {trigger_late:.3f} s '
-                f"(pose_timeout {self.timeout:g} s; this agent's timer ran {late:.3f} s late, {OVERLOADED}): "
-                'no command from state that old: the agent stops'
+                f"(pose_timeout {self.timeout:g} s; this agent's timer ran {late:.3f} s late, "
+                f'{OVERLOADED}): no command from state that old: the agent stops'
             )
 
 
