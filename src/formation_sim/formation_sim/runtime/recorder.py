@@ -592,6 +592,7 @@ def main(args: Sequence[str] | None = None) -> int:
     """Run the recorder until SIGINT or SIGTERM, then finalize the bag."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.task import Future
 
     from formation_agent.ros.process import EXIT_BAD_INPUT, SignalFlag, make_executor, shutdown_guard
 
@@ -616,8 +617,9 @@ def main(args: Sequence[str] | None = None) -> int:
         # which fell behind a 3-agent lock-step run on a loaded machine.
         executor = make_executor('events')
         executor.add_node(node)
-        while not stop.is_set() and node.failure is None:
-            executor.spin_once(timeout_sec=0.1)
+        never = Future()  # every event of 0.1 s dispatched in C++, then a look at the stop flag:
+        while not stop.is_set() and node.failure is None:  # a spin_once per message cost more
+            executor.spin_until_future_complete(never, timeout_sec=0.1)
         node.stop_timers()
         if node.failure is None:
             node.drain(executor, interrupted=lambda: requests > 1)
