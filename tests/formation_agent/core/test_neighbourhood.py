@@ -119,7 +119,8 @@ def test_edges_out_of_their_range_are_named():
     hood.check_sensed_range([0.0, math.nextafter(2.0, 0.0)])  # just inside Δ - ||d_ij|| = 2
     with pytest.raises(
         AgentError,
-        match=r'^agent 1: edge to agent 2 is out of its range: \|\|x_i-x_j-d_ij\|\| = 2.0 >= Δ-\|\|d_ij\|\| = 2.0$',
+        match=r'^agent 1: edge to agent 2 is out of its range: '
+        r'\|\|x_i-x_j-d_ij\|\| = 2.0 >= Δ-\|\|d_ij\|\| = 2.0$',
     ):
         hood.check_sensed_range([0.0, 2.0])
     error = hood.out_of_range(0, 2.5, 2.0)

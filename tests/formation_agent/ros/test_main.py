@@ -221,6 +221,26 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
         robot.wait(timeout=10)
 
 
+def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, agent_process):
+    """Issue 19, part 1: the robots stop at the horizon and the final Step comes late (a loaded
+    machine): the agent's poses go stale after the end of the run.  It stops its robot and waits for
+    the final Step, then leaves with exit 0 and a final report without failure."""
+    horizon = 1.5
+    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon)
+    rig.spin_until(lambda: time.time() >= rig.epoch + horizon, timeout=10.0, what='the horizon')
+    rig.silent.update({1, 2})  # both robots stopped at the end of the run
+    zero = (0.0,) * 6
+    rig.spin_until(
+        lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
+    )
+    assert time.time() > rig.epoch + horizon + 0.5  # its pose is stale (pose_timeout 0.5 s)
+    assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
+    rig.finish()
+    assert rig.wait_for_exit(agent) == 0
+    _assert_stopped(rig, agent, status=0, failure=None)
+    assert 'agent 1: poses stopped after the horizon t=1.5' in agent.stderr, agent.stderr
+
+
 def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_process):
     """Robot 2 goes silent; agent 1 finds out at its next trigger (news from agent 2 brings it on)."""
     from formation_msgs_py.types import TriggerInfo

@@ -12,7 +12,8 @@
   closed-loop motion without cancellation.
 - On robots (README, "Running on robots"): `kinds` (the registry of robot kinds: each kind's
   control point, command adapter, message type, limits and simulated model), `limits` (`Limits`,
-  saturation counts), `kinematics` (control points, the unicycle's diffeomorphism), `pose_sensing` (`PoseBook`: SensedState from poses, stale poses refused),
+  saturation counts), `kinematics` (control points, the unicycle's diffeomorphism), `pose_sensing`
+  (`PoseBook`: SensedState from poses, stale poses refused),
   `velocity_reference` (ETA-2's q_i(t) for velocity-commanded robots), `commander`
   (`RobotCommander`: velocity commands within a robot's `Limits`, clips counted).
 """
