@@ -116,7 +116,8 @@ class Robot:
             self.position, self.yaw = position, wrap_angle(yaw)
 
     def set_command(self, command: Command) -> Command:
-        """Apply `command` from now on, clipped to the limits as its kind's base does; returns what is applied."""
+        """Apply `command` from now on, clipped to the limits as its kind's base does; returns what is
+        applied."""
         size = self.dimension if self.kind.world_frame_command else 1
         if len(command.linear) != size:
             what = (
@@ -125,7 +126,8 @@ class Robot:
                 else 'one forward speed v'
             )
             raise RobotError(
-                f'a {self.model} robot in {self.dimension} dimensions takes {what}, got {list(command.linear)}'
+                f'a {self.model} robot in {self.dimension} dimensions takes {what}, got '
+                f'{list(command.linear)}'
             )
         linear, angular, clipped = self.kind.clip(
             tuple(float(v) for v in command.linear),
