@@ -63,7 +63,8 @@ _kind = next((k for m, k in {kinds!r} if any(m in a for a in sys.argv + getattr(
 if _folder and _kind:
     _profile = cProfile.Profile(time.thread_time)  # CPU of the main thread (the callbacks), not wall time
     _profile.enable()
-    atexit.register(lambda: (_profile.disable(), _profile.dump_stats(os.path.join(_folder, f'{{_kind}}-{{os.getpid()}}.prof'))))
+    _path = os.path.join(_folder, f'{{_kind}}-{{os.getpid()}}.prof')
+    atexit.register(lambda: (_profile.disable(), _profile.dump_stats(_path)))
 """
 
 
@@ -234,8 +235,9 @@ def table(rows: list[dict], n: int) -> str:
             median = {name: statistics.median(u[name] for u in units) for name in units[0]}
             processes = ', '.join(f'{k} {v}' for k, v in done[0]['processes'].items())
             lines.append(
-                f'| {code} | {key} | {median["agent"]:.1%} | {median["robot"]:.1%} | {median["coordinator"]:.1%} | '
-                f'{median["recorder"]:.1%} | {median["total"]:.1%} | {processes} |'
+                f'| {code} | {key} | {median["agent"]:.1%} | {median["robot"]:.1%} | '
+                f'{median["coordinator"]:.1%} | {median["recorder"]:.1%} | {median["total"]:.1%} | '
+                f'{processes} |'
             )
     return '\n'.join(lines)
 

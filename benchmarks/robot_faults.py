@@ -21,7 +21,8 @@ control point... (its pose) travelled after the fault, the exit status and the m
 `formation run`, the time it took to exit after the fault, and whether `formation analyze` found
 the bag to agree with summary.json.
 
-    python benchmarks/robot_faults.py --domain-id 33 [--faults robot_kill ctrl_c] [--backends unicycle external]
+    python benchmarks/robot_faults.py --domain-id 33 [--faults robot_kill ctrl_c] \
+        [--backends unicycle external]
 
 Run it under the machine's ROS lock (`flock /tmp/ros-tests.lock ...`): it starts 10-20 processes a row.
 """

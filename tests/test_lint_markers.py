@@ -12,7 +12,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 TREES = ('src', 'tests', 'benchmarks', 'scripts', 'docs')
-# `# noqa: E402, F401 - why` (the reason after '-', '—', ':' or in parentheses, at least a word)
+# A marker names its rules after 'noqa:' and then its reason, after '-', '—', ':' or in parentheses.
 NOQA = re.compile(r'#\s*noqa\b(?P<rest>.*)$', re.IGNORECASE)
 REASONED = re.compile(r':\s*[A-Z]+[0-9]+(?:\s*,\s*[A-Z]+[0-9]+)*\s*(?:[-—:(]\s*)\w')
 FORMAT_OFF = re.compile(r'#\s*fmt:\s*(?:off|skip)\b')

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 
@@ -17,6 +17,8 @@ from formation_msgs_py.cdr import (
     odometry_fields,
     pack_pose_stamped,
     pose_stamped_fields,
+    twist_fields,
+    twist_stamped_fields,
 )
 from formation_msgs_py.codec import MessageError, decode_odometry, decode_pose_stamped
 
@@ -147,3 +149,25 @@ def test_the_fields_of_serialized_poses_are_the_messages_fields_bit_for_bit_and_
         with pytest.raises(MessageError, match='bytes') as caught:
             odometry_fields(good[:cut])
         assert caught.value.reason == 'length'
+
+
+@pytest.mark.parametrize('frame', ['world', '', 'map_x'])
+def test_twist_fields_are_rclpys_field_for_field_and_cut_bytes_are_refused(frame):
+    rng = np.random.default_rng(6)
+    for k in range(100):
+        values = (math.inf, math.nan, *rng.normal(size=4)) if k == 0 else tuple(rng.normal(size=6))
+        twist = Twist()
+        twist.linear.x, twist.linear.y, twist.linear.z = values[:3]
+        twist.angular.x, twist.angular.y, twist.angular.z = values[3:]
+        assert np.array_equal(twist_fields(serialize_message(twist)), values, equal_nan=True)
+        stamped = TwistStamped(twist=twist)
+        stamped.header.frame_id = frame
+        stamped.header.stamp.sec, stamped.header.stamp.nanosec = k, 999_999_999 - k
+        got_frame, got = twist_stamped_fields(serialize_message(stamped))
+        assert got_frame == frame and np.array_equal(got, values, equal_nan=True)
+    for message, fields in ((twist, twist_fields), (stamped, twist_stamped_fields)):
+        good = serialize_message(message)
+        for cut in (0, 3, len(good) - 1):
+            with pytest.raises(MessageError, match='bytes') as caught:
+                fields(good[:cut])
+            assert caught.value.reason == 'length'

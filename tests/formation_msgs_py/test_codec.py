@@ -293,7 +293,8 @@ def test_malformed_status_is_rejected(values, complaint):
 def test_malformed_step_is_rejected():
     with pytest.raises(
         MessageError,
-        match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\] and the due agent ids, got 3",
+        match=r"expected 5 values \['version', 'step_index', 'time', 'flags', 'epoch'\] "
+        'and the due agent ids, got 3',
     ):
         decode_step(_array([1, 0, 0.0]))
     with pytest.raises(MessageError, match='must be finite'):

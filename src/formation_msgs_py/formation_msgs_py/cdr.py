@@ -11,6 +11,8 @@ the two pose types with `struct`:
 - `decode_odometry_cdr`, `decode_pose_stamped_cdr`: bytes -> `RobotPose`, with the checks of
   `codec.decode_odometry` / `codec.decode_pose_stamped` (finite values, a unit quaternion);
   bytes that are not such a message raise `MessageError` (reason `length`).
+- `odometry_fields`, `pose_stamped_fields`, `twist_fields`, `twist_stamped_fields`: the fields
+  as sent, unchecked (the coordinator's poses, a simulated robot's velocity commands).
 
 The layout is ROS 2's: a 4-byte encapsulation header (CDR little endian: 00 01 00 00), then the
 fields in order, each aligned to its size from the end of that header; a string is a uint32
@@ -185,3 +187,23 @@ def pose_stamped_fields(data: bytes) -> tuple[int, int, tuple[float, ...]]:
     pose_at = _align8(end)
     _need(data, pose_at + _POSE.size, 'pose')
     return sec, nanosec, _POSE.unpack_from(data, pose_at)
+
+
+def twist_fields(data: bytes) -> tuple[float, ...]:
+    """Serialized geometry_msgs/Twist -> (linear x y z, angular x y z), as sent, unchecked: a
+    unicycle's velocity command, taken by a simulated robot without rclpy's Python message."""
+    if len(data) < _HEADER or data[:2] != ENCAPSULATION[:2]:
+        raise MessageError(
+            f'twist: {len(data)} bytes are not a little-endian CDR message', reason=REJECT_LENGTH
+        )
+    _need(data, _HEADER + _TWIST.size, 'twist')
+    return _TWIST.unpack_from(data, _HEADER)
+
+
+def twist_stamped_fields(data: bytes) -> tuple[str, tuple[float, ...]]:
+    """Serialized geometry_msgs/TwistStamped -> (frame_id, (linear x y z, angular x y z)), as
+    sent, unchecked: a holonomic robot's velocity command."""
+    _, _, frame, end = _stamp_and_frame(data, 'twist')
+    twist_at = _align8(end)
+    _need(data, twist_at + _TWIST.size, 'twist')
+    return frame, _TWIST.unpack_from(data, twist_at)

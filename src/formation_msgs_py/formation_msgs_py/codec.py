@@ -323,7 +323,8 @@ def decode_step(msg) -> Step:
     data = _data('step', msg)
     if len(data) < len(_STEP_LABELS):
         raise MessageError(
-            f'step: expected {len(_STEP_LABELS)} values {list(_STEP_LABELS)} and the due agent ids, got {len(data)}',
+            f'step: expected {len(_STEP_LABELS)} values {list(_STEP_LABELS)} and the due agent ids, '
+            f'got {len(data)}',
             reason=REJECT_LENGTH,
         )
     _check_version('step', data[0])
@@ -497,7 +498,8 @@ def decode_agent_report(msg) -> AgentReport:
         raise MessageError(f'agent report must be a JSON object, got {text[:80]!r}')
     if body.get('version') != AGENT_REPORT_VERSION:
         raise MessageError(
-            f'agent report: version {body.get("version")!r} is not supported (expected {AGENT_REPORT_VERSION})',
+            f'agent report: version {body.get("version")!r} is not supported '
+            f'(expected {AGENT_REPORT_VERSION})',
             reason=REJECT_VERSION,
         )
     known = set(_REPORT_FIELDS)

@@ -68,15 +68,40 @@ ROBOT_POSE_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 
+# What a robot's driver subscribes its cmd_vel with: ROS's default profile (reliable, volatile,
+# keep last 10; rclpy's QoSProfile(depth=10)).  History is not part of QoS matching.
+DEFAULT_READER_DEPTH = 10
+
 # Velocity commands: reliable (the final zero command must arrive, and the agent waits for its
 # acknowledgement), volatile (a robot that connects late must never get an old command replayed),
 # and the protocol's liveliness lease, so a coordinator can tell that an agent's command writer is
-# gone.  A robot's reader matches if it asks for volatile durability (best effort or reliable).
+# gone.  A robot's reader matches if it asks for volatile durability (best effort or reliable) and
+# any liveliness lease of at least ours (the default: infinite).
+#
+# A robot whose process was frozen (SIGSTOP; a driver stalled) finds on resuming every command
+# sent meanwhile waiting in its transport (shared memory or its socket): its DDS reader takes them
+# in one burst into its history, which keeps the newest `depth` of them, and its callback then runs
+# on each in turn: measured, 26 commands sent during a 2 s freeze and a zero, a keep-last-10
+# reader's callback ran on 9 stale commands and then the zero, whatever this writer's depth (1 or
+# 10: the commands are not re-sent, they were delivered).  Hence the stop publishes the zero command
+# `depth` times (`formation_agent.ros.commands`): a default reader holds only zeros then (measured:
+# 10 zeros and nothing else), and a robot of ours reads keep-last 1 (ROBOT_COMMAND_READER_QOS).
+# The writer's history keeps as many, so a repair re-sends zeros only.
 ROBOT_COMMAND_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=10,
+    depth=DEFAULT_READER_DEPTH,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
     liveliness=LivelinessPolicy.AUTOMATIC,
     liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
+)
+
+# A simulated robot's command reader (`formation_sim.runtime.robot_node`): a robot acts on the
+# newest command only, so it keeps only the newest; after a freeze it takes the zero alone
+# (measured: only the zero after SIGCONT, where keep-last 10 took 9 stale commands first).
+ROBOT_COMMAND_READER_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
 )

@@ -117,7 +117,8 @@ def test_missing_and_future_poses_are_refused():
     with pytest.raises(PoseError) as error:
         book.sense(t=0.0, now=NOW, velocities=False)
     assert str(error.value) == (
-        'agent 1: the pose of robot 3 on /agent_3/robot/pose has not arrived by t=0.000; its last pose was refused: '
+        'agent 1: the pose of robot 3 on /agent_3/robot/pose has not arrived by t=0.000; '
+        'its last pose was refused: '
         "pose of robot 3 in frame 'map', not the world frame 'world': the agent stops"
     )
 

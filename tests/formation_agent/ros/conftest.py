@@ -72,7 +72,10 @@ class AgentProcess:
         if python_prelude is None:
             command = [sys.executable, '-m', 'formation_agent.ros.main', *ros_args]
         else:  # the test changes something inside the process first (a fault), then runs main
-            script = f'{python_prelude}\nimport sys\nfrom formation_agent.ros.main import main\nsys.exit(main(sys.argv))\n'
+            script = (
+                f'{python_prelude}\nimport sys\nfrom formation_agent.ros.main import main\n'
+                'sys.exit(main(sys.argv))\n'
+            )
             command = [sys.executable, '-c', script, *ros_args]
         self.stdout_path = tmp_path / 'agent_1.out'
         self.stderr_path = tmp_path / 'agent_1.err'
@@ -285,7 +288,8 @@ def bench(robot_domain, tmp_path):
 
 @pytest.fixture
 def agent_process(tmp_path, robot_domain):
-    """`agent_process(**parameters) -> AgentProcess`, agent 1 on the test's own domain; killed after the test."""
+    """`agent_process(**parameters) -> AgentProcess`, agent 1 on the test's own domain; killed
+    after the test."""
     agents = []
 
     def start(**parameters) -> AgentProcess:

@@ -27,9 +27,21 @@ def _eta1_control(rel_position) -> np.ndarray:
     return np.array(agent.trigger(0.0, sensed).control)
 
 
+def _before_stop(rig) -> list:
+    """Every command before the stop: the agent sends the zero command DEFAULT_READER_DEPTH times
+    (a frozen robot's reader then holds only zeros when it resumes)."""
+    from formation_msgs_py.qos import DEFAULT_READER_DEPTH
+
+    messages = [msg for _, msg in rig.commands]
+    before, stop = messages[:-DEFAULT_READER_DEPTH], messages[-DEFAULT_READER_DEPTH:]
+    twists = [msg.twist if hasattr(msg, 'twist') else msg for msg in stop]
+    assert all((t.linear.x, t.linear.y, t.angular.z) == (0.0, 0.0, 0.0) for t in twists), stop
+    return before
+
+
 def _commands(rig):
-    """(v, ω) of every command before the final zero."""
-    return [(msg.linear.x, msg.angular.z) for _, msg in rig.commands[:-1]]
+    """(v, ω) of every command before the stop."""
+    return [(msg.linear.x, msg.angular.z) for msg in _before_stop(rig)]
 
 
 def _drive(bench, agent_process, **parameters):
@@ -93,7 +105,8 @@ def test_eta2_on_a_holonomic_robot_follows_its_velocity_reference_from_odometry(
     rig.spin_until(lambda: len(rig.commands) >= 20, timeout=15.0, what='twenty commands')
     rig.finish()
     assert rig.wait_for_exit(agent) == 0, agent.stderr
-    # What agent 1 senses: the twists rotated into the world frame (holonomic: the origin is the control point).
+    # What agent 1 senses: the twists rotated into the world frame (holonomic: the origin is the
+    # control point).
     q1 = 0.1 * np.array([math.cos(0.3), math.sin(0.3)])
     q2 = 0.05 * np.array([math.cos(-1.2), math.sin(-1.2)])
     agent_core = Eta2Agent(
@@ -112,7 +125,7 @@ def test_eta2_on_a_holonomic_robot_follows_its_velocity_reference_from_odometry(
             msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
             np.array([msg.twist.linear.x, msg.twist.linear.y]),
         )
-        for _, msg in rig.commands[:-1]
+        for msg in _before_stop(rig)
     ]
     # From any command to any later one: q(b) - u^d/k3 = (q(a) - u^d/k3) e^{-k3 (b - a)} (stamps to the ns).
     (a, qa), *later = samples

@@ -135,6 +135,112 @@ def test_a_frozen_agent_sends_no_command_after_it_resumes(bench, agent_process):
     _assert_stopped(rig, agent, status=1, failure='the agent stops')
 
 
+# A robot's command reader in a process of its own (to be frozen): 'default' reads as a robot's
+# driver does (ROS's default profile, keep last 10), 'ours' as a simulated robot does; it prints
+# every command its callback takes, with the wall time it took it.
+_ROBOT_READER = """
+import sys, time, rclpy
+from geometry_msgs.msg import TwistStamped
+from rclpy.qos import QoSProfile
+from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
+rclpy.init()
+node = rclpy.create_node('frozen_robot')
+qos = ROBOT_COMMAND_READER_QOS if sys.argv[1] == 'ours' else QoSProfile(depth=10)
+def taken(msg):
+    sent = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    print(time.time(), sent, msg.twist.linear.x, msg.twist.linear.y, flush=True)
+node.create_subscription(TwistStamped, '/agent_1/robot/cmd_vel', taken, qos)
+rclpy.spin(node)
+"""
+
+
+@pytest.mark.parametrize('reader', ['default', 'ours'])
+def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
+    bench, agent_process, robot_domain, tmp_path, reader
+):
+    """Issue 19: a robot's process stopped for 2 s (SIGSTOP): its poses stop, its agent goes on
+    commanding it until the pose is stale, then stops.  On SIGCONT every command sent meanwhile is
+    waiting in the robot's transport; its reader must take none but zeros (the agent sends the zero
+    as many times as a default reader keeps; a simulated robot keeps the newest only)."""
+    from formation_msgs_py.qos import DEFAULT_READER_DEPTH
+
+    def taken():
+        lines = (tmp_path / 'robot.out').read_text().splitlines()
+        return [
+            (float(at), float(sent), (float(x), float(y)))
+            for at, sent, x, y in (line.split() for line in lines)
+        ]
+
+    with open(tmp_path / 'robot.out', 'w') as out:
+        robot = subprocess.Popen(
+            [sys.executable, '-c', _ROBOT_READER, reader],
+            stdout=out,
+            env={
+                **os.environ,
+                'ROS_DOMAIN_ID': str(robot_domain),
+                'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+                'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
+            },
+        )
+    try:
+        rig, agent = _run_until_commanding(bench, agent_process)
+        rig.spin_until(lambda: len(taken()) >= 5, timeout=15.0, what='the robot to take five commands')
+        robot.send_signal(signal.SIGSTOP)
+        rig.silent.add(1)  # a frozen robot publishes no pose
+        frozen_at, sent = time.time(), len(rig.commands)
+        zero = (0.0,) * 6
+        rig.spin_until(
+            lambda: any(_linear(msg) == zero for _, msg in rig.commands[sent:]),
+            timeout=10.0,
+            what="the agent's stop",
+        )
+        # Resumed while the agent waits (DELIVERY_TIMEOUT) for the robot to acknowledge its stop: once
+        # it is gone, a resumed reader drops what its writer sent (measured: nothing taken at all).
+        rig.spin_for(frozen_at + 2.0 - time.time())
+        resumed_at = time.time()
+        robot.send_signal(signal.SIGCONT)
+        assert rig.wait_for_exit(agent) == 1
+        _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.5')
+        stale = [command for _, msg in rig.commands[sent:] if (command := _linear(msg)) != zero]
+        assert len(stale) > DEFAULT_READER_DEPTH, 'the agent should command the frozen robot until it stops'
+        stop = [_linear(msg) for _, msg in rig.commands[sent + len(stale) :]]
+        assert stop == [zero] * DEFAULT_READER_DEPTH, 'the stop: as many zeros as a default reader keeps'
+        rig.spin_until(
+            lambda: any(at > resumed_at for at, _, _ in taken()),
+            timeout=10.0,
+            what='the robot to take a command',
+        )
+        # What the robot takes after it resumed: none of the commands sent while it was frozen but
+        # the zeros (a command sent just before the freeze, in its reader or callback when the
+        # SIGSTOP came, may still be taken: the one it was acting on).  Stamps: when it was sent.
+        after = [(sent - frozen_at, command) for at, sent, command in taken() if at > resumed_at]
+        meanwhile = [command for sent, command in after if sent > 0.0]
+        assert meanwhile and all(command == (0.0, 0.0) for command in meanwhile), after
+    finally:
+        robot.kill()
+        robot.wait(timeout=10)
+
+
+def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, agent_process):
+    """Issue 19, part 1: the robots stop at the horizon and the final Step comes late (a loaded
+    machine): the agent's poses go stale after the end of the run.  It stops its robot and waits for
+    the final Step, then leaves with exit 0 and a final report without failure."""
+    horizon = 1.5
+    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon)
+    rig.spin_until(lambda: time.time() >= rig.epoch + horizon, timeout=10.0, what='the horizon')
+    rig.silent.update({1, 2})  # both robots stopped at the end of the run
+    zero = (0.0,) * 6
+    rig.spin_until(
+        lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
+    )
+    assert time.time() > rig.epoch + horizon + 0.5  # its pose is stale (pose_timeout 0.5 s)
+    assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
+    rig.finish()
+    assert rig.wait_for_exit(agent) == 0
+    _assert_stopped(rig, agent, status=0, failure=None)
+    assert 'agent 1: poses stopped after the horizon t=1.5' in agent.stderr, agent.stderr
+
+
 def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_process):
     """Robot 2 goes silent; agent 1 finds out at its next trigger (news from agent 2 brings it on)."""
     from formation_msgs_py.types import TriggerInfo

@@ -108,7 +108,8 @@ def test_every_missing_parameter_is_named_at_once(ros):
         ),
         (
             {'robot': 'unicycle', 'sensing': 'poses'},
-            'robot: unicycle: a unicycle is steered at a control point ahead of its axle: control_point_distance l must be > 0, got 0.0',
+            'robot: unicycle: a unicycle is steered at a control point ahead of its axle: '
+            'control_point_distance l must be > 0, got 0.0',
         ),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
         (
@@ -333,7 +334,8 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
         simulator.destroy_publisher(step_writer)  # as its process would on the way out
         with pytest.raises(
             PeerLostError,
-            match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: it left the graph',
+            match=r'agent 1: the simulator \(writer of /formation/step\) is lost during discovery: '
+            'it left the graph',
         ):
             while time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)

@@ -79,8 +79,8 @@ def test_a_pose_stale_because_this_agent_ran_late_says_so(rig):
     staleness.guard.timer.tick(EPOCH + 4.2)  # the command timer (0.02 s) came 0.62 s late
     message = str(staleness.explain(_stale_error(book, 4.2), EPOCH + 4.2))
     assert message.endswith(
-        "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran 0.620 s late (an overloaded computer?): "
-        'the agent stops'
+        "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran 0.620 s late "
+        '(an overloaded computer?): the agent stops'
     ), message
 
 
@@ -131,3 +131,48 @@ def test_a_trigger_that_fires_long_after_it_was_due_is_refused_once(rig):
         'agent 1: at t=3.000 its trigger came 2.000 s after it was due (pose_timeout 0.5 s;'
     )
     assert staleness.trigger_refusal(clock[0]) is None, 'taken once'
+
+
+HORIZON = 10.0
+
+
+@pytest.mark.parametrize(
+    ('stamps', 'now', 'end'),
+    [
+        ({1: 9.8, 2: 9.9}, 10.4, True),  # both robots stopped at the horizon: 0.2 s old then
+        ({1: 9.5, 2: 9.8}, 10.05, True),  # robot 1's pose 0.5 s old at the horizon: still fresh then
+        ({1: 9.8, 2: 9.4}, 10.4, False),  # robot 2 was 0.6 s silent at the horizon: stale before it
+        ({1: 9.8}, 10.4, False),  # robot 2's pose never came
+        ({1: 10.5, 2: 10.5}, 11.2, True),  # poses after the horizon, then none: stale only past it
+    ],
+)
+def test_a_pose_that_stopped_with_its_robot_at_the_horizon_is_the_end_of_the_run(rig, stamps, now, end):
+    """Issue 19, part 1: between the horizon and the final Step, a pose that stops because its robot
+    stopped at the horizon is no fault; one stale before the horizon, or missing, is."""
+    _clock, _schedule, book, _writers, staleness = rig
+    for robot, stamp in stamps.items():
+        book.add(robot, _pose(EPOCH + stamp))
+    error = _stale_error(book, now)
+    assert staleness.after_horizon(error, EPOCH + now, horizon=HORIZON) is end
+    assert not staleness.after_horizon(RuntimeError('not a pose'), EPOCH + now, horizon=HORIZON)
+
+
+def test_the_poses_waiting_in_a_reader_are_taken_before_a_pose_is_called_stale():
+    """A neighbour's poses are taken only at triggers: one that waits in its reader is the latest."""
+    clock = [EPOCH]
+    schedule = TriggerSchedule(agent_id=1, timers=NoTimers(), clock=lambda: clock[0])
+    schedule.start(EPOCH)
+    book = _book()
+    waiting = {2: _pose(EPOCH + 9.9)}
+    staleness = Staleness(
+        book=book,
+        period=0.02,
+        count_writers=lambda topic: 1,
+        schedule=schedule,
+        take=lambda robot: robot in waiting and book.add(robot, waiting.pop(robot)),
+    )
+    book.add(1, _pose(EPOCH + 9.9))
+    book.add(2, _pose(EPOCH + 0.0))  # taken at the trigger at t = 0
+    error = _stale_error(book, 10.5)
+    assert staleness.stale_robots(EPOCH + 10.5) == [1, 2] and not waiting
+    assert staleness.after_horizon(error, EPOCH + 10.5, horizon=HORIZON)

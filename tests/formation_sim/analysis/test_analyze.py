@@ -1,4 +1,5 @@
-"""formation_sim.analysis.analyze and formation_sim.analysis.figures: runs rebuilt from bags, metrics, checks, figures."""
+"""formation_sim.analysis.analyze and formation_sim.analysis.figures: runs rebuilt from bags, metrics, checks,
+figures."""
 
 from __future__ import annotations
 
@@ -573,7 +574,10 @@ def test_a_run_stopped_early_and_consistent_with_its_bag_passes_with_the_stop_na
 
     assert main(['analyze', str(run_dir), '--no-figures']) == 0
     err = capsys.readouterr().err
-    stop = 'the run stopped early at t = 1 (step 123), before its horizon 10: interrupted: stopped by a signal (SIGINT/SIGTERM) (summary.json)'
+    stop = (
+        'the run stopped early at t = 1 (step 123), before its horizon 10: interrupted: stopped by a signal '
+        '(SIGINT/SIGTERM) (summary.json)'
+    )
     assert stop in err and 'summary.json equals the bag' in err
     report = json.loads((run_dir / 'analysis' / 'analysis.json').read_text())
     assert report['run']['stopped'] == {

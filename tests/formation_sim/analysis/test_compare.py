@@ -106,7 +106,8 @@ def test_event_triggered_against_periodic_sampling(paper_single_record, tmp_path
     assert report['runs']['b']['period'] == period
     assert report['runs']['b']['messages_sent'] == periodic.messages_sent
     expected = [
-        f'agent {agent}: {len(paper_single_record.trigger_times[agent])} events in A, {len(periodic.trigger_times[agent])} in B '
+        f'agent {agent}: {len(paper_single_record.trigger_times[agent])} events in A, '
+        f'{len(periodic.trigger_times[agent])} in B '
         f'(compared the first {len(paper_single_record.trigger_times[agent])})'
         for agent in (1, 2, 3)
     ]

@@ -22,11 +22,12 @@ KILLED_WRITER = textwrap.dedent("""
     from formation_sim.bag.io import BagWriter
 
     forever = QosTime(sec=9223372036, nsec=854775807)
-    latched = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, forever, forever,
-                  QosLiveliness.AUTOMATIC, QosTime(sec=1, nsec=0), False)
+    latched = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
+                  forever, forever, QosLiveliness.AUTOMATIC, QosTime(sec=1, nsec=0), False)
     bag = BagWriter(sys.argv[1])
     bag.open()
-    bag.add_topic('/formation/step', 'std_msgs/msg/Float64MultiArray', offered_qos_profiles=[latched, latched])
+    bag.add_topic('/formation/step', 'std_msgs/msg/Float64MultiArray',
+                  offered_qos_profiles=[latched, latched])
     for k in range(10):
         bag.write('/formation/step', k, bytes(24))
     bag.flush()

@@ -24,7 +24,8 @@ KILLED = textwrap.dedent("""
     kept = []
     for k in range(20):
         text = json.dumps({'k': k}).encode()
-        data = b'\\x00\\x01\\x00\\x00' + (len(text) + 1).to_bytes(4, 'little') + text + b'\\x00'  # CDR std_msgs/String
+        # CDR std_msgs/String
+        data = b'\\x00\\x01\\x00\\x00' + (len(text) + 1).to_bytes(4, 'little') + text + b'\\x00'
         bag.write('/formation/sensing_log', 1000 * k, data)
         kept.append(data.hex())
         if k in (9, 19):

@@ -80,8 +80,8 @@ def test_an_earlier_run_is_refused_then_replaced_with_force_leaving_nothing_stal
     )
     err = capsys.readouterr().err
     assert (
-        f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); nothing was changed'
-        in err
+        f'{out} already holds an earlier run (analysis/, formation.png, summary.json, trajectory/); '
+        'nothing was changed' in err
     )
     assert _listing(out) == earlier
     assert (
@@ -146,15 +146,18 @@ BAD_SIMULATE_ARGUMENTS = [
     ),
     (
         ['--samples', 'none', '--sample-dt', '0.1'],
-        'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt 0.1',
+        'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got '
+        '--sample-dt 0.1',
     ),
     (
         ['--samples', 'grid', '--sample-dt', '0'],
-        'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)',
+        'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: '
+        '--samples none)',
     ),
     (
         ['--samples', 'events', '--continuous'],
-        'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got events',
+        'argument --samples: the continuous controller has no events; its trajectory is the grid '
+        '(--sample-dt), got events',
     ),
 ]
 

@@ -732,7 +732,8 @@ def test_the_largest_agent_id_is_accepted(tmp_path):
 
 
 def test_an_alias_bomb_costs_neither_time_nor_memory(tmp_path):
-    """In its own process with 1 GiB of address space: before the fix this took 1.5 GB and 358 MB of stderr."""
+    """In its own process with 1 GiB of address space: before the fix this took 1.5 GB and 358 MB of
+    stderr."""
     path = tmp_path / 'bomb.yaml'
     path.write_text(
         BOMB

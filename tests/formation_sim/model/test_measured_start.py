@@ -50,7 +50,8 @@ def test_a_robot_moved_far_off_breaks_its_edges_with_the_numbers():
     assert all(b.capacity == 2.0 - 1.0 for b in start.breaches)
     message = start.message()
     assert message.startswith(
-        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)'
+        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial '
+        'condition of Theorem 1)'
     )
     assert 'edge (4,1): the measured ‖x_4 − x_1 − d_41‖ = 1.49 m' in message
     assert message.endswith(': the run does not start')

@@ -474,7 +474,8 @@ def test_the_largest_agent_id_travels():
 
 
 def _aliased(repeats: int, size: int = 999) -> str:
-    """A YAML document of 1 + (size + 1) + 1 + repeats * (size + 1) + 1 + 1 nodes once its aliases are expanded."""
+    """A YAML document of 1 + (size + 1) + 1 + repeats * (size + 1) + 1 + 1 nodes once its aliases are
+    expanded."""
     return f'a: &a [{", ".join(["0"] * size)}]\nb: [{", ".join(["*a"] * repeats)}]\n'
 
 
@@ -632,7 +633,8 @@ def test_headings_are_optional_per_agent_and_round_trip_exactly(tmp_path, suffix
     del data['agents'][2]['heading']
     with pytest.raises(
         ScenarioError,
-        match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading or none',
+        match=r'agents\.2: heading missing, while agents 1, 3, 4 have one: give every agent a heading '
+        r'or none',
     ):
         scenario_from_dict(data)
     data['agents'][2]['heading'] = float('nan')

@@ -1,4 +1,5 @@
-"""The speed scale κ from a robot's limits, the settling time, and the threshold floor a pose noise asks for."""
+"""The speed scale κ from a robot's limits, the settling time, and the threshold floor a pose noise asks
+for."""
 
 from __future__ import annotations
 
@@ -140,8 +141,8 @@ def test_settling_time_waits_for_the_last_time_above():
 def test_the_noise_floor_is_what_noisy_senses_put_into_e_i_by_the_agent_itself():
     """Monte Carlo through the agent core: agent 1 of robots_lab at the formation senses its edges
     with noise σ, each neighbour sends its own noisy sense of the same edge; e_1 just after is what
-    the derivation says: σ sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) = √10 σ per axis (ω_ij = 1), and its norm exceeds c0 = 3 s with probability
-    e^{-9/2} in the plane."""
+    the derivation says: σ sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) = √10 σ per axis (ω_ij = 1), and its
+    norm exceeds c0 = 3 s with probability e^{-9/2} in the plane."""
     scenario = load_scenario('robots_lab')
     sigma = 0.005
     floor, per_agent, formula = scenario_noise_floor(scenario, pose_noise=sigma)

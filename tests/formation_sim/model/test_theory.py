@@ -448,7 +448,7 @@ def test_theorem_constants_refuse_broken_hypotheses(single, double):
         theory.theorem_constants(single.replace(positions=far))
 
 
-# --------------------------------------------------------------------------- the rates, checked against the dynamics
+# ----------------------------------------------------------- the rates, checked against the dynamics
 
 
 def continuous_double(scenario, horizon):

@@ -459,7 +459,8 @@ def test_lengths_outside_what_double_precision_computes_with_are_refused_by_rule
         )
         assert finding.subject == 'edge (1, 2)'
         assert finding.message.startswith(
-            f'{name} = {value:.6g} is below {2.0**-250:.6g} (2^-250): the certified search divides by the fourth power of the distance to Δ'
+            f'{name} = {value:.6g} is below {2.0**-250:.6g} (2^-250): the certified search divides by '
+            'the fourth power of the distance to Δ'
         ), finding.message
     else:
         assert finding.subject == 'scenario'

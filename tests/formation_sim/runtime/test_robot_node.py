@@ -42,15 +42,20 @@ class _Probe:
         self.node.create_subscription(PoseStamped, robot_pose_topic(robot_id), self.poses.append, ROBOT_QOS)
 
 
-def _robot(context, **parameters):
+def _robot(context, *, shared: bool = False, **parameters):
+    """A robot ticked by its own timer, or (`shared`) by a `RobotTicker` as in a process of several."""
     from formation_agent.ros.parameters import as_overrides
-    from formation_sim.runtime.robot_node import SimulatedRobotNode
+    from formation_sim.runtime.robot_node import RobotTicker, SimulatedRobotNode
 
-    return SimulatedRobotNode(
+    robot = SimulatedRobotNode(
         namespace=f'/agent_{parameters["robot_id"]}',
         parameter_overrides=as_overrides(parameters),
         context=context,
+        own_timer=not shared,
     )
+    if shared:
+        RobotTicker([robot])
+    return robot
 
 
 def _spin(executor, seconds: float, until=lambda: False) -> None:
@@ -82,11 +87,13 @@ def executor(ros):
         node.destroy_node()
 
 
-def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop(ros, executor):
+@pytest.mark.parametrize('shared', [False, True], ids=['own_timer', 'ticker'])
+def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop(ros, executor, shared):
     from geometry_msgs.msg import Twist, Vector3
 
     robot = _robot(
         ros,
+        shared=shared,
         robot_id=1,
         model='unicycle',
         position=[1.0, 0.5],
@@ -134,6 +141,32 @@ def test_a_unicycle_drives_exact_arcs_between_ticks_and_stops_when_commands_stop
     assert len(rests) == 1, 'it moved after stopping'
     # What the agent sees: the same poses on pose and odom, body-frame twist (v, 0) and ω.
     assert probe.poses and probe.odom and probe.odom[-1].child_frame_id == 'agent_1/base_link'
+
+
+def test_robots_of_one_process_tick_on_one_timer_per_rate(ros):
+    from formation_agent.ros.parameters import as_overrides
+    from formation_sim.runtime.robot_node import RobotTicker, SimulatedRobotNode
+
+    robots = [
+        SimulatedRobotNode(
+            namespace=f'/agent_{i}',
+            parameter_overrides=as_overrides(
+                {'robot_id': i, 'model': 'unicycle', 'position': [float(i), 0.0], 'rate': rate}
+            ),
+            context=ros,
+            own_timer=False,
+        )
+        for i, rate in ((1, 100.0), (2, 50.0), (3, 100.0))
+    ]
+    try:
+        assert [len(list(robot.timers)) for robot in robots] == [0, 0, 0]
+        RobotTicker(robots)
+        # Robots 1 and 3 (100 Hz) on robot 1's timer, robot 2 (50 Hz) on its own.
+        timers = [[timer.timer_period_ns for timer in robot.timers] for robot in robots]
+        assert timers == [[10_000_000], [20_000_000], []]
+    finally:
+        for robot in robots:
+            robot.destroy_node()
 
 
 def test_a_car_cannot_turn_in_place_and_steers_at_most_its_limit(ros, executor):

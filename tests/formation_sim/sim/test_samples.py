@@ -30,7 +30,8 @@ from formation_sim.sim.summary import build_summary, load_record, write_summary
 
 
 def _norm_maxima(scenario, positions):
-    """Per edge, the largest np.linalg.norm of x_i - x_j over the rows: the summary's formula before streaming."""
+    """Per edge, the largest np.linalg.norm of x_i - x_j over the rows: the summary's formula before
+    streaming."""
     index = {agent: k for k, agent in enumerate(scenario.agent_ids)}
     return np.array(
         [
@@ -111,7 +112,8 @@ def test_a_run_that_fails_leaves_its_samples_named_incomplete_and_readers_refuse
 
 @pytest.mark.timeout(120)
 def test_a_run_killed_mid_way_leaves_no_trajectory_under_the_final_name(tmp_path):
-    """SIGKILL while the samples stream: what is on disk is `trajectory.incomplete/`, never a cut `trajectory/`."""
+    """SIGKILL while the samples stream: what is on disk is `trajectory.incomplete/`, never a cut
+    `trajectory/`."""
     marker = tmp_path / 'midway'
     code = textwrap.dedent(f"""
         import pathlib, time
@@ -124,7 +126,8 @@ def test_a_run_killed_mid_way_leaves_no_trajectory_under_the_final_name(tmp_path
             if events == 300:
                 pathlib.Path({str(marker)!r}).write_text('at 300 events')
                 time.sleep(600)
-        simulate(random_scenario(n=30, seed=2), horizon=5.0, sample_dt=0.001, trajectory_dir={str(tmp_path)!r}, on_event=hold)
+        simulate(random_scenario(n=30, seed=2), horizon=5.0, sample_dt=0.001,
+                 trajectory_dir={str(tmp_path)!r}, on_event=hold)
     """)
     process = subprocess.Popen([sys.executable, '-c', code])
     try:

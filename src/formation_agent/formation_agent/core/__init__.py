@@ -3,6 +3,8 @@
 - `eta`: `Eta1Agent` (ETA-1) and `Eta2Agent` (ETA-2): sense-and-broadcast at a trigger, receive
   a neighbour's triggering information, predict the neighbours' relative states in closed form
   ((statexixj), (statexixjd), (stateqiqj)) and find the next triggering time.
+- `neighbourhood`: an agent's edges (d_ij, Δ - ||d_ij||, Assumption 1) and the checks of what it is
+  handed (`AgentError`).
 - `crossing`: the certified search for the first t with ||e_i(t)|| = c0 + α e^{-βt}.
 - `speed_scale`: the speed scale κ and the threshold floor c0: the real-time gains of the agents,
   the exact world and a robot's velocity reference, derived in one place (docs/SPEED_SCALE.md).
@@ -10,7 +12,8 @@
   closed-loop motion without cancellation.
 - On robots (README, "Running on robots"): `kinds` (the registry of robot kinds: each kind's
   control point, command adapter, message type, limits and simulated model), `limits` (`Limits`,
-  saturation counts), `kinematics` (control points, the unicycle's diffeomorphism), `pose_sensing` (`PoseBook`: SensedState from poses, stale poses refused),
+  saturation counts), `kinematics` (control points, the unicycle's diffeomorphism), `pose_sensing`
+  (`PoseBook`: SensedState from poses, stale poses refused),
   `velocity_reference` (ETA-2's q_i(t) for velocity-commanded robots), `commander`
   (`RobotCommander`: velocity commands within a robot's `Limits`, clips counted).
 """

@@ -187,7 +187,8 @@ class CrossingSearch:
             phi_rate = -2.0 * beta * (1.0 - floor * scale) - 2.0 * s2 * size_rate  # (r²)'(a) = -2β(1-w)
             if not (math.isfinite(phi) and math.isfinite(phi_rate)):
                 raise CrossingError(
-                    f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, e.de/dt = {size_rate!r}'
+                    f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, '
+                    f'e.de/dt = {size_rate!r}'
                 )
             size = math.sqrt(size_sq)
             if phi <= tolerance:

@@ -35,6 +35,8 @@ import numpy as np
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
+from formation_agent.core.neighbourhood import AgentError, Neighbourhood
+from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
@@ -43,14 +45,7 @@ from formation_agent.core.speed_scale import (
     eta1_gains,
     eta2_gains,
 )
-from formation_agent.core.tension import (
-    curvature_gain,
-    edge_capacity,
-    omega,
-    omega_prime,
-    omega_second,
-    weight_gain,
-)
+from formation_agent.core.tension import curvature_gain, omega, omega_prime, omega_second, weight_gain
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 
@@ -79,10 +74,6 @@ SCALE_GAINS: dict[str, float] = {
 _GAP_FRACTION = 0.125
 
 
-class AgentError(ValueError):
-    """Input the agent cannot accept: bad parameters, malformed or inconsistent information."""
-
-
 @dataclass(frozen=True, kw_only=True, slots=True)
 class TriggerOutput:
     """Result of a trigger: the new input and one triggering-information message per neighbour."""
@@ -90,13 +81,6 @@ class TriggerOutput:
     time: float
     control: np.ndarray
     infos: tuple[TriggerInfo, ...]
-
-
-def _positive(name: str, value: float) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0.0):
-        raise AgentError(f'{name} must be a finite number > 0, got {value!r}')
-    return value
 
 
 class _AgentHooks:
@@ -124,7 +108,8 @@ class _AgentHooks:
 
 
 class _EventTriggeredAgent(_AgentHooks):
-    """Bookkeeping shared by ETA-1 and ETA-2: neighbours, anchors, caching of the next time."""
+    """Bookkeeping shared by ETA-1 and ETA-2: anchors, caching of the next time; its neighbours
+    and the checks of what it is handed are its `Neighbourhood` (`formation_agent.core.neighbourhood`)."""
 
     algorithm = ''
 
@@ -136,31 +121,12 @@ class _EventTriggeredAgent(_AgentHooks):
         delta: float,
         tolerance: float = DEFAULT_TOLERANCE,
     ) -> None:
-        if not neighbours:
-            raise AgentError(f'agent {agent_id} has no neighbours: the graph must be connected')
-        if agent_id in neighbours:
-            raise AgentError(f'agent {agent_id} lists itself as a neighbour (self-loop)')
-        self.agent_id = int(agent_id)
-        self.delta = _positive('delta (communication radius Δ)', delta)
-        self.neighbour_ids = tuple(int(j) for j in neighbours)
-        self._slot = {j: k for k, j in enumerate(self.neighbour_ids)}
-        self._neighbour_set = set(self.neighbour_ids)
-        offsets = np.array([np.asarray(neighbours[j], dtype=float) for j in self.neighbour_ids])
-        if offsets.ndim != 2 or offsets.shape[1] < 1:
-            raise AgentError(
-                f'agent {agent_id}: desired displacements must be vectors of one dimension p >= 1'
-            )
-        if not np.all(np.isfinite(offsets)):
-            raise AgentError(f'agent {agent_id}: desired displacements are not finite')
-        self.offsets = offsets  # d_ij, one row per neighbour
-        self.capacity = edge_capacity(self.delta, offsets)  # Δ - ||d_ij||
-        for j, c in zip(self.neighbour_ids, self.capacity):
-            if c <= 0.0:
-                raise AgentError(
-                    f'edge ({agent_id},{j}): ||d_ij|| = {float(self.delta - c)!r} is not below Δ = {self.delta!r} '
-                    '(Assumption 1)'
-                )
-        self.dimension = offsets.shape[1]
+        # Who the neighbours are, d_ij and Δ - ||d_ij|| (checked), and the checks of every input.
+        hood = self._hood = Neighbourhood(agent_id=agent_id, neighbours=neighbours, delta=delta)
+        self.agent_id, self.delta, self.neighbour_ids = hood.agent_id, hood.delta, hood.ids
+        offsets = self.offsets = hood.offsets  # d_ij, one row per neighbour
+        self.capacity = hood.capacity  # Δ - ||d_ij||
+        self.dimension = hood.dimension
         self.tolerance = _positive('tolerance', tolerance)
         m, p = offsets.shape
         self._anchor_time = np.zeros(m)
@@ -168,9 +134,8 @@ class _EventTriggeredAgent(_AgentHooks):
         self._neighbour_control = np.zeros((m, p))
         self._heard = np.zeros(m, dtype=bool)
         self.control = np.zeros(p)  # the command: u_i (ETA-1) or u^d_i (ETA-2), broadcast and applied
-        self._offset = np.zeros(
-            p
-        )  # its term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1)
+        # The command's term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1).
+        self._offset = np.zeros(p)
         self.last_trigger: float | None = None
         self.last_event = 0.0
         self._search: CrossingSearch | None = None  # the plan from the current knowledge
@@ -198,64 +163,20 @@ class _EventTriggeredAgent(_AgentHooks):
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def _vector(self, value, what: str) -> np.ndarray:
-        array = np.asarray(value, dtype=float)
-        if array.shape != (self.dimension,):
-            raise AgentError(
-                f'agent {self.agent_id}: {what} has shape {array.shape}, expected ({self.dimension},)'
-            )
-        if not np.all(np.isfinite(array)):
-            raise AgentError(f'agent {self.agent_id}: {what} is not finite: {array.tolist()}')
-        return array
-
-    def _floats(self, value, what: str, *args) -> tuple[float, ...]:
-        """`value` as a tuple of p finite floats (the checks of `_vector`, without numpy).
-
-        `what` names the value, as a format template filled with `args` only on error (this runs
-        for every message).
-        """
-        try:
-            floats = tuple(map(float, value))
-        except (TypeError, ValueError):
-            floats = None
-        if floats is not None and len(floats) == self.dimension and all(map(math.isfinite, floats)):
-            return floats
-        return tuple(self._vector(value, what.format(*args)).tolist())  # raises the error naming the rule
-
-    def _check_time(self, stamp: float, what: str, *args) -> float:
-        stamp = float(stamp)
-        if not math.isfinite(stamp):
-            raise AgentError(f'agent {self.agent_id}: {what.format(*args)} has a non-finite time {stamp!r}')
-        return stamp
-
-    def _relative_rows(self, values: Mapping[int, object] | None, what: str) -> list[tuple[float, ...]]:
-        if values is None or values.keys() != self._neighbour_set:
-            got = None if values is None else sorted(values)
-            raise AgentError(
-                f'agent {self.agent_id}: {what} must cover exactly its neighbours {sorted(self.neighbour_ids)}, got {got}'
-            )
-        template = what + '[{}]'
-        return [self._floats(values[j], template, j) for j in self.neighbour_ids]
-
     def receive(self, info: TriggerInfo) -> None:
-        """Take a neighbour's triggering information (ETA-1 step 6, ETA-2 step 7: predict anew from its time)."""
-        if info.receiver != self.agent_id:
-            raise AgentError(f'agent {self.agent_id} got information addressed to agent {info.receiver}')
-        k = self._slot.get(info.sender)
-        if k is None:
-            raise AgentError(
-                f'agent {self.agent_id} got information from agent {info.sender}, '
-                f'which is not a neighbour {sorted(self.neighbour_ids)}'
-            )
-        stamp = self._check_time(info.stamp, 'information from agent {}', info.sender)
+        """Take a neighbour's triggering information (ETA-1 step 6, ETA-2 step 7: predict anew
+        from its time)."""
+        hood = self._hood
+        k = hood.sender_slot(info)
+        stamp = hood.time(info.stamp, 'information from agent {}', info.sender)
         if stamp < self._edge_time[k] or (self.last_trigger is not None and stamp < self.last_trigger):
             raise AgentError(
                 f'agent {self.agent_id}: information from agent {info.sender} goes back in time '
                 f'(t={stamp!r}, edge last updated at t={self._edge_time[k]!r})'
             )
         # The message carries x_j - x_i; this agent's edge state is x_i - x_j - d_ij.
-        rel = self._floats(info.rel_position, 'rel_position from agent {}', info.sender)
-        control = self._floats(info.control, 'control from agent {}', info.sender)
+        rel = hood.floats(info.rel_position, 'rel_position from agent {}', info.sender)
+        control = hood.floats(info.control, 'control from agent {}', info.sender)
         self._receive_extra(k, info)
         y = tuple(-r - d for r, d in zip(rel, self._offsets3[k]))
         self._anchor_time[k] = stamp
@@ -278,24 +199,20 @@ class _EventTriggeredAgent(_AgentHooks):
         """ETA-2 also takes the relative velocity."""
 
     def trigger(self, t: float, sensed: SensedState) -> TriggerOutput:
-        """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering information."""
-        t = self._check_time(t, 'trigger')
+        """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering
+        information."""
+        t = self._hood.time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
         if self.last_trigger is not None and t < self.last_trigger:
             raise AgentError(
                 f'agent {self.agent_id}: trigger at t={t!r} before its last one at t={self.last_trigger!r}'
             )
-        rel = self._relative_rows(sensed.rel_positions, 'sensed rel_positions')
+        rel = self._hood.rows(sensed.rel_positions, 'sensed rel_positions')
         # Edge by edge in plain floats (a handful of edges: numpy would cost more than it saves).
         y = [tuple(r - d for r, d in zip(row, offset)) for row, offset in zip(rel, self._offsets)]
         length = [math.sqrt(sum(v * v for v in row)) for row in y]
-        for k, (r, c) in enumerate(zip(length, self._capacity)):
-            if r >= c:
-                raise AgentError(
-                    f'agent {self.agent_id}: edge to agent {self.neighbour_ids[k]} is out of its range: '
-                    f'||x_i-x_j-d_ij|| = {r!r} >= Δ-||d_ij|| = {c!r}'
-                )
+        self._hood.check_sensed_range(length)
         extra = self._sensed_extra(sensed)  # validated before anything changes
         self._anchor_time[:] = t
         self._anchor_y[:] = y
@@ -463,12 +380,6 @@ class _EventTriggeredAgent(_AgentHooks):
         values = tuple(values)
         return values + (0.0,) * (_FAST_DIMENSION - len(values))
 
-    def _out_of_range_error(self, k: int, r: float, c: float) -> AgentError:
-        return AgentError(
-            f'agent {self.agent_id}: predicted edge to agent {self.neighbour_ids[k]} left its range '
-            f'(||y_ij|| = {r!r} >= Δ-||d_ij|| = {c!r})'
-        )
-
 
 class Eta1Agent(_EventTriggeredAgent):
     """Event-Triggered Algorithm 1: single integrators, Theorem 1."""
@@ -562,7 +473,7 @@ class Eta1Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._out_of_range_error(k, r, c)
+                raise self._hood.out_of_range(k, r, c)
             w = (2.0 * c - r) / (gap * gap)  # ω_ij (fij)
             e0 += w * y0
             e1 += w * y1
@@ -652,7 +563,7 @@ class Eta2Agent(_EventTriggeredAgent):
             raise AgentError(
                 f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity'
             )
-        q = tuple(-v for v in self._floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
+        q = tuple(-v for v in self._hood.floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
         self._anchor_q[k] = q
         self._edge_q[k] = self._pad(q)
 
@@ -660,7 +571,7 @@ class Eta2Agent(_EventTriggeredAgent):
         return self._sensed_q[k]
 
     def _sensed_extra(self, sensed: SensedState) -> list[tuple[float, ...]]:
-        return self._relative_rows(sensed.rel_velocities, 'sensed rel_velocities')
+        return self._hood.rows(sensed.rel_velocities, 'sensed rel_velocities')
 
     def _update(
         self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]
@@ -788,7 +699,7 @@ class Eta2Agent(_EventTriggeredAgent):
             r = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
             gap = c - r
             if gap <= 0.0:
-                raise self._out_of_range_error(k, r, c)
+                raise self._hood.out_of_range(k, r, c)
             w = (2.0 * c - r) / (gap * gap)  # ω_ij (fij)
             m0 = k1 * y0 + k2 * q0
             m1 = k1 * y1 + k2 * q1

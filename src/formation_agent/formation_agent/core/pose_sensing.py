@@ -100,8 +100,8 @@ class PoseBook:
             )
         if age < -self.timeout:
             raise PoseError(
-                f'{where} is stamped {-age:.3f} s in the future at t={t:.3f} (pose_timeout {self.timeout:g} s; '
-                'are the clocks synchronised?): the agent stops'
+                f'{where} is stamped {-age:.3f} s in the future at t={t:.3f} '
+                f'(pose_timeout {self.timeout:g} s; are the clocks synchronised?): the agent stops'
             )
         return pose
 
@@ -116,13 +116,14 @@ class PoseBook:
         previous = self._previous.get(robot)
         if previous is None:
             raise PoseError(
-                f'agent {self.agent_id}: the velocity of robot {robot} needs two poses on {self.topic(robot)} '
-                f'(pose differences), one has arrived by t={t:.3f}: the agent stops'
+                f'agent {self.agent_id}: the velocity of robot {robot} needs two poses on '
+                f'{self.topic(robot)} (pose differences), one has arrived by t={t:.3f}: the agent stops'
             )
         return (self._point(pose) - self._point(previous)) / (pose.stamp - previous.stamp)
 
     def sense(self, *, t: float, now: float, velocities: bool) -> SensedState:
-        """What the agent senses at its trigger t (wall time `now`): x_i - x_j, and for ETA-2 q_i, q_i - q_j."""
+        """What the agent senses at its trigger t (wall time `now`): x_i - x_j, and for ETA-2 q_i,
+        q_i - q_j."""
         poses = {robot: self.fresh(robot, t=t, now=now) for robot in self.robots}
         x = {robot: self._point(pose) for robot, pose in poses.items()}
         i = self.agent_id

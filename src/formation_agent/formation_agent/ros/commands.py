@@ -10,8 +10,10 @@
   within the robot's limits, recomputed and republished at `command_rate` (a unicycle's (v, ω) depends on its
   heading, ETA-2's velocity reference on time).
 
-`stop()` sends the zero command (once; nothing after it).  The node calls it on every way out:
-the final Step, a lost peer, SIGINT/SIGTERM, a stale pose, any exception.
+`stop()` sends the zero command (once, nothing after it; to a robot as many times as a default
+command reader keeps, so that a robot frozen meanwhile holds only zeros when it resumes:
+`formation_msgs_py.qos.ROBOT_COMMAND_QOS`).  The node calls it on every way out: the final Step, a
+lost peer, SIGINT/SIGTERM, a stale pose, any exception.
 """
 
 from __future__ import annotations
@@ -170,7 +172,9 @@ class RobotOutput:
             self.publisher.publish(encode_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
 
     def stop(self) -> None:
-        """The zero command, once; nothing is sent after it."""
+        """The zero command, `ROBOT_COMMAND_QOS.depth` times in a row (a frozen robot's reader of
+        the default depth holds only zeros when it resumes, not the commands sent before); nothing
+        is sent after it."""
         if self._stopped:
             return
         self._stopped = True
@@ -179,8 +183,8 @@ class RobotOutput:
             self._timer = None
         if self._world_frame:
             zero = (0.0,) * self._config.dimension
-            self.publisher.publish(
-                encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
-            )
+            message = encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
         else:
-            self.publisher.publish(encode_body_velocity(0.0, 0.0))
+            message = encode_body_velocity(0.0, 0.0)
+        for _ in range(ROBOT_COMMAND_QOS.depth):
+            self.publisher.publish(message)

@@ -59,7 +59,8 @@ class Discovery:
         def readers(publisher, peer: str) -> Iterator[str]:
             have = publisher.get_subscription_count()
             if have < listeners:
-                yield f'readers of {publisher.topic_name}: {have} of {listeners} ({", ".join([peer, *others])})'
+                who = ', '.join([peer, *others])
+                yield f'readers of {publisher.topic_name}: {have} of {listeners} ({who})'
 
         for j, publisher in node.info_publishers.items():
             yield from readers(publisher, f'agent {j}')
@@ -95,13 +96,14 @@ class Discovery:
             node.publish_status(step_index=DISCOVERY_STEP, ready=ready)
             if ready and changed:
                 node.get_logger().info(
-                    f'agent {node.agent_id}: every endpoint matched {time.monotonic() - self._created:.1f} s after the node '
-                    'started; waiting for step 0'
+                    f'agent {node.agent_id}: every endpoint matched {time.monotonic() - self._created:.1f} s '
+                    'after the node started; waiting for step 0'
                 )
         if gaps and logging:
             self._next_log = now + DISCOVERY_LOG_PERIOD
             node.get_logger().info(
-                f'agent {node.agent_id}: discovery for {now - self._created:.0f} s, still waiting for: {"; ".join(gaps)}'
+                f'agent {node.agent_id}: discovery for {now - self._created:.0f} s, still waiting for: '
+                + '; '.join(gaps)
             )
 
 

@@ -2,8 +2,8 @@
 
 ```
 formation_agent --ros-args -r __ns:=/agent_2 --params-file team.yaml --params-file robot.yaml
-formation_agent --ros-args --params-file agents.params.yaml -p agent_id:=2   # the same node: /agent_2 from its id
-formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml   # packed, as `formation run` does
+formation_agent --ros-args --params-file agents.params.yaml -p agent_id:=2  # /agent_2 from its id
+formation_agent --agents 1,2,3 --ros-args --params-file agents.params.yaml  # packed (`formation run`)
 formation_agent --help                                                      # options and the parameter table
 ```
 
@@ -74,7 +74,10 @@ def _parser() -> argparse.ArgumentParser:
         '--executor',
         choices=EXECUTORS,
         default='events',
-        help='rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single (SingleThreadedExecutor)',
+        help=(
+            'rclpy executor: events (rclpy.experimental.EventsExecutor, default) or single '
+            '(SingleThreadedExecutor)'
+        ),
     )
     parser.add_argument(
         '--agents',
@@ -130,8 +133,9 @@ def _missing_id_hint(error: Exception, options: argparse.Namespace) -> str:
     if not missing or options.agents:
         return ''
     return (
-        '. A parameter file keyed by node name, as agents.params.yaml is, gives /agent_<i>/formation_agent its '
-        'parameters: name the agent with --agents i, -r __ns:=/agent_<i> or -p agent_id:=i'
+        '. A parameter file keyed by node name, as agents.params.yaml is, gives '
+        '/agent_<i>/formation_agent its parameters: name the agent with --agents i, '
+        '-r __ns:=/agent_<i> or -p agent_id:=i'
     )
 
 
@@ -149,7 +153,8 @@ def main(args: Sequence[str] | None = None) -> int:
             nodes = _build_nodes(options, argv)
             if len(nodes) > 1:  # how long a packed process takes to be up (large teams)
                 nodes[0].get_logger().info(
-                    f'{len(nodes)} agent nodes created in {time.monotonic() - began:.1f} s (agents {options.agents})'
+                    f'{len(nodes)} agent nodes created in {time.monotonic() - began:.1f} s '
+                    f'(agents {options.agents})'
                 )
             executor = make_executor(options.executor)
             for node in nodes:

@@ -128,6 +128,7 @@ def _make_staleness(node: FormationAgentNode) -> Staleness | None:
         period=1.0 / node.config.command_rate,
         count_writers=node.count_publishers,
         schedule=node.schedule,
+        take=node.sensing.readers.take,
     )
 
 
@@ -211,6 +212,7 @@ class FormationAgentNode(Node):
         self.step: Step | None = None
         self.finished = False
         self.failure: Exception | None = None
+        self.ended_at_horizon = False  # its poses stopped after the horizon: no failure (`_fail`)
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self.simulator = SimulatorWatch(config.agent_id)
         self._discovery: Discovery | None = Discovery(self)
@@ -254,9 +256,22 @@ class FormationAgentNode(Node):
         the first error is kept for `check` to raise, a stale pose explained (`Staleness`)."""
         self.schedule.stop()
         self.output.stop()
+        now = time.time()
+        if self.staleness is not None and self.staleness.after_horizon(
+            error, now, horizon=self.config.horizon
+        ):
+            # The robots stopped at the horizon and the final Step is on its way: the end of the
+            # run, not a fault (issue 19).  Stopped, the agent leaves on that Step (or its loss).
+            if not self.ended_at_horizon:
+                self.ended_at_horizon = True
+                self.get_logger().info(
+                    f'agent {self.agent_id}: poses stopped after the horizon t={self.config.horizon:g} (the '
+                    'robots stopped at the end of the run): robot stopped, waiting for the final Step'
+                )
+            return
         if self.failure is None:
             stale = self.staleness is not None and isinstance(error, PoseError)
-            self.failure = self.staleness.explain(error, time.time()) if stale else error
+            self.failure = self.staleness.explain(error, now) if stale else error
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""

@@ -12,8 +12,12 @@ Every node of the project declares its parameters from a tuple of `ParameterSpec
 ```python
 SPECS = (
     ParameterSpec(name='agent_id', type=INTEGER, description='this agent's id i', low=0),
-    ParameterSpec(name='delta', type=DOUBLE, description='communication radius Δ [m]', low=0.0, low_open=True),
-    ParameterSpec(name='robot', type=STRING, default='none', description='command adapter', choices=('none', 'unicycle')),
+    ParameterSpec(
+        name='delta', type=DOUBLE, description='communication radius Δ [m]', low=0.0, low_open=True
+    ),
+    ParameterSpec(
+        name='robot', type=STRING, default='none', description='command adapter', choices=('none', 'unicycle')
+    ),
 )
 values = declare_parameters(node, SPECS)   # {'agent_id': 2, 'delta': 4.0, 'robot': 'none'}
 ```
@@ -132,7 +136,8 @@ class ParameterSpec:
                 number >= self.high if self.high_open else number > self.high
             )
             if too_low or too_high or (isinstance(number, float) and math.isnan(number)):
-                return f'must be {self.constraint_text()}{" (every element)" if is_array else ""}, got {_quote(number)}'
+                every = ' (every element)' if is_array else ''
+                return f'must be {self.constraint_text()}{every}, got {_quote(number)}'
         return None
 
 
@@ -208,9 +213,8 @@ def parameter_table(specs: Sequence[ParameterSpec]) -> str:
     lines = ['| parameter | type | default | range | meaning |', '|---|---|---|---|---|']
     for row in _rows(specs):
         name, kind, default, constraint, description = (cell.replace('|', '\\|') for cell in row)
-        lines.append(
-            f'| `{name}` | {kind} | {default if default == "required" else f"`{default}`"} | {constraint} | {description} |'
-        )
+        shown = default if default == 'required' else f'`{default}`'
+        lines.append(f'| `{name}` | {kind} | {shown} | {constraint} | {description} |')
     return '\n'.join(lines)
 
 

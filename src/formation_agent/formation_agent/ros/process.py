@@ -142,7 +142,8 @@ def shutdown_guard(
             return
         with contextlib.suppress(Exception):
             sys.stderr.write(
-                f'{command}: shutting rclpy down took more than {bound:g} s; leaving without it (stacks below)\n'
+                f'{command}: shutting rclpy down took more than {bound:g} s; '
+                'leaving without it (stacks below)\n'
             )
             sys.stderr.flush()
             faulthandler.dump_traceback(file=sys.stderr, all_threads=True)

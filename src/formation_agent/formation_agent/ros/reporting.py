@@ -61,7 +61,8 @@ class AgentCounts:
         discovery), +inf otherwise; `planned` (last_planned) always finite."""
         if not math.isfinite(planned):  # a trigger is planned only for a finite time
             raise AgentNodeError(
-                f'agent {self.agent_id}: last_planned must be finite (docs/MESSAGES.md, "Status"), got {planned!r}'
+                f'agent {self.agent_id}: last_planned must be finite (docs/MESSAGES.md, "Status"), '
+                f'got {planned!r}'
             )
         self.status_due = False
         defined = ready or step_index == DISCOVERY_STEP

@@ -126,7 +126,8 @@ class PoseReaders:
         }
 
     def take(self, robot: int) -> None:
-        """Every pose of `robot` waiting in its reader (at most `pose_take_depth`), oldest first, into the book."""
+        """Every pose of `robot` waiting in its reader (at most `pose_take_depth`), oldest first,
+        into the book."""
         sub = self._subs[robot]
         while True:
             with sub.handle:

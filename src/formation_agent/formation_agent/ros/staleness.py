@@ -11,6 +11,10 @@ A command is computed from the agent's last trigger and its own latest pose.  Af
 was due has not come: `CommandGuard` refuses to send a command from state older than
 `pose_timeout` (`StaleStateError`), and the agent stops instead.  `Staleness` puts these
 together for an agent node that senses poses.
+
+The end of a robot run is no failure: a pose that goes stale because its robot stopped at the
+horizon, while the final Step is on its way, stops the robot without a failure
+(`Staleness.after_horizon`: every stale pose was fresh at the horizon).
 """
 
 from __future__ import annotations
@@ -101,13 +105,15 @@ class CommandGuard:
         where = f'agent {self.agent_id}: at t={t:.3f}'
         if late > self.timeout:
             raise StaleStateError(
-                f'{where} its command timer ran {late:.3f} s late (pose_timeout {self.timeout:g} s; the process was '
-                f'stopped, or {OVERLOADED[:-1]}): no command from state that old: the agent stops'
+                f'{where} its command timer ran {late:.3f} s late (pose_timeout {self.timeout:g} s; '
+                f'the process was stopped, or {OVERLOADED[:-1]}): no command from state that old: '
+                'the agent stops'
             )
         if trigger_late is not None and trigger_late > self.timeout:
             raise StaleStateError(
-                f'{where} its trigger has been due for {trigger_late:.3f} s (pose_timeout {self.timeout:g} s; '
-                f"this agent's timer ran {late:.3f} s late, {OVERLOADED}): no command from state that old: the agent stops"
+                f'{where} its trigger has been due for {trigger_late:.3f} s '
+                f"(pose_timeout {self.timeout:g} s; this agent's timer ran {late:.3f} s late, "
+                f'{OVERLOADED}): no command from state that old: the agent stops'
             )
 
 
@@ -115,13 +121,22 @@ class Staleness:
     """An agent's watch over the age of what it commands from (sensing from poses).
 
     `count_writers(topic)` gives the writers a topic has now; `schedule` is the agent's
-    `formation_agent.ros.stepping.TriggerSchedule`.
+    `formation_agent.ros.stepping.TriggerSchedule`; `take(robot)` puts the poses of `robot` that
+    wait in its reader into the book (`formation_agent.ros.sensing.PoseReaders.take`: a neighbour's
+    are taken only at triggers).
     """
 
     def __init__(
-        self, *, book: PoseBook, period: float, count_writers: Callable[[str], int], schedule
+        self,
+        *,
+        book: PoseBook,
+        period: float,
+        count_writers: Callable[[str], int],
+        schedule,
+        take: Callable[[int], None] = lambda robot: None,
     ) -> None:
         self.book = book
+        self._take = take
         self.guard = CommandGuard(agent_id=book.agent_id, period=period, timeout=book.timeout)
         self.writers = WriterWatch({robot: book.topic(robot) for robot in book.robots})
         self._count_writers = count_writers
@@ -146,23 +161,37 @@ class Staleness:
             return None
         t = now - self._schedule.epoch
         return StaleStateError(
-            f'agent {self.book.agent_id}: at t={t:.3f} its trigger came {late:.3f} s after it was due (pose_timeout '
-            f'{timeout:g} s; the process was stopped, or {OVERLOADED[:-1]}): no command from state that old: the agent stops'
+            f'agent {self.book.agent_id}: at t={t:.3f} its trigger came {late:.3f} s after it was due '
+            f'(pose_timeout {timeout:g} s; the process was stopped, or {OVERLOADED[:-1]}): '
+            'no command from state that old: the agent stops'
         )
+
+    def stale_robots(self, now: float) -> list[int]:
+        """The robots whose latest pose (taken now) is not fresh at `now` (Unix time)."""
+        t = now - (self._schedule.epoch or 0.0)
+        for robot in self.book.robots:
+            self._take(robot)
+        return [robot for robot in self.book.robots if _refused(self.book, robot, t=t, now=now)]
+
+    def after_horizon(self, error: Exception, now: float, *, horizon: float) -> bool:
+        """Whether `error` is only the end of the run (issue 19): a pose that stopped because its
+        robot stopped at the horizon while the final Step was on its way.  True when `error` is a
+        PoseError and every pose stale at `now` was fresh at the horizon (its age then at most
+        pose_timeout; so `now` is past the horizon).  A pose stale before the horizon, or one that
+        never came, stays a fault."""
+        epoch = self._schedule.epoch
+        if not isinstance(error, PoseError) or epoch is None:
+            return False
+        stale = self.stale_robots(now)
+        end = epoch + horizon
+        return bool(stale) and not any(_refused(self.book, robot, t=horizon, now=end) for robot in stale)
 
     def explain(self, error: PoseError, now: float) -> PoseError:
         """`error` with why its pose may be stale: the writer gone, or this agent late."""
         schedule = self._schedule
         if schedule.epoch is None:
             return error
-        t = now - schedule.epoch
-        stale = None
-        for robot in self.book.robots:
-            try:
-                self.book.fresh(robot, t=t, now=now)
-            except PoseError:
-                stale = robot
-                break
+        stale = next(iter(self.stale_robots(now)), None)
         if stale is None:
             return error
         self.look(now)
@@ -171,3 +200,12 @@ class Staleness:
         return PoseError(
             explained(str(error), diagnosis(writer=writer, timer_late=late, timeout=self.book.timeout))
         )
+
+
+def _refused(book: PoseBook, robot: int, *, t: float, now: float) -> bool:
+    """`book` refuses `robot`'s pose at `now` (run time t): missing, too old or from the future."""
+    try:
+        book.fresh(robot, t=t, now=now)
+    except PoseError:
+        return True
+    return False

@@ -77,7 +77,8 @@ class TriggerSchedule:
         due = step.time == self.next_time  # the exact float this agent reported
         if due != (self.agent_id in step.due):
             raise AgentNodeError(
-                f'agent {self.agent_id}: step {step.index} at t={step.time!r} lists due agents {list(step.due)}, '
+                f'agent {self.agent_id}: step {step.index} at t={step.time!r} lists due agents '
+                f'{list(step.due)}, '
                 f'but this agent reported its next triggering time {self.next_time!r}'
             )
         return due

@@ -41,7 +41,10 @@ class Check:
         return {'name': self.name, 'ok': self.ok, 'detail': self.detail, 'binding': self.binding}
 
 
-ROBOT_BOUNDS_NOTE = "robots: reported, not guaranteed (noise, latency, saturation and the robots' dynamics are outside the theorems)"
+ROBOT_BOUNDS_NOTE = (
+    "robots: reported, not guaranteed (noise, latency, saturation and the robots' dynamics are outside the "
+    'theorems)'
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -312,7 +315,10 @@ def _floor_checks(record: RunRecord, series: Series, bounds: TheoryBounds) -> li
         Check(
             name='formation error <= 2 sqrt(z B(κt)) (threshold floor)',
             ok=bool(ratio[worst] <= 1.0),
-            detail=f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= {floor.ball:.4g}',
+            detail=(
+                f'largest error / bound {ratio[worst]:.3g} at t = {float(t[worst])!r}; ultimately <= '
+                f'{floor.ball:.4g}'
+            ),
         )
     )
     if bounds.xi is not None:

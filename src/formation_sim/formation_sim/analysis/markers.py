@@ -135,7 +135,8 @@ class FormationMarkers:
         n, p = len(self.scenario.agent_ids), self.scenario.dimension
         if x.shape != (n, p):
             raise MarkerError(
-                f'positions must have shape ({n}, {p}) for agents {list(self.scenario.agent_ids)}, got {x.shape}'
+                f'positions must have shape ({n}, {p}) for agents {list(self.scenario.agent_ids)}, got '
+                f'{x.shape}'
             )
         if not np.all(np.isfinite(x)):
             raise MarkerError('positions must be finite')
@@ -471,7 +472,8 @@ def write_bag_with_markers(
                 state = decode_world_state(decode(message.rawdata, message.msgtype))
                 if tuple(state.agent_ids) != scenario.agent_ids:
                     raise MarkerError(
-                        f'a state of agents {list(state.agent_ids)} in {source}; the scenario has {list(scenario.agent_ids)}'
+                        f'a state of agents {list(state.agent_ids)} in {source}; the scenario has '
+                        f'{list(scenario.agent_ids)}'
                     )
                 bag.write(
                     MARKERS_TOPIC,

@@ -210,9 +210,10 @@ def reindex(bag_dir: Path | str) -> Recovery:
             recovered.unlink(missing_ok=True)
             size = sum(len(m.data) for m in salvage.messages)
             msg = (
-                f'{bag_dir}: cannot write the recovered copy {recovered.name}: {error.strerror} (it needs about '
-                f'{size / 1e6:.1f} MB beside the cut-short {mcap_path.name}, which holds {len(salvage.messages)} '
-                'messages in complete chunks); the bag is unchanged: free space, then recover it again'
+                f'{bag_dir}: cannot write the recovered copy {recovered.name}: {error.strerror} (it '
+                f'needs about {size / 1e6:.1f} MB beside the cut-short {mcap_path.name}, which holds '
+                f'{len(salvage.messages)} messages in complete chunks); the bag is unchanged: free '
+                'space, then recover it again'
             )
             raise BagRecoveryError(msg) from error
         mcap_path.replace(damaged_copy)
@@ -224,7 +225,10 @@ def reindex(bag_dir: Path | str) -> Recovery:
         done = (
             f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
         )
-        msg = f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it again'
+        msg = (
+            f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it '
+            'again'
+        )
         raise BagRecoveryError(msg) from error
 
     return Recovery(

@@ -108,9 +108,10 @@ def run(args: argparse.Namespace) -> int:
         deviation = report['max_trigger_deviation']
         trajectory = report['trajectory']
         print(
-            f'events A {a.total_events} / B {b.total_events}; messages A {a.messages_sent} / B {b.messages_sent}; '
-            f'max triggering-time deviation {deviation if deviation is not None else "—"}; '
-            f'max trajectory deviation {trajectory["max_deviation"] if trajectory else "—"}',
+            f'events A {a.total_events} / B {b.total_events}; messages A {a.messages_sent} / B '
+            f'{b.messages_sent}; max triggering-time deviation '
+            f'{deviation if deviation is not None else "—"}; max trajectory deviation '
+            f'{trajectory["max_deviation"] if trajectory else "—"}',
             file=sys.stderr,
         )
         for line in report['count_mismatches']:

@@ -26,7 +26,10 @@ def register(subparsers) -> None:
     parser.add_argument(
         'topic',
         metavar='TOPIC',
-        help="the topic's name, e.g. /formation/step or /agent_1/trigger_info/to_2 (`formation topics` lists them)",
+        help=(
+            "the topic's name, e.g. /formation/step or /agent_1/trigger_info/to_2 (`formation topics` lists "
+            'them)'
+        ),
     )
     add_domain_argument(parser)
     parser.add_argument('--count', type=POSITIVE_INT, default=None, metavar='K', help='exit after K messages')

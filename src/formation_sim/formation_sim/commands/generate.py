@@ -1,4 +1,5 @@
-"""`formation generate --agents N --out FILE`: a random team meeting every hypothesis of Theorem 1 or 2, as a scenario file.
+"""`formation generate --agents N --out FILE`: a random team meeting every hypothesis of Theorem 1
+or 2, as a scenario file.
 
 The team is `formation_sim.model.generate.random_scenario`; the file is JSON if its name ends in
 .json (the format for large teams: the json module reads 10 000 agents in half a second, PyYAML
@@ -120,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as error:
         return refuse('generate', f'cannot write {out}: {error.strerror or error}')
     print(
-        f'{out}: {scenario.name}, {scenario.n} agents, {len(scenario.edges)} edges, {scenario.dynamics} integrators in {scenario.dimension}-D ({kind})'
+        f'{out}: {scenario.name}, {scenario.n} agents, {len(scenario.edges)} edges, {scenario.dynamics} '
+        f'integrators in {scenario.dimension}-D ({kind})'
     )
     return EXIT_OK

@@ -101,8 +101,8 @@ def resolve_speed_scale(
     observed = choice.observed
     settle = observed.settle_time
     print(
-        f'formation {command}: --speed-scale auto: κ = {kappa:.4g} ({choice.source}: the exact run at κ = 1 asks for '
-        f'{observed.speed:.4g} m/s'
+        f'formation {command}: --speed-scale auto: κ = {kappa:.4g} ({choice.source}: the exact run '
+        f'at κ = 1 asks for {observed.speed:.4g} m/s'
         + ('' if observed.acceleration is None else f', {observed.acceleration:.4g} m/s²')
         + f', kept {observed.margin:g}× below the {observed.binding}'
         + (
@@ -143,7 +143,8 @@ def exceeded(choice: SpeedScaleChoice, kappa: float) -> list[str]:
     acceleration = choice.observed.acceleration
     if acceleration is not None and kappa * kappa * acceleration > limits.max_acceleration:
         found.append(
-            f'{kappa * kappa * acceleration:.4g} m/s² beyond --max-acceleration {limits.max_acceleration:g} m/s²'
+            f'{kappa * kappa * acceleration:.4g} m/s² beyond --max-acceleration '
+            f'{limits.max_acceleration:g} m/s²'
         )
     return found
 
@@ -171,7 +172,8 @@ def check_saturation(
     if not found:
         return None
     remedy = (
-        f'--speed-scale auto (κ = {choice.value:.4g}: the largest command {OBSERVED_MARGIN:g}× below the limits'
+        f'--speed-scale auto (κ = {choice.value:.4g}: the largest command {OBSERVED_MARGIN:g}× below '
+        'the limits'
         + (
             f', settling to {100 * choice.settling.fraction:g} % in {choice.observed.settle_time:.3g} s'
             if math.isfinite(choice.observed.settle_time)
@@ -182,13 +184,15 @@ def check_saturation(
     message = (
         f'the exact run of {scenario.name} at speed scale κ = {kappa:g} asks for '
         + '; '.join(found)
-        + f': those commands would be clipped, which the theorems do not cover (connectivity and convergence are '
-        f'not guaranteed while clipping lasts). Run slower with {remedy}, or add --allow-saturation to run anyway'
+        + ': those commands would be clipped, which the theorems do not cover (connectivity and '
+        f'convergence are not guaranteed while clipping lasts). Run slower with {remedy}, or add '
+        '--allow-saturation to run anyway'
     )
     if allow:
         print(
-            f'formation {command}: warning: {message.replace(", or add --allow-saturation to run anyway", "")} '
-            '(--allow-saturation: running anyway; summary.json extra.saturation counts the clipped commands)',
+            f'formation {command}: warning: '
+            f'{message.replace(", or add --allow-saturation to run anyway", "")} (--allow-saturation: '
+            'running anyway; summary.json extra.saturation counts the clipped commands)',
             file=sys.stderr,
         )
         return None

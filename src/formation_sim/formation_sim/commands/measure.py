@@ -110,8 +110,9 @@ def run(args: argparse.Namespace) -> int:
         return 130
     if missing := [i for i in ids if i not in measured]:
         print(
-            f'formation measure: no pose within {args.timeout:g} s from robots {", ".join(map(str, missing))} '
-            f'(topics /agent_<i>/robot/{args.pose_type}, ROS domain {args.domain_id if args.domain_id is not None else "of the environment"})',
+            f'formation measure: no pose within {args.timeout:g} s from robots '
+            f'{", ".join(map(str, missing))} (topics /agent_<i>/robot/{args.pose_type}, ROS domain '
+            f'{args.domain_id if args.domain_id is not None else "of the environment"})',
             file=sys.stderr,
         )
         return 1
@@ -128,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
         position, heading, _ = starts[i]
         print(f'robot {i}: at {", ".join(f"{v:.4f}" for v in position)} m, heading {heading:.4f} rad')
     print(
-        f'wrote {args.out}: `formation validate {args.out}` checks the start, `formation run {args.out} --backend external` runs it'
+        f'wrote {args.out}: `formation validate {args.out}` checks the start, `formation run {args.out} '
+        '--backend external` runs it'
     )
     return 0
 

@@ -26,13 +26,21 @@ from formation_sim.commands.common import (
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         'params',
-        help='write the parameter files of a distributed run (agents, recorder, simulator or coordinator, robots) without starting it',
-        description='Write what `formation run` with the same arguments would write before it starts its processes: '
-        'scenario.yaml, agents.params.yaml, recorder.params.yaml, simulator.params.yaml (backend exact) or '
-        'coordinator.params.yaml (robot backends) and robots.params.yaml (simulated robots), each keyed by node '
-        'name; then print the command that starts each process by hand. Nothing is started.',
-        epilog='The output folder follows the run-folder rule of `formation run`: new or empty, or --force to '
-        'replace an earlier run there. Exit status: 0 written; 2 bad input (nothing written).',
+        help=(
+            'write the parameter files of a distributed run (agents, recorder, simulator or coordinator, '
+            'robots) without starting it'
+        ),
+        description=(
+            'Write what `formation run` with the same arguments would write before it starts its processes: '
+            'scenario.yaml, agents.params.yaml, recorder.params.yaml, simulator.params.yaml (backend exact) '
+            'or coordinator.params.yaml (robot backends) and robots.params.yaml (simulated robots), each '
+            'keyed by node name; then print the command that starts each process by hand. Nothing is '
+            'started.'
+        ),
+        epilog=(
+            'The output folder follows the run-folder rule of `formation run`: new or empty, or --force to '
+            'replace an earlier run there. Exit status: 0 written; 2 bad input (nothing written).'
+        ),
     )
     add_run_arguments(parser, kind='params')
     add_plan_arguments(parser)

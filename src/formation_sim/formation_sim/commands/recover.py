@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
         return refuse('recover', error)
     if recovery.healthy:
         print(
-            f'{bag}: healthy (metadata.yaml and a complete MCAP file, {recovery.message_count} messages); left as it is'
+            f'{bag}: healthy (metadata.yaml and a complete MCAP file, {recovery.message_count} '
+            'messages); left as it is'
         )
         return 0
     if recovery.rewritten:

@@ -53,7 +53,10 @@ def register(subparsers) -> None:
         type=NON_NEGATIVE_INT,
         default=0,
         metavar='K',
-        help='wait until every replayed topic has K matched subscribers before starting (timeout --wait-timeout)',
+        help=(
+            'wait until every replayed topic has K matched subscribers before starting (timeout '
+            '--wait-timeout)'
+        ),
     )
     parser.add_argument(
         '--wait-timeout',
@@ -93,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         clock = f', {result.clock_messages} /clock' if result.clock_messages else ''
         print(
-            f'published {result.published} messages on {len(result.per_topic)} topics{clock} in {result.wall_time:.2f} s',
+            f'published {result.published} messages on {len(result.per_topic)} topics{clock} in '
+            f'{result.wall_time:.2f} s',
             file=sys.stderr,
         )
     return 130 if result.interrupted else 0

@@ -41,7 +41,10 @@ def register(subparsers) -> None:
         '--out',
         type=Path,
         default=None,
-        help='folder for robots.params.yaml and logs, new or empty (default: a new folder runs/<scenario>-robots-<date>-<time>)',
+        help=(
+            'folder for robots.params.yaml and logs, new or empty (default: a new folder '
+            'runs/<scenario>-robots-<date>-<time>)'
+        ),
     )
     parser.add_argument('--force', action='store_true', help="replace an earlier run's files in --out")
     parser.add_argument(

@@ -28,14 +28,16 @@ def register(subparsers) -> None:
         description='Distributed run over ROS 2, every agent its own node talking only to its neighbours. '
         'Backend exact (default): a simulator node holds the exact world and the sensing services, and '
         'time advances in lock-step from event to event. A backend named after a robot kind (holonomic, '
-        'unicycle; formation_agent.core.kinds): one simulated robot of that kind per agent (pose and velocity-command topics), a coordinator keeps wall-clock time. Backend '
-        'external: the coordinator, agents and recorder only; the robots are whatever publishes '
-        '/agent_<i>/robot/pose (or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). '
-        'Writes summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
+        'unicycle; formation_agent.core.kinds): one simulated robot of that kind per agent (pose and '
+        'velocity-command topics), a coordinator keeps wall-clock time. Backend external: the '
+        'coordinator, agents and recorder only; the robots are whatever publishes /agent_<i>/robot/pose '
+        '(or odom) and takes /agent_<i>/robot/cmd_vel (README, "Running on robots"). Writes '
+        'summary.json (same schema as `formation simulate`) and the rosbag2 bag (MCAP) into --out.',
         epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started, nothing on disk '
-        'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 4 on robots, the '
-        "robots' measured start breaks the initial condition on an edge (no Step 0, no command was sent); 130 interrupted. A run "
-        'stopped early still writes summary.json up to that moment and a readable bag.',
+        'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 4 '
+        "on robots, the robots' measured start breaks the initial condition on an edge (no Step 0, no "
+        'command was sent); 130 interrupted. A run stopped early still writes summary.json up to that '
+        'moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')
     add_plan_arguments(parser)
@@ -58,15 +60,19 @@ def register(subparsers) -> None:
     parser.add_argument(
         '--discovery-server',
         action='store_true',
-        help='discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) instead of every '
-        'process announcing itself to every other: for large teams (BENCHMARKS.md)',
+        help=(
+            'discover through a Fast DDS discovery server that the run starts (ROS_DISCOVERY_SERVER) '
+            'instead of every process announcing itself to every other: for large teams (BENCHMARKS.md)'
+        ),
     )
     parser.add_argument(
         '--allow-saturation',
         action='store_true',
-        help='robot backends: run even when the exact run asks for commands beyond --max-speed, --max-angular-speed or '
-        '--max-acceleration (refused by default, exit 2: clipped commands are outside the theorems; --speed-scale auto '
-        'slows the team until they fit)',
+        help=(
+            'robot backends: run even when the exact run asks for commands beyond --max-speed, '
+            '--max-angular-speed or --max-acceleration (refused by default, exit 2: clipped commands are '
+            'outside the theorems; --speed-scale auto slows the team until they fit)'
+        ),
     )
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
@@ -137,11 +143,13 @@ def _warn_saturation(result) -> None:
     saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
     if saturation and saturation.get('total'):
         kinds = ', '.join(
-            f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, {entry["allowed"]:g} allowed)'
+            f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, '
+            f'{entry["allowed"]:g} allowed)'
             for kind, entry in saturation['by_kind'].items()
         )
         print(
             f"warning: {saturation['total']} commands saturated at the robots' limits: {kinds}; agents "
-            f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json extra.saturation)',
+            f'{", ".join(saturation["by_agent"])}; the theorems assume no saturation (summary.json '
+            'extra.saturation)',
             file=sys.stderr,
         )

@@ -65,7 +65,10 @@ def register(subparsers) -> None:
     baseline.add_argument(
         '--continuous',
         action='store_true',
-        help='baseline: the continuous controller (weights and states at every instant), integrated by scipy (DOP853, rtol 1e-10)',
+        help=(
+            'baseline: the continuous controller (weights and states at every instant), integrated by scipy '
+            '(DOP853, rtol 1e-10)'
+        ),
     )
     parser.add_argument(
         '--tolerance',
@@ -84,7 +87,10 @@ def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | N
     policy = args.samples
     if args.continuous:
         if policy != 'auto':
-            return f'argument --samples: the continuous controller has no events; its trajectory is the grid (--sample-dt), got {policy}'
+            return (
+                'argument --samples: the continuous controller has no events; its trajectory is the grid '
+                f'(--sample-dt), got {policy}'
+            )
         if args.sample_dt == 0.0:
             return 'argument --sample-dt: must be > 0 with --continuous (its trajectory is the sample grid)'
         return 'grid', DEFAULT_SAMPLE_DT if args.sample_dt is None else args.sample_dt
@@ -92,10 +98,16 @@ def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | N
         policy = 'events' if agents <= AUTO_EVENTS_MAX_AGENTS else 'grid'
     if policy == 'none':
         if args.sample_dt is not None:
-            return f'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got --sample-dt {args.sample_dt:g}'
+            return (
+                'argument --sample-dt: --samples none keeps no grid (only t = 0 and the horizon), got '
+                f'--sample-dt {args.sample_dt:g}'
+            )
         return policy, None
     if policy == 'grid' and args.sample_dt == 0.0:
-        return 'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: --samples none)'
+        return (
+            'argument --sample-dt: --samples grid needs a grid spacing > 0 (t = 0 and the horizon alone: '
+            '--samples none)'
+        )
     return policy, DEFAULT_SAMPLE_DT if args.sample_dt is None else args.sample_dt
 
 

@@ -1,4 +1,5 @@
-"""`formation study SPEC --out DIR`: many cases on Dask; `formation study report DIR`: their figures and table.
+"""`formation study SPEC --out DIR`: many cases on Dask; `formation study report DIR`: their figures
+and table.
 
 The SPEC (YAML, formation_sim.study.spec) lists the cases; each runs through the exact engine on a
 Dask worker (a LocalCluster of processes, or `--scheduler tcp://HOST:PORT`) and its row is
@@ -21,14 +22,18 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         'study',
         help='run a study (many cases, on Dask) or report on one',
-        description='`formation study SPEC --out DIR` runs every case of SPEC (grids and random draws over teams, '
-        'gains, algorithm and horizon; docs/STUDY.md) through the exact engine on Dask distributed and appends '
-        'one row per case to DIR/rows.csv as it finishes; run again into the same DIR, it runs only the cases '
-        'still missing. Every case is validated against its theorem before any runs. '
-        '`formation study report DIR` writes figures and a Markdown table from the rows into DIR/report.',
-        epilog='Exit status: 0 every case has a row and none failed; 1 some cases failed (their rows hold the '
-        'error); 2 bad input (a SPEC key, range or a case breaking a hypothesis: nothing was run); 130 '
-        'interrupted (the rows written are kept).',
+        description=(
+            '`formation study SPEC --out DIR` runs every case of SPEC (grids and random draws over teams, '
+            'gains, algorithm and horizon; docs/STUDY.md) through the exact engine on Dask distributed and '
+            'appends one row per case to DIR/rows.csv as it finishes; run again into the same DIR, it runs '
+            'only the cases still missing. Every case is validated against its theorem before any runs. '
+            '`formation study report DIR` writes figures and a Markdown table from the rows into DIR/report.'
+        ),
+        epilog=(
+            'Exit status: 0 every case has a row and none failed; 1 some cases failed (their rows hold the '
+            'error); 2 bad input (a SPEC key, range or a case breaking a hypothesis: nothing was run); 130 '
+            'interrupted (the rows written are kept).'
+        ),
     )
     parser.add_argument(
         'spec', metavar='SPEC', help="the study's YAML file, or the word report followed by DIR"
@@ -62,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if args.folder is not None:
         return refuse(
             'study',
-            f'unexpected argument {args.folder!r} (formation study SPEC --out DIR, or formation study report DIR)',
+            f'unexpected argument {args.folder!r} (formation study SPEC --out DIR, or formation study '
+            'report DIR)',
         )
     if args.out is None:
         return refuse('study', 'argument --out: the study folder is required (rows.csv goes there)')

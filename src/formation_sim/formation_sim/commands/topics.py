@@ -1,4 +1,5 @@
-"""`formation topics`: live topics with types, publisher/subscriber counts and node names (no ros2cli needed)."""
+"""`formation topics`: live topics with types, publisher/subscriber counts and node names (no ros2cli
+needed)."""
 
 from __future__ import annotations
 

@@ -47,9 +47,9 @@ def register(subparsers) -> None:
         'a bound from the proofs where it shows the limits are never reached, else the largest in an '
         'exact in-process run (which the output names), and the speed scales κ that keep the commands within '
         'them (guaranteed, observed; --speed-scale auto runs the observed) with the time each needs to '
-        'settle. With --pose-noise: the threshold floor c0 that noise asks for. Exit 0 if valid (warnings allowed) and within '
-        'the limits, 1 if a hypothesis is broken or a command exceeds a limit, 2 if the scenario '
-        'cannot be read.',
+        'settle. With --pose-noise: the threshold floor c0 that noise asks for. Exit 0 if valid '
+        '(warnings allowed) and within the limits, 1 if a hypothesis is broken or a command exceeds a '
+        'limit, 2 if the scenario cannot be read.',
     )
     add_scenario_argument(parser)
     add_scale_arguments(parser)
@@ -83,14 +83,20 @@ def register(subparsers) -> None:
         type=POSITIVE,
         default=None,
         metavar='SIGMA',
-        help='σ of the robots\' position noise [m]: suggest the threshold floor c0 that keeps the noise from triggering (README, "Running on robots")',
+        help=(
+            "σ of the robots' position noise [m]: suggest the threshold floor c0 that keeps the noise from "
+            'triggering (README, "Running on robots")'
+        ),
     )
     parser.add_argument(
         '--pose-period',
         type=POSITIVE,
         default=DEFAULT_POSE_PERIOD,
         metavar='DT',
-        help=f'ETA-2 with --pose-noise: the time between two poses a velocity is differenced from [s] (default {DEFAULT_POSE_PERIOD:g}, 100 Hz)',
+        help=(
+            'ETA-2 with --pose-noise: the time between two poses a velocity is differenced from [s] '
+            f'(default {DEFAULT_POSE_PERIOD:g}, 100 Hz)'
+        ),
     )
     parser.set_defaults(func=run)
 
@@ -244,14 +250,16 @@ def _noise_floor(scenario, args: argparse.Namespace) -> dict:
             0.0 if alpha + present <= floor else math.log(alpha / (floor - present)) / beta
         )  # paper's time
         lines.append(
-            f"  the scenario's c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} from t = {below / kappa:.4g} s on "
-            f"(κ = {kappa:g}; horizon {scenario.horizon:g} s): from then on the noise alone can set off triggers, each trigger's "
-            'noise the next (the longer the run, the more events)'
+            f"  the scenario's c0 = {present:g}: its threshold c0 + α e^(-βt) is below c0 = {floor:.3g} "
+            f'from t = {below / kappa:.4g} s on (κ = {kappa:g}; horizon {scenario.horizon:g} s): from '
+            "then on the noise alone can set off triggers, each trigger's noise the next (the longer the "
+            'run, the more events)'
         )
     if scenario.dynamics == 'single':
         reach = min(sum(omega_at_formation(scenario, agent)) for agent in scenario.agent_ids)
         lines.append(
-            f'  a floor costs accuracy: the formation settles to about c0 / min_i Σ_j ω_ij = {floor / reach:.3g} m or better'
+            '  a floor costs accuracy: the formation settles to about c0 / min_i Σ_j ω_ij = '
+            f'{floor / reach:.3g} m or better'
         )
     return {
         'suggested': floor,

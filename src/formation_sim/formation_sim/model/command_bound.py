@@ -78,8 +78,9 @@ def command_bound(scenario: Scenario) -> CommandBound:
     theory.TheoryError outside the hypotheses, or with a threshold floor c0 > 0."""
     if scenario.gains.threshold_floor > 0.0:
         raise theory.TheoryError(
-            f'the proofs bound the commands for the threshold α e^(-βt) of (triggersingle)/(triggerdouble); with a floor '
-            f'c0 = {scenario.gains.threshold_floor:g} they bound neither ν nor the commands'
+            'the proofs bound the commands for the threshold α e^(-βt) of '
+            f'(triggersingle)/(triggerdouble); with a floor c0 = {scenario.gains.threshold_floor:g} '
+            'they bound neither ν nor the commands'
         )
     kappa = scenario.gains.speed_scale
     constants = theory.theorem_constants(scenario)
@@ -103,8 +104,11 @@ def command_bound(scenario: Scenario) -> CommandBound:
             source='theory',
             speed=dict(zip(ids, (kappa * speed).tolist())),
             acceleration=None,
-            reference='Theorem 1: ||u_i|| <= Σ_j f_ij(k_ij) min(k_ij, 2 sqrt(k_V)) from (uxsingle), (wij), (lengthys), (lengthysV); (dotyi) for comparison'
-            + ('' if kappa == 1.0 else f'; times κ = {kappa:g}'),
+            reference=(
+                'Theorem 1: ||u_i|| <= Σ_j f_ij(k_ij) min(k_ij, 2 sqrt(k_V)) from (uxsingle), (wij), '
+                '(lengthys), (lengthysV); (dotyi) for comparison'
+                + ('' if kappa == 1.0 else f'; times κ = {kappa:g}')
+            ),
             dotyi=dict(zip(ids, (kappa * dotyi).tolist())),
         )
     gains = scenario.gains
@@ -114,6 +118,10 @@ def command_bound(scenario: Scenario) -> CommandBound:
         source='theory',
         speed=dict.fromkeys(ids, kappa * q_max),
         acceleration=dict(zip(ids, (kappa * kappa * acceleration).tolist())),
-        reference='Theorem 2 (i): ||q_i|| <= sqrt(2 k^d_ν); ||u^d_i - k3 q_i|| <= Σ_j f_ij(k^d_ij)(k1 k^d_ij + 2 k2 sqrt(2 k^d_ν)) + k3 sqrt(2 k^d_ν) from (uxdouble), (wij), (kijd)'
-        + ('' if kappa == 1.0 else f'; times κ = {kappa:g} (speed) and κ² (acceleration)'),
+        reference=(
+            'Theorem 2 (i): ||q_i|| <= sqrt(2 k^d_ν); ||u^d_i - k3 q_i|| <= '
+            'Σ_j f_ij(k^d_ij)(k1 k^d_ij + 2 k2 sqrt(2 k^d_ν)) + k3 sqrt(2 k^d_ν) '
+            'from (uxdouble), (wij), (kijd)'
+            + ('' if kappa == 1.0 else f'; times κ = {kappa:g} (speed) and κ² (acceleration)')
+        ),
     )

@@ -83,7 +83,8 @@ def _connected_points(
 def _family_points(
     rng: np.random.Generator, n: int, dimension: int, reach: float, graph: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Points and the pairs (i < j, sorted) of a star, path, cycle or complete graph, each pair within reach."""
+    """Points and the pairs (i < j, sorted) of a star, path, cycle or complete graph, each pair within
+    reach."""
     if graph == 'path':
         steps = _in_ball(rng, n - 1, dimension)
         norms = np.linalg.norm(steps, axis=1, keepdims=True)
@@ -152,21 +153,16 @@ def random_scenario(
     )
 
     rng = np.random.default_rng(seed)
-    reach = REACH_FRACTION * delta
-    if graph == 'geometric':
-        tau, pairs = _connected_points(rng, n, dimension, reach, degree)
-    else:
-        tau, pairs = _family_points(rng, n, dimension, reach, graph)
-    d = tau[pairs[:, 0]] - tau[pairs[:, 1]]
-    capacities = delta - np.linalg.norm(d, axis=1)
-
-    offsets = _in_ball(rng, n, dimension)
-    ratios = np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1) / capacities
-    worst = float(ratios.max())
-    offsets = offsets * ((1.0 - slack) / worst) if worst > 0.0 else np.zeros_like(offsets)
-    positions = tau + offsets
-    velocities = max_speed * _in_ball(rng, n, dimension) if dynamics == 'double' else None
-
+    positions, velocities, pairs, d = _random_team(
+        rng,
+        n=n,
+        dimension=dimension,
+        delta=delta,
+        degree=degree,
+        graph=graph,
+        slack=slack,
+        max_speed=max_speed if dynamics == 'double' else None,
+    )
     ids = tuple(range(1, n + 1))
     edges = tuple(Edge(i=int(i) + 1, j=int(j) + 1, d=dk) for (i, j), dk in zip(pairs, d))
     placeholder = (
@@ -189,6 +185,36 @@ def random_scenario(
     if dynamics == 'single':
         return scenario.replace(gains=SingleGains(alpha=alpha, beta=beta * beta0))
     return scenario.replace(gains=_double_gains(alpha=alpha, beta1=beta1 * beta0, k3=k3, beta_d=beta_d))
+
+
+def _random_team(
+    rng: np.random.Generator,
+    *,
+    n: int,
+    dimension: int,
+    delta: float,
+    degree: float,
+    graph: str,
+    slack: float,
+    max_speed: float | None,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    """The drawn team: positions, velocities (None without `max_speed`), the edges' index pairs and
+    their d_ij (module docstring), drawn from `rng` in that order."""
+    reach = REACH_FRACTION * delta
+    if graph == 'geometric':
+        tau, pairs = _connected_points(rng, n, dimension, reach, degree)
+    else:
+        tau, pairs = _family_points(rng, n, dimension, reach, graph)
+    d = tau[pairs[:, 0]] - tau[pairs[:, 1]]
+    capacities = delta - np.linalg.norm(d, axis=1)
+
+    offsets = _in_ball(rng, n, dimension)
+    ratios = np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1) / capacities
+    worst = float(ratios.max())
+    offsets = offsets * ((1.0 - slack) / worst) if worst > 0.0 else np.zeros_like(offsets)
+    positions = tau + offsets
+    velocities = max_speed * _in_ball(rng, n, dimension) if max_speed is not None else None
+    return positions, velocities, pairs, d
 
 
 def _check_arguments(
@@ -225,7 +251,8 @@ def _check_arguments(
 
 
 def _double_gains(*, alpha: float, beta1: float, k3: float | None, beta_d: float | None) -> DoubleGains:
-    """ETA-2's gains for this β1: P from (riccatti), k3 and β_d as fractions of their bounds (random_scenario)."""
+    """ETA-2's gains for this β1: P from (riccatti), k3 and β_d as fractions of their bounds
+    (random_scenario)."""
     gains = DoubleGains.from_riccati(alpha_d=alpha, beta_d=1.0, beta1=beta1, k3='paper')
     k3_value = 'paper' if k3 is None else k3 * k3_upper_bound(gains.k1, gains.k2)
     gains = DoubleGains.from_riccati(alpha_d=alpha, beta_d=1.0, beta1=beta1, k3=k3_value)

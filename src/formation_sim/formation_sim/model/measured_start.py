@@ -50,8 +50,8 @@ class InitialBreach:
         error, capacity = _apart(self.error, self.capacity)
         ij = _pair(self.i, self.j)
         return (
-            f'edge ({self.i},{self.j}): the measured ‖x_{self.i} − x_{self.j} − d_{ij}‖ = {error} m is not below '
-            f'Δ − ‖d_{ij}‖ = {capacity} m (initial condition of Theorem {self.theorem})'
+            f'edge ({self.i},{self.j}): the measured ‖x_{self.i} − x_{self.j} − d_{ij}‖ = {error} m is '
+            f'not below Δ − ‖d_{ij}‖ = {capacity} m (initial condition of Theorem {self.theorem})'
         )
 
     def to_dict(self) -> dict:

@@ -64,7 +64,8 @@ class ScenarioError(ValueError):
 
 
 class _ShortRepr(reprlib.Repr):
-    """repr() cut to a readable length: long strings, huge integers and deep or long containers end in '...'."""
+    """repr() cut to a readable length: long strings, huge integers and deep or long containers end in
+    '...'."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -585,8 +586,8 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     if headings and len(headings) != len(ids):
         missing = [a for a in ids if a not in headings]
         raise ScenarioError(
-            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} have one: '
-            'give every agent a heading or none'
+            f'agents.{missing[0]}: heading missing, while agents {_id_list(tuple(sorted(headings)))} '
+            'have one: give every agent a heading or none'
         )
     positions = np.array([entries[a][0] for a in ids])
     velocities = np.array([entries[a][1] for a in ids]) if dynamics == 'double' else None
@@ -1063,7 +1064,10 @@ def builtin_scenarios() -> tuple[str, ...]:
     return tuple(sorted(entry.name[:-5] for entry in folder.iterdir() if entry.name.endswith('.yaml')))
 
 
-_LARGER_TEAMS = 'the same schema as JSON (.json, `formation generate`), or Python (scenario_from_dict, formation_sim.generate)'
+_LARGER_TEAMS = (
+    'the same schema as JSON (.json, `formation generate`), or Python (scenario_from_dict, '
+    'formation_sim.generate)'
+)
 
 
 def _size_limit(kind: str) -> int:
@@ -1102,7 +1106,8 @@ def _read_text(path: Path, *, kind: str) -> str:
 
 
 def file_kind(path: str | Path) -> str:
-    """'JSON' for a name ending in .json, else 'YAML': how `load_scenario` and `dump_scenario` read and write it."""
+    """'JSON' for a name ending in .json, else 'YAML': how `load_scenario` and `dump_scenario` read and write
+    it."""
     return 'JSON' if Path(path).suffix.lower() == JSON_SUFFIX else 'YAML'
 
 
@@ -1181,7 +1186,8 @@ def dump_scenario_text(scenario: Scenario) -> str:
 
 
 def dump_scenario_json_text(scenario: Scenario) -> str:
-    """`scenario` as JSON text, one agent and one edge a line, that reads back exactly (floats keep every bit)."""
+    """`scenario` as JSON text, one agent and one edge a line, that reads back exactly (floats keep every
+    bit)."""
     data = scenario_to_dict(scenario)
 
     def text(value: Any) -> str:
@@ -1193,7 +1199,10 @@ def dump_scenario_json_text(scenario: Scenario) -> str:
     )
     agents = ',\n'.join(f'  {text(str(agent))}: {text(entry)}' for agent, entry in data['agents'].items())
     edges = ',\n'.join(f'  {text(edge)}' for edge in data['edges'])
-    return f'{{\n{head}"agents": {{\n{agents}\n}},\n"edges": [\n{edges}\n],\n"gains": {text(data["gains"])}\n}}\n'
+    return (
+        f'{{\n{head}"agents": {{\n{agents}\n}},\n"edges": [\n{edges}\n],\n"gains": '
+        f'{text(data["gains"])}\n}}\n'
+    )
 
 
 def dump_scenario_as(scenario: Scenario, kind: str) -> str:

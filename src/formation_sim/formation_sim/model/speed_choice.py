@@ -87,7 +87,8 @@ class RobotLimits:
         if turn < self.max_speed:
             return (
                 turn,
-                f'turn rate {self.max_angular_speed:g} rad/s (l = {self.control_point_distance:g} m: ||u|| <= W l = {turn:.4g} m/s)',
+                f'turn rate {self.max_angular_speed:g} rad/s (l = {self.control_point_distance:g} m: '
+                f'||u|| <= W l = {turn:.4g} m/s)',
             )
         return self.max_speed, f'speed {self.max_speed:g} m/s'
 
@@ -119,12 +120,14 @@ def check_limits_apply(limits: RobotLimits, dynamics: str) -> None:
     limit on ETA-1, whose velocity commands (uxsingle) jump at every event."""
     if not limits.any:
         raise LimitsError(
-            'a speed scale from the limits needs at least one of --max-speed, --max-angular-speed, --max-acceleration'
+            'a speed scale from the limits needs at least one of --max-speed, --max-angular-speed, '
+            '--max-acceleration'
         )
     if dynamics == 'single' and math.isfinite(limits.max_acceleration):
         raise LimitsError(
-            f'max_acceleration {limits.max_acceleration:g} m/s²: ETA-1 commands velocities (uxsingle) that jump at '
-            'every event, which no speed scale bounds in acceleration; the limit applies to ETA-2 (double integrators)'
+            f'max_acceleration {limits.max_acceleration:g} m/s²: ETA-1 commands velocities (uxsingle) '
+            'that jump at every event, which no speed scale bounds in acceleration; the limit applies '
+            'to ETA-2 (double integrators)'
         )
 
 
@@ -196,8 +199,8 @@ class SpeedScaleChoice:
             'guaranteed_missing': self.guaranteed_missing,
             'observed': self.observed.to_dict(),
             'settling': {
-                'definition': f'first time after which the formation error (largest ||x_i - x_j - d_ij|| over the edges) '
-                f'stays <= {self.settling.fraction:g} of its value at t = 0',
+                'definition': f'first time after which the formation error (largest ||x_i - x_j - '
+                f'd_ij|| over the edges) stays <= {self.settling.fraction:g} of its value at t = 0',
                 'initial_error': self.settling.initial_error,
                 'time_at_1': self.settling.time if math.isfinite(self.settling.time) else None,
                 'exact_run_horizon': self.settling.run_horizon,
@@ -211,7 +214,8 @@ class SpeedScaleChoice:
         lines = [
             f'speed scale κ for these limits (κ = 1 asks for up to {self.observed.speed:.4g} m/s'
             + ('' if self.observed.acceleration is None else f', {self.observed.acceleration:.4g} m/s²')
-            + f' in the exact run; the formation error {settling.initial_error:.4g} m at t = 0 reaches {fraction} '
+            + f' in the exact run; the formation error {settling.initial_error:.4g} m at t = 0 '
+            f'reaches {fraction} '
             + (
                 f'at t = {settling.time:.4g} s'
                 if math.isfinite(settling.time)
@@ -227,13 +231,15 @@ class SpeedScaleChoice:
             how = (
                 "from the proofs' bound on the commands"
                 if value.source == 'guaranteed'
-                else f"from the exact run's largest commands, each kept {value.margin:g}× below its limit (not a guarantee)"
+                else f"from the exact run's largest commands, each kept {value.margin:g}× below its limit "
+                '(not a guarantee)'
             )
             if not math.isfinite(value.value):
                 lines.append(f'  {value.source}: any κ ({value.binding}; {how})')
                 continue
             lines.append(
-                f'  {value.source}: κ = {value.value:.4g}, bound by the {value.binding}; {how}; {self._settle_words(value)}'
+                f'  {value.source}: κ = {value.value:.4g}, bound by the {value.binding}; {how}; '
+                f'{self._settle_words(value)}'
             )
         chosen = self.value
         lines.append(f'  --speed-scale auto runs κ = {chosen:.4g} ({self.source})')
@@ -245,7 +251,10 @@ class SpeedScaleChoice:
             return f'{fraction} not reached within the exact run'
         words = f'{fraction} of the formation error after {value.settle_time:.4g} s'
         if value.settle_time > self.horizon:
-            words += f' — beyond the horizon {self.horizon:g} s: the run ends before it forms (a longer --horizon, or other gains)'
+            words += (
+                f' — beyond the horizon {self.horizon:g} s: the run ends before it forms (a longer '
+                '--horizon, or other gains)'
+            )
         return words
 
 
@@ -362,7 +371,8 @@ def noise_floor(
         pose_period is not None and pose_period > 0.0 and math.isfinite(pose_period)
     ):
         raise LimitsError(
-            f'pose_period: ETA-2 senses velocities from two poses Δt apart: Δt must be a number > 0, got {pose_period!r}'
+            'pose_period: ETA-2 senses velocities from two poses Δt apart: Δt must be a number > 0, '
+            f'got {pose_period!r}'
         )
     per_agent = {}
     for agent, omegas in weights.items():
@@ -372,11 +382,15 @@ def noise_floor(
         per_agent[agent] = position
     floor = quantile * max(per_agent.values())
     if dynamics == 'single':
-        formula = f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, σ = {pose_noise:g} m'
+        formula = (
+            f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, '
+            f'σ = {pose_noise:g} m'
+        )
     else:
         formula = (
-            f'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) (k1 + k2 √2/(κ Δt)), ω_ij = 2/(Δ − ||d_ij||), q = {quantile:g}, '
-            f'σ = {pose_noise:g} m, Δt = {pose_period:g} s, κ = {speed_scale:g}'
+            'c0 = q σ max_i sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²) (k1 + k2 √2/(κ Δt)), ω_ij = 2/(Δ − '
+            f'||d_ij||), q = {quantile:g}, σ = {pose_noise:g} m, Δt = {pose_period:g} s, κ = '
+            f'{speed_scale:g}'
         )
     return floor, per_agent, formula
 

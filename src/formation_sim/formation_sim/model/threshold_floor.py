@@ -121,7 +121,10 @@ def _eta1(scenario, constants, c0: float) -> FloorBounds:
         n=n,
         alpha=alpha,
         rate=beta,
-        condition=f'c0 < β0 min(Δ-||d_ij||) sqrt(2/n) = {limit:.6g} (the ultimate ball c0 sqrt(n/2)/β0 within every capacity)',
+        condition=(
+            f'c0 < β0 min(Δ-||d_ij||) sqrt(2/n) = {limit:.6g} (the ultimate ball c0 sqrt(n/2)/β0 within '
+            'every capacity)'
+        ),
         ultimate=n * c0 * c0 / (8.0 * b0 * b0),
         ball=c0 * math.sqrt(n / 2.0) / b0,
     )

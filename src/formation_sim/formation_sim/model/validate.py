@@ -45,6 +45,7 @@ every edge and the Riccati solution.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 import math
 import sys
@@ -391,14 +392,16 @@ def _beta0(scenario: Scenario, out: _Collector, *, connected: bool, capacities: 
 
 
 def _check_speed_scale(scenario: Scenario, out: _Collector, beta0: float | None) -> None:
-    """κ changes none of the hypotheses (they are the paper's, in s = κt): a note with the real-time numbers."""
+    """κ changes none of the hypotheses (they are the paper's, in s = κt): a note with the real-time
+    numbers."""
     kappa = scenario.speed_scale
     if kappa == 1.0:
         return
     gains = scenario.gains
     name, rate = ('β', gains.beta) if scenario.dynamics == 'single' else ('β_d', gains.beta_d)
     line = (
-        f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) divided by κ, "
+        f"speed scale κ = {_g(kappa)}: the paper's run in s = κt, every triggering time (and ξ_i) "
+        'divided by κ, '
         f'commands × κ'
         + (
             ''
@@ -441,8 +444,9 @@ def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
         out.error(
             'threshold_floor',
             'gains',
-            f'threshold floor c0 = {_g(c0)}: the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) = {_g(floor.ball)} '
-            f'is not within min(Δ-||d_ij||) = {_g(c_min)}: even ultimately nothing keeps the edges in range',
+            f'threshold floor c0 = {_g(c0)}: the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) = '
+            f'{_g(floor.ball)} is not within min(Δ-||d_ij||) = {_g(c_min)}: even ultimately nothing '
+            'keeps the edges in range',
             threshold_floor=c0,
             ball=floor.ball,
             limit=c_min,
@@ -452,8 +456,9 @@ def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
         out.warning(
             'threshold_floor',
             'gains',
-            f'threshold floor c0 = {_g(c0)}: connectivity is proven only if {floor.condition.replace(" < ", " were below ")}; '
-            'it is not, so connectivity is checked on runs only (docs/SPEED_SCALE.md)',
+            f'threshold floor c0 = {_g(c0)}: connectivity is proven only if '
+            f'{floor.condition.replace(" < ", " were below ")}; it is not, so connectivity is checked '
+            'on runs only (docs/SPEED_SCALE.md)',
             threshold_floor=c0,
             value=floor.value,
             limit=floor.limit,
@@ -527,8 +532,10 @@ def _check_parameters(scenario: Scenario, out: _Collector) -> None:
             out.error(
                 'parameters',
                 subject,
-                f'{key} = {value!r} is a subnormal double (0 < |x| < {smallest!r}): agents receive it as a ROS '
-                f"parameter, and rcl's parameter file parser reads it as text, so the agent cannot start; use 0 "
+                f'{key} = {value!r} is a subnormal double (0 < |x| < {smallest!r}): agents receive it '
+                'as a ROS '
+                "parameter, and rcl's parameter file parser reads it as text, so the agent cannot "
+                'start; use 0 '
                 f'or a magnitude of at least {smallest!r}',
                 key=key,
                 value=value,
@@ -545,11 +552,11 @@ def _check_precision(
     by ρ = g_ij ulp(y_ij) ((gij); for E_i of ETA-2 (k1 g_ij + k2 h_ij ||q_i - q_j||) ulp(y_ij) +
     k2 f_ij ulp(q_i - q_j); `theory.rounding_step`). Near the threshold the computed error then
     stands still for a while at some margin φ > tolerance, and the certified search walks such a
-    plateau in steps of about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to 2 ρ / (α
-    tolerance). It gives
-    up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance MAX_STEPS / 4. With the slack
-    σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³, h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ -
-    ||d_ij||) grow as σ shrinks: the rule is a floor on the initial slack, reported with it.
+    plateau in steps of about φ/|φ'|: 2 ρ / (α φ) of them (threshold α or α_d), up to
+    2 ρ / (α tolerance). It gives up after MAX_STEPS, so ρ <= α PRECISION_LIMIT = α tolerance
+    MAX_STEPS / 4. With the slack σ = Δ - ||d_ij|| - ||y_ij(0)||, g_ij = 2c²/σ³,
+    h_ij = (2c + σ)/σ³, f_ij = (c + σ)/σ² (c = Δ - ||d_ij||) grow as σ shrinks: the rule is a
+    floor on the initial slack, reported with it.
     (Late in a run the threshold itself shrinks toward the rounding of the states: the engine's
     rounding floor, the same ρ with the ulp of the positions, stops the run there.)
     """
@@ -560,29 +567,9 @@ def _check_precision(
         name, threshold, k1, k2 = 'α_d', gains.alpha_d, gains.k1, gains.k2
     if not (threshold > 0.0 and k1 > 0.0 and k2 >= 0.0):
         return  # the gains' own rules report them
-    heads, tails, d = scenario.edge_indices()
-    y = scenario.positions[heads] - scenario.positions[tails] - d
-    ulp_y = np.spacing(np.abs(y).max(axis=1))
-    if scenario.velocities is None:
-        speed = ulp_q = np.zeros(len(heads))
-    else:  # the paper's q_p(0) and E_i: at a speed scale κ error and threshold are both × κ² (docs/SPEED_SCALE.md)
-        q = scenario.velocities[heads] - scenario.velocities[tails]
-        speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
-
-    def error_step(k: int, sigma: float) -> float:
-        return float(
-            theory.rounding_step(
-                float(capacities[k]),
-                sigma,
-                float(ulp_y[k]),
-                k1=k1,
-                k2=k2,
-                speed=float(speed[k]),
-                ulp_q=float(ulp_q[k]),
-            )
-        )
-
+    error_step = _error_step(scenario, capacities, k1=k1, k2=k2)
     limit = PRECISION_LIMIT * threshold
+    ulp_y = _ulp_y(scenario)
     for k, edge in enumerate(scenario.edges):
         capacity, slack = float(capacities[k]), float(capacities[k] - errors0[k])
         if not (capacity > 0.0 and slack > 0.0):
@@ -590,15 +577,7 @@ def _check_precision(
         step = error_step(k, slack)
         if step <= limit:
             continue
-        # The least resolvable slack: the step falls with the slack, so bisect (geometrically).
-        low, high = slack, capacity
-        if error_step(k, high) > limit:
-            floor = high
-        else:
-            for _ in range(100):
-                middle = math.sqrt(low * high)
-                low, high = (middle, high) if error_step(k, middle) > limit else (low, middle)
-            floor = high
+        floor = _least_slack(error_step, k, slack=slack, capacity=capacity, limit=limit)
         how = (
             'g_ij × ulp, (gij)'
             if k2 == 0.0
@@ -619,6 +598,57 @@ def _check_precision(
             threshold=threshold,
             limit=PRECISION_LIMIT,
         )
+
+
+def _ulp_y(scenario: Scenario) -> np.ndarray:
+    """Per edge, one ulp of y_ij(0) = x_i(0) - x_j(0) - d_ij (its largest coordinate's)."""
+    heads, tails, d = scenario.edge_indices()
+    y = scenario.positions[heads] - scenario.positions[tails] - d
+    return np.spacing(np.abs(y).max(axis=1))
+
+
+def _error_step(
+    scenario: Scenario, capacities: np.ndarray, *, k1: float, k2: float
+) -> Callable[[int, float], float]:
+    """(edge k, slack σ) -> how far one ulp of y_ij moves the triggering error at that slack
+    (`theory.rounding_step`, with edge k's initial relative velocity)."""
+    heads, tails, _ = scenario.edge_indices()
+    ulp_y = _ulp_y(scenario)
+    if scenario.velocities is None:
+        speed = ulp_q = np.zeros(len(heads))
+    else:  # the paper's q_p(0) and E_i: at a speed scale κ error and threshold are both × κ²
+        # (docs/SPEED_SCALE.md)
+        q = scenario.velocities[heads] - scenario.velocities[tails]
+        speed, ulp_q = np.linalg.norm(q, axis=1), np.spacing(np.abs(q).max(axis=1))
+
+    def error_step(k: int, sigma: float) -> float:
+        return float(
+            theory.rounding_step(
+                float(capacities[k]),
+                sigma,
+                float(ulp_y[k]),
+                k1=k1,
+                k2=k2,
+                speed=float(speed[k]),
+                ulp_q=float(ulp_q[k]),
+            )
+        )
+
+    return error_step
+
+
+def _least_slack(
+    error_step: Callable[[int, float], float], k: int, *, slack: float, capacity: float, limit: float
+) -> float:
+    """The least slack whose error step on edge k is within `limit`: the step falls with the slack,
+    so bisect (geometrically) between `slack` (over it) and the capacity."""
+    low, high = slack, capacity
+    if error_step(k, high) > limit:
+        return high
+    for _ in range(100):
+        middle = math.sqrt(low * high)
+        low, high = (middle, high) if error_step(k, middle) > limit else (low, middle)
+    return high
 
 
 def _check_remark(scenario: Scenario, out: _Collector, name: str, value: float) -> None:

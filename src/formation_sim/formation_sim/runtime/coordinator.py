@@ -49,6 +49,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
@@ -532,8 +533,15 @@ def main(
                 return EXIT_BAD_INPUT
             executor = make_executor(node.executor_kind)
             executor.add_node(node)
+            # A coordinator dispatches 0.1 s of events per look at its stop signals and its end (a
+            # failure raises from its callback): a spin_once per pose cost it more (issue 19). The
+            # simulator takes one event per look, its failure flag checked after each.
+            batched, never = isinstance(node, FormationCoordinatorNode), Future()
             while not node.finished:
-                executor.spin_once(timeout_sec=0.1)
+                if batched:
+                    executor.spin_until_future_complete(never, timeout_sec=0.1)
+                else:
+                    executor.spin_once(timeout_sec=0.1)
                 stop.check()
                 if node.failure is not None:
                     raise node.failure

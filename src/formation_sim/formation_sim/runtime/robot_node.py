@@ -18,8 +18,8 @@ its agent only as a real robot would (README, "Running on robots"; names in
   `formation analyze` measure the formation on it; an agent never reads it).
 
 Between ticks the robot moves exactly under the command it holds (`formation_sim.sim.robots`, by
-its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at the first tick
-at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
+its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at
+the first tick at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
 `max_angular_speed` as a real base clips it.  A robot whose commands stop coming (its agent died,
 the network broke) stops after `command_timeout` s, as real bases do.
 
@@ -68,7 +68,9 @@ from formation_agent.ros.process import (
     make_executor,
     shutdown_guard,
 )
-from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped
+from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
+from formation_msgs_py.codec import MessageError
+from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
 from formation_msgs_py.topics import (
     ROBOT_NODE,
     agent_namespace,
@@ -215,7 +217,11 @@ SPECS = (
 
 
 class SimulatedRobotNode(Node):
-    """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands."""
+    """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands.
+
+    `own_timer` False: the robot ticks when `tick()` is called (`RobotTicker`: one timer for the
+    robots of a process at each rate).
+    """
 
     def __init__(
         self,
@@ -223,6 +229,7 @@ class SimulatedRobotNode(Node):
         namespace: str | None = None,
         parameter_overrides: list[Parameter] | None = None,
         context=None,
+        own_timer: bool = True,
     ) -> None:
         super().__init__(
             NODE_NAME, namespace=namespace, parameter_overrides=parameter_overrides or [], context=context
@@ -267,8 +274,13 @@ class SimulatedRobotNode(Node):
             if p['publish_truth']
             else None
         )
+        # Raw: its fields read from its bytes (formation_msgs_py.cdr), no rclpy message (issue 19).
         self._command_sub = self.create_subscription(
-            command_message(self.robot.kind), robot_command_topic(self.robot_id), self._on_command, ROBOT_QOS
+            command_message(self.robot.kind),
+            robot_command_topic(self.robot_id),
+            self._on_command,
+            ROBOT_COMMAND_READER_QOS,  # the newest command only: none from before a freeze after it
+            raw=True,
         )
         self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
         self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = (
@@ -286,36 +298,41 @@ class SimulatedRobotNode(Node):
             child_frame=self.body_frame,
             sigma=(self.noise.position_sigma, self.noise.yaw_sigma),
         )
+        self.rate = float(p['rate'])
         self._last_tick = time.time()
-        self._timer = self.create_timer(1.0 / float(p['rate']), self._tick)
+        self._timer = self.create_timer(1.0 / self.rate, self.tick) if own_timer else None
 
     # -- commands -------------------------------------------------------------------------------
 
-    def _on_command(self, msg) -> None:
+    def _on_command(self, data: bytes) -> None:
         now = time.time()
-        p = self.robot.dimension
-        if self.world_frame_command:
-            if msg.header.frame_id != self.world_frame:
-                self.commands_refused += 1
-                if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
-                    self.get_logger().warning(
-                        f'refused a command in frame {msg.header.frame_id!r}: this {self.robot.model} robot takes world-frame '
-                        f'velocities in {self.world_frame!r} ({self.commands_refused} refused so far)'
-                    )
-                return
-            twist = msg.twist
-            command = Command(
-                linear=(twist.linear.x, twist.linear.y, twist.linear.z)[:p], angular=twist.angular.z
+        try:
+            if self.world_frame_command:
+                frame, twist = twist_stamped_fields(data)
+            else:
+                frame, twist = None, twist_fields(data)
+        except MessageError as error:
+            self._refuse(f'refused a command that is not a {self.robot.kind.command_type}: {error}')
+            return
+        if frame is not None and frame != self.world_frame:
+            self._refuse(
+                f'refused a command in frame {frame!r}: this {self.robot.model} robot takes world-frame '
+                f'velocities in {self.world_frame!r}'
             )
-        else:
-            command = Command(linear=(msg.linear.x,), angular=msg.angular.z)
+            return
+        linear = twist[: self.robot.dimension] if self.world_frame_command else twist[:1]
+        command = Command(linear=linear, angular=twist[5])
         values = (*command.linear, command.angular)
         if not all(math.isfinite(v) for v in values):
-            self.commands_refused += 1
-            self.get_logger().warning(f'refused a command with a non-finite value: {values}')
+            self._refuse(f'refused a command with a non-finite value: {values}')
             return
         self.commands_received += 1
         self._commands.append((now, command))
+
+    def _refuse(self, why: str) -> None:
+        self.commands_refused += 1
+        if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
+            self.get_logger().warning(f'{why} ({self.commands_refused} refused so far)')
 
     def _take_command(self, now: float) -> None:
         """The newest command that has arrived at least `command_latency` ago, else a stop on timeout."""
@@ -341,11 +358,11 @@ class SimulatedRobotNode(Node):
 
     # -- ticks ----------------------------------------------------------------------------------
 
-    def _tick(self) -> None:
+    def tick(self) -> None:
+        """Move to now under the command held (exactly), publish, take the command due."""
         now = time.time()
-        self.robot.advance(
-            max(0.0, now - self._last_tick)
-        )  # exact, under the command held since the last tick
+        # Exact, under the command held since the last tick.
+        self.robot.advance(max(0.0, now - self._last_tick))
         self._last_tick = now
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self.robot.body_twist()
@@ -364,6 +381,26 @@ class SimulatedRobotNode(Node):
         self._take_command(now)  # held from now to the next tick
 
 
+class RobotTicker:
+    """The robots of a process ticked by one timer per rate: a timer of its own per robot woke the
+    executor 400 times a second for 4 robots at 100 Hz (issue 19, BENCHMARKS.md "CPU of a robot
+    run").  Each robot still reads the clock itself (`SimulatedRobotNode.tick`)."""
+
+    def __init__(self, robots: Sequence[SimulatedRobotNode]) -> None:
+        by_rate: dict[float, list[SimulatedRobotNode]] = {}
+        for robot in robots:
+            by_rate.setdefault(robot.rate, []).append(robot)
+        self._timers = [
+            group[0].create_timer(1.0 / rate, lambda group=tuple(group): _tick_all(group))
+            for rate, group in by_rate.items()
+        ]
+
+
+def _tick_all(robots: Sequence[SimulatedRobotNode]) -> None:
+    for robot in robots:
+        robot.tick()
+
+
 def _xyz(position: np.ndarray) -> tuple[float, float, float]:
     """A position of 1 to 3 axes as (x, y, z), the axes it lacks 0."""
     values = [float(v) for v in position] + [0.0, 0.0]
@@ -373,8 +410,8 @@ def _xyz(position: np.ndarray) -> tuple[float, float, float]:
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog='formation_robot',
-        description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: each takes velocity '
-        'commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
+        description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: '
+        'each takes velocity commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
         epilog=parameter_help(SPECS)
         + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
         '(formation run --backend unicycle writes robots.params.yaml).',
@@ -402,8 +439,10 @@ def main(args: Sequence[str] | None = None) -> int:
                         SimulatedRobotNode(
                             namespace=agent_namespace(robot_id),
                             parameter_overrides=[Parameter('robot_id', Parameter.Type.INTEGER, robot_id)],
+                            own_timer=False,
                         )
                     )
+                ticker = RobotTicker(nodes)  # noqa: F841 - its timers belong to the nodes
             else:
                 nodes.append(SimulatedRobotNode())
             executor = make_executor('events')

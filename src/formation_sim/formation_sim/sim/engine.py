@@ -18,7 +18,7 @@ import heapq
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -56,9 +56,10 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
     values = horizon / sample_dt * per_sample
     if values > MAX_GRID_VALUES:
         raise EngineError(
-            f'the sample spacing {sample_dt!r} s asks for {horizon / sample_dt:.3g} samples of {per_sample} numbers '
-            f'over the horizon {horizon:g} s ({values:.3g} numbers; at most {MAX_GRID_VALUES:.0e}): use a spacing of '
-            f'at least {horizon * per_sample / MAX_GRID_VALUES:.3g} s, or 0 (samples at events only)'
+            f'the sample spacing {sample_dt!r} s asks for {horizon / sample_dt:.3g} samples of '
+            f'{per_sample} numbers over the horizon {horizon:g} s ({values:.3g} numbers; at most '
+            f'{MAX_GRID_VALUES:.0e}): use a spacing of at least {horizon * per_sample / MAX_GRID_VALUES:.3g} '
+            's, or 0 (samples at events only)'
         )
 
 
@@ -184,7 +185,8 @@ def _next_event_time(heap, serial, searches, horizon: float) -> float:
 
 
 ROUNDING_FLOOR_ULPS = 8.0
-"""A run stops once the threshold is below this many rounding steps of the triggering error (`rounding_floor`)."""
+"""A run stops once the threshold is below this many rounding steps of the triggering error
+(`rounding_floor`)."""
 
 
 @dataclass(frozen=True)
@@ -371,14 +373,7 @@ def _run(
 ) -> int:
     """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent."""
     messages = 0
-    planned_period: dict[int, float] = {}
-    # Heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
-    # frontier of a search still under way (a certified lower bound on the agent's time). Only
-    # the entry with the agent's latest serial is live; older ones are skipped when they surface.
-    heap: list[tuple[float, int, int, int]] = []
-    serial: dict[int, int] = {}
-    searches: dict[int, CrossingSearch] = {}
-    counter = 0
+    agenda = _Agenda(horizon=horizon, period=period)
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
     t = 0.0
     steps = 0
@@ -391,39 +386,15 @@ def _run(
             raise EngineError(problem)
         if on_event is not None:
             on_event(t, world, due)
-        outbox = []
-        for i in due:
-            agent = agents[i]
-            try:
-                out = agent.trigger(t, world.sense(i, agent.neighbour_ids))
-            except ValueError as err:
-                raise EngineError(f'at t={t!r}: {err}') from err
-            world.set_control(i, out.control)
-            trigger_times[i].append(t)
-            outbox.extend(out.infos)
-        changed = set(due)
-        for info in outbox:
-            agents[info.receiver].receive(info)
-            changed.add(info.receiver)
+        outbox = _trigger_and_deliver(agents, world, due, t, trigger_times)
         messages += len(outbox)
-        for i in sorted(changed):
-            counter += 1
-            serial[i] = counter
-            if period is None:
-                # Searched lazily below: only as far as the team's next event needs.
-                search = agents[i].trigger_search(horizon)
-                searches[i] = search
-                heapq.heappush(heap, (search.frontier, 0, i, counter))
-            else:
-                nxt = (round(t / period) + 1) * period if i in due else planned_period[i]
-                planned_period[i] = nxt
-                heapq.heappush(heap, (nxt, 1, i, counter))
-        t_next = _next_event_time(heap, serial, searches, horizon)
+        agenda.plan(agents, set(due).union(info.receiver for info in outbox), due, t)
+        t_next = agenda.next_time()
         if t_next == t and period is None:
             # News at this instant put an agent on its threshold already (it would have crossed
             # within rounding of its neighbour): it triggers at this very instant, in a further
             # round. An agent due twice at one instant means the threshold is at rounding level.
-            due = _pop_due(heap, serial, t)
+            due = agenda.pop_due(t)
             twice = [i for i in due if trigger_times[i][-1] == t]
             if twice:
                 raise EngineError(due_twice(twice[0], some_agent, t))
@@ -439,5 +410,66 @@ def _run(
         sampler.grid_until(t_next)
         world.advance(t_next)
         t = t_next
-        due = _pop_due(heap, serial, t)
+        due = agenda.pop_due(t)
     return messages
+
+
+def _trigger_and_deliver(
+    agents: dict, world: World, due: list[int], t: float, trigger_times: dict[int, list[float]]
+) -> list:
+    """Every due agent triggers at `t` (it senses, and its new control acts on the world), then
+    their triggering information reaches its receivers; the messages, in the order sent."""
+    outbox = []
+    for i in due:
+        agent = agents[i]
+        try:
+            out = agent.trigger(t, world.sense(i, agent.neighbour_ids))
+        except ValueError as err:
+            raise EngineError(f'at t={t!r}: {err}') from err
+        world.set_control(i, out.control)
+        trigger_times[i].append(t)
+        outbox.extend(out.infos)
+    for info in outbox:
+        agents[info.receiver].receive(info)
+    return outbox
+
+
+@dataclass(kw_only=True)
+class _Agenda:
+    """When each agent triggers next, as `_run` learns it.
+
+    A heap of (time, kind, agent, serial): kind 1 = a planned triggering time, kind 0 = the
+    frontier of a search still under way (a certified lower bound on the agent's time). Only
+    the entry with the agent's latest serial is live; older ones are skipped when they surface.
+    With `period`, every agent's next time is its next multiple of the period instead.
+    """
+
+    horizon: float
+    period: float | None
+    heap: list[tuple[float, int, int, int]] = field(default_factory=list)
+    serial: dict[int, int] = field(default_factory=dict)
+    searches: dict[int, CrossingSearch] = field(default_factory=dict)
+    planned_period: dict[int, float] = field(default_factory=dict)
+    counter: int = 0
+
+    def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
+        """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""
+        for i in sorted(changed):
+            self.counter += 1
+            self.serial[i] = self.counter
+            if self.period is None:
+                # Searched lazily (`next_time`): only as far as the team's next event needs.
+                search = agents[i].trigger_search(self.horizon)
+                self.searches[i] = search
+                heapq.heappush(self.heap, (search.frontier, 0, i, self.counter))
+            else:
+                period = self.period
+                nxt = (round(t / period) + 1) * period if i in due else self.planned_period[i]
+                self.planned_period[i] = nxt
+                heapq.heappush(self.heap, (nxt, 1, i, self.counter))
+
+    def next_time(self) -> float:
+        return _next_event_time(self.heap, self.serial, self.searches, self.horizon)
+
+    def pop_due(self, t: float) -> list[int]:
+        return _pop_due(self.heap, self.serial, t)

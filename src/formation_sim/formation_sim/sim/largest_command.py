@@ -84,7 +84,10 @@ def measured_run(scenario: Scenario, *, horizon: float | None = None) -> tuple[C
         source='exact run',
         speed=dict(zip(ids, speed.tolist())),
         acceleration=dict(zip(ids, acceleration.tolist())) if double else None,
-        reference=f'the exact in-process run to t = {record.horizon:g} ({record.total_events} events): what this run asks for, not a guarantee',
+        reference=(
+            f'the exact in-process run to t = {record.horizon:g} ({record.total_events} events): what this '
+            'run asks for, not a guarantee'
+        ),
     ), record
 
 

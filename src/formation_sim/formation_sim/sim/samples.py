@@ -8,15 +8,16 @@ are a `Samples`, the store every `RunRecord` holds, and `load_trajectory` is the
 run folder's samples.
 
 Trajectory folder `trajectory/` of a run folder: NumPy `.npy` files (format 1.0, little-endian,
-C order), each readable alone, lazily, with `np.load(path, mmap_mode='r')`:
+C order), each readable alone, lazily, with `np.load(path, mmap_mode='r')`; file (shape, type):
+what it holds:
 
-| file | shape, type | what |
-|---|---|---|
-| `agent_ids.npy` | (n,) int64 | row k of every state is agent agent_ids[k] |
-| `times.npy` | (K,) float64 | the sample times, increasing |
-| `positions.npy` | (K, n, p) float64 | x at each sample time |
-| `velocities.npy` | (K, n, p) float64 | q at each sample time (double integrators only) |
-| `edge_maxima.npy` | (m,) float64 | only when not every event time is a sample: per edge (the scenario's order), the largest ‖x_i − x_j‖ at t = 0, the horizon and its two agents' triggering times (`EdgeLengths`) |
+- `agent_ids.npy` ((n,) int64): row k of every state is agent agent_ids[k]
+- `times.npy` ((K,) float64): the sample times, increasing
+- `positions.npy` ((K, n, p) float64): x at each sample time
+- `velocities.npy` ((K, n, p) float64): q at each sample time (double integrators only)
+- `edge_maxima.npy` ((m,) float64): only when not every event time is a sample: per edge (the
+  scenario's order), the largest ‖x_i − x_j‖ at t = 0, the horizon and its two agents' triggering
+  times (`EdgeLengths`)
 
 While a run goes on the folder is `trajectory.incomplete/`: the states are appended as they come,
 after a header of fixed size that says 0 rows. At the end the headers are rewritten with the row
@@ -59,7 +60,8 @@ _WRITE_BUFFER = 1 << 20
 
 
 class TrajectoryError(ValueError):
-    """A trajectory that cannot be read: incomplete, cut short, or inconsistent; the message says which file and why."""
+    """A trajectory that cannot be read: incomplete, cut short, or inconsistent; the message says which file
+    and why."""
 
 
 # ------------------------------------------------------------------------------------- samples
@@ -67,7 +69,8 @@ class TrajectoryError(ValueError):
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Samples:
-    """The state at K sample times: arrays in memory, or memory-mapped files of a trajectory folder (`path`)."""
+    """The state at K sample times: arrays in memory, or memory-mapped files of a trajectory folder
+    (`path`)."""
 
     times: np.ndarray  # (K,) increasing
     positions: np.ndarray  # (K, n, p)
@@ -230,7 +233,8 @@ def _fsync_folder(folder: Path) -> None:
 
 
 class TrajectoryWriter:
-    """Streams the samples of a run into `run_dir/trajectory.incomplete/`; `close` completes it as `trajectory/`.
+    """Streams the samples of a run into `run_dir/trajectory.incomplete/`; `close` completes it as
+    `trajectory/`.
 
     Memory: the sample times only (8 bytes a sample); the states go to the files as they come.
     """
@@ -268,7 +272,8 @@ class TrajectoryWriter:
         return 1 if array.ndim == 2 else array.shape[0]
 
     def close(self, times, *, edge_maxima: np.ndarray | None = None) -> Samples:
-        """Complete the trajectory with its sample times and rename it `trajectory/`; its samples, memory-mapped."""
+        """Complete the trajectory with its sample times and rename it `trajectory/`; its samples,
+        memory-mapped."""
         times = np.asarray(times, dtype='<f8')
         if times.shape != (self.count,):
             self.abandon()
@@ -312,7 +317,8 @@ class TrajectoryWriter:
 
 
 def write_trajectory(samples: Samples, run_dir: str | Path, *, agent_ids) -> Samples:
-    """Write in-memory `samples` as `run_dir/trajectory/` (through `trajectory.incomplete/`); the written samples."""
+    """Write in-memory `samples` as `run_dir/trajectory/` (through `trajectory.incomplete/`); the written
+    samples."""
     velocities = samples.velocities is not None
     writer = TrajectoryWriter(
         run_dir, agent_ids=agent_ids, dimension=samples.positions.shape[2], velocities=velocities
@@ -361,7 +367,8 @@ def read_trajectory(folder: str | Path) -> Samples:
     expected = (len(times), len(agent_ids))
     if times.ndim != 1 or positions.ndim != 3 or positions.shape[:2] != expected:
         raise TrajectoryError(
-            f'{folder}: {len(times)} sample times and {len(agent_ids)} agents, but positions of shape {positions.shape}'
+            f'{folder}: {len(times)} sample times and {len(agent_ids)} agents, but positions of shape '
+            f'{positions.shape}'
         )
     if velocities is not None and velocities.shape != positions.shape:
         raise TrajectoryError(
@@ -391,8 +398,8 @@ def load_trajectory(run_dir: str | Path) -> Samples | None:
             raise TrajectoryError(f'{legacy}: cannot be read: {error}') from None
     if (run_dir / INCOMPLETE_DIR).is_dir():
         raise TrajectoryError(
-            f'{run_dir / INCOMPLETE_DIR}: the run stopped before its trajectory was complete (it was killed or '
-            f'failed while writing it); its samples are not a whole run'
+            f'{run_dir / INCOMPLETE_DIR}: the run stopped before its trajectory was complete (it was '
+            'killed or failed while writing it); its samples are not a whole run'
         )
     return None
 

@@ -1,28 +1,42 @@
 """`summary.json` and the trajectory folder of a run, whichever implementation produced it.
 
-Schema `formation-summary/1` (all times in seconds, agent ids and edges "i-j" as string keys):
+Schema `formation-summary/1`, key by key (all times in seconds, agent ids and edges "i-j" as string
+keys):
 
-| key | meaning |
-|---|---|
-| `schema` | "formation-summary/1" |
-| `scenario`, `dynamics`, `mode`, `horizon`, `n_agents`, `dimension`, `delta` | what was run |
-| `trigger_times` | agent -> list of triggering times, t_1 = 0 included |
-| `event_counts`, `total_events` | agent -> number of triggers; their sum |
-| `min_inter_event_time` | agent -> smallest t_{k+1} - t_k (null with fewer than two triggers) |
-| `messages_sent`, `sensing_calls` | triggering-information messages (one per trigger per neighbour); sensing calls |
-| `edges` | list of {i, j, d, max_length, min_range_slack = Δ - max_length, final_error} |
-| `max_edge_length` | the largest `max_length` (must stay < Δ: connectivity preserved) |
-| `final_formation_error` | max over edges of ||x_i - x_j - d_ij|| at the horizon |
-| `final_positions`, `final_velocities` | agent -> vector (velocities null for single integrators) |
-| `theorem_constants` | `formation_sim.model.theory.TheoremConstants.to_dict()` (the paper's time s = κt), with `speed_scale` κ when not 1 and `threshold_floor` (`formation_sim.model.threshold_floor.FloorBounds.to_dict()`) when c0 > 0; or {"error": ...} |
-| `xi_check` | agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii), or c0/c_i with a threshold floor; ξ in seconds (ξ_i / κ) |
-| `wall_time` | seconds the run took |
-| `extra` | implementation-specific details (e.g. the distributed run's domain id) |
-| `extra.failure` | distributed runs: null if the run reached the horizon; else {kind, message, agents, time, step, wall_time, detected_by[, process][, followed]} — what stopped it first (`followed`: agent -> the error of each agent that then stopped on its own) (kind: agent_lost, agent_failed, robot_lost (a robot whose poses stopped), recorder_lost, process_lost, process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete, error), which agents, at which sim time and step (the summary then covers the run up to `extra.reached_time`) |
-| `extra.published`, `extra.recording` | distributed runs: messages published per topic from step 0 on; {complete, missing, foreign, published, recorded}: the bag against it (`formation_sim.analysis.accounting`) |
-| `extra.summary_source`, `extra.processes` | only when `formation run` wrote the summary because the simulator could not: how, and every process's exit |
-| `extra.rejected_messages` | distributed runs: {total, by_reason, by_agent, simulator}: messages refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) |
-| `extra.injected_faults` | distributed runs: {dropped, delayed, by_agent}: triggering information dropped or delayed by fault injection (a test facility) |
+- `schema`: "formation-summary/1"
+- `scenario`, `dynamics`, `mode`, `horizon`, `n_agents`, `dimension`, `delta`: what was run
+- `trigger_times`: agent -> list of triggering times, t_1 = 0 included
+- `event_counts`, `total_events`: agent -> number of triggers; their sum
+- `min_inter_event_time`: agent -> smallest t_{k+1} - t_k (null with fewer than two triggers)
+- `messages_sent`, `sensing_calls`: triggering-information messages (one per trigger per neighbour);
+  sensing calls
+- `edges`: list of {i, j, d, max_length, min_range_slack = Δ - max_length, final_error}
+- `max_edge_length`: the largest `max_length` (must stay < Δ: connectivity preserved)
+- `final_formation_error`: max over edges of ||x_i - x_j - d_ij|| at the horizon
+- `final_positions`, `final_velocities`: agent -> vector (velocities null for single integrators)
+- `theorem_constants`: `formation_sim.model.theory.TheoremConstants.to_dict()` (the paper's time s =
+  κt), with `speed_scale` κ when not 1 and `threshold_floor`
+  (`formation_sim.model.threshold_floor.FloorBounds.to_dict()`) when c0 > 0; or {"error": ...}
+- `xi_check`: agent -> {xi, min_inter_event_time, holds}: Theorem 1 (iii) / 2 (iii), or c0/c_i with
+  a threshold floor; ξ in seconds (ξ_i / κ)
+- `wall_time`: seconds the run took
+- `extra`: implementation-specific details (e.g. the distributed run's domain id)
+- `extra.failure`: distributed runs: null if the run reached the horizon; else {kind, message,
+  agents, time, step, wall_time, detected_by[, process][, followed]} — what stopped it first
+  (`followed`: agent -> the error of each agent that then stopped on its own) (kind: agent_lost,
+  agent_failed, robot_lost (a robot whose poses stopped), recorder_lost, process_lost,
+  process_failed, connectivity_lost, stall, discovery, protocol, interrupted, recording_incomplete,
+  error), which agents, at which sim time and step (the summary then covers the run up to
+  `extra.reached_time`)
+- `extra.published`, `extra.recording`: distributed runs: messages published per topic from step 0
+  on; {complete, missing, foreign, published, recorded}: the bag against it
+  (`formation_sim.analysis.accounting`)
+- `extra.summary_source`, `extra.processes`: only when `formation run` wrote the summary because the
+  simulator could not: how, and every process's exit
+- `extra.rejected_messages`: distributed runs: {total, by_reason, by_agent, simulator}: messages
+  refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`)
+- `extra.injected_faults`: distributed runs: {dropped, delayed, by_agent}: triggering information
+  dropped or delayed by fault injection (a test facility)
 
 `max_length` is taken over the samples (every event time and the sampling grid) and, for runs
 that keep no event samples (`formation simulate --samples grid|none`), over each edge's two

@@ -247,8 +247,9 @@ def report_text(rows: list[dict[str, Any]], figures: list[str]) -> str:
     if savings:
         values = np.array([s for _, s in savings])
         parts += [
-            f'Events saved against periodic sampling at equal final error: {len(values)} teams, median {100 * np.median(values):.1f} %, '
-            f'least {100 * values.min():.1f} %, most {100 * values.max():.1f} %.',
+            f'Events saved against periodic sampling at equal final error: {len(values)} teams, median '
+            f'{100 * np.median(values):.1f} %, least {100 * values.min():.1f} %, most '
+            f'{100 * values.max():.1f} %.',
             '',
         ]
     parts += [f'![{name}]({name})' for name in figures]

@@ -53,10 +53,12 @@ class StudySummary:
     def format(self) -> str:
         eff = self.efficiency
         lines = [
-            f'{self.cases} cases: {self.already_done} done before, {self.ran} run now, {self.failed} failed in all'
+            f'{self.cases} cases: {self.already_done} done before, {self.ran} run now, {self.failed} '
+            'failed in all'
             + ('' if self.complete else f', {self.cases - self.already_done - self.ran} still missing')
             + (' (interrupted: run it again with the same --out to finish)' if self.interrupted else ''),
-            f'wall time {self.wall_time:.1f} s ({self.run_time:.1f} s running) on {self.workers} worker{"s" if self.workers != 1 else ""}; '
+            f'wall time {self.wall_time:.1f} s ({self.run_time:.1f} s running) on {self.workers} '
+            f'worker{"s" if self.workers != 1 else ""}; '
             f'the runs alone {self.sum_of_runs:.1f} s'
             + (
                 ''
@@ -144,7 +146,8 @@ def run_study(
     todo = [case for case in study.cases if case.key not in folder.done]
     say = report or (lambda _line: None)
     say(
-        f'study {study.name!r}: {len(study.cases)} cases, {before} done in {folder.folder}, {len(todo)} to run'
+        f'study {study.name!r}: {len(study.cases)} cases, {before} done in {folder.folder}, {len(todo)} '
+        'to run'
     )
     tally = _Tally(started=time.perf_counter())
     count, interrupted = 0, False

@@ -18,10 +18,11 @@ YAML (or a dict with the same shape; docs/STUDY.md has the reference):
 A block is the product of its grid axes times `draws` (default 1) draws of its distributions; draw
 d of block b uses numpy's default_rng([seed, b, d]) and draws the parameters in name order, so a
 case depends on the SPEC alone; a team's seed is d unless given, so the grid points of one draw
-share their team (an ETA run and its periodic baseline). Every value is checked against PARAMETERS (the parameter, the rule
-and the value are named); cases identical after normalisation (a `period` is kept only with
-`sampling: periodic`, a graph's `degree` only for `geometric`, ETA-2's gains only for ETA-2) are
-run once. A case's key is a hash of its parameters: the rows of a study are keyed by it.
+share their team (an ETA run and its periodic baseline). Every value is checked against
+PARAMETERS (the parameter, the rule and the value are named); cases identical after normalisation
+(a `period` is kept only with `sampling: periodic`, a graph's `degree` only for `geometric`, ETA-2's
+gains only for ETA-2) are run once. A case's key is a hash of its parameters: the rows of a study
+are keyed by it.
 """
 
 from __future__ import annotations
@@ -116,7 +117,8 @@ PARAMETERS: dict[str, Parameter] = {
     ),
     'beta_d': Parameter(
         None,
-        'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half the smaller bound)',
+        'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half '
+        'the smaller bound)',
         lambda v: _is_num(v) and 0 < v < 1,
     ),
     'max_speed': Parameter(1.0, 'a number >= 0 (bound on |q_i(0)|, ETA-2)', lambda v: _is_num(v) and v >= 0),
@@ -152,7 +154,10 @@ class Case:
 
     def describe(self) -> str:
         p = self.params
-        return f'case {self.index} (cases[{self.block}]: {p["algorithm"]} {p["sampling"]} n={p["n"]} p={p["p"]} {p["graph"]} seed={p["seed"]})'
+        return (
+            f'case {self.index} (cases[{self.block}]: {p["algorithm"]} {p["sampling"]} n={p["n"]} '
+            f'p={p["p"]} {p["graph"]} seed={p["seed"]})'
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,7 +205,8 @@ def _distribution(value: Any, where: str) -> tuple[str, Any] | None:
         return None
     if len(value) != 1 or next(iter(value)) not in DISTRIBUTIONS:
         raise StudyError(
-            f'{where}: a distribution is one of {{{", ".join(f"{d}: ..." for d in DISTRIBUTIONS)}}}, got {short_repr(value)}'
+            f'{where}: a distribution is one of {{{", ".join(f"{d}: ..." for d in DISTRIBUTIONS)}}}, '
+            f'got {short_repr(value)}'
         )
     kind, args = next(iter(value.items()))
     if kind == 'choice':

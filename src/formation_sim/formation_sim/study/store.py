@@ -95,13 +95,15 @@ class StudyFolder:
             known = json.loads(marker.read_text())
             if known.get('digest') != study.digest:
                 raise StudyError(
-                    f'{self.folder} holds another study ({known.get("name")!r}, {known.get("cases")} cases, digest '
-                    f'{known.get("digest")}; this SPEC: {study.name!r}, {len(study.cases)} cases, digest {study.digest}): '
-                    'nothing was changed; choose another --out'
+                    f'{self.folder} holds another study ({known.get("name")!r}, {known.get("cases")} '
+                    f'cases, digest {known.get("digest")}; this SPEC: {study.name!r}, '
+                    f'{len(study.cases)} cases, digest {study.digest}): nothing was changed; choose '
+                    'another --out'
                 )
         elif self.folder.exists() and any(self.folder.iterdir()):
             raise StudyError(
-                f'{self.folder} holds files but no {STUDY_FILE}: not a study folder; nothing was changed; choose another --out'
+                f'{self.folder} holds files but no {STUDY_FILE}: not a study folder; nothing was '
+                'changed; choose another --out'
             )
         self.rows = read_rows(self.folder) if marker.exists() else []
         self.done = {row['key'] for row in self.rows}

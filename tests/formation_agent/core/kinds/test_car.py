@@ -155,7 +155,8 @@ def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v
         (
             GEOMETRY,
             Limits(),
-            'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] (it cannot turn in place), got inf',
+            'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] '
+            '(it cannot turn in place), got inf',
         ),
         (GEOMETRY, Limits(steering_angle=1.6), 'got 1.6'),
         (Geometry(wheelbase=0.33), LIMITS, 'control_point_distance l must be > 0, got 0.0'),

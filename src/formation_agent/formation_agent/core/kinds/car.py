@@ -1,4 +1,5 @@
-"""The car kind: a car-like robot (kinematic bicycle), steered at a control point ahead of its rear axle (ROS-free).
+"""The car kind: a car-like robot (kinematic bicycle), steered at a control point ahead of its
+rear axle (ROS-free).
 
 Model: rear axle (x, y), heading θ, wheelbase L, front wheels steered by φ with |φ| <= φ_max < π/2:
 
@@ -65,7 +66,10 @@ def steering_angle(v: float, omega: float, wheelbase: float) -> float:
 
 class Car(Unicycle):
     name = 'car'
-    summary = 'body-frame Twist (v, ω), car-like (kinematic bicycle) steered l ahead of its rear axle, |ω| <= |v| tan φ_max / L'
+    summary = (
+        'body-frame Twist (v, ω), car-like (kinematic bicycle) steered l ahead of its rear axle, '
+        '|ω| <= |v| tan φ_max / L'
+    )
     parameters = ('control_point_distance', 'max_angular_speed', 'wheelbase', 'max_steering_angle')
     params_file = 'car.params.yaml'
 
@@ -77,7 +81,8 @@ class Car(Unicycle):
             )
         if not 0.0 < limits.steering_angle < math.pi / 2:
             problems.append(
-                f'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] (it cannot turn in place), '
+                'a car needs its steering limit max_steering_angle φ_max in (0, π/2) [rad] '
+                '(it cannot turn in place), '
                 f'got {limits.steering_angle!r}'
             )
         return problems

@@ -78,7 +78,8 @@ class RobotKind:
                 else f'in {" or ".join(map(str, self.dimensions))} dimensions'
             )
             return [
-                f'a {self.name} moves {where}: dimension p must be {" or ".join(map(str, self.dimensions))}, got {dimension}'
+                f'a {self.name} moves {where}: dimension p must be '
+                f'{" or ".join(map(str, self.dimensions))}, got {dimension}'
             ]
         return []
 

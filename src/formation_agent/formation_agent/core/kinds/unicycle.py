@@ -47,7 +47,8 @@ class Unicycle(RobotKind):
         problems = super().placement_problems(dimension=dimension, geometry=geometry)
         if not geometry.control_point_distance > 0.0:
             problems.append(
-                f'a {self.name} is steered at a control point ahead of its axle: control_point_distance l must be > 0, '
+                f'a {self.name} is steered at a control point ahead of its axle: '
+                'control_point_distance l must be > 0, '
                 f'got {geometry.control_point_distance!r}'
             )
         return problems

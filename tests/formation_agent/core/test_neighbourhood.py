@@ -1,0 +1,129 @@
+"""An agent's neighbourhood without an agent: its edges checked (Assumption 1), and every check of
+what an agent is handed, each refusal naming the agent, the rule and the value."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formation_agent.core.eta import AgentError as EtaAgentError
+from formation_agent.core.neighbourhood import AgentError, Neighbourhood, positive
+from formation_msgs_py.types import TriggerInfo
+
+
+def _hood(**overrides) -> Neighbourhood:
+    kwargs = {'agent_id': 1, 'neighbours': {3: (0.0, -2.0), 2: (-2.0, 0.0)}, 'delta': 4.0, **overrides}
+    return Neighbourhood(**kwargs)
+
+
+def _info(*, sender: int = 2, receiver: int = 1) -> TriggerInfo:
+    return TriggerInfo(
+        sender=sender, receiver=receiver, stamp=0.5, control=(0.0, 0.0), rel_position=(1.0, 1.0)
+    )
+
+
+def test_the_edges_keep_the_given_neighbour_order_and_their_capacities():
+    hood = _hood()
+    assert hood.ids == (3, 2) and hood.slot == {3: 0, 2: 1} and hood.dimension == 2
+    assert np.array_equal(hood.offsets, [[0.0, -2.0], [-2.0, 0.0]])
+    assert hood.capacity.tolist() == [2.0, 2.0]  # Δ - ||d_ij||
+    assert hood.agent_id == 1 and hood.delta == 4.0
+
+
+def test_the_error_is_the_agents_error():
+    assert AgentError is EtaAgentError and issubclass(AgentError, ValueError)
+
+
+@pytest.mark.parametrize(
+    ('overrides', 'message'),
+    [
+        ({'neighbours': {}}, r'^agent 1 has no neighbours: the graph must be connected$'),
+        ({'neighbours': {1: (0.0, 1.0)}}, r'^agent 1 lists itself as a neighbour \(self-loop\)$'),
+        ({'delta': 0.0}, r'^delta \(communication radius Δ\) must be a finite number > 0, got 0.0$'),
+        ({'delta': math.nan}, r'must be a finite number > 0, got nan$'),
+        ({'neighbours': {2: (0.0, 1.0), 3: (1.0,)}}, r'^agent 1: desired displacements must be vectors'),
+        ({'neighbours': {2: ()}}, r'vectors of one dimension p >= 1$'),
+        ({'neighbours': {2: ('east', 1.0)}}, r'vectors of one dimension p >= 1$'),
+        ({'neighbours': {2: (0.0, math.inf)}}, r'^agent 1: desired displacements are not finite$'),
+        (
+            {'neighbours': {2: (0.0, 1.0), 5: (0.0, -4.0)}},
+            r'^edge \(1,5\): \|\|d_ij\|\| = 4.0 is not below Δ = 4.0 \(Assumption 1\)$',
+        ),
+    ],
+)
+def test_bad_edges_are_named_with_their_rule(overrides, message):
+    with pytest.raises(AgentError, match=message):
+        _hood(**overrides)
+
+
+def test_positive_numbers_only():
+    assert positive('tolerance', 1) == 1.0 and isinstance(positive('tolerance', 1), float)
+    for bad in (0.0, -1.0, math.inf, math.nan):
+        with pytest.raises(AgentError, match=rf'^tolerance must be a finite number > 0, got {bad!r}$'):
+            positive('tolerance', bad)
+
+
+def test_vectors_are_p_finite_floats_and_the_template_is_filled_only_on_error():
+    hood = _hood()
+    assert hood.floats([1, 2.5], 'control from agent {}', 2) == (1.0, 2.5)
+    assert hood.floats(np.array([0.25, -0.0]), 'unused {}', object()) == (0.25, -0.0)
+    with pytest.raises(
+        AgentError, match=r'^agent 1: control from agent 2 has shape \(3,\), expected \(2,\)$'
+    ):
+        hood.floats((1.0, 2.0, 3.0), 'control from agent {}', 2)
+    with pytest.raises(AgentError, match=r'^agent 1: rel_position from agent 3 is not finite: \[nan, 0.0\]$'):
+        hood.floats((math.nan, 0.0), 'rel_position from agent {}', 3)
+    with pytest.raises(AgentError, match=r'has shape \(\), expected \(2,\)$'):
+        hood.floats(1.0, 'a scalar')  # not iterable: numpy names its shape
+
+
+def test_times_must_be_finite():
+    hood = _hood()
+    assert hood.time(1, 'trigger') == 1.0
+    with pytest.raises(AgentError, match=r'^agent 1: information from agent 2 has a non-finite time inf$'):
+        hood.time(math.inf, 'information from agent {}', 2)
+
+
+def test_per_neighbour_values_cover_exactly_the_neighbours_in_their_order():
+    hood = _hood()
+    assert hood.rows({2: (1.0, 0.0), 3: (0.0, 1.0)}, 'sensed rel_positions') == [(0.0, 1.0), (1.0, 0.0)]
+    for values, got in (
+        ({2: (1.0, 0.0)}, r'\[2\]'),
+        (None, 'None'),
+        ({2: (0, 0), 3: (0, 0), 4: (0, 0)}, r'\[2, 3, 4\]'),
+    ):
+        with pytest.raises(
+            AgentError,
+            match=rf'^agent 1: sensed rel_positions must cover exactly its neighbours \[2, 3\], got {got}$',
+        ):
+            hood.rows(values, 'sensed rel_positions')
+    with pytest.raises(AgentError, match=r'^agent 1: sensed rel_velocities\[3\] is not finite'):
+        hood.rows({2: (1.0, 0.0), 3: (math.nan, 1.0)}, 'sensed rel_velocities')
+
+
+def test_information_must_come_from_a_neighbour_to_this_agent():
+    hood = _hood()
+    assert hood.sender_slot(_info(sender=2)) == 1 and hood.sender_slot(_info(sender=3)) == 0
+    with pytest.raises(AgentError, match=r'^agent 1 got information addressed to agent 3$'):
+        hood.sender_slot(_info(receiver=3))
+    with pytest.raises(
+        AgentError, match=r'^agent 1 got information from agent 4, which is not a neighbour \[2, 3\]$'
+    ):
+        hood.sender_slot(_info(sender=4))
+
+
+def test_edges_out_of_their_range_are_named():
+    hood = _hood()
+    hood.check_sensed_range([0.0, math.nextafter(2.0, 0.0)])  # just inside Δ - ||d_ij|| = 2
+    with pytest.raises(
+        AgentError,
+        match=r'^agent 1: edge to agent 2 is out of its range: '
+        r'\|\|x_i-x_j-d_ij\|\| = 2.0 >= Δ-\|\|d_ij\|\| = 2.0$',
+    ):
+        hood.check_sensed_range([0.0, 2.0])
+    error = hood.out_of_range(0, 2.5, 2.0)
+    assert isinstance(error, AgentError) and str(error) == (
+        'agent 1: predicted edge to agent 3 left its range (||y_ij|| = 2.5 >= Δ-||d_ij|| = 2.0)'
+    )
