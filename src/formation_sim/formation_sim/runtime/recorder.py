@@ -105,14 +105,16 @@ RECORDER_PARAMETERS = (
         name='prefix',
         type=STRING,
         default='',
-        description="also record every topic whose name starts with this, found by polling the graph ('': none)",
+        description='also record every topic whose name starts with this, found by polling the graph '
+        "('': none)",
     ),
     ParameterSpec(
         name='clock_topic',
         type=STRING,
         default=DEFAULT_CLOCK_TOPIC,
-        description="the run's Step topic (std_msgs/Float64MultiArray [version, step, time, flags, epoch, ...]): bag time is "
-        "its sim time in lock-step, the receive time since its epoch on the wall clock ('': the node's clock)",
+        description="the run's Step topic (std_msgs/Float64MultiArray [version, step, time, flags, epoch, "
+        '...]): bag time is its sim time in lock-step, the receive time since its epoch on the wall clock '
+        "('': the node's clock)",
     ),
     ParameterSpec(
         name='discovery_period',
@@ -132,20 +134,23 @@ RECORDER_PARAMETERS = (
         name='heartbeat_topic',
         type=STRING,
         default=RECORDER_TOPIC,
-        description="where it says how much it recorded, after every flush and step (a run watches its liveliness; '': none)",
+        description='where it says how much it recorded, after every flush and step (a run watches its '
+        "liveliness; '': none)",
     ),
     ParameterSpec(
         name='watched_topics',
         type=STRING_ARRAY,
         default=[],
-        description="recorded topics the heartbeat lists as 'silent' until their first message came (a robot run's time "
+        description="recorded topics the heartbeat lists as 'silent' until their first message came (a robot "
+        "run's time "
         "keeper starts only once the recorder has the robots' poses from before t = 0)",
     ),
     ParameterSpec(
         name='endless_topics',
         type=STRING_ARRAY,
         default=[],
-        description="recorded topics whose writers outlive the run (external robots' poses): on stopping, their "
+        description="recorded topics whose writers outlive the run (external robots' poses): on stopping, "
+        'their '
         'messages are recorded but do not hold the drain up',
     ),
     ParameterSpec(
@@ -336,7 +341,8 @@ class RecorderNode(Node):
         self.bag.open()
         self.bag.set_custom_data(
             'formation_timestamps',
-            f'run time: sim time of {self._clock_topic} (lock-step), receive time since its epoch (wall clock)'
+            f'run time: sim time of {self._clock_topic} (lock-step), '
+            'receive time since its epoch (wall clock)'
             if self._clock_topic
             else 'node clock',
         )

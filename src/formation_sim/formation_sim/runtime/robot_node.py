@@ -18,8 +18,8 @@ its agent only as a real robot would (README, "Running on robots"; names in
   `formation analyze` measure the formation on it; an agent never reads it).
 
 Between ticks the robot moves exactly under the command it holds (`formation_sim.sim.robots`, by
-its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at the first tick
-at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
+its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at
+the first tick at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
 `max_angular_speed` as a real base clips it.  A robot whose commands stop coming (its agent died,
 the network broke) stops after `command_timeout` s, as real bases do.
 
@@ -410,8 +410,8 @@ def _xyz(position: np.ndarray) -> tuple[float, float, float]:
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog='formation_robot',
-        description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: each takes velocity '
-        'commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
+        description='Simulated kinematic robots (of a registered kind: parameter model) for formation runs: '
+        'each takes velocity commands on /agent_<i>/robot/cmd_vel and publishes its pose and odometry.',
         epilog=parameter_help(SPECS)
         + '\n\nParameters per robot, keyed by node name /agent_<i>/simulated_robot '
         '(formation run --backend unicycle writes robots.params.yaml).',
