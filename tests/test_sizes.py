@@ -87,7 +87,8 @@ def test_an_allowed_unit_never_grows_and_leaves_the_list_once_within_the_rule(mo
     assert (module, name) in UNITS, f'{module}: {name} is gone: delete its entry in ALLOWED'
     kind, lines = UNITS[module, name]
     assert _over(kind, lines), (
-        f'{module}: {kind} {name} is {lines} lines, within the rule ({LIMITS[kind]}): delete its entry in ALLOWED'
+        f'{module}: {kind} {name} is {lines} lines, within the rule ({LIMITS[kind]}): '
+        'delete its entry in ALLOWED'
     )
     assert lines <= ceiling, (
         f'{module}: {kind} {name} grew to {lines} lines past its ceiling {ceiling}: split it'
