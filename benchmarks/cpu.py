@@ -16,10 +16,13 @@ as a fraction of one core:
   the command's wall time.
 
 Per agent and per simulated robot: the kind's total divided by the number of agents or robots
-(robots may share a process).  `--profile DIR` runs every child under cProfile (a sitecustomize
-on PYTHONPATH; the main thread's CPU time, `time.thread_time`, where the executor runs every
-callback; written when the process exits) and prints each kind's top
-functions by cumulative and own time.
+(robots may share a process).  Then each kind's threads over the stepping window
+(/proc/<pid>/task: the main thread 'python', where the executor runs every callback, and Fast
+DDS's 'dds.*' threads).
+
+`--profile DIR` runs every child under cProfile (a sitecustomize on PYTHONPATH; the main thread's
+CPU time, `time.thread_time`, where the executor runs every callback; written when the process
+exits) and prints each kind's top functions by own time.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import argparse
 import json
 import os
 import pstats
+import re
 import statistics
 import subprocess
 import sys
@@ -76,6 +80,9 @@ class CpuWatch(threading.Thread):
         self.root = root_pid
         self.samples: dict[int, list[tuple[float, float]]] = {}  # pid -> [(unix time, cpu seconds)]
         self.kinds: dict[int, str] = {}
+        # Per thread: (pid, tid) -> [(unix time, cpu seconds)], and its (kind, thread name).
+        self.thread_samples: dict[tuple[int, int], list[tuple[float, float]]] = {}
+        self.thread_names: dict[tuple[int, int], tuple[str, str]] = {}
         self._halt = threading.Event()
 
     def run(self) -> None:
@@ -84,6 +91,9 @@ class CpuWatch(threading.Thread):
             for pid, (kind, cpu) in _descendants(self.root).items():
                 self.kinds[pid] = kind
                 self.samples.setdefault(pid, []).append((now, cpu))
+                for tid, (name, thread_cpu) in _threads(pid).items():
+                    self.thread_names[pid, tid] = (kind, name)
+                    self.thread_samples.setdefault((pid, tid), []).append((now, thread_cpu))
             self._halt.wait(SAMPLE_PERIOD)
 
     def stop(self) -> None:
@@ -95,6 +105,14 @@ class CpuWatch(threading.Thread):
         used: dict[str, float] = {}
         for pid, series in self.samples.items():
             used[self.kinds[pid]] = used.get(self.kinds[pid], 0.0) + _at(series, end) - _at(series, start)
+        return used
+
+    def thread_cpu_between(self, start: float, end: float) -> dict[str, float]:
+        """CPU seconds between two Unix times by kind and thread ('agents python', 'robots dds.shm')."""
+        used: dict[str, float] = {}
+        for key, series in self.thread_samples.items():
+            label = ' '.join(self.thread_names[key])
+            used[label] = used.get(label, 0.0) + _at(series, end) - _at(series, start)
         return used
 
     def cpu_life(self) -> dict[str, float]:
@@ -111,6 +129,25 @@ def _at(series: list[tuple[float, float]], when: float) -> float:
         if t0 <= when <= t1:
             return c0 + (c1 - c0) * (when - t0) / (t1 - t0)
     return series[-1][1]
+
+
+def _threads(pid: int) -> dict[int, tuple[str, float]]:
+    """Each thread of `pid`: its name (Fast DDS's port numbers cut: 'dds.shm.7411' -> 'dds.shm')
+    and its utime + stime."""
+    found = {}
+    try:
+        tasks = list(Path(f'/proc/{pid}/task').iterdir())
+    except OSError:
+        return found
+    for task in tasks:
+        try:
+            stat = (task / 'stat').read_text()
+        except OSError:
+            continue
+        name = re.sub(r'\.\d+$', '', stat[stat.index('(') + 1 : stat.rindex(')')])
+        fields = stat.rsplit(')', 1)[1].split()
+        found[int(task.name)] = (name, (int(fields[11]) + int(fields[12])) / TICKS)
+    return found
 
 
 def _descendants(root: int) -> dict[int, tuple[str, float]]:
@@ -204,6 +241,8 @@ def measure(
             used = watch.cpu_between(start, end)
             row['stepping_window_s'] = end - start
             row['stepping'] = {kind: used.get(kind, 0.0) / (end - start) for _, kind in KINDS}
+            threads = watch.thread_cpu_between(start, end)
+            row['stepping_threads'] = {label: cpu / (end - start) for label, cpu in sorted(threads.items())}
     return row
 
 
@@ -239,6 +278,26 @@ def table(rows: list[dict], n: int) -> str:
                 f'{median["coordinator"]:.1%} | {median["recorder"]:.1%} | {median["total"]:.1%} | '
                 f'{processes} |'
             )
+    return '\n'.join(lines)
+
+
+def thread_table(rows: list[dict]) -> str:
+    """Each kind's threads in the stepping window (medians over the runs of a code): where the CPU
+    goes, the executor's thread ('python': every callback) against Fast DDS's ('dds.*')."""
+    codes = list(dict.fromkeys(r['code'] for r in rows))
+    shares = {
+        code: [r['stepping_threads'] for r in rows if r['code'] == code and r.get('stepping_threads')]
+        for code in codes
+    }
+    labels = sorted({label for runs in shares.values() for run in runs for label in run})
+    lines = ['| process kind, thread | ' + ' | '.join(codes) + ' |', '|---|' + '---|' * len(codes)]
+    for label in labels:
+        cells = [
+            f'{statistics.median(run.get(label, 0.0) for run in shares[code]):.1%}' if shares[code] else '-'
+            for code in codes
+        ]
+        if any(cell not in ('0.0%', '-') for cell in cells):
+            lines.append(f'| {label} | ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
 
 
@@ -296,6 +355,8 @@ def main() -> int:
         f'robots_square, unicycle backend, horizon {options.horizon:g} s, {n} agents; fractions of one core'
     )
     print(table(rows, n))
+    print('\nBy thread, stepping (all processes of a kind together):')
+    print(thread_table(rows))
     (out / 'cpu.json').write_text(json.dumps(rows, indent=1))
     if options.profile:
         print_profiles(options.profile, top=options.top)

@@ -26,10 +26,6 @@ LIMITS = {'class': 300, 'function': 80}
 ALLOWED: dict[tuple[str, str], int] = {
     # `ruff format` (the tree was formatted in one commit, every `fmt: skip` removed) took these past
     # the rule: one argument or item per line. Each is to be split along its seams.
-    ('formation_sim/runtime/launch.py', 'LaunchPlan'): 315,
-    ('formation_sim/runtime/orchestrate.py', 'FormationRun'): 347,
-    ('formation_sim/runtime/orchestrate.py', 'FormationRun._launch_and_watch'): 86,
-    ('formation_sim/runtime/time_keeper.py', 'TimeKeeperNode'): 312,
 }
 
 
@@ -91,7 +87,8 @@ def test_an_allowed_unit_never_grows_and_leaves_the_list_once_within_the_rule(mo
     assert (module, name) in UNITS, f'{module}: {name} is gone: delete its entry in ALLOWED'
     kind, lines = UNITS[module, name]
     assert _over(kind, lines), (
-        f'{module}: {kind} {name} is {lines} lines, within the rule ({LIMITS[kind]}): delete its entry in ALLOWED'
+        f'{module}: {kind} {name} is {lines} lines, within the rule ({LIMITS[kind]}): '
+        'delete its entry in ALLOWED'
     )
     assert lines <= ceiling, (
         f'{module}: {kind} {name} grew to {lines} lines past its ceiling {ceiling}: split it'

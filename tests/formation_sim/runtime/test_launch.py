@@ -351,3 +351,79 @@ def test_simulated_robots_start_at_the_scenarios_headings_unless_one_is_given(tm
     given = RobotOptions(**{**TURTLEBOT3.to_dict(), 'yaw': 0.5})
     assert {given.initial_heading(lab, agent) for agent in lab.agent_ids} == {0.5}  # --initial-heading wins
     assert options.robot_parameters(lab, 3)['yaw'] == -0.155
+
+
+def test_a_childs_environment_is_the_runs_whatever_this_process_had(tmp_path):
+    from formation_sim.runtime.launch import FASTDDS_PROFILE, child_environment
+
+    mine = {
+        'ROS_DOMAIN_ID': '7',
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
+        'ROS_DISCOVERY_SERVER': '10.0.0.9:11811',  # a user's own server is not the run's
+        'OPENBLAS_NUM_THREADS': '4',  # the user's choice stays
+        'HOME': '/home/someone',
+    }
+    where = dict(domain_id=150, log_dir=tmp_path / 'logs' / 'ros', udp_only=False, extra_env={})
+    env = child_environment(dict(mine), localhost_only=True, discovery_server=None, **where)
+    assert env['ROS_DOMAIN_ID'] == '150' and env['ROS_LOG_DIR'] == str((tmp_path / 'logs' / 'ros').resolve())
+    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST' and 'ROS_DISCOVERY_SERVER' not in env
+    assert env['OPENBLAS_NUM_THREADS'] == '4' and env['HOME'] == '/home/someone'
+    assert env['RMW_IMPLEMENTATION'] == 'rmw_fastrtps_cpp' and 'FASTDDS_BUILTIN_TRANSPORTS' not in env
+    assert env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(FASTDDS_PROFILE)
+    wide = child_environment(
+        dict(mine), localhost_only=False, discovery_server='127.0.0.1:40123', **{**where, 'udp_only': True}
+    )
+    assert 'ROS_AUTOMATIC_DISCOVERY_RANGE' not in wide  # Jazzy's default: the subnet
+    assert wide['ROS_DISCOVERY_SERVER'] == '127.0.0.1:40123' and wide['FASTDDS_BUILTIN_TRANSPORTS'] == 'UDPv4'
+    extra = child_environment(
+        dict(mine),
+        localhost_only=True,
+        discovery_server=None,
+        **{**where, 'extra_env': {'ROS_DOMAIN_ID': '9', 'FOO': 'bar'}},
+    )
+    assert extra['ROS_DOMAIN_ID'] == '9' and extra['FOO'] == 'bar'  # the caller's own word is last
+
+
+def test_a_robots_topics_by_kind():
+    from formation_sim.runtime.launch import robot_topics
+
+    scenario = load_scenario('robots_square')
+    assert robot_topics(scenario, 'pose', 'command') == {
+        f'/agent_{i}/robot/{name}' for i in scenario.agent_ids for name in ('pose', 'cmd_vel')
+    }
+    assert robot_topics(scenario, 'odom', 'odom') == {f'/agent_{i}/robot/odom' for i in scenario.agent_ids}
+
+
+def test_simulated_robots_run_on_after_a_lost_agent_until_their_command_timeout_stops_them(tmp_path):
+    import dataclasses
+    from types import SimpleNamespace
+
+    from formation_sim.runtime.orchestrate import robots_after
+
+    agent, robot = SimpleNamespace(name='agent_2'), SimpleNamespace(name='robot_2')
+    robots = dataclasses.replace(TURTLEBOT3, command_timeout=0.75)
+    unicycles = _plan(tmp_path / 'u', 'unicycle', robots=robots)
+    assert robots_after(unicycles, agent) == 0.75 + 0.3  # its robot stops on its own, in the bag
+    assert robots_after(unicycles, robot) == robots_after(unicycles, None) == 0.0
+    assert robots_after(_plan(tmp_path / 'x', 'external', robots=robots), agent) == 0.0  # not ours
+
+
+def test_every_node_of_a_run_is_its_own_and_a_signal_asks_the_run_to_stop():
+    import signal
+
+    from formation_agent.ros.process import SignalFlag
+    from formation_sim.runtime.orchestrate import own_nodes, signals_trapped
+
+    assert own_nodes(load_scenario('paper_single')) == {
+        '/formation_simulator',
+        '/formation_coordinator',
+        '/formation_recorder',
+        *(f'/agent_{i}/{node}' for i in (1, 2, 3) for node in ('formation_agent', 'simulated_robot')),
+    }
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig, handler in before.items():
+        flag = SignalFlag()
+        with signals_trapped(flag):
+            signal.getsignal(sig)(sig, None)  # what the interpreter calls on the signal
+            assert flag.is_set()
+        assert signal.getsignal(sig) is handler

@@ -334,7 +334,8 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     # POLL_PERIOD + a tick after the kill, each agent's zero command on it.
     ends = _zero_commands_after(result.bag, killed_at, agents=(1, 3, 4))
     assert set(ends) == {1, 3, 4} and max(ends.values()) - killed_at < 1.0, ends
-    # Robot 2 as it truly moved (its odometry, exact without noise): still after its command timeout (and a tick), to the end of the bag.
+    # Robot 2 as it truly moved (its odometry, exact without noise): still after its command timeout
+    # (and a tick), to the end of the bag.
     after = []
     for message in read_bag(result.bag):
         if message.topic == '/agent_2/robot/odom':
@@ -400,8 +401,8 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
     assert result.exit_status == EXIT_REFUSED, result.message
     # Edge (1,2): x_1 − x_2 − d_12 = (−1.5 − 1.015 + 1, 0.0075), 1.52 m; edge (4,1): 1.49 m.
     assert (
-        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)'
-        in result.message
+        'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is '
+        'not below Δ − ‖d_12‖ = 1 m (initial condition of Theorem 1)' in result.message
     )
     assert 'edge (4,1): the measured ‖x_4 − x_1 − d_41‖ = 1.49 m' in result.message
     assert 'the run does not start' in result.message

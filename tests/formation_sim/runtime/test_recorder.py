@@ -87,7 +87,10 @@ def test_an_unreadable_bag_raises_bag_read_error_naming_the_remedy(tmp_path: Pat
     (tmp_path / 'bag' / 'metadata.yaml').unlink()  # what a SIGKILLed recorder leaves
     with pytest.raises(
         BagReadError,
-        match=rf'no metadata.yaml \(it holds {mcap.name}\).*`formation recover {tmp_path / "bag"}` rebuilds it',
+        match=(
+            rf'no metadata.yaml \(it holds {mcap.name}\).*'
+            rf'`formation recover {tmp_path / "bag"}` rebuilds it'
+        ),
     ):
         list(read_bag(tmp_path / 'bag'))
     reindex(tmp_path / 'bag')

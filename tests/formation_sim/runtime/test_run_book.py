@@ -10,9 +10,11 @@ from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
 from formation_sim.model.scenario import load_scenario
 from formation_sim.runtime.run_book import (
     AgentLostError,
+    ConnectivityLostError,
     CoordinatorError,
     RecorderBook,
     RecorderLostError,
+    RobotLostError,
     RunBook,
 )
 
@@ -248,3 +250,53 @@ def test_lock_step_waits_for_a_recorder_more_than_the_lag_behind_or_not_heard_ye
     assert recorders.behind(5, recorders=2, lag=2)  # the second recorder not heard yet
     recorders.accept_heartbeat('{"version": 1, "recorder": "/b", "step": 2}')
     assert recorders.behind(5, recorders=2, lag=2) and not recorders.behind(4, recorders=2, lag=2)
+
+
+def _failure(error: BaseException, **overrides) -> dict:
+    from formation_sim.runtime.run_book import failure_extra
+
+    where = dict(interrupted=False, time=2.5, step=7, wall_time=1.25, detected_by='simulator')
+    return failure_extra(error, **{**where, **overrides})
+
+
+def test_a_failure_names_its_kind_agents_and_time_and_an_edge_its_length_and_a_start_its_breaches():
+    from formation_sim.runtime.run_book import InitialConditionError
+
+    lost = _failure(AgentLostError('agent 2 lost', agents=[2]))
+    assert lost == {
+        'kind': 'agent_lost',
+        'message': 'agent 2 lost',
+        'agents': [2],
+        'time': 2.5,
+        'step': 7,
+        'wall_time': 1.25,
+        'detected_by': 'simulator',
+    }
+    edge = _failure(ConnectivityLostError('edge (2, 3) at Δ', time=1.75, edge=(2, 3), length=4.0))
+    assert (edge['kind'], edge['agents'], edge['time']) == ('connectivity_lost', [2, 3], 1.75)  # its own time
+    assert (edge['edge'], edge['length']) == ([2, 3], 4.0)
+    breaches = [{'edge': [1, 2], 'length': 4.5}]
+    start = _failure(InitialConditionError('apart', agents=[1, 2], breaches=breaches), step=None)
+    assert start['kind'] == 'initial_condition' and start['breaches'] == breaches and start['step'] is None
+
+
+def test_a_failure_without_words_is_named_by_its_kind_and_a_signal_is_an_interruption():
+    assert (
+        _failure(KeyboardInterrupt(), interrupted=True)['message'] == 'stopped by a signal (SIGINT/SIGTERM)'
+    )
+    assert _failure(KeyboardInterrupt(), interrupted=True)['kind'] == 'interrupted'
+    error = _failure(ValueError(''))
+    assert (error['kind'], error['message'], error['agents']) == ('error', 'ValueError', [])
+
+
+def test_the_agents_that_stopped_after_the_first_cause_follow_it_in_its_message():
+    from formation_sim.runtime.run_book import add_what_followed
+
+    info = _failure(RobotLostError('robot 2 lost', agents=[2]))
+    add_what_followed(info, {2: 'its pose stopped', 3: 'the pose of robot 2 is 0.52 s old', 1: 'likewise'})
+    assert info['followed'] == {'3': 'the pose of robot 2 is 0.52 s old', '1': 'likewise'}
+    assert info['message'] == 'robot 2 lost; then agents 1, 3 stopped: likewise'
+    signal = _failure(KeyboardInterrupt(), interrupted=True)
+    add_what_followed(signal, {1: 'stopped by a signal'})  # the signal stopped them all: nothing follows
+    assert 'followed' not in signal and signal['message'] == 'stopped by a signal (SIGINT/SIGTERM)'
+    add_what_followed(None, {1: 'why'})  # no failure: nothing to add to

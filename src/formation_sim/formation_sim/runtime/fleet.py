@@ -2,7 +2,8 @@
 --backend external` when no real robots are at hand (README, "Running on robots").
 
 ```python
-fleet = RobotFleet('robots_square', robots=RobotOptions(model='unicycle'), out_dir='runs/fleet', domain_id=42)  # out_dir new or empty
+fleet = RobotFleet('robots_square', robots=RobotOptions(model='unicycle'),
+                   out_dir='runs/fleet', domain_id=42)  # out_dir new or empty
 fleet.run()   # until Ctrl-C / SIGTERM, fleet.stop(), or `duration`
 ```
 

@@ -177,7 +177,8 @@ def format_topics(topics: list[TopicInfo], *, verbose: bool = False) -> str:
     lines = []
     for topic in topics:
         lines.append(
-            f'{topic.name:<{width}}  [{", ".join(topic.types)}]  publishers: {len(topic.publishers)}  subscribers: {len(topic.subscribers)}'
+            f'{topic.name:<{width}}  [{", ".join(topic.types)}]  '
+            f'publishers: {len(topic.publishers)}  subscribers: {len(topic.subscribers)}'
         )
         if verbose:
             for role, nodes in (('publisher', topic.publishers), ('subscriber', topic.subscribers)):

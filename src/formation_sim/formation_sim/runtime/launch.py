@@ -2,11 +2,13 @@
 
 A backend decides who keeps time and what the world is (README, "Running on robots"):
 
-| backend | time keeper | world | agents sense | extra processes |
-|---|---|---|---|---|
-| `exact` | simulator (`sim_node`, lock-step or wall clock) | the simulator's exact world | its sensing service | – |
-| a robot kind (`holonomic`, `unicycle`) | coordinator (`coordinator`, wall clock) | one simulated robot of that kind per agent (`robot_node`) | the robots' poses | the robots |
-| `external` | coordinator | whatever publishes the robots' poses and takes their commands | the robots' poses | – |
+- `exact`: time kept by the simulator (`sim_node`, lock-step or wall clock); the world is its
+  exact world, which the agents sense through its sensing service; no extra process;
+- a robot kind (`holonomic`, `unicycle`): time kept by the coordinator (`coordinator`, wall
+  clock); the world is one simulated robot of that kind per agent (`robot_node`), whose poses the
+  agents sense; the robots are the extra processes;
+- `external`: time kept by the coordinator; the world is whatever publishes the robots' poses
+  (which the agents sense) and takes their commands; no extra process.
 
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
 told not to, the recorder.  `LaunchPlan.write_inputs` writes what every process reads into the run
@@ -35,10 +37,17 @@ from pathlib import Path
 import yaml
 
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
-from formation_msgs_py.topics import AGENT_NODE, COORDINATOR_NODE, ROBOT_NODE, SIMULATOR_NODE
+from formation_msgs_py.topics import (
+    AGENT_NODE,
+    COORDINATOR_NODE,
+    ROBOT_NODE,
+    SIMULATOR_NODE,
+    robot_command_topic,
+)
 from formation_sim.model.scenario import Scenario, dump_scenario
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
 from formation_agent.core.limits import Limits as KindLimits
+from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
 
 BACKENDS = KindNames(
@@ -56,7 +65,9 @@ DOMAIN_RANGE = (100, DOMAIN_ID_MAX)  # ids a run picks from when not given one
 MANY_PROCESSES = 30  # beyond this, shared-memory transport segments cost more than they bring
 ONE_PROCESS_PER_AGENT_UP_TO = 24  # agents_per_process='auto': one process each up to this many agents ...
 AUTO_AGENT_PROCESSES = 6  # ... beyond, the team in at most this many processes (BENCHMARKS.md, "Large teams")
-ROBOTS_PER_PROCESS = 8  # simulated robots sharing a process (and its executor, its DDS participant) by default (BENCHMARKS.md, "CPU of a robot run")
+# Simulated robots sharing a process (and its executor, its DDS participant) by default
+# (BENCHMARKS.md, "CPU of a robot run").
+ROBOTS_PER_PROCESS = 8
 SCENARIO_FILE = 'scenario.yaml'
 AGENTS_FILE = 'agents.params.yaml'
 RECORDER_FILE = 'recorder.params.yaml'
@@ -237,7 +248,9 @@ class RobotOptions:
 class ProcessSpec:
     """One process of a run: its name, the arguments after `python`, and how it is expected to end."""
 
-    name: str  # 'simulator', 'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>', 'robots_<i>-<j>', 'discovery_server'
+    # 'simulator', 'coordinator', 'recorder', 'agent_<i>', 'agents_<i>-<j>', 'robot_<i>',
+    # 'robots_<i>-<j>', 'discovery_server'
+    name: str
     args: tuple[str, ...]
     expected_exit: bool  # leaves by itself when the run completes (else it is stopped)
     keeper: bool = False  # the run's time keeper: its exit ends the run, its progress lines are shown
@@ -344,42 +357,18 @@ class LaunchPlan:
         coordinator measures the formation on (`robot_trajectory`).  The time keeper starts a robot
         run only once the recorder has a message on each (its bag then covers t = 0); robots that
         publish only the other kind (an external team with odometry alone) must not hold it up."""
-        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
-
-        by_name = {'pose': robot_pose_topic, 'odom': robot_odom_topic, 'true_odom': robot_true_odom_topic}
-        kinds = (
-            by_name[self.robots.pose_type],
-            by_name[self.robot_trajectory],
-        )  # the agents', the coordinator's
-        poses = {topic(i) for i in self.scenario.agent_ids for topic in kinds}
-        return [name for name, _ in self.recorder_topics() if name in poses]
+        read = robot_topics(self.scenario, self.robots.pose_type, self.robot_trajectory)
+        return [name for name, _ in self.recorder_topics() if name in read]
 
     def endless_topics(self) -> list[str]:
         """The recorded topics of robots that outlive the run (external ones: their poses)."""
-        from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
-
-        poses = {
-            topic(i)
-            for i in self.scenario.agent_ids
-            for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic)
-        }
+        poses = robot_topics(self.scenario, *TRAJECTORY_TOPICS)
         return [name for name, _ in self.recorder_topics() if name in poses]
 
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
         all but a robot's own (its poses, and the velocity commands it takes)."""
-        from formation_msgs_py.topics import (
-            robot_command_topic,
-            robot_odom_topic,
-            robot_pose_topic,
-            robot_true_odom_topic,
-        )
-
-        robot = {
-            topic(i)
-            for i in self.scenario.agent_ids
-            for topic in (robot_pose_topic, robot_odom_topic, robot_true_odom_topic, robot_command_topic)
-        }
+        robot = robot_topics(self.scenario, *TRAJECTORY_TOPICS, 'command')
         return {name for name, _ in self.recorder_topics()} - robot
 
     def write_inputs(self) -> dict[str, Path]:
@@ -533,7 +522,8 @@ class LaunchPlan:
         return f'/{SIMULATOR_NODE}' if self.backend == 'exact' else f'/{COORDINATOR_NODE}'
 
     def keeper_parameters(self, scenario_file: Path) -> dict:
-        """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`, `coordinator.COORDINATOR_PARAMETERS`)."""
+        """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`,
+        `coordinator.COORDINATOR_PARAMETERS`)."""
         params = {
             'scenario': str(scenario_file.resolve()),
             'horizon': float(self.horizon),
@@ -569,28 +559,60 @@ class LaunchPlan:
     # -- environment -------------------------------------------------------------------------------
 
     def environment(self, domain_id: int, *, extra_env: dict[str, str]) -> dict[str, str]:
-        """The environment of every child: its ROS domain, logs, discovery, our packages."""
-        env = dict(os.environ)
-        env['ROS_DOMAIN_ID'] = str(domain_id)
-        env['ROS_LOG_DIR'] = str((self.out_dir / LOG_DIR / 'ros').resolve())
-        env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
-        env['PYTHONUNBUFFERED'] = '1'
-        if self.localhost_only:
-            env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        else:
-            env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
-        if self.discovery == 'server':
-            env['ROS_DISCOVERY_SERVER'] = f'127.0.0.1:{self.discovery_port}'  # a client of the run's server
-        else:
-            env.pop('ROS_DISCOVERY_SERVER', None)  # a user's server is not the run's
-        if self.process_count() > MANY_PROCESSES:
-            env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
-        # numpy's OpenBLAS starts a thread per core at import, which costs every child ~0.1 s of
-        # CPU while all of them start at once; no node does linear algebra worth a thread.
-        env.setdefault('OPENBLAS_NUM_THREADS', '1')
-        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
-        env.update(extra_env)
-        return with_our_packages(env)
+        """The environment of every child (`child_environment`), from this process's."""
+        return child_environment(
+            dict(os.environ),
+            domain_id=domain_id,
+            log_dir=self.out_dir / LOG_DIR / 'ros',
+            localhost_only=self.localhost_only,
+            # A client of the run's discovery server.
+            discovery_server=f'127.0.0.1:{self.discovery_port}' if self.discovery == 'server' else None,
+            udp_only=self.process_count() > MANY_PROCESSES,
+            extra_env=extra_env,
+        )
+
+
+def robot_topics(scenario: Scenario, *kinds: str) -> set[str]:
+    """Every robot's topics of these kinds: 'pose', 'odom', 'true_odom' (`robot_poses.TRAJECTORY_TOPICS`)
+    or 'command'."""
+    by_kind = {**TRAJECTORY_TOPICS, 'command': robot_command_topic}
+    return {by_kind[kind](i) for i in scenario.agent_ids for kind in kinds}
+
+
+def child_environment(
+    env: dict[str, str],
+    *,
+    domain_id: int,
+    log_dir: Path,
+    localhost_only: bool,
+    discovery_server: str | None,
+    udp_only: bool,
+    extra_env: dict[str, str],
+) -> dict[str, str]:
+    """`env` (this process's environment) made a run's child's: its ROS domain, its logs in
+    `log_dir`, discovery on this machine only (`localhost_only`) and through the run's
+    `discovery_server` (host:port; None: none, not even a user's), UDP alone (`udp_only`: many
+    processes), Fast DDS's settings, our packages; `extra_env` last."""
+    env['ROS_DOMAIN_ID'] = str(domain_id)
+    env['ROS_LOG_DIR'] = str(log_dir.resolve())
+    env['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
+    env['PYTHONUNBUFFERED'] = '1'
+    if localhost_only:
+        env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    else:
+        env.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)  # Jazzy's default: SUBNET
+    if discovery_server is not None:
+        env['ROS_DISCOVERY_SERVER'] = discovery_server
+    else:
+        env.pop('ROS_DISCOVERY_SERVER', None)  # a user's server is not the run's
+    if udp_only:
+        env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+    # numpy's OpenBLAS starts a thread per core at import, which costs every child ~0.1 s of
+    # CPU while all of them start at once; no node does linear algebra worth a thread.
+    env.setdefault('OPENBLAS_NUM_THREADS', '1')
+    env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
+    env.update(extra_env)
+    return with_our_packages(env)
 
 
 def discovery_server_program() -> str:
@@ -603,7 +625,8 @@ def discovery_server_program() -> str:
     found = str(beside) if os.access(beside, os.X_OK) else shutil.which(DISCOVERY_SERVER_PROGRAM)
     if found is None:
         raise RunError(
-            f'the discovery server needs {DISCOVERY_SERVER_PROGRAM} (Fast DDS, installed with the ros-fastrtps wheel): '
+            f'the discovery server needs {DISCOVERY_SERVER_PROGRAM} '
+            '(Fast DDS, installed with the ros-fastrtps wheel): '
             f'neither {beside} nor any {DISCOVERY_SERVER_PROGRAM} on PATH'
         )
     return found

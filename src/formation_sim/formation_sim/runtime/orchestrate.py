@@ -5,8 +5,9 @@ from formation_sim.runtime.orchestrate import FormationRun
 from formation_sim.runtime.launch import RobotOptions
 
 result = FormationRun('paper_single', out_dir='runs/demo', horizon=10.0).run()
+turtlebots = RobotOptions(model='unicycle', max_linear_speed=0.22, max_angular_speed=2.84)
 robots = FormationRun('robots_square', out_dir='runs/u', horizon=30.0, backend='unicycle',
-                      robots=RobotOptions(model='unicycle', max_linear_speed=0.22, max_angular_speed=2.84)).run()
+                      robots=turtlebots).run()
 print(result.summary, result.bag)
 ```
 
@@ -15,8 +16,9 @@ The pieces: `launch` (the backend's plan: domain, environment, inputs, processes
 of the dead), `results` (what a run leaves).  The run ends when the time keeper (the simulator,
 or the coordinator of a robot backend) reaches the horizon, when any child dies, or on
 Ctrl-C/SIGTERM.  Children are then stopped (SIGINT, then SIGTERM, then SIGKILL after timeouts; the
-recorder last) and the Fast DDS shared-memory files whose owners died are removed.  If the orchestrator itself is killed,
-the kernel sends every child SIGTERM (PR_SET_PDEATHSIG), so nothing is left running.
+recorder last) and the Fast DDS shared-memory files whose owners died are removed.  If the
+orchestrator itself is killed, the kernel sends every child SIGTERM (PR_SET_PDEATHSIG), so nothing
+is left running.
 
 Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypotheses starts
 nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
@@ -77,7 +79,10 @@ from formation_sim.runtime.results import (
     check_recording,
     lost_or_failed,
     describe_phases,
+    detection_time,
     excused_after_end,
+    first_lost,
+    keeper_failed,
     phases,
     read_summary,
     recover_bag,
@@ -86,7 +91,8 @@ from formation_sim.runtime.results import (
     timeline,
 )
 from formation_sim.runtime.run_options import RunOptions
-from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor, describe_exit
+from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor
+from formation_sim.sim.summary import SUMMARY_FILE
 
 __all__ = [
     'BACKENDS',
@@ -104,14 +110,9 @@ __all__ = [
     'reserve_domain',
 ]
 
-SUMMARY_FILE = 'summary.json'
-
-# How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
-# grace, one 0.1 s tick, and margin for a loaded machine (formation_msgs_py.qos.LIVELINESS_LEASE).
-LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
-# On robots, how long the coordinator may take to stop the run on an agent's final report that
-# names its error (it does so at once; margin for a loaded machine).
-AGENT_REPORT_DETECTION = 1.0
+# Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
+# memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
+SHM_SNAPSHOT_PERIOD = 0.2
 
 
 def _process_started() -> float:
@@ -207,7 +208,7 @@ class FormationRun:
         # command began (before run(): its imports, the scenario read and validated).
         self.marks = {'prepare': self._prepared_from, 'run': time.time()}
         lost: Child | None = None
-        with reserve_domain(self.options.domain_id) as domain_id, self._signals_trapped():
+        with reserve_domain(self.options.domain_id) as domain_id, signals_trapped(self._interrupted):
             try:  # the domain is ours: only now may the run folder change
                 self.out_dir = claim_out_dir(
                     self.out_dir, scenario_name=self.scenario.name, kind='run', force=self.force
@@ -227,7 +228,9 @@ class FormationRun:
                 status, message, lost = self._launch_and_watch(paths)
             finally:
                 self.removed_shm_files = self._supervisor.stop(
-                    self.options.stop_timeouts, domain_id=domain_id, robots_after=self._robots_after(lost)
+                    self.options.stop_timeouts,
+                    domain_id=domain_id,
+                    robots_after=robots_after(self.plan, lost),
                 )
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
@@ -263,9 +266,7 @@ class FormationRun:
         if self.options.progress:
             outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
             spent = f' ({describe_phases(run_phases)})' if run_phases else ''
-            self._say(
-                f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True
-            )
+            say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result
 
     def _write_summary(
@@ -336,26 +337,7 @@ class FormationRun:
         """'; nodes outside the run wrote on them: …', as graph.json saw them."""
         from formation_sim.runtime.run_end import GRAPH_FILE
 
-        own = {f'/{SIMULATOR_NODE}', f'/{COORDINATOR_NODE}', f'/{RECORDER_NODE}'}
-        for i in self.scenario.agent_ids:
-            own |= {f'{agent_namespace(i)}/{AGENT_NODE}', f'{agent_namespace(i)}/{ROBOT_NODE}'}
-        return strangers(topics, self.out_dir / GRAPH_FILE, own, domain_id)
-
-    @contextlib.contextmanager
-    def _signals_trapped(self) -> Iterator[None]:
-        """Ctrl-C and SIGTERM ask the run to stop cleanly (only possible from the main thread)."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        previous = {
-            sig: signal.signal(sig, lambda signum, frame: self._interrupted.set())
-            for sig in (signal.SIGINT, signal.SIGTERM)
-        }
-        try:
-            yield
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+        return strangers(topics, self.out_dir / GRAPH_FILE, own_nodes(self.scenario), domain_id)
 
     @property
     def last_progress(self) -> str:
@@ -366,8 +348,8 @@ class FormationRun:
         """Stop the run as Ctrl-C would (for callers on another thread)."""
         self._interrupted.set()
 
-    def _launch_and_watch(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:
-        """Start the children and watch them: (exit status, message, the child that was lost)."""
+    def _start_children(self, paths: dict[str, Path]) -> Child:
+        """Every process of the plan, in its order; the time keeper's child."""
         supervisor = self._supervisor
         keeper = None
         for spec in self.plan.processes(paths):
@@ -378,23 +360,27 @@ class FormationRun:
         if self.options.progress:
             groups = len(self.plan.agent_groups())
             robots = sum(1 for c in supervisor.children if c.name.startswith('robot'))
+            robots_text = f', {robots} robot process(es)' if robots else ''
+            recorder = ', recorder' if self.options.record else ''
             server = (
                 f', discovery server on port {self.plan.discovery_port}'
                 if self.plan.discovery == 'server'
                 else ''
             )
-            self._say(
-                f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent process(es)'
-                f'{f", {robots} robot process(es)" if robots else ""}{", recorder" if self.options.record else ""}{server} started; '
-                'waiting for discovery'
+            say(
+                f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent '
+                f'process(es){robots_text}{recorder}{server} started; waiting for discovery'
             )
+        return keeper
+
+    def _launch_and_watch(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:
+        """Start the children and watch them: (exit status, message, the child that was lost)."""
+        supervisor = self._supervisor
+        keeper = self._start_children(paths)
         deadline = None if self.options.timeout is None else time.monotonic() + self.options.timeout
         shown = ''
         lost: Child | None = None
-        # The children's Fast DDS files, noted while they live (a look at /dev/shm; the children's
-        # memory maps only when it changed: supervise.Supervisor.note_shm_files).
-        snapshot_period = 0.2
-        next_snapshot = time.monotonic()
+        next_snapshot = time.monotonic()  # the children's Fast DDS files, noted while they live
         while True:
             if self._interrupted.is_set():
                 return EXIT_INTERRUPTED, 'interrupted', lost
@@ -403,11 +389,11 @@ class FormationRun:
                 return EXIT_FAILED, f'timed out after {self.options.timeout} s', lost
             if self.options.progress and self.last_progress != shown:
                 shown = self.last_progress
-                self._say(shown)
+                say(shown)
             supervisor.note_exits(now)
             if now >= next_snapshot:
                 supervisor.note_shm_files(now)
-                next_snapshot = now + snapshot_period
+                next_snapshot = now + SHM_SNAPSHOT_PERIOD
             code = keeper.process.poll()
             if code is not None:
                 self.marks['keeper_exited'] = time.time()
@@ -419,65 +405,54 @@ class FormationRun:
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
                     return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
-                if code in (
-                    EXIT_FAILED,
-                    EXIT_LOST,
-                    EXIT_REFUSED,
-                ):  # the time keeper named the first cause and its status
-                    status = code
-                else:
-                    status = (
-                        lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
-                    )
-                seen = '' if lost is None else f'{lost.describe()}; '
-                return (
-                    status,
-                    f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}',
-                    lost,
-                )
+                return (*keeper_failed(code, keeper, lost), lost)
             if lost is None:
-                lost = next(
-                    (
-                        c
-                        for c in supervisor.children
-                        if c is not keeper
-                        and c.exited_at is not None
-                        and (c.process.returncode != 0 or not c.expected_exit)
-                    ),
-                    None,
-                )
+                lost = first_lost(supervisor.children, keeper)
                 if lost is not None and self.options.progress:
-                    self._say(f'{lost.describe()}; stopping the run')
-            if lost is not None and now - lost.exited_at > self._detection(lost):
+                    say(f'{lost.describe()}; stopping the run')
+            if lost is not None and now - lost.exited_at > detection_time(lost, backend=self.options.backend):
                 # The time keeper has had the time to detect it and stop by itself.
                 return lost_or_failed(lost), f'{lost.describe()}; see {lost.log}', lost
             time.sleep(POLL_PERIOD)
 
-    def _robots_after(self, lost: Child | None) -> float:
-        """How long the simulated robots run on after the stop began: a robot whose agent died
-        without its zero command stops on its command timeout, and the bag shows it."""
-        if lost is None or not lost.name.startswith('agent') or not self.plan.simulated_robots:
-            return 0.0
-        return self.options.robots.command_timeout + 0.3  # and a few of its ticks
 
-    def _detection(self, lost: Child) -> float:
-        """How long the time keeper may take to stop the run by itself after `lost` exited.
+def robots_after(plan: LaunchPlan, lost: Child | None) -> float:
+    """How long the simulated robots run on after the stop began: a robot whose agent died
+    without its zero command stops on its command timeout, and the bag shows it."""
+    if lost is None or not lost.name.startswith('agent') or not plan.simulated_robots:
+        return 0.0
+    return plan.robots.command_timeout + 0.3  # and a few of its ticks
 
-        Not an agent (a robot, the recorder): 0, everything stops now.  An agent that named its
-        error: the time keeper stops the run as soon as the agent's final report comes
-        (`AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
-        killed on a robot run: 0, robots must not wait for a liveliness lease (the message names
-        the dead agent's process).  Lock-step: the keeper sees the lease lapse (`LOST_DETECTION`)."""
-        if not lost.name.startswith('agent'):
-            return 0.0
-        if lost.failed_itself:
-            return AGENT_REPORT_DETECTION if self.options.backend != 'exact' else LOST_DETECTION
-        return 0.0 if self.options.backend != 'exact' else LOST_DETECTION
 
-    def _say(self, text: str, *, end: bool = False) -> None:
-        stream = sys.stderr
-        if stream.isatty():
-            stream.write(f'\r\033[K[formation run] {text}' + ('\n' if end else ''))
-        else:
-            stream.write(f'[formation run] {text}\n')
-        stream.flush()
+def own_nodes(scenario: Scenario) -> set[str]:
+    """The names of every node a run of `scenario` may have (graph.json's keys)."""
+    own = {f'/{SIMULATOR_NODE}', f'/{COORDINATOR_NODE}', f'/{RECORDER_NODE}'}
+    for i in scenario.agent_ids:
+        own |= {f'{agent_namespace(i)}/{AGENT_NODE}', f'{agent_namespace(i)}/{ROBOT_NODE}'}
+    return own
+
+
+@contextlib.contextmanager
+def signals_trapped(flag: SignalFlag) -> Iterator[None]:
+    """Ctrl-C and SIGTERM set `flag`: the run stops cleanly (only possible from the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {
+        sig: signal.signal(sig, lambda signum, frame: flag.set()) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def say(text: str, *, end: bool = False) -> None:
+    """A progress line of `formation run` on stderr (on a terminal, over the previous one)."""
+    stream = sys.stderr
+    if stream.isatty():
+        stream.write(f'\r\033[K[formation run] {text}' + ('\n' if end else ''))
+    else:
+        stream.write(f'[formation run] {text}\n')
+    stream.flush()

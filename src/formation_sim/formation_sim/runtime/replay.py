@@ -98,7 +98,8 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
 
 
 class BagPlayer:
-    """Publishes a bag's messages from `node` (an rclpy node the caller spins or not: publishing needs no spin)."""
+    """Publishes a bag's messages from `node` (an rclpy node the caller spins or not: publishing
+    needs no spin)."""
 
     def __init__(
         self,
@@ -165,7 +166,8 @@ class BagPlayer:
                 return
             if time.monotonic() > deadline:
                 raise ReplayError(
-                    f'no {count} subscriber(s) within {timeout} s on {lacking[:10]}{" …" if len(lacking) > 10 else ""}'
+                    f'no {count} subscriber(s) within {timeout} s on '
+                    f'{lacking[:10]}{" …" if len(lacking) > 10 else ""}'
                 )
             time.sleep(0.05)
 
@@ -251,7 +253,10 @@ def main_replay(
         domain = domain_id if domain_id is not None else int(os.environ.get('ROS_DOMAIN_ID') or 0)
     except ValueError:
         raise ReplayError(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]!r} is not a domain id') from None
-    hint = 'replaying there would feed that run old messages and mix them into its bag; choose another --domain-id'
+    hint = (
+        'replaying there would feed that run old messages and mix them into its bag; '
+        'choose another --domain-id'
+    )
     with contextlib.ExitStack() as held:
         try:
             held.enter_context(reserve_domain(domain))

@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from formation_agent.ros.process import EXIT_REFUSED
 from formation_sim.runtime.supervise import Child, describe_exit
 
 # Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
@@ -35,7 +36,9 @@ class RunResult:
     out_dir: Path
     summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
     bag: Path | None  # DIR/bag, None if not recorded or not readable
-    exit_status: int  # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (formation_agent.ros.process.EXIT_REFUSED) the robots' start refused; 130 interrupted
+    # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (EXIT_REFUSED,
+    # formation_agent.ros.process) the robots' start refused; 130 interrupted
+    exit_status: int
     domain_id: int
     wall_time: float
     children: tuple[ChildExit, ...] = ()
@@ -56,6 +59,57 @@ class RunResult:
 def lost_or_failed(child: Child) -> int:
     """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
     return EXIT_FAILED if child.failed_itself else EXIT_LOST
+
+
+# How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
+# grace, one 0.1 s tick, and margin for a loaded machine (formation_msgs_py.qos.LIVELINESS_LEASE).
+LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
+# On robots, how long the coordinator may take to stop the run on an agent's final report that
+# names its error (it does so at once; margin for a loaded machine).
+AGENT_REPORT_DETECTION = 1.0
+
+
+def first_lost(children: list[Child], keeper: Child) -> Child | None:
+    """The first child besides the time keeper `keeper` whose exit (seen) stops the run: one that
+    failed, or one that should have run until stopped."""
+    return next(
+        (
+            c
+            for c in children
+            if c is not keeper
+            and c.exited_at is not None
+            and (c.process.returncode != 0 or not c.expected_exit)
+        ),
+        None,
+    )
+
+
+def detection_time(lost: Child, *, backend: str) -> float:
+    """How long the time keeper may take to stop the run by itself after `lost` exited.
+
+    Not an agent (a robot, the recorder): 0, everything stops now.  An agent that named its
+    error: the time keeper stops the run as soon as the agent's final report comes
+    (`AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
+    killed on a robot run: 0, robots must not wait for a liveliness lease (the message names
+    the dead agent's process).  Lock-step (`backend` exact): the keeper sees the lease lapse
+    (`LOST_DETECTION`)."""
+    if not lost.name.startswith('agent'):
+        return 0.0
+    if lost.failed_itself:
+        return AGENT_REPORT_DETECTION if backend != 'exact' else LOST_DETECTION
+    return 0.0 if backend != 'exact' else LOST_DETECTION
+
+
+def keeper_failed(code: int, keeper: Child, lost: Child | None) -> tuple[int, str]:
+    """The time keeper exited with `code`, not 0: the run's exit status and message.  A status
+    that names the first cause (failed, lost, refused) is the run's; else the child seen `lost`
+    decides, or how the keeper ended (killed by a signal: lost)."""
+    if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED):
+        status = code
+    else:
+        status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
+    seen = '' if lost is None else f'{lost.describe()}; '
+    return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}'
 
 
 def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
@@ -92,9 +146,10 @@ def timeline(keeper: dict[str, float], marks: dict[str, float], *, started: floa
 
 def phases(marks: dict[str, float]) -> dict[str, float]:
     """summary.json's extra.phases from its timeline: `prepare` (before the run's timeline begins
-    at `run`: the `formation` command's imports, the scenario read and validated), `start` (spawn, imports, DDS participants,
-    discovery: up to step 0), `stepping` (step 0 to the final step), `end` (final reports,
-    acknowledgements, the summary, every process's exit, the bag closed and checked)."""
+    at `run`: the `formation` command's imports, the scenario read and validated), `start` (spawn,
+    imports, DDS participants, discovery: up to step 0), `stepping` (step 0 to the final step),
+    `end` (final reports, acknowledgements, the summary, every process's exit, the bag closed and
+    checked)."""
     spans = {
         'prepare': ('prepare', 'run'),
         'start': (None, 'step0'),
@@ -226,7 +281,8 @@ def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], 
         c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end
     ]
     note = '; '.join(
-        f'{c.name} stopped after the run reached its horizon (not a failure of the run): {after_end[c.name.removeprefix("agent_")]}'
+        f'{c.name} stopped after the run reached its horizon (not a '
+        f'failure of the run): {after_end[c.name.removeprefix("agent_")]}'
         for c in excused
     )
     return [c for c in failed if c not in excused], note
@@ -287,7 +343,8 @@ def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
         }
         if uncounted:
             notes.append(
-                f'{sum(uncounted.values())} messages in the bag are uncounted: agents {missing} sent no final report '
+                f'{sum(uncounted.values())} messages in the bag are '
+                f'uncounted: agents {missing} sent no final report '
                 f'({", ".join(f"{topic} {n}" for topic, n in sorted(uncounted.items()))})'
             )
         foreign = {topic: n for topic, n in foreign.items() if topic not in uncounted}

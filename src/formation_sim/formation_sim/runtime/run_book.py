@@ -110,6 +110,57 @@ def ids_text(agents: list[int], *, most: int = 20) -> str:
     return shown + (f', … ({len(agents)} in all)' if len(agents) > most else '')
 
 
+def failure_extra(
+    error: BaseException,
+    *,
+    interrupted: bool,
+    time: float,
+    step: int | None,
+    wall_time: float,
+    detected_by: str,
+) -> dict:
+    """summary.json's `extra.failure` for what stopped a run early: its kind (a CoordinatorError's
+    own; 'interrupted' for SIGINT/SIGTERM; else 'error'), its message, the agents it names (or its
+    edge), the run time (the error's own, else `time`) and step it came at, the wall time since
+    t = 0 began, and who detected it; with an edge's length, or the initial condition's breaches."""
+    if isinstance(error, CoordinatorError):
+        kind = error.kind
+    elif interrupted:
+        kind = 'interrupted'
+    else:
+        kind = 'error'
+    info = {
+        'kind': kind,
+        'message': str(error)
+        or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
+        'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
+        'time': getattr(error, 'time', time),
+        'step': step,
+        'wall_time': wall_time,
+        'detected_by': detected_by,
+    }
+    if isinstance(error, ConnectivityLostError):
+        info.update(edge=list(error.edge), length=error.length)
+    if isinstance(error, InitialConditionError):
+        info.update(breaches=error.breaches)
+    return info
+
+
+def add_what_followed(info: dict | None, failures: dict[int, str]) -> None:
+    """After the first cause (`info`, extra.failure): the agents that then stopped on errors of
+    their own (`failures`: agent -> why, from their final reports), in `info['followed']` and after
+    the first cause in its message.  Not after an interruption: the signal stopped every agent."""
+    if info is None or info['kind'] == 'interrupted':
+        return
+    followed = {i: why for i, why in failures.items() if i not in info['agents']}
+    if not followed:
+        return
+    info['followed'] = {str(i): why for i, why in followed.items()}
+    agents = sorted(followed)
+    names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {ids_text(agents)}'
+    info['message'] += f'; then {names} stopped: {followed[agents[0]]}'
+
+
 @dataclass
 class AgentBook:
     """What the coordinator knows of one agent: its latest status and what it received from it."""

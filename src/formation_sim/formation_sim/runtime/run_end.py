@@ -36,7 +36,8 @@ def collect_final_reports(
 
 
 def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
-    """What is left published, wait (bounded) until every reader acknowledged the Steps and the tools' topics."""
+    """What is left published, wait (bounded) until every reader acknowledged the Steps and the
+    tools' topics."""
     node.flush()
     _wait_acknowledged(
         executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec

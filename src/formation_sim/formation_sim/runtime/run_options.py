@@ -129,7 +129,8 @@ def _check_numbers(options: RunOptions, scenario: Scenario, horizon: float) -> N
         raise RunError(f'sample_period: {error}') from None
     if options.backend != 'exact' and not options.sample_period:
         raise RunError(
-            f'sample_period must be > 0 on robots (the poses are sampled on its grid), got {options.sample_period!r}'
+            'sample_period must be > 0 on robots (the poses are sampled on its grid), '
+            f'got {options.sample_period!r}'
         )
     timeout = options.timeout
     if timeout is not None and not (

@@ -42,10 +42,9 @@ from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
 from formation_sim.runtime.run_book import (
-    ConnectivityLostError,
-    CoordinatorError,
+    add_what_followed,
+    failure_extra,
     DiscoveryError,
-    InitialConditionError,
     RecorderBook,
     RunBook,
     ids_text,
@@ -82,21 +81,29 @@ TIME_KEEPER_PARAMETERS = (
         low=0.0,
         high=math.inf,
         high_open=True,
-        description='spacing of the formation samples in summary.json [s] (simulator: 0 = at events only; robots: > 0)',
+        description=(
+            'spacing of the formation samples in summary.json [s] '
+            '(simulator: 0 = at events only; robots: > 0)'
+        ),
     ),
     ParameterSpec(
         name='extra_subscribers',
         type=INTEGER,
         default=0,
         low=0,
-        description="listeners besides the run's own nodes (a recorder) that must match every topic before step 0",
+        description=(
+            "listeners besides the run's own nodes (a recorder) that must match every topic before step 0"
+        ),
     ),
     ParameterSpec(
         name='step_listeners',
         type=INTEGER,
         default=0,
         low=0,
-        description='nodes outside the run (monitors, fault injectors) that must hear every Step: step 0 waits for them',
+        description=(
+            'nodes outside the run (monitors, fault injectors) '
+            'that must hear every Step: step 0 waits for them'
+        ),
     ),
     ParameterSpec(
         name='progress_period',
@@ -284,7 +291,8 @@ class TimeKeeperNode(WorldHooks, Node):
             self._print_progress()
 
     def _discovery_tick(self, now: float) -> None:
-        """Before step 0: start once connected, give up after the discovery timeout, else say what is missing."""
+        """Before step 0: start once connected, give up after the discovery timeout, else say what
+        is missing."""
         if self.book.all_ready() and self._connected():  # (cheap while agents are missing)
             self._start()
         elif now - self._created > self.discovery_timeout:
@@ -318,7 +326,8 @@ class TimeKeeperNode(WorldHooks, Node):
         self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
             self._say(
-                f'progress discovery done in {self._started - self._created:.1f} s; {note}t=0 ({self.clock_mode})'
+                f'progress discovery done in {self._started - self._created:.1f} s; '
+                f'{note}t=0 ({self.clock_mode})'
             )
         self._publish(
             self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
@@ -348,43 +357,21 @@ class TimeKeeperNode(WorldHooks, Node):
             self.graph = graph_of(self)
 
     def fail(self, error: BaseException) -> None:
-        """Note why the run stops early (extra.failure of the summary)."""
-        if self.failure_info is not None:
-            return
-        if isinstance(error, CoordinatorError):
-            kind = error.kind
-        elif isinstance(error, (KeyboardInterrupt, ExternalShutdownException)):
-            kind = 'interrupted'
-        else:
-            kind = 'error'
-        self.failure_info = {
-            'kind': kind,
-            'message': str(error)
-            or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-            'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
-            'time': getattr(error, 'time', self.reached_time),
-            'step': None if self.step is None else self.step.index,
-            'wall_time': time.monotonic() - (self._started or self._created),  # since t = 0 began
-            'detected_by': self.get_name().removeprefix('formation_'),
-        }
-        if isinstance(error, ConnectivityLostError):
-            self.failure_info.update(edge=list(error.edge), length=error.length)
-        if isinstance(error, InitialConditionError):
-            self.failure_info.update(breaches=error.breaches)
+        """Note why the run stops early (extra.failure of the summary): the first cause only."""
+        if self.failure_info is None:
+            self.failure_info = failure_extra(
+                error,
+                interrupted=isinstance(error, (KeyboardInterrupt, ExternalShutdownException)),
+                time=self.reached_time,
+                step=None if self.step is None else self.step.index,
+                wall_time=time.monotonic() - (self._started or self._created),  # since t = 0 began
+                detected_by=self.get_name().removeprefix('formation_'),
+            )
 
     def note_what_followed(self) -> None:
         """After the first cause: the agents that then stopped on errors of their own (their
         final reports), in `extra.failure.followed` and after the first cause in its message."""
-        info = self.failure_info
-        if info is None or info['kind'] == 'interrupted':  # every agent was stopped by the signal too
-            return
-        followed = {i: why for i, why in self.book.failures().items() if i not in info['agents']}
-        if not followed:
-            return
-        info['followed'] = {str(i): why for i, why in followed.items()}
-        agents = sorted(followed)
-        names = f'agent {agents[0]}' if len(agents) == 1 else f'agents {ids_text(agents)}'
-        info['message'] += f'; then {names} stopped: {followed[agents[0]]}'
+        add_what_followed(self.failure_info, self.book.failures())
 
     # -- the agents' messages -------------------------------------------------------------------
 
@@ -491,7 +478,8 @@ class TimeKeeperNode(WorldHooks, Node):
         events = sum(len(book.trigger_times) for book in self.agents.values())
         try:
             print(
-                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} events={events} steps={self.steps} '
+                f'progress t={self.reached_time:.6f} horizon={self.horizon:g} '
+                f'events={events} steps={self.steps} '
                 f'wall={time.monotonic() - (self._started or self._created):.1f}s',
                 flush=True,
             )
