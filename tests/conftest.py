@@ -68,6 +68,16 @@ def long_run_scenario(tmp_path_factory) -> str:
     return str(path)
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads the groups
+def pytest_collection_modifyitems(items):
+    """The tests that use `ros` (a module's own `DOMAIN_ID`) run on one pytest-xdist worker per
+    module (`--dist loadgroup`): two tests of one module on two workers at once were one ROS domain
+    with, say, two robots 1 publishing on one topic.  A test already in a group keeps it."""
+    for item in items:
+        if 'ros' in getattr(item, 'fixturenames', ()) and item.get_closest_marker('xdist_group') is None:
+            item.add_marker(pytest.mark.xdist_group(f'ros_domain_{item.module.DOMAIN_ID}'))
+
+
 @pytest.fixture(scope='module')
 def ros(request, tmp_path_factory):
     """An rclpy context on the test module's own `DOMAIN_ID`, discovery limited to this machine."""
