@@ -87,3 +87,34 @@ def test_a_shutdown_that_ends_in_time_leaves_no_watchdog_behind() -> None:
     with shutdown_guard('formation_test', lambda: 7, bound=0.05):
         pass
     assert not any(thread.name == 'shutdown_guard' for thread in threading.enumerate())
+
+
+_STUCK_NODE = """
+import sys, time
+from formation_agent.ros.process import StopSignals
+with StopSignals():
+    print('ready', flush=True)
+    while True:
+        time.sleep(0.05)  # stuck here: its stack names this line
+"""
+
+
+def test_a_stuck_node_asked_for_its_stacks_writes_them_and_lives_on() -> None:
+    import subprocess
+    import time
+
+    from formation_agent.ros.process import STACKS_SIGNAL
+
+    child = subprocess.Popen(
+        [sys.executable, '-c', _STUCK_NODE], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert child.stdout.readline().strip() == 'ready'
+        os.kill(child.pid, STACKS_SIGNAL)
+        time.sleep(0.5)
+        assert child.poll() is None, 'the signal ended the process'
+    finally:
+        child.terminate()  # SIGTERM: StopSignals takes it; the loop above does not look, so kill
+        child.kill()
+        _, stderr = child.communicate(timeout=10)
+    assert 'most recent call first' in stderr and 'line 7' in stderr, stderr

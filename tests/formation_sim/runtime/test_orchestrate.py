@@ -443,3 +443,20 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
         status == 2
         and 'the run did not start (no Step 0; extra.failure initial_condition: edge (1,2)' in out.err
     ), (status, out)
+
+
+@pytest.mark.timeout(120)
+def test_a_run_that_times_out_names_the_children_still_running_and_their_stacks_are_in_their_logs(
+    tmp_path, long_run_scenario
+):
+    """A run stuck past its timeout (here a 600 s scenario given 4 s) asks each child still
+    running for its threads' stacks before it stops them: the log says where each one was."""
+    from formation_sim.runtime.orchestrate import EXIT_FAILED, FormationRun
+
+    run = FormationRun(long_run_scenario, out_dir=tmp_path / 'run', domain_id=74, progress=False, timeout=4.0)
+    result = run.run()
+    assert result.exit_status == EXIT_FAILED
+    assert 'timed out after 4.0 s; still running: ' in result.message, result.message
+    assert 'simulator (stacks in ' in result.message, result.message
+    log = next(child.log for child in run._children if child.name == 'simulator')
+    assert 'most recent call first' in log.read_text(), log.read_text()[-2000:]

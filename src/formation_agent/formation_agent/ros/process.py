@@ -72,6 +72,16 @@ class SignalFlag:
         return self._set
 
 
+STACKS_SIGNAL = signal.SIGUSR1  # `formation run` asks a child that outlived its timeout for its stacks
+
+
+def stacks_on_signal() -> None:
+    """Every thread's stack on stderr (the run's log) when STACKS_SIGNAL comes: a run that timed
+    out says where each of its children still was (`FormationRun`, before it stops them)."""
+    with contextlib.suppress(Exception):  # stderr may be closed; the signal is then the default's
+        faulthandler.register(STACKS_SIGNAL, file=sys.stderr, all_threads=True)
+
+
 class StopSignals:
     """SIGINT and SIGTERM as a flag that the spin loop turns into KeyboardInterrupt between spins.
 
@@ -90,6 +100,7 @@ class StopSignals:
 
     def __enter__(self) -> StopSignals:
         self._previous = {sig: signal.signal(sig, self._on_signal) for sig in self.SIGNALS}
+        stacks_on_signal()
         return self
 
     def __exit__(self, *exc_info) -> None:

@@ -113,6 +113,7 @@ __all__ = [
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
 SHM_SNAPSHOT_PERIOD = 0.2
+STACKS_WAIT = 0.5  # [s] for the children asked for their stacks on a timeout to write them
 
 
 def _process_started() -> float:
@@ -373,6 +374,17 @@ class FormationRun:
             )
         return keeper
 
+    def _timed_out(self) -> str:
+        """The timeout's message, once the children still running wrote their stacks to their logs
+        (where each was stuck), before they are stopped."""
+        asked = self._supervisor.ask_for_stacks()
+        if not asked:
+            return f'timed out after {self.options.timeout} s'
+        time.sleep(STACKS_WAIT)
+        return f'timed out after {self.options.timeout} s; still running: ' + ', '.join(
+            f'{child.name} (stacks in {child.log})' for child in asked
+        )
+
     def _launch_and_watch(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:
         """Start the children and watch them: (exit status, message, the child that was lost)."""
         supervisor = self._supervisor
@@ -386,7 +398,7 @@ class FormationRun:
                 return EXIT_INTERRUPTED, 'interrupted', lost
             now = time.monotonic()
             if deadline is not None and now > deadline:
-                return EXIT_FAILED, f'timed out after {self.options.timeout} s', lost
+                return EXIT_FAILED, self._timed_out(), lost
             if self.options.progress and self.last_progress != shown:
                 shown = self.last_progress
                 say(shown)

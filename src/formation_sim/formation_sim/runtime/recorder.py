@@ -600,7 +600,13 @@ def main(args: Sequence[str] | None = None) -> int:
     from rclpy.signals import SignalHandlerOptions
     from rclpy.task import Future
 
-    from formation_agent.ros.process import EXIT_BAD_INPUT, SignalFlag, make_executor, shutdown_guard
+    from formation_agent.ros.process import (
+        EXIT_BAD_INPUT,
+        SignalFlag,
+        make_executor,
+        shutdown_guard,
+        stacks_on_signal,
+    )
 
     argv = list(args if args is not None else sys.argv)
     _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts (exit 0)
@@ -616,6 +622,7 @@ def main(args: Sequence[str] | None = None) -> int:
     # still queued in the subscriptions are taken.
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    stacks_on_signal()
     node: RecorderNode | None = None
     try:
         node = RecorderNode()

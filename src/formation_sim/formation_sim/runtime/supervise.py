@@ -21,6 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from formation_agent.ros.process import STACKS_SIGNAL
 from formation_sim.runtime.fastdds_shm import domain_port_files, fastdds_names, held_files, remove_orphans
 from formation_sim.runtime.launch import ProcessSpec
 
@@ -142,6 +143,16 @@ class Supervisor:
                 handle.flush()
             if line.startswith(PROGRESS_PREFIX):
                 self.last_progress = line[len(PROGRESS_PREFIX) :].strip()
+
+    def ask_for_stacks(self) -> list[Child]:
+        """Each of the run's node processes still running writes every thread's stack to its log
+        (STACKS_SIGNAL, `formation_agent.ros.process.stacks_on_signal`); the discovery server is
+        not ours and is left alone.  The children asked."""
+        asked = [child for child in self.children if child.alive() and child.name != 'discovery_server']
+        for child in asked:
+            with contextlib.suppress(OSError):
+                os.kill(child.pid, STACKS_SIGNAL)
+        return asked
 
     def note_exits(self, now: float) -> None:
         for child in self.children:
