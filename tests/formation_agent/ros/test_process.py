@@ -95,7 +95,7 @@ from formation_agent.ros.process import StopSignals
 with StopSignals():
     print('ready', flush=True)
     while True:
-        time.sleep(0.05)  # stuck here: its stack names this line
+        time.sleep(0.05)  # stuck here
 """
 
 
@@ -117,4 +117,5 @@ def test_a_stuck_node_asked_for_its_stacks_writes_them_and_lives_on() -> None:
         child.terminate()  # SIGTERM: StopSignals takes it; the loop above does not look, so kill
         child.kill()
         _, stderr = child.communicate(timeout=10)
-    assert 'most recent call first' in stderr and 'line 7' in stderr, stderr
+    # Its main thread's stack, wherever the signal found it (still leaving print, or in the loop).
+    assert 'most recent call first' in stderr and 'File "<string>"' in stderr, stderr
