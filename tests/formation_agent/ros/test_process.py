@@ -6,6 +6,8 @@ import os
 import signal
 import sys
 
+import pytest
+
 from formation_agent.ros.process import SignalFlag, StopSignals
 
 
@@ -87,6 +89,35 @@ def test_a_shutdown_that_ends_in_time_leaves_no_watchdog_behind() -> None:
     with shutdown_guard('formation_test', lambda: 7, bound=0.05):
         pass
     assert not any(thread.name == 'shutdown_guard' for thread in threading.enumerate())
+
+
+_GIL_HELD = """
+import atexit, ctypes
+from formation_agent.ros import process
+process.GIL_FREE_MARGIN = 0.3
+process.EXIT_BOUND = 0.5
+held = ctypes.PyDLL(None).sleep  # PyDLL keeps the GIL through the C call
+{body}
+"""
+
+_SHUTDOWN_HOLDING_THE_GIL = """with process.shutdown_guard('formation_test', lambda: 7, bound=0.3):
+    held(60)  # a shutdown blocked in C code that holds the GIL: the guard's thread never runs"""
+
+_EXIT_HOLDING_THE_GIL = """atexit.register(held, 60)  # an exit handler blocked in C code, the GIL held
+process.exit_process(0)"""
+
+
+@pytest.mark.parametrize('body', [_SHUTDOWN_HOLDING_THE_GIL, _EXIT_HOLDING_THE_GIL], ids=['shutdown', 'exit'])
+def test_a_process_blocked_in_c_code_that_holds_the_gil_still_leaves_with_its_stacks(body: str) -> None:
+    import subprocess
+
+    # (without faulthandler's thread the child sleeps 60 s, and the run below times out)
+    done = subprocess.run(
+        [sys.executable, '-c', _GIL_HELD.format(body=body)], capture_output=True, text=True, timeout=30
+    )
+    assert done.returncode == 1, done.stderr
+    assert 'Timeout (0:00:00' in done.stderr, done.stderr  # faulthandler's dump, then _exit(1)
+    assert 'File "<string>", line 8 in <module>' in done.stderr, done.stderr  # where it was held
 
 
 _STUCK_NODE = """

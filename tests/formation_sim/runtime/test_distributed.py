@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formation_sim.sim.engine import simulate
 from formation_sim.model.scenario import load_scenario
+from formation_sim.runtime.launch import LOG_DIR
+from formation_sim.sim.engine import simulate
 
 # Each run starts 4-5 ROS processes: one run at a time on this suite's worker.
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_distributed')]
@@ -92,8 +93,23 @@ def test_lockstep_run_reproduces_the_in_process_engine(
         assert counts[f'/agent_{i}/{command}'] == len(reference.trigger_times[i])
 
     _assert_agents_isolated(json.loads((result.out_dir / 'graph.json').read_text()), scenario)
-    assert all(child.returncode == 0 for child in result.children), result.children
+    _assert_children_left_cleanly(result)
     _assert_timeline(summary, result)
+
+
+def _assert_children_left_cleanly(result) -> None:
+    """Every child exited 0 by itself; one that did not is named with its log's end (its stacks,
+    if it was stuck: `Supervisor.ask_for_stacks`)."""
+    unclean = [child for child in result.children if child.returncode != 0]
+    tails = [
+        f'{child}:\n' + '\n'.join(_log_lines(result.out_dir / LOG_DIR / f'{child.name}.log')[-60:])
+        for child in unclean
+    ]
+    assert not unclean, '\n\n'.join(tails)
+
+
+def _log_lines(path: Path) -> list[str]:
+    return path.read_text(errors='replace').splitlines() if path.exists() else [f'(no log at {path})']
 
 
 def _assert_timeline(summary: dict, result) -> None:

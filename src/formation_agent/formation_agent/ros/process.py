@@ -32,6 +32,15 @@ SHUTDOWN_BOUND = 10.0
 """How long a node process may take to destroy its nodes and shut rclpy down [s] before it leaves
 without them (`shutdown_guard`): every command has gone out by then, a process must still end."""
 
+GIL_FREE_MARGIN = 2.0
+"""How much longer than its bound a guard waits before faulthandler's own thread, which needs no
+GIL, writes the stacks and leaves with status 1 (`shutdown_guard`, `exit_process`): a main thread
+blocked in C code while it holds the GIL starves the guard's Python thread."""
+
+EXIT_BOUND = 5.0
+"""How long `exit_process` may take (exit handlers, flushing) [s] before faulthandler's thread
+writes the stacks and leaves with status 1."""
+
 # EXECUTORS (formation_msgs_py.middleware): rclpy's EventsExecutor (default) or the
 # SingleThreadedExecutor. The SingleThreadedExecutor rebuilds its wait set in Python on every spin;
 # on a 2-core machine that was most of the simulator's time per lock-step step (BENCHMARKS.md).
@@ -124,8 +133,11 @@ def exit_process(status: int) -> NoReturn:
     Python's exit handlers run and its streams are flushed, but the C++ static destructors are
     skipped: Fast DDS's DomainParticipantFactory destructor sleeps a fixed 100 ms at every process
     exit (the participant itself is gone with rclpy's shutdown), and a run waits for its
-    simulator, its agents and its recorder to exit one after the other.
+    simulator, its agents and its recorder to exit one after the other.  After EXIT_BOUND it leaves
+    with status 1 and the stacks on stderr, whatever holds it.
     """
+    with contextlib.suppress(Exception):
+        faulthandler.dump_traceback_later(EXIT_BOUND, exit=True, file=sys.stderr)
     with contextlib.suppress(Exception):
         atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
@@ -162,8 +174,11 @@ def shutdown_guard(
 
     watchdog = threading.Thread(target=leave, name='shutdown_guard', daemon=True)
     watchdog.start()
+    with contextlib.suppress(Exception):  # stderr closed: the Python guard alone
+        faulthandler.dump_traceback_later(bound + GIL_FREE_MARGIN, exit=True, file=sys.stderr)
     try:
         yield
     finally:
+        faulthandler.cancel_dump_traceback_later()
         done.set()
         watchdog.join()

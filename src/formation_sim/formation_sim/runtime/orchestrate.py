@@ -113,7 +113,6 @@ __all__ = [
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
 SHM_SNAPSHOT_PERIOD = 0.2
-STACKS_WAIT = 0.5  # [s] for the children asked for their stacks on a timeout to write them
 
 
 def _process_started() -> float:
@@ -380,7 +379,6 @@ class FormationRun:
         asked = self._supervisor.ask_for_stacks()
         if not asked:
             return f'timed out after {self.options.timeout} s'
-        time.sleep(STACKS_WAIT)
         return f'timed out after {self.options.timeout} s; still running: ' + ', '.join(
             f'{child.name} (stacks in {child.log})' for child in asked
         )

@@ -30,6 +30,7 @@ SHM_LOOK_PERIOD = (
     2.0  # children's shared-memory files are looked at when /dev/shm changes, or after this long [s]
 )
 PROGRESS_PREFIX = 'progress '
+STACKS_WAIT = 0.5  # [s] for the children asked for their stacks to write them (`ask_for_stacks`)
 
 try:  # looked up here, not in the forked child (a child before exec must take no lock)
     _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
@@ -144,14 +145,23 @@ class Supervisor:
             if line.startswith(PROGRESS_PREFIX):
                 self.last_progress = line[len(PROGRESS_PREFIX) :].strip()
 
-    def ask_for_stacks(self) -> list[Child]:
-        """Each of the run's node processes still running writes every thread's stack to its log
-        (STACKS_SIGNAL, `formation_agent.ros.process.stacks_on_signal`); the discovery server is
-        not ours and is left alone.  The children asked."""
-        asked = [child for child in self.children if child.alive() and child.name != 'discovery_server']
+    def ask_for_stacks(self, children: Sequence[Child] | None = None) -> list[Child]:
+        """Each of `children` (default: the run's) still running writes every thread's stack to its
+        log (STACKS_SIGNAL, `formation_agent.ros.process.stacks_on_signal`), given STACKS_WAIT to do
+        it; the discovery server is not ours and is left alone.  The children asked.
+
+        faulthandler writes from its C signal handler: a process whose main thread is blocked in C
+        code, holding the GIL or not, still says where it is."""
+        asked = [
+            child
+            for child in (self.children if children is None else children)
+            if child.alive() and child.name != 'discovery_server'
+        ]
         for child in asked:
             with contextlib.suppress(OSError):
                 os.kill(child.pid, STACKS_SIGNAL)
+        if asked:
+            time.sleep(STACKS_WAIT)
         return asked
 
     def note_exits(self, now: float) -> None:
@@ -184,6 +194,7 @@ class Supervisor:
         leaving = [c for c in self.children if c.expected_exit and c is not besides]
         while any(c.alive() for c in leaving) and time.monotonic() < limit:
             time.sleep(POLL_PERIOD)
+        self.ask_for_stacks(leaving)  # one that should have left: where it is, before it is stopped
         return [c for c in leaving if not c.alive() and c.process.returncode != 0]
 
     def stop(self, timeouts: tuple[float, float], *, domain_id: int, robots_after: float = 0.0) -> list[str]:
@@ -231,6 +242,9 @@ class Supervisor:
             alive = [c for c in children if c.alive()]
             if not alive:
                 break
+            if sig != signal.SIGINT:  # it did not stop when asked: where it is stuck, in its log
+                self.ask_for_stacks(alive)
+                alive = [c for c in alive if c.alive()]
             for child in alive:  # what it maps now: a child that stops unmaps what its dead peers left
                 child.shm_files |= held_files(child.pid)
                 child.signal_used = sig.name
