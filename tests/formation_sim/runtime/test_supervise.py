@@ -40,5 +40,5 @@ def test_a_child_deaf_to_sigint_writes_its_stacks_to_its_log_before_it_is_termin
     # SIGINT and SIGTERM set StopSignals' flag, which this node never reads: SIGKILL ended it.
     assert child.process.returncode == -9 and child.signal_used == 'SIGKILL'
     log = child.log.read_text()
-    # Asked three times: after it did not leave by itself, before SIGTERM and before SIGKILL.
+    # Asked three times: before its wait to leave by itself ends, and before SIGTERM and SIGKILL.
     assert log.count('File "<string>", line 7 in <module>') == 3, log

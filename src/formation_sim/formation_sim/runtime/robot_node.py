@@ -70,6 +70,7 @@ from formation_agent.ros.process import (
     StopSignals,
     exit_process,
     make_executor,
+    release_ros,
     shutdown_guard,
 )
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
@@ -448,6 +449,7 @@ def main(args: Sequence[str] | None = None) -> int:
     options = _parse(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[SimulatedRobotNode] = []
+    executor = None
     status = 0
     with StopSignals() as stop:
         try:
@@ -490,9 +492,8 @@ def main(args: Sequence[str] | None = None) -> int:
                     f'clipped by the limits {node.robot.saturated}, stops on timeout {node.timeouts}'
                 )
             with shutdown_guard('formation_robot', lambda: status):
-                for node in nodes:
-                    node.destroy_node()
-                rclpy.try_shutdown()
+                release_ros(executor, nodes)
+                executor = None  # its C++ teardown, under the guard
     return status
 
 
