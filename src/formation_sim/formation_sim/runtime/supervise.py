@@ -129,6 +129,7 @@ class Supervisor:
             start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
             preexec_fn=_die_with_parent,  # noqa: PLW1509 - only prctl, no locks taken
             text=True,
+            errors='replace',  # a stray byte in the time keeper's output must not end _pump
         )
         child = Child(name=spec.name, process=process, log=log, expected_exit=spec.expected_exit)
         if spec.keeper:
