@@ -130,6 +130,7 @@ class Bench:
             2: {'xy': (0.5, 0.3), 'theta': 0.0, 'twist': (0.0, 0.0)},
         }
         self.silent: set[int] = set()  # robots whose poses stopped
+        self.last_pose_at: dict[int, float] = {}  # time.time() each robot's pose was last published
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         kind, topic = (PoseStamped, robot_pose_topic) if pose_type == 'pose' else (Odometry, robot_odom_topic)
         self._pose_kind = kind
@@ -185,6 +186,7 @@ class Bench:
                 msg.child_frame_id = f'robot_{robot}'
                 msg.twist.twist.linear.x, msg.twist.twist.angular.z = state['twist']
             self._pose_pubs[robot].publish(msg)
+            self.last_pose_at[robot] = now
 
     def spin_until(self, predicate, *, timeout: float, what: str) -> None:
         deadline = time.monotonic() + timeout

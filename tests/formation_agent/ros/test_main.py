@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 import pytest
+import yaml
 
 from formation_agent.config import (
     DIRECTORY as CONFIG,
@@ -233,7 +234,8 @@ def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, ag
     rig.spin_until(
         lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
     )
-    assert time.time() > rig.epoch + horizon + 0.5  # its pose is stale (pose_timeout 0.5 s)
+    # Its pose is stale (pose_timeout 0.5 s from the last one, published up to a tick before the horizon).
+    assert time.time() > rig.last_pose_at[1] + 0.5
     assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
     rig.finish()
     assert rig.wait_for_exit(agent) == 0
@@ -285,12 +287,17 @@ def test_an_exception_in_the_node_stops_the_robot(bench, agent_process):
     ],
 )
 def test_the_example_parameter_files_make_the_documented_robot(
-    bench, agent_process, name, robot, pose_type, allowed
+    bench, agent_process, tmp_path, name, robot, pose_type, allowed
 ):
     """README's one command per robot: the team's file, then the robot's example file from config/."""
     rig = bench(robot=robot, pose_type=pose_type)
     rig.robots[2]['xy'] = (3.0, 0.3)  # far from its place: the agent asks for more than the robot can do
-    agent = agent_process(params_files=(CONFIG / f'{name}.params.yaml',))
+    # The poses come from this test's Python (the rig), which a loaded machine may pause longer
+    # than the crazyflie's 0.1 s pose_timeout; the safety stop is not what is tested here
+    # (test_a_stale_*_pose_*): a last file widens it.
+    patient = tmp_path / 'patient.params.yaml'
+    patient.write_text(yaml.safe_dump({'/**': {'ros__parameters': {'pose_timeout': 5.0}}}))
+    agent = agent_process(params_files=(CONFIG / f'{name}.params.yaml', patient))
     rig.start()
     rig.spin_until(lambda: len(rig.commands) >= 5, timeout=15.0, what='five commands')
     rig.finish()

@@ -29,16 +29,45 @@ def _wait_for_line(log: Path, line: str, *, timeout: float = 20.0) -> None:
     raise AssertionError(f'{log} never said {line!r}')
 
 
-def test_a_child_deaf_to_sigint_writes_its_stacks_to_its_log_before_it_is_terminated(tmp_path) -> None:
+def test_a_child_deaf_to_sigint_writes_its_stacks_to_its_log_before_it_is_terminated(
+    tmp_path, monkeypatch
+) -> None:
+    from formation_sim.runtime import supervise
+
+    # Each wait asks for the stacks at once and gives the child all of it to write them: 1.5 s,
+    # for a loaded machine (0.5 s in a run).
+    monkeypatch.setattr(supervise, 'STACKS_WAIT', 1.5)
     supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
     child = supervisor.start(ProcessSpec(name='agent_1', args=('-c', _DEAF_NODE), expected_exit=True))
     _wait_for_line(child.log, 'ready')
 
-    assert supervisor.wait_for_expected(0.2, besides=None) == []  # it did not leave: asked, not failed
-    supervisor.stop((0.3, 0.3), domain_id=232)
+    assert supervisor.wait_for_expected(1.5, besides=None) == []  # it did not leave: asked, not failed
+    supervisor.stop((1.5, 1.5), domain_id=232)
 
     # SIGINT and SIGTERM set StopSignals' flag, which this node never reads: SIGKILL ended it.
     assert child.process.returncode == -9 and child.signal_used == 'SIGKILL'
     log = child.log.read_text()
-    # Asked three times: after it did not leave by itself, before SIGTERM and before SIGKILL.
+    # Asked three times: before its wait to leave by itself ends, and before SIGTERM and SIGKILL.
     assert log.count('File "<string>", line 7 in <module>') == 3, log
+
+
+# A time keeper whose output holds a byte that is not UTF-8, then more than a pipe holds.
+_STRAY_BYTE_KEEPER = r"""
+import sys
+sys.stdout.buffer.write(b'\xff fast dds said this\n')
+for i in range(5000):
+    sys.stdout.buffer.write(b'progress t=%d, a line of some length to fill a pipe quickly\n' % i)
+sys.stdout.flush()
+"""
+
+
+def test_a_time_keeper_writing_a_stray_byte_is_still_read_to_its_end(tmp_path) -> None:
+    supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
+    keeper = supervisor.start(
+        ProcessSpec(name='simulator', args=('-c', _STRAY_BYTE_KEEPER), expected_exit=True, keeper=True)
+    )
+    # Its 5000 lines (~330 kB) pass through the pipe only while the supervisor reads them.
+    assert keeper.process.wait(timeout=30) == 0
+    _wait_for_line(keeper.log, 'progress t=4999, a line of some length to fill a pipe quickly')
+    assert supervisor.last_progress == 't=4999, a line of some length to fill a pipe quickly'
+    assert keeper.log.read_text().startswith('\ufffd fast dds said this\n')

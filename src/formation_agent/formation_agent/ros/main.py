@@ -50,6 +50,7 @@ from formation_agent.ros.process import (
     StopSignals,
     exit_process,
     make_executor,
+    release_ros,
     shutdown_guard,
 )
 from formation_agent.ros.staleness import StaleStateError
@@ -149,6 +150,7 @@ def main(args: Sequence[str] | None = None) -> int:
     options = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[FormationAgentNode] = []
+    executor = None
     status = 0
     failure: str | None = None
     with StopSignals() as stop:
@@ -204,9 +206,8 @@ def main(args: Sequence[str] | None = None) -> int:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)
             with shutdown_guard('formation_agent', lambda: status):
-                for node in nodes:
-                    node.destroy_node()
-                rclpy.try_shutdown()
+                release_ros(executor, nodes)
+                executor = None  # its C++ teardown, under the guard
     return status
 
 

@@ -146,6 +146,22 @@ def exit_process(status: int) -> NoReturn:
     os._exit(status)
 
 
+def release_ros(executor, nodes) -> None:
+    """The end of a node process, in ros2/examples' order: the executor stops dispatching and lets
+    go of every entity (`shutdown`), the nodes are destroyed, rclpy is shut down.
+
+    Call it under `shutdown_guard`, inside StopSignals, and drop the executor there too
+    (`executor = None`): its C++ teardown then runs under the guard and with the stop signals
+    taken, not after `main` returns, where SIGTERM is fatal and nothing bounds it."""
+    import rclpy
+
+    if executor is not None:
+        executor.shutdown(timeout_sec=1.0)
+    for node in nodes:
+        node.destroy_node()
+    rclpy.try_shutdown()
+
+
 @contextlib.contextmanager
 def shutdown_guard(
     command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND

@@ -60,6 +60,7 @@ from formation_agent.ros.process import (
     StopSignals,
     exit_process,
     make_executor,
+    release_ros,
     shutdown_guard,
 )
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
@@ -582,9 +583,8 @@ def main(
             _stop_and_write(node, executor, error)
         finally:
             with shutdown_guard(node_class.COMMAND, lambda: status):
-                if node is not None:
-                    node.destroy_node()
-                rclpy.try_shutdown()
+                release_ros(executor, [] if node is None else [node])
+                executor = None  # its C++ teardown, under the guard
     return status
 
 

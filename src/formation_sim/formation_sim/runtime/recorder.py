@@ -604,6 +604,7 @@ def main(args: Sequence[str] | None = None) -> int:
         EXIT_BAD_INPUT,
         SignalFlag,
         make_executor,
+        release_ros,
         shutdown_guard,
         stacks_on_signal,
     )
@@ -624,6 +625,7 @@ def main(args: Sequence[str] | None = None) -> int:
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     stacks_on_signal()
     node: RecorderNode | None = None
+    executor = None
     try:
         node = RecorderNode()
         # The EventsExecutor takes a message several times faster than the SingleThreadedExecutor,
@@ -652,9 +654,8 @@ def main(args: Sequence[str] | None = None) -> int:
             'formation_recorder',
             lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0,
         ):
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+            release_ros(executor, [] if node is None else [node])
+            executor = None  # its C++ teardown, under the guard and the stop handlers
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if node is not None and node.failure is not None:

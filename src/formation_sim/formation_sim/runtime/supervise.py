@@ -129,6 +129,7 @@ class Supervisor:
             start_new_session=True,  # own process group: a terminal's Ctrl-C reaches only us
             preexec_fn=_die_with_parent,  # noqa: PLW1509 - only prctl, no locks taken
             text=True,
+            errors='replace',  # a stray byte in the time keeper's output must not end _pump
         )
         child = Child(name=spec.name, process=process, log=log, expected_exit=spec.expected_exit)
         if spec.keeper:
@@ -145,10 +146,11 @@ class Supervisor:
             if line.startswith(PROGRESS_PREFIX):
                 self.last_progress = line[len(PROGRESS_PREFIX) :].strip()
 
-    def ask_for_stacks(self, children: Sequence[Child] | None = None) -> list[Child]:
+    def ask_for_stacks(self, children: Sequence[Child] | None = None, *, wait: bool = True) -> list[Child]:
         """Each of `children` (default: the run's) still running writes every thread's stack to its
         log (STACKS_SIGNAL, `formation_agent.ros.process.stacks_on_signal`), given STACKS_WAIT to do
-        it; the discovery server is not ours and is left alone.  The children asked.
+        it (`wait`; else the caller waits); the discovery server is not ours and is left alone.  The
+        children asked.
 
         faulthandler writes from its C signal handler: a process whose main thread is blocked in C
         code, holding the GIL or not, still says where it is."""
@@ -160,9 +162,21 @@ class Supervisor:
         for child in asked:
             with contextlib.suppress(OSError):
                 os.kill(child.pid, STACKS_SIGNAL)
-        if asked:
+        if asked and wait:
             time.sleep(STACKS_WAIT)
         return asked
+
+    def _wait(self, children: Sequence[Child], limit: float, *, ask_for_stacks: bool = True) -> None:
+        """Until `children` have left or time.monotonic() reaches `limit`; those still running
+        STACKS_WAIT before it are asked for their stacks (`ask_for_stacks`), so that they are
+        written before the next signal.  The wait is never longer for it: a shorter one asks at
+        once, a zero one asks nothing."""
+        asked = not ask_for_stacks
+        while any(c.alive() for c in children) and time.monotonic() < limit:
+            if not asked and limit - time.monotonic() <= STACKS_WAIT:
+                self.ask_for_stacks([c for c in children if c.alive()], wait=False)
+                asked = True
+            time.sleep(POLL_PERIOD)
 
     def note_exits(self, now: float) -> None:
         for child in self.children:
@@ -192,9 +206,8 @@ class Supervisor:
         that left with a non-zero status."""
         limit = time.monotonic() + timeout
         leaving = [c for c in self.children if c.expected_exit and c is not besides]
-        while any(c.alive() for c in leaving) and time.monotonic() < limit:
-            time.sleep(POLL_PERIOD)
-        self.ask_for_stacks(leaving)  # one that should have left: where it is, before it is stopped
+        # One that should have left says where it is before it is stopped.
+        self._wait(leaving, limit)
         return [c for c in leaving if not c.alive() and c.process.returncode != 0]
 
     def stop(self, timeouts: tuple[float, float], *, domain_id: int, robots_after: float = 0.0) -> list[str]:
@@ -242,9 +255,6 @@ class Supervisor:
             alive = [c for c in children if c.alive()]
             if not alive:
                 break
-            if sig != signal.SIGINT:  # it did not stop when asked: where it is stuck, in its log
-                self.ask_for_stacks(alive)
-                alive = [c for c in alive if c.alive()]
             for child in alive:  # what it maps now: a child that stops unmaps what its dead peers left
                 child.shm_files |= held_files(child.pid)
                 child.signal_used = sig.name
@@ -252,6 +262,5 @@ class Supervisor:
                     os.killpg(child.pid, sig)  # the group we created for it, nothing else
                     if sig == signal.SIGINT:
                         os.killpg(child.pid, signal.SIGCONT)  # a stopped child (SIGSTOP) must hear it
-            limit = time.monotonic() + wait
-            while any(c.alive() for c in alive) and time.monotonic() < limit:
-                time.sleep(0.05)
+            # One that does not stop when asked says where it is stuck.
+            self._wait(alive, time.monotonic() + wait, ask_for_stacks=sig != signal.SIGKILL)
