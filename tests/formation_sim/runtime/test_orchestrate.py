@@ -1,6 +1,6 @@
 """`formation run` on robots: simulated unicycles and holonomic robots, and robots started apart
 as real ones would be (`--backend external`).  Real processes on the wall clock in private ROS
-domains 163-165; robots_square with short horizons (its commands settle in about a second).
+domains 163-166 and 190; robots_square with short horizons (its commands settle in about a second).
 
 What issue 9 asks of each: the run exits 0, no edge reaches Δ, the bag holds every robot's
 command topic and its last message is a stop, and `formation analyze DIR` exits 0 (every check
@@ -353,6 +353,78 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
     assert after, f'the bag holds no pose of robot 2 after its timeout (killed at {killed_at}): {failure}'
     assert all(vx == 0.0 and vy == 0.0 for vx, vy, _, _ in after)
     assert len({(x, y) for _, _, x, y in after}) == 1
+
+
+@pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
+@pytest.mark.timeout(300)
+def test_an_external_robot_killed_mid_run_is_the_first_cause_and_the_other_robots_stop(tmp_path, capsys):
+    """Issue 19: SIGKILL to one robot of a `formation robots` fleet (each robot its own process).
+    The fleet keeps its other robots (before, it stopped them all within its 0.25 s poll, and the
+    run named agent 2's stale pose as the first cause, exit 1): the coordinator sees robot 2
+    silent while the others publish and names it first (exit 3, `robot_lost`), every other robot
+    gets its zero command within the silence and a second, and `formation analyze` agrees."""
+    import threading
+
+    from formation_sim.runtime.fleet import RobotFleet
+    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+
+    domain = 190
+    fleet = RobotFleet(
+        'robots_square',
+        robots=RobotOptions(model='unicycle', robots_per_process=1),
+        out_dir=tmp_path / 'fleet',
+        domain_id=domain,
+        extra_env={'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOG_DIR': str(tmp_path / 'ros_log')},
+    )
+    statuses, deaths = [], []
+    fleet_worker = threading.Thread(
+        target=lambda: statuses.append(fleet.run(duration=250.0, on_death=deaths.append))
+    )
+    fleet_worker.start()
+    # The silence the coordinator allows a robot is the agents' pose timeout: 2 s, so that a robot
+    # process not scheduled for a while on a loaded machine is not taken for the dead one.
+    run = FormationRun(
+        'robots_square',
+        out_dir=tmp_path / 'external',
+        horizon=60.0,
+        domain_id=domain,
+        progress=False,
+        timeout=240.0,
+        backend='external',
+        robots=RobotOptions(model='unicycle', pose_timeout=float(TEST_POSE_TIMEOUT)),
+    )
+    results = []
+    worker = threading.Thread(target=lambda: results.append(run.run()))
+    worker.start()
+    try:
+        deadline = time.monotonic() + 180.0
+        while 't=' not in run.last_progress and worker.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert 't=' in run.last_progress, 'the run never started'
+        victim = next(child for child in fleet.supervisor.children if child.name == 'robot_2')
+        killed_at = time.time()
+        os.kill(victim.pid, signal.SIGKILL)
+        worker.join(timeout=150.0)
+        (result,) = results
+        assert result.exit_status == EXIT_LOST, result.message
+        assert result.message.startswith('robot 2 lost at t='), result.message
+        assert 'while the other robots still published' in result.message, result.message
+        failure = json.loads(result.summary.read_text())['extra']['failure']
+        assert failure['kind'] == 'robot_lost' and failure['agents'] == [2], failure
+        # The other robots ran on; each got its zero command within the silence and a second.
+        assert fleet_worker.is_alive() and [child.name for child in deaths] == ['robot_2']
+        ends = _zero_commands_after(result.bag, killed_at, agents=(1, 3, 4))
+        assert set(ends) == {1, 3, 4}, ends
+        assert max(ends.values()) - killed_at < float(TEST_POSE_TIMEOUT) + 1.0, (ends, killed_at)
+    finally:
+        fleet.stop()
+        fleet_worker.join(timeout=60.0)
+        worker.join(timeout=60.0)
+    assert statuses == [3]
+    # `formation analyze` finds the bag as summary.json says: the run stopped early, robot 2 lost.
+    capsys.readouterr()
+    assert main(['analyze', str(result.out_dir), '--no-figures']) == 0, capsys.readouterr()
 
 
 @pytest.mark.timeout(300)

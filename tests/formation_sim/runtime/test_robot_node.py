@@ -269,3 +269,62 @@ def test_a_holonomic_robot_takes_world_frame_commands_only_and_publishes_noisy_l
     assert len(errors) > 10
     assert 0.004 < errors.std() < 0.02
     assert _stamp(probe.odom[-1]) <= _stamp(probe.truth[-1]) - 0.04  # the latency
+
+
+class _Clocks:
+    """The robot node's clocks (wall and monotonic) with a jump: a process frozen (SIGSTOP) and
+    resumed finds both clocks `offset` s further on than its last tick (both run on through a freeze)."""
+
+    def __init__(self) -> None:
+        self.offset = 0.0
+
+    def time(self) -> float:
+        return time.time() + self.offset
+
+    def monotonic(self) -> float:
+        return time.monotonic() + self.offset
+
+
+@pytest.mark.parametrize(
+    ('gaps', 'moved'),
+    [
+        ((2.0,), 0.5),  # frozen 2 s right after its command: 0.5 s under it (the timeout), not 2 s
+        ((0.3, 0.3), 0.5),  # two ticks 0.3 s apart: stopped 0.5 s after the command, inside the second
+        ((0.3,), 0.3),  # within its timeout: it drives on
+    ],
+    ids=['frozen_2s', 'late_ticks', 'within_timeout'],
+)
+def test_a_robot_moves_under_its_last_command_for_its_timeout_at_most_however_late_its_next_tick(
+    ros, monkeypatch, gaps, moved
+):
+    """A base's watchdog stops it `command_timeout` after its last command, wherever its ticks fall:
+    a robot frozen 2 s (SIGSTOP) found, at its first tick after SIGCONT, that it had gone on under
+    its last command for the whole freeze (0.60 m at 0.3 m/s, measured), then stopped."""
+    from formation_sim.runtime import robot_node
+    from formation_sim.sim.robots import Command, Limits, make_robot
+
+    clocks = _Clocks()
+    monkeypatch.setattr(robot_node, 'time', clocks)
+    robot = _robot(
+        ros, shared=True, robot_id=5, model='unicycle', position=[0.0, 0.0], yaw=0.2, command_timeout=0.5
+    )
+    try:
+        command = Command(linear=(0.3,), angular=0.8)
+        robot._commands.append((clocks.monotonic(), command))  # as _on_command notes its arrival
+        robot.tick()  # takes the command at its arrival (no command latency)
+        start_position, start_yaw = robot.robot.position.copy(), robot.robot.yaw
+        for gap in gaps:
+            clocks.offset += gap
+            robot.tick()
+        exact = make_robot(
+            'unicycle', scenario_position=[0.0, 0.0], yaw=0.2, control_point_distance=0.1, limits=Limits()
+        )
+        exact.position, exact.yaw = start_position, start_yaw
+        exact.set_command(command)
+        exact.advance(moved)
+        # Within the clock readings between the command's arrival and the first tick (microseconds).
+        assert np.allclose(robot.robot.position, exact.position, atol=1e-4), (robot.robot.position, exact)
+        stopped = moved < sum(gaps)
+        assert robot.robot.command.is_zero == stopped and robot.timeouts == int(stopped)
+    finally:
+        robot.destroy_node()

@@ -1,7 +1,8 @@
 """`formation robots SCENARIO --model M --domain-id N`: simulated robots on their own, as real robots
 would be, for `formation run SCENARIO --backend external --robot M --domain-id N`.
 
-Exit status: 0 stopped (Ctrl-C, SIGTERM, or --duration over); 2 bad input; 3 a robot process died.
+Exit status: 0 stopped (Ctrl-C, SIGTERM, or --duration over); 2 bad input; 3 a robot process died
+(the other robots run on until stopped, as independent robots would).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ def register(subparsers) -> None:
         '/agent_<i>/robot/pose, odom and true_odom and takes /agent_<i>/robot/cmd_vel. They run until '
         'Ctrl-C or SIGTERM. Then run the team on them: formation run SCENARIO --backend external --robot M '
         '--domain-id N.',
-        epilog='Exit status: 0 stopped; 2 bad input; 3 a robot process died (see OUT/logs).',
+        epilog='Exit status: 0 stopped; 2 bad input; 3 a robot process died (see OUT/logs; the other robots '
+        'ran on until stopped).',
     )
     add_scenario_argument(parser)
     parser.add_argument(
@@ -90,10 +92,19 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     try:
-        status = fleet.run(duration=args.duration)
+        status = fleet.run(duration=args.duration, on_death=_tell_death)
     except RunError as error:
         return refuse('robots', error)
     print(f'logs: {fleet.plan.out_dir / "logs"}', file=sys.stderr)
     if status:
         print(f'formation robots: {", ".join(child.describe() for child in fleet.died)}', file=sys.stderr)
     return status
+
+
+def _tell_death(child) -> None:
+    """A robot process died: said at once; the other robots run on until Ctrl-C."""
+    print(
+        f'formation robots: {child.describe()}; the other robots run on until stopped',
+        file=sys.stderr,
+        flush=True,
+    )

@@ -10,12 +10,19 @@ fleet.run()   # until Ctrl-C / SIGTERM, fleet.stop(), or `duration`
 Each robot is a `robot_node` process (or `robots_per_process` to one) placed at its agent's
 scenario position, in the given ROS domain; the run started there with `--backend external`
 finds them by their topics.  The fleet takes no lock on the domain: the run does.
+
+A robot process that dies takes only its own robots with it: the others run on until the fleet
+is stopped, as independent robots would (each stops on its agent's zero command, or on its own
+command timeout).  Before, the fleet stopped every robot within its 0.25 s poll, so a run on it
+saw every robot's poses stop nearly together and once named an agent's stale pose as the first
+cause instead of the dead robot (1 external `robot_kill` run of 3, BENCHMARKS.md "Robot faults").
 """
 
 from __future__ import annotations
 
 import dataclasses
 import signal
+from collections.abc import Callable
 import threading
 import time
 from pathlib import Path
@@ -72,14 +79,15 @@ class RobotFleet:
             localhost_only=localhost_only,
         )
         self.supervisor: Supervisor | None = None
-        self.died: list = []  # robot processes that exited on their own
+        self.died: list = []  # robot processes that exited on their own, in the order seen
         self._stop = SignalFlag()  # set in a signal handler: no lock (process.SignalFlag)
 
     def stop(self) -> None:
         self._stop.set()
 
-    def run(self, *, duration: float | None = None) -> int:
-        """Start the robots and keep them until stopped; 0, or 3 if a robot process died."""
+    def run(self, *, duration: float | None = None, on_death: Callable[[object], None] | None = None) -> int:
+        """Start the robots and keep them until stopped; 0, or 3 if a robot process died (the others
+        run on; `on_death` is told of each dead process, a `supervise.Child`, when it is seen)."""
         try:
             out = claim_out_dir(
                 self.out_dir, scenario_name=self.scenario.name, kind='robots', force=self.force
@@ -97,21 +105,23 @@ class RobotFleet:
             if trapped
             else {}
         )
-        status = 0
         try:
             for spec in self.plan.robot_processes(params):
                 self.supervisor.start(spec)
             deadline = None if duration is None else time.monotonic() + duration
             while not self._stop.is_set() and (deadline is None or time.monotonic() < deadline):
                 self.supervisor.note_exits(time.monotonic())
-                if dead := [c for c in self.supervisor.children if c.exited_at is not None]:
-                    self.died = dead
-                    status = 3
-                    break
+                for child in self.supervisor.children:
+                    if child.exited_at is not None and child not in self.died:
+                        self.died.append(child)
+                        if on_death is not None:
+                            on_death(child)
+                if len(self.died) == len(self.supervisor.children):
+                    break  # nothing left to run
                 self.supervisor.note_shm_files(time.monotonic())
                 time.sleep(max(POLL_PERIOD, 0.25))
         finally:
             self.supervisor.stop((5.0, 3.0), domain_id=self.domain_id)
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-        return status
+        return 3 if self.died else 0

@@ -21,7 +21,11 @@ Between ticks the robot moves exactly under the command it holds (`formation_sim
 its kind's model: a straight line, or the closed-form arc of a unicycle); a command takes effect at
 the first tick at least `command_latency` s after it arrived, clipped to `max_linear_speed` and
 `max_angular_speed` as a real base clips it.  A robot whose commands stop coming (its agent died,
-the network broke) stops after `command_timeout` s, as real bases do.
+the network broke) stops `command_timeout` s after the last one took effect, as a real base's
+watchdog stops it: at that instant, not at the next tick, so a robot whose process was frozen
+(SIGSTOP) moved under its last command for `command_timeout` at most, however long the freeze (its
+first tick after it went 2 s under the held command before: 0.60 m at 0.3 m/s).  Command ages are
+measured on the monotonic clock, which runs on through a freeze.
 
 Time is the wall clock (`time.time()`, the clock of the Step 0 epoch the agents time their
 triggers from), so poses line up with the run on one machine and on machines whose clocks agree.
@@ -283,11 +287,11 @@ class SimulatedRobotNode(Node):
             ROBOT_COMMAND_READER_QOS,  # the newest command only: none from before a freeze after it
             raw=True,
         )
-        self._commands: deque[tuple[float, Command]] = deque()  # (arrival, command) not yet applied
+        self._commands: deque[tuple[float, Command]] = deque()  # (monotonic arrival, command) to apply
         self._measurements: deque[tuple[float, np.ndarray, float, np.ndarray, float]] = (
             deque()
         )  # pose_latency queue
-        self._last_command_at: float | None = None  # arrival of the command the robot holds
+        self._last_command_at: float | None = None  # arrival of the command the robot holds (monotonic)
         self.commands_received = 0
         self.commands_refused = 0
         self.timeouts = 0  # times the robot stopped because commands stopped coming
@@ -301,12 +305,13 @@ class SimulatedRobotNode(Node):
         )
         self.rate = float(p['rate'])
         self._last_tick = time.time()
+        self._last_tick_clock = time.monotonic()  # the same instant on the monotonic clock
         self._timer = self.create_timer(1.0 / self.rate, self.tick) if own_timer else None
 
     # -- commands -------------------------------------------------------------------------------
 
     def _on_command(self, data: bytes) -> None:
-        now = time.time()
+        now = time.monotonic()
         try:
             if self.world_frame_command:
                 frame, twist = twist_stamped_fields(data)
@@ -335,36 +340,49 @@ class SimulatedRobotNode(Node):
         if self.commands_refused <= 3 or self.commands_refused % 100 == 0:
             self.get_logger().warning(f'{why} ({self.commands_refused} refused so far)')
 
-    def _take_command(self, now: float) -> None:
-        """The newest command that has arrived at least `command_latency` ago, else a stop on timeout."""
+    def _take_command(self, clock: float) -> None:
+        """The newest command that arrived at least `command_latency` before `clock` (monotonic)."""
         due = None
-        while self._commands and self._commands[0][0] + self.command_latency <= now:
+        while self._commands and self._commands[0][0] + self.command_latency <= clock:
             due = self._commands.popleft()
         if due is not None:
             self._last_command_at = due[0]
             self.robot.set_command(due[1])
-            return
+
+    def _timeout_after(self) -> float | None:
+        """Seconds after the last tick at which the base's watchdog stops the non-zero command it
+        holds (`command_timeout` after it took effect; <= 0: already due), or None."""
         held = self.robot.command
-        if (
-            held is not None
-            and not held.is_zero
-            and self._last_command_at is not None
-            and now - self._last_command_at > self.command_timeout + self.command_latency
-        ):
-            self.timeouts += 1
-            self.get_logger().warning(
-                f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts})'
-            )
-            self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
+        if held is None or held.is_zero or self._last_command_at is None:
+            return None
+        return self._last_command_at + self.command_latency + self.command_timeout - self._last_tick_clock
+
+    def _move(self, elapsed: float) -> None:
+        """Move exactly for `elapsed` s since the last tick under the command held, stopped at the
+        instant its timeout passes (a tick late, or a freeze late, the robot moved no further)."""
+        stop_after = self._timeout_after()
+        if stop_after is None or stop_after >= elapsed:
+            self.robot.advance(elapsed)
+            return
+        before = min(elapsed, max(0.0, stop_after))
+        self.robot.advance(before)
+        self.timeouts += 1
+        self.get_logger().warning(
+            f'no command for {self.command_timeout} s: stopping (timeout {self.timeouts}; '
+            f'{elapsed - before:.3f} s before this tick)'
+        )
+        held = self.robot.command
+        self.robot.set_command(Command(linear=(0.0,) * len(held.linear), angular=0.0))
+        self.robot.advance(elapsed - before)
 
     # -- ticks ----------------------------------------------------------------------------------
 
     def tick(self) -> None:
         """Move to now under the command held (exactly), publish, take the command due."""
-        now = time.time()
-        # Exact, under the command held since the last tick.
-        self.robot.advance(max(0.0, now - self._last_tick))
-        self._last_tick = now
+        now, clock = time.time(), time.monotonic()
+        # Exact, under the command held since the last tick (until its timeout, if that passed).
+        self._move(max(0.0, now - self._last_tick))
+        self._last_tick, self._last_tick_clock = now, clock
         position, yaw = self.robot.position.copy(), self.robot.yaw
         linear, angular = self.robot.body_twist()
         if self._truth_pub is not None:
@@ -379,7 +397,7 @@ class SimulatedRobotNode(Node):
             self._odom_pub.publish(self._measured.pack(stamp, where, orientation, body_linear, body_angular))
             if self._pose_pub.get_subscription_count():  # most readers take the odometry
                 self._pose_pub.publish(pack_pose_stamped(stamp, self.world_frame, where, orientation))
-        self._take_command(now)  # held from now to the next tick
+        self._take_command(clock)  # held from now to the next tick
 
 
 class RobotTicker:
