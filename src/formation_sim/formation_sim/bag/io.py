@@ -28,7 +28,6 @@ from typing import TYPE_CHECKING, Any, BinaryIO, NamedTuple, Self
 import yaml
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
-from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from formation_sim.sim.files import write_atomically
@@ -408,6 +407,8 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
     leaves: `formation_sim.bag.recovery.reindex`, `formation recover`, rebuilds it) and for files
     rosbags cannot read.
     """
+    from rosbags.rosbag2 import Reader  # here: its import (~45 ms of CPU) is not the recorder's to pay
+
     path = Path(path)
     if path.is_dir() and not (path / 'metadata.yaml').is_file():
         mcap = sorted(p.name for p in path.glob('*.mcap'))
