@@ -11,8 +11,8 @@ stime (/proc/<pid>/stat) of every process under the command every SAMPLE_PERIOD 
 command line), and reports each kind's CPU as a fraction of one core:
 
 - `stepping`: over the run's steady state, from STEADY_AFTER s after step 0 to STEADY_BEFORE s
-  before the final Step (summary.json extra.timeline, counted from the run's start: its `prepare`
-  mark says how long after the command's), what a robot's computer pays while the team moves;
+  before the final Step (the Unix times of both in summary.json's extra.timestamps), what a
+  robot's computer pays while the team moves;
 - `life`: over each process's whole life (imports, discovery, the end included), per second of
   the command's wall time; its CPU seconds are also split into the phases before step 0 (imports,
   discovery), from step 0 to the final Step, and after it (the end), per kind.
@@ -238,12 +238,12 @@ def measure(
     row['life'] = {kind: life.get(kind, 0.0) / row['wall_s'] for _, kind in KINDS}
     summary = run_dir / 'summary.json'
     if summary.is_file():
-        marks = json.loads(summary.read_text())['extra'].get('timeline', {})
+        extra = json.loads(summary.read_text())['extra']
+        marks = extra.get('timestamps', {})  # the time keeper's Unix times
+        if 'step0' not in marks:  # older code: its timeline, counted from about the command's start
+            marks = {name: began + at for name, at in extra.get('timeline', {}).items()}
         if 'step0' in marks and 'final_step' in marks:
-            # The timeline counts from the run's start, `prepare` (negative) s after the command's
-            # (code without that mark: from the command's start).
-            origin = began - marks.get('prepare', 0.0)
-            step0, final = origin + marks['step0'], origin + marks['final_step']
+            step0, final = marks['step0'], marks['final_step']
             start, end = step0 + STEADY_AFTER, final - STEADY_BEFORE
             used = watch.cpu_between(start, end)
             row['stepping_window_s'] = end - start
