@@ -1,20 +1,23 @@
 """What a robot run costs in CPU, per kind of process: now and at the code before (issue 19).
 
-    .venv/bin/python benchmarks/cpu.py [--horizon 30] [--repeats 1] [--profile DIR] [--out DIR]
+    .venv/bin/python benchmarks/cpu.py [--horizon 30] [--repeats 1] [--baseline REV]
+        [--profile DIR] [--out DIR]
 
 Runs `formation run robots_square --backend unicycle` (4 agents, 4 simulated robots, the
 coordinator, the recorder) as a process of its own, with the working tree's packages and with
-those of BASELINE_REV (`startup.Baseline`, first on the path of the command and of every process
-it starts), alternating.  A watcher samples utime + stime (/proc/<pid>/stat) of every process
-under the command every SAMPLE_PERIOD s, by kind (its command line), and reports each kind's CPU
-as a fraction of one core:
+those of a baseline revision (`--baseline`, BASELINE_REV by default; `startup.Baseline`, first on
+the path of the command and of every process it starts), alternating.  A watcher samples utime +
+stime (/proc/<pid>/stat) of every process under the command every SAMPLE_PERIOD s, by kind (its
+command line), and reports each kind's CPU as a fraction of one core:
 
 - `stepping`: over the run's steady state, from STEADY_AFTER s after step 0 to STEADY_BEFORE s
-  before the final Step (summary.json extra.timeline, counted from the command's start: the run
-  begins within a second of it), what a robot's computer pays while the team moves;
+  before the final Step (summary.json extra.timeline, counted from the run's start: its `prepare`
+  mark says how long after the command's), what a robot's computer pays while the team moves;
 - `life`: over each process's whole life (imports, discovery, the end included), per second of
-  the command's wall time.
+  the command's wall time; its CPU seconds are also split into the phases before step 0 (imports,
+  discovery), from step 0 to the final Step, and after it (the end), per kind.
 
+Both codes' modules are compiled before the runs (`compileall`), as an installed package's are.
 Per agent and per simulated robot: the kind's total divided by the number of agents or robots
 (robots may share a process).  Then each kind's threads over the stepping window
 (/proc/<pid>/task: the main thread 'python', where the executor runs every callback, and Fast
@@ -237,13 +240,46 @@ def measure(
     if summary.is_file():
         marks = json.loads(summary.read_text())['extra'].get('timeline', {})
         if 'step0' in marks and 'final_step' in marks:
-            start, end = began + marks['step0'] + STEADY_AFTER, began + marks['final_step'] - STEADY_BEFORE
+            # The timeline counts from the run's start, `prepare` (negative) s after the command's
+            # (code without that mark: from the command's start).
+            origin = began - marks.get('prepare', 0.0)
+            step0, final = origin + marks['step0'], origin + marks['final_step']
+            start, end = step0 + STEADY_AFTER, final - STEADY_BEFORE
             used = watch.cpu_between(start, end)
             row['stepping_window_s'] = end - start
             row['stepping'] = {kind: used.get(kind, 0.0) / (end - start) for _, kind in KINDS}
             threads = watch.thread_cpu_between(start, end)
             row['stepping_threads'] = {label: cpu / (end - start) for label, cpu in sorted(threads.items())}
+            row['phases_s'] = _phases(watch, began - SAMPLE_PERIOD, step0, final)
     return row
+
+
+def _phases(watch: CpuWatch, before: float, step0: float, final: float) -> dict[str, dict[str, float]]:
+    """CPU seconds of each kind before step 0, from step 0 to the final Step, and after it."""
+    first, run, life = watch.cpu_between(before, step0), watch.cpu_between(step0, final), watch.cpu_life()
+    return {
+        kind: {
+            'start': first.get(kind, 0.0),
+            'run': run.get(kind, 0.0),
+            'end': life.get(kind, 0.0) - first.get(kind, 0.0) - run.get(kind, 0.0),
+        }
+        for _, kind in KINDS
+    }
+
+
+def phase_table(rows: list[dict]) -> str:
+    """CPU seconds per kind (all its processes) before step 0, stepping and after the final Step
+    (medians over the runs of a code)."""
+    lines = ['| code | kind | start [s] | run [s] | end [s] |', '|---|---|---|---|---|']
+    for code in dict.fromkeys(r['code'] for r in rows):
+        done = [r['phases_s'] for r in rows if r['code'] == code and r.get('phases_s')]
+        for kind in dict.fromkeys(kind for _, kind in KINDS):
+            if done:
+                cells = [
+                    statistics.median(run[kind][phase] for run in done) for phase in ('start', 'run', 'end')
+                ]
+                lines.append(f'| {code} | {kind} | ' + ' | '.join(f'{c:.2f}' for c in cells) + ' |')
+    return '\n'.join(lines)
 
 
 def per_unit(row: dict, key: str, n: int) -> dict:
@@ -326,13 +362,20 @@ def main() -> int:
         '--profile', type=Path, default=None, help='cProfile every child into this folder (now only)'
     )
     parser.add_argument('--top', type=int, default=25)
+    parser.add_argument(
+        '--baseline', default=BASELINE_REV, help=f'the code before: a git revision (default {BASELINE_REV})'
+    )
     options = parser.parse_args()
     from formation_sim.model.scenario import load_scenario
 
     n = len(load_scenario(SCENARIO).agent_ids)
     out = options.out or Path(tempfile.mkdtemp(prefix='bench_cpu_'))
     codes = ['now'] if options.profile else [c for c in ('before', 'now') if options.only in (None, c)]
-    baseline = Baseline(BASELINE_REV) if 'before' in codes else None
+    baseline = Baseline(options.baseline) if 'before' in codes else None
+    # Both codes' modules compiled ahead, as an installed package's are (pip compiles them): an
+    # environment with PYTHONDONTWRITEBYTECODE would have every process compile them again.
+    for tree in [ROOT, *([Path(baseline.root)] if baseline is not None else [])]:
+        subprocess.run([sys.executable, '-m', 'compileall', '-q', str(tree / 'src')], check=True)
     rows, domain = [], options.domain_id
     try:
         for k in range(options.repeats):
@@ -357,6 +400,8 @@ def main() -> int:
     print(table(rows, n))
     print('\nBy thread, stepping (all processes of a kind together):')
     print(thread_table(rows))
+    print('\nCPU seconds by phase (all processes of a kind): before step 0, stepping, after the final Step:')
+    print(phase_table(rows))
     (out / 'cpu.json').write_text(json.dumps(rows, indent=1))
     if options.profile:
         print_profiles(options.profile, top=options.top)

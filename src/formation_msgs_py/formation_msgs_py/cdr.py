@@ -8,6 +8,8 @@ the two pose types with `struct`:
 
 - `OdometryWriter`: one robot's `nav_msgs/Odometry` (frames and covariances fixed, packed once),
   `pack_pose_stamped`: a `geometry_msgs/PoseStamped`;
+- `pack_body_velocity`, `pack_world_velocity`: an agent's velocity command to its robot (50 Hz),
+  `codec.encode_body_velocity` / `encode_world_velocity` as bytes, with their checks;
 - `decode_odometry_cdr`, `decode_pose_stamped_cdr`: bytes -> `RobotPose`, with the checks of
   `codec.decode_odometry` / `codec.decode_pose_stamped` (finite values, a unit quaternion);
   bytes that are not such a message raise `MessageError` (reason `length`).
@@ -27,7 +29,7 @@ import math
 import struct
 from collections.abc import Sequence
 
-from formation_msgs_py.codec import MessageError, pose_values, twist_values
+from formation_msgs_py.codec import MessageError, nanoseconds, pose_values, twist_values, vector3_values
 from formation_msgs_py.lockstep import REJECT_LENGTH
 from formation_msgs_py.types import RobotPose
 
@@ -118,6 +120,31 @@ def pack_pose_stamped(
             strings,
             b'\x00' * (-end % 8),
             _POSE.pack(*position, *orientation),
+        )
+    )
+
+
+def pack_body_velocity(linear: float, angular: float) -> bytes:
+    """`codec.encode_body_velocity` as CDR bytes: a `geometry_msgs/Twist` in the body frame
+    (linear.x = v, angular.z = ω), both checked finite."""
+    (v, omega), _ = vector3_values('body velocity', (linear, angular))
+    return ENCAPSULATION + _TWIST.pack(v, 0.0, 0.0, 0.0, 0.0, omega)
+
+
+def pack_world_velocity(velocity: Sequence[float], *, frame_id: str, stamp: float) -> bytes:
+    """`codec.encode_world_velocity` as CDR bytes: a `geometry_msgs/TwistStamped` whose linear
+    is `velocity` (1 to 3 components, checked finite) in the frame `frame_id`, stamped at Unix
+    time `stamp` (rounded to the nanosecond as `codec.ros_time`)."""
+    seconds, nano = divmod(nanoseconds(stamp), 1_000_000_000)  # checked first, as the message's
+    _, linear = vector3_values('world velocity', velocity)
+    strings, end = _string(frame_id, _STAMP.size)
+    return b''.join(
+        (
+            ENCAPSULATION,
+            _STAMP.pack(seconds, nano),
+            strings,
+            b'\x00' * (-end % 8),
+            _TWIST.pack(*linear, 0.0, 0.0, 0.0),
         )
     )
 

@@ -597,15 +597,21 @@ def decode_world_state(msg) -> WorldState:
 _AXES = ('x', 'y', 'z')
 
 
-def _vector3(what: str, values: Sequence[float]):
-    from geometry_msgs.msg import Vector3
-
+def vector3_values(what: str, values: Sequence[float]) -> tuple[list[float], list[float]]:
+    """(the values as floats, checked finite, and as a geometry_msgs/Vector3's x, y, z: 1 to 3
+    components, the missing ones 0); for the message and the CDR encoders alike."""
     vector = [float(v) for v in values]
     if not 1 <= len(vector) <= 3:
         raise MessageError(f'{what}: geometry_msgs carries 1 to 3 components, got {len(vector)}')
     _check_finite(what, vector)
-    vector += [0.0] * (3 - len(vector))
-    return Vector3(x=vector[0], y=vector[1], z=vector[2])
+    return vector, vector + [0.0] * (3 - len(vector))
+
+
+def _vector3(what: str, values: Sequence[float]):
+    from geometry_msgs.msg import Vector3
+
+    _, (x, y, z) = vector3_values(what, values)
+    return Vector3(x=x, y=y, z=z)
 
 
 def encode_velocity_command(control: Sequence[float]):
@@ -734,14 +740,20 @@ def encode_body_velocity(linear: float, angular: float):
 # Time for tools (/clock, headers): rounded to the nanosecond; never used by the algorithm.
 
 
+def nanoseconds(seconds: float) -> int:
+    """The nanoseconds nearest to `seconds` (finite, >= 0): a ROS time, as `ros_time` and the CDR
+    encoders stamp it."""
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        raise MessageError(f'ROS time must be finite and >= 0, got {seconds!r}')
+    return round(seconds * 1e9)
+
+
 def ros_time(seconds: float):
     """builtin_interfaces/Time nearest to `seconds` (>= 0)."""
     from builtin_interfaces.msg import Time
 
-    if not (math.isfinite(seconds) and seconds >= 0.0):
-        raise MessageError(f'ROS time must be finite and >= 0, got {seconds!r}')
-    nanoseconds = round(seconds * 1e9)
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+    sec, nanosec = divmod(nanoseconds(seconds), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def encode_pose_array(state: WorldState, *, frame_id: str = 'world'):

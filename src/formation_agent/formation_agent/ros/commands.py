@@ -30,12 +30,8 @@ from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
 from formation_agent.core.pose_sensing import PoseError
 from formation_agent.ros.staleness import StaleStateError
-from formation_msgs_py.codec import (
-    encode_acceleration_command,
-    encode_body_velocity,
-    encode_velocity_command,
-    encode_world_velocity,
-)
+from formation_msgs_py.cdr import pack_body_velocity, pack_world_velocity
+from formation_msgs_py.codec import encode_acceleration_command, encode_velocity_command
 from formation_msgs_py.qos import PROTOCOL_QOS, ROBOT_COMMAND_QOS
 from formation_msgs_py.types import SensedState
 
@@ -163,13 +159,14 @@ class RobotOutput:
         wall = time.time() if wall is None else wall
         t = self._last_t = max(wall - self._epoch, self._last_t)
         pose = self._poses.fresh(self._config.agent_id, t=t, now=wall)  # an unobserved robot stops
+        # As CDR bytes (`formation_msgs_py.cdr`): no Python message to build and convert (issue 19).
         if self._world_frame:
             velocity = self.commander.command(t)
             self.publisher.publish(
-                encode_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall)
+                pack_world_velocity(velocity, frame_id=self._config.world_frame, stamp=wall)
             )
         else:
-            self.publisher.publish(encode_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
+            self.publisher.publish(pack_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
 
     def stop(self) -> None:
         """The zero command, `ROBOT_COMMAND_QOS.depth` times in a row (a frozen robot's reader of
@@ -183,8 +180,8 @@ class RobotOutput:
             self._timer = None
         if self._world_frame:
             zero = (0.0,) * self._config.dimension
-            message = encode_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
+            message = pack_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
         else:
-            message = encode_body_velocity(0.0, 0.0)
+            message = pack_body_velocity(0.0, 0.0)
         for _ in range(ROBOT_COMMAND_QOS.depth):
             self.publisher.publish(message)

@@ -38,6 +38,7 @@ import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
 
 from formation_agent.core.eta import make_agent
@@ -212,6 +213,7 @@ class FormationAgentNode(Node):
         self.step: Step | None = None
         self.finished = False
         self.failure: Exception | None = None
+        self.settled = Future()  # done once finished or failed: the process's loop looks at once (main)
         self.ended_at_horizon = False  # its poses stopped after the horizon: no failure (`_fail`)
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self.simulator = SimulatorWatch(config.agent_id)
@@ -272,6 +274,7 @@ class FormationAgentNode(Node):
         if self.failure is None:
             stale = self.staleness is not None and isinstance(error, PoseError)
             self.failure = self.staleness.explain(error, now) if stale else error
+            self.settled.set_result(False)
 
     def connected(self) -> bool:
         """Every endpoint this agent needs is matched with its peer (and the extra listeners)."""
@@ -301,6 +304,7 @@ class FormationAgentNode(Node):
             self.schedule.stop()
             self.output.stop()  # the zero command before anything else
             self._publish_report(final=True)
+            self.settled.set_result(True)
             return
         if step.realtime:
             self.schedule.start(step.epoch)
