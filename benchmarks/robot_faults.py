@@ -19,7 +19,10 @@ Columns: the time from the fault to the last robot's last zero command (robots w
 killed get none: their robots stop on their own command timeout), the largest distance a robot's
 control point... (its pose) travelled after the fault, the exit status and the message of
 `formation run`, the time it took to exit after the fault, and whether `formation analyze` found
-the bag to agree with summary.json.
+the bag to agree with summary.json.  A `robot_stop` row also says what the frozen robot did once
+resumed (`resumed`): how far its first pose after SIGCONT lies from its last before the freeze,
+how far it moved after that, the non-zero commands it was sent after SIGCONT, and the timeout
+stops its log names (`resumed_by`: `formation run` had already ended, resuming and stopping it).
 
     python benchmarks/robot_faults.py --domain-id 33 [--faults robot_kill ctrl_c] \
         [--backends unicycle external]
@@ -132,6 +135,35 @@ class Observer:
             largest = max([largest, *(math.hypot(x - x0, y - y0) for at, x, y in poses[i] if at > fault)])
         return largest
 
+    def on_resume(self, robot: int, *, fault: float, resumed: float, logs: Path, by_run: bool) -> dict:
+        """What a robot frozen at `fault` did once resumed: how far its first pose after SIGCONT
+        is from its last before the freeze, how far it moved after that first pose, the non-zero
+        commands it was sent after SIGCONT (unknown when `formation run` resumed it: `by_run`), and
+        its own log's timeout stops."""
+        poses = self.poses[robot]
+        before = [(x, y) for at, x, y in poses if at <= fault]
+        after = [(x, y) for at, x, y in poses if at > resumed]
+        stops = []
+        for log in logs.glob(f'robot*_{robot}*.log'):
+            stops += [
+                line.split(': ', 1)[-1]
+                for line in log.read_text(errors='replace').splitlines()
+                if 'stopping' in line
+            ]
+        return {
+            'jump': math.hypot(after[0][0] - before[-1][0], after[0][1] - before[-1][1])
+            if before and after
+            else None,
+            'moved_after': max(
+                (math.hypot(x - after[0][0], y - after[0][1]) for x, y in after), default=None
+            ),
+            'poses_after': len(after),
+            'nonzero_commands_after': (
+                None if by_run else sum(1 for at, zero in self.commands[robot] if at > resumed and not zero)
+            ),
+            'timeout_stops': stops,
+        }
+
 
 def _pids(*words: str) -> list[int]:
     """Processes whose command line holds every one of `words`."""
@@ -225,7 +257,12 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
             os.kill(victim, {'robot_kill': signal.SIGKILL}.get(fault, signal.SIGSTOP))
             if fault == 'robot_stop':
                 time.sleep(2.0)
-                os.kill(victim, signal.SIGCONT)
+                resumed_at = time.monotonic()
+                try:
+                    os.kill(victim, signal.SIGCONT)
+                except ProcessLookupError:  # formation run ended first: it resumed and stopped it
+                    row['resumed_by'] = 'formation run (SIGCONT with SIGINT at its end)'
+                    resumed_at = fault_at + 0.05  # any pose of the frozen robot after this came after
         elif fault == 'agent_kill':
             os.kill(
                 _one(('formation_agent.ros.main', '--agents', str(out / 'agents.params.yaml'), str(VICTIM))),
@@ -268,6 +305,11 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         else:
             differences, failing = None, analyze.stderr.strip()[-300:]
         row.update(analyze=analyze.returncode, differences=differences, failing_checks=failing)
+        if fault == 'robot_stop':
+            logs = (fleet_out if backend == 'external' else out) / 'logs'
+            row['resumed'] = observer.on_resume(
+                VICTIM, fault=fault_at, resumed=resumed_at, logs=logs, by_run='resumed_by' in row
+            )
     finally:
         for process in (run, fleet):
             if process is not None and process.poll() is None:
