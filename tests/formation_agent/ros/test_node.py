@@ -261,6 +261,27 @@ def test_a_malformed_step_is_rejected_and_the_node_keeps_waiting(live_node):
     assert node.step is None and not node.finished
 
 
+@pytest.mark.parametrize('end', ['final_step', 'failure'])
+def test_the_final_step_or_a_failure_settles_the_node_for_its_process_loop(live_node, end):
+    """`settled` ends the wait of `formation_agent.ros.main`'s loop (0.1 s of events per look):
+    done once the node finishes or fails, never before; a failure is then raised by `check`."""
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Step
+
+    node = live_node()
+    node._on_step(_info_msg([1, 0, 0.0]))  # a malformed step: nothing settled
+    assert not node.settled.done()
+    if end == 'final_step':
+        node._on_step(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_FINAL)))
+        assert node.finished and node.settled.done() and node.counts.final_sent
+        node.check()  # finished: nothing to raise
+    else:
+        node._fail(RuntimeError('the robot caught fire'))
+        assert node.settled.done() and not node.finished
+        with pytest.raises(RuntimeError, match='caught fire'):
+            node.check()
+
+
 def test_fault_injection_drops_everything_at_loss_one(live_node):
     node = live_node(inject_loss=1.0, inject_seed=3)
     for k in range(20):
