@@ -24,12 +24,25 @@ from formation_agent.core.kinds.registry import Geometry, RobotKind
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 
 
+_EPS = float(np.finfo(float).eps)
+
+
+def sinc(u: float) -> float:
+    """`np.sinc(u)` = sin(πu)/(πu) of one float, the same bits (its steps: πu, eps for 0, numpy's
+    sin) without its arrays: a simulated robot's tick takes one (100 Hz), and `np.sinc` of a
+    scalar was a tenth of the robots' main thread (issue 19)."""
+    y = math.pi * u
+    if not y:
+        y = _EPS
+    return np.sin(y) / y
+
+
 def arc(
     position: np.ndarray, yaw: float, v: float, omega: float, duration: float
 ) -> tuple[np.ndarray, float]:
     """The exact arc of (v, ω) held for `duration` from (position, yaw) (module docstring)."""
     half = 0.5 * omega * duration
-    chord = v * duration * np.sinc(half / math.pi)  # np.sinc(u) = sin(πu)/(πu)
+    chord = v * duration * sinc(half / math.pi)
     middle = yaw + half
     return position + chord * np.array([math.cos(middle), math.sin(middle)]), yaw + omega * duration
 
