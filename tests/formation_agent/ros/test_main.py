@@ -168,7 +168,8 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
     from formation_msgs_py.qos import DEFAULT_READER_DEPTH
 
     def taken():
-        lines = (tmp_path / 'robot.out').read_text().splitlines()
+        text = (tmp_path / 'robot.out').read_text()
+        lines = text.splitlines()[: text.count('\n')]  # not a line the robot is still writing
         return [
             (float(at), float(sent), (float(x), float(y)))
             for at, sent, x, y in (line.split() for line in lines)
@@ -203,7 +204,11 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
         resumed_at = time.time()
         robot.send_signal(signal.SIGCONT)
         assert rig.wait_for_exit(agent) == 1
-        _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.5')
+        _assert_stopped(rig, agent, status=1, failure='')
+        # Its own pose went stale; on a loaded machine its command timer may come too late first.
+        (final,) = [report for report in rig.reports if report.final]
+        reasons = ('the pose of robot 1 on /agent_1/robot/pose is ', 'its command timer ran ')
+        assert any(reason in final.failure for reason in reasons), final.failure
         stale = [command for _, msg in rig.commands[sent:] if (command := _linear(msg)) != zero]
         assert len(stale) > DEFAULT_READER_DEPTH, 'the agent should command the frozen robot until it stops'
         stop = [_linear(msg) for _, msg in rig.commands[sent + len(stale) :]]
