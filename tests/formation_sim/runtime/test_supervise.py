@@ -71,3 +71,22 @@ def test_a_time_keeper_writing_a_stray_byte_is_still_read_to_its_end(tmp_path) -
     _wait_for_line(keeper.log, 'progress t=4999, a line of some length to fill a pipe quickly')
     assert supervisor.last_progress == 't=4999, a line of some length to fill a pipe quickly'
     assert keeper.log.read_text().startswith('\ufffd fast dds said this\n')
+
+
+def test_a_child_that_failed_without_naming_its_error_is_described_by_its_logs_last_line(tmp_path) -> None:
+    supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
+    crashed = supervisor.start(
+        ProcessSpec(name='simulator', args=('-c', 'raise RuntimeError("no context")'), expected_exit=True)
+    )
+    named = supervisor.start(
+        ProcessSpec(
+            name='agent_1',
+            args=('-c', 'import sys; print("formation_agent: a stale pose", file=sys.stderr); sys.exit(1)'),
+            expected_exit=True,
+        )
+    )
+    assert crashed.process.wait(timeout=30) == 1 and named.process.wait(timeout=30) == 1
+    assert crashed.describe() == (
+        f"simulator (pid {crashed.pid}) exited with status 1 (its log ends: 'RuntimeError: no context')"
+    )
+    assert named.describe() == f'agent_1 (pid {named.pid}) exited with status 1: a stale pose'

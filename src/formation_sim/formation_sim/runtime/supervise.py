@@ -71,26 +71,35 @@ class Child:
     def alive(self) -> bool:
         return self.process.poll() is None
 
-    def error_line(self) -> str:
-        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
+    def _log_tail(self) -> list[str]:
+        """The last 64 kB of its log, as lines."""
         try:
             with self.log.open('rb') as handle:
                 handle.seek(max(0, self.log.stat().st_size - 65536))
-                lines = handle.read().decode(errors='replace').splitlines()
+                return handle.read().decode(errors='replace').splitlines()
         except OSError:
-            return ''
+            return []
+
+    def error_line(self) -> str:
+        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
         named = [
             line
-            for line in lines
+            for line in self._log_tail()
             if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))
         ]
         return named[-1].split(': ', 1)[1] if named else ''
 
     def describe(self) -> str:
-        """'agent_2 (pid 123) killed by SIGKILL', with the error it named if it gave one."""
+        """'agent_2 (pid 123) killed by SIGKILL', with the error it named if it gave one, else, for
+        one that failed without naming it (a traceback, a stuck end cut short), its log's last line."""
         text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
-        error = self.error_line() if self.process.returncode not in (None, 0) else ''
-        return f'{text}: {error}' if error else text
+        if self.process.returncode in (None, 0):
+            return text
+        error = self.error_line()
+        if error:
+            return f'{text}: {error}'
+        last = next((line.strip() for line in reversed(self._log_tail()) if line.strip()), '')
+        return f'{text} (its log ends: {last[:200]!r})' if last and self.process.returncode > 0 else text
 
     @property
     def failed_itself(self) -> bool:
