@@ -82,7 +82,8 @@ def test_a_group_and_a_ros_domain_module_each_run_on_one_worker(tmp_path):
     done = subprocess.run(
         command,
         cwd=tmp_path,
-        env={**os.environ, 'RAN_DIR': str(ran)},
+        # The inner run's options are the command's alone, not the caller's PYTEST_ADDOPTS.
+        env={**{k: v for k, v in os.environ.items() if k != 'PYTEST_ADDOPTS'}, 'RAN_DIR': str(ran)},
         capture_output=True,
         text=True,
         timeout=110,
