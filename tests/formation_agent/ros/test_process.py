@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from formation_agent.ros.process import SignalFlag, StopSignals
+from formation_agent.ros.process import SignalFlag, StopSignals, teardown_status
 
 
 def _acquisitions_during(call) -> list[str]:
@@ -74,7 +74,8 @@ def test_a_shutdown_that_hangs_leaves_within_the_bound_with_the_status_and_says_
         [sys.executable, '-c', _HANGING_SHUTDOWN], capture_output=True, text=True, timeout=30
     )
     assert done.returncode == 7, done.stderr
-    first, *stacks = done.stderr.splitlines()
+    mark, first, *stacks = done.stderr.splitlines()
+    assert mark == 'shutting ROS down, exit status 7'
     assert (
         first == 'formation_test: shutting rclpy down took more than 0.5 s; leaving without it (stacks below)'
     )
@@ -118,6 +119,18 @@ def test_a_process_blocked_in_c_code_that_holds_the_gil_still_leaves_with_its_st
     assert done.returncode == 1, done.stderr
     assert 'Timeout (0:00:00' in done.stderr, done.stderr  # faulthandler's dump, then _exit(1)
     assert 'File "<string>", line 8 in <module>' in done.stderr, done.stderr  # where it was held
+    # The status the process meant to leave with, when it was its teardown that hung.
+    assert teardown_status(done.stderr.splitlines()) == (7 if body is _SHUTDOWN_HOLDING_THE_GIL else None)
+
+
+def test_the_status_a_process_left_its_run_with_is_read_only_from_a_teardown_cut_short() -> None:
+    assert teardown_status(['shutting ROS down, exit status 0', 'Timeout (0:00:12)!', '  File "x"']) == 0
+    assert teardown_status(['shutting ROS down, exit status 3', 'Timeout (0:00:12)!']) == 3
+    assert teardown_status(['shutting ROS down, exit status 0']) is None  # it left: no dump after it
+    assert teardown_status(['Timeout (0:00:05)!', 'shutting ROS down, exit status 0']) is None
+    assert (
+        teardown_status(['formation_agent: the pose of robot 1 is 0.6 s old', 'Timeout (0:00:12)!']) is None
+    )
 
 
 _STUCK_NODE = """

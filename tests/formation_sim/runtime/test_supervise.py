@@ -90,3 +90,35 @@ def test_a_child_that_failed_without_naming_its_error_is_described_by_its_logs_l
         f"simulator (pid {crashed.pid}) exited with status 1 (its log ends: 'RuntimeError: no context')"
     )
     assert named.describe() == f'agent_1 (pid {named.pid}) exited with status 1: a stale pose'
+
+
+def test_a_child_whose_ros_teardown_hung_after_a_clean_run_is_no_failure_and_said_so(tmp_path) -> None:
+    from formation_sim.runtime.results import excused_teardown
+
+    supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
+    # As rclpy's destroy_node blocked in C code with the GIL held, cut short by faulthandler.
+    hung = supervisor.start(ProcessSpec(name='agent_3', args=('-c', _GIL_HELD_TEARDOWN), expected_exit=True))
+    failed_itself = supervisor.start(
+        ProcessSpec(
+            name='agent_1',
+            args=('-c', 'import sys; print("formation_agent: a stale pose", file=sys.stderr); sys.exit(1)'),
+            expected_exit=True,
+        )
+    )
+    assert hung.process.wait(timeout=30) == 1 and failed_itself.process.wait(timeout=30) == 1
+    assert hung.left_with() == 0 and failed_itself.left_with() is None
+    failed, note = excused_teardown([hung, failed_itself])
+    assert failed == [failed_itself]
+    assert note == (
+        'agent_3 left the run with status 0, then its ROS teardown hung in C code (rclpy) and was cut '
+        f'short (stacks in {hung.log})'
+    )
+
+
+_GIL_HELD_TEARDOWN = """
+import ctypes
+from formation_agent.ros import process
+process.GIL_FREE_MARGIN = 0.3
+with process.shutdown_guard('formation_agent', lambda: 0, bound=0.3):
+    ctypes.PyDLL(None).sleep(60)
+"""

@@ -37,6 +37,11 @@ GIL_FREE_MARGIN = 2.0
 GIL, writes the stacks and leaves with status 1 (`shutdown_guard`, `exit_process`): a main thread
 blocked in C code while it holds the GIL starves the guard's Python thread."""
 
+TEARDOWN_MARK = 'shutting ROS down, exit status '
+"""The line a node process writes before its ROS teardown (`shutdown_guard`), with the status it
+leaves with: a teardown that then hangs in C code and is cut short (status 1, 'Timeout (' and the
+stacks after this line) left the run with that status (`teardown_status`)."""
+
 EXIT_BOUND = 5.0
 """How long `exit_process` may take (exit handlers, flushing) [s] before faulthandler's thread
 writes the stacks and leaves with status 1."""
@@ -146,6 +151,24 @@ def exit_process(status: int) -> NoReturn:
     os._exit(status)
 
 
+def teardown_status(log_lines: list[str]) -> int | None:
+    """The status a node process left its run with if its ROS teardown hung and faulthandler's
+    thread cut it short (its log: TEARDOWN_MARK with the status, then faulthandler's 'Timeout ('
+    dump); None otherwise.
+
+    rclpy's `destroy_node` can block in C code while it holds the GIL (seen in rclpy 7.1.6 with
+    Fast DDS, about once in a thousand node teardowns on a loaded machine): the guard's Python
+    thread cannot run, and faulthandler leaves with status 1 whatever the run's was."""
+    marks = [k for k, line in enumerate(log_lines) if line.startswith(TEARDOWN_MARK)]
+    if not marks:
+        return None
+    after = log_lines[marks[-1] + 1 :]
+    if not any(line.startswith('Timeout (') for line in after):
+        return None
+    text = log_lines[marks[-1]].removeprefix(TEARDOWN_MARK).strip()
+    return int(text) if text.lstrip('-').isdigit() else None
+
+
 def release_ros(executor, nodes) -> None:
     """The end of a node process, in ros2/examples' order: the executor stops dispatching and lets
     go of every entity (`shutdown`), the nodes are destroyed, rclpy is shut down.
@@ -172,7 +195,9 @@ def shutdown_guard(
 
     Fast DDS can block in a participant's shutdown (a peer killed while it held a shared-memory
     port's lock): a node that has sent its last command and said why it stopped must still exit,
-    or the run that started it waits for it.
+    or the run that started it waits for it.  The block's first line on stderr is TEARDOWN_MARK
+    with `status()`; a block stuck in C code with the GIL held is cut short `GIL_FREE_MARGIN`
+    later by faulthandler's thread (status 1: `teardown_status` tells the status it meant).
     """
     done = threading.Event()
 
@@ -188,6 +213,9 @@ def shutdown_guard(
             faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
         os._exit(status())
 
+    with contextlib.suppress(Exception):
+        sys.stderr.write(f'{TEARDOWN_MARK}{status()}\n')
+        sys.stderr.flush()
     watchdog = threading.Thread(target=leave, name='shutdown_guard', daemon=True)
     watchdog.start()
     with contextlib.suppress(Exception):  # stderr closed: the Python guard alone

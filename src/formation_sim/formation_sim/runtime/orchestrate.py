@@ -81,6 +81,7 @@ from formation_sim.runtime.results import (
     describe_phases,
     detection_time,
     excused_after_end,
+    excused_teardown,
     first_lost,
     keeper_failed,
     phases,
@@ -255,7 +256,13 @@ class FormationRun:
             domain_id=domain_id,
             wall_time=time.monotonic() - started,
             children=tuple(
-                ChildExit(name=c.name, pid=c.pid, returncode=c.process.returncode, signal_used=c.signal_used)
+                ChildExit(
+                    name=c.name,
+                    pid=c.pid,
+                    returncode=c.process.returncode,
+                    signal_used=c.signal_used,
+                    left_with=c.left_with(),
+                )
                 for c in self._children
             ),
             message=message,
@@ -409,7 +416,9 @@ class FormationRun:
                 self.marks['keeper_exited'] = time.time()
                 if code == 0:
                     failed = supervisor.wait_for_expected(self.options.stop_timeouts[0], besides=keeper)
+                    failed, hung = excused_teardown(failed)
                     failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
+                    after_end = '; '.join(note for note in (after_end, hung) if note)
                     if not failed:
                         return EXIT_OK, after_end, lost
                     # The time keeper reached the end, but a process that should have left

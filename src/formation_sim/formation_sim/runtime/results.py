@@ -27,6 +27,7 @@ class ChildExit:
     pid: int
     returncode: int | None  # None: did not exit by itself and had to be stopped
     signal_used: str | None  # the last signal sent to stop it, if any
+    left_with: int | None = None  # the status it left the run with, if its ROS teardown then hung (cut short)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -266,6 +267,18 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
             failure['detected_by'] += ', orchestrator'
     extra['failure'] = failure
     return failure
+
+
+def excused_teardown(failed: list[Child]) -> tuple[list[Child], str]:
+    """The children that left the run with status 0 and then hung in their ROS teardown (cut
+    short: `Child.left_with`) are no failure of the run.  The others, and a note naming them."""
+    excused = [c for c in failed if c.left_with() == 0]
+    note = '; '.join(
+        f'{c.name} left the run with status 0, then its ROS teardown hung in C code (rclpy) and '
+        f'was cut short (stacks in {c.log})'
+        for c in excused
+    )
+    return [c for c in failed if c not in excused], note
 
 
 def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], str]:

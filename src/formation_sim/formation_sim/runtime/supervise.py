@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from formation_agent.ros.process import STACKS_SIGNAL
+from formation_agent.ros.process import STACKS_SIGNAL, teardown_status
 from formation_sim.runtime.fastdds_shm import domain_port_files, fastdds_names, held_files, remove_orphans
 from formation_sim.runtime.launch import ProcessSpec
 
@@ -79,6 +79,13 @@ class Child:
                 return handle.read().decode(errors='replace').splitlines()
         except OSError:
             return []
+
+    def left_with(self) -> int | None:
+        """The status it left its run with, if its ROS teardown then hung and was cut short (exit
+        1, `formation_agent.ros.process.teardown_status`); None otherwise."""
+        if self.process.returncode in (None, 0):
+            return None
+        return teardown_status(self._log_tail())
 
     def error_line(self) -> str:
         """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
