@@ -532,3 +532,49 @@ def test_a_run_that_times_out_names_the_children_still_running_and_their_stacks_
     assert 'simulator (stacks in ' in result.message, result.message
     log = next(child.log for child in run._children if child.name == 'simulator')
     assert 'most recent call first' in log.read_text(), log.read_text()[-2000:]
+
+
+# Run the rest of the command line (python -m MODULE ...) with rclpy's Node.destroy_node blocked in
+# C code that holds the GIL, as rclpy 7.1.6 sometimes blocks there, and a 0.3 s shutdown guard.
+_TEARDOWN_HANGS = """
+import ctypes, runpy, sys
+import rclpy.node
+from formation_agent.ros import process
+rclpy.node.Node.destroy_node = lambda self: ctypes.PyDLL(None).sleep(60)
+process.shutdown_guard.__wrapped__.__kwdefaults__['bound'] = 0.3
+process.GIL_FREE_MARGIN = 0.3
+assert sys.argv[2] == '-m', sys.argv
+sys.argv = [sys.argv[3], *sys.argv[4:]]
+runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)
+"""
+
+
+@pytest.mark.timeout(200)
+def test_a_run_whose_processes_hang_in_their_ros_teardown_after_its_end_is_done_and_says_so(tmp_path):
+    """The simulator (the time keeper) and agent 2 each block in rclpy's destroy_node after a
+    complete run, the GIL held, and are cut short (exit 1): the run is done, and names them."""
+    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.model.scenario import load_scenario
+
+    hangs = ('simulator', 'agent_2')
+    run = FormationRun(
+        load_scenario('paper_single'),
+        out_dir=tmp_path / 'run',
+        horizon=1.0,
+        domain_id=76,
+        progress=False,
+        record=False,
+        timeout=120.0,
+        launch_prefix=lambda name: [sys.executable, '-c', _TEARDOWN_HANGS] if name in hangs else [],
+    )
+    result = run.run()
+    assert result.ok, result.message
+    for child in result.children:
+        if child.name in hangs:
+            assert (child.returncode, child.left_with) == (1, 0), child
+        else:
+            assert child.returncode == 0, child
+    for name in hangs:
+        assert f'{name} left the run with status 0, then its ROS teardown hung' in result.message, (
+            result.message
+        )

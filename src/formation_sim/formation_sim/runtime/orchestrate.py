@@ -414,9 +414,9 @@ class FormationRun:
             code = keeper.process.poll()
             if code is not None:
                 self.marks['keeper_exited'] = time.time()
-                if code == 0:
+                if code == 0 or keeper.left_with() == 0:  # its ROS teardown may hang after the end
                     failed = supervisor.wait_for_expected(self.options.stop_timeouts[0], besides=keeper)
-                    failed, hung = excused_teardown(failed)
+                    failed, hung = excused_teardown(failed + ([keeper] if code else []))
                     failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     after_end = '; '.join(note for note in (after_end, hung) if note)
                     if not failed:
