@@ -211,7 +211,7 @@ def main(args: Sequence[str] | None = None) -> int:
             for node in nodes:
                 with contextlib.suppress(Exception):  # best effort: the others must still stop
                     node.leave(failure=failure, deadline=deadline)
-            with shutdown_guard('formation_agent', lambda: status):
+            with shutdown_guard('formation_agent', lambda: status, announce=bool(nodes)):
                 release_ros(executor, nodes)
                 executor = None  # its C++ teardown, under the guard
     return status

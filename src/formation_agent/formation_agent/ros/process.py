@@ -187,7 +187,7 @@ def release_ros(executor, nodes) -> None:
 
 @contextlib.contextmanager
 def shutdown_guard(
-    command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND
+    command: str, status: Callable[[], int], *, bound: float = SHUTDOWN_BOUND, announce: bool = True
 ) -> Iterator[None]:
     """Leave the process with `status()` if the block (destroying the nodes, rclpy's shutdown)
     has not ended within `bound` seconds, after one line naming it and every thread's stack on
@@ -196,8 +196,9 @@ def shutdown_guard(
     Fast DDS can block in a participant's shutdown (a peer killed while it held a shared-memory
     port's lock): a node that has sent its last command and said why it stopped must still exit,
     or the run that started it waits for it.  The block's first line on stderr is TEARDOWN_MARK
-    with `status()`; a block stuck in C code with the GIL held is cut short `GIL_FREE_MARGIN`
-    later by faulthandler's thread (status 1: `teardown_status` tells the status it meant).
+    with `status()` (`announce`: a process refused before it made a node says only why); a
+    block stuck in C code with the GIL held is cut short `GIL_FREE_MARGIN` later by
+    faulthandler's thread (status 1: `teardown_status` tells the status it meant).
     """
     done = threading.Event()
 
@@ -213,9 +214,10 @@ def shutdown_guard(
             faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
         os._exit(status())
 
-    with contextlib.suppress(Exception):
-        sys.stderr.write(f'{TEARDOWN_MARK}{status()}\n')
-        sys.stderr.flush()
+    if announce:
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f'{TEARDOWN_MARK}{status()}\n')
+            sys.stderr.flush()
     watchdog = threading.Thread(target=leave, name='shutdown_guard', daemon=True)
     watchdog.start()
     with contextlib.suppress(Exception):  # stderr closed: the Python guard alone

@@ -531,7 +531,8 @@ def main(
                 node = node_class()
             except ParameterError as error:  # bad input: every problem named, nothing started
                 _tell(f'{node_class.COMMAND}: {error}')
-                return EXIT_BAD_INPUT
+                status = EXIT_BAD_INPUT  # the shutdown guard's too
+                return status
             executor = make_executor(node.executor_kind)
             executor.add_node(node)
             # A coordinator dispatches 0.1 s of events per look at its stop signals and its end (a
@@ -582,7 +583,7 @@ def main(
             )
             _stop_and_write(node, executor, error)
         finally:
-            with shutdown_guard(node_class.COMMAND, lambda: status):
+            with shutdown_guard(node_class.COMMAND, lambda: status, announce=node is not None):
                 release_ros(executor, [] if node is None else [node])
                 executor = None  # its C++ teardown, under the guard
     return status

@@ -653,6 +653,7 @@ def main(args: Sequence[str] | None = None) -> int:
         with shutdown_guard(
             'formation_recorder',
             lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0,
+            announce=node is not None,
         ):
             release_ros(executor, [] if node is None else [node])
             executor = None  # its C++ teardown, under the guard and the stop handlers

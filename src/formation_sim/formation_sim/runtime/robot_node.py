@@ -491,7 +491,7 @@ def main(args: Sequence[str] | None = None) -> int:
                     f'commands received {node.commands_received}, refused {node.commands_refused}, '
                     f'clipped by the limits {node.robot.saturated}, stops on timeout {node.timeouts}'
                 )
-            with shutdown_guard('formation_robot', lambda: status):
+            with shutdown_guard('formation_robot', lambda: status, announce=bool(nodes)):
                 release_ros(executor, nodes)
                 executor = None  # its C++ teardown, under the guard
     return status
