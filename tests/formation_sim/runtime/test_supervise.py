@@ -73,18 +73,20 @@ def test_a_time_keeper_writing_a_stray_byte_is_still_read_to_its_end(tmp_path) -
     assert keeper.log.read_text().startswith('\ufffd fast dds said this\n')
 
 
+# An agent that names its error on its way out, as formation_agent does.
+_NAMED_FAILURE = ProcessSpec(
+    name='agent_1',
+    args=('-c', 'import sys; print("formation_agent: a stale pose", file=sys.stderr); sys.exit(1)'),
+    expected_exit=True,
+)
+
+
 def test_a_child_that_failed_without_naming_its_error_is_described_by_its_logs_last_line(tmp_path) -> None:
     supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
     crashed = supervisor.start(
         ProcessSpec(name='simulator', args=('-c', 'raise RuntimeError("no context")'), expected_exit=True)
     )
-    named = supervisor.start(
-        ProcessSpec(
-            name='agent_1',
-            args=('-c', 'import sys; print("formation_agent: a stale pose", file=sys.stderr); sys.exit(1)'),
-            expected_exit=True,
-        )
-    )
+    named = supervisor.start(_NAMED_FAILURE)
     assert crashed.process.wait(timeout=30) == 1 and named.process.wait(timeout=30) == 1
     assert crashed.describe() == (
         f"simulator (pid {crashed.pid}) exited with status 1 (its log ends: 'RuntimeError: no context')"
@@ -98,13 +100,7 @@ def test_a_child_whose_ros_teardown_hung_after_a_clean_run_is_no_failure_and_sai
     supervisor = Supervisor(log_dir=tmp_path, env=dict(os.environ))
     # As rclpy's destroy_node blocked in C code with the GIL held, cut short by faulthandler.
     hung = supervisor.start(ProcessSpec(name='agent_3', args=('-c', _GIL_HELD_TEARDOWN), expected_exit=True))
-    failed_itself = supervisor.start(
-        ProcessSpec(
-            name='agent_1',
-            args=('-c', 'import sys; print("formation_agent: a stale pose", file=sys.stderr); sys.exit(1)'),
-            expected_exit=True,
-        )
-    )
+    failed_itself = supervisor.start(_NAMED_FAILURE)
     assert hung.process.wait(timeout=30) == 1 and failed_itself.process.wait(timeout=30) == 1
     assert hung.left_with() == 0 and failed_itself.left_with() is None
     failed, note = excused_teardown([hung, failed_itself])
