@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import dataclasses
 import signal
-from collections.abc import Callable
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from formation_agent.ros.process import SignalFlag
