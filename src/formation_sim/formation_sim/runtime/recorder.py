@@ -6,7 +6,9 @@ ROS-free `formation_sim.bag.io.BagWriter`. Reading bags back: `formation_sim.bag
 one: `formation_sim.bag.recovery`.
 
 Time stamps (`RunClock`): bag time is the run's time.  In lock-step a message is stamped with the
-simulation time of the latest Step on the clock topic; on the wall clock (a Step flagged realtime:
+simulation time of the latest Step received on the clock topic (a message that overtook its Step
+on the way, on a loaded machine, gets an earlier Step's time: the events executor gives no DDS
+source times to order them by); on the wall clock (a Step flagged realtime:
 `formation run --real-time` and every robot run) with the time it was received, counted from the
 Step's epoch (t = 0 of the run) on a monotonic clock, so that bag time equals sim time on a
 synchronised clock.  Messages received before the first Step wait up to `EARLY_WINDOW` s for it:
