@@ -285,10 +285,13 @@ def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsy
 
 @pytest.mark.alone  # a wall-clock bound: no other ROS test beside it (tests/conftest.py)
 @pytest.mark.timeout(300)
-def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_path):
-    """SIGKILL leaves no zero command: `formation run` sees the agent's process die and stops the
-    run at once (robots must not wait for a liveliness lease), naming the agent; the robot,
-    without commands, stops after its command timeout (0.5 s)."""
+def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_gets_its_zero_from_the_coordinator(
+    tmp_path, capsys
+):
+    """SIGKILL leaves the agent no way to stop its robot: `formation run` sees the agent's process
+    die and stops the run at once (robots must not wait for a liveliness lease), naming the agent;
+    the coordinator, with no final report from agent 2, sends robot 2 its zero command (issue 19),
+    and the robot, without commands, had stopped after its own command timeout (0.5 s) anyway."""
     import threading
 
     from formation_sim.bag.io import decode, read_bag
@@ -330,10 +333,14 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_stops_by_itself(tmp_
         and failure['detected_by'] == 'coordinator, orchestrator'
     ), failure
     assert failure['message'].startswith('agent_2 (pid ') and 'killed by SIGKILL' in failure['message']
-    # Every other robot's zero command within the bound: the coordinator's final Step at most
-    # POLL_PERIOD + a tick after the kill, each agent's zero command on it.
-    ends = _zero_commands_after(result.bag, killed_at, agents=(1, 3, 4))
-    assert set(ends) == {1, 3, 4} and max(ends.values()) - killed_at < 1.0, ends
+    # Every robot's zero command within the bound: the coordinator's final Step at most
+    # POLL_PERIOD + a tick after the kill, each agent's zero command on it; robot 2's from the
+    # coordinator UNREPORTED_STOP_AFTER later, and its stream ends there (nothing after the zero).
+    ends = _zero_commands_after(result.bag, killed_at, agents=(1, 2, 3, 4))
+    assert set(ends) == {1, 2, 3, 4} and max(ends.values()) - killed_at < 1.0, ends
+    assert json.loads(result.summary.read_text())['extra']['robots_stopped_here'] == [2]
+    # `formation analyze` agrees, every robot's last command a stop among its checks (before: exit 1).
+    assert main(['analyze', str(result.out_dir), '--no-figures']) == 0, capsys.readouterr()
     # Robot 2 as it truly moved (its odometry, exact without noise): still after its command timeout
     # (and a tick), to the end of the bag.
     after = []

@@ -42,6 +42,19 @@ def command_message(kind: RobotKind) -> type:
     return getattr(importlib.import_module(package.replace('/', '.')), name)
 
 
+def publish_zero(publisher, kind: RobotKind, *, dimension: int, world_frame: str) -> None:
+    """A robot's zero command of its kind (a world-frame TwistStamped stamped now, or a body-frame
+    Twist), `ROBOT_COMMAND_QOS.depth` times in a row: a frozen robot's reader of the default depth
+    holds only zeros when it resumes, not the commands sent before."""
+    zero = kind.zero_command(dimension)
+    if kind.world_frame_command:
+        message = pack_world_velocity(zero, frame_id=world_frame, stamp=time.time())
+    else:
+        message = pack_body_velocity(*zero)
+    for _ in range(ROBOT_COMMAND_QOS.depth):
+        publisher.publish(message)
+
+
 class PlantOutput:
     """robot: none — u_i / u^d_i to the simulator's plant (or any plant that takes them)."""
 
@@ -169,19 +182,16 @@ class RobotOutput:
             self.publisher.publish(pack_body_velocity(*self.commander.command(t, yaw(pose.orientation))))
 
     def stop(self) -> None:
-        """The zero command, `ROBOT_COMMAND_QOS.depth` times in a row (a frozen robot's reader of
-        the default depth holds only zeros when it resumes, not the commands sent before); nothing
-        is sent after it."""
+        """The zero command (`publish_zero`); nothing is sent after it."""
         if self._stopped:
             return
         self._stopped = True
         if self._timer is not None:
             self._node.destroy_timer(self._timer)
             self._timer = None
-        if self._world_frame:
-            zero = (0.0,) * self._config.dimension
-            message = pack_world_velocity(zero, frame_id=self._config.world_frame, stamp=time.time())
-        else:
-            message = pack_body_velocity(0.0, 0.0)
-        for _ in range(ROBOT_COMMAND_QOS.depth):
-            self.publisher.publish(message)
+        publish_zero(
+            self.publisher,
+            self.commander.kind,
+            dimension=self._config.dimension,
+            world_frame=self._config.world_frame,
+        )

@@ -31,6 +31,7 @@ from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
+WORLD_FRAME = 'world'  # the default frame_id of poses and of holonomic commands
 ROBOTS = KindNames(before=('none',))  # 'none' and every registered robot kind, read at each use
 LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle')
 
@@ -121,7 +122,7 @@ AGENT_PARAMETERS = (
         low=0.0,
         low_open=True,
     ),
-    _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default='world'),
+    _spec('world_frame', STRING, 'frame_id of every pose and of holonomic commands', default=WORLD_FRAME),
     _spec(
         'robot',
         STRING,

@@ -93,6 +93,7 @@ from formation_sim.runtime.run_book import (
     ids_text,
 )
 from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses
+from formation_sim.runtime.robot_stops import RobotStops
 from formation_sim.runtime.run_end import (
     collect_final_reports,
     stop_agents,
@@ -298,6 +299,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
         }
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
         self._horizon_timer = None
+        self.robot_stops = RobotStops(
+            self, model=self.robot_model, robots=self.scenario.agent_ids, dimension=self.scenario.dimension
+        )
         self.measured_start: MeasuredStart | None = None
 
     def _watch_agents(self) -> dict:
@@ -352,7 +356,11 @@ class FormationCoordinatorNode(TimeKeeperNode):
         return f'measured start within {largest:.3g} m of the scenario (agent {agent}); '
 
     def _world_extra(self) -> dict:
-        return {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
+        extra = {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
+        return {**extra, **self.robot_stops.extra()}
+
+    def stop_unreported_robots(self) -> None:
+        self.robot_stops.stop(self.book.unreported(), why='no final report from their agents')
 
     def _begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""

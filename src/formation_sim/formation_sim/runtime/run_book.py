@@ -259,6 +259,10 @@ class RunBook:
             if book.report is not None and book.report.final and book.report.failure
         }
 
+    def unreported(self) -> list[int]:
+        """Agents, alive or lost, whose final report has not come."""
+        return [i for i, book in self.agents.items() if book.report is None or not book.report.final]
+
     def final_reports_in(self) -> bool:
         """Every agent still alive has sent its final report."""
         return all(

@@ -23,16 +23,23 @@ from formation_sim.sim.summary import SUMMARY_FILE, unstarted_summary, write_sum
 
 GRAPH_FILE = 'graph.json'
 FINAL_REPORTS_TIMEOUT = 3.0  # [s] the longest wait for the agents' final reports
+# [s] after the final Step, the robots of agents that have not reported get the zero command from
+# the time keeper (a coordinator's `robot_stops.RobotStops`; the exact world stops with the run)
+UNREPORTED_STOP_AFTER = 0.5
 DELIVERY_TIMEOUT = 5.0  # [s] the longest wait for the readers' acknowledgements
 
 
 def collect_final_reports(
     node: TimeKeeperNode, executor, *, timeout_sec: float = FINAL_REPORTS_TIMEOUT
 ) -> None:
-    """After the final step: wait (bounded) for every live agent's last report."""
-    deadline = time.monotonic() + timeout_sec
-    while not node.final_reports_in() and time.monotonic() < deadline:
+    """After the final step: wait (bounded) for every live agent's last report; the robots of
+    those not reported after `UNREPORTED_STOP_AFTER` s (or lost) are stopped from here."""
+    began = time.monotonic()
+    while not node.final_reports_in() and time.monotonic() < began + timeout_sec:
         executor.spin_once(timeout_sec=0.05)
+        if time.monotonic() >= began + UNREPORTED_STOP_AFTER:
+            node.stop_unreported_robots()
+    node.stop_unreported_robots()
 
 
 def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:

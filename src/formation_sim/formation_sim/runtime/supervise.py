@@ -236,8 +236,8 @@ class Supervisor:
         3 s), and the recorder, still recording meanwhile, then drains and closes its bag.
 
         `robots_after`: the simulated robots run at least this long after the stop began (a robot
-        whose agent was killed gets no zero command: the bag shows it stopping on its own
-        command timeout).
+        whose agent was killed gets its zero command from the coordinator only after
+        `run_end.UNREPORTED_STOP_AFTER`: the bag shows it stopping on its own command timeout).
 
         A child that dies by a signal cannot remove its Fast DDS shared-memory files, and a peer
         that mapped one of its ports keeps the port's reference (the file outlives both).  Once

@@ -422,6 +422,9 @@ class TimeKeeperNode(WorldHooks, Node):
     def rejected(self) -> dict[str, int]:
         return self.book.rejected
 
+    def stop_unreported_robots(self) -> None:
+        """After the final Step: stop the robots of agents with no final report (robots only)."""
+
     def final_reports_in(self) -> bool:
         return self.book.final_reports_in()
 
