@@ -16,8 +16,8 @@ and noise-free pose (`/agent_<i>/robot/true_odom`).  Once the run has driven the
   to the run).
 
 Columns: the time from the fault to the last robot's last zero command (a robot whose agent was
-killed gets its zero from the coordinator, `formation_sim.runtime.robot_stops`), the largest distance a robot's
-control point... (its pose) travelled after the fault, the exit status and the message of
+killed gets its zero from the coordinator, `formation_sim.runtime.robot_stops`), the largest
+distance a robot's control point... (its pose) travelled after the fault, the exit status and the message of
 `formation run`, the time it took to exit after the fault, and whether `formation analyze` found
 the bag to agree with summary.json.  A `robot_stop` row also says what the frozen robot did once
 resumed (`resumed`): how far its first pose after SIGCONT lies from its last before the freeze,
