@@ -274,6 +274,7 @@ def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_ty
                 and f'/agent_1/robot/{other}' not in recorder['watched_topics']
             )
         assert coordinator['pose_silence'] == robots.pose_timeout
+        assert coordinator['world_frame'] == robots.world_frame  # its zero commands' frame
 
 
 @pytest.mark.parametrize(

@@ -47,7 +47,7 @@ class _Node:
 @pytest.mark.parametrize(('model', 'message'), [('unicycle', Twist), ('holonomic', TwistStamped)])
 def test_each_robot_gets_its_kinds_zero_once_as_often_as_a_robots_reader_keeps(model, message) -> None:
     node = _Node()
-    stops = RobotStops(node, model=model, robots=[1, 2, 3], dimension=2)
+    stops = RobotStops(node, model=model, robots=[1, 2, 3], dimension=2, world_frame='map')
     assert sorted(node.publishers) == [f'/agent_{i}/robot/cmd_vel' for i in (1, 2, 3)]
     assert all(p.message is message and p.qos == ROBOT_COMMAND_QOS for p in node.publishers.values())
     assert stops.extra() == {}  # nothing stopped: nothing in summary.json
@@ -62,7 +62,7 @@ def test_each_robot_gets_its_kinds_zero_once_as_often_as_a_robots_reader_keeps(m
         assert (twist.linear.x, twist.linear.y, twist.linear.z) == (0.0, 0.0, 0.0)
         assert (twist.angular.x, twist.angular.y, twist.angular.z) == (0.0, 0.0, 0.0)
         if message is TwistStamped:
-            assert command.header.frame_id == 'world'  # the agents' default world_frame
+            assert command.header.frame_id == 'map'  # the agents' world_frame
     assert stops.extra() == {'robots_stopped_here': [2, 3]}
     assert node.logger.lines == [
         'robots [2]: no final report from their agents: the coordinator sent them the zero command',

@@ -52,6 +52,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
+from formation_agent.ros.config import WORLD_FRAME
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
 from formation_agent.ros.process import (
     EXIT_BAD_INPUT,
@@ -163,6 +164,12 @@ COORDINATOR_PARAMETERS = (
             "a robot whose poses on robot_trajectory stop for this long while the other robots' still come "
             "is lost: the run stops at once [s] (formation run: the agents' pose_timeout)"
         ),
+    ),
+    ParameterSpec(
+        name='world_frame',
+        type=STRING,
+        default=WORLD_FRAME,
+        description="frame_id of the zero commands it sends holonomic robots (the agents' world_frame)",
     ),
     ParameterSpec(
         name='backend',
@@ -300,7 +307,11 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
         self._horizon_timer = None
         self.robot_stops = RobotStops(
-            self, model=self.robot_model, robots=self.scenario.agent_ids, dimension=self.scenario.dimension
+            self,
+            model=self.robot_model,
+            robots=self.scenario.agent_ids,
+            dimension=self.scenario.dimension,
+            world_frame=self.parameter_values['world_frame'],
         )
         self.measured_start: MeasuredStart | None = None
 

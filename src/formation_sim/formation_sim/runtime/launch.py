@@ -545,6 +545,7 @@ class LaunchPlan:
                 robot_trajectory=self.robot_trajectory,
                 # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
                 pose_silence=float(self.robots.pose_timeout),
+                world_frame=self.robots.world_frame,  # of its zero commands (robot_stops), as the agents'
             )
         return params
 

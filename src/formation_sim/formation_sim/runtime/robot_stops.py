@@ -17,7 +17,6 @@ from collections.abc import Sequence
 
 from formation_agent.core.kinds import robot_kind
 from formation_agent.ros.commands import command_message, publish_zero
-from formation_agent.ros.config import WORLD_FRAME
 from formation_msgs_py.qos import ROBOT_COMMAND_QOS
 from formation_msgs_py.topics import robot_command_topic
 
@@ -25,10 +24,11 @@ from formation_msgs_py.topics import robot_command_topic
 class RobotStops:
     """A zero-command writer per robot (`stop` sends each robot its zero once)."""
 
-    def __init__(self, node, *, model: str, robots: Sequence[int], dimension: int) -> None:
+    def __init__(self, node, *, model: str, robots: Sequence[int], dimension: int, world_frame: str) -> None:
         self._node = node
         self._kind = robot_kind(model)
         self._dimension = dimension
+        self._world_frame = world_frame  # a holonomic robot's TwistStamped frame_id, as its agent's
         message = command_message(self._kind)
         self._publishers = {
             i: node.create_publisher(message, robot_command_topic(i), ROBOT_COMMAND_QOS) for i in robots
@@ -39,7 +39,9 @@ class RobotStops:
         """Send each of `robots` not yet stopped from here its zero command; those it sent to."""
         new = [i for i in robots if i in self._publishers and i not in self.stopped]
         for i in new:
-            publish_zero(self._publishers[i], self._kind, dimension=self._dimension, world_frame=WORLD_FRAME)
+            publish_zero(
+                self._publishers[i], self._kind, dimension=self._dimension, world_frame=self._world_frame
+            )
         if new:
             self.stopped += new
             self._node.get_logger().warning(
