@@ -87,11 +87,12 @@ class Child:
             return None
         return teardown_status(self._log_tail())
 
-    def error_line(self) -> str:
-        """The error the child named on its way out (its last 'formation_...: ' line), or ''."""
+    def error_line(self, lines: list[str] | None = None) -> str:
+        """The error the child named on its way out (its last 'formation_...: ' line), or ''
+        (`lines`: its log's tail, read here when not given)."""
         named = [
             line
-            for line in self._log_tail()
+            for line in (self._log_tail() if lines is None else lines)
             if line.startswith(('formation_agent: ', 'formation_sim: ', 'formation_recorder: '))
         ]
         return named[-1].split(': ', 1)[1] if named else ''
@@ -102,10 +103,11 @@ class Child:
         text = f'{self.name} (pid {self.pid}) {describe_exit(self.process.returncode)}'
         if self.process.returncode in (None, 0):
             return text
-        error = self.error_line()
+        lines = self._log_tail()
+        error = self.error_line(lines)
         if error:
             return f'{text}: {error}'
-        last = next((line.strip() for line in reversed(self._log_tail()) if line.strip()), '')
+        last = next((line.strip() for line in reversed(lines) if line.strip()), '')
         return f'{text} (its log ends: {last[:200]!r})' if last and self.process.returncode > 0 else text
 
     @property
