@@ -31,6 +31,7 @@ from formation_msgs_py.lockstep import (
     Step,
     WorldState,
 )
+from formation_msgs_py.topics import WORLD_FRAME
 from formation_msgs_py.types import MAX_AGENT_ID, RobotPose, SensedState, TriggerInfo
 
 LAYOUT_VERSION = 1
@@ -756,7 +757,7 @@ def ros_time(seconds: float):
     return Time(sec=sec, nanosec=nanosec)
 
 
-def encode_pose_array(state: WorldState, *, frame_id: str = 'world'):
+def encode_pose_array(state: WorldState, *, frame_id: str = WORLD_FRAME):
     """geometry_msgs/PoseArray of agent positions (p <= 3; missing axes 0) for visualisation."""
     from geometry_msgs.msg import Point, Pose, PoseArray
     from std_msgs.msg import Header

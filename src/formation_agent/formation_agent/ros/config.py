@@ -26,12 +26,17 @@ from formation_agent.ros.parameters import (
     parameter_help,
     read_parameters,
 )
-from formation_msgs_py.topics import agent_namespace, robot_command_topic, robot_odom_topic, robot_pose_topic
+from formation_msgs_py.topics import (
+    WORLD_FRAME,
+    agent_namespace,
+    robot_command_topic,
+    robot_odom_topic,
+    robot_pose_topic,
+)
 from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
 POSE_TYPES = ('pose', 'odom')
-WORLD_FRAME = 'world'  # the default frame_id of poses and of holonomic commands
 ROBOTS = KindNames(before=('none',))  # 'none' and every registered robot kind, read at each use
 LIMIT_PARAMETERS = ('max_linear_speed', 'max_angular_speed', 'max_linear_acceleration', 'max_steering_angle')
 

@@ -31,10 +31,10 @@ from formation_sim.model import theory
 if TYPE_CHECKING:
     from formation_sim.model.scenario import Scenario
 
-from formation_msgs_py.topics import MARKERS_TOPIC, STATE_TOPIC
+from formation_msgs_py.topics import MARKERS_TOPIC, STATE_TOPIC, WORLD_FRAME
 
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
-DEFAULT_FRAME = 'world'
+DEFAULT_FRAME = WORLD_FRAME
 
 # visualization_msgs/Marker constants (type, action).
 SPHERE = 2

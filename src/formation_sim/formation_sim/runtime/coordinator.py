@@ -52,7 +52,6 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.config import WORLD_FRAME
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
 from formation_agent.ros.process import (
     EXIT_BAD_INPUT,
@@ -75,6 +74,7 @@ from formation_msgs_py.topics import (
     SCENARIO_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
+    WORLD_FRAME,
     robot_command_topic,
     robot_odom_topic,
     robot_pose_topic,

@@ -42,6 +42,7 @@ from formation_msgs_py.topics import (
     COORDINATOR_NODE,
     ROBOT_NODE,
     SIMULATOR_NODE,
+    WORLD_FRAME,
     robot_command_topic,
 )
 from formation_sim.model.scenario import Scenario, dump_scenario
@@ -111,7 +112,7 @@ class RobotOptions:
     command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
     pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
     pose_timeout: float = 0.5  # [s] an older pose stops the agent safely
-    world_frame: str = 'world'
+    world_frame: str = WORLD_FRAME
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
     yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0

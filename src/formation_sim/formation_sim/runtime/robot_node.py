@@ -78,6 +78,7 @@ from formation_msgs_py.codec import MessageError
 from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
 from formation_msgs_py.topics import (
     ROBOT_NODE,
+    WORLD_FRAME,
     agent_namespace,
     robot_command_topic,
     robot_odom_topic,
@@ -210,7 +211,10 @@ SPECS = (
         description='seed of the pose noise (one stream per robot)',
     ),
     ParameterSpec(
-        name='world_frame', type=STRING, default='world', description='frame of poses and holonomic commands'
+        name='world_frame',
+        type=STRING,
+        default=WORLD_FRAME,
+        description='frame of poses and holonomic commands',
     ),
     ParameterSpec(
         name='publish_truth',
