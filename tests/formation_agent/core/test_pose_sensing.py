@@ -131,3 +131,13 @@ def test_a_pose_older_than_the_one_held_is_refused():
         f'pose of robot 1 stamped {NOW - 0.02!r}, before the one held ({NOW - 0.01!r})',
     )
     assert book.fresh(1, t=0.0, now=NOW).position == (0.0, 0.0, 0.0)
+
+
+def test_the_shared_stamp_rule_refuses_old_future_and_nan_ages():
+    """`stamp_refusal` is the rule of the agents' `fresh` and of the coordinator's poses (issue 28)."""
+    from formation_agent.core.pose_sensing import stamp_refusal
+
+    assert stamp_refusal(age=0.51, timeout=0.5) == 'old' and stamp_refusal(age=0.5, timeout=0.5) is None
+    assert stamp_refusal(age=-0.51, timeout=0.5) == 'future' and stamp_refusal(age=-0.5, timeout=0.5) is None
+    assert stamp_refusal(age=-0.4, timeout=math.inf, future=0.1) == 'future'
+    assert stamp_refusal(age=math.nan, timeout=0.5) == 'not a time'

@@ -107,3 +107,84 @@ def test_every_trajectory_source_names_its_robot_topic():
         'odom': '/agent_4/robot/odom',
         'pose': '/agent_4/robot/pose',
     }
+
+
+# -- issue 28: the poses the agents refuse are refused here too --------------------------------
+
+
+def _gated(**options) -> RobotPoses:
+    return RobotPoses(
+        [1, 2, 3], model='holonomic', dimension=2, control_point_distance=0.1, silence=0.5, **options
+    )
+
+
+def _take(poses: RobotPoses, agent: int, fields: tuple, *, wall: float) -> tuple[str, str] | None:
+    """What the coordinator's pose callback does: refuse, or note as a sample from t = 0."""
+    refusal = poses.refusal(agent, fields, wall=wall)
+    if refusal is None:
+        poses.note(agent, fields, epoch=EPOCH, now=wall - EPOCH)
+    return refusal
+
+
+@pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize('index', [0, 1, 2, 3, 6])
+def test_a_pose_with_a_non_finite_value_is_refused_counted_and_never_sampled(bad, index):
+    poses = _gated()
+    for k in range(3):
+        assert _take(poses, 1, _fields(k * 0.01, x=1.0), wall=EPOCH + k * 0.01) is None
+    for k in range(3):
+        assert _take(poses, 2, _fields(k * 0.01, x=3.0), wall=EPOCH + k * 0.01) is None
+        assert _take(poses, 3, _fields(k * 0.01, x=5.0), wall=EPOCH + k * 0.01) is None
+    sec, nanosec, values = _fields(0.05, x=1.0)
+    values = list(values)
+    values[index] = bad
+    for _ in range(5):  # five NaN poses on one robot's odom (issue 28's finding)
+        reason, detail = _take(poses, 1, (sec, nanosec, tuple(values)), wall=EPOCH + 0.06)
+        assert reason == 'non_finite' and 'must be finite' in detail and 'robot 1' in detail
+    assert poses.refused == {'non_finite': 5} and len(poses.samples[1]) == 3
+    latest = poses.latest_positions()
+    assert np.isfinite(latest).all() and latest[:, 0].tolist() == [1.0, 3.0, 5.0]
+
+
+def test_a_non_finite_twist_and_a_quaternion_far_from_unit_are_refused():
+    poses = _gated()
+    sec, nanosec, values = _fields(0.0, x=1.0)
+    assert _take(poses, 1, (sec, nanosec, values, (0.0, math.nan, 0, 0, 0, 0)), wall=EPOCH)[0] == 'non_finite'
+    zero = (*values[:3], 0.0, 0.0, 0.0, 0.0)
+    reason, detail = _take(poses, 1, (sec, nanosec, zero), wall=EPOCH)
+    assert reason == 'field' and 'unit quaternion' in detail
+    assert poses.samples[1] == [] and poses.refused == {'non_finite': 1, 'field': 1}
+
+
+def test_a_pose_stamped_ahead_of_the_clock_beyond_the_tolerance_is_refused():
+    """Issue 28: one odometry pose stamped 0.4 s ahead gave max_edge_length 5.38 > Δ = 3."""
+    poses = _gated(ahead=0.1)
+    assert _take(poses, 1, _fields(1.0, x=1.0), wall=EPOCH + 1.0) is None
+    reason, detail = _take(poses, 1, _fields(1.4, x=4.0), wall=EPOCH + 1.0)
+    assert reason == 'future' and '0.400 s ahead' in detail and 'tolerance 0.1 s' in detail
+    # The real next pose, stamped after the one held and before the forged one, is taken.
+    assert _take(poses, 1, _fields(1.01, x=1.0), wall=EPOCH + 1.01) is None
+    assert [s.time for s in poses.samples[1]] == pytest.approx([1.0, 1.01], abs=1e-7)
+    assert _take(poses, 1, _fields(1.09, x=1.0), wall=EPOCH + 1.0) is None  # within the tolerance
+
+
+def test_a_pose_stamped_before_the_last_accepted_one_is_refused():
+    poses = _gated()
+    assert _take(poses, 2, _fields(1.0, x=1.0), wall=EPOCH + 1.0) is None
+    reason, detail = _take(poses, 2, _fields(0.5, x=1.0), wall=EPOCH + 1.0)
+    assert reason == 'time_backwards' and 'before the one held' in detail
+    assert len(poses.samples[2]) == 1
+
+
+def test_a_jump_beyond_the_speed_limit_is_refused_and_a_reachable_pose_is_not():
+    poses = _gated(max_speed=0.5, slack=0.05)
+    assert _take(poses, 3, _fields(1.0, x=1.0), wall=EPOCH + 1.0) is None
+    # 0.1 s later the robot can be 0.5 * 0.1 + 0.05 = 0.1 m further: 0.099 m is taken, 0.2 m not.
+    reason, detail = _take(poses, 3, _fields(1.1, x=1.2), wall=EPOCH + 1.1)
+    assert reason == 'jump' and '0.200 m' in detail and '0.5 m/s' in detail
+    assert _take(poses, 3, _fields(1.1, x=1.099), wall=EPOCH + 1.1) is None
+    assert poses.refused == {'jump': 1}
+    # Without a speed limit (inf) no jump is refused.
+    free = _gated()
+    assert _take(free, 3, _fields(1.0, x=1.0), wall=EPOCH + 1.0) is None
+    assert _take(free, 3, _fields(1.01, x=100.0), wall=EPOCH + 1.01) is None

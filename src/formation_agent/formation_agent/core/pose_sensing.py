@@ -16,21 +16,97 @@ old (by its header stamp against the agent's clock) and not stamped more than `t
 future (clocks out of step).  Otherwise `PoseError` names the robot, its topic, the age and the
 limit, and the agent stops safely.  Poses in another frame than the world frame, or older than
 the one already held, are refused on arrival and counted (`add`).
+
+The rules a pose must meet to be used are this module's functions, shared by every reader of
+poses (issue 28): the agents' `PoseBook` and the coordinator's `formation_sim.runtime.robot_poses`.
+`stamp_refusal` (too old, or stamped ahead of the reader's clock) and `pose_refusal` (finite
+values and a unit quaternion as `formation_msgs_py.codec.pose_values` checks them, not stamped
+before the last pose accepted from the robot, not stamped ahead beyond a tolerance, and no jump
+from the last accepted pose beyond what the robot's speed limit allows between their stamps).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from formation_agent.core.kinematics import control_point, control_point_velocity
-from formation_msgs_py.lockstep import REJECT_FRAME, REJECT_TIME_BACKWARDS
+from formation_msgs_py.codec import MessageError, pose_values, twist_values
+from formation_msgs_py.lockstep import REJECT_FRAME, REJECT_FUTURE, REJECT_JUMP, REJECT_TIME_BACKWARDS
 from formation_msgs_py.types import RobotPose, SensedState
 
 
 class PoseError(ValueError):
     """A pose the agent needs is missing, too old, or from the future: the agent must stop."""
+
+
+def stamp_refusal(*, age: float, timeout: float, future: float | None = None) -> str | None:
+    """Why a pose `age` seconds old (negative: stamped ahead of the reader's clock) must not be
+    used, or None: older than `timeout`, or ahead by more than `future` (default `timeout`).
+    A NaN age is refused too (no comparison holds for it)."""
+    future = timeout if future is None else future
+    if age > timeout:
+        return 'old'
+    if age < -future:
+        return 'future'
+    if math.isnan(age):
+        return 'not a time'
+    return None
+
+
+def pose_refusal(
+    robot: int,
+    *,
+    stamp: float,
+    pose: Sequence[float],
+    twist: Sequence[float] | None = None,
+    now: float,
+    ahead: float,
+    latest: tuple[float, Sequence[float]] | None = None,
+    max_speed: float = math.inf,
+    slack: float = 0.0,
+) -> tuple[str, str] | None:
+    """Why a pose of `robot` (Unix `stamp`, `pose`: position x y z and quaternion x y z w, the
+    odometry's `twist`: linear and angular, 3 each) that arrived at Unix time `now` must not be
+    used, as (reason, detail), or None.  `latest`: the stamp and position of the last pose of
+    `robot` accepted; `ahead`: how far a stamp may be ahead of `now` [s]; `max_speed`: the robot's
+    speed limit [m/s] (inf: no jump is refused), `slack` the distance allowed on top [m].
+
+    The rules: finite values and a unit quaternion (`codec.pose_values`, `codec.twist_values`:
+    the agents' decoders'); a finite stamp not before `latest`'s (REJECT_TIME_BACKWARDS), nor
+    ahead of `now` by more than `ahead` (REJECT_FUTURE, `stamp_refusal`); and a position at most
+    `max_speed` (t - t_latest) + `slack` from `latest`'s (REJECT_JUMP)."""
+    try:
+        position, _ = pose_values(f'pose of robot {robot}', pose[:3], pose[3:7])
+        if twist is not None:
+            twist_values(twist[:3], twist[3:6])
+    except MessageError as error:
+        return error.reason, str(error)
+    if not math.isfinite(stamp):
+        return REJECT_FUTURE, f'pose of robot {robot} stamped {stamp!r}: not a time'
+    if stamp_refusal(age=now - stamp, timeout=math.inf, future=ahead) is not None:
+        return REJECT_FUTURE, (
+            f'pose of robot {robot} stamped {stamp - now:.3f} s ahead of this clock (tolerance {ahead:g} s; '
+            'are the clocks synchronised?)'
+        )
+    if latest is None:
+        return None
+    held, where = latest
+    if stamp < held:
+        return (
+            REJECT_TIME_BACKWARDS,
+            f'pose of robot {robot} stamped {stamp!r}, before the one held ({held!r})',
+        )
+    moved = math.dist(position[: len(where)], where)
+    allowed = max_speed * (stamp - held) + slack
+    if moved > allowed:
+        return REJECT_JUMP, (
+            f'pose of robot {robot} {moved:.3f} m from the one held {stamp - held:.3f} s before it: more '
+            f'than its speed limit allows ({max_speed:g} m/s, {slack:g} m slack: {allowed:.3f} m)'
+        )
+    return None
 
 
 class PoseBook:
@@ -70,7 +146,7 @@ class PoseBook:
             self._refused[robot] = detail
             return REJECT_FRAME, detail
         latest = self._latest.get(robot)
-        if latest is not None and pose.stamp < latest.stamp:
+        if latest is not None and pose.stamp < latest.stamp:  # pose_refusal's rule, on a decoded pose
             detail = f'pose of robot {robot} stamped {pose.stamp!r}, before the one held ({latest.stamp!r})'
             return REJECT_TIME_BACKWARDS, detail
         if latest is not None and pose.stamp > latest.stamp:
@@ -94,11 +170,12 @@ class PoseBook:
             refused = f'; its last pose was refused: {self._refused[robot]}' if robot in self._refused else ''
             raise PoseError(f'{where} has not arrived by t={t:.3f}{refused}: the agent stops')
         age = now - pose.stamp
-        if age > self.timeout:
+        refusal = stamp_refusal(age=age, timeout=self.timeout)
+        if refusal == 'old':
             raise PoseError(
                 f'{where} is {age:.3f} s old at t={t:.3f} (pose_timeout {self.timeout:g} s): the agent stops'
             )
-        if age < -self.timeout:
+        if refusal is not None:
             raise PoseError(
                 f'{where} is stamped {-age:.3f} s in the future at t={t:.3f} '
                 f'(pose_timeout {self.timeout:g} s; are the clocks synchronised?): the agent stops'

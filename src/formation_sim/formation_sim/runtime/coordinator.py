@@ -166,6 +166,38 @@ COORDINATOR_PARAMETERS = (
         ),
     ),
     ParameterSpec(
+        name='pose_ahead_tolerance',
+        type=DOUBLE,
+        default=0.1,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description=(
+            "a pose stamped further ahead of this node's clock is refused and counted, never sampled [s] "
+            '(the agents: their pose_timeout)'
+        ),
+    ),
+    ParameterSpec(
+        name='max_linear_speed',
+        type=DOUBLE,
+        default=math.inf,
+        low=0.0,
+        low_open=True,
+        description=(
+            "the robots' speed limit [m/s] (inf: none): a pose further from its robot's last one than it "
+            'allows between their stamps (plus pose_jump_slack) is refused and counted'
+        ),
+    ),
+    ParameterSpec(
+        name='pose_jump_slack',
+        type=DOUBLE,
+        default=0.05,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description='the distance a pose may be off the speed limit on top (its noise) [m]',
+    ),
+    ParameterSpec(
         name='world_frame',
         type=STRING,
         default=WORLD_FRAME,
@@ -288,13 +320,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             if self.trajectory_source == 'pose'
             else (Odometry, odometry_fields)
         )
-        self.poses = RobotPoses(
-            self.scenario.agent_ids,
-            model=self.robot_model,
-            dimension=self.scenario.dimension,
-            control_point_distance=self.control_point_distance,
-            silence=self.parameter_values['pose_silence'],
-        )
+        self.poses = RobotPoses.of_coordinator(self.scenario, self.parameter_values)
         # Raw: the poses' fields read from their bytes (formation_msgs_py.cdr), not through rclpy's
         # Python messages, which were most of the coordinator's CPU (400 Odometry a second for 4
         # robots); the same floats as `formation analyze` reads from the bag (sim.robots.sample_from_fields).
@@ -511,8 +537,12 @@ class FormationCoordinatorNode(TimeKeeperNode):
         except MessageError as error:
             self._reject(self._pose_subs[agent].topic_name, error.reason, str(error))
             return
-        # Before t = 0 (no epoch yet): kept, the last few, for the first sample.
-        self.poses.note(agent, fields, epoch=None if self.step is None else self._epoch, now=time.monotonic())
+        if (refusal := self.poses.refusal(agent, fields, wall=time.time())) is not None:  # the agents' rules
+            self._reject(self._pose_subs[agent].topic_name, *refusal)
+        else:  # before t = 0 (no epoch yet): kept, the last few, for the first sample
+            self.poses.note(
+                agent, fields, epoch=None if self.step is None else self._epoch, now=time.monotonic()
+            )
 
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).

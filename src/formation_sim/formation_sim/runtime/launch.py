@@ -547,7 +547,12 @@ class LaunchPlan:
                 # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
                 pose_silence=float(self.robots.pose_timeout),
                 world_frame=self.robots.world_frame,  # of its zero commands (robot_stops), as the agents'
+                # A pose further from its robot's last one than the speed limit allows is refused
+                # (issue 28); a simulated pose's noise is allowed on top (8 sigma of each pose).
+                pose_jump_slack=0.05 + 8.0 * float(self.robots.pose_noise),
             )
+            if math.isfinite(self.robots.max_linear_speed):
+                params['max_linear_speed'] = float(self.robots.max_linear_speed)
         return params
 
     def _keeper_args(self, paths: dict[str, Path]) -> tuple[str, ...]:

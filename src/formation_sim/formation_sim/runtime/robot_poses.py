@@ -5,6 +5,12 @@ before t = 0 the last `EARLY_POSES` of each robot are kept (the first sample nee
 them), from t = 0 on each becomes a `RobotSample` (run time, control point, its velocity) and its
 arrival is noted in the `PoseWatch` (a robot whose poses stop is lost).  At the end the samples
 are cut as `formation analyze` cuts the bag (`sim.robots.poses_for_end`) into `PoseTrack`s.
+
+A pose is kept only if the agents' rules accept it (`formation_agent.core.pose_sensing.pose_refusal`,
+issue 28): finite with a unit quaternion, not stamped before the robot's last accepted pose, nor
+ahead of this clock beyond `ahead` seconds, nor further from the last accepted one than the
+robot's speed limit allows.  A refused pose is counted by its reason (`refused`), never sampled,
+never used for a connectivity verdict and never a sign of the robot's life.
 """
 
 from __future__ import annotations
@@ -12,8 +18,11 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable
 
+import math
+
 import numpy as np
 
+from formation_agent.core.pose_sensing import pose_refusal
 from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
 from formation_sim.runtime.run_book import CoordinatorError, PoseWatch
 from formation_sim.sim.robots import PoseTrack, RobotSample, poses_for_end, sample_from_fields
@@ -35,6 +44,9 @@ class RobotPoses:
         dimension: int,
         control_point_distance: float,
         silence: float,
+        ahead: float = 0.1,
+        max_speed: float = math.inf,
+        slack: float = 0.05,
     ) -> None:
         self.model = model
         self.dimension = dimension
@@ -43,6 +55,9 @@ class RobotPoses:
         self.samples: dict[int, list[RobotSample]] = {i: [] for i in agent_ids}
         self.early: dict[int, deque] = {i: deque(maxlen=EARLY_POSES) for i in self.samples}
         self.watch = PoseWatch(self.samples, silence=silence)
+        self.ahead, self.max_speed, self.slack = ahead, max_speed, slack
+        self._accepted: dict[int, tuple[float, tuple[float, ...]]] = {}  # robot -> (stamp, position)
+        self.refused: dict[str, int] = {}  # reason -> poses refused
 
     def sample(self, fields: tuple, *, epoch: float) -> RobotSample:
         """A pose's fields (stamp, pose, and the twist of odometry) as a sample, run time from `epoch`."""
@@ -54,8 +69,45 @@ class RobotPoses:
             epoch=epoch,
         )
 
+    @classmethod
+    def of_coordinator(cls, scenario, values: dict) -> RobotPoses:
+        """The poses of `scenario`'s robots as a coordinator with parameter `values` reads them."""
+        return cls(
+            scenario.agent_ids,
+            model=values['robot'],
+            dimension=scenario.dimension,
+            control_point_distance=values['control_point_distance'],
+            silence=values['pose_silence'],
+            ahead=values['pose_ahead_tolerance'],
+            max_speed=values['max_linear_speed'],
+            slack=values['pose_jump_slack'],
+        )
+
+    def refusal(self, agent: int, fields: tuple, *, wall: float) -> tuple[str, str] | None:
+        """Why a pose of robot `agent` (its fields) that arrived at Unix time `wall` is refused
+        (reason, detail; counted in `refused`), or None: then it is the robot's latest accepted."""
+        sec, nanosec, pose = fields[0], fields[1], fields[2]
+        stamp = sec + nanosec * 1e-9
+        refusal = pose_refusal(
+            agent,
+            stamp=stamp,
+            pose=pose,
+            twist=fields[3] if len(fields) > 3 else None,
+            now=wall,
+            ahead=self.ahead,
+            latest=self._accepted.get(agent),
+            max_speed=self.max_speed,
+            slack=self.slack,
+        )
+        if refusal is None:
+            self._accepted[agent] = (stamp, tuple(pose[:3]))
+        else:
+            self.refused[refusal[0]] = self.refused.get(refusal[0], 0) + 1
+        return refusal
+
     def note(self, agent: int, fields: tuple, *, epoch: float | None, now: float) -> None:
-        """A pose of robot `agent` arrived at monotonic time `now`; `epoch` None: before t = 0."""
+        """A pose of robot `agent` (accepted by `refusal`) arrived at monotonic time `now`; `epoch`
+        None: before t = 0."""
         if epoch is None:  # before t = 0: the last few, for the first sample
             self.early[agent].append(fields)
             return
