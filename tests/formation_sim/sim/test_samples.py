@@ -217,3 +217,35 @@ def test_edge_lengths_of_some_agents_touch_only_their_edges():
     lengths.add_edges(edges, x[lengths.heads[edges]], x[lengths.tails[edges]])
     expected = [np.linalg.norm(x[0] - x[1]), 0.0, np.linalg.norm(x[1] - x[2])]
     assert lengths.maxima.tolist() == expected
+
+
+def test_a_summary_with_non_finite_values_is_written_as_strict_json_naming_each(tmp_path):
+    """Issue 28: `formation run` died writing summary.json ('Out of range float values are not JSON
+    compliant: nan') after NaN poses; every such value is null now, and named with what it was."""
+    import json
+
+    from formation_sim.sim.summary import write_summary_file
+
+    summary = {
+        'schema': 'formation-summary/1',
+        'max_edge_length': float('nan'),
+        'edges': [{'max_length': 2.0}, {'max_length': np.float64('inf')}],
+        'final_positions': {'1': (1.0, -np.inf)},
+        'extra': {'failure': None},
+    }
+    path = write_summary_file(summary, tmp_path / 'summary.json')
+    text = path.read_text()
+    data = json.loads(text, parse_constant=lambda name: pytest.fail(f'{name} in summary.json'))
+    assert data['max_edge_length'] is None and data['edges'][1]['max_length'] is None
+    assert data['edges'][0]['max_length'] == 2.0 and data['final_positions'] == {'1': [1.0, None]}
+    assert data['extra'] == {
+        'failure': None,
+        'non_finite': {
+            'max_edge_length': 'nan',
+            'edges[1].max_length': 'inf',
+            'final_positions.1[1]': '-inf',
+        },
+    }
+    # A finite summary is written as it is, with no such entry.
+    write_summary_file({'a': 1.5, 'extra': {}}, tmp_path / 'clean.json')
+    assert json.loads((tmp_path / 'clean.json').read_text()) == {'a': 1.5, 'extra': {}}

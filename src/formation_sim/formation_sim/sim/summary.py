@@ -35,6 +35,8 @@ keys):
   simulator could not: how, and every process's exit
 - `extra.rejected_messages`: distributed runs: {total, by_reason, by_agent, simulator}: messages
   refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`)
+- `extra.non_finite`: only when a value was not a finite number (NaN or infinite: JSON has
+  neither): where it was (e.g. 'edges[0].max_length') -> 'nan', 'inf' or '-inf'; it is written null
 - `extra.injected_faults`: distributed runs: {dropped, delayed, by_agent}: triggering information
   dropped or delayed by fault injection (a test facility)
 
@@ -213,8 +215,34 @@ def write_summary(record, out_dir) -> Path:
 
 
 def write_summary_file(summary: dict, path) -> Path:
-    """Write a summary dictionary as `path` (summary.json), whole or not at all."""
-    return write_atomically(path, json.dumps(summary, indent=1, allow_nan=False) + '\n')
+    """Write a summary dictionary as `path` (summary.json), whole or not at all.  JSON holds no
+    NaN or infinity: a value that is not finite (what a run fed bad input could make) is written
+    as null, and `extra.non_finite` names it with what it was (`finite_or_null`), so that the
+    summary is always written and always strict JSON (issue 28)."""
+    clean, replaced = finite_or_null(summary)
+    if replaced:
+        extra = clean.get('extra') if isinstance(clean.get('extra'), dict) else {}
+        clean['extra'] = {**extra, 'non_finite': replaced}
+    return write_atomically(path, json.dumps(clean, indent=1, allow_nan=False) + '\n')
+
+
+def finite_or_null(value, where: str = '') -> tuple[object, dict[str, str]]:
+    """`value` (JSON-like: dicts, lists, tuples, numbers) with every float that is NaN or
+    infinite (numpy's too) replaced by None, and {where it was: 'nan' | 'inf' | '-inf'}, where
+    is a path such as 'edges[0].max_length'."""
+    replaced: dict[str, str] = {}
+
+    def clean(item, path: str):
+        if isinstance(item, dict):
+            return {key: clean(inner, f'{path}.{key}' if path else str(key)) for key, inner in item.items()}
+        if isinstance(item, (list, tuple)):
+            return [clean(inner, f'{path}[{k}]') for k, inner in enumerate(item)]
+        if isinstance(item, (float, np.floating)) and not np.isfinite(item):
+            replaced[path] = repr(float(item))
+            return None
+        return item
+
+    return clean(value, where), replaced
 
 
 def load_summary(path) -> dict:
