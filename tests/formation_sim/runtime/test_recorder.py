@@ -850,6 +850,27 @@ def test_wall_clock_messages_are_stamped_with_their_receive_time_since_the_epoch
     assert clock.stamp_ns() == 1_780_000_000
 
 
+@pytest.mark.parametrize(
+    't', [1e300, 1e11, 5e9, -1.0, -0.0 - 1e-300, float('inf'), float('-inf'), float('nan')]
+)
+def test_a_step_whose_time_no_bag_can_stamp_is_refused_and_changes_nothing(t) -> None:
+    """Issue 28: one forged Step with t = 1e300 killed the recorder (OverflowError in its clock),
+    t = 1e11 too (an uncaught BagError: a stamp past int64 nanoseconds)."""
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
+    from formation_sim.runtime.recorder import MAX_BAG_TIME, RunClock
+
+    clock = RunClock()
+    assert clock.on_step([1.0, 3.0, 0.5])
+    assert not clock.on_step([1.0, 4.0, t])
+    assert not clock.on_step([1.0, 4.0, 0.5, float(STEP_FLAG_REALTIME), t])  # as an epoch
+    assert clock.stamp_ns() == 500_000_000 and clock.step_index == 3 and not clock.realtime
+    # The largest time taken still stamps a bag, wall time minus it too.
+    below = MAX_BAG_TIME * (1 - 1e-15)
+    assert clock.on_step([1.0, 5.0, below]) and 0 <= clock.stamp_ns() < 2**63
+    wall = RunClock(wall_ns=lambda: 2**62)
+    assert wall.on_step([1.0, 0.0, 0.0, float(STEP_FLAG_REALTIME), below]) and 0 <= wall.stamp_ns() < 2**63
+
+
 def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_path: Path) -> None:
     from formation_sim.runtime.recorder import RECORDER_PARAMETERS
 

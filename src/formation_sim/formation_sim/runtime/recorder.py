@@ -201,6 +201,16 @@ def import_message_class(msgtype: str) -> type:
         raise UnknownMessageTypeError(msg) from err
 
 
+MAX_BAG_TIME = 2**63 / _NS_PER_S / 2
+"""A bag stamps int64 nanoseconds: a Step's time or epoch must be below half of 2**63 ns (~146
+years), so that wall time minus epoch plus run time fits too."""
+
+
+def bag_time(seconds: float) -> bool:
+    """Whether `seconds` is a time a bag can stamp: finite, in [0, MAX_BAG_TIME)."""
+    return isinstance(seconds, (int, float)) and math.isfinite(seconds) and 0.0 <= seconds < MAX_BAG_TIME
+
+
 class RunClock:
     """Bag time of the messages of a run, from the Steps on its clock topic (module docstring).
 
@@ -226,19 +236,17 @@ class RunClock:
         return self._anchor is not None
 
     def on_step(self, data: Sequence[float]) -> bool:
-        """Take a Step's data; False (and nothing changed) unless it holds [version, step, time >= 0, ...]."""
-        if len(data) <= _STEP_TIME_INDEX or not (
-            math.isfinite(data[_STEP_TIME_INDEX]) and data[_STEP_TIME_INDEX] >= 0
-        ):
+        """Take a Step's data; False (and nothing changed) unless it holds [version, step, time, ...]
+        with a time a bag can stamp (`bag_time`: in [0, MAX_BAG_TIME) s, issue 28: t = 1e300 and
+        t = 1e11 killed the recorder) and, on the wall clock, such an epoch."""
+        if len(data) <= _STEP_TIME_INDEX or not bag_time(data[_STEP_TIME_INDEX]):
             return False
         flags = data[_STEP_FLAGS_INDEX] if len(data) > _STEP_FLAGS_INDEX else 0.0
         epoch = data[_STEP_EPOCH_INDEX] if len(data) > _STEP_EPOCH_INDEX else 0.0
-        if (
-            math.isfinite(flags)
-            and flags.is_integer()
-            and int(flags) & STEP_FLAG_REALTIME
-            and math.isfinite(epoch)
-        ):
+        realtime = math.isfinite(flags) and flags.is_integer() and int(flags) & STEP_FLAG_REALTIME
+        if realtime and not bag_time(epoch):
+            return False
+        if realtime:
             if self._anchor is None:  # the epoch is the run's t = 0 on every machine's wall clock
                 self._anchor = (self._monotonic_ns(), self._wall_ns() - round(epoch * _NS_PER_S))
         else:
@@ -333,6 +341,7 @@ class RecorderNode(Node):
             deque()
         )  # (received, topic, rawdata) before the first Step
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
+        self.unwritable = 0  # messages the bag could not stamp (not recorded; a warning names the first)
         self.flushed_count = 0  # messages in the file for sure (as of the last flush)
         self.failure: RecorderError | None = None  # the bag could not be written
         self._bad_clock_warned = False
@@ -465,6 +474,10 @@ class RecorderNode(Node):
             self.bag.write(name, stamp_ns, rawdata)
         except OSError as error:
             self._fail(error)
+        except BagError as error:  # a stamp no bag holds (RunClock refuses the Steps that would)
+            self.unwritable += 1
+            if self.unwritable <= 3:
+                self.get_logger().warning(f'{name}: a message not recorded: {error}')
 
     def _write_early(self, *, before: int | None = None) -> None:
         """Write the messages that came before the first Step (those received before `before`
