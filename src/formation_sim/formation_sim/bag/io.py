@@ -417,16 +417,62 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
             f'{path}: no metadata.yaml ({held}); a recorder that was killed leaves its bag so: '
             f'`formation recover {path}` rebuilds it'
         )
+    if path.is_dir():
+        _check_bag_information(path)
     try:
         with Reader(path) as reader:
             for connection, timestamp, rawdata in reader.messages():
                 yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(rawdata))
     except Exception as error:
         if not type(error).__module__.startswith(('rosbags', 'mcap')) and not isinstance(
-            error, (OSError, struct.error)
+            error, (OSError, struct.error, KeyError, TypeError, ValueError, IndexError)
         ):
             raise
-        raise BagReadError(f'{path}: cannot read the bag: {error}') from None
+        raise BagReadError(damaged_bag_message(path, error)) from None
+
+
+def _check_bag_information(path: Path) -> None:
+    """BagReadError in words when metadata.yaml is empty or not a rosbag2 bag's information."""
+    metadata = path / METADATA_FILE
+    remedy = (
+        f'`formation recover {path}` rebuilds it from the MCAP file (the old one kept as '
+        'metadata.yaml.damaged)'
+    )
+    try:
+        information = yaml.safe_load(metadata.read_text(encoding='utf-8', errors='replace'))
+    except yaml.YAMLError as error:
+        raise BagReadError(f'{metadata}: not YAML ({str(error).splitlines()[0]}); {remedy}') from None
+    if information is None:
+        raise BagReadError(f'{metadata} is empty (its writer was cut short?); {remedy}')
+    if not isinstance(information, dict) or not isinstance(
+        information.get('rosbag2_bagfile_information'), dict
+    ):
+        raise BagReadError(f'{metadata} holds no rosbag2_bagfile_information; {remedy}')
+
+
+def damaged_bag_message(path: Path, error: BaseException) -> str:
+    """What is wrong with the bag at `path` that its reader refused with `error`, in words, and
+    what to do (issue 28: the readers' own words were 'File end magic is invalid.', 'Chunk
+    checksum mismatch.')."""
+    text = str(error) or type(error).__name__
+    lowered = text.lower()
+    recover = (
+        f'`formation recover {path}` keeps every intact chunk, says what it dropped and rebuilds the bag'
+    )
+    if 'checksum' in lowered or 'crc' in lowered:
+        return (
+            f'{path}: a chunk of its MCAP file is damaged (its checksum does not match what was written: '
+            f'bytes changed on disk or in a copy; the reader said {text!r}); {recover}'
+        )
+    if 'magic' in lowered or 'unexpected end' in lowered or isinstance(error, (EOFError, struct.error)):
+        return (
+            f'{path}: its MCAP file is cut short or its end is damaged (the reader said {text!r}): a copy or '
+            f'a disk that stopped midway, or a recorder killed; {recover}'
+        )
+    return (
+        f'{path}: cannot read the bag ({type(error).__name__}: {text}): its files are damaged or not a '
+        f'rosbag2 MCAP bag; {recover}'
+    )
 
 
 def decode(rawdata: bytes, msgtype: str, *, typestore: Typestore | None = None) -> Any:

@@ -7,15 +7,18 @@ rosbags and ros2 bag refuse it. The file holds every message up to the recorder'
 
 from __future__ import annotations
 
+import io
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, Message, Schema
-from mcap.stream_reader import StreamReader
+from mcap.opcode import Opcode
+from mcap.data_stream import ReadDataStream
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import CRCValidationError, breakup_chunk
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapFileWriter
 from rosbags.rosbag2 import Reader
@@ -44,11 +47,17 @@ class Recovery:
     rewritten: bool  # False: the MCAP file was complete and is kept as it is
     damaged_copy: Path | None  # the original, truncated file, when rewritten
     healthy: bool = False  # the bag was readable as it was: nothing was changed
+    dropped: tuple[str, ...] = ()  # what was left out (damaged chunks, a cut-short end), in words
 
     @property
     def message_count(self) -> int:
         """Messages recovered in all."""
         return sum(self.message_counts.values())
+
+
+_MAGIC = b'\x89MCAP0\r\n'
+_RECORD_HEAD = struct.Struct('<BQ')  # opcode, content length
+_CHUNK_TIMES = struct.Struct('<QQ')  # a chunk's first and last message's log time
 
 
 @dataclass
@@ -57,27 +66,83 @@ class _Salvage:
     channels: dict[int, Channel]
     messages: list[Message]
     complete: bool  # the footer was reached
+    dropped: list[str] = field(default_factory=list)  # what was left out, in words
 
 
 def _salvage(mcap_path: Path) -> _Salvage:
-    """Read every record up to the end of the file or the first damaged one."""
+    """Every intact record of the file's data, record by record: a chunk whose checksum does not
+    match (flipped bytes) or that does not parse is dropped and named, the records after it are
+    still read; a file cut short ends at its last whole record."""
     salvage = _Salvage(schemas={}, channels={}, messages=[], complete=False)
     with mcap_path.open('rb') as stream:
-        try:
-            # A chunk is parsed whole before its records are yielded: a chunk cut by the kill
-            # raises here and contributes nothing, every earlier chunk is kept.
-            for record in StreamReader(stream, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    salvage.schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    salvage.channels[record.id] = record
-                elif isinstance(record, Message):
-                    salvage.messages.append(record)
-                elif isinstance(record, Footer):
-                    salvage.complete = True
-        except (McapError, ValueError, EOFError, OSError, struct.error):
-            salvage.complete = False
+        data = stream.read()
+    if not data.startswith(_MAGIC):
+        salvage.dropped.append(f'the file does not begin with the MCAP magic bytes ({len(data)} bytes)')
+        return salvage
+    offset = len(_MAGIC)
+    while offset < len(data):
+        if offset + _RECORD_HEAD.size > len(data):
+            break  # cut short inside a record's head
+        opcode, length = _RECORD_HEAD.unpack_from(data, offset)
+        end = offset + _RECORD_HEAD.size + length
+        if end > len(data):
+            what = (
+                f'a chunk ({_times(data, offset)})'
+                if opcode == Opcode.CHUNK
+                else f'a record (opcode {opcode:#04x})'
+            )
+            salvage.dropped.append(
+                f'bytes {offset}-{len(data)}: {what} of {length} bytes that the file does not hold '
+                '(cut short, or its length damaged): the rest of the file'
+            )
+            break
+        if opcode == Opcode.FOOTER:
+            salvage.complete = True
+            break
+        if opcode in (Opcode.CHUNK, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+            _take(salvage, data, offset, end, opcode)
+        offset = end
     return salvage
+
+
+def _times(data: bytes, offset: int) -> str:
+    """A chunk's log times as it states them (they may be damaged too)."""
+    at = offset + _RECORD_HEAD.size
+    if at + _CHUNK_TIMES.size > len(data):
+        return 'its times unknown'
+    start, end = _CHUNK_TIMES.unpack_from(data, at)
+    return f'messages logged {start / 1e9:.3f}-{end / 1e9:.3f} s'
+
+
+def _take(salvage: _Salvage, data: bytes, offset: int, end: int, opcode: int) -> None:
+    """Keep the schemas, channels and messages of one record (a chunk's checked against its
+    checksum), or name it in `salvage.dropped`."""
+    content = data[offset + _RECORD_HEAD.size : end]
+    stream = ReadDataStream(io.BytesIO(content))
+    try:
+        if opcode == Opcode.CHUNK:
+            records = breakup_chunk(Chunk.read(stream), validate_crc=True)
+        elif opcode == Opcode.MESSAGE:
+            records = [Message.read(stream, len(content))]
+        else:
+            records = [(Schema if opcode == Opcode.SCHEMA else Channel).read(stream)]
+        if stream.count != len(content):
+            raise ValueError(f'{stream.count} of its {len(content)} bytes make the record')
+    except (McapError, ValueError, EOFError, struct.error, KeyError, IndexError, UnicodeDecodeError) as error:
+        what = 'a chunk' if opcode == Opcode.CHUNK else f'a record (opcode {opcode:#04x})'
+        why = (
+            'its checksum does not match' if isinstance(error, CRCValidationError) else f'unreadable: {error}'
+        )
+        times = f', {_times(data, offset)}' if opcode == Opcode.CHUNK else ''
+        salvage.dropped.append(f'bytes {offset}-{end}: {what} dropped, {why}{times}')
+        return
+    for record in records:
+        if isinstance(record, Schema):
+            salvage.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            salvage.channels[record.id] = record
+        elif isinstance(record, Message):
+            salvage.messages.append(record)
 
 
 def _topic_record(channel: Channel, schema: Schema, count: int) -> TopicRecord:
@@ -158,13 +223,35 @@ def _readable_counts(bag_dir: Path) -> dict[str, int] | None:
         return None
 
 
+def _write_metadata(bag_dir: Path, information: dict, *, mcap_path: Path, damaged_copy: Path | None) -> None:
+    """Write the recovered bag's metadata.yaml (an unreadable one kept as metadata.yaml.damaged)."""
+    metadata = bag_dir / 'metadata.yaml'
+    if metadata.is_file() and _readable_counts(bag_dir) is None:
+        # An unreadable metadata.yaml is the user's file: kept beside the new one.
+        metadata.replace(metadata.with_name('metadata.yaml.damaged'))
+    try:
+        write_bag_information(bag_dir, information)
+    except OSError as error:
+        done = (
+            f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
+        )
+        msg = (
+            f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it '
+            'again'
+        )
+        raise BagRecoveryError(msg) from error
+
+
 def reindex(bag_dir: Path | str) -> Recovery:
     """Rebuild ``metadata.yaml`` (and if needed the MCAP file) of a bag whose recorder died.
 
-    A bag that opens as it is (metadata.yaml and a complete MCAP file) is left alone
-    (`Recovery.healthy`). Otherwise every message in a complete MCAP chunk is kept; a chunk cut
-    short by the kill is dropped. A truncated MCAP file is rewritten complete, and the original
-    kept beside it as ``<name>.mcap.damaged``; ``metadata.yaml`` is written anew (atomically).
+    A bag that opens as it is (metadata.yaml and a complete MCAP file whose every chunk matches
+    its checksum) is left alone (`Recovery.healthy`). Otherwise every message in an intact MCAP
+    chunk is kept; a chunk cut short by the kill, or whose checksum does not match (flipped
+    bytes), is dropped and named (`Recovery.dropped`), and the chunks after it are still read. A
+    truncated or damaged MCAP file is rewritten complete, and the original kept beside it as
+    ``<name>.mcap.damaged``; ``metadata.yaml`` is written anew (atomically; an unreadable one is
+    kept as ``metadata.yaml.damaged``).
     Nothing is changed if the rewrite cannot be written (a full disk), and no temporary stays.
 
     Raises:
@@ -179,12 +266,12 @@ def reindex(bag_dir: Path | str) -> Recovery:
         msg = f'{bag_dir}: expected exactly one .mcap file, found {[p.name for p in candidates]}'
         raise BagRecoveryError(msg)
     mcap_path = candidates[0]
-    if (healthy := _readable_counts(bag_dir)) is not None:
+    salvage = _salvage(mcap_path)
+    intact = salvage.complete and not salvage.dropped  # every chunk's checksum checked
+    if intact and (healthy := _readable_counts(bag_dir)) is not None:
         return Recovery(
             mcap_path=mcap_path, message_counts=healthy, rewritten=False, damaged_copy=None, healthy=True
         )
-
-    salvage = _salvage(mcap_path)
     if missing := {c.schema_id for c in salvage.channels.values()} - set(salvage.schemas):
         msg = f'{mcap_path}: channels refer to schemas {sorted(missing)} that are not in the file'
         raise BagRecoveryError(msg)
@@ -200,7 +287,7 @@ def reindex(bag_dir: Path | str) -> Recovery:
     information = _bag_metadata(salvage, mcap_path.name, counts)
 
     damaged_copy = None
-    if not salvage.complete:
+    if not intact:
         damaged_copy = mcap_path.with_name(f'{mcap_path.name}.damaged')
         recovered = mcap_path.with_name(f'{mcap_path.name}.recovering')
         recovered.unlink(missing_ok=True)
@@ -219,21 +306,11 @@ def reindex(bag_dir: Path | str) -> Recovery:
         mcap_path.replace(damaged_copy)
         recovered.replace(mcap_path)
 
-    try:
-        write_bag_information(bag_dir, information)
-    except OSError as error:
-        done = (
-            f'{mcap_path.name} was rebuilt complete ({damaged_copy.name} kept), but ' if damaged_copy else ''
-        )
-        msg = (
-            f'{bag_dir}: {done}cannot write metadata.yaml: {error.strerror}; free space, then recover it '
-            'again'
-        )
-        raise BagRecoveryError(msg) from error
-
+    _write_metadata(bag_dir, information, mcap_path=mcap_path, damaged_copy=damaged_copy)
     return Recovery(
         mcap_path=mcap_path,
         message_counts={salvage.channels[cid].topic: n for cid, n in counts.items()},
-        rewritten=not salvage.complete,
+        rewritten=not intact,
         damaged_copy=damaged_copy,
+        dropped=tuple(salvage.dropped),
     )
