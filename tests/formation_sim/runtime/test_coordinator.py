@@ -123,6 +123,38 @@ def test_a_pose_that_is_not_its_message_is_rejected_and_counted_not_sampled(coor
     assert node.rejected == {'length': 1} and len(node.poses.samples[1]) == 1
 
 
+def test_nan_ahead_and_jumping_poses_are_refused_counted_and_never_checked_or_sampled(coordinator):
+    """Issue 28: five NaN odometry poses were kept (the edge check blinded, summary.json not
+    JSON); one stamped 0.4 s ahead gave max_edge_length 5.38 > Δ with no failure."""
+    from formation_sim.runtime.run_book import ConnectivityLostError
+
+    node = _running(coordinator, max_linear_speed=0.5)
+    for _ in range(5):
+        nan = _odometry(2, 0.52, epoch=node._epoch)
+        nan.pose.pose.position.x = math.nan
+        node._on_pose(_raw(nan), 2)
+    ahead = _odometry(3, 0.9, epoch=node._epoch)  # 0.4 s ahead of the clock, 3 m off
+    ahead.pose.pose.position.x = 3.0
+    node._on_pose(_raw(ahead), 3)
+    jump = _odometry(4, 0.51, epoch=node._epoch)  # 2 m in 10 ms: beyond 0.5 m/s
+    jump.pose.pose.position.x += 2.0
+    node._on_pose(_raw(jump), 4)
+    assert node.rejected == {'non_finite': 5, 'future': 1, 'jump': 1}
+    assert node.poses.refused == node.rejected
+    latest = node.poses.latest_positions()
+    assert np.isfinite(latest).all() and all(len(samples) == 1 for samples in node.poses.samples.values())
+    node._running_tick()  # every edge as the real poses have it: shorter than Δ, no failure
+    # NaN poses do not blind the edge check: with no speed limit, a real pose 3 m off stops the run.
+    free = _running(coordinator)
+    for _ in range(5):
+        free._on_pose(_raw(nan), 2)
+    far = _odometry(3, 0.53, epoch=free._epoch)
+    far.pose.pose.position.x = 3.0
+    free._on_pose(_raw(far), 3)
+    with pytest.raises(ConnectivityLostError, match=r'edge \(\d, 3\) reached the communication radius'):
+        free._running_tick()
+
+
 def _report(agent: int, failure: str | None):
     from formation_msgs_py.codec import encode_agent_report
     from formation_msgs_py.lockstep import AgentReport
@@ -322,6 +354,16 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
                 _odometry(agent, t),
                 lambda m, a=agent: node._on_pose(_raw(m), a),
             )
+        if k == 50:  # issue 28: a NaN pose and one stamped ahead of every clock, both refused by both
+            nan, ahead = _odometry(2, t + 0.001), _odometry(3, time.time() + 5.0 - EPOCH)
+            nan.pose.pose.position.y, ahead.pose.pose.position.x = math.nan, 40.0
+            for agent, forged in ((2, nan), (3, ahead)):
+                arrive(
+                    f'/agent_{agent}/robot/true_odom',
+                    'nav_msgs/msg/Odometry',
+                    forged,
+                    lambda m, a=agent: node._on_pose(_raw(m), a),
+                )
         for agent, times in triggers.items():
             for number, stamp in enumerate(times, start=1):
                 if t - 0.01 < stamp <= t:
@@ -400,11 +442,21 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     with BagWriter(tmp_path / 'bag') as bag:
         for topic, msgtype, _ in messages:
             bag.add_topic(topic, msgtype)
-        for number, (topic, _, msg) in enumerate(messages):
-            bag.write(topic, number, serialize_message(msg))
+        received = 0  # run time [ns] as the recorder stamps a message: when it got it, after its stamp
+        for number, (topic, msgtype, msg) in enumerate(messages):
+            if msgtype == 'nav_msgs/msg/Odometry' and msg.header.stamp.sec < EPOCH + 10.0:
+                stamp = msg.header.stamp
+                run_time = (stamp.sec - 1_700_000_000) * 10**9 + stamp.nanosec - 250_000_000  # - EPOCH
+                received = max(received, run_time + 10_000_000)  # got 10 ms after its stamp
+            bag.write(topic, max(received, 0) + number, serialize_message(msg))
     from_bag = load_bag_run(tmp_path / 'bag')
     assert from_bag.record.mode == 'robots'
     checks = {check.name: check for check in from_bag.checks}
+    assert node.rejected == {'non_finite': 1, 'future': 1}
+    assert checks['robot poses'].detail == (
+        '2 poses on /agent_<i>/robot/true_odom refused as the coordinator and the agents refuse them, '
+        "not sampled: {'future': 1, 'non_finite': 1}"
+    )
     assert [name for name, check in checks.items() if not check.ok] == [
         "every robot's last command is a stop"
     ]

@@ -33,7 +33,7 @@ import math
 import re
 import struct
 import tempfile
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,11 +64,12 @@ from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
 from formation_sim.bag.io import BagError, decode, read_bag
 from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
+from formation_agent.core.pose_sensing import pose_refusal
+from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_sim.sim.robots import (
     PoseTrack,
-    odometry_sample,
     poses_for_end,
-    pose_sample,
+    sample_from_fields,
     sample_times,
     trajectory_samples,
 )
@@ -199,7 +200,8 @@ class _Collected:
     commands: dict[int, int] = field(default_factory=lambda: defaultdict(int))
     problems: list[str] = field(default_factory=list)
     robots: dict | None = None  # /formation/robots: what the robots of a robot run are
-    robot_messages: dict[tuple[int, str], list[tuple[str, bytes]]] = field(
+    # (agent, robot topic) -> (msgtype, CDR, bag time [ns]: when the recorder got it, run time)
+    robot_messages: dict[tuple[int, str], list[tuple[str, bytes, int]]] = field(
         default_factory=lambda: defaultdict(list)
     )
     reports: dict[int, Any] = field(default_factory=dict)  # agent -> its latest report (the final one kept)
@@ -218,7 +220,7 @@ def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
             got.topics.setdefault(topic, msgtype)
             got.counts[topic] += 1
             try:
-                _dispatch(got, topic, msgtype, message.rawdata)
+                _dispatch(got, topic, msgtype, message.rawdata, stamp_ns=message.timestamp_ns)
             except MessageError as error:
                 got.problems.append(f'{topic} message {got.counts[topic]}: {error}')
             except Exception as error:  # CDR that does not decode as its type: the message is damaged
@@ -236,7 +238,7 @@ def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
     return got
 
 
-def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None:
+def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes, *, stamp_ns: int = 0) -> None:
     array = msgtype == 'std_msgs/msg/Float64MultiArray'
     if (match := TRIGGER_INFO_TOPIC.match(topic)) and array:
         info = decode_trigger_info(decode(rawdata, msgtype))
@@ -267,7 +269,7 @@ def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes) -> None
         got.commands[int(match.group(1))] += 1
     elif match := ROBOT_TOPIC.match(topic):
         # Decoded once the run is known (which topic is the trajectory, the epoch, the model).
-        got.robot_messages[(int(match.group(1)), match.group(2))].append((msgtype, rawdata))
+        got.robot_messages[(int(match.group(1)), match.group(2))].append((msgtype, rawdata, stamp_ns))
     elif topic == ROBOTS_TOPIC and msgtype == 'std_msgs/msg/String':
         try:
             got.robots = json.loads(decode(rawdata, msgtype).data)
@@ -633,16 +635,39 @@ def _robot_poses(
     model: str,
     distance: float,
     epoch: float,
-) -> dict:
-    """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order."""
-    poses = {}
+) -> tuple[dict, Check]:
+    """Every robot's samples (`RobotSample`) from its `trajectory` topic, in the bag's order, the
+    poses the coordinator refuses left out as it leaves them out (`pose_sensing.pose_refusal`:
+    not finite, stamped backwards, ahead of when the recorder got it, or a jump beyond the speed
+    limit), and the check that counts them."""
+    robots = got.robots or {}
+    rules = {
+        'ahead': float(robots.get('pose_ahead_tolerance', 0.1)),
+        'max_speed': float(robots.get('max_linear_speed') or math.inf),
+        'slack': float(robots.get('pose_jump_slack', 0.05)),
+    }
+    poses, refused = {}, Counter()
     for agent in scenario.agent_ids:
-        poses[agent] = []
-        for msgtype, rawdata in got.robot_messages.get((agent, trajectory), []):
-            sample = odometry_sample if msgtype == 'nav_msgs/msg/Odometry' else pose_sample
+        poses[agent], latest = [], None
+        for msgtype, rawdata, received in got.robot_messages.get((agent, trajectory), []):
+            odometry = msgtype == 'nav_msgs/msg/Odometry'
+            try:
+                fields = (odometry_fields if odometry else pose_stamped_fields)(rawdata)
+            except (MessageError, struct.error) as error:
+                refused[getattr(error, 'reason', 'length')] += 1
+                continue
+            stamp = fields[0] + fields[1] * 1e-9
+            twist = fields[3] if odometry else None
+            now = epoch + received * 1e-9
+            if refusal := pose_refusal(
+                agent, stamp=stamp, pose=fields[2], twist=twist, now=now, latest=latest, **rules
+            ):
+                refused[refusal[0]] += 1
+                continue
+            latest = (stamp, tuple(fields[2][:3]))
             poses[agent].append(
-                sample(
-                    decode(rawdata, msgtype),
+                sample_from_fields(
+                    *fields,
                     model=model,
                     dimension=scenario.dimension,
                     control_point_distance=distance,
@@ -652,10 +677,16 @@ def _robot_poses(
     missing = [agent for agent, samples in poses.items() if not samples]
     if missing:
         raise AnalysisError(
-            f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages: their '
-            'trajectories cannot be rebuilt'
+            f'{bag}: robots {missing} have no /agent_<i>/robot/{trajectory} messages the coordinator '
+            f'would take (refused: {dict(refused)}): their trajectories cannot be rebuilt'
         )
-    return poses
+    detail = (
+        f'{sum(refused.values())} poses on /agent_<i>/robot/{trajectory} refused as the coordinator and '
+        f'the agents refuse them, not sampled: {dict(sorted(refused.items()))}'
+        if refused
+        else 'every pose taken'
+    )
+    return poses, Check(name='robot poses', ok=True, detail=detail)
 
 
 def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> BagRun:
@@ -665,9 +696,10 @@ def _robot_run(bag: Path, got: _Collected, scenario: Scenario, source: str) -> B
     epoch = _robot_epoch(bag, got.steps)
     final = [step for step in got.steps if step.flags & STEP_FLAG_FINAL]
     checks = [_decoding_check(got)]
-    poses = _robot_poses(
+    poses, poses_check = _robot_poses(
         bag, got, scenario, trajectory=trajectory, model=model, distance=distance, epoch=epoch
     )
+    checks.append(poses_check)
     if final:
         end = final[-1].time
     else:
@@ -780,7 +812,7 @@ def _last_commands_check(got: _Collected, scenario: Scenario) -> Check:
         if not commands:
             silent.append(agent)
             continue
-        msgtype, rawdata = commands[-1]
+        msgtype, rawdata, _ = commands[-1]
         msg = decode(rawdata, msgtype)
         twist = msg.twist if msgtype == 'geometry_msgs/msg/TwistStamped' else msg
         values = [

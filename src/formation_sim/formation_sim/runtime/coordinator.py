@@ -93,7 +93,7 @@ from formation_sim.runtime.run_book import (
     RobotLostError,
     ids_text,
 )
-from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses
+from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses, pose_rules
 from formation_sim.runtime.robot_stops import RobotStops
 from formation_sim.runtime.run_end import (
     collect_final_reports,
@@ -311,6 +311,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'pose_silence': self.parameter_values[
                 'pose_silence'
             ],  # poses silent this long at the end are not sampled past it
+            **pose_rules(self.parameter_values),  # the poses refused (formation analyze refuses them too)
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
         self._tool_publishers.append(self._robots_pub)

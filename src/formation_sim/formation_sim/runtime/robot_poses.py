@@ -33,6 +33,18 @@ TRAJECTORY_TOPICS = {'true_odom': robot_true_odom_topic, 'odom': robot_odom_topi
 """Which robot topic (agent id -> name) the formation is measured on, by `robot_trajectory`."""
 
 
+def pose_rules(values: dict) -> dict:
+    """The coordinator's pose rules as /formation/robots tells them (`formation analyze` applies
+    them to the bag): its parameters pose_ahead_tolerance, max_linear_speed (None: none) and
+    pose_jump_slack."""
+    speed = values['max_linear_speed']
+    return {
+        'pose_ahead_tolerance': values['pose_ahead_tolerance'],
+        'max_linear_speed': speed if math.isfinite(speed) else None,
+        'pose_jump_slack': values['pose_jump_slack'],
+    }
+
+
 class RobotPoses:
     """Every robot's poses of a run: kept from before t = 0, sampled from it on, watched."""
 
