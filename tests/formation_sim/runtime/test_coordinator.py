@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 import time
 
 import numpy as np
@@ -481,3 +482,78 @@ def _axle(agent: int, t: float) -> tuple[float, float, float]:
         -0.2 * agent - v / w * (math.cos(yaw) - math.cos(0.2 * agent)),
         yaw,
     )
+
+
+def test_any_value_on_any_topic_the_coordinator_reads_is_taken_or_refused_never_a_crash(coordinator):
+    """Issue 28, property-based: Status, reports, triggering information, recorder heartbeats and
+    poses carrying any values (NaN, ±inf, extreme times and ids, empty and huge arrays, damaged
+    CDR) are taken or refused and counted; the only exceptions are the run's own named errors (a
+    report that says its agent failed stops the run), and the poses kept stay finite."""
+    from types import SimpleNamespace
+
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    from formation_msgs_py.lockstep import REJECT_REASONS
+    from formation_sim.runtime.coordinator import NAMED_ERRORS
+
+    node = _running(coordinator)
+    floats = st.one_of(
+        st.sampled_from([math.nan, math.inf, -math.inf, 1e300, 1e11, -1.0, 0.0, 1.0, 2.0, 3.0]), st.floats()
+    )
+    arrays = st.one_of(st.lists(floats, max_size=24), st.just([1.0] * 50_000))
+    texts = st.one_of(
+        st.text(max_size=80),
+        st.builds(
+            lambda agent, failure, version: json.dumps(
+                {
+                    'version': version,
+                    'agent': agent,
+                    'final': True,
+                    'rejected': {},
+                    'published': {},
+                    'failure': failure,
+                }
+            ),
+            st.one_of(st.integers(-5, 10), floats),
+            st.one_of(st.none(), st.text(max_size=10)),
+            st.one_of(st.just(3), floats),
+        ),
+    )
+    good = _raw(_odometry(1, 0.5, epoch=node._epoch))
+    poses = st.one_of(
+        st.binary(max_size=120),
+        st.tuples(st.integers(0, len(good) - 8), floats).map(
+            lambda edit: good[: edit[0]] + struct.pack('<d', edit[1]) + good[edit[0] + 8 :]
+        ),
+    )
+    calls = st.one_of(
+        st.tuples(st.just('status'), arrays),
+        st.tuples(st.just('report'), texts),
+        st.tuples(st.just('info'), arrays),
+        st.tuples(st.just('recorder'), texts),
+        st.tuples(st.just('pose'), poses),
+    )
+
+    @settings(max_examples=400, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(st.lists(calls, min_size=1, max_size=6), st.integers(1, 4))
+    def feed(messages, agent):
+        for kind, value in messages:
+            try:
+                if kind == 'status':
+                    node._on_status(SimpleNamespace(data=value))
+                elif kind == 'report':
+                    node._on_report(SimpleNamespace(data=value))
+                elif kind == 'info':
+                    node._on_info(SimpleNamespace(data=value), agent)
+                elif kind == 'recorder':
+                    node._on_recorder(SimpleNamespace(data=value))
+                else:
+                    node._on_pose(value, agent)
+            except NAMED_ERRORS:
+                pass
+        assert set(node.rejected) <= set(REJECT_REASONS)
+        for samples in node.poses.samples.values():
+            assert all(np.isfinite(s.position).all() and math.isfinite(s.time) for s in samples)
+
+    feed()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import random
 import signal
@@ -96,7 +97,7 @@ def test_an_unreadable_bag_raises_bag_read_error_naming_the_remedy(tmp_path: Pat
         list(read_bag(tmp_path / 'bag'))
     reindex(tmp_path / 'bag')
     mcap.write_bytes(b'not an mcap file' * 10)
-    with pytest.raises(BagReadError, match='cannot read the bag: '):
+    with pytest.raises(BagReadError, match='its MCAP file is not an MCAP file'):
         list(read_bag(tmp_path / 'bag'))
     assert issubclass(BagReadError, BagError)
 
@@ -869,6 +870,35 @@ def test_a_step_whose_time_no_bag_can_stamp_is_refused_and_changes_nothing(t) ->
     assert clock.on_step([1.0, 5.0, below]) and 0 <= clock.stamp_ns() < 2**63
     wall = RunClock(wall_ns=lambda: 2**62)
     assert wall.on_step([1.0, 0.0, 0.0, float(STEP_FLAG_REALTIME), below]) and 0 <= wall.stamp_ns() < 2**63
+
+
+def test_any_step_data_leaves_the_run_clock_stamping_what_a_bag_holds() -> None:
+    """Issue 28, property-based: Steps of any values (both clocks) never raise, and every stamp
+    the clock gives afterwards is one a bag can write (int in [0, 2**63))."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
+    from formation_sim.runtime.recorder import RunClock
+
+    floats = st.one_of(
+        st.sampled_from([math.nan, math.inf, -math.inf, 1e300, 1e11, 4.7e9, -1.0, 0.0, 1.7e9]), st.floats()
+    )
+    flags = st.sampled_from([0.0, float(STEP_FLAG_REALTIME), float(STEP_FLAG_FINAL | STEP_FLAG_REALTIME)])
+    steps = st.lists(
+        st.one_of(st.lists(floats, max_size=8), st.tuples(floats, floats, floats, flags, floats).map(list))
+    )
+
+    @settings(max_examples=500, deadline=None)
+    @given(steps)
+    def feed(datas):
+        clock = RunClock()
+        for data in datas:
+            clock.on_step(data)
+            stamp = clock.stamp_ns()
+            assert isinstance(stamp, int) and 0 <= stamp < 2**63
+
+    feed()
 
 
 def test_recorder_help_lists_every_parameter_and_bad_ones_are_named_at_once(tmp_path: Path) -> None:

@@ -418,7 +418,7 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
             f'`formation recover {path}` rebuilds it'
         )
     if path.is_dir():
-        _check_bag_information(path)
+        check_bag_information(path)
     try:
         with Reader(path) as reader:
             for connection, timestamp, rawdata in reader.messages():
@@ -431,9 +431,12 @@ def read_bag(path: Path | str) -> Iterator[BagMessage]:
         raise BagReadError(damaged_bag_message(path, error)) from None
 
 
-def _check_bag_information(path: Path) -> None:
-    """BagReadError in words when metadata.yaml is empty or not a rosbag2 bag's information."""
-    metadata = path / METADATA_FILE
+def check_bag_information(path: Path) -> None:
+    """BagReadError in words when the bag folder `path`'s metadata.yaml is empty or not a rosbag2
+    bag's information (a missing one is the reader's to name)."""
+    metadata = Path(path) / METADATA_FILE
+    if not metadata.is_file():
+        return
     remedy = (
         f'`formation recover {path}` rebuilds it from the MCAP file (the old one kept as '
         'metadata.yaml.damaged)'
@@ -463,6 +466,11 @@ def damaged_bag_message(path: Path, error: BaseException) -> str:
         return (
             f'{path}: a chunk of its MCAP file is damaged (its checksum does not match what was written: '
             f'bytes changed on disk or in a copy; the reader said {text!r}); {recover}'
+        )
+    if 'magic' in lowered and 'end magic' not in lowered:
+        return (
+            f'{path}: its MCAP file is not an MCAP file (its first bytes are not the MCAP magic; the reader '
+            f'said {text!r}): a file of something else, or damaged from its start; {recover}'
         )
     if 'magic' in lowered or 'unexpected end' in lowered or isinstance(error, (EOFError, struct.error)):
         return (

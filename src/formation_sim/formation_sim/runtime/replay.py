@@ -84,7 +84,10 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
     """Topic -> (message type, the QoS profiles its publishers offered when recorded)."""
     from rosbags.rosbag2 import Reader
 
+    from formation_sim.bag.io import BagReadError, check_bag_information, damaged_bag_message
+
     try:
+        check_bag_information(bag)
         with Reader(bag) as reader:
             return {
                 connection.topic: (
@@ -93,8 +96,10 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
                 )
                 for connection in reader.connections
             }
+    except BagReadError as error:
+        raise ReplayError(str(error)) from None
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
-        raise ReplayError(f'{bag}: cannot read the bag: {error}') from None
+        raise ReplayError(damaged_bag_message(bag, error)) from None
 
 
 class BagPlayer:
