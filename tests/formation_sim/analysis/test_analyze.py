@@ -704,3 +704,15 @@ def test_any_bytes_on_any_topic_of_a_bag_are_read_or_named_as_damaged():
         ), repr(escaped)
 
     feed()
+
+
+def test_analyze_never_writes_into_a_runs_bag_folder(paper_single_record, write_run_bag, tmp_path, capsys):
+    """Issue 28: `formation analyze RUN --out RUN/bag` wrote its report into the bag's folder."""
+    from formation_sim.cli import main
+
+    bag = write_run_bag(paper_single_record, tmp_path / 'run' / 'bag')
+    before = sorted(p.name for p in bag.iterdir())
+    for out in (bag, bag / 'report'):
+        assert main(['analyze', str(tmp_path / 'run'), '--out', str(out), '--quiet']) == 2
+        assert 'the bag folder' in capsys.readouterr().err
+    assert sorted(p.name for p in bag.iterdir()) == before

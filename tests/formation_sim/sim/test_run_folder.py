@@ -173,3 +173,24 @@ def test_run_entries_cover_what_simulate_leaves(tmp_path):
 @pytest.mark.ros
 def test_run_entries_cover_what_a_distributed_run_leaves(distributed_single_run):
     assert {p.name for p in distributed_single_run.out_dir.iterdir()} <= RUN_ENTRIES
+
+
+@pytest.mark.parametrize('inside', ['', 'x', 'x/y'])
+def test_a_bag_folder_and_any_folder_inside_it_are_refused_for_runs_and_reports(tmp_path, inside):
+    """Issue 28: `analyze --out RUN/bag` and `run --out RUN/bag/x` wrote inside a bag's folder."""
+    from formation_sim.sim.run_folder import check_report_dir
+
+    bag = tmp_path / 'run' / 'bag'
+    bag.mkdir(parents=True)
+    (bag / 'bag_0.mcap').write_bytes(b'\x89MCAP0\r\n')
+    out = bag / inside if inside else bag
+    for check in (check_out_dir, check_report_dir):
+        with pytest.raises(RunFolderError, match=r'the bag folder .*bag \(it holds a recording') as refused:
+            check(out)
+        assert ('is the bag folder' if not inside else 'lies inside the bag folder') in str(refused.value)
+    assert sorted(p.name for p in bag.iterdir()) == ['bag_0.mcap']  # nothing changed
+    (bag / 'bag_0.mcap').unlink()
+    (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')  # a bag by its metadata alone
+    with pytest.raises(RunFolderError, match='the bag folder'):
+        check_out_dir(bag / 'x', force=True)
+    check_out_dir(tmp_path / 'run' / 'other')  # beside the bag: a folder like any other

@@ -81,14 +81,35 @@ def _existing_ancestor(path: Path) -> Path:
     return Path(absolute.anchor)  # pragma: no cover - the root always exists
 
 
+def bag_around(path: Path) -> Path | None:
+    """The bag folder (one holding metadata.yaml or an .mcap file) that `path` is or lies in, or None."""
+    absolute = Path(os.path.abspath(path))
+    for candidate in (absolute, *absolute.parents):
+        if candidate.is_dir() and ((candidate / 'metadata.yaml').is_file() or any(candidate.glob('*.mcap'))):
+            return candidate
+    return None
+
+
+def _refuse_bag(out: Path) -> None:
+    """Issue 28: `analyze --out RUN/bag` and `run --out RUN/bag/x` wrote inside a bag's folder."""
+    if (bag := bag_around(out)) is not None:
+        where = 'is' if bag == Path(os.path.abspath(out)) else 'lies inside'
+        raise RunFolderError(
+            f'{out} {where} the bag folder {bag} (it holds a recording: metadata.yaml or .mcap); files '
+            'written there would be mixed into the recording; nothing was changed: choose another --out'
+        )
+
+
 def check_out_dir(out: Path, *, force: bool = False) -> None:
     """Refuse `out` unless a run may write there; changes nothing on disk.
 
     Accepted: a folder that does not exist yet (in a writable place) or is empty; with `force`,
-    a folder holding only an earlier run's files (RUN_ENTRIES).
+    a folder holding only an earlier run's files (RUN_ENTRIES).  Never a bag's folder nor one
+    inside it.
     """
     out = Path(out)
     ancestor = _existing_ancestor(out)
+    _refuse_bag(out)
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise RunFolderError(f'{out}: cannot write in {ancestor} (permission denied)')
     if ancestor != Path(os.path.abspath(out)):
@@ -171,6 +192,7 @@ def check_report_dir(out: Path) -> None:
     """Refuse an output folder for a report (analyze, compare) that holds a run it would overwrite."""
     out = Path(out)
     ancestor = _existing_ancestor(out)
+    _refuse_bag(out)
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise RunFolderError(f'{out}: cannot write in {ancestor} (permission denied)')
     if out.is_dir() and holds_run(out):
