@@ -107,3 +107,67 @@ def test_a_time_keeper_that_failed_gives_its_status_or_the_lost_childs(tmp_path)
     assert (
         keeper_failed(-9, keeper, None)[0] == EXIT_LOST and keeper_failed(7, keeper, None)[0] == EXIT_FAILED
     )
+
+
+def _killed_keeper():
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        name='simulator',
+        pid=4242,
+        process=SimpleNamespace(returncode=-9),
+        signal_used=None,
+        exited_at=None,
+        error_line=lambda: None,
+    )
+
+
+@pytest.mark.ros  # the Steps are serialized by rclpy
+def test_a_killed_simulators_failure_is_at_the_latest_step_and_time_the_orchestrator_knows(tmp_path):
+    """Issue 28: a killed simulator's summary recorded the failure at t = 0.0 and step null though
+    the run was past step 20: the time and step are now the latest of its last progress line (once
+    a second) and the bag's last Step, or null with the reason."""
+    from rclpy.serialization import serialize_message
+
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import Step
+    from formation_sim.bag.io import BagWriter
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.runtime.results import summary_of_what_is_known
+
+    scenario = load_scenario('paper_single')
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as writer:
+        writer.add_topic('/formation/step', 'std_msgs/msg/Float64MultiArray')
+        for index in range(24):
+            step = Step(index=index, time=index * 0.01, due=(1,))
+            writer.write('/formation/step', round(step.time * 1e9), serialize_message(encode_step(step)))
+
+    def failure(progress_line: str, bag_dir: Path) -> dict:
+        keeper = _killed_keeper()
+        data = summary_of_what_is_known(
+            keeper,
+            scenario=scenario,
+            horizon=10.0,
+            mode='distributed',
+            bag=bag_dir,
+            run_dir=tmp_path,
+            status=3,
+            last_progress=progress_line,
+            children=[keeper],
+            launched=0.0,
+            notes=[],
+        )
+        return data['extra']['failure']
+
+    # The last progress line (a second old) said step 4; the bag holds Steps up to 23 at t = 0.23.
+    got = failure('t=0.000001 horizon=10 events=7 steps=4 wall=1.0s', bag)
+    assert (got['time'], got['step']) == (0.23, 23) and 'time_unknown' not in got
+    assert got['time_from'] == "its last progress line and the bag's last Step"
+    # A later progress line than the bag: the progress line's.
+    got = failure('t=0.5 horizon=10 events=70 steps=50 wall=2.0s', bag)
+    assert (got['time'], got['step']) == (0.5, 50)
+    # Neither: null, and why.
+    got = failure('', tmp_path / 'no_bag')
+    assert got['time'] is None and got['step'] is None
+    assert got['time_unknown'] == 'the simulator printed no progress line and the bag holds no Step'

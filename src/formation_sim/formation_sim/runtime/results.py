@@ -4,8 +4,10 @@ published against what its bag holds, a summary of what is known when the time k
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import math
 import re
 import time
 from dataclasses import dataclass
@@ -236,6 +238,7 @@ def summary_of_what_is_known(
             source = f'orchestrator: the {keeper.name} left no summary; the run as far as its bag holds it'
         except (AnalysisError, ValueError) as error:
             notes.append(f'the bag could not be read back: {error}')
+    _latest_known(failure, progress, bag, reached=(data or {}).get('extra', {}).get('reached_time'))
     if data is None:
         data = unstarted_summary(scenario, horizon=horizon, mode=mode, extra={})
         source = f'orchestrator: the {keeper.name} left no summary and there is no readable bag'
@@ -245,6 +248,49 @@ def summary_of_what_is_known(
         processes={c.name: describe_exit(c.process.returncode) for c in children},
     )
     return data
+
+
+def _latest_known(failure: dict, progress: dict, bag: Path, *, reached: float | None) -> None:
+    """extra.failure's time and step: the latest the orchestrator knows (issue 28: a simulator
+    killed past step 20 was recorded at t = 0.0, step null), from the time keeper's last progress
+    line (once a second) and the bag (its last Step; `reached`: the run time its messages reach);
+    None with `time_unknown` saying why when neither says."""
+    times = [progress['t']] if 't' in progress else []
+    steps = [int(progress['steps'])] if 'steps' in progress else []
+    sources = ['its last progress line'] if times or steps else []
+    last = _last_step(bag)
+    if last is not None:
+        times.append(last[1])
+        steps.append(last[0])
+        sources.append("the bag's last Step")
+    if reached is not None and math.isfinite(reached):
+        times.append(float(reached))
+    failure['time'] = max(times) if times else None
+    failure['step'] = max(steps) if steps else None
+    if failure['time'] is None or failure['step'] is None:
+        failure['time_unknown'] = (
+            f'the {failure["message"].split(" ")[0]} printed no progress line and the bag holds no Step'
+        )
+    failure['time_from'] = ' and '.join(sources) or None
+
+
+def _last_step(bag: Path) -> tuple[int, float] | None:
+    """(index, time) of the last Step the bag holds, or None (no bag, no Step, unreadable)."""
+    from formation_msgs_py.codec import MessageError, decode_step
+    from formation_msgs_py.topics import STEP_TOPIC
+    from formation_sim.bag.io import BagError, decode, read_bag
+
+    last = None
+    try:
+        for message in read_bag(bag):
+            if message.topic == STEP_TOPIC:
+                with contextlib.suppress(MessageError, ValueError):
+                    step = decode_step(decode(message.rawdata, message.msgtype))
+                    if last is None or step.index >= last[0]:
+                        last = (step.index, float(step.time))
+    except BagError:
+        return last
+    return last
 
 
 def annotate(data: dict, lost: Child | None, status: int, message: str, *, launched: float) -> dict | None:
