@@ -31,6 +31,8 @@ REJECT_DIMENSION = 'dimension'  # p differs from the receiver's, or ETA-1/ETA-2 
 REJECT_TIME_BACKWARDS = 'time_backwards'  # stamped before t = 0 or before the sender's previous one
 REJECT_DUPLICATE = 'duplicate'  # stamped at the very time of the sender's previous one
 REJECT_FRAME = 'frame'  # a robot pose in another frame than the world frame
+REJECT_FUTURE = 'future'  # stamped after the run's horizon, or ahead of the receiver's clock (issue 28)
+REJECT_STEP_ORDER = 'step_order'  # a Step that cannot follow the run's previous one (issue 28)
 LAYOUT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_NON_FINITE, REJECT_FIELD)
 REJECT_REASONS = (
     *LAYOUT_REASONS,
@@ -40,6 +42,8 @@ REJECT_REASONS = (
     REJECT_TIME_BACKWARDS,
     REJECT_DUPLICATE,
     REJECT_FRAME,
+    REJECT_FUTURE,
+    REJECT_STEP_ORDER,
 )
 
 # What a robot's command adapter clips (AgentReport.saturation; README, "Running on robots").
