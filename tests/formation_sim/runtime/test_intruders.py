@@ -141,3 +141,33 @@ def test_a_tick_a_little_late_is_no_freeze(gap):
     watch.tick(0.1 + gap)
     error = RobotLostError('robot 2 lost', agents=[2])
     assert watch.ended_at is None and watch.blame(error, 0.1 + gap, who='simulator') is error
+
+
+def test_a_sensing_call_is_a_trigger_only_when_the_agents_own_information_stamped_with_it_follows():
+    """The finding: 500 calls a second to /agent_2/sense became agent 2's triggers (1 062 sensing
+    calls for 63 events)."""
+    from formation_sim.runtime.intruders import SensingCalls
+
+    calls = SensingCalls([1, 2])
+    for t in (0.5, 0.51, 0.52):  # a stranger's two calls, then agent 2's own
+        calls.asked(2, t)
+    calls.asked(2, 0.53)  # a stranger's again, after agent 2's
+    assert not calls.triggered(2, 0.4)  # no call was answered at 0.4: a replay or a forgery
+    assert calls.triggered(2, 0.52) and calls.triggers == 1
+    assert not calls.triggered(2, 0.52)  # its copy
+    assert calls.foreign == {1: 0, 2: 2}
+    calls.foreign_call(1)
+    assert calls.extra() == {'foreign_sensing_calls': {'1': 1, '2': 3}}  # 0.53 never became a trigger
+    assert SensingCalls([1]).extra() == {}
+
+
+def test_a_writer_whose_node_is_not_known_yet_is_a_stranger_and_named_once_its_name_comes():
+    watched = _command_2()
+    unknown = Writer(node='_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_', gid='0f')
+    watch = GraphWatch([watched])
+    (found,) = watch.note(watched, [AGENT_2, unknown])
+    assert found.text().startswith(
+        'a node outside the run, a writer of no known ROS node (writer gid 0f), writes'
+    )
+    assert watch.note(watched, [AGENT_2, ROGUE]) == []  # the same writer: not news, but now named
+    assert str(watch.error()).startswith('a node outside the run, /rogue (writer gid 0f)')

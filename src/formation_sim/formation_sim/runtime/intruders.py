@@ -42,6 +42,10 @@ TOPICS_PER_LOOK = 32
 ~0.8 ms here, so a run of any size spends at most ~3 % of a core on it; larger runs cycle through
 their topics over several looks."""
 
+UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+"""What rmw_fastrtps gives as the node name of a writer whose participant has not (yet) said which
+ROS nodes it holds: a raw DDS writer, or one seen before its node's graph information."""
+
 FREEZE_BLAME_WINDOW = LIVELINESS_LEASE + LOST_GRACE + 1.0
 """Seconds after a keeper's freeze during which a loss it sees is blamed on the freeze: what its
 peers did when they saw it lost (the lease, then their grace) and what waited while it was frozen."""
@@ -60,6 +64,8 @@ class Writer:
     gid: str
 
     def __str__(self) -> str:
+        if UNKNOWN_NODE in self.node:  # a DDS writer whose ROS node the graph does not (yet) know
+            return f'a writer of no known ROS node (writer gid {self.gid})'
         return f'{self.node} (writer gid {self.gid})'
 
 
@@ -167,10 +173,10 @@ class GraphWatch:
         """The writers of `watched.topic` seen now; the intrusions not seen before."""
         new = []
         for intrusion in intrusions(watched, writers):
-            key = (intrusion.kind, watched.topic, tuple(w.gid for w in intrusion.writers))
+            key = (intrusion.kind, watched.topic, tuple(sorted(w.gid for w in intrusion.writers)))
             if key not in self.found:
-                self.found[key] = intrusion
                 new.append(intrusion)
+            self.found[key] = intrusion  # the latest names (a node's name may come after its writer)
         return new
 
     def error(self) -> ForeignWriterError | None:
@@ -263,6 +269,49 @@ def simulator_watched(scenario) -> list[Watched]:
             )
         )
     return watched
+
+
+class SensingCalls:
+    """The wall-clock simulator's sensing calls, and which of them were triggers.
+
+    Any node can call `/agent_<i>/sense` (std_srvs/Trigger names no caller): a call is agent i's
+    trigger only once agent i's own triggering information stamped with the time it was answered
+    follows (`triggered`); the calls answered before it, and those never followed, are foreign
+    (500 calls a second from outside became agent 2's "triggers": 1 062 sensing calls for 63
+    events).  In lock-step a call that is not agent i's turn while a stranger calls its service
+    is refused and counted here too (`foreign_call`), not blamed on agent i.
+    """
+
+    def __init__(self, agents: Iterable[int]) -> None:
+        self._pending: dict[int, list[float]] = {i: [] for i in agents}
+        self.foreign: dict[int, int] = dict.fromkeys(self._pending, 0)
+        self.triggers = 0  # calls confirmed as triggers
+
+    def asked(self, agent: int, t: float) -> None:
+        """A call for `agent` answered with its state at run time `t`."""
+        self._pending[agent].append(t)
+
+    def triggered(self, agent: int, stamp: float) -> bool:
+        """`agent`'s triggering information stamped `stamp` came: True if that makes a pending call
+        its trigger (the calls answered before it are foreign); False for a stamp no call gave
+        (a copy replayed to a late reader, or a forgery)."""
+        calls = self._pending.get(agent)
+        if not calls or stamp not in calls:
+            return False
+        self.foreign[agent] += sum(1 for t in calls if t < stamp)
+        self._pending[agent] = [t for t in calls if t > stamp]
+        self.triggers += 1
+        return True
+
+    def foreign_call(self, agent: int) -> None:
+        self.foreign[agent] += 1
+
+    def extra(self) -> dict:
+        """summary.json's `extra.foreign_sensing_calls` (agent -> calls that were no trigger of
+        its own, those still unanswered by a trigger included); none: absent."""
+        counts = {i: n + len(self._pending[i]) for i, n in self.foreign.items()}
+        counts = {str(i): n for i, n in counts.items() if n}
+        return {'foreign_sensing_calls': counts} if counts else {}
 
 
 class FreezeWatch:
