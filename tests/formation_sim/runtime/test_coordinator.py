@@ -505,3 +505,39 @@ def test_a_second_process_claiming_an_agent_is_refused_before_step_0(ros, coordi
             twin.destroy_node()
     assert str(caught.value).startswith('two processes claim agent 2: /agent_2/formation_agent (writer gid ')
     assert f'both write {topic}' in str(caught.value) and node.step is None
+
+
+def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinator):
+    """Wall clock: forged, plausible triggering information was taken (agent 1: 813 events instead
+    of ~81, and the run said done).  The coordinator compares the agents' Statuses at each look."""
+    from formation_msgs_py.lockstep import Status
+    from formation_sim.runtime.intruders import ForeignInformationError
+    from formation_sim.runtime.time_keeper import look_at_graph
+
+    node = _running(coordinator)
+    for agent, (sent, received) in {1: (20, 20), 2: (20, 20), 3: (20, 20), 4: (20, 20)}.items():
+        node.agents[agent].status = Status(
+            agent=agent,
+            step_index=0,
+            next_time=1.0,
+            info_sent=sent,
+            info_received=received,
+            commands_sent=1,
+            triggers=10,
+            ready=True,
+        )
+    look_at_graph(node, everything=True)  # as many taken as sent
+    node.agents[1].status = Status(
+        agent=1,
+        step_index=0,
+        next_time=1.0,
+        info_sent=20,
+        info_received=200,
+        commands_sent=1,
+        triggers=90,
+        ready=True,
+    )
+    with pytest.raises(
+        ForeignInformationError, match=r'took 260 messages .* but sent only 80: 180 came from outside'
+    ):
+        look_at_graph(node, everything=True)

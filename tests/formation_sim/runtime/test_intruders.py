@@ -171,3 +171,53 @@ def test_a_writer_whose_node_is_not_known_yet_is_a_stranger_and_named_once_its_n
     )
     assert watch.note(watched, [AGENT_2, ROGUE]) == []  # the same writer: not news, but now named
     assert str(watch.error()).startswith('a node outside the run, /rogue (writer gid 0f)')
+
+
+def _status(agent, *, sent, received):
+    from formation_msgs_py.lockstep import Status
+
+    return Status(
+        agent=agent,
+        step_index=0,
+        next_time=1.0,
+        info_sent=sent,
+        info_received=received,
+        commands_sent=1,
+        triggers=1,
+        ready=True,
+    )
+
+
+def test_more_information_taken_than_sent_is_foreign_and_its_writer_named():
+    """The finding: a forged but plausible TriggerInfo "from agent 2" on the wall clock gave agent
+    1 813 events instead of ~81, and the run said done."""
+    from formation_sim.runtime.intruders import (
+        ForeignInformationError,
+        foreign_information_error,
+        information_excess,
+    )
+
+    honest = [_status(1, sent=10, received=12), _status(2, sent=12, received=10), None]
+    assert information_excess(honest, slack=4) is None
+    in_flight = [_status(1, sent=10, received=14), _status(2, sent=10, received=10)]  # a Status on its way
+    assert information_excess(in_flight, slack=4) is None
+    forged = [_status(1, sent=10, received=90), _status(2, sent=10, received=10)]
+    assert information_excess(forged, slack=4) == (100, 20)
+    (watched,) = [
+        w
+        for w in protocol_watched(load_scenario('paper_single'), keeper='/k')
+        if w.topic == '/agent_2/trigger_info/to_1'
+    ]
+    watch = GraphWatch([watched])
+    watch.note(watched, [AGENT_2, ROGUE])
+    error = foreign_information_error(100, 20, watch)
+    assert isinstance(error, ForeignInformationError) and error.kind == 'foreign_information'
+    assert str(error) == (
+        "a node outside the run, /rogue (writer gid 0f), writes agent 2's triggering information to agent 1 "
+        '(/agent_2/trigger_info/to_1): the agents took 100 messages of triggering information, but sent only '
+        '20: 80 came from outside the run, and the run is not its own any more: the run stops'
+    )
+    assert error.nodes == ['/rogue'] and error.agents == [2]
+    assert str(foreign_information_error(100, 20, GraphWatch([]))).startswith(
+        'no stranger seen in the graph yet: '
+    )

@@ -129,6 +129,13 @@ class DuplicateAgentError(ForeignWriterError):
     kind = 'duplicate_agent'
 
 
+class ForeignInformationError(ForeignWriterError):
+    """On the wall clock the agents took more triggering information than they sent: forged
+    information, well formed and plausible, was taken as a neighbour's (no tag can tell it yet)."""
+
+    kind = 'foreign_information'
+
+
 class KeeperFrozenError(CoordinatorError):
     """The time keeper itself was frozen or starved: what it then saw lost followed from that."""
 
@@ -269,6 +276,32 @@ def simulator_watched(scenario) -> list[Watched]:
             )
         )
     return watched
+
+
+def information_excess(statuses: Iterable, *, slack: int) -> tuple[int, int] | None:
+    """(received, sent) over the agents' latest Statuses when they took more triggering information
+    than `slack` beyond what they all sent, else None.  Each message an agent takes was sent by a
+    neighbour; `slack` covers the Statuses still on their way (a receiver's may come before its
+    sender's): one trigger's messages per directed edge."""
+    sent = received = 0
+    for status in statuses:
+        if status is not None:
+            sent += status.info_sent
+            received += status.info_received
+    return (received, sent) if received > sent + slack else None
+
+
+def foreign_information_error(received: int, sent: int, watch: GraphWatch) -> ForeignInformationError:
+    """The failure for agents that took `received` messages of triggering information when only
+    `sent` were sent: the strangers seen on the information's topics named first."""
+    strangers = [i for i in watch.found.values() if i.kind == 'stranger' and i.watched.agent is not None]
+    who = '; '.join(i.text() for i in strangers) if strangers else 'no stranger seen in the graph yet'
+    return ForeignInformationError(
+        f'{who}: the agents took {received} messages of triggering information, but sent only {sent}: '
+        f'{received - sent} came from outside the run, and the run is not its own any more: the run stops',
+        nodes=sorted({w.node for i in strangers for w in i.writers}),
+        agents=sorted({i.watched.agent for i in strangers}),
+    )
 
 
 class SensingCalls:

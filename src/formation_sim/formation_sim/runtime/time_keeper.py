@@ -51,6 +51,8 @@ from formation_sim.runtime.run_book import (
 )
 from formation_sim.runtime.intruders import (
     TOPICS_PER_LOOK,
+    foreign_information_error,
+    information_excess,
     FreezeWatch,
     GraphWatch,
     Writer,
@@ -552,6 +554,10 @@ def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
             node.get_logger().warning(intrusion.text())
     if (error := watch.error()) is not None:
         raise error
+    if node.realtime and node.step is not None:  # lock-step: RunBook.settled counts them exactly
+        statuses = (book.status for book in node.agents.values())
+        if (excess := information_excess(statuses, slack=2 * len(node.scenario.edges))) is not None:
+            raise foreign_information_error(*excess, watch)
 
 
 def blamed(node: TimeKeeperNode, error: BaseException) -> BaseException:
