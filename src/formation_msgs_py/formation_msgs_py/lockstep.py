@@ -31,8 +31,10 @@ REJECT_DIMENSION = 'dimension'  # p differs from the receiver's, or ETA-1/ETA-2 
 REJECT_TIME_BACKWARDS = 'time_backwards'  # stamped before t = 0 or before the sender's previous one
 REJECT_DUPLICATE = 'duplicate'  # stamped at the very time of the sender's previous one
 REJECT_FRAME = 'frame'  # a robot pose in another frame than the world frame
-REJECT_FUTURE = 'future'  # a robot pose stamped ahead of the reader's clock beyond a tolerance
+# stamped ahead of the reader's clock beyond a tolerance, or after the run's horizon (issue 28)
+REJECT_FUTURE = 'future'
 REJECT_JUMP = 'jump'  # a robot pose further from the last one than the robot's speed limit allows
+REJECT_STEP_ORDER = 'step_order'  # a Step that cannot follow the run's previous one (issue 28)
 LAYOUT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_NON_FINITE, REJECT_FIELD)
 REJECT_REASONS = (
     *LAYOUT_REASONS,
@@ -44,6 +46,7 @@ REJECT_REASONS = (
     REJECT_FRAME,
     REJECT_FUTURE,
     REJECT_JUMP,
+    REJECT_STEP_ORDER,
 )
 
 # What a robot's command adapter clips (AgentReport.saturation; README, "Running on robots").

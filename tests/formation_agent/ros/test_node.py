@@ -561,7 +561,7 @@ def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live
     from formation_msgs_py.qos import PROTOCOL_QOS
     from formation_msgs_py.topics import STATUS_TOPIC
 
-    node = live_node()
+    node = live_node(horizon=1000.0)  # it stops at its horizon on its own clock (issue 28)
     node.core, node.sensing = _BehindCore(), _InstantSensing()
     statuses = []
     node.create_subscription(
@@ -588,3 +588,112 @@ def test_thousands_of_past_due_triggers_in_a_row_never_crash_the_agent(ros, live
     assert statuses and all(
         math.isfinite(s.last_planned) and s.last_planned <= s.next_time + 1e-4 for s in statuses
     )
+
+
+# -- hostile traffic (issue 28) -------------------------------------------------------------------
+
+
+def _commands_of(ros, node, topic='/agent_1/cmd_vel'):
+    from geometry_msgs.msg import Twist
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+
+    received = []
+    node.create_subscription(
+        Twist, topic, lambda msg: received.append((msg.linear.x, msg.linear.y)), PROTOCOL_QOS
+    )
+    return received
+
+
+def _spin_until(executor, done, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.02)
+
+
+def test_a_forged_wall_clock_step_never_hides_the_real_final_step(ros, live_node):
+    """The finding: one forged Step (index 1, epoch 100 s earlier) was taken, the real final Step
+    (index 1) then looked like a repeat, and the agents commanded on for 7.6 s after the end.
+    Now the forged Step is refused and counted, and the final Step stops the agent."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+
+    node = live_node()
+    commands = _commands_of(ros, node)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    epoch = time.time()
+    try:
+        node._on_step(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=epoch)))
+        node._on_step(encode_step(Step(index=1, time=0.0, flags=STEP_FLAG_REALTIME, epoch=epoch - 100.0)))
+        assert node.rejected == {'step_order': 1} and node.schedule.epoch == epoch and not node.finished
+        final = Step(index=1, time=10.0, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=epoch)
+        node._on_step(encode_step(final))
+        assert node.finished and node.schedule.stopped and node.counts.final_sent
+        _spin_until(executor, lambda: commands)
+    finally:
+        executor.remove_node(node)
+    assert commands == [(0.0, 0.0)], 'the zero command, and nothing after it'
+
+
+def test_a_stamp_no_sender_can_give_is_refused_and_the_real_next_one_taken(live_node):
+    """The finding: a forged TriggerInfo stamped 1e300 made agent 2's real messages look older
+    (refused as time_backwards, counted against agent 2) and stalled the run 60 s."""
+    node = live_node()
+    node.faults.arrive(_info(stamp=1e300), 2)
+    node.faults.arrive(_info(stamp=10.5), 2)  # after the horizon t = 10
+    node.faults.arrive(_info(stamp=0.0), 2)  # the real one: held for the own trigger at t = 0
+    assert node.rejected == {'future': 2}
+    assert [(info.sender, info.stamp) for info in node.arrivals.held] == [(2, 0.0)]
+    node.schedule.start(time.time())  # the wall clock: no stamp ahead of the own clock
+    node.faults.arrive(_info(stamp=5.0), 2)
+    assert node.rejected == {'future': 3}
+
+
+def test_a_wall_clock_agent_stops_at_the_horizon_on_its_own_clock_without_a_final_step(ros, live_node):
+    """No final Step comes (lost, or refused): at epoch + horizon the agent sends its zero and
+    triggers no more; it still leaves on the final Step."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+
+    node = live_node(horizon=0.3)
+    commands = _commands_of(ros, node)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    try:
+        node._on_step(encode_step(Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=time.time())))
+        _spin_until(executor, lambda: node.schedule.stopped)
+        assert node.schedule.stopped and not node.finished
+        _spin_until(executor, lambda: commands)
+    finally:
+        executor.remove_node(node)
+    assert commands == [(0.0, 0.0)]
+
+
+@pytest.mark.parametrize('wall_clock', [False, True])
+def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_of_life(
+    live_node, wall_clock
+):
+    """The finding: a coordinator frozen 3 s gave the robots their zeros after 1.21-1.24 s (the
+    bound is 1 s): the agents waited LOST_GRACE after the lease.  The robot stops at the lease now,
+    and the agent leaves after the grace; lock-step moves nothing and keeps its patience."""
+    from types import SimpleNamespace
+
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+
+    node = live_node()
+    if wall_clock:
+        node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=time.time())
+        node.schedule.start(node.step.epoch)
+        node.output.start(node.step.epoch)
+    else:
+        node.step = Step(index=0, time=0.0)
+    node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
+    assert not node.schedule.stopped
+    node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1))
+    assert node.schedule.stopped == wall_clock and node.output._stopped == wall_clock
+    node.check()  # within the grace: still there

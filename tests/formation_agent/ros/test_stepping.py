@@ -249,3 +249,71 @@ def test_wall_clock_information_that_crossed_the_own_trigger_is_re_based_and_cou
         'at the trigger: not late'
     )
     assert counts.late_infos == 1
+
+
+# -- which Step an agent takes (issue 28) -------------------------------------------------------------
+
+
+def _wall(index, *, epoch=1000.0, final=False, t=0.0):
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
+
+    return Step(
+        index=index, time=t, flags=STEP_FLAG_REALTIME | (STEP_FLAG_FINAL if final else 0), epoch=epoch
+    )
+
+
+def test_a_forged_wall_clock_step_is_refused_and_the_real_final_step_still_taken():
+    """The finding: a forged Step (index 1, epoch 100 s earlier) was taken, and the real final
+    Step (index 1 too) then looked like a repeat: the robots drove on 7.6 s past the end."""
+    from formation_agent.ros.stepping import STEP_REPEAT, STEP_TAKE, StepGate
+
+    gate = StepGate(agent_id=2)
+    assert gate.judge(_wall(0)) == STEP_TAKE
+    assert gate.judge(_wall(0)) == STEP_REPEAT  # transient local replays it: silent
+    reason, why = gate.judge(_wall(1, epoch=900.0))
+    assert reason == 'step_order'
+    assert why == (
+        'agent 2: refused step 1 at t=0.0 (wall clock, epoch 900.0): the run began with step 0 at t=0.0 '
+        '(wall clock, epoch 1000.0)'
+    )
+    assert gate.judge(_wall(0, epoch=900.0))[0] == 'step_order'  # a step 0 of another run
+    assert gate.judge(_wall(5))[1].endswith('on the wall clock only the final Step follows step 0')
+    assert gate.judge(_wall(1, final=True, t=10.0)) == STEP_TAKE
+    assert gate.last == _wall(1, final=True, t=10.0) and gate.first == _wall(0)
+
+
+@pytest.mark.parametrize('first', [None, 'lock-step', 'wall clock'])
+def test_a_final_step_is_always_taken(first):
+    """Stopping is always safe: whatever index, time or epoch a final Step carries, it is taken."""
+    from formation_agent.ros.stepping import STEP_TAKE, StepGate
+
+    gate = StepGate(agent_id=1)
+    if first == 'lock-step':
+        assert gate.judge(Step(index=0, time=0.0, due=(1,))) == STEP_TAKE
+    elif first == 'wall clock':
+        assert gate.judge(_wall(0)) == STEP_TAKE
+    assert gate.judge(_wall(0, epoch=-5.0, final=True, t=1e300)) == STEP_TAKE
+
+
+def test_lock_step_steps_that_skip_or_go_back_are_refused_and_the_real_next_one_taken():
+    """The finding: a Step going backwards made the real next one look like a repeat (60 s stall)."""
+    from formation_agent.ros.stepping import STEP_REPEAT, STEP_TAKE, StepGate
+
+    gate = StepGate(agent_id=1)
+    assert gate.judge(Step(index=3, time=0.0))[1].endswith('the run has not begun (no step 0 yet)')
+    assert gate.judge(Step(index=0, time=0.5))[0] == 'step_order'  # step 0 is at t = 0
+    assert gate.judge(Step(index=0, time=0.0, due=(1, 2))) == STEP_TAKE
+    assert gate.judge(Step(index=1, time=0.25, due=(2,))) == STEP_TAKE
+    refusals = [
+        (Step(index=2, time=0.125, due=(1,)), 'its time goes back from t=0.25 (step 1)'),
+        (Step(index=7, time=0.5, due=(1,)), 'the latest step taken is 1: step 2 is missing'),
+        (Step(index=1, time=0.25, due=(1,)), 'step 1 was step 1 at t=0.25 (lock-step)'),
+        (_wall(2, epoch=0.0, t=0.5), 'the run began with step 0 at t=0.0 (lock-step)'),
+    ]
+    for step, why in refusals:
+        reason, text = gate.judge(step)
+        assert reason == 'step_order' and text.endswith(why), text
+    assert gate.judge(Step(index=1, time=0.25, due=(2,))) == STEP_REPEAT
+    assert gate.judge(Step(index=0, time=0.0, due=(1, 2))) == STEP_REPEAT
+    assert gate.judge(Step(index=2, time=0.25, due=(1,))) == STEP_TAKE  # the same instant again: allowed
+    assert gate.last.index == 2

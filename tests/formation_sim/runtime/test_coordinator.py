@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 import time
 
@@ -557,3 +558,114 @@ def test_any_value_on_any_topic_the_coordinator_reads_is_taken_or_refused_never_
             assert all(np.isfinite(s.position).all() and math.isfinite(s.time) for s in samples)
 
     feed()
+
+
+# -- strangers in the graph (issue 28) ------------------------------------------------------------
+
+
+def _look_until_raised(node, timeout=10.0):
+    """Look at the graph until a look raises (discovery of the rogue takes a moment)."""
+    from formation_sim.runtime.time_keeper import look_at_graph
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        look_at_graph(node, everything=True)
+        time.sleep(0.05)
+    pytest.fail('nothing found in the graph')
+
+
+def test_an_outside_node_on_a_robots_command_topic_stops_the_run_and_is_named(ros, coordinator, tmp_path):
+    """The finding: an outside node on /agent_2/robot/cmd_vel drove robot 2 6 cm, and nothing was
+    flagged.  The coordinator sees it in the graph: the run fails, naming the node and its gid."""
+    from geometry_msgs.msg import Twist
+
+    from formation_msgs_py.qos import ROBOT_COMMAND_QOS
+    from formation_sim.runtime.coordinator import _stop_and_write
+    from formation_sim.runtime.intruders import ForeignWriterError
+    from formation_sim.runtime.time_keeper import look_at_graph
+
+    node = _running(coordinator, out_dir=str(tmp_path))
+    look_at_graph(node, everything=True)  # its own zero-command writers are no strangers
+    ros_node = None
+    try:
+        import rclpy
+
+        ros_node = rclpy.create_node('rogue', namespace='/outside', context=ros)
+        ros_node.create_publisher(Twist, '/agent_2/robot/cmd_vel', ROBOT_COMMAND_QOS)
+        with pytest.raises(ForeignWriterError) as caught:
+            _look_until_raised(node)
+    finally:
+        if ros_node is not None:
+            ros_node.destroy_node()
+    message = str(caught.value)
+    assert re.fullmatch(
+        r"a node outside the run, /outside/rogue \(writer gid [0-9a-f]{32}\), writes robot 2's command "
+        r'\(/agent_2/robot/cmd_vel\): the run stops',
+        message,
+    ), message
+    _stop_and_write(node, None, caught.value)
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    failure = summary['extra']['failure']
+    assert failure['kind'] == 'foreign_writer' and failure['agents'] == [2] and failure['message'] == message
+    assert summary['extra']['foreign_writers'][0]['writers'][0]['node'] == '/outside/rogue'
+
+
+def test_a_second_process_claiming_an_agent_is_refused_before_step_0(ros, coordinator):
+    """Two nodes named /agent_2/formation_agent writing agent 2's triggering information: two
+    processes claim agent 2, both named, before anything is sent."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.qos import PROTOCOL_QOS
+    from formation_msgs_py.topics import trigger_info_topic
+    from formation_sim.runtime.intruders import DuplicateAgentError
+
+    node = coordinator()
+    topic = trigger_info_topic(2, min(node.scenario.neighbours(2)))
+    twins = [rclpy.create_node('formation_agent', namespace='/agent_2', context=ros) for _ in range(2)]
+    try:
+        for twin in twins:
+            twin.create_publisher(Float64MultiArray, topic, PROTOCOL_QOS)
+        with pytest.raises(DuplicateAgentError) as caught:
+            _look_until_raised(node)
+    finally:
+        for twin in twins:
+            twin.destroy_node()
+    assert str(caught.value).startswith('two processes claim agent 2: /agent_2/formation_agent (writer gid ')
+    assert f'both write {topic}' in str(caught.value) and node.step is None
+
+
+def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinator):
+    """Wall clock: forged, plausible triggering information was taken (agent 1: 813 events instead
+    of ~81, and the run said done).  The coordinator compares the agents' Statuses at each look."""
+    from formation_msgs_py.lockstep import Status
+    from formation_sim.runtime.intruders import ForeignInformationError
+    from formation_sim.runtime.time_keeper import look_at_graph
+
+    node = _running(coordinator)
+    for agent, (sent, received) in {1: (20, 20), 2: (20, 20), 3: (20, 20), 4: (20, 20)}.items():
+        node.agents[agent].status = Status(
+            agent=agent,
+            step_index=0,
+            next_time=1.0,
+            info_sent=sent,
+            info_received=received,
+            commands_sent=1,
+            triggers=10,
+            ready=True,
+        )
+    look_at_graph(node, everything=True)  # as many taken as sent
+    node.agents[1].status = Status(
+        agent=1,
+        step_index=0,
+        next_time=1.0,
+        info_sent=20,
+        info_received=200,
+        commands_sent=1,
+        triggers=90,
+        ready=True,
+    )
+    with pytest.raises(
+        ForeignInformationError, match=r'took 260 messages .* but sent only 80: 180 came from outside'
+    ):
+        look_at_graph(node, everything=True)

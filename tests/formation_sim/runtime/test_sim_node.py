@@ -133,3 +133,78 @@ def test_discovery_says_what_it_still_waits_for(simulator):
     assert 'agents not ready (their own endpoints unmatched): 1, 3' in gaps
     assert 'agents whose liveliness lease expired: 3' in gaps
     assert not node._connected()
+
+
+# -- sensing calls from outside the run (issue 28) --------------------------------------------------
+
+
+def _rogue_client(ros, node, agent):
+    """A node outside the run with a client of agent `agent`'s sensing service, seen in the graph."""
+    import time
+
+    import rclpy
+    from std_srvs.srv import Trigger
+
+    from formation_msgs_py.topics import sense_service
+
+    rogue = rclpy.create_node('curious', namespace='/outside', context=ros)
+    rogue.create_client(Trigger, sense_service(agent))
+    deadline = time.monotonic() + 10.0
+    topic = f'rq{sense_service(agent)}Request'
+    while not node.get_publishers_info_by_topic(topic, no_mangle=True) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return rogue
+
+
+def test_a_sensing_call_out_of_turn_from_outside_is_refused_counted_and_its_caller_named(ros, simulator):
+    """The finding: one call of /agent_2/sense from outside ended a lock-step run with "agent 2 is
+    not due to sense", the caller never named.  With a stranger calling the service the call is
+    refused and counted as foreign; at agent 2's own step the same state is given again; with no
+    stranger it is agent 2's protocol violation, as before."""
+    from formation_msgs_py.codec import decode_sensed_state
+    from formation_msgs_py.lockstep import Step
+
+    alone = simulator()
+    assert alone._on_sense(2).success is False
+    assert str(alone.failure) == 'agent 2 is not due to sense at step -1 (due: [])'
+    node = simulator()
+    rogue = _rogue_client(ros, node, 2)
+    try:
+        refusal = node._on_sense(2)
+        assert refusal.success is False and refusal.message.endswith(': refused')
+        assert node.failure is None and node.calls.foreign == {1: 0, 2: 1, 3: 0}
+        node._publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
+        first = decode_sensed_state(node._on_sense(2))  # the stranger's call, or agent 2's: one answer
+        again = decode_sensed_state(node._on_sense(2))  # the other one: the same state again
+    finally:
+        rogue.destroy_node()
+    assert again == first and node.failure is None
+    assert node.sensing_calls == 1 and node.calls.foreign[2] == 2
+    assert node.calls.extra() == {'foreign_sensing_calls': {'2': 2}}
+
+
+def test_wall_clock_sensing_calls_are_triggers_only_when_the_agents_information_follows(simulator, ros):
+    import time
+
+    from rclpy.parameter import Parameter
+
+    from formation_msgs_py.codec import decode_sensed_state, encode_trigger_info
+    from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.runtime.sim_node import FormationSimulatorNode, _on_trigger_info
+
+    node = FormationSimulatorNode(
+        scenario=load_scenario('paper_single'),
+        parameter_overrides=[Parameter('clock_mode', value='realtime')],
+        context=ros,
+    )
+    try:
+        node._epoch = time.time()
+        node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=node._epoch)
+        stamps = [decode_sensed_state(node._on_sense(2)).stamp for _ in range(3)]  # 2 foreign, then its own
+        info = TriggerInfo(sender=2, receiver=1, stamp=stamps[1], control=(0.0, 0.0), rel_position=(1.0, 1.0))
+        _on_trigger_info(node, encode_trigger_info(info), 2)
+        assert node.agents[2].trigger_times == [stamps[1]] and node.sensing_calls == 1
+        assert node.calls.extra() == {'foreign_sensing_calls': {'2': 2}}  # one before it, one never followed
+    finally:
+        node.destroy_node()

@@ -3,22 +3,33 @@
 A message that breaks its layout (`formation_msgs_py.codec.MessageError`) or cannot be true is
 dropped before the core sees it, logged (the first three of each reason, then every hundredth)
 and counted per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) for the agent's report.
+
+A stamp no sender of the run can give (after the run's horizon, or on the wall clock more than
+STAMP_AHEAD_TOLERANCE ahead of the receiver's own clock) is refused as `future` and leaves the
+sender's last stamp as it was: one forged message stamped 1e300 made every real one after it look
+older, refused as `time_backwards` against the real sender, and stalled lock-step (issue 28).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from formation_msgs_py.codec import MessageError, decode_trigger_info
 from formation_msgs_py.lockstep import (
     REJECT_DIMENSION,
     REJECT_DUPLICATE,
+    REJECT_FUTURE,
     REJECT_RECEIVER,
     REJECT_SENDER,
     REJECT_TIME_BACKWARDS,
 )
 from formation_msgs_py.topics import trigger_info_topic
 from formation_msgs_py.types import TriggerInfo
+
+STAMP_AHEAD_TOLERANCE = 0.5
+"""Seconds a wall-clock stamp may be ahead of the receiver's own clock (t = now - epoch): the
+sender stamps when it senses, before it sends, so only the hosts' clock offset can put it ahead."""
 
 
 class Rejections:
@@ -39,9 +50,17 @@ class Rejections:
 
 
 def implausible(
-    info: TriggerInfo, *, sender: int, agent_id: int, algorithm: str, dimension: int, last_stamp: float | None
+    info: TriggerInfo,
+    *,
+    sender: int,
+    agent_id: int,
+    algorithm: str,
+    dimension: int,
+    last_stamp: float | None,
+    latest: float = math.inf,
 ) -> tuple[str, str] | None:
-    """Why `info`, well formed, cannot be the next information of `sender` for agent `agent_id`."""
+    """Why `info`, well formed, cannot be the next information of `sender` for agent `agent_id`
+    (`latest`: the latest stamp a sender of the run can give now)."""
     if info.sender != sender:
         return REJECT_SENDER, f'information from agent {info.sender} on the topic of agent {sender}'
     if info.receiver != agent_id:
@@ -51,6 +70,11 @@ def implausible(
         return REJECT_DIMENSION, (
             f'{"ETA-1" if info.rel_velocity is None else "ETA-2"} information of dimension '
             f'{len(info.control)}; this agent runs {algorithm.upper()} with p = {dimension}'
+        )
+    if info.stamp > latest:
+        return (
+            REJECT_FUTURE,
+            f'agent {sender} stamped t={info.stamp!r}, after the latest possible t={latest!r}',
         )
     if info.stamp < 0.0 or (last_stamp is not None and info.stamp < last_stamp):
         previous = 't = 0' if last_stamp is None else f'its previous one at t={last_stamp!r}'
@@ -69,9 +93,11 @@ def read_info(
     dimension: int,
     heard: dict[int, float],
     reject: Rejections,
+    latest: float = math.inf,
 ) -> TriggerInfo | None:
     """The triggering information in `msg` from `sender`, or None if it is refused (`reject`ed);
-    `heard` (sender -> stamp of its last accepted information) is updated."""
+    `heard` (sender -> stamp of its last accepted information) is updated; `latest`: the latest
+    stamp a sender of the run can give now (`implausible`)."""
     topic = trigger_info_topic(sender, agent_id)
     try:
         info = decode_trigger_info(msg)
@@ -85,6 +111,7 @@ def read_info(
         algorithm=algorithm,
         dimension=dimension,
         last_stamp=heard.get(sender),
+        latest=latest,
     )
     if problem is not None:
         reject(topic, *problem)

@@ -47,12 +47,20 @@ from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
 from formation_agent.ros.discovery import Discovery, SimulatorWatch
 from formation_agent.ros.faults import FaultInjection, InjectedFaults
-from formation_agent.ros.inbox import Rejections, read_info
+from formation_agent.ros.inbox import STAMP_AHEAD_TOLERANCE, Rejections, read_info
 from formation_agent.ros.outbox import Outbox
 from formation_agent.ros.reporting import AgentCounts, PredictionError, agent_status
 from formation_agent.ros.sensing import PoseSensing, ServiceSensing
 from formation_agent.ros.staleness import Staleness
-from formation_agent.ros.stepping import AgentNodeError, Arrivals, TriggerSchedule, refuse_lock_step
+from formation_agent.ros.stepping import (
+    STEP_REPEAT,
+    STEP_TAKE,
+    AgentNodeError,
+    Arrivals,
+    StepGate,
+    TriggerSchedule,
+    refuse_lock_step,
+)
 from formation_msgs_py.codec import MessageError, decode_step, encode_trigger_info
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
@@ -196,6 +204,7 @@ class FormationAgentNode(Node):
         self.counts = AgentCounts(agent_id=config.agent_id)
         self.schedule = TriggerSchedule(agent_id=config.agent_id, timers=_NodeTimers(self))
         self.arrivals = Arrivals(schedule=self.schedule, counts=self.counts)
+        self.step_gate = StepGate(agent_id=config.agent_id)
         self.reject = Rejections(self.get_logger(), changed=self.counts.changed)
         self.faults = _make_faults(self)
         self.sensing = (
@@ -217,6 +226,7 @@ class FormationAgentNode(Node):
         self.ended_at_horizon = False  # its poses stopped after the horizon: no failure (`_fail`)
         self._report_timer = self.create_timer(0.5, self._publish_report_if_dirty)
         self.simulator = SimulatorWatch(config.agent_id)
+        self.end_watch = _EndWatch(self)
         self._discovery: Discovery | None = Discovery(self)
 
     def _create_endpoints(self) -> None:
@@ -238,9 +248,9 @@ class FormationAgentNode(Node):
             STEP_TOPIC,
             self._on_step,
             READER_QOS,
-            # self.simulator is made after this subscription: looked up when the event comes
+            # self.end_watch is made after this subscription: looked up when the event comes
             event_callbacks=SubscriptionEventCallbacks(
-                liveliness=lambda info: self.simulator.on_liveliness(info)  # noqa: PLW0108 - see above
+                liveliness=lambda info: self.end_watch.on_keeper_liveliness(info)  # noqa: PLW0108 - see above
             ),
         )
 
@@ -287,13 +297,8 @@ class FormationAgentNode(Node):
     # -- steps ----------------------------------------------------------------------------------
 
     def _on_step(self, msg: Float64MultiArray) -> None:
-        try:
-            step = decode_step(msg)
-        except MessageError as error:
-            self.reject(STEP_TOPIC, error.reason, str(error))
+        if (step := _next_step(self, msg)) is None:
             return
-        if self.step is not None and step.index <= self.step.index:
-            return  # a repeat of a step already handled
         if self._discovery is not None:
             self._discovery.close()
             self._discovery = None
@@ -308,6 +313,7 @@ class FormationAgentNode(Node):
             return
         if step.realtime:
             self.schedule.start(step.epoch)
+            self.end_watch.start(step.epoch)
             self.sensing.start(step.epoch)
             self.output.start(step.epoch)
             self._sense_now()  # t^i_1 = 0
@@ -383,6 +389,7 @@ class FormationAgentNode(Node):
             dimension=self.config.dimension,
             heard=self.schedule.heard,
             reject=self.reject,
+            latest=_latest_stamp(self),
         )
         # Held while this agent triggers at that instant itself: its own sensing comes first, then
         # the neighbours' information (DESIGN.md, "Time and exactness"), and its status must not
@@ -462,6 +469,82 @@ class FormationAgentNode(Node):
         """Let reliable writers hand over what they still hold before the node goes away (until
         `deadline`, time.monotonic())."""
         self.outbox.wait_for_delivery(deadline, self.output.publisher)
+
+
+def _next_step(node: FormationAgentNode, msg: Float64MultiArray) -> Step | None:
+    """The Step in `msg` if `node` takes it (`StepGate`): a malformed one, or one that cannot be
+    the run's next, is refused and counted; a repeat, or any Step after the end, is ignored."""
+    try:
+        step = decode_step(msg)
+    except MessageError as error:
+        node.reject(STEP_TOPIC, error.reason, str(error))
+        return None
+    if node.finished:
+        return None  # the run is over for this agent: nothing a Step says can change that
+    verdict = node.step_gate.judge(step)
+    if verdict != STEP_TAKE:
+        if verdict != STEP_REPEAT:  # a Step that cannot be the run's next one: refused, counted
+            node.reject(STEP_TOPIC, *verdict)
+        return None
+    return step
+
+
+def _latest_stamp(node: FormationAgentNode) -> float:
+    """The latest stamp a neighbour of `node` can give now: the horizon, and on the wall clock the
+    agent's own run time plus STAMP_AHEAD_TOLERANCE (`formation_agent.ros.inbox`)."""
+    latest = node.config.horizon
+    if node.schedule.wall_clock:
+        latest = min(latest, time.time() - node.schedule.epoch + STAMP_AHEAD_TOLERANCE)
+    return latest
+
+
+class _EndWatch:
+    """The end of a wall-clock run as one agent sees it on its own (issue 28): nothing keeps its
+    robot moving past the run's horizon or a keeper that shows no sign of life."""
+
+    def __init__(self, node: FormationAgentNode) -> None:
+        self._node = node
+        self._timer = None
+
+    def start(self, epoch: float) -> None:
+        """Step 0 on the wall clock: the horizon is armed on the agent's own clock."""
+        delay = max(0.0, epoch + self._node.config.horizon - time.time())
+        self._timer = self._node.create_timer(delay, self._at_horizon)
+
+    def _at_horizon(self) -> None:
+        """The run's horizon on this agent's own clock: no trigger and no command from now on,
+        whatever Step comes or does not (a forged Step kept robots moving 7.6 s past the end); the
+        agent leaves on the final Step (or the keeper's loss)."""
+        node = self._node
+        node.destroy_timer(self._timer)
+        if self._stop():
+            node.get_logger().info(
+                f'agent {node.agent_id}: the horizon t={node.config.horizon:g} on its own clock: robot '
+                'stopped, waiting for the final Step'
+            )
+
+    def on_keeper_liveliness(self, info) -> None:
+        """The keeper's Step writer changed liveliness (`SimulatorWatch`).  On the wall clock a
+        robot would go on moving under its last command: the moment the keeper shows no sign of
+        life (frozen, or gone) the robot gets its zero and no trigger follows, within the lease of
+        the keeper's last sign of life (a frozen coordinator's robots got theirs after 1.21-1.24 s,
+        the lease plus LOST_GRACE); the agent leaves after LOST_GRACE (`check`)."""
+        node = self._node
+        node.simulator.on_liveliness(info)
+        if node.simulator.lost_at is not None and node.schedule.wall_clock and self._stop():
+            node.get_logger().warning(
+                f'agent {node.agent_id}: the time keeper (writer of {STEP_TOPIC}) shows no sign of life: '
+                'robot stopped'
+            )
+
+    def _stop(self) -> bool:
+        """The zero command and no trigger after it; False if the agent had stopped already."""
+        node = self._node
+        if node.finished or node.schedule.stopped:
+            return False
+        node.schedule.stop()
+        node.output.stop()
+        return True
 
 
 if __name__ == '__main__':  # the command moved to formation_agent.ros.main: say so, not nothing

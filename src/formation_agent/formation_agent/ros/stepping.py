@@ -8,6 +8,11 @@ clock (`start`) a one-shot timer fires at epoch + t^i_{k+1} (`arm`), through the
 instant the agent is due at waits for its own trigger (`holds`; docs/DESIGN.md, "Time and
 exactness"); wall-clock information that crossed the agent's own later trigger is re-anchored at
 it (`rebased`).  `Arrivals` takes accepted information into the core by these rules.
+
+`StepGate` decides which Step an agent takes (issue 28): a Step that cannot follow the run's
+previous one (another epoch, a second wall-clock Step that is not final, a lock-step index that
+skips or a time that goes back) is refused and counted, so that a forged or replayed Step never
+makes the real next one look like a repeat; a final Step is always taken (stopping is safe).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
-from formation_msgs_py.lockstep import Step
+from formation_msgs_py.lockstep import REJECT_STEP_ORDER, Step
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 
@@ -261,3 +266,62 @@ class Arrivals:
             info = rebased(info, sensed=self.sensed, at=at)
         core.receive(info)
         self._counts.received(late=late)
+
+
+STEP_TAKE = 'take'
+STEP_REPEAT = 'repeat'
+
+
+class StepGate:
+    """Which Step an agent takes: the run's own sequence only (issue 28).
+
+    `judge(step)` returns STEP_TAKE, STEP_REPEAT (a copy of a Step already taken: transient
+    local replays it to a late reader; ignored silently) or (REJECT_STEP_ORDER, why) for a Step
+    that cannot be the run's next one: before step 0 anything but a step 0 at t = 0; on the wall
+    clock anything after step 0 but the final Step, or a step 0 of another epoch; in lock-step an
+    index that skips one, a time that goes back, a change of clock or epoch, or a second Step of
+    the same index that differs.  A final Step is always taken: an agent stops on it whatever
+    else it carries, so that nothing can keep a robot moving past the run's end.
+    """
+
+    def __init__(self, *, agent_id: int) -> None:
+        self.agent_id = agent_id
+        self.first: Step | None = None  # the step 0 taken
+        self.last: Step | None = None  # the latest Step taken
+
+    def judge(self, step: Step) -> str | tuple[str, str]:
+        problem = None if step.final else self._problem(step)
+        if problem == STEP_REPEAT:
+            return STEP_REPEAT
+        if problem is not None:
+            return REJECT_STEP_ORDER, f'agent {self.agent_id}: refused {_step_text(step)}: {problem}'
+        self.first = self.first or step
+        self.last = step
+        return STEP_TAKE
+
+    def _problem(self, step: Step) -> str | None:
+        last, first = self.last, self.first
+        if last is None:
+            if step.index != 0 or step.time != 0.0:
+                return 'the run has not begun (no step 0 yet)'
+            return None
+        if step.realtime != first.realtime or step.epoch != first.epoch:
+            if step.index == 0 and step == first:
+                return STEP_REPEAT
+            return f'the run began with {_step_text(first)}'
+        if first.realtime:
+            return STEP_REPEAT if step == first else 'on the wall clock only the final Step follows step 0'
+        if step.index < last.index or step == last:
+            return STEP_REPEAT  # an old Step again (its time was checked when it was taken)
+        if step.index == last.index:
+            return f'step {last.index} was {_step_text(last)}'
+        if step.index > last.index + 1:
+            return f'the latest step taken is {last.index}: step {last.index + 1} is missing'
+        if step.time < last.time:
+            return f'its time goes back from t={last.time!r} (step {last.index})'
+        return None
+
+
+def _step_text(step: Step) -> str:
+    clock = f'wall clock, epoch {step.epoch!r}' if step.realtime else 'lock-step'
+    return f'{"final " if step.final else ""}step {step.index} at t={step.time!r} ({clock})'

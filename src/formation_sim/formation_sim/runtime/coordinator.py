@@ -102,7 +102,14 @@ from formation_sim.runtime.run_end import (
     write_results,
     write_unstarted,
 )
-from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
+from formation_sim.runtime.intruders import ForeignWriterError, KeeperFrozenError
+from formation_sim.runtime.time_keeper import (
+    blamed,
+    graph_of,
+    run_extra,
+    TIME_KEEPER_PARAMETERS,
+    TimeKeeperNode,
+)
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
@@ -548,7 +555,15 @@ class FormationCoordinatorNode(TimeKeeperNode):
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
 LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
-NAMED_ERRORS = (*LOST_ERRORS, AgentFailedError, ConnectivityLostError, DiscoveryError, InitialConditionError)
+NAMED_ERRORS = (
+    *LOST_ERRORS,
+    AgentFailedError,
+    ConnectivityLostError,
+    DiscoveryError,
+    InitialConditionError,
+    ForeignWriterError,
+    KeeperFrozenError,
+)
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -620,6 +635,7 @@ def main(
                 status = EXIT_INTERRUPTED
                 _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
+            error = error if node is None else blamed(node, error)  # its cause first (issue 28)
             _tell(f'formation_sim: {error}')
             if not isinstance(error, NAMED_ERRORS):
                 with contextlib.suppress(OSError):

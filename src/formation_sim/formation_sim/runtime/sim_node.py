@@ -42,10 +42,18 @@ from typing import NoReturn
 import numpy as np
 from geometry_msgs.msg import Accel, Twist
 from rclpy.event_handler import SubscriptionEventCallbacks
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from formation_agent.ros.process import exit_process
-from formation_msgs_py.codec import decode_command, encode_sensed_state, encode_step, sensing_refusal
+from formation_msgs_py.codec import (
+    MessageError,
+    decode_command,
+    decode_trigger_info,
+    encode_sensed_state,
+    encode_step,
+    sensing_refusal,
+)
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import (
@@ -84,6 +92,13 @@ from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
 from formation_sim.runtime.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
 from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.runtime.exact_world import ExactWorld
+from formation_sim.runtime.intruders import (
+    DuplicateAgentError,
+    SensingCalls,
+    Writer,
+    intrusions,
+    simulator_watched,
+)
 from formation_sim.sim.engine import due_twice
 from formation_sim.sim.record import RunRecord
 
@@ -248,6 +263,8 @@ class FormationSimulatorNode(TimeKeeperNode):
             for i in self.agents
         ]
         self.sensing_calls = 0
+        self.calls = SensingCalls(self.agents)  # which calls were triggers, which foreign (issue 28)
+        self._info_subs = _trigger_readers(self) if self.realtime else {}
         self._due: set[int] = set()
         self._last_advance = self._created
 
@@ -342,9 +359,8 @@ class FormationSimulatorNode(TimeKeeperNode):
         if self.finished:  # asked after the horizon: the final state, not counted
             return encode_sensed_state(self.world.sense(agent, book.neighbours))
         t = self._realtime_event()
-        book.trigger_times.append(t)
-        book.expected_triggers += 1
-        self.sensing_calls += 1
+        book.expected_triggers += 1  # a trigger may follow (its Status may come before its information)
+        self.calls.asked(agent, t)  # a trigger once the agent's information stamped t follows
         self.view.log_sensing(agent, 0, t)
         return encode_sensed_state(self.world.sense(agent, book.neighbours))
 
@@ -397,9 +413,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             return self._sense_realtime(agent)
         index = -1 if self.step is None else self.step.index
         if self.step is None or agent not in self._due or book.sensed_at_step == index:
-            reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(self._due)})'
-            self.failure = SimulatorError(reason)
-            return sensing_refusal(reason)
+            return _out_of_turn(self, agent, index)
         book.sensed_at_step = index
         self.sensing_calls += 1
         sensed = self.world.sense(agent, book.neighbours)
@@ -474,6 +488,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
                 **run_extra(self, self.world.time),
+                **self.calls.extra(),
                 **(
                     self.book.lateness({i: book.trigger_times for i, book in self.agents.items()})
                     if self.realtime
@@ -481,6 +496,65 @@ class FormationSimulatorNode(TimeKeeperNode):
                 ),
             },
         )
+
+
+def _trigger_readers(node: FormationSimulatorNode) -> dict:
+    """Wall clock: per agent, a reader of its triggering information to its first neighbour,
+    whose stamps say which sensing calls were its triggers (`SensingCalls`)."""
+    return {
+        i: node.create_subscription(
+            Float64MultiArray,
+            trigger_info_topic(i, min(book.neighbours)),
+            lambda msg, agent=i: _on_trigger_info(node, msg, agent),
+            READER_QOS,
+        )
+        for i, book in node.agents.items()
+    }
+
+
+def _on_trigger_info(node: FormationSimulatorNode, msg, agent: int) -> None:
+    """Agent `agent`'s triggering information: the sensing call answered at its stamp was its
+    trigger (a message that is not its layout, or not its own, changes nothing)."""
+    try:
+        info = decode_trigger_info(msg)
+    except MessageError:
+        return  # the agents refuse and count it; the run's triggers are the agents' own stamps
+    if info.sender == agent and node.calls.triggered(agent, info.stamp):
+        node.agents[agent].trigger_times.append(info.stamp)
+        node.sensing_calls += 1
+
+
+def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
+    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
+    `agent`'s own is a protocol violation that ends the run; but any node can call the service
+    (std_srvs/Trigger names no caller), so the graph is asked first: with a stranger calling it,
+    the call is refused (or, at the agent's own step, answered again with the same state) and
+    counted as foreign, the stranger named; two processes claiming the agent end the run."""
+    due = agent in node._due
+    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node._due)})'
+    (watched,) = [w for w in simulator_watched(node.scenario) if w.mangled and w.agent == agent]
+    writers = [
+        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
+        for i in node.get_publishers_info_by_topic(watched.topic, no_mangle=True)
+    ]
+    found = {i.kind: i for i in intrusions(watched, writers)}
+    if 'duplicate' in found:
+        duplicate = found['duplicate']
+        node.failure = DuplicateAgentError(
+            duplicate.text(), nodes=[w.node for w in duplicate.writers], agents=[agent]
+        )
+        return sensing_refusal(str(node.failure))
+    if 'stranger' not in found:
+        node.failure = SimulatorError(reason)
+        return sensing_refusal(reason)
+    node.calls.foreign_call(agent)
+    if node.calls.foreign[agent] <= 3:
+        node.get_logger().warning(
+            f'{found["stranger"].text()}: a call out of turn ({reason}) counted as foreign'
+        )
+    if due and node.step is not None and node.agents[agent].sensed_at_step == index:
+        return encode_sensed_state(node.world.sense(agent, node.agents[agent].neighbours))  # the same again
+    return sensing_refusal(f'{reason}: refused')
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -49,7 +49,22 @@ from formation_sim.runtime.run_book import (
     RunBook,
     ids_text,
 )
+from formation_sim.runtime.intruders import (
+    TOPICS_PER_LOOK,
+    foreign_information_error,
+    information_excess,
+    FreezeWatch,
+    GraphWatch,
+    Writer,
+    ForeignWriterError,
+    protocol_watched,
+    robot_watched,
+    simulator_watched,
+)
 from formation_sim.sim.record import RunRecord
+
+GRAPH_LOOK_PERIOD = 1.0  # [s] between a keeper's looks at its run's writers (`intruders.GraphWatch`)
+TICK_PERIOD = 0.1  # [s] the keeper's tick: discovery, lost peers, the world's checks
 
 DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 
@@ -270,7 +285,8 @@ class TimeKeeperNode(WorldHooks, Node):
         self._setup_world()
         # One writer per agent whose DDS liveliness is the agent's sign of life.
         self._agent_writers = self._watch_agents()
-        self._timer = self.create_timer(0.1, self._tick)
+        self._timer = self.create_timer(TICK_PERIOD, self._tick)
+        watch_intruders(self)
         self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
         self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
 
@@ -278,6 +294,7 @@ class TimeKeeperNode(WorldHooks, Node):
 
     def _tick(self) -> None:
         now = time.monotonic()
+        self.freeze.tick(now)
         if not self.finished:
             self._check_lost(now)
         if self.step is None:
@@ -329,6 +346,7 @@ class TimeKeeperNode(WorldHooks, Node):
                 f'progress discovery done in {self._started - self._created:.1f} s; '
                 f'{note}t=0 ({self.clock_mode})'
             )
+        look_at_graph(self, everything=True)  # no step 0 with two processes claiming an agent
         self._publish(
             self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
         )
@@ -499,6 +517,58 @@ class TimeKeeperNode(WorldHooks, Node):
         return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
 
 
+def watch_intruders(node: TimeKeeperNode) -> None:
+    """Strangers and duplicates in the graph (`graph_watch`, looked at every GRAPH_LOOK_PERIOD),
+    and the keeper's own freezes (`freeze`, ticked by its tick): issue 28."""
+    node.graph_watch = GraphWatch(watched_topics(node))
+    node.freeze = FreezeWatch(period=TICK_PERIOD)
+    node._graph_timer = node.create_timer(GRAPH_LOOK_PERIOD, lambda: look_at_graph(node))
+
+
+def watched_topics(node: TimeKeeperNode) -> list:
+    """The topics whose writers `node` watches (`intruders.GraphWatch`): the protocol's, and the
+    world's (the simulator's plant and sensing, or the robots')."""
+    keeper = node.get_fully_qualified_name()
+    world = (
+        simulator_watched(node.scenario)
+        if node.serves_sensing
+        else robot_watched(node.scenario, keeper=keeper)
+    )
+    return protocol_watched(node.scenario, keeper=keeper) + world
+
+
+def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
+    """A look at the writers of the next slice of watched topics (`everything`: all of them);
+    each stranger or duplicate found is logged once, and one that changes the run raises
+    (ForeignWriterError: the run stops, naming it)."""
+    if node.finished:
+        return
+    watch = node.graph_watch
+    for watched in watch.due(len(watch.watched) if everything else TOPICS_PER_LOOK):
+        infos = node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
+        writers = [
+            Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
+            for i in infos
+        ]
+        for intrusion in watch.note(watched, writers):
+            node.get_logger().warning(intrusion.text())
+    if (error := watch.error()) is not None:
+        raise error
+    if node.realtime and node.step is not None:  # lock-step: RunBook.settled counts them exactly
+        statuses = (book.status for book in node.agents.values())
+        if (excess := information_excess(statuses, slack=2 * len(node.scenario.edges))) is not None:
+            raise foreign_information_error(*excess, watch)
+
+
+def blamed(node: TimeKeeperNode, error: BaseException) -> BaseException:
+    """`error` with its cause named first (issue 28): the keeper's own freeze (a KeeperFrozenError),
+    else the strangers seen in the graph before it."""
+    error = node.freeze.blame(error, time.monotonic(), who=node.get_name().removeprefix('formation_'))
+    if node.graph_watch.found and not isinstance(error, ForeignWriterError) and error.args:
+        error.args = (node.graph_watch.blame(str(error)), *error.args[1:])
+    return error
+
+
 def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
     """Every parameter of `node` read and every rule checked before anything is set up: one
     ParameterError names every problem (the command exits 2, nothing started, the node
@@ -593,6 +663,7 @@ def run_extra(node: TimeKeeperNode, reached: float) -> dict:
         'reached_time': reached,
         'failure': node.failure_info,
         **node._world_extra(),
+        **node.graph_watch.extra(),
         **(
             {'after_end': {str(i): why for i, why in sorted(node.after_end.items())}}
             if node.after_end
