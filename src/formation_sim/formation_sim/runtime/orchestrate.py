@@ -44,9 +44,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from formation_agent.ros.process import (
-    EXIT_REFUSED,
+    EXIT_REFUSED,  # 4: the robots' measured start broke a hypothesis, nothing was sent
+    EXIT_STOPPED,  # 5: an operator stopped the run (/formation/stop, formation stop)
     SignalFlag,
-)  # 4: the robots' measured start broke a hypothesis, nothing was sent
+)
 from formation_msgs_py.topics import (
     AGENT_NODE,
     COORDINATOR_NODE,
@@ -102,6 +103,7 @@ __all__ = [
     'EXIT_LOST',
     'EXIT_OK',
     'EXIT_REFUSED',
+    'EXIT_STOPPED',
     'ChildExit',
     'FormationRun',
     'RobotOptions',
@@ -271,7 +273,15 @@ class FormationRun:
             phases=run_phases,
         )
         if self.options.progress:
-            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
+            outcome = (
+                'done'
+                if result.ok
+                else 'stopped'
+                if status == EXIT_INTERRUPTED
+                else 'stopped by the operator'
+                if status == EXIT_STOPPED
+                else 'FAILED'
+            )
             spent = f' ({describe_phases(run_phases)})' if run_phases else ''
             say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result
