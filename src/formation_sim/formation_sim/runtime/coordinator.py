@@ -374,9 +374,6 @@ class FormationCoordinatorNode(TimeKeeperNode):
         extra = {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
         return {**extra, **self.robot_stops.extra()}
 
-    def stop_robots(self, *, why: str) -> list[int]:
-        return self.robot_stops.stop_all(why=why)
-
     def stop_unreported_robots(self) -> None:
         self.robot_stops.stop(self.book.unreported(), why='no final report from their agents')
 

@@ -113,6 +113,9 @@ __all__ = [
     'reserve_domain',
 ]
 
+# What the last line of `formation run` says of a run that ended with these statuses besides 0.
+OUTCOMES = {EXIT_INTERRUPTED: 'stopped', EXIT_STOPPED: 'stopped by the operator'}
+
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
 SHM_SNAPSHOT_PERIOD = 0.2
@@ -273,15 +276,7 @@ class FormationRun:
             phases=run_phases,
         )
         if self.options.progress:
-            outcome = (
-                'done'
-                if result.ok
-                else 'stopped'
-                if status == EXIT_INTERRUPTED
-                else 'stopped by the operator'
-                if status == EXIT_STOPPED
-                else 'FAILED'
-            )
+            outcome = 'done' if result.ok else OUTCOMES.get(status, 'FAILED')
             spent = f' ({describe_phases(run_phases)})' if run_phases else ''
             say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result

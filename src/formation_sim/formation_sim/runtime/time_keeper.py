@@ -180,10 +180,12 @@ class WorldHooks:
         """t = 0: Step 0."""
         raise NotImplementedError
 
+    robot_stops = None  # the robots' zero-command writers (`robot_stops.RobotStops`): the coordinator's
+
     def stop_robots(self, *, why: str) -> list[int]:
         """An operator's emergency stop: every robot its zero command now; the robots (the exact
         world has none: it stops with the final Step)."""
-        return []
+        return [] if self.robot_stops is None else self.robot_stops.stop_all(why=why)
 
     def _running_tick(self) -> None:
         """A tick of the running run: the world's checks, and the final Step at the horizon."""
