@@ -24,7 +24,7 @@ from std_srvs.srv import Trigger
 
 from formation_agent.ros.process import EXIT_STOPPED
 from formation_msgs_py.topics import STOP_SERVICE
-from formation_sim.runtime.operator_stop import OperatorStop
+from formation_sim.runtime.operator_stop import CALLER_LOOK, CALLER_WAIT, OperatorStop
 from formation_sim.runtime.run_book import OperatorStopError, failure_extra
 
 BOUND = 1.0  # [s] issue 27: every robot's zero within this long of the call
@@ -125,11 +125,29 @@ def test_a_call_before_step_0_sends_no_step_and_names_an_operator_when_the_graph
         'stopping the run before it started (no Step 0: no robot has moved): every robot is sent a zero '
         'command (4 robots)'
     )
-    assert keeper.calls == ['zeros: an operator stopped the run', 'graph', 'fail']
+    # The graph looked at for CALLER_WAIT (a caller's node name may come after its request).
+    looks = keeper.calls.count('graph')
+    assert keeper.calls == ['zeros: an operator stopped the run'] + ['graph'] * looks + ['fail']
+    assert CALLER_WAIT / CALLER_LOOK - 2 <= looks <= CALLER_WAIT / CALLER_LOOK + 2, looks
     assert keeper.failure_info['message'] == (
         'stopped by an operator before step 0 (the emergency stop, /formation/stop)'
     )
     assert keeper.failure_info['asked_by'] == [] and keeper.failure_info['kind'] == 'stopped_by_operator'
+
+
+def test_a_caller_whose_node_name_comes_after_its_request_is_still_named():
+    keeper = _Keeper(step=2, graph={('formation_simulator', '/'): []})
+    looked = keeper.get_node_names_and_namespaces
+
+    def later():  # the third look finds the caller
+        if keeper.calls.count('graph') == 2:
+            keeper.graph[('formation_stop_lab_7', '/')] = [STOP_SERVICE]
+        return looked()
+
+    keeper.get_node_names_and_namespaces = later
+    OperatorStop(keeper)
+    _call(keeper)
+    assert keeper.calls.count('graph') == 3 and keeper.failure_info['asked_by'] == ['/formation_stop_lab_7']
 
 
 def test_a_call_after_the_end_stops_the_robots_again_and_is_no_failure():

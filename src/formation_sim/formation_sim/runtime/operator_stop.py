@@ -33,6 +33,12 @@ from formation_sim.runtime.run_book import OperatorStopError
 
 RUN_NODES = (SIMULATOR_NODE, COORDINATOR_NODE, RECORDER_NODE)  # a run's own nodes in the root namespace
 UNKNOWN_CALLER = 'an operator'
+# [s] The graph learns a caller's node name (Fast DDS: ros_discovery_info) apart from its request;
+# on a loaded machine it came after the request (1 lock-step test of 2).  Looked for this long, this
+# often, once the stop is out; a caller the graph never shows (another machine's ros2 service
+# call, say) costs its answer this long.
+CALLER_WAIT = 0.5
+CALLER_LOOK = 0.05
 
 
 class OperatorStop:
@@ -71,6 +77,10 @@ class OperatorStop:
             'by': UNKNOWN_CALLER,
         }
         callers = self.callers()  # after the stop went out: the graph walk may take a while
+        looked = time.monotonic()
+        while not callers and time.monotonic() - looked < CALLER_WAIT:  # its node's name on its way
+            time.sleep(CALLER_LOOK)
+            callers = self.callers()
         self.asked['by'] = ', '.join(callers) if callers else UNKNOWN_CALLER
         error = OperatorStopError(
             f'stopped by {self.asked["by"]} {self._when(self.asked)} (the emergency stop, {STOP_SERVICE})',
