@@ -183,6 +183,8 @@ def _bad_input(tmp_path):
             ],
             'a_run already holds an earlier run (summary.json)',
         ),
+        (['stop', '--domain-id', '233'], 'argument --domain-id: must be an integer in [0, 232]'),
+        (['stop', '--timeout', '0'], 'argument --timeout: must be a finite number > 0, got 0.0'),
         (['no_such_command'], "invalid choice: 'no_such_command'"),
         (['validate', 'paper_single', '--no-such-option'], 'unrecognized arguments: --no-such-option'),
         ([], 'COMMAND'),

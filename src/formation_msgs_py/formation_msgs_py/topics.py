@@ -17,6 +17,7 @@ MARKERS_TOPIC = '/formation/markers'  # Foxglove view (tools only)
 RECORDER_TOPIC = '/formation/recorder'  # the recorder's heartbeat: its liveliness is its sign of life
 CLOCK_TOPIC = '/clock'
 ROBOTS_TOPIC = '/formation/robots'  # what the robots of a robot run are (JSON, once; tools only)
+STOP_SERVICE = '/formation/stop'  # std_srvs/srv/Trigger: the run's emergency stop (its time keeper serves it)
 WORLD_FRAME = 'world'  # the default frame_id of poses, holonomic commands and the tools' views
 
 # Node names: the time keepers and the recorder in the root namespace, agents and simulated robots

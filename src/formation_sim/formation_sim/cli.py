@@ -30,8 +30,13 @@ COMMANDS: tuple[str, ...] = (
     'replay',
     'topics',
     'echo',
+    'stop',
 )
 
+
+# Subcommands whose parser is built alone when one is named first: an emergency stop must not
+# wait for the other subcommands' imports (scipy: 2-4 s on a loaded 2-core machine).
+ALONE: tuple[str, ...] = ('stop',)
 
 PACKAGES = ('formation_sim', 'formation_agent', 'formation_msgs_py')
 
@@ -61,24 +66,27 @@ class _Version(argparse.Action):
         parser.exit()
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(*, only: str | None = None) -> argparse.ArgumentParser:
+    """The `formation` parser; `only`: with that subcommand alone (one of ALONE)."""
     parser = argparse.ArgumentParser(
         prog='formation',
         description='Event-triggered formation control with connectivity preservation '
         '(Yi, Wei, Dimarogonas, Johansson 2017).',
         epilog='Exit status of every command: 0 done; 1 the command ran and the answer is no (a run '
         'failed, a check does not hold); 2 bad input, refused before anything started or changed; '
-        '`formation run` also 3 (a process or agent was lost) and 130 (interrupted).',
+        "`formation run` also 3 (a process or agent was lost), 4 (the robots' measured start refused), 5 "
+        '(an operator stopped it: `formation stop`) and 130 (interrupted).',
     )
     parser.add_argument('--version', action=_Version, help="print the packages' versions and exit")
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
-    for name in COMMANDS:
+    for name in (only,) if only in ALONE else COMMANDS:
         importlib.import_module(f'formation_sim.commands.{name}').register(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(only=argv[0] if argv else None)
     try:
         args = parser.parse_args(argv)
     except SystemExit as done:  # argparse: 2 after a bad argument (it printed why), 0 after --help

@@ -107,6 +107,8 @@ def test_a_time_keeper_that_failed_gives_its_status_or_the_lost_childs(tmp_path)
     assert (
         keeper_failed(-9, keeper, None)[0] == EXIT_LOST and keeper_failed(7, keeper, None)[0] == EXIT_FAILED
     )
+    # An operator's stop (/formation/stop) is the run's status whatever child went meanwhile.
+    assert keeper_failed(5, keeper, lost)[0] == 5 and keeper_failed(5, keeper, None)[0] == 5
 
 
 def _killed_keeper():

@@ -70,6 +70,24 @@ def test_each_robot_gets_its_kinds_zero_once_as_often_as_a_robots_reader_keeps(m
     ]
 
 
+def test_an_operators_stop_sends_every_robot_its_zero_and_leaves_the_unreported_ones_to_be_sent_again():
+    """`stop_all` (the emergency stop): every robot its zero at once; not noted as stopped from
+    here, so that a robot whose agent then does not report gets its zero once more from `stop`."""
+    node = _Node()
+    stops = RobotStops(node, model='unicycle', robots=[1, 2, 3], dimension=2, world_frame='world')
+    assert stops.stop_all(why='an operator stopped the run') == [1, 2, 3]
+    assert [len(p.sent) for p in node.publishers.values()] == [ROBOT_COMMAND_QOS.depth] * 3
+    for publisher in node.publishers.values():
+        twist = deserialize_message(publisher.sent[-1], Twist)
+        assert (twist.linear.x, twist.angular.z) == (0.0, 0.0)
+    assert stops.extra() == {} and node.logger.lines == [
+        'an operator stopped the run: the coordinator sent every robot the zero command'
+    ]
+    assert stops.stop([2], why='no final report from their agents') == [2]  # its agent did not report
+    assert len(node.publishers['/agent_2/robot/cmd_vel'].sent) == 2 * ROBOT_COMMAND_QOS.depth
+    assert stops.extra() == {'robots_stopped_here': [2]}
+
+
 class _Clock:
     def __init__(self) -> None:
         self.now = 100.0

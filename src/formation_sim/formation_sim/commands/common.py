@@ -26,6 +26,8 @@ if TYPE_CHECKING:
 EXIT_OK = 0
 EXIT_FAILED = 1  # the command ran and the answer is no (a run failed, a check does not hold)
 EXIT_BAD_INPUT = 2  # bad arguments or unreadable input: refused, nothing started, nothing changed
+# `formation run` also: 3 a process or agent lost, 4 the robots' start refused, 5 an operator stopped
+# the run (`formation stop`), 130 interrupted (formation_sim.runtime.results, formation_agent.ros.process)
 
 
 # --------------------------------------------------------------------------- argument values

@@ -36,8 +36,9 @@ def register(subparsers) -> None:
         epilog='Exit status: 0 done; 1 the run failed; 2 bad input (nothing was started, nothing on disk '
         'changed); 3 a process or an agent was lost (summary.json extra.failure says which and when); 4 '
         "on robots, the robots' measured start breaks the initial condition on an edge (no Step 0, no "
-        'command was sent); 130 interrupted. A run stopped early still writes summary.json up to that '
-        'moment and a readable bag.',
+        'command was sent); 5 an operator stopped the run (its emergency stop /formation/stop: `formation '
+        'stop`, docs/EMERGENCY_STOP.md; extra.failure.kind stopped_by_operator); 130 interrupted. A run '
+        'stopped early still writes summary.json up to that moment and a readable bag.',
     )
     add_run_arguments(parser, kind='run')
     add_plan_arguments(parser)

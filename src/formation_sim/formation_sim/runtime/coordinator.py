@@ -26,7 +26,8 @@ simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares with
 and the agents' sensing services; this module adds the robots' world, and `main()` of both time
 keepers, which ends the run through `run_end` (final reports, delivery, the agents stopped
 early, summary.json and graph.json).  Exit status: 0 done, 1 failed, 3 an agent or the recorder
-lost, 4 the robots' measured start breaks the initial condition (no Step 0, no command), 130 interrupted.
+lost, 4 the robots' measured start breaks the initial condition (no Step 0, no command), 5 an operator
+stopped the run (the emergency stop `/formation/stop`: `operator_stop`), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from formation_agent.ros.process import (
     EXIT_BAD_INPUT,
     EXIT_PEER_LOST,
     EXIT_REFUSED,
+    EXIT_STOPPED,
     StopSignals,
     exit_process,
     make_executor,
@@ -74,6 +76,7 @@ from formation_msgs_py.topics import (
     SCENARIO_TOPIC,
     STATUS_TOPIC,
     STEP_TOPIC,
+    STOP_SERVICE,
     WORLD_FRAME,
     robot_command_topic,
     robot_odom_topic,
@@ -89,6 +92,7 @@ from formation_sim.runtime.run_book import (
     ConnectivityLostError,
     DiscoveryError,
     InitialConditionError,
+    OperatorStopError,
     RecorderLostError,
     RobotLostError,
     ids_text,
@@ -563,7 +567,19 @@ NAMED_ERRORS = (
     InitialConditionError,
     ForeignWriterError,
     KeeperFrozenError,
+    OperatorStopError,
 )
+
+
+def exit_status_of(node: TimeKeeperNode | None, error: Exception) -> int:
+    """The time keeper's exit status for a run that stopped on `error`: its first cause decides (an
+    operator's stop noted before a later error is still the operator's)."""
+    first = None if node is None or node.failure_info is None else node.failure_info['kind']
+    if first == OperatorStopError.kind or isinstance(error, OperatorStopError):
+        return EXIT_STOPPED
+    if isinstance(error, LOST_ERRORS):
+        return EXIT_AGENT_LOST
+    return EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -575,7 +591,8 @@ def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
         '(formation params SCENARIO --out DIR writes it)\n'
         'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
         "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition "
-        '(nothing was sent); 130 interrupted.',
+        f'(nothing was sent); 5 an operator stopped the run ({STOP_SERVICE}, formation stop); '
+        '130 interrupted.',
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
 
@@ -640,13 +657,7 @@ def main(
             if not isinstance(error, NAMED_ERRORS):
                 with contextlib.suppress(OSError):
                     traceback.print_exc(file=sys.stderr)
-            status = (
-                EXIT_AGENT_LOST
-                if isinstance(error, LOST_ERRORS)
-                else EXIT_REFUSED
-                if isinstance(error, InitialConditionError)
-                else EXIT_FAILED
-            )
+            status = exit_status_of(node, error)
             _stop_and_write(node, executor, error)
         finally:
             with shutdown_guard(node_class.COMMAND, lambda: status, announce=node is not None):

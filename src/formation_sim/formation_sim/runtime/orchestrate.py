@@ -44,9 +44,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from formation_agent.ros.process import (
-    EXIT_REFUSED,
+    EXIT_REFUSED,  # 4: the robots' measured start broke a hypothesis, nothing was sent
+    EXIT_STOPPED,  # 5: an operator stopped the run (/formation/stop, formation stop)
     SignalFlag,
-)  # 4: the robots' measured start broke a hypothesis, nothing was sent
+)
 from formation_msgs_py.topics import (
     AGENT_NODE,
     COORDINATOR_NODE,
@@ -102,6 +103,7 @@ __all__ = [
     'EXIT_LOST',
     'EXIT_OK',
     'EXIT_REFUSED',
+    'EXIT_STOPPED',
     'ChildExit',
     'FormationRun',
     'RobotOptions',
@@ -110,6 +112,9 @@ __all__ = [
     'RunResult',
     'reserve_domain',
 ]
+
+# What the last line of `formation run` says of a run that ended with these statuses besides 0.
+OUTCOMES = {EXIT_INTERRUPTED: 'stopped', EXIT_STOPPED: 'stopped by the operator'}
 
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
@@ -271,7 +276,7 @@ class FormationRun:
             phases=run_phases,
         )
         if self.options.progress:
-            outcome = 'done' if result.ok else 'stopped' if status == EXIT_INTERRUPTED else 'FAILED'
+            outcome = 'done' if result.ok else OUTCOMES.get(status, 'FAILED')
             spent = f' ({describe_phases(run_phases)})' if run_phases else ''
             say(f'{outcome} in {result.wall_time:.1f} s{spent}: {message or self.last_progress}', end=True)
         return result

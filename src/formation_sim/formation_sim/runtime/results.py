@@ -13,13 +13,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from formation_agent.ros.process import EXIT_REFUSED
+from formation_agent.ros.process import EXIT_REFUSED, EXIT_STOPPED
 from formation_sim.runtime.supervise import Child, describe_exit
 
 # Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_LOST = 3  # a process of the run died or an agent was lost
+# 4 (EXIT_REFUSED) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped the run (formation stop)
 EXIT_INTERRUPTED = 130
 
 
@@ -40,7 +41,8 @@ class RunResult:
     summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
     bag: Path | None  # DIR/bag, None if not recorded or not readable
     # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (EXIT_REFUSED,
-    # formation_agent.ros.process) the robots' start refused; 130 interrupted
+    # formation_agent.ros.process) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped
+    # the run (/formation/stop); 130 interrupted
     exit_status: int
     domain_id: int
     wall_time: float
@@ -107,7 +109,7 @@ def keeper_failed(code: int, keeper: Child, lost: Child | None) -> tuple[int, st
     """The time keeper exited with `code`, not 0: the run's exit status and message.  A status
     that names the first cause (failed, lost, refused) is the run's; else the child seen `lost`
     decides, or how the keeper ended (killed by a signal: lost)."""
-    if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED):
+    if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED, EXIT_STOPPED):
         status = code
     else:
         status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED

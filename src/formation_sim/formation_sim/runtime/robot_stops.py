@@ -9,6 +9,12 @@ the robot of every agent that has not reported the same zero command, through a 
 own on the robot's command topic, made when the run is set up (matched by then: no discovery
 when it is needed).  It sends only zeros, and only after the run's final Step: a live agent
 sends no other command after that Step either.
+
+An operator's emergency stop (`operator_stop.OperatorStop`) does not wait: every robot gets its
+zero from here at once, beside the final Step (`stop_all`), so that a robot stops within the
+bound even when its agent is slow; a robot whose agent then sends no final report within
+`UNREPORTED_STOP_AFTER` gets its zero again as above (a slow agent may have sent one more
+command of its own before it took the final Step).
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ class RobotStops:
             i: node.create_publisher(message, robot_command_topic(i), ROBOT_COMMAND_QOS) for i in robots
         }
         self.stopped: list[int] = []  # robots sent their zero from here, in order
+        self.sent_all: list[int] = []  # every robot, once `stop_all` sent them their zero
 
     def stop(self, robots: Sequence[int], *, why: str) -> list[int]:
         """Send each of `robots` not yet stopped from here its zero command; those it sent to."""
@@ -48,6 +55,16 @@ class RobotStops:
                 f'robots {new}: {why}: the coordinator sent them the zero command'
             )
         return new
+
+    def stop_all(self, *, why: str) -> list[int]:
+        """Every robot its zero command now, whatever was sent before (an operator's stop): the
+        robots, in order.  Not noted in `stopped`, so that `stop` sends a robot whose agent does
+        not report its zero once more."""
+        for publisher in self._publishers.values():
+            publish_zero(publisher, self._kind, dimension=self._dimension, world_frame=self._world_frame)
+        self.sent_all = list(self._publishers)
+        self._node.get_logger().warning(f'{why}: the coordinator sent every robot the zero command')
+        return self.sent_all
 
     def extra(self) -> dict:
         """summary.json's `extra.robots_stopped_here`: the robots stopped from here (none: absent)."""

@@ -104,6 +104,17 @@ class AgentFailedError(CoordinatorError):
         self.agents = agents
 
 
+class OperatorStopError(CoordinatorError):
+    """An operator called the run's emergency stop (`topics.STOP_SERVICE`, `formation stop`): the
+    run ends at once, every robot sent a zero command (`operator_stop.OperatorStop`)."""
+
+    kind = 'stopped_by_operator'
+
+    def __init__(self, message: str, *, asked_by: list[str]) -> None:
+        super().__init__(message)
+        self.asked_by = asked_by
+
+
 def ids_text(agents: list[int], *, most: int = 20) -> str:
     """Agent ids for a message, the first `most` of a long list."""
     shown = ', '.join(map(str, agents[:most]))
@@ -143,14 +154,17 @@ def failure_extra(
         info.update(edge=list(error.edge), length=error.length)
     if isinstance(error, InitialConditionError):
         info.update(breaches=error.breaches)
+    if isinstance(error, OperatorStopError):
+        info.update(asked_by=error.asked_by)
     return info
 
 
 def add_what_followed(info: dict | None, failures: dict[int, str]) -> None:
     """After the first cause (`info`, extra.failure): the agents that then stopped on errors of
     their own (`failures`: agent -> why, from their final reports), in `info['followed']` and after
-    the first cause in its message.  Not after an interruption: the signal stopped every agent."""
-    if info is None or info['kind'] == 'interrupted':
+    the first cause in its message.  Not after an interruption or an operator's stop: that stopped
+    every agent."""
+    if info is None or info['kind'] in ('interrupted', OperatorStopError.kind):
         return
     followed = {i: why for i, why in failures.items() if i not in info['agents']}
     if not followed:

@@ -29,7 +29,8 @@ nothing); the run then stops.  Lock-step waits for a recorder that falls more th
 violation, a stall, SIGINT/SIGTERM), the simulator ends it as at the horizon (a final Step, the
 samples, the final reports) and writes summary.json with what happened up to then and
 `extra.failure` saying what went wrong, where and when.  Exit status: 0 done, 1 failed, 3 an
-agent or the recorder lost, 130 interrupted.
+agent or the recorder lost, 5 an operator stopped the run (`/formation/stop`, `operator_stop`), 130
+interrupted.
 """
 
 from __future__ import annotations

@@ -41,6 +41,7 @@ from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLA
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
+from formation_sim.runtime.operator_stop import OperatorStop
 from formation_sim.runtime.run_book import (
     add_what_followed,
     failure_extra,
@@ -194,6 +195,13 @@ class WorldHooks:
         """t = 0: Step 0."""
         raise NotImplementedError
 
+    robot_stops = None  # the robots' zero-command writers (`robot_stops.RobotStops`): the coordinator's
+
+    def stop_robots(self, *, why: str) -> list[int]:
+        """An operator's emergency stop: every robot its zero command now; the robots (the exact
+        world has none: it stops with the final Step)."""
+        return [] if self.robot_stops is None else self.robot_stops.stop_all(why=why)
+
     def _running_tick(self) -> None:
         """A tick of the running run: the world's checks, and the final Step at the horizon."""
         raise NotImplementedError
@@ -287,6 +295,7 @@ class TimeKeeperNode(WorldHooks, Node):
         self._agent_writers = self._watch_agents()
         self._timer = self.create_timer(TICK_PERIOD, self._tick)
         watch_intruders(self)
+        self.operator_stop = OperatorStop(self)  # /formation/stop, the run's emergency stop
         self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
         self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
 
@@ -339,6 +348,8 @@ class TimeKeeperNode(WorldHooks, Node):
         return not discovery_gaps(self)
 
     def _start(self) -> None:
+        if self.operator_stop.requested:  # an operator stopped the run before it started: no Step 0
+            return
         note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
         self._started = self._marks['step0'] = time.monotonic()
         if self.progress_period > 0.0:
@@ -360,18 +371,14 @@ class TimeKeeperNode(WorldHooks, Node):
         self._reached = self.reached_time
         if self._finished_at is None:
             self._finished_at = time.monotonic()
-        if (
-            not self.graph and not self.realtime
-        ):  # the graph as it is now, before the final Step sends the agents home
+        if not self.graph and not self.realtime:  # the graph now, before the final Step sends agents home
             self.graph = graph_of(self)
         self.finished = True
         self._publish(
             self._step_pub,
             encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)),
         )
-        if (
-            not self.graph
-        ):  # on the wall clock (robots), the final Step first: the agents leave after their reports
+        if not self.graph:  # on the wall clock, the final Step first: agents leave after their reports
             self.graph = graph_of(self)
 
     def fail(self, error: BaseException) -> None:

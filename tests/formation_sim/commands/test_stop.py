@@ -1,0 +1,98 @@
+"""Tests of `formation stop` (formation_sim.commands.stop): its refusals, its light start, and the
+"no run answered" error on a domain where no run is (ROS domain 57).  A run stopped by it:
+tests/formation_sim/runtime/test_operator_stop.py."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from formation_sim.commands import common, stop
+
+DOMAIN_ID = 57  # no run ever uses it: nobody answers there
+
+
+@pytest.mark.parametrize('text', ['0', '232', '233', '-1', 'x', '1.5', ''])
+def test_its_domain_rule_is_common_domain_id_word_for_word(text):
+    """The command has its own light argument types (no scenario model at start): the same rule
+    and words as every other command's --domain-id."""
+
+    def outcome(parse):
+        try:
+            return parse(text)
+        except argparse.ArgumentTypeError as error:
+            return str(error)
+
+    assert outcome(stop._domain_id) == outcome(common.DOMAIN_ID)
+
+
+@pytest.mark.parametrize('text', ['5', '0.01', '0', '-1', 'inf', 'nan', 'x'])
+def test_its_timeout_rule_is_common_positive_word_for_word(text):
+    def outcome(parse):
+        try:
+            return parse(text)
+        except argparse.ArgumentTypeError as error:
+            return str(error)
+
+    assert outcome(stop._positive) == outcome(common.POSITIVE)
+
+
+def _formation(*arguments: str, env: dict | None = None, code: str | None = None):
+    command = (
+        [sys.executable, '-m', 'formation_sim.cli', *arguments]
+        if code is None
+        else [sys.executable, '-c', code]
+    )
+    return subprocess.run(
+        command, capture_output=True, text=True, timeout=120, check=False, env=env or dict(os.environ)
+    )
+
+
+def test_it_starts_without_the_scenario_model_and_refuses_bad_input_before_rclpy():
+    """An emergency stop must not wait for scipy (seconds on a loaded machine): the command's
+    parser is built alone, and a bad domain is refused before rclpy is loaded."""
+    done = _formation(
+        code=(
+            'import sys\n'
+            'from formation_sim.cli import main\n'
+            "status = main(['stop', '--domain-id', '233'])\n"
+            "heavy = {'scipy', 'rclpy', 'matplotlib', 'numpy'}\n"
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & heavy)\n"
+            'print(status, heavy)\n'
+        )
+    )
+    assert done.stdout.strip() == '2 []', (done.stdout, done.stderr)
+    assert 'argument --domain-id: must be an integer in [0, 232] (a ROS_DOMAIN_ID), got 233' in done.stderr
+
+
+def test_a_bad_ros_domain_id_in_the_environment_is_named():
+    done = _formation('stop', env={**os.environ, 'ROS_DOMAIN_ID': 'lab'})
+    assert done.returncode == 2
+    assert (
+        "formation stop: error: ROS_DOMAIN_ID='lab' is not a ROS domain id (give --domain-id N)"
+        in done.stderr
+    )
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize('how', ['--domain-id', 'ROS_DOMAIN_ID'])
+def test_no_run_answered_is_a_clear_failure_within_the_timeout(tmp_path, how):
+    env = {**os.environ, 'ROS_LOG_DIR': str(tmp_path)}
+    arguments = ['stop', '--timeout', '1']
+    if how == '--domain-id':
+        arguments += ['--domain-id', str(DOMAIN_ID)]
+    else:
+        env['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
+    began = time.monotonic()
+    done = _formation(*arguments, env=env)
+    spent = time.monotonic() - began
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    assert f'formation stop: no run answered on domain {DOMAIN_ID} within 1 s' in done.stderr
+    assert done.stdout == '' and 'Traceback' not in done.stderr
+    assert 1.0 <= spent < 1.0 + 30.0  # the wait itself, and a process's start on a loaded machine
