@@ -74,6 +74,7 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE
         delta=scenario.delta,
         gains=gains,
         tolerance=tolerance,
+        safety=scenario.safety,
     )
 
 
@@ -311,6 +312,10 @@ def simulate(
         raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
     if period is not None and not (math.isfinite(period) and period > 0.0):
         raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    if period is not None and scenario.safety is not None:
+        raise EngineError(
+            'the safety layer runs with event triggering only (its own triggers), not with a period'
+        )
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
@@ -355,8 +360,17 @@ def simulate(
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
+            **({'safety': _safety_extra(scenario, agents)} if scenario.safety is not None else {}),
         },
     )
+
+
+def _safety_extra(scenario, agents: dict) -> dict:
+    """The safety layer's settings and how often it changed a command (docs/SAFETY.md)."""
+    return {
+        **scenario.safety.as_dict(),
+        'interventions': {str(i): agent.safety_interventions for i, agent in agents.items()},
+    }
 
 
 def _run(
@@ -423,7 +437,12 @@ def _trigger_and_deliver(
     for i in due:
         agent = agents[i]
         try:
-            out = agent.trigger(t, world.sense(i, agent.neighbour_ids))
+            sensed = world.sense(i, agent.neighbour_ids)
+            if agent.safety is None:
+                out = agent.trigger(t, sensed)
+            else:  # the other robots its range sensor sees (docs/SAFETY.md)
+                nearby = world.nearby(i, agent.safety.sensing_radius, exclude=agent.neighbour_ids)
+                out = agent.trigger(t, sensed, nearby=nearby)
         except ValueError as err:
             raise EngineError(f'at t={t!r}: {err}') from err
         world.set_control(i, out.control)
