@@ -108,7 +108,37 @@ class _AgentHooks:
         raise NotImplementedError
 
 
-class _EventTriggeredAgent(_AgentHooks):
+class _SafetyHooks:
+    """The collision layer's part of an agent (docs/SAFETY.md): off (None) unless Eta1Agent is given
+    a `SafetyConfig`; its time caps the agent's certified search."""
+
+    _safety: SafetyLayer | None = None
+    _capped_search: CappedSearch | None = None
+
+    @property
+    def safety(self) -> SafetyConfig | None:
+        """The collision layer's configuration (docs/SAFETY.md), or None when it is off."""
+        return None if self._safety is None else self._safety.config
+
+    @property
+    def safety_interventions(self) -> int:
+        """Triggers at which the safety layer changed the nominal command (0 when it is off)."""
+        return 0 if self._safety is None else self._safety.interventions
+
+    def _capped(self, search: CrossingSearch) -> CappedSearch:
+        """`search` with the safety layer's time as a cap (S6), made once per search."""
+        held = self._capped_search
+        if held is None or held.inner is not search:
+            edges = [
+                (self._edge_time[k], self._edge_y[k], self._offsets[k], self._edge_u[k], self._capacity[k])
+                for k in range(len(self.neighbour_ids))
+            ]
+            cap = self._safety.safety_time(now=self.last_event, edges=edges)
+            held = self._capped_search = CappedSearch(search, cap)
+        return held
+
+
+class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     """Bookkeeping shared by ETA-1 and ETA-2: anchors, caching of the next time; its neighbours
     and the checks of what it is handed are its `Neighbourhood` (`formation_agent.core.neighbourhood`)."""
 
@@ -329,31 +359,6 @@ class _EventTriggeredAgent(_AgentHooks):
             )
             self._search = search
         return search if self._safety is None else self._capped(search)
-
-    _safety: SafetyLayer | None = None
-    _capped_search: CappedSearch | None = None
-
-    @property
-    def safety(self) -> SafetyConfig | None:
-        """The collision layer's configuration (docs/SAFETY.md), or None when it is off."""
-        return None if self._safety is None else self._safety.config
-
-    @property
-    def safety_interventions(self) -> int:
-        """Triggers at which the safety layer changed the nominal command (0 when it is off)."""
-        return 0 if self._safety is None else self._safety.interventions
-
-    def _capped(self, search: CrossingSearch) -> CappedSearch:
-        """`search` with the safety layer's time as a cap (S6), made once per search."""
-        held = self._capped_search
-        if held is None or held.inner is not search:
-            edges = [
-                (self._edge_time[k], self._edge_y[k], self._offsets[k], self._edge_u[k], self._capacity[k])
-                for k in range(len(self.neighbour_ids))
-            ]
-            cap = self._safety.safety_time(now=self.last_event, edges=edges)
-            held = self._capped_search = CappedSearch(search, cap)
-        return held
 
     _threshold: Threshold
 

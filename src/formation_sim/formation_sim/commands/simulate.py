@@ -122,15 +122,8 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
-    if (
-        scenario is None
-        or (scenario := with_min_separation(scenario, args.min_separation, 'simulate')) is None
-    ):
+    if scenario is None or (scenario := _with_safety(scenario, args)) is None:
         return EXIT_BAD_INPUT
-    if scenario.safety is not None and (args.period is not None or args.continuous):
-        return refuse(
-            'simulate', 'the safety layer (--min-separation or safety:) runs with event triggering only'
-        )
     if (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
         return EXIT_BAD_INPUT
     scenario, auto_scale = resolved
@@ -199,6 +192,15 @@ def run(args: argparse.Namespace) -> int:
     if figure is not None:
         print(f'figure:     {figure}')
     return EXIT_OK
+
+
+def _with_safety(scenario, args: argparse.Namespace):
+    """The scenario with --min-separation applied, or None after saying why it cannot run."""
+    scenario = with_min_separation(scenario, args.min_separation, 'simulate')
+    if scenario is not None and scenario.safety is not None and (args.period is not None or args.continuous):
+        refuse('simulate', 'the safety layer (--min-separation or safety:) runs with event triggering only')
+        return None
+    return scenario
 
 
 def _run_failed(error: Exception, out: Path) -> int:

@@ -282,6 +282,15 @@ def _pop_due(heap: list[tuple[float, int, int, int]], serial: dict[int, int], t:
     return sorted(due)
 
 
+def _check_period(period: float | None, scenario) -> None:
+    if period is not None and not (math.isfinite(period) and period > 0.0):
+        raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    if period is not None and scenario.safety is not None:
+        raise EngineError(
+            'the safety layer runs with event triggering only (its own triggers), not with a period'
+        )
+
+
 def simulate(
     scenario,
     *,
@@ -310,12 +319,7 @@ def simulate(
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
         raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
-    if period is not None and not (math.isfinite(period) and period > 0.0):
-        raise EngineError(f'period must be a finite number > 0, got {period!r}')
-    if period is not None and scenario.safety is not None:
-        raise EngineError(
-            'the safety layer runs with event triggering only (its own triggers), not with a period'
-        )
+    _check_period(period, scenario)
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
