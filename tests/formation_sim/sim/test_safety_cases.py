@@ -161,3 +161,15 @@ def test_simulate_min_separation_turns_the_layer_on(tmp_path, capsys):
     assert "argument --min-separation: safety: the collision layer runs with dynamics 'single'" in err
     assert not (tmp_path / 'r2').exists()
     assert math.isfinite(summary['horizon'])
+
+
+def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
+    path = tmp_path / 'swap.yaml'
+    dump_scenario(safety_cases.swap_square(safety=None), path)
+    assert main(['validate', str(path), '--min-separation', '0.25', '--json']) == 0
+    data = json.loads(capsys.readouterr().out)
+    # (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = (1 + sqrt(1.25)) / 2; (R - ρ*) / (2 v̄) = 2 - ρ*
+    assert data['safety']['guard_radius'] == pytest.approx(1.0590169943749475)
+    assert data['safety']['heartbeat'] == pytest.approx(2.0 - 1.0590169943749475)
+    assert main(['validate', str(path), '--min-separation', '1.0']) == 2
+    assert 'safety.min_separation: agents 1 and 2 start 1 m apart' in capsys.readouterr().err
