@@ -173,3 +173,12 @@ def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
     assert data['safety']['heartbeat'] == pytest.approx(2.0 - 1.0590169943749475)
     assert main(['validate', str(path), '--min-separation', '1.0']) == 2
     assert 'safety.min_separation: agents 1 and 2 start 1 m apart' in capsys.readouterr().err
+
+
+def test_a_distributed_run_refuses_the_layer_it_does_not_carry_yet():
+    """Not wired into the agent nodes yet: refused before anything starts, not silently off."""
+    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.run_options import RunOptions
+
+    with pytest.raises(RunError, match='the safety layer .* is not wired into distributed runs yet'):
+        RunOptions().check(safety_cases.swap_two(safety=SAFETY))

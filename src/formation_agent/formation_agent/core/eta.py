@@ -125,6 +125,11 @@ class _SafetyHooks:
         """Triggers at which the safety layer changed the nominal command (0 when it is off)."""
         return 0 if self._safety is None else self._safety.interventions
 
+    @property
+    def safety_last_intervention(self) -> float | None:
+        """The latest trigger at which the safety layer changed the nominal command, or None."""
+        return None if self._safety is None else self._safety.last_intervention
+
     def _capped(self, search: CrossingSearch) -> CappedSearch:
         """`search` with the safety layer's time as a cap (S6), made once per search."""
         held = self._capped_search

@@ -229,6 +229,7 @@ class SafetyLayer:
         self._seen: list[tuple[float, float]] = []  # x_i - x_j of the other robots seen at the trigger
         self._trigger_time = 0.0
         self.interventions = 0  # triggers where the applied command differs from the nominal one
+        self.last_intervention: float | None = None  # the time of the latest such trigger
 
     def filter(
         self,
@@ -272,6 +273,7 @@ class SafetyLayer:
         self._command = v
         if v != u:
             self.interventions += 1
+            self.last_intervention = t
         return v
 
     def safety_time(

@@ -374,6 +374,7 @@ def _safety_extra(scenario, agents: dict) -> dict:
     return {
         **scenario.safety.as_dict(),
         'interventions': {str(i): agent.safety_interventions for i, agent in agents.items()},
+        'last_intervention': max((a.safety_last_intervention or 0.0 for a in agents.values()), default=0.0),
     }
 
 

@@ -140,6 +140,7 @@ def measure(scenario: Scenario) -> dict[str, float]:
         'settle': settling_time(scenario, times, x, 0.05),
         'edge': float(edge_maxima(scenario, x).max()),
         'least_gap': float(min(g.min() for g in gaps)) if gaps else math.inf,
+        'last_intervention': record.extra.get('safety', {}).get('last_intervention', 0.0),
     }
 
 
@@ -149,15 +150,16 @@ def main(argv: list[str] | None = None) -> int:
     safety = SafetyConfig(min_separation=0.25)
     print(
         '| seed | closest off [m] | closest on [m] | events off | events on | to 5 cm off [s] '
-        '| to 5 cm on [s] | largest edge on [m] |'
+        '| to 5 cm on [s] | largest edge on [m] | least inter-event on [s] | last intervention [s] |'
     )
-    print('|---|---|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|---|---|')
     for seed in seeds:
         off = measure(random_square(seed, safety=None))
         on = measure(random_square(seed, safety=safety))
         print(
             f'| {seed} | {off["closest"]:.4f} | {on["closest"]:.4f} | {off["events"]} | {on["events"]} | '
-            f'{off["settle"]:.2f} | {on["settle"]:.2f} | {on["edge"]:.3f} |'
+            f'{off["settle"]:.2f} | {on["settle"]:.2f} | {on["edge"]:.3f} | {on["least_gap"]:.4f} | '
+            f'{on["last_intervention"]:.2f} |'
         )
     return 0
 
