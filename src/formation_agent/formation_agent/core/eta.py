@@ -37,6 +37,7 @@ from formation_agent.core.closed_form import advance_double, one_minus_exp, z_mi
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
 from formation_agent.core.neighbourhood import AgentError, Neighbourhood
 from formation_agent.core.neighbourhood import positive as _positive
+from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
@@ -107,7 +108,42 @@ class _AgentHooks:
         raise NotImplementedError
 
 
-class _EventTriggeredAgent(_AgentHooks):
+class _SafetyHooks:
+    """The collision layer's part of an agent (docs/SAFETY.md): off (None) unless Eta1Agent is given
+    a `SafetyConfig`; its time caps the agent's certified search."""
+
+    _safety: SafetyLayer | None = None
+    _capped_search: CappedSearch | None = None
+
+    @property
+    def safety(self) -> SafetyConfig | None:
+        """The collision layer's configuration (docs/SAFETY.md), or None when it is off."""
+        return None if self._safety is None else self._safety.config
+
+    @property
+    def safety_interventions(self) -> int:
+        """Triggers at which the safety layer changed the nominal command (0 when it is off)."""
+        return 0 if self._safety is None else self._safety.interventions
+
+    @property
+    def safety_last_intervention(self) -> float | None:
+        """The latest trigger at which the safety layer changed the nominal command, or None."""
+        return None if self._safety is None else self._safety.last_intervention
+
+    def _capped(self, search: CrossingSearch) -> CappedSearch:
+        """`search` with the safety layer's time as a cap (S6), made once per search."""
+        held = self._capped_search
+        if held is None or held.inner is not search:
+            edges = [
+                (self._edge_time[k], self._edge_y[k], self._offsets[k], self._edge_u[k], self._capacity[k])
+                for k in range(len(self.neighbour_ids))
+            ]
+            cap = self._safety.safety_time(now=self.last_event, edges=edges)
+            held = self._capped_search = CappedSearch(search, cap)
+        return held
+
+
+class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     """Bookkeeping shared by ETA-1 and ETA-2: anchors, caching of the next time; its neighbours
     and the checks of what it is handed are its `Neighbourhood` (`formation_agent.core.neighbourhood`)."""
 
@@ -198,9 +234,12 @@ class _EventTriggeredAgent(_AgentHooks):
     def _receive_extra(self, k: int, info: TriggerInfo) -> None:
         """ETA-2 also takes the relative velocity."""
 
-    def trigger(self, t: float, sensed: SensedState) -> TriggerOutput:
+    def trigger(
+        self, t: float, sensed: SensedState, *, nearby: Mapping[int, tuple[float, ...]] | None = None
+    ) -> TriggerOutput:
         """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering
-        information."""
+        information. `nearby`: x_i - x_j of the other robots within the safety layer's sensing
+        radius (only read with the layer on, docs/SAFETY.md)."""
         t = self._hood.time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
@@ -218,6 +257,10 @@ class _EventTriggeredAgent(_AgentHooks):
         self._anchor_y[:] = y
         offset = self._update(y, length, extra)
         control = self._command(offset)
+        if self._safety is not None:  # the applied command, broadcast; e_i keeps the nominal offset
+            control = self._safety.filter(
+                t=t, nominal=control, rel=rel, y=y, capacity=self._capacity, nearby=nearby
+            )
         self.control = np.array(control)
         self._offset = np.array(offset)
         m = len(self.neighbour_ids)
@@ -320,7 +363,7 @@ class _EventTriggeredAgent(_AgentHooks):
                 initial_step=max(self._interval or 0.0, _FIRST_SPAN),
             )
             self._search = search
-        return search
+        return search if self._safety is None else self._capped(search)
 
     _threshold: Threshold
 
@@ -397,8 +440,15 @@ class Eta1Agent(_EventTriggeredAgent):
         tolerance: float = DEFAULT_TOLERANCE,
         speed_scale: float = DEFAULT_SPEED_SCALE,
         threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
+        safety: SafetyConfig | None = None,
     ) -> None:
         super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
+        if safety is not None:  # collision avoidance with connectivity (docs/SAFETY.md)
+            if self.dimension != 2:
+                raise AgentError(
+                    f'agent {agent_id}: the safety layer is planar, got dimension {self.dimension}'
+                )
+            self._safety = SafetyLayer(safety, agent_id=agent_id)
         self.alpha = _positive('alpha', alpha)
         self.beta = _positive('beta', beta)
         try:
@@ -771,9 +821,11 @@ def make_agent(
     delta: float,
     gains: Mapping[str, float],
     tolerance: float = DEFAULT_TOLERANCE,
+    safety: SafetyConfig | None = None,
 ) -> Eta1Agent | Eta2Agent:
     """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored;
-    speed_scale and threshold_floor are optional, SCALE_GAINS)."""
+    speed_scale and threshold_floor are optional, SCALE_GAINS); `safety`: the collision layer
+    (ETA-1 only, docs/SAFETY.md)."""
     if algorithm not in ALGORITHM_GAINS:
         raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
     missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
@@ -782,6 +834,10 @@ def make_agent(
     kind = Eta1Agent if algorithm == 'eta1' else Eta2Agent
     chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
     chosen.update({name: gains.get(name, default) for name, default in SCALE_GAINS.items()})
+    if safety is not None:
+        if algorithm != 'eta1':
+            raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
+        chosen['safety'] = safety
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
 
 

@@ -97,6 +97,34 @@ def refuse(command: str, error: Exception | str) -> int:
 # --------------------------------------------------------------------------- scenarios and outputs
 
 
+def add_safety_argument(parser: argparse.ArgumentParser) -> None:
+    """--min-separation D: the collision layer on, the scenario's other safety keys kept (docs/SAFETY.md)."""
+    parser.add_argument(
+        '--min-separation',
+        type=POSITIVE,
+        default=None,
+        metavar='D',
+        help='keep every two robots at least D metres apart (between the points they control), '
+        'composed with connectivity: the safety layer of docs/SAFETY.md (ETA-1, the plane); the '
+        "scenario's other safety keys are kept, the defaults taken where it has none. Default: the "
+        "scenario's safety.min_separation, or the layer off",
+    )
+
+
+def with_min_separation(scenario: Scenario, separation: float | None, command: str) -> Scenario | None:
+    """The scenario with the safety layer at `separation` (None: as it is), or None after saying why not."""
+    if separation is None:
+        return scenario
+    from formation_agent.core.safety import SafetyConfig, SafetyError
+
+    keys = {} if scenario.safety is None else scenario.safety.as_dict()
+    try:
+        return scenario.replace(safety=SafetyConfig(**{**keys, 'min_separation': separation}))
+    except (ScenarioError, SafetyError) as error:
+        refuse(command, f'argument --min-separation: {error}')
+        return None
+
+
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         'scenario', metavar='SCENARIO', help=f'YAML file or built-in name ({", ".join(builtin_scenarios())})'

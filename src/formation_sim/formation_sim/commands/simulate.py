@@ -14,9 +14,11 @@ from formation_sim.commands.common import (
     NON_NEGATIVE,
     POSITIVE,
     add_run_arguments,
+    add_safety_argument,
     load_valid_scenario,
     scale_options,
     refuse,
+    with_min_separation,
 )
 from formation_sim.commands.limits import add_limit_arguments, resolve_speed_scale
 
@@ -76,6 +78,7 @@ def register(subparsers) -> None:
         default=None,
         help="relative margin at which a crossing counts as reached (default: the agents' own, 1e-12)",
     )
+    add_safety_argument(parser)
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='print only the output folder')
     add_limit_arguments(parser)
@@ -119,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
-    if scenario is None:
+    if scenario is None or (scenario := _with_safety(scenario, args)) is None:
         return EXIT_BAD_INPUT
     if (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
         return EXIT_BAD_INPUT
@@ -189,6 +192,15 @@ def run(args: argparse.Namespace) -> int:
     if figure is not None:
         print(f'figure:     {figure}')
     return EXIT_OK
+
+
+def _with_safety(scenario, args: argparse.Namespace):
+    """The scenario with --min-separation applied, or None after saying why it cannot run."""
+    scenario = with_min_separation(scenario, args.min_separation, 'simulate')
+    if scenario is not None and scenario.safety is not None and (args.period is not None or args.continuous):
+        refuse('simulate', 'the safety layer (--min-separation or safety:) runs with event triggering only')
+        return None
+    return scenario
 
 
 def _run_failed(error: Exception, out: Path) -> int:

@@ -17,9 +17,11 @@ from formation_sim.commands.common import (
     EXIT_FAILED,
     EXIT_OK,
     POSITIVE,
+    add_safety_argument,
     add_scale_arguments,
     add_scenario_argument,
     scale_options,
+    with_min_separation,
 )
 from formation_sim.model.scenario import ScenarioError, load_scenario
 from formation_sim.model.speed_choice import (
@@ -54,6 +56,7 @@ def register(subparsers) -> None:
     add_scenario_argument(parser)
     add_scale_arguments(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
+    add_safety_argument(parser)
     parser.add_argument(
         '--max-speed', type=POSITIVE, default=None, metavar='V', help="the robots' speed limit [m/s]"
     )
@@ -107,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
     except ScenarioError as error:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return EXIT_UNREADABLE
+    if (scenario := with_min_separation(scenario, args.min_separation, 'validate')) is None:
+        return EXIT_UNREADABLE
     report = validate_scenario(scenario)
     if report.ok and args.speed_scale == 'auto':
         from formation_sim.commands.limits import resolve_speed_scale
@@ -132,9 +137,13 @@ def run(args: argparse.Namespace) -> int:
             data['commands'] = commands
         if floor is not None:
             data['threshold_floor'] = floor
+        if scenario.safety is not None:
+            data['safety'] = _safety_numbers(scenario.safety)
         print(json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False))
     else:
         print(report.format())
+        if scenario.safety is not None:
+            print(_safety_numbers(scenario.safety)['line'])
         for part in (commands, floor):
             if part is not None:
                 print('\n'.join(part['lines']))
@@ -268,3 +277,15 @@ def _noise_floor(scenario, args: argparse.Namespace) -> dict:
         'scenario_floor': present,
         'lines': lines,
     }
+
+
+def _safety_numbers(safety) -> dict:
+    """The safety layer's settings and derived radii (docs/SAFETY.md); its rules held at loading."""
+    numbers = {**safety.as_dict(), 'guard_radius': safety.guard_radius, 'heartbeat': safety.heartbeat}
+    numbers['line'] = (
+        f'safety layer: robots kept >= {safety.min_separation:g} m apart, edges within Δ - ||d_ij|| '
+        f'(γ = {safety.gamma:g} 1/s, v̄ = {safety.max_speed:g} m/s, '
+        f'sensing radius {safety.sensing_radius:g} m > guard radius {safety.guard_radius:.4g} m, '
+        f'heartbeat {safety.heartbeat:.4g} s)'
+    )
+    return numbers

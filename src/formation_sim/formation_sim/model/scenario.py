@@ -26,6 +26,7 @@ from collections.abc import Mapping
 import numpy as np
 import yaml
 
+from formation_agent.core.safety import SafetyConfig, SafetyError
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
@@ -329,6 +330,7 @@ class Scenario:
     gains: SingleGains | DoubleGains
     horizon: float
     headings: np.ndarray | None = None  # (n,) [rad]: simulated robots' headings at t = 0, or None
+    safety: SafetyConfig | None = None  # collision avoidance with connectivity (docs/SAFETY.md), or None
 
     def __post_init__(self) -> None:
         _name(self.name)
@@ -362,6 +364,8 @@ class Scenario:
 
         edges = _checked_edges(self.edges, ids=ids, index=index, p=positions.shape[1])
         object.__setattr__(self, 'edges', edges)
+        if self.safety is not None:
+            _check_safety(self.safety, dynamics=self.dynamics, ids=ids, positions=positions)
         object.__setattr__(self, '_index', index)
         object.__setattr__(self, '_neighbours', None)  # built on first use
         object.__setattr__(self, '_edge_indices', None)  # likewise
@@ -433,6 +437,7 @@ class Scenario:
                     and np.array_equal(self.headings, other.headings)
                 )
             )
+            and self.safety == other.safety
         )
 
     __hash__ = None
@@ -496,6 +501,30 @@ class Scenario:
     def speed_scale(self) -> float:
         """κ (docs/SPEED_SCALE.md): the run is the paper's in the time s = κt."""
         return self.gains.speed_scale
+
+
+def _check_safety(safety, *, dynamics: str, ids: tuple[int, ...], positions: np.ndarray) -> None:
+    """The safety layer's rules on the scenario: ETA-1, the plane, every pair apart by more than D."""
+    if not isinstance(safety, SafetyConfig):
+        raise ScenarioError(f'safety: expected a SafetyConfig, got {short_repr(safety)}')
+    if dynamics != 'single':
+        raise ScenarioError(
+            f"safety: the collision layer runs with dynamics 'single' (ETA-1), got {dynamics!r}"
+        )
+    if positions.shape[1] != 2:
+        raise ScenarioError(
+            f'safety: the collision layer is planar (dimension 2), got dimension {positions.shape[1]}'
+        )
+    from scipy.spatial import cKDTree  # the closest pair in O(n log n)
+
+    gaps, rows = cKDTree(positions).query(positions, k=2)
+    a = int(np.argmin(gaps[:, 1]))
+    a, b, gap = min(a, int(rows[a, 1])), max(a, int(rows[a, 1])), float(gaps[a, 1])
+    if not gap > safety.min_separation:
+        raise ScenarioError(
+            f'safety.min_separation: agents {ids[a]} and {ids[b]} start {gap:.6g} '
+            f'm apart, not more than the separation {safety.min_separation!r} m (h_ij(0) > 0, (S1))'
+        )
 
 
 def _checked_edges(edges, *, ids: tuple[int, ...], index: dict[int, int], p: int) -> tuple[Edge, ...]:
@@ -572,7 +601,7 @@ def _positive(value: Any, where: str, what: str) -> float:
 def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     """Build a scenario from the YAML schema (docs/SCENARIOS.md); `name` is used if data has none."""
     data = _mapping(data, 'scenario')
-    _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name',))
+    _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name', 'safety'))
     scenario_name = _name(data.get('name', name if name is not None else 'scenario'))
 
     dynamics = data['dynamics']
@@ -595,6 +624,12 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     edges = _edges_from_dict(data['edges'], ids=ids, dimension=dimension)
 
     gains = _gains_from_dict(data['gains'], dynamics)
+    safety = None
+    if data.get('safety') is not None:
+        try:
+            safety = SafetyConfig.from_mapping(data['safety'])
+        except SafetyError as error:
+            raise ScenarioError(str(error)) from None
     return Scenario(
         name=scenario_name,
         dynamics=dynamics,
@@ -606,6 +641,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         gains=gains,
         horizon=horizon,
         headings=np.array([headings[a] for a in ids]) if headings else None,
+        safety=safety,
     )
 
 
@@ -756,7 +792,7 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
     for key, default in SCALE_KEYS.items():  # written only where not the paper's: older readers keep working
         if getattr(gains, key) != default:
             gains_dict[key] = getattr(gains, key)
-    return {
+    data = {
         'name': scenario.name,
         'dynamics': scenario.dynamics,
         'communication_radius': scenario.delta,
@@ -765,6 +801,9 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         'edges': [{'i': e.i, 'j': e.j, 'd': e.d.tolist()} for e in scenario.edges],
         'gains': gains_dict,
     }
+    if scenario.safety is not None:  # written only when on: older readers keep working
+        data['safety'] = scenario.safety.as_dict()
+    return data
 
 
 # --------------------------------------------------------------------------- YAML

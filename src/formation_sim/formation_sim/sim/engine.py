@@ -74,6 +74,7 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE
         delta=scenario.delta,
         gains=gains,
         tolerance=tolerance,
+        safety=scenario.safety,
     )
 
 
@@ -281,6 +282,15 @@ def _pop_due(heap: list[tuple[float, int, int, int]], serial: dict[int, int], t:
     return sorted(due)
 
 
+def _check_period(period: float | None, scenario) -> None:
+    if period is not None and not (math.isfinite(period) and period > 0.0):
+        raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    if period is not None and scenario.safety is not None:
+        raise EngineError(
+            'the safety layer runs with event triggering only (its own triggers), not with a period'
+        )
+
+
 def simulate(
     scenario,
     *,
@@ -309,8 +319,7 @@ def simulate(
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
         raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
-    if period is not None and not (math.isfinite(period) and period > 0.0):
-        raise EngineError(f'period must be a finite number > 0, got {period!r}')
+    _check_period(period, scenario)
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
@@ -355,8 +364,18 @@ def simulate(
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
+            **({'safety': _safety_extra(scenario, agents)} if scenario.safety is not None else {}),
         },
     )
+
+
+def _safety_extra(scenario, agents: dict) -> dict:
+    """The safety layer's settings and how often it changed a command (docs/SAFETY.md)."""
+    return {
+        **scenario.safety.as_dict(),
+        'interventions': {str(i): agent.safety_interventions for i, agent in agents.items()},
+        'last_intervention': max((a.safety_last_intervention or 0.0 for a in agents.values()), default=0.0),
+    }
 
 
 def _run(
@@ -423,7 +442,12 @@ def _trigger_and_deliver(
     for i in due:
         agent = agents[i]
         try:
-            out = agent.trigger(t, world.sense(i, agent.neighbour_ids))
+            sensed = world.sense(i, agent.neighbour_ids)
+            if agent.safety is None:
+                out = agent.trigger(t, sensed)
+            else:  # the other robots its range sensor sees (docs/SAFETY.md)
+                nearby = world.nearby(i, agent.safety.sensing_radius, exclude=agent.neighbour_ids)
+                out = agent.trigger(t, sensed, nearby=nearby)
         except ValueError as err:
             raise EngineError(f'at t={t!r}: {err}') from err
         world.set_control(i, out.control)

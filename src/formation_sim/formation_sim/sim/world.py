@@ -137,3 +137,15 @@ class World:
             rel_velocities=rel_vel,
             velocity=tuple(self._q[i].tolist()),
         )
+
+    def nearby(self, agent: int, radius: float, *, exclude=()) -> dict[int, tuple[float, ...]]:
+        """x_i - x_j of every other agent j within `radius` of `agent` (not in `exclude`): what its
+        range sensor sees (the safety layer, docs/SAFETY.md)."""
+        i = self.index(agent)
+        skip = {i, *(self.index(j) for j in exclude)}
+        rel = (self._x[i] - self._x).tolist()
+        return {
+            self.agent_ids[k]: tuple(row)
+            for k, row in enumerate(rel)
+            if k not in skip and sum(v * v for v in row) <= radius * radius
+        }

@@ -1,0 +1,168 @@
+"""The safety layer's adversarial cases and its exact measures (docs/SAFETY.md), ROS-free.
+
+Cases: the head-on swap of two robots, the 4-robot diagonal swap (the square turned by 180°:
+every robot heads through the centre), three robots on a line whose ends swap past the middle
+one, and seeded random placements of 4 robots in a 2.2 m square forming a 1 m square (Δ = 4,
+the cycle 1-2-3-4). Measures: the exact closest approach of two robots over a run (positions are
+linear between consecutive samples, which include every event: the minimum of a quadratic per
+interval and pair), each edge's largest length, and the time the formation error stays below a
+tolerance. `python -m formation_sim.sim.safety_cases` prints docs/SAFETY.md's table.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from formation_agent.core.safety import SafetyConfig
+from formation_sim.model.scenario import Edge, Scenario, SingleGains
+
+DELTA = 4.0
+GAINS = SingleGains(alpha=1.0, beta=0.3)  # β < β0 = ρ2(DD^T)/Δ0: 1/3 (path of 3) .. 2/3 (cycle of 4)
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # 1 m square, corners 1-2-3-4
+
+
+def _scenario(name, positions, targets, pairs, *, safety, horizon):
+    targets = np.asarray(targets, dtype=float)
+    ids = tuple(range(1, len(targets) + 1))
+    edges = tuple(Edge(i=i, j=j, d=targets[i - 1] - targets[j - 1]) for i, j in pairs)
+    return Scenario(
+        name=name,
+        dynamics='single',
+        delta=DELTA,
+        agent_ids=ids,
+        positions=np.asarray(positions, dtype=float),
+        velocities=None,
+        edges=edges,
+        gains=GAINS,
+        horizon=horizon,
+        safety=safety,
+    )
+
+
+def swap_two(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenario:
+    """Two robots 1 m apart that must trade places, head on."""
+    return _scenario(
+        'swap_two',
+        [[0.0, 0.0], [1.0, 0.0]],
+        [[1.0, 0.0], [0.0, 0.0]],
+        [(1, 2)],
+        safety=safety,
+        horizon=horizon,
+    )
+
+
+def swap_square(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenario:
+    """Four robots on a 1 m square that must each reach the opposite corner (a 180° rotation)."""
+    return _scenario(
+        'swap_square',
+        SQUARE,
+        SQUARE[[2, 3, 0, 1]],
+        [(1, 2), (2, 3), (3, 4), (4, 1)],
+        safety=safety,
+        horizon=horizon,
+    )
+
+
+def line_three(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenario:
+    """Three robots on a line, 0.5 m apart, whose outer two must trade places past the middle one."""
+    line = [[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]]
+    return _scenario('line_three', line, line[::-1], [(1, 2), (2, 3)], safety=safety, horizon=horizon)
+
+
+def random_square(
+    seed: int, *, safety: SafetyConfig | None, side: float = 2.2, horizon: float = 30.0
+) -> Scenario:
+    """4 robots uniform in a `side` square (seeded; drawn again until every pair is more than
+    0.3 m apart and (initial) holds with 10 % to spare) forming the 1 m square on the cycle."""
+    rng = np.random.default_rng(seed)
+    pairs = [(1, 2), (2, 3), (3, 4), (4, 1)]
+    while True:
+        x = rng.random((4, 2)) * side
+        gaps = [np.linalg.norm(x[a] - x[b]) for a in range(4) for b in range(a + 1, 4)]
+        errors = [np.linalg.norm(x[i - 1] - x[j - 1] - (SQUARE[i - 1] - SQUARE[j - 1])) for i, j in pairs]
+        if min(gaps) > 0.3 and max(errors) < 0.9 * (DELTA - 1.0):
+            return _scenario(f'random_square_{seed}', x, SQUARE, pairs, safety=safety, horizon=horizon)
+
+
+def closest_approach(times: np.ndarray, positions: np.ndarray) -> tuple[float, float, tuple[int, int]]:
+    """(distance, time, (row a, row b)): the least distance of two robots over the samples, exact
+    when motion is linear between consecutive samples (every event is a sample): per interval and
+    pair, the minimum of ||r0 + s (r1 - r0)|| over s in [0, 1] in closed form."""
+    n = positions.shape[1]
+    best = (math.inf, 0.0, (0, 0))
+    for a in range(n):
+        for b in range(a + 1, n):
+            r = positions[:, a] - positions[:, b]
+            r0, dr = r[:-1], r[1:] - r[:-1]
+            dd = (dr * dr).sum(axis=1)
+            s = np.clip(
+                np.divide(-(r0 * dr).sum(axis=1), dd, out=np.zeros_like(dd), where=dd > 0.0), 0.0, 1.0
+            )
+            dist = np.linalg.norm(r0 + s[:, None] * dr, axis=1)
+            k = int(np.argmin(dist))
+            if dist[k] < best[0]:
+                best = (float(dist[k]), float(times[k] + s[k] * (times[k + 1] - times[k])), (a, b))
+    return best
+
+
+def edge_maxima(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
+    """Each edge's largest length ||x_i - x_j|| (convex between samples: the largest sample)."""
+    heads, tails, _ = scenario.edge_indices()
+    return np.linalg.norm(positions[:, heads] - positions[:, tails], axis=2).max(axis=0)
+
+
+def settling_time(scenario: Scenario, times: np.ndarray, positions: np.ndarray, tolerance: float) -> float:
+    """The first sample time from which every ||x_i - x_j - d_ij|| stays <= tolerance (convex between
+    samples, so checking the samples is exact up to the sample spacing); inf if never."""
+    heads, tails, d = scenario.edge_indices()
+    error = np.linalg.norm(positions[:, heads] - positions[:, tails] - d, axis=2).max(axis=1)
+    above = np.flatnonzero(error > tolerance)
+    if above.size == 0:
+        return float(times[0])
+    if above[-1] == len(times) - 1:
+        return math.inf
+    return float(times[above[-1] + 1])
+
+
+def measure(scenario: Scenario) -> dict[str, float]:
+    """One run's numbers for the table: closest approach, events, time to 5 cm, largest edge."""
+    from formation_sim.sim.engine import simulate
+
+    record = simulate(scenario, sample_dt=0.01)
+    times, x = record.samples.times, np.asarray(record.samples.positions)
+    gaps = [np.diff(v) for v in record.trigger_times.values() if len(v) > 1]
+    return {
+        'closest': closest_approach(times, x)[0],
+        'events': record.total_events,
+        'settle': settling_time(scenario, times, x, 0.05),
+        'edge': float(edge_maxima(scenario, x).max()),
+        'least_gap': float(min(g.min() for g in gaps)) if gaps else math.inf,
+        'last_intervention': record.extra.get('safety', {}).get('last_intervention', 0.0),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the 20-placement table of docs/SAFETY.md (D = 0.25 m, the layer's defaults)."""
+    seeds = range(int(argv[0]) if argv else 20)
+    safety = SafetyConfig(min_separation=0.25)
+    print(
+        '| seed | closest off [m] | closest on [m] | events off | events on | to 5 cm off [s] '
+        '| to 5 cm on [s] | largest edge on [m] | least inter-event on [s] | last intervention [s] |'
+    )
+    print('|---|---|---|---|---|---|---|---|---|---|')
+    for seed in seeds:
+        off = measure(random_square(seed, safety=None))
+        on = measure(random_square(seed, safety=safety))
+        print(
+            f'| {seed} | {off["closest"]:.4f} | {on["closest"]:.4f} | {off["events"]} | {on["events"]} | '
+            f'{off["settle"]:.2f} | {on["settle"]:.2f} | {on["edge"]:.3f} | {on["least_gap"]:.4f} | '
+            f'{on["last_intervention"]:.2f} |'
+        )
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

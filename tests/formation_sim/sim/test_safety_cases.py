@@ -1,0 +1,184 @@
+"""The safety layer in the exact engine (docs/SAFETY.md): forward invariance of the separation and
+of the edges on adversarial cases and seeded random placements, convergence, the layer off giving
+main's events bit for bit, the scenario key and `formation simulate --min-separation`."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+
+import numpy as np
+import pytest
+
+from formation_agent.core.safety import SafetyConfig
+from formation_sim.cli import main
+from formation_sim.model.scenario import (
+    ScenarioError,
+    dump_scenario,
+    load_scenario,
+    scenario_from_dict,
+    scenario_to_dict,
+)
+from formation_sim.sim import safety_cases
+from formation_sim.sim.engine import EngineError, simulate
+
+SAFETY = SafetyConfig(min_separation=0.25)
+CASES = {
+    'swap_two': safety_cases.swap_two,
+    'swap_square': safety_cases.swap_square,
+    'line_three': safety_cases.line_three,
+    **{f'random_{seed}': functools.partial(safety_cases.random_square, seed) for seed in (1, 5, 13)},
+}
+
+
+@pytest.fixture(scope='module', params=sorted(CASES))
+def case(request):
+    scenario = CASES[request.param](safety=SAFETY)
+    record = simulate(scenario, sample_dt=0.05)
+    return scenario, record, np.asarray(record.samples.times), np.asarray(record.samples.positions)
+
+
+def test_no_two_robots_come_closer_than_the_separation(case):
+    """(S1)-(S3): h_ij(t) >= h_ij(0) e^{-γt} > 0; checked exactly between samples (every event is one)."""
+    scenario, _, times, x = case
+    closest, when, (a, b) = safety_cases.closest_approach(times, x)
+    assert closest > SAFETY.min_separation, (closest, when, a, b)
+    # the barrier's own bound, at every sample: ||r||² - D² >= (||r(0)||² - D²) e^{-γt}
+    n = scenario.n
+    for a in range(n):
+        for b in range(a + 1, n):
+            h = ((x[:, a] - x[:, b]) ** 2).sum(axis=1) - SAFETY.min_separation**2
+            assert np.all(h >= h[0] * np.exp(-SAFETY.gamma * times) * (1 - 1e-9))
+
+
+def test_every_edge_stays_within_its_capacity(case):
+    """(S2), (S4): ||x_i - x_j - d_ij|| < Δ - ||d_ij||, so ||x_i - x_j|| < Δ (convex between samples)."""
+    scenario, _, _, x = case
+    heads, tails, d = scenario.edge_indices()
+    y = np.linalg.norm(x[:, heads] - x[:, tails] - d, axis=2)
+    assert np.all(y < scenario.delta - np.linalg.norm(d, axis=1))
+    assert np.all(safety_cases.edge_maxima(scenario, x) < scenario.delta)
+
+
+def test_the_team_reaches_the_formation_within_5_cm(case):
+    scenario, _, times, x = case
+    assert safety_cases.settling_time(scenario, times, x, 0.05) < 15.0
+
+
+def test_every_agent_keeps_a_positive_inter_event_time(case):
+    _, record, _, _ = case
+    gaps = np.concatenate([np.diff(t) for t in record.trigger_times.values()])
+    assert gaps.min() > 1e-3  # measured least: 0.06 s (docs/SAFETY.md)
+    assert record.extra['safety']['min_separation'] == 0.25
+
+
+@pytest.mark.parametrize('make', [safety_cases.swap_two, safety_cases.swap_square, safety_cases.line_three])
+def test_without_the_layer_the_adversarial_cases_collide(make):
+    """The cases are adversarial: ETA-1 alone drives robots through each other."""
+    scenario = make(safety=None)
+    record = simulate(scenario, sample_dt=0.05)
+    closest, _, _ = safety_cases.closest_approach(record.samples.times, np.asarray(record.samples.positions))
+    assert closest < 0.01
+
+
+def test_head_on_swap_passes_on_the_right():
+    """The tie-break turns each robot to its right: robot 1 (heading +x) passes below robot 2."""
+    scenario = safety_cases.swap_two(safety=SAFETY)
+    x = np.asarray(simulate(scenario, sample_dt=0.05).samples.positions)
+    crossing = np.argmin(np.abs(x[:, 0, 0] - x[:, 1, 0]))
+    assert x[crossing, 0, 1] < x[crossing, 1, 1]
+
+
+def _digest(record) -> str:
+    text = ';'.join(f'{i}:' + ','.join(t.hex() for t in ts) for i, ts in sorted(record.trigger_times.items()))
+    text += '|' + ','.join(float(v).hex() for v in record.samples.positions[-1].ravel())
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@pytest.mark.parametrize(
+    ('name', 'events', 'digest'),
+    [
+        ('paper_single', 187, '8930d8f9c51da2762cb6173b4d3f506a7accb27e0e8d2793abeae621dd777e4d'),
+        ('robots_square', 259, 'f1e00b3197536b0806a4de1d880625bead78619c6092da778fc651f08eae8638'),
+    ],
+)
+def test_the_layer_off_gives_mains_events_bit_for_bit(name, events, digest):
+    """Digests of every triggering time and the final state (float.hex) of main at b089890, before
+    the layer existed."""
+    record = simulate(load_scenario(name), sample_dt=0.0)
+    assert record.total_events == events
+    assert _digest(record) == digest
+    assert 'safety' not in record.extra
+
+
+def test_the_scenario_key_round_trips_and_is_checked(tmp_path):
+    scenario = safety_cases.swap_square(safety=SafetyConfig(min_separation=0.3, gamma=3.0))
+    data = scenario_to_dict(scenario)
+    assert data['safety'] == {
+        'min_separation': 0.3,
+        'sensing_radius': 2.0,
+        'gamma': 3.0,
+        'max_speed': 0.5,
+        'turn': 1.0,
+    }
+    assert scenario_from_dict(data) == scenario
+    dump_scenario(scenario, tmp_path / 's.yaml')
+    assert load_scenario(tmp_path / 's.yaml') == scenario
+    assert 'safety' not in scenario_to_dict(scenario.replace(safety=None))
+    for change, message in (
+        ({'min_separation': 1.0}, 'safety.min_separation: agents 1 and 2 start 1 m apart, not more than'),
+        ({'min_separation': 0.3, 'speed': 1}, "safety: unknown key 'speed'"),
+        ({'min_separation': 0.3, 'gamma': 0}, 'safety.gamma: must be a finite number > 0, got 0'),
+    ):
+        with pytest.raises(ScenarioError, match=message):
+            scenario_from_dict({**data, 'safety': change})
+    double = scenario_to_dict(load_scenario('paper_double'))
+    with pytest.raises(ScenarioError, match="safety: the collision layer runs with dynamics 'single'"):
+        scenario_from_dict({**double, 'safety': {'min_separation': 0.1}})
+
+
+def test_the_periodic_baseline_is_refused_with_the_layer():
+    with pytest.raises(EngineError, match='the safety layer runs with event triggering only'):
+        simulate(safety_cases.swap_two(safety=SAFETY), period=0.1)
+
+
+def test_simulate_min_separation_turns_the_layer_on(tmp_path, capsys):
+    path = tmp_path / 'swap.yaml'
+    dump_scenario(safety_cases.swap_two(safety=None, horizon=8.0), path)
+    out = tmp_path / 'run'
+    assert (
+        main(['simulate', str(path), '--min-separation', '0.3', '--out', str(out), '--quiet', '--no-plot'])
+        == 0
+    )
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['safety']['min_separation'] == 0.3
+    assert sum(summary['extra']['safety']['interventions'].values()) > 0
+    capsys.readouterr()
+    assert main(['simulate', 'paper_double', '--min-separation', '0.3', '--out', str(tmp_path / 'r2')]) == 2
+    err = capsys.readouterr().err
+    assert "argument --min-separation: safety: the collision layer runs with dynamics 'single'" in err
+    assert not (tmp_path / 'r2').exists()
+    assert math.isfinite(summary['horizon'])
+
+
+def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
+    path = tmp_path / 'swap.yaml'
+    dump_scenario(safety_cases.swap_square(safety=None), path)
+    assert main(['validate', str(path), '--min-separation', '0.25', '--json']) == 0
+    data = json.loads(capsys.readouterr().out)
+    # (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = (1 + sqrt(1.25)) / 2; (R - ρ*) / (2 v̄) = 2 - ρ*
+    assert data['safety']['guard_radius'] == pytest.approx(1.0590169943749475)
+    assert data['safety']['heartbeat'] == pytest.approx(2.0 - 1.0590169943749475)
+    assert main(['validate', str(path), '--min-separation', '1.0']) == 2
+    assert 'safety.min_separation: agents 1 and 2 start 1 m apart' in capsys.readouterr().err
+
+
+def test_a_distributed_run_refuses_the_layer_it_does_not_carry_yet():
+    """Not wired into the agent nodes yet: refused before anything starts, not silently off."""
+    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.run_options import RunOptions
+
+    with pytest.raises(RunError, match='the safety layer .* is not wired into distributed runs yet'):
+        RunOptions().check(safety_cases.swap_two(safety=SAFETY))
