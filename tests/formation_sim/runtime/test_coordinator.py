@@ -541,3 +541,23 @@ def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinato
         ForeignInformationError, match=r'took 260 messages .* but sent only 80: 180 came from outside'
     ):
         look_at_graph(node, everything=True)
+
+
+def test_a_coordinator_frozen_past_the_lease_names_its_freeze_not_the_robots(coordinator):
+    """The finding: a coordinator frozen 3 s (SIGSTOP) said "robots 1, 2, 3, 4 lost" although the
+    robots were fine.  Its own tick, 3 s late, names the freeze first (`blamed`, as its main does)."""
+    from formation_sim.runtime.intruders import KeeperFrozenError
+    from formation_sim.runtime.run_book import RobotLostError
+    from formation_sim.runtime.time_keeper import blamed
+
+    node = _running(coordinator, pose_silence=0.5)
+    now = time.monotonic()
+    node.freeze.tick(now - 3.1)  # its last tick before the freeze
+    for agent in node.scenario.agent_ids:
+        node.poses.watch.heard[agent] -= 3.0  # every robot's latest pose taken before the freeze
+    with pytest.raises(RobotLostError) as caught:
+        node._check_robots()
+    error = blamed(node, caught.value)
+    assert isinstance(error, KeeperFrozenError) and error.kind == 'keeper_frozen'
+    assert str(error).startswith('the coordinator itself was stopped or starved for 3.0')
+    assert str(error).endswith(str(caught.value))
