@@ -65,6 +65,7 @@ from formation_sim.sim.record import RunRecord
 
 GRAPH_LOOK_PERIOD = 1.0  # [s] between a keeper's looks at its run's writers (`intruders.GraphWatch`)
 TICK_PERIOD = 0.1  # [s] the keeper's tick: discovery, lost peers, the world's checks
+EARLY_FINAL = "it left on a final Step its run's keeper did not send (forged, or another run's)"
 LOOK_BUDGET = 0.02  # [s] a look at the graph stops after this long (2 % of a core at one look a second)
 LOOK_ALL_MOST = 256  # topics looked at all at once just before step 0 (a large team: a slice, as later)
 
@@ -423,9 +424,9 @@ class TimeKeeperNode(WorldHooks, Node):
         if (refusal := self.book.accept_report(report)) is not None:
             self._reject(REPORT_TOPIC, 'field', refusal)
             return
-        if report.final and report.failure and self.step is not None:
-            if not self.finished:
-                self._agent_failed(report.agent, report.failure)
+        if report.final and self.step is not None and (report.failure or not self.finished):
+            if not self.finished:  # no failure named: it left on a final Step from elsewhere
+                self._agent_failed(report.agent, report.failure or EARLY_FINAL)
             elif self.failure_info is None:  # after the run reached its end: no fault of the run
                 self.after_end[report.agent] = report.failure
 
