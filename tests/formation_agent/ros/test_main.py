@@ -233,7 +233,8 @@ def test_a_robot_frozen_while_its_agent_stops_takes_only_zeros_when_it_resumes(
 def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, agent_process):
     """Issue 19, part 1: the robots stop at the horizon and the final Step comes late (a loaded
     machine): the agent's poses go stale after the end of the run.  It stops its robot and waits for
-    the final Step, then leaves with exit 0 and a final report without failure."""
+    the final Step, then leaves with exit 0 and a final report without failure.  Issue 28: it stops
+    its robot at the horizon on its own clock, before its poses go stale."""
     horizon = 1.5
     rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon)
     rig.spin_until(lambda: time.time() >= rig.epoch + horizon, timeout=10.0, what='the horizon')
@@ -242,13 +243,14 @@ def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, ag
     rig.spin_until(
         lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
     )
-    # Its pose is stale (pose_timeout 0.5 s from the last one, published up to a tick before the horizon).
+    rig.spin_for(0.7)
+    # Its pose is stale now (pose_timeout 0.5 s from the last one, published up to a tick before the horizon).
     assert time.time() > rig.last_pose_at[1] + 0.5
     assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
     rig.finish()
     assert rig.wait_for_exit(agent) == 0
     _assert_stopped(rig, agent, status=0, failure=None)
-    assert 'agent 1: poses stopped after the horizon t=1.5' in agent.stderr, agent.stderr
+    assert 'agent 1: the horizon t=1.5 on its own clock: robot stopped' in agent.stderr, agent.stderr
 
 
 def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_process):

@@ -224,9 +224,10 @@ def decode_report(msg):
 
 def test_an_agent_that_leaves_on_the_final_step_or_after_it_stops_nothing(coordinator):
     node = _running(coordinator)
-    node._on_report(_report(1, None))  # its final report at the end: no failure
     node.end_now()
+    node._on_report(_report(1, None))  # its final report at the end: no failure
     node._on_report(_report(2, 'stopped by a signal'))  # after the final Step: the run has ended
+    # (one without a failure before the final Step went out: a final Step from elsewhere, below)
     assert node.failure_info is None
 
 
@@ -669,3 +670,38 @@ def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinato
         ForeignInformationError, match=r'took 260 messages .* but sent only 80: 180 came from outside'
     ):
         look_at_graph(node, everything=True)
+
+
+def test_a_coordinator_frozen_past_the_lease_names_its_freeze_not_the_robots(coordinator):
+    """The finding: a coordinator frozen 3 s (SIGSTOP) said "robots 1, 2, 3, 4 lost" although the
+    robots were fine.  Its own tick, 3 s late, names the freeze first (`blamed`, as its main does)."""
+    from formation_sim.runtime.intruders import KeeperFrozenError
+    from formation_sim.runtime.run_book import RobotLostError
+    from formation_sim.runtime.time_keeper import blamed
+
+    node = _running(coordinator, pose_silence=0.5)
+    now = time.monotonic()
+    node.freeze.tick(now - 3.1)  # its last tick before the freeze
+    for agent in node.scenario.agent_ids:
+        node.poses.watch.heard[agent] -= 3.0  # every robot's latest pose taken before the freeze
+    with pytest.raises(RobotLostError) as caught:
+        node._check_robots()
+    error = blamed(node, caught.value)
+    assert isinstance(error, KeeperFrozenError) and error.kind == 'keeper_frozen'
+    assert str(error).startswith('the coordinator itself was stopped or starved for 3.0')
+    assert str(error).endswith(str(caught.value))
+
+
+def test_an_agent_that_leaves_on_a_final_step_the_coordinator_did_not_send_stops_the_run(coordinator):
+    """Agents stop on any final Step (stopping is safe): one forged mid-run sends them home early,
+    and the run must not go on as if they had been lost, nor end done."""
+    from formation_sim.runtime.run_book import AgentFailedError
+
+    node = _running(coordinator)
+    with pytest.raises(
+        AgentFailedError, match=r"agent 3 stopped .*: it left on a final Step its run's keeper did not send"
+    ):
+        node._on_report(_report(3, None))
+    node.end_now()
+    node._on_report(_report(2, None))  # after the real final Step: its own end
+    assert node.after_end == {}

@@ -221,3 +221,19 @@ def test_more_information_taken_than_sent_is_foreign_and_its_writer_named():
     assert str(foreign_information_error(100, 20, GraphWatch([]))).startswith(
         'no stranger seen in the graph yet: '
     )
+
+
+def test_one_process_on_several_topics_is_named_once_with_every_topic():
+    scenario = load_scenario('paper_single')
+    watched = [
+        w for w in protocol_watched(scenario, keeper='/k') + simulator_watched(scenario) if w.agent == 2
+    ]
+    twin = Writer(node='/agent_2/formation_agent', gid='aa')
+    watch = GraphWatch(watched)
+    for w in watched:
+        watch.note(w, [AGENT_2, twin])
+    topics = ', '.join(w.topic for w in watched)
+    assert str(watch.error()) == (
+        'two processes claim agent 2: /agent_2/formation_agent (writer gid 01) and /agent_2/formation_agent '
+        f'(writer gid aa) both write {topics}: the run stops'
+    )

@@ -195,7 +195,7 @@ class GraphWatch:
         cls = DuplicateAgentError if first.kind == 'duplicate' else ForeignWriterError
         agents = sorted({i.watched.agent for i in fatal if i.watched.agent is not None})
         return cls(
-            '; '.join(i.text() for i in fatal) + ': the run stops',
+            '; '.join(_grouped(fatal)) + ': the run stops',
             nodes=sorted({w.node for i in fatal for w in i.writers}),
             agents=agents,
         )
@@ -209,6 +209,25 @@ class GraphWatch:
     def extra(self) -> dict:
         """summary.json's `extra.foreign_writers` (none seen: absent)."""
         return {'foreign_writers': [i.extra() for i in self.found.values()]} if self.found else {}
+
+
+def _grouped(found: list[Intrusion]) -> list[str]:
+    """The texts of `found`, one per kind and set of nodes: the same nodes on several topics (one
+    process writes each of an agent's topics) are named once, with every topic."""
+    groups: dict[tuple, list[Intrusion]] = {}
+    for intrusion in found:
+        key = (intrusion.kind, intrusion.watched.agent, tuple(w.node for w in intrusion.writers))
+        groups.setdefault(key, []).append(intrusion)
+    texts = []
+    for group in groups.values():
+        text = group[0].text()
+        if len(group) > 1:
+            if group[0].kind == 'duplicate':
+                text = text.removesuffix(group[0].watched.topic) + ', '.join(i.watched.topic for i in group)
+            else:
+                text += ''.join(f', {i.watched.what} ({i.watched.topic})' for i in group[1:])
+        texts.append(text)
+    return texts
 
 
 def protocol_watched(scenario, *, keeper: str) -> list[Watched]:
@@ -381,6 +400,6 @@ class FreezeWatch:
             return error
         return KeeperFrozenError(
             f'the {who} itself was stopped or starved for {frozen:.2f} s (its {self.period:g} s timer came '
-            f'that late; SIGSTOP, or an overloaded computer): the agents saw it lost and stopped their '
-            f'robots; what it saw then follows from its own freeze: {error}'
+            f'that late; SIGSTOP, or an overloaded computer), longer than the liveliness lease its peers '
+            f'watch it by: what it saw then follows from its own freeze: {error}'
         )

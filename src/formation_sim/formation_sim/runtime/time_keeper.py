@@ -66,6 +66,9 @@ from formation_sim.sim.record import RunRecord
 
 GRAPH_LOOK_PERIOD = 1.0  # [s] between a keeper's looks at its run's writers (`intruders.GraphWatch`)
 TICK_PERIOD = 0.1  # [s] the keeper's tick: discovery, lost peers, the world's checks
+EARLY_FINAL = "it left on a final Step its run's keeper did not send (forged, or another run's)"
+LOOK_BUDGET = 0.02  # [s] a look at the graph stops after this long (2 % of a core at one look a second)
+LOOK_ALL_MOST = 256  # topics looked at all at once just before step 0 (a large team: a slice, as later)
 
 DISCOVERY_PROGRESS_AFTER = 2.0  # [s] a discovery that takes longer says what it waits for (progress lines)
 
@@ -428,9 +431,9 @@ class TimeKeeperNode(WorldHooks, Node):
         if (refusal := self.book.accept_report(report)) is not None:
             self._reject(REPORT_TOPIC, 'field', refusal)
             return
-        if report.final and report.failure and self.step is not None:
-            if not self.finished:
-                self._agent_failed(report.agent, report.failure)
+        if report.final and self.step is not None and (report.failure or not self.finished):
+            if not self.finished:  # no failure named: it left on a final Step from elsewhere
+                self._agent_failed(report.agent, report.failure or EARLY_FINAL)
             elif self.failure_info is None:  # after the run reached its end: no fault of the run
                 self.after_end[report.agent] = report.failure
 
@@ -545,13 +548,19 @@ def watched_topics(node: TimeKeeperNode) -> list:
 
 
 def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
-    """A look at the writers of the next slice of watched topics (`everything`: all of them);
-    each stranger or duplicate found is logged once, and one that changes the run raises
-    (ForeignWriterError: the run stops, naming it)."""
+    """A look at the writers of the next slice of watched topics (at most TOPICS_PER_LOOK, within
+    LOOK_BUDGET s; `everything`: all of them, up to LOOK_ALL_MOST); each stranger or duplicate
+    found is logged once, and one that changes the run raises (ForeignWriterError: the run stops,
+    naming it); on the wall clock, so do agents that took more information than was sent."""
     if node.finished:
         return
     watch = node.graph_watch
-    for watched in watch.due(len(watch.watched) if everything else TOPICS_PER_LOOK):
+    everything = everything and len(watch.watched) <= LOOK_ALL_MOST
+    until = time.monotonic() + LOOK_BUDGET
+    for _ in range(len(watch.watched) if everything else TOPICS_PER_LOOK):
+        if not everything and time.monotonic() > until:
+            break  # a graph of thousands of endpoints answers slower: the rest at the next look
+        (watched,) = watch.due(1)
         infos = node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
         writers = [
             Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
