@@ -8,6 +8,7 @@ import argparse
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -53,6 +54,12 @@ def _formation(*arguments: str, env: dict | None = None, code: str | None = None
     )
 
 
+def test_it_discovers_with_the_runs_fast_dds_settings():
+    from formation_sim.runtime.launch import FASTDDS_PROFILE
+
+    assert stop.FASTDDS_PROFILE == FASTDDS_PROFILE and FASTDDS_PROFILE.is_file()
+
+
 def test_it_starts_without_the_scenario_model_and_refuses_bad_input_before_rclpy():
     """An emergency stop must not wait for scipy (seconds on a loaded machine): the command's
     parser is built alone, and a bad domain is refused before rclpy is loaded."""
@@ -96,3 +103,52 @@ def test_no_run_answered_is_a_clear_failure_within_the_timeout(tmp_path, how):
     assert f'formation stop: no run answered on domain {DOMAIN_ID} within 1 s' in done.stderr
     assert done.stdout == '' and 'Traceback' not in done.stderr
     assert 1.0 <= spent < 1.0 + 30.0  # the wait itself, and a process's start on a loaded machine
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_a_request_that_went_out_but_got_no_answer_is_not_called_no_run(tmp_path, ros):
+    """A stop service that takes the request but answers late (a run stopping on a loaded machine):
+    the command waits ANSWER_WAIT past a short --timeout, then says the request went out and the
+    run may be stopping (exit 1), not that no service was reached."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_srvs.srv import Trigger
+
+    from formation_msgs_py.topics import STOP_SERVICE
+
+    taken = []
+
+    def slow(request, response):
+        taken.append(time.monotonic())
+        time.sleep(stop.ANSWER_WAIT + 3.0)
+        response.success, response.message = True, 'late'
+        return response
+
+    node = Node('slow_keeper', context=ros)
+    node.create_service(Trigger, STOP_SERVICE, slow)
+    executor = SingleThreadedExecutor(context=ros)
+    executor.add_node(node)
+    spinning = threading.Event()
+    spinning.set()
+
+    def spin() -> None:
+        while spinning.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    worker = threading.Thread(target=spin, daemon=True)
+    worker.start()
+    try:
+        env = {**os.environ, 'ROS_LOG_DIR': str(tmp_path)}
+        done = _formation('stop', '--domain-id', str(DOMAIN_ID), '--timeout', '3', env=env)
+    finally:
+        spinning.clear()
+        worker.join(timeout=30.0)
+        node.destroy_node()
+    assert taken, done.stderr  # the request reached the service
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    assert (
+        f'formation stop: no run answered on domain {DOMAIN_ID} within 3 s (the request went out to a '
+        in (done.stderr)
+    )
+    assert 'but no answer came: that run may be stopping' in done.stderr

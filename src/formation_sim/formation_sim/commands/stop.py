@@ -16,6 +16,7 @@ import re
 import socket
 import sys
 import time
+from pathlib import Path
 
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok
 from formation_msgs_py.topics import STOP_SERVICE
@@ -24,9 +25,15 @@ from formation_msgs_py.topics import STOP_SERVICE
 # scenario model: seconds on a loaded machine); `formation_sim.cli` builds its parser alone.  The
 # same rules and words as common's DOMAIN_ID and POSITIVE (tests/formation_sim/commands/test_stop.py).
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+# runtime.launch.FASTDDS_PROFILE, the run's Fast DDS settings, without importing the launch plan.
+FASTDDS_PROFILE = Path(__file__).resolve().parents[1] / 'runtime' / 'fastdds_profile.xml'
 
 DEFAULT_TIMEOUT = 5.0  # [s] discovery of the run's time keeper on one machine takes well under a second
 DISCOVERY_LOOK = 0.01  # [s] how often it looks whether the stop service is reachable yet
+# [s] Once the request is out, its answer gets at least this long, past --timeout if need be: the
+# run stops at once but may answer late (it looks up who asked: operator_stop.CALLER_WAIT; a loaded
+# machine), and "no run answered" must not be said of a run that is stopping.
+ANSWER_WAIT = 3.0
 
 
 def _domain_id(text: str) -> int:
@@ -76,7 +83,8 @@ def register(subparsers) -> None:
         type=_positive,
         default=DEFAULT_TIMEOUT,
         metavar='S',
-        help=f'wait at most S seconds for a run to answer (default {DEFAULT_TIMEOUT:g})',
+        help=f'wait at most S seconds for a run to answer once ROS is up (default {DEFAULT_TIMEOUT:g}; an '
+        f'answer to a request already sent gets at least {ANSWER_WAIT:g} s)',
     )
     parser.add_argument(
         '--network',
@@ -103,11 +111,16 @@ def run(args: argparse.Namespace) -> int:
         answer = call_stop(domain_id=domain, timeout=args.timeout)
     except KeyboardInterrupt:
         return 130
-    if answer is None:
+    if not isinstance(answer, tuple):
+        why = (
+            f'the request went out to a {STOP_SERVICE} service at {answer} but no answer came: that run '
+            'may be stopping, its output and summary.json say; call again to see'
+            if answer
+            else f'no {STOP_SERVICE} service reached; is the run on another --domain-id, or another machine: '
+            '--network?'
+        )
         print(
-            f'formation stop: no run answered on domain {domain} within {args.timeout:g} s '
-            f'(no {STOP_SERVICE} service reached; is the run on another --domain-id, or another machine: '
-            '--network?)',
+            f'formation stop: no run answered on domain {domain} within {args.timeout:g} s ({why})',
             file=sys.stderr,
         )
         return EXIT_FAILED
@@ -120,9 +133,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _discovery_environment(*, network: bool) -> None:
-    """As a run's processes discover (`runtime.launch.child_environment`): Fast DDS, and this
-    machine only unless `network` or the environment's own range."""
+    """As a run's processes discover (`runtime.launch.child_environment`): Fast DDS with the run's
+    settings (announcements every 0.1 s at first: a loaded machine's participants find each other
+    sooner), and this machine only unless `network` or the environment's own range."""
     os.environ['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
     if network:
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SUBNET'
     else:
@@ -135,32 +150,36 @@ def caller_name() -> str:
     return f'formation_stop_{host}_{os.getpid()}'
 
 
-def call_stop(*, domain_id: int, timeout: float) -> tuple[bool, str] | None:
-    """Call the stop service on `domain_id`: (success, message) of the run that answered within
-    `timeout` seconds, or None.  One call, one bounded wait (no loop of rclpy spins)."""
+def call_stop(*, domain_id: int, timeout: float) -> tuple[bool, str] | str:
+    """Call the stop service on `domain_id`: (success, message) of the run that answered; else ''
+    when no service was reached within `timeout` seconds (once ROS is up: its start on a loaded
+    machine is not the run's), or the time the request went out when no answer came within the
+    timeout and `ANSWER_WAIT` after the request.  One call, one bounded wait (no loop of spins)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from std_srvs.srv import Trigger
 
-    deadline = time.monotonic() + timeout
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = None
     try:
         node = Node(caller_name(), context=context, start_parameter_services=False, enable_rosout=False)
+        deadline = time.monotonic() + timeout
         client = node.create_client(Trigger, STOP_SERVICE)
         # Client.wait_for_service looks every 0.25 s: an emergency stop looks more often.
         while not client.service_is_ready():
             if time.monotonic() >= deadline:
-                return None
+                return ''
             time.sleep(DISCOVERY_LOOK)
-        future = client.call_async(Trigger.Request())
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        executor.spin_until_future_complete(future, timeout_sec=max(deadline - time.monotonic(), 0.01))
+        sent = time.strftime('%H:%M:%S')
+        future = client.call_async(Trigger.Request())
+        wait = max(deadline - time.monotonic(), ANSWER_WAIT)
+        executor.spin_until_future_complete(future, timeout_sec=wait)
         response = future.result() if future.done() else None
-        return None if response is None else (bool(response.success), str(response.message))
+        return sent if response is None else (bool(response.success), str(response.message))
     finally:
         if node is not None:
             node.destroy_node()
