@@ -716,3 +716,38 @@ def test_analyze_never_writes_into_a_runs_bag_folder(paper_single_record, write_
         assert main(['analyze', str(tmp_path / 'run'), '--out', str(out), '--quiet']) == 2
         assert 'the bag folder' in capsys.readouterr().err
     assert sorted(p.name for p in bag.iterdir()) == before
+
+
+@pytest.mark.parametrize(
+    ('realtime', 'last', 'extra', 'ok'),
+    [
+        (True, 0.0, 1, True),  # the wall clock: each agent's zero command as it leaves
+        (True, 0.0, 0, True),  # an agent that left without its zero command
+        (True, 0.3, 1, False),  # one command more, not a stop
+        (True, 0.0, 2, False),
+        (False, 0.0, 1, False),  # lock-step: no command outside a trigger
+    ],
+)
+def test_one_command_per_trigger_counts_the_wall_clocks_final_zero_command(realtime, last, extra, ok):
+    """Issue 28: a clean --real-time run exited 0 and `formation analyze` of it 1 ('one command per
+    trigger', commands {1: 19, ...} for 18 triggers): on the wall clock every agent sends its
+    plant a zero command as it leaves (PlantOutput.stop), which the check now expects."""
+    from geometry_msgs.msg import Twist
+    from rclpy.serialization import serialize_message
+
+    from formation_sim.analysis.load import _Collected, _dispatch, _message_checks
+
+    scenario = load_scenario('paper_single')
+    trigger_times = {agent: [0.0, 0.5, 1.0] for agent in scenario.agent_ids}
+    got = _Collected()
+    for agent in scenario.agent_ids:
+        for k in range(3 + extra):
+            command = Twist()
+            command.linear.x = last if k == 2 + extra else 0.1
+            _dispatch(got, f'/agent_{agent}/cmd_vel', 'geometry_msgs/msg/Twist', serialize_message(command))
+    (check,) = [
+        c
+        for c in _message_checks(got, scenario, trigger_times, stopped=False, horizon=1.0, realtime=realtime)
+        if c.name == 'one command per trigger'
+    ]
+    assert check.ok == ok, check.detail

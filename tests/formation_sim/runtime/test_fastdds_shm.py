@@ -60,18 +60,42 @@ def test_the_files_of_a_dead_owner_go_whole_and_those_held_or_mapped_stay(made):
         }
         named = [dead_port[0], dead_segment[1], locked[0], mapped[1]]  # any one file names its family
         removed = remove_orphans(str(path) for path in named)
-        assert sorted(removed) == sorted(str(path) for path in dead_port + dead_segment)
-        assert not [path for path in dead_port + dead_segment if path.exists()]
-        assert all(path.exists() for path in locked + mapped + unnamed)
+        # Issue 28: a dead owner's segment that a live peer (an outside node) still maps goes too:
+        # only its name; the peer's mapping stays valid (it reads what was there).
+        assert sorted(removed) == sorted(str(path) for path in dead_port + dead_segment + mapped)
+        assert not [path for path in dead_port + dead_segment + mapped if path.exists()]
+        assert all(path.exists() for path in locked + unnamed)
+        assert view[:4] == b'\0\0\0\0'
     finally:
         view.close()
         handle.close()
         os.close(lock)
-    # Once their holders are gone, they are left by the dead too; what was not named still stays.
-    assert sorted(remove_orphans([str(locked[1]), str(mapped[0])])) == sorted(
-        str(path) for path in locked + mapped
-    )
+    # Once its holder is gone, the port is left by the dead too; what was not named still stays.
+    assert sorted(remove_orphans([str(locked[1])])) == sorted(str(path) for path in locked)
     assert all(path.exists() for path in unnamed)
+
+
+def test_a_dead_owners_port_that_a_live_peer_maps_goes_and_one_without_a_lock_file_stays(made):
+    """Issue 28: ports of a killed simulator that an outside node mapped outlived the run. With
+    its lock file free the owner is dead: the names go, the peer's mapping stays valid. Without a
+    lock file a mapped file may be a live owner's: it stays until nobody maps it."""
+    port = _port(65390 + (os.getpid() + 1) % 3)
+    unlocked = _segment()
+    unlocked[1].unlink()  # no lock file
+    made += port + unlocked
+    handles = [port[0].open('r+b'), unlocked[0].open('r+b')]
+    views = [mmap.mmap(handle.fileno(), 0) for handle in handles]
+    try:
+        assert sorted(remove_orphans([str(port[0]), str(unlocked[0])])) == sorted(str(path) for path in port)
+        assert not [path for path in port if path.exists()] and unlocked[0].exists()
+        views[0][:3] = b'abc'  # the peer's mapping still works
+        assert views[0][:3] == b'abc'
+    finally:
+        for view in views:
+            view.close()
+        for handle in handles:
+            handle.close()
+    assert remove_orphans([str(unlocked[0])]) == [str(unlocked[0])]
 
 
 def test_a_process_holds_its_segment_its_ports_and_their_lock_files(made):

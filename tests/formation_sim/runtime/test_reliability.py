@@ -535,9 +535,11 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(
     assert failure['process']['name'] == 'simulator' and failure['process']['returncode'] == -signal.SIGKILL
     assert extra['processes']['simulator'] == 'killed by SIGKILL'
     assert 'bag' in extra['summary_source']
-    # The last progress line came before the kill; the bag holds the run up to the kill.
+    # The last progress line came before the kill; the bag holds the run up to the kill: the
+    # failure is at the latest of the two (issue 28), at least where the bag's samples reach.
     assert isinstance(failure['step'], int) and failure['step'] > 0
-    assert 0.0 < failure['time'] <= extra['reached_time'] < scenario.horizon
+    assert 0.0 < extra['reached_time'] <= failure['time'] < scenario.horizon
+    assert "the bag's last Step" in failure['time_from']
     # The bag may hold the triggers of the step in progress (sent, not yet sampled): one more step.
     last = max(t for times in summary['trigger_times'].values() for t in times)
     reference = simulate(scenario, horizon=last + 1.0)

@@ -8,7 +8,10 @@ whichever participant takes the next free one.  A process killed hard cannot rem
 and a peer that mapped one of its ports keeps that port's reference, so the file outlives both.
 
 A file is left by the dead when nobody holds its lock (a live owner always does: the kernel
-releases a flock when its holder dies) and no live process maps it.  `remove_orphans` removes
+releases a flock when its holder dies), even when a live peer still maps it (issue 28: an outside
+node in the domain kept a killed simulator's ports mapped, and they outlived it): only the names
+are removed, the peer's mapping stays valid and its memory is freed when it unmaps.  A file
+without a lock file is left by the dead only when no live process maps it.  `remove_orphans` removes
 such files among those it is given, holding the lock while it does, so that a participant
 starting at that moment cannot take the port over between the check and the removal.  It never
 looks beyond the names it is given: files of other runs stay where they are.
@@ -143,7 +146,8 @@ def in_use(paths: Iterable[str]) -> set[str]:
 def remove_orphans(paths: Iterable[str]) -> list[str]:
     """Remove the files of every segment or port named in `paths` whose owner is gone; return them.
 
-    A segment or port goes whole (file, semaphore, lock file) once nobody holds its lock and no
+    A segment or port goes whole (file, semaphore, lock file) once nobody holds its lock file
+    (a live peer may still map it: only the names go); one without a lock file goes only when no
     live process maps any of its files; any other is left alone.
     """
     families = {}
@@ -158,7 +162,12 @@ def remove_orphans(paths: Iterable[str]) -> list[str]:
     mapped = mapped_by_anyone(str(file) for files in families.values() for file in files)
     removed = []
     for base, files in sorted(families.items()):
-        if any(str(file) in mapped for file in files):
+        # A live peer that still maps a dead owner's file (an outside node in the domain, issue 28:
+        # the run's ports outlived it) keeps its mapping when the name goes, and the memory is freed
+        # when it unmaps; the owner's lock file, free, says the owner is dead.  Without a lock file
+        # a mapped file may be a live owner's: it stays.
+        lock_file = SHM_DIR / f'{base}_el'
+        if not lock_file.exists() and any(str(file) in mapped for file in files):
             continue
         with _lock_if_free(SHM_DIR / f'{base}_el') as free:
             if not free:

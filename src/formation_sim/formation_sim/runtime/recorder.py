@@ -503,7 +503,8 @@ class RecorderNode(Node):
         if not self.clock.on_step(data) and not self._bad_clock_warned:
             self._bad_clock_warned = True
             self.get_logger().warning(
-                f'{self._clock_topic}: data {list(data)} is not [version, step_index, time >= 0, ...];'
+                f'{self._clock_topic}: data {list(data)} is not [version, step_index, time, ...] with a time '
+                f'(and a wall-clock epoch) in [0, {MAX_BAG_TIME:.4g}) s, what a bag can stamp;'
                 ' keeping the previous time'
             )
 
