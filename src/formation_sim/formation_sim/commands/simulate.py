@@ -18,7 +18,7 @@ from formation_sim.commands.common import (
     scale_options,
     refuse,
 )
-from formation_sim.commands.limits import add_limit_arguments, resolve_speed_scale
+from formation_sim.commands.limits import WARP, add_limit_arguments, resolve_speed_scale, resolve_time_warp
 
 
 DEFAULT_SAMPLE_DT = 0.01
@@ -121,9 +121,19 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
-    if (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
+    warp = None
+    if args.speed_scale == WARP:
+        if args.continuous or args.period is not None:
+            return refuse(
+                'simulate', '--speed-scale warp: the event-triggered engine only (no --continuous, --period)'
+            )
+        if (warped := resolve_time_warp(scenario, args, 'simulate')) is None:
+            return EXIT_BAD_INPUT
+        scenario, warp, auto_scale = warped
+    elif (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
         return EXIT_BAD_INPUT
-    scenario, auto_scale = resolved
+    else:
+        scenario, auto_scale = resolved
     chosen = sample_policy(args, scenario.n)
     if isinstance(chosen, str):
         return refuse('simulate', chosen)
@@ -158,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
                 period=args.period,
                 trajectory_dir=out,  # the samples go to disk as they come
                 progress=progress,
+                time_warp=warp,
             )
     except (EngineError, ValueError, ArithmeticError, OSError) as error:
         return _run_failed(error, out)

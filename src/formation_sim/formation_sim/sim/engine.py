@@ -25,6 +25,7 @@ import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model import theory
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
@@ -96,8 +97,10 @@ class Sampler:
         on_sample: Callable[[float, np.ndarray, np.ndarray | None], None] | None = None,
         writer: TrajectoryWriter | None = None,
         watch: EdgeLengths | None = None,
+        clock: _WarpClock | None = None,
     ) -> None:
         self.world = world
+        self.clock = clock  # a time warp: the world runs in the paper's time, the samples in real time
         self.dt = sample_dt
         self.events = events
         self.on_sample = on_sample
@@ -113,13 +116,15 @@ class Sampler:
         if not self.dt:
             return
         while True:
-            tg = self._next_grid * self.dt
+            tg = real = self._next_grid * self.dt
+            if self.clock is not None:
+                tg = self.clock.paper(real)  # the grid is in real time, the world in the paper's
             if tg > t_end or (tg == t_end and self.events):
                 return
             self._next_grid += 1
             if tg > self.world.time:
                 x, q = self.world.state_at(tg)
-                self._add(tg, x, q)
+                self._add(real, x, q)
 
     def event(self, *, due=(), force: bool = False) -> None:
         """The world's present state as a sample (with event samples, or `force`); `due`: the agents
@@ -131,9 +136,10 @@ class Sampler:
                 self.world.positions_of(self.watch.heads[edges]),
                 self.world.positions_of(self.watch.tails[edges]),
             )
-        if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
+        now = self.world.time if self.clock is None else self.clock.real(self.world.time)
+        if not (self.events or force) or (self.times and self.times[-1] == now):
             return
-        self._add(self.world.time, self.world.positions, self.world.velocities)
+        self._add(now, self.world.positions, self.world.velocities)
 
     def _add(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
         self.times.append(t)
@@ -152,6 +158,33 @@ class Sampler:
         if self.writer is not None:
             return self.writer.close(self.times, edge_maxima=maxima)
         return Samples.from_rows(self.times, self.positions, self.velocities or None, edge_maxima=maxima)
+
+
+@dataclass(frozen=True)
+class _WarpClock:
+    """A time warp as the engine applies it (docs/SPEED_SCALE.md, "A time warp"): the world and the
+    agents run in the paper's time s, the record in real time t; the real horizon and its paper
+    time map onto each other exactly."""
+
+    warp: TimeWarp
+    horizon: float  # real
+    paper_horizon: float
+
+    @classmethod
+    def of(cls, warp: TimeWarp, scenario, *, horizon: float, period: float | None) -> _WarpClock:
+        if scenario.dynamics != 'single' or scenario.gains.speed_scale != 1.0 or period is not None:
+            raise EngineError(
+                'time_warp: applies to ETA-1 event-triggered runs at speed scale 1 (the warp replaces κ), '
+                f'got dynamics {scenario.dynamics!r}, speed_scale {scenario.gains.speed_scale!r}, period '
+                f'{period!r}'
+            )
+        return cls(warp=warp, horizon=horizon, paper_horizon=warp.paper(horizon))
+
+    def paper(self, t: float) -> float:
+        return self.paper_horizon if t == self.horizon else self.warp.paper(t)
+
+    def real(self, s: float) -> float:
+        return self.horizon if s == self.paper_horizon else self.warp.real(s)
 
 
 def _next_event_time(heap, serial, searches, horizon: float) -> float:
@@ -292,6 +325,7 @@ def simulate(
     trajectory_dir: str | Path | None = None,
     progress: Callable[[float, int], None] | None = None,
     on_event: Callable[[float, World, list[int]], None] | None = None,
+    time_warp: TimeWarp | None = None,
 ) -> RunRecord:
     """Run ETA-1/ETA-2 (or periodic sampling with `period`) exactly up to `horizon`.
 
@@ -305,6 +339,11 @@ def simulate(
     single integrators is still the exact maximum. Samples are kept in memory (O(samples x agents)),
     or, with `trajectory_dir` (a run folder), written into its `trajectory/` as they are produced
     (memory O(agents + samples)) and memory-mapped in the record (`formation_sim.sim.samples`).
+
+    `time_warp` (ETA-1 at κ = 1): the run is the paper's in the time s(t) of the warp
+    (`formation_agent.core.time_warp`): the agents and the world run in s to s(horizon), exactly the
+    κ = 1 run; the record's times are real (t(s) for events, the grid in real time), and `on_event`
+    and `progress` get the paper's time.
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -312,6 +351,7 @@ def simulate(
     if period is not None and not (math.isfinite(period) and period > 0.0):
         raise EngineError(f'period must be a finite number > 0, got {period!r}')
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
+    clock = None if time_warp is None else _WarpClock.of(time_warp, scenario, horizon=horizon, period=period)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
@@ -325,7 +365,7 @@ def simulate(
             velocities=scenario.dynamics == 'double',
         )
     watch = None if sample_events else EdgeLengths(scenario)
-    sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch)
+    sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch, clock=clock)
     try:
         messages = _run(
             scenario,
@@ -333,7 +373,7 @@ def simulate(
             agents,
             sampler,
             trigger_times,
-            horizon=horizon,
+            horizon=horizon if clock is None else clock.paper_horizon,
             period=period,
             progress=progress,
             on_event=on_event,
@@ -343,6 +383,10 @@ def simulate(
             writer.abandon()  # what was written stays, named trajectory.incomplete
         raise
     wall_time = time.perf_counter() - started
+    extra = {}
+    if clock is not None:  # the events were found in the paper's time: labelled in real time
+        trigger_times = {i: [clock.real(s) for s in times] for i, times in trigger_times.items()}
+        extra['time_warp'] = time_warp.to_dict()
     return RunRecord(
         scenario=scenario,
         horizon=horizon,
@@ -355,6 +399,7 @@ def simulate(
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
+            **extra,
         },
     )
 
