@@ -78,7 +78,8 @@ def POSITIVE_OR_AUTO(text: str) -> float | str:
         return POSITIVE(text)
     except argparse.ArgumentTypeError as error:
         raise argparse.ArgumentTypeError(
-            str(error).replace('a finite number > 0', "a finite number > 0, 'auto' or 'warp'", 1)
+            str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)
+            + " (or 'warp': a time warp, simulate and validate)"
         ) from None
 
 

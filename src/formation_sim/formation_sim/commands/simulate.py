@@ -121,19 +121,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
-    warp = None
-    if args.speed_scale == WARP:
-        if args.continuous or args.period is not None:
-            return refuse(
-                'simulate', '--speed-scale warp: the event-triggered engine only (no --continuous, --period)'
-            )
-        if (warped := resolve_time_warp(scenario, args, 'simulate')) is None:
-            return EXIT_BAD_INPUT
-        scenario, warp, auto_scale = warped
-    elif (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
-        return EXIT_BAD_INPUT
-    else:
-        scenario, auto_scale = resolved
+    if isinstance(resolved := _speed_scale(scenario, args), int):
+        return resolved
+    scenario, warp, auto_scale = resolved
     chosen = sample_policy(args, scenario.n)
     if isinstance(chosen, str):
         return refuse('simulate', chosen)
@@ -200,6 +190,20 @@ def run(args: argparse.Namespace) -> int:
     if figure is not None:
         print(f'figure:     {figure}')
     return EXIT_OK
+
+
+def _speed_scale(scenario, args: argparse.Namespace):
+    """(the scenario to run, the time warp or None, what summary.json records of the choice or None)
+    for --speed-scale auto, warp or K; the exit status after saying why not."""
+    if args.speed_scale != WARP:
+        resolved = resolve_speed_scale(scenario, args, 'simulate')
+        return EXIT_BAD_INPUT if resolved is None else (resolved[0], None, resolved[1])
+    if args.continuous or args.period is not None:
+        return refuse(
+            'simulate', '--speed-scale warp: the event-triggered engine only (no --continuous, --period)'
+        )
+    warped = resolve_time_warp(scenario, args, 'simulate')
+    return EXIT_BAD_INPUT if warped is None else warped
 
 
 def _run_failed(error: Exception, out: Path) -> int:

@@ -162,9 +162,10 @@ class Sampler:
 
 @dataclass(frozen=True)
 class _WarpClock:
-    """A time warp as the engine applies it (docs/SPEED_SCALE.md, "A time warp"): the world and the
-    agents run in the paper's time s, the record in real time t; the real horizon and its paper
-    time map onto each other exactly."""
+    """A time warp as the engine applies it (ETA-1 at κ = 1; docs/SPEED_SCALE.md, "A time warp"):
+    the world and the agents run in the paper's time s to s(horizon), exactly the κ = 1 run; the
+    record is in real time (t(s) for the events, the grid in real time), the real horizon and its
+    paper time mapping onto each other exactly; `on_event` and `progress` get the paper's time."""
 
     warp: TimeWarp
     horizon: float  # real
@@ -185,6 +186,9 @@ class _WarpClock:
 
     def real(self, s: float) -> float:
         return self.horizon if s == self.paper_horizon else self.warp.real(s)
+
+    def relabel(self, trigger_times: dict[int, list[float]]) -> dict[int, list[float]]:
+        return {i: [self.real(s) for s in times] for i, times in trigger_times.items()}
 
 
 def _next_event_time(heap, serial, searches, horizon: float) -> float:
@@ -331,7 +335,8 @@ def simulate(
 
     With `period`, every agent samples and broadcasts at k * period instead of at its own
     triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
-    due)` is called at every event time before the due agents trigger (for checkers).
+    due)` is called at every event time before the due agents trigger (for checkers). `time_warp`:
+    the κ = 1 run in the time s(t) of the warp (`_WarpClock`).
 
     The record samples the state at every event time and every `sample_dt` (0 or None: no grid).
     `sample_events=False` samples only the grid, t = 0 and the horizon; each edge's largest length
@@ -339,11 +344,6 @@ def simulate(
     single integrators is still the exact maximum. Samples are kept in memory (O(samples x agents)),
     or, with `trajectory_dir` (a run folder), written into its `trajectory/` as they are produced
     (memory O(agents + samples)) and memory-mapped in the record (`formation_sim.sim.samples`).
-
-    `time_warp` (ETA-1 at κ = 1): the run is the paper's in the time s(t) of the warp
-    (`formation_agent.core.time_warp`): the agents and the world run in s to s(horizon), exactly the
-    κ = 1 run; the record's times are real (t(s) for events, the grid in real time), and `on_event`
-    and `progress` get the paper's time.
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -373,7 +373,7 @@ def simulate(
             agents,
             sampler,
             trigger_times,
-            horizon=horizon if clock is None else clock.paper_horizon,
+            horizon=horizon,
             period=period,
             progress=progress,
             on_event=on_event,
@@ -383,10 +383,6 @@ def simulate(
             writer.abandon()  # what was written stays, named trajectory.incomplete
         raise
     wall_time = time.perf_counter() - started
-    extra = {}
-    if clock is not None:  # the events were found in the paper's time: labelled in real time
-        trigger_times = {i: [clock.real(s) for s in times] for i, times in trigger_times.items()}
-        extra['time_warp'] = time_warp.to_dict()
     return RunRecord(
         scenario=scenario,
         horizon=horizon,
@@ -399,7 +395,7 @@ def simulate(
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
-            **extra,
+            **({} if clock is None else {'time_warp': clock.warp.to_dict()}),
         },
     )
 
@@ -416,7 +412,11 @@ def _run(
     progress,
     on_event,
 ) -> int:
-    """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent."""
+    """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent.
+    With the sampler's warp clock it runs in the paper's time and labels the triggering times in real time."""
+    clock = sampler.clock
+    if clock is not None:
+        horizon = clock.paper_horizon
     messages = 0
     agenda = _Agenda(horizon=horizon, period=period)
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
@@ -456,6 +456,8 @@ def _run(
         world.advance(t_next)
         t = t_next
         due = agenda.pop_due(t)
+    if clock is not None:
+        trigger_times.update(clock.relabel(trigger_times))
     return messages
 
 
