@@ -90,3 +90,68 @@ def test_too_many_pieces_refused():
     n = MAX_PIECES + 1
     with pytest.raises(WarpError, match=f'at most {MAX_PIECES} pieces, got {n}'):
         TimeWarp(paper_starts=tuple(float(k) for k in range(n)), rates=(1.0,) * n)
+
+
+def test_warped_agents_in_real_time_trigger_when_the_engine_s_warped_run_does():
+    """A team of `WarpedAgent`s driven in real time, as agent nodes on the wall clock drive them
+    (the world moving in the paper's time), triggers at the engine's warped triggering times."""
+    import numpy as np
+
+    from formation_agent.core.time_warp import WarpedAgent
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.engine import build_agent, simulate
+    from formation_sim.sim.world import World
+
+    scenario = load_scenario('robots_lab')
+    horizon = 8.0
+    expected = simulate(scenario, horizon=horizon, sample_dt=None, time_warp=WARP).trigger_times
+    agents = {i: WarpedAgent(build_agent(scenario, i), WARP) for i in scenario.agent_ids}
+    world = World.from_scenario(scenario)
+    got = {i: [] for i in agents}
+    due, t = list(agents), 0.0
+    while True:
+        world.advance(max(world.time, agents[due[0]].paper(t)))  # the world in s
+        outbox = []
+        for i in due:
+            out = agents[i].trigger(t, world.sense(i, agents[i].core.neighbour_ids))
+            assert out.time == t and all(info.stamp == t for info in out.infos)
+            world.set_control(i, out.control)  # u_p: the world moves in s
+            got[i].append(t)
+            outbox.extend(out.infos)
+        for info in outbox:
+            agents[info.receiver].receive(info)
+        plan = {i: agent.next_trigger_time(horizon) for i, agent in agents.items()}
+        t = min(plan.values())
+        if not t <= horizon:
+            break
+        due = sorted(i for i, ti in plan.items() if ti == t)
+    for i, times in expected.items():
+        assert len(got[i]) == len(times) > 5
+        np.testing.assert_allclose(got[i], times, rtol=1e-12, atol=1e-14)
+    assert np.array_equal(agents[1].control, agents[1].core.control)  # the paper's u_p
+
+
+@pytest.mark.parametrize(
+    ('values', 'words'),
+    [
+        ({'time_warp': [0.0, 0.5, 1.0]}, 'time_warp: must be the pairs [s_0, κ_0, s_1, κ_1, ...]'),
+        ({'time_warp': [0.0, 0.5], 'algorithm': 'eta2'}, 'time_warp: eta1 only'),
+        (
+            {'time_warp': [0.0, 0.5], 'speed_scale': 0.5},
+            'time_warp: replaces speed_scale, which must then be 1',
+        ),
+        ({'time_warp': [0.0, 0.5], 'robot': 'none'}, 'time_warp: applies to robots (wall clock) only so far'),
+    ],
+)
+def test_the_agents_parameter_is_checked_with_rule_and_value(values, words):
+    from formation_agent.ros.config import AGENT_PARAMETERS, _warp_problems
+
+    assert next(spec for spec in AGENT_PARAMETERS if spec.name == 'time_warp').default == []
+    problems = _warp_problems({'algorithm': 'eta1', 'speed_scale': 1.0, 'robot': 'unicycle', **values})
+    assert len(problems) == 1 and words in problems[0]
+    assert (
+        _warp_problems(
+            {'algorithm': 'eta1', 'speed_scale': 1.0, 'robot': 'unicycle', 'time_warp': [0.0, 1.0]}
+        )
+        == []
+    )

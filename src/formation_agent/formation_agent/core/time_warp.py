@@ -13,12 +13,14 @@ and the commands, κ(t) u_p, change.
 rounded past its piece's end is held at that end): map each time once, the way it is used (events
 are found in s and labelled with `real(s)`; a clock's real time is read with `paper(t)`).
 
-No ROS: the agent layer's core, so that an agent node can apply it at its edges.
+No ROS: the agent layer's core, so that an agent node can apply it at its edges (`WarpedAgent`:
+an agent's core in s seen in real time; a robot's command κ(t) u_p: `RobotCommander`'s warp).
 """
 
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -143,3 +145,57 @@ def _number(what: str, value) -> float:
     if not math.isfinite(number):
         raise WarpError(f'time_warp: {what} must be finite numbers, got {number!r}')
     return number
+
+
+class WarpedAgent:
+    """An ETA-1 agent core running in the paper's time s (κ = 1 gains), seen in real time through a
+    warp: what an agent node on the wall clock drives (`trigger`, `receive`, `next_trigger_time`,
+    `ready`, as `formation_agent.core.eta`'s agents).
+
+    A real time is mapped to s once, where it enters (a trigger's time, a neighbour's stamp), and a
+    triggering time found in s leaves as t(s); the times this agent planned or triggered at map back
+    to their own s exactly (no round trip through the floats). Its `control` and the controls it
+    sends are the paper's u_p: a robot is sent κ(t) u_p (`RobotCommander`), neighbours predict in s.
+    """
+
+    def __init__(self, core, warp: TimeWarp) -> None:
+        self.core = core
+        self.warp = warp
+        self._known: dict[float, float] = {}  # real -> paper of the planned and the last trigger
+        self._last = (-math.inf, -math.inf)  # (real, paper) of the last trigger
+
+    @property
+    def ready(self) -> bool:
+        return self.core.ready
+
+    @property
+    def control(self):
+        return self.core.control
+
+    def paper(self, t: float) -> float:
+        known = self._known.get(t)
+        return self.warp.paper(t) if known is None else known
+
+    def trigger(self, t: float, sensed):
+        s = self.paper(t)
+        out = self.core.trigger(s, sensed)
+        self._known = {t: s}
+        self._last = (t, s)
+        infos = tuple(dataclasses.replace(info, stamp=t) for info in out.infos)
+        return dataclasses.replace(out, time=t, infos=infos)
+
+    def receive(self, info) -> None:
+        """A neighbour's information, its real stamp mapped to s; a stamp at or after this agent's
+        last trigger maps to no earlier s than that trigger's (order in real time is kept in s)."""
+        s = self.paper(info.stamp)
+        if info.stamp >= self._last[0]:
+            s = max(s, self._last[1])
+        self.core.receive(dataclasses.replace(info, stamp=s))
+
+    def next_trigger_time(self, limit: float = math.inf) -> float:
+        s = self.core.next_trigger_time(self.warp.paper(limit) if math.isfinite(limit) else math.inf)
+        if not math.isfinite(s):
+            return s
+        t = self.warp.real(s)
+        self._known[t] = s
+        return t

@@ -38,8 +38,8 @@ def robot_limits(args: argparse.Namespace) -> RobotLimits:
 
 AUTO = 'auto'
 WARP = 'warp'
-WARP_COMMANDS = ('simulate', 'validate')
-"""The commands that apply a time warp (`--speed-scale warp`); the agent nodes take none yet."""
+WARP_COMMANDS = ('simulate', 'validate', 'run')
+"""The commands that apply a time warp (`--speed-scale warp`); `run` on robot backends only."""
 
 
 def speed_scale_of(scenario: Scenario) -> float:
@@ -87,8 +87,8 @@ def resolve_speed_scale(
     if getattr(args, 'speed_scale', None) == WARP and command not in WARP_COMMANDS:
         refuse(
             command,
-            f'--speed-scale warp: only formation {" and ".join(WARP_COMMANDS)} apply a time warp so far '
-            '(the agent nodes take none yet; docs/SPEED_SCALE.md, "A time warp"): use --speed-scale auto',
+            f'--speed-scale warp: only formation {", ".join(WARP_COMMANDS)} apply a time warp so far '
+            '(docs/SPEED_SCALE.md, "A time warp"): use --speed-scale auto',
         )
         return None
     if getattr(args, 'speed_scale', None) != AUTO:
