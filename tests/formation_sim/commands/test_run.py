@@ -422,24 +422,29 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
     class Recorded(orchestrate.FormationRun):
         def run(self):
             seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
+            seen.update(warp=self.options.robots.time_warp)
             raise orchestrate.RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
-    arguments = [
-        'run',
-        'robots_lab',
-        '--backend',
-        'unicycle',
-        *TURTLEBOT3_LIMITS,
-        '--speed-scale',
-        'auto',
-        '--quiet',
-    ]
+    # ETA-2 on robots: the constant κ
+    arguments = ['run', 'robots_lab_double', '--backend', 'holonomic', '--max-speed', '0.5']
+    arguments += ['--max-acceleration', '1', '--speed-scale', 'auto', '--quiet']
     assert main([*arguments, '--out', str(tmp_path / 'a')]) == 2  # the test's stop, after the check passed
     err = capsys.readouterr().err
     assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
-    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.2
+    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.5 and seen['warp'] == ()
     assert seen['extra']['speed_scale']['source'] == 'observed'
+    # ETA-1 on robots: the observed time warp (issue 27), the agents at κ = 1 in the paper's time
+    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto']
+    assert main([*arguments, '--quiet', '--out', str(tmp_path / 'b')]) == 2
+    err = capsys.readouterr().err
+    assert '--speed-scale auto: a time warp, κ(t) in ' in err and 'beyond' not in err
+    assert seen['kappa'] == 1.0 and seen['extra']['speed_scale']['kind'] == 'time_warp'
+    assert seen['warp'] == tuple(
+        seen['extra']['speed_scale']['observed'][key][k]
+        for k in range(len(seen['extra']['speed_scale']['observed']['rates']))
+        for key in ('paper_starts', 'rates')
+    )
 
 
 def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
@@ -500,7 +505,7 @@ def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path,
     ]
     assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'a')]) == 2  # the test's stop
     err = capsys.readouterr().err
-    assert '--speed-scale warp: κ(t) in ' in err and 'beyond' not in err
+    assert '--speed-scale warp: a time warp, κ(t) in ' in err and 'beyond' not in err
     warp = choose_time_warp(
         load_scenario('robots_lab').replace(horizon=30.0),
         limits=RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1),

@@ -366,7 +366,9 @@ def test_speed_scale_warp_runs_the_observed_warp_and_records_it(tmp_path, capsys
         paper_starts=tuple(chosen['observed']['paper_starts']), rates=tuple(chosen['observed']['rates'])
     )
     assert summary['extra']['time_warp']['rates'] == list(warp.rates)
-    assert f'--speed-scale warp: κ(t) in {warp.pieces} pieces from {warp.rates[0]:.4g} to 1' in err
+    assert (
+        f'--speed-scale warp: a time warp, κ(t) in {warp.pieces} pieces from {warp.rates[0]:.4g} to 1' in err
+    )
     # the choice is the library's for the same limits, and the run is the engine's under it
     choice = choose_time_warp(
         load_scenario('robots_lab').replace(horizon=20.0),

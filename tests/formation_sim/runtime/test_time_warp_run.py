@@ -1,7 +1,7 @@
 """A time warp on simulated robots (docs/SPEED_SCALE.md, "A time warp"; real processes, private ROS
-domain 203): `formation run --backend unicycle --speed-scale warp` hands the observed warp to every
-agent, which runs its core in the paper's time and sends κ(t) u_p; the team forms within the
-limits, with no command clipped."""
+domain 203): `formation run --backend unicycle --speed-scale auto` (ETA-1 on robots: the warp)
+hands the observed warp to every agent, which runs its core in the paper's time and sends
+κ(t) u_p; the team forms within the limits, with no command clipped."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('format
 def test_a_warped_unicycle_run_forms_within_the_limits(tmp_path):
     out = tmp_path / 'run'
     limits = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
-    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *limits, '--speed-scale', 'warp']
+    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *limits, '--speed-scale', 'auto']
     code = main(
         [*arguments, '--horizon', '12', '--domain-id', '203', '--out', str(out), '--quiet', '--no-plot']
     )

@@ -209,10 +209,15 @@ def check_saturation(
     return message
 
 
-def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str):
-    """`--speed-scale warp`: (the scenario at κ = 1, the observed warp of `choose_time_warp` for the
-    parsed limits, what to record in summary.json's extra.speed_scale), after saying so on stderr;
-    None after printing why no warp applies (nothing started)."""
+def chosen_warp(record: dict | None) -> bool:
+    """Whether summary.json's extra.speed_scale `record` is a time warp's."""
+    return record is not None and record.get('kind') == 'time_warp'
+
+
+def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str, *, flag: str = WARP):
+    """`--speed-scale warp` (or `flag`: auto on robots): (the scenario at κ = 1, the observed warp of
+    `choose_time_warp` for the parsed limits, what to record in summary.json's extra.speed_scale),
+    after saying so on stderr; None after printing why no warp applies (nothing started)."""
     from formation_sim.sim.largest_command import choose_time_warp, unit_scale
 
     try:
@@ -220,12 +225,13 @@ def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str
         horizon = scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
         choice = choose_time_warp(scenario.replace(horizon=horizon), limits=limits)
     except LimitsError as error:
-        refuse(command, f'--speed-scale warp: {error}')
+        refuse(command, f'--speed-scale {flag}: {error}')
         return None
     warp = choice.warp
     settle = choice.settle_time(warp)
     print(
-        f'formation {command}: --speed-scale warp: κ(t) in {warp.pieces} pieces from {warp.rates[0]:.4g} '
+        f'formation {command}: --speed-scale {flag}: a time warp, κ(t) in {warp.pieces} pieces from '
+        f'{warp.rates[0]:.4g} '
         f'to {warp.max_rate:.4g} (observed: the exact run at κ = 1 kept {choice.margin:g}× below the speed '
         f'limit {choice.limits.speed_limit()[0]:.4g} m/s, capped at {choice.cap:g}'
         + (

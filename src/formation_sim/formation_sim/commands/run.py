@@ -19,8 +19,10 @@ from formation_sim.commands.common import (
     refuse,
 )
 from formation_sim.commands.limits import (
+    AUTO,
     WARP,
     check_saturation,
+    chosen_warp,
     resolve_speed_scale,
     resolve_time_warp,
     robot_limits,
@@ -98,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(resolved := _speed_scale(scenario, args, options), int):
         return resolved
     scenario, chosen = resolved
-    if options['robots'] is not None and args.speed_scale != WARP:  # a warp is chosen within the limits
+    if options['robots'] is not None and not chosen_warp(chosen):  # a warp is chosen within the limits
         horizon = scenario.horizon if args.horizon is None else args.horizon
         refusal = check_saturation(
             scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation
@@ -143,10 +145,12 @@ def run(args: argparse.Namespace) -> int:
 def _speed_scale(scenario, args: argparse.Namespace, options: dict):
     """(the scenario to run, what summary.json records of the speed's choice) for --speed-scale
     auto, warp (robot backends: the agents' time warp goes into `options`) or K; else the exit status
-    after saying why not."""
+    after saying why not.  On robots, auto runs ETA-1 under the observed warp (issue 27), ETA-2 at
+    the constant κ; in lock-step, auto is the constant κ (what `simulate --speed-scale auto` runs)."""
     import dataclasses
 
-    if args.speed_scale != WARP:
+    warped_auto = args.speed_scale == AUTO and options['robots'] is not None and scenario.dynamics == 'single'
+    if args.speed_scale != WARP and not warped_auto:
         resolved = resolve_speed_scale(scenario, args, 'run')
         return EXIT_BAD_INPUT if resolved is None else resolved
     if options['robots'] is None:
@@ -155,7 +159,7 @@ def _speed_scale(scenario, args: argparse.Namespace, options: dict):
             '--speed-scale warp: robot backends only so far (the lock-step simulator takes no warp; '
             'formation simulate --speed-scale warp runs it exactly)',
         )
-    if (warped := resolve_time_warp(scenario, args, 'run')) is None:
+    if (warped := resolve_time_warp(scenario, args, 'run', flag=args.speed_scale)) is None:
         return EXIT_BAD_INPUT
     scenario, warp, chosen = warped
     options['robots'] = dataclasses.replace(options['robots'], time_warp=tuple(warp.to_parameter()))
