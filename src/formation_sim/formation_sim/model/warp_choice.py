@@ -217,5 +217,5 @@ class WarpChoice:
                 f'  the constant observed κ = {constant:.4g}: {fraction} after '
                 f'{self.settling.at(constant):.4g} s'
             )
-        lines.append('  --speed-scale warp runs the observed warp')
+        lines.append('  --speed-scale warp (and auto on robots, ETA-1) runs the observed warp')
         return lines
