@@ -101,3 +101,19 @@ def test_a_commander_that_cannot_drive_is_refused(options, complaint):
     assert complaint in str(error.value)
     with pytest.raises(ValueError, match=r'limit angular_speed must be > 0 \(inf: none\), got nan'):
         Limits(angular_speed=math.nan)
+
+
+def test_a_warped_eta1_command_is_the_paper_command_times_the_rate_at_its_time():
+    from formation_agent.core.time_warp import TimeWarp
+
+    warp = TimeWarp(paper_starts=(0.0, 0.5), rates=(0.25, 1.0))  # κ = 1 from t = 2 on
+    commander = RobotCommander(
+        drive='holonomic', dimension=2, limits=Limits(linear_speed=0.3), time_warp=warp
+    )
+    commander.set_control(0.0, (0.8, -0.6))  # the paper's u_p: 1 m/s
+    assert commander.command(1.999) == pytest.approx((0.2, -0.15))  # 0.25 u_p, within the limit
+    assert commander.saturation.records == {}
+    assert commander.command(2.0) == pytest.approx((0.24, -0.18))  # u_p clipped to 0.3 m/s, counted
+    assert len(commander.saturation.records) == 1
+    with pytest.raises(ValueError, match='time_warp: ETA-1 only'):
+        RobotCommander(drive='holonomic', dimension=2, limits=Limits(), k3=0.6, time_warp=warp)

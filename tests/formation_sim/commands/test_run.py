@@ -422,24 +422,29 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
     class Recorded(orchestrate.FormationRun):
         def run(self):
             seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
+            seen.update(warp=self.options.robots.time_warp)
             raise orchestrate.RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
-    arguments = [
-        'run',
-        'robots_lab',
-        '--backend',
-        'unicycle',
-        *TURTLEBOT3_LIMITS,
-        '--speed-scale',
-        'auto',
-        '--quiet',
-    ]
+    # ETA-2 on robots: the constant κ
+    arguments = ['run', 'robots_lab_double', '--backend', 'holonomic', '--max-speed', '0.5']
+    arguments += ['--max-acceleration', '1', '--speed-scale', 'auto', '--quiet']
     assert main([*arguments, '--out', str(tmp_path / 'a')]) == 2  # the test's stop, after the check passed
     err = capsys.readouterr().err
     assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
-    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.2
+    assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.5 and seen['warp'] == ()
     assert seen['extra']['speed_scale']['source'] == 'observed'
+    # ETA-1 on robots: the observed time warp (issue 27), the agents at κ = 1 in the paper's time
+    arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto']
+    assert main([*arguments, '--quiet', '--out', str(tmp_path / 'b')]) == 2
+    err = capsys.readouterr().err
+    assert '--speed-scale auto: a time warp, κ(t) in ' in err and 'beyond' not in err
+    assert seen['kappa'] == 1.0 and seen['extra']['speed_scale']['kind'] == 'time_warp'
+    assert seen['warp'] == tuple(
+        seen['extra']['speed_scale']['observed'][key][k]
+        for k in range(len(seen['extra']['speed_scale']['observed']['rates']))
+        for key in ('paper_starts', 'rates')
+    )
 
 
 def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
@@ -469,3 +474,66 @@ def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypa
     assert started == [0.15] and 'beyond' not in capsys.readouterr().err
     assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2
     assert started == [0.15] and 'beyond --max-angular-speed 0.5 rad/s' in capsys.readouterr().err
+
+
+def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path, capsys, monkeypatch):
+    import yaml
+
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.model.speed_choice import RobotLimits
+    from formation_sim.runtime import launch, orchestrate
+    from formation_sim.sim.largest_command import choose_time_warp
+
+    seen = {}
+
+    class Recorded(orchestrate.FormationRun):
+        def run(self):
+            seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
+            seen.update(robots=self.options.robots)
+            raise orchestrate.RunError('stopped by the test')
+
+    monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
+    arguments = [
+        'run',
+        'robots_lab',
+        *TURTLEBOT3_LIMITS,
+        '--speed-scale',
+        'warp',
+        '--horizon',
+        '30',
+        '--quiet',
+    ]
+    assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'a')]) == 2  # the test's stop
+    err = capsys.readouterr().err
+    assert '--speed-scale warp: a time warp, κ(t) in ' in err and 'beyond' not in err
+    warp = choose_time_warp(
+        load_scenario('robots_lab').replace(horizon=30.0),
+        limits=RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1),
+    ).warp
+    assert seen['kappa'] == 1.0 and seen['extra']['speed_scale']['kind'] == 'time_warp'
+    assert seen['robots'].time_warp == tuple(warp.to_parameter())
+    parameters = seen['robots'].agent_parameters()
+    assert parameters['time_warp'] == warp.to_parameter()
+    # every agent's params file holds the list itself: rcl reads no YAML alias
+    path = tmp_path / 'agents.params.yaml'
+    launch._write_yaml(path, {f'/agent_{i}/formation_agent': {'ros__parameters': parameters} for i in (1, 2)})
+    assert '&' not in path.read_text() and '*' not in path.read_text()
+    assert yaml.safe_load(path.read_text())['/agent_2/formation_agent']['ros__parameters']['time_warp'] == (
+        warp.to_parameter()
+    )
+    # the lock-step simulator takes no warp, nor ETA-2: refused before anything starts
+    assert main([*arguments, '--out', str(tmp_path / 'b')]) == 2
+    assert '--speed-scale warp: robot backends only so far' in capsys.readouterr().err
+    double = [
+        'run',
+        'robots_lab_double',
+        '--max-speed',
+        '0.5',
+        '--speed-scale',
+        'warp',
+        '--backend',
+        'holonomic',
+    ]
+    assert main([*double, '--out', str(tmp_path / 'c'), '--quiet']) == 2
+    assert '--speed-scale warp: time_warp: ETA-1 only' in capsys.readouterr().err
+    assert not any((tmp_path / name).exists() for name in 'abc')

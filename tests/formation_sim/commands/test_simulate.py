@@ -343,3 +343,47 @@ def test_speed_scale_auto_chooses_kappa_from_the_limits_and_records_it(tmp_path,
     assert (
         "argument --speed-scale: must be a finite number > 0 or 'auto', got 'fast'" in capsys.readouterr().err
     )
+
+
+def test_speed_scale_warp_runs_the_observed_warp_and_records_it(tmp_path, capsys):
+    import json
+
+    from formation_agent.core.time_warp import TimeWarp
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.model.speed_choice import RobotLimits
+    from formation_sim.sim.largest_command import choose_time_warp
+
+    limits = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
+    out = tmp_path / 'warp'
+    arguments = ['simulate', 'robots_lab', '--speed-scale', 'warp', *limits, '--horizon', '20']
+    assert main([*arguments, '--out', str(out), '--quiet', '--no-plot']) == 0
+    err = capsys.readouterr().err
+    summary = json.loads((out / 'summary.json').read_text())
+    chosen = summary['extra']['speed_scale']
+    assert chosen['kind'] == 'time_warp' and chosen['source'] == 'observed' and chosen['margin'] == 1.25
+    assert chosen['cap'] == 1.0 and chosen['limits']['max_speed'] == 0.22
+    warp = TimeWarp(
+        paper_starts=tuple(chosen['observed']['paper_starts']), rates=tuple(chosen['observed']['rates'])
+    )
+    assert summary['extra']['time_warp']['rates'] == list(warp.rates)
+    assert (
+        f'--speed-scale warp: a time warp, κ(t) in {warp.pieces} pieces from {warp.rates[0]:.4g} to 1' in err
+    )
+    # the choice is the library's for the same limits, and the run is the engine's under it
+    choice = choose_time_warp(
+        load_scenario('robots_lab').replace(horizon=20.0),
+        limits=RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1),
+    )
+    assert choice.warp == warp
+    record = simulate(load_scenario('robots_lab'), horizon=20.0, sample_dt=None, time_warp=warp)
+    assert summary['trigger_times'] == {str(k): v for k, v in record.trigger_times.items()}
+    # what applies no warp is refused before anything starts
+    for extra, words in (
+        (['--period', '0.1'], '--speed-scale warp: the event-triggered engine only'),
+        ([], '--speed-scale warp: time_warp: ETA-1 only'),
+    ):
+        scenario = 'paper_double' if not extra else 'robots_lab'
+        bad = tmp_path / 'bad'
+        assert main(['simulate', scenario, '--speed-scale', 'warp', *limits, *extra, '--out', str(bad)]) == 2
+        assert words in capsys.readouterr().err
+        assert not bad.exists()

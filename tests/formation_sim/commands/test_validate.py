@@ -834,3 +834,43 @@ def test_validate_suggests_the_threshold_floor_for_a_pose_noise(capsys):
     assert f'suggested c0 = {floor["suggested"]:.3g}' in out and 'sqrt(3 Σ_j ω_ij² + (Σ_j ω_ij)²)' in out
     assert main(['validate', 'robots_lab', '--pose-noise', '0']) == 2
     assert 'argument --pose-noise: must be a finite number > 0, got 0.0' in capsys.readouterr().err
+
+
+def test_validate_reports_the_time_to_five_percent_with_the_warp_and_the_constant_kappa(capsys):
+    import numpy as np
+
+    from formation_agent.core.time_warp import TimeWarp
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.engine import simulate
+
+    limits = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
+    assert main(['validate', 'robots_lab', *limits, '--json']) == 1
+    data = json.loads(capsys.readouterr().out)['commands']
+    warp_data = data['time_warp']
+    warp = TimeWarp(
+        paper_starts=tuple(warp_data['observed']['paper_starts']), rates=tuple(warp_data['observed']['rates'])
+    )
+    settle = warp_data['observed']['settle_time']
+    constant = warp_data['constant_settle_time']
+    assert math.isclose(constant, data['speed_scale']['observed']['settle_time'], rel_tol=1e-12)
+    assert settle < constant / 2.5  # robots_lab: 2.1 s against 6.4 s
+    # the warped run itself crosses 5 % of its initial formation error for good at that real time
+    scenario = load_scenario('robots_lab')
+    record = simulate(scenario, horizon=20.0, sample_dt=None, time_warp=warp)
+    heads, tails, d = scenario.edge_indices()
+    x = np.asarray(record.sample_positions)
+    error = np.linalg.norm(x[:, heads] - x[:, tails] - d, axis=2).max(axis=1)
+    above = np.flatnonzero(error > 0.05 * error[0])
+    times = np.asarray(record.sample_times)
+    assert times[above[-1]] <= settle <= times[above[-1] + 1]
+    assert warp_data['guaranteed']['settle_time'] > settle
+    assert main(['validate', 'robots_lab', *limits]) == 1
+    out = capsys.readouterr().out
+    assert (
+        f'observed: {warp.pieces} pieces, κ from {warp.rates[0]:.4g} to 1; 5 % of the formation error after'
+        in out
+    )
+    assert f'the constant observed κ = {data["speed_scale"]["value"]:.4g}: 5 % after {constant:.4g} s' in out
+    # ETA-2: no warp, and why
+    main(['validate', 'paper_double', '--max-speed', '0.22'])
+    assert 'time warp: none: time_warp: ETA-1 only' in capsys.readouterr().out

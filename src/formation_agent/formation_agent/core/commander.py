@@ -60,7 +60,10 @@ class RobotCommander:
         distance: float = 0.0,
         wheelbase: float = 0.0,
         k3: float | None = None,
+        time_warp=None,
     ) -> None:
+        """`time_warp` (ETA-1; `formation_agent.core.time_warp.TimeWarp`): the controls are the
+        paper's u_p and the robot is sent κ(t) u_p at each command's real time t."""
         if drive not in DRIVES:
             raise KindError(f'drive must be one of {DRIVES}, got {drive!r}')
         self.kind = robot_kind(drive)
@@ -73,6 +76,9 @@ class RobotCommander:
         self.limits = limits
         self.distance = float(distance)
         self.k3 = k3
+        if time_warp is not None and k3 is not None:
+            raise ValueError('time_warp: ETA-1 only (ETA-2 stays on a constant speed scale)')
+        self.time_warp = time_warp
         self.saturation = SaturationLog()
         self.commands = 0  # commands computed (each published once)
         self._desired: np.ndarray | None = None  # ETA-1: u_i
@@ -106,7 +112,7 @@ class RobotCommander:
             return self._reference.velocity(t)
         if self._desired is None:
             raise ValueError('no control yet: the agent has not triggered')
-        return self._desired
+        return self._desired if self.time_warp is None else self.time_warp.rate(t) * self._desired
 
     def command(self, t: float, heading: float | None = None) -> tuple[float, ...]:
         """The robot's command at t by its kind's adapter: (u_1..u_p) in the world frame (holonomic)

@@ -122,6 +122,7 @@ class RobotOutput:
             distance=config.control_point_distance,
             wheelbase=config.wheelbase,
             k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
+            time_warp=config.time_warp,  # the agent's controls are then u_p: sent as κ(t) u_p
         )
         self._world_frame = self.commander.kind.world_frame_command  # TwistStamped; else Twist (v, ω)
         self.publisher = node.create_publisher(

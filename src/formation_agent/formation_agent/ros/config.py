@@ -15,6 +15,7 @@ from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
 from formation_agent.core.kinds.registry import Geometry
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
+from formation_agent.core.time_warp import TimeWarp, WarpError
 from formation_agent.ros.parameters import (
     DOUBLE,
     DOUBLE_ARRAY,
@@ -85,6 +86,14 @@ AGENT_PARAMETERS = (
         default=SCALE_GAINS['speed_scale'],
         low=SPEED_SCALE_LIMITS[0],
         high=SPEED_SCALE_LIMITS[1],
+    ),
+    _spec(
+        'time_warp',
+        DOUBLE_ARRAY,
+        "eta1 on robots: a time warp [s_0, κ_0, s_1, κ_1, ...] (docs/SPEED_SCALE.md, 'A time warp'): "
+        "the paper's run at s(t), ds/dt = κ_m from s_m on, commands κ(t) u_i; speed_scale must be 1; "
+        '[]: none',
+        default=[],
     ),
     _spec(
         'threshold_floor',
@@ -280,6 +289,7 @@ class AgentConfig:
     inject_delay_ms: float
     inject_jitter_ms: float
     inject_seed: int
+    time_warp: TimeWarp | None = None
 
     @property
     def double(self) -> bool:
@@ -340,6 +350,7 @@ def read_config(node) -> AgentConfig:
             linear_acceleration=values['max_linear_acceleration'],
             steering_angle=values['max_steering_angle'],
         ),
+        time_warp=TimeWarp.from_parameter(values['time_warp']) if values['time_warp'] else None,
         **{
             name: values[name]
             for name in (
@@ -389,6 +400,8 @@ def _rules(node, values: dict) -> list[str]:
             f'agent {values["agent_id"]} must run in namespace {expected}, not {node.get_namespace()} '
             f'(e.g. --ros-args -r __ns:={expected}, or formation_agent --agents {values["agent_id"]})'
         )
+    if have('time_warp') and values['time_warp']:
+        problems += _warp_problems(values)
     if have('world_frame') and not values['world_frame']:
         problems.append("world_frame must name a frame, got ''")
     if have('pose_topic') and values['pose_topic'] and '{id}' not in values['pose_topic']:
@@ -408,6 +421,26 @@ def _rules(node, values: dict) -> list[str]:
         )
     if robot not in (None, 'none') and have('control_point_distance', 'wheelbase'):
         problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
+    return problems
+
+
+def _warp_problems(values: dict) -> list[str]:
+    """A time warp: a good one (its rule time_warp), on ETA-1, at speed scale 1, on a robot."""
+    try:
+        TimeWarp.from_parameter(values['time_warp'])
+    except WarpError as error:
+        return [str(error)]
+    problems = []
+    if values.get('algorithm') == 'eta2':
+        problems.append('time_warp: eta1 only (eta2 stays on a constant speed_scale: docs/SPEED_SCALE.md)')
+    if values.get('speed_scale', 1.0) != 1.0:
+        problems.append(
+            f'time_warp: replaces speed_scale, which must then be 1, got {values["speed_scale"]!r}'
+        )
+    if values.get('robot') == 'none':
+        problems.append(
+            'time_warp: applies to robots (wall clock) only so far; a lock-step run takes none (robot: none)'
+        )
     return problems
 
 

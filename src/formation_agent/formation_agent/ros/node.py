@@ -43,6 +43,7 @@ from std_msgs.msg import Float64MultiArray
 
 from formation_agent.core.eta import make_agent
 from formation_agent.core.pose_sensing import PoseError
+from formation_agent.core.time_warp import WarpedAgent
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
 from formation_agent.ros.discovery import Discovery, SimulatorWatch
@@ -105,14 +106,16 @@ class _NodeTimers:
 
 
 def _make_core(config):
-    """The agent's ETA-1 or ETA-2 core (`formation_agent.core.eta`) from its parameters."""
-    return make_agent(
+    """The agent's ETA-1 or ETA-2 core (`formation_agent.core.eta`) from its parameters; with a time
+    warp, run in the paper's time and seen in real time (`WarpedAgent`)."""
+    core = make_agent(
         agent_id=config.agent_id,
         neighbours=config.neighbours,
         delta=config.delta,
         algorithm=config.algorithm,
         gains=config.gains,
     )
+    return core if config.time_warp is None else WarpedAgent(core, config.time_warp)
 
 
 def _make_faults(node: FormationAgentNode) -> InjectedFaults:

@@ -73,14 +73,15 @@ def POSITIVE_INT_OR_AUTO(text: str) -> int | str:
 
 
 def POSITIVE_OR_AUTO(text: str) -> float | str:
-    """A finite number > 0, or 'auto'."""
-    if text == 'auto':
+    """A finite number > 0, 'auto' or 'warp' (a time warp: `formation_sim.commands.limits`)."""
+    if text in ('auto', 'warp'):
         return text
     try:
         return POSITIVE(text)
     except argparse.ArgumentTypeError as error:
         raise argparse.ArgumentTypeError(
             str(error).replace('a finite number > 0', "a finite number > 0 or 'auto'", 1)
+            + " (or 'warp': a time warp, simulate and validate)"
         ) from None
 
 
@@ -165,7 +166,9 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
         "triggering time divided by κ; the horizon stays in seconds (default: the scenario's "
         'gains.speed_scale, 1). '
         "auto: the largest κ that keeps the exact run's commands 1.25 times below the robots' limits "
-        '(--max-speed, --max-angular-speed, --max-acceleration; README, "Running on robots")',
+        '(--max-speed, --max-angular-speed, --max-acceleration; README, "Running on robots"). '
+        'warp (simulate, validate; ETA-1): a speed that follows the run, κ(t) from the same limits '
+        '(docs/SPEED_SCALE.md, "A time warp")',
     )
     parser.add_argument(
         '--threshold-floor',
@@ -182,7 +185,7 @@ def scale_options(args: argparse.Namespace) -> dict:
     `--speed-scale auto` is left to `formation_sim.commands.limits.resolve_speed_scale` (None here)."""
     speed_scale = getattr(args, 'speed_scale', None)
     return {
-        'speed_scale': None if speed_scale == 'auto' else speed_scale,
+        'speed_scale': None if speed_scale in ('auto', 'warp') else speed_scale,
         'threshold_floor': getattr(args, 'threshold_floor', None),
     }
 

@@ -37,6 +37,9 @@ def robot_limits(args: argparse.Namespace) -> RobotLimits:
 
 
 AUTO = 'auto'
+WARP = 'warp'
+WARP_COMMANDS = ('simulate', 'validate', 'run')
+"""The commands that apply a time warp (`--speed-scale warp`); `run` on robot backends only."""
 
 
 def speed_scale_of(scenario: Scenario) -> float:
@@ -81,6 +84,13 @@ def resolve_speed_scale(
     other value: (the scenario, None).  None after printing why auto cannot choose (nothing started)."""
     from formation_sim.sim.largest_command import choose_speed_scale
 
+    if getattr(args, 'speed_scale', None) == WARP and command not in WARP_COMMANDS:
+        refuse(
+            command,
+            f'--speed-scale warp: only formation {", ".join(WARP_COMMANDS)} apply a time warp so far '
+            '(docs/SPEED_SCALE.md, "A time warp"): use --speed-scale auto',
+        )
+        return None
     if getattr(args, 'speed_scale', None) != AUTO:
         return scenario, None
     try:
@@ -197,3 +207,39 @@ def check_saturation(
         )
         return None
     return message
+
+
+def chosen_warp(record: dict | None) -> bool:
+    """Whether summary.json's extra.speed_scale `record` is a time warp's."""
+    return record is not None and record.get('kind') == 'time_warp'
+
+
+def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str, *, flag: str = WARP):
+    """`--speed-scale warp` (or `flag`: auto on robots): (the scenario at κ = 1, the observed warp of
+    `choose_time_warp` for the parsed limits, what to record in summary.json's extra.speed_scale),
+    after saying so on stderr; None after printing why no warp applies (nothing started)."""
+    from formation_sim.sim.largest_command import choose_time_warp, unit_scale
+
+    try:
+        limits = robot_limits(args)
+        horizon = scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
+        choice = choose_time_warp(scenario.replace(horizon=horizon), limits=limits)
+    except LimitsError as error:
+        refuse(command, f'--speed-scale {flag}: {error}')
+        return None
+    warp = choice.warp
+    settle = choice.settle_time(warp)
+    print(
+        f'formation {command}: --speed-scale {flag}: a time warp, κ(t) in {warp.pieces} pieces from '
+        f'{warp.rates[0]:.4g} '
+        f'to {warp.max_rate:.4g} (observed: the exact run at κ = 1 kept {choice.margin:g}× below the speed '
+        f'limit {choice.limits.speed_limit()[0]:.4g} m/s, capped at {choice.cap:g}'
+        + (
+            f'; {100 * choice.settling.fraction:g} % of the formation error after {settle:.3g} s'
+            if math.isfinite(settle)
+            else ''
+        )
+        + ')',
+        file=sys.stderr,
+    )
+    return unit_scale(scenario), warp, choice.to_dict()

@@ -18,7 +18,15 @@ from formation_sim.commands.common import (
     plan_options,
     refuse,
 )
-from formation_sim.commands.limits import check_saturation, resolve_speed_scale, robot_limits
+from formation_sim.commands.limits import (
+    AUTO,
+    WARP,
+    check_saturation,
+    chosen_warp,
+    resolve_speed_scale,
+    resolve_time_warp,
+    robot_limits,
+)
 
 
 def register(subparsers) -> None:
@@ -86,14 +94,14 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
         return EXIT_BAD_INPUT
-    if (resolved := resolve_speed_scale(scenario, args, 'run')) is None:
-        return EXIT_BAD_INPUT
-    scenario, chosen = resolved
     try:
         options = plan_options(args)
     except RunError as error:
         return refuse('run', error)
-    if options['robots'] is not None:
+    if isinstance(resolved := _speed_scale(scenario, args, options), int):
+        return resolved
+    scenario, chosen = resolved
+    if options['robots'] is not None and not chosen_warp(chosen):  # a warp is chosen within the limits
         horizon = scenario.horizon if args.horizon is None else args.horizon
         refusal = check_saturation(
             scenario.replace(horizon=horizon), limits=robot_limits(args), allow=args.allow_saturation
@@ -133,6 +141,30 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet and result.message:  # otherwise the run's last progress line said it already
         print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status
+
+
+def _speed_scale(scenario, args: argparse.Namespace, options: dict):
+    """(the scenario to run, what summary.json records of the speed's choice) for --speed-scale
+    auto, warp (robot backends: the agents' time warp goes into `options`) or K; else the exit status
+    after saying why not.  On robots, auto runs ETA-1 under the observed warp (issue 27), ETA-2 at
+    the constant κ; in lock-step, auto is the constant κ (what `simulate --speed-scale auto` runs)."""
+    import dataclasses
+
+    warped_auto = args.speed_scale == AUTO and options['robots'] is not None and scenario.dynamics == 'single'
+    if args.speed_scale != WARP and not warped_auto:
+        resolved = resolve_speed_scale(scenario, args, 'run')
+        return EXIT_BAD_INPUT if resolved is None else resolved
+    if options['robots'] is None:
+        return refuse(
+            'run',
+            '--speed-scale warp: robot backends only so far (the lock-step simulator takes no warp; '
+            'formation simulate --speed-scale warp runs it exactly)',
+        )
+    if (warped := resolve_time_warp(scenario, args, 'run', flag=args.speed_scale)) is None:
+        return EXIT_BAD_INPUT
+    scenario, warp, chosen = warped
+    options['robots'] = dataclasses.replace(options['robots'], time_warp=tuple(warp.to_parameter()))
+    return scenario, chosen
 
 
 def _warn_saturation(result) -> None:

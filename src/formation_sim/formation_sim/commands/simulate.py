@@ -20,7 +20,7 @@ from formation_sim.commands.common import (
     refuse,
     with_min_separation,
 )
-from formation_sim.commands.limits import add_limit_arguments, resolve_speed_scale
+from formation_sim.commands.limits import WARP, add_limit_arguments, resolve_speed_scale, resolve_time_warp
 
 
 DEFAULT_SAMPLE_DT = 0.01
@@ -124,9 +124,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None or (scenario := _with_safety(scenario, args)) is None:
         return EXIT_BAD_INPUT
-    if (resolved := resolve_speed_scale(scenario, args, 'simulate')) is None:
-        return EXIT_BAD_INPUT
-    scenario, auto_scale = resolved
+    if isinstance(resolved := _speed_scale(scenario, args), int):
+        return resolved
+    scenario, warp, auto_scale = resolved
     chosen = sample_policy(args, scenario.n)
     if isinstance(chosen, str):
         return refuse('simulate', chosen)
@@ -161,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
                 period=args.period,
                 trajectory_dir=out,  # the samples go to disk as they come
                 progress=progress,
+                time_warp=warp,
             )
     except (EngineError, ValueError, ArithmeticError, OSError) as error:
         return _run_failed(error, out)
@@ -201,6 +202,20 @@ def _with_safety(scenario, args: argparse.Namespace):
         refuse('simulate', 'the safety layer (--min-separation or safety:) runs with event triggering only')
         return None
     return scenario
+
+
+def _speed_scale(scenario, args: argparse.Namespace):
+    """(the scenario to run, the time warp or None, what summary.json records of the choice or None)
+    for --speed-scale auto, warp or K; the exit status after saying why not."""
+    if args.speed_scale != WARP:
+        resolved = resolve_speed_scale(scenario, args, 'simulate')
+        return EXIT_BAD_INPUT if resolved is None else (resolved[0], None, resolved[1])
+    if args.continuous or args.period is not None:
+        return refuse(
+            'simulate', '--speed-scale warp: the event-triggered engine only (no --continuous, --period)'
+        )
+    warped = resolve_time_warp(scenario, args, 'simulate')
+    return EXIT_BAD_INPUT if warped is None else warped
 
 
 def _run_failed(error: Exception, out: Path) -> int:

@@ -212,14 +212,31 @@ def _commands(scenario, args: argparse.Namespace) -> dict:
     )
     choice = choose_speed_scale(scenario, limits=limits)
     lines.extend(choice.lines())
+    warp = _time_warp(scenario, limits, constant=choice.value, lines=lines)
     return {
         'within': within,
         'guaranteed': guaranteed,
         'largest': answer.to_dict(),
         'theory_too_loose': None if loose is None else loose.to_dict(),
         'speed_scale': choice.to_dict(),
+        'time_warp': warp,
         'lines': lines,
     }
+
+
+def _time_warp(scenario, limits: RobotLimits, *, constant: float, lines: list[str]) -> dict:
+    """The time warps for `limits` (ETA-1) and the time to settle with them and with the constant
+    κ, appended to `lines`; {'missing': why} where no warp applies."""
+    from formation_sim.sim.largest_command import choose_time_warp
+
+    try:
+        warp = choose_time_warp(scenario, limits=limits)
+    except LimitsError as error:
+        lines.append(f'time warp: none: {error}')
+        return {'missing': str(error)}
+    lines.extend(warp.lines(constant=constant))
+    settle = warp.settling.at(constant)
+    return {**warp.to_dict(), 'constant_settle_time': settle if math.isfinite(settle) else None}
 
 
 def _limits(args: argparse.Namespace) -> RobotLimits:

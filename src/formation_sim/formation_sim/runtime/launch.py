@@ -113,6 +113,7 @@ class RobotOptions:
     pose_type: str = 'odom'  # what the agents read: 'odom' (nav_msgs/Odometry) or 'pose' (PoseStamped)
     pose_timeout: float = 0.5  # [s] an older pose stops the agent safely
     world_frame: str = WORLD_FRAME
+    time_warp: tuple[float, ...] = ()  # ETA-1: the agents' time warp [s_0, κ_0, ...] (); (): none
     # Simulated robots only:
     rate: float = 100.0  # [Hz]
     yaw: float | None = None  # initial heading of every robot [rad]; None: the scenario's `heading`s, else 0
@@ -206,6 +207,8 @@ class RobotOptions:
                 params[name] = float(getattr(self, name))
         if self.wheelbase > 0.0:  # a car's; none: the default
             params['wheelbase'] = float(self.wheelbase)
+        if self.time_warp:  # docs/SPEED_SCALE.md, "A time warp"
+            params['time_warp'] = [float(v) for v in self.time_warp]
         return params
 
     def robot_parameters(self, scenario: Scenario, agent_id: int) -> dict:
@@ -663,8 +666,16 @@ def with_our_packages(env: dict[str, str]) -> dict[str, str]:
     return env
 
 
+class _NoAliases(yaml.SafeDumper):
+    """rcl reads no YAML aliases ('Will not support aliasing'): a list every agent shares (a time
+    warp) is written out for each."""
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
 def _write_yaml(path: Path, data: dict) -> None:
-    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding='utf-8')
+    path.write_text(yaml.dump(data, Dumper=_NoAliases, sort_keys=False), encoding='utf-8')
 
 
 # -- ROS domain -----------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model import theory
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
@@ -97,8 +98,10 @@ class Sampler:
         on_sample: Callable[[float, np.ndarray, np.ndarray | None], None] | None = None,
         writer: TrajectoryWriter | None = None,
         watch: EdgeLengths | None = None,
+        clock: _WarpClock | None = None,
     ) -> None:
         self.world = world
+        self.clock = clock  # a time warp: the world runs in the paper's time, the samples in real time
         self.dt = sample_dt
         self.events = events
         self.on_sample = on_sample
@@ -114,13 +117,15 @@ class Sampler:
         if not self.dt:
             return
         while True:
-            tg = self._next_grid * self.dt
+            tg = real = self._next_grid * self.dt
+            if self.clock is not None:
+                tg = self.clock.paper(real)  # the grid is in real time, the world in the paper's
             if tg > t_end or (tg == t_end and self.events):
                 return
             self._next_grid += 1
             if tg > self.world.time:
                 x, q = self.world.state_at(tg)
-                self._add(tg, x, q)
+                self._add(real, x, q)
 
     def event(self, *, due=(), force: bool = False) -> None:
         """The world's present state as a sample (with event samples, or `force`); `due`: the agents
@@ -132,9 +137,10 @@ class Sampler:
                 self.world.positions_of(self.watch.heads[edges]),
                 self.world.positions_of(self.watch.tails[edges]),
             )
-        if not (self.events or force) or (self.times and self.times[-1] == self.world.time):
+        now = self.world.time if self.clock is None else self.clock.real(self.world.time)
+        if not (self.events or force) or (self.times and self.times[-1] == now):
             return
-        self._add(self.world.time, self.world.positions, self.world.velocities)
+        self._add(now, self.world.positions, self.world.velocities)
 
     def _add(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
         self.times.append(t)
@@ -153,6 +159,37 @@ class Sampler:
         if self.writer is not None:
             return self.writer.close(self.times, edge_maxima=maxima)
         return Samples.from_rows(self.times, self.positions, self.velocities or None, edge_maxima=maxima)
+
+
+@dataclass(frozen=True)
+class _WarpClock:
+    """A time warp as the engine applies it (ETA-1 at κ = 1; docs/SPEED_SCALE.md, "A time warp"):
+    the world and the agents run in the paper's time s to s(horizon), exactly the κ = 1 run; the
+    record is in real time (t(s) for the events, the grid in real time), the real horizon and its
+    paper time mapping onto each other exactly; `on_event` and `progress` get the paper's time."""
+
+    warp: TimeWarp
+    horizon: float  # real
+    paper_horizon: float
+
+    @classmethod
+    def of(cls, warp: TimeWarp, scenario, *, horizon: float, period: float | None) -> _WarpClock:
+        if scenario.dynamics != 'single' or scenario.gains.speed_scale != 1.0 or period is not None:
+            raise EngineError(
+                'time_warp: applies to ETA-1 event-triggered runs at speed scale 1 (the warp replaces κ), '
+                f'got dynamics {scenario.dynamics!r}, speed_scale {scenario.gains.speed_scale!r}, period '
+                f'{period!r}'
+            )
+        return cls(warp=warp, horizon=horizon, paper_horizon=warp.paper(horizon))
+
+    def paper(self, t: float) -> float:
+        return self.paper_horizon if t == self.horizon else self.warp.paper(t)
+
+    def real(self, s: float) -> float:
+        return self.horizon if s == self.paper_horizon else self.warp.real(s)
+
+    def relabel(self, trigger_times: dict[int, list[float]]) -> dict[int, list[float]]:
+        return {i: [self.real(s) for s in times] for i, times in trigger_times.items()}
 
 
 def _next_event_time(heap, serial, searches, horizon: float) -> float:
@@ -302,12 +339,14 @@ def simulate(
     trajectory_dir: str | Path | None = None,
     progress: Callable[[float, int], None] | None = None,
     on_event: Callable[[float, World, list[int]], None] | None = None,
+    time_warp: TimeWarp | None = None,
 ) -> RunRecord:
     """Run ETA-1/ETA-2 (or periodic sampling with `period`) exactly up to `horizon`.
 
     With `period`, every agent samples and broadcasts at k * period instead of at its own
     triggering times (the periodic baseline); everything else is the same. `on_event(t, world,
-    due)` is called at every event time before the due agents trigger (for checkers).
+    due)` is called at every event time before the due agents trigger (for checkers). `time_warp`:
+    the κ = 1 run in the time s(t) of the warp (`_WarpClock`).
 
     The record samples the state at every event time and every `sample_dt` (0 or None: no grid).
     `sample_events=False` samples only the grid, t = 0 and the horizon; each edge's largest length
@@ -321,6 +360,7 @@ def simulate(
         raise EngineError(f'horizon must be a finite number > 0, got {horizon!r}')
     _check_period(period, scenario)
     check_sample_dt(sample_dt, horizon=horizon, scenario=scenario)
+    clock = None if time_warp is None else _WarpClock.of(time_warp, scenario, horizon=horizon, period=period)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
@@ -334,7 +374,7 @@ def simulate(
             velocities=scenario.dynamics == 'double',
         )
     watch = None if sample_events else EdgeLengths(scenario)
-    sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch)
+    sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch, clock=clock)
     try:
         messages = _run(
             scenario,
@@ -365,6 +405,7 @@ def simulate(
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
             **({'safety': _safety_extra(scenario, agents)} if scenario.safety is not None else {}),
+            **({} if clock is None else {'time_warp': clock.warp.to_dict()}),
         },
     )
 
@@ -390,7 +431,11 @@ def _run(
     progress,
     on_event,
 ) -> int:
-    """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent."""
+    """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent.
+    With the sampler's warp clock it runs in the paper's time and labels the triggering times in real time."""
+    clock = sampler.clock
+    if clock is not None:
+        horizon = clock.paper_horizon
     messages = 0
     agenda = _Agenda(horizon=horizon, period=period)
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
@@ -430,6 +475,8 @@ def _run(
         world.advance(t_next)
         t = t_next
         due = agenda.pop_due(t)
+    if clock is not None:
+        trigger_times.update(clock.relabel(trigger_times))
     return messages
 
 

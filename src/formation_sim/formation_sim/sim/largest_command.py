@@ -32,6 +32,14 @@ from formation_sim.model.speed_choice import (
     scale_choice,
     settling_time,
 )
+from formation_sim.model.warp_choice import (
+    WARP_CAP,
+    WARP_WINDOW,
+    WarpChoice,
+    guaranteed_warp,
+    observed_warp,
+    warp_limit,
+)
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.record import RunRecord
 
@@ -175,4 +183,74 @@ def choose_speed_scale(
         settling=settling(paper, record),
         horizon=scenario.horizon,
         margin=margin,
+    )
+
+
+def command_steps(scenario: Scenario, *, horizon: float) -> tuple[np.ndarray, np.ndarray, RunRecord]:
+    """ETA-1: (the event times, the largest ||u_i|| in force from each to the next, the record) of
+    the exact run of `scenario` to `horizon`: the team's largest command as a step function of time
+    (exact: ETA-1's commands change at events only)."""
+    times: list[float] = []
+    largest: list[float] = []
+    seen: dict = {}
+
+    def note(t_from: float, world) -> None:
+        times.append(t_from)
+        largest.append(float(np.linalg.norm(world.controls, axis=1).max()))
+
+    def on_event(t: float, world, due) -> None:
+        # Called before the agents due at t trigger: the controls in force since the previous event
+        # (rounds at one instant: only the last round's controls are ever in force).
+        last = seen.get('t')
+        if last is not None and t > last:
+            note(last, world)
+        seen['t'], seen['world'] = t, world
+
+    record = simulate(scenario, horizon=horizon, sample_dt=None, on_event=on_event)
+    note(seen['t'], seen['world'])  # the controls set at the last event
+    return np.asarray(times), np.asarray(largest), record
+
+
+def choose_time_warp(
+    scenario: Scenario,
+    *,
+    limits: RobotLimits,
+    margin: float = OBSERVED_MARGIN,
+    cap: float = WARP_CAP,
+    window: float = WARP_WINDOW,
+) -> WarpChoice:
+    """The time warps for `limits` (`formation_sim.model.warp_choice`, ETA-1): the observed one from
+    the exact run at κ = 1 to cap × the scenario's horizon (all the warped run can reach of the
+    paper's time), the guaranteed one from the proofs' decaying bound.  LimitsError where no warp
+    applies (ETA-2, no speed limit)."""
+    warp_limit(limits, scenario.dynamics, cap=cap, window=window)
+    paper = unit_scale(scenario)
+    horizons = (cap * float(scenario.horizon), float(scenario.horizon))
+    times, largest, record = command_steps(paper, horizon=horizons[0])
+    observed = observed_warp(
+        times=times, largest=largest, limits=limits, horizons=horizons, margin=margin, cap=cap, window=window
+    )
+    guaranteed, missing = None, None
+    try:
+        bound = command_bound(paper)
+        guaranteed = guaranteed_warp(
+            speed=bound.max_speed,
+            dotyi=max(bound.dotyi.values()),
+            beta=paper.gains.beta,
+            limits=limits,
+            horizons=horizons,
+            cap=cap,
+            window=window,
+        )
+    except theory.TheoryError as error:
+        missing = str(error)
+    return WarpChoice(
+        limits=limits,
+        observed=observed,
+        guaranteed=guaranteed,
+        guaranteed_missing=missing,
+        settling=settling(paper, record),
+        margin=margin,
+        cap=cap,
+        window=window,
     )
