@@ -13,6 +13,7 @@ import pytest
 from formation_agent.core.eta import AgentError, Eta1Agent, make_agent
 from formation_agent.core.safety import (
     CappedSearch,
+    courteous_zero,
     SafetyConfig,
     SafetyError,
     SafetyLayer,
@@ -95,6 +96,38 @@ def test_the_worst_case_half_bounds_every_motion_of_the_other_robot(seed):
         r = r0 + taus[:, None] * v - w
         half = 2.0 * r @ v + 0.5 * cfg.gamma * ((r * r).sum(axis=1) - cfg.min_separation**2)
         assert np.all(half >= bound - 1e-12)
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_the_courteous_bound_holds_while_the_other_robot_keeps_its_half(seed):
+    """(S7'): j moves at any speed <= v̄ but keeps r_ij·v_j <= (γ/4) h_ij (its own half); then
+    a_ij stays >= 0 up to courteous_zero (400 Euler steps, 3 random motions of j per seed)."""
+    rng = np.random.default_rng(seed)
+    cfg = CONFIG
+    d = cfg.min_separation
+    r0 = rng.normal(size=2)
+    r0 *= (d + rng.uniform(1e-4, 0.3)) / np.linalg.norm(r0)  # close: where (S7') matters
+    v = rng.normal(size=2)
+    v *= cfg.max_speed * rng.random() ** 3 / np.linalg.norm(v)
+    if 2 * r0 @ v + 0.25 * cfg.gamma * (r0 @ r0 - d * d) < 0:  # a command the filter could give
+        v = np.zeros(2)
+    limit = courteous_zero(tuple(r0), tuple(v), cfg)
+    steps = 400
+    dt = min(limit, 0.2) / steps  # Euler steps, each v_j projected onto j's half
+    g, vm, vx, vy = cfg.gamma, cfg.max_speed, float(v[0]), float(v[1])
+    for _ in range(3):
+        rx, ry = float(r0[0]), float(r0[1])
+        for angle, size in zip(rng.uniform(0, 2 * math.pi, steps), rng.random(steps)):
+            jx, jy = vm * size * math.cos(angle), vm * size * math.sin(angle)
+            excess = rx * jx + ry * jy - 0.25 * g * (rx * rx + ry * ry - d * d)
+            if excess > 0:
+                norm2 = rx * rx + ry * ry
+                jx, jy = jx - excess * rx / norm2, jy - excess * ry / norm2
+                scale = min(1.0, vm / math.hypot(jx, jy))
+                jx, jy = jx * scale, jy * scale
+            rx, ry = rx + dt * (vx - jx), ry + dt * (vy - jy)
+            assert 2 * (rx * vx + ry * vy) + 0.5 * g * (rx * rx + ry * ry - d * d) >= -1e-9
+    assert limit > 0.0
 
 
 def test_the_exact_half_is_the_barrier_along_the_line():

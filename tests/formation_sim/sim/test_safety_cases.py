@@ -182,3 +182,14 @@ def test_a_distributed_run_refuses_the_layer_it_does_not_carry_yet():
 
     with pytest.raises(RunError, match='the safety layer .* is not wired into distributed runs yet'):
         RunOptions().check(safety_cases.swap_two(safety=SAFETY))
+
+
+def test_a_stress_team_keeps_its_separation_and_reaches_the_formation(capsys):
+    """The stress sweep's team 4 (5 robots, complete graph, D = 0.253 m), through its printer."""
+    scenario = safety_cases.random_team(4)
+    assert scenario.n == 5 and scenario.safety.min_separation == pytest.approx(0.253, abs=5e-4)
+    safety_cases.main(['--stress', '4', '5'])
+    line = capsys.readouterr().out
+    closest = float(line.split('closest=')[1].split()[0])
+    settle = float(line.split('to 5 cm=')[1].split()[0])
+    assert closest > scenario.safety.min_separation and settle < 30.0

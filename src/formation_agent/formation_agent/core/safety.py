@@ -208,6 +208,40 @@ def worst_case_half(r0: tuple[float, float], v: tuple[float, float], config: Saf
     return c0, c1, c2
 
 
+def courteous_zero(r0: tuple[float, float], v: tuple[float, float], config: SafetyConfig) -> float:
+    """A time W before which a_ij (S3) cannot reach 0 for a robot j seen at r0 while i holds v, using
+    that j keeps its own half, r_ij·v_j <= (γ/4) h_ij, at all times (S7'). On [0, W]
+
+        ȧ_ij = 2||v||² - 2 v_j·v + γ r·v - γ r·v_j
+             >= m(W) = 2||v||² - 2v̄||v|| + γ (r0·v - v̄||v|| W) - (γ²/4) [(||r0|| + (||v|| + v̄) W)² - D²]
+
+    so a_ij >= 0 on [0, W] whenever a_ij(0) + m(W) W >= 0. The largest such W up to the heartbeat,
+    by 40 bisections from 0 (plain floats, fixed steps: the same bits everywhere). Where (S7) needs
+    ~h/(4 v̄ ||r||) for two robots standing next to each other, this needs ~2/γ."""
+    g, vm, d = config.gamma, config.max_speed, config.min_separation
+    speed = math.hypot(*v)
+    r_norm = math.hypot(*r0)
+    rv = _dot(r0, v)
+    a0 = 2.0 * rv + 0.5 * g * (_dot(r0, r0) - d * d)
+    base = 2.0 * speed * speed - 2.0 * vm * speed + g * rv
+
+    def holds(window: float) -> bool:
+        reach = r_norm + (speed + vm) * window
+        slope = base - g * vm * speed * window - 0.25 * g * g * (reach * reach - d * d)
+        return a0 + slope * window >= 0.0
+
+    low, high = 0.0, config.heartbeat
+    if a0 <= 0.0 or holds(high):
+        return high if a0 > 0.0 else 0.0
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        if holds(mid):
+            low = mid
+        else:
+            high = mid
+    return low
+
+
 def exact_half(r: tuple[float, float], w: tuple[float, float], v: tuple[float, float], *, gamma, level, sign):
     """(c0, c1, c2) of a half along z(τ) = r + τ w exactly: sign = +1 is a_ij (S3) with z = r_ij and
     level = D²; sign = -1 is b_ij (S4) with z = y_ij and level = c_ij²."""
@@ -285,8 +319,9 @@ class SafetyLayer:
         v = self._command
         t0 = self._trigger_time
         best = t0 + cfg.heartbeat
-        for r in self._seen:
-            best = min(best, t0 + first_zero(*worst_case_half(r, v, cfg), max(now - t0, 0.0)))
+        for r in self._seen:  # (S7) and (S7'), each a valid bound: the later one
+            zero = max(first_zero(*worst_case_half(r, v, cfg), max(now - t0, 0.0)), courteous_zero(r, v, cfg))
+            best = min(best, t0 + zero)
         dd = cfg.min_separation * cfg.min_separation
         for s, y, d, u_j, c in edges:
             w = (v[0] - u_j[0], v[1] - u_j[1])

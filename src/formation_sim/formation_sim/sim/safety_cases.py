@@ -87,6 +87,45 @@ def random_square(
             return _scenario(f'random_square_{seed}', x, SQUARE, pairs, safety=safety, horizon=horizon)
 
 
+def random_team(seed: int) -> Scenario:
+    """The stress sweep's team `seed` (docs/SAFETY.md): 3-6 robots in a 1.5-3 m square, targets more
+    than 2D apart, a path, cycle or complete graph, D 0.1-0.4 m, v̄ 0.3-1 m/s, γ 2-5 1/s, R = 3 m,
+    α = 1, β = 0.2; the placement drawn again until every pair is more than 1.2 D apart and every
+    edge within 90 % of its capacity (ValueError after 20 000 draws)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 7))
+    d = float(rng.uniform(0.1, 0.4))
+    side = float(rng.uniform(1.5, 3.0))
+    while True:
+        targets = rng.random((n, 2)) * side
+        if _closest(targets) > 2 * d:
+            break
+    path = [(i, i + 1) for i in range(1, n)]
+    pairs = [path, [*path, (n, 1)], [(i, j) for i in range(1, n + 1) for j in range(i + 1, n + 1)]]
+    pairs = pairs[int(rng.integers(0, 3))]
+    capacity = DELTA - max(np.linalg.norm(targets[i - 1] - targets[j - 1]) for i, j in pairs)
+    for _ in range(20000):
+        x = rng.random((n, 2)) * side
+        errors = [np.linalg.norm(x[i - 1] - x[j - 1] - (targets[i - 1] - targets[j - 1])) for i, j in pairs]
+        if _closest(x) > 1.2 * d and max(errors) < 0.9 * capacity:
+            break
+    else:
+        raise ValueError(f'random_team({seed}): no placement in 20 000 draws')
+    safety = SafetyConfig(
+        min_separation=d,
+        max_speed=float(rng.uniform(0.3, 1.0)),
+        gamma=float(rng.uniform(2, 5)),
+        sensing_radius=3.0,
+    )
+    scenario = _scenario(f'random_team_{seed}', x, targets, pairs, safety=safety, horizon=30.0)
+    return scenario.replace(gains=SingleGains(alpha=1.0, beta=0.2))
+
+
+def _closest(points: np.ndarray) -> float:
+    n = len(points)
+    return min(float(np.linalg.norm(points[a] - points[b])) for a in range(n) for b in range(a + 1, n))
+
+
 def closest_approach(times: np.ndarray, positions: np.ndarray) -> tuple[float, float, tuple[int, int]]:
     """(distance, time, (row a, row b)): the least distance of two robots over the samples, exact
     when motion is linear between consecutive samples (every event is a sample): per interval and
@@ -144,8 +183,36 @@ def measure(scenario: Scenario) -> dict[str, float]:
     }
 
 
+def stress(seeds) -> None:
+    """Print the stress sweep of docs/SAFETY.md, a line per `random_team` (at most 20 000 events)."""
+    from formation_sim.sim.engine import simulate
+
+    def cap(t: float, events: int) -> None:
+        if events > 20000:
+            raise RuntimeError(f'more than 20000 events by t = {t:.3f}')
+
+    for seed in seeds:
+        try:
+            scenario = random_team(seed)
+            record = simulate(scenario, sample_dt=0.05, progress=cap)
+        except (ValueError, RuntimeError) as error:
+            print(f'{seed}: {error}')
+            continue
+        times, x = record.samples.times, np.asarray(record.samples.positions)
+        gaps = min(np.diff(t).min() for t in record.trigger_times.values() if len(t) > 1)
+        print(
+            f'{seed}: n={scenario.n} D={scenario.safety.min_separation:.3f} '
+            f'closest={closest_approach(times, x)[0]:.4f} events={record.total_events} '
+            f'to 5 cm={settling_time(scenario, times, x, 0.05):.2f} least inter-event={gaps:.4g}'
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Print the 20-placement table of docs/SAFETY.md (D = 0.25 m, the layer's defaults)."""
+    """Print the 20-placement table of docs/SAFETY.md (D = 0.25 m, the layer's defaults), or with
+    `--stress FIRST STOP` the stress sweep over those seeds."""
+    if argv and argv[0] == '--stress':
+        stress(range(int(argv[1]), int(argv[2])))
+        return 0
     seeds = range(int(argv[0]) if argv else 20)
     safety = SafetyConfig(min_separation=0.25)
     print(
