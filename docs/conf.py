@@ -59,9 +59,13 @@ def _indent(line: str) -> int:
 
 
 def _escape(line: str) -> str:
-    """`|` (a substitution in reST) escaped outside `code`."""
+    """`|` (a substitution in reST) escaped outside `code`; a letter glued to a literal set apart."""
     parts = line.split('`')
-    return '`'.join(_PIPE.sub(r'\\|', part) if k % 2 == 0 else part for k, part in enumerate(parts))
+    for k in range(0, len(parts), 2):  # the text between literals
+        parts[k] = _PIPE.sub(r'\\|', parts[k])
+        if k > 0 and parts[k][:1].isalnum():  # `Case`s: reST wants no letter right after a literal
+            parts[k] = '\\ ' + parts[k]
+    return '`'.join(parts)
 
 
 def rest_lines(lines: list[str]) -> list[str]:
