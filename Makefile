@@ -14,7 +14,7 @@ PYTEST_ARGS ?= -n auto --dist loadgroup
 
 DEMO_DIR = runs/demo
 
-.PHONY: venv lint test demo bench clean distclean
+.PHONY: venv lint test demo bench docs clean distclean
 
 venv: $(STAMP)
 
@@ -45,11 +45,23 @@ demo: venv
 	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR) --force
 	$(VENV)/bin/formation analyze $(DEMO_DIR)
 
+# The docs site (docs/index.md and every page it lists, the API reference from the docstrings) into
+# docs/_build/html; -W: a warning (a broken link or reference, a page left out) fails the build.
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): requirements-docs.txt $(STAMP)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-docs.txt
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "docs: docs/_build/html/index.html"
+
 bench: venv
 	@if [ -f benchmarks/run.py ]; then $(PY) benchmarks/run.py; else echo "no benchmarks yet (benchmarks/run.py is missing)"; fi
 
 clean:
-	rm -rf runs ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache .ruff_cache
+	rm -rf runs docs/_build ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache .ruff_cache
 	find src tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	find src -name '*.egg-info' -type d -prune -exec rm -rf {} +
 

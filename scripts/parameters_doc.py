@@ -23,8 +23,8 @@ Jazzy install `ros2 param describe /formation_recorder output` explains it; the 
 prints the same table. Missing parameters, values of the wrong type, out of range or not among
 the choices are all named in one error, and the node exits with status 2 before it starts
 anything. `formation run` writes every node's parameter file into its run folder, and `formation
-params SCENARIO --out DIR` writes the same files without starting anything (README, "Agents on
-separate machines").
+params SCENARIO --out DIR` writes the same files without starting anything ([Agents on separate
+machines](SEPARATE_MACHINES.md)).
 """
 
 
