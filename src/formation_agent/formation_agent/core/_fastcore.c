@@ -523,8 +523,20 @@ static int run(Model *md, const Search *s, State *st, double until) {
 
 /* ---- Python glue ---------------------------------------------------------------------------- */
 
-static int get_double(PyObject *obj, const char *name, double *out) {
-    PyObject *value = PyObject_GetAttrString(obj, name);
+/* Attribute names, interned once (PyInit__fastcore). */
+enum {
+    N_ALPHA, N_BETA, N_FLOOR, N_LIMIT, N_TOLERANCE, N_FRONTIER, N_SPAN, N_STEPS, N_RESULT, N_COVER, N_MODEL,
+    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_NAMES
+};
+static const char *NAME_TEXT[N_NAMES] = {
+    "alpha", "beta", "floor", "limit", "tolerance", "frontier", "_span", "steps", "result", "_cover", "model",
+    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3",
+};
+static PyObject *NAMES[N_NAMES];
+static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
+
+static int get_double(PyObject *obj, int name, double *out) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
     if (value == NULL)
         return -1;
     *out = PyFloat_AsDouble(value);
@@ -532,20 +544,11 @@ static int get_double(PyObject *obj, const char *name, double *out) {
     return (*out == -1.0 && PyErr_Occurred()) ? -1 : 0;
 }
 
-static int set_double(PyObject *obj, const char *name, double value) {
+static int set_double(PyObject *obj, int name, double value) {
     PyObject *v = PyFloat_FromDouble(value);
     if (v == NULL)
         return -1;
-    int rc = PyObject_SetAttrString(obj, name, v);
-    Py_DECREF(v);
-    return rc;
-}
-
-static int set_long(PyObject *obj, const char *name, long value) {
-    PyObject *v = PyLong_FromLong(value);
-    if (v == NULL)
-        return -1;
-    int rc = PyObject_SetAttrString(obj, name, v);
+    int rc = PyObject_SetAttr(obj, NAMES[name], v);
     Py_DECREF(v);
     return rc;
 }
@@ -574,140 +577,208 @@ static int read_floats(PyObject *seq, double *out, Py_ssize_t count, const char 
     return 0;
 }
 
+static int read_attr_floats(PyObject *obj, int name, double *out, Py_ssize_t count) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
+    if (value == NULL)
+        return -1;
+    int rc = read_floats(value, out, count, NAME_TEXT[name]);
+    Py_DECREF(value);
+    return rc;
+}
+
 static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
-    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", NULL};
-    PyObject *coefficients;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "O", names, &GROWTH, &MAX_STEPS, &RTOL, &GAP_FRACTION,
-                                     &SERIES_LIMIT, &coefficients))
+    (void)self;
+    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser", NULL};
+    PyObject *coefficients, *raiser;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO", names, &GROWTH, &MAX_STEPS, &RTOL, &GAP_FRACTION,
+                                     &SERIES_LIMIT, &coefficients, &raiser))
         return NULL;
     if (read_floats(coefficients, SERIES, N_SERIES, "series") < 0)
         return NULL;
+    Py_INCREF(raiser);
+    Py_XSETREF(RAISER, raiser);
     configured = 1;
     Py_RETURN_NONE;
 }
 
-/* advance(search, until, kind, rows, u_offset, control_norm, k1, k2, k3): CrossingSearch.advance
- * for a plain-float agent. Writes the search's frontier, _span, _cover, result and steps as the
- * Python loop does, and returns None, or on an error the Python path raises with a message:
- * ('range', k, r, c), ('steps', a) or ('finite', a, size_sq, size_rate). */
+/* The model (the agent) as the loop reads it; md->rows allocated here (PyMem_Free it). */
+static int read_model(PyObject *model, Model *md) {
+    PyObject *kind = PyObject_GetAttr(model, NAMES[N_KIND]);
+    if (kind == NULL)
+        return -1;
+    md->kind = (int)PyLong_AsLong(kind);
+    Py_DECREF(kind);
+    if (md->kind != 1 && md->kind != 2) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %d", md->kind);
+        return -1;
+    }
+    if (read_attr_floats(model, N_U_OFFSET, md->u_off, 3) < 0 ||
+        get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
+        return -1;
+    if (md->kind == 2 &&
+        (get_double(model, N_K1, &md->k1) < 0 || get_double(model, N_K2, &md->k2) < 0 ||
+         get_double(model, N_K3, &md->k3) < 0))
+        return -1;
+    PyObject *rows = PyObject_GetAttr(model, NAMES[N_ROWS]);
+    if (rows == NULL)
+        return -1;
+    PyObject *fast = PySequence_Fast(rows, "_rows");
+    Py_DECREF(rows);
+    if (fast == NULL)
+        return -1;
+    md->m = PySequence_Fast_GET_SIZE(fast);
+    Py_ssize_t width = md->kind == 1 ? WIDTH1 : WIDTH2;
+    Py_ssize_t n = md->m > 0 ? md->m : 1;
+    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
+    if (md->rows == NULL) {
+        Py_DECREF(fast);
+        PyErr_NoMemory();
+        return -1;
+    }
+    md->probe = md->rows + n * width;
+    md->speeds = md->probe + 4 * n;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        if (read_floats(PySequence_Fast_GET_ITEM(fast, k), md->rows + k * width, width, "_rows") < 0) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+static int read_search(PyObject *search, Search *s, State *st) {
+    if (get_double(search, N_ALPHA, &s->alpha) || get_double(search, N_BETA, &s->beta) ||
+        get_double(search, N_FLOOR, &s->floor) || get_double(search, N_LIMIT, &s->limit) ||
+        get_double(search, N_TOLERANCE, &s->tolerance) || get_double(search, N_FRONTIER, &st->frontier) ||
+        get_double(search, N_SPAN, &st->span))
+        return -1;
+    PyObject *steps = PyObject_GetAttr(search, NAMES[N_STEPS]);
+    if (steps == NULL)
+        return -1;
+    st->steps = PyLong_AsLong(steps);
+    Py_DECREF(steps);
+    if (st->steps == -1 && PyErr_Occurred())
+        return -1;
+    PyObject *old = PyObject_GetAttr(search, NAMES[N_RESULT]);
+    if (old == NULL)
+        return -1;
+    if (old != Py_None) {
+        st->has_result = 1;
+        st->result = PyFloat_AsDouble(old);
+    }
+    Py_DECREF(old);
+    if (st->has_result && PyErr_Occurred())
+        return -1;
+    double cov[3];
+    if (read_attr_floats(search, N_COVER, cov, 3) < 0)
+        return -1;
+    st->cover_end = cov[0];
+    st->bound_e = cov[1];
+    st->bound_curv = cov[2];
+    return 0;
+}
+
+static int write_search(PyObject *search, const State *st) {
+    PyObject *cover = Py_BuildValue("(ddd)", st->cover_end, st->bound_e, st->bound_curv);
+    if (cover == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(search, NAMES[N_COVER], cover);
+    Py_DECREF(cover);
+    if (rc < 0 || set_double(search, N_FRONTIER, st->frontier) < 0 || set_double(search, N_SPAN, st->span) < 0)
+        return -1;
+    return st->has_result ? set_double(search, N_RESULT, st->result) : 0;
+}
+
+/* The error the pure-Python path raises with a message: compiled._raise(model, problem) raises it. */
+static void raise_problem(PyObject *model, PyObject *problem) {
+    if (problem == NULL)
+        return;
+    PyObject *out = PyObject_CallFunctionObjArgs(RAISER, model, problem, NULL);
+    Py_DECREF(problem);
+    if (out != NULL) { /* the raiser must raise */
+        Py_DECREF(out);
+        PyErr_SetString(PyExc_RuntimeError, "compiled._raise returned instead of raising");
+    }
+}
+
+/* advance(search, until): CrossingSearch.advance for a plain-float agent (search.model). Writes
+ * the search's frontier, _span, _cover, result and steps as the Python loop does and returns its
+ * result; errors are the Python path's (steps counted, the rest left, as there). */
 static PyObject *advance(PyObject *self, PyObject *args) {
-    PyObject *search, *rows, *u_offset;
+    (void)self;
+    PyObject *search;
     double until;
-    int kind;
-    Model md;
-    memset(&md, 0, sizeof md);
-    if (!PyArg_ParseTuple(args, "OdiOOdddd", &search, &until, &kind, &rows, &u_offset, &md.control_norm, &md.k1,
-                          &md.k2, &md.k3))
+    if (!PyArg_ParseTuple(args, "Od", &search, &until))
         return NULL;
     if (!configured) {
         PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not called");
         return NULL;
     }
-    if (kind != 1 && kind != 2) {
-        PyErr_Format(PyExc_ValueError, "kind must be 1 (ETA-1) or 2 (ETA-2), got %d", kind);
-        return NULL;
-    }
-    md.kind = kind;
+    Model md;
     Search s;
     State st;
+    memset(&md, 0, sizeof md);
     memset(&st, 0, sizeof st);
-    PyObject *result = NULL, *cover = NULL, *rows_fast = NULL;
-    if (get_double(search, "alpha", &s.alpha) || get_double(search, "beta", &s.beta) ||
-        get_double(search, "floor", &s.floor) || get_double(search, "limit", &s.limit) ||
-        get_double(search, "tolerance", &s.tolerance) || get_double(search, "frontier", &st.frontier) ||
-        get_double(search, "_span", &st.span))
+    if (read_search(search, &s, &st) < 0)
         return NULL;
-    PyObject *steps = PyObject_GetAttrString(search, "steps");
-    if (steps == NULL)
+    PyObject *model = PyObject_GetAttr(search, NAMES[N_MODEL]);
+    if (model == NULL)
         return NULL;
-    st.steps = PyLong_AsLong(steps);
-    Py_DECREF(steps);
-    if (st.steps == -1 && PyErr_Occurred())
-        return NULL;
-    PyObject *old = PyObject_GetAttrString(search, "result");
-    if (old == NULL)
-        return NULL;
-    if (old != Py_None) {
-        st.has_result = 1;
-        st.result = PyFloat_AsDouble(old);
-    }
-    Py_DECREF(old);
-    if (st.has_result && PyErr_Occurred())
-        return NULL;
-    cover = PyObject_GetAttrString(search, "_cover");
-    if (cover == NULL)
-        return NULL;
-    double cov[3];
-    if (read_floats(cover, cov, 3, "_cover") < 0)
+    PyObject *result = NULL;
+    if (read_model(model, &md) < 0)
         goto done;
-    st.cover_end = cov[0];
-    st.bound_e = cov[1];
-    st.bound_curv = cov[2];
-    if (read_floats(u_offset, md.u_off, 3, "u_offset") < 0)
-        goto done;
-    rows_fast = PySequence_Fast(rows, "rows");
-    if (rows_fast == NULL)
-        goto done;
-    md.m = PySequence_Fast_GET_SIZE(rows_fast);
-    Py_ssize_t width = kind == 1 ? WIDTH1 : WIDTH2;
-    Py_ssize_t n = md.m > 0 ? md.m : 1;
-    md.rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
-    if (md.rows == NULL) {
-        PyErr_NoMemory();
-        goto done;
-    }
-    md.probe = md.rows + n * width;
-    md.speeds = md.probe + 4 * n;
-    for (Py_ssize_t k = 0; k < md.m; k++)
-        if (read_floats(PySequence_Fast_GET_ITEM(rows_fast, k), md.rows + k * width, width, "row") < 0)
-            goto done;
     int status = run(&md, &s, &st, until);
-    if (set_long(search, "steps", st.steps) < 0)
+    PyObject *steps = PyLong_FromLong(st.steps);
+    if (steps == NULL)
         goto done;
-    if (status == ERR_OVERFLOW) {
+    int rc = PyObject_SetAttr(search, NAMES[N_STEPS], steps);
+    Py_DECREF(steps);
+    if (rc < 0)
+        goto done;
+    switch (status) {
+    case OK:
+        if (write_search(search, &st) == 0)
+            result = st.has_result ? PyFloat_FromDouble(st.result) : Py_NewRef(Py_None);
+        break;
+    case ERR_OVERFLOW:
         PyErr_SetString(PyExc_OverflowError, "math range error");
-        goto done;
+        break;
+    case ERR_RANGE:
+        raise_problem(model, Py_BuildValue("(sndd)", "range", md.bad_k, md.bad_r, md.bad_c));
+        break;
+    case ERR_STEPS:
+        raise_problem(model, Py_BuildValue("(sd)", "steps", st.bad_a));
+        break;
+    default:
+        raise_problem(model, Py_BuildValue("(sddd)", "finite", st.bad_a, st.bad_size_sq, st.bad_size_rate));
     }
-    if (status == ERR_RANGE) {
-        result = Py_BuildValue("(sndd)", "range", md.bad_k, md.bad_r, md.bad_c);
-        goto done;
-    }
-    if (status == ERR_STEPS) {
-        result = Py_BuildValue("(sd)", "steps", st.bad_a);
-        goto done;
-    }
-    if (status == ERR_FINITE) {
-        result = Py_BuildValue("(sddd)", "finite", st.bad_a, st.bad_size_sq, st.bad_size_rate);
-        goto done;
-    }
-    PyObject *new_cover = Py_BuildValue("(ddd)", st.cover_end, st.bound_e, st.bound_curv);
-    if (new_cover == NULL)
-        goto done;
-    int rc = PyObject_SetAttrString(search, "_cover", new_cover);
-    Py_DECREF(new_cover);
-    if (rc < 0 || set_double(search, "frontier", st.frontier) < 0 || set_double(search, "_span", st.span) < 0)
-        goto done;
-    if (st.has_result && set_double(search, "result", st.result) < 0)
-        goto done;
-    result = Py_NewRef(Py_None);
 done:
     PyMem_Free(md.rows);
-    Py_XDECREF(rows_fast);
-    Py_XDECREF(cover);
+    Py_DECREF(model);
     return result;
 }
 
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
-     "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series): the search's constants."},
+     "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
+     "constants and the function that raises the Python path's errors."},
     {"advance", advance, METH_VARARGS,
-     "advance(search, until, kind, rows, u_offset, control_norm, k1, k2, k3): CrossingSearch.advance "
-     "for a plain-float agent; None, or ('range', k, r, c) / ('steps', a) / ('finite', a, e2, ee)."},
+     "advance(search, until): CrossingSearch.advance for a plain-float agent (search.model); its result."},
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fastcore",
-                                    "The compiled certified first-crossing search (docs/COMPILED_CORE.md).", -1,
-                                    methods};
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_fastcore", "The compiled certified first-crossing search (docs/COMPILED_CORE.md).", -1,
+    methods, NULL, NULL, NULL, NULL,
+};
 
-PyMODINIT_FUNC PyInit__fastcore(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__fastcore(void) {
+    for (int i = 0; i < N_NAMES; i++) {
+        NAMES[i] = PyUnicode_InternFromString(NAME_TEXT[i]);
+        if (NAMES[i] == NULL)
+            return NULL;
+    }
+    return PyModule_Create(&module);
+}

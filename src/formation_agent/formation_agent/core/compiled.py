@@ -52,6 +52,7 @@ def configure(*, gap_fraction: float) -> None:
             gap_fraction=gap_fraction,
             series_limit=SERIES_LIMIT,
             series=_SERIES,
+            raiser=_raise,
         )
 
 
@@ -80,26 +81,13 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def kernel(kind: int):
-    """The compiled advance for an agent of ETA-`kind` (1 or 2), or None for the pure-Python path."""
-    if not _active:
-        return None
-    return _ADVANCE[kind]
-
-
-def _advance(search, until: float, kind: int) -> float | None:
-    model = search.model
-    k1, k2, k3 = (model.k1, model.k2, model.k3) if kind == 2 else (0.0, 0.0, 0.0)
-    problem = _fastcore.advance(
-        search, until, kind, model._rows, model._u_offset, model._control_norm, k1, k2, k3
-    )
-    if problem is not None:
-        _raise(model, problem)
-    return search.result
+def kernel():
+    """The compiled advance(search, until) for a plain-float agent, or None for the pure-Python path."""
+    return _fastcore.advance if _active else None
 
 
 def _raise(model, problem: tuple) -> None:
-    """The error the pure-Python path raises at this point, in its words."""
+    """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]
     if what == 'range':
         _, k, r, c = problem
@@ -107,14 +95,3 @@ def _raise(model, problem: tuple) -> None:
     if what == 'steps':
         raise crossing.steps_error(problem[1])
     raise crossing.finite_error(*problem[1:])
-
-
-def _advance1(search, until: float) -> float | None:
-    return _advance(search, until, 1)
-
-
-def _advance2(search, until: float) -> float | None:
-    return _advance(search, until, 2)
-
-
-_ADVANCE = {1: _advance1, 2: _advance2}

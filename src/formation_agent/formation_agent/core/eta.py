@@ -339,7 +339,7 @@ class _EventTriggeredAgent(_AgentHooks):
     def search_kernel(self):
         """The compiled search loop for this agent (the plain-float path, p <= 3), or None: the
         search then calls the methods below (formation_agent.core.compiled; the same floats)."""
-        return compiled.kernel(self._kind) if self._fast else None
+        return compiled.kernel() if self._fast else None
 
     def error(self, t: float) -> np.ndarray:
         """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
