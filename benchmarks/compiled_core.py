@@ -5,13 +5,14 @@
 For ETA-1 and ETA-2 random teams (`cases.random`, seed 1) of each size, the in-process engine
 (`simulate(..., sample_dt=None, sample_events=False)`: the event chain only) runs on the
 pure-Python path and on the compiled one (`compiled.use_compiled`), alternating, `--repeats`
-times each; the event chains must be equal float for float (the run stops otherwise). Reported:
+times each (once at n >= 10 000), then once more each with the time spent in the searches
+measured; the event chains must be equal float for float (the run stops otherwise). Reported:
 µs per event and per event × (1 + mean degree), median wall and CPU of the repeats, and the
 speed-up. At the largest ETA-1 size the vectorised fixed-step simulation (benchmarks/naive.py,
 dt = 1e-4) runs on the same scenario and horizon. Last, the start-up time and peak memory of an
-agent process (`python -c 'import formation_agent.ros.main'` and one agent's first search, as
-`peak_rss.py` measures a process) with the working tree and with BASELINE_REV's packages
-(before the compiled core), alternating.
+agent process (`import formation_agent.ros.main` and one agent's first search, as `peak_rss.py`
+measures a process) with HEAD's packages and with BASELINE_REV's (before the compiled core),
+alternating.
 
 Writes benchmarks/results/<date>-compiled_core.json and prints the Markdown tables of BENCHMARKS.md.
 """
@@ -270,7 +271,8 @@ def main() -> int:
     }
     for dynamics in ('single', 'double'):
         for n in args.sizes:
-            case = engine_case(dynamics, n, args.repeats, HORIZONS[dynamics, n])
+            repeats = 1 if n >= 10000 else args.repeats  # minutes per run at n = 10 000
+            case = engine_case(dynamics, n, repeats, HORIZONS[dynamics, n])
             result['engine'].append(case)
             print(json.dumps({k: v for k, v in case.items() if k not in ('python', 'compiled')}), flush=True)
     largest = max(args.sizes)
