@@ -44,10 +44,12 @@ test: venv
 # The paper's single-integrator example distributed over ROS 2 nodes and recorded, then the
 # figures and the report recomputed from the bag alone. --force: each demo replaces the last one
 # in runs/demo (and only that folder), so `make demo` can be run again and again.
-# The agent core and the engine's tests again on the pure-Python path (FORMATION_PURE_PYTHON=1),
+# The search's and the engine's tests again on the pure-Python path (FORMATION_PURE_PYTHON=1),
 # which a machine without the compiled core runs; `make test` runs them compiled.
+PURE_TESTS := test_eta.py test_crossing.py test_closed_form.py test_speed_scale.py
 test-pure: venv
-	FORMATION_PURE_PYTHON=1 $(PY) -m pytest $(PYTEST_ARGS) tests/formation_agent/core tests/formation_sim/sim/test_engine.py
+	FORMATION_PURE_PYTHON=1 $(PY) -m pytest $(PYTEST_ARGS) $(addprefix tests/formation_agent/core/,$(PURE_TESTS)) \
+	  $(addprefix tests/formation_sim/sim/,test_engine.py test_engine_rounding_floor.py test_engine_speed_scale.py)
 
 demo: venv
 	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR) --force
