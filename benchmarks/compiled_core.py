@@ -259,28 +259,33 @@ def main() -> int:
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--startup-repeats', type=int, default=7)
     parser.add_argument('--quick', action='store_true', help='n = 10 and 100, one repeat (a smoke run)')
+    parser.add_argument('--startup-only', action='store_true', help='the agent process only')
     args = parser.parse_args()
     if not compiled.AVAILABLE:
         raise SystemExit('the compiled core is not built: run `make venv`')
     if args.quick:
         args.sizes, args.repeats, args.startup_repeats = [10, 100], 1, 2
+    if args.startup_only:
+        args.sizes = []
     result = {
         'date': dt.datetime.now(dt.UTC).isoformat(timespec='seconds'),
         'load_before': os.getloadavg(),
         'engine': [],
     }
+    stamp = dt.datetime.now(dt.UTC).strftime('%Y%m%d-%H%M%S')
+    out = HERE / 'results' / f'{stamp}-compiled_core.json'
     for dynamics in ('single', 'double'):
         for n in args.sizes:
             repeats = 1 if n >= 10000 else args.repeats  # minutes per run at n = 10 000
             case = engine_case(dynamics, n, repeats, HORIZONS[dynamics, n])
             result['engine'].append(case)
+            out.write_text(json.dumps(result, indent=1))  # what is done so far, should a case not end
             print(json.dumps({k: v for k, v in case.items() if k not in ('python', 'compiled')}), flush=True)
-    largest = max(args.sizes)
-    result['fixed_step'] = fixed_step_case(largest, HORIZONS['single', largest])
+    if args.sizes:
+        largest = max(args.sizes)
+        result['fixed_step'] = fixed_step_case(largest, HORIZONS['single', largest])
     result['startup'] = agent_startup(args.startup_repeats)
     result['load_after'] = os.getloadavg()
-    stamp = dt.datetime.now(dt.UTC).strftime('%Y%m%d-%H%M%S')
-    out = HERE / 'results' / f'{stamp}-compiled_core.json'
     out.write_text(json.dumps(result, indent=1))
     print(tables(result))
     print(f'written: {out.relative_to(HERE.parent)}')
