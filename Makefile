@@ -7,6 +7,9 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 PACKAGES := src/formation_msgs_py src/formation_agent src/formation_sim
 PACKAGING := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.xml)
+# The compiled core (docs/COMPILED_CORE.md) is built by formation_agent's install: a change to its
+# source reinstalls, which rebuilds it.
+COMPILED := src/formation_agent/formation_agent/core/_fastcore.c
 
 # xdist workers; loadgroup keeps tests marked xdist_group(name) on one worker (per-test timeout:
 # pytest.ini). Override e.g. `make test PYTEST_ARGS='-n 0 -k recorder'`.
@@ -14,11 +17,11 @@ PYTEST_ARGS ?= -n auto --dist loadgroup
 
 DEMO_DIR = runs/demo
 
-.PHONY: venv lint test demo bench docs clean distclean
+.PHONY: venv lint test test-pure demo bench docs clean distclean
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt requirements-dev.txt $(PACKAGING)
+$(STAMP): requirements.txt requirements-dev.txt $(PACKAGING) $(COMPILED)
 	test -x $(PY) || $(PYTHON3) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements-dev.txt
 	# --no-deps: every dependency is pinned in requirements*.txt; the three packages depend on
@@ -41,6 +44,13 @@ test: venv
 # The paper's single-integrator example distributed over ROS 2 nodes and recorded, then the
 # figures and the report recomputed from the bag alone. --force: each demo replaces the last one
 # in runs/demo (and only that folder), so `make demo` can be run again and again.
+# The search's and the engine's tests again on the pure-Python path (FORMATION_PURE_PYTHON=1),
+# which a machine without the compiled core runs; `make test` runs them compiled.
+PURE_TESTS := test_eta.py test_crossing.py test_closed_form.py test_speed_scale.py
+test-pure: venv
+	FORMATION_PURE_PYTHON=1 $(PY) -m pytest $(PYTEST_ARGS) $(addprefix tests/formation_agent/core/,$(PURE_TESTS)) \
+	  $(addprefix tests/formation_sim/sim/,test_engine.py test_engine_rounding_floor.py test_engine_speed_scale.py)
+
 demo: venv
 	$(VENV)/bin/formation run paper_single --horizon 10 --out $(DEMO_DIR) --force
 	$(VENV)/bin/formation analyze $(DEMO_DIR)

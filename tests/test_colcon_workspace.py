@@ -53,7 +53,8 @@ def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
         shutil.copytree(
             WORKSPACE_SRC / name,
             root / 'src' / name,
-            ignore=shutil.ignore_patterns('*.egg-info', '__pycache__'),
+            # *.so: the compiled core built in place by `make venv`; colcon must build its own.
+            ignore=shutil.ignore_patterns('*.egg-info', '__pycache__', '*.so'),
         )
     (root / 'tests').symlink_to(REPO / 'tests')
     build = _colcon(
@@ -136,6 +137,28 @@ def test_colcon_install_is_what_python_imports(colcon_install: Path) -> None:
     )
     assert probe.returncode == 0, probe.stderr
     assert Path(probe.stdout.strip()).is_relative_to(colcon_install)
+
+
+@pytest.mark.slow
+def test_colcon_builds_the_compiled_core(colcon_install: Path) -> None:
+    # docs/COMPILED_CORE.md: the colcon install has its own _fastcore, and new searches run it.
+    probe = subprocess.run(
+        [
+            sys.executable,
+            '-c',
+            'from formation_agent.core import _fastcore, compiled; '
+            'print(_fastcore.__file__); print(compiled.implementation())',
+        ],
+        env=install_env(colcon_install),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert probe.returncode == 0, probe.stderr
+    where, which = probe.stdout.split()
+    assert Path(where).is_relative_to(colcon_install)
+    assert which == 'compiled'
 
 
 @pytest.mark.slow

@@ -2,9 +2,20 @@
 
 from glob import glob
 
-from setuptools import find_namespace_packages, setup
+from setuptools import Extension, find_namespace_packages, setup
 
 package_name = 'formation_agent'
+
+# The compiled core (docs/COMPILED_CORE.md): plain C through the CPython API, so that building it
+# needs only the C compiler and the Python headers that colcon and pip already use. The flags keep
+# IEEE semantics (no contraction into FMA, no fast-math) so that it gives the pure-Python path's
+# floats; `optional`: where it cannot be built the install goes on and the pure-Python path runs.
+compiled_core = Extension(
+    f'{package_name}.core._fastcore',
+    sources=[f'{package_name}/core/_fastcore.c'],
+    extra_compile_args=['-O2', '-ffp-contract=off', '-fno-fast-math', '-std=c11'],
+    optional=True,
+)
 
 setup(
     name=package_name,
@@ -28,6 +39,7 @@ setup(
     install_requires=['setuptools', 'numpy', 'scipy'],
     # `colcon test` runs pytest (setup.cfg points it at this package's tests in the repository).
     extras_require={'test': ['pytest']},
-    zip_safe=True,
+    ext_modules=[compiled_core],
+    zip_safe=False,
     entry_points={'console_scripts': ['formation_agent = formation_agent.ros.main:entry_point']},
 )

@@ -110,6 +110,7 @@ class CrossingSearch:
 
     __slots__ = (
         '_cover',
+        '_kernel',
         '_norm',
         '_span',
         '_terms',
@@ -153,6 +154,8 @@ class CrossingSearch:
         self._cover = (-math.inf, math.nan, math.nan)
         self._terms = getattr(model, 'error_terms', None) or _vector_terms(model)
         self._norm = getattr(model, 'error_norm', None) or _vector_norm(model)
+        # The compiled loop (formation_agent.core.compiled) where the model offers one: the same floats.
+        self._kernel = getattr(model, 'search_kernel', None)
 
     @property
     def done(self) -> bool:
@@ -165,6 +168,8 @@ class CrossingSearch:
 
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
+        if self._kernel is not None:
+            return self._kernel(self, until)
         a = self.frontier
         beta, alpha, tolerance, floor = self.beta, self.alpha, self.tolerance, self.floor
         terms, bounds = self._terms, self.model.bounds
@@ -175,7 +180,7 @@ class CrossingSearch:
                 self.result = math.inf
                 break
             if self.steps >= MAX_STEPS:
-                raise CrossingError(f'no convergence after {MAX_STEPS} certified steps (t={a!r})')
+                raise steps_error(a)
             self.steps += 1
             size_sq, size_rate = terms(a)
             if floor == 0.0:  # S = 1/θ(a), written out as in _scale (this is the hot loop)
@@ -186,10 +191,7 @@ class CrossingSearch:
             phi = 1.0 - s2 * size_sq
             phi_rate = -2.0 * beta * (1.0 - floor * scale) - 2.0 * s2 * size_rate  # (r²)'(a) = -2β(1-w)
             if not (math.isfinite(phi) and math.isfinite(phi_rate)):
-                raise CrossingError(
-                    f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, '
-                    f'e.de/dt = {size_rate!r}'
-                )
+                raise finite_error(a, size_sq, size_rate)
             size = math.sqrt(size_sq)
             if phi <= tolerance:
                 result = self._finish(a, phi, phi_rate, size, cover_end, bound_e, bound_curv, stuck=False)
@@ -273,6 +275,18 @@ class CrossingSearch:
         if self.floor == 0.0:
             return math.exp(self.beta * a) / self.alpha
         return 1.0 / (self.floor + self.alpha * math.exp(-self.beta * a))
+
+
+def steps_error(a: float) -> CrossingError:
+    """The search took MAX_STEPS steps and stands at `a`."""
+    return CrossingError(f'no convergence after {MAX_STEPS} certified steps (t={a!r})')
+
+
+def finite_error(a: float, size_sq: float, size_rate: float) -> CrossingError:
+    """||e||² or e·ė is not finite at `a`."""
+    return CrossingError(
+        f'triggering error is not finite at t={a!r}: ||e||^2 = {size_sq!r}, e.de/dt = {size_rate!r}'
+    )
 
 
 def first_crossing(

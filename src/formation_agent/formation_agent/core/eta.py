@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formation_agent.core import compiled
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
@@ -73,6 +74,7 @@ SCALE_GAINS: dict[str, float] = {
 # c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
 # within a small factor of the local values.
 _GAP_FRACTION = 0.125
+compiled.configure(gap_fraction=_GAP_FRACTION)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -374,6 +376,14 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     # ErrorModel interface (formation_agent.core.crossing) -------------------------------------------
 
+    _kind = 0  # 1: ETA-1, 2: ETA-2 (the compiled core's layout of `_row`)
+
+    @property
+    def search_kernel(self):
+        """The compiled search loop for this agent (the plain-float path, p <= 3), or None: the
+        search then calls the methods below (formation_agent.core.compiled; the same floats)."""
+        return compiled.kernel() if self._fast else None
+
     def error(self, t: float) -> np.ndarray:
         """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
         return self.error_and_rate(t)[0]
@@ -428,6 +438,7 @@ class Eta1Agent(_EventTriggeredAgent):
     """Event-Triggered Algorithm 1: single integrators, Theorem 1."""
 
     algorithm = 'eta1'
+    _kind = 1
 
     def __init__(
         self,
@@ -572,6 +583,7 @@ class Eta2Agent(_EventTriggeredAgent):
     """
 
     algorithm = 'eta2'
+    _kind = 2
 
     def __init__(
         self,

@@ -1,0 +1,784 @@
+/* The compiled certified first-crossing search of formation_agent.core (docs/COMPILED_CORE.md).
+ *
+ * One function, advance(), runs CrossingSearch.advance (crossing.py) for an agent on the
+ * plain-float path (p <= 3): the step loop, e_i and its rate (Eta1Agent/Eta2Agent._fast_probe),
+ * their bounds (_fast_bounds), the last step (_finish) and the polish (_root_in_bracket), with
+ * ETA-2's closed forms (Eta2Agent._closed_form, closed_form.z_minus_one_plus_exp_float).
+ * Every expression is the Python one, operation for operation and in its order (Python
+ * evaluates a * b * c as (a * b) * c, and so does C); min/max are Python's (the first argument
+ * unless the second is strictly smaller/larger); exp, expm1 and sqrt are the libm functions
+ * that CPython's math module calls. Built with -O2 -ffp-contract=off and without -ffast-math
+ * (setup.py), the results are the very floats of the pure-Python path, which
+ * tests/formation_agent/core/test_compiled.py checks bit for bit.
+ *
+ * The constants (growth factor, step limit, the polish's 4 ulps, the gap fraction, the series)
+ * are handed over once by formation_agent.core.compiled (configure), so they have one source.
+ * Errors the Python path raises with a message are returned as a tuple for compiled.py to
+ * raise in the same words; an overflow of exp/expm1 raises OverflowError('math range error')
+ * as math.exp does.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#define WIDTH1 9  /* Eta1Agent._row: anchor, y0, y1, y2, v0, v1, v2, speed, capacity */
+#define WIDTH2 11 /* Eta2Agent._row: anchor, y0, y1, y2, q0, q1, q2, u0, u1, u2, capacity */
+#define N_SERIES 11
+
+static double GROWTH = 4.0, RTOL = 0.0, GAP_FRACTION = 0.125, SERIES_LIMIT = 0.1;
+static long MAX_STEPS = 0;
+static double SERIES[N_SERIES];
+static int configured = 0;
+
+/* Python's min(a, b) and max(a, b) for two floats. */
+static inline double py_min(double a, double b) { return b < a ? b : a; }
+static inline double py_max(double a, double b) { return b > a ? b : a; }
+
+enum { OK = 0, ERR_RANGE = 1, ERR_OVERFLOW = 2 };
+
+typedef struct {
+    int kind; /* 1: ETA-1, 2: ETA-2 */
+    Py_ssize_t m;
+    double *rows;  /* m rows of WIDTH1 / WIDTH2 */
+    double *probe; /* ETA-1: radius per edge; ETA-2: (r, ||q||, ||q'||, c) per edge */
+    double *speeds;
+    double cap; /* ETA-1: the span limit of _span_within_capacity */
+    double u_off[3];
+    double control_norm;
+    double k1, k2, k3;
+    Py_ssize_t bad_k; /* ERR_RANGE: the edge, its length and capacity */
+    double bad_r, bad_c;
+} Model;
+
+/* math.exp / math.expm1: an infinite result of a finite argument is an OverflowError. */
+static inline int checked(double x, double y) { return isinf(y) && isfinite(x) ? ERR_OVERFLOW : OK; }
+
+static inline int out_of_range(Model *md, Py_ssize_t k, double r, double c) {
+    md->bad_k = k;
+    md->bad_r = r;
+    md->bad_c = c;
+    return ERR_RANGE;
+}
+
+/* Eta1Agent._fast_probe: e and (with_rate) its rate, padded to three components. */
+static int probe1(Model *md, double t, int with_rate, double *out) {
+    double e0 = 0.0, e1 = 0.0, e2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
+    double cap = INFINITY;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        const double *row = md->rows + k * WIDTH1;
+        double anchor = row[0], ya0 = row[1], ya1 = row[2], ya2 = row[3];
+        double v0 = row[4], v1 = row[5], v2 = row[6], speed = row[7], c = row[8];
+        double s = t - anchor;
+        double y0 = ya0 + s * v0; /* (statexixj) */
+        double y1 = ya1 + s * v1;
+        double y2 = ya2 + s * v2;
+        double r = sqrt(y0 * y0 + y1 * y1 + y2 * y2);
+        double gap = c - r;
+        if (gap <= 0.0)
+            return out_of_range(md, k, r, c);
+        double w = (2.0 * c - r) / (gap * gap); /* (fij) */
+        e0 += w * y0;
+        e1 += w * y1;
+        e2 += w * y2;
+        if (!with_rate)
+            continue;
+        double radial = r > 0.0 ? (y0 * v0 + y1 * v1 + y2 * v2) / r : 0.0;
+        double f = (3.0 * c - r) / (gap * gap * gap) * radial; /* (hij) */
+        d0 += f * y0 + w * v0;
+        d1 += f * y1 + w * v1;
+        d2 += f * y2 + w * v2;
+        md->probe[k] = r;
+        if (speed > 0.0) {
+            double limit = GAP_FRACTION * gap / speed;
+            cap = py_min(cap, limit);
+        }
+    }
+    if (with_rate)
+        md->cap = cap;
+    out[0] = e0 + md->u_off[0];
+    out[1] = e1 + md->u_off[1];
+    out[2] = e2 + md->u_off[2];
+    out[3] = d0;
+    out[4] = d1;
+    out[5] = d2;
+    return OK;
+}
+
+/* Eta1Agent._fast_bounds */
+static void bounds1(Model *md, double span, double size, double *out) {
+    span = py_min(span, md->cap);
+    double rate = 0.0, curv = 0.0, reach_sum = 0.0;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        const double *row = md->rows + k * WIDTH1;
+        double r = md->probe[k], speed = row[7], c = row[8];
+        double reach = r + span * speed;
+        double gap = c - reach;
+        double gap3 = gap * gap * gap;
+        rate += 2.0 * c * c / gap3 * speed; /* (gij), (dotnormei) */
+        curv += (reach * ((8.0 * c - 2.0 * reach) / (gap3 * gap)) + 3.0 * ((3.0 * c - reach) / gap3)) * speed *
+                speed;
+        reach_sum += (2.0 * c - reach) / (gap * gap) * reach;
+    }
+    out[0] = span;
+    out[1] = py_min(size + rate * span, md->control_norm + reach_sum);
+    out[2] = rate;
+    out[3] = curv;
+}
+
+/* closed_form.z_minus_one_plus_exp_float */
+static inline double series(double z) {
+    const double *c = SERIES;
+    double acc = c[8] - z * (c[9] - z * c[10]);
+    return z * z * (c[0] - z * (c[1] - z * (c[2] - z * (c[3] - z * (c[4] - z * (c[5] - z * (c[6] - z * (c[7] - z * acc))))))));
+}
+
+/* Eta2Agent._fast_probe, with Eta2Agent._closed_form written out. */
+static int probe2(Model *md, double t, int with_rate, double *out) {
+    double k1 = md->k1, k2 = md->k2, k3 = md->k3;
+    double e0 = 0.0, e1 = 0.0, e2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
+    double lag = 0.0, ramp = 0.0, fade = 0.0, last_anchor = 0.0;
+    int have_anchor = 0;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        const double *row = md->rows + k * WIDTH2;
+        double anchor = row[0], ya0 = row[1], ya1 = row[2], ya2 = row[3];
+        double qa0 = row[4], qa1 = row[5], qa2 = row[6], u0 = row[7], u1 = row[8], u2 = row[9], c = row[10];
+        if (!have_anchor || anchor != last_anchor) {
+            double z = k3 * (t - anchor);
+            double em = expm1(-z);
+            if (checked(-z, em))
+                return ERR_OVERFLOW;
+            double decay = -em; /* 1 - e^{-z} */
+            double rmp = fabs(z) < SERIES_LIMIT ? series(z) : z - decay;
+            lag = decay / k3;
+            ramp = rmp / (k3 * k3);
+            fade = 1.0 - decay;
+            last_anchor = anchor;
+            have_anchor = 1;
+        }
+        double y0 = ya0 + lag * qa0 + ramp * u0; /* (statexixjd) */
+        double y1 = ya1 + lag * qa1 + ramp * u1;
+        double y2 = ya2 + lag * qa2 + ramp * u2;
+        double q0 = fade * qa0 + lag * u0; /* (stateqiqj) */
+        double q1 = fade * qa1 + lag * u1;
+        double q2 = fade * qa2 + lag * u2;
+        double r = sqrt(y0 * y0 + y1 * y1 + y2 * y2);
+        double gap = c - r;
+        if (gap <= 0.0)
+            return out_of_range(md, k, r, c);
+        double w = (2.0 * c - r) / (gap * gap); /* (fij) */
+        double m0 = k1 * y0 + k2 * q0;
+        double m1 = k1 * y1 + k2 * q1;
+        double m2 = k1 * y2 + k2 * q2;
+        e0 += w * m0;
+        e1 += w * m1;
+        e2 += w * m2;
+        if (!with_rate)
+            continue;
+        double a0 = u0 - k3 * q0;
+        double a1 = u1 - k3 * q1;
+        double a2 = u2 - k3 * q2;
+        double radial = r > 0.0 ? (y0 * q0 + y1 * q1 + y2 * q2) / r : 0.0;
+        double f = (3.0 * c - r) / (gap * gap * gap) * radial; /* (hij) */
+        d0 += f * m0 + w * (k1 * q0 + k2 * a0);
+        d1 += f * m1 + w * (k1 * q1 + k2 * a1);
+        d2 += f * m2 + w * (k1 * q2 + k2 * a2);
+        double *p = md->probe + 4 * k;
+        p[0] = r;
+        p[1] = sqrt(q0 * q0 + q1 * q1 + q2 * q2);
+        p[2] = sqrt(a0 * a0 + a1 * a1 + a2 * a2);
+        p[3] = c;
+    }
+    out[0] = e0 + md->u_off[0];
+    out[1] = e1 + md->u_off[1];
+    out[2] = e2 + md->u_off[2];
+    out[3] = d0;
+    out[4] = d1;
+    out[5] = d2;
+    return OK;
+}
+
+/* Eta2Agent._fast_bounds */
+static int bounds2(Model *md, double span, double size, double *out) {
+    double k1 = md->k1, k2 = md->k2, k3 = md->k3;
+    double em = expm1(-k3 * span);
+    if (checked(-k3 * span, em))
+        return ERR_OVERFLOW;
+    double growth = -em / k3;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        const double *p = md->probe + 4 * k;
+        double r = p[0], q_now = p[1], accel = p[2], c = p[3];
+        double speed = q_now + growth * accel;
+        if (speed > 0.0)
+            span = py_min(span, GAP_FRACTION * (c - r) / speed);
+        md->speeds[k] = speed;
+    }
+    double rate = 0.0, curv_y = 0.0, curv_q = 0.0, reach_sum = 0.0;
+    int kink = 0;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        const double *p = md->probe + 4 * k;
+        double r = p[0], accel = p[2], c = p[3], speed = md->speeds[k];
+        double reach = r + span * speed;
+        double gap = c - reach;
+        double gap3 = gap * gap * gap;
+        double w = (2.0 * c - reach) / (gap * gap);
+        double h = (3.0 * c - reach) / gap3;
+        double g = 2.0 * c * c / gap3;
+        double second = (8.0 * c - 2.0 * reach) / (gap3 * gap);
+        double speed_sq = speed * speed;
+        rate += k1 * g * speed + k2 * (h * speed_sq + w * accel);
+        curv_y += (reach * second + 3.0 * h) * speed_sq + g * accel;
+        if (speed > 0.0) {
+            double low = r - span * speed;
+            if (low <= 0.0) {
+                kink = 1;
+            } else {
+                double omega_ddot = second * speed_sq + h * (speed_sq / low + accel);
+                curv_q += omega_ddot * speed + 2.0 * h * speed * accel + w * k3 * accel;
+            }
+        } else {
+            curv_q += w * k3 * accel;
+        }
+        reach_sum += w * (k1 * reach + k2 * speed);
+    }
+    out[0] = span;
+    out[1] = py_min(size + rate * span, md->control_norm + reach_sum);
+    out[2] = rate;
+    out[3] = kink ? INFINITY : k1 * curv_y + k2 * curv_q;
+    return OK;
+}
+
+static inline int probe(Model *md, double t, int with_rate, double *out) {
+    return md->kind == 1 ? probe1(md, t, with_rate, out) : probe2(md, t, with_rate, out);
+}
+
+static inline int bounds(Model *md, double span, double size, double *out) {
+    if (md->kind == 1) {
+        bounds1(md, span, size, out);
+        return OK;
+    }
+    return bounds2(md, span, size, out);
+}
+
+/* The agent's error_norm: ||e(t)|| from a probe without the rate. */
+static inline int norm(Model *md, double t, double *out) {
+    double e[6];
+    int status = probe(md, t, 0, e);
+    if (status)
+        return status;
+    *out = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    return OK;
+}
+
+typedef struct {
+    double alpha, beta, floor, limit, tolerance;
+} Search;
+
+/* CrossingSearch._scale */
+static inline int scale_at(const Search *s, double a, double *out) {
+    if (s->floor == 0.0) {
+        double x = s->beta * a, y = exp(x);
+        if (checked(x, y))
+            return ERR_OVERFLOW;
+        *out = y / s->alpha;
+        return OK;
+    }
+    double x = -s->beta * a, y = exp(x);
+    if (checked(x, y))
+        return ERR_OVERFLOW;
+    *out = 1.0 / (s->floor + s->alpha * y);
+    return OK;
+}
+
+/* The margin r(t) - S ||e(t)|| of _finish. */
+static inline int margin(Model *md, double beta, double a, double share, double fade, double scale, double t,
+                         double *out) {
+    double x = -beta * (t - a), y = exp(x), n;
+    if (checked(x, y))
+        return ERR_OVERFLOW;
+    int status = norm(md, t, &n);
+    if (status)
+        return status;
+    *out = share + fade * y - scale * n;
+    return OK;
+}
+
+/* crossing._root_in_bracket over the margin (max_iterations = 200). */
+static int root_in_bracket(Model *md, double beta, double a0, double share, double fade, double scale, double a,
+                           double fa, double b, double fb, double *out) {
+    int kept = 0;
+    double weight_a = fa, weight_b = fb, x = a;
+    for (int i = 0; i < 200; i++) {
+        double big = py_max(py_max(fabs(a), fabs(b)), 1e-300);
+        if (b - a <= RTOL * big)
+            break;
+        double previous = x;
+        x = b - weight_b * ((b - a) / (weight_b - weight_a));
+        if (!(a < x && x < b))
+            x = a + 0.5 * (b - a);
+        double fx;
+        int status = margin(md, beta, a0, share, fade, scale, x, &fx);
+        if (status)
+            return status;
+        if (fx == 0.0) {
+            *out = x;
+            return OK;
+        }
+        if ((fx > 0.0) == (fa > 0.0)) {
+            a = x;
+            fa = fx;
+            weight_a = fx;
+            if (kept == 1)
+                weight_b *= 0.5;
+            kept = 1;
+        } else {
+            b = x;
+            fb = fx;
+            weight_b = fx;
+            if (kept == -1)
+                weight_a *= 0.5;
+            kept = -1;
+        }
+        if (fabs(x - previous) <= RTOL * fabs(x))
+            break;
+    }
+    *out = fabs(fa) <= fabs(fb) ? a : b;
+    return OK;
+}
+
+/* Python's math.ulp */
+static double py_ulp(double x) {
+    if (isnan(x))
+        return x;
+    x = fabs(x);
+    if (isinf(x))
+        return x;
+    double x2 = nextafter(x, INFINITY);
+    if (isinf(x2)) {
+        x2 = nextafter(x, -INFINITY);
+        return x - x2;
+    }
+    return x2 - x;
+}
+
+/* CrossingSearch._finish; *found = 0 is its None (step on from a). */
+static int finish(Model *md, const Search *s, double a, double phi, double phi_rate, double size, double cover_end,
+                  double bound_e, double bound_curv, int stuck, int *found, double *out) {
+    *found = 1;
+    *out = a;
+    if (phi <= 0.0 || phi_rate >= 0.0)
+        return OK;
+    double beta = s->beta, scale;
+    int status = scale_at(s, a, &scale);
+    if (status)
+        return status;
+    double share = s->floor * scale;
+    double fade = 1.0 - share;
+    double margin_a = 1.0 - scale * size;
+    if (margin_a <= 0.0)
+        return OK;
+    double width = py_max(2.0 * phi / -phi_rate, a != 0.0 ? 4.0 * py_ulp(a) : 1e-300);
+    double b = a + width;
+    if (cover_end < b) {
+        double bd[4];
+        status = bounds(md, b - a, size, bd);
+        if (status)
+            return status;
+        bound_e = bd[1];
+        bound_curv = bd[3];
+        if (a + bd[0] < b) {
+            *found = stuck;
+            return OK;
+        }
+    }
+    double curvature = 4.0 * beta * beta + 2.0 * scale * scale * bound_e * bound_curv;
+    if (!(curvature * (b - a) <= -0.5 * phi_rate)) {
+        *found = stuck;
+        return OK;
+    }
+    double margin_b;
+    status = margin(md, beta, a, share, fade, scale, b, &margin_b);
+    if (status)
+        return status;
+    if (margin_b >= 0.0)
+        return OK;
+    return root_in_bracket(md, beta, a, share, fade, scale, a, margin_a, b, margin_b, out);
+}
+
+/* crossing._quadratic_step */
+static inline double quadratic_step(double phi, double phi_rate, double curvature) {
+    if (curvature <= 0.0)
+        return phi_rate < 0.0 ? phi / -phi_rate : INFINITY;
+    double root = sqrt(phi_rate * phi_rate + 2.0 * curvature * phi);
+    if (phi_rate > 0.0)
+        return (phi_rate + root) / curvature;
+    return 2.0 * phi / (root - phi_rate);
+}
+
+typedef struct {
+    double frontier, span, cover_end, bound_e, bound_curv, result;
+    int has_result;
+    long steps;
+    double bad_a, bad_size_sq, bad_size_rate; /* ERR_STEPS / ERR_FINITE */
+} State;
+
+enum { ERR_STEPS = 3, ERR_FINITE = 4 };
+
+/* The loop of CrossingSearch.advance. */
+static int run(Model *md, const Search *s, State *st, double until) {
+    double a = st->frontier, span = st->span;
+    double cover_end = st->cover_end, bound_e = st->bound_e, bound_curv = st->bound_curv;
+    double beta = s->beta, alpha = s->alpha, tolerance = s->tolerance, floor_ = s->floor;
+    int status;
+    while (!st->has_result && a <= until) {
+        if (a > s->limit) {
+            st->result = INFINITY;
+            st->has_result = 1;
+            break;
+        }
+        if (st->steps >= MAX_STEPS) {
+            st->bad_a = a;
+            return ERR_STEPS;
+        }
+        st->steps += 1;
+        double e[6];
+        status = probe(md, a, 1, e);
+        if (status)
+            return status;
+        double size_sq = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        double size_rate = e[0] * e[3] + e[1] * e[4] + e[2] * e[5];
+        double scale;
+        if (floor_ == 0.0) {
+            double x = beta * a, y = exp(x);
+            if (checked(x, y))
+                return ERR_OVERFLOW;
+            scale = y / alpha;
+        } else {
+            double x = -beta * a, y = exp(x);
+            if (checked(x, y))
+                return ERR_OVERFLOW;
+            scale = 1.0 / (floor_ + alpha * y);
+        }
+        double s2 = scale * scale;
+        double phi = 1.0 - s2 * size_sq;
+        double phi_rate = -2.0 * beta * (1.0 - floor_ * scale) - 2.0 * s2 * size_rate;
+        if (!(isfinite(phi) && isfinite(phi_rate))) {
+            st->bad_a = a;
+            st->bad_size_sq = size_sq;
+            st->bad_size_rate = size_rate;
+            return ERR_FINITE;
+        }
+        double size = sqrt(size_sq);
+        if (phi <= tolerance) {
+            int found;
+            double result;
+            status = finish(md, s, a, phi, phi_rate, size, cover_end, bound_e, bound_curv, 0, &found, &result);
+            if (status)
+                return status;
+            if (found) {
+                st->result = result;
+                st->has_result = 1;
+                break;
+            }
+        }
+        double bd[4];
+        status = bounds(md, span, size, bd);
+        if (status)
+            return status;
+        double span_eff = bd[0], bound_rate = bd[2];
+        bound_e = bd[1];
+        bound_curv = bd[3];
+        cover_end = a + span_eff;
+        double lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate;
+        double step = lipschitz > 0.0 ? phi / lipschitz : INFINITY;
+        double curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv);
+        if (curvature < INFINITY)
+            step = py_max(step, quadratic_step(phi, phi_rate, curvature));
+        if (step >= span_eff) {
+            step = span_eff;
+            span = span_eff * GROWTH;
+        } else {
+            span = py_max(step * GROWTH, 1e-300);
+        }
+        double nxt = a + step;
+        if (nxt <= a) {
+            int found;
+            double result;
+            status = finish(md, s, a, phi, phi_rate, size, cover_end, bound_e, bound_curv, 1, &found, &result);
+            if (status)
+                return status;
+            st->result = result; /* stuck: _finish always answers */
+            st->has_result = 1;
+            break;
+        }
+        a = nxt;
+    }
+    st->frontier = a;
+    st->span = span;
+    st->cover_end = cover_end;
+    st->bound_e = bound_e;
+    st->bound_curv = bound_curv;
+    return OK;
+}
+
+/* ---- Python glue ---------------------------------------------------------------------------- */
+
+/* Attribute names, interned once (PyInit__fastcore). */
+enum {
+    N_ALPHA, N_BETA, N_FLOOR, N_LIMIT, N_TOLERANCE, N_FRONTIER, N_SPAN, N_STEPS, N_RESULT, N_COVER, N_MODEL,
+    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_NAMES
+};
+static const char *NAME_TEXT[N_NAMES] = {
+    "alpha", "beta", "floor", "limit", "tolerance", "frontier", "_span", "steps", "result", "_cover", "model",
+    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3",
+};
+static PyObject *NAMES[N_NAMES];
+static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
+
+static int get_double(PyObject *obj, int name, double *out) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
+    if (value == NULL)
+        return -1;
+    *out = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return (*out == -1.0 && PyErr_Occurred()) ? -1 : 0;
+}
+
+static int set_double(PyObject *obj, int name, double value) {
+    PyObject *v = PyFloat_FromDouble(value);
+    if (v == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, NAMES[name], v);
+    Py_DECREF(v);
+    return rc;
+}
+
+/* A sequence of `count` floats into out. */
+static int read_floats(PyObject *seq, double *out, Py_ssize_t count, const char *what) {
+    PyObject *fast = PySequence_Fast(seq, what);
+    if (fast == NULL)
+        return -1;
+    if (PySequence_Fast_GET_SIZE(fast) != count) {
+        PyErr_Format(PyExc_ValueError, "%s: %zd values, expected %zd", what, PySequence_Fast_GET_SIZE(fast),
+                     count);
+        Py_DECREF(fast);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        double v = PyFloat_AsDouble(items[i]);
+        if (v == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fast);
+            return -1;
+        }
+        out[i] = v;
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+static int read_attr_floats(PyObject *obj, int name, double *out, Py_ssize_t count) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
+    if (value == NULL)
+        return -1;
+    int rc = read_floats(value, out, count, NAME_TEXT[name]);
+    Py_DECREF(value);
+    return rc;
+}
+
+static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
+    (void)self;
+    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser", NULL};
+    PyObject *coefficients, *raiser;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO", names, &GROWTH, &MAX_STEPS, &RTOL, &GAP_FRACTION,
+                                     &SERIES_LIMIT, &coefficients, &raiser))
+        return NULL;
+    if (read_floats(coefficients, SERIES, N_SERIES, "series") < 0)
+        return NULL;
+    Py_INCREF(raiser);
+    Py_XSETREF(RAISER, raiser);
+    configured = 1;
+    Py_RETURN_NONE;
+}
+
+/* The model (the agent) as the loop reads it; md->rows allocated here (PyMem_Free it). */
+static int read_model(PyObject *model, Model *md) {
+    PyObject *kind = PyObject_GetAttr(model, NAMES[N_KIND]);
+    if (kind == NULL)
+        return -1;
+    md->kind = (int)PyLong_AsLong(kind);
+    Py_DECREF(kind);
+    if (md->kind != 1 && md->kind != 2) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %d", md->kind);
+        return -1;
+    }
+    if (read_attr_floats(model, N_U_OFFSET, md->u_off, 3) < 0 ||
+        get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
+        return -1;
+    if (md->kind == 2 &&
+        (get_double(model, N_K1, &md->k1) < 0 || get_double(model, N_K2, &md->k2) < 0 ||
+         get_double(model, N_K3, &md->k3) < 0))
+        return -1;
+    PyObject *rows = PyObject_GetAttr(model, NAMES[N_ROWS]);
+    if (rows == NULL)
+        return -1;
+    PyObject *fast = PySequence_Fast(rows, "_rows");
+    Py_DECREF(rows);
+    if (fast == NULL)
+        return -1;
+    md->m = PySequence_Fast_GET_SIZE(fast);
+    Py_ssize_t width = md->kind == 1 ? WIDTH1 : WIDTH2;
+    Py_ssize_t n = md->m > 0 ? md->m : 1;
+    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
+    if (md->rows == NULL) {
+        Py_DECREF(fast);
+        PyErr_NoMemory();
+        return -1;
+    }
+    md->probe = md->rows + n * width;
+    md->speeds = md->probe + 4 * n;
+    for (Py_ssize_t k = 0; k < md->m; k++) {
+        if (read_floats(PySequence_Fast_GET_ITEM(fast, k), md->rows + k * width, width, "_rows") < 0) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+static int read_search(PyObject *search, Search *s, State *st) {
+    if (get_double(search, N_ALPHA, &s->alpha) || get_double(search, N_BETA, &s->beta) ||
+        get_double(search, N_FLOOR, &s->floor) || get_double(search, N_LIMIT, &s->limit) ||
+        get_double(search, N_TOLERANCE, &s->tolerance) || get_double(search, N_FRONTIER, &st->frontier) ||
+        get_double(search, N_SPAN, &st->span))
+        return -1;
+    PyObject *steps = PyObject_GetAttr(search, NAMES[N_STEPS]);
+    if (steps == NULL)
+        return -1;
+    st->steps = PyLong_AsLong(steps);
+    Py_DECREF(steps);
+    if (st->steps == -1 && PyErr_Occurred())
+        return -1;
+    PyObject *old = PyObject_GetAttr(search, NAMES[N_RESULT]);
+    if (old == NULL)
+        return -1;
+    if (old != Py_None) {
+        st->has_result = 1;
+        st->result = PyFloat_AsDouble(old);
+    }
+    Py_DECREF(old);
+    if (st->has_result && PyErr_Occurred())
+        return -1;
+    double cov[3];
+    if (read_attr_floats(search, N_COVER, cov, 3) < 0)
+        return -1;
+    st->cover_end = cov[0];
+    st->bound_e = cov[1];
+    st->bound_curv = cov[2];
+    return 0;
+}
+
+static int write_search(PyObject *search, const State *st) {
+    PyObject *cover = Py_BuildValue("(ddd)", st->cover_end, st->bound_e, st->bound_curv);
+    if (cover == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(search, NAMES[N_COVER], cover);
+    Py_DECREF(cover);
+    if (rc < 0 || set_double(search, N_FRONTIER, st->frontier) < 0 || set_double(search, N_SPAN, st->span) < 0)
+        return -1;
+    return st->has_result ? set_double(search, N_RESULT, st->result) : 0;
+}
+
+/* The error the pure-Python path raises with a message: compiled._raise(model, problem) raises it. */
+static void raise_problem(PyObject *model, PyObject *problem) {
+    if (problem == NULL)
+        return;
+    PyObject *out = PyObject_CallFunctionObjArgs(RAISER, model, problem, NULL);
+    Py_DECREF(problem);
+    if (out != NULL) { /* the raiser must raise */
+        Py_DECREF(out);
+        PyErr_SetString(PyExc_RuntimeError, "compiled._raise returned instead of raising");
+    }
+}
+
+/* advance(search, until): CrossingSearch.advance for a plain-float agent (search.model). Writes
+ * the search's frontier, _span, _cover, result and steps as the Python loop does and returns its
+ * result; errors are the Python path's (steps counted, the rest left, as there). */
+static PyObject *advance(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *search;
+    double until;
+    if (!PyArg_ParseTuple(args, "Od", &search, &until))
+        return NULL;
+    if (!configured) {
+        PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not called");
+        return NULL;
+    }
+    Model md;
+    Search s;
+    State st;
+    memset(&md, 0, sizeof md);
+    memset(&st, 0, sizeof st);
+    if (read_search(search, &s, &st) < 0)
+        return NULL;
+    PyObject *model = PyObject_GetAttr(search, NAMES[N_MODEL]);
+    if (model == NULL)
+        return NULL;
+    PyObject *result = NULL;
+    if (read_model(model, &md) < 0)
+        goto done;
+    int status = run(&md, &s, &st, until);
+    PyObject *steps = PyLong_FromLong(st.steps);
+    if (steps == NULL)
+        goto done;
+    int rc = PyObject_SetAttr(search, NAMES[N_STEPS], steps);
+    Py_DECREF(steps);
+    if (rc < 0)
+        goto done;
+    switch (status) {
+    case OK:
+        if (write_search(search, &st) == 0)
+            result = st.has_result ? PyFloat_FromDouble(st.result) : Py_NewRef(Py_None);
+        break;
+    case ERR_OVERFLOW:
+        PyErr_SetString(PyExc_OverflowError, "math range error");
+        break;
+    case ERR_RANGE:
+        raise_problem(model, Py_BuildValue("(sndd)", "range", md.bad_k, md.bad_r, md.bad_c));
+        break;
+    case ERR_STEPS:
+        raise_problem(model, Py_BuildValue("(sd)", "steps", st.bad_a));
+        break;
+    default:
+        raise_problem(model, Py_BuildValue("(sddd)", "finite", st.bad_a, st.bad_size_sq, st.bad_size_rate));
+    }
+done:
+    PyMem_Free(md.rows);
+    Py_DECREF(model);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
+     "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
+     "constants and the function that raises the Python path's errors."},
+    {"advance", advance, METH_VARARGS,
+     "advance(search, until): CrossingSearch.advance for a plain-float agent (search.model); its result."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_fastcore", "The compiled certified first-crossing search (docs/COMPILED_CORE.md).", -1,
+    methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__fastcore(void) {
+    for (int i = 0; i < N_NAMES; i++) {
+        NAMES[i] = PyUnicode_InternFromString(NAME_TEXT[i]);
+        if (NAMES[i] == NULL)
+            return NULL;
+    }
+    return PyModule_Create(&module);
+}
