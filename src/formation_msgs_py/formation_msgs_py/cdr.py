@@ -52,6 +52,11 @@ def _string(text: str, offset: int) -> tuple[bytes, int]:
 
 def _read_string(data: bytes, offset: int, what: str) -> tuple[str, int]:
     offset += -(offset - _HEADER) % 4
+    if offset + _LENGTH.size > len(data):  # no room for the string's length
+        raise MessageError(
+            f'{what}: a string at byte {offset} does not fit a message of {len(data)} bytes',
+            reason=REJECT_LENGTH,
+        )
     (length,) = _LENGTH.unpack_from(data, offset)
     end = offset + 4 + length
     if length < 1 or end > len(data) or data[end - 1] != 0:
