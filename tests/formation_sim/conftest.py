@@ -53,17 +53,20 @@ def _bag_trigger_stamps(bag: Path) -> tuple[dict[str, int], dict[tuple[int, int]
     return counts, stamps
 
 
-def _wait_for_stepping(run, limit: float = 120.0) -> None:
-    """Wait until the simulator reports sim time past 0 (on a loaded machine that can take a while)."""
+def _wait_for_stepping(run, limit: float = 120.0, *, ended=lambda: None) -> None:
+    """Wait until the simulator reports sim time past 0 (on a loaded machine that can take a while).
+    `ended()`: the run's result once it has returned (then waiting is over: say how it ended)."""
     deadline = time.monotonic() + limit
 
     def reached() -> float:
         found = re.search(r'\bt=([0-9.eE+-]+)', run.last_progress)
         return float(found.group(1)) if found else 0.0
 
-    while reached() <= 0.0 and time.monotonic() < deadline:
+    while reached() <= 0.0 and time.monotonic() < deadline and ended() is None:
         time.sleep(0.05)
-    assert reached() > 0.0, f'the run never stepped past t = 0 (last progress: {run.last_progress!r})'
+    result = ended()
+    how = '' if result is None else f'; it ended with status {result.exit_status}: {result.message}'
+    assert reached() > 0.0, f'the run never stepped past t = 0 (last progress: {run.last_progress!r}){how}'
 
 
 class _SteppingRun:
@@ -74,7 +77,7 @@ class _SteppingRun:
         self._results: list = []
         self._worker = threading.Thread(target=lambda: self._results.append(run.run()), daemon=True)
         self._worker.start()
-        _wait_for_stepping(run)
+        _wait_for_stepping(run, ended=lambda: self._results[0] if self._results else None)
 
     def result(self, timeout: float):
         """run()'s result, once it returned within `timeout` seconds."""
