@@ -131,7 +131,10 @@ def test_a_frozen_agent_sends_no_command_after_it_resumes(bench, agent_process):
     after = [_linear(msg) for _, msg in rig.commands[frozen:]]
     assert after and all(command == (0.0,) * 6 for command in after), after
     line = _named(agent.stderr)
-    assert any(words in line for words in ('s late', 'after it was due', 's old')), line
+    # Resumed, it may see its time keeper's liveliness lapse and come back before any timer of its
+    # own runs (its own freeze made the keeper look silent): it says so (two fresh-clone runs).
+    reasons = ('s late', 'after it was due', 's old', 'the keeper only looked silent')
+    assert any(words in line for words in reasons), line
     assert line.endswith(': the agent stops') and 'Traceback' not in agent.stderr, line
     _assert_stopped(rig, agent, status=1, failure='the agent stops')
 

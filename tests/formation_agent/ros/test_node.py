@@ -683,6 +683,7 @@ def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_
     and the agent leaves after the grace; lock-step moves nothing and keeps its patience."""
     from types import SimpleNamespace
 
+    from formation_agent.ros.node import AgentNodeError
     from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
 
     node = live_node()
@@ -697,3 +698,11 @@ def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_
     node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1))
     assert node.schedule.stopped == wall_clock and node.output._stopped == wall_clock
     node.check()  # within the grace: still there
+    # The keeper back within the grace: a wall-clock agent that stopped its robot for it leaves with
+    # the cause named (it waited for a final Step that a test bench never sends: fresh-clone runs).
+    node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))
+    if wall_clock:
+        with pytest.raises(AgentNodeError, match='showed no sign of life and came back .* cannot rejoin'):
+            node.check()
+    else:
+        node.check()

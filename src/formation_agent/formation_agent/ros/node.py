@@ -508,6 +508,7 @@ class _EndWatch:
     def __init__(self, node: FormationAgentNode) -> None:
         self._node = node
         self._timer = None
+        self._keeper_stop: float | None = None  # when the robot was stopped for a silent keeper
 
     def start(self, epoch: float) -> None:
         """Step 0 on the wall clock: the horizon is armed on the agent's own clock."""
@@ -534,7 +535,20 @@ class _EndWatch:
         the lease plus LOST_GRACE); the agent leaves after LOST_GRACE (`check`)."""
         node = self._node
         node.simulator.on_liveliness(info)
+        if info.alive_count > 0 and self._keeper_stop is not None and not node.finished:
+            # Back within the grace: a stopped agent cannot rejoin (its neighbours predict with the
+            # command it had), so it leaves with the cause named instead of waiting for a final Step.
+            node._fail(
+                AgentNodeError(
+                    f'agent {node.agent_id}: the time keeper (writer of {STEP_TOPIC}) showed no sign of '
+                    f'life and came back {time.monotonic() - self._keeper_stop:.2f} s after this agent '
+                    'stopped its robot for it: a stopped agent cannot rejoin the run (if this agent was '
+                    'stopped or starved itself, the keeper only looked silent)'
+                )
+            )
+            return
         if node.simulator.lost_at is not None and node.schedule.wall_clock and self._stop():
+            self._keeper_stop = time.monotonic()
             node.get_logger().warning(
                 f'agent {node.agent_id}: the time keeper (writer of {STEP_TOPIC}) shows no sign of life: '
                 'robot stopped'
