@@ -47,8 +47,8 @@ def test_a_robot_command_from_a_node_that_is_neither_its_agent_nor_the_coordinat
     )
     watch = GraphWatch([watched])
     assert watch.error() is None
-    assert watch.note(watched, [AGENT_2, ROGUE]) == [found]
-    assert watch.note(watched, [AGENT_2, ROGUE]) == []  # named once
+    assert watch.note(watched, [AGENT_2, ROGUE], now=0.0) == [found]
+    assert watch.note(watched, [AGENT_2, ROGUE], now=0.0) == []  # named once
     error = watch.error()
     assert isinstance(error, ForeignWriterError) and error.kind == 'foreign_writer'
     assert (
@@ -73,7 +73,7 @@ def test_two_processes_claiming_one_agent_are_both_named():
     assert watched.mangled and not watched.fatal
     twin = Writer(node='/agent_2/formation_agent', gid='aa')
     watch = GraphWatch([watched])
-    (found,) = watch.note(watched, [twin, AGENT_2])
+    (found,) = watch.note(watched, [twin, AGENT_2], now=0.0)
     assert found.fatal and found.text() == (
         'two processes claim agent 2: /agent_2/formation_agent (writer gid 01) and /agent_2/formation_agent '
         '(writer gid aa) both write rq/agent_2/senseRequest'
@@ -89,7 +89,7 @@ def test_a_stranger_on_a_protocol_topic_is_named_not_fatal_and_blamed_first_for_
     step = watched[0]
     assert step.topic == '/formation/step' and step.allowed == {'/formation_simulator'}
     watch = GraphWatch(watched)
-    (found,) = watch.note(step, [Writer(node='/formation_simulator', gid='05'), ROGUE])
+    (found,) = watch.note(step, [Writer(node='/formation_simulator', gid='05'), ROGUE], now=0.0)
     assert not found.fatal and watch.error() is None
     assert watch.blame('agent 2 is not due to sense') == (
         'a node outside the run, /rogue (writer gid 0f), writes Steps (/formation/step); '
@@ -161,16 +161,40 @@ def test_a_sensing_call_is_a_trigger_only_when_the_agents_own_information_stampe
     assert SensingCalls([1]).extra() == {}
 
 
-def test_a_writer_whose_node_is_not_known_yet_is_a_stranger_and_named_once_its_name_comes():
+def test_a_writer_whose_node_is_not_known_yet_is_judged_after_the_grace_and_named_once_its_name_comes():
+    from formation_sim.runtime.intruders import UNKNOWN_GRACE
+
     watched = _command_2()
     unknown = Writer(node='_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_', gid='0f')
     watch = GraphWatch([watched])
-    (found,) = watch.note(watched, [AGENT_2, unknown])
+    assert watch.note(watched, [AGENT_2, unknown], now=10.0) == []  # its name may be on its way
+    assert watch.note(watched, [AGENT_2, unknown], now=10.0 + UNKNOWN_GRACE / 2) == []
+    (found,) = watch.note(watched, [AGENT_2, unknown], now=10.0 + UNKNOWN_GRACE)
     assert found.text().startswith(
         'a node outside the run, a writer of no known ROS node (writer gid 0f), writes'
     )
-    assert watch.note(watched, [AGENT_2, ROGUE]) == []  # the same writer: not news, but now named
+    assert watch.note(watched, [AGENT_2, ROGUE], now=20.0) == []  # the same writer: not news, but now named
     assert str(watch.error()).startswith('a node outside the run, /rogue (writer gid 0f)')
+
+
+def test_a_nameless_writer_named_late_as_the_agent_itself_is_taken_back():
+    """The finding: a fresh-clone CI run named agent 2's own writer, seen before its node's name
+    came, "a node outside the run", and blamed the run's failure on it."""
+    from formation_sim.runtime.intruders import UNKNOWN_GRACE
+
+    watched = _command_2()
+    own = Writer(node='_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_', gid='0a')
+    stranger = Writer(node='_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_', gid='0f')
+    watch = GraphWatch([watched])
+    watch.note(watched, [own, stranger], now=0.0)
+    (found,) = watch.note(watched, [own, stranger], now=UNKNOWN_GRACE)
+    assert [w.gid for w in found.writers] == ['0a', '0f']
+    late = Writer(node=AGENT_2.node, gid='0a')
+    assert watch.note(watched, [late, stranger], now=UNKNOWN_GRACE + 1) == []
+    (kept,) = watch.found.values()
+    assert [w.gid for w in kept.writers] == ['0f']  # the real stranger stays named
+    watch.note(watched, [late, Writer(node=COORDINATOR.node, gid='0f')], now=UNKNOWN_GRACE + 2)
+    assert watch.found == {} and watch.blame('the failure') == 'the failure'
 
 
 def _status(agent, *, sent, received):
@@ -209,7 +233,7 @@ def test_more_information_taken_than_sent_is_foreign_and_its_writer_named():
         if w.topic == '/agent_2/trigger_info/to_1'
     ]
     watch = GraphWatch([watched])
-    watch.note(watched, [AGENT_2, ROGUE])
+    watch.note(watched, [AGENT_2, ROGUE], now=0.0)
     error = foreign_information_error(100, 20, watch)
     assert isinstance(error, ForeignInformationError) and error.kind == 'foreign_information'
     assert str(error) == (
@@ -231,7 +255,7 @@ def test_one_process_on_several_topics_is_named_once_with_every_topic():
     twin = Writer(node='/agent_2/formation_agent', gid='aa')
     watch = GraphWatch(watched)
     for w in watched:
-        watch.note(w, [AGENT_2, twin])
+        watch.note(w, [AGENT_2, twin], now=0.0)
     topics = ', '.join(w.topic for w in watched)
     assert str(watch.error()) == (
         'two processes claim agent 2: /agent_2/formation_agent (writer gid 01) and /agent_2/formation_agent '

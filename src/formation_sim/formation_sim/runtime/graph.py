@@ -30,6 +30,7 @@ from formation_msgs_py.codec import (
     decode_world_state,
 )
 from formation_msgs_py.topics import STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
+from formation_sim.runtime.intruders import UNKNOWN_NODE  # an endpoint seen before its node's name
 
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
 FLOAT_ARRAY = 'std_msgs/msg/Float64MultiArray'
@@ -146,10 +147,6 @@ def topic_infos(node) -> list[TopicInfo]:
 
 def _node_name_of(node) -> str:
     return f'{node.get_namespace().rstrip("/")}/{node.get_name()}'
-
-
-# DDS can announce an endpoint before the name of the node that owns it; rmw then reports it.
-UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
 
 
 def discover_topics(node, *, wait: float, settle: float = 0.5) -> list[TopicInfo]:

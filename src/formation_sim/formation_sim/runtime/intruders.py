@@ -46,6 +46,12 @@ UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
 """What rmw_fastrtps gives as the node name of a writer whose participant has not (yet) said which
 ROS nodes it holds: a raw DDS writer, or one seen before its node's graph information."""
 
+UNKNOWN_GRACE = 5.0
+"""Seconds a writer of no known ROS node is given for its node's name to come before it is judged:
+DDS announces an endpoint before rmw's graph information names its node, and on a loaded machine
+that can take seconds (a fresh-clone CI run named agent 2's own writer a stranger, and the run's
+failure was blamed on it).  A raw DDS writer stays nameless and is judged after this."""
+
 FREEZE_BLAME_WINDOW = LIVELINESS_LEASE + LOST_GRACE + 1.0
 """Seconds after a keeper's freeze during which a loss it sees is blamed on the freeze: what its
 peers did when they saw it lost (the lease, then their grace) and what waited while it was frozen."""
@@ -166,6 +172,7 @@ class GraphWatch:
     watched: Sequence[Watched]
     found: dict[tuple[str, str, tuple[str, ...]], Intrusion] = field(default_factory=dict)
     _next: int = 0
+    _nameless: dict[str, float] = field(default_factory=dict)  # gid -> first seen without a name
 
     def due(self, most: int = TOPICS_PER_LOOK) -> list[Watched]:
         """The next `most` topics to look at (round robin)."""
@@ -176,15 +183,43 @@ class GraphWatch:
         self._next = (self._next + count) % len(self.watched)
         return chosen
 
-    def note(self, watched: Watched, writers: Iterable[Writer]) -> list[Intrusion]:
-        """The writers of `watched.topic` seen now; the intrusions not seen before."""
+    def note(self, watched: Watched, writers: Iterable[Writer], *, now: float) -> list[Intrusion]:
+        """The writers of `watched.topic` seen at `now` (monotonic s); the intrusions not seen
+        before.  A writer of no known node is judged only once it stayed nameless UNKNOWN_GRACE s;
+        one named since as a writer the topic allows is taken back from what was found."""
+        writers = list(writers)
+        judged = []
+        for writer in writers:
+            if UNKNOWN_NODE in writer.node:
+                first = self._nameless.setdefault(writer.gid, now)
+                if now - first < UNKNOWN_GRACE:
+                    continue
+            judged.append(writer)
+        self._take_back(watched, [w for w in writers if UNKNOWN_NODE not in w.node])
         new = []
-        for intrusion in intrusions(watched, writers):
+        for intrusion in intrusions(watched, judged):
             key = (intrusion.kind, watched.topic, tuple(sorted(w.gid for w in intrusion.writers)))
             if key not in self.found:
                 new.append(intrusion)
             self.found[key] = intrusion  # the latest names (a node's name may come after its writer)
         return new
+
+    def _take_back(self, watched: Watched, named: list[Writer]) -> None:
+        """Strangers found on `watched.topic` while nameless that are now `named` writers the topic
+        allows: no strangers (their node's name came after the grace)."""
+        if not watched.allowed:
+            return
+        cleared = {w.gid for w in named if w.node in watched.allowed}
+        for key, intrusion in list(self.found.items()):
+            if intrusion.watched.topic != watched.topic or intrusion.kind != 'stranger':
+                continue
+            if not any(w.gid in cleared and UNKNOWN_NODE in w.node for w in intrusion.writers):
+                continue
+            del self.found[key]
+            rest = tuple(w for w in intrusion.writers if w.gid not in cleared)
+            if rest:
+                kept = Intrusion(kind='stranger', watched=intrusion.watched, writers=rest)
+                self.found[(kept.kind, watched.topic, tuple(sorted(w.gid for w in rest)))] = kept
 
     def error(self) -> ForeignWriterError | None:
         """The failure the first fatal intrusion makes (None: none yet)."""

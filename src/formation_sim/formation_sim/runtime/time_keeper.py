@@ -566,7 +566,7 @@ def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
             Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
             for i in infos
         ]
-        for intrusion in watch.note(watched, writers):
+        for intrusion in watch.note(watched, writers, now=time.monotonic()):
             node.get_logger().warning(intrusion.text())
     if (error := watch.error()) is not None:
         raise error
