@@ -151,6 +151,38 @@ def stepping_run():
     return _SteppingRun
 
 
+def _inode(path: str) -> int | None:
+    try:
+        return os.stat(path).st_ino
+    except FileNotFoundError:
+        return None
+
+
+class _ShmFiles:
+    """Fast DDS files of processes about to die, by inode: `left()` are those still there as the
+    same file and not in use.  A machine-wide port (fastrtps_port7000, ...) made anew meanwhile by
+    another process (another test on another worker) is another file, not one the dead left."""
+
+    def __init__(self, paths) -> None:
+        self.paths = set(paths)
+        self._inodes = {path: _inode(path) for path in self.paths}
+
+    def left(self) -> list[str]:
+        from formation_sim.runtime.fastdds_shm import in_use
+
+        return sorted(
+            path
+            for path in self.paths - in_use(self.paths)
+            if self._inodes[path] is not None and _inode(path) == self._inodes[path]
+        )
+
+
+@pytest.fixture
+def shm_files():
+    """`shm_files(paths)`: note the Fast DDS files `paths` now; `.left()` after their owners died."""
+    return _ShmFiles
+
+
 @pytest.fixture
 def bag_trigger_stamps():
     """`bag_trigger_stamps(bag) -> (messages per topic, TriggerInfo stamps per directed edge)`."""

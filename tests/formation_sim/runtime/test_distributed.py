@@ -240,10 +240,10 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, steppin
 
 
 @pytest.mark.timeout(300)
-def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_run_scenario):
+def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_run_scenario, shm_files):
     import signal
 
-    from formation_sim.runtime.fastdds_shm import held_files, in_use
+    from formation_sim.runtime.fastdds_shm import held_files
     from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(
@@ -256,11 +256,11 @@ def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_ru
     )
     stepping = stepping_run(run)
     victim = next(child for child in run._children if child.name == 'agent_2')
-    leftovers = held_files(victim.pid)
+    leftovers = shm_files(held_files(victim.pid))
     os.kill(victim.pid, signal.SIGKILL)
     result = stepping.result(timeout=60.0)
     # What the victim could not remove, the orchestrator did (unless another process still uses it).
-    assert not [path for path in leftovers - in_use(leftovers) if Path(path).exists()]
+    assert not leftovers.left()
     assert result.exit_status == 3
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message
@@ -320,8 +320,10 @@ _DEAF_EXEC = (
 
 
 @pytest.mark.timeout(300)
-def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, stepping_run, long_run_scenario):
-    from formation_sim.runtime.fastdds_shm import in_use
+def test_children_killed_hard_leave_no_shared_memory_files(
+    tmp_path, stepping_run, long_run_scenario, shm_files
+):
+    from formation_sim.runtime.fastdds_shm import held_files
     from formation_sim.runtime.orchestrate import FormationRun
 
     # No grace period: every child still alive right after SIGINT is killed by SIGTERM or SIGKILL.
@@ -339,6 +341,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, stepping_ru
         launch_prefix=lambda name: [sys.executable, '-c', _DEAF_EXEC] if name == 'simulator' else [],
     )
     stepping = stepping_run(run)
+    held = shm_files(set().union(*(held_files(child.pid) for child in run._children)))
     run.interrupt()
     result = stepping.result(timeout=60.0)
     assert result.exit_status == 130
@@ -348,7 +351,7 @@ def test_children_killed_hard_leave_no_shared_memory_files(tmp_path, stepping_ru
     assert 'simulator' in [child.name for child in killed], [c.process.returncode for c in run._children]
     files = set().union(*(child.shm_files for child in killed))
     assert files, 'the killed children mapped no Fast DDS shared-memory file'
-    assert not [path for path in files - in_use(files) if Path(path).exists()]
+    assert not held.left()
     assert not [child for child in result.children if _alive(child.pid)]
 
 

@@ -281,9 +281,9 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
 
 @pytest.mark.timeout(300)
 def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(
-    tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario
+    tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario, shm_files
 ):
-    from formation_sim.runtime.fastdds_shm import held_files, in_use
+    from formation_sim.runtime.fastdds_shm import held_files
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     scenario = load_scenario(long_run_scenario)
@@ -291,11 +291,11 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     stepping = stepping_run(run)
     time.sleep(0.5)  # well into the run
     victim = next(child for child in run._children if child.name == 'agent_2')
-    shm_files = held_files(victim.pid)
+    held = shm_files(held_files(victim.pid))
     os.kill(victim.pid, signal.SIGKILL)
     result = stepping.result(timeout=120.0)
     assert result.exit_status == EXIT_LOST == 3
-    assert shm_files and not [path for path in shm_files - in_use(shm_files) if Path(path).exists()]
+    assert held.paths and not held.left(), held.left()
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
     assert not _wait_until_gone(str(result.out_dir))
@@ -392,13 +392,13 @@ rclpy.shutdown()
 
 @pytest.mark.timeout(300)
 def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_other_is_touched(
-    tmp_path, ros_env, stepping_run, long_run_scenario
+    tmp_path, ros_env, stepping_run, long_run_scenario, shm_files
 ):
     """Every child of a recorded run killed with SIGKILL at once: each segment and port its
     children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
     outside the domain's range; a live participant of another domain and a dead port of nobody
     in the run keep theirs."""
-    from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files, in_use
+    from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files
     from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
 
     def family(path: str) -> set[Path]:
@@ -430,6 +430,7 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
         time.sleep(0.5)
         children = list(run._children)
         held = set().union(*(held_files(child.pid) for child in children))
+        family_files = shm_files(str(path) for path in set().union(*(family(path) for path in held)))
         for child in children:
             os.kill(child.pid, signal.SIGKILL)
         result = stepping.result(timeout=120.0)
@@ -441,9 +442,7 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
             for name in ports
         ), ports
         assert any(path.endswith('_el') for path in held), 'no lock file noted'
-        family_files = {str(path) for path in set().union(*(family(path) for path in held))}
-        # (a port 70xx of a killed child may be taken over at once by a new participant elsewhere)
-        left = sorted(path for path in family_files - in_use(family_files) if Path(path).exists())
+        left = family_files.left()
         assert not left, f'left in /dev/shm: {left}'
         assert all(Path(path).exists() for path in bystanders), 'a live participant lost its files'
         assert all(path.exists() for path in stranger), 'a dead port of nobody in the run was removed'

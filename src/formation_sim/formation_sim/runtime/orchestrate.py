@@ -388,11 +388,13 @@ class FormationRun:
     def _timed_out(self) -> str:
         """The timeout's message, once the children still running wrote their stacks to their logs
         (where each was stuck), before they are stopped."""
+        running = [c for c in self._supervisor.children if c.alive() and c.name != 'discovery_server']
         asked = self._supervisor.ask_for_stacks()
-        if not asked:
+        if not running:
             return f'timed out after {self.options.timeout} s'
         return f'timed out after {self.options.timeout} s; still running: ' + ', '.join(
-            f'{child.name} (stacks in {child.log})' for child in asked
+            f'{c.name} (stacks in {c.log})' if c in asked else f'{c.name} (still starting: no stacks yet)'
+            for c in running
         )
 
     def _launch_and_watch(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:

@@ -45,6 +45,18 @@ def _die_with_parent() -> None:
         _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
 
 
+def catches(pid: int, sig: int) -> bool:
+    """Whether process `pid` has its own handler for signal `sig` (Linux: /proc/<pid>/status,
+    SigCgt).  A child still starting (importing rclpy takes seconds on a loaded machine) has no
+    stack handler yet, and STACKS_SIGNAL's default would end it without a word: a fresh-clone run
+    under load named a simulator 'stacks in' a log it never wrote."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('SigCgt:'):
+                return bool(int(line.split()[1], 16) >> (int(sig) - 1) & 1)
+    return False
+
+
 def describe_exit(returncode: int | None) -> str:
     if returncode is None:
         return 'still running'
@@ -167,15 +179,15 @@ class Supervisor:
     def ask_for_stacks(self, children: Sequence[Child] | None = None, *, wait: bool = True) -> list[Child]:
         """Each of `children` (default: the run's) still running writes every thread's stack to its
         log (STACKS_SIGNAL, `formation_agent.ros.process.stacks_on_signal`), given STACKS_WAIT to do
-        it (`wait`; else the caller waits); the discovery server is not ours and is left alone.  The
-        children asked.
+        it (`wait`; else the caller waits); the discovery server is not ours and is left alone, and
+        a child still starting (no handler yet, `catches`) is not asked.  The children asked.
 
         faulthandler writes from its C signal handler: a process whose main thread is blocked in C
         code, holding the GIL or not, still says where it is."""
         asked = [
             child
             for child in (self.children if children is None else children)
-            if child.alive() and child.name != 'discovery_server'
+            if child.alive() and child.name != 'discovery_server' and catches(child.pid, STACKS_SIGNAL)
         ]
         for child in asked:
             with contextlib.suppress(OSError):
