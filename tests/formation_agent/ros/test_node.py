@@ -152,8 +152,8 @@ def test_the_safety_parameters_give_the_core_its_layer(ros):
             '= 1.05902 m',
         ),
         (
-            {'min_separation': 0.25, 'sensing': 'poses'},
-            "min_separation: the safety layer needs sensing: service (the simulator's answer holds",
+            {'min_separation': 0.25, 'sensing': 'poses', 'other_robot_ids': [2, 5]},
+            'other_robot_ids must name each other robot once, not the agent or a neighbour, got [2, 5]',
         ),
         (
             {'min_separation': 0.25, 'dimension': 3, 'neighbour_offsets': [0.0] * 6},

@@ -38,11 +38,6 @@ BAD_RUN_ARGUMENTS = [
         ['--min-separation', '100'],
         'argument --min-separation: safety.sensing_radius: must exceed the guard radius',
     ),
-    (
-        ['--min-separation', '0.25', '--backend', 'holonomic'],
-        'the safety layer (safety:, --min-separation) runs on the simulator (backend exact) only so far, not '
-        "on robots (backend 'holonomic')",
-    ),
 ]
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from formation_agent.core.safety import SafetyConfig
 from formation_sim.cli import main
@@ -112,6 +113,36 @@ def test_a_wall_clock_run_with_the_safety_layer_keeps_the_robots_apart(tmp_path)
 
     unsafe = simulate(plain, sample_dt=0.01)
     assert safety_cases.closest_approach(unsafe.samples.times, np.asarray(unsafe.samples.positions))[0] < D
+
+
+@pytest.mark.timeout(420)
+def test_holonomic_robots_with_the_safety_layer_keep_apart_sensing_the_others_from_their_poses(tmp_path):
+    """Robot backend: each agent reads every robot's pose topic and hands the core the others
+    within R (sensing: poses, other_robot_ids); the robots' recorded poses never come closer than
+    D (the diagonal swap, where without the layer all four meet at the centre)."""
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    scenario = safety_cases.swap_square(safety=SafetyConfig(min_separation=D), horizon=6.0)
+    result = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        domain_id=129,
+        progress=False,
+        record=False,
+        timeout=300.0,
+        backend='holonomic',
+    ).run()
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    assert summary['mode'] == 'robots' and sum(summary['extra']['safety']['interventions'].values()) > 0
+    samples = load_trajectory(result.out_dir)
+    closest, when, pair = safety_cases.closest_approach(
+        np.asarray(samples.times), np.asarray(samples.positions)
+    )
+    assert closest >= D, f'robots {pair} came {closest} m close at t = {when}'
+    agents = yaml.safe_load((result.out_dir / 'agents.params.yaml').read_text())
+    params = agents['/agent_1/formation_agent']['ros__parameters']
+    assert params['sensing'] == 'poses' and params['other_robot_ids'] == [3]  # 1's neighbours: 2, 4
 
 
 def test_the_agents_parameters_carry_the_layer_and_read_back_into_its_config(tmp_path: Path):

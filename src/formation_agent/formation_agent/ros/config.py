@@ -151,6 +151,15 @@ AGENT_PARAMETERS = (
         default=DEFAULT_TURN,
         low=0.0,
     ),
+    _spec(
+        'other_robot_ids',
+        INTEGER_ARRAY,
+        "safety layer with sensing: poses — ids of the team's other robots (not itself, not a "
+        'neighbour), whose pose topics the agent reads to see those within sensing_radius',
+        default=[],
+        low=0,
+        high=MAX_AGENT_ID,
+    ),
     # Robots (README, "Running on robots").
     _spec(
         'sensing',
@@ -339,6 +348,7 @@ class AgentConfig:
     inject_seed: int
     time_warp: TimeWarp | None = None
     safety: SafetyConfig | None = None  # the safety layer (min_separation > 0), docs/SAFETY.md
+    other_robot_ids: tuple[int, ...] = ()  # the safety layer on robots: the others' pose topics
 
     @property
     def double(self) -> bool:
@@ -401,6 +411,7 @@ def read_config(node) -> AgentConfig:
         ),
         time_warp=TimeWarp.from_parameter(values['time_warp']) if values['time_warp'] else None,
         safety=_safety(values) if values['min_separation'] > 0.0 else None,
+        other_robot_ids=tuple(int(j) for j in values['other_robot_ids']),
         **{
             name: values[name]
             for name in (
@@ -502,11 +513,11 @@ def _safety_problems(values: dict) -> list[str]:
         problems.append('min_separation: the safety layer runs with eta1 only, got algorithm eta2')
     if values.get('dimension', 2) != 2:
         problems.append(f'min_separation: the safety layer is planar, got dimension {values["dimension"]}')
-    if values.get('sensing', 'service') != 'service':
+    others = list(values.get('other_robot_ids', []))
+    mine = {values.get('agent_id'), *values.get('neighbour_ids', [])}
+    if len(set(others)) != len(others) or mine & set(others):
         problems.append(
-            "min_separation: the safety layer needs sensing: service (the simulator's answer holds the "
-            f'other robots within sensing_radius); sensing from poses gives only the neighbours, got '
-            f'{values["sensing"]!r}'
+            f'other_robot_ids must name each other robot once, not the agent or a neighbour, got {others}'
         )
     if values.get('time_warp'):
         problems.append('min_separation: the safety layer takes no time_warp')

@@ -93,12 +93,6 @@ class RunOptions:
                 f'distributed runs need p <= 3 (geometry_msgs commands), got p = {scenario.dimension}'
             )
         backend, clock, robots = _check_world(self, scenario)
-        if scenario.safety is not None and backend != 'exact':
-            raise RunError(
-                f'the safety layer (safety:, --min-separation) runs on the simulator (backend exact) only so '
-                f"far, not on robots (backend {backend!r}): the robots' agents do not sense the other robots "
-                'yet (docs/SAFETY.md)'
-            )
         if self.executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {self.executor!r}')
         _check_inject(self.inject or {}, clock)

@@ -103,7 +103,7 @@ from formation_sim.runtime.intruders import (
     intrusions,
     simulator_watched,
 )
-from formation_sim.sim.engine import due_twice, safety_extra
+from formation_sim.sim.engine import due_twice
 from formation_sim.sim.record import RunRecord
 
 CLOCK_MODES = ('lockstep', 'realtime')
@@ -194,6 +194,10 @@ def agent_parameters(
     }
     if scenario.safety is not None:  # the safety layer's keys (docs/SAFETY.md), as the agent names them
         params.update({name: float(getattr(scenario.safety, key)) for key, name in SAFETY_PARAMETERS.items()})
+        # on robots the agent reads these robots' poses to see those within R (sensing: poses)
+        params['other_robot_ids'] = [
+            int(j) for j in scenario.agent_ids if j != agent_id and j not in neighbours
+        ]
     if scenario.dynamics == 'single':
         params.update(algorithm='eta1', alpha=float(gains.alpha), beta=float(gains.beta))
     else:
@@ -494,7 +498,6 @@ class FormationSimulatorNode(TimeKeeperNode):
             wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
             extra={
                 **run_extra(self, self.world.time),
-                **_safety_extra(self),
                 **self.calls.extra(),
                 **(
                     self.book.lateness({i: book.trigger_times for i, book in self.agents.items()})
@@ -515,17 +518,6 @@ def sensed_state(node: FormationSimulatorNode, agent: int) -> SensedState:
     if safety is None:
         return sensed
     return replace(sensed, nearby=node.world.nearby(agent, safety.sensing_radius, exclude=neighbours))
-
-
-def _safety_extra(node: FormationSimulatorNode) -> dict:
-    """summary.json's `extra.safety` as the engine writes it, from the agents' latest reports (an
-    agent without one counts no intervention)."""
-    if node.scenario.safety is None:
-        return {}
-    reports = {i: book.report for i, book in node.agents.items()}
-    counts = {i: (r.safety_interventions or 0) if r is not None else 0 for i, r in reports.items()}
-    last = {i: None if r is None else r.safety_last_intervention for i, r in reports.items()}
-    return {'safety': safety_extra(node.scenario.safety, interventions=counts, last_interventions=last)}
 
 
 def _trigger_readers(node: FormationSimulatorNode) -> dict:
