@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ import pytest
 from formation_msgs_py.codec import (
     AGENT_REPORT_VERSION,
     LAYOUT_VERSION,
+    MAX_NEARBY,
     MessageError,
     decode_agent_report,
     decode_command,
@@ -247,6 +250,85 @@ def test_non_finite_sensed_values_cannot_be_encoded():
     state = SensedState(agent=1, stamp=0.0, rel_positions={2: (math.nan,)})
     with pytest.raises(MessageError, match=r'sensed x_1 - x_2\[0\] must be finite'):
         encode_sensed_state(state)
+
+
+def test_nearby_robots_round_trip_bit_for_bit_and_stay_absent_without_the_layer():
+    # The safety layer's other robots within R (docs/SAFETY.md): the very floats, keyed by id.
+    state = SensedState(
+        agent=2,
+        stamp=0.30000000000000004,
+        rel_positions={1: (0.1 + 0.2, -1 / 3)},
+        nearby={7: (-0.0, 5e-324), 4: (1e-300, 2.0**-1074 * 3)},
+    )
+    back = decode_sensed_state(through_wire(encode_sensed_state(state)))
+    assert back == state and list(back.nearby) == [7, 4]
+    for j, vector in state.nearby.items():
+        assert bits(back.nearby[j]) == bits(vector)
+    empty = SensedState(agent=2, stamp=0.0, rel_positions={1: (1.0, 0.0)}, nearby={})
+    assert decode_sensed_state(encode_sensed_state(empty)).nearby == {}
+    # Without the layer the answer is the earlier layout, key for key: older agents read it.
+    off = SensedState(agent=2, stamp=0.0, rel_positions={1: (1.0, 0.0)})
+    assert 'nearby' not in encode_sensed_state(off).message
+    assert decode_sensed_state(encode_sensed_state(off)).nearby is None
+
+
+_NEAR = '{"version":1,"agent":1,"stamp":0.0,"rel_positions":{"2":[1.0,0.0]},"nearby":%s}'
+
+
+@pytest.mark.parametrize(
+    ('nearby', 'complaint', 'reason'),
+    [
+        ('{"3":[NaN,0.0]}', 'nearby[3][0] must be finite', 'field'),
+        ('{"3":[1e999,0.0]}', 'nearby[3][0] must be finite', 'field'),
+        ('{"3":[%s,0.0]}' % ('9' * 400), 'nearby[3][0] must be finite', 'field'),
+        ('{"3":[1.0]}', 'nearby[3] has 1 components, expected 2', 'field'),
+        ('{"3":"x"}', 'nearby[3] must be a list of numbers', 'field'),
+        ('[[1.0,0.0]]', 'nearby must map neighbour ids to vectors', 'field'),
+        ('{"03":[1.0,0.0]}', "id '03' is not written canonically", 'field'),
+        ('{"1":[1.0,0.0]}', 'nearby robot 1 is the agent itself, one of its neighbours', 'field'),
+        ('{"2":[1.0,0.0]}', 'nearby robot 2 is the agent itself, one of its neighbours', 'field'),
+        ('{"-4":[1.0,0.0]}', 'nearby robot -4 is the agent itself, one of its neighbours or not an', 'field'),
+        (
+            json.dumps({str(j): [1.0, 0.0] for j in range(3, 4 + MAX_NEARBY)}),
+            f'{MAX_NEARBY + 1} nearby robots, at most {MAX_NEARBY}',
+            'length',
+        ),
+    ],
+)
+def test_a_hostile_nearby_list_is_refused_with_the_rule_broken(nearby, complaint, reason):
+    with pytest.raises(MessageError) as error:
+        decode_sensed_state(_response(_NEAR % nearby))
+    assert complaint in str(error.value) and error.value.reason == reason
+
+
+def test_nearby_lists_that_break_the_rules_cannot_be_encoded():
+    many = dict.fromkeys(range(3, 4 + MAX_NEARBY), (1.0, 0.0))
+    with pytest.raises(MessageError, match=f'{MAX_NEARBY + 1} nearby robots, at most {MAX_NEARBY}'):
+        encode_sensed_state(SensedState(agent=1, stamp=0.0, rel_positions={}, nearby=many))
+    bad = SensedState(agent=1, stamp=0.0, rel_positions={}, nearby={3: (math.inf, 0.0)})
+    with pytest.raises(MessageError, match=r'sensed nearby x_1 - x_3\[0\] must be finite'):
+        encode_sensed_state(bad)
+
+
+def test_agent_report_carries_the_safety_counts_only_with_the_layer():
+    report = AgentReport(
+        agent=3, final=True, rejected={}, safety_interventions=17, safety_last_intervention=0.1 + 0.2
+    )
+    back = decode_agent_report(through_wire(encode_agent_report(report)))
+    assert back == report and bits([back.safety_last_intervention]) == bits([0.1 + 0.2])
+    never = AgentReport(agent=3, final=True, rejected={}, safety_interventions=0)
+    assert decode_agent_report(encode_agent_report(never)) == never
+    off = AgentReport(agent=3, final=True, rejected={})
+    assert 'safety' not in encode_agent_report(off).data
+    assert decode_agent_report(encode_agent_report(off)).safety_interventions is None
+    body = json.loads(encode_agent_report(report).data)
+    for bad, complaint in [
+        ({'interventions': -1, 'last_intervention': None}, 'safety interventions must be a count'),
+        ({'interventions': 1, 'last_intervention': 'x'}, 'safety last_intervention must be a number'),
+        ({'interventions': 1}, "safety must hold exactly ['interventions', 'last_intervention']"),
+    ]:
+        with pytest.raises(MessageError, match=re.escape(complaint)):
+            decode_agent_report(SimpleNamespace(data=json.dumps({**body, 'safety': bad})))
 
 
 def test_step_and_status_round_trip_including_infinite_next_time():

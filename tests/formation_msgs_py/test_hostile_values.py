@@ -20,6 +20,7 @@ from formation_msgs_py import cdr
 from formation_msgs_py.codec import (
     MessageError,
     decode_agent_report,
+    decode_sensed_state,
     decode_status,
     decode_step,
     decode_trigger_info,
@@ -179,12 +180,48 @@ JSON_VALUES = st.recursive(
                 ),
                 'failure': st.one_of(st.none(), st.text(max_size=20), JSON_VALUES),
             },
-            optional={'dropped': JSON_VALUES, 'saturation': JSON_VALUES, 'late': JSON_VALUES},
+            optional={
+                'dropped': JSON_VALUES,
+                'saturation': JSON_VALUES,
+                'late': JSON_VALUES,
+                'safety': st.one_of(
+                    JSON_VALUES,
+                    st.fixed_dictionaries({'interventions': JSON_VALUES, 'last_intervention': JSON_VALUES}),
+                ),
+            },
         ).map(json.dumps),
     )
 )
 def test_an_agent_report_decodes_or_is_refused_with_a_reason(text):
     _decodes_or_refuses(decode_agent_report, SimpleNamespace(data=text), finite=False)
+
+
+def _vectors(keys) -> st.SearchStrategy:
+    """A JSON object of ids to vectors as a hostile simulator could write it."""
+    return st.dictionaries(keys, st.lists(st.one_of(FLOATS, JSON_VALUES), max_size=3), max_size=4)
+
+
+_IDS = st.one_of(st.integers(-3, 9).map(str), st.sampled_from(['01', ' 2', '2147483648', 'x', '']))
+
+
+@EXAMPLES
+@given(
+    st.fixed_dictionaries(
+        {
+            'version': st.one_of(st.just(1), FLOATS),
+            'agent': st.one_of(st.just(1), st.integers(-(2**40), 2**40), FLOATS),
+            'stamp': st.one_of(FLOATS, JSON_VALUES),
+            'rel_positions': st.one_of(_vectors(_IDS), JSON_VALUES),
+        },
+        optional={'nearby': st.one_of(_vectors(_IDS), JSON_VALUES), 'velocity': JSON_VALUES},
+    ).map(lambda body: json.dumps(body, allow_nan=True))
+)
+def test_a_sensed_state_with_nearby_robots_decodes_or_is_refused_with_a_reason(text):
+    # The simulator's sensing answer, the safety layer's nearby robots included (docs/SAFETY.md).
+    state = _decodes_or_refuses(decode_sensed_state, SimpleNamespace(success=True, message=text))
+    if state is not None and state.nearby is not None:
+        assert state.agent not in state.nearby and not set(state.nearby) & set(state.rel_positions)
+        assert len({len(v) for v in (*state.nearby.values(), *state.rel_positions.values())}) <= 1
 
 
 # -- robot poses and commands as CDR bytes -----------------------------------------------------

@@ -42,6 +42,9 @@ KIND_ETA2 = 2
 
 _MAX_ID = MAX_AGENT_ID  # also bounds the other small integer fields (step flags)
 _MAX_COUNT = 2**53  # float64 holds every integer up to here exactly
+MAX_NEARBY = 1024
+"""The most robots one sensing answer reports nearby (the safety layer's filter enumerates pairs of
+constraints: far more would not be computed within a trigger anyway)."""
 
 
 class MessageError(ValueError):
@@ -212,6 +215,16 @@ def encode_sensed_state(state: SensedState):
         }
     if state.velocity is not None:
         body['velocity'] = _vector_json(f'sensed q_{state.agent}', state.velocity)
+    if state.nearby is not None:  # the safety layer's other robots within R (absent: layer off)
+        if len(state.nearby) > MAX_NEARBY:
+            raise MessageError(
+                f'sensed state of agent {state.agent}: {len(state.nearby)} nearby robots, at most '
+                f'{MAX_NEARBY}',
+                reason=REJECT_LENGTH,
+            )
+        body['nearby'] = {
+            str(j): _vector_json(f'sensed nearby x_{state.agent} - x_{j}', v) for j, v in state.nearby.items()
+        }
     # repr floats: json writes the shortest string that reads back to the same double.
     text = json.dumps(body, separators=(',', ':'), allow_nan=False)
     return Trigger.Response(success=True, message=text)
@@ -227,7 +240,10 @@ def sensing_refusal(reason: str):
 def _json_number(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise MessageError(f'{name} must be a number, got {value!r}')
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer past the doubles (JSON integers have no bound)
+        number = math.inf
     if not math.isfinite(number):
         raise MessageError(f'{name} must be finite, got {value!r}')
     return number
@@ -272,7 +288,15 @@ def decode_sensed_state(response) -> SensedState:
         raise MessageError(
             f'sensed state: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})'
         )
-    unknown = set(body) - {'version', 'agent', 'stamp', 'rel_positions', 'rel_velocities', 'velocity'}
+    unknown = set(body) - {
+        'version',
+        'agent',
+        'stamp',
+        'rel_positions',
+        'rel_velocities',
+        'velocity',
+        'nearby',
+    }
     if unknown:
         raise MessageError(f'sensed state: unknown fields {sorted(unknown)}')
     for key in ('agent', 'stamp', 'rel_positions'):
@@ -303,7 +327,29 @@ def decode_sensed_state(response) -> SensedState:
         rel_positions=rel_positions,
         rel_velocities=rel_velocities,
         velocity=velocity,
+        nearby=_decode_nearby(agent, body, p, rel_positions),
     )
+
+
+def _decode_nearby(agent: int, body: dict, p: int | None, rel_positions: dict) -> dict | None:
+    """The sensed state's `nearby` (the safety layer's other robots within R), or None when absent:
+    at most MAX_NEARBY robots, none of them the agent itself or one of `rel_positions`' neighbours,
+    each with the neighbours' dimension."""
+    if 'nearby' not in body:
+        return None
+    table = body['nearby']
+    if isinstance(table, dict) and len(table) > MAX_NEARBY:
+        raise MessageError(
+            f'sensed state of agent {agent}: {len(table)} nearby robots, at most {MAX_NEARBY}',
+            reason=REJECT_LENGTH,
+        )
+    nearby = _json_vectors(f'sensed state of agent {agent} nearby', table, p)
+    if clash := sorted(j for j in nearby if j == agent or j in rel_positions or not 0 <= j <= _MAX_ID):
+        raise MessageError(
+            f'sensed state of agent {agent}: nearby robot {clash[0]} is the agent itself, one of its '
+            'neighbours or not an agent id (nearby holds the other robots only)'
+        )
+    return nearby
 
 
 # --------------------------------------------------------------------------------------------
@@ -457,6 +503,14 @@ def encode_agent_report(report: AgentReport):
         'failure': None if report.failure is None else str(report.failure),
         'published': {topic: int(n) for topic, n in sorted(report.published.items())},
     }
+    if report.safety_interventions is not None:  # only with the safety layer on: older readers unchanged
+        last = report.safety_last_intervention
+        if last is not None:
+            _check_finite(f'agent report of agent {report.agent} safety last_intervention', [last])
+        body['safety'] = {
+            'interventions': int(report.safety_interventions),
+            'last_intervention': None if last is None else float(last),
+        }
     return String(data=json.dumps(body, separators=(',', ':')))
 
 
@@ -504,7 +558,7 @@ def decode_agent_report(msg) -> AgentReport:
             reason=REJECT_VERSION,
         )
     known = set(_REPORT_FIELDS)
-    if unknown := set(body) - known:
+    if unknown := set(body) - known - {'safety'}:
         raise MessageError(f'agent report: unknown fields {sorted(unknown)}')
     if missing := known - set(body):
         raise MessageError(f'agent report: missing fields {sorted(missing)}')
@@ -537,7 +591,22 @@ def decode_agent_report(msg) -> AgentReport:
         saturation=_decode_saturation(agent, body['saturation']),
         failure=body['failure'],
         published=published,
+        **_decode_report_safety(agent, body.get('safety')),
     )
+
+
+def _decode_report_safety(agent: int, table) -> dict:
+    """An agent report's optional `safety` entry (the safety layer on): its counts as AgentReport fields."""
+    if table is None:
+        return {}
+    what = f'agent report of agent {agent} safety'
+    if not isinstance(table, dict) or set(table) != {'interventions', 'last_intervention'}:
+        raise MessageError(f"{what} must hold exactly ['interventions', 'last_intervention'], got {table!r}")
+    last = table['last_intervention']
+    return {
+        'safety_interventions': _json_count(f'{what} interventions', table['interventions']),
+        'safety_last_intervention': None if last is None else _json_number(f'{what} last_intervention', last),
+    }
 
 
 # --------------------------------------------------------------------------------------------

@@ -154,6 +154,10 @@ class AgentReport:
     # topic -> messages the agent published there from step 0 on (this report included): what a
     # recorder matched before step 0 must hold
     published: dict[str, int] = field(default_factory=dict)
+    # the safety layer (docs/SAFETY.md), None when it is off: triggers at which it changed the
+    # nominal command, and the latest such time (None: none yet)
+    safety_interventions: int | None = None
+    safety_last_intervention: float | None = None
 
     @property
     def rejected_total(self) -> int:

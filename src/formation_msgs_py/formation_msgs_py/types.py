@@ -37,7 +37,9 @@ class SensedState:
     """What agent `agent` senses at its triggering time `stamp`.
 
     `rel_positions[j]` is x_i - x_j; for double integrators also `rel_velocities[j]` = q_i - q_j
-    and the agent's own velocity q_i.
+    and the agent's own velocity q_i.  With the safety layer (docs/SAFETY.md) `nearby[j]` is
+    x_i - x_j of every other robot j within the sensing radius that is not a neighbour (None: the
+    layer is off, nothing sensed beyond the neighbours).
     """
 
     agent: int
@@ -45,6 +47,7 @@ class SensedState:
     rel_positions: dict[int, Vector]
     rel_velocities: dict[int, Vector] | None = None
     velocity: Vector | None = None
+    nearby: dict[int, Vector] | None = None
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)

@@ -141,3 +141,38 @@ def test_the_shared_stamp_rule_refuses_old_future_and_nan_ages():
     assert stamp_refusal(age=-0.51, timeout=0.5) == 'future' and stamp_refusal(age=-0.5, timeout=0.5) is None
     assert stamp_refusal(age=-0.4, timeout=math.inf, future=0.1) == 'future'
     assert stamp_refusal(age=math.nan, timeout=0.5) == 'not a time'
+
+
+def test_the_safety_layer_sees_the_other_robots_within_its_radius_from_their_poses():
+    # docs/SAFETY.md on robots: the others' control points within R are handed on as nearby; every
+    # robot's pose must be fresh (a robot not seen may be close), the neighbours stay as they were.
+    book = PoseBook(
+        agent_id=1,
+        neighbour_ids=(2,),
+        dimension=2,
+        offset=(0.1, 0.0, 0.0),
+        world_frame='world',
+        timeout=0.5,
+        topic=lambda robot: f'/agent_{robot}/robot/pose',
+        other_ids=(3, 4, 5),
+        sensing_radius=2.0,
+    )
+    assert book.robots == (1, 2, 3, 4, 5)
+    for robot, pose in (
+        (1, _pose(0.0, 0.0)),
+        (2, _pose(1.0, 0.0)),
+        (3, _pose(1.9, 0.0)),
+        (4, _pose(2.1, 0.0)),
+    ):
+        assert book.add(robot, pose) is None
+    with pytest.raises(PoseError, match='the pose of robot 5 on /agent_5/robot/pose has not arrived'):
+        book.sense(t=1.0, now=NOW, velocities=False)
+    book.add(5, _pose(0.0, -2.2, -math.pi / 2))  # its control point at (0, -2.3): 2.302 m from (0.1, 0)
+    sensed = book.sense(t=1.0, now=NOW, velocities=False)
+    assert sensed.rel_positions == {2: (-1.0, 0.0)}
+    # control points: 1 at (0.1, 0), 3 at (2.0, 0): 1.9 m; 4 at (2.2, 0): 2.1 m; 5 at (0, -2.3)
+    assert list(sensed.nearby) == [3] and sensed.nearby[3] == pytest.approx((-1.9, 0.0), abs=1e-15)
+    plain = _book()
+    for robot, pose in ((1, _pose(0.0, 0.0)), (2, _pose(1.0, 0.0)), (3, _pose(1.9, 0.0))):
+        plain.add(robot, pose)
+    assert plain.sense(t=1.0, now=NOW, velocities=False).nearby is None  # the layer off: as before

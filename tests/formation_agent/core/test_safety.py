@@ -277,3 +277,26 @@ def test_the_layer_is_refused_where_it_does_not_apply():
         )
     with pytest.raises(AgentError, match='agent 1: the safety layer is planar, got dimension 3'):
         Eta1Agent(agent_id=1, neighbours={2: (1.0, 0.0, 0.0)}, delta=4.0, alpha=1.0, beta=0.3, safety=CONFIG)
+
+
+@pytest.mark.parametrize(
+    ('nearby', 'complaint'),
+    [
+        (None, 'agent 1: the safety layer needs the other robots within the sensing radius (nearby)'),
+        ({1: (0.5, 0.0)}, 'agent 1: nearby robot 1 is the agent itself or one of its neighbours'),
+        ({2: (0.5, 0.0)}, 'agent 1: nearby robot 2 is the agent itself or one of its neighbours'),
+        ({3: (0.5, 0.0, 0.0)}, 'agent 1: nearby robot 3 must be at a finite planar x_i - x_j'),
+        ({3: (math.nan, 0.0)}, 'agent 1: nearby robot 3 must be at a finite planar x_i - x_j'),
+        ({3: (2.5, 0.0)}, 'agent 1: nearby robot 3 at 2.5 m is beyond the sensing radius 2.0 m'),
+    ],
+)
+def test_a_trigger_refuses_nearby_robots_a_range_sensor_cannot_give(nearby, complaint):
+    # What a distributed agent is handed by its sensing (docs/SAFETY.md): refused before anything
+    # changes, so the agent stays as it was.
+    safe, sensed = _pair(CONFIG)
+    with pytest.raises(SafetyError) as error:
+        safe[1].trigger(0.0, sensed[1], nearby=nearby)
+    assert complaint in str(error.value)
+    assert safe[1].last_trigger is None and safe[1].safety_interventions == 0
+    edge = {3: (2.0, 0.0)}  # exactly at R: seen, as `World.nearby` sees it (||r||² <= R²)
+    assert safe[1].trigger(0.0, sensed[1], nearby=edge).time == 0.0

@@ -132,6 +132,44 @@ def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, co
     assert complaint in str(error.value)
 
 
+def test_the_safety_parameters_give_the_core_its_layer(ros):
+    from formation_agent.core.safety import SafetyConfig
+
+    node = make_node(ros)
+    assert node.config.safety is None and node.core.safety is None  # off by default (D = 0)
+    node = make_node(ros, min_separation=0.3, sensing_radius=2.5, safety_gamma=3.0, safety_turn=0.0)
+    expected = SafetyConfig(min_separation=0.3, sensing_radius=2.5, gamma=3.0, max_speed=0.5, turn=0.0)
+    assert node.config.safety == expected and node.core.safety == expected
+
+
+@pytest.mark.parametrize(
+    ('changes', 'complaint'),
+    [
+        ({'min_separation': -0.1}, "parameter 'min_separation' (double) must be >= 0, got -0.1"),
+        (
+            {'min_separation': 0.25, 'sensing_radius': 0.5},
+            'safety.sensing_radius: must exceed the guard radius ρ* = (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ '
+            '= 1.05902 m',
+        ),
+        (
+            {'min_separation': 0.25, 'sensing': 'poses', 'other_robot_ids': [2, 5]},
+            'other_robot_ids must name each other robot once, not the agent or a neighbour, got [2, 5]',
+        ),
+        (
+            {'min_separation': 0.25, 'dimension': 3, 'neighbour_offsets': [0.0] * 6},
+            'min_separation: the safety layer is planar, got dimension 3',
+        ),
+        ({'safety_turn': -1.0}, "parameter 'safety_turn' (double) must be >= 0, got -1.0"),
+    ],
+)
+def test_bad_safety_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
+    from formation_agent.ros.parameters import ParameterError
+
+    with pytest.raises(ParameterError) as error:
+        make_node(ros, **changes)
+    assert complaint in str(error.value)
+
+
 def test_robot_parameters_have_their_documented_defaults(ros):
     node = make_node(ros)
     config = node.config

@@ -33,6 +33,11 @@ BAD_RUN_ARGUMENTS = [
     (['--speed-scale', 'inf'], "argument --speed-scale: must be a finite number > 0 or 'auto', got inf"),
     (['--speed-scale', '1e-9'], 'gains.speed_scale: must lie in [1e-06, 1e+06]'),
     (['--threshold-floor', '-0.1'], 'argument --threshold-floor: must be a finite number >= 0, got -0.1'),
+    (['--min-separation', '0'], 'argument --min-separation: must be a finite number > 0, got 0.0'),
+    (
+        ['--min-separation', '100'],
+        'argument --min-separation: safety.sensing_radius: must exceed the guard radius',
+    ),
 ]
 
 

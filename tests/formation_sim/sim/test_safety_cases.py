@@ -175,13 +175,15 @@ def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
     assert 'safety.min_separation: agents 1 and 2 start 1 m apart' in capsys.readouterr().err
 
 
-def test_a_distributed_run_refuses_the_layer_it_does_not_carry_yet():
-    """Not wired into the agent nodes yet: refused before anything starts, not silently off."""
-    from formation_sim.runtime.launch import RunError
+def test_a_distributed_run_takes_the_layer_on_every_backend():
+    """Wired into the agents on the simulator and on robots (tests/formation_sim/runtime/
+    test_safety_run.py); the scenario's own rules still refuse what the layer cannot run."""
     from formation_sim.runtime.run_options import RunOptions
 
-    with pytest.raises(RunError, match='the safety layer .* is not wired into distributed runs yet'):
-        RunOptions().check(safety_cases.swap_two(safety=SAFETY))
+    safe = safety_cases.swap_two(safety=SAFETY)
+    assert RunOptions().check(safe).backend == 'exact'
+    assert RunOptions(clock='realtime').check(safe).clock == 'realtime'
+    assert RunOptions(backend='holonomic').check(safe).backend == 'holonomic'
 
 
 def test_a_stress_team_keeps_its_separation_and_reaches_the_formation(capsys):

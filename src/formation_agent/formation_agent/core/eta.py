@@ -255,6 +255,8 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         length = [math.sqrt(sum(v * v for v in row)) for row in y]
         self._hood.check_sensed_range(length)
         extra = self._sensed_extra(sensed)  # validated before anything changes
+        if self._safety is not None:
+            self._safety.check_nearby(nearby, neighbours=self.neighbour_ids)
         self._anchor_time[:] = t
         self._anchor_y[:] = y
         offset = self._update(y, length, extra)

@@ -122,12 +122,18 @@ class PoseBook:
         world_frame: str,
         timeout: float,
         topic: Callable[[int], str],
+        other_ids: Sequence[int] = (),
+        sensing_radius: float | None = None,
     ) -> None:
+        """`other_ids`, `sensing_radius`: the safety layer (docs/SAFETY.md): the team's other robots,
+        whose poses are read too, and the range within which `sense` reports them as `nearby`."""
         if not timeout > 0.0:
             raise ValueError(f'pose timeout must be > 0, got {timeout!r}')
         self.agent_id = agent_id
         self.neighbour_ids = tuple(neighbour_ids)
-        self.robots = (agent_id, *self.neighbour_ids)
+        self.other_ids = tuple(other_ids)
+        self.sensing_radius = sensing_radius
+        self.robots = (agent_id, *self.neighbour_ids, *self.other_ids)
         self.dimension = dimension
         self.offset = np.asarray(offset, dtype=float)
         self.world_frame = world_frame
@@ -205,6 +211,11 @@ class PoseBook:
         x = {robot: self._point(pose) for robot, pose in poses.items()}
         i = self.agent_id
         rel_positions = {j: _floats(x[i] - x[j]) for j in self.neighbour_ids}
+        if self.sensing_radius is not None:  # the safety layer: the other robots within R
+            radius2 = self.sensing_radius * self.sensing_radius
+            rel = {j: _floats(x[i] - x[j]) for j in self.other_ids}
+            nearby = {j: r for j, r in rel.items() if sum(v * v for v in r) <= radius2}
+            return SensedState(agent=i, stamp=t, rel_positions=rel_positions, nearby=nearby)
         if not velocities:
             return SensedState(agent=i, stamp=t, rel_positions=rel_positions)
         q = {robot: self._velocity(robot, pose, t) for robot, pose in poses.items()}

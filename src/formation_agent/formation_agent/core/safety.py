@@ -265,6 +265,35 @@ class SafetyLayer:
         self.interventions = 0  # triggers where the applied command differs from the nominal one
         self.last_intervention: float | None = None  # the time of the latest such trigger
 
+    def check_nearby(
+        self, nearby: Mapping[int, Sequence[float]] | None, *, neighbours: Sequence[int]
+    ) -> None:
+        """SafetyError unless `nearby` is what a range sensor within R gives: other robots only (not
+        this agent, not a neighbour), planar, finite, each within the sensing radius (the engine's
+        `World.nearby` rule, ||r||² <= R²). None is refused: the layer blind to the robots that are
+        not neighbours would keep no distance from them."""
+        me = self.agent_id
+        if nearby is None:
+            raise SafetyError(
+                f'agent {me}: the safety layer needs the other robots within the sensing radius '
+                '(nearby) at every trigger; the sensing gave none (docs/SAFETY.md)'
+            )
+        radius2 = self.config.sensing_radius * self.config.sensing_radius
+        for j, r in nearby.items():
+            if j == me or j in neighbours:
+                raise SafetyError(
+                    f'agent {me}: nearby robot {j} is the agent itself or one of its neighbours'
+                )
+            if len(r) != 2 or not all(math.isfinite(v) for v in r):
+                raise SafetyError(
+                    f'agent {me}: nearby robot {j} must be at a finite planar x_i - x_j, got {r!r}'
+                )
+            if not sum(v * v for v in r) <= radius2:
+                raise SafetyError(
+                    f'agent {me}: nearby robot {j} at {math.hypot(*r)!r} m is beyond the sensing radius '
+                    f'{self.config.sensing_radius!r} m'
+                )
+
     def filter(
         self,
         *,

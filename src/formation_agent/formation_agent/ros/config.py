@@ -14,6 +14,14 @@ from formation_agent.core.commander import Limits
 from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
 from formation_agent.core.kinds.registry import Geometry
+from formation_agent.core.safety import (
+    DEFAULT_GAMMA,
+    DEFAULT_MAX_SPEED,
+    DEFAULT_SENSING_RADIUS,
+    DEFAULT_TURN,
+    SafetyConfig,
+    SafetyError,
+)
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 from formation_agent.core.time_warp import TimeWarp, WarpError
 from formation_agent.ros.parameters import (
@@ -102,6 +110,55 @@ AGENT_PARAMETERS = (
         '(docs/SPEED_SCALE.md); 0: the paper',
         default=SCALE_GAINS['threshold_floor'],
         low=0.0,
+    ),
+    # The safety layer (docs/SAFETY.md): the scenario's safety: keys, written by `formation run`.
+    _spec(
+        'min_separation',
+        DOUBLE,
+        'safety layer (docs/SAFETY.md, eta1, planar): D, the least distance kept between two robots [m]; '
+        '0: the layer off',
+        default=0.0,
+        low=0.0,
+    ),
+    _spec(
+        'sensing_radius',
+        DOUBLE,
+        'safety layer: R, the range within which the agent senses the other robots [m]',
+        default=DEFAULT_SENSING_RADIUS,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'safety_gamma',
+        DOUBLE,
+        'safety layer: γ, how fast a barrier may shrink, dh/dt >= -γ h [1/s]',
+        default=DEFAULT_GAMMA,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'safety_max_speed',
+        DOUBLE,
+        'safety layer: v̄, the bound of every applied command [m/s]',
+        default=DEFAULT_MAX_SPEED,
+        low=0.0,
+        low_open=True,
+    ),
+    _spec(
+        'safety_turn',
+        DOUBLE,
+        "safety layer: λ, the tie-break's turn to the right, atan(λ)",
+        default=DEFAULT_TURN,
+        low=0.0,
+    ),
+    _spec(
+        'other_robot_ids',
+        INTEGER_ARRAY,
+        "safety layer with sensing: poses — ids of the team's other robots (not itself, not a "
+        'neighbour), whose pose topics the agent reads to see those within sensing_radius',
+        default=[],
+        low=0,
+        high=MAX_AGENT_ID,
     ),
     # Robots (README, "Running on robots").
     _spec(
@@ -290,6 +347,8 @@ class AgentConfig:
     inject_jitter_ms: float
     inject_seed: int
     time_warp: TimeWarp | None = None
+    safety: SafetyConfig | None = None  # the safety layer (min_separation > 0), docs/SAFETY.md
+    other_robot_ids: tuple[int, ...] = ()  # the safety layer on robots: the others' pose topics
 
     @property
     def double(self) -> bool:
@@ -351,6 +410,8 @@ def read_config(node) -> AgentConfig:
             steering_angle=values['max_steering_angle'],
         ),
         time_warp=TimeWarp.from_parameter(values['time_warp']) if values['time_warp'] else None,
+        safety=_safety(values) if values['min_separation'] > 0.0 else None,
+        other_robot_ids=tuple(int(j) for j in values['other_robot_ids']),
         **{
             name: values[name]
             for name in (
@@ -402,6 +463,8 @@ def _rules(node, values: dict) -> list[str]:
         )
     if have('time_warp') and values['time_warp']:
         problems += _warp_problems(values)
+    if have('min_separation', *SAFETY_PARAMETERS.values()) and values['min_separation'] > 0.0:
+        problems += _safety_problems(values)
     if have('world_frame') and not values['world_frame']:
         problems.append("world_frame must name a frame, got ''")
     if have('pose_topic') and values['pose_topic'] and '{id}' not in values['pose_topic']:
@@ -421,6 +484,43 @@ def _rules(node, values: dict) -> list[str]:
         )
     if robot not in (None, 'none') and have('control_point_distance', 'wheelbase'):
         problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
+    return problems
+
+
+SAFETY_PARAMETERS = {
+    'min_separation': 'min_separation',
+    'sensing_radius': 'sensing_radius',
+    'gamma': 'safety_gamma',
+    'max_speed': 'safety_max_speed',
+    'turn': 'safety_turn',
+}
+"""The safety layer's keys (`SafetyConfig`) -> the agent's parameters."""
+
+
+def _safety(values: dict) -> SafetyConfig:
+    return SafetyConfig(**{key: values[name] for key, name in SAFETY_PARAMETERS.items()})
+
+
+def _safety_problems(values: dict) -> list[str]:
+    """The safety layer on: its own rules (`SafetyConfig`), eta1 in the plane, sensing from the
+    simulator's service (which reports the other robots within R), no time warp."""
+    problems = []
+    try:
+        _safety(values)
+    except SafetyError as error:
+        problems.append(str(error))
+    if values.get('algorithm') == 'eta2':
+        problems.append('min_separation: the safety layer runs with eta1 only, got algorithm eta2')
+    if values.get('dimension', 2) != 2:
+        problems.append(f'min_separation: the safety layer is planar, got dimension {values["dimension"]}')
+    others = list(values.get('other_robot_ids', []))
+    mine = {values.get('agent_id'), *values.get('neighbour_ids', [])}
+    if len(set(others)) != len(others) or mine & set(others):
+        problems.append(
+            f'other_robot_ids must name each other robot once, not the agent or a neighbour, got {others}'
+        )
+    if values.get('time_warp'):
+        problems.append('min_separation: the safety layer takes no time_warp')
     return problems
 
 

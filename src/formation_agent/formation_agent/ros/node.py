@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -114,6 +115,7 @@ def _make_core(config):
         delta=config.delta,
         algorithm=config.algorithm,
         gains=config.gains,
+        safety=config.safety,
     )
     return core if config.time_warp is None else WarpedAgent(core, config.time_warp)
 
@@ -162,7 +164,7 @@ def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> Ag
     """The agent's AgentReport: its counts, what it refused, injected and clipped."""
     output = node.output
     plant = (output.publisher.topic_name, output.sent) if isinstance(output, PlantOutput) else None
-    return node.counts.report(
+    report = node.counts.report(
         final=final,
         failure=failure,
         rejected=node.reject.counts,
@@ -171,6 +173,13 @@ def _report(node: FormationAgentNode, *, final: bool, failure: str | None) -> Ag
         robot_commands=output.robot_commands,
         saturation=output.saturation,
         plant=plant,
+    )
+    if node.config.safety is None:
+        return report
+    return replace(  # the safety layer's counts, for summary.json's extra.safety
+        report,
+        safety_interventions=node.core.safety_interventions,
+        safety_last_intervention=node.core.safety_last_intervention,
     )
 
 
@@ -354,7 +363,7 @@ class FormationAgentNode(Node):
             return
         sensed = sensed_getter()
         t = self.schedule.sensed_time(sensed, step=self.step)
-        out = self.core.trigger(t, sensed)
+        out = _core_trigger(self, t, sensed)
         self.schedule.triggered(t)
         self.counts.triggered(t)
         self.output.publish(t, tuple(float(v) for v in out.control), sensed)
@@ -472,6 +481,14 @@ class FormationAgentNode(Node):
         """Let reliable writers hand over what they still hold before the node goes away (until
         `deadline`, time.monotonic())."""
         self.outbox.wait_for_delivery(deadline, self.output.publisher)
+
+
+def _core_trigger(node: FormationAgentNode, t: float, sensed):
+    """The core's trigger; with the safety layer also the other robots within R that the same
+    sensing answer holds (docs/SAFETY.md), as the engine hands them."""
+    if node.config.safety is None:
+        return node.core.trigger(t, sensed)
+    return node.core.trigger(t, sensed, nearby=sensed.nearby)
 
 
 def _next_step(node: FormationAgentNode, msg: Float64MultiArray) -> Step | None:

@@ -168,6 +168,9 @@ class PoseSensing:
             world_frame=config.world_frame,
             timeout=config.pose_timeout,
             topic=config.robot_pose_topic,
+            # the safety layer: every other robot's pose too, those within R handed on as nearby
+            other_ids=config.other_robot_ids if config.safety is not None else (),
+            sensing_radius=None if config.safety is None else config.safety.sensing_radius,
         )
         self._epoch: float | None = None
         self.readers = PoseReaders(node, config, self.book, reject=reject)

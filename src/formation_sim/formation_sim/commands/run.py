@@ -13,10 +13,12 @@ from formation_sim.commands.common import (
     POSITIVE,
     add_plan_arguments,
     add_run_arguments,
+    add_safety_argument,
     load_valid_scenario,
     scale_options,
     plan_options,
     refuse,
+    with_min_separation,
 )
 from formation_sim.commands.limits import (
     AUTO,
@@ -83,6 +85,7 @@ def register(subparsers) -> None:
             'outside the theorems; --speed-scale auto slows the team until they fit)'
         ),
     )
+    add_safety_argument(parser)
     parser.add_argument('--no-plot', action='store_true', help='skip the figure')
     parser.add_argument('--quiet', action='store_true', help='no progress; print only the output folder')
     parser.set_defaults(func=run)
@@ -92,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
-    if scenario is None:
+    if scenario is None or (scenario := with_min_separation(scenario, args.min_separation, 'run')) is None:
         return EXIT_BAD_INPUT
     try:
         options = plan_options(args)

@@ -92,11 +92,6 @@ class RunOptions:
             raise RunError(
                 f'distributed runs need p <= 3 (geometry_msgs commands), got p = {scenario.dimension}'
             )
-        if scenario.safety is not None:
-            raise RunError(
-                'the safety layer (scenario key safety:) is not wired into distributed runs yet: run the '
-                'scenario with formation simulate, or without safety: (docs/SAFETY.md)'
-            )
         backend, clock, robots = _check_world(self, scenario)
         if self.executor not in EXECUTORS:
             raise RunError(f'executor must be one of {EXECUTORS}, got {self.executor!r}')

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import NoReturn
 
 import numpy as np
@@ -46,6 +47,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
+from formation_agent.ros.config import SAFETY_PARAMETERS
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     MessageError,
@@ -57,6 +59,7 @@ from formation_msgs_py.codec import (
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.types import SensedState
 from formation_msgs_py.topics import (
     CLOCK_TOPIC,
     GROUND_TRUTH_TOPIC,
@@ -189,6 +192,12 @@ def agent_parameters(
         'speed_scale': float(gains.speed_scale),
         'threshold_floor': float(gains.threshold_floor),
     }
+    if scenario.safety is not None:  # the safety layer's keys (docs/SAFETY.md), as the agent names them
+        params.update({name: float(getattr(scenario.safety, key)) for key, name in SAFETY_PARAMETERS.items()})
+        # on robots the agent reads these robots' poses to see those within R (sensing: poses)
+        params['other_robot_ids'] = [
+            int(j) for j in scenario.agent_ids if j != agent_id and j not in neighbours
+        ]
     if scenario.dynamics == 'single':
         params.update(algorithm='eta1', alpha=float(gains.alpha), beta=float(gains.beta))
     else:
@@ -358,12 +367,12 @@ class FormationSimulatorNode(TimeKeeperNode):
     def _sense_realtime(self, agent: int):
         book = self.agents[agent]
         if self.finished:  # asked after the horizon: the final state, not counted
-            return encode_sensed_state(self.world.sense(agent, book.neighbours))
+            return encode_sensed_state(sensed_state(self, agent))
         t = self._realtime_event()
         book.expected_triggers += 1  # a trigger may follow (its Status may come before its information)
         self.calls.asked(agent, t)  # a trigger once the agent's information stamped t follows
         self.view.log_sensing(agent, 0, t)
-        return encode_sensed_state(self.world.sense(agent, book.neighbours))
+        return encode_sensed_state(sensed_state(self, agent))
 
     # -- lock-step ------------------------------------------------------------------------------
 
@@ -409,7 +418,7 @@ class FormationSimulatorNode(TimeKeeperNode):
     def _on_sense(self, agent: int):
         book = self.agents[agent]
         if self.finished:  # asked after the end: the final state, not counted
-            return encode_sensed_state(self.world.sense(agent, book.neighbours))
+            return encode_sensed_state(sensed_state(self, agent))
         if self.realtime and self.step is not None:
             return self._sense_realtime(agent)
         index = -1 if self.step is None else self.step.index
@@ -417,7 +426,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             return _out_of_turn(self, agent, index)
         book.sensed_at_step = index
         self.sensing_calls += 1
-        sensed = self.world.sense(agent, book.neighbours)
+        sensed = sensed_state(self, agent)
         self.view.log_sensing(agent, index, self.world.time)
         return encode_sensed_state(sensed)
 
@@ -499,6 +508,18 @@ class FormationSimulatorNode(TimeKeeperNode):
         )
 
 
+def sensed_state(node: FormationSimulatorNode, agent: int) -> SensedState:
+    """What `agent` senses now: its neighbours' relative states, and with the safety layer the
+    other robots within its sensing radius, the very floats the engine hands
+    `trigger(nearby=...)` (`World.nearby`, docs/SAFETY.md)."""
+    neighbours = node.agents[agent].neighbours
+    sensed = node.world.sense(agent, neighbours)
+    safety = node.scenario.safety
+    if safety is None:
+        return sensed
+    return replace(sensed, nearby=node.world.nearby(agent, safety.sensing_radius, exclude=neighbours))
+
+
 def _trigger_readers(node: FormationSimulatorNode) -> dict:
     """Wall clock: per agent, a reader of its triggering information to its first neighbour,
     whose stamps say which sensing calls were its triggers (`SensingCalls`)."""
@@ -554,7 +575,7 @@ def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
             f'{found["stranger"].text()}: a call out of turn ({reason}) counted as foreign'
         )
     if due and node.step is not None and node.agents[agent].sensed_at_step == index:
-        return encode_sensed_state(node.world.sense(agent, node.agents[agent].neighbours))  # the same again
+        return encode_sensed_state(sensed_state(node, agent))  # the same again
     return sensing_refusal(f'{reason}: refused')
 
 

@@ -62,6 +62,7 @@ from formation_sim.runtime.intruders import (
     robot_watched,
     simulator_watched,
 )
+from formation_sim.sim.engine import safety_extra
 from formation_sim.sim.record import RunRecord
 
 GRAPH_LOOK_PERIOD = 1.0  # [s] between a keeper's looks at its run's writers (`intruders.GraphWatch`)
@@ -686,7 +687,20 @@ def run_extra(node: TimeKeeperNode, reached: float) -> dict:
             else {}
         ),
         **message_counts(node),
+        **safety_summary(node),
     }
+
+
+def safety_summary(node: TimeKeeperNode) -> dict:
+    """summary.json's `extra.safety` as the engine writes it (docs/SAFETY.md), from the agents'
+    latest reports (an agent without one counts no intervention); {} without the layer."""
+    safety = node.scenario.safety
+    if safety is None:
+        return {}
+    reports = {i: book.report for i, book in node.agents.items()}
+    counts = {i: 0 if r is None else r.safety_interventions or 0 for i, r in reports.items()}
+    last = {i: None if r is None else r.safety_last_intervention for i, r in reports.items()}
+    return {'safety': safety_extra(safety, interventions=counts, last_interventions=last)}
 
 
 def message_counts(node: TimeKeeperNode) -> dict:

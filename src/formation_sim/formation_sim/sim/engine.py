@@ -412,10 +412,21 @@ def simulate(
 
 def _safety_extra(scenario, agents: dict) -> dict:
     """The safety layer's settings and how often it changed a command (docs/SAFETY.md)."""
+    return safety_extra(
+        scenario.safety,
+        interventions={i: agent.safety_interventions for i, agent in agents.items()},
+        last_interventions={i: agent.safety_last_intervention for i, agent in agents.items()},
+    )
+
+
+def safety_extra(safety, *, interventions: dict, last_interventions: dict) -> dict:
+    """summary.json's `extra.safety`: the layer's settings, per agent the triggers at which it
+    changed the nominal command, and the latest such time over the team (0.0: none); the engine's
+    and a distributed run's (from the agents' reports) alike."""
     return {
-        **scenario.safety.as_dict(),
-        'interventions': {str(i): agent.safety_interventions for i, agent in agents.items()},
-        'last_intervention': max((a.safety_last_intervention or 0.0 for a in agents.values()), default=0.0),
+        **safety.as_dict(),
+        'interventions': {str(i): n for i, n in interventions.items()},
+        'last_intervention': max((t or 0.0 for t in last_interventions.values()), default=0.0),
     }
 
 
