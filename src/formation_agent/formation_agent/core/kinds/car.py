@@ -83,7 +83,7 @@ class Car(Unicycle):
         'body-frame Twist (v, ω), car-like (kinematic bicycle) steered l ahead of its rear axle, '
         '|ω| <= |v| tan φ_max / L'
     )
-    parameters = ('control_point_distance', 'max_angular_speed', 'wheelbase', 'max_steering_angle')
+    parameters = ('max_angular_speed', 'max_steering_angle')  # its shape parameters: `shape`
     params_file = 'car.params.yaml'
     shape = (*Unicycle.shape, WHEELBASE)
     # An F1TENTH car (car.params.yaml: L = 0.33 m, φ_max = 0.42 rad): body 0.58 m x 0.31 m

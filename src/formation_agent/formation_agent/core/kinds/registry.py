@@ -9,9 +9,9 @@ A kind says, in one place, what the agents and the tools need to know of a robot
   limits, every clip counted (`command`, `formation_agent.core.limits`), and the zero command;
 - the command's message: `command_type` (a ROS type name, resolved in the ros layer) and its
   convention, a world-frame TwistStamped (`world_frame_command`) or a body-frame Twist (v, ω);
-- its parameters beyond the speed limits (`parameters`, names of the agent's parameter table) and
-  the rules they obey (`problems`); its shape parameters, each declared once (`shape`,
-  `formation_agent.core.kinds.shape`), among them its footprint radius (`footprint_radius`);
+- its shape parameters, each declared once (`shape`, `formation_agent.core.kinds.shape`), among
+  them its footprint radius (`footprint_radius`); the limits it takes beyond the speed limit
+  (`parameters`, names of the agent's parameter table); the rules they obey (`problems`);
 - the simulated model: how a base clips what it is sent (`clip`) and the exact motion under a
   held command (`move`, closed form; `formation_sim.sim.robots` moves its robots with it), the
   odometry twist (`body_twist`) and where the robot stands for a scenario position (`origin`);
@@ -70,7 +70,7 @@ class RobotKind:
     steered: bool = (
         False  # its control point moves by turning, l ahead: a turn-rate limit W caps its speed at W l
     )
-    parameters: tuple[str, ...] = ()  # its parameters beyond max_linear_speed (the agent's parameter names)
+    parameters: tuple[str, ...] = ()  # its limits beyond max_linear_speed (the agent's parameter names)
     shape: tuple[ShapeParameter, ...] = (FOOTPRINT_RADIUS,)  # its shape parameters, declared once (shape.py)
     footprint_radius: float = 0.0  # r [m]: its footprint (FOOTPRINT_RADIUS), a kind's own default
     params_file: str | None = None  # formation_agent/config/<file>: an example robot's parameters

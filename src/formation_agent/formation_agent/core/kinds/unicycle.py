@@ -66,7 +66,7 @@ class Unicycle(RobotKind):
     world_frame_command = False
     dimensions = (2,)
     steered = True
-    parameters = ('control_point_distance', 'max_angular_speed')
+    parameters = ('max_angular_speed',)  # its shape parameters: `shape`
     params_file = 'turtlebot3.params.yaml'
     shape = (*RobotKind.shape, CONTROL_POINT_DISTANCE)
     # TurtleBot3 Burger: robot_radius 0.105 m in turtlebot3_navigation2's param/burger.yaml (the
