@@ -77,7 +77,7 @@ def run_once(
 ) -> dict:
     robots = None
     if robot is not None:
-        robots = RobotOptions(model=backend, seed=seed, **LIMITS, **robot)
+        robots = RobotOptions.of(model=backend, seed=seed, **LIMITS, **robot)
     result = FormationRun(
         SCENARIO,
         out_dir=out,

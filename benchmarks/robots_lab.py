@@ -109,7 +109,7 @@ def planned(name: str, *, horizon: float, seed: int) -> tuple[Scenario, dict, Ro
     if floor:
         c0, _, _ = scenario_noise_floor(scenario, pose_noise=sigma, speed_scale=scenario.speed_scale)
         scenario = scenario.with_scale(threshold_floor=c0)
-    robots = RobotOptions(
+    robots = RobotOptions.of(
         model=backend, seed=seed, pose_noise=sigma, latency=LATENCY if sigma > 0.0 else 0.0, **limits
     )
     return scenario, chosen, robots

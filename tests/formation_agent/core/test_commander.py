@@ -15,6 +15,7 @@ from formation_agent.core.commander import (
     limit_world_velocity,
 )
 from formation_agent.core.kinematics import control_point_rate
+from formation_agent.core.kinds import Geometry
 from formation_msgs_py.lockstep import Saturation
 
 
@@ -48,7 +49,9 @@ def test_a_differential_drive_command_is_scaled_by_one_factor():
 def test_a_clipped_unicycle_keeps_its_control_point_on_course():
     rng = np.random.default_rng(2)
     limits = Limits(linear_speed=0.22, angular_speed=2.84)
-    commander = RobotCommander(drive='unicycle', dimension=2, limits=limits, distance=0.1)
+    commander = RobotCommander(
+        drive='unicycle', dimension=2, limits=limits, geometry=Geometry(control_point_distance=0.1)
+    )
     for _ in range(100):
         u = rng.normal(scale=1.0, size=2)
         theta = rng.uniform(-math.pi, math.pi)
@@ -89,10 +92,13 @@ def test_eta1_commands_are_the_agents_and_eta2_follows_its_reference():
     [
         ({'drive': 'tank', 'dimension': 2}, "drive must be one of ('holonomic', 'unicycle'"),
         (
-            {'drive': 'unicycle', 'dimension': 3, 'distance': 0.1},
+            {'drive': 'unicycle', 'dimension': 3},
             'a unicycle moves in the plane: dimension p must be 2, got 3',
         ),
-        ({'drive': 'unicycle', 'dimension': 2}, 'control_point_distance l must be > 0, got 0.0'),
+        (
+            {'drive': 'unicycle', 'dimension': 2, 'geometry': Geometry(control_point_distance=0.0)},
+            'control_point_distance l must be > 0, got 0.0',
+        ),
     ],
 )
 def test_a_commander_that_cannot_drive_is_refused(options, complaint):

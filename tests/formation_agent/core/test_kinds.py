@@ -10,26 +10,42 @@ import pytest
 from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import (
     KIND_NAMES,
+    SEPARATION_MARGIN,
     Geometry,
     KindError,
     KindNames,
     RobotKind,
+    control_point_separation,
+    default_min_separation,
     register,
     robot_kind,
     unregister,
 )
+from formation_agent.core.kinds.shape import ShapeError, ShapeParameter, declared
 from formation_agent.core.limits import Limits, SaturationLog
+
+HULL_WIDTH = ShapeParameter(
+    name='hull_width',
+    symbol='w',
+    help='the width of its hull [m]',
+    default=0.3,
+    nodes=('agent', 'robot'),
+    metavar='W',
+)
+"""The toy kind's own shape parameter: its one declaration is all it takes (docs/DESIGN.md)."""
 
 
 class Sluggish(RobotKind):
     """A toy kind: a world-frame robot whose base moves at half the velocity it is sent, so its
-    adapter sends 2u (and halves the speed limit); 1-D or 2-D."""
+    adapter sends 2u (and halves the speed limit); 1-D or 2-D; a shape parameter of its own."""
 
     name = 'sluggish'
     summary = 'world-frame TwistStamped at half speed (a toy)'
     command_type = 'geometry_msgs/msg/TwistStamped'
     world_frame_command = True
     dimensions = (1, 2)
+    shape = (*RobotKind.shape, HULL_WIDTH)
+    footprint_radius = 0.2
 
     def command(self, u, *, heading, geometry, limits, log):
         u = np.asarray(u, dtype=float)
@@ -58,6 +74,9 @@ def sluggish():
     yield kind
     unregister(kind.name)
     assert kind.name not in KIND_NAMES
+    assert HULL_WIDTH not in declared()  # its shape parameter went with it
+    with pytest.raises(ShapeError, match=r"shape parameter must be one of \(.*\), got 'hull_width'"):
+        Geometry(hull_width=0.3)
 
 
 def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
@@ -103,17 +122,47 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     assert topics['/agent_1/robot/cmd_vel'] == 'geometry_msgs/msg/TwistStamped'
     # The agent's command adapter and the simulated robot both come from the kind: the robot
     # moves its control point with exactly the velocity u the agent asked for.
+    _its_shape_parameter_is_everywhere(parser, scenario)
     commander = RobotCommander(drive='sluggish', dimension=2, limits=Limits(linear_speed=1.0))
     u = (0.3, -0.4)
     commander.set_control(0.0, u)
     command = commander.command(0.0)
     robot = make_robot(
-        'sluggish', scenario_position=[1.0, 2.0], yaw=0.0, control_point_distance=0.0, limits=BaseLimits()
+        'sluggish',
+        scenario_position=[1.0, 2.0],
+        yaw=0.0,
+        geometry=Geometry(control_point_distance=0.0),
+        limits=BaseLimits(),
     )
     robot.set_command(Command(linear=command, angular=0.0))
     robot.advance(2.0)
     assert np.allclose(robot.scenario_position(), [1.6, 1.2], rtol=0, atol=1e-15)
     assert command_message(sluggish).__name__ == 'TwistStamped'
+
+
+def _its_shape_parameter_is_everywhere(parser, scenario):
+    """The toy kind's one declaration, HULL_WIDTH, in the command line, RobotOptions, the parameter
+    files a run writes and the tables of the nodes it names (not the coordinator's)."""
+    from formation_agent.ros.config import AGENT_PARAMETERS
+    from formation_sim.commands.common import plan_options
+    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.robot_node import SPECS as ROBOT_SPECS
+
+    args = parser.parse_args(['run', 'robots_square', '--backend', 'sluggish', '--hull-width', '0.4'])
+    robots = plan_options(args)['robots']
+    assert robots.geometry.hull_width == 0.4 and Geometry().hull_width == 0.3  # given; its default
+    assert robots.agent_parameters()['hull_width'] == 0.4
+    assert robots.robot_parameters(scenario, 1)['hull_width'] == 0.4
+    for table, present in ((AGENT_PARAMETERS, True), (ROBOT_SPECS, True), (COORDINATOR_PARAMETERS, False)):
+        specs = {spec.name: spec for spec in table}
+        assert ('hull_width' in specs) is present
+        if present:
+            spec = specs['hull_width']
+            assert (spec.default, spec.constraint_text()) == (0.3, '> 0, finite')
+            assert spec.description == 'sluggish: the width of its hull [m]'
+            assert spec.problem(0.0) == 'must be > 0, finite, got 0.0'
+    with pytest.raises(SystemExit):  # its rule, on the command line: > 0
+        parser.parse_args(['run', 'robots_square', '--backend', 'sluggish', '--hull-width', '0'])
 
 
 def test_kind_names_are_read_at_each_use(sluggish):
@@ -179,3 +228,72 @@ def test_a_kinds_adapter_and_model_agree_where_no_limit_acts(name):
         moved, turned = kind.move(origin, yaw, linear, angular, tau)
         rate = (moved + kind.world_offset(turned, geometry, 2) - point) / tau
         assert np.allclose(rate, u, atol=1e-5) and log.records == {}
+
+
+def test_each_built_in_kind_carries_its_footprint():
+    """Crazyflie 2.x with propellers, TurtleBot3 Burger (turtlebot3_navigation2's robot_radius), an
+    F1TENTH car about its rear axle (docs/ROBOTS.md, "Footprints")."""
+    footprints = {name: robot_kind(name).footprint(Geometry()) for name in ('holonomic', 'unicycle', 'car')}
+    assert footprints == {'holonomic': 0.07, 'unicycle': 0.105, 'car': 0.49}
+    assert robot_kind('unicycle').footprint(Geometry(footprint_radius=0.22)) == 0.22  # a Waffle, given
+    # The F1TENTH body (f1tenth_gym: 0.58 m x 0.31 m, its centre lr = 0.17145 m ahead of the rear
+    # axle) lies within the car's disc about its rear axle.
+    front, rear, half_width = 0.17145 + 0.29, 0.29 - 0.17145, 0.155
+    corners = [(x, y) for x in (front, -rear) for y in (half_width, -half_width)]
+    assert max(math.hypot(x, y) for x, y in corners) <= footprints['car']
+
+
+@pytest.mark.parametrize(
+    ('name', 'geometry', 'reach'),
+    [
+        ('holonomic', Geometry(), 0.0),
+        ('unicycle', Geometry(control_point_distance=0.1), 0.1),
+        ('car', Geometry(control_point_distance=0.33, wheelbase=0.33), 0.33),
+    ],
+)
+def test_control_points_kept_d_s_apart_keep_the_origins_d_apart_and_no_less_would(name, geometry, reach):
+    kind, separation = robot_kind(name), 0.3
+    d_s = control_point_separation(separation, kind=kind, geometry=geometry)
+    assert math.isclose(d_s, separation + 2 * reach, rel_tol=0, abs_tol=1e-15)  # D + 2l (docs/SAFETY.md)
+    rng = np.random.default_rng(27)
+    for _ in range(2000):  # control points d_s apart, any direction, any headings
+        yaw_i, yaw_j, direction = rng.uniform(-math.pi, math.pi, 3)
+        point_j = d_s * np.array([math.cos(direction), math.sin(direction)])
+        origin_i = kind.origin(np.zeros(2), yaw_i, geometry)
+        origin_j = kind.origin(point_j, yaw_j, geometry)
+        assert np.linalg.norm(origin_i - origin_j) >= separation - 1e-12
+    # Back to back (control points pointing away from each other) the origins are exactly D apart.
+    origin_i = kind.origin(np.zeros(2), math.pi, geometry)
+    origin_j = kind.origin(np.array([d_s, 0.0]), 0.0, geometry)
+    assert math.isclose(float(np.linalg.norm(origin_i - origin_j)), separation, rel_tol=0, abs_tol=1e-12)
+
+
+def test_the_separation_between_two_kinds_adds_each_ones_reach():
+    unicycle, holonomic = robot_kind('unicycle'), robot_kind('holonomic')
+    mixed = control_point_separation(
+        0.3,
+        kind=unicycle,
+        geometry=Geometry(control_point_distance=0.1),
+        other_kind=holonomic,
+        other_geometry=Geometry(),
+    )
+    assert math.isclose(mixed, 0.4, rel_tol=0, abs_tol=1e-15)
+    with pytest.raises(KindError, match=r'origin_separation D must be a finite number >= 0 \[m\], got -0.1'):
+        control_point_separation(-0.1, kind=unicycle, geometry=Geometry())
+
+
+def test_the_default_separation_keeps_two_footprints_a_margin_apart():
+    """--min-separation on robots by default: D_s for D = 2r + 0.05 m, between control points."""
+    assert SEPARATION_MARGIN == 0.05
+    cases = [
+        ('holonomic', Geometry(), 2 * 0.07 + 0.05),
+        ('unicycle', Geometry(), 2 * 0.105 + 0.05 + 2 * 0.1),  # TurtleBot3 Burgers at l = 0.1 m: 0.46 m
+        ('unicycle', Geometry(footprint_radius=0.22), 2 * 0.22 + 0.05 + 2 * 0.1),  # Waffles: 0.69 m
+        ('car', Geometry(control_point_distance=0.33, wheelbase=0.33), 2 * 0.49 + 0.05 + 2 * 0.33),
+    ]
+    for name, geometry, expected in cases:
+        separation = default_min_separation(kind=robot_kind(name), geometry=geometry)
+        assert math.isclose(separation, expected, rel_tol=1e-15), (name, separation, expected)
+    assert default_min_separation(kind=robot_kind('holonomic'), geometry=Geometry(), margin=0.0) == 0.14
+    with pytest.raises(KindError, match=r'margin must be a finite number >= 0 \[m\], got nan'):
+        default_min_separation(kind=robot_kind('holonomic'), geometry=Geometry(), margin=math.nan)

@@ -106,10 +106,9 @@ def test_every_missing_parameter_is_named_at_once(ros):
             },
             'robot: unicycle: a unicycle moves in the plane: dimension p must be 2, got 3',
         ),
-        (
-            {'robot': 'unicycle', 'sensing': 'poses'},
-            'robot: unicycle: a unicycle is steered at a control point ahead of its axle: '
-            'control_point_distance l must be > 0, got 0.0',
+        (  # l's rule, declared once in the unicycle kind (it defaults to 0.1 m, as everywhere)
+            {'robot': 'unicycle', 'sensing': 'poses', 'control_point_distance': 0.0},
+            "parameter 'control_point_distance' (double) must be > 0, finite, got 0.0",
         ),
         ({'max_linear_speed': 0.22}, "max_linear_speed apply to a robot's command adapter"),
         (
@@ -180,7 +179,8 @@ def test_robot_parameters_have_their_documented_defaults(ros):
         'none',
         'world',
     )
-    assert (config.command_rate, config.control_point_distance) == (50.0, 0.0)
+    # l: 0.1 m, its kind's declared default, as the coordinator's and the robot's (it was 0 here).
+    assert (config.command_rate, config.geometry.control_point_distance) == (50.0, 0.1)
     assert (
         math.inf
         == config.limits.linear_speed

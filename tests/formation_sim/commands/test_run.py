@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import pytest
@@ -479,6 +480,29 @@ def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypa
     assert started == [0.15] and 'beyond' not in capsys.readouterr().err
     assert main([*arguments, '--backend', 'unicycle', '--out', str(tmp_path / 'b')]) == 2
     assert started == [0.15] and 'beyond --max-angular-speed 0.5 rad/s' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ('robot', 'backend', 'turn_limited'),
+    [
+        (None, 'holonomic', False),
+        ('holonomic', 'external', False),
+        (None, 'unicycle', True),
+        (None, 'car', True),
+        ('car', 'holonomic', True),  # the robots are cars: the old string test took them for holonomic
+        (None, 'exact', True),  # no robots named (simulate, validate): taken to be steered, as before
+        (None, None, True),
+    ],
+)
+def test_the_turn_rate_limits_the_speed_only_of_robots_their_kind_steers(robot, backend, turn_limited):
+    import argparse
+
+    from formation_sim.commands.limits import robot_limits
+
+    args = argparse.Namespace(robot=robot, backend=backend, max_speed=None, max_angular_speed=2.84)
+    limits = robot_limits(args)
+    assert limits.max_angular_speed == (2.84 if turn_limited else math.inf)
+    assert limits.control_point_distance == 0.1  # not given: l's declared default
 
 
 def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path, capsys, monkeypatch):

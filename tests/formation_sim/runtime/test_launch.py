@@ -9,12 +9,16 @@ import numpy as np
 import pytest
 import yaml
 
+from formation_agent.core.kinds import Geometry
 from formation_sim.model.scenario import load_scenario
 from formation_sim.runtime.launch import RobotOptions, RunError
 from formation_sim.runtime.orchestrate import FormationRun
 
 TURTLEBOT3 = RobotOptions(
-    model='unicycle', control_point_distance=0.1, max_linear_speed=0.22, max_angular_speed=2.84
+    model='unicycle',
+    geometry=Geometry(control_point_distance=0.1),
+    max_linear_speed=0.22,
+    max_angular_speed=2.84,
 )
 
 
@@ -303,8 +307,8 @@ def test_the_recorder_waits_only_for_the_poses_the_agents_read(tmp_path, pose_ty
             'pose_noise must be a finite number >= 0, got -0.1',
         ),
         (
-            dict(backend='unicycle', robots=RobotOptions(control_point_distance=0.0)),
-            'control_point_distance must be > 0, got 0.0',
+            dict(backend='unicycle', robots=RobotOptions(geometry=Geometry(control_point_distance=0.0))),
+            'control_point_distance l must be a finite number > 0 [m], got 0.0',
         ),
         (
             dict(backend='unicycle', robots=RobotOptions(pose_type='tf')),
@@ -428,3 +432,30 @@ def test_every_node_of_a_run_is_its_own_and_a_signal_asks_the_run_to_stop():
             signal.getsignal(sig)(sig, None)  # what the interpreter calls on the signal
             assert flag.is_set()
         assert signal.getsignal(sig) is handler
+
+
+def test_robot_options_take_the_shape_parameters_and_give_the_default_separation():
+    from formation_sim.cli import build_parser
+    from formation_sim.commands.common import plan_options
+
+    burgers = RobotOptions(model='unicycle')
+    assert burgers.geometry == Geometry(control_point_distance=0.1)  # the declared default
+    assert math.isclose(burgers.default_min_separation, 2 * 0.105 + 0.05 + 2 * 0.1, rel_tol=1e-15)
+    waffles = RobotOptions.of(model='unicycle', footprint_radius=0.22, max_linear_speed=0.26)
+    assert (waffles.geometry.footprint_radius, waffles.max_linear_speed) == (0.22, 0.26)
+    assert math.isclose(waffles.default_min_separation, 2 * 0.22 + 0.05 + 2 * 0.1, rel_tol=1e-15)
+    # The command line's flags are the declared parameters; a car's files hold its L.
+    args = build_parser().parse_args(
+        ['run', 'robots_square', '--backend', 'car', '--wheelbase', '0.33', '--footprint-radius', '0.3']
+    )
+    cars = plan_options(args)['robots']
+    assert cars.geometry == Geometry(control_point_distance=0.1, wheelbase=0.33, footprint_radius=0.3)
+    scenario = load_scenario('robots_square')
+    assert {k: cars.agent_parameters()[k] for k in ('control_point_distance', 'wheelbase')} == {
+        'control_point_distance': 0.1,
+        'wheelbase': 0.33,
+    }
+    assert cars.robot_parameters(scenario, 1)['wheelbase'] == 0.33
+    assert 'wheelbase' not in RobotOptions(model='unicycle').agent_parameters()  # not a unicycle's
+    with pytest.raises(RunError, match=r'footprint_radius r must be a finite number > 0 \[m\], got 0.0'):
+        RobotOptions(model='unicycle', geometry=Geometry(footprint_radius=0.0)).check(scenario)

@@ -302,6 +302,7 @@ def test_a_robot_moves_under_its_last_command_for_its_timeout_at_most_however_la
     its last command for the whole freeze (0.60 m at 0.3 m/s, measured), then stopped."""
     from formation_sim.runtime import robot_node
     from formation_sim.sim.robots import Command, Limits, make_robot
+    from formation_agent.core.kinds import Geometry
 
     clocks = _Clocks()
     monkeypatch.setattr(robot_node, 'time', clocks)
@@ -317,7 +318,11 @@ def test_a_robot_moves_under_its_last_command_for_its_timeout_at_most_however_la
             clocks.offset += gap
             robot.tick()
         exact = make_robot(
-            'unicycle', scenario_position=[0.0, 0.0], yaw=0.2, control_point_distance=0.1, limits=Limits()
+            'unicycle',
+            scenario_position=[0.0, 0.0],
+            yaw=0.2,
+            geometry=Geometry(control_point_distance=0.1),
+            limits=Limits(),
         )
         exact.position, exact.yaw = start_position, start_yaw
         exact.set_command(command)

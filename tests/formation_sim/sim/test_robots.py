@@ -11,6 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from formation_agent.core import kinematics
+from formation_agent.core.kinds import Geometry
 from formation_sim.sim.robots import (
     Command,
     HolonomicRobot,
@@ -89,7 +90,11 @@ def test_limits_clip_commands_as_a_base_does_and_count_them():
 
 def test_a_unicycle_is_placed_by_its_control_point():
     robot = make_robot(
-        'unicycle', scenario_position=[1.0, 1.0], yaw=math.pi / 2, control_point_distance=0.1, limits=Limits()
+        'unicycle',
+        scenario_position=[1.0, 1.0],
+        yaw=math.pi / 2,
+        geometry=Geometry(control_point_distance=0.1),
+        limits=Limits(),
     )
     assert np.allclose(robot.position, [1.0, 0.9])
     assert np.allclose(robot.scenario_position(), [1.0, 1.0])
@@ -99,7 +104,7 @@ def test_a_unicycle_is_placed_by_its_control_point():
             'unicycle',
             scenario_position=[1.0, 1.0, 0.0],
             yaw=0.0,
-            control_point_distance=0.1,
+            geometry=Geometry(control_point_distance=0.1),
             limits=Limits(),
         )
 

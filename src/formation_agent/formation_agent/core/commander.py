@@ -57,8 +57,7 @@ class RobotCommander:
         drive: str,
         dimension: int,
         limits: Limits,
-        distance: float = 0.0,
-        wheelbase: float = 0.0,
+        geometry: Geometry | None = None,
         k3: float | None = None,
         time_warp=None,
     ) -> None:
@@ -67,14 +66,13 @@ class RobotCommander:
         if drive not in DRIVES:
             raise KindError(f'drive must be one of {DRIVES}, got {drive!r}')
         self.kind = robot_kind(drive)
-        self.geometry = Geometry(control_point_distance=float(distance), wheelbase=float(wheelbase))
+        self.geometry = Geometry() if geometry is None else geometry  # the declared defaults
         problems = self.kind.problems(dimension=dimension, geometry=self.geometry, limits=limits)
         if problems:
             raise KindError('; '.join(problems))
         self.drive = drive
         self.dimension = dimension
         self.limits = limits
-        self.distance = float(distance)
         self.k3 = k3
         if time_warp is not None and k3 is not None:
             raise ValueError('time_warp: ETA-1 only (ETA-2 stays on a constant speed scale)')

@@ -15,7 +15,9 @@
 - `process`: the executor a node process spins (`make_executor`), SIGINT/SIGTERM as a flag
   (`StopSignals`), and exit statuses (`EXIT_BAD_INPUT`, `EXIT_PEER_LOST`).
 - `parameters`: every node's parameter table (`ParameterSpec`): descriptors for
-  `ros2 param describe`, one error naming every bad parameter, the `--help` table.
+  `ros2 param describe`, one error naming every bad parameter, the `--help` table;
+  `kind_parameters`: the robot parameters every node declares alike (the kinds' shape parameters,
+  the robot limits).
 
 QoS profiles of the protocol and the robot topics: `formation_msgs_py.qos`.
 """

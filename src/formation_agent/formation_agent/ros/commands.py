@@ -119,8 +119,7 @@ class RobotOutput:
             drive=config.robot,
             dimension=config.dimension,
             limits=config.limits,
-            distance=config.control_point_distance,
-            wheelbase=config.wheelbase,
+            geometry=config.geometry,
             k3=damping(config.gains['k3'], config.gains['speed_scale']) if config.double else None,  # κ k3
             time_warp=config.time_warp,  # the agent's controls are then u_p: sent as κ(t) u_p
         )

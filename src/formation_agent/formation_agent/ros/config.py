@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from formation_agent.core.commander import Limits
 from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
-from formation_agent.core.kinds.registry import Geometry
+from formation_agent.core.kinds.shape import Geometry, declared
 from formation_agent.core.safety import (
     DEFAULT_GAMMA,
     DEFAULT_MAX_SPEED,
@@ -24,6 +24,7 @@ from formation_agent.core.safety import (
 )
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 from formation_agent.core.time_warp import TimeWarp, WarpError
+from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     DOUBLE,
     DOUBLE_ARRAY,
@@ -54,7 +55,7 @@ def _spec(name, kind, description, **options) -> ParameterSpec:
     return ParameterSpec(name=name, type=kind, description=description, **options)
 
 
-AGENT_PARAMETERS = (
+_FORMATION = (
     # The formation (written per agent by `formation run`, from the scenario).
     _spec(
         'agent_id',
@@ -160,6 +161,10 @@ AGENT_PARAMETERS = (
         low=0,
         high=MAX_AGENT_ID,
     ),
+)
+
+
+_ROBOT = (
     # Robots (README, "Running on robots").
     _spec(
         'sensing',
@@ -208,53 +213,18 @@ AGENT_PARAMETERS = (
         "robot: the robot's velocity command topic ('': /agent_<i>/robot/cmd_vel)",
         default='',
     ),
-    _spec(
-        'control_point_distance',
-        DOUBLE,
-        'robot: unicycle — distance l of the control point ahead of the '
-        'wheel axle [m]; the scenario positions are those of the control points',
-        default=0.0,
-        low=0.0,
-    ),
-    _spec(
-        'max_linear_speed',
-        DOUBLE,
-        'robot: speed limit [m/s] (inf: none); clips are counted and reported',
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-    ),
-    _spec(
-        'max_angular_speed',
-        DOUBLE,
-        'robot: unicycle — turn rate limit [rad/s] (inf: none)',
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-    ),
-    _spec(
-        'wheelbase',
-        DOUBLE,
-        'robot: car — wheelbase L from the rear axle to the steered front axle [m]',
-        default=0.0,
-        low=0.0,
-    ),
-    _spec(
+)
+_DRIVE = (
+    limit_spec('max_linear_speed', 'robot: speed limit [m/s] (inf: none); clips are counted and reported'),
+    limit_spec('max_angular_speed', 'robot: unicycle — turn rate limit [rad/s] (inf: none)'),
+    limit_spec(
         'max_steering_angle',
-        DOUBLE,
         'robot: car — steering limit φ_max [rad], in (0, π/2): |ω| <= |v| tan φ_max / L '
         '(inf: none, for the other kinds)',
-        default=math.inf,
-        low=0.0,
-        low_open=True,
     ),
-    _spec(
+    limit_spec(
         'max_linear_acceleration',
-        DOUBLE,
         'robot: ETA-2 — acceleration limit of the velocity reference [m/s²] (inf: none)',
-        default=math.inf,
-        low=0.0,
-        low_open=True,
     ),
     _spec(
         'command_rate',
@@ -297,6 +267,16 @@ AGENT_PARAMETERS = (
     _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0, low=0),
 )
 
+
+def _agent_parameters() -> tuple[ParameterSpec, ...]:
+    """Built at each use: a kind registered later brings its shape parameters."""
+    return (*_FORMATION, *_ROBOT, *shape_specs('agent'), *_DRIVE)
+
+
+AGENT_PARAMETERS = SpecTable(_agent_parameters)
+"""The agent's parameters (`formation_agent --help`; docs/PARAMETERS.md), its robot's shape
+parameters generated from the kinds registered at each use."""
+
 GAIN_PARAMETERS = {
     'eta1': (
         _spec('alpha', DOUBLE, 'eta1: threshold gain α of (triggersingle)', low=0.0, low_open=True),
@@ -337,8 +317,7 @@ class AgentConfig:
     world_frame: str
     robot: str
     command_topic: str
-    control_point_distance: float
-    wheelbase: float
+    geometry: Geometry  # the robot's shape parameters (formation_agent.core.kinds.shape)
     limits: Limits
     command_rate: float
     extra_subscribers: int
@@ -375,10 +354,6 @@ class AgentConfig:
             (0.0, 0.0, 0.0) if self.robot == 'none' else robot_kind(self.robot).control_offset(self.geometry)
         )
 
-    @property
-    def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
-
 
 def read_config(node) -> AgentConfig:
     """Every parameter of `node`, checked; one ParameterError names every problem."""
@@ -412,6 +387,7 @@ def read_config(node) -> AgentConfig:
         time_warp=TimeWarp.from_parameter(values['time_warp']) if values['time_warp'] else None,
         safety=_safety(values) if values['min_separation'] > 0.0 else None,
         other_robot_ids=tuple(int(j) for j in values['other_robot_ids']),
+        geometry=_geometry(values),
         **{
             name: values[name]
             for name in (
@@ -422,8 +398,6 @@ def read_config(node) -> AgentConfig:
                 'world_frame',
                 'robot',
                 'command_topic',
-                'control_point_distance',
-                'wheelbase',
                 'command_rate',
                 'extra_subscribers',
                 'inject_loss',
@@ -482,7 +456,7 @@ def _rules(node, values: dict) -> list[str]:
             f"robot: {robot} needs sensing: poses (the simulator's sensing service reports its own simulated "
             'world, which does not take robot commands)'
         )
-    if robot not in (None, 'none') and have('control_point_distance', 'wheelbase'):
+    if robot not in (None, 'none') and have(*(parameter.name for parameter in declared(node='agent'))):
         problems += [f'robot: {robot}: {problem}' for problem in _kind_problems(robot, values)]
     return problems
 
@@ -547,9 +521,7 @@ def _warp_problems(values: dict) -> list[str]:
 def _kind_problems(robot: str, values: dict) -> list[str]:
     """What the robot's kind says of the parameters known (formation_agent.core.kinds)."""
     kind = robot_kind(robot)
-    geometry = Geometry(
-        control_point_distance=values['control_point_distance'], wheelbase=values['wheelbase']
-    )
+    geometry = _geometry(values)
     problems = kind.placement_problems(dimension=values.get('dimension'), geometry=geometry)
     if all(name in values for name in LIMIT_PARAMETERS):
         limits = Limits(
@@ -560,6 +532,11 @@ def _kind_problems(robot: str, values: dict) -> list[str]:
         )
         problems += kind.drive_problems(geometry=geometry, limits=limits)
     return problems
+
+
+def _geometry(values: dict) -> Geometry:
+    """The robot's shape from the agent's shape parameters read (those not read: their defaults)."""
+    return Geometry(**{p.name: values[p.name] for p in declared(node='agent') if p.name in values})
 
 
 def agent_help() -> str:

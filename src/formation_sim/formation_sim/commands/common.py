@@ -345,18 +345,12 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> 
 
 
 def _add_robot_limits(group, defaults) -> None:
-    """A robot's geometry and limits, each a number > 0: (flag, default, metavar, help)."""
+    """A robot's shape (every declared shape parameter) and limits, each a number > 0:
+    (flag, default, metavar, help)."""
+    add_shape_arguments(group)
     for flag, default, metavar, text in (
-        (
-            '--control-point-distance',
-            defaults.control_point_distance,
-            'L',
-            'unicycle: the control point l ahead of the axle [m] (default '
-            f'{defaults.control_point_distance})',
-        ),
         ('--max-speed', math.inf, 'V', 'speed limit of agents and robots [m/s] (default: none)'),
         ('--max-angular-speed', math.inf, 'W', 'turn-rate limit [rad/s] (default: none)'),
-        ('--wheelbase', None, 'L', 'car: wheelbase from the rear to the front axle [m]'),
         (
             '--max-steering-angle',
             math.inf,
@@ -366,6 +360,44 @@ def _add_robot_limits(group, defaults) -> None:
         ('--max-acceleration', math.inf, 'A', 'ETA-2 agents: acceleration limit [m/s²] (default: none)'),
     ):
         group.add_argument(flag, type=POSITIVE, default=default, metavar=metavar, help=text)
+
+
+def add_shape_arguments(group, parameters=None) -> None:
+    """A flag per shape parameter (`formation_agent.core.kinds.shape`; all declared by default):
+    `--name-with-dashes`, checked by its rule, its default (None: each kind's own), its help."""
+    from formation_agent.core.kinds.shape import declared
+
+    for parameter in declared() if parameters is None else parameters:
+        group.add_argument(
+            parameter.flag,
+            type=POSITIVE if parameter.positive else NON_NEGATIVE,
+            default=parameter.default,
+            metavar=parameter.metavar,
+            help=shape_help(parameter),
+        )
+
+
+def shape_help(parameter) -> str:
+    """'<kinds that take it>: <help> (default ...)' of a shape parameter."""
+    from formation_agent.core.kinds import robot_kind
+    from formation_agent.core.kinds.shape import owners
+
+    kinds = owners(parameter.name)
+    if parameter.default is None:
+        default = "the kind's: " + ', '.join(
+            f'{name} {getattr(robot_kind(name), parameter.name):g}' for name in kinds
+        )
+    else:
+        default = f'{parameter.default:g}' if parameter.positive else 'none'
+    return f'{", ".join(kinds)}: {parameter.help} (default {default})'
+
+
+def shape_geometry(args: argparse.Namespace, parameters=None):
+    """The `Geometry` of the parsed shape flags (those not given: their declared defaults)."""
+    from formation_agent.core.kinds.shape import Geometry, declared
+
+    given = {p.name: getattr(args, p.name, None) for p in (declared() if parameters is None else parameters)}
+    return Geometry(**{name: value for name, value in given.items() if value is not None})
 
 
 def _add_robot_interface(group, defaults) -> None:
@@ -442,10 +474,9 @@ def robot_options(args: argparse.Namespace, model: str):
 
     return RobotOptions(
         model=model,
-        control_point_distance=args.control_point_distance,
+        geometry=shape_geometry(args),
         max_linear_speed=args.max_speed,
         max_angular_speed=args.max_angular_speed,
-        wheelbase=args.wheelbase or 0.0,
         max_steering_angle=args.max_steering_angle,
         max_linear_acceleration=args.max_acceleration,
         command_rate=args.command_rate,

@@ -11,27 +11,30 @@ import argparse
 import math
 import sys
 
-from formation_sim.commands.common import POSITIVE, refuse
+from formation_agent.core.kinds import KIND_NAMES, robot_kind
+from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
+from formation_sim.commands.common import POSITIVE, add_shape_arguments, refuse
 from formation_sim.model.scenario import Scenario, ScenarioError
 from formation_sim.model.speed_choice import OBSERVED_MARGIN, LimitsError, RobotLimits, SpeedScaleChoice
 
 
 def robot_limits(args: argparse.Namespace) -> RobotLimits:
-    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none).  A run's
-    holonomic robots (`--backend holonomic`, `--robot holonomic`) do not turn to move: no turn rate."""
+    """The limits of the parsed robot arguments (`--max-speed` ...; absent or inf: none).  The turn
+    rate limits the control point's speed only on robots steered at a control point ahead of their
+    axle (`RobotKind.steered`); the robots are `--robot`, else the backend's kind, else (no robot
+    named: `simulate`, `validate`, the exact backend) taken to be steered."""
 
     def given(name: str) -> float:
         value = getattr(args, name, None)
         return math.inf if value is None else value
 
-    holonomic = (
-        'holonomic' in (getattr(args, 'robot', None), getattr(args, 'backend', None))
-        and getattr(args, 'robot', None) != 'unicycle'
-    )
+    model = getattr(args, 'robot', None) or getattr(args, 'backend', None)
+    steered = robot_kind(model).steered if model in KIND_NAMES else True
     return RobotLimits(
         max_speed=given('max_speed'),
-        max_angular_speed=math.inf if holonomic else given('max_angular_speed'),
-        control_point_distance=getattr(args, 'control_point_distance', None) or 0.1,
+        max_angular_speed=given('max_angular_speed') if steered else math.inf,
+        control_point_distance=getattr(args, 'control_point_distance', None)
+        or CONTROL_POINT_DISTANCE.default,
         max_acceleration=given('max_acceleration'),
     )
 
@@ -60,13 +63,7 @@ def add_limit_arguments(parser: argparse.ArgumentParser) -> None:
         metavar='W',
         help='unicycles: their turn-rate limit [rad/s]',
     )
-    group.add_argument(
-        '--control-point-distance',
-        type=POSITIVE,
-        default=0.1,
-        metavar='L',
-        help='unicycles: the control point l ahead of the axle [m] (default 0.1)',
-    )
+    add_shape_arguments(group, (CONTROL_POINT_DISTANCE,))
     group.add_argument(
         '--max-acceleration',
         type=POSITIVE,
@@ -93,14 +90,9 @@ def resolve_speed_scale(
         return None
     if getattr(args, 'speed_scale', None) != AUTO:
         return scenario, None
-    try:
-        limits = robot_limits(args)
-        horizon = scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
-        choice = choose_speed_scale(scenario.replace(horizon=horizon), limits=limits)
-    except LimitsError as error:
-        refuse(command, f'--speed-scale auto: {error}')
+    if (choice := _choose(choose_speed_scale, scenario, args, command, f'--speed-scale {AUTO}')) is None:
         return None
-    kappa = choice.value
+    kappa, horizon = choice.value, _horizon(scenario, args)
     try:
         scaled = scenario.with_scale(speed_scale=kappa)
     except ScenarioError as error:  # κ outside the rule speed_scale: the limits cannot be met
@@ -135,6 +127,20 @@ def resolve_speed_scale(
     if record['guaranteed'] is not None and not math.isfinite(record['guaranteed']):
         record['guaranteed'] = None
     return scaled, record
+
+
+def _horizon(scenario: Scenario, args: argparse.Namespace) -> float:
+    return scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
+
+
+def _choose(choose, scenario: Scenario, args: argparse.Namespace, command: str, option: str):
+    """`choose` (`choose_speed_scale`, `choose_time_warp`) for the parsed limits over the run's
+    horizon; None after refusing with the limits' error, named by `option`."""
+    try:
+        return choose(scenario.replace(horizon=_horizon(scenario, args)), limits=robot_limits(args))
+    except LimitsError as error:
+        refuse(command, f'{option}: {error}')
+        return None
 
 
 def exceeded(choice: SpeedScaleChoice, kappa: float) -> list[str]:
@@ -220,12 +226,7 @@ def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str
     after saying so on stderr; None after printing why no warp applies (nothing started)."""
     from formation_sim.sim.largest_command import choose_time_warp, unit_scale
 
-    try:
-        limits = robot_limits(args)
-        horizon = scenario.horizon if getattr(args, 'horizon', None) is None else args.horizon
-        choice = choose_time_warp(scenario.replace(horizon=horizon), limits=limits)
-    except LimitsError as error:
-        refuse(command, f'--speed-scale {flag}: {error}')
+    if (choice := _choose(choose_time_warp, scenario, args, command, f'--speed-scale {flag}')) is None:
         return None
     warp = choice.warp
     settle = choice.settle_time(warp)

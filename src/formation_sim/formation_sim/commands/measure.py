@@ -21,8 +21,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from formation_agent.core.kinds import KIND_NAMES, Geometry, robot_kind
-from formation_sim.commands.common import POSITIVE, add_domain_argument, refuse
+from formation_agent.core.kinds import KIND_NAMES, robot_kind
+from formation_agent.core.kinds.shape import declared
+from formation_sim.commands.common import (
+    POSITIVE,
+    add_domain_argument,
+    add_shape_arguments,
+    refuse,
+    shape_geometry,
+)
 
 POSE_TYPES = ('odom', 'pose')
 
@@ -43,20 +50,7 @@ def register(subparsers) -> None:
         default='odom',
         help='the topic read per robot: robot/odom (default) or robot/pose',
     )
-    parser.add_argument(
-        '--control-point-distance',
-        type=POSITIVE,
-        default=0.1,
-        metavar='L',
-        help='a unicycle or car: l ahead of the axle [m] (default 0.1)',
-    )
-    parser.add_argument(
-        '--wheelbase',
-        type=POSITIVE,
-        default=None,
-        metavar='W',
-        help="a car's wheelbase [m] (its kind's default otherwise)",
-    )
+    add_shape_arguments(parser, declared(node='robot'))  # what places a robot's control point
     parser.add_argument(
         '--timeout',
         type=POSITIVE,
@@ -91,10 +85,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         data, name, source = load_scenario_data(args.scenario)
         ids, dimension, double = _team(data)
-        geometry = Geometry(
-            control_point_distance=args.control_point_distance,
-            **({'wheelbase': args.wheelbase} if args.wheelbase else {}),
-        )
+        geometry = shape_geometry(args, declared(node='robot'))
         problems = robot_kind(args.robot).placement_problems(dimension=dimension, geometry=geometry)
         if problems:
             raise ScenarioError('; '.join(problems))

@@ -12,6 +12,7 @@ import json
 import math
 import sys
 
+from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
 from formation_sim.commands.common import (
     EXIT_BAD_INPUT,
     EXIT_FAILED,
@@ -20,6 +21,7 @@ from formation_sim.commands.common import (
     add_safety_argument,
     add_scale_arguments,
     add_scenario_argument,
+    add_shape_arguments,
     scale_options,
     with_min_separation,
 )
@@ -67,13 +69,7 @@ def register(subparsers) -> None:
         metavar='W',
         help='unicycles: their turn-rate limit [rad/s]',
     )
-    parser.add_argument(
-        '--control-point-distance',
-        type=POSITIVE,
-        default=0.1,
-        metavar='L',
-        help='unicycles: the control point l ahead of the axle [m] (default 0.1)',
-    )
+    add_shape_arguments(parser, (CONTROL_POINT_DISTANCE,))
     parser.add_argument(
         '--max-acceleration',
         type=POSITIVE,

@@ -53,6 +53,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
+from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
 from formation_agent.ros.process import (
     EXIT_BAD_INPUT,
@@ -117,6 +118,7 @@ from formation_sim.runtime.time_keeper import (
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.kinds.shape import declared
 from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
 
 COORDINATOR_FILE = (
@@ -134,7 +136,7 @@ EXIT_INTERRUPTED = 130
 POSE_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
 
 
-COORDINATOR_PARAMETERS = (
+_HEAD = (
     *TIME_KEEPER_PARAMETERS,
     ParameterSpec(
         name='robot',
@@ -143,16 +145,8 @@ COORDINATOR_PARAMETERS = (
         choices=ROBOT_MODELS,
         description='what the robots are',
     ),
-    ParameterSpec(
-        name='control_point_distance',
-        type=DOUBLE,
-        default=0.1,
-        low=0.0,
-        description=(
-            'unicycle (a kind steered ahead of its axle): the control point l ahead of the axle [m] (the '
-            "scenario's positions are those of the control points)"
-        ),
-    ),
+)
+_TAIL = (
     ParameterSpec(
         name='robot_trajectory',
         type=STRING,
@@ -188,16 +182,10 @@ COORDINATOR_PARAMETERS = (
             '(the agents: their pose_timeout)'
         ),
     ),
-    ParameterSpec(
-        name='max_linear_speed',
-        type=DOUBLE,
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-        description=(
-            "the robots' speed limit [m/s] (inf: none): a pose further from its robot's last one than it "
-            'allows between their stamps (plus pose_jump_slack) is refused and counted'
-        ),
+    limit_spec(
+        'max_linear_speed',
+        "the robots' speed limit [m/s] (inf: none): a pose further from its robot's last one than it "
+        'allows between their stamps (plus pose_jump_slack) is refused and counted',
     ),
     ParameterSpec(
         name='pose_jump_slack',
@@ -222,7 +210,20 @@ COORDINATOR_PARAMETERS = (
         description='the backend, as /formation/robots tells the tools (simulated robots, or external ones)',
     ),
 )
+
+
+def _coordinator_parameters() -> tuple[ParameterSpec, ...]:
+    """Built at each use: a kind registered later brings its shape parameters."""
+    return (*_HEAD, *shape_specs('coordinator'), *_TAIL)
+
+
+COORDINATOR_PARAMETERS = SpecTable(_coordinator_parameters)
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
+
+
+def _geometry(values: dict) -> Geometry:
+    """The robots' shape from the coordinator's shape parameters."""
+    return Geometry(**{p.name: values[p.name] for p in declared(node='coordinator')})
 
 
 def robot_run_topics(
@@ -290,8 +291,8 @@ class FormationCoordinatorNode(TimeKeeperNode):
         """The rules between the world's parameters and the scenario (robots)."""
         problems = []
         model = values.get('robot')
-        if model is not None and 'control_point_distance' in values:
-            geometry = Geometry(control_point_distance=values['control_point_distance'])
+        if model is not None and all(p.name in values for p in declared(node='coordinator')):
+            geometry = _geometry(values)
             problems += robot_kind(model).placement_problems(dimension=scenario.dimension, geometry=geometry)
         if 'sample_period' in values and not values['sample_period'] > 0.0:
             problems.append(
@@ -306,7 +307,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def _setup_world(self) -> None:
         """The robots: which topic shows each where it is, and what its scenario position is."""
         self.robot_model = self.parameter_values['robot']
-        self.control_point_distance = self.parameter_values['control_point_distance']
+        self.geometry = _geometry(self.parameter_values)
         self.trajectory_source = self.parameter_values['robot_trajectory']
         self.backend = self.parameter_values['backend']
         self.robots = {
@@ -314,9 +315,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             'backend': self.backend,
             'model': self.robot_model,
             # Where the scenario's point sits ahead of the robot's origin, by its kind (a holonomic robot: 0).
-            'control_point_distance': robot_kind(self.robot_model).control_offset(
-                Geometry(control_point_distance=self.control_point_distance)
-            )[0],
+            'control_point_distance': robot_kind(self.robot_model).control_offset(self.geometry)[0],
             'trajectory': self.trajectory_source,
             'sample_period': self.sample_period,
             'pose_silence': self.parameter_values[

@@ -31,7 +31,7 @@ import shutil
 import socket
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import yaml
@@ -46,7 +46,8 @@ from formation_msgs_py.topics import (
     robot_command_topic,
 )
 from formation_sim.model.scenario import Scenario, dump_scenario
-from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
+from formation_agent.core.kinds.shape import declared
 from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS
 from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
@@ -99,14 +100,17 @@ class RobotOptions:
 
     Limits apply twice, as on real robots: the agent saturates its commands (and counts it, the
     theorems assume no saturation) and the base clips what it is sent.  A unicycle's scenario
-    position is its control point, `control_point_distance` ahead of the axle.
+    position is its control point, `control_point_distance` ahead of the axle.  Its shape is a
+    `Geometry` of the kinds' declared shape parameters (formation_agent.core.kinds.shape): each
+    robot node and agent is told the ones its kind takes.
     """
 
     model: str = 'unicycle'  # a robot kind (formation_agent.core.kinds; for `external`: what the robots are)
-    control_point_distance: float = 0.1  # l [m]
+    geometry: Geometry = field(
+        default_factory=Geometry
+    )  # l, L, r, ...: each its declared default unless given
     max_linear_speed: float = math.inf  # [m/s]
     max_angular_speed: float = math.inf  # [rad/s]
-    wheelbase: float = 0.0  # L [m] (car)
     max_steering_angle: float = math.inf  # φ_max [rad] (car)
     max_linear_acceleration: float = math.inf  # [m/s²] (ETA-2)
     command_rate: float = 50.0  # [Hz] how often an agent re-sends its velocity command
@@ -144,14 +148,11 @@ class RobotOptions:
             )
         except RobotError as error:
             raise RunError(str(error)) from None
-        positive = (
-            'control_point_distance',
-            'max_linear_acceleration',
-            'command_rate',
-            'pose_timeout',
-            'rate',
-            'command_timeout',
-        )
+        for parameter in declared():  # l > 0 for every kind, as before; L >= 0; r > 0 where given
+            value = self.geometry.values()[parameter.name]
+            if value is not None and (problem := parameter.problem(value)) is not None:
+                raise RunError(problem)
+        positive = ('max_linear_acceleration', 'command_rate', 'pose_timeout', 'rate', 'command_timeout')
         for name in positive:
             if not getattr(self, name) > 0.0:
                 raise RunError(f'{name} must be > 0, got {getattr(self, name)!r}')
@@ -165,14 +166,35 @@ class RobotOptions:
             raise RunError(f'robots_per_process must be >= 1, got {self.robots_per_process}')
         if not self.world_frame:
             raise RunError('world_frame must not be empty')
-        if not (math.isfinite(self.wheelbase) and self.wheelbase >= 0.0):
-            raise RunError(f'wheelbase must be a finite number >= 0, got {self.wheelbase!r}')
         if problems := self.kind_problems(scenario.dimension):
             raise RunError('; '.join(problems))
 
+    @classmethod
+    def of(cls, **options) -> RobotOptions:
+        """RobotOptions with the shape parameters given by name beside the other options
+        (`RobotOptions.of(model='car', wheelbase=0.33, max_linear_speed=1.0)`): each declared
+        shape parameter goes into `geometry` (with those of a `geometry` given)."""
+        names = {parameter.name for parameter in declared()}
+        shape = {name: options.pop(name) for name in [name for name in options if name in names]}
+        geometry = options.pop('geometry', Geometry())
+        return cls(geometry=geometry.replace(**shape), **options)
+
+    def shape_parameters(self, node: str) -> dict[str, float]:
+        """The shape parameters of `node` ('agent', 'robot', 'coordinator') its robots' kind takes
+        (the coordinator: all it takes), each with its value."""
+        kind = robot_kind(self.model)
+        return {
+            parameter.name: kind.shape_value(self.geometry, parameter.name)
+            for parameter in declared(node=node)
+            if node == 'coordinator' or parameter in kind.shape
+        }
+
     @property
-    def geometry(self) -> Geometry:
-        return Geometry(control_point_distance=self.control_point_distance, wheelbase=self.wheelbase)
+    def default_min_separation(self) -> float:
+        """The `--min-separation` these robots take by default: D_s between control points for two
+        footprints kept SEPARATION_MARGIN apart (`formation_agent.core.kinds.default_min_separation`;
+        docs/ROBOTS.md, "Footprints")."""
+        return default_min_separation(kind=robot_kind(self.model), geometry=self.geometry)
 
     def kind_problems(self, dimension: int) -> list[str]:
         """What the robots' kind says of these options (its dimensions, geometry and limits)."""
@@ -193,7 +215,7 @@ class RobotOptions:
             'pose_type': self.pose_type,
             'pose_timeout': float(self.pose_timeout),
             'robot': self.model,
-            'control_point_distance': float(self.control_point_distance),
+            **self.shape_parameters('agent'),
             'command_rate': float(self.command_rate),
             'world_frame': self.world_frame,
         }
@@ -205,8 +227,6 @@ class RobotOptions:
         ):
             if math.isfinite(getattr(self, name)):  # no limit: the agent's default (none)
                 params[name] = float(getattr(self, name))
-        if self.wheelbase > 0.0:  # a car's; none: the default
-            params['wheelbase'] = float(self.wheelbase)
         if self.time_warp:  # docs/SPEED_SCALE.md, "A time warp"
             params['time_warp'] = [float(v) for v in self.time_warp]
         return params
@@ -218,7 +238,7 @@ class RobotOptions:
             'model': self.model,
             'position': [float(v) for v in scenario.positions[scenario.index(agent_id)]],
             'yaw': self.initial_heading(scenario, agent_id),
-            'control_point_distance': float(self.control_point_distance),
+            **self.shape_parameters('robot'),
             'rate': float(self.rate),
             'pose_noise': float(self.pose_noise),
             'yaw_noise': float(self.yaw_noise),
@@ -232,8 +252,6 @@ class RobotOptions:
         for name in ('max_linear_speed', 'max_angular_speed', 'max_steering_angle'):
             if math.isfinite(getattr(self, name)):
                 params[name] = float(getattr(self, name))
-        if self.wheelbase > 0.0:
-            params['wheelbase'] = float(self.wheelbase)
         return params
 
     def initial_heading(self, scenario: Scenario, agent_id: int) -> float:
@@ -545,7 +563,7 @@ class LaunchPlan:
             params.update(
                 backend=self.backend,
                 robot=self.robots.model,
-                control_point_distance=float(self.robots.control_point_distance),
+                **self.robots.shape_parameters('coordinator'),
                 robot_trajectory=self.robot_trajectory,
                 # A robot silent for as long as its agents accept a pose is lost: the run stops at once.
                 pose_silence=float(self.robots.pose_timeout),

@@ -54,6 +54,8 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from formation_agent.ros.commands import command_message
+from formation_agent.core.kinds.shape import Geometry, declared
+from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     BOOL,
     DOUBLE,
@@ -103,7 +105,8 @@ NODE_NAME = ROBOT_NODE
 # poses.  Reliable, so the recorder (a reliable reader) matches and records them.
 ROBOT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
-SPECS = (
+
+_HEAD = (
     ParameterSpec(
         name='robot_id',
         type=INTEGER,
@@ -120,14 +123,8 @@ SPECS = (
         description="initial position in the scenario's sense [m] (a unicycle: its control point)",
     ),
     ParameterSpec(name='yaw', type=DOUBLE, default=0.0, description='initial heading θ [rad]'),
-    ParameterSpec(
-        name='control_point_distance',
-        type=DOUBLE,
-        default=0.1,
-        low=0.0,
-        low_open=True,
-        description='unicycle: distance l of the control point ahead of the axle [m]',
-    ),
+)
+_TAIL = (
     ParameterSpec(
         name='rate',
         type=DOUBLE,
@@ -136,37 +133,9 @@ SPECS = (
         low_open=True,
         description='ticks (pose publications) per second [Hz]',
     ),
-    ParameterSpec(
-        name='max_linear_speed',
-        type=DOUBLE,
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-        description='speed limit [m/s]',
-    ),
-    ParameterSpec(
-        name='max_angular_speed',
-        type=DOUBLE,
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-        description='turn-rate limit [rad/s]',
-    ),
-    ParameterSpec(
-        name='wheelbase',
-        type=DOUBLE,
-        default=0.0,
-        low=0.0,
-        description='car: wheelbase L from the rear axle to the front axle [m]',
-    ),
-    ParameterSpec(
-        name='max_steering_angle',
-        type=DOUBLE,
-        default=math.inf,
-        low=0.0,
-        low_open=True,
-        description='car: steering limit φ_max [rad]',
-    ),
+    limit_spec('max_linear_speed', 'speed limit [m/s]'),
+    limit_spec('max_angular_speed', 'turn-rate limit [rad/s]'),
+    limit_spec('max_steering_angle', 'car: steering limit φ_max [rad]'),
     ParameterSpec(
         name='pose_noise',
         type=DOUBLE,
@@ -225,6 +194,15 @@ SPECS = (
 )
 
 
+def _robot_parameters() -> tuple[ParameterSpec, ...]:
+    """Built at each use: a kind registered later brings its shape parameters."""
+    return (*_HEAD, *shape_specs('robot'), *_TAIL)
+
+
+SPECS = SpecTable(_robot_parameters)
+"""A simulated robot's parameters (`formation_robot --help`; docs/PARAMETERS.md)."""
+
+
 class SimulatedRobotNode(Node):
     """One kinematic robot (of a registered kind) at a fixed rate, talking only poses and commands.
 
@@ -251,8 +229,7 @@ class SimulatedRobotNode(Node):
                 p['model'],
                 scenario_position=p['position'],
                 yaw=float(p['yaw']),
-                control_point_distance=float(p['control_point_distance']),
-                wheelbase=float(p['wheelbase']),
+                geometry=Geometry(**{shape.name: float(p[shape.name]) for shape in declared(node='robot')}),
                 limits=Limits(
                     linear=float(p['max_linear_speed']),
                     angular=float(p['max_angular_speed']),

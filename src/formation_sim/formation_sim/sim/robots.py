@@ -154,21 +154,13 @@ HolonomicRobot = partial(Robot, model='holonomic')
 UnicycleRobot = partial(Robot, model='unicycle')
 
 
-def make_robot(
-    model: str,
-    *,
-    scenario_position,
-    yaw: float,
-    control_point_distance: float,
-    limits: Limits,
-    wheelbase: float = 0.0,
-) -> Robot:
-    """A robot of kind `model` whose scenario position (its control point) is `scenario_position`."""
+def make_robot(model: str, *, scenario_position, yaw: float, geometry: Geometry, limits: Limits) -> Robot:
+    """A robot of kind `model` and shape `geometry` whose scenario position (its control point) is
+    `scenario_position`."""
     try:
         kind = robot_kind(model)
     except KindError as error:
         raise RobotError(str(error)) from None
-    geometry = Geometry(control_point_distance=float(control_point_distance), wheelbase=float(wheelbase))
     point = np.asarray(scenario_position, dtype=float)
     problems = kind.problems(dimension=point.size, geometry=geometry, limits=limits.kind_limits())
     if problems:

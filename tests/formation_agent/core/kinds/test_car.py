@@ -127,8 +127,7 @@ def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v
         'car',
         scenario_position=[0.4, -1.0],
         yaw=0.9,
-        control_point_distance=0.33,
-        wheelbase=0.33,
+        geometry=Geometry(control_point_distance=0.33, wheelbase=0.33),
         limits=BaseLimits(steering=0.42),
     )
     start = robot.position.copy()
@@ -159,7 +158,11 @@ def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v
             '(it cannot turn in place), got inf',
         ),
         (GEOMETRY, Limits(steering_angle=1.6), 'got 1.6'),
-        (Geometry(wheelbase=0.33), LIMITS, 'control_point_distance l must be > 0, got 0.0'),
+        (
+            Geometry(control_point_distance=0.0, wheelbase=0.33),
+            LIMITS,
+            'control_point_distance l must be > 0, got 0.0',
+        ),
     ],
 )
 def test_a_car_that_cannot_be_driven_is_refused_with_the_rule(geometry, limits, complaint):
@@ -170,10 +173,4 @@ def test_a_car_that_cannot_be_driven_is_refused_with_the_rule(geometry, limits, 
         KindError,
         match=complaint.replace('(', r'\(').replace(')', r'\)').replace('[', r'\[').replace(']', r'\]'),
     ):
-        RobotCommander(
-            drive='car',
-            dimension=2,
-            limits=limits,
-            distance=geometry.control_point_distance,
-            wheelbase=geometry.wheelbase,
-        )
+        RobotCommander(drive='car', dimension=2, limits=limits, geometry=geometry)

@@ -34,9 +34,22 @@ import math
 
 from formation_agent.core.kinematics import unicycle_velocity
 from formation_agent.core.kinds.registry import Geometry
+from formation_agent.core.kinds.shape import ShapeParameter
 from formation_agent.core.kinds.unicycle import Unicycle
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 from formation_msgs_py.lockstep import SATURATION_STEERING
+
+WHEELBASE = ShapeParameter(
+    name='wheelbase',
+    symbol='L',
+    help='the wheelbase L from the rear axle to the steered front axle [m]',
+    default=0.0,  # not given: a car needs its own (drive_problems); the other kinds take none
+    positive=False,
+    nodes=('agent', 'robot'),
+    metavar='L',
+)
+"""L: a physical property of each car, with no default a car could assume (a wrong L is a wrong
+steering limit |ω| <= |v| tan φ_max / L): 0 stands for not given and a car refuses it."""
 
 ROUNDING = 1e-12  # a base counts as clipped only a turn rate beyond |v| κ by more than this, relative
 
@@ -70,8 +83,13 @@ class Car(Unicycle):
         'body-frame Twist (v, ω), car-like (kinematic bicycle) steered l ahead of its rear axle, '
         '|ω| <= |v| tan φ_max / L'
     )
-    parameters = ('control_point_distance', 'max_angular_speed', 'wheelbase', 'max_steering_angle')
+    parameters = ('max_angular_speed', 'max_steering_angle')  # its shape parameters: `shape`
     params_file = 'car.params.yaml'
+    shape = (*Unicycle.shape, WHEELBASE)
+    # An F1TENTH car (car.params.yaml: L = 0.33 m, φ_max = 0.42 rad): body 0.58 m x 0.31 m
+    # centred 0.171 m ahead of the rear axle (f1tenth_gym's length, width, lr); the disc about the
+    # rear axle that holds it reaches the front corners, hypot(0.171 + 0.29, 0.155) = 0.487 m.
+    footprint_radius = 0.49
 
     def drive_problems(self, *, geometry: Geometry, limits: Limits) -> list[str]:
         problems = []

@@ -23,6 +23,10 @@ class Holonomic(RobotKind):
     dimensions = (1, 2, 3)
     parameters = ()
     params_file = 'crazyflie.params.yaml'
+    # A Crazyflie 2.x (crazyflie.params.yaml): motors 33 mm from the centre along each axis (46.7 mm
+    # out), 47 mm propellers: 0.0467 + 0.0235 = 0.070 m.  In the plane only: one flying under
+    # another needs more height (its downwash), which a disc does not say.
+    footprint_radius = 0.07
 
     def command(
         self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog

@@ -9,8 +9,9 @@ A kind says, in one place, what the agents and the tools need to know of a robot
   limits, every clip counted (`command`, `formation_agent.core.limits`), and the zero command;
 - the command's message: `command_type` (a ROS type name, resolved in the ros layer) and its
   convention, a world-frame TwistStamped (`world_frame_command`) or a body-frame Twist (v, ω);
-- its parameters beyond the speed limits (`parameters`, names of the agent's parameter table) and
-  the rules they obey (`problems`);
+- its shape parameters, each declared once (`shape`, `formation_agent.core.kinds.shape`), among
+  them its footprint radius (`footprint_radius`); the limits it takes beyond the speed limit
+  (`parameters`, names of the agent's parameter table); the rules they obey (`problems`);
 - the simulated model: how a base clips what it is sent (`clip`) and the exact motion under a
   held command (`move`, closed form; `formation_sim.sim.robots` moves its robots with it), the
   odometry twist (`body_twist`) and where the robot stands for a scenario position (`origin`);
@@ -25,11 +26,12 @@ live view of the names (with fixed names before and after: the agent's 'none', t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from formation_agent.core.kinds.shape import Geometry, ShapeParameter, declare, undeclare
 from formation_agent.core.limits import Limits, SaturationLog
 
 _KINDS: dict[str, RobotKind] = {}
@@ -39,12 +41,20 @@ class KindError(ValueError):
     """An unknown kind, a kind registered twice, or a robot its kind cannot be (named, with the rule)."""
 
 
-@dataclass(frozen=True, kw_only=True)
-class Geometry:
-    """A robot's shape as its kind needs it; 0: not given."""
+FOOTPRINT_RADIUS = ShapeParameter(
+    name='footprint_radius',
+    symbol='r',
+    help='radius r of its footprint, a disc about its origin (its pose) that holds the whole robot [m]',
+    default=None,  # each kind's own `footprint_radius` (docs/ROBOTS.md, "Footprints")
+    nodes=(),  # no node takes it yet: the safety layer on robots will (docs/SAFETY.md)
+    metavar='R',
+)
+"""Every kind's footprint radius r, declared once for all kinds; its default is each kind's own."""
 
-    control_point_distance: float = 0.0  # l [m]: the control point ahead of the (rear) axle
-    wheelbase: float = 0.0  # L [m]: from the rear axle to the steered front axle (car)
+SEPARATION_MARGIN = 0.05
+"""[m] the gap kept between two footprints by the default separation (`default_min_separation`):
+a few centimetres of pose error (odometry over a run, motion capture's millimetres) and a base's
+lag behind its command (0.22 m/s for 0.1 s is 2.2 cm); docs/ROBOTS.md, "Footprints"."""
 
 
 class RobotKind:
@@ -57,8 +67,23 @@ class RobotKind:
         False  # TwistStamped in the world frame; else Twist (v = linear.x, ω = angular.z)
     )
     dimensions: tuple[int, ...] = (2,)  # the dimensions p its control point moves in
-    parameters: tuple[str, ...] = ()  # its parameters beyond max_linear_speed (the agent's parameter names)
+    steered: bool = (
+        False  # its control point moves by turning, l ahead: a turn-rate limit W caps its speed at W l
+    )
+    parameters: tuple[str, ...] = ()  # its limits beyond max_linear_speed (the agent's parameter names)
+    shape: tuple[ShapeParameter, ...] = (FOOTPRINT_RADIUS,)  # its shape parameters, declared once (shape.py)
+    footprint_radius: float = 0.0  # r [m]: its footprint (FOOTPRINT_RADIUS), a kind's own default
     params_file: str | None = None  # formation_agent/config/<file>: an example robot's parameters
+
+    def shape_value(self, geometry: Geometry, name: str) -> float:
+        """The value of shape parameter `name` for a robot of this kind: the geometry's, or the
+        kind's own where the parameter's default is each kind's (None)."""
+        value = getattr(geometry, name)
+        return float(getattr(self, name) if value is None else value)
+
+    def footprint(self, geometry: Geometry) -> float:
+        """r [m]: the radius of the disc about the robot's origin that holds the robot."""
+        return self.shape_value(geometry, FOOTPRINT_RADIUS.name)
 
     # -- what a robot of this kind must be ----------------------------------------------------
 
@@ -135,16 +160,64 @@ class RobotKind:
 
 
 def register(kind: RobotKind) -> RobotKind:
-    """Add a kind to the registry (KindError if its name is taken or empty); returns it."""
+    """Add a kind to the registry and declare its shape parameters (KindError if its name is taken
+    or empty, ShapeError if it declares a shape parameter differently, KindError if it lacks its
+    own value of one whose default is each kind's); returns it."""
     if not kind.name or kind.name in _KINDS or kind.name in RESERVED:
         raise KindError(f'a robot kind needs a name that is new and not one of {RESERVED}, got {kind.name!r}')
+    for parameter in kind.shape:
+        own = getattr(kind, parameter.name, None)
+        if parameter.default is None and not (isinstance(own, float) and parameter.holds(own)):
+            raise KindError(
+                f'a robot kind sets its own {parameter.name} {parameter.symbol} ({parameter.rule} [m]): '
+                f'{kind.name} has {own!r}'
+            )
+    declare(kind.shape, kind=kind.name)
     _KINDS[kind.name] = kind
     return kind
 
 
 def unregister(name: str) -> None:
-    """Remove a kind (tests register toy kinds and remove them again)."""
-    _KINDS.pop(name, None)
+    """Remove a kind and the shape parameters only it took (tests register toy kinds and remove them)."""
+    if _KINDS.pop(name, None) is not None:
+        undeclare(name)
+
+
+def control_point_separation(
+    origin_separation: float,
+    *,
+    kind: RobotKind,
+    geometry: Geometry,
+    other_kind: RobotKind | None = None,
+    other_geometry: Geometry | None = None,
+) -> float:
+    """D_s: the separation between two robots' control points that keeps their origins (their
+    poses) at least D = `origin_separation` apart, whatever their headings.
+
+    A control point sits c_i = ||control_offset|| from its robot's origin (l ahead of the axle of a
+    unicycle or a car, 0 on a holonomic robot), so by the triangle inequality
+    ||o_i - o_j|| >= ||x_i - x_j|| - c_i - c_j and D_s = D + c_i + c_j holds it; no less does, as
+    two robots back to back (control points pointing away from each other) have ||o_i - o_j|| =
+    ||x_i - x_j|| - c_i - c_j (docs/SAFETY.md: D + 2l for two unicycles).  The other robot: of the
+    same kind and geometry unless given."""
+    if not (math.isfinite(origin_separation) and origin_separation >= 0.0):
+        raise KindError(f'origin_separation D must be a finite number >= 0 [m], got {origin_separation!r}')
+    other_kind = kind if other_kind is None else other_kind
+    other_geometry = geometry if other_geometry is None else other_geometry
+    reach = math.hypot(*kind.control_offset(geometry))
+    other_reach = math.hypot(*other_kind.control_offset(other_geometry))
+    return origin_separation + reach + other_reach
+
+
+def default_min_separation(
+    *, kind: RobotKind, geometry: Geometry, margin: float = SEPARATION_MARGIN
+) -> float:
+    """The `--min-separation` a robot backend takes by default: D_s between control points for
+    D = 2 r + margin between origins (two footprints of radius r kept `margin` apart)."""
+    if not (math.isfinite(margin) and margin >= 0.0):
+        raise KindError(f'margin must be a finite number >= 0 [m], got {margin!r}')
+    footprint = kind.footprint(geometry)
+    return control_point_separation(2.0 * footprint + margin, kind=kind, geometry=geometry)
 
 
 def robot_kind(name: str) -> RobotKind:

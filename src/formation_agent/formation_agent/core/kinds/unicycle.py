@@ -21,7 +21,19 @@ import numpy as np
 
 from formation_agent.core.kinematics import unicycle_velocity
 from formation_agent.core.kinds.registry import Geometry, RobotKind
+from formation_agent.core.kinds.shape import ShapeParameter
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
+
+CONTROL_POINT_DISTANCE = ShapeParameter(
+    name='control_point_distance',
+    symbol='l',
+    help="the control point l ahead of the axle [m]; the scenario's positions are the control points'",
+    default=0.1,
+    metavar='L',
+)
+"""l: where a unicycle (and a car) is steered; > 0, as the near-identity diffeomorphism needs
+(|ω| = |u⊥| / l).  0.1 m: a TurtleBot3 Burger's (turtlebot3.params.yaml), the value every robot
+node, coordinator and command line took by default (docs/ROBOTS.md)."""
 
 
 _EPS = float(np.finfo(float).eps)
@@ -53,8 +65,13 @@ class Unicycle(RobotKind):
     command_type = 'geometry_msgs/msg/Twist'
     world_frame_command = False
     dimensions = (2,)
-    parameters = ('control_point_distance', 'max_angular_speed')
+    steered = True
+    parameters = ('max_angular_speed',)  # its shape parameters: `shape`
     params_file = 'turtlebot3.params.yaml'
+    shape = (*RobotKind.shape, CONTROL_POINT_DISTANCE)
+    # TurtleBot3 Burger: robot_radius 0.105 m in turtlebot3_navigation2's param/burger.yaml (the
+    # example's limits 0.22 m/s, 2.84 rad/s are the Burger's); a Waffle takes 0.22 m.
+    footprint_radius = 0.105
 
     def placement_problems(self, *, dimension, geometry: Geometry) -> list[str]:
         problems = super().placement_problems(dimension=dimension, geometry=geometry)
