@@ -371,9 +371,10 @@ class LaunchPlan:
 
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
-        all but a robot's own (its poses, and the velocity commands it takes)."""
-        robot = robot_topics(self.scenario, *TRAJECTORY_TOPICS, 'command')
-        return {name for name, _ in self.recorder_topics()} - robot
+        the topic table's counted rows, all but a robot's own (its poses, the commands it takes)."""
+        from formation_msgs_py.topic_table import match_topic
+
+        return {name for name, _ in self.recorder_topics() if match_topic(name)[0].counted}
 
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
