@@ -8,7 +8,7 @@ raises one `ParameterError` naming every problem.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from formation_agent.core.commander import Limits
 from formation_agent.core.eta import SCALE_GAINS
@@ -34,6 +34,7 @@ from formation_msgs_py.topics import (
     robot_odom_topic,
     robot_pose_topic,
 )
+from formation_msgs_py.tags import KeyFileError, read_key
 from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
@@ -238,6 +239,13 @@ AGENT_PARAMETERS = (
         low=0.0,
     ),
     _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0, low=0),
+    _spec(
+        'key_file',
+        STRING,
+        "the run's key (docs/HOSTILE_TRAFFIC.md, Tags): the agent tags what it sends and refuses Steps "
+        "and information without a valid tag; '' (default): no tags (an agent started by hand)",
+        default='',
+    ),
 )
 
 GAIN_PARAMETERS = {
@@ -290,6 +298,7 @@ class AgentConfig:
     inject_jitter_ms: float
     inject_seed: int
     time_warp: TimeWarp | None = None
+    key: bytes | None = field(default=None, repr=False)  # the run's key (key_file), never printed
 
     @property
     def double(self) -> bool:
@@ -351,6 +360,7 @@ def read_config(node) -> AgentConfig:
             steering_angle=values['max_steering_angle'],
         ),
         time_warp=TimeWarp.from_parameter(values['time_warp']) if values['time_warp'] else None,
+        key=read_key(values['key_file']) if values['key_file'] else None,
         **{
             name: values[name]
             for name in (
@@ -402,6 +412,11 @@ def _rules(node, values: dict) -> list[str]:
         )
     if have('time_warp') and values['time_warp']:
         problems += _warp_problems(values)
+    if have('key_file') and values['key_file']:
+        try:
+            read_key(values['key_file'])
+        except KeyFileError as error:
+            problems.append(str(error))
     if have('world_frame') and not values['world_frame']:
         problems.append("world_frame must name a frame, got ''")
     if have('pose_topic') and values['pose_topic'] and '{id}' not in values['pose_topic']:

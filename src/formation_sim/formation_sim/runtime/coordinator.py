@@ -65,7 +65,7 @@ from formation_agent.ros.process import (
     release_ros,
     shutdown_guard,
 )
-from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
+from formation_msgs_py.codec import MessageError, check_array, decode_trigger_info, encode_step
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
@@ -104,6 +104,7 @@ from formation_sim.runtime.time_keeper import (
     blamed,
     graph_of,
     run_extra,
+    tag_refused,
     TIME_KEEPER_PARAMETERS,
     TimeKeeperNode,
 )
@@ -216,6 +217,11 @@ COORDINATOR_PARAMETERS = (
     ),
 )
 """The coordinator's parameters (`formation_coordinator --help`; docs/PARAMETERS.md)."""
+
+
+def _tag_refused_info(node: FormationCoordinatorNode, msg, agent: int) -> bool:
+    """Whether agent `agent`'s triggering information lacks the run's valid tag (refused, counted)."""
+    return tag_refused(node, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg, check_array)
 
 
 def robot_run_topics(
@@ -346,7 +352,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             i: self.create_subscription(
                 Float64MultiArray,
                 trigger_info_topic(i, min(book.neighbours)),
-                lambda msg, agent=i: self._on_info(msg, agent),
+                lambda msg, agent=i: _tag_refused_info(self, msg, agent) or self._on_info(msg, agent),
                 READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
                     liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)

@@ -49,6 +49,7 @@ from std_srvs.srv import Trigger
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     MessageError,
+    check_array,
     decode_command,
     decode_trigger_info,
     encode_sensed_state,
@@ -57,6 +58,7 @@ from formation_msgs_py.codec import (
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.tags import TagError
 from formation_msgs_py.topic_table import EXACT, recorded_topics
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_sim.model.scenario import Scenario
@@ -489,7 +491,12 @@ def _trigger_readers(node: FormationSimulatorNode) -> dict:
 
 def _on_trigger_info(node: FormationSimulatorNode, msg, agent: int) -> None:
     """Agent `agent`'s triggering information: the sensing call answered at its stamp was its
-    trigger (a message that is not its layout, or not its own, changes nothing)."""
+    trigger (a message that is not its layout, or not its own, or without the run's valid tag,
+    changes nothing: agent j refuses and counts it)."""
+    try:
+        check_array(node.verifier, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg)
+    except TagError:
+        return
     try:
         info = decode_trigger_info(msg)
     except MessageError:
