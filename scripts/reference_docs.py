@@ -5,8 +5,8 @@ up to date (a test runs it, as for docs/PARAMETERS.md).
 - EXIT_CODES.md: every `EXIT_<NAME> = <status>` of the modules that define exit statuses, with the
   comment or docstring the code gives it, one row per status.
 - TOPICS.md: the processes of a run and the topics between them, from the topic lists the
-  recorder is given (`sim_node.formation_topics`, `coordinator.robot_run_topics`) and the names of
-  `formation_msgs_py.topics`.
+  recorder is given (`sim_node.formation_topics`, `coordinator.robot_run_topics`) and the topic
+  table they are drawn from (`formation_msgs_py.topic_table`).
 
     python scripts/reference_docs.py            # rewrite both
     python scripts/reference_docs.py --check    # exit 1 if either differs from the code
@@ -112,42 +112,18 @@ def render_exit_codes() -> str:
 
 # Who writes and who reads each topic of a run (the names come from formation_msgs_py.topics; a
 # topic of the lists without a row here fails the generator, so the page cannot fall behind).
-def _roles() -> dict[str, tuple[str, str]]:
-    from formation_msgs_py import topics as t
+def _row(topic: str):
+    """The topic table's row of a topic (`formation_msgs_py.topic_table`)."""
+    from formation_msgs_py.topic_table import match_topic
 
-    return {
-        t.STEP_TOPIC: ('time keeper', 'agents, recorder (its clock)'),
-        t.STATUS_TOPIC: ('agents', 'time keeper'),
-        t.REPORT_TOPIC: ('agents', 'time keeper, recorder'),
-        t.STATE_TOPIC: ('simulator', 'recorder, tools'),
-        t.GROUND_TRUTH_TOPIC: ('simulator', 'recorder, tools'),
-        t.SENSING_LOG_TOPIC: ('simulator', 'recorder, tools'),
-        t.CLOCK_TOPIC: ('simulator', 'recorder, tools'),
-        t.SCENARIO_TOPIC: ('time keeper', 'recorder, tools'),
-        t.MARKERS_TOPIC: ('simulator', 'recorder, Foxglove'),
-        t.ROBOTS_TOPIC: ('coordinator', 'recorder, tools'),
-        'trigger_info': ('agent i', 'agent j, recorder'),
-        'cmd': ('agent i', 'simulator (its plant), recorder'),
-        'robot/pose': (
-            'robot i (motion capture, simulated robot)',
-            'agent i and its neighbours, coordinator, recorder',
-        ),
-        'robot/odom': ('robot i', 'agent i and its neighbours, coordinator, recorder'),
-        'robot/true_odom': ('simulated robot i', 'coordinator, recorder'),
-        'robot/cmd_vel': ('agent i (coordinator: the zero command)', 'robot i, recorder'),
-    }
+    if (found := match_topic(topic)) is None:
+        raise SystemExit(f'topic {topic} is not in formation_msgs_py.topic_table: add its row')
+    return found[0]
 
 
-def _role_key(topic: str) -> str:
-    roles = _roles()
-    if topic in roles:
-        return topic
-    for key in ('trigger_info', 'robot/true_odom', 'robot/pose', 'robot/odom', 'robot/cmd_vel'):
-        if f'/{key}' in topic:
-            return key
-    if topic.endswith(('/cmd_vel', '/cmd_accel')):
-        return 'cmd'
-    raise SystemExit(f'topic {topic} has no writer and readers in scripts/reference_docs.py: add them')
+def _roles_of(topic: str) -> tuple[str, str]:
+    row = _row(topic)
+    return row.writer, row.readers
 
 
 def _generic(topic: str) -> str:
@@ -163,7 +139,7 @@ def _topic_table(listed: list[tuple[str, str]]) -> list[str]:
         if name in seen:
             continue
         seen.add(name)
-        writer, readers = _roles()[_role_key(topic)]
+        writer, readers = _roles_of(topic)
         rows.append(f'| `{name}` | `{msgtype}` | {writer} | {readers} |')
     return ['| topic | type | written by | read by |', '|---|---|---|---|', *rows]
 
@@ -177,13 +153,31 @@ def _diagram(listed: list[tuple[str, str]], keeper: str) -> list[str]:
         if name in seen:
             continue
         seen.add(name)
-        writer, readers = _roles()[_role_key(topic)]
+        writer, readers = _roles_of(topic)
         writer = keeper if writer == 'time keeper' else writer
         by_writer.setdefault(writer, []).append(f'  ──{name}──▶ {readers.replace("time keeper", keeper)}')
     out = ['```text']
     for writer, lines in by_writer.items():
         out += [f'[{writer}]', *lines, '']
     return [*out[:-1], '```']
+
+
+def _whole_table() -> list[str]:
+    """Every row of the topic table (`formation_msgs_py.topic_table.TOPICS`)."""
+    from formation_msgs_py.topic_table import KIND_COMMAND, TOPICS
+
+    def yes(flag: bool) -> str:
+        return 'yes' if flag else 'no'
+
+    lines = ['| topic | type | writer QoS | recorded on | counted | tagged |', '|---|---|---|---|---|---|']
+    for row in TOPICS:
+        msgtype = "the robot kind's command type" if row.msgtype == KIND_COMMAND else f'`{row.msgtype}`'
+        recorded = ', '.join(sorted(row.recorded)) or 'never'
+        if row.when is not None:
+            recorded += f' ({row.when})'
+        flags = f'{yes(row.counted)} | {yes(row.tagged)}'
+        lines.append(f'| `{row.pattern}` | {msgtype} | `{row.qos}` | {recorded} | {flags} |')
+    return lines
 
 
 def render_topics() -> str:
@@ -201,8 +195,8 @@ def render_topics() -> str:
             '',
             'Generated from the code by `python scripts/reference_docs.py` (a test checks that it is up',
             'to date): the topics are the lists a run gives its recorder (`formation_sim.runtime.sim_node.',
-            'formation_topics`, `formation_sim.runtime.coordinator.robot_run_topics`), spelled in',
-            '`formation_msgs_py.topics`; every agent `i` lives in the namespace `/agent_<i>`. Each',
+            'formation_topics`, `formation_sim.runtime.coordinator.robot_run_topics`), both drawn from',
+            '[the topic table](#the-topic-table); every agent `i` lives in the namespace `/agent_<i>`. Each',
             'process is its own OS process (agents may share one: `--agents-per-process`), all in one',
             'private ROS domain. Message layouts and QoS: [MESSAGES.md](MESSAGES.md); the protocol:',
             '[the distributed runtime](RUNTIME.md).',
@@ -226,6 +220,19 @@ def render_topics() -> str:
             *_diagram(robots, 'coordinator'),
             '',
             *_topic_table(robots),
+            '',
+            '## The topic table',
+            '',
+            "Every topic of a run, one row of `formation_msgs_py.topic_table.TOPICS`: the recorders' lists,",
+            "the launch plan's counting and the analysis' dispatch are derived from it. *writer QoS*: the",
+            'profile of `formation_msgs_py.qos` its writer offers (robot poses: the profile agents read',
+            'them with); *recorded on*: the backends whose recorder records it (`exact`; `robots`: every',
+            'robot backend), and under which condition (the dynamics, the pose topics a robot run uses);',
+            "*counted*: the run's nodes count what they publish on it (summary.json `extra.published`,",
+            "checked against the bag); *tagged*: its messages carry the run's tag (HOSTILE_TRAFFIC.md,",
+            '"Tags").',
+            '',
+            *_whole_table(),
             '',
         ]
     )

@@ -31,6 +31,7 @@ from formation_msgs_py.lockstep import (
     Step,
     WorldState,
 )
+from formation_msgs_py.tags import TAG_PREFIX, Signer, Verifier, split_text
 from formation_msgs_py.topics import WORLD_FRAME
 from formation_msgs_py.types import MAX_AGENT_ID, RobotPose, SensedState, TriggerInfo
 
@@ -115,6 +116,50 @@ def _data(what: str, msg) -> list[float]:
     if data is None:
         raise MessageError(f'{what}: expected std_msgs/Float64MultiArray, got {type(msg).__name__}')
     return [float(v) for v in data]
+
+
+# --------------------------------------------------------------------------------------------
+# The run's tag (formation_msgs_py.tags): a Float64MultiArray carries it as the label of one more
+# layout dimension of size 0 (its data unchanged), a String as its last line.
+
+
+def tag_array(msg, signer: Signer | None, topic: str):
+    """`msg` (a Float64MultiArray) tagged for `topic` by `signer` (None: untouched).  The layout is
+    replaced, not changed: an encoder's layout is shared between messages (`_layout`)."""
+    if signer is None:
+        return msg
+    from std_msgs.msg import MultiArrayDimension, MultiArrayLayout
+
+    label = signer.tag_array(topic, msg.data)
+    dims = [*msg.layout.dim, MultiArrayDimension(label=label, size=0, stride=0)]
+    msg.layout = MultiArrayLayout(dim=dims, data_offset=msg.layout.data_offset)
+    return msg
+
+
+def array_tag(msg) -> str | None:
+    """The tag a Float64MultiArray carries (None: none)."""
+    dims = getattr(getattr(msg, 'layout', None), 'dim', None)
+    label = dims[-1].label if dims else ''
+    return label if isinstance(label, str) and label.startswith(TAG_PREFIX) else None
+
+
+def check_array(verifier: Verifier, topic: str, msg) -> None:
+    """TagError (counted by `verifier`) unless `msg` carries a valid tag for `topic`; nothing
+    without a key."""
+    if verifier.required:
+        verifier.check_array(topic, getattr(msg, 'data', ()), array_tag(msg))
+
+
+def tag_string(msg, signer: Signer | None, topic: str):
+    """`msg` (a std_msgs/String) with its tag as its last line (None: untouched)."""
+    if signer is not None:
+        msg.data = signer.tag_string(topic, msg.data)
+    return msg
+
+
+def check_string(verifier: Verifier, topic: str, msg) -> None:
+    if verifier.required:
+        verifier.check_string(topic, getattr(msg, 'data', None) or '')
 
 
 # --------------------------------------------------------------------------------------------
@@ -545,6 +590,7 @@ def decode_agent_report(msg) -> AgentReport:
     text = getattr(msg, 'data', None)
     if not isinstance(text, str):
         raise MessageError(f'agent report: expected std_msgs/String, got {type(msg).__name__}')
+    text, _ = split_text(text)  # its tag, if any, checked by the reader (formation_msgs_py.tags)
     try:
         body = json.loads(text)
     except json.JSONDecodeError as error:

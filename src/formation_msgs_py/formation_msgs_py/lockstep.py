@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from formation_msgs_py.tags import TAG_REASONS
+
 STEP_FLAG_FINAL = 1
 """Step flag: the run is over (the horizon is reached); agents leave."""
 
@@ -47,6 +49,7 @@ REJECT_REASONS = (
     REJECT_FUTURE,
     REJECT_JUMP,
     REJECT_STEP_ORDER,
+    *TAG_REASONS,  # untagged, forged (foreign), replayed: the run's tag (formation_msgs_py.tags)
 )
 
 # What a robot's command adapter clips (AgentReport.saturation; README, "Running on robots").

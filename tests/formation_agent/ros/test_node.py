@@ -82,6 +82,29 @@ def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complain
     assert str(error.value).startswith('/agent_1/formation_agent: ')
 
 
+def test_a_key_file_others_may_read_or_that_is_no_key_is_refused_and_a_good_one_tags(ros, tmp_path):
+    """The run's key (docs/HOSTILE_TRAFFIC.md, Tags): its file's rules named, with its mode."""
+    import os
+
+    from formation_agent.ros.parameters import ParameterError
+    from formation_msgs_py.tags import new_key, write_key
+
+    good = write_key(tmp_path / 'run.key', new_key())
+    node = make_node(ros, key_file=str(good))
+    assert node.signer is not None and node.signer.writer == 'agent_1' and node.verifier.required
+    assert 'key' not in repr(node.config).replace('key_file', '')  # never printed
+    assert make_node(ros).signer is None and not make_node(ros).verifier.required  # no key: as before
+    shared = write_key(tmp_path / 'shared.key', new_key())
+    os.chmod(shared, 0o640)
+    for path, complaint in (
+        (shared, f'key_file {shared}: must be readable by its owner only (mode 0600), got 0640'),
+        (tmp_path / 'none.key', f'key_file {tmp_path / "none.key"}: cannot be read'),
+    ):
+        with pytest.raises(ParameterError) as error:
+            make_node(ros, key_file=str(path))
+        assert complaint in str(error.value)
+
+
 def test_every_missing_parameter_is_named_at_once(ros):
     from formation_agent.ros.parameters import ParameterError
 

@@ -54,8 +54,18 @@ def test_params_writes_what_formation_run_wrote(distributed_single_run, tmp_path
     ]
     assert written == {name: (run_folder / name).read_text() for name in written}
     assert sorted(p.name for p in (tmp_path / 'inputs').iterdir()) == sorted(
-        written
+        [*written, 'run.key']
     )  # nothing else: no logs, no bag
+    # Each folder its own key, readable by its owner only (docs/HOSTILE_TRAFFIC.md, Tags), named by
+    # every node's parameters and held by none of them.
+    key = tmp_path / 'inputs' / 'run.key'
+    assert os.stat(key).st_mode & 0o777 == 0o600
+    assert key.read_text() != (run_folder / 'run.key').read_text()
+    agents = yaml.safe_load(written['agents.params.yaml'])
+    assert {a['ros__parameters']['key_file'] for a in agents.values()} == {
+        str((run_folder / 'run.key').resolve())
+    }
+    assert key.read_text().strip() not in ''.join(written.values())
     out = capsys.readouterr().out
     assert f'formation_sim --ros-args --params-file {tmp_path / "inputs" / "simulator.params.yaml"}' in out
 
@@ -82,6 +92,7 @@ def test_robot_backends_write_the_coordinators_and_the_robots_files(tmp_path, ca
         'agents.params.yaml',
         'coordinator.params.yaml',
         'robots.params.yaml',
+        'run.key',
         'scenario.yaml',
     ]
     coordinator = yaml.safe_load((out / 'coordinator.params.yaml').read_text())['/formation_coordinator'][

@@ -705,3 +705,31 @@ def test_an_agent_that_leaves_on_a_final_step_the_coordinator_did_not_send_stops
     node.end_now()
     node._on_report(_report(2, None))  # after the real final Step: its own end
     assert node.after_end == {}
+
+
+def test_with_the_runs_key_triggering_information_without_its_tag_is_no_trigger(coordinator, tmp_path):
+    """docs/HOSTILE_TRAFFIC.md, Tags: the coordinator learns agent i's triggers from its information
+    to its first neighbour; with the run's key a forged one is refused and counted, not a trigger."""
+    from formation_msgs_py.codec import encode_trigger_info, tag_array
+    from formation_msgs_py.tags import Signer, new_key, write_key
+    from formation_msgs_py.topics import trigger_info_topic
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.runtime.coordinator import _tag_refused_info
+
+    key = new_key()
+    node = _running(coordinator, key_file=str(write_key(tmp_path / 'run.key', key)))
+    first = min(node.agents[2].neighbours)
+    topic = trigger_info_topic(2, first)
+
+    def info(stamp):
+        return encode_trigger_info(
+            TriggerInfo(sender=2, receiver=first, stamp=stamp, control=(0.1, 0.0), rel_position=(1.0, 0.0))
+        )
+
+    for msg in (info(0.25), tag_array(info(0.3), Signer(new_key(), writer='agent_2'), topic)):
+        assert _tag_refused_info(node, msg, 2)
+    signed = tag_array(info(0.35), Signer(key, writer='agent_2'), topic)
+    assert not _tag_refused_info(node, signed, 2)
+    node._on_info(signed, 2)
+    assert node.agents[2].trigger_times == [0.35]
+    assert node.rejected == {'untagged': 1, 'forged': 1}

@@ -1130,3 +1130,29 @@ def test_a_robot_runs_bag_is_stamped_with_the_run_time_of_each_message(tmp_path:
     }
     assert {p['durability'] for p in offered['/agent_1/robot/odom']} == {'volatile'}  # as the robot offers it
     assert {p['durability'] for p in offered['/formation/robots']} == {'transient_local'}
+
+
+def test_a_step_without_the_runs_tag_is_no_clock_for_the_bag():
+    """With the run's key, a Step without its valid tag moves no bag time (docs/HOSTILE_TRAFFIC.md,
+    Tags); without a key every Step does, as before."""
+    from types import SimpleNamespace
+
+    from formation_msgs_py.codec import encode_step, tag_array
+    from formation_msgs_py.lockstep import Step
+    from formation_msgs_py.tags import Signer, Verifier, new_key
+    from formation_sim.runtime.recorder import _untagged_step
+
+    key, warned = new_key(), []
+    node = SimpleNamespace(
+        _verifier=Verifier(key),
+        _clock_topic='/formation/step',
+        get_logger=lambda: SimpleNamespace(warning=warned.append),
+    )
+    step = Step(index=1, time=0.5, flags=0, epoch=0.0, due=())
+    assert _untagged_step(node, encode_step(step))
+    assert warned and 'a Step that moves no bag time' in warned[0]
+    signed = tag_array(encode_step(step), Signer(key, writer='formation_simulator'), '/formation/step')
+    assert not _untagged_step(node, signed)
+    assert _untagged_step(node, signed)  # the same Step again: a replay
+    node._verifier = Verifier(None)
+    assert not _untagged_step(node, encode_step(step))

@@ -80,6 +80,7 @@ class _Outsider:
 
     publisher: object
     executor: object
+    node: object
     worker: threading.Thread
     results: list
     steps: list[int]  # the indices of the Steps it heard
@@ -119,7 +120,9 @@ def _outsider_with_run(name: str, domain_id: int, run):
         node.create_subscription(
             Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg).index), READER_QOS
         )
-        yield _Outsider(publisher=publisher, executor=executor, worker=worker, results=results, steps=steps)
+        yield _Outsider(
+            publisher=publisher, executor=executor, node=node, worker=worker, results=results, steps=steps
+        )
         worker.join()
     finally:
         node.destroy_node()
@@ -143,7 +146,8 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.topics import trigger_info_topic
-    from formation_msgs_py.codec import encode_trigger_info
+    from formation_msgs_py.codec import encode_trigger_info, tag_array
+    from formation_msgs_py.tags import KEY_FILE, Signer, read_key
     from formation_msgs_py.types import TriggerInfo
     from formation_sim.runtime.orchestrate import FormationRun
 
@@ -193,8 +197,11 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
         while outsider.worker.is_alive():
             outsider.executor.spin_once(timeout_sec=0.05)
             if not injected and outsider.steps and max(outsider.steps) >= inject_at:
+                # An insider: it holds the run's key (a node of the run gone bad), so its messages
+                # pass the tag and meet the layout and plausibility checks (docs/HOSTILE_TRAFFIC.md).
+                signer = Signer(read_key(run.out_dir / KEY_FILE), writer='injector')
                 for msg, _ in bad:
-                    outsider.publisher.publish(msg)
+                    outsider.publisher.publish(tag_array(msg, signer, trigger_info_topic(2, 1)))
                 injected = True
     seen, results = outsider.steps, outsider.results
     (result,) = results
@@ -217,6 +224,85 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
     assert f'rejected a message on {trigger_info_topic(2, 1)} (sender, 1 so far)' in log
     assert 'information from agent 3 on the topic of agent 2' in log
+
+
+@pytest.mark.timeout(300)
+def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_counted_foreign(
+    tmp_path, ros_env
+):
+    """Issue 28 item 2.  An outsider without the run's key sends mid-run a well-formed, plausible
+    TriggerInfo from agent 2 to agent 1 (stamped at the latest Step's time: the layout and
+    plausibility checks take it), the same under another run's key, and a Step that is the run's
+    next one, marked final (agents stop on any final Step they take).  Each is refused by its tag
+    before the algorithm sees it: the lock-step run equals the in-process engine bit for bit, and
+    summary.json counts them as foreign."""
+    from std_msgs.msg import Float64MultiArray
+
+    from formation_msgs_py.codec import decode_step, encode_step, encode_trigger_info, tag_array
+    from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Step
+    from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
+    from formation_msgs_py.tags import Signer, new_key
+    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+    from formation_msgs_py.types import TriggerInfo
+    from formation_sim.runtime.orchestrate import FormationRun
+
+    domain_id = 73
+    scenario = load_scenario('paper_single')
+    horizon = 2.0
+    reference = simulate(scenario, horizon=horizon)
+    events = sorted({t for times in reference.trigger_times.values() for t in times})
+    inject_at = len(events) // 2
+    run = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=horizon,
+        domain_id=domain_id,
+        progress=False,
+        timeout=240.0,
+        step_listeners=1,
+    )
+    injected = False
+    with _outsider_with_run('forger', domain_id, run) as outsider:
+        steps: list[Step] = []
+        outsider.node.create_subscription(
+            Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg)), READER_QOS
+        )
+        step_writer = outsider.node.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        while outsider.worker.is_alive():
+            outsider.executor.spin_once(timeout_sec=0.05)
+            agents_hear_it = step_writer.get_subscription_count() >= len(scenario.agent_ids)
+            if not injected and agents_hear_it and steps and steps[-1].index >= inject_at:
+                last = steps[-1]
+                info = encode_trigger_info(
+                    TriggerInfo(
+                        sender=2, receiver=1, stamp=last.time, control=(3.0, -3.0), rel_position=(1.0, 2.0)
+                    )
+                )
+                outsider.publisher.publish(info)  # untagged
+                other_run = Signer(new_key(), writer='agent_2')
+                outsider.publisher.publish(tag_array(info, other_run, trigger_info_topic(2, 1)))  # forged
+                final = Step(
+                    index=last.index + 1, time=last.time, flags=STEP_FLAG_FINAL, epoch=last.epoch, due=()
+                )
+                step_writer.publish(encode_step(final))  # untagged
+                injected = True
+    (result,) = outsider.results
+    assert injected, f'the run ended before step {inject_at}'
+    assert result.ok, result.message
+    summary = json.loads(result.summary.read_text())
+    for agent, times in reference.trigger_times.items():  # bit for bit: JSON floats round-trip
+        assert summary['trigger_times'][str(agent)] == list(times), f'agent {agent}'
+    assert summary['total_events'] == reference.total_events
+    assert summary['messages_sent'] == reference.messages_sent
+    n = len(scenario.agent_ids)
+    rejected = summary['extra']['rejected_messages']
+    assert rejected['by_reason'] == {'untagged': 1 + n, 'forged': 1}, rejected
+    assert rejected['by_agent']['1'] == {'untagged': 2, 'forged': 1}
+    assert all(rejected['by_agent'][str(i)] == {'untagged': 1} for i in scenario.agent_ids if i != 1)
+    assert summary['extra']['foreign_messages'] == n + 2
+    assert summary['extra']['failure'] is None
+    log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
+    assert "a message without the run's tag" in log and 'that is not the run key' in log
 
 
 @pytest.mark.timeout(300)

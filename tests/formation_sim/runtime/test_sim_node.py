@@ -30,6 +30,53 @@ def simulator(ros):
         node.destroy_node()
 
 
+def test_with_the_runs_key_statuses_and_reports_without_its_tag_are_refused_as_foreign(ros, tmp_path):
+    """docs/HOSTILE_TRAFFIC.md, Tags: the keeper's readers check the tag before decoding; what a
+    holder of the key sends passes, once; summary.json counts untagged + forged as foreign."""
+    from rclpy.parameter import Parameter
+
+    from formation_msgs_py.codec import encode_agent_report, encode_status, tag_array, tag_string
+    from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
+    from formation_msgs_py.tags import Signer, new_key, write_key
+    from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC
+    from formation_sim.runtime.sim_node import FormationSimulatorNode
+    from formation_sim.runtime.time_keeper import _tagged, message_counts
+
+    key = new_key()
+    node = FormationSimulatorNode(
+        scenario=load_scenario('paper_single'),
+        context=ros,
+        parameter_overrides=[Parameter('key_file', value=str(write_key(tmp_path / 'run.key', key)))],
+    )
+    try:
+        assert node.signer is not None and node.signer.writer == 'formation_simulator'
+        status = Status(
+            agent=2,
+            step_index=DISCOVERY_STEP,
+            next_time=1.0,
+            info_sent=0,
+            info_received=0,
+            commands_sent=0,
+            triggers=0,
+            ready=False,
+        )
+        agent_2, stranger = Signer(key, writer='agent_2'), Signer(new_key(), writer='agent_2')
+        taken = []
+        _tagged(node, STATUS_TOPIC, encode_status(status), taken.append)  # untagged
+        _tagged(node, STATUS_TOPIC, tag_array(encode_status(status), stranger, STATUS_TOPIC), taken.append)
+        signed = tag_array(encode_status(status), agent_2, STATUS_TOPIC)
+        _tagged(node, STATUS_TOPIC, signed, taken.append)
+        _tagged(node, STATUS_TOPIC, signed, taken.append)  # a replay
+        report = encode_agent_report(AgentReport(agent=2, final=False, rejected={}))
+        _tagged(node, REPORT_TOPIC, report, taken.append)  # untagged
+        _tagged(node, REPORT_TOPIC, tag_string(report, agent_2, REPORT_TOPIC), taken.append)
+        assert [type(msg).__name__ for msg in taken] == ['Float64MultiArray', 'String']
+        assert node.rejected == {'untagged': 2, 'forged': 1, 'replayed': 1}
+        assert message_counts(node)['foreign_messages'] == 3
+    finally:
+        node.destroy_node()
+
+
 def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
     from std_msgs.msg import Float64MultiArray, String
 

@@ -8,7 +8,7 @@ raises one `ParameterError` naming every problem.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from formation_agent.core.commander import Limits
 from formation_agent.core.eta import SCALE_GAINS
@@ -43,6 +43,7 @@ from formation_msgs_py.topics import (
     robot_odom_topic,
     robot_pose_topic,
 )
+from formation_msgs_py.tags import KeyFileError, read_key
 from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')
@@ -265,6 +266,13 @@ _DRIVE = (
         low=0.0,
     ),
     _spec('inject_seed', INTEGER, 'test facility: seed of the injected faults', default=0, low=0),
+    _spec(
+        'key_file',
+        STRING,
+        "the run's key (docs/HOSTILE_TRAFFIC.md, Tags): the agent tags what it sends and refuses Steps "
+        "and information without a valid tag; '' (default): no tags (an agent started by hand)",
+        default='',
+    ),
 )
 
 
@@ -328,6 +336,7 @@ class AgentConfig:
     time_warp: TimeWarp | None = None
     safety: SafetyConfig | None = None  # the safety layer (min_separation > 0), docs/SAFETY.md
     other_robot_ids: tuple[int, ...] = ()  # the safety layer on robots: the others' pose topics
+    key: bytes | None = field(default=None, repr=False)  # the run's key (key_file), never printed
 
     @property
     def double(self) -> bool:
@@ -388,6 +397,7 @@ def read_config(node) -> AgentConfig:
         safety=_safety(values) if values['min_separation'] > 0.0 else None,
         other_robot_ids=tuple(int(j) for j in values['other_robot_ids']),
         geometry=_geometry(values),
+        key=read_key(values['key_file']) if values['key_file'] else None,
         **{
             name: values[name]
             for name in (
@@ -439,6 +449,11 @@ def _rules(node, values: dict) -> list[str]:
         problems += _warp_problems(values)
     if have('min_separation', *SAFETY_PARAMETERS.values()) and values['min_separation'] > 0.0:
         problems += _safety_problems(values)
+    if have('key_file') and values['key_file']:
+        try:
+            read_key(values['key_file'])
+        except KeyFileError as error:
+            problems.append(str(error))
     if have('world_frame') and not values['world_frame']:
         problems.append("world_frame must name a frame, got ''")
     if have('pose_topic') and values['pose_topic'] and '{id}' not in values['pose_topic']:

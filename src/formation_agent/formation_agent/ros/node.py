@@ -63,7 +63,8 @@ from formation_agent.ros.stepping import (
     TriggerSchedule,
     refuse_lock_step,
 )
-from formation_msgs_py.codec import MessageError, decode_step, encode_trigger_info
+from formation_msgs_py.codec import MessageError, check_array, decode_step, encode_trigger_info
+from formation_msgs_py.tags import Signer, TagError, Verifier
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
@@ -218,6 +219,7 @@ class FormationAgentNode(Node):
         self.arrivals = Arrivals(schedule=self.schedule, counts=self.counts)
         self.step_gate = StepGate(agent_id=config.agent_id)
         self.reject = Rejections(self.get_logger(), changed=self.counts.changed)
+        self.signer, self.verifier = _tags(config)  # the run's tag (docs/HOSTILE_TRAFFIC.md, Tags)
         self.faults = _make_faults(self)
         self.sensing = (
             PoseSensing(self, config, reject=self.reject)
@@ -242,7 +244,7 @@ class FormationAgentNode(Node):
         self._discovery: Discovery | None = Discovery(self)
 
     def _create_endpoints(self) -> None:
-        self.outbox = Outbox(self, self.counts, self.neighbour_ids)
+        self.outbox = Outbox(self, self.counts, self.neighbour_ids, signer=self.signer)
         self.info_publishers = self.outbox.info
         self.status_publisher = self.outbox.status
         self.report_publisher = self.outbox.report
@@ -250,7 +252,7 @@ class FormationAgentNode(Node):
             self.create_subscription(
                 Float64MultiArray,
                 trigger_info_topic(j, self.agent_id),
-                lambda msg, sender=j: self.faults.arrive(msg, sender),
+                lambda msg, sender=j: _on_info(self, msg, sender),
                 READER_QOS,
             )
             for j in self.neighbour_ids
@@ -369,7 +371,7 @@ class FormationAgentNode(Node):
         self.output.publish(t, tuple(float(v) for v in out.control), sensed)
         self.counts.commands_sent += 1
         for info in out.infos:
-            self.outbox.publish(self.info_publishers[info.receiver], encode_trigger_info(info))
+            self.outbox.publish_info(info.receiver, encode_trigger_info(info))
             self.counts.info_sent += 1
         self.arrivals.triggered(sensed, core=self.core)  # what waited for this trigger
         self._knowledge_changed()
@@ -493,7 +495,10 @@ def _core_trigger(node: FormationAgentNode, t: float, sensed):
 
 def _next_step(node: FormationAgentNode, msg: Float64MultiArray) -> Step | None:
     """The Step in `msg` if `node` takes it (`StepGate`): a malformed one, or one that cannot be
-    the run's next, is refused and counted; a repeat, or any Step after the end, is ignored."""
+    the run's next, is refused and counted; a repeat, or any Step after the end, is ignored.  With
+    the run's key, a Step without its valid tag is refused first (`_tag_refused`)."""
+    if _tag_refused(node, STEP_TOPIC, msg):
+        return None
     try:
         step = decode_step(msg)
     except MessageError as error:
@@ -507,6 +512,30 @@ def _next_step(node: FormationAgentNode, msg: Float64MultiArray) -> Step | None:
             node.reject(STEP_TOPIC, *verdict)
         return None
     return step
+
+
+def _tags(config) -> tuple[Signer | None, Verifier]:
+    """With the run's key, what the agent sends is tagged and what it reads without a valid tag
+    is refused before the algorithm sees it (`_tag_refused`)."""
+    signer = Signer(config.key, writer=f'agent_{config.agent_id}') if config.key else None
+    return signer, Verifier(config.key)
+
+
+def _on_info(node: FormationAgentNode, msg, sender: int) -> None:
+    """A neighbour's triggering information: its tag checked, then on to the fault injection."""
+    if not _tag_refused(node, trigger_info_topic(sender, node.agent_id), msg):
+        node.faults.arrive(msg, sender)
+
+
+def _tag_refused(node: FormationAgentNode, topic: str, msg) -> bool:
+    """Whether `msg` lacks the run's valid tag for `topic` (refused and counted: untagged and
+    forged are foreign, a replay apart); never without a key."""
+    try:
+        check_array(node.verifier, topic, msg)
+    except TagError as error:
+        node.reject(topic, error.reason, str(error))
+        return True
+    return False
 
 
 def _latest_stamp(node: FormationAgentNode) -> float:

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import struct
 import tempfile
 from collections import Counter, defaultdict
@@ -49,15 +48,8 @@ from formation_msgs_py.codec import (
     decode_world_state,
 )
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
-from formation_msgs_py.topics import (
-    REPORT_TOPIC,
-    ROBOTS_TOPIC,
-    SCENARIO_TOPIC,
-    SENSING_LOG_TOPIC,
-    STATE_TOPIC,
-    STATUS_TOPIC,
-    STEP_TOPIC,
-)
+from formation_msgs_py.topic_table import match_topic
+from formation_msgs_py.topics import ROBOTS_TOPIC, SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STEP_TOPIC
 from formation_agent.core.speed_scale import initial_velocities
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
@@ -80,15 +72,6 @@ SCENARIO_FILE = 'scenario.yaml'
 
 
 BAG_DIR = 'bag'
-
-
-TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
-
-
-COMMAND_TOPIC = re.compile(r'^/agent_(\d+)/(cmd_vel|cmd_accel)$')
-
-
-ROBOT_TOPIC = re.compile(r'^/agent_(\d+)/robot/(pose|odom|true_odom|cmd_vel)$')
 
 
 class AnalysisError(ValueError):
@@ -239,48 +222,105 @@ def _read(bag: Path, progress: ProgressCallback | None) -> _Collected:
     return got
 
 
+def _on_trigger_info(
+    got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int
+) -> None:
+    info = decode_trigger_info(decode(rawdata, msgtype))
+    sender, receiver = ids
+    if (info.sender, info.receiver) != (sender, receiver):
+        raise MessageError(
+            f'carries sender {info.sender} and receiver {info.receiver}, '
+            f"not the topic's {sender} -> {receiver}"
+        )
+    got.infos[(info.sender, info.stamp)].append(info.receiver)
+    got.info_total += 1
+
+
+def _on_status(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+    status = decode_status(decode(rawdata, msgtype))
+    got.statuses[status.agent].append(status)
+
+
+def _on_sensing_log(
+    got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int
+) -> None:
+    try:
+        entry = json.loads(decode(rawdata, msgtype).data)
+        got.sensing.append((int(entry['agent']), float(entry['time'])))
+    except (ValueError, KeyError, TypeError) as error:
+        raise MessageError(f'sensing log entry is not {{"agent", "time", ...}} JSON: {error}') from None
+
+
+def _on_scenario(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+    got.scenario_text = decode(rawdata, msgtype).data
+
+
+def _on_command(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+    got.commands[ids[0]] += 1
+    got.last_command_zero[ids[0]] = _is_zero_command(rawdata, msgtype)
+
+
+def _on_robot(kind: str):
+    """Robot topics are decoded once the run is known (which topic is the trajectory, the epoch,
+    the model): kept as they came."""
+
+    def keep(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+        got.robot_messages[(ids[0], kind)].append((msgtype, rawdata, stamp_ns))
+
+    return keep
+
+
+def _on_robots(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+    try:
+        got.robots = json.loads(decode(rawdata, msgtype).data)
+    except ValueError as error:
+        raise MessageError(f'not JSON: {error}') from None
+
+
+def _on_report(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+    report = decode_agent_report(decode(rawdata, msgtype))
+    if report.agent not in got.reports or not got.reports[report.agent].final:
+        got.reports[report.agent] = report
+
+
+def _append(field: str, decoder):
+    def on(got: _Collected, rawdata: bytes, msgtype: str, ids: tuple[int, ...], stamp_ns: int) -> None:
+        getattr(got, field).append(decoder(decode(rawdata, msgtype)))
+
+    return on
+
+
+HANDLERS: dict[str, tuple[bool, Any]] = {
+    'step': (True, _append('steps', decode_step)),
+    'status': (True, _on_status),
+    'state': (True, _append('states', decode_world_state)),
+    'ground_truth': (False, None),  # for tools: the analysis rebuilds the formation from the states
+    'sensing_log': (True, _on_sensing_log),
+    'clock': (False, None),
+    'report': (True, _on_report),
+    'scenario': (True, _on_scenario),
+    'markers': (False, None),
+    'robots': (True, _on_robots),
+    'cmd_vel': (False, _on_command),
+    'cmd_accel': (False, _on_command),
+    'robot/pose': (False, _on_robot('pose')),
+    'robot/odom': (False, _on_robot('odom')),
+    'robot/true_odom': (False, _on_robot('true_odom')),
+    'robot/cmd_vel': (False, _on_robot('cmd_vel')),
+    'trigger_info': (True, _on_trigger_info),
+}
+"""What the analysis does with each recorded row of the topic table (`formation_msgs_py.topic_table`;
+a test checks that every recorded row has an entry): (read only if of the row's type, the handler;
+None: not read)."""
+
+
 def _dispatch(got: _Collected, topic: str, msgtype: str, rawdata: bytes, *, stamp_ns: int = 0) -> None:
-    array = msgtype == 'std_msgs/msg/Float64MultiArray'
-    if (match := TRIGGER_INFO_TOPIC.match(topic)) and array:
-        info = decode_trigger_info(decode(rawdata, msgtype))
-        sender, receiver = int(match.group(1)), int(match.group(2))
-        if (info.sender, info.receiver) != (sender, receiver):
-            raise MessageError(
-                f"carries sender {info.sender} and receiver {info.receiver}, not the topic's {sender} "
-                f'-> {receiver}'
-            )
-        got.infos[(info.sender, info.stamp)].append(info.receiver)
-        got.info_total += 1
-    elif topic == STATE_TOPIC and array:
-        got.states.append(decode_world_state(decode(rawdata, msgtype)))
-    elif topic == STEP_TOPIC and array:
-        got.steps.append(decode_step(decode(rawdata, msgtype)))
-    elif topic == STATUS_TOPIC and array:
-        status = decode_status(decode(rawdata, msgtype))
-        got.statuses[status.agent].append(status)
-    elif topic == SENSING_LOG_TOPIC and msgtype == 'std_msgs/msg/String':
-        try:
-            entry = json.loads(decode(rawdata, msgtype).data)
-            got.sensing.append((int(entry['agent']), float(entry['time'])))
-        except (ValueError, KeyError, TypeError) as error:
-            raise MessageError(f'sensing log entry is not {{"agent", "time", ...}} JSON: {error}') from None
-    elif topic == SCENARIO_TOPIC and msgtype == 'std_msgs/msg/String':
-        got.scenario_text = decode(rawdata, msgtype).data
-    elif match := COMMAND_TOPIC.match(topic):
-        got.commands[int(match.group(1))] += 1
-        got.last_command_zero[int(match.group(1))] = _is_zero_command(rawdata, msgtype)
-    elif match := ROBOT_TOPIC.match(topic):
-        # Decoded once the run is known (which topic is the trajectory, the epoch, the model).
-        got.robot_messages[(int(match.group(1)), match.group(2))].append((msgtype, rawdata, stamp_ns))
-    elif topic == ROBOTS_TOPIC and msgtype == 'std_msgs/msg/String':
-        try:
-            got.robots = json.loads(decode(rawdata, msgtype).data)
-        except ValueError as error:
-            raise MessageError(f'not JSON: {error}') from None
-    elif topic == REPORT_TOPIC and msgtype == 'std_msgs/msg/String':
-        report = decode_agent_report(decode(rawdata, msgtype))
-        if report.agent not in got.reports or not got.reports[report.agent].final:
-            got.reports[report.agent] = report
+    if (found := match_topic(topic)) is None or found[0].key not in HANDLERS:
+        return
+    row, ids = found
+    typed, handler = HANDLERS[row.key]
+    if handler is not None and (not typed or msgtype == row.msgtype):
+        handler(got, rawdata, msgtype, ids, stamp_ns)
 
 
 def _is_zero_command(rawdata: bytes, msgtype: str) -> bool:

@@ -66,23 +66,16 @@ from formation_agent.ros.process import (
     release_ros,
     shutdown_guard,
 )
-from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
+from formation_msgs_py.codec import MessageError, check_array, decode_trigger_info, encode_step
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.topic_table import ODOM, POSE, ROBOTS, TRUE_ODOM, recorded_topics
 from formation_msgs_py.topics import (
     COORDINATOR_NODE,
-    REPORT_TOPIC,
     ROBOTS_TOPIC,
-    SCENARIO_TOPIC,
-    STATUS_TOPIC,
-    STEP_TOPIC,
     STOP_SERVICE,
     WORLD_FRAME,
-    robot_command_topic,
-    robot_odom_topic,
-    robot_pose_topic,
-    robot_true_odom_topic,
     trigger_info_topic,
 )
 from formation_sim.model.measured_start import MeasuredStart, check_measured_start
@@ -112,6 +105,7 @@ from formation_sim.runtime.time_keeper import (
     blamed,
     graph_of,
     run_extra,
+    tag_refused,
     TIME_KEEPER_PARAMETERS,
     TimeKeeperNode,
 )
@@ -226,6 +220,11 @@ def _geometry(values: dict) -> Geometry:
     return Geometry(**{p.name: values[p.name] for p in declared(node='coordinator')})
 
 
+def _tag_refused_info(node: FormationCoordinatorNode, msg, agent: int) -> bool:
+    """Whether agent `agent`'s triggering information lacks the run's valid tag (refused, counted)."""
+    return tag_refused(node, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg, check_array)
+
+
 def robot_run_topics(
     scenario: Scenario, *, model: str, simulated: bool, pose_type: str, truth: bool | None = None
 ) -> list[tuple[str, str]]:
@@ -236,25 +235,18 @@ def robot_run_topics(
     exact: `launch.RobotOptions.odometry_is_truth`); real robots: both pose topics, whichever
     they have."""
     truth = simulated if truth is None else truth
-    array, string, odometry = 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String', 'nav_msgs/msg/Odometry'
-    command_type = robot_kind(model).command_type
-    topics = [
-        (STEP_TOPIC, array),
-        (STATUS_TOPIC, array),
-        (REPORT_TOPIC, string),
-        (SCENARIO_TOPIC, string),
-        (ROBOTS_TOPIC, string),
-    ]
-    for i in scenario.agent_ids:
-        if pose_type == 'pose' or not simulated:
-            topics.append((robot_pose_topic(i), 'geometry_msgs/msg/PoseStamped'))
-        if pose_type == 'odom' or not simulated or not truth:
-            topics.append((robot_odom_topic(i), odometry))
-        if truth:
-            topics.append((robot_true_odom_topic(i), odometry))
-        topics.append((robot_command_topic(i), command_type))
-        topics += [(trigger_info_topic(i, j), array) for j in scenario.neighbours(i)]
-    return topics
+    conditions = {POSE} if pose_type == 'pose' or not simulated else set()
+    if pose_type == 'odom' or not simulated or not truth:
+        conditions.add(ODOM)
+    if truth:
+        conditions.add(TRUE_ODOM)
+    return recorded_topics(
+        backend=ROBOTS,
+        agent_ids=scenario.agent_ids,
+        neighbours=scenario.neighbours,
+        conditions=conditions,
+        command_type=robot_kind(model).command_type,
+    )
 
 
 class FormationCoordinatorNode(TimeKeeperNode):
@@ -359,7 +351,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             i: self.create_subscription(
                 Float64MultiArray,
                 trigger_info_topic(i, min(book.neighbours)),
-                lambda msg, agent=i: self._on_info(msg, agent),
+                lambda msg, agent=i: _tag_refused_info(self, msg, agent) or self._on_info(msg, agent),
                 READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
                     liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)

@@ -37,6 +37,7 @@ from pathlib import Path
 import yaml
 
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
+from formation_msgs_py.tags import KEY_FILE, new_key, write_key
 from formation_msgs_py.topics import (
     AGENT_NODE,
     COORDINATOR_NODE,
@@ -389,9 +390,10 @@ class LaunchPlan:
 
     def counted_topics(self) -> set[str]:
         """The recorded topics whose messages the run's nodes count (summary.json extra.published):
-        all but a robot's own (its poses, and the velocity commands it takes)."""
-        robot = robot_topics(self.scenario, *TRAJECTORY_TOPICS, 'command')
-        return {name for name, _ in self.recorder_topics()} - robot
+        the topic table's counted rows, all but a robot's own (its poses, the commands it takes)."""
+        from formation_msgs_py.topic_table import match_topic
+
+        return {name for name, _ in self.recorder_topics() if match_topic(name)[0].counted}
 
     def write_inputs(self) -> dict[str, Path]:
         """scenario.yaml and the params files every process reads; their paths by role."""
@@ -403,6 +405,9 @@ class LaunchPlan:
         out.mkdir(parents=True, exist_ok=True)
         paths = {'scenario': out / SCENARIO_FILE}
         dump_scenario(self.scenario, paths['scenario'])  # every float kept bit for bit
+        # The run's own key, 0600, named by the parameter files (docs/HOSTILE_TRAFFIC.md, Tags).
+        self.key_file.unlink(missing_ok=True)  # a folder this run may take holds no other run's key
+        paths['key'] = write_key(self.key_file, new_key())
         extra = 1 if self.record else 0
         injected = {
             f'inject_{key}': (int(value) if key == 'seed' else float(value))
@@ -415,6 +420,7 @@ class LaunchPlan:
                     **agent_parameters(self.scenario, i, horizon=self.horizon, extra_subscribers=extra),
                     **injected,
                     **on_robots,
+                    'key_file': str(self.key_file),
                 }
             }
             for i in self.scenario.agent_ids
@@ -435,6 +441,7 @@ class LaunchPlan:
                         # Stopped last, once every writer has left and its messages were
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
+                        'key_file': str(self.key_file),  # Steps without the run's tag move no bag time
                         **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
                         # External robots publish on after the run: their poses must not hold the drain up.
                         **({'endless_topics': self.endless_topics()} if self.backend == 'external' else {}),
@@ -543,6 +550,11 @@ class LaunchPlan:
     def _keeper_node(self) -> str:
         return f'/{SIMULATOR_NODE}' if self.backend == 'exact' else f'/{COORDINATOR_NODE}'
 
+    @property
+    def key_file(self) -> Path:
+        """The run's key file (`formation_msgs_py.tags.KEY_FILE` in the run folder)."""
+        return (self.out_dir / KEY_FILE).resolve()
+
     def keeper_parameters(self, scenario_file: Path) -> dict:
         """The time keeper's parameters (`sim_node.SIMULATOR_PARAMETERS`,
         `coordinator.COORDINATOR_PARAMETERS`)."""
@@ -556,6 +568,7 @@ class LaunchPlan:
             'executor': self.executor,
             # Discovery of a large team on a small machine takes long (300 agents here: ~1 min).
             'discovery_timeout': max(120.0, float(len(self.scenario.agent_ids))),
+            'key_file': str(self.key_file),
         }
         if self.backend == 'exact':
             params['clock_mode'] = self.clock

@@ -57,7 +57,9 @@ from formation_agent.ros.parameters import (
     parameter_help,
     read_parameters,
 )
+from formation_msgs_py.codec import check_array
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
+from formation_msgs_py.tags import TagError, run_tags
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
 from formation_sim.bag.io import (
     BagError,
@@ -117,6 +119,13 @@ RECORDER_PARAMETERS = (
         description="the run's Step topic (std_msgs/Float64MultiArray [version, step, time, flags, epoch, "
         '...]): bag time is its sim time in lock-step, the receive time since its epoch on the wall clock '
         "('': the node's clock)",
+    ),
+    ParameterSpec(
+        name='key_file',
+        type=STRING,
+        default='',
+        description="the run's key (docs/HOSTILE_TRAFFIC.md, Tags): a Step without a valid tag is "
+        "recorded but moves no bag time ('': every Step does)",
     ),
     ParameterSpec(
         name='discovery_period',
@@ -270,6 +279,18 @@ class RunClock:
         return max(0, run_time + (self._monotonic_ns() if received_ns is None else received_ns) - since)
 
 
+def _untagged_step(node, msg) -> bool:
+    """Whether a Step lacks the run's valid tag: it moves no bag time (it is recorded all the same,
+    as every foreign message; docs/HOSTILE_TRAFFIC.md, Tags)."""
+    try:
+        check_array(node._verifier, node._clock_topic, msg)
+    except TagError as error:
+        if node._verifier.refused[error.reason] <= 3:
+            node.get_logger().warning(f'a Step that moves no bag time: {error}')
+        return True
+    return False
+
+
 def _requested_topics(values: dict) -> tuple[list[tuple[str, str]], list[str]]:
     """The recorder's `topics` parameter as (name, type) pairs, and the problems of `topics`,
     `watched_topics` and `output` (each type importable here and in the Jazzy typestore)."""
@@ -325,6 +346,7 @@ class RecorderNode(Node):
         output = values['output']
         self._prefix = values['prefix']
         self._clock_topic = values['clock_topic']
+        self._verifier = run_tags(values['key_file'], writer=RECORDER_NODE)[1]
         heartbeat_topic = self._heartbeat_topic = values['heartbeat_topic']
         self._drain_quiet = values['drain_quiet']
         self._endless = frozenset(values['endless_topics'])
@@ -499,8 +521,9 @@ class RecorderNode(Node):
         from rclpy.serialization import deserialize_message
         from std_msgs.msg import Float64MultiArray
 
-        data = deserialize_message(rawdata, Float64MultiArray).data
-        if not self.clock.on_step(data) and not self._bad_clock_warned:
+        if _untagged_step(self, msg := deserialize_message(rawdata, Float64MultiArray)):
+            return
+        if not self.clock.on_step(data := msg.data) and not self._bad_clock_warned:
             self._bad_clock_warned = True
             self.get_logger().warning(
                 f'{self._clock_topic}: data {list(data)} is not [version, step_index, time, ...] with a time '

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from formation_msgs_py.tags import FOREIGN_REASONS
+
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 from formation_msgs_py.middleware import LIVELINESS_LEASE, LOST_GRACE
 from formation_msgs_py.topics import trigger_info_topic
@@ -467,6 +469,8 @@ class RunBook:
                 'by_agent': by_agent,
                 'simulator': dict(self.rejected),
             },
+            # Refused for their tag (formation_msgs_py.tags): without one, or not the run's key's.
+            'foreign_messages': sum(by_reason.get(reason, 0) for reason in FOREIGN_REASONS),
             'injected_faults': {
                 'dropped': sum(r.dropped for r in reports),
                 'delayed': sum(r.delayed for r in reports),

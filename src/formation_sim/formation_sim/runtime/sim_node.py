@@ -51,6 +51,7 @@ from formation_agent.ros.config import SAFETY_PARAMETERS
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     MessageError,
+    check_array,
     decode_command,
     decode_trigger_info,
     encode_sensed_state,
@@ -60,22 +61,9 @@ from formation_msgs_py.codec import (
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.types import SensedState
-from formation_msgs_py.topics import (
-    CLOCK_TOPIC,
-    GROUND_TRUTH_TOPIC,
-    MARKERS_TOPIC,
-    REPORT_TOPIC,
-    SCENARIO_TOPIC,
-    SENSING_LOG_TOPIC,
-    SIMULATOR_NODE,
-    STATE_TOPIC,
-    STATUS_TOPIC,
-    STEP_TOPIC,
-    command_topic,
-    sense_service,
-    trigger_info_topic,
-)
-from formation_sim.analysis.markers import MARKERS_TYPE
+from formation_msgs_py.tags import TagError
+from formation_msgs_py.topic_table import EXACT, recorded_topics
+from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
@@ -152,26 +140,14 @@ outstanding stays far below the writers' depths (24 runs of 24 complete since, v
 
 
 def formation_topics(scenario: Scenario) -> list[tuple[str, str]]:
-    """Every topic of a run of `scenario` with its type, as a recorder wants them."""
-    array = 'std_msgs/msg/Float64MultiArray'
-    double = scenario.dynamics == 'double'
-    command_type = 'geometry_msgs/msg/Accel' if double else 'geometry_msgs/msg/Twist'
-    topics = [
-        (STEP_TOPIC, array),
-        (STATUS_TOPIC, array),
-        (STATE_TOPIC, array),
-        (GROUND_TRUTH_TOPIC, 'geometry_msgs/msg/PoseArray'),
-        (SENSING_LOG_TOPIC, 'std_msgs/msg/String'),
-        (CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock'),
-        (REPORT_TOPIC, 'std_msgs/msg/String'),
-        (SCENARIO_TOPIC, 'std_msgs/msg/String'),
-        (MARKERS_TOPIC, MARKERS_TYPE),
-    ]
-    for i in scenario.agent_ids:
-        topics.append((command_topic(i, double=double), command_type))
-        for j in scenario.neighbours(i):
-            topics.append((trigger_info_topic(i, j), array))
-    return topics
+    """Every topic of a run of `scenario` with its type, as a recorder wants them: the exact
+    backend's rows of the topic table (`formation_msgs_py.topic_table`)."""
+    return recorded_topics(
+        backend=EXACT,
+        agent_ids=scenario.agent_ids,
+        neighbours=scenario.neighbours,
+        conditions={scenario.dynamics},
+    )
 
 
 def agent_parameters(
@@ -536,7 +512,12 @@ def _trigger_readers(node: FormationSimulatorNode) -> dict:
 
 def _on_trigger_info(node: FormationSimulatorNode, msg, agent: int) -> None:
     """Agent `agent`'s triggering information: the sensing call answered at its stamp was its
-    trigger (a message that is not its layout, or not its own, changes nothing)."""
+    trigger (a message that is not its layout, or not its own, or without the run's valid tag,
+    changes nothing: agent j refuses and counts it)."""
+    try:
+        check_array(node.verifier, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg)
+    except TagError:
+        return
     try:
         info = decode_trigger_info(msg)
     except MessageError:

@@ -36,9 +36,18 @@ from formation_agent.ros.parameters import (
     read_parameters,
 )
 from formation_agent.ros.process import EXECUTORS
-from formation_msgs_py.codec import MessageError, decode_agent_report, decode_status, encode_step
+from formation_msgs_py.codec import (
+    MessageError,
+    check_array,
+    check_string,
+    decode_agent_report,
+    decode_status,
+    encode_step,
+    tag_array,
+)
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
+from formation_msgs_py.tags import KeyFileError, TagError, read_key, run_tags
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
 from formation_sim.runtime.operator_stop import OperatorStop
@@ -147,6 +156,15 @@ TIME_KEEPER_PARAMETERS = (
         choices=EXECUTORS,
         description='rclpy executor: events (EventsExecutor) or single (SingleThreadedExecutor)',
     ),
+    ParameterSpec(
+        name='key_file',
+        type=STRING,
+        default='',
+        description=(
+            "the run's key (docs/HOSTILE_TRAFFIC.md, Tags; formation run writes DIR/run.key, mode 0600): "
+            "Steps are tagged, Statuses and reports without a valid tag refused; '': no tags"
+        ),
+    ),
 )
 """What the coordinator and the simulator share."""
 
@@ -243,6 +261,7 @@ class TimeKeeperNode(WorldHooks, Node):
         super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
         values, scenario = _checked_parameters(self, scenario)
         self.parameter_values = values
+        self.signer, self.verifier = run_tags(values['key_file'], writer=node_name)  # the run's tag
         self.out_dir = values['out_dir']
         self.sample_period = values['sample_period']
         self.extra_subscribers = values['extra_subscribers']
@@ -263,10 +282,7 @@ class TimeKeeperNode(WorldHooks, Node):
         # For tools: the scenario once (so a bag is self-contained).
         self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
         self._tool_publishers = [self._scenario_pub]
-        self._status_sub = self.create_subscription(
-            Float64MultiArray, STATUS_TOPIC, self._on_status, READER_QOS
-        )
-        self._report_sub = self.create_subscription(String, REPORT_TOPIC, self._on_report, READER_QOS)
+        self._status_sub, self._report_sub = _agent_readers(self)
         # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
         # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
         # every reliable keep-last writer of the run overwrite what it did not acknowledge.
@@ -405,6 +421,7 @@ class TimeKeeperNode(WorldHooks, Node):
     # -- the agents' messages -------------------------------------------------------------------
 
     def _publish(self, publisher, msg) -> None:
+        msg = tag_array(msg, self.signer, STEP_TOPIC) if publisher is self._step_pub else msg
         publisher.publish(msg)
         self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
 
@@ -586,12 +603,50 @@ def blamed(node: TimeKeeperNode, error: BaseException) -> BaseException:
     return error
 
 
+def _agent_readers(node: TimeKeeperNode) -> tuple:
+    """The keeper's readers of the agents' Statuses and reports: what comes without the run's
+    valid tag is refused first (`tag_refused`)."""
+    return (
+        node.create_subscription(
+            Float64MultiArray,
+            STATUS_TOPIC,
+            lambda msg: _tagged(node, STATUS_TOPIC, msg, node._on_status),
+            READER_QOS,
+        ),
+        node.create_subscription(
+            String, REPORT_TOPIC, lambda msg: _tagged(node, REPORT_TOPIC, msg, node._on_report), READER_QOS
+        ),
+    )
+
+
+def _tagged(node: TimeKeeperNode, topic: str, msg, then) -> None:
+    """`then(msg)` unless `msg` lacks the run's valid tag (a Status array, a report string)."""
+    if not tag_refused(node, topic, msg, check_array if topic == STATUS_TOPIC else check_string):
+        then(msg)
+
+
+def tag_refused(node: TimeKeeperNode, topic: str, msg, check) -> bool:
+    """Whether `msg` lacks the run's valid tag for `topic` (`check`: codec.check_array or
+    check_string); refused and counted (untagged and forged: foreign) by the keeper."""
+    try:
+        check(node.verifier, topic, msg)
+    except TagError as error:
+        node._reject(topic, error.reason, str(error))
+        return True
+    return False
+
+
 def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
     """Every parameter of `node` read and every rule checked before anything is set up: one
     ParameterError names every problem (the command exits 2, nothing started, the node
     destroyed); else (the values, the scenario)."""
     specs = [spec for spec in node.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
     values, problems = read_parameters(node, specs)
+    if values.get('key_file'):
+        try:
+            read_key(values['key_file'])
+        except KeyFileError as error:
+            problems.append(str(error))
     if scenario is None and 'scenario' in values:
         try:
             scenario = load_scenario(values['scenario'])

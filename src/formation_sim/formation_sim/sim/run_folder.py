@@ -19,6 +19,8 @@ import shutil
 import time
 from pathlib import Path
 
+from formation_msgs_py.tags import KEY_FILE
+
 RUNS_ROOT = Path('runs')
 
 # Every entry a run or its analysis leaves at the top of its folder (a test keeps this list true
@@ -38,6 +40,7 @@ RUN_ENTRIES = frozenset(
         'robots.params.yaml',
         'simulator.params.yaml',
         'coordinator.params.yaml',
+        KEY_FILE,  # the run's key (docs/HOSTILE_TRAFFIC.md, Tags)
         'graph.json',
         'bag',
         'logs',

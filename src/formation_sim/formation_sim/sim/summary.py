@@ -35,6 +35,9 @@ keys):
   simulator could not: how, and every process's exit
 - `extra.rejected_messages`: distributed runs: {total, by_reason, by_agent, simulator}: messages
   refused as malformed or implausible, per reason (`formation_msgs_py.lockstep.REJECT_REASONS`)
+- `extra.foreign_messages`: distributed runs: how many of them were refused for their tag, none or
+  not the run key's (`untagged`, `forged`: docs/HOSTILE_TRAFFIC.md, "Tags"); `replayed` ones are
+  counted under their reason only
 - `extra.non_finite`: only when a value was not a finite number (NaN or infinite: JSON has
   neither): where it was (e.g. 'edges[0].max_length') -> 'nan', 'inf' or '-inf'; it is written null
 - `extra.injected_faults`: distributed runs: {dropped, delayed, by_agent}: triggering information
