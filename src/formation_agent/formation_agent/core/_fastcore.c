@@ -21,6 +21,7 @@
 #include <Python.h>
 #include <math.h>
 #include <string.h>
+#include <structmember.h>
 
 #define WIDTH1 9  /* Eta1Agent._row: anchor, y0, y1, y2, v0, v1, v2, speed, capacity */
 #define WIDTH2 11 /* Eta2Agent._row: anchor, y0, y1, y2, q0, q1, q2, u0, u1, u2, capacity */
@@ -61,6 +62,18 @@ static inline int out_of_range(Model *md, Py_ssize_t k, double r, double c) {
     return ERR_RANGE;
 }
 
+/* The tail of both probes (_fast_probe's return): e plus the command's offset, and the rate. */
+static inline int probe_out(const Model *md, double e0, double e1, double e2, double d0, double d1, double d2,
+                            double *out) {
+    out[0] = e0 + md->u_off[0];
+    out[1] = e1 + md->u_off[1];
+    out[2] = e2 + md->u_off[2];
+    out[3] = d0;
+    out[4] = d1;
+    out[5] = d2;
+    return OK;
+}
+
 /* Eta1Agent._fast_probe: e and (with_rate) its rate, padded to three components. */
 static int probe1(Model *md, double t, int with_rate, double *out) {
     double e0 = 0.0, e1 = 0.0, e2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
@@ -96,13 +109,7 @@ static int probe1(Model *md, double t, int with_rate, double *out) {
     }
     if (with_rate)
         md->cap = cap;
-    out[0] = e0 + md->u_off[0];
-    out[1] = e1 + md->u_off[1];
-    out[2] = e2 + md->u_off[2];
-    out[3] = d0;
-    out[4] = d1;
-    out[5] = d2;
-    return OK;
+    return probe_out(md, e0, e1, e2, d0, d1, d2, out);
 }
 
 /* Eta1Agent._fast_bounds */
@@ -189,13 +196,7 @@ static int probe2(Model *md, double t, int with_rate, double *out) {
         p[2] = sqrt(a0 * a0 + a1 * a1 + a2 * a2);
         p[3] = c;
     }
-    out[0] = e0 + md->u_off[0];
-    out[1] = e1 + md->u_off[1];
-    out[2] = e2 + md->u_off[2];
-    out[3] = d0;
-    out[4] = d1;
-    out[5] = d2;
-    return OK;
+    return probe_out(md, e0, e1, e2, d0, d1, d2, out);
 }
 
 /* Eta2Agent._fast_bounds */
@@ -523,14 +524,10 @@ static int run(Model *md, const Search *s, State *st, double until) {
 
 /* ---- Python glue ---------------------------------------------------------------------------- */
 
-/* Attribute names, interned once (PyInit__fastcore). */
-enum {
-    N_ALPHA, N_BETA, N_FLOOR, N_LIMIT, N_TOLERANCE, N_FRONTIER, N_SPAN, N_STEPS, N_RESULT, N_COVER, N_MODEL,
-    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_NAMES
-};
+/* Attribute names of the agent (the model), interned once (PyInit__fastcore). */
+enum { N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_TRIGGERS, N_INFOS, N_NAMES };
 static const char *NAME_TEXT[N_NAMES] = {
-    "alpha", "beta", "floor", "limit", "tolerance", "frontier", "_span", "steps", "result", "_cover", "model",
-    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3",
+    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3", "triggers", "infos_received",
 };
 static PyObject *NAMES[N_NAMES];
 static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
@@ -544,13 +541,13 @@ static int get_double(PyObject *obj, int name, double *out) {
     return (*out == -1.0 && PyErr_Occurred()) ? -1 : 0;
 }
 
-static int set_double(PyObject *obj, int name, double value) {
-    PyObject *v = PyFloat_FromDouble(value);
-    if (v == NULL)
+static int get_long(PyObject *obj, int name, long *out) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
+    if (value == NULL)
         return -1;
-    int rc = PyObject_SetAttr(obj, NAMES[name], v);
-    Py_DECREF(v);
-    return rc;
+    *out = PyLong_AsLong(value);
+    Py_DECREF(value);
+    return (*out == -1 && PyErr_Occurred()) ? -1 : 0;
 }
 
 /* A sequence of `count` floats into out. */
@@ -577,15 +574,6 @@ static int read_floats(PyObject *seq, double *out, Py_ssize_t count, const char 
     return 0;
 }
 
-static int read_attr_floats(PyObject *obj, int name, double *out, Py_ssize_t count) {
-    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
-    if (value == NULL)
-        return -1;
-    int rc = read_floats(value, out, count, NAME_TEXT[name]);
-    Py_DECREF(value);
-    return rc;
-}
-
 static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
     (void)self;
     static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser", NULL};
@@ -601,20 +589,23 @@ static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
-/* The model (the agent) as the loop reads it; md->rows allocated here (PyMem_Free it). */
+/* The model (the agent) as the loop reads it: its kind, gains, the command's offset and its
+ * rows, packed into md (md->rows allocated here, freed by the caller with PyMem_Free). */
 static int read_model(PyObject *model, Model *md) {
-    PyObject *kind = PyObject_GetAttr(model, NAMES[N_KIND]);
-    if (kind == NULL)
+    long kind;
+    if (get_long(model, N_KIND, &kind) < 0)
         return -1;
-    md->kind = (int)PyLong_AsLong(kind);
-    Py_DECREF(kind);
-    if (md->kind != 1 && md->kind != 2) {
-        if (!PyErr_Occurred())
-            PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %d", md->kind);
+    if (kind != 1 && kind != 2) {
+        PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %ld", kind);
         return -1;
     }
-    if (read_attr_floats(model, N_U_OFFSET, md->u_off, 3) < 0 ||
-        get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
+    md->kind = (int)kind;
+    PyObject *offset = PyObject_GetAttr(model, NAMES[N_U_OFFSET]);
+    if (offset == NULL)
+        return -1;
+    int rc = read_floats(offset, md->u_off, 3, "_u_offset");
+    Py_DECREF(offset);
+    if (rc < 0 || get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
         return -1;
     if (md->kind == 2 &&
         (get_double(model, N_K1, &md->k1) < 0 || get_double(model, N_K2, &md->k2) < 0 ||
@@ -648,49 +639,6 @@ static int read_model(PyObject *model, Model *md) {
     return 0;
 }
 
-static int read_search(PyObject *search, Search *s, State *st) {
-    if (get_double(search, N_ALPHA, &s->alpha) || get_double(search, N_BETA, &s->beta) ||
-        get_double(search, N_FLOOR, &s->floor) || get_double(search, N_LIMIT, &s->limit) ||
-        get_double(search, N_TOLERANCE, &s->tolerance) || get_double(search, N_FRONTIER, &st->frontier) ||
-        get_double(search, N_SPAN, &st->span))
-        return -1;
-    PyObject *steps = PyObject_GetAttr(search, NAMES[N_STEPS]);
-    if (steps == NULL)
-        return -1;
-    st->steps = PyLong_AsLong(steps);
-    Py_DECREF(steps);
-    if (st->steps == -1 && PyErr_Occurred())
-        return -1;
-    PyObject *old = PyObject_GetAttr(search, NAMES[N_RESULT]);
-    if (old == NULL)
-        return -1;
-    if (old != Py_None) {
-        st->has_result = 1;
-        st->result = PyFloat_AsDouble(old);
-    }
-    Py_DECREF(old);
-    if (st->has_result && PyErr_Occurred())
-        return -1;
-    double cov[3];
-    if (read_attr_floats(search, N_COVER, cov, 3) < 0)
-        return -1;
-    st->cover_end = cov[0];
-    st->bound_e = cov[1];
-    st->bound_curv = cov[2];
-    return 0;
-}
-
-static int write_search(PyObject *search, const State *st) {
-    PyObject *cover = Py_BuildValue("(ddd)", st->cover_end, st->bound_e, st->bound_curv);
-    if (cover == NULL)
-        return -1;
-    int rc = PyObject_SetAttr(search, NAMES[N_COVER], cover);
-    Py_DECREF(cover);
-    if (rc < 0 || set_double(search, N_FRONTIER, st->frontier) < 0 || set_double(search, N_SPAN, st->span) < 0)
-        return -1;
-    return st->has_result ? set_double(search, N_RESULT, st->result) : 0;
-}
-
 /* The error the pure-Python path raises with a message: compiled._raise(model, problem) raises it. */
 static void raise_problem(PyObject *model, PyObject *problem) {
     if (problem == NULL)
@@ -703,69 +651,192 @@ static void raise_problem(PyObject *model, PyObject *problem) {
     }
 }
 
-/* advance(search, until): CrossingSearch.advance for a plain-float agent (search.model). Writes
- * the search's frontier, _span, _cover, result and steps as the Python loop does and returns its
- * result; errors are the Python path's (steps counted, the rest left, as there). */
-static PyObject *advance(PyObject *self, PyObject *args) {
-    (void)self;
-    PyObject *search;
-    double until;
-    if (!PyArg_ParseTuple(args, "Od", &search, &until))
-        return NULL;
+/* ---- Search: CrossingSearch of a plain-float agent, its state and packed rows in C ---------- */
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *model;
+    Model md;                 /* md.rows == NULL until the first advance reads the model */
+    long known_triggers;      /* the model's knowledge when md was read: (triggers, infos_received) */
+    long known_infos;
+    Search s;
+    State st;
+    double start;
+} SearchObject;
+
+/* The packed model, read again when the agent's knowledge changed since it was read (as the
+ * Python path, which reads the agent's rows at every evaluation). */
+static int search_model(SearchObject *self) {
+    long triggers, infos;
+    if (get_long(self->model, N_TRIGGERS, &triggers) < 0 || get_long(self->model, N_INFOS, &infos) < 0)
+        return -1;
+    if (self->md.rows != NULL && triggers == self->known_triggers && infos == self->known_infos)
+        return 0;
+    PyMem_Free(self->md.rows);
+    memset(&self->md, 0, sizeof self->md);
+    if (read_model(self->model, &self->md) < 0) {
+        PyMem_Free(self->md.rows);
+        self->md.rows = NULL;
+        return -1;
+    }
+    self->known_triggers = triggers;
+    self->known_infos = infos;
+    return 0;
+}
+
+static PyObject *search_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static char *names[] = {"model", "start", "alpha", "beta", "limit", "tolerance", "initial_step", "floor", NULL};
+    PyObject *model;
+    double start, alpha, beta, limit, tolerance, initial_step, floor_;
     if (!configured) {
         PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not called");
         return NULL;
     }
-    Model md;
-    Search s;
-    State st;
-    memset(&md, 0, sizeof md);
-    memset(&st, 0, sizeof st);
-    if (read_search(search, &s, &st) < 0)
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O$ddddddd", names, &model, &start, &alpha, &beta, &limit,
+                                     &tolerance, &initial_step, &floor_))
         return NULL;
-    PyObject *model = PyObject_GetAttr(search, NAMES[N_MODEL]);
-    if (model == NULL)
+    SearchObject *self = (SearchObject *)type->tp_alloc(type, 0);
+    if (self == NULL)
         return NULL;
-    PyObject *result = NULL;
-    if (read_model(model, &md) < 0)
-        goto done;
-    int status = run(&md, &s, &st, until);
-    PyObject *steps = PyLong_FromLong(st.steps);
-    if (steps == NULL)
-        goto done;
-    int rc = PyObject_SetAttr(search, NAMES[N_STEPS], steps);
-    Py_DECREF(steps);
-    if (rc < 0)
-        goto done;
-    switch (status) {
-    case OK:
-        if (write_search(search, &st) == 0)
-            result = st.has_result ? PyFloat_FromDouble(st.result) : Py_NewRef(Py_None);
-        break;
-    case ERR_OVERFLOW:
-        PyErr_SetString(PyExc_OverflowError, "math range error");
-        break;
-    case ERR_RANGE:
-        raise_problem(model, Py_BuildValue("(sndd)", "range", md.bad_k, md.bad_r, md.bad_c));
-        break;
-    case ERR_STEPS:
-        raise_problem(model, Py_BuildValue("(sd)", "steps", st.bad_a));
-        break;
-    default:
-        raise_problem(model, Py_BuildValue("(sddd)", "finite", st.bad_a, st.bad_size_sq, st.bad_size_rate));
-    }
-done:
-    PyMem_Free(md.rows);
-    Py_DECREF(model);
-    return result;
+    self->model = Py_NewRef(model);
+    self->start = start;
+    self->s = (Search){.alpha = alpha, .beta = beta, .floor = floor_, .limit = limit, .tolerance = tolerance};
+    /* CrossingSearch.__init__: at the start, no result, no step, the first span, no last step. */
+    self->st.frontier = start;
+    self->st.span = initial_step;
+    self->st.cover_end = -INFINITY;
+    self->st.bound_e = NAN;
+    self->st.bound_curv = NAN;
+    return (PyObject *)self;
 }
+
+static int search_traverse(SearchObject *self, visitproc visit, void *arg) {
+    Py_VISIT(self->model);
+    return 0;
+}
+
+static int search_clear(SearchObject *self) {
+    Py_CLEAR(self->model);
+    return 0;
+}
+
+static void search_dealloc(SearchObject *self) {
+    PyObject_GC_UnTrack(self);
+    search_clear(self);
+    PyMem_Free(self->md.rows);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *search_result(SearchObject *self, void *closure) {
+    (void)closure;
+    return self->st.has_result ? PyFloat_FromDouble(self->st.result) : Py_NewRef(Py_None);
+}
+
+/* advance(until): CrossingSearch.advance; its result (None: not done yet). Errors are the Python
+ * path's: the failing step counted, the frontier left where it was. */
+static PyObject *search_advance(SearchObject *self, PyObject *arg) {
+    double until = PyFloat_AsDouble(arg);
+    if (until == -1.0 && PyErr_Occurred())
+        return NULL;
+    State *st = &self->st;
+    if (!st->has_result && st->frontier <= until) { /* else the loop would not take a step */
+        if (self->model == NULL) {
+            PyErr_SetString(PyExc_RuntimeError, "search without a model");
+            return NULL;
+        }
+        if (search_model(self) < 0)
+            return NULL;
+        switch (run(&self->md, &self->s, st, until)) {
+        case OK:
+            break;
+        case ERR_OVERFLOW:
+            PyErr_SetString(PyExc_OverflowError, "math range error");
+            return NULL;
+        case ERR_RANGE:
+            raise_problem(self->model, Py_BuildValue("(sndd)", "range", self->md.bad_k, self->md.bad_r,
+                                                     self->md.bad_c));
+            return NULL;
+        case ERR_STEPS:
+            raise_problem(self->model, Py_BuildValue("(sd)", "steps", st->bad_a));
+            return NULL;
+        default:
+            raise_problem(self->model,
+                          Py_BuildValue("(sddd)", "finite", st->bad_a, st->bad_size_sq, st->bad_size_rate));
+            return NULL;
+        }
+    }
+    return search_result(self, NULL);
+}
+
+static PyObject *search_run(SearchObject *self, PyObject *unused) {
+    (void)unused;
+    PyObject *inf = PyFloat_FromDouble(INFINITY);
+    if (inf == NULL)
+        return NULL;
+    PyObject *out = search_advance(self, inf);
+    Py_DECREF(inf);
+    return out;
+}
+
+static PyObject *search_done(SearchObject *self, void *closure) {
+    (void)closure;
+    return PyBool_FromLong(self->st.has_result);
+}
+
+static PyObject *search_cover(SearchObject *self, void *closure) {
+    (void)closure;
+    return Py_BuildValue("(ddd)", self->st.cover_end, self->st.bound_e, self->st.bound_curv);
+}
+
+static PyMemberDef search_members[] = {
+    {"model", T_OBJECT, offsetof(SearchObject, model), READONLY, "the agent whose error is searched"},
+    {"start", T_DOUBLE, offsetof(SearchObject, start), READONLY, "where the search began"},
+    {"alpha", T_DOUBLE, offsetof(SearchObject, s.alpha), READONLY, "α of the threshold c0 + α e^{-βt}"},
+    {"beta", T_DOUBLE, offsetof(SearchObject, s.beta), READONLY, "β of the threshold"},
+    {"floor", T_DOUBLE, offsetof(SearchObject, s.floor), READONLY, "c0 of the threshold"},
+    {"limit", T_DOUBLE, offsetof(SearchObject, s.limit), READONLY, "no crossing searched past this time"},
+    {"tolerance", T_DOUBLE, offsetof(SearchObject, s.tolerance), READONLY, "the margin that counts as reached"},
+    {"frontier", T_DOUBLE, offsetof(SearchObject, st.frontier), READONLY,
+     "the next point examined; no crossing in [start, frontier)"},
+    {"steps", T_LONG, offsetof(SearchObject, st.steps), READONLY, "certified steps taken"},
+    {"_span", T_DOUBLE, offsetof(SearchObject, st.span), READONLY, "the next trial span"},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyGetSetDef search_getset[] = {
+    {"result", (getter)search_result, NULL, "None until done, then the crossing time (inf: none up to limit)",
+     NULL},
+    {"done", (getter)search_done, NULL, "True once the result is known", NULL},
+    {"_cover", (getter)search_cover, NULL, "(end, E, E2): the last step's bounds", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef search_methods[] = {
+    {"advance", (PyCFunction)search_advance, METH_O,
+     "advance(until): certified steps while the frontier is <= until; the result (None: not done yet)."},
+    {"run", (PyCFunction)search_run, METH_NOARGS, "run(): search to the end; the crossing time, or inf."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject SearchType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "formation_agent.core._fastcore.Search",
+    .tp_doc = "Search(model, *, start, alpha, beta, limit, tolerance, initial_step, floor): "
+              "crossing.CrossingSearch of a plain-float agent (p <= 3), compiled; the same floats.",
+    .tp_basicsize = sizeof(SearchObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = search_new,
+    .tp_dealloc = (destructor)search_dealloc,
+    .tp_traverse = (traverseproc)search_traverse,
+    .tp_clear = (inquiry)search_clear,
+    .tp_members = search_members,
+    .tp_getset = search_getset,
+    .tp_methods = search_methods,
+};
 
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
      "constants and the function that raises the Python path's errors."},
-    {"advance", advance, METH_VARARGS,
-     "advance(search, until): CrossingSearch.advance for a plain-float agent (search.model); its result."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -780,5 +851,14 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
         if (NAMES[i] == NULL)
             return NULL;
     }
-    return PyModule_Create(&module);
+    if (PyType_Ready(&SearchType) < 0)
+        return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL)
+        return NULL;
+    if (PyModule_AddObjectRef(m, "Search", (PyObject *)&SearchType) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

@@ -81,9 +81,11 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def kernel():
-    """The compiled advance(search, until) for a plain-float agent, or None for the pure-Python path."""
-    return _fastcore.advance if _active else None
+def search_type():
+    """The compiled twin of `crossing.CrossingSearch` for a plain-float agent (`_fastcore.Search`: the
+    same constructor, attributes and floats, its state and the agent's packed rows held in C), or
+    None for the pure-Python path."""
+    return _fastcore.Search if _active else None
 
 
 def _raise(model, problem: tuple) -> None:

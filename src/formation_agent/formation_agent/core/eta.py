@@ -354,7 +354,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
             # The first trial span only sets how fast the certified steps grow, never what they
             # certify; the agent's own last inter-event time is its natural scale. It depends on
             # the knowledge alone, so a robot and the simulator take the same steps.
-            search = CrossingSearch(
+            search = (self._search_type() or CrossingSearch)(
                 self,
                 start=self.last_event,
                 alpha=threshold.alpha,
@@ -378,11 +378,11 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     _kind = 0  # 1: ETA-1, 2: ETA-2 (the compiled core's layout of `_row`)
 
-    @property
-    def search_kernel(self):
-        """The compiled search loop for this agent (the plain-float path, p <= 3), or None: the
-        search then calls the methods below (formation_agent.core.compiled; the same floats)."""
-        return compiled.kernel() if self._fast else None
+    def _search_type(self):
+        """The compiled search (`_fastcore.Search`) for this agent (the plain-float path, p <= 3), or
+        None: `CrossingSearch` then calls the methods below (formation_agent.core.compiled; the same
+        floats)."""
+        return compiled.search_type() if self._fast else None
 
     def error(self, t: float) -> np.ndarray:
         """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
