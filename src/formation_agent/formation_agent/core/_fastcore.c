@@ -525,9 +525,21 @@ static int run(Model *md, const Search *s, State *st, double until) {
 /* ---- Python glue ---------------------------------------------------------------------------- */
 
 /* Attribute names of the agent (the model), interned once (PyInit__fastcore). */
-enum { N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_TRIGGERS, N_INFOS, N_NAMES };
+enum {
+    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_TRIGGERS, N_INFOS,
+    /* receive: the agent's */
+    N_HOOD, N_SLOT, N_AGENT_ID, N_DIMENSION, N_FAST, N_EDGE_TIME, N_LAST_TRIGGER, N_OFFSETS3, N_ANCHOR_TIME,
+    N_ANCHOR_Y, N_NEIGHBOUR_CONTROL, N_HEARD, N_EDGE_Y, N_EDGE_U, N_EDGE_Q, N_ANCHOR_Q, N_U, N_CAPACITY,
+    N_LAST_EVENT, N_SEARCH, N_RESULT,
+    /* receive: the TriggerInfo's */
+    N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY, N_NAMES
+};
 static const char *NAME_TEXT[N_NAMES] = {
     "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3", "triggers", "infos_received",
+    "_hood", "slot", "agent_id", "dimension", "_fast", "_edge_time", "last_trigger", "_offsets3", "_anchor_time",
+    "_anchor_y", "_neighbour_control", "_heard", "_edge_y", "_edge_u", "_edge_q", "_anchor_q", "_u", "_capacity",
+    "last_event", "_search", "result",
+    "sender", "receiver", "stamp", "control", "rel_position", "rel_velocity",
 };
 static PyObject *NAMES[N_NAMES];
 static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
@@ -833,10 +845,289 @@ static PyTypeObject SearchType = {
     .tp_methods = search_methods,
 };
 
+/* ---- receive: _EventTriggeredAgent.receive of a plain-float agent --------------------------- */
+
+/* Owned references, released together. */
+typedef struct {
+    PyObject *items[48];
+    int n;
+} Held;
+
+static PyObject *hold(Held *h, PyObject *obj) {
+    if (obj != NULL)
+        h->items[h->n++] = obj;
+    return obj;
+}
+
+static void release(Held *h) {
+    while (h->n > 0)
+        Py_DECREF(h->items[--h->n]);
+}
+
+/* `value` as p finite floats when it is a tuple or list of p floats or ints (Neighbourhood.floats
+ * accepts these with the same values); 0 otherwise, without an error set: the Python path decides. */
+static int plain_floats(PyObject *value, Py_ssize_t p, double *out) {
+    if (!(PyTuple_CheckExact(value) || PyList_CheckExact(value)) || PySequence_Fast_GET_SIZE(value) != p)
+        return 0;
+    PyObject **items = PySequence_Fast_ITEMS(value);
+    for (Py_ssize_t i = 0; i < p; i++) {
+        if (!(PyFloat_Check(items[i]) || PyLong_Check(items[i])))
+            return 0;
+        double v = PyFloat_AsDouble(items[i]);
+        if (v == -1.0 && PyErr_Occurred()) {
+            PyErr_Clear();
+            return 0;
+        }
+        if (!isfinite(v))
+            return 0;
+        out[i] = v;
+    }
+    return 1;
+}
+
+/* A number (float or int) as a double; 0 without an error set otherwise. */
+static int plain_double(PyObject *value, double *out) {
+    if (!(PyFloat_Check(value) || PyLong_Check(value)))
+        return 0;
+    *out = PyFloat_AsDouble(value);
+    if (*out == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        return 0;
+    }
+    return 1;
+}
+
+static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
+    PyObject *t = PyTuple_New(n);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *x = PyFloat_FromDouble(v[i]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, x);
+    }
+    return t;
+}
+
+/* list[k] = value (a new reference, stolen); -1 on error. */
+static int list_put(PyObject *list, Py_ssize_t k, PyObject *value) {
+    if (value == NULL)
+        return -1;
+    if (!PyList_CheckExact(list) || k >= PyList_GET_SIZE(list)) {
+        Py_DECREF(value);
+        PyErr_SetString(PyExc_TypeError, "receive: the agent's edge lists are not lists of its edges");
+        return -1;
+    }
+    PyList_SetItem(list, k, value);
+    return 0;
+}
+
+/* obj[key] = value (value a new reference, released); -1 on error. */
+static int item_put(PyObject *obj, PyObject *key, PyObject *value) {
+    if (value == NULL)
+        return -1;
+    int rc = PyObject_SetItem(obj, key, value);
+    Py_DECREF(value);
+    return rc;
+}
+
+/* The message read and checked as the Python path checks it; 0: leave it to the Python path. */
+typedef struct {
+    Py_ssize_t k, p;
+    int kind;
+    double stamp, rel[3], control[3], velocity[3];
+} Message;
+
+static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) {
+    PyObject *hood = hold(h, PyObject_GetAttr(agent, NAMES[N_HOOD]));
+    PyObject *agent_id = hood ? hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID])) : NULL;
+    PyObject *receiver = agent_id ? hold(h, PyObject_GetAttr(info, NAMES[N_RECEIVER])) : NULL;
+    PyObject *sender = receiver ? hold(h, PyObject_GetAttr(info, NAMES[N_SENDER])) : NULL;
+    PyObject *slot = sender ? hold(h, PyObject_GetAttr(hood, NAMES[N_SLOT])) : NULL;
+    if (slot == NULL || !PyDict_CheckExact(slot))
+        return -1;
+    int same = PyObject_RichCompareBool(receiver, agent_id, Py_EQ);
+    if (same <= 0) /* an error: the Python path raises it, or its own */
+        return same < 0 ? (PyErr_Clear(), 0) : 0;
+    PyObject *k = PyDict_GetItemWithError(slot, sender);
+    if (k == NULL)
+        return PyErr_Occurred() ? (PyErr_Clear(), 0) : 0;
+    msg->k = PyLong_AsSsize_t(k);
+    long kind, p, fast;
+    if (msg->k < 0 || get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p < 1 || p > 3 || (kind != 1 && kind != 2))
+        return 0;
+    msg->kind = (int)kind;
+    msg->p = p;
+    PyObject *stamp = hold(h, PyObject_GetAttr(info, NAMES[N_STAMP]));
+    PyObject *edge_time = stamp ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
+    PyObject *last_trigger = edge_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    if (last_trigger == NULL)
+        return -1;
+    if (!plain_double(stamp, &msg->stamp) || !isfinite(msg->stamp) || !PyList_CheckExact(edge_time) ||
+        msg->k >= PyList_GET_SIZE(edge_time))
+        return 0;
+    double edge, last = -INFINITY;
+    if (!plain_double(PyList_GET_ITEM(edge_time, msg->k), &edge) ||
+        (last_trigger != Py_None && !plain_double(last_trigger, &last)))
+        return 0;
+    if (msg->stamp < edge || (last_trigger != Py_None && msg->stamp < last))
+        return 0; /* back in time: the Python path raises */
+    PyObject *rel = hold(h, PyObject_GetAttr(info, NAMES[N_REL_POSITION]));
+    PyObject *control = rel ? hold(h, PyObject_GetAttr(info, NAMES[N_CONTROL])) : NULL;
+    PyObject *velocity = control ? hold(h, PyObject_GetAttr(info, NAMES[N_REL_VELOCITY])) : NULL;
+    if (velocity == NULL)
+        return -1;
+    if (!plain_floats(rel, p, msg->rel) || !plain_floats(control, p, msg->control))
+        return 0;
+    if (kind == 2 && (velocity == Py_None || !plain_floats(velocity, p, msg->velocity)))
+        return 0;
+    return 1;
+}
+
+/* The agent's knowledge updated as the Python path updates it (the same floats). */
+static int take_message(PyObject *agent, Held *h, const Message *msg) {
+    Py_ssize_t k = msg->k, p = msg->p;
+    double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
+    PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
+    PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
+    PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
+    hold(h, offset);
+    hold(h, cap);
+    if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
+        read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
+        return -1;
+    for (Py_ssize_t i = 0; i < p; i++) {
+        y[i] = -msg->rel[i] - d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
+        uj[i] = msg->control[i];
+        q[i] = -msg->velocity[i];
+    }
+    PyObject *key = hold(h, PyLong_FromSsize_t(k));
+    PyObject *anchor_time = key ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME])) : NULL;
+    PyObject *anchor_y = anchor_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Y])) : NULL;
+    PyObject *neighbour_control = anchor_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_CONTROL])) : NULL;
+    PyObject *heard = neighbour_control ? hold(h, PyObject_GetAttr(agent, NAMES[N_HEARD])) : NULL;
+    PyObject *edge_time = heard ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
+    PyObject *edge_y = edge_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Y])) : NULL;
+    PyObject *edge_u = edge_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U])) : NULL;
+    PyObject *rows = edge_u ? hold(h, PyObject_GetAttr(agent, NAMES[N_ROWS])) : NULL;
+    if (rows == NULL)
+        return -1;
+    if (msg->kind == 2) { /* Eta2Agent._receive_extra */
+        PyObject *anchor_q = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Q]));
+        PyObject *edge_q = anchor_q ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Q])) : NULL;
+        if (edge_q == NULL || item_put(anchor_q, key, floats_tuple(q, p)) < 0 ||
+            list_put(edge_q, k, floats_tuple(q, 3)) < 0)
+            return -1;
+    }
+    if (item_put(anchor_time, key, PyFloat_FromDouble(msg->stamp)) < 0 ||
+        item_put(anchor_y, key, floats_tuple(y, p)) < 0 ||
+        item_put(neighbour_control, key, floats_tuple(uj, p)) < 0 || item_put(heard, key, Py_NewRef(Py_True)) < 0 ||
+        list_put(edge_time, k, PyFloat_FromDouble(msg->stamp)) < 0 || list_put(edge_y, k, floats_tuple(y, 3)) < 0 ||
+        list_put(edge_u, k, floats_tuple(uj, 3)) < 0)
+        return -1;
+    double row[WIDTH2];
+    Py_ssize_t width;
+    row[0] = msg->stamp;
+    row[1] = y[0];
+    row[2] = y[1];
+    row[3] = y[2];
+    if (msg->kind == 1) { /* Eta1Agent._row */
+        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
+        row[4] = v0;
+        row[5] = v1;
+        row[6] = v2;
+        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+        row[8] = c;
+        width = WIDTH1;
+    } else { /* Eta2Agent._row */
+        row[4] = q[0];
+        row[5] = q[1];
+        row[6] = q[2];
+        row[7] = u[0] - uj[0];
+        row[8] = u[1] - uj[1];
+        row[9] = u[2] - uj[2];
+        row[10] = c;
+        width = WIDTH2;
+    }
+    return list_put(rows, k, floats_tuple(row, width));
+}
+
+/* The counters, the last event, and the plan dropped unless it is due at or before the message. */
+static int after_message(PyObject *agent, Held *h, double stamp) {
+    long infos;
+    double last;
+    PyObject *last_event = hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_EVENT]));
+    if (last_event == NULL || get_long(agent, N_INFOS, &infos) < 0)
+        return -1;
+    PyObject *count = PyLong_FromLong(infos + 1);
+    if (count == NULL || PyObject_SetAttr(agent, NAMES[N_INFOS], count) < 0) {
+        Py_XDECREF(count);
+        return -1;
+    }
+    Py_DECREF(count);
+    last = PyFloat_AsDouble(last_event);
+    if (last == -1.0 && PyErr_Occurred())
+        return -1;
+    if (stamp > last) { /* max(self.last_event, stamp) */
+        PyObject *now = PyFloat_FromDouble(stamp);
+        int rc = now == NULL ? -1 : PyObject_SetAttr(agent, NAMES[N_LAST_EVENT], now);
+        Py_XDECREF(now);
+        if (rc < 0)
+            return -1;
+    }
+    PyObject *search = hold(h, PyObject_GetAttr(agent, NAMES[N_SEARCH]));
+    if (search == NULL)
+        return -1;
+    if (search != Py_None) {
+        PyObject *result = hold(h, PyObject_GetAttr(search, NAMES[N_RESULT]));
+        if (result == NULL)
+            return -1;
+        if (result != Py_None) {
+            double due = PyFloat_AsDouble(result);
+            if (due == -1.0 && PyErr_Occurred())
+                return -1;
+            if (due <= stamp)
+                return 0; /* already due at or before this time: its own trigger re-plans everything */
+        }
+    }
+    return PyObject_SetAttr(agent, NAMES[N_SEARCH], Py_None);
+}
+
+/* receive(agent, info): _EventTriggeredAgent.receive for a plain-float agent (p <= 3), the same
+ * updates and floats. False, with nothing changed, where a check fails or the message is not made
+ * of plain tuples and floats: the Python path then takes it (and raises its error). */
+static PyObject *receive(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agent, *info;
+    if (!PyArg_ParseTuple(args, "OO", &agent, &info))
+        return NULL;
+    Held h = {.n = 0};
+    Message msg;
+    int status = read_message(agent, info, &h, &msg);
+    if (status == 1)
+        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+    release(&h);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
      "constants and the function that raises the Python path's errors."},
+    {"receive", receive, METH_VARARGS,
+     "receive(agent, info): the agent's receive for a plain-float agent; False (nothing changed): the "
+     "Python path takes it."},
     {NULL, NULL, 0, NULL},
 };
 

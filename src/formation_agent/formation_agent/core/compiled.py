@@ -88,6 +88,12 @@ def search_type():
     return _fastcore.Search if _active else None
 
 
+def receiver():
+    """The compiled `receive(agent, info)` of a plain-float agent (True: taken; False: nothing changed,
+    the agent's Python `receive` takes the message), or None for the pure-Python path."""
+    return _fastcore.receive if _active else None
+
+
 def _raise(model, problem: tuple) -> None:
     """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]

@@ -203,7 +203,12 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     def receive(self, info: TriggerInfo) -> None:
         """Take a neighbour's triggering information (ETA-1 step 6, ETA-2 step 7: predict anew
-        from its time)."""
+        from its time). A plain-float agent takes it compiled where the compiled core runs
+        (`compiled.receiver`: the same updates and floats; a message it does not accept as it is —
+        one this method refuses, or not plain tuples of floats — comes here)."""
+        fast = compiled.receiver() if self._fast else None
+        if fast is not None and fast(self, info):
+            return
         hood = self._hood
         k = hood.sender_slot(info)
         stamp = hood.time(info.stamp, 'information from agent {}', info.sender)
