@@ -18,7 +18,7 @@ import pytest
 
 from formation_agent.core import compiled
 from formation_agent.core.crossing import CrossingError, CrossingSearch
-from formation_agent.core.eta import Eta1Agent, Eta2Agent
+from formation_agent.core.eta import Eta1Agent, Eta2Agent, TriggerOutput
 from formation_agent.core.neighbourhood import AgentError
 from formation_msgs_py.types import SensedState, TriggerInfo
 from formation_sim.model.generate import random_scenario
@@ -199,12 +199,14 @@ def test_the_step_limit_is_the_same_error_on_both_paths(both, monkeypatch):
         return str(caught.value), search.steps
 
     monkeypatch.setattr(crossing, 'MAX_STEPS', 3)
-    compiled.configure(gap_fraction=0.125)  # hands the compiled core the patched limit
+    compiled.configure(
+        gap_fraction=0.125, trigger_output=TriggerOutput
+    )  # hands the compiled core the patched limit
     try:
         pure, fast = both(attempt)
     finally:
         monkeypatch.undo()
-        compiled.configure(gap_fraction=0.125)
+        compiled.configure(gap_fraction=0.125, trigger_output=TriggerOutput)
     assert pure == fast
     assert pure[0].startswith('no convergence after 3 certified steps (t=')
 
@@ -324,8 +326,19 @@ def test_receive_and_trigger_leave_the_same_knowledge_on_both_paths(both, seed):
                 rel_velocities=vel if double else None,
                 velocity=(0.0,) * p if double else None,
             )
-            agent.trigger(t, sensed)
-            states.append(_knowledge(agent))
+            bad = rng.integers(0, 8)
+            if bad == 0:  # a neighbour missing
+                sensed = SensedState(**{**_fields(sensed), 'rel_positions': dict(list(rel.items())[1:])})
+            elif bad == 1:  # an edge out of its range
+                far = {**rel, ids[0]: tuple(v + 10.0 for v in rel[ids[0]])}
+                sensed = SensedState(**{**_fields(sensed), 'rel_positions': far})
+            elif bad == 2:  # another agent's sensing
+                sensed = SensedState(**{**_fields(sensed), 'agent': 2})
+            try:
+                out = agent.trigger(t - (bad == 3) * 0.5, sensed)  # 3: before the last trigger
+                states.append((_knowledge(agent), _output(out)))
+            except AgentError as error:
+                states.append(str(error))
             for _ in range(int(rng.integers(1, 3 * len(ids)))):
                 t += float(rng.choice([0.0, rng.uniform(0.0, 1e-2)]))
                 info = _message(rng, agent, int(rng.choice(ids)), t, double=double)
@@ -356,3 +369,39 @@ def test_receive_and_trigger_leave_the_same_knowledge_on_both_paths(both, seed):
 
 def _fields(info):
     return {name: getattr(info, name) for name in info.__slots__}
+
+
+def _output(out):
+    """A TriggerOutput by bits: its time, command and every message."""
+    infos = [
+        (i.sender, i.receiver, _bits(i.stamp), [_bits(v) for v in (*i.control, *i.rel_position)])
+        + (None if i.rel_velocity is None else tuple(_bits(v) for v in i.rel_velocity),)
+        for i in out.infos
+    ]
+    assert all(type(v) is float for i in out.infos for v in (*i.control, *i.rel_position))
+    return _bits(out.time), [_bits(v) for v in out.control.tolist()], out.control.shape, infos
+
+
+@pytest.mark.parametrize('double', [False, True])
+def test_plain_messages_and_sensing_are_taken_compiled(both, double):
+    # The compiled receive and trigger do take plain input (else the test above compares Python with Python).
+    rng = np.random.default_rng(3)
+    agent = _random_agent(rng, double=double, dimension=2)
+    ids = agent.neighbour_ids
+    sensed = SensedState(
+        agent=1,
+        stamp=0.0,
+        rel_positions={j: tuple(agent.offsets[k]) for k, j in enumerate(ids)},
+        rel_velocities=dict.fromkeys(ids, (0.1, 0.0)) if double else None,
+        velocity=(0.0, 0.0) if double else None,
+    )
+    compiled.use_compiled(True)
+    out = compiled.trigger()(agent, 0.0, sensed)
+    assert out is not None and len(out.infos) == len(ids) and agent.triggers == 1
+    info = _message(np.random.default_rng(1), agent, ids[0], 0.5, double=double)
+    info = TriggerInfo(**{**_fields(info), 'control': (0.5, -0.25), 'rel_position': (0.25, 0.5)})
+    assert compiled.receiver()(agent, info) is True and agent.infos_received == 1
+    assert (
+        compiled.receiver()(agent, TriggerInfo(**{**_fields(info), 'stamp': 0.25})) is False
+    )  # back in time
+    assert agent.infos_received == 1

@@ -532,7 +532,10 @@ enum {
     N_ANCHOR_Y, N_NEIGHBOUR_CONTROL, N_HEARD, N_EDGE_Y, N_EDGE_U, N_EDGE_Q, N_ANCHOR_Q, N_U, N_CAPACITY,
     N_LAST_EVENT, N_SEARCH, N_RESULT,
     /* receive: the TriggerInfo's */
-    N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY, N_NAMES
+    N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY,
+    /* trigger: the agent's and the SensedState's */
+    N_AGENT, N_NEIGHBOUR_IDS, N_REL_POSITIONS, N_REL_VELOCITIES, N_SPEED_SCALE, N_SENSED_Q, N_OFFSET, N_INTERVAL,
+    N_NAMES
 };
 static const char *NAME_TEXT[N_NAMES] = {
     "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3", "triggers", "infos_received",
@@ -540,9 +543,14 @@ static const char *NAME_TEXT[N_NAMES] = {
     "_anchor_y", "_neighbour_control", "_heard", "_edge_y", "_edge_u", "_edge_q", "_anchor_q", "_u", "_capacity",
     "last_event", "_search", "result",
     "sender", "receiver", "stamp", "control", "rel_position", "rel_velocity",
+    "agent", "neighbour_ids", "rel_positions", "rel_velocities", "speed_scale", "_sensed_q", "_offset", "_interval",
 };
 static PyObject *NAMES[N_NAMES];
 static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
+/* What trigger builds its output with (configure): np.array, TriggerOutput, TriggerInfo, their keywords. */
+static PyObject *NP_ARRAY = NULL, *TRIGGER_OUTPUT = NULL, *TRIGGER_INFO = NULL, *INFO_NAMES = NULL,
+                *OUTPUT_NAMES = NULL;
+static int DIRECT_INFO = 0, DIRECT_OUTPUT = 0; /* plain frozen slots dataclasses (compiled.plain_record) */
 
 static int get_double(PyObject *obj, int name, double *out) {
     PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
@@ -588,15 +596,35 @@ static int read_floats(PyObject *seq, double *out, Py_ssize_t count, const char 
 
 static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
     (void)self;
-    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser", NULL};
-    PyObject *coefficients, *raiser;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO", names, &GROWTH, &MAX_STEPS, &RTOL, &GAP_FRACTION,
-                                     &SERIES_LIMIT, &coefficients, &raiser))
+    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser",
+                            "array", "trigger_output", "trigger_info", "direct_output", "direct_info", NULL};
+    PyObject *coefficients, *raiser, *array = NULL, *output = NULL, *info = NULL;
+    int direct_output, direct_info;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO" "OOO" "pp", names, &GROWTH, &MAX_STEPS, &RTOL,
+                                     &GAP_FRACTION, &SERIES_LIMIT, &coefficients, &raiser, &array, &output, &info,
+                                     &direct_output, &direct_info))
         return NULL;
+    if (!PyType_Check(output) || !PyType_Check(info)) {
+        PyErr_SetString(PyExc_TypeError, "trigger_output and trigger_info must be types");
+        return NULL;
+    }
+    DIRECT_OUTPUT = direct_output;
+    DIRECT_INFO = direct_info;
     if (read_floats(coefficients, SERIES, N_SERIES, "series") < 0)
         return NULL;
     Py_INCREF(raiser);
     Py_XSETREF(RAISER, raiser);
+    /* trigger's output: np.array, TriggerOutput(time, control, infos), TriggerInfo(sender, ...) */
+    if (INFO_NAMES == NULL) {
+        INFO_NAMES = Py_BuildValue("(ssssss)", "sender", "receiver", "stamp", "control", "rel_position",
+                                   "rel_velocity");
+        OUTPUT_NAMES = Py_BuildValue("(sss)", "time", "control", "infos");
+        if (INFO_NAMES == NULL || OUTPUT_NAMES == NULL)
+            return NULL;
+    }
+    Py_XSETREF(NP_ARRAY, Py_NewRef(array));
+    Py_XSETREF(TRIGGER_OUTPUT, Py_NewRef(output));
+    Py_XSETREF(TRIGGER_INFO, Py_NewRef(info));
     configured = 1;
     Py_RETURN_NONE;
 }
@@ -925,13 +953,45 @@ static int list_put(PyObject *list, Py_ssize_t k, PyObject *value) {
     return 0;
 }
 
-/* obj[key] = value (value a new reference, released); -1 on error. */
-static int item_put(PyObject *obj, PyObject *key, PyObject *value) {
-    if (value == NULL)
+/* Write n values at item `start` of a C-contiguous array of `format` ("d": float64, "?": bool) with
+ * items of `size` bytes: the agent's numpy mirrors, as `array[k] = ...` stores them. */
+static int put_items(PyObject *array, const char *format, Py_ssize_t size, Py_ssize_t start, const void *values,
+                     Py_ssize_t n) {
+    Py_buffer view;
+    if (PyObject_GetBuffer(array, &view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
         return -1;
-    int rc = PyObject_SetItem(obj, key, value);
-    Py_DECREF(value);
-    return rc;
+    int fits = view.itemsize == size && view.format != NULL && strcmp(view.format, format) == 0 && start >= 0 &&
+               (start + n) * size <= view.len;
+    if (fits)
+        memcpy((char *)view.buf + start * size, values, (size_t)(n * size));
+    PyBuffer_Release(&view);
+    if (!fits)
+        PyErr_Format(PyExc_TypeError, "an agent's mirror is not a contiguous array of '%s' of its edges", format);
+    return fits ? 0 : -1;
+}
+
+static int put_doubles(PyObject *array, Py_ssize_t start, const double *values, Py_ssize_t n) {
+    return put_items(array, "d", sizeof(double), start, values, n);
+}
+
+/* m rows of p of the padded vectors, packed (for the (m, p) numpy mirrors). */
+static void pack_rows(double (*rows)[3], Py_ssize_t m, Py_ssize_t p, double *out) {
+    for (Py_ssize_t k = 0; k < m; k++)
+        for (Py_ssize_t i = 0; i < p; i++)
+            out[k * p + i] = rows[k][i];
+}
+
+/* A frozen slots dataclass of `names`, built as its __init__ builds it (object.__setattr__ of each
+ * field) where configure found it a plain one (DIRECT), else by calling it. */
+static PyObject *make_record(PyObject *type, int direct, PyObject *names, PyObject *const *values) {
+    Py_ssize_t n = PyTuple_GET_SIZE(names);
+    if (!direct)
+        return PyObject_Vectorcall(type, values, 0, names);
+    PyObject *obj = ((PyTypeObject *)type)->tp_alloc((PyTypeObject *)type, 0);
+    for (Py_ssize_t i = 0; obj != NULL && i < n; i++)
+        if (PyObject_GenericSetAttr(obj, PyTuple_GET_ITEM(names, i), values[i]) < 0)
+            Py_CLEAR(obj);
+    return obj;
 }
 
 /* The message read and checked as the Python path checks it; 0: leave it to the Python path. */
@@ -1010,8 +1070,7 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
         uj[i] = msg->control[i];
         q[i] = -msg->velocity[i];
     }
-    PyObject *key = hold(h, PyLong_FromSsize_t(k));
-    PyObject *anchor_time = key ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME])) : NULL;
+    PyObject *anchor_time = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME]));
     PyObject *anchor_y = anchor_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Y])) : NULL;
     PyObject *neighbour_control = anchor_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_CONTROL])) : NULL;
     PyObject *heard = neighbour_control ? hold(h, PyObject_GetAttr(agent, NAMES[N_HEARD])) : NULL;
@@ -1024,13 +1083,13 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
     if (msg->kind == 2) { /* Eta2Agent._receive_extra */
         PyObject *anchor_q = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Q]));
         PyObject *edge_q = anchor_q ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Q])) : NULL;
-        if (edge_q == NULL || item_put(anchor_q, key, floats_tuple(q, p)) < 0 ||
+        if (edge_q == NULL || put_doubles(anchor_q, k * p, q, p) < 0 ||
             list_put(edge_q, k, floats_tuple(q, 3)) < 0)
             return -1;
     }
-    if (item_put(anchor_time, key, PyFloat_FromDouble(msg->stamp)) < 0 ||
-        item_put(anchor_y, key, floats_tuple(y, p)) < 0 ||
-        item_put(neighbour_control, key, floats_tuple(uj, p)) < 0 || item_put(heard, key, Py_NewRef(Py_True)) < 0 ||
+    const char yes = 1;
+    if (put_doubles(anchor_time, k, &msg->stamp, 1) < 0 || put_doubles(anchor_y, k * p, y, p) < 0 ||
+        put_doubles(neighbour_control, k * p, uj, p) < 0 || put_items(heard, "?", 1, k, &yes, 1) < 0 ||
         list_put(edge_time, k, PyFloat_FromDouble(msg->stamp)) < 0 || list_put(edge_y, k, floats_tuple(y, 3)) < 0 ||
         list_put(edge_u, k, floats_tuple(uj, 3)) < 0)
         return -1;
@@ -1121,6 +1180,299 @@ static PyObject *receive(PyObject *self, PyObject *args) {
     return PyBool_FromLong(status);
 }
 
+/* ---- trigger: _EventTriggeredAgent.trigger of a plain-float agent without the safety layer --- */
+
+#define MAX_EDGES 64
+
+/* What a trigger is handed, read and checked as the Python path checks it. */
+typedef struct {
+    Py_ssize_t m, p;
+    int kind;
+    double t;
+    double rel[MAX_EDGES][3], extra[MAX_EDGES][3], y[MAX_EDGES][3], length[MAX_EDGES];
+} Sensing;
+
+/* One vector of p finite floats per neighbour (Neighbourhood.rows): 0 where the Python path decides. */
+static int sensed_rows(PyObject *values, PyObject *ids, Sensing *in, double (*out)[3]) {
+    if (values == NULL || !PyDict_CheckExact(values) || PyDict_GET_SIZE(values) != in->m)
+        return 0;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        PyObject *row = PyDict_GetItemWithError(values, PyTuple_GET_ITEM(ids, k));
+        if (row == NULL)
+            return PyErr_Occurred() ? (PyErr_Clear(), 0) : 0;
+        if (!plain_floats(row, in->p, out[k]))
+            return 0;
+        for (Py_ssize_t i = in->p; i < 3; i++)
+            out[k][i] = 0.0; /* padded to three components */
+    }
+    return 1;
+}
+
+static int read_sensing(PyObject *agent, PyObject *t_obj, PyObject *sensed, Held *h, Sensing *in) {
+    long kind, p, fast;
+    if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p < 1 || p > 3 || (kind != 1 && kind != 2) || !plain_double(t_obj, &in->t) || !isfinite(in->t))
+        return 0;
+    in->kind = (int)kind;
+    in->p = p;
+    PyObject *agent_id = hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID]));
+    PyObject *who = agent_id ? hold(h, PyObject_GetAttr(sensed, NAMES[N_AGENT])) : NULL;
+    PyObject *ids = who ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_IDS])) : NULL;
+    PyObject *last_trigger = ids ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    PyObject *offsets = last_trigger ? hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3])) : NULL;
+    PyObject *capacity = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    int same = PyObject_RichCompareBool(who, agent_id, Py_EQ);
+    if (same <= 0)
+        return same < 0 ? (PyErr_Clear(), 0) : 0;
+    double last;
+    if (last_trigger != Py_None && (!plain_double(last_trigger, &last) || in->t < last))
+        return 0;
+    if (!PyTuple_CheckExact(ids) || PyTuple_GET_SIZE(ids) > MAX_EDGES || !PyList_CheckExact(offsets) ||
+        !PyList_CheckExact(capacity))
+        return 0;
+    in->m = PyTuple_GET_SIZE(ids);
+    PyObject *rel = hold(h, PyObject_GetAttr(sensed, NAMES[N_REL_POSITIONS]));
+    if (rel == NULL)
+        return -1;
+    if (!sensed_rows(rel, ids, in, in->rel))
+        return 0;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        double d[3], c;
+        if (read_floats(PyList_GET_ITEM(offsets, k), d, 3, "_offsets3") < 0)
+            return -1;
+        if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
+            return 0;
+        double sum = 0.0;
+        for (Py_ssize_t i = 0; i < 3; i++)
+            in->y[k][i] = 0.0;
+        for (Py_ssize_t i = 0; i < p; i++) {
+            in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
+            sum += in->y[k][i] * in->y[k][i];   /* sum(v * v for v in row): from 0, left to right */
+        }
+        in->length[k] = sqrt(sum);
+        if (in->length[k] >= c)
+            return 0; /* out of its range: the Python path raises */
+    }
+    if (kind == 2) {
+        PyObject *vel = hold(h, PyObject_GetAttr(sensed, NAMES[N_REL_VELOCITIES]));
+        if (vel == NULL)
+            return -1;
+        if (!sensed_rows(vel, ids, in, in->extra))
+            return 0;
+    }
+    return 1;
+}
+
+/* [t] * m, or a list of the rows as tuples of n floats. */
+static PyObject *rows_list(double (*rows)[3], Py_ssize_t m, Py_ssize_t n) {
+    PyObject *list = PyList_New(m);
+    for (Py_ssize_t k = 0; list != NULL && k < m; k++) {
+        PyObject *row = floats_tuple(rows[k], n);
+        if (row == NULL)
+            Py_CLEAR(list);
+        else
+            PyList_SET_ITEM(list, k, row);
+    }
+    return list;
+}
+
+static int set_attr(PyObject *obj, int name, PyObject *value) { /* value: a new reference, released */
+    if (value == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, NAMES[name], value);
+    Py_DECREF(value);
+    return rc;
+}
+
+
+/* The new input (_update, _command) and the knowledge after the trigger, as the Python path. */
+static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset) {
+    Py_ssize_t m = in->m, p = in->p;
+    double total[3] = {0.0, 0.0, 0.0}, k1 = 0.0, k2 = 0.0;
+    if (in->kind == 2 && (get_double(agent, N_K1, &k1) < 0 || get_double(agent, N_K2, &k2) < 0))
+        return -1;
+    PyObject *capacity = hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY]));
+    if (capacity == NULL)
+        return -1;
+    for (Py_ssize_t k = 0; k < m; k++) { /* _weighted_sum */
+        double r = in->length[k], c = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        double gap = c - r;
+        double w = (2.0 * c - r) / (gap * gap); /* ω_ij (fij) */
+        for (Py_ssize_t i = 0; i < p; i++) {
+            double v = in->kind == 1 ? in->y[k][i] : k1 * in->y[k][i] + k2 * in->extra[k][i];
+            total[i] += w * v;
+        }
+    }
+    double kappa = 1.0;
+    if (in->kind == 1 && get_double(agent, N_SPEED_SCALE, &kappa) < 0)
+        return -1;
+    for (Py_ssize_t i = 0; i < 3; i++) {
+        offset[i] = i < p ? -total[i] : 0.0; /* (uxsingle) / (uxdouble) */
+        control[i] = i < p && in->kind == 1 ? kappa * offset[i] : offset[i]; /* κ u_i (ETA-1) */
+    }
+    double packed[MAX_EDGES * 3];
+    for (Py_ssize_t k = 0; k < m; k++)
+        packed[k] = in->t;
+    PyObject *anchor_time = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME]));
+    PyObject *anchor_y = anchor_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Y])) : NULL;
+    PyObject *edge_u = anchor_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U])) : NULL;
+    if (edge_u == NULL || put_doubles(anchor_time, 0, packed, m) < 0 || !PyList_CheckExact(edge_u) ||
+        PyList_GET_SIZE(edge_u) != m)
+        return -1;
+    pack_rows(in->y, m, p, packed);
+    if (put_doubles(anchor_y, 0, packed, m * p) < 0)
+        return -1;
+    if (in->kind == 2) { /* Eta2Agent._update */
+        PyObject *anchor_q = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Q]));
+        if (anchor_q != NULL)
+            pack_rows(in->extra, m, p, packed);
+        if (anchor_q == NULL || put_doubles(anchor_q, 0, packed, m * p) < 0 ||
+            set_attr(agent, N_SENSED_Q, rows_list(in->extra, m, p)) < 0 ||
+            set_attr(agent, N_EDGE_Q, rows_list(in->extra, m, 3)) < 0)
+            return -1;
+    }
+    PyObject *command = hold(h, floats_tuple(control, p)), *own = hold(h, floats_tuple(offset, p));
+    if (command == NULL || own == NULL || set_attr(agent, N_CONTROL, PyObject_CallOneArg(NP_ARRAY, command)) < 0 ||
+        set_attr(agent, N_OFFSET, PyObject_CallOneArg(NP_ARRAY, own)) < 0)
+        return -1;
+    PyObject *rows = PyList_New(m);
+    if (rows == NULL || set_attr(agent, N_ROWS, Py_NewRef(rows)) < 0) {
+        Py_XDECREF(rows);
+        return -1;
+    }
+    hold(h, rows);
+    for (Py_ssize_t k = 0; k < m; k++) {
+        double uj[3], row[WIDTH2], *y = in->y[k];
+        if (read_floats(PyList_GET_ITEM(edge_u, k), uj, 3, "_edge_u") < 0)
+            return -1;
+        row[0] = in->t;
+        row[1] = y[0];
+        row[2] = y[1];
+        row[3] = y[2];
+        if (in->kind == 1) { /* Eta1Agent._row */
+            double v0 = control[0] - uj[0], v1 = control[1] - uj[1], v2 = control[2] - uj[2];
+            row[4] = v0;
+            row[5] = v1;
+            row[6] = v2;
+            row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+            row[8] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        } else { /* Eta2Agent._row */
+            const double *q = in->extra[k];
+            row[4] = q[0];
+            row[5] = q[1];
+            row[6] = q[2];
+            row[7] = control[0] - uj[0];
+            row[8] = control[1] - uj[1];
+            row[9] = control[2] - uj[2];
+            row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        }
+        PyObject *packed = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
+        if (packed == NULL)
+            return -1;
+        PyList_SET_ITEM(rows, k, packed);
+    }
+    double norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
+    PyObject *edge_time = PyList_New(m); /* [t] * m */
+    for (Py_ssize_t k = 0; edge_time != NULL && k < m; k++) {
+        PyObject *x = PyFloat_FromDouble(in->t);
+        if (x == NULL)
+            Py_CLEAR(edge_time);
+        else
+            PyList_SET_ITEM(edge_time, k, x);
+    }
+    if (set_attr(agent, N_EDGE_TIME, edge_time) < 0 || set_attr(agent, N_EDGE_Y, rows_list(in->y, m, 3)) < 0 ||
+        set_attr(agent, N_U, floats_tuple(control, 3)) < 0 || set_attr(agent, N_U_OFFSET, floats_tuple(offset, 3)) < 0 ||
+        set_attr(agent, N_CONTROL_NORM, PyFloat_FromDouble(norm)) < 0)
+        return -1;
+    return 0;
+}
+
+/* The counters and times after a trigger (_interval, last_trigger, last_event, the plan dropped). */
+static int after_trigger(PyObject *agent, Held *h, PyObject *t) {
+    double now = PyFloat_AsDouble(t), last_event;
+    long triggers;
+    PyObject *last_trigger = hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER]));
+    PyObject *last = last_trigger ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_EVENT])) : NULL;
+    if (last == NULL || get_long(agent, N_TRIGGERS, &triggers) < 0)
+        return -1;
+    if (last_trigger != Py_None) {
+        double before = PyFloat_AsDouble(last_trigger);
+        if (now > before && set_attr(agent, N_INTERVAL, PyFloat_FromDouble(now - before)) < 0)
+            return -1;
+    }
+    last_event = PyFloat_AsDouble(last);
+    if (PyErr_Occurred() || PyObject_SetAttr(agent, NAMES[N_LAST_TRIGGER], t) < 0 ||
+        (now > last_event && PyObject_SetAttr(agent, NAMES[N_LAST_EVENT], t) < 0) ||
+        PyObject_SetAttr(agent, NAMES[N_SEARCH], Py_None) < 0 ||
+        set_attr(agent, N_TRIGGERS, PyLong_FromLong(triggers + 1)) < 0)
+        return -1;
+    return 0;
+}
+
+/* TriggerOutput(time=t, control=np.array(control), infos=(TriggerInfo(...) per neighbour)). */
+static PyObject *trigger_output(PyObject *agent, Held *h, Sensing *in, PyObject *t, const double *control) {
+    PyObject *agent_id = hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID]));
+    PyObject *ids = agent_id ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_IDS])) : NULL;
+    PyObject *command = ids ? hold(h, floats_tuple(control, in->p)) : NULL;
+    PyObject *infos = command ? hold(h, PyTuple_New(in->m)) : NULL;
+    if (infos == NULL)
+        return NULL;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        PyObject *rel = floats_tuple(in->rel[k], in->p);
+        PyObject *velocity = in->kind == 1 ? Py_NewRef(Py_None) : floats_tuple(in->extra[k], in->p);
+        PyObject *info = NULL;
+        if (rel != NULL && velocity != NULL) {
+            PyObject *args[6] = {agent_id, PyTuple_GET_ITEM(ids, k), t, command, rel, velocity};
+            info = make_record(TRIGGER_INFO, DIRECT_INFO, INFO_NAMES, args);
+        }
+        Py_XDECREF(rel);
+        Py_XDECREF(velocity);
+        if (info == NULL)
+            return NULL;
+        PyTuple_SET_ITEM(infos, k, info);
+    }
+    PyObject *array = hold(h, PyObject_CallOneArg(NP_ARRAY, command));
+    if (array == NULL)
+        return NULL;
+    PyObject *args[3] = {t, array, infos};
+    return make_record(TRIGGER_OUTPUT, DIRECT_OUTPUT, OUTPUT_NAMES, args);
+}
+
+/* trigger(agent, t, sensed): _EventTriggeredAgent.trigger for a plain-float agent (p <= 3) without
+ * the safety layer, the same updates, floats and output. None, with nothing changed, where a check
+ * fails or the sensing is not made of plain tuples and floats: the Python path then takes it. */
+static PyObject *trigger(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agent, *t_obj, *sensed;
+    if (!PyArg_ParseTuple(args, "OOO", &agent, &t_obj, &sensed))
+        return NULL;
+    if (TRIGGER_OUTPUT == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not given the trigger's types");
+        return NULL;
+    }
+    Held h = {.n = 0};
+    Sensing *in = PyMem_Malloc(sizeof(Sensing));
+    if (in == NULL)
+        return PyErr_NoMemory();
+    PyObject *out = NULL;
+    int status = read_sensing(agent, t_obj, sensed, &h, in);
+    if (status == 0)
+        out = Py_NewRef(Py_None);
+    else if (status == 1) {
+        double control[3], offset[3];
+        PyObject *t = hold(&h, PyFloat_FromDouble(in->t));
+        if (t != NULL && take_sensing(agent, &h, in, control, offset) == 0 && after_trigger(agent, &h, t) == 0)
+            out = trigger_output(agent, &h, in, t, control);
+    }
+    release(&h);
+    PyMem_Free(in);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
@@ -1128,6 +1480,9 @@ static PyMethodDef methods[] = {
     {"receive", receive, METH_VARARGS,
      "receive(agent, info): the agent's receive for a plain-float agent; False (nothing changed): the "
      "Python path takes it."},
+    {"trigger", trigger, METH_VARARGS,
+     "trigger(agent, t, sensed): the agent's trigger for a plain-float agent without the safety layer; its "
+     "TriggerOutput, or None (nothing changed): the Python path takes it."},
     {NULL, NULL, 0, NULL},
 };
 

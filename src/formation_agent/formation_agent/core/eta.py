@@ -74,7 +74,6 @@ SCALE_GAINS: dict[str, float] = {
 # c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
 # within a small factor of the local values.
 _GAP_FRACTION = 0.125
-compiled.configure(gap_fraction=_GAP_FRACTION)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -84,6 +83,9 @@ class TriggerOutput:
     time: float
     control: np.ndarray
     infos: tuple[TriggerInfo, ...]
+
+
+compiled.configure(gap_fraction=_GAP_FRACTION, trigger_output=TriggerOutput)
 
 
 class _AgentHooks:
@@ -246,7 +248,12 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     ) -> TriggerOutput:
         """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering
         information. `nearby`: x_i - x_j of the other robots within the safety layer's sensing
-        radius (only read with the layer on, docs/SAFETY.md)."""
+        radius (only read with the layer on, docs/SAFETY.md). A plain-float agent without the safety
+        layer triggers compiled where the compiled core runs (`compiled.trigger`: the same updates,
+        floats and output; sensing it does not take as it is, or refuses, comes here)."""
+        fast = compiled.trigger() if self._fast and self._safety is None else None
+        if fast is not None and (out := fast(self, t, sensed)) is not None:
+            return out
         t = self._hood.time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
