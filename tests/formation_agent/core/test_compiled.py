@@ -405,3 +405,66 @@ def test_plain_messages_and_sensing_are_taken_compiled(both, double):
         compiled.receiver()(agent, TriggerInfo(**{**_fields(info), 'stamp': 0.25})) is False
     )  # back in time
     assert agent.infos_received == 1
+
+
+class _StubSearch:
+    """A search whose frontier walks to a drawn crossing time in drawn steps (a CrossingError at `bad`)."""
+
+    def __init__(self, rng, start):
+        self.frontier, self.result = start, None
+        self.crossing = start + float(rng.choice([0.0, rng.exponential(0.05), math.inf]))
+        self.step = float(rng.choice([1e-3, 1e-2, 0.05]))
+        self.bad = start + 0.3 if rng.integers(0, 40) == 0 else math.inf
+
+    def advance(self, until):
+        while self.result is None and self.frontier <= until:
+            if self.frontier >= self.bad:
+                raise CrossingError(f'stub at t={self.frontier!r}')
+            if self.frontier + self.step >= self.crossing:
+                self.result = self.crossing
+            else:
+                self.frontier += self.step
+        return self.result
+
+
+class _StubAgent:
+    def __init__(self, rng):
+        self.rng, self.start = rng, 0.0
+
+    def trigger_search(self, limit):
+        return _StubSearch(self.rng, self.start)
+
+
+@pytest.mark.parametrize('seed', range(12))
+def test_the_compiled_agenda_gives_the_engines_order_and_times(both, seed):
+    # formation_sim.sim.engine._Agenda on its Python heap and on _fastcore.Agenda: the same times,
+    # the same agents due, the same agent named when a search fails, on random plans and ties.
+    from formation_sim.sim.engine import EngineError, _Agenda
+
+    def make():
+        rng = np.random.default_rng(seed)
+        ids = tuple(sorted(int(i) for i in rng.choice(np.arange(100), size=12, replace=False)))
+        agents = {i: _StubAgent(np.random.default_rng([seed, i])) for i in ids}
+        agenda = _Agenda(horizon=2.0, period=None, agent_ids=ids)
+        assert (agenda.queue is not None) == compiled.active()
+        changed, seen, t = set(ids), [], 0.0
+        for _ in range(60):
+            for i in changed:
+                agents[i].start = t
+            agenda.plan(agents, changed, [], t)
+            try:
+                t_next = agenda.next_time()
+            except EngineError as error:
+                seen.append(str(error))
+                break
+            if t_next > 2.0:
+                break
+            t = t_next
+            due = agenda.pop_due(t)
+            seen.append((_bits(t), due))
+            changed = set(due) | {int(i) for i in rng.choice(ids, size=int(rng.integers(0, 4)))}
+        return seen
+
+    pure, fast = both(make)
+    assert pure == fast
+    assert len(pure) > 3

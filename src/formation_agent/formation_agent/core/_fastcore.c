@@ -774,10 +774,7 @@ static PyObject *search_result(SearchObject *self, void *closure) {
 
 /* advance(until): CrossingSearch.advance; its result (None: not done yet). Errors are the Python
  * path's: the failing step counted, the frontier left where it was. */
-static PyObject *search_advance(SearchObject *self, PyObject *arg) {
-    double until = PyFloat_AsDouble(arg);
-    if (until == -1.0 && PyErr_Occurred())
-        return NULL;
+static PyObject *search_step(SearchObject *self, double until) {
     State *st = &self->st;
     if (!st->has_result && st->frontier <= until) { /* else the loop would not take a step */
         if (self->model == NULL) {
@@ -808,14 +805,16 @@ static PyObject *search_advance(SearchObject *self, PyObject *arg) {
     return search_result(self, NULL);
 }
 
+static PyObject *search_advance(SearchObject *self, PyObject *arg) {
+    double until = PyFloat_AsDouble(arg);
+    if (until == -1.0 && PyErr_Occurred())
+        return NULL;
+    return search_step(self, until);
+}
+
 static PyObject *search_run(SearchObject *self, PyObject *unused) {
     (void)unused;
-    PyObject *inf = PyFloat_FromDouble(INFINITY);
-    if (inf == NULL)
-        return NULL;
-    PyObject *out = search_advance(self, inf);
-    Py_DECREF(inf);
-    return out;
+    return search_step(self, INFINITY);
 }
 
 static PyObject *search_done(SearchObject *self, void *closure) {
@@ -1473,6 +1472,321 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     return out;
 }
 
+
+/* ---- Agenda: the engine's next-event queue (formation_sim.sim.engine._Agenda without a period) -- */
+
+/* A heap entry (time, kind, agent, serial) as the engine's tuples: kind 1 a planned triggering time,
+ * kind 0 the frontier of a search under way; agents by their rank among the sorted ids, so that
+ * entries order as the tuples do. */
+typedef struct {
+    double key;
+    int kind;
+    Py_ssize_t slot;
+    long long number;
+} Entry;
+
+typedef struct {
+    PyObject_HEAD
+    double horizon;
+    Py_ssize_t n, size, capacity;
+    Entry *heap;
+    PyObject *ids;       /* the agents' ids, sorted (a tuple) */
+    PyObject *slots;     /* id -> rank */
+    PyObject **searches; /* per agent: its search, or NULL */
+    long long *serial;   /* per agent: the serial of its live entry */
+    long long counter;
+    PyObject *failed; /* the agent whose search raised in next_time, or None */
+} AgendaObject;
+
+static PyTypeObject AgendaType;
+
+static inline int entry_less(const Entry *a, const Entry *b) {
+    if (a->key != b->key)
+        return a->key < b->key;
+    if (a->kind != b->kind)
+        return a->kind < b->kind;
+    if (a->slot != b->slot)
+        return a->slot < b->slot;
+    return a->number < b->number;
+}
+
+static int heap_push(AgendaObject *self, Entry e) { /* heapq.heappush */
+    if (self->size == self->capacity) {
+        Py_ssize_t capacity = self->capacity ? 2 * self->capacity : 64;
+        Entry *grown = PyMem_Realloc(self->heap, sizeof(Entry) * (size_t)capacity);
+        if (grown == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        self->heap = grown;
+        self->capacity = capacity;
+    }
+    Py_ssize_t pos = self->size++;
+    while (pos > 0) {
+        Py_ssize_t parent = (pos - 1) >> 1;
+        if (!entry_less(&e, &self->heap[parent]))
+            break;
+        self->heap[pos] = self->heap[parent];
+        pos = parent;
+    }
+    self->heap[pos] = e;
+    return 0;
+}
+
+static Entry heap_pop(AgendaObject *self) { /* heapq.heappop (size > 0) */
+    Entry top = self->heap[0], last = self->heap[--self->size];
+    Py_ssize_t pos = 0, n = self->size;
+    while (1) {
+        Py_ssize_t child = 2 * pos + 1;
+        if (child >= n)
+            break;
+        if (child + 1 < n && entry_less(&self->heap[child + 1], &self->heap[child]))
+            child++;
+        if (!entry_less(&self->heap[child], &last))
+            break;
+        self->heap[pos] = self->heap[child];
+        pos = child;
+    }
+    if (n > 0)
+        self->heap[pos] = last;
+    return top;
+}
+
+static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static char *names[] = {"agent_ids", "horizon", NULL};
+    PyObject *agent_ids;
+    double horizon;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$Od", names, &agent_ids, &horizon))
+        return NULL;
+    PyObject *ids = PySequence_List(agent_ids);
+    if (ids == NULL || PyList_Sort(ids) < 0) {
+        Py_XDECREF(ids);
+        return NULL;
+    }
+    AgendaObject *self = (AgendaObject *)type->tp_alloc(type, 0);
+    if (self == NULL) {
+        Py_DECREF(ids);
+        return NULL;
+    }
+    self->horizon = horizon;
+    self->failed = Py_NewRef(Py_None);
+    self->ids = PyList_AsTuple(ids);
+    Py_DECREF(ids);
+    self->slots = PyDict_New();
+    if (self->ids == NULL || self->slots == NULL)
+        goto fail;
+    self->n = PyTuple_GET_SIZE(self->ids);
+    self->searches = PyMem_Calloc((size_t)(self->n ? self->n : 1), sizeof(PyObject *));
+    self->serial = PyMem_Calloc((size_t)(self->n ? self->n : 1), sizeof(long long));
+    if (self->searches == NULL || self->serial == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *rank = PyLong_FromSsize_t(k);
+        if (rank == NULL || PyDict_SetItem(self->slots, PyTuple_GET_ITEM(self->ids, k), rank) < 0) {
+            Py_XDECREF(rank);
+            goto fail;
+        }
+        Py_DECREF(rank);
+    }
+    if (PyDict_GET_SIZE(self->slots) != self->n) {
+        PyErr_SetString(PyExc_ValueError, "Agenda: the agent ids are not distinct");
+        goto fail;
+    }
+    return (PyObject *)self;
+fail:
+    Py_DECREF(self);
+    return NULL;
+}
+
+static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
+    for (Py_ssize_t k = 0; self->searches != NULL && k < self->n; k++)
+        Py_VISIT(self->searches[k]);
+    Py_VISIT(self->ids);
+    Py_VISIT(self->slots);
+    Py_VISIT(self->failed);
+    return 0;
+}
+
+static int agenda_clear(AgendaObject *self) {
+    for (Py_ssize_t k = 0; self->searches != NULL && k < self->n; k++)
+        Py_CLEAR(self->searches[k]);
+    Py_CLEAR(self->ids);
+    Py_CLEAR(self->slots);
+    Py_CLEAR(self->failed);
+    return 0;
+}
+
+static void agenda_dealloc(AgendaObject *self) {
+    PyObject_GC_UnTrack(self);
+    agenda_clear(self);
+    PyMem_Free(self->searches);
+    PyMem_Free(self->serial);
+    PyMem_Free(self->heap);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* method and attribute names */
+
+/* plan(agents, changed): _Agenda.plan without a period; `changed` the agents to plan anew, sorted. */
+static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
+    PyObject *agents, *changed;
+    if (!PyArg_ParseTuple(args, "O!O!", &PyDict_Type, &agents, &PyList_Type, &changed))
+        return NULL;
+    PyObject *horizon = PyFloat_FromDouble(self->horizon);
+    if (horizon == NULL)
+        return NULL;
+    for (Py_ssize_t c = 0; c < PyList_GET_SIZE(changed); c++) {
+        PyObject *id = PyList_GET_ITEM(changed, c);
+        PyObject *rank = PyDict_GetItemWithError(self->slots, id);
+        PyObject *agent = rank ? PyDict_GetItemWithError(agents, id) : NULL;
+        if (agent == NULL) {
+            if (!PyErr_Occurred())
+                PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
+            Py_DECREF(horizon);
+            return NULL;
+        }
+        Py_ssize_t k = PyLong_AsSsize_t(rank);
+        self->counter += 1;
+        self->serial[k] = self->counter;
+        /* Searched lazily (next_time): only as far as the team's next event needs. */
+        PyObject *search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+        double frontier;
+        if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
+            frontier = ((SearchObject *)search)->st.frontier;
+        } else if (search != NULL) {
+            PyObject *value = PyObject_GetAttr(search, FRONTIER);
+            frontier = value ? PyFloat_AsDouble(value) : -1.0;
+            Py_XDECREF(value);
+            if (PyErr_Occurred())
+                Py_CLEAR(search);
+        }
+        if (search == NULL) {
+            Py_DECREF(horizon);
+            return NULL;
+        }
+        Py_XSETREF(self->searches[k], search);
+        if (heap_push(self, (Entry){frontier, 0, k, self->counter}) < 0) {
+            Py_DECREF(horizon);
+            return NULL;
+        }
+    }
+    Py_DECREF(horizon);
+    Py_RETURN_NONE;
+}
+
+/* search.advance(until) -> 1 with *result (done), 0 with *frontier (not yet), -1 on error. */
+static int advance_any(PyObject *search, double until, double *result, double *frontier) {
+    PyObject *out;
+    if (Py_IS_TYPE(search, &SearchType)) {
+        out = search_step((SearchObject *)search, until);
+    } else {
+        PyObject *arg = PyFloat_FromDouble(until);
+        out = arg ? PyObject_CallMethodOneArg(search, ADVANCE, arg) : NULL;
+        Py_XDECREF(arg);
+    }
+    if (out == NULL)
+        return -1;
+    if (out != Py_None) {
+        *result = PyFloat_AsDouble(out);
+        Py_DECREF(out);
+        return PyErr_Occurred() ? -1 : 1;
+    }
+    Py_DECREF(out);
+    if (Py_IS_TYPE(search, &SearchType)) {
+        *frontier = ((SearchObject *)search)->st.frontier;
+        return 0;
+    }
+    PyObject *value = PyObject_GetAttr(search, FRONTIER);
+    if (value == NULL)
+        return -1;
+    *frontier = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return PyErr_Occurred() ? -1 : 0;
+}
+
+/* next_time(): engine._next_event_time, the earliest planned time of the team, advancing unfinished
+ * searches only as needed (ties put searches first, kind 0). A search that raises leaves its agent
+ * in `failed` and its error raised. */
+static PyObject *agenda_next_time(AgendaObject *self, PyObject *unused) {
+    (void)unused;
+    double horizon = self->horizon;
+    while (self->size > 0) {
+        Entry top = self->heap[0];
+        if (self->serial[top.slot] != top.number) {
+            heap_pop(self);
+            continue;
+        }
+        if (top.kind == 1 || top.key > horizon)
+            return PyFloat_FromDouble(top.key);
+        heap_pop(self);
+        double until = self->size > 0 ? self->heap[0].key : INFINITY, result, frontier;
+        PyObject *search = self->searches[top.slot];
+        Py_INCREF(search);
+        int status = advance_any(search, py_min(until, horizon), &result, &frontier);
+        Py_DECREF(search);
+        if (status < 0) {
+            Py_XSETREF(self->failed, Py_NewRef(PyTuple_GET_ITEM(self->ids, top.slot)));
+            return NULL;
+        }
+        if (status == 0) {
+            if (heap_push(self, (Entry){frontier, 0, top.slot, top.number}) < 0)
+                return NULL;
+        } else if (result <= horizon) {
+            if (heap_push(self, (Entry){result, 1, top.slot, top.number}) < 0)
+                return NULL;
+        }
+    }
+    return PyFloat_FromDouble(INFINITY);
+}
+
+/* pop_due(t): engine._pop_due, the agents planned for exactly t (live entries), taken off, sorted. */
+static PyObject *agenda_pop_due(AgendaObject *self, PyObject *arg) {
+    double t = PyFloat_AsDouble(arg);
+    if (t == -1.0 && PyErr_Occurred())
+        return NULL;
+    PyObject *due = PyList_New(0);
+    while (due != NULL && self->size > 0 && self->heap[0].key == t) {
+        Entry e = heap_pop(self);
+        if (e.kind == 1 && self->serial[e.slot] == e.number &&
+            PyList_Append(due, PyTuple_GET_ITEM(self->ids, e.slot)) < 0)
+            Py_CLEAR(due);
+    }
+    if (due != NULL && PyList_Sort(due) < 0)
+        Py_CLEAR(due);
+    return due;
+}
+
+static PyMemberDef agenda_members[] = {
+    {"horizon", T_DOUBLE, offsetof(AgendaObject, horizon), READONLY, "no event is planned past it"},
+    {"failed", T_OBJECT, offsetof(AgendaObject, failed), READONLY,
+     "the agent whose search raised in next_time, or None"},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyMethodDef agenda_methods[] = {
+    {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
+     "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},
+    {"pop_due", (PyCFunction)agenda_pop_due, METH_O, "pop_due(t): the agents planned for exactly t, sorted."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject AgendaType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "formation_agent.core._fastcore.Agenda",
+    .tp_doc = "Agenda(*, agent_ids, horizon): the engine's next-event queue (formation_sim.sim.engine._Agenda "
+              "without a period), compiled; the same order, the same times.",
+    .tp_basicsize = sizeof(AgendaObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = agenda_new,
+    .tp_dealloc = (destructor)agenda_dealloc,
+    .tp_traverse = (traverseproc)agenda_traverse,
+    .tp_clear = (inquiry)agenda_clear,
+    .tp_members = agenda_members,
+    .tp_methods = agenda_methods,
+};
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
@@ -1497,12 +1811,18 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
         if (NAMES[i] == NULL)
             return NULL;
     }
-    if (PyType_Ready(&SearchType) < 0)
+    if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0)
+        return NULL;
+    TRIGGER_SEARCH = PyUnicode_InternFromString("trigger_search");
+    ADVANCE = PyUnicode_InternFromString("advance");
+    FRONTIER = PyUnicode_InternFromString("frontier");
+    if (TRIGGER_SEARCH == NULL || ADVANCE == NULL || FRONTIER == NULL)
         return NULL;
     PyObject *m = PyModule_Create(&module);
     if (m == NULL)
         return NULL;
-    if (PyModule_AddObjectRef(m, "Search", (PyObject *)&SearchType) < 0) {
+    if (PyModule_AddObjectRef(m, "Search", (PyObject *)&SearchType) < 0 ||
+        PyModule_AddObjectRef(m, "Agenda", (PyObject *)&AgendaType) < 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -124,6 +124,13 @@ def trigger():
     return _fastcore.trigger if _active else None
 
 
+def agenda():
+    """The compiled next-event queue of the in-process engine without a period (`_fastcore.Agenda`, the
+    twin of formation_sim.sim.engine._Agenda's heap: the same order and times), or None for the
+    pure-Python path."""
+    return _fastcore.Agenda if _active else None
+
+
 def _raise(model, problem: tuple) -> None:
     """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]

@@ -332,7 +332,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     @property
     def ready(self) -> bool:
         """True once the agent has triggered and heard from every neighbour."""
-        return self.last_trigger is not None and bool(self._heard.all())
+        return self.last_trigger is not None and self._heard_all()
 
     def next_trigger_time(self, limit: float = math.inf) -> float:
         """Next triggering time t^i_{k+1} (ETA-1 steps 3-4, ETA-2 steps 4-5); inf if it lies beyond `limit`.
@@ -359,7 +359,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
             if not still_valid:
                 search = None
         if search is None:
-            if not self._heard.all():
+            if not self._heard_all():
                 missing = [j for j, heard in zip(self.neighbour_ids, self._heard) if not heard]
                 raise AgentError(f'agent {self.agent_id} has not heard from neighbours {missing} yet')
             threshold = self._threshold
@@ -378,6 +378,15 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
             )
             self._search = search
         return search if self._safety is None else self._capped(search)
+
+    _everyone_heard = False
+
+    def _heard_all(self) -> bool:
+        """True once every neighbour was heard (it stays so: nothing unhears one); numpy's all()
+        is asked only until then (it cost 5 % of the compiled engine, once per new search)."""
+        if not self._everyone_heard:
+            self._everyone_heard = bool(self._heard.all())
+        return self._everyone_heard
 
     _threshold: Threshold
 
