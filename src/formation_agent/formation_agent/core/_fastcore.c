@@ -528,8 +528,8 @@ static int run(Model *md, const Search *s, State *st, double until) {
 enum {
     N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_TRIGGERS, N_INFOS,
     /* receive: the agent's */
-    N_HOOD, N_SLOT, N_AGENT_ID, N_DIMENSION, N_FAST, N_EDGE_TIME, N_LAST_TRIGGER, N_OFFSETS3, N_ANCHOR_TIME,
-    N_ANCHOR_Y, N_NEIGHBOUR_CONTROL, N_HEARD, N_EDGE_Y, N_EDGE_U, N_EDGE_Q, N_ANCHOR_Q, N_U, N_CAPACITY,
+    N_HOOD, N_SLOT, N_AGENT_ID, N_DIMENSION, N_FAST, N_EDGE_TIME, N_LAST_TRIGGER, N_OFFSETS3,
+    N_HEARD, N_EDGE_Y, N_EDGE_U, N_EDGE_Q, N_U, N_CAPACITY,
     N_LAST_EVENT, N_SEARCH, N_RESULT,
     /* receive: the TriggerInfo's */
     N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY,
@@ -539,8 +539,8 @@ enum {
 };
 static const char *NAME_TEXT[N_NAMES] = {
     "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3", "triggers", "infos_received",
-    "_hood", "slot", "agent_id", "dimension", "_fast", "_edge_time", "last_trigger", "_offsets3", "_anchor_time",
-    "_anchor_y", "_neighbour_control", "_heard", "_edge_y", "_edge_u", "_edge_q", "_anchor_q", "_u", "_capacity",
+    "_hood", "slot", "agent_id", "dimension", "_fast", "_edge_time", "last_trigger", "_offsets3",
+    "_heard", "_edge_y", "_edge_u", "_edge_q", "_u", "_capacity",
     "last_event", "_search", "result",
     "sender", "receiver", "stamp", "control", "rel_position", "rel_velocity",
     "agent", "neighbour_ids", "rel_positions", "rel_velocities", "speed_scale", "_sensed_q", "_offset", "_interval",
@@ -952,34 +952,6 @@ static int list_put(PyObject *list, Py_ssize_t k, PyObject *value) {
     return 0;
 }
 
-/* Write n values at item `start` of a C-contiguous array of `format` ("d": float64, "?": bool) with
- * items of `size` bytes: the agent's numpy mirrors, as `array[k] = ...` stores them. */
-static int put_items(PyObject *array, const char *format, Py_ssize_t size, Py_ssize_t start, const void *values,
-                     Py_ssize_t n) {
-    Py_buffer view;
-    if (PyObject_GetBuffer(array, &view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-        return -1;
-    int fits = view.itemsize == size && view.format != NULL && strcmp(view.format, format) == 0 && start >= 0 &&
-               (start + n) * size <= view.len;
-    if (fits)
-        memcpy((char *)view.buf + start * size, values, (size_t)(n * size));
-    PyBuffer_Release(&view);
-    if (!fits)
-        PyErr_Format(PyExc_TypeError, "an agent's mirror is not a contiguous array of '%s' of its edges", format);
-    return fits ? 0 : -1;
-}
-
-static int put_doubles(PyObject *array, Py_ssize_t start, const double *values, Py_ssize_t n) {
-    return put_items(array, "d", sizeof(double), start, values, n);
-}
-
-/* m rows of p of the padded vectors, packed (for the (m, p) numpy mirrors). */
-static void pack_rows(double (*rows)[3], Py_ssize_t m, Py_ssize_t p, double *out) {
-    for (Py_ssize_t k = 0; k < m; k++)
-        for (Py_ssize_t i = 0; i < p; i++)
-            out[k * p + i] = rows[k][i];
-}
-
 /* A frozen slots dataclass of `names`, built as its __init__ builds it (object.__setattr__ of each
  * field) where configure found it a plain one (DIRECT), else by calling it. */
 static PyObject *make_record(PyObject *type, int direct, PyObject *names, PyObject *const *values) {
@@ -1069,10 +1041,7 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
         uj[i] = msg->control[i];
         q[i] = -msg->velocity[i];
     }
-    PyObject *anchor_time = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME]));
-    PyObject *anchor_y = anchor_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Y])) : NULL;
-    PyObject *neighbour_control = anchor_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_CONTROL])) : NULL;
-    PyObject *heard = neighbour_control ? hold(h, PyObject_GetAttr(agent, NAMES[N_HEARD])) : NULL;
+    PyObject *heard = hold(h, PyObject_GetAttr(agent, NAMES[N_HEARD]));
     PyObject *edge_time = heard ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
     PyObject *edge_y = edge_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Y])) : NULL;
     PyObject *edge_u = edge_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U])) : NULL;
@@ -1080,15 +1049,11 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
     if (rows == NULL)
         return -1;
     if (msg->kind == 2) { /* Eta2Agent._receive_extra */
-        PyObject *anchor_q = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Q]));
-        PyObject *edge_q = anchor_q ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Q])) : NULL;
-        if (edge_q == NULL || put_doubles(anchor_q, k * p, q, p) < 0 ||
-            list_put(edge_q, k, floats_tuple(q, 3)) < 0)
+        PyObject *edge_q = hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Q]));
+        if (edge_q == NULL || list_put(edge_q, k, floats_tuple(q, 3)) < 0)
             return -1;
     }
-    const char yes = 1;
-    if (put_doubles(anchor_time, k, &msg->stamp, 1) < 0 || put_doubles(anchor_y, k * p, y, p) < 0 ||
-        put_doubles(neighbour_control, k * p, uj, p) < 0 || put_items(heard, "?", 1, k, &yes, 1) < 0 ||
+    if (list_put(heard, k, Py_NewRef(Py_True)) < 0 ||
         list_put(edge_time, k, PyFloat_FromDouble(msg->stamp)) < 0 || list_put(edge_y, k, floats_tuple(y, 3)) < 0 ||
         list_put(edge_u, k, floats_tuple(uj, 3)) < 0)
         return -1;
@@ -1313,24 +1278,11 @@ static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, 
         offset[i] = i < p ? -total[i] : 0.0; /* (uxsingle) / (uxdouble) */
         control[i] = i < p && in->kind == 1 ? kappa * offset[i] : offset[i]; /* κ u_i (ETA-1) */
     }
-    double packed[MAX_EDGES * 3];
-    for (Py_ssize_t k = 0; k < m; k++)
-        packed[k] = in->t;
-    PyObject *anchor_time = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_TIME]));
-    PyObject *anchor_y = anchor_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Y])) : NULL;
-    PyObject *edge_u = anchor_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U])) : NULL;
-    if (edge_u == NULL || put_doubles(anchor_time, 0, packed, m) < 0 || !PyList_CheckExact(edge_u) ||
-        PyList_GET_SIZE(edge_u) != m)
-        return -1;
-    pack_rows(in->y, m, p, packed);
-    if (put_doubles(anchor_y, 0, packed, m * p) < 0)
+    PyObject *edge_u = hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U]));
+    if (edge_u == NULL || !PyList_CheckExact(edge_u) || PyList_GET_SIZE(edge_u) != m)
         return -1;
     if (in->kind == 2) { /* Eta2Agent._update */
-        PyObject *anchor_q = hold(h, PyObject_GetAttr(agent, NAMES[N_ANCHOR_Q]));
-        if (anchor_q != NULL)
-            pack_rows(in->extra, m, p, packed);
-        if (anchor_q == NULL || put_doubles(anchor_q, 0, packed, m * p) < 0 ||
-            set_attr(agent, N_SENSED_Q, rows_list(in->extra, m, p)) < 0 ||
+        if (set_attr(agent, N_SENSED_Q, rows_list(in->extra, m, p)) < 0 ||
             set_attr(agent, N_EDGE_Q, rows_list(in->extra, m, 3)) < 0)
             return -1;
     }

@@ -169,10 +169,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         self.dimension = hood.dimension
         self.tolerance = _positive('tolerance', tolerance)
         m, p = offsets.shape
-        self._anchor_time = np.zeros(m)
-        self._anchor_y = np.zeros((m, p))  # y_i - y_j = x_i - x_j - d_ij at the anchor
-        self._neighbour_control = np.zeros((m, p))
-        self._heard = np.zeros(m, dtype=bool)
+        self._heard = [False] * m
         self.control = np.zeros(p)  # the command: u_i (ETA-1) or u^d_i (ETA-2), broadcast and applied
         # The command's term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1).
         self._offset = np.zeros(p)
@@ -186,7 +183,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         # date by trigger/receive, with one row of prediction constants per edge; and the
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
-        zero = (0.0,) * _FAST_DIMENSION
+        zero = (0.0,) * max(p, _FAST_DIMENSION)
         self._offsets = [tuple(row) for row in offsets.tolist()]
         self._offsets3 = [self._pad(row) for row in self._offsets]
         self._capacity = self.capacity.tolist()
@@ -224,9 +221,6 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         control = hood.floats(info.control, 'control from agent {}', info.sender)
         self._receive_extra(k, info)
         y = tuple(-r - d for r, d in zip(rel, self._offsets3[k]))
-        self._anchor_time[k] = stamp
-        self._anchor_y[k] = y
-        self._neighbour_control[k] = control
         self._heard[k] = True
         self._edge_time[k] = stamp
         self._edge_y[k] = self._pad(y)
@@ -267,8 +261,6 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         length = [math.sqrt(sum(v * v for v in row)) for row in y]
         self._hood.check_sensed_range(length)
         extra = self._sensed_extra(sensed)  # validated before anything changes
-        self._anchor_time[:] = t
-        self._anchor_y[:] = y
         offset = self._update(y, length, extra)
         control = self._command(offset)
         if self._safety is not None:  # the applied command, broadcast; e_i keeps the nominal offset
@@ -381,11 +373,44 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     _everyone_heard = False
 
+    # The knowledge as arrays, for the numpy path (p > 3) and the tests: views of the edge lists
+    # (the one record of the knowledge, which trigger and receive keep), built when read and kept
+    # until the knowledge changes.
+    _mirror_key: tuple | None = None
+    _mirror: tuple = ()
+
+    def _mirrors(self) -> tuple[np.ndarray, ...]:
+        """(anchor times, y_ij at the anchors, the neighbours' controls[, q_ij at the anchors]), read-only."""
+        key = (self.triggers, self.infos_received)
+        if self._mirror_key != key:
+            m, p = len(self.neighbour_ids), self.dimension
+            lists = [self._edge_y, self._edge_u, *([self._edge_q] if hasattr(self, '_edge_q') else [])]
+            arrays = [np.array(self._edge_time, dtype=float)]
+            arrays += [np.array([row[:p] for row in rows], dtype=float).reshape(m, p) for rows in lists]
+            for array in arrays:
+                array.flags.writeable = False
+            self._mirror, self._mirror_key = tuple(arrays), key
+        return self._mirror
+
+    @property
+    def _anchor_time(self) -> np.ndarray:
+        """Each edge's anchor: its last event (its own trigger or the neighbour's)."""
+        return self._mirrors()[0]
+
+    @property
+    def _anchor_y(self) -> np.ndarray:
+        """y_ij = x_i - x_j - d_ij at each edge's anchor."""
+        return self._mirrors()[1]
+
+    @property
+    def _neighbour_control(self) -> np.ndarray:
+        """Each neighbour's latest control."""
+        return self._mirrors()[2]
+
     def _heard_all(self) -> bool:
-        """True once every neighbour was heard (it stays so: nothing unhears one); numpy's all()
-        is asked only until then (it cost 5 % of the compiled engine, once per new search)."""
+        """True once every neighbour was heard (it stays so: nothing unhears one)."""
         if not self._everyone_heard:
-            self._everyone_heard = bool(self._heard.all())
+            self._everyone_heard = all(self._heard)
         return self._everyone_heard
 
     _threshold: Threshold
@@ -638,8 +663,7 @@ class Eta2Agent(_EventTriggeredAgent):
         except ScaleError as error:
             raise AgentError(f'agent {agent_id}: {error}') from None
         self.speed_scale = float(speed_scale)
-        self._anchor_q = np.zeros_like(self._anchor_y)  # q_i - q_j at the anchor
-        self._edge_q = [(0.0,) * _FAST_DIMENSION] * len(self.neighbour_ids)
+        self._edge_q = [(0.0,) * max(self.dimension, _FAST_DIMENSION)] * len(self.neighbour_ids)
 
     def _receive_extra(self, k: int, info: TriggerInfo) -> None:
         if info.rel_velocity is None:
@@ -647,8 +671,12 @@ class Eta2Agent(_EventTriggeredAgent):
                 f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity'
             )
         q = tuple(-v for v in self._hood.floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
-        self._anchor_q[k] = q
         self._edge_q[k] = self._pad(q)
+
+    @property
+    def _anchor_q(self) -> np.ndarray:
+        """q_i - q_j at each edge's anchor."""
+        return self._mirrors()[3]
 
     def _info_velocity(self, k: int):
         return self._sensed_q[k]
@@ -659,7 +687,6 @@ class Eta2Agent(_EventTriggeredAgent):
     def _update(
         self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]
     ) -> tuple[float, ...]:
-        self._anchor_q[:] = extra
         self._sensed_q = extra
         self._edge_q = [self._pad(row) for row in extra]
         k1, k2 = self.k1, self.k2
