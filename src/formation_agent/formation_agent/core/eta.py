@@ -147,7 +147,59 @@ class _SafetyHooks:
         return held
 
 
-class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
+class _KnowledgeArrays:
+    """An agent's knowledge as numpy arrays, for the numpy path (p > 3) and the tests: read-only views
+    of its edge lists (`_edge_time`, `_edge_y`, `_edge_u`, ETA-2's `_edge_q`: the one record of the
+    knowledge, which trigger and receive keep), built when read and kept until the knowledge changes;
+    and whether every neighbour was heard."""
+
+    neighbour_ids: tuple[int, ...]
+    dimension: int
+    triggers: int
+    infos_received: int
+    _heard: list[bool]
+
+    _everyone_heard = False
+
+    _mirror_key: tuple | None = None
+    _mirror: tuple = ()
+
+    def _mirrors(self) -> tuple[np.ndarray, ...]:
+        """(anchor times, y_ij at the anchors, the neighbours' controls[, q_ij at the anchors]), read-only."""
+        key = (self.triggers, self.infos_received)
+        if self._mirror_key != key:
+            m, p = len(self.neighbour_ids), self.dimension
+            lists = [self._edge_y, self._edge_u, *([self._edge_q] if hasattr(self, '_edge_q') else [])]
+            arrays = [np.array(self._edge_time, dtype=float)]
+            arrays += [np.array([row[:p] for row in rows], dtype=float).reshape(m, p) for rows in lists]
+            for array in arrays:
+                array.flags.writeable = False
+            self._mirror, self._mirror_key = tuple(arrays), key
+        return self._mirror
+
+    @property
+    def _anchor_time(self) -> np.ndarray:
+        """Each edge's anchor: its last event (its own trigger or the neighbour's)."""
+        return self._mirrors()[0]
+
+    @property
+    def _anchor_y(self) -> np.ndarray:
+        """y_ij = x_i - x_j - d_ij at each edge's anchor."""
+        return self._mirrors()[1]
+
+    @property
+    def _neighbour_control(self) -> np.ndarray:
+        """Each neighbour's latest control."""
+        return self._mirrors()[2]
+
+    def _heard_all(self) -> bool:
+        """True once every neighbour was heard (it stays so: nothing unhears one)."""
+        if not self._everyone_heard:
+            self._everyone_heard = all(self._heard)
+        return self._everyone_heard
+
+
+class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
     """Bookkeeping shared by ETA-1 and ETA-2: anchors, caching of the next time; its neighbours
     and the checks of what it is handed are its `Neighbourhood` (`formation_agent.core.neighbourhood`)."""
 
@@ -370,48 +422,6 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
             )
             self._search = search
         return search if self._safety is None else self._capped(search)
-
-    _everyone_heard = False
-
-    # The knowledge as arrays, for the numpy path (p > 3) and the tests: views of the edge lists
-    # (the one record of the knowledge, which trigger and receive keep), built when read and kept
-    # until the knowledge changes.
-    _mirror_key: tuple | None = None
-    _mirror: tuple = ()
-
-    def _mirrors(self) -> tuple[np.ndarray, ...]:
-        """(anchor times, y_ij at the anchors, the neighbours' controls[, q_ij at the anchors]), read-only."""
-        key = (self.triggers, self.infos_received)
-        if self._mirror_key != key:
-            m, p = len(self.neighbour_ids), self.dimension
-            lists = [self._edge_y, self._edge_u, *([self._edge_q] if hasattr(self, '_edge_q') else [])]
-            arrays = [np.array(self._edge_time, dtype=float)]
-            arrays += [np.array([row[:p] for row in rows], dtype=float).reshape(m, p) for rows in lists]
-            for array in arrays:
-                array.flags.writeable = False
-            self._mirror, self._mirror_key = tuple(arrays), key
-        return self._mirror
-
-    @property
-    def _anchor_time(self) -> np.ndarray:
-        """Each edge's anchor: its last event (its own trigger or the neighbour's)."""
-        return self._mirrors()[0]
-
-    @property
-    def _anchor_y(self) -> np.ndarray:
-        """y_ij = x_i - x_j - d_ij at each edge's anchor."""
-        return self._mirrors()[1]
-
-    @property
-    def _neighbour_control(self) -> np.ndarray:
-        """Each neighbour's latest control."""
-        return self._mirrors()[2]
-
-    def _heard_all(self) -> bool:
-        """True once every neighbour was heard (it stays so: nothing unhears one)."""
-        if not self._everyone_heard:
-            self._everyone_heard = all(self._heard)
-        return self._everyone_heard
 
     _threshold: Threshold
 
