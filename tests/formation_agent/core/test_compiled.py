@@ -468,3 +468,13 @@ def test_the_compiled_agenda_gives_the_engines_order_and_times(both, seed):
     pure, fast = both(make)
     assert pure == fast
     assert len(pure) > 3
+
+
+def test_sums_of_squares_add_left_to_right_as_the_compiled_trigger():
+    # Not sum(): from Python 3.12 on (ROS Jazzy's) it compensates its rounding, the compiled core
+    # does not. 1 + 3 × 2^-54 left to right stays 1; compensated it rounds up to 1 + 2^-52.
+    from formation_agent.core.eta import _sum_of_squares
+
+    values = (1.0, 2.0**-27, 2.0**-27, 2.0**-27)
+    assert _sum_of_squares(values) == 1.0
+    assert math.fsum(v * v for v in values) == 1.0 + 2.0**-52

@@ -310,7 +310,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         rel = self._hood.rows(sensed.rel_positions, 'sensed rel_positions')
         # Edge by edge in plain floats (a handful of edges: numpy would cost more than it saves).
         y = [tuple(r - d for r, d in zip(row, offset)) for row, offset in zip(rel, self._offsets)]
-        length = [math.sqrt(sum(v * v for v in row)) for row in y]
+        length = [math.sqrt(_sum_of_squares(row)) for row in y]
         self._hood.check_sensed_range(length)
         extra = self._sensed_extra(sensed)  # validated before anything changes
         offset = self._update(y, length, extra)
@@ -326,7 +326,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         self._edge_y = [self._pad(row) for row in y]
         self._u = self._pad(control)
         self._u_offset = self._pad(offset)
-        self._control_norm = math.sqrt(sum(c * c for c in self._u_offset))
+        self._control_norm = math.sqrt(_sum_of_squares(self._u_offset))
         if self._fast:
             self._rows = [self._row(k) for k in range(m)]
         if self.last_trigger is not None and t > self.last_trigger:
@@ -909,6 +909,15 @@ def make_agent(
             raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
         chosen['safety'] = safety
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
+
+
+def _sum_of_squares(values) -> float:
+    """v0² + v1² + ... left to right, as the compiled trigger adds them: not `sum()`, which from
+    Python 3.12 on (ROS Jazzy's) compensates its rounding and would round differently."""
+    total = 0.0
+    for v in values:
+        total += v * v
+    return total
 
 
 def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:
