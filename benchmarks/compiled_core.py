@@ -159,7 +159,7 @@ def _agent_process(prelude: str) -> dict:
     return measured
 
 
-def agent_startup(repeats: int) -> dict:
+def agent_startup(repeats: int, baseline: str = BASELINE_REV) -> dict:
     """Start-up wall time and peak RSS of an agent process, before (BASELINE_REV) and now (HEAD with
     the compiled core built here), alternating; both from materialised packages on sys.path, so
     that the import machinery is the same (not the editable installs' finder)."""
@@ -167,7 +167,7 @@ def agent_startup(repeats: int) -> dict:
 
     with tempfile.TemporaryDirectory(prefix='bench_compiled_') as folder:
         roots = {'before': Path(folder) / 'before', 'now': Path(folder) / 'now'}
-        materialise(BASELINE_REV, roots['before'])
+        materialise(baseline, roots['before'])
         materialise('HEAD', roots['now'])
         shutil.copy(built.__file__, roots['now'] / 'src' / 'formation_agent' / 'formation_agent' / 'core')
         preludes = {
@@ -178,7 +178,7 @@ def agent_startup(repeats: int) -> dict:
         for _ in range(repeats):
             for name, prelude in preludes.items():
                 runs[name].append(_agent_process(prelude))
-    out = {'baseline': BASELINE_REV, 'runs': runs}
+    out = {'baseline': baseline, 'runs': runs}
     for name, values in runs.items():
         out[name] = {
             'wall_s': statistics.median(v['wall_s'] for v in values),
@@ -235,6 +235,7 @@ def main() -> int:
     parser.add_argument('--startup-only', action='store_true', help='the agent process only')
     parser.add_argument('--no-fixed-step', action='store_true', help='without the fixed-step comparison')
     parser.add_argument('--no-startup', action='store_true', help='without the agent process')
+    parser.add_argument('--baseline', default=BASELINE_REV, help='the revision compared with')
     args = parser.parse_args()
     if not compiled.AVAILABLE:
         raise SystemExit('the compiled core is not built: run `make venv`')
@@ -260,7 +261,7 @@ def main() -> int:
         largest = max(args.sizes)
         result['fixed_step'] = fixed_step_case(largest, HORIZONS['single', largest])
     if not args.no_startup:
-        result['startup'] = agent_startup(args.startup_repeats)
+        result['startup'] = agent_startup(args.startup_repeats, args.baseline)
     result['load_after'] = os.getloadavg()
     out.write_text(json.dumps(result, indent=1))
     print(tables(result))
