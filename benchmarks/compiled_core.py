@@ -3,16 +3,16 @@
     python benchmarks/compiled_core.py [--quick] [--sizes 10 100 1000 10000] [--repeats 3]
 
 For ETA-1 and ETA-2 random teams (`cases.random`, seed 1) of each size, the in-process engine
-(`simulate(..., sample_dt=None, sample_events=False)`: the event chain only) runs on the
-pure-Python path and on the compiled one (`compiled.use_compiled`), alternating, `--repeats`
-times each (once at n >= 10 000), then once more each with the time spent in the searches
-measured; the event chains must be equal float for float (the run stops otherwise). Reported:
-µs per event and per event × (1 + mean degree), median wall and CPU of the repeats, and the
-speed-up. At the largest ETA-1 size the vectorised fixed-step simulation (benchmarks/naive.py,
-dt = 1e-4) runs on the same scenario and horizon. Last, the start-up time and peak memory of an
-agent process (`import formation_agent.ros.main` and one agent's first search, as `peak_rss.py`
-measures a process) with HEAD's packages and with BASELINE_REV's (before the compiled core),
-alternating.
+(`simulate(..., sample_dt=None, sample_events=False)`: the event chain only) runs on the pure-Python
+path and on the compiled one (`compiled.use_compiled`), alternating, `--repeats` times each (once at
+n >= 10 000); the event chains must be equal float for float (the run stops otherwise). Reported: µs
+per event and per event × (1 + mean degree), median wall and CPU of the repeats, and the speed-up
+(since issue 31's second step the compiled searches run inside the compiled agenda, so the time in
+them is no longer measured apart). At the largest ETA-1 size the vectorised fixed-step simulation
+(benchmarks/naive.py, dt = 1e-4) runs on the same scenario and horizon (skipped with --no-fixed-
+step). Last, the start-up time and peak memory of an agent process (`import
+formation_agent.ros.main` and one agent's first search, as `peak_rss.py` measures a process) with
+HEAD's packages and with BASELINE_REV's (before the compiled core), alternating.
 
 Writes benchmarks/results/<date>-compiled_core.json and prints the Markdown tables of BENCHMARKS.md.
 """
@@ -38,7 +38,6 @@ from cases import build_scenario, label, random  # noqa: E402 - benchmarks/ put 
 from engine_baseline import PACKAGES, materialise  # noqa: E402 - benchmarks/ put on sys.path first
 
 from formation_agent.core import compiled  # noqa: E402 - after the path is set up
-from formation_agent.core.crossing import CrossingSearch  # noqa: E402 - after the path is set up
 from formation_sim.sim.engine import simulate  # noqa: E402 - after the path is set up
 
 # main before the compiled core.
@@ -91,27 +90,6 @@ def _run_engine(scenario, horizon: float, on: bool):
     return time.perf_counter() - started, time.process_time() - cpu, record.trigger_times
 
 
-def _search_time(scenario, horizon: float, on: bool) -> float:
-    """Seconds spent in the certified searches (CrossingSearch.advance) in one more run of the path."""
-    original = CrossingSearch.advance
-    spent = 0.0
-
-    def timed(search, until):
-        nonlocal spent
-        started = time.perf_counter()
-        try:
-            return original(search, until)
-        finally:
-            spent += time.perf_counter() - started
-
-    CrossingSearch.advance = timed
-    try:
-        _run_engine(scenario, horizon, on)
-    finally:
-        CrossingSearch.advance = original
-    return spent
-
-
 def engine_case(dynamics: str, n: int, repeats: int, horizon: float) -> dict:
     case = random(n, dynamics)
     scenario = build_scenario(case)
@@ -142,9 +120,6 @@ def engine_case(dynamics: str, n: int, repeats: int, horizon: float) -> dict:
             'us_per_event': wall / events * 1e6,
             'us_per_event_edge': wall / events / (1.0 + degree) * 1e6,
         }
-    for on, name in ((False, 'python'), (True, 'compiled')):
-        out[name]['search_us_per_event'] = _search_time(scenario, horizon, on) / events * 1e6
-    out['search_speedup'] = out['python']['search_us_per_event'] / out['compiled']['search_us_per_event']
     out['speedup'] = out['python']['wall'] / out['compiled']['wall']
     out['speedup_cpu'] = out['python']['cpu'] / out['compiled']['cpu']
     return out
@@ -184,7 +159,7 @@ def _agent_process(prelude: str) -> dict:
     return measured
 
 
-def agent_startup(repeats: int) -> dict:
+def agent_startup(repeats: int, baseline: str = BASELINE_REV) -> dict:
     """Start-up wall time and peak RSS of an agent process, before (BASELINE_REV) and now (HEAD with
     the compiled core built here), alternating; both from materialised packages on sys.path, so
     that the import machinery is the same (not the editable installs' finder)."""
@@ -192,7 +167,7 @@ def agent_startup(repeats: int) -> dict:
 
     with tempfile.TemporaryDirectory(prefix='bench_compiled_') as folder:
         roots = {'before': Path(folder) / 'before', 'now': Path(folder) / 'now'}
-        materialise(BASELINE_REV, roots['before'])
+        materialise(baseline, roots['before'])
         materialise('HEAD', roots['now'])
         shutil.copy(built.__file__, roots['now'] / 'src' / 'formation_agent' / 'formation_agent' / 'core')
         preludes = {
@@ -203,7 +178,7 @@ def agent_startup(repeats: int) -> dict:
         for _ in range(repeats):
             for name, prelude in preludes.items():
                 runs[name].append(_agent_process(prelude))
-    out = {'baseline': BASELINE_REV, 'runs': runs}
+    out = {'baseline': baseline, 'runs': runs}
     for name, values in runs.items():
         out[name] = {
             'wall_s': statistics.median(v['wall_s'] for v in values),
@@ -215,9 +190,8 @@ def agent_startup(repeats: int) -> dict:
 def tables(result: dict) -> str:
     lines = [
         '| case | n | d̄ | T [s] | events | Python µs/event | compiled µs/event | Python µs/(event·(1+d̄)) '
-        '| compiled µs/(event·(1+d̄)) | speed-up wall (CPU) | search µs/event Python → compiled '
-        '| search speed-up | bit-equal |',
-        '|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+        '| compiled µs/(event·(1+d̄)) | speed-up wall (CPU) | compiled CPU µs/event | bit-equal |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|',
     ]
     for c in result['engine']:
         p, f = c['python'], c['compiled']
@@ -225,8 +199,7 @@ def tables(result: dict) -> str:
             f'| {c["case"]} | {c["n"]} | {c["degree"]:.1f} | {c["horizon"]:g} | {c["events"]} '
             f'| {p["us_per_event"]:.0f} | {f["us_per_event"]:.0f} | {p["us_per_event_edge"]:.0f} '
             f'| {f["us_per_event_edge"]:.1f} | {c["speedup"]:.2f}× ({c["speedup_cpu"]:.2f}×) '
-            f'| {p["search_us_per_event"]:.0f} → {f["search_us_per_event"]:.1f} '
-            f'| {c["search_speedup"]:.1f}× | yes |'
+            f'| {f["cpu"] / c["events"] * 1e6:.0f} | yes |'
         )
     if result.get('fixed_step'):
         s = result['fixed_step']
@@ -260,6 +233,9 @@ def main() -> int:
     parser.add_argument('--startup-repeats', type=int, default=7)
     parser.add_argument('--quick', action='store_true', help='n = 10 and 100, one repeat (a smoke run)')
     parser.add_argument('--startup-only', action='store_true', help='the agent process only')
+    parser.add_argument('--no-fixed-step', action='store_true', help='without the fixed-step comparison')
+    parser.add_argument('--no-startup', action='store_true', help='without the agent process')
+    parser.add_argument('--baseline', default=BASELINE_REV, help='the revision compared with')
     args = parser.parse_args()
     if not compiled.AVAILABLE:
         raise SystemExit('the compiled core is not built: run `make venv`')
@@ -281,10 +257,11 @@ def main() -> int:
             result['engine'].append(case)
             out.write_text(json.dumps(result, indent=1))  # what is done so far, should a case not end
             print(json.dumps({k: v for k, v in case.items() if k not in ('python', 'compiled')}), flush=True)
-    if args.sizes:
+    if args.sizes and not args.no_fixed_step:
         largest = max(args.sizes)
         result['fixed_step'] = fixed_step_case(largest, HORIZONS['single', largest])
-    result['startup'] = agent_startup(args.startup_repeats)
+    if not args.no_startup:
+        result['startup'] = agent_startup(args.startup_repeats, args.baseline)
     result['load_after'] = os.getloadavg()
     out.write_text(json.dumps(result, indent=1))
     print(tables(result))

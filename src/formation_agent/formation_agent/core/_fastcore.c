@@ -21,6 +21,7 @@
 #include <Python.h>
 #include <math.h>
 #include <string.h>
+#include <structmember.h>
 
 #define WIDTH1 9  /* Eta1Agent._row: anchor, y0, y1, y2, v0, v1, v2, speed, capacity */
 #define WIDTH2 11 /* Eta2Agent._row: anchor, y0, y1, y2, q0, q1, q2, u0, u1, u2, capacity */
@@ -61,6 +62,18 @@ static inline int out_of_range(Model *md, Py_ssize_t k, double r, double c) {
     return ERR_RANGE;
 }
 
+/* The tail of both probes (_fast_probe's return): e plus the command's offset, and the rate. */
+static inline int probe_out(const Model *md, double e0, double e1, double e2, double d0, double d1, double d2,
+                            double *out) {
+    out[0] = e0 + md->u_off[0];
+    out[1] = e1 + md->u_off[1];
+    out[2] = e2 + md->u_off[2];
+    out[3] = d0;
+    out[4] = d1;
+    out[5] = d2;
+    return OK;
+}
+
 /* Eta1Agent._fast_probe: e and (with_rate) its rate, padded to three components. */
 static int probe1(Model *md, double t, int with_rate, double *out) {
     double e0 = 0.0, e1 = 0.0, e2 = 0.0, d0 = 0.0, d1 = 0.0, d2 = 0.0;
@@ -96,13 +109,7 @@ static int probe1(Model *md, double t, int with_rate, double *out) {
     }
     if (with_rate)
         md->cap = cap;
-    out[0] = e0 + md->u_off[0];
-    out[1] = e1 + md->u_off[1];
-    out[2] = e2 + md->u_off[2];
-    out[3] = d0;
-    out[4] = d1;
-    out[5] = d2;
-    return OK;
+    return probe_out(md, e0, e1, e2, d0, d1, d2, out);
 }
 
 /* Eta1Agent._fast_bounds */
@@ -189,13 +196,7 @@ static int probe2(Model *md, double t, int with_rate, double *out) {
         p[2] = sqrt(a0 * a0 + a1 * a1 + a2 * a2);
         p[3] = c;
     }
-    out[0] = e0 + md->u_off[0];
-    out[1] = e1 + md->u_off[1];
-    out[2] = e2 + md->u_off[2];
-    out[3] = d0;
-    out[4] = d1;
-    out[5] = d2;
-    return OK;
+    return probe_out(md, e0, e1, e2, d0, d1, d2, out);
 }
 
 /* Eta2Agent._fast_bounds */
@@ -523,17 +524,33 @@ static int run(Model *md, const Search *s, State *st, double until) {
 
 /* ---- Python glue ---------------------------------------------------------------------------- */
 
-/* Attribute names, interned once (PyInit__fastcore). */
+/* Attribute names of the agent (the model), interned once (PyInit__fastcore). */
 enum {
-    N_ALPHA, N_BETA, N_FLOOR, N_LIMIT, N_TOLERANCE, N_FRONTIER, N_SPAN, N_STEPS, N_RESULT, N_COVER, N_MODEL,
-    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_NAMES
+    N_KIND, N_ROWS, N_U_OFFSET, N_CONTROL_NORM, N_K1, N_K2, N_K3, N_TRIGGERS, N_INFOS,
+    /* receive: the agent's */
+    N_HOOD, N_SLOT, N_AGENT_ID, N_DIMENSION, N_FAST, N_EDGE_TIME, N_LAST_TRIGGER, N_OFFSETS3,
+    N_HEARD, N_EDGE_Y, N_EDGE_U, N_EDGE_Q, N_U, N_CAPACITY,
+    N_LAST_EVENT, N_SEARCH, N_RESULT,
+    /* receive: the TriggerInfo's */
+    N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY,
+    /* trigger: the agent's and the SensedState's */
+    N_AGENT, N_NEIGHBOUR_IDS, N_REL_POSITIONS, N_REL_VELOCITIES, N_SPEED_SCALE, N_SENSED_Q, N_OFFSET, N_INTERVAL,
+    N_NAMES
 };
 static const char *NAME_TEXT[N_NAMES] = {
-    "alpha", "beta", "floor", "limit", "tolerance", "frontier", "_span", "steps", "result", "_cover", "model",
-    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3",
+    "_kind", "_rows", "_u_offset", "_control_norm", "k1", "k2", "k3", "triggers", "infos_received",
+    "_hood", "slot", "agent_id", "dimension", "_fast", "_edge_time", "last_trigger", "_offsets3",
+    "_heard", "_edge_y", "_edge_u", "_edge_q", "_u", "_capacity",
+    "last_event", "_search", "result",
+    "sender", "receiver", "stamp", "control", "rel_position", "rel_velocity",
+    "agent", "neighbour_ids", "rel_positions", "rel_velocities", "speed_scale", "_sensed_q", "_offset", "_interval",
 };
 static PyObject *NAMES[N_NAMES];
 static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
+/* What trigger builds its output with (configure): np.array, TriggerOutput, TriggerInfo, their keywords. */
+static PyObject *NP_ARRAY = NULL, *TRIGGER_OUTPUT = NULL, *TRIGGER_INFO = NULL, *INFO_NAMES = NULL,
+                *OUTPUT_NAMES = NULL;
+static int DIRECT_INFO = 0, DIRECT_OUTPUT = 0; /* plain frozen slots dataclasses (compiled.plain_record) */
 
 static int get_double(PyObject *obj, int name, double *out) {
     PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
@@ -544,13 +561,13 @@ static int get_double(PyObject *obj, int name, double *out) {
     return (*out == -1.0 && PyErr_Occurred()) ? -1 : 0;
 }
 
-static int set_double(PyObject *obj, int name, double value) {
-    PyObject *v = PyFloat_FromDouble(value);
-    if (v == NULL)
+static int get_long(PyObject *obj, int name, long *out) {
+    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
+    if (value == NULL)
         return -1;
-    int rc = PyObject_SetAttr(obj, NAMES[name], v);
-    Py_DECREF(v);
-    return rc;
+    *out = PyLong_AsLong(value);
+    Py_DECREF(value);
+    return (*out == -1 && PyErr_Occurred()) ? -1 : 0;
 }
 
 /* A sequence of `count` floats into out. */
@@ -577,44 +594,58 @@ static int read_floats(PyObject *seq, double *out, Py_ssize_t count, const char 
     return 0;
 }
 
-static int read_attr_floats(PyObject *obj, int name, double *out, Py_ssize_t count) {
-    PyObject *value = PyObject_GetAttr(obj, NAMES[name]);
-    if (value == NULL)
-        return -1;
-    int rc = read_floats(value, out, count, NAME_TEXT[name]);
-    Py_DECREF(value);
-    return rc;
-}
-
 static PyObject *configure(PyObject *self, PyObject *args, PyObject *kwargs) {
     (void)self;
-    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser", NULL};
-    PyObject *coefficients, *raiser;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO", names, &GROWTH, &MAX_STEPS, &RTOL, &GAP_FRACTION,
-                                     &SERIES_LIMIT, &coefficients, &raiser))
+    static char *names[] = {"growth", "max_steps", "rtol", "gap_fraction", "series_limit", "series", "raiser",
+                            "array", "trigger_output", "trigger_info", "direct_output", "direct_info", NULL};
+    PyObject *coefficients, *raiser, *array = NULL, *output = NULL, *info = NULL;
+    int direct_output, direct_info;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$dlddd" "OO" "OOO" "pp", names, &GROWTH, &MAX_STEPS, &RTOL,
+                                     &GAP_FRACTION, &SERIES_LIMIT, &coefficients, &raiser, &array, &output, &info,
+                                     &direct_output, &direct_info))
         return NULL;
+    if (!PyType_Check(output) || !PyType_Check(info)) {
+        PyErr_SetString(PyExc_TypeError, "trigger_output and trigger_info must be types");
+        return NULL;
+    }
+    DIRECT_OUTPUT = direct_output;
+    DIRECT_INFO = direct_info;
     if (read_floats(coefficients, SERIES, N_SERIES, "series") < 0)
         return NULL;
     Py_INCREF(raiser);
     Py_XSETREF(RAISER, raiser);
+    /* trigger's output: np.array, TriggerOutput(time, control, infos), TriggerInfo(sender, ...) */
+    if (INFO_NAMES == NULL) {
+        INFO_NAMES = Py_BuildValue("(ssssss)", "sender", "receiver", "stamp", "control", "rel_position",
+                                   "rel_velocity");
+        OUTPUT_NAMES = Py_BuildValue("(sss)", "time", "control", "infos");
+        if (INFO_NAMES == NULL || OUTPUT_NAMES == NULL)
+            return NULL;
+    }
+    Py_XSETREF(NP_ARRAY, Py_NewRef(array));
+    Py_XSETREF(TRIGGER_OUTPUT, Py_NewRef(output));
+    Py_XSETREF(TRIGGER_INFO, Py_NewRef(info));
     configured = 1;
     Py_RETURN_NONE;
 }
 
-/* The model (the agent) as the loop reads it; md->rows allocated here (PyMem_Free it). */
+/* The model (the agent) as the loop reads it: its kind, gains, the command's offset and its
+ * rows, packed into md (md->rows allocated here, freed by the caller with PyMem_Free). */
 static int read_model(PyObject *model, Model *md) {
-    PyObject *kind = PyObject_GetAttr(model, NAMES[N_KIND]);
-    if (kind == NULL)
+    long kind;
+    if (get_long(model, N_KIND, &kind) < 0)
         return -1;
-    md->kind = (int)PyLong_AsLong(kind);
-    Py_DECREF(kind);
-    if (md->kind != 1 && md->kind != 2) {
-        if (!PyErr_Occurred())
-            PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %d", md->kind);
+    if (kind != 1 && kind != 2) {
+        PyErr_Format(PyExc_ValueError, "_kind must be 1 (ETA-1) or 2 (ETA-2), got %ld", kind);
         return -1;
     }
-    if (read_attr_floats(model, N_U_OFFSET, md->u_off, 3) < 0 ||
-        get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
+    md->kind = (int)kind;
+    PyObject *offset = PyObject_GetAttr(model, NAMES[N_U_OFFSET]);
+    if (offset == NULL)
+        return -1;
+    int rc = read_floats(offset, md->u_off, 3, "_u_offset");
+    Py_DECREF(offset);
+    if (rc < 0 || get_double(model, N_CONTROL_NORM, &md->control_norm) < 0)
         return -1;
     if (md->kind == 2 &&
         (get_double(model, N_K1, &md->k1) < 0 || get_double(model, N_K2, &md->k2) < 0 ||
@@ -648,49 +679,6 @@ static int read_model(PyObject *model, Model *md) {
     return 0;
 }
 
-static int read_search(PyObject *search, Search *s, State *st) {
-    if (get_double(search, N_ALPHA, &s->alpha) || get_double(search, N_BETA, &s->beta) ||
-        get_double(search, N_FLOOR, &s->floor) || get_double(search, N_LIMIT, &s->limit) ||
-        get_double(search, N_TOLERANCE, &s->tolerance) || get_double(search, N_FRONTIER, &st->frontier) ||
-        get_double(search, N_SPAN, &st->span))
-        return -1;
-    PyObject *steps = PyObject_GetAttr(search, NAMES[N_STEPS]);
-    if (steps == NULL)
-        return -1;
-    st->steps = PyLong_AsLong(steps);
-    Py_DECREF(steps);
-    if (st->steps == -1 && PyErr_Occurred())
-        return -1;
-    PyObject *old = PyObject_GetAttr(search, NAMES[N_RESULT]);
-    if (old == NULL)
-        return -1;
-    if (old != Py_None) {
-        st->has_result = 1;
-        st->result = PyFloat_AsDouble(old);
-    }
-    Py_DECREF(old);
-    if (st->has_result && PyErr_Occurred())
-        return -1;
-    double cov[3];
-    if (read_attr_floats(search, N_COVER, cov, 3) < 0)
-        return -1;
-    st->cover_end = cov[0];
-    st->bound_e = cov[1];
-    st->bound_curv = cov[2];
-    return 0;
-}
-
-static int write_search(PyObject *search, const State *st) {
-    PyObject *cover = Py_BuildValue("(ddd)", st->cover_end, st->bound_e, st->bound_curv);
-    if (cover == NULL)
-        return -1;
-    int rc = PyObject_SetAttr(search, NAMES[N_COVER], cover);
-    Py_DECREF(cover);
-    if (rc < 0 || set_double(search, N_FRONTIER, st->frontier) < 0 || set_double(search, N_SPAN, st->span) < 0)
-        return -1;
-    return st->has_result ? set_double(search, N_RESULT, st->result) : 0;
-}
-
 /* The error the pure-Python path raises with a message: compiled._raise(model, problem) raises it. */
 static void raise_problem(PyObject *model, PyObject *problem) {
     if (problem == NULL)
@@ -703,69 +691,1064 @@ static void raise_problem(PyObject *model, PyObject *problem) {
     }
 }
 
-/* advance(search, until): CrossingSearch.advance for a plain-float agent (search.model). Writes
- * the search's frontier, _span, _cover, result and steps as the Python loop does and returns its
- * result; errors are the Python path's (steps counted, the rest left, as there). */
-static PyObject *advance(PyObject *self, PyObject *args) {
-    (void)self;
-    PyObject *search;
-    double until;
-    if (!PyArg_ParseTuple(args, "Od", &search, &until))
-        return NULL;
+/* ---- Search: CrossingSearch of a plain-float agent, its state and packed rows in C ---------- */
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *model;
+    Model md;                 /* md.rows == NULL until the first advance reads the model */
+    long known_triggers;      /* the model's knowledge when md was read: (triggers, infos_received) */
+    long known_infos;
+    Search s;
+    State st;
+    double start;
+} SearchObject;
+
+/* The packed model, read again when the agent's knowledge changed since it was read (as the
+ * Python path, which reads the agent's rows at every evaluation). */
+static int search_model(SearchObject *self) {
+    long triggers, infos;
+    if (get_long(self->model, N_TRIGGERS, &triggers) < 0 || get_long(self->model, N_INFOS, &infos) < 0)
+        return -1;
+    if (self->md.rows != NULL && triggers == self->known_triggers && infos == self->known_infos)
+        return 0;
+    PyMem_Free(self->md.rows);
+    memset(&self->md, 0, sizeof self->md);
+    if (read_model(self->model, &self->md) < 0) {
+        PyMem_Free(self->md.rows);
+        self->md.rows = NULL;
+        return -1;
+    }
+    self->known_triggers = triggers;
+    self->known_infos = infos;
+    return 0;
+}
+
+static PyObject *search_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static char *names[] = {"model", "start", "alpha", "beta", "limit", "tolerance", "initial_step", "floor", NULL};
+    PyObject *model;
+    double start, alpha, beta, limit, tolerance, initial_step, floor_;
     if (!configured) {
         PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not called");
         return NULL;
     }
-    Model md;
-    Search s;
-    State st;
-    memset(&md, 0, sizeof md);
-    memset(&st, 0, sizeof st);
-    if (read_search(search, &s, &st) < 0)
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O$ddddddd", names, &model, &start, &alpha, &beta, &limit,
+                                     &tolerance, &initial_step, &floor_))
         return NULL;
-    PyObject *model = PyObject_GetAttr(search, NAMES[N_MODEL]);
-    if (model == NULL)
+    SearchObject *self = (SearchObject *)type->tp_alloc(type, 0);
+    if (self == NULL)
         return NULL;
-    PyObject *result = NULL;
-    if (read_model(model, &md) < 0)
-        goto done;
-    int status = run(&md, &s, &st, until);
-    PyObject *steps = PyLong_FromLong(st.steps);
-    if (steps == NULL)
-        goto done;
-    int rc = PyObject_SetAttr(search, NAMES[N_STEPS], steps);
-    Py_DECREF(steps);
-    if (rc < 0)
-        goto done;
-    switch (status) {
-    case OK:
-        if (write_search(search, &st) == 0)
-            result = st.has_result ? PyFloat_FromDouble(st.result) : Py_NewRef(Py_None);
-        break;
-    case ERR_OVERFLOW:
-        PyErr_SetString(PyExc_OverflowError, "math range error");
-        break;
-    case ERR_RANGE:
-        raise_problem(model, Py_BuildValue("(sndd)", "range", md.bad_k, md.bad_r, md.bad_c));
-        break;
-    case ERR_STEPS:
-        raise_problem(model, Py_BuildValue("(sd)", "steps", st.bad_a));
-        break;
-    default:
-        raise_problem(model, Py_BuildValue("(sddd)", "finite", st.bad_a, st.bad_size_sq, st.bad_size_rate));
-    }
-done:
-    PyMem_Free(md.rows);
-    Py_DECREF(model);
-    return result;
+    self->model = Py_NewRef(model);
+    self->start = start;
+    self->s = (Search){.alpha = alpha, .beta = beta, .floor = floor_, .limit = limit, .tolerance = tolerance};
+    /* CrossingSearch.__init__: at the start, no result, no step, the first span, no last step. */
+    self->st.frontier = start;
+    self->st.span = initial_step;
+    self->st.cover_end = -INFINITY;
+    self->st.bound_e = NAN;
+    self->st.bound_curv = NAN;
+    return (PyObject *)self;
 }
+
+static int search_traverse(SearchObject *self, visitproc visit, void *arg) {
+    Py_VISIT(self->model);
+    return 0;
+}
+
+static int search_clear(SearchObject *self) {
+    Py_CLEAR(self->model);
+    return 0;
+}
+
+static void search_dealloc(SearchObject *self) {
+    PyObject_GC_UnTrack(self);
+    search_clear(self);
+    PyMem_Free(self->md.rows);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *search_result(SearchObject *self, void *closure) {
+    (void)closure;
+    return self->st.has_result ? PyFloat_FromDouble(self->st.result) : Py_NewRef(Py_None);
+}
+
+/* advance(until): CrossingSearch.advance; its result (None: not done yet). Errors are the Python
+ * path's: the failing step counted, the frontier left where it was. */
+static PyObject *search_step(SearchObject *self, double until) {
+    State *st = &self->st;
+    if (!st->has_result && st->frontier <= until) { /* else the loop would not take a step */
+        if (self->model == NULL) {
+            PyErr_SetString(PyExc_RuntimeError, "search without a model");
+            return NULL;
+        }
+        if (search_model(self) < 0)
+            return NULL;
+        switch (run(&self->md, &self->s, st, until)) {
+        case OK:
+            break;
+        case ERR_OVERFLOW:
+            PyErr_SetString(PyExc_OverflowError, "math range error");
+            return NULL;
+        case ERR_RANGE:
+            raise_problem(self->model, Py_BuildValue("(sndd)", "range", self->md.bad_k, self->md.bad_r,
+                                                     self->md.bad_c));
+            return NULL;
+        case ERR_STEPS:
+            raise_problem(self->model, Py_BuildValue("(sd)", "steps", st->bad_a));
+            return NULL;
+        default:
+            raise_problem(self->model,
+                          Py_BuildValue("(sddd)", "finite", st->bad_a, st->bad_size_sq, st->bad_size_rate));
+            return NULL;
+        }
+    }
+    return search_result(self, NULL);
+}
+
+static PyObject *search_advance(SearchObject *self, PyObject *arg) {
+    double until = PyFloat_AsDouble(arg);
+    if (until == -1.0 && PyErr_Occurred())
+        return NULL;
+    return search_step(self, until);
+}
+
+static PyObject *search_run(SearchObject *self, PyObject *unused) {
+    (void)unused;
+    return search_step(self, INFINITY);
+}
+
+static PyObject *search_done(SearchObject *self, void *closure) {
+    (void)closure;
+    return PyBool_FromLong(self->st.has_result);
+}
+
+static PyObject *search_cover(SearchObject *self, void *closure) {
+    (void)closure;
+    return Py_BuildValue("(ddd)", self->st.cover_end, self->st.bound_e, self->st.bound_curv);
+}
+
+static PyMemberDef search_members[] = {
+    {"model", T_OBJECT, offsetof(SearchObject, model), READONLY, "the agent whose error is searched"},
+    {"start", T_DOUBLE, offsetof(SearchObject, start), READONLY, "where the search began"},
+    {"alpha", T_DOUBLE, offsetof(SearchObject, s.alpha), READONLY, "α of the threshold c0 + α e^{-βt}"},
+    {"beta", T_DOUBLE, offsetof(SearchObject, s.beta), READONLY, "β of the threshold"},
+    {"floor", T_DOUBLE, offsetof(SearchObject, s.floor), READONLY, "c0 of the threshold"},
+    {"limit", T_DOUBLE, offsetof(SearchObject, s.limit), READONLY, "no crossing searched past this time"},
+    {"tolerance", T_DOUBLE, offsetof(SearchObject, s.tolerance), READONLY, "the margin that counts as reached"},
+    {"frontier", T_DOUBLE, offsetof(SearchObject, st.frontier), READONLY,
+     "the next point examined; no crossing in [start, frontier)"},
+    {"steps", T_LONG, offsetof(SearchObject, st.steps), READONLY, "certified steps taken"},
+    {"_span", T_DOUBLE, offsetof(SearchObject, st.span), READONLY, "the next trial span"},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyGetSetDef search_getset[] = {
+    {"result", (getter)search_result, NULL, "None until done, then the crossing time (inf: none up to limit)",
+     NULL},
+    {"done", (getter)search_done, NULL, "True once the result is known", NULL},
+    {"_cover", (getter)search_cover, NULL, "(end, E, E2): the last step's bounds", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef search_methods[] = {
+    {"advance", (PyCFunction)search_advance, METH_O,
+     "advance(until): certified steps while the frontier is <= until; the result (None: not done yet)."},
+    {"run", (PyCFunction)search_run, METH_NOARGS, "run(): search to the end; the crossing time, or inf."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject SearchType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "formation_agent.core._fastcore.Search",
+    .tp_doc = "Search(model, *, start, alpha, beta, limit, tolerance, initial_step, floor): "
+              "crossing.CrossingSearch of a plain-float agent (p <= 3), compiled; the same floats.",
+    .tp_basicsize = sizeof(SearchObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = search_new,
+    .tp_dealloc = (destructor)search_dealloc,
+    .tp_traverse = (traverseproc)search_traverse,
+    .tp_clear = (inquiry)search_clear,
+    .tp_members = search_members,
+    .tp_getset = search_getset,
+    .tp_methods = search_methods,
+};
+
+/* ---- receive: _EventTriggeredAgent.receive of a plain-float agent --------------------------- */
+
+/* Owned references, released together. */
+typedef struct {
+    PyObject *items[48];
+    int n;
+} Held;
+
+static PyObject *hold(Held *h, PyObject *obj) {
+    if (obj != NULL)
+        h->items[h->n++] = obj;
+    return obj;
+}
+
+static void release(Held *h) {
+    while (h->n > 0)
+        Py_DECREF(h->items[--h->n]);
+}
+
+/* `value` as p finite floats when it is a tuple or list of p floats or ints (Neighbourhood.floats
+ * accepts these with the same values); 0 otherwise, without an error set: the Python path decides. */
+static int plain_floats(PyObject *value, Py_ssize_t p, double *out) {
+    if (!(PyTuple_CheckExact(value) || PyList_CheckExact(value)) || PySequence_Fast_GET_SIZE(value) != p)
+        return 0;
+    PyObject **items = PySequence_Fast_ITEMS(value);
+    for (Py_ssize_t i = 0; i < p; i++) {
+        if (!(PyFloat_Check(items[i]) || PyLong_Check(items[i])))
+            return 0;
+        double v = PyFloat_AsDouble(items[i]);
+        if (v == -1.0 && PyErr_Occurred()) {
+            PyErr_Clear();
+            return 0;
+        }
+        if (!isfinite(v))
+            return 0;
+        out[i] = v;
+    }
+    return 1;
+}
+
+/* A number (float or int) as a double; 0 without an error set otherwise. */
+static int plain_double(PyObject *value, double *out) {
+    if (!(PyFloat_Check(value) || PyLong_Check(value)))
+        return 0;
+    *out = PyFloat_AsDouble(value);
+    if (*out == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        return 0;
+    }
+    return 1;
+}
+
+static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
+    PyObject *t = PyTuple_New(n);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *x = PyFloat_FromDouble(v[i]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, x);
+    }
+    return t;
+}
+
+/* list[k] = value (a new reference, stolen); -1 on error. */
+static int list_put(PyObject *list, Py_ssize_t k, PyObject *value) {
+    if (value == NULL)
+        return -1;
+    if (!PyList_CheckExact(list) || k >= PyList_GET_SIZE(list)) {
+        Py_DECREF(value);
+        PyErr_SetString(PyExc_TypeError, "receive: the agent's edge lists are not lists of its edges");
+        return -1;
+    }
+    PyList_SetItem(list, k, value);
+    return 0;
+}
+
+/* A frozen slots dataclass of `names`, built as its __init__ builds it (object.__setattr__ of each
+ * field) where configure found it a plain one (DIRECT), else by calling it. */
+static PyObject *make_record(PyObject *type, int direct, PyObject *names, PyObject *const *values) {
+    Py_ssize_t n = PyTuple_GET_SIZE(names);
+    if (!direct)
+        return PyObject_Vectorcall(type, values, 0, names);
+    PyObject *obj = ((PyTypeObject *)type)->tp_alloc((PyTypeObject *)type, 0);
+    for (Py_ssize_t i = 0; obj != NULL && i < n; i++)
+        if (PyObject_GenericSetAttr(obj, PyTuple_GET_ITEM(names, i), values[i]) < 0)
+            Py_CLEAR(obj);
+    return obj;
+}
+
+/* The message read and checked as the Python path checks it; 0: leave it to the Python path. */
+typedef struct {
+    Py_ssize_t k, p;
+    int kind;
+    double stamp, rel[3], control[3], velocity[3];
+} Message;
+
+static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) {
+    PyObject *hood = hold(h, PyObject_GetAttr(agent, NAMES[N_HOOD]));
+    PyObject *agent_id = hood ? hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID])) : NULL;
+    PyObject *receiver = agent_id ? hold(h, PyObject_GetAttr(info, NAMES[N_RECEIVER])) : NULL;
+    PyObject *sender = receiver ? hold(h, PyObject_GetAttr(info, NAMES[N_SENDER])) : NULL;
+    PyObject *slot = sender ? hold(h, PyObject_GetAttr(hood, NAMES[N_SLOT])) : NULL;
+    if (slot == NULL || !PyDict_CheckExact(slot))
+        return -1;
+    int same = PyObject_RichCompareBool(receiver, agent_id, Py_EQ);
+    if (same <= 0) /* an error: the Python path raises it, or its own */
+        return same < 0 ? (PyErr_Clear(), 0) : 0;
+    PyObject *k = PyDict_GetItemWithError(slot, sender);
+    if (k == NULL)
+        return PyErr_Occurred() ? (PyErr_Clear(), 0) : 0;
+    msg->k = PyLong_AsSsize_t(k);
+    long kind, p, fast;
+    if (msg->k < 0 || get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p < 1 || p > 3 || (kind != 1 && kind != 2))
+        return 0;
+    msg->kind = (int)kind;
+    msg->p = p;
+    PyObject *stamp = hold(h, PyObject_GetAttr(info, NAMES[N_STAMP]));
+    PyObject *edge_time = stamp ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
+    PyObject *last_trigger = edge_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    if (last_trigger == NULL)
+        return -1;
+    if (!plain_double(stamp, &msg->stamp) || !isfinite(msg->stamp) || !PyList_CheckExact(edge_time) ||
+        msg->k >= PyList_GET_SIZE(edge_time))
+        return 0;
+    double edge, last = -INFINITY;
+    if (!plain_double(PyList_GET_ITEM(edge_time, msg->k), &edge) ||
+        (last_trigger != Py_None && !plain_double(last_trigger, &last)))
+        return 0;
+    if (msg->stamp < edge || (last_trigger != Py_None && msg->stamp < last))
+        return 0; /* back in time: the Python path raises */
+    PyObject *rel = hold(h, PyObject_GetAttr(info, NAMES[N_REL_POSITION]));
+    PyObject *control = rel ? hold(h, PyObject_GetAttr(info, NAMES[N_CONTROL])) : NULL;
+    PyObject *velocity = control ? hold(h, PyObject_GetAttr(info, NAMES[N_REL_VELOCITY])) : NULL;
+    if (velocity == NULL)
+        return -1;
+    if (!plain_floats(rel, p, msg->rel) || !plain_floats(control, p, msg->control))
+        return 0;
+    if (kind == 2 && (velocity == Py_None || !plain_floats(velocity, p, msg->velocity)))
+        return 0;
+    return 1;
+}
+
+/* The agent's knowledge updated as the Python path updates it (the same floats). */
+static int take_message(PyObject *agent, Held *h, const Message *msg) {
+    Py_ssize_t k = msg->k, p = msg->p;
+    double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
+    PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
+    PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
+    PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
+    hold(h, offset);
+    hold(h, cap);
+    if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
+        read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
+        return -1;
+    for (Py_ssize_t i = 0; i < p; i++) {
+        y[i] = -msg->rel[i] - d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
+        uj[i] = msg->control[i];
+        q[i] = -msg->velocity[i];
+    }
+    PyObject *heard = hold(h, PyObject_GetAttr(agent, NAMES[N_HEARD]));
+    PyObject *edge_time = heard ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
+    PyObject *edge_y = edge_time ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Y])) : NULL;
+    PyObject *edge_u = edge_y ? hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U])) : NULL;
+    PyObject *rows = edge_u ? hold(h, PyObject_GetAttr(agent, NAMES[N_ROWS])) : NULL;
+    if (rows == NULL)
+        return -1;
+    if (msg->kind == 2) { /* Eta2Agent._receive_extra */
+        PyObject *edge_q = hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_Q]));
+        if (edge_q == NULL || list_put(edge_q, k, floats_tuple(q, 3)) < 0)
+            return -1;
+    }
+    if (list_put(heard, k, Py_NewRef(Py_True)) < 0 ||
+        list_put(edge_time, k, PyFloat_FromDouble(msg->stamp)) < 0 || list_put(edge_y, k, floats_tuple(y, 3)) < 0 ||
+        list_put(edge_u, k, floats_tuple(uj, 3)) < 0)
+        return -1;
+    double row[WIDTH2];
+    Py_ssize_t width;
+    row[0] = msg->stamp;
+    row[1] = y[0];
+    row[2] = y[1];
+    row[3] = y[2];
+    if (msg->kind == 1) { /* Eta1Agent._row */
+        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
+        row[4] = v0;
+        row[5] = v1;
+        row[6] = v2;
+        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+        row[8] = c;
+        width = WIDTH1;
+    } else { /* Eta2Agent._row */
+        row[4] = q[0];
+        row[5] = q[1];
+        row[6] = q[2];
+        row[7] = u[0] - uj[0];
+        row[8] = u[1] - uj[1];
+        row[9] = u[2] - uj[2];
+        row[10] = c;
+        width = WIDTH2;
+    }
+    return list_put(rows, k, floats_tuple(row, width));
+}
+
+/* The counters, the last event, and the plan dropped unless it is due at or before the message. */
+static int after_message(PyObject *agent, Held *h, double stamp) {
+    long infos;
+    double last;
+    PyObject *last_event = hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_EVENT]));
+    if (last_event == NULL || get_long(agent, N_INFOS, &infos) < 0)
+        return -1;
+    PyObject *count = PyLong_FromLong(infos + 1);
+    if (count == NULL || PyObject_SetAttr(agent, NAMES[N_INFOS], count) < 0) {
+        Py_XDECREF(count);
+        return -1;
+    }
+    Py_DECREF(count);
+    last = PyFloat_AsDouble(last_event);
+    if (last == -1.0 && PyErr_Occurred())
+        return -1;
+    if (stamp > last) { /* max(self.last_event, stamp) */
+        PyObject *now = PyFloat_FromDouble(stamp);
+        int rc = now == NULL ? -1 : PyObject_SetAttr(agent, NAMES[N_LAST_EVENT], now);
+        Py_XDECREF(now);
+        if (rc < 0)
+            return -1;
+    }
+    PyObject *search = hold(h, PyObject_GetAttr(agent, NAMES[N_SEARCH]));
+    if (search == NULL)
+        return -1;
+    if (search != Py_None) {
+        PyObject *result = hold(h, PyObject_GetAttr(search, NAMES[N_RESULT]));
+        if (result == NULL)
+            return -1;
+        if (result != Py_None) {
+            double due = PyFloat_AsDouble(result);
+            if (due == -1.0 && PyErr_Occurred())
+                return -1;
+            if (due <= stamp)
+                return 0; /* already due at or before this time: its own trigger re-plans everything */
+        }
+    }
+    return PyObject_SetAttr(agent, NAMES[N_SEARCH], Py_None);
+}
+
+/* receive(agent, info): _EventTriggeredAgent.receive for a plain-float agent (p <= 3), the same
+ * updates and floats. False, with nothing changed, where a check fails or the message is not made
+ * of plain tuples and floats: the Python path then takes it (and raises its error). */
+static PyObject *receive(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agent, *info;
+    if (!PyArg_ParseTuple(args, "OO", &agent, &info))
+        return NULL;
+    Held h = {.n = 0};
+    Message msg;
+    int status = read_message(agent, info, &h, &msg);
+    if (status == 1)
+        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+    release(&h);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
+/* ---- trigger: _EventTriggeredAgent.trigger of a plain-float agent without the safety layer --- */
+
+#define MAX_EDGES 64
+
+/* What a trigger is handed, read and checked as the Python path checks it. */
+typedef struct {
+    Py_ssize_t m, p;
+    int kind;
+    double t;
+    double rel[MAX_EDGES][3], extra[MAX_EDGES][3], y[MAX_EDGES][3], length[MAX_EDGES];
+} Sensing;
+
+/* One vector of p finite floats per neighbour (Neighbourhood.rows): 0 where the Python path decides. */
+static int sensed_rows(PyObject *values, PyObject *ids, Sensing *in, double (*out)[3]) {
+    if (values == NULL || !PyDict_CheckExact(values) || PyDict_GET_SIZE(values) != in->m)
+        return 0;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        PyObject *row = PyDict_GetItemWithError(values, PyTuple_GET_ITEM(ids, k));
+        if (row == NULL)
+            return PyErr_Occurred() ? (PyErr_Clear(), 0) : 0;
+        if (!plain_floats(row, in->p, out[k]))
+            return 0;
+        for (Py_ssize_t i = in->p; i < 3; i++)
+            out[k][i] = 0.0; /* padded to three components */
+    }
+    return 1;
+}
+
+static int read_sensing(PyObject *agent, PyObject *t_obj, PyObject *sensed, Held *h, Sensing *in) {
+    long kind, p, fast;
+    if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p < 1 || p > 3 || (kind != 1 && kind != 2) || !plain_double(t_obj, &in->t) || !isfinite(in->t))
+        return 0;
+    in->kind = (int)kind;
+    in->p = p;
+    PyObject *agent_id = hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID]));
+    PyObject *who = agent_id ? hold(h, PyObject_GetAttr(sensed, NAMES[N_AGENT])) : NULL;
+    PyObject *ids = who ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_IDS])) : NULL;
+    PyObject *last_trigger = ids ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    PyObject *offsets = last_trigger ? hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3])) : NULL;
+    PyObject *capacity = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    int same = PyObject_RichCompareBool(who, agent_id, Py_EQ);
+    if (same <= 0)
+        return same < 0 ? (PyErr_Clear(), 0) : 0;
+    double last;
+    if (last_trigger != Py_None && (!plain_double(last_trigger, &last) || in->t < last))
+        return 0;
+    if (!PyTuple_CheckExact(ids) || PyTuple_GET_SIZE(ids) > MAX_EDGES || !PyList_CheckExact(offsets) ||
+        !PyList_CheckExact(capacity))
+        return 0;
+    in->m = PyTuple_GET_SIZE(ids);
+    PyObject *rel = hold(h, PyObject_GetAttr(sensed, NAMES[N_REL_POSITIONS]));
+    if (rel == NULL)
+        return -1;
+    if (!sensed_rows(rel, ids, in, in->rel))
+        return 0;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        double d[3], c;
+        if (read_floats(PyList_GET_ITEM(offsets, k), d, 3, "_offsets3") < 0)
+            return -1;
+        if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
+            return 0;
+        double sum = 0.0;
+        for (Py_ssize_t i = 0; i < 3; i++)
+            in->y[k][i] = 0.0;
+        for (Py_ssize_t i = 0; i < p; i++) {
+            in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
+            sum += in->y[k][i] * in->y[k][i];   /* sum(v * v for v in row): from 0, left to right */
+        }
+        in->length[k] = sqrt(sum);
+        if (in->length[k] >= c)
+            return 0; /* out of its range: the Python path raises */
+    }
+    if (kind == 2) {
+        PyObject *vel = hold(h, PyObject_GetAttr(sensed, NAMES[N_REL_VELOCITIES]));
+        if (vel == NULL)
+            return -1;
+        if (!sensed_rows(vel, ids, in, in->extra))
+            return 0;
+    }
+    return 1;
+}
+
+/* [t] * m, or a list of the rows as tuples of n floats. */
+static PyObject *rows_list(double (*rows)[3], Py_ssize_t m, Py_ssize_t n) {
+    PyObject *list = PyList_New(m);
+    for (Py_ssize_t k = 0; list != NULL && k < m; k++) {
+        PyObject *row = floats_tuple(rows[k], n);
+        if (row == NULL)
+            Py_CLEAR(list);
+        else
+            PyList_SET_ITEM(list, k, row);
+    }
+    return list;
+}
+
+static int set_attr(PyObject *obj, int name, PyObject *value) { /* value: a new reference, released */
+    if (value == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, NAMES[name], value);
+    Py_DECREF(value);
+    return rc;
+}
+
+
+/* The new input (_update, _command) and the knowledge after the trigger, as the Python path. */
+static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset) {
+    Py_ssize_t m = in->m, p = in->p;
+    double total[3] = {0.0, 0.0, 0.0}, k1 = 0.0, k2 = 0.0;
+    if (in->kind == 2 && (get_double(agent, N_K1, &k1) < 0 || get_double(agent, N_K2, &k2) < 0))
+        return -1;
+    PyObject *capacity = hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY]));
+    if (capacity == NULL)
+        return -1;
+    for (Py_ssize_t k = 0; k < m; k++) { /* _weighted_sum */
+        double r = in->length[k], c = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        double gap = c - r;
+        double w = (2.0 * c - r) / (gap * gap); /* ω_ij (fij) */
+        for (Py_ssize_t i = 0; i < p; i++) {
+            double v = in->kind == 1 ? in->y[k][i] : k1 * in->y[k][i] + k2 * in->extra[k][i];
+            total[i] += w * v;
+        }
+    }
+    double kappa = 1.0;
+    if (in->kind == 1 && get_double(agent, N_SPEED_SCALE, &kappa) < 0)
+        return -1;
+    for (Py_ssize_t i = 0; i < 3; i++) {
+        offset[i] = i < p ? -total[i] : 0.0; /* (uxsingle) / (uxdouble) */
+        control[i] = i < p && in->kind == 1 ? kappa * offset[i] : offset[i]; /* κ u_i (ETA-1) */
+    }
+    PyObject *edge_u = hold(h, PyObject_GetAttr(agent, NAMES[N_EDGE_U]));
+    if (edge_u == NULL || !PyList_CheckExact(edge_u) || PyList_GET_SIZE(edge_u) != m)
+        return -1;
+    if (in->kind == 2) { /* Eta2Agent._update */
+        if (set_attr(agent, N_SENSED_Q, rows_list(in->extra, m, p)) < 0 ||
+            set_attr(agent, N_EDGE_Q, rows_list(in->extra, m, 3)) < 0)
+            return -1;
+    }
+    PyObject *command = hold(h, floats_tuple(control, p)), *own = hold(h, floats_tuple(offset, p));
+    if (command == NULL || own == NULL || set_attr(agent, N_CONTROL, PyObject_CallOneArg(NP_ARRAY, command)) < 0 ||
+        set_attr(agent, N_OFFSET, PyObject_CallOneArg(NP_ARRAY, own)) < 0)
+        return -1;
+    PyObject *rows = PyList_New(m);
+    if (rows == NULL || set_attr(agent, N_ROWS, Py_NewRef(rows)) < 0) {
+        Py_XDECREF(rows);
+        return -1;
+    }
+    hold(h, rows);
+    for (Py_ssize_t k = 0; k < m; k++) {
+        double uj[3], row[WIDTH2], *y = in->y[k];
+        if (read_floats(PyList_GET_ITEM(edge_u, k), uj, 3, "_edge_u") < 0)
+            return -1;
+        row[0] = in->t;
+        row[1] = y[0];
+        row[2] = y[1];
+        row[3] = y[2];
+        if (in->kind == 1) { /* Eta1Agent._row */
+            double v0 = control[0] - uj[0], v1 = control[1] - uj[1], v2 = control[2] - uj[2];
+            row[4] = v0;
+            row[5] = v1;
+            row[6] = v2;
+            row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+            row[8] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        } else { /* Eta2Agent._row */
+            const double *q = in->extra[k];
+            row[4] = q[0];
+            row[5] = q[1];
+            row[6] = q[2];
+            row[7] = control[0] - uj[0];
+            row[8] = control[1] - uj[1];
+            row[9] = control[2] - uj[2];
+            row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        }
+        PyObject *packed = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
+        if (packed == NULL)
+            return -1;
+        PyList_SET_ITEM(rows, k, packed);
+    }
+    double norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
+    PyObject *edge_time = PyList_New(m); /* [t] * m */
+    for (Py_ssize_t k = 0; edge_time != NULL && k < m; k++) {
+        PyObject *x = PyFloat_FromDouble(in->t);
+        if (x == NULL)
+            Py_CLEAR(edge_time);
+        else
+            PyList_SET_ITEM(edge_time, k, x);
+    }
+    if (set_attr(agent, N_EDGE_TIME, edge_time) < 0 || set_attr(agent, N_EDGE_Y, rows_list(in->y, m, 3)) < 0 ||
+        set_attr(agent, N_U, floats_tuple(control, 3)) < 0 || set_attr(agent, N_U_OFFSET, floats_tuple(offset, 3)) < 0 ||
+        set_attr(agent, N_CONTROL_NORM, PyFloat_FromDouble(norm)) < 0)
+        return -1;
+    return 0;
+}
+
+/* The counters and times after a trigger (_interval, last_trigger, last_event, the plan dropped). */
+static int after_trigger(PyObject *agent, Held *h, PyObject *t) {
+    double now = PyFloat_AsDouble(t), last_event;
+    long triggers;
+    PyObject *last_trigger = hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER]));
+    PyObject *last = last_trigger ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_EVENT])) : NULL;
+    if (last == NULL || get_long(agent, N_TRIGGERS, &triggers) < 0)
+        return -1;
+    if (last_trigger != Py_None) {
+        double before = PyFloat_AsDouble(last_trigger);
+        if (now > before && set_attr(agent, N_INTERVAL, PyFloat_FromDouble(now - before)) < 0)
+            return -1;
+    }
+    last_event = PyFloat_AsDouble(last);
+    if (PyErr_Occurred() || PyObject_SetAttr(agent, NAMES[N_LAST_TRIGGER], t) < 0 ||
+        (now > last_event && PyObject_SetAttr(agent, NAMES[N_LAST_EVENT], t) < 0) ||
+        PyObject_SetAttr(agent, NAMES[N_SEARCH], Py_None) < 0 ||
+        set_attr(agent, N_TRIGGERS, PyLong_FromLong(triggers + 1)) < 0)
+        return -1;
+    return 0;
+}
+
+/* TriggerOutput(time=t, control=np.array(control), infos=(TriggerInfo(...) per neighbour)). */
+static PyObject *trigger_output(PyObject *agent, Held *h, Sensing *in, PyObject *t, const double *control) {
+    PyObject *agent_id = hold(h, PyObject_GetAttr(agent, NAMES[N_AGENT_ID]));
+    PyObject *ids = agent_id ? hold(h, PyObject_GetAttr(agent, NAMES[N_NEIGHBOUR_IDS])) : NULL;
+    PyObject *command = ids ? hold(h, floats_tuple(control, in->p)) : NULL;
+    PyObject *infos = command ? hold(h, PyTuple_New(in->m)) : NULL;
+    if (infos == NULL)
+        return NULL;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        PyObject *rel = floats_tuple(in->rel[k], in->p);
+        PyObject *velocity = in->kind == 1 ? Py_NewRef(Py_None) : floats_tuple(in->extra[k], in->p);
+        PyObject *info = NULL;
+        if (rel != NULL && velocity != NULL) {
+            PyObject *args[6] = {agent_id, PyTuple_GET_ITEM(ids, k), t, command, rel, velocity};
+            info = make_record(TRIGGER_INFO, DIRECT_INFO, INFO_NAMES, args);
+        }
+        Py_XDECREF(rel);
+        Py_XDECREF(velocity);
+        if (info == NULL)
+            return NULL;
+        PyTuple_SET_ITEM(infos, k, info);
+    }
+    PyObject *array = hold(h, PyObject_CallOneArg(NP_ARRAY, command));
+    if (array == NULL)
+        return NULL;
+    PyObject *args[3] = {t, array, infos};
+    return make_record(TRIGGER_OUTPUT, DIRECT_OUTPUT, OUTPUT_NAMES, args);
+}
+
+/* trigger(agent, t, sensed): _EventTriggeredAgent.trigger for a plain-float agent (p <= 3) without
+ * the safety layer, the same updates, floats and output. None, with nothing changed, where a check
+ * fails or the sensing is not made of plain tuples and floats: the Python path then takes it. */
+static PyObject *trigger(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agent, *t_obj, *sensed;
+    if (!PyArg_ParseTuple(args, "OOO", &agent, &t_obj, &sensed))
+        return NULL;
+    if (TRIGGER_OUTPUT == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure was not given the trigger's types");
+        return NULL;
+    }
+    Held h = {.n = 0};
+    Sensing *in = PyMem_Malloc(sizeof(Sensing));
+    if (in == NULL)
+        return PyErr_NoMemory();
+    PyObject *out = NULL;
+    int status = read_sensing(agent, t_obj, sensed, &h, in);
+    if (status == 0)
+        out = Py_NewRef(Py_None);
+    else if (status == 1) {
+        double control[3], offset[3];
+        PyObject *t = hold(&h, PyFloat_FromDouble(in->t));
+        if (t != NULL && take_sensing(agent, &h, in, control, offset) == 0 && after_trigger(agent, &h, t) == 0)
+            out = trigger_output(agent, &h, in, t, control);
+    }
+    release(&h);
+    PyMem_Free(in);
+    return out;
+}
+
+
+/* ---- Agenda: the engine's next-event queue (formation_sim.sim.engine._Agenda without a period) -- */
+
+/* A heap entry (time, kind, agent, serial) as the engine's tuples: kind 1 a planned triggering time,
+ * kind 0 the frontier of a search under way; agents by their rank among the sorted ids, so that
+ * entries order as the tuples do. */
+typedef struct {
+    double key;
+    int kind;
+    Py_ssize_t slot;
+    long long number;
+} Entry;
+
+typedef struct {
+    PyObject_HEAD
+    double horizon;
+    Py_ssize_t n, size, capacity;
+    Entry *heap;
+    PyObject *ids;       /* the agents' ids, sorted (a tuple) */
+    PyObject *slots;     /* id -> rank */
+    PyObject **searches; /* per agent: its search, or NULL */
+    long long *serial;   /* per agent: the serial of its live entry */
+    long long counter;
+    PyObject *failed; /* the agent whose search raised in next_time, or None */
+} AgendaObject;
+
+static PyTypeObject AgendaType;
+
+static inline int entry_less(const Entry *a, const Entry *b) {
+    if (a->key != b->key)
+        return a->key < b->key;
+    if (a->kind != b->kind)
+        return a->kind < b->kind;
+    if (a->slot != b->slot)
+        return a->slot < b->slot;
+    return a->number < b->number;
+}
+
+static int heap_push(AgendaObject *self, Entry e) { /* heapq.heappush */
+    if (self->size == self->capacity) {
+        Py_ssize_t capacity = self->capacity ? 2 * self->capacity : 64;
+        Entry *grown = PyMem_Realloc(self->heap, sizeof(Entry) * (size_t)capacity);
+        if (grown == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        self->heap = grown;
+        self->capacity = capacity;
+    }
+    Py_ssize_t pos = self->size++;
+    while (pos > 0) {
+        Py_ssize_t parent = (pos - 1) >> 1;
+        if (!entry_less(&e, &self->heap[parent]))
+            break;
+        self->heap[pos] = self->heap[parent];
+        pos = parent;
+    }
+    self->heap[pos] = e;
+    return 0;
+}
+
+static Entry heap_pop(AgendaObject *self) { /* heapq.heappop (size > 0) */
+    Entry top = self->heap[0], last = self->heap[--self->size];
+    Py_ssize_t pos = 0, n = self->size;
+    while (1) {
+        Py_ssize_t child = 2 * pos + 1;
+        if (child >= n)
+            break;
+        if (child + 1 < n && entry_less(&self->heap[child + 1], &self->heap[child]))
+            child++;
+        if (!entry_less(&self->heap[child], &last))
+            break;
+        self->heap[pos] = self->heap[child];
+        pos = child;
+    }
+    if (n > 0)
+        self->heap[pos] = last;
+    return top;
+}
+
+static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static char *names[] = {"agent_ids", "horizon", NULL};
+    PyObject *agent_ids;
+    double horizon;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$Od", names, &agent_ids, &horizon))
+        return NULL;
+    PyObject *ids = PySequence_List(agent_ids);
+    if (ids == NULL || PyList_Sort(ids) < 0) {
+        Py_XDECREF(ids);
+        return NULL;
+    }
+    AgendaObject *self = (AgendaObject *)type->tp_alloc(type, 0);
+    if (self == NULL) {
+        Py_DECREF(ids);
+        return NULL;
+    }
+    self->horizon = horizon;
+    self->failed = Py_NewRef(Py_None);
+    self->ids = PyList_AsTuple(ids);
+    Py_DECREF(ids);
+    self->slots = PyDict_New();
+    if (self->ids == NULL || self->slots == NULL)
+        goto fail;
+    self->n = PyTuple_GET_SIZE(self->ids);
+    self->searches = PyMem_Calloc((size_t)(self->n ? self->n : 1), sizeof(PyObject *));
+    self->serial = PyMem_Calloc((size_t)(self->n ? self->n : 1), sizeof(long long));
+    if (self->searches == NULL || self->serial == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *rank = PyLong_FromSsize_t(k);
+        if (rank == NULL || PyDict_SetItem(self->slots, PyTuple_GET_ITEM(self->ids, k), rank) < 0) {
+            Py_XDECREF(rank);
+            goto fail;
+        }
+        Py_DECREF(rank);
+    }
+    if (PyDict_GET_SIZE(self->slots) != self->n) {
+        PyErr_SetString(PyExc_ValueError, "Agenda: the agent ids are not distinct");
+        goto fail;
+    }
+    return (PyObject *)self;
+fail:
+    Py_DECREF(self);
+    return NULL;
+}
+
+static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
+    for (Py_ssize_t k = 0; self->searches != NULL && k < self->n; k++)
+        Py_VISIT(self->searches[k]);
+    Py_VISIT(self->ids);
+    Py_VISIT(self->slots);
+    Py_VISIT(self->failed);
+    return 0;
+}
+
+static int agenda_clear(AgendaObject *self) {
+    for (Py_ssize_t k = 0; self->searches != NULL && k < self->n; k++)
+        Py_CLEAR(self->searches[k]);
+    Py_CLEAR(self->ids);
+    Py_CLEAR(self->slots);
+    Py_CLEAR(self->failed);
+    return 0;
+}
+
+static void agenda_dealloc(AgendaObject *self) {
+    PyObject_GC_UnTrack(self);
+    agenda_clear(self);
+    PyMem_Free(self->searches);
+    PyMem_Free(self->serial);
+    PyMem_Free(self->heap);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* method and attribute names */
+
+/* plan(agents, changed): _Agenda.plan without a period; `changed` the agents to plan anew, sorted. */
+static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
+    PyObject *agents, *changed;
+    if (!PyArg_ParseTuple(args, "O!O!", &PyDict_Type, &agents, &PyList_Type, &changed))
+        return NULL;
+    PyObject *horizon = PyFloat_FromDouble(self->horizon);
+    if (horizon == NULL)
+        return NULL;
+    for (Py_ssize_t c = 0; c < PyList_GET_SIZE(changed); c++) {
+        PyObject *id = PyList_GET_ITEM(changed, c);
+        PyObject *rank = PyDict_GetItemWithError(self->slots, id);
+        PyObject *agent = rank ? PyDict_GetItemWithError(agents, id) : NULL;
+        if (agent == NULL) {
+            if (!PyErr_Occurred())
+                PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
+            Py_DECREF(horizon);
+            return NULL;
+        }
+        Py_ssize_t k = PyLong_AsSsize_t(rank);
+        self->counter += 1;
+        self->serial[k] = self->counter;
+        /* Searched lazily (next_time): only as far as the team's next event needs. */
+        PyObject *search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+        double frontier;
+        if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
+            frontier = ((SearchObject *)search)->st.frontier;
+        } else if (search != NULL) {
+            PyObject *value = PyObject_GetAttr(search, FRONTIER);
+            frontier = value ? PyFloat_AsDouble(value) : -1.0;
+            Py_XDECREF(value);
+            if (PyErr_Occurred())
+                Py_CLEAR(search);
+        }
+        if (search == NULL) {
+            Py_DECREF(horizon);
+            return NULL;
+        }
+        Py_XSETREF(self->searches[k], search);
+        if (heap_push(self, (Entry){frontier, 0, k, self->counter}) < 0) {
+            Py_DECREF(horizon);
+            return NULL;
+        }
+    }
+    Py_DECREF(horizon);
+    Py_RETURN_NONE;
+}
+
+/* search.advance(until) -> 1 with *result (done), 0 with *frontier (not yet), -1 on error. */
+static int advance_any(PyObject *search, double until, double *result, double *frontier) {
+    PyObject *out;
+    if (Py_IS_TYPE(search, &SearchType)) {
+        out = search_step((SearchObject *)search, until);
+    } else {
+        PyObject *arg = PyFloat_FromDouble(until);
+        out = arg ? PyObject_CallMethodOneArg(search, ADVANCE, arg) : NULL;
+        Py_XDECREF(arg);
+    }
+    if (out == NULL)
+        return -1;
+    if (out != Py_None) {
+        *result = PyFloat_AsDouble(out);
+        Py_DECREF(out);
+        return PyErr_Occurred() ? -1 : 1;
+    }
+    Py_DECREF(out);
+    if (Py_IS_TYPE(search, &SearchType)) {
+        *frontier = ((SearchObject *)search)->st.frontier;
+        return 0;
+    }
+    PyObject *value = PyObject_GetAttr(search, FRONTIER);
+    if (value == NULL)
+        return -1;
+    *frontier = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return PyErr_Occurred() ? -1 : 0;
+}
+
+/* next_time(): engine._next_event_time, the earliest planned time of the team, advancing unfinished
+ * searches only as needed (ties put searches first, kind 0). A search that raises leaves its agent
+ * in `failed` and its error raised. */
+static PyObject *agenda_next_time(AgendaObject *self, PyObject *unused) {
+    (void)unused;
+    double horizon = self->horizon;
+    while (self->size > 0) {
+        Entry top = self->heap[0];
+        if (self->serial[top.slot] != top.number) {
+            heap_pop(self);
+            continue;
+        }
+        if (top.kind == 1 || top.key > horizon)
+            return PyFloat_FromDouble(top.key);
+        heap_pop(self);
+        double until = self->size > 0 ? self->heap[0].key : INFINITY, result, frontier;
+        PyObject *search = self->searches[top.slot];
+        Py_INCREF(search);
+        int status = advance_any(search, py_min(until, horizon), &result, &frontier);
+        Py_DECREF(search);
+        if (status < 0) {
+            Py_XSETREF(self->failed, Py_NewRef(PyTuple_GET_ITEM(self->ids, top.slot)));
+            return NULL;
+        }
+        if (status == 0) {
+            if (heap_push(self, (Entry){frontier, 0, top.slot, top.number}) < 0)
+                return NULL;
+        } else if (result <= horizon) {
+            if (heap_push(self, (Entry){result, 1, top.slot, top.number}) < 0)
+                return NULL;
+        }
+    }
+    return PyFloat_FromDouble(INFINITY);
+}
+
+/* pop_due(t): engine._pop_due, the agents planned for exactly t (live entries), taken off, sorted. */
+static PyObject *agenda_pop_due(AgendaObject *self, PyObject *arg) {
+    double t = PyFloat_AsDouble(arg);
+    if (t == -1.0 && PyErr_Occurred())
+        return NULL;
+    PyObject *due = PyList_New(0);
+    while (due != NULL && self->size > 0 && self->heap[0].key == t) {
+        Entry e = heap_pop(self);
+        if (e.kind == 1 && self->serial[e.slot] == e.number &&
+            PyList_Append(due, PyTuple_GET_ITEM(self->ids, e.slot)) < 0)
+            Py_CLEAR(due);
+    }
+    if (due != NULL && PyList_Sort(due) < 0)
+        Py_CLEAR(due);
+    return due;
+}
+
+static PyMemberDef agenda_members[] = {
+    {"horizon", T_DOUBLE, offsetof(AgendaObject, horizon), READONLY, "no event is planned past it"},
+    {"failed", T_OBJECT, offsetof(AgendaObject, failed), READONLY,
+     "the agent whose search raised in next_time, or None"},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyMethodDef agenda_methods[] = {
+    {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
+     "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},
+    {"pop_due", (PyCFunction)agenda_pop_due, METH_O, "pop_due(t): the agents planned for exactly t, sorted."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject AgendaType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "formation_agent.core._fastcore.Agenda",
+    .tp_doc = "Agenda(*, agent_ids, horizon): the engine's next-event queue (formation_sim.sim.engine._Agenda "
+              "without a period), compiled; the same order, the same times.",
+    .tp_basicsize = sizeof(AgendaObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = agenda_new,
+    .tp_dealloc = (destructor)agenda_dealloc,
+    .tp_traverse = (traverseproc)agenda_traverse,
+    .tp_clear = (inquiry)agenda_clear,
+    .tp_members = agenda_members,
+    .tp_methods = agenda_methods,
+};
 
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
      "constants and the function that raises the Python path's errors."},
-    {"advance", advance, METH_VARARGS,
-     "advance(search, until): CrossingSearch.advance for a plain-float agent (search.model); its result."},
+    {"receive", receive, METH_VARARGS,
+     "receive(agent, info): the agent's receive for a plain-float agent; False (nothing changed): the "
+     "Python path takes it."},
+    {"trigger", trigger, METH_VARARGS,
+     "trigger(agent, t, sensed): the agent's trigger for a plain-float agent without the safety layer; its "
+     "TriggerOutput, or None (nothing changed): the Python path takes it."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -780,5 +1763,20 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
         if (NAMES[i] == NULL)
             return NULL;
     }
-    return PyModule_Create(&module);
+    if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0)
+        return NULL;
+    TRIGGER_SEARCH = PyUnicode_InternFromString("trigger_search");
+    ADVANCE = PyUnicode_InternFromString("advance");
+    FRONTIER = PyUnicode_InternFromString("frontier");
+    if (TRIGGER_SEARCH == NULL || ADVANCE == NULL || FRONTIER == NULL)
+        return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL)
+        return NULL;
+    if (PyModule_AddObjectRef(m, "Search", (PyObject *)&SearchType) < 0 ||
+        PyModule_AddObjectRef(m, "Agenda", (PyObject *)&AgendaType) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
 }

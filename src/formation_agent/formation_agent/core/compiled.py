@@ -13,11 +13,15 @@ made after the call).
 
 from __future__ import annotations
 
+import dataclasses
 import os
+
+import numpy as np
 
 from formation_agent.core import crossing
 from formation_agent.core.closed_form import _C as _SERIES
 from formation_agent.core.closed_form import SERIES_LIMIT
+from formation_msgs_py.types import TriggerInfo
 
 ENVIRONMENT = 'FORMATION_PURE_PYTHON'
 """Set to 1 to force the pure-Python path."""
@@ -41,9 +45,9 @@ def _forced_pure() -> bool:
 _active = AVAILABLE and not _forced_pure()
 
 
-def configure(*, gap_fraction: float) -> None:
+def configure(*, gap_fraction: float, trigger_output: type) -> None:
     """Hand the compiled core the search's constants from their one source: crossing.py, closed_form.py
-    and eta.py's gap fraction (eta.py calls this once, at its import)."""
+    and eta.py's gap fraction, and the types a trigger returns (eta.py calls this once, at its import)."""
     if _fastcore is not None:
         _fastcore.configure(
             growth=crossing._GROWTH,
@@ -53,7 +57,26 @@ def configure(*, gap_fraction: float) -> None:
             series_limit=SERIES_LIMIT,
             series=_SERIES,
             raiser=_raise,
+            array=np.array,
+            trigger_output=trigger_output,
+            trigger_info=TriggerInfo,
+            direct_output=plain_record(trigger_output, ('time', 'control', 'infos')),
+            direct_info=plain_record(
+                TriggerInfo, ('sender', 'receiver', 'stamp', 'control', 'rel_position', 'rel_velocity')
+            ),
         )
+
+
+def plain_record(cls: type, fields: tuple[str, ...]) -> bool:
+    """True when `cls(**values)` only stores `fields` (a slots dataclass of exactly these fields and no
+    __post_init__): the compiled trigger then fills a new one field by field, as its frozen __init__
+    does with object.__setattr__, instead of calling it."""
+    return (
+        dataclasses.is_dataclass(cls)
+        and getattr(cls, '__slots__', None) == fields
+        and tuple(f.name for f in dataclasses.fields(cls)) == fields
+        and not hasattr(cls, '__post_init__')
+    )
 
 
 def active() -> bool:
@@ -81,9 +104,31 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def kernel():
-    """The compiled advance(search, until) for a plain-float agent, or None for the pure-Python path."""
-    return _fastcore.advance if _active else None
+def search_type():
+    """The compiled twin of `crossing.CrossingSearch` for a plain-float agent (`_fastcore.Search`: the
+    same constructor, attributes and floats, its state and the agent's packed rows held in C), or
+    None for the pure-Python path."""
+    return _fastcore.Search if _active else None
+
+
+def receiver():
+    """The compiled `receive(agent, info)` of a plain-float agent (True: taken; False: nothing changed,
+    the agent's Python `receive` takes the message), or None for the pure-Python path."""
+    return _fastcore.receive if _active else None
+
+
+def trigger():
+    """The compiled `trigger(agent, t, sensed)` of a plain-float agent without the safety layer (its
+    TriggerOutput; None: nothing changed, the agent's Python `trigger` takes it), or None for the
+    pure-Python path."""
+    return _fastcore.trigger if _active else None
+
+
+def agenda():
+    """The compiled next-event queue of the in-process engine without a period (`_fastcore.Agenda`, the
+    twin of formation_sim.sim.engine._Agenda's heap: the same order and times), or None for the
+    pure-Python path."""
+    return _fastcore.Agenda if _active else None
 
 
 def _raise(model, problem: tuple) -> None:

@@ -110,7 +110,6 @@ class CrossingSearch:
 
     __slots__ = (
         '_cover',
-        '_kernel',
         '_norm',
         '_span',
         '_terms',
@@ -154,8 +153,6 @@ class CrossingSearch:
         self._cover = (-math.inf, math.nan, math.nan)
         self._terms = getattr(model, 'error_terms', None) or _vector_terms(model)
         self._norm = getattr(model, 'error_norm', None) or _vector_norm(model)
-        # The compiled loop (formation_agent.core.compiled) where the model offers one: the same floats.
-        self._kernel = getattr(model, 'search_kernel', None)
 
     @property
     def done(self) -> bool:
@@ -168,8 +165,6 @@ class CrossingSearch:
 
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
-        if self._kernel is not None:
-            return self._kernel(self, until)
         a = self.frontier
         beta, alpha, tolerance, floor = self.beta, self.alpha, self.tolerance, self.floor
         terms, bounds = self._terms, self.model.bounds

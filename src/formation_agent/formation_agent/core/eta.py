@@ -74,7 +74,6 @@ SCALE_GAINS: dict[str, float] = {
 # c = Δ - ||d_ij||), so that the bounds, which are evaluated at the far end of the step, stay
 # within a small factor of the local values.
 _GAP_FRACTION = 0.125
-compiled.configure(gap_fraction=_GAP_FRACTION)
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -84,6 +83,9 @@ class TriggerOutput:
     time: float
     control: np.ndarray
     infos: tuple[TriggerInfo, ...]
+
+
+compiled.configure(gap_fraction=_GAP_FRACTION, trigger_output=TriggerOutput)
 
 
 class _AgentHooks:
@@ -145,7 +147,59 @@ class _SafetyHooks:
         return held
 
 
-class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
+class _KnowledgeArrays:
+    """An agent's knowledge as numpy arrays, for the numpy path (p > 3) and the tests: read-only views
+    of its edge lists (`_edge_time`, `_edge_y`, `_edge_u`, ETA-2's `_edge_q`: the one record of the
+    knowledge, which trigger and receive keep), built when read and kept until the knowledge changes;
+    and whether every neighbour was heard."""
+
+    neighbour_ids: tuple[int, ...]
+    dimension: int
+    triggers: int
+    infos_received: int
+    _heard: list[bool]
+
+    _everyone_heard = False
+
+    _mirror_key: tuple | None = None
+    _mirror: tuple = ()
+
+    def _mirrors(self) -> tuple[np.ndarray, ...]:
+        """(anchor times, y_ij at the anchors, the neighbours' controls[, q_ij at the anchors]), read-only."""
+        key = (self.triggers, self.infos_received)
+        if self._mirror_key != key:
+            m, p = len(self.neighbour_ids), self.dimension
+            lists = [self._edge_y, self._edge_u, *([self._edge_q] if hasattr(self, '_edge_q') else [])]
+            arrays = [np.array(self._edge_time, dtype=float)]
+            arrays += [np.array([row[:p] for row in rows], dtype=float).reshape(m, p) for rows in lists]
+            for array in arrays:
+                array.flags.writeable = False
+            self._mirror, self._mirror_key = tuple(arrays), key
+        return self._mirror
+
+    @property
+    def _anchor_time(self) -> np.ndarray:
+        """Each edge's anchor: its last event (its own trigger or the neighbour's)."""
+        return self._mirrors()[0]
+
+    @property
+    def _anchor_y(self) -> np.ndarray:
+        """y_ij = x_i - x_j - d_ij at each edge's anchor."""
+        return self._mirrors()[1]
+
+    @property
+    def _neighbour_control(self) -> np.ndarray:
+        """Each neighbour's latest control."""
+        return self._mirrors()[2]
+
+    def _heard_all(self) -> bool:
+        """True once every neighbour was heard (it stays so: nothing unhears one)."""
+        if not self._everyone_heard:
+            self._everyone_heard = all(self._heard)
+        return self._everyone_heard
+
+
+class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
     """Bookkeeping shared by ETA-1 and ETA-2: anchors, caching of the next time; its neighbours
     and the checks of what it is handed are its `Neighbourhood` (`formation_agent.core.neighbourhood`)."""
 
@@ -167,10 +221,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         self.dimension = hood.dimension
         self.tolerance = _positive('tolerance', tolerance)
         m, p = offsets.shape
-        self._anchor_time = np.zeros(m)
-        self._anchor_y = np.zeros((m, p))  # y_i - y_j = x_i - x_j - d_ij at the anchor
-        self._neighbour_control = np.zeros((m, p))
-        self._heard = np.zeros(m, dtype=bool)
+        self._heard = [False] * m
         self.control = np.zeros(p)  # the command: u_i (ETA-1) or u^d_i (ETA-2), broadcast and applied
         # The command's term in the error: e_i = sum_j ω_ij y_ij + offset (u_i / κ for ETA-1).
         self._offset = np.zeros(p)
@@ -184,7 +235,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         # date by trigger/receive, with one row of prediction constants per edge; and the
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
-        zero = (0.0,) * _FAST_DIMENSION
+        zero = (0.0,) * max(p, _FAST_DIMENSION)
         self._offsets = [tuple(row) for row in offsets.tolist()]
         self._offsets3 = [self._pad(row) for row in self._offsets]
         self._capacity = self.capacity.tolist()
@@ -203,7 +254,12 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     def receive(self, info: TriggerInfo) -> None:
         """Take a neighbour's triggering information (ETA-1 step 6, ETA-2 step 7: predict anew
-        from its time)."""
+        from its time). A plain-float agent takes it compiled where the compiled core runs
+        (`compiled.receiver`: the same updates and floats; a message it does not accept as it is —
+        one this method refuses, or not plain tuples of floats — comes here)."""
+        fast = compiled.receiver() if self._fast else None
+        if fast is not None and fast(self, info):
+            return
         hood = self._hood
         k = hood.sender_slot(info)
         stamp = hood.time(info.stamp, 'information from agent {}', info.sender)
@@ -217,9 +273,6 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         control = hood.floats(info.control, 'control from agent {}', info.sender)
         self._receive_extra(k, info)
         y = tuple(-r - d for r, d in zip(rel, self._offsets3[k]))
-        self._anchor_time[k] = stamp
-        self._anchor_y[k] = y
-        self._neighbour_control[k] = control
         self._heard[k] = True
         self._edge_time[k] = stamp
         self._edge_y[k] = self._pad(y)
@@ -241,7 +294,12 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     ) -> TriggerOutput:
         """ETA-1 step 8, ETA-2 step 9: sense, update the input, and produce the triggering
         information. `nearby`: x_i - x_j of the other robots within the safety layer's sensing
-        radius (only read with the layer on, docs/SAFETY.md)."""
+        radius (only read with the layer on, docs/SAFETY.md). A plain-float agent without the safety
+        layer triggers compiled where the compiled core runs (`compiled.trigger`: the same updates,
+        floats and output; sensing it does not take as it is, or refuses, comes here)."""
+        fast = compiled.trigger() if self._fast and self._safety is None else None
+        if fast is not None and (out := fast(self, t, sensed)) is not None:
+            return out
         t = self._hood.time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
@@ -252,13 +310,11 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         rel = self._hood.rows(sensed.rel_positions, 'sensed rel_positions')
         # Edge by edge in plain floats (a handful of edges: numpy would cost more than it saves).
         y = [tuple(r - d for r, d in zip(row, offset)) for row, offset in zip(rel, self._offsets)]
-        length = [math.sqrt(sum(v * v for v in row)) for row in y]
+        length = [math.sqrt(_sum_of_squares(row)) for row in y]
         self._hood.check_sensed_range(length)
         extra = self._sensed_extra(sensed)  # validated before anything changes
         if self._safety is not None:
             self._safety.check_nearby(nearby, neighbours=self.neighbour_ids)
-        self._anchor_time[:] = t
-        self._anchor_y[:] = y
         offset = self._update(y, length, extra)
         control = self._command(offset)
         if self._safety is not None:  # the applied command, broadcast; e_i keeps the nominal offset
@@ -272,7 +328,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
         self._edge_y = [self._pad(row) for row in y]
         self._u = self._pad(control)
         self._u_offset = self._pad(offset)
-        self._control_norm = math.sqrt(sum(c * c for c in self._u_offset))
+        self._control_norm = math.sqrt(_sum_of_squares(self._u_offset))
         if self._fast:
             self._rows = [self._row(k) for k in range(m)]
         if self.last_trigger is not None and t > self.last_trigger:
@@ -322,7 +378,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
     @property
     def ready(self) -> bool:
         """True once the agent has triggered and heard from every neighbour."""
-        return self.last_trigger is not None and bool(self._heard.all())
+        return self.last_trigger is not None and self._heard_all()
 
     def next_trigger_time(self, limit: float = math.inf) -> float:
         """Next triggering time t^i_{k+1} (ETA-1 steps 3-4, ETA-2 steps 4-5); inf if it lies beyond `limit`.
@@ -349,14 +405,14 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
             if not still_valid:
                 search = None
         if search is None:
-            if not self._heard.all():
+            if not self._heard_all():
                 missing = [j for j, heard in zip(self.neighbour_ids, self._heard) if not heard]
                 raise AgentError(f'agent {self.agent_id} has not heard from neighbours {missing} yet')
             threshold = self._threshold
             # The first trial span only sets how fast the certified steps grow, never what they
             # certify; the agent's own last inter-event time is its natural scale. It depends on
             # the knowledge alone, so a robot and the simulator take the same steps.
-            search = CrossingSearch(
+            search = (self._search_type() or CrossingSearch)(
                 self,
                 start=self.last_event,
                 alpha=threshold.alpha,
@@ -380,11 +436,11 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks):
 
     _kind = 0  # 1: ETA-1, 2: ETA-2 (the compiled core's layout of `_row`)
 
-    @property
-    def search_kernel(self):
-        """The compiled search loop for this agent (the plain-float path, p <= 3), or None: the
-        search then calls the methods below (formation_agent.core.compiled; the same floats)."""
-        return compiled.kernel() if self._fast else None
+    def _search_type(self):
+        """The compiled search (`_fastcore.Search`) for this agent (the plain-float path, p <= 3), or
+        None: `CrossingSearch` then calls the methods below (formation_agent.core.compiled; the same
+        floats)."""
+        return compiled.search_type() if self._fast else None
 
     def error(self, t: float) -> np.ndarray:
         """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
@@ -619,8 +675,7 @@ class Eta2Agent(_EventTriggeredAgent):
         except ScaleError as error:
             raise AgentError(f'agent {agent_id}: {error}') from None
         self.speed_scale = float(speed_scale)
-        self._anchor_q = np.zeros_like(self._anchor_y)  # q_i - q_j at the anchor
-        self._edge_q = [(0.0,) * _FAST_DIMENSION] * len(self.neighbour_ids)
+        self._edge_q = [(0.0,) * max(self.dimension, _FAST_DIMENSION)] * len(self.neighbour_ids)
 
     def _receive_extra(self, k: int, info: TriggerInfo) -> None:
         if info.rel_velocity is None:
@@ -628,8 +683,12 @@ class Eta2Agent(_EventTriggeredAgent):
                 f'agent {self.agent_id}: ETA-2 information from agent {info.sender} lacks rel_velocity'
             )
         q = tuple(-v for v in self._hood.floats(info.rel_velocity, 'rel_velocity from agent {}', info.sender))
-        self._anchor_q[k] = q
         self._edge_q[k] = self._pad(q)
+
+    @property
+    def _anchor_q(self) -> np.ndarray:
+        """q_i - q_j at each edge's anchor."""
+        return self._mirrors()[3]
 
     def _info_velocity(self, k: int):
         return self._sensed_q[k]
@@ -640,7 +699,6 @@ class Eta2Agent(_EventTriggeredAgent):
     def _update(
         self, y: list[tuple[float, ...]], length: list[float], extra: list[tuple[float, ...]]
     ) -> tuple[float, ...]:
-        self._anchor_q[:] = extra
         self._sensed_q = extra
         self._edge_q = [self._pad(row) for row in extra]
         k1, k2 = self.k1, self.k2
@@ -853,6 +911,15 @@ def make_agent(
             raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
         chosen['safety'] = safety
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
+
+
+def _sum_of_squares(values) -> float:
+    """v0² + v1² + ... left to right, as the compiled trigger adds them: not `sum()`, which from
+    Python 3.12 on (ROS Jazzy's) compensates its rounding and would round differently."""
+    total = 0.0
+    for v in values:
+        total += v * v
+    return total
 
 
 def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:

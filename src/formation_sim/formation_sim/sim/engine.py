@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formation_agent.core import compiled
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_agent.core.time_warp import TimeWarp
@@ -448,7 +449,7 @@ def _run(
     if clock is not None:
         horizon = clock.paper_horizon
     messages = 0
-    agenda = _Agenda(horizon=horizon, period=period)
+    agenda = _Agenda(horizon=horizon, period=period, agent_ids=scenario.agent_ids)
     due = list(scenario.agent_ids)  # t^i_1 = 0 for every agent
     t = 0.0
     steps = 0
@@ -528,14 +529,25 @@ class _Agenda:
 
     horizon: float
     period: float | None
+    agent_ids: tuple[int, ...] = ()
     heap: list[tuple[float, int, int, int]] = field(default_factory=list)
     serial: dict[int, int] = field(default_factory=dict)
     searches: dict[int, CrossingSearch] = field(default_factory=dict)
     planned_period: dict[int, float] = field(default_factory=dict)
     counter: int = 0
+    queue: object = None
+
+    def __post_init__(self) -> None:
+        # Without a period, where the compiled core runs, the queue is its compiled twin
+        # (`_fastcore.Agenda`: this heap, its serials and searches in C; the same order and times).
+        if self.period is None and self.agent_ids and (queue := compiled.agenda()) is not None:
+            self.queue = queue(agent_ids=self.agent_ids, horizon=self.horizon)
 
     def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
         """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""
+        if self.queue is not None:
+            self.queue.plan(agents, sorted(changed))
+            return
         for i in sorted(changed):
             self.counter += 1
             self.serial[i] = self.counter
@@ -551,7 +563,14 @@ class _Agenda:
                 heapq.heappush(self.heap, (nxt, 1, i, self.counter))
 
     def next_time(self) -> float:
-        return _next_event_time(self.heap, self.serial, self.searches, self.horizon)
+        if self.queue is None:
+            return _next_event_time(self.heap, self.serial, self.searches, self.horizon)
+        try:
+            return self.queue.next_time()
+        except CrossingError as error:
+            raise EngineError(f'agent {self.queue.failed}: {error}; {PRECISION_HINT}') from error
 
     def pop_due(self, t: float) -> list[int]:
-        return _pop_due(self.heap, self.serial, t)
+        if self.queue is None:
+            return _pop_due(self.heap, self.serial, t)
+        return self.queue.pop_due(t)
