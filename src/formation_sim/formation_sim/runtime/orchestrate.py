@@ -329,7 +329,11 @@ class FormationRun:
             extra = data.setdefault('extra', {})
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
-            extra.update(self.options.summary_extra)
+            for key, value in self.options.summary_extra.items():  # a dict adds to the run's own
+                mine = extra.get(key)
+                extra[key] = (
+                    {**mine, **value} if isinstance(mine, dict) and isinstance(value, dict) else value
+                )
             from formation_sim.sim.summary import write_summary_file
 
             try:
