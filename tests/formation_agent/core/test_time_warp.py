@@ -184,3 +184,27 @@ def test_the_agents_parameter_is_checked_with_rule_and_value(values, words):
         )
         == []
     )
+
+
+def test_the_safety_layer_takes_a_time_warp():
+    """Issue 27: the agent's safety rules no longer refuse a warp (every robot follows the same
+    one, so the layer holds in the paper's time); its own rules still apply."""
+    from formation_agent.ros.config import _safety_problems
+
+    values = {
+        'min_separation': 0.45,
+        'sensing_radius': 2.0,
+        'safety_gamma': 2.0,
+        'safety_max_speed': 0.5,
+        'safety_turn': 1.0,
+        'algorithm': 'eta1',
+        'dimension': 2,
+        'agent_id': 1,
+        'neighbour_ids': [2, 4],
+        'other_robot_ids': [3],
+        'time_warp': [0.0, 0.352, 1.0, 0.44],
+    }
+    assert _safety_problems(values) == []
+    assert _safety_problems({**values, 'dimension': 3}) == [
+        'min_separation: the safety layer is planar, got dimension 3'
+    ]
