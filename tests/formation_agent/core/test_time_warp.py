@@ -92,19 +92,35 @@ def test_too_many_pieces_refused():
         TimeWarp(paper_starts=tuple(float(k) for k in range(n)), rates=(1.0,) * n)
 
 
-def test_warped_agents_in_real_time_trigger_when_the_engine_s_warped_run_does():
+def _robots_lab():
+    from formation_sim.model.scenario import load_scenario
+
+    return load_scenario('robots_lab')
+
+
+def _swap_square_safe():
+    from formation_agent.core.safety import SafetyConfig
+    from formation_sim.sim.safety_cases import swap_square
+
+    return swap_square(safety=SafetyConfig(min_separation=0.45))
+
+
+@pytest.mark.parametrize('make', [_robots_lab, _swap_square_safe])
+def test_warped_agents_in_real_time_trigger_when_the_engine_s_warped_run_does(make):
     """A team of `WarpedAgent`s driven in real time, as agent nodes on the wall clock drive them
-    (the world moving in the paper's time), triggers at the engine's warped triggering times."""
+    (the world moving in the paper's time), triggers at the engine's warped triggering times; with
+    the safety layer too (the other robots within R handed on at each trigger, as an agent node
+    hands them), its interventions counted and the latest one in real time."""
     import numpy as np
 
     from formation_agent.core.time_warp import WarpedAgent
-    from formation_sim.model.scenario import load_scenario
     from formation_sim.sim.engine import build_agent, simulate
     from formation_sim.sim.world import World
 
-    scenario = load_scenario('robots_lab')
+    scenario = make()
     horizon = 8.0
-    expected = simulate(scenario, horizon=horizon, sample_dt=None, time_warp=WARP).trigger_times
+    record = simulate(scenario, horizon=horizon, sample_dt=None, time_warp=WARP)
+    expected = record.trigger_times
     agents = {i: WarpedAgent(build_agent(scenario, i), WARP) for i in scenario.agent_ids}
     world = World.from_scenario(scenario)
     got = {i: [] for i in agents}
@@ -113,7 +129,13 @@ def test_warped_agents_in_real_time_trigger_when_the_engine_s_warped_run_does():
         world.advance(max(world.time, agents[due[0]].paper(t)))  # the world in s
         outbox = []
         for i in due:
-            out = agents[i].trigger(t, world.sense(i, agents[i].core.neighbour_ids))
+            core = agents[i].core
+            sensed = world.sense(i, core.neighbour_ids)
+            if scenario.safety is None:
+                out = agents[i].trigger(t, sensed)
+            else:
+                nearby = world.nearby(i, scenario.safety.sensing_radius, exclude=core.neighbour_ids)
+                out = agents[i].trigger(t, sensed, nearby=nearby)
             assert out.time == t and all(info.stamp == t for info in out.infos)
             world.set_control(i, out.control)  # u_p: the world moves in s
             got[i].append(t)
@@ -129,6 +151,13 @@ def test_warped_agents_in_real_time_trigger_when_the_engine_s_warped_run_does():
         assert len(got[i]) == len(times) > 5
         np.testing.assert_allclose(got[i], times, rtol=1e-12, atol=1e-14)
     assert np.array_equal(agents[1].control, agents[1].core.control)  # the paper's u_p
+    if scenario.safety is not None:
+        counts = {i: agent.safety_interventions for i, agent in agents.items()}
+        assert counts == {int(i): n for i, n in record.extra['safety']['interventions'].items()}
+        assert sum(counts.values()) > 0
+        last = max(agent.safety_last_intervention or 0.0 for agent in agents.values())
+        assert last == pytest.approx(record.extra['safety']['last_intervention'], rel=1e-12)
+        assert last > WARP.real_starts[-1]  # in real time: beyond s = 1.0, where t = s/κ differs
 
 
 @pytest.mark.parametrize(
@@ -155,3 +184,27 @@ def test_the_agents_parameter_is_checked_with_rule_and_value(values, words):
         )
         == []
     )
+
+
+def test_the_safety_layer_takes_a_time_warp():
+    """Issue 27: the agent's safety rules no longer refuse a warp (every robot follows the same
+    one, so the layer holds in the paper's time); its own rules still apply."""
+    from formation_agent.ros.config import _safety_problems
+
+    values = {
+        'min_separation': 0.45,
+        'sensing_radius': 2.0,
+        'safety_gamma': 2.0,
+        'safety_max_speed': 0.5,
+        'safety_turn': 1.0,
+        'algorithm': 'eta1',
+        'dimension': 2,
+        'agent_id': 1,
+        'neighbour_ids': [2, 4],
+        'other_robot_ids': [3],
+        'time_warp': [0.0, 0.352, 1.0, 0.44],
+    }
+    assert _safety_problems(values) == []
+    assert _safety_problems({**values, 'dimension': 3}) == [
+        'min_separation: the safety layer is planar, got dimension 3'
+    ]

@@ -34,7 +34,7 @@ BAD_RUN_ARGUMENTS = [
     (['--speed-scale', 'inf'], "argument --speed-scale: must be a finite number > 0 or 'auto', got inf"),
     (['--speed-scale', '1e-9'], 'gains.speed_scale: must lie in [1e-06, 1e+06]'),
     (['--threshold-floor', '-0.1'], 'argument --threshold-floor: must be a finite number >= 0, got -0.1'),
-    (['--min-separation', '0'], 'argument --min-separation: must be a finite number > 0, got 0.0'),
+    (['--min-separation', '-0.1'], 'argument --min-separation: must be a finite number >= 0, got -0.1'),
     (
         ['--min-separation', '100'],
         'argument --min-separation: safety.sensing_radius: must exceed the guard radius',
@@ -368,6 +368,14 @@ def test_bad_robot_runs_are_refused_before_anything_starts(tmp_path, capsys, arg
 TURTLEBOT3_LIMITS = ['--max-speed', '0.22', '--max-angular-speed', '2.84']
 
 
+def _default_layer(scenario):
+    """`scenario` with the safety layer a Burger team runs by default: footprints r = 0.105 m kept
+    5 cm apart, D_s = 0.26 + 2 l between control points (l = 0.1 m; docs/ROBOTS.md)."""
+    from formation_agent.core.safety import SafetyConfig
+
+    return scenario.replace(safety=SafetyConfig(min_separation=(2 * 0.105 + 0.05) + 0.1 + 0.1))
+
+
 def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and_the_remedy(
     tmp_path, capsys, monkeypatch
 ):
@@ -383,7 +391,8 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
         == 2
     )
     err = capsys.readouterr().err
-    asked = measured_command(load_scenario('robots_lab')).max_speed  # the exact run at κ = 1
+    # the exact run at κ = 1, with the layer robots run by default (Burgers: origins 0.26 m apart)
+    asked = measured_command(_default_layer(load_scenario('robots_lab'))).max_speed
     assert f'asks for {asked:.4g} m/s beyond --max-speed 0.22 m/s' in err
     assert f'{asked / 0.1:.4g} rad/s beyond --max-angular-speed 2.84 rad/s' in err
     assert '--speed-scale auto' in err and '--allow-saturation' in err
@@ -440,12 +449,15 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
     assert 'beyond' not in err and '--speed-scale auto: κ = ' in err
     assert seen['extra']['speed_scale']['value'] == seen['kappa'] < 0.5 and seen['warp'] == ()
     assert seen['extra']['speed_scale']['source'] == 'observed'
+    assert seen['extra']['safety'] == {'layer': 'off', 'source': 'double, dimension 2'}  # ETA-1's layer
     # ETA-1 on robots: the observed time warp (issue 27), the agents at κ = 1 in the paper's time
     arguments = ['run', 'robots_lab', '--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--speed-scale', 'auto']
     assert main([*arguments, '--quiet', '--out', str(tmp_path / 'b')]) == 2
     err = capsys.readouterr().err
     assert '--speed-scale auto: a time warp, κ(t) in ' in err and 'beyond' not in err
     assert seen['kappa'] == 1.0 and seen['extra']['speed_scale']['kind'] == 'time_warp'
+    assert seen['extra']['safety']['source'] == 'unicycle footprints (r = 0.105 m)'  # on by default
+    assert "the safety layer keeps the robots' origins 0.26 m apart" in err
     assert seen['warp'] == tuple(
         seen['extra']['speed_scale']['observed'][key][k]
         for k in range(len(seen['extra']['speed_scale']['observed']['rates']))
@@ -536,7 +548,7 @@ def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path,
     err = capsys.readouterr().err
     assert '--speed-scale warp: a time warp, κ(t) in ' in err and 'beyond' not in err
     warp = choose_time_warp(
-        load_scenario('robots_lab').replace(horizon=30.0),
+        _default_layer(load_scenario('robots_lab')).replace(horizon=30.0),
         limits=RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1),
     ).warp
     assert seen['kappa'] == 1.0 and seen['extra']['speed_scale']['kind'] == 'time_warp'

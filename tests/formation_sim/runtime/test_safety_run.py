@@ -1,5 +1,5 @@
 """The safety layer in distributed runs (issue 27, docs/SAFETY.md; real processes, private ROS
-domains 125-129): `formation run --min-separation D` on the simulator equals `formation simulate
+domains 125-130): `formation run --min-separation D` on the simulator equals `formation simulate
 --min-separation D` bit for bit in lock-step (every trigger time, every sample, extra.safety), and
 keeps every two robots at least D apart on the wall clock. Each agent senses the other robots
 within R through the simulator's sensing answer only."""
@@ -143,6 +143,31 @@ def test_holonomic_robots_with_the_safety_layer_keep_apart_sensing_the_others_fr
     agents = yaml.safe_load((result.out_dir / 'agents.params.yaml').read_text())
     params = agents['/agent_1/formation_agent']['ros__parameters']
     assert params['sensing'] == 'poses' and params['other_robot_ids'] == [3]  # 1's neighbours: 2, 4
+
+
+@pytest.mark.timeout(420)
+def test_unicycles_under_the_time_warp_keep_their_origins_d_apart(tmp_path):
+    """Issue 27 on simulated Burgers: `formation run --backend unicycle --speed-scale auto
+    --min-separation 0.25` keeps the origins 0.25 m apart, so the control points (l = 0.1 m)
+    0.45 m, under the observed time warp, no command saturated (the diagonal swap, 10 s)."""
+    path = tmp_path / 'swap.yaml'
+    dump_scenario(safety_cases.swap_square(safety=None), path)
+    limits = ['--max-speed', '0.22', '--max-angular-speed', '2.84', '--speed-scale', 'auto']
+    arguments = ['run', str(path), '--backend', 'unicycle', *limits, '--min-separation', str(D)]
+    assert _cli(*arguments, '--horizon', '10', '--domain-id', '130', '--out', str(tmp_path / 'run')) == 0
+    summary = json.loads((tmp_path / 'run' / 'summary.json').read_text())
+    safety = summary['extra']['safety']
+    assert (safety['origin_separation'], safety['source']) == (D, '--min-separation')
+    assert safety['min_separation'] == safety['control_point_separation'] == pytest.approx(D + 0.2, rel=1e-15)
+    assert sum(safety['interventions'].values()) > 0
+    assert summary['extra']['speed_scale']['kind'] == 'time_warp'
+    assert summary['extra']['saturation']['total'] == 0
+    samples = load_trajectory(tmp_path / 'run')  # the control points, from the robots' poses
+    closest, when, pair = safety_cases.closest_approach(
+        np.asarray(samples.times), np.asarray(samples.positions)
+    )
+    assert closest >= D + 0.2, f'control points {pair} came {closest} m close at t = {when}'
+    assert summary['max_edge_length'] < 4.0
 
 
 def test_the_agents_parameters_carry_the_layer_and_read_back_into_its_config(tmp_path: Path):

@@ -108,3 +108,21 @@ def test_warp_refused_where_it_does_not_apply(scenario, kwargs, words):
     with pytest.raises(EngineError, match='time_warp: applies to ETA-1 event-triggered runs') as caught:
         simulate(scenario, horizon=1.0, time_warp=WARP, **kwargs)
     assert words in str(caught.value)
+
+
+def test_with_the_safety_layer_the_warp_never_asks_more_than_the_limit_whatever_the_run_does():
+    """The layer's filter keeps every applied command within v̄ = 0.5 m/s, so a warp capped at
+    κ <= 0.22 / 0.5 cannot ask a robot for more than 0.22 m/s, on any run: the pieces that the
+    exact run alone would allow up to κ = 1 (where its commands are small) are held at 0.44."""
+    from formation_agent.core.safety import SafetyConfig
+
+    limits = RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1)
+    scenario = load_scenario('robots_anywhere')
+    plain = choose_time_warp(scenario, limits=limits).warp
+    assert plain.max_rate == 1.0  # without the layer: the exact run's commands decay, κ rises to 1
+    safe = scenario.replace(safety=SafetyConfig(min_separation=0.46))
+    choice = choose_time_warp(safe, limits=limits)
+    assert choice.cap == choice.warp.max_rate < 0.44 and choice.cap == pytest.approx(0.44, rel=1e-8)
+    assert choice.cap * 0.5 <= 0.22
+    assert choice.warp.rates[0] == pytest.approx(0.22 / (1.25 * 0.5), rel=1e-12)  # the observed start
+    assert choice.to_dict()['cap'] == choice.cap

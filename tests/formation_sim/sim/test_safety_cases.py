@@ -195,3 +195,25 @@ def test_a_stress_team_keeps_its_separation_and_reaches_the_formation(capsys):
     closest = float(line.split('closest=')[1].split()[0])
     settle = float(line.split('to 5 cm=')[1].split()[0])
     assert closest > scenario.safety.min_separation and settle < 30.0
+
+
+def test_the_builtin_robots_anywhere_is_its_seeded_draw_and_forms_with_the_default_layer():
+    """robots_anywhere (docs/SCENARIOS.md): random_square(0) in a 2 m square, each pair > 0.3 m apart
+    (> 0.46 m: the Burgers' default D_s applies); with that layer the exact run keeps every two
+    control points 0.46 m apart and forms within 5 cm inside its horizon, edges below Δ."""
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.engine import simulate
+
+    builtin = load_scenario('robots_anywhere')
+    drawn = safety_cases.random_square(0, safety=None, side=2.0)
+    assert np.array_equal(builtin.positions, drawn.positions)
+    assert {e.pair: tuple(e.d) for e in builtin.edges} == {e.pair: tuple(e.d) for e in drawn.edges}
+    assert (builtin.delta, builtin.gains, builtin.n) == (4.0, drawn.gains, 4)
+    assert np.all(builtin.positions >= 0.0) and np.all(builtin.positions <= 2.0)
+    assert safety_cases._closest(builtin.positions) > 0.46
+    scenario = builtin.replace(safety=SafetyConfig(min_separation=0.46))
+    record = simulate(scenario, sample_dt=0.01)
+    times, x = record.samples.times, np.asarray(record.samples.positions)
+    assert safety_cases.closest_approach(times, x)[0] >= 0.46
+    assert safety_cases.settling_time(scenario, times, x, 0.05) < builtin.horizon
+    assert safety_cases.edge_maxima(scenario, x).max() < builtin.delta

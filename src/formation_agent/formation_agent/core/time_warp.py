@@ -176,9 +176,24 @@ class WarpedAgent:
         known = self._known.get(t)
         return self.warp.paper(t) if known is None else known
 
-    def trigger(self, t: float, sensed):
+    @property
+    def safety_interventions(self) -> int:
+        """The core's count of triggers at which the safety layer changed the command."""
+        return self.core.safety_interventions
+
+    @property
+    def safety_last_intervention(self) -> float | None:
+        """The latest such trigger in real time (the core's, t(s)), or None."""
+        last = self.core.safety_last_intervention
+        return None if last is None else self.warp.real(last)
+
+    def trigger(self, t: float, sensed, **nearby):
+        """The core's trigger at s(t); `nearby` (the safety layer's other robots within R, positions
+        relative to this one at that instant) passes on unchanged: every robot follows the same
+        warp, so the team at real time t is the paper's team at s(t) and the layer's barriers hold
+        in s as they do at κ = 1 (docs/SAFETY.md, "Robots set down anywhere")."""
         s = self.paper(t)
-        out = self.core.trigger(s, sensed)
+        out = self.core.trigger(s, sensed, **nearby)
         self._known = {t: s}
         self._last = (t, s)
         infos = tuple(dataclasses.replace(info, stamp=t) for info in out.infos)

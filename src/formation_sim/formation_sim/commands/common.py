@@ -102,13 +102,15 @@ def add_safety_argument(parser: argparse.ArgumentParser) -> None:
     """--min-separation D: the collision layer on, the scenario's other safety keys kept (docs/SAFETY.md)."""
     parser.add_argument(
         '--min-separation',
-        type=POSITIVE,
+        type=NON_NEGATIVE,
         default=None,
         metavar='D',
-        help='keep every two robots at least D metres apart (between the points they control), '
-        'composed with connectivity: the safety layer of docs/SAFETY.md (ETA-1, the plane); the '
-        "scenario's other safety keys are kept, the defaults taken where it has none. Default: the "
-        "scenario's safety.min_separation, or the layer off",
+        help='keep every two robots at least D metres apart, composed with connectivity: the safety '
+        'layer of docs/SAFETY.md (ETA-1, the plane); 0: the layer off. The simulator keeps the points '
+        "the agents control D apart, robot backends the robots' origins (their poses), so their "
+        "control points D + c_i + c_j. The scenario's other safety keys are kept, the defaults taken "
+        "where it has none. Default: the scenario's safety.min_separation; else on robot backends "
+        "(ETA-1, planar) the kind's footprints 2r + 0.05 m apart (docs/ROBOTS.md), elsewhere off",
     )
 
 
@@ -116,6 +118,8 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
     """The scenario with the safety layer at `separation` (None: as it is), or None after saying why not."""
     if separation is None:
         return scenario
+    if separation == 0.0:
+        return scenario.replace(safety=None)
     from formation_agent.core.safety import SafetyConfig, SafetyError
 
     keys = {} if scenario.safety is None else scenario.safety.as_dict()
@@ -124,6 +128,69 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
     except (ScenarioError, SafetyError) as error:
         refuse(command, f'argument --min-separation: {error}')
         return None
+
+
+def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[Scenario, dict] | None:
+    """On a robot backend (`robots`: its RobotOptions): the scenario with the safety layer keeping
+    the robots' origins D apart, so their control points D_s = D + c_i + c_j (docs/ROBOTS.md,
+    "Footprints"), and what summary.json's extra.safety adds (D, D_s, where D came from); None
+    after saying why not.  D: `separation` (0: off), else the scenario's safety.min_separation,
+    else, for ETA-1 in the plane, the kind's default (footprints 2r + SEPARATION_MARGIN apart)."""
+    from formation_agent.core.kinds import SEPARATION_MARGIN, control_point_separation, robot_kind
+
+    kind = robot_kind(robots.model)
+    if separation == 0.0:
+        note = {'layer': 'off', 'source': '--min-separation 0'}
+        print('formation run: the safety layer is off (--min-separation 0)', file=sys.stderr)
+        return scenario.replace(safety=None), note
+    if separation is not None:
+        origins, source = separation, '--min-separation'
+    elif scenario.safety is not None:
+        origins, source = scenario.safety.min_separation, 'scenario safety.min_separation'
+    elif scenario.dynamics == 'single' and scenario.dimension == 2:
+        footprint = kind.footprint(robots.geometry)
+        origins, source = 2.0 * footprint + SEPARATION_MARGIN, f'{kind.name} footprints (r = {footprint:g} m)'
+    else:
+        print(
+            'formation run: the safety layer is off (ETA-1 in the plane only; docs/SAFETY.md)',
+            file=sys.stderr,
+        )
+        return scenario, {'layer': 'off', 'source': f'{scenario.dynamics}, dimension {scenario.dimension}'}
+    points = control_point_separation(origins, kind=kind, geometry=robots.geometry)
+    default = separation is None and scenario.safety is None
+    if default and (problem := _separation_problem(scenario, points)) is not None:
+        print(  # the default never refuses a run: it says why the layer stays off
+            "formation run: warning: the safety layer is off: the default, the robots' origins "
+            f'{origins:g} m apart ({source}, control points {points:g} m), does not apply: {problem}; give '
+            '--min-separation D (or 0 to silence this)',
+            file=sys.stderr,
+        )
+        return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
+    if (safe := with_min_separation(scenario, points, 'run')) is None:
+        print(
+            f"formation run: (the robots' origins {origins:g} m apart, from {source}, are their control "
+            f'points {points:g} m apart: D_s = D + c_i + c_j, docs/ROBOTS.md "Footprints")',
+            file=sys.stderr,
+        )
+        return None
+    print(
+        f"formation run: the safety layer keeps the robots' origins {origins:g} m apart ({source}): "
+        f'their control points {points:g} m',
+        file=sys.stderr,
+    )
+    return safe, {'origin_separation': origins, 'control_point_separation': points, 'source': source}
+
+
+def _separation_problem(scenario: Scenario, separation: float) -> str | None:
+    """Why the safety layer at `separation` cannot run `scenario` (its rules), or None."""
+    from formation_agent.core.safety import SafetyConfig, SafetyError
+
+    keys = {} if scenario.safety is None else scenario.safety.as_dict()
+    try:
+        scenario.replace(safety=SafetyConfig(**{**keys, 'min_separation': separation}))
+    except (ScenarioError, SafetyError) as error:
+        return str(error)
+    return None
 
 
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:

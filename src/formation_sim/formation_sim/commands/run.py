@@ -18,6 +18,7 @@ from formation_sim.commands.common import (
     scale_options,
     plan_options,
     refuse,
+    robot_safety,
     with_min_separation,
 )
 from formation_sim.commands.limits import (
@@ -95,15 +96,20 @@ def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.orchestrate import FormationRun, RunError
 
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
-    if scenario is None or (scenario := with_min_separation(scenario, args.min_separation, 'run')) is None:
+    if scenario is None:
         return EXIT_BAD_INPUT
     try:
         options = plan_options(args)
     except RunError as error:
         return refuse('run', error)
+    if (safe := _safety(scenario, args, options)) is None:
+        return EXIT_BAD_INPUT
+    scenario, extra = safe
     if isinstance(resolved := _speed_scale(scenario, args, options), int):
         return resolved
     scenario, chosen = resolved
+    if chosen is not None:
+        extra['speed_scale'] = chosen
     if options['robots'] is not None and not chosen_warp(chosen):  # a warp is chosen within the limits
         horizon = scenario.horizon if args.horizon is None else args.horizon
         refusal = check_saturation(
@@ -120,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
             timeout=args.timeout,
             localhost_only=not args.network,
             discovery='server' if args.discovery_server else 'simple',
-            summary_extra=None if chosen is None else {'speed_scale': chosen},
+            summary_extra=extra,
         ).run()
     except RunError as error:
         return refuse('run', error)
@@ -144,6 +150,18 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet and result.message:  # otherwise the run's last progress line said it already
         print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status
+
+
+def _safety(scenario, args: argparse.Namespace, options: dict):
+    """(the scenario with the safety layer as asked, summary.json's extra so far), or None after
+    saying why not: on robot backends the robots' origins are kept apart, by default their
+    footprints (`robot_safety`), on the simulator the points the agents control."""
+    if options['robots'] is not None:
+        if (safe := robot_safety(scenario, args.min_separation, options['robots'])) is None:
+            return None
+        return safe[0], {'safety': safe[1]}
+    scenario = with_min_separation(scenario, args.min_separation, 'run')
+    return None if scenario is None else (scenario, {})
 
 
 def _speed_scale(scenario, args: argparse.Namespace, options: dict):

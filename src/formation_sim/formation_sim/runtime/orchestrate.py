@@ -329,7 +329,7 @@ class FormationRun:
             extra = data.setdefault('extra', {})
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
-            extra.update(self.options.summary_extra)
+            _add_extra(extra, self.options.summary_extra)
             from formation_sim.sim.summary import write_summary_file
 
             try:
@@ -482,3 +482,11 @@ def say(text: str, *, end: bool = False) -> None:
     else:
         stream.write(f'[formation run] {text}\n')
     stream.flush()
+
+
+def _add_extra(extra: dict, more) -> None:
+    """summary.json's extra with `more` (the command's: the speed's choice, the safety layer's
+    origins): a dict adds to the run's own entry of that name (extra.safety), anything else replaces it."""
+    for key, value in more.items():
+        mine = extra.get(key)
+        extra[key] = {**mine, **value} if isinstance(mine, dict) and isinstance(value, dict) else value

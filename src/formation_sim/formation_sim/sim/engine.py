@@ -405,18 +405,22 @@ def simulate(
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
             **({'period': period} if period is not None else {}),
-            **({'safety': _safety_extra(scenario, agents)} if scenario.safety is not None else {}),
+            **({'safety': _safety_extra(scenario, agents, clock)} if scenario.safety is not None else {}),
             **({} if clock is None else {'time_warp': clock.warp.to_dict()}),
         },
     )
 
 
-def _safety_extra(scenario, agents: dict) -> dict:
-    """The safety layer's settings and how often it changed a command (docs/SAFETY.md)."""
+def _safety_extra(scenario, agents: dict, clock) -> dict:
+    """The safety layer's settings and how often it changed a command (docs/SAFETY.md); under a
+    warp the agents run in s, so their latest intervention is labelled t(s) as their triggers are."""
+    last = {i: agent.safety_last_intervention for i, agent in agents.items()}
+    if clock is not None:
+        last = {i: None if s is None else clock.real(s) for i, s in last.items()}
     return safety_extra(
         scenario.safety,
         interventions={i: agent.safety_interventions for i, agent in agents.items()},
-        last_interventions={i: agent.safety_last_intervention for i, agent in agents.items()},
+        last_interventions=last,
     )
 
 

@@ -211,6 +211,10 @@ def command_steps(scenario: Scenario, *, horizon: float) -> tuple[np.ndarray, np
     return np.asarray(times), np.asarray(largest), record
 
 
+LAYER_ROUNDING = 1.0 + 1e-9
+"""The safety layer's cap κ <= L / (v̄ × this): its filter's ||v|| <= v̄ holds up to rounding."""
+
+
 def choose_time_warp(
     scenario: Scenario,
     *,
@@ -221,9 +225,13 @@ def choose_time_warp(
 ) -> WarpChoice:
     """The time warps for `limits` (`formation_sim.model.warp_choice`, ETA-1): the observed one from
     the exact run at κ = 1 to cap × the scenario's horizon (all the warped run can reach of the
-    paper's time), the guaranteed one from the proofs' decaying bound.  LimitsError where no warp
-    applies (ETA-2, no speed limit)."""
-    warp_limit(limits, scenario.dynamics, cap=cap, window=window)
+    paper's time), the guaranteed one from the proofs' decaying bound.  With the safety layer every
+    applied command is within v̄ whatever the run does, so κ <= L / v̄ is a guarantee: the cap (a
+    wall-clock run that strays from the exact one, as the layer's ties make likely, then asks no
+    more than the robots can do).  LimitsError where no warp applies (ETA-2, no speed limit)."""
+    limit = warp_limit(limits, scenario.dynamics, cap=cap, window=window)
+    if scenario.safety is not None:  # the layer's filter keeps every applied command within v̄
+        cap = min(cap, limit / (scenario.safety.max_speed * LAYER_ROUNDING))
     paper = unit_scale(scenario)
     horizons = (cap * float(scenario.horizon), float(scenario.horizon))
     times, largest, record = command_steps(paper, horizon=horizons[0])
