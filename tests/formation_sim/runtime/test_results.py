@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from formation_sim.runtime.results import EXIT_INTERRUPTED, annotate, phases
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.runtime.results import annotate, phases
 from formation_sim.runtime.supervise import Child
 
 
@@ -48,7 +49,7 @@ def test_a_child_that_stopped_the_run_is_its_first_cause_by_kind_and_agent(
     child = _child(
         name, returncode, tmp_path, error='the pose of robot 2 is 0.6 s old' if returncode > 0 else ''
     )
-    failure = annotate(data, child, EXIT_INTERRUPTED, '', launched=0.0)
+    failure = annotate(data, child, ExitCode.INTERRUPTED, '', launched=0.0)
     assert (failure['kind'], failure['agents']) == (kind, agents)
     assert failure['message'].startswith(f'{name} (pid {child.pid}) ') and failure['process']['name'] == name
     assert failure['detected_by'] == 'coordinator, orchestrator'
@@ -94,18 +95,19 @@ def test_the_time_keeper_gets_its_time_to_name_a_lost_child_itself(tmp_path, nam
 
 
 def test_a_time_keeper_that_failed_gives_its_status_or_the_lost_childs(tmp_path):
-    from formation_sim.runtime.results import EXIT_FAILED, EXIT_LOST, keeper_failed
+    from formation_sim.runtime.results import keeper_failed
 
     keeper = _child('coordinator', 4, tmp_path)
     status, message = keeper_failed(4, keeper, None)  # refused: the robots' start (nothing was sent)
     assert status == 4 and message == f'coordinator (pid {keeper.pid}) exited with status 4; see {keeper.log}'
     lost = _child('agent_2', 1, tmp_path, error='the pose of robot 2 is 0.6 s old')
     status, message = keeper_failed(130, keeper, lost)  # stopped with the rest: the lost child decides
-    assert status == EXIT_FAILED and message.startswith(
+    assert status == ExitCode.FAILED and message.startswith(
         f'agent_2 (pid {lost.pid}) exited with status 1: the pose of robot 2 is 0.6 s old; coordinator'
     )
     assert (
-        keeper_failed(-9, keeper, None)[0] == EXIT_LOST and keeper_failed(7, keeper, None)[0] == EXIT_FAILED
+        keeper_failed(-9, keeper, None)[0] == ExitCode.LOST
+        and keeper_failed(7, keeper, None)[0] == ExitCode.FAILED
     )
     # An operator's stop (/formation/stop) is the run's status whatever child went meanwhile.
     assert keeper_failed(5, keeper, lost)[0] == 5 and keeper_failed(5, keeper, None)[0] == 5

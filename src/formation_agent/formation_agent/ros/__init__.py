@@ -13,7 +13,7 @@
   go (`PlantOutput`, `RobotOutput`); `inbox`: what it refuses to read; `faults`: injected
   faults (a test facility).
 - `process`: the executor a node process spins (`make_executor`), SIGINT/SIGTERM as a flag
-  (`StopSignals`), and exit statuses (`EXIT_BAD_INPUT`, `EXIT_PEER_LOST`).
+  (`StopSignals`); the exit statuses are `formation_msgs_py.exit_codes.ExitCode`.
 - `parameters`: every node's parameter table (`ParameterSpec`): descriptors for
   `ros2 param describe`, one error naming every bad parameter, the `--help` table.
 
@@ -28,7 +28,7 @@ __all__ = lazy_exports(
         'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError'),
         'main': ('main',),
         'config': ('AgentConfig', 'agent_help', 'read_config'),
-        'process': ('EXECUTORS', 'EXIT_BAD_INPUT', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
+        'process': ('EXECUTORS', 'StopSignals', 'make_executor'),
         'parameters': (
             'ParameterError',
             'ParameterSpec',

@@ -45,8 +45,6 @@ from formation_agent.ros.node import (
 from formation_agent.ros.parameters import ParameterError, read_parameters
 from formation_agent.ros.process import (
     EXECUTORS,
-    EXIT_BAD_INPUT,
-    EXIT_PEER_LOST,
     StopSignals,
     exit_process,
     make_executor,
@@ -54,6 +52,7 @@ from formation_agent.ros.process import (
     shutdown_guard,
 )
 from formation_agent.ros.staleness import StaleStateError
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import agent_namespace
 
 
@@ -186,10 +185,10 @@ def main(args: Sequence[str] | None = None) -> int:
             FaultInjectionError,
         ) as error:  # bad input: every problem named, nothing started
             print(f'formation_agent: {error}{_missing_id_hint(error, options)}', file=sys.stderr, flush=True)
-            status = EXIT_BAD_INPUT
+            status = ExitCode.BAD_INPUT
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
-            status, failure = EXIT_PEER_LOST, str(error)
+            status, failure = ExitCode.LOST, str(error)
         except (
             PoseError,
             StaleStateError,

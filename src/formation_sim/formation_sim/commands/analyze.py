@@ -11,11 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import EXIT_BAD_INPUT, POSITIVE_INT, bounded_int, check_report_argument
-
-EXIT_OK = 0
-EXIT_FINDINGS = 1
-EXIT_UNREADABLE = EXIT_BAD_INPUT
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import POSITIVE_INT, bounded_int, check_report_argument
 
 
 def register(subparsers) -> None:
@@ -96,19 +93,19 @@ def run(args: argparse.Namespace) -> int:
 
     show = not args.quiet
     if not check_report_argument('analyze', args.out):
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     try:
         location, bag_run = _load(args, show=show)
     except AnalysisError as error:
         print(f'formation analyze: error: {error}', file=sys.stderr)
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     record = bag_run.record
     out = args.out or default_out_dir(location)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         print(f'formation analyze: error: cannot create {out}: {error.strerror or error}', file=sys.stderr)
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     evaluating = Progress('evaluating ν and V', enabled=show)
     series = run_series(record, progress=evaluating)
     evaluating.close()
@@ -120,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     if args.markers:
         marked = _write_markers(location.bag, out, record.scenario, show=show)
         if marked is None:
-            return EXIT_UNREADABLE
+            return ExitCode.BAD_INPUT
         written.update(marked)
     report = build_report(
         bag_run,
@@ -214,7 +211,7 @@ def _conclude(args: argparse.Namespace, record, report: dict, *, out: Path, writ
             out=out,
             written=written,
         )
-    return EXIT_FINDINGS if failed or differs else EXIT_OK
+    return ExitCode.FAILED if failed or differs else ExitCode.OK
 
 
 def _print_findings(

@@ -12,14 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from formation_sim.commands.common import (
-    EXIT_OK,
-    NON_NEGATIVE_INT,
-    POSITIVE,
-    POSITIVE_INT,
-    UNIT_FRACTION,
-    refuse,
-)
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, UNIT_FRACTION, refuse
 
 
 def register(subparsers) -> None:
@@ -124,4 +118,4 @@ def run(args: argparse.Namespace) -> int:
         f'{out}: {scenario.name}, {scenario.n} agents, {len(scenario.edges)} edges, {scenario.dynamics} '
         f'integrators in {scenario.dimension}-D ({kind})'
     )
-    return EXIT_OK
+    return ExitCode.OK

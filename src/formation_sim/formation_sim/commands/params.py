@@ -12,8 +12,8 @@ import argparse
 import dataclasses
 import sys
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
-    EXIT_BAD_INPUT,
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
@@ -54,11 +54,11 @@ def run(args: argparse.Namespace) -> int:
 
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     from formation_sim.commands.limits import resolve_speed_scale
 
     if (resolved := resolve_speed_scale(scenario, args, 'params')) is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     scenario = resolved[0]  # the agents' parameter files carry κ
     try:
         plan = FormationRun(

@@ -54,17 +54,7 @@ from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
-from formation_agent.ros.process import (
-    EXIT_BAD_INPUT,
-    EXIT_PEER_LOST,
-    EXIT_REFUSED,
-    EXIT_STOPPED,
-    StopSignals,
-    exit_process,
-    make_executor,
-    release_ros,
-    shutdown_guard,
-)
+from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
 from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
@@ -117,16 +107,13 @@ from formation_sim.runtime.time_keeper import (
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
 
 COORDINATOR_FILE = (
     'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 )
 TRAJECTORY_SOURCES = tuple(TRAJECTORY_TOPICS)  # which robot topic the formation is measured on
-
-EXIT_FAILED = 1
-EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
-EXIT_INTERRUPTED = 130
 
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
@@ -576,10 +563,10 @@ def exit_status_of(node: TimeKeeperNode | None, error: Exception) -> int:
     operator's stop noted before a later error is still the operator's)."""
     first = None if node is None or node.failure_info is None else node.failure_info['kind']
     if first == OperatorStopError.kind or isinstance(error, OperatorStopError):
-        return EXIT_STOPPED
+        return ExitCode.STOPPED
     if isinstance(error, LOST_ERRORS):
-        return EXIT_AGENT_LOST
-    return EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
+        return ExitCode.LOST
+    return ExitCode.REFUSED if isinstance(error, InitialConditionError) else ExitCode.FAILED
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -613,7 +600,7 @@ def main(
                 node = node_class()
             except ParameterError as error:  # bad input: every problem named, nothing started
                 _tell(f'{node_class.COMMAND}: {error}')
-                status = EXIT_BAD_INPUT  # the shutdown guard's too
+                status = ExitCode.BAD_INPUT  # the shutdown guard's too
                 return status
             executor = make_executor(node.executor_kind)
             executor.add_node(node)
@@ -643,13 +630,13 @@ def main(
                     write_results(node)
                 except OSError as error:  # e.g. a full disk: the run itself went well
                     _tell(f'formation_sim: cannot write the results: {error}')
-                    status = EXIT_FAILED
+                    status = ExitCode.FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
-            status = EXIT_INTERRUPTED
+            status = ExitCode.INTERRUPTED
             _stop_and_write(node, executor, error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
-                status = EXIT_INTERRUPTED
+                status = ExitCode.INTERRUPTED
                 _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
             error = error if node is None else blamed(node, error)  # its cause first (issue 28)

@@ -43,11 +43,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from formation_agent.ros.process import (
-    EXIT_REFUSED,  # 4: the robots' measured start broke a hypothesis, nothing was sent
-    EXIT_STOPPED,  # 5: an operator stopped the run (/formation/stop, formation stop)
-    SignalFlag,
-)
+from formation_agent.ros.process import SignalFlag
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import (
     AGENT_NODE,
     COORDINATOR_NODE,
@@ -70,10 +67,6 @@ from formation_sim.runtime.launch import (
     reserve_domain,
 )
 from formation_sim.runtime.results import (
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    EXIT_LOST,
-    EXIT_OK,
     ChildExit,
     RunResult,
     annotate,
@@ -98,12 +91,6 @@ from formation_sim.sim.summary import SUMMARY_FILE
 
 __all__ = [
     'BACKENDS',
-    'EXIT_FAILED',
-    'EXIT_INTERRUPTED',
-    'EXIT_LOST',
-    'EXIT_OK',
-    'EXIT_REFUSED',
-    'EXIT_STOPPED',
     'ChildExit',
     'FormationRun',
     'RobotOptions',
@@ -114,7 +101,7 @@ __all__ = [
 ]
 
 # What the last line of `formation run` says of a run that ended with these statuses besides 0.
-OUTCOMES = {EXIT_INTERRUPTED: 'stopped', EXIT_STOPPED: 'stopped by the operator'}
+OUTCOMES = {ExitCode.INTERRUPTED: 'stopped', ExitCode.STOPPED: 'stopped by the operator'}
 
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
@@ -247,10 +234,10 @@ class FormationRun:
         status, failure, run_phases = self._write_summary(
             status, message, lost, domain_id=domain_id, notes=notes
         )
-        if status == EXIT_OK and not summary.is_file():
-            status = EXIT_FAILED
+        if status == ExitCode.OK and not summary.is_file():
+            status = ExitCode.FAILED
             message = message or f'the {self.plan.keeper} exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+        if failure is not None and status != ExitCode.INTERRUPTED and failure['message'] not in message:
             message = failure['message'] + (f'; {message}' if message else '')
         message = '; '.join([message, *notes] if message else notes)
         result = RunResult(
@@ -320,10 +307,10 @@ class FormationRun:
                         'step': data['extra'].get('steps'),
                         'detected_by': 'orchestrator',
                     }
-                    status = EXIT_FAILED if status == EXIT_OK else status
-                elif status != EXIT_INTERRUPTED:
+                    status = ExitCode.FAILED if status == ExitCode.OK else status
+                elif status != ExitCode.INTERRUPTED:
                     notes.append(check.describe_missing())
-            if check is not None and check.foreign and status != EXIT_INTERRUPTED:
+            if check is not None and check.foreign and status != ExitCode.INTERRUPTED:
                 notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
             self.marks['checked'] = time.time()
             extra = data.setdefault('extra', {})
@@ -405,10 +392,10 @@ class FormationRun:
         next_snapshot = time.monotonic()  # the children's Fast DDS files, noted while they live
         while True:
             if self._interrupted.is_set():
-                return EXIT_INTERRUPTED, 'interrupted', lost
+                return ExitCode.INTERRUPTED, 'interrupted', lost
             now = time.monotonic()
             if deadline is not None and now > deadline:
-                return EXIT_FAILED, self._timed_out(), lost
+                return ExitCode.FAILED, self._timed_out(), lost
             if self.options.progress and self.last_progress != shown:
                 shown = self.last_progress
                 say(shown)
@@ -425,10 +412,10 @@ class FormationRun:
                     failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     after_end = '; '.join(note for note in (after_end, hung) if note)
                     if not failed:
-                        return EXIT_OK, after_end, lost
+                        return ExitCode.OK, after_end, lost
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
-                    return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
+                    return ExitCode.FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
                 return (*keeper_failed(code, keeper, lost), lost)
             if lost is None:
                 lost = first_lost(supervisor.children, keeper)

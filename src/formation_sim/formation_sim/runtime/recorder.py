@@ -57,6 +57,7 @@ from formation_agent.ros.parameters import (
     parameter_help,
     read_parameters,
 )
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
 from formation_sim.bag.io import (
@@ -617,7 +618,6 @@ def main(args: Sequence[str] | None = None) -> int:
     from rclpy.task import Future
 
     from formation_agent.ros.process import (
-        EXIT_BAD_INPUT,
         SignalFlag,
         make_executor,
         release_ros,
@@ -659,7 +659,7 @@ def main(args: Sequence[str] | None = None) -> int:
     except (ParameterError, BagError) as error:
         if node is None:  # bad parameters, or a bag that exists already: nothing was recorded
             print(f'formation_recorder: {error}', file=sys.stderr, flush=True)
-            return EXIT_BAD_INPUT
+            return ExitCode.BAD_INPUT
         if node.failure is None:
             raise
     finally:
@@ -668,7 +668,7 @@ def main(args: Sequence[str] | None = None) -> int:
                 node.close()
         with shutdown_guard(
             'formation_recorder',
-            lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0,
+            lambda: ExitCode.BAD_INPUT if node is None else 1 if node.failure is not None else 0,
             announce=node is not None,
         ):
             release_ros(executor, [] if node is None else [node])

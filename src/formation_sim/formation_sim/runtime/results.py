@@ -13,15 +13,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from formation_agent.ros.process import EXIT_REFUSED, EXIT_STOPPED
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.runtime.supervise import Child, describe_exit
-
-# Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_LOST = 3  # a process of the run died or an agent was lost
-# 4 (EXIT_REFUSED) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped the run (formation stop)
-EXIT_INTERRUPTED = 130
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,9 +33,8 @@ class RunResult:
     out_dir: Path
     summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
     bag: Path | None  # DIR/bag, None if not recorded or not readable
-    # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (EXIT_REFUSED,
-    # formation_agent.ros.process) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped
-    # the run (/formation/stop); 130 interrupted
+    # an ExitCode (formation_msgs_py.exit_codes): OK, FAILED, LOST (a process or agent lost), REFUSED
+    # (the robots' start refused), STOPPED (an operator stopped the run: /formation/stop), INTERRUPTED
     exit_status: int
     domain_id: int
     wall_time: float
@@ -62,8 +54,8 @@ class RunResult:
 
 
 def lost_or_failed(child: Child) -> int:
-    """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
-    return EXIT_FAILED if child.failed_itself else EXIT_LOST
+    """ExitCode.FAILED for a child that left naming an error, ExitCode.LOST for one that died or vanished."""
+    return ExitCode.FAILED if child.failed_itself else ExitCode.LOST
 
 
 # How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
@@ -109,10 +101,10 @@ def keeper_failed(code: int, keeper: Child, lost: Child | None) -> tuple[int, st
     """The time keeper exited with `code`, not 0: the run's exit status and message.  A status
     that names the first cause (failed, lost, refused) is the run's; else the child seen `lost`
     decides, or how the keeper ended (killed by a signal: lost)."""
-    if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED, EXIT_STOPPED):
+    if code in (ExitCode.FAILED, ExitCode.LOST, ExitCode.REFUSED, ExitCode.STOPPED):
         status = code
     else:
-        status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
+        status = lost_or_failed(lost) if lost is not None else ExitCode.LOST if code < 0 else ExitCode.FAILED
     seen = '' if lost is None else f'{lost.describe()}; '
     return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}'
 
@@ -218,7 +210,7 @@ def summary_of_what_is_known(
         key: float(value)
         for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)
     }
-    stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
+    stopped_by_us = status == ExitCode.INTERRUPTED or keeper.signal_used is not None
     killed = keeper.process.returncode is None or keeper.process.returncode < 0
     failure = {
         'kind': 'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
@@ -299,7 +291,7 @@ def annotate(data: dict, lost: Child | None, status: int, message: str, *, launc
     """Add the orchestrator's view of a failure to the summary's extra.failure; return it."""
     extra = data.setdefault('extra', {})
     failure = extra.get('failure')
-    if failure is None and status == EXIT_OK:
+    if failure is None and status == ExitCode.OK:
         return None
     if failure is None:  # the time keeper completed, but a child failed
         failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}

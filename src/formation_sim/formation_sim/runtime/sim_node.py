@@ -76,11 +76,6 @@ from formation_sim.analysis.markers import MARKERS_TYPE
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
-from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's names since before the split
-    EXIT_AGENT_LOST,
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-)
 from formation_sim.runtime.run_end import GRAPH_FILE, write_results  # noqa: F401 - likewise
 from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
     AgentLostError,
