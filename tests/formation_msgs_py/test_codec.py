@@ -12,7 +12,6 @@ import pytest
 from formation_msgs_py.codec import (
     AGENT_REPORT_VERSION,
     LAYOUT_VERSION,
-    MessageError,
     decode_agent_report,
     decode_command,
     decode_odometry,
@@ -36,6 +35,7 @@ from formation_msgs_py.codec import (
     ros_time,
     sensing_refusal,
 )
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import (
     LAYOUT_REASONS,
     REJECT_REASONS,

@@ -51,7 +51,8 @@ __all__ = lazy_exports(
             'robot_command_topic',
             'robot_true_odom_topic',
         ),
-        'codec': ('MessageError',),
+        'codec': (),
         'exit_codes': ('ExitCode',),
+        'errors': ('FormationError', 'MessageError'),
     },
 )

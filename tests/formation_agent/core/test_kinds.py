@@ -11,13 +11,13 @@ from formation_agent.core.commander import RobotCommander
 from formation_agent.core.kinds import (
     KIND_NAMES,
     Geometry,
-    KindError,
     KindNames,
     RobotKind,
     register,
     robot_kind,
     unregister,
 )
+from formation_agent.core.errors import KindError
 from formation_agent.core.limits import Limits, SaturationLog
 
 

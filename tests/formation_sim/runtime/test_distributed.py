@@ -357,7 +357,7 @@ def test_lockstep_run_takes_same_instant_rounds_and_stops_where_the_engine_stops
     # paper_single to t = 200: the engine stops where the threshold reaches the rounding of the
     # states (after an instant with a second round of triggers); the distributed run must take the
     # same rounds and stop at the same event with the same message.
-    from formation_sim.sim.engine import EngineError
+    from formation_sim.sim.errors import EngineError
 
     scenario = load_scenario('paper_single')
     with pytest.raises(EngineError) as stop:

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch import RobotOptions, RunError
+from formation_sim.runtime.launch import RobotOptions
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.orchestrate import FormationRun
 
 TURTLEBOT3 = RobotOptions(

@@ -25,7 +25,8 @@ from std_srvs.srv import Trigger
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import STOP_SERVICE
 from formation_sim.runtime.operator_stop import CALLER_LOOK, CALLER_WAIT, OperatorStop
-from formation_sim.runtime.run_book import OperatorStopError, failure_extra
+from formation_sim.runtime.run_book import failure_extra
+from formation_sim.runtime.errors import OperatorStopError
 
 BOUND = 1.0  # [s] issue 27: every robot's zero within this long of the call
 TEST_POSE_TIMEOUT = 2.0  # as tests/formation_sim/runtime/test_orchestrate.py: a loaded machine

@@ -14,15 +14,11 @@ import pytest
 
 from formation_agent.core.safety import SafetyConfig
 from formation_sim.cli import main
-from formation_sim.model.scenario import (
-    ScenarioError,
-    dump_scenario,
-    load_scenario,
-    scenario_from_dict,
-    scenario_to_dict,
-)
+from formation_sim.model.scenario import dump_scenario, load_scenario, scenario_from_dict, scenario_to_dict
+from formation_sim.model.errors import ScenarioError
 from formation_sim.sim import safety_cases
-from formation_sim.sim.engine import EngineError, simulate
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError
 
 SAFETY = SafetyConfig(min_separation=0.25)
 CASES = {
@@ -177,7 +173,7 @@ def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
 
 def test_a_distributed_run_refuses_the_layer_it_does_not_carry_yet():
     """Not wired into the agent nodes yet: refused before anything starts, not silently off."""
-    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.errors import RunError
     from formation_sim.runtime.run_options import RunOptions
 
     with pytest.raises(RunError, match='the safety layer .* is not wired into distributed runs yet'):

@@ -15,12 +15,12 @@ import pytest
 
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
-from formation_sim.sim.engine import EngineError, simulate
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError, TrajectoryError
 from formation_sim.sim.samples import (
     INCOMPLETE_DIR,
     TRAJECTORY_DIR,
     EdgeLengths,
-    TrajectoryError,
     edge_maxima,
     header_shape,
     load_trajectory,

@@ -58,9 +58,7 @@ from typing import Protocol
 
 import numpy as np
 
-
-class CrossingError(RuntimeError):
-    """The search could not proceed (non-finite error, or a step that does not advance)."""
+from formation_agent.core.errors import CrossingError
 
 
 # What a CrossingError means for a run, said by the engine and by an agent node alike.

@@ -36,13 +36,13 @@ from formation_agent.core import compiled
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
-from formation_agent.core.neighbourhood import AgentError, Neighbourhood
+from formation_agent.core.neighbourhood import Neighbourhood
+from formation_agent.core.errors import AgentError, ScaleError
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
-    ScaleError,
     Threshold,
     eta1_gains,
     eta2_gains,

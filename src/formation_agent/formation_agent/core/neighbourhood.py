@@ -16,12 +16,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from formation_agent.core.errors import AgentError
 from formation_agent.core.tension import edge_capacity
 from formation_msgs_py.types import TriggerInfo
-
-
-class AgentError(ValueError):
-    """Input the agent cannot accept: bad parameters, malformed or inconsistent information."""
 
 
 def positive(name: str, value: float) -> float:

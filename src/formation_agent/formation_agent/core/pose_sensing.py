@@ -32,14 +32,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from formation_agent.core.errors import PoseError
 from formation_agent.core.kinematics import control_point, control_point_velocity
-from formation_msgs_py.codec import MessageError, pose_values, twist_values
+from formation_msgs_py.codec import pose_values, twist_values
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import REJECT_FRAME, REJECT_FUTURE, REJECT_JUMP, REJECT_TIME_BACKWARDS
 from formation_msgs_py.types import RobotPose, SensedState
-
-
-class PoseError(ValueError):
-    """A pose the agent needs is missing, too old, or from the future: the agent must stop."""
 
 
 def stamp_refusal(*, age: float, timeout: float, future: float | None = None) -> str | None:

@@ -37,6 +37,8 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from formation_agent.core.errors import SafetyError
+
 DEFAULT_GAMMA = 2.0  # [1/s]
 DEFAULT_MAX_SPEED = 0.5  # [m/s]
 DEFAULT_SENSING_RADIUS = 2.0  # [m]
@@ -49,10 +51,6 @@ SAFETY_KEYS = ('min_separation', 'sensing_radius', 'gamma', 'max_speed', 'turn')
 _FEASIBLE = 1e-12
 # Relative slack under which a pair constraint counts as active at the filtered command.
 _ACTIVE = 1e-9
-
-
-class SafetyError(ValueError):
-    """A safety configuration or input outside its rules (the message names the rule and the value)."""
 
 
 def _number(name: str, value, *, positive: bool = True) -> float:

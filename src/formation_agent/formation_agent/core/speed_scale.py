@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formation_agent.core.errors import ScaleError
+
 DEFAULT_SPEED_SCALE = 1.0
 DEFAULT_THRESHOLD_FLOOR = 0.0
 
@@ -33,10 +35,6 @@ SPEED_SCALE_LIMITS = (1e-6, 1e6)
 """κ must lie in these bounds (rule speed_scale): ETA-2's gains hold κ² and its certified search
 bounds up to κ⁴ of the paper's; beyond a factor 10⁶ either way the scaled times, rates and bounds
 would leave the range in which the run's floats resolve them (1e-6 turns 10 s into ~4 months)."""
-
-
-class ScaleError(ValueError):
-    """A speed scale or threshold floor outside its rule; the message names the rule and the value."""
 
 
 def check_speed_scale(value) -> float:

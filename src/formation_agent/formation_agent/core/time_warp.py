@@ -24,6 +24,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from formation_agent.core.errors import WarpError
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
 
 MAX_PIECES = 100_000
@@ -34,10 +35,6 @@ WARP_CAP = 1.0
 """The default cap κ_max on a chosen warp's rate: never faster than the paper's own time. By
 Theorem 1 (iii) an agent's inter-event times in s are >= ξ_i, so in real time they are >= ξ_i/κ_max:
 the events per real second of every agent stay within the κ = 1 run's bound, 1/ξ_i."""
-
-
-class WarpError(ValueError):
-    """A time warp outside its rule; the message names the rule time_warp and the value."""
 
 
 @dataclass(frozen=True, kw_only=True)

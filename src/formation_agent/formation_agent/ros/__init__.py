@@ -25,16 +25,11 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError'),
+        'node': ('FormationAgentNode',),
         'main': ('main',),
         'config': ('AgentConfig', 'agent_help', 'read_config'),
         'process': ('EXECUTORS', 'StopSignals', 'make_executor'),
-        'parameters': (
-            'ParameterError',
-            'ParameterSpec',
-            'declare_parameters',
-            'parameter_help',
-            'read_parameters',
-        ),
+        'parameters': ('ParameterSpec', 'declare_parameters', 'parameter_help', 'read_parameters'),
+        'errors': ('AgentNodeError', 'ParameterError', 'PeerLostError', 'PredictionError'),
     },
 )

@@ -15,18 +15,19 @@ from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
 from formation_agent.core.kinds.registry import Geometry
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
-from formation_agent.core.time_warp import TimeWarp, WarpError
+from formation_agent.core.time_warp import TimeWarp
+from formation_agent.core.errors import WarpError
 from formation_agent.ros.parameters import (
     DOUBLE,
     DOUBLE_ARRAY,
     INTEGER,
     INTEGER_ARRAY,
     STRING,
-    ParameterError,
     ParameterSpec,
     parameter_help,
     read_parameters,
 )
+from formation_agent.ros.errors import ParameterError
 from formation_msgs_py.topics import (
     WORLD_FRAME,
     agent_namespace,

@@ -32,17 +32,17 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
-from formation_agent.core.pose_sensing import PoseError
+from formation_agent.core.errors import PoseError
 from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
-from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import (
-    DELIVERY_TIMEOUT,
-    NODE_NAME,
-    FormationAgentNode,
+from formation_agent.ros.errors import (
+    FaultInjectionError,
+    ParameterError,
     PeerLostError,
     PredictionError,
+    StaleStateError,
 )
-from formation_agent.ros.parameters import ParameterError, read_parameters
+from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode
+from formation_agent.ros.parameters import read_parameters
 from formation_agent.ros.process import (
     EXECUTORS,
     StopSignals,
@@ -51,7 +51,6 @@ from formation_agent.ros.process import (
     release_ros,
     shutdown_guard,
 )
-from formation_agent.ros.staleness import StaleStateError
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import agent_namespace
 

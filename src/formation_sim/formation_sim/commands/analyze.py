@@ -13,6 +13,7 @@ from pathlib import Path
 
 from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import POSITIVE_INT, bounded_int, check_report_argument
+from formation_sim.model.errors import TheoryError
 
 
 def register(subparsers) -> None:
@@ -68,7 +69,7 @@ def default_out_dir(location) -> Path:
 def _refuse_unstarted(summary: Path | None) -> None:
     """A run that never reached Step 0 (discovery failed, or the robots' measured start broke the
     initial condition): no trajectory to check; its summary.json says why."""
-    from formation_sim.analysis.load import AnalysisError
+    from formation_sim.analysis.errors import AnalysisError
 
     if summary is None:
         return
@@ -86,9 +87,8 @@ def _refuse_unstarted(summary: Path | None) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.checks import run_series, theory_bounds
-    from formation_sim.analysis.load import AnalysisError
+    from formation_sim.analysis.errors import AnalysisError
     from formation_sim.analysis.report import build_report
-    from formation_sim.model import theory
     from formation_sim.progress import Progress
 
     show = not args.quiet
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     evaluating.close()
     try:
         bounds, bounds_error = theory_bounds(record.scenario), None
-    except theory.TheoryError as error:
+    except TheoryError as error:
         bounds, bounds_error = None, str(error)
     written = {} if args.no_figures else _write_figures(args, record, series, bounds, out, show=show)
     if args.markers:
@@ -132,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace, *, show: bool):
     """The run's location and its run rebuilt from the bag; AnalysisError when there is none."""
-    from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+    from formation_sim.analysis.load import load_bag_run, locate
+    from formation_sim.analysis.errors import AnalysisError
     from formation_sim.progress import Progress
 
     location = locate(args.run)
@@ -168,8 +169,9 @@ def _write_figures(
 def _write_markers(bag: Path, out: Path, scenario, *, show: bool) -> dict[str, str] | None:
     """OUT/bag_markers, a copy of the bag with /formation/markers: its entry for the report, or
     None (the error printed) when it cannot be written."""
-    from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
-    from formation_sim.bag.io import BagError
+    from formation_sim.analysis.markers import write_bag_with_markers
+    from formation_sim.analysis.errors import MarkerError
+    from formation_sim.bag.errors import BagError
     from formation_sim.progress import Progress
 
     target = out / 'bag_markers'

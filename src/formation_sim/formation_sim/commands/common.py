@@ -15,9 +15,11 @@ from typing import TYPE_CHECKING
 
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
-from formation_sim.model.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario, short_repr
+from formation_sim.model.scenario import Scenario, builtin_scenarios, load_scenario, short_repr
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.validate import validate_scenario
-from formation_sim.sim.run_folder import RunFolderError, check_report_dir
+from formation_sim.sim.run_folder import check_report_dir
+from formation_sim.sim.errors import RunFolderError
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -109,7 +111,8 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
     """The scenario with the safety layer at `separation` (None: as it is), or None after saying why not."""
     if separation is None:
         return scenario
-    from formation_agent.core.safety import SafetyConfig, SafetyError
+    from formation_agent.core.safety import SafetyConfig
+    from formation_agent.core.errors import SafetyError
 
     keys = {} if scenario.safety is None else scenario.safety.as_dict()
     try:
@@ -296,7 +299,8 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch import ROBOT_MODELS, RunError
+    from formation_sim.runtime.launch import ROBOT_MODELS
+    from formation_sim.runtime.errors import RunError
 
     robots = None
     if args.backend != 'exact':

@@ -62,13 +62,13 @@ def _default_out(a: Path, b: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.compare import (
-        CompareError,
         compare_runs,
         load_run,
         overlay_figures,
         within,
         write_comparison,
     )
+    from formation_sim.analysis.errors import CompareError
     from formation_sim.progress import Progress
 
     if not check_report_argument('compare', args.out):

@@ -12,8 +12,9 @@ import math
 import sys
 
 from formation_sim.commands.common import POSITIVE, refuse
-from formation_sim.model.scenario import Scenario, ScenarioError
-from formation_sim.model.speed_choice import OBSERVED_MARGIN, LimitsError, RobotLimits, SpeedScaleChoice
+from formation_sim.model.scenario import Scenario
+from formation_sim.model.errors import LimitsError, ScenarioError
+from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, SpeedScaleChoice
 
 
 def robot_limits(args: argparse.Namespace) -> RobotLimits:

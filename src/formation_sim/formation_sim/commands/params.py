@@ -48,9 +48,11 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch import FASTDDS_PROFILE, RunError
+    from formation_sim.runtime.launch import FASTDDS_PROFILE
+    from formation_sim.runtime.errors import RunError
     from formation_sim.runtime.orchestrate import FormationRun
-    from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+    from formation_sim.sim.run_folder import claim_out_dir
+    from formation_sim.sim.errors import RunFolderError
 
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:

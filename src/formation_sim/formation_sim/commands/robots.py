@@ -67,7 +67,7 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.fleet import RobotFleet
-    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.errors import RunError
 
     scenario = load_valid_scenario(args.scenario, 'robots')
     if scenario is None:

@@ -114,8 +114,9 @@ def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | N
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.plots import plot_run
-    from formation_sim.sim.engine import EngineError, check_sample_dt, simulate
-    from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+    from formation_sim.sim.engine import check_sample_dt, simulate
+    from formation_sim.sim.errors import EngineError, RunFolderError
+    from formation_sim.sim.run_folder import claim_out_dir
     from formation_sim.sim.samples import TRAJECTORY_DIR
     from formation_sim.sim.summary import write_summary
 
@@ -218,7 +219,7 @@ def _speed_scale(scenario, args: argparse.Namespace):
 
 def _run_failed(error: Exception, out: Path) -> int:
     """A run that failed: the error said, its run folder emptied and removed; the exit status."""
-    from formation_sim.sim.engine import EngineError
+    from formation_sim.sim.errors import EngineError
     from formation_sim.sim.samples import discard_incomplete
 
     # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;

@@ -21,9 +21,9 @@ from formation_sim.commands.common import (
     scale_options,
     with_min_separation,
 )
-from formation_sim.model.scenario import ScenarioError, load_scenario
+from formation_sim.model.scenario import load_scenario
+from formation_sim.model.errors import LimitsError, ScenarioError
 from formation_sim.model.speed_choice import (
-    LimitsError,
     RobotLimits,
     check_limits_apply,
     omega_at_formation,

@@ -53,9 +53,11 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec, parameter_help
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
-from formation_msgs_py.codec import MessageError, decode_trigger_info, encode_step
+from formation_msgs_py.codec import decode_trigger_info, encode_step
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
@@ -76,16 +78,18 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.model.measured_start import MeasuredStart, check_measured_start
 from formation_sim.model.scenario import Scenario
-from formation_sim.runtime.run_book import (
+from formation_sim.runtime.run_book import ids_text
+from formation_sim.runtime.errors import (
     AgentFailedError,
     AgentLostError,
     ConnectivityLostError,
     DiscoveryError,
+    ForeignWriterError,
     InitialConditionError,
+    KeeperFrozenError,
     OperatorStopError,
     RecorderLostError,
     RobotLostError,
-    ids_text,
 )
 from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses, pose_rules
 from formation_sim.runtime.robot_stops import RobotStops
@@ -96,7 +100,6 @@ from formation_sim.runtime.run_end import (
     write_results,
     write_unstarted,
 )
-from formation_sim.runtime.intruders import ForeignWriterError, KeeperFrozenError
 from formation_sim.runtime.time_keeper import (
     blamed,
     graph_of,

@@ -29,7 +29,7 @@ from rclpy.node import NodeNameNonExistentError
 from std_srvs.srv import Trigger
 
 from formation_msgs_py.topics import COORDINATOR_NODE, RECORDER_NODE, SIMULATOR_NODE, STOP_SERVICE
-from formation_sim.runtime.run_book import OperatorStopError
+from formation_sim.runtime.errors import OperatorStopError
 
 RUN_NODES = (SIMULATOR_NODE, COORDINATOR_NODE, RECORDER_NODE)  # a run's own nodes in the root namespace
 UNKNOWN_CALLER = 'an operator'

@@ -55,17 +55,18 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
-from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
+from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
+from formation_sim.sim.errors import RunFolderError
 from formation_sim.runtime.launch import (
     BACKENDS,
     BAG_DIR,
     LOG_DIR,
     LaunchPlan,
     RobotOptions,
-    RunError,
     free_udp_port,
     reserve_domain,
 )
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.results import (
     ChildExit,
     RunResult,

@@ -52,23 +52,18 @@ from formation_agent.ros.parameters import (
     DOUBLE,
     STRING,
     STRING_ARRAY,
-    ParameterError,
     ParameterSpec,
     parameter_help,
     read_parameters,
 )
+from formation_agent.ros.errors import ParameterError
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
-from formation_sim.bag.io import (
-    BagError,
-    BagWriter,
-    TopicSpecError,
-    UnknownMessageTypeError,
-    check_msgtype,
-    jazzy_typestore,
-)
+from formation_sim.bag.io import BagWriter, check_msgtype, jazzy_typestore
+from formation_sim.bag.errors import BagError, TopicSpecError, UnknownMessageTypeError
 from formation_sim.runtime.bag_qos import offered_qos
+from formation_sim.runtime.errors import RecorderError
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -171,10 +166,6 @@ RECORDER_PARAMETERS = (
         **_positive_seconds,
     ),
 )
-
-
-class RecorderError(BagError):
-    """The recorder could not be set up or could not write its bag."""
 
 
 def parse_topic_spec(spec: str) -> tuple[str, str]:

@@ -115,7 +115,7 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
         return False
     if recorder is not None and recorder.process.returncode == 0 and (bag / 'metadata.yaml').is_file():
         return False  # the recorder closed it and said so (it exits 0 only then)
-    from formation_sim.bag.io import BagError
+    from formation_sim.bag.errors import BagError
     from formation_sim.bag.recovery import reindex
 
     died = recorder is not None and recorder.process.returncode not in (0, None)
@@ -224,7 +224,8 @@ def summary_of_what_is_known(
     }
     data = None
     if (bag / 'metadata.yaml').is_file():
-        from formation_sim.analysis.load import AnalysisError, load_bag_run
+        from formation_sim.analysis.load import load_bag_run
+        from formation_sim.analysis.errors import AnalysisError
 
         try:
             data = build_summary(load_bag_run(bag, run_dir=run_dir, scenario=scenario).record)
@@ -270,9 +271,11 @@ def _latest_known(failure: dict, progress: dict, bag: Path, *, reached: float | 
 
 def _last_step(bag: Path) -> tuple[int, float] | None:
     """(index, time) of the last Step the bag holds, or None (no bag, no Step, unreadable)."""
-    from formation_msgs_py.codec import MessageError, decode_step
+    from formation_msgs_py.codec import decode_step
+    from formation_msgs_py.errors import MessageError
     from formation_msgs_py.topics import STEP_TOPIC
-    from formation_sim.bag.io import BagError, decode, read_bag
+    from formation_sim.bag.io import decode, read_bag
+    from formation_sim.bag.errors import BagError
 
     last = None
     try:

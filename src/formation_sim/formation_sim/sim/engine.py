@@ -23,17 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingSearch
+from formation_agent.core.errors import CrossingError
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model import theory
+from formation_sim.sim.errors import EngineError
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
 from formation_sim.sim.world import World
-
-
-class EngineError(RuntimeError):
-    """The simulation could not go on (an agent rejected its input, a step did not advance)."""
 
 
 # Numbers the sampling grid of one run may hold (positions, and velocities for double

@@ -61,7 +61,8 @@ from formation_sim.model.threshold_floor import floor_bounds
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
-from formation_sim.sim.samples import TrajectoryError, edge_maxima, load_trajectory, write_trajectory
+from formation_sim.sim.samples import edge_maxima, load_trajectory, write_trajectory
+from formation_sim.sim.errors import TrajectoryError
 
 SCHEMA = 'formation-summary/1'
 SUMMARY_FILE = 'summary.json'

@@ -13,13 +13,13 @@ from formation_agent.core.kinds.holonomic import Holonomic
 from formation_agent.core.kinds.registry import (
     KIND_NAMES,
     Geometry,
-    KindError,
     KindNames,
     RobotKind,
     register,
     robot_kind,
     unregister,
 )
+from formation_agent.core.errors import KindError
 from formation_agent.core.kinds.unicycle import Unicycle
 
 for _kind in (Holonomic(), Unicycle(), Car()):

@@ -30,13 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formation_agent.core.errors import KindError
 from formation_agent.core.limits import Limits, SaturationLog
 
 _KINDS: dict[str, RobotKind] = {}
-
-
-class KindError(ValueError):
-    """An unknown kind, a kind registered twice, or a robot its kind cannot be (named, with the rule)."""
 
 
 @dataclass(frozen=True, kw_only=True)
