@@ -76,6 +76,12 @@ def test_lockstep_run_reproduces_the_in_process_engine(
     summary = json.loads(result.summary.read_text())
     assert summary['mode'] == 'distributed'
     _assert_same_events(summary, reference)
+    # summary.json through its type (issue 29): read and written again, the same bytes.
+    from formation_sim.sim.summary import RunSummary
+
+    typed = RunSummary.read(result.summary)
+    assert typed.to_dict() == summary and typed.started and typed.failure is None
+    assert typed.write(tmp_path / 'again.json').read_bytes() == result.summary.read_bytes()
 
     # The bag: every topic of the run, one TriggerInfo per trigger and neighbour, stamped with
     # the sender's triggering times.

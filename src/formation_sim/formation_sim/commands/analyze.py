@@ -7,7 +7,6 @@ bag differs from summary.json (the report says where), 2 the run cannot be analy
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -70,12 +69,13 @@ def _refuse_unstarted(summary: Path | None) -> None:
     """A run that never reached Step 0 (discovery failed, or the robots' measured start broke the
     initial condition): no trajectory to check; its summary.json says why."""
     from formation_sim.analysis.errors import AnalysisError
+    from formation_sim.sim.summary import RunSummary
 
     if summary is None:
         return
     try:
-        extra = json.loads(summary.read_text(encoding='utf-8')).get('extra') or {}
-    except (OSError, ValueError, AttributeError):
+        extra = RunSummary.read(summary).extra
+    except (OSError, ValueError):
         return  # the bag is what is analysed: a damaged summary is reported as a difference
     if isinstance(extra, dict) and extra.get('started') is False:
         failure = extra.get('failure') or {}

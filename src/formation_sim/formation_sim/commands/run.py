@@ -170,11 +170,11 @@ def _speed_scale(scenario, args: argparse.Namespace, options: dict):
 
 def _warn_saturation(result) -> None:
     """Robot runs: say whether the agents clipped commands to the robots' limits (the theorems assume not)."""
-    import json
+    from formation_sim.sim.summary import RunSummary
 
     if result.summary is None:
         return
-    saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
+    saturation = RunSummary.read(result.summary).extra.get('saturation')
     if saturation and saturation.get('total'):
         kinds = ', '.join(
             f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, '

@@ -31,7 +31,7 @@ from formation_sim.runtime.errors import (
     RecorderLostError,
     RobotLostError,
 )
-from formation_sim.sim.summary import lateness_extra, saturation_extra
+from formation_sim.sim.summary import lateness_extra, run_failure, saturation_extra
 
 
 def ids_text(agents: list[int], *, most: int = 20) -> str:
@@ -59,16 +59,16 @@ def failure_extra(
         kind = 'interrupted'
     else:
         kind = 'error'
-    info = {
-        'kind': kind,
-        'message': str(error)
+    info = run_failure(
+        kind,
+        str(error)
         or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-        'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
-        'time': getattr(error, 'time', time),
-        'step': step,
-        'wall_time': wall_time,
-        'detected_by': detected_by,
-    }
+        agents=list(getattr(error, 'agents', getattr(error, 'edge', []))),
+        time=getattr(error, 'time', time),
+        step=step,
+        wall_time=wall_time,
+        detected_by=detected_by,
+    )
     if isinstance(error, ConnectivityLostError):
         info.update(edge=list(error.edge), length=error.length)
     if isinstance(error, InitialConditionError):

@@ -30,3 +30,7 @@ class TrajectoryError(FormationError, ValueError):
 
 class WorldError(FormationError, ValueError):
     """A request the world cannot honour (unknown agent, time going backwards, bad input)."""
+
+
+class SummaryError(FormationError, ValueError):
+    """A file that is not a summary.json of this schema (not JSON, another schema, keys missing)."""
