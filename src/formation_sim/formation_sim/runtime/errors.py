@@ -91,7 +91,7 @@ class InitialConditionError(CoordinatorError):
 
     kind = 'initial_condition'
 
-    def __init__(self, message: str, *, agents: list[int], breaches: list[dict]) -> None:
+    def __init__(self, message: str, *, agents: list[int], breaches: list[dict[str, object]]) -> None:
         super().__init__(message)
         self.agents = agents
         self.breaches = breaches

@@ -53,6 +53,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -65,8 +66,15 @@ from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import edge_maxima, load_trajectory, write_trajectory
 from formation_sim.sim.errors import SummaryError, TrajectoryError
 
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from formation_msgs_py.lockstep import AgentReport
+    from formation_sim.model.scenario import Scenario
+
 SCHEMA = 'formation-summary/1'
 SUMMARY_FILE = 'summary.json'
+Json = dict[str, Any]  # a JSON object as json.loads gives it
 
 # summary.json's keys, in the order it is written: what was run; what the run's samples give (a
 # run without samples, `RunSummary.started` false, has none of these); the wall time and `extra`.
@@ -106,7 +114,7 @@ class RunSummary:
     dimension: int
     delta: float
     wall_time: float | None
-    extra: dict = field(default_factory=dict)
+    extra: Json = field(default_factory=dict)
     schema: str = SCHEMA
     # The sampled keys (None in a run without samples; final_velocities is None also for single
     # integrators).
@@ -116,13 +124,13 @@ class RunSummary:
     min_inter_event_time: dict[str, float | None] | None = None
     messages_sent: int | None = None
     sensing_calls: int | None = None
-    edges: list[dict] | None = None
+    edges: list[Json] | None = None
     max_edge_length: float | None = None
     final_formation_error: float | None = None
     final_positions: dict[str, list[float]] | None = None
     final_velocities: dict[str, list[float]] | None = None
-    theorem_constants: dict | None = None
-    xi_check: dict[str, dict] | None = None
+    theorem_constants: Json | None = None
+    xi_check: dict[str, Json] | None = None
 
     @property
     def started(self) -> bool:
@@ -130,11 +138,12 @@ class RunSummary:
         return self.trigger_times is not None
 
     @property
-    def failure(self) -> dict | None:
+    def failure(self) -> Json | None:
         """`extra.failure`: what stopped the run early, or None."""
-        return self.extra.get('failure')
+        failure: Json | None = self.extra.get('failure')
+        return failure
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> Json:
         """summary.json's object, in the order it is written."""
         keys = ('schema', *_RUN_KEYS, *(_SAMPLED_KEYS if self.started else ()), 'wall_time', 'extra')
         return {key: getattr(self, key) for key in keys}
@@ -175,7 +184,7 @@ class RunSummary:
         return write_summary_file(self, path)
 
 
-def build_summary(record) -> dict:
+def build_summary(record: RunRecord) -> Json:
     """The summary of a `RunRecord` as summary.json's object (see the module docstring for the
     schema): `summary_of(record).to_dict()`."""
     return summary_of(record).to_dict()
@@ -261,7 +270,7 @@ def summary_of(record: RunRecord) -> RunSummary:
     )
 
 
-def unstarted_summary(scenario, *, horizon: float, mode: str, extra: dict) -> RunSummary:
+def unstarted_summary(scenario: Scenario, *, horizon: float, mode: str, extra: Json) -> RunSummary:
     """The summary of a run that has no samples (it never reached t = 0, or left neither summary
     nor bag): what was to be run, and `extra` (its failure)."""
     return RunSummary(
@@ -277,21 +286,23 @@ def unstarted_summary(scenario, *, horizon: float, mode: str, extra: dict) -> Ru
     )
 
 
-def run_failure(kind: str, message: str, *, agents: list[int], detected_by: str, **details: object) -> dict:
+def run_failure(
+    kind: str, message: str, *, agents: Iterable[int], detected_by: str, **details: object
+) -> Json:
     """summary.json's `extra.failure` (the module docstring gives its kinds), built here for every
     way a run stops early — by the time keeper (`formation_sim.runtime.run_book.failure_extra`) and
     by the orchestrator (`formation_sim.runtime.results`: a time keeper that left no summary, a
     process that failed, a recording left incomplete). Its keys in one order: kind, message,
     agents, then `time`, `step` and `wall_time` when the caller knows them, detected_by, then the
     other `details` as given (an edge's length, the process, who asked for a stop)."""
-    entry: dict = {'kind': kind, 'message': message, 'agents': list(agents)}
+    entry: Json = {'kind': kind, 'message': message, 'agents': list(agents)}
     entry.update({key: details.pop(key) for key in ('time', 'step', 'wall_time') if key in details})
     entry['detected_by'] = detected_by
     entry.update(details)
     return entry
 
 
-def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int, list[float]]) -> dict:
+def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int, list[float]]) -> Json:
     """Wall clock: `extra.lateness` and `extra.max_lateness`, per agent trigger time − planned time
     over the triggers whose plan a Status announced (`planned`: agent -> trigger number k ->
     `Status.last_planned` of the Status that first counted k triggers)."""
@@ -307,11 +318,13 @@ def lateness_extra(planned: dict[int, dict[int, float]], trigger_times: dict[int
     }
 
 
-def saturation_extra(reports) -> dict:
+def saturation_extra(reports: Iterable[AgentReport | None]) -> Json:
     """Robot runs: `extra.saturation`, the commands the agents' robot adapters clipped to their
     limits (the theorems assume none), from each agent's latest report (`AgentReport.saturation`:
     kind -> count, largest value requested, limit): in total, per kind and per agent."""
-    total, by_kind, by_agent = 0, {}, {}
+    total = 0
+    by_kind: dict[str, Json] = {}
+    by_agent: dict[str, dict[str, int]] = {}
     for report in reports:
         if report is None:
             continue
@@ -328,7 +341,7 @@ def saturation_extra(reports) -> dict:
     return {'total': total, 'by_kind': by_kind, 'by_agent': by_agent}
 
 
-def write_summary(record, out_dir) -> Path:
+def write_summary(record: RunRecord, out_dir: str | Path) -> Path:
     """Write `summary.json` and the trajectory (unless the run streamed it there already) into
     `out_dir`; return the summary's path. The small summary first: on a disk about to fill up it is
     what matters most."""
@@ -340,7 +353,7 @@ def write_summary(record, out_dir) -> Path:
     return path
 
 
-def write_summary_file(summary: RunSummary, path) -> Path:
+def write_summary_file(summary: RunSummary, path: str | Path) -> Path:
     """Write a summary as `path` (summary.json), whole or not at all.  JSON holds no
     NaN or infinity: a value that is not finite (what a run fed bad input could make) is written
     as null, and `extra.non_finite` names it with what it was (`finite_or_null`), so that the
@@ -352,13 +365,13 @@ def write_summary_file(summary: RunSummary, path) -> Path:
     return write_atomically(path, json.dumps(clean, indent=1, allow_nan=False) + '\n')
 
 
-def finite_or_null(value, where: str = '') -> tuple[object, dict[str, str]]:
+def finite_or_null(value: Any, where: str = '') -> tuple[Any, dict[str, str]]:
     """`value` (JSON-like: dicts, lists, tuples, numbers) with every float that is NaN or
     infinite (numpy's too) replaced by None, and {where it was: 'nan' | 'inf' | '-inf'}, where
     is a path such as 'edges[0].max_length'."""
     replaced: dict[str, str] = {}
 
-    def clean(item, path: str):
+    def clean(item: Any, path: str) -> Any:
         if isinstance(item, dict):
             return {key: clean(inner, f'{path}.{key}' if path else str(key)) for key, inner in item.items()}
         if isinstance(item, (list, tuple)):
@@ -371,13 +384,13 @@ def finite_or_null(value, where: str = '') -> tuple[object, dict[str, str]]:
     return clean(value, where), replaced
 
 
-def load_summary(path) -> dict:
+def load_summary(path: str | Path) -> Json:
     """Read a summary.json (a run folder or the file itself) as its object, through `RunSummary`
     (SummaryError if it is not one)."""
     return RunSummary.read(path).to_dict()
 
 
-def load_record(run_dir, scenario=None):
+def load_record(run_dir: str | Path, scenario: Scenario | None = None) -> RunRecord:
     """Rebuild the `RunRecord` of a run folder from `summary.json` and its trajectory (memory-mapped).
 
     The scenario is read from the folder's `scenario.yaml` (written by `formation run`) unless
