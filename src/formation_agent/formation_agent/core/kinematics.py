@@ -55,7 +55,8 @@ def control_point(
     position: Sequence[float], orientation: Sequence[float], offset: Sequence[float]
 ) -> np.ndarray:
     """The world position of the point `offset` (body frame, (3,)) of a robot at this pose."""
-    return np.asarray(position, dtype=float) + rotate(orientation, offset)
+    point: np.ndarray = np.asarray(position, dtype=float) + rotate(orientation, offset)
+    return point
 
 
 def control_point_velocity(
@@ -67,7 +68,9 @@ def control_point_velocity(
     return rotate(orientation, [float(linear[k]) + spin[k] for k in range(3)])
 
 
-def unicycle_velocity(u: Sequence[float], heading: float, distance: float) -> tuple[float, float]:
+def unicycle_velocity(
+    u: Sequence[float] | np.ndarray, heading: float, distance: float
+) -> tuple[float, float]:
     """(v, ω) that move the control point at `distance` l ahead of the axle with velocity u (2,)."""
     c, s = math.cos(heading), math.sin(heading)
     ux, uy = float(u[0]), float(u[1])

@@ -34,7 +34,8 @@ def sinc(u: float) -> float:
     y = math.pi * u
     if not y:
         y = _EPS
-    return np.sin(y) / y
+    ratio: float = np.sin(y) / y
+    return ratio
 
 
 def arc(
@@ -53,10 +54,10 @@ class Unicycle(RobotKind):
     command_type = 'geometry_msgs/msg/Twist'
     world_frame_command = False
     dimensions = (2,)
-    parameters = ('control_point_distance', 'max_angular_speed')
+    parameters: tuple[str, ...] = ('control_point_distance', 'max_angular_speed')
     params_file = 'turtlebot3.params.yaml'
 
-    def placement_problems(self, *, dimension, geometry: Geometry) -> list[str]:
+    def placement_problems(self, *, dimension: int | None, geometry: Geometry) -> list[str]:
         problems = super().placement_problems(dimension=dimension, geometry=geometry)
         if not geometry.control_point_distance > 0.0:
             problems.append(
@@ -70,14 +71,16 @@ class Unicycle(RobotKind):
         return (float(geometry.control_point_distance), 0.0, 0.0)
 
     def command(
-        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+        self, u: np.ndarray, *, heading: float | None, geometry: Geometry, limits: Limits, log: SaturationLog
     ) -> tuple[float, ...]:
         if heading is None:
             raise ValueError(f'a {self.name} command needs the robot heading')
         v, omega = unicycle_velocity(u, heading, geometry.control_point_distance)
         return limit_body_velocity(v, omega, limits, log)
 
-    def clip(self, linear, angular, *, geometry: Geometry, limits: Limits):
+    def clip(
+        self, linear: tuple[float, ...], angular: float, *, geometry: Geometry, limits: Limits
+    ) -> tuple[tuple[float, ...], float, bool]:
         """|v| and |ω| clipped each on its own."""
         v, w = float(linear[0]), float(angular)
         clipped = abs(v) > limits.linear_speed or abs(w) > limits.angular_speed
@@ -85,8 +88,10 @@ class Unicycle(RobotKind):
         w = max(-limits.angular_speed, min(limits.angular_speed, w))
         return (v,), w, clipped
 
-    def move(self, position, yaw, linear, angular, duration):
+    def move(
+        self, position: np.ndarray, yaw: float, linear: tuple[float, ...], angular: float, duration: float
+    ) -> tuple[np.ndarray, float]:
         return arc(position, yaw, linear[0], angular, duration)
 
-    def body_twist(self, linear, angular, yaw):
+    def body_twist(self, linear: tuple[float, ...], angular: float, yaw: float) -> tuple[np.ndarray, float]:
         return np.array([linear[0], 0.0, 0.0]), angular
