@@ -14,6 +14,8 @@ made after the call).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from typing import Any
 
 from formation_agent.core import crossing
 from formation_agent.core.closed_form import _C as _SERIES
@@ -25,7 +27,7 @@ ENVIRONMENT = 'FORMATION_PURE_PYTHON'
 try:
     from formation_agent.core import _fastcore
 except ImportError:  # not built (no compiler at install, or a plain copy of the sources)
-    _fastcore = None
+    _fastcore = None  # type: ignore[assignment]  # the module or None: AVAILABLE says which
 
 AVAILABLE = _fastcore is not None
 """True when the compiled core was built and imports."""
@@ -81,12 +83,12 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def kernel():
+def kernel() -> Callable[[crossing.CrossingSearch, float], float | None] | None:
     """The compiled advance(search, until) for a plain-float agent, or None for the pure-Python path."""
     return _fastcore.advance if _active else None
 
 
-def _raise(model, problem: tuple) -> None:
+def _raise(model: Any, problem: tuple[Any, ...]) -> None:  # model: the agent's error model
     """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]
     if what == 'range':

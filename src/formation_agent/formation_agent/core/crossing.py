@@ -54,7 +54,8 @@ very same steps as running to the end (`first_crossing`), so the answer is the s
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from collections.abc import Callable
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -162,12 +163,13 @@ class CrossingSearch:
     def run(self) -> float:
         """Search to the end; the crossing time, or inf if there is none up to `limit`."""
         self.advance(math.inf)
-        return self.result
+        return cast(float, self.result)  # set once the search reached inf
 
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
         if self._kernel is not None:
-            return self._kernel(self, until)
+            found: float | None = self._kernel(self, until)
+            return found
         a = self.frontier
         beta, alpha, tolerance, floor = self.beta, self.alpha, self.tolerance, self.floor
         terms, bounds = self._terms, self.model.bounds
@@ -315,7 +317,9 @@ def first_crossing(
     ).run()
 
 
-def _root_in_bracket(f, a: float, fa: float, b: float, fb: float, *, max_iterations: int = 200) -> float:
+def _root_in_bracket(
+    f: Callable[[float], float], a: float, fa: float, b: float, fb: float, *, max_iterations: int = 200
+) -> float:
     """A root of f in [a, b], where fa = f(a) and fb = f(b) have opposite signs (fa > 0 > fb here).
 
     Regula falsi with the Illinois modification (the value kept at an end that survives twice in
@@ -351,7 +355,7 @@ def _root_in_bracket(f, a: float, fa: float, b: float, fb: float, *, max_iterati
     return a if abs(fa) <= abs(fb) else b
 
 
-def _vector_terms(model: ErrorModel):
+def _vector_terms(model: ErrorModel) -> Callable[[float], tuple[float, float]]:
     def terms(t: float) -> tuple[float, float]:
         e, e_rate = model.error_and_rate(t)
         return float(e @ e), float(e @ e_rate)
@@ -359,7 +363,7 @@ def _vector_terms(model: ErrorModel):
     return terms
 
 
-def _vector_norm(model: ErrorModel):
+def _vector_norm(model: ErrorModel) -> Callable[[float], float]:
     def norm(t: float) -> float:
         return float(np.linalg.norm(model.error(t)))
 
