@@ -35,7 +35,7 @@ def _cross(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 
 
-def rotate(orientation: Sequence[float], vector: Sequence[float]) -> np.ndarray:
+def rotate(orientation: Sequence[float], vector: Sequence[float] | np.ndarray) -> np.ndarray:
     """R(q) v: `vector` (3,) from the body frame into the world frame, q = (x, y, z, w) unit."""
     r = [float(c) for c in orientation[:3]]
     w = float(orientation[3])
@@ -52,7 +52,7 @@ def yaw(orientation: Sequence[float]) -> float:
 
 
 def control_point(
-    position: Sequence[float], orientation: Sequence[float], offset: Sequence[float]
+    position: Sequence[float], orientation: Sequence[float], offset: Sequence[float] | np.ndarray
 ) -> np.ndarray:
     """The world position of the point `offset` (body frame, (3,)) of a robot at this pose."""
     point: np.ndarray = np.asarray(position, dtype=float) + rotate(orientation, offset)
@@ -60,7 +60,10 @@ def control_point(
 
 
 def control_point_velocity(
-    orientation: Sequence[float], linear: Sequence[float], angular: Sequence[float], offset: Sequence[float]
+    orientation: Sequence[float],
+    linear: Sequence[float],
+    angular: Sequence[float],
+    offset: Sequence[float] | np.ndarray,
 ) -> np.ndarray:
     """World velocity of the body point `offset` from the body-frame twist (REP 105 odometry):
     R (v + ω × offset)."""
