@@ -244,6 +244,7 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
     from formation_sim.runtime.results import excused_after_end
     from formation_sim.runtime.supervise import Child
     from formation_sim.runtime.time_keeper import run_extra
+    from formation_sim.sim.summary import unstarted_summary
 
     node = _running(coordinator, horizon=0.5)
     node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
@@ -262,7 +263,8 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
             'is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'
         )
     }
-    (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
+    # a summary.json the time keeper could write (RunSummary refuses one with its keys missing)
+    unstarted_summary(node.scenario, horizon=0.5, mode='robots', extra=extra).write(tmp_path / 'summary.json')
 
     def child(name: str, returncode: int) -> Child:
         process = subprocess.Popen(['true'])
