@@ -30,10 +30,12 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGING) $(COMPILED)
 	touch $(STAMP)
 
 # ruff with pyproject.toml's rule set and format. To fix what they report:
-# `.venv/bin/ruff format . && .venv/bin/ruff check --fix .`
+# `.venv/bin/ruff format . && .venv/bin/ruff check --fix .`. Then mypy (scripts/typecheck.py):
+# strict on formation_agent.core and the contracts, no error beyond scripts/mypy_baseline.txt.
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(PY) scripts/typecheck.py
 
 # pytest exits 5 when it collects no test: not a failure of the code, so report it and pass.
 test: venv
@@ -71,7 +73,7 @@ bench: venv
 	@if [ -f benchmarks/run.py ]; then $(PY) benchmarks/run.py; else echo "no benchmarks yet (benchmarks/run.py is missing)"; fi
 
 clean:
-	rm -rf runs docs/_build ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache .ruff_cache
+	rm -rf runs docs/_build ros2_ws/build ros2_ws/install ros2_ws/log build install log .pytest_cache .ruff_cache .mypy_cache
 	find src tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	find src -name '*.egg-info' -type d -prune -exec rm -rf {} +
 

@@ -39,7 +39,8 @@ def _final_error(record) -> float:
 
 def _periodic(scenario, horizon: float, period: float, target: float):
     """(works, record or reason) for periodic sampling with `period`."""
-    from formation_sim.sim.engine import EngineError, simulate
+    from formation_sim.sim.engine import simulate
+    from formation_sim.sim.errors import EngineError
 
     try:
         record = simulate(scenario, horizon=horizon, period=period, sample_dt=0.01)

@@ -2,8 +2,8 @@
 """Write docs/EXIT_CODES.md and docs/TOPICS.md from the code; `--check` only says whether they are
 up to date (a test runs it, as for docs/PARAMETERS.md).
 
-- EXIT_CODES.md: every `EXIT_<NAME> = <status>` of the modules that define exit statuses, with the
-  comment or docstring the code gives it, one row per status.
+- EXIT_CODES.md: every member of `formation_msgs_py.exit_codes.ExitCode` with what it means and the
+  modules that return it (every `ExitCode.<NAME>` under src), one row per status.
 - TOPICS.md: the processes of a run and the topics between them, from the topic lists the
   recorder is given (`sim_node.formation_topics`, `coordinator.robot_run_topics`) and the topic
   table they are drawn from (`formation_msgs_py.topic_table`).
@@ -14,7 +14,6 @@ up to date (a test runs it, as for docs/PARAMETERS.md).
 
 import argparse
 import ast
-import importlib
 import re
 import sys
 from pathlib import Path
@@ -22,88 +21,55 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / 'docs'
 
-# Where exit statuses are defined, in the order the table names them.
-EXIT_MODULES = (
-    'formation_sim.commands.common',
-    'formation_agent.ros.process',
-    'formation_sim.runtime.results',
-    'formation_sim.runtime.coordinator',
-    'formation_sim.commands.analyze',
-    'formation_sim.commands.validate',
-    'formation_sim.commands.study',
-)
-# What a status means where no definition says it in a comment (0 and 130 are conventions).
-PLAIN = {
-    0: 'done: the command did what was asked and every check holds',
-    130: 'interrupted (Ctrl-C, SIGINT or SIGTERM)',
-}
+SRC = ROOT / 'src'
+PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
 
 
-def _source_comment(lines: list[str], node: ast.Assign, body: list, index: int) -> str:
-    """The definition's trailing `# comment`, else the string right after it, else ''."""
-    line = lines[node.lineno - 1]
-    if '#' in line.split('=', 1)[1]:
-        return line.split('#', 1)[1].strip()
-    following = body[index + 1] if index + 1 < len(body) else None
-    if isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant):
-        return ' '.join(str(following.value.value).split())
-    return ''
+def exit_code_users() -> dict[int, list[str]]:
+    """status -> the modules under src that name its `ExitCode` member (`ExitCode.LOST`), sorted."""
+    from formation_msgs_py.exit_codes import ExitCode
 
-
-def exit_statuses() -> dict[int, list[tuple[str, str]]]:
-    """status -> [(module.NAME, what the code says of it)]."""
-    found: dict[int, list[tuple[str, str]]] = {}
-    for name in EXIT_MODULES:
-        module = importlib.import_module(name)
-        path = Path(module.__file__)
-        lines = path.read_text().splitlines()
-        body = ast.parse(path.read_text()).body
-        for index, node in enumerate(body):
-            if not (isinstance(node, ast.Assign) and len(node.targets) == 1):
+    users: dict[int, set[str]] = {code: set() for code in ExitCode}
+    for package in PACKAGES:
+        root = SRC / package
+        for path in sorted((root / package).rglob('*.py')):
+            module = '.'.join(path.relative_to(root).with_suffix('').parts).removesuffix('.__init__')
+            if module == 'formation_msgs_py.exit_codes':
                 continue
-            target = getattr(node.targets[0], 'id', '')
-            value = getattr(module, target, None)
-            if not target.startswith('EXIT_') or type(value) is not int:
-                continue
-            found.setdefault(value, []).append(
-                (f'{name}.{target}', _source_comment(lines, node, body, index))
-            )
-    return dict(sorted(found.items()))
-
-
-def _plain(comment: str) -> str:
-    """A comment as a table cell: 'Exit status of a node that ... .' -> 'a node that ...'; a bare
-    number (`# 3`, the value spelled out) says nothing."""
-    text = comment.removeprefix('Exit status of ').rstrip('.').strip()
-    return '' if text.isdigit() else text
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if (
+                    isinstance(node, ast.Attribute)
+                    and isinstance(node.value, ast.Name)
+                    and node.value.id == 'ExitCode'
+                ):
+                    users[ExitCode[node.attr]].add(module)
+    return {code: sorted(found) for code, found in users.items()}
 
 
 def render_exit_codes() -> str:
-    rows = []
-    for status, names in exit_statuses().items():
-        said = list(dict.fromkeys(_plain(comment) for _, comment in names if _plain(comment)))
-        if not said and status not in PLAIN:
-            raise SystemExit(f'exit status {status} ({names[0][0]}) has no comment in the code: add one')
-        meaning = '; '.join(said) if said else PLAIN[status]
-        if status in PLAIN and said:
-            meaning = f'{PLAIN[status]}; {meaning}'
-        defined = ', '.join(f'`{name}`' for name, _ in names)
-        rows.append(f'| {status} | {meaning} | {defined} |')
+    from formation_msgs_py.exit_codes import SENTENCE, ExitCode
+
+    users = exit_code_users()
+    rows = [
+        f'| {code} | `{code.name}` | {code.meaning} | {", ".join(f"`{m}`" for m in users[code]) or "—"} |'
+        for code in ExitCode
+    ]
     return '\n'.join(
         [
             '# Exit codes',
             '',
             'Generated from the code by `python scripts/reference_docs.py` (a test checks that it is up',
-            'to date): every exit status a command or a node process can end with, what the code says of',
-            'it, and where it is defined. The statuses mean the same in every command: 0 done, 1 the',
-            'command ran and the answer is no, 2 bad input refused before anything started or changed;',
-            '`formation run` and the node processes add 3 (a process, an agent, a robot or the recorder',
-            "was lost), 4 (the robots' measured start breaks the initial condition: nothing was sent),",
-            '5 (an operator stopped the run: [Emergency stop](EMERGENCY_STOP.md)) and 130 (interrupted).',
-            'What each fault of a run looks like: [Reliability](RELIABILITY.md).',
+            'to date): every exit status a command or a node process can end with is a member of one',
+            'enum, `formation_msgs_py.exit_codes.ExitCode`, which also writes the `formation --help`',
+            'epilog. The statuses mean the same in every command, in one sentence:',
             '',
-            '| status | meaning | defined as |',
-            '|---|---|---|',
+            SENTENCE,
+            '',
+            "What each fault of a run looks like: [Reliability](RELIABILITY.md); an operator's stop:",
+            '[Emergency stop](EMERGENCY_STOP.md).',
+            '',
+            '| status | `ExitCode` | meaning | returned in |',
+            '|---|---|---|---|',
             *rows,
             '',
         ]

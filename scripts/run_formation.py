@@ -10,7 +10,8 @@ Copy and adapt: everything is the public API of formation_sim.runtime.orchestrat
 import argparse
 import sys
 
-from formation_sim.runtime.orchestrate import FormationRun, RunError
+from formation_sim.runtime.orchestrate import FormationRun
+from formation_sim.runtime.errors import RunError
 
 
 def main() -> int:

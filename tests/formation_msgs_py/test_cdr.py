@@ -23,12 +23,12 @@ from formation_msgs_py.cdr import (
     twist_stamped_fields,
 )
 from formation_msgs_py.codec import (
-    MessageError,
     decode_odometry,
     decode_pose_stamped,
     encode_body_velocity,
     encode_world_velocity,
 )
+from formation_msgs_py.errors import MessageError
 
 FRAMES = [('world', 'agent_1/base_link'), ('', ''), ('map', 'a'), ('odom', 'robot_12/base_footprint_x')]
 

@@ -15,7 +15,6 @@ from formation_msgs_py.codec import (
     AGENT_REPORT_VERSION,
     LAYOUT_VERSION,
     MAX_NEARBY,
-    MessageError,
     decode_agent_report,
     decode_command,
     decode_odometry,
@@ -39,6 +38,7 @@ from formation_msgs_py.codec import (
     ros_time,
     sensing_refusal,
 )
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import (
     LAYOUT_REASONS,
     REJECT_REASONS,

@@ -18,7 +18,6 @@ from hypothesis import strategies as st
 
 from formation_msgs_py import cdr
 from formation_msgs_py.codec import (
-    MessageError,
     decode_agent_report,
     decode_sensed_state,
     decode_status,
@@ -26,6 +25,7 @@ from formation_msgs_py.codec import (
     decode_trigger_info,
     decode_world_state,
 )
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import REJECT_REASONS
 
 pytestmark = pytest.mark.ros  # the CDR examples are serialized by rclpy

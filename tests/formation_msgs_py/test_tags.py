@@ -8,7 +8,8 @@ import time
 import pytest
 
 from formation_msgs_py import tags
-from formation_msgs_py.tags import FORGED, REPLAYED, UNTAGGED, KeyFileError, Signer, TagError, Verifier
+from formation_msgs_py.errors import KeyFileError, TagError
+from formation_msgs_py.tags import FORGED, REPLAYED, UNTAGGED, Signer, Verifier
 
 KEY = bytes(range(32))
 OTHER = bytes(range(1, 33))

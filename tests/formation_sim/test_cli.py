@@ -30,6 +30,13 @@ def test_the_exit_codes_are_documented_in_the_top_level_help(capsys):
     help_text = ' '.join(capsys.readouterr().out.split())
     assert '0 done; 1 the command ran and the answer is no' in help_text
     assert '2 bad input, refused before anything started or changed' in help_text
+    # Every status of the one enum, as docs/EXIT_CODES.md and the README say them.
+    from formation_msgs_py.exit_codes import SENTENCE, ExitCode
+
+    assert f'Exit status of every command: {SENTENCE}' in help_text
+    assert all(
+        f'{code} {code.brief}' in help_text or f'{code} ({code.brief})' in help_text for code in ExitCode
+    )
 
 
 def _bad_input(tmp_path):

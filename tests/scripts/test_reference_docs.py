@@ -1,10 +1,10 @@
 """docs/EXIT_CODES.md and docs/TOPICS.md (scripts/reference_docs.py) are what the code defines: the
-pages are up to date, every exit status the code defines is in the table with where it is defined,
+pages are up to date, every exit status of the one enum is in the table with the modules that return it,
 and every topic a run records is on the topics page with its type."""
 
 from __future__ import annotations
 
-import importlib
+import ast
 import re
 import subprocess
 import sys
@@ -13,15 +13,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / 'scripts' / 'reference_docs.py'
 DOCS = ROOT / 'docs'
-EXIT_MODULES = (
-    'formation_sim.commands.common',
-    'formation_agent.ros.process',
-    'formation_sim.runtime.results',
-    'formation_sim.runtime.coordinator',
-    'formation_sim.commands.analyze',
-    'formation_sim.commands.validate',
-    'formation_sim.commands.study',
-)
 
 
 def _check() -> subprocess.CompletedProcess:
@@ -51,25 +42,38 @@ def test_check_names_a_stale_page(tmp_path, monkeypatch):
     assert reference_docs.main(['--check']) == 0
 
 
-def test_every_exit_status_of_the_code_is_in_the_table():
+def test_every_exit_status_of_the_enum_is_in_the_table_with_the_modules_that_return_it():
+    from formation_msgs_py.exit_codes import ExitCode
+
     table = {}
     for line in (DOCS / 'EXIT_CODES.md').read_text().splitlines():
-        if match := re.fullmatch(r'\| (\d+) \| (.+) \| (.+) \|', line):
-            table[int(match.group(1))] = match.group(3)
-    defined = {}
-    for name in EXIT_MODULES:
-        module = importlib.import_module(name)
-        for attribute, value in vars(module).items():
-            if (
-                attribute.startswith('EXIT_')
-                and type(value) is int
-                and f'{attribute} =' in Path(module.__file__).read_text()
-            ):
-                defined[f'{name}.{attribute}'] = value
-    assert {0, 1, 2, 3, 4, 130} <= set(table)
-    for where, value in defined.items():
-        assert f'`{where}`' in table[value], (where, value)
-    assert set(table) == set(defined.values())
+        if match := re.fullmatch(r'\| (\d+) \| `(\w+)` \| (.+) \| (.+) \|', line):
+            table[int(match.group(1))] = (match.group(2), match.group(3), match.group(4))
+    assert sorted(table) == [0, 1, 2, 3, 4, 5, 130] == [int(code) for code in ExitCode]
+    for code in ExitCode:
+        assert table[code][:2] == (code.name, code.meaning), code
+    # A module that returns a status is named in its row: the agent's command and the time keeper.
+    assert '`formation_agent.ros.main`' in table[ExitCode.LOST][2]
+    assert '`formation_sim.runtime.coordinator`' in table[ExitCode.REFUSED][2]
+    assert '`formation_sim.commands.study`' in table[ExitCode.INTERRUPTED][2]
+
+
+def test_no_module_spells_an_exit_status_of_its_own():
+    """Every exit status is an `ExitCode` member: no `EXIT_<NAME> = <int>` is left in src, scripts
+    or benchmarks (issue 29: 130 was defined three times)."""
+    found = []
+    for folder in ('src', 'scripts', 'benchmarks'):
+        for path in sorted((ROOT / folder).rglob('*.py')):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Assign | ast.AnnAssign):
+                    targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                    names = [n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)]
+                    value = node.value
+                    if any(name.startswith('EXIT_') for name in names) and not (
+                        isinstance(value, ast.Constant) and isinstance(value.value, float)
+                    ):
+                        found.append(f'{path.relative_to(ROOT)}:{node.lineno}')
+    assert found == []
 
 
 def test_every_recorded_topic_is_on_the_topics_page():

@@ -14,14 +14,8 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'core.eta': (
-            'ALGORITHM_GAINS',
-            'AgentError',
-            'Eta1Agent',
-            'Eta2Agent',
-            'TriggerOutput',
-            'make_agent',
-        ),
-        'core.crossing': ('CrossingError', 'CrossingSearch', 'first_crossing'),
+        'core.eta': ('ALGORITHM_GAINS', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
+        'core.crossing': ('CrossingSearch', 'first_crossing'),
+        'core.errors': ('AgentError', 'CrossingError'),
     },
 )

@@ -5,7 +5,8 @@ and their encoding over standard Jazzy types.
   (what its sensing service returns) and `RobotPose` (a robot's pose as it arrives);
   `lockstep`: `Step`, `Status`, `WorldState`, `AgentReport` (with `Saturation`) and the reasons
   a message is rejected; `topics`: every topic, service and node name; `middleware`: ROS domain
-  ids and their ports, executors, the liveliness lease and graces.
+  ids and their ports, executors, the liveliness lease and graces; `exit_codes`: `ExitCode`, every
+  exit status of the project.
 - `codec` (rclpy message classes, imported lazily): encoders and decoders; `qos` (rclpy): the
   protocol's quality of service.
 
@@ -50,6 +51,8 @@ __all__ = lazy_exports(
             'robot_command_topic',
             'robot_true_odom_topic',
         ),
-        'codec': ('MessageError',),
+        'codec': (),
+        'exit_codes': ('ExitCode',),
+        'errors': ('FormationError', 'MessageError'),
     },
 )

@@ -29,7 +29,8 @@ import math
 import struct
 from collections.abc import Sequence
 
-from formation_msgs_py.codec import MessageError, nanoseconds, pose_values, twist_values, vector3_values
+from formation_msgs_py.codec import nanoseconds, pose_values, twist_values, vector3_values
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import REJECT_LENGTH
 from formation_msgs_py.types import RobotPose
 

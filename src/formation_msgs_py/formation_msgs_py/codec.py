@@ -19,8 +19,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import (
-    REJECT_FIELD,
     REJECT_LENGTH,
     REJECT_NON_FINITE,
     REJECT_VERSION,
@@ -46,19 +46,6 @@ _MAX_COUNT = 2**53  # float64 holds every integer up to here exactly
 MAX_NEARBY = 1024
 """The most robots one sensing answer reports nearby (the safety layer's filter enumerates pairs of
 constraints: far more would not be computed within a trigger anyway)."""
-
-
-class MessageError(ValueError):
-    """A message that does not follow its documented layout.
-
-    `reason` says which kind of rule it broke (`formation_msgs_py.lockstep.LAYOUT_REASONS`): an
-    unsupported layout version, a length that does not match its header, a NaN or infinite
-    value, or a field out of its range (ids, counts, kinds, flags).
-    """
-
-    def __init__(self, message: str, *, reason: str = REJECT_FIELD) -> None:
-        super().__init__(message)
-        self.reason = reason
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from formation_msgs_py.tags import TAG_REASONS
 
 STEP_FLAG_FINAL = 1
 """Step flag: the run is over (the horizon is reached); agents leave."""
@@ -37,6 +36,13 @@ REJECT_FRAME = 'frame'  # a robot pose in another frame than the world frame
 REJECT_FUTURE = 'future'
 REJECT_JUMP = 'jump'  # a robot pose further from the last one than the robot's speed limit allows
 REJECT_STEP_ORDER = 'step_order'  # a Step that cannot follow the run's previous one (issue 28)
+# The run's tag refuses (formation_msgs_py.tags): the reasons, defined here as the other rejections.
+UNTAGGED = 'untagged'  # no tag, where the reader holds the run's key
+FORGED = 'forged'  # a tag that is not the run's key's: malformed, or another key's
+REPLAYED = 'replayed'  # a valid tag whose sequence the reader has already had from its writer
+FOREIGN_REASONS = (UNTAGGED, FORGED)
+TAG_REASONS = (*FOREIGN_REASONS, REPLAYED)
+
 LAYOUT_REASONS = (REJECT_VERSION, REJECT_LENGTH, REJECT_NON_FINITE, REJECT_FIELD)
 REJECT_REASONS = (
     *LAYOUT_REASONS,

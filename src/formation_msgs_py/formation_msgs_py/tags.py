@@ -29,30 +29,15 @@ from array import array
 from collections.abc import Sequence
 from pathlib import Path
 
+from formation_msgs_py.errors import KeyFileError, TagError
+from formation_msgs_py.lockstep import FOREIGN_REASONS, FORGED, REPLAYED, TAG_REASONS, UNTAGGED
+
 KEY_FILE = 'run.key'
 """The key's file in the run folder, beside the parameter files (mode 0600)."""
 KEY_BYTES = 32
 TAG_PREFIX = 'tag1:'
 _DIGEST_HEX = 64
 _DOMAIN = b'formation-tag-1\0'
-
-UNTAGGED = 'untagged'  # no tag, where the reader holds the run's key
-FORGED = 'forged'  # a tag that is not the run's key's: malformed, or another key's
-REPLAYED = 'replayed'  # a valid tag whose sequence the reader has already had from its writer
-FOREIGN_REASONS = (UNTAGGED, FORGED)
-TAG_REASONS = (*FOREIGN_REASONS, REPLAYED)
-
-
-class TagError(ValueError):
-    """A message refused by its tag; `reason` is one of TAG_REASONS."""
-
-    def __init__(self, message: str, *, reason: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-
-
-class KeyFileError(ValueError):
-    """A key file that cannot be the run's key (its mode, its length, its text)."""
 
 
 # -- the key ----------------------------------------------------------------------------------

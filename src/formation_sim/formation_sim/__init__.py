@@ -21,13 +21,7 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'model.scenario': (
-            'Scenario',
-            'ScenarioError',
-            'builtin_scenarios',
-            'dump_scenario',
-            'load_scenario',
-        ),
+        'model.scenario': ('Scenario', 'builtin_scenarios', 'dump_scenario', 'load_scenario'),
         'model.validate': ('ValidationError', 'require_valid', 'validate_scenario'),
         'model.generate': ('random_scenario',),
         'model.theory': ('theorem_constants',),
@@ -37,5 +31,6 @@ __all__ = lazy_exports(
         'bag.io': ('read_bag',),
         'analysis.load': ('load_bag_run',),
         'runtime.orchestrate': ('FormationRun', 'RunResult'),
+        'model.errors': ('ScenarioError',),
     },
 )

@@ -2,8 +2,8 @@
 
 Each module `formation_sim/commands/<name>.py` exposes `register(subparsers)`, which adds its
 parser and sets `func(args) -> int` (the exit code) as the parser's default.  Exit codes are the
-same for every command (`formation_sim.commands.common`, README "Exit codes"): 0 done, 1 the
-command ran and the answer is no, 2 bad input (refused before anything started or changed).
+same for every command (`formation_msgs_py.exit_codes.ExitCode`, docs/EXIT_CODES.md): 0 done, 1
+the command ran and the answer is no, 2 bad input (refused before anything started or changed).
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import importlib
 import platform
 import sys
 from importlib import metadata
+
+from formation_msgs_py import exit_codes
 
 # One entry per subcommand module, in help order.
 COMMANDS: tuple[str, ...] = (
@@ -39,6 +41,9 @@ COMMANDS: tuple[str, ...] = (
 ALONE: tuple[str, ...] = ('stop',)
 
 PACKAGES = ('formation_sim', 'formation_agent', 'formation_msgs_py')
+
+# The exit statuses, written from the one enum (docs/EXIT_CODES.md and the README say the same).
+EPILOG = f'Exit status of every command: {exit_codes.SENTENCE}'
 
 
 def version_text() -> str:
@@ -72,10 +77,7 @@ def build_parser(*, only: str | None = None) -> argparse.ArgumentParser:
         prog='formation',
         description='Event-triggered formation control with connectivity preservation '
         '(Yi, Wei, Dimarogonas, Johansson 2017).',
-        epilog='Exit status of every command: 0 done; 1 the command ran and the answer is no (a run '
-        'failed, a check does not hold); 2 bad input, refused before anything started or changed; '
-        "`formation run` also 3 (a process or agent was lost), 4 (the robots' measured start refused), 5 "
-        '(an operator stopped it: `formation stop`) and 130 (interrupted).',
+        epilog=EPILOG,
     )
     parser.add_argument('--version', action=_Version, help="print the packages' versions and exit")
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from formation_agent.core import compiled
-from formation_agent.core.crossing import CrossingError, CrossingSearch
+from formation_agent.core.crossing import CrossingSearch
+from formation_agent.core.errors import AgentError, CrossingError
 from formation_agent.core.eta import Eta1Agent, Eta2Agent, TriggerOutput
-from formation_agent.core.neighbourhood import AgentError
 from formation_msgs_py.types import SensedState, TriggerInfo
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario

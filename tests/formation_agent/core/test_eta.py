@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.eta import AgentError, Eta1Agent, Eta2Agent
+from formation_agent.core.eta import Eta1Agent, Eta2Agent
+from formation_agent.core.errors import AgentError
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 D12 = np.array([0.0, -2.0])
@@ -395,7 +396,16 @@ def test_each_algorithm_supplies_every_hook_the_shared_base_calls():
     hooks = {name for name, member in vars(eta._AgentHooks).items() if inspect.isfunction(member)} | set(
         eta._AgentHooks.__annotations__
     )
-    assert hooks == {'_update', '_row', '_fast_probe', '_threshold'}
+    assert hooks == {
+        '_update',
+        '_row',
+        '_fast_probe',
+        '_threshold',
+        # the vector path's error and bounds, the plain-float path's bounds (declared for mypy)
+        '_vector_error_and_rate',
+        '_vector_bounds',
+        '_fast_bounds',
+    }
     assert not hooks & set(vars(eta._EventTriggeredAgent))
     base = inspect.getsource(eta._EventTriggeredAgent)
     assert all(f'self.{hook}(' in base for hook in hooks)  # each declared hook is called by the base

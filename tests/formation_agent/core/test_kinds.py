@@ -12,7 +12,6 @@ from formation_agent.core.kinds import (
     KIND_NAMES,
     SEPARATION_MARGIN,
     Geometry,
-    KindError,
     KindNames,
     RobotKind,
     control_point_separation,
@@ -21,7 +20,8 @@ from formation_agent.core.kinds import (
     robot_kind,
     unregister,
 )
-from formation_agent.core.kinds.shape import ShapeError, ShapeParameter, declared
+from formation_agent.core.errors import KindError, ShapeError
+from formation_agent.core.kinds.shape import ShapeParameter, declared
 from formation_agent.core.limits import Limits, SaturationLog
 
 HULL_WIDTH = ShapeParameter(

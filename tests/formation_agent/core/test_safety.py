@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.eta import AgentError, Eta1Agent, make_agent
+from formation_agent.core.eta import Eta1Agent, make_agent
+from formation_agent.core.errors import AgentError, SafetyError
 from formation_agent.core.safety import (
     CappedSearch,
     courteous_zero,
     SafetyConfig,
-    SafetyError,
     SafetyLayer,
     exact_half,
     filter_command,

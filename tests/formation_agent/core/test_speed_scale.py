@@ -7,8 +7,9 @@ import math
 
 import pytest
 
-from formation_agent.core.eta import AgentError, Eta1Agent, Eta2Agent
-from formation_agent.core.speed_scale import ScaleError, check_speed_scale, check_threshold_floor
+from formation_agent.core.eta import Eta1Agent, Eta2Agent
+from formation_agent.core.errors import AgentError, ScaleError
+from formation_agent.core.speed_scale import check_speed_scale, check_threshold_floor
 
 
 @pytest.mark.parametrize('bad', [0.0, -1.0, math.nan, math.inf, -math.inf, 1e-7, 2e6, 'fast'])

@@ -74,7 +74,7 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
-    from formation_agent.ros.parameters import ParameterError
+    from formation_agent.ros.errors import ParameterError
 
     with pytest.raises(ParameterError) as error:
         make_node(ros, **changes)
@@ -106,7 +106,7 @@ def test_a_key_file_others_may_read_or_that_is_no_key_is_refused_and_a_good_one_
 
 
 def test_every_missing_parameter_is_named_at_once(ros):
-    from formation_agent.ros.parameters import ParameterError
+    from formation_agent.ros.errors import ParameterError
 
     with pytest.raises(ParameterError) as error:
         make_node(ros, delta=None, horizon=None, alpha=None, beta=None, neighbour_offsets=None)
@@ -147,7 +147,7 @@ def test_every_missing_parameter_is_named_at_once(ros):
     ],
 )
 def test_bad_robot_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):
-    from formation_agent.ros.parameters import ParameterError
+    from formation_agent.ros.errors import ParameterError
 
     with pytest.raises(ParameterError) as error:
         make_node(ros, **changes)
@@ -398,7 +398,7 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray
 
-    from formation_agent.ros.node import PeerLostError
+    from formation_agent.ros.errors import PeerLostError
     from formation_msgs_py.qos import PROTOCOL_QOS
     from formation_msgs_py.topics import STEP_TOPIC
 
@@ -437,7 +437,7 @@ def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_la
     the graph, or the wall clock (a robot would go on moving), gets LOST_GRACE."""
     from types import SimpleNamespace
 
-    from formation_agent.ros.node import PeerLostError
+    from formation_agent.ros.errors import PeerLostError
     from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
     from formation_msgs_py.qos import KEEPER_LEASE_GRACE, LOST_GRACE
 
@@ -521,7 +521,7 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
 
 
 def test_robot_modes_refuse_lock_step(live_node):
-    from formation_agent.ros.node import AgentNodeError
+    from formation_agent.ros.errors import AgentNodeError
     from formation_msgs_py.codec import encode_step
     from formation_msgs_py.lockstep import Step
 
@@ -744,7 +744,7 @@ def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_
     and the agent leaves after the grace; lock-step moves nothing and keeps its patience."""
     from types import SimpleNamespace
 
-    from formation_agent.ros.node import AgentNodeError
+    from formation_agent.ros.errors import AgentNodeError
     from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
 
     node = live_node()

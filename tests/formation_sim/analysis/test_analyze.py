@@ -13,7 +13,8 @@ import pytest
 
 from formation_sim.model import theory
 from formation_sim.analysis.checks import run_series, theorem_checks, theory_bounds
-from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+from formation_sim.analysis.load import load_bag_run, locate
+from formation_sim.analysis.errors import AnalysisError
 from formation_sim.analysis.report import bag_summary, diff_summaries
 from formation_sim.sim.engine import simulate
 from formation_sim.model.scenario import dump_scenario, load_scenario
@@ -663,7 +664,7 @@ def test_any_bytes_on_any_topic_of_a_bag_are_read_or_named_as_damaged():
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
-    from formation_msgs_py.codec import MessageError
+    from formation_msgs_py.errors import MessageError
     from formation_sim.analysis.load import _Collected, _dispatch
 
     topics = [

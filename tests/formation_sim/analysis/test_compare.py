@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from formation_sim.analysis.compare import (
-    CompareError,
     RunData,
     compare_runs,
     compare_trajectories,
@@ -19,6 +18,7 @@ from formation_sim.analysis.compare import (
     overlay_figures,
     within,
 )
+from formation_sim.analysis.errors import CompareError
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.summary import write_summary
 

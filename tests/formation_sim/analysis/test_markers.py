@@ -18,11 +18,12 @@ from formation_sim.analysis.markers import (
     TEXT_VIEW_FACING,
     FormationMarkers,
     LiveMarkerArray,
-    MarkerError,
     edge_colour,
     write_bag_with_markers,
 )
-from formation_sim.bag.io import BagError, decode, read_bag
+from formation_sim.analysis.errors import MarkerError
+from formation_sim.bag.io import decode, read_bag
+from formation_sim.bag.errors import BagError
 from formation_sim.model.scenario import load_scenario
 
 

@@ -123,7 +123,7 @@ def test_positions_may_be_missing_and_a_silent_robot_is_named(robots, tmp_path, 
 
 
 def test_a_scenario_without_positions_points_at_formation_measure(tmp_path):
-    from formation_sim.model.scenario import ScenarioError
+    from formation_sim.model.errors import ScenarioError
 
     data = scenario_to_dict(load_scenario('robots_lab'))
     data['agents'] = {i: {} for i in data['agents']}

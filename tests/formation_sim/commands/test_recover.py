@@ -11,7 +11,8 @@ import textwrap
 import pytest
 
 from formation_sim.cli import main
-from formation_sim.bag.io import BagReadError, read_bag
+from formation_sim.bag.io import read_bag
+from formation_sim.bag.errors import BagReadError
 
 # A recorder's writer that flushes twice, then dies by SIGKILL with messages still in memory.
 KILLED = textwrap.dedent("""

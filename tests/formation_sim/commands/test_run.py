@@ -8,6 +8,7 @@ from typing import ClassVar
 import pytest
 
 from formation_sim.cli import main
+from formation_sim.runtime.errors import RunError
 
 
 BAD_RUN_ARGUMENTS = [
@@ -78,7 +79,7 @@ def _listing(folder):
 def test_the_api_refuses_a_bad_request_before_touching_the_earlier_run(tmp_path, monkeypatch, force):
     import subprocess
 
-    from formation_sim.runtime.orchestrate import FormationRun, RunError
+    from formation_sim.runtime.orchestrate import FormationRun
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
     earlier = _earlier_run(tmp_path / 'run')
@@ -229,7 +230,7 @@ def test_formation_run_process_on_an_invalid_scenario_exits_non_zero_and_leaves_
 
 
 def test_fault_injection_requests_are_checked_before_anything_starts(tmp_path):
-    from formation_sim.runtime.orchestrate import FormationRun, RunError
+    from formation_sim.runtime.orchestrate import FormationRun
 
     with pytest.raises(RunError, match='loss needs the wall clock'):
         FormationRun('paper_single', out_dir=tmp_path / 'a', inject={'loss': 0.1})
@@ -265,7 +266,7 @@ def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
     class Recorded(orchestrate.FormationRun):
         def run(self):
             seen['localhost_only'] = self.options.localhost_only
-            raise orchestrate.RunError('stopped by the test')
+            raise RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     assert main(['run', 'paper_single', '--out', str(tmp_path / 'a'), '--network', '--quiet']) == 2
@@ -409,7 +410,7 @@ def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the
     class Recorded(orchestrate.FormationRun):
         def run(self):
             started.append(self.scenario.name)
-            raise orchestrate.RunError('stopped by the test')
+            raise RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     arguments = ['--backend', 'unicycle', *TURTLEBOT3_LIMITS, '--quiet']
@@ -438,7 +439,7 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
         def run(self):
             seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
             seen.update(warp=self.options.robots.time_warp)
-            raise orchestrate.RunError('stopped by the test')
+            raise RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     # ETA-2 on robots: the constant κ
@@ -473,7 +474,7 @@ def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypa
     class Recorded(orchestrate.FormationRun):
         def run(self):
             started.append(self.scenario.gains.speed_scale)
-            raise orchestrate.RunError('stopped by the test')
+            raise RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     # κ = 0.15 keeps robots_lab's speed within 0.22 m/s; its ||u||/l (0.1 m) would exceed 0.5 rad/s
@@ -531,7 +532,7 @@ def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path,
         def run(self):
             seen.update(kappa=self.scenario.gains.speed_scale, extra=self.options.summary_extra)
             seen.update(robots=self.options.robots)
-            raise orchestrate.RunError('stopped by the test')
+            raise RunError('stopped by the test')
 
     monkeypatch.setattr(orchestrate, 'FormationRun', Recorded)
     arguments = [

@@ -14,7 +14,6 @@ from formation_sim.model.scenario import (
     DoubleGains,
     Edge,
     Scenario,
-    ScenarioError,
     SingleGains,
     builtin_scenarios,
     dump_scenario,
@@ -22,6 +21,7 @@ from formation_sim.model.scenario import (
     scenario_from_dict,
     scenario_to_dict,
 )
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.validate import require_valid
 
 

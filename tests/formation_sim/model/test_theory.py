@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import solve_continuous_are
 
 from formation_sim.model import gains, theory
+from formation_sim.model.errors import TheoryError
 from formation_sim.model.scenario import DoubleGains, Edge, Scenario, SingleGains, load_scenario
 
 
@@ -152,7 +153,7 @@ def test_omega_is_the_gradient_weight_of_the_tension():
 
 
 def test_edge_functions_reject_outside_the_domain():
-    with pytest.raises(theory.TheoryError, match='Δ - ||d_ij||'):
+    with pytest.raises(TheoryError, match='Δ - ||d_ij||'):
         theory.f_ij(1.0, capacity=1.0)
 
 
@@ -435,14 +436,14 @@ def test_theorem2_constants_by_hand(label, scenario, b):
 
 
 def test_theorem_constants_refuse_broken_hypotheses(single, double):
-    with pytest.raises(theory.TheoryError, match=r'\[beta\]'):
+    with pytest.raises(TheoryError, match=r'\[beta\]'):
         theory.theorem_constants(single.replace(gains=SingleGains(alpha=1.0, beta=1.5)))
-    with pytest.raises(theory.TheoryError, match=r'\[a\]'):
+    with pytest.raises(TheoryError, match=r'\[a\]'):
         theory.theorem_constants(single, a=1.0)
-    with pytest.raises(theory.TheoryError, match=r'\[beta_d\]'):
+    with pytest.raises(TheoryError, match=r'\[beta_d\]'):
         gains = DoubleGains.from_riccati(alpha_d=1.0, beta_d=1.2, beta1=1.5, k3='paper')
         theory.theorem_constants(double.replace(gains=gains))
-    with pytest.raises(theory.TheoryError, match=r'\[initial\]'):
+    with pytest.raises(TheoryError, match=r'\[initial\]'):
         far = single.positions.copy()
         far[0] += 3.0
         theory.theorem_constants(single.replace(positions=far))

@@ -14,7 +14,8 @@ from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import DoubleGains, load_scenario
 from formation_sim.model.threshold_floor import floor_bounds
 from formation_sim.model.validate import validate_scenario
-from formation_sim.sim.engine import EngineError, simulate
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError
 
 
 def _near_formation_double(c0: float):

@@ -579,7 +579,7 @@ def test_a_strict_bound_met_up_to_rounding_is_accepted_and_beyond_it_refused(pap
     import math
 
     from formation_sim.model import theory
-    from formation_sim.model.theory import TheoryError
+    from formation_sim.model.errors import TheoryError
 
     beta0 = 1.5  # the paper's example, exactly
     accepted = scenario_from_dict(paper_scenario_dict('single', beta=math.nextafter(beta0, math.inf)))

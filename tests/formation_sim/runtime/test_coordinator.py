@@ -99,7 +99,7 @@ def test_discovery_waits_for_every_agent_and_every_robot(coordinator):
 
 
 def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
-    from formation_sim.runtime.run_book import ConnectivityLostError
+    from formation_sim.runtime.errors import ConnectivityLostError
 
     node = coordinator()
     _start(node, time.time() - 0.5)
@@ -128,7 +128,7 @@ def test_a_pose_that_is_not_its_message_is_rejected_and_counted_not_sampled(coor
 def test_nan_ahead_and_jumping_poses_are_refused_counted_and_never_checked_or_sampled(coordinator):
     """Issue 28: five NaN odometry poses were kept (the edge check blinded, summary.json not
     JSON); one stamped 0.4 s ahead gave max_edge_length 5.38 > Δ with no failure."""
-    from formation_sim.runtime.run_book import ConnectivityLostError
+    from formation_sim.runtime.errors import ConnectivityLostError
 
     node = _running(coordinator, max_linear_speed=0.5)
     for _ in range(5):
@@ -174,7 +174,7 @@ def _running(coordinator, **parameters):
 
 
 def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator):
-    from formation_sim.runtime.run_book import RobotLostError
+    from formation_sim.runtime.errors import RobotLostError
 
     node = _running(coordinator, pose_silence=0.5)
     node._running_tick()  # every robot heard: the run goes on
@@ -190,7 +190,7 @@ def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator)
 
 
 def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_is_named_first(coordinator):
-    from formation_sim.runtime.run_book import AgentFailedError, RobotLostError
+    from formation_sim.runtime.errors import AgentFailedError, RobotLostError
 
     node = _running(coordinator, pose_silence=0.5)
     with pytest.raises(
@@ -244,6 +244,7 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
     from formation_sim.runtime.results import excused_after_end
     from formation_sim.runtime.supervise import Child
     from formation_sim.runtime.time_keeper import run_extra
+    from formation_sim.sim.summary import unstarted_summary
 
     node = _running(coordinator, horizon=0.5)
     node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
@@ -262,7 +263,8 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
             'is 0.508 s old at t=0.981 (pose_timeout 0.5 s)'
         )
     }
-    (tmp_path / 'summary.json').write_text(json.dumps({'extra': extra}))
+    # a summary.json the time keeper could write (RunSummary refuses one with its keys missing)
+    unstarted_summary(node.scenario, horizon=0.5, mode='robots', extra=extra).write(tmp_path / 'summary.json')
 
     def child(name: str, returncode: int) -> Child:
         process = subprocess.Popen(['true'])
@@ -279,7 +281,7 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
 def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
     from formation_sim.runtime.coordinator import _stop_and_write
-    from formation_sim.runtime.run_book import DiscoveryError
+    from formation_sim.runtime.errors import DiscoveryError
 
     node = _running(coordinator)
     node.end_now()
@@ -582,7 +584,7 @@ def test_an_outside_node_on_a_robots_command_topic_stops_the_run_and_is_named(ro
 
     from formation_msgs_py.qos import ROBOT_COMMAND_QOS
     from formation_sim.runtime.coordinator import _stop_and_write
-    from formation_sim.runtime.intruders import ForeignWriterError
+    from formation_sim.runtime.errors import ForeignWriterError
     from formation_sim.runtime.time_keeper import look_at_graph
 
     node = _running(coordinator, out_dir=str(tmp_path))
@@ -619,7 +621,7 @@ def test_a_second_process_claiming_an_agent_is_refused_before_step_0(ros, coordi
 
     from formation_msgs_py.qos import PROTOCOL_QOS
     from formation_msgs_py.topics import trigger_info_topic
-    from formation_sim.runtime.intruders import DuplicateAgentError
+    from formation_sim.runtime.errors import DuplicateAgentError
 
     node = coordinator()
     topic = trigger_info_topic(2, min(node.scenario.neighbours(2)))
@@ -640,7 +642,7 @@ def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinato
     """Wall clock: forged, plausible triggering information was taken (agent 1: 813 events instead
     of ~81, and the run said done).  The coordinator compares the agents' Statuses at each look."""
     from formation_msgs_py.lockstep import Status
-    from formation_sim.runtime.intruders import ForeignInformationError
+    from formation_sim.runtime.errors import ForeignInformationError
     from formation_sim.runtime.time_keeper import look_at_graph
 
     node = _running(coordinator)
@@ -675,8 +677,7 @@ def test_agents_that_took_more_information_than_was_sent_stop_the_run(coordinato
 def test_a_coordinator_frozen_past_the_lease_names_its_freeze_not_the_robots(coordinator):
     """The finding: a coordinator frozen 3 s (SIGSTOP) said "robots 1, 2, 3, 4 lost" although the
     robots were fine.  Its own tick, 3 s late, names the freeze first (`blamed`, as its main does)."""
-    from formation_sim.runtime.intruders import KeeperFrozenError
-    from formation_sim.runtime.run_book import RobotLostError
+    from formation_sim.runtime.errors import KeeperFrozenError, RobotLostError
     from formation_sim.runtime.time_keeper import blamed
 
     node = _running(coordinator, pose_silence=0.5)
@@ -695,7 +696,7 @@ def test_a_coordinator_frozen_past_the_lease_names_its_freeze_not_the_robots(coo
 def test_an_agent_that_leaves_on_a_final_step_the_coordinator_did_not_send_stops_the_run(coordinator):
     """Agents stop on any final Step (stopping is safe): one forged mid-run sends them home early,
     and the run must not go on as if they had been lost, nor end done."""
-    from formation_sim.runtime.run_book import AgentFailedError
+    from formation_sim.runtime.errors import AgentFailedError
 
     node = _running(coordinator)
     with pytest.raises(

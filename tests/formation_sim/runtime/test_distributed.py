@@ -76,6 +76,12 @@ def test_lockstep_run_reproduces_the_in_process_engine(
     summary = json.loads(result.summary.read_text())
     assert summary['mode'] == 'distributed'
     _assert_same_events(summary, reference)
+    # summary.json through its type (issue 29): read and written again, the same bytes.
+    from formation_sim.sim.summary import RunSummary
+
+    typed = RunSummary.read(result.summary)
+    assert typed.to_dict() == summary and typed.started and typed.failure is None
+    assert typed.write(tmp_path / 'again.json').read_bytes() == result.summary.read_bytes()
 
     # The bag: every topic of the run, one TriggerInfo per trigger and neighbour, stamped with
     # the sender's triggering times.
@@ -360,7 +366,7 @@ def test_lockstep_run_takes_same_instant_rounds_and_stops_where_the_engine_stops
     # paper_single to t = 200: the engine stops where the threshold reaches the rounding of the
     # states (after an instant with a second round of triggers); the distributed run must take the
     # same rounds and stop at the same event with the same message.
-    from formation_sim.sim.engine import EngineError
+    from formation_sim.sim.errors import EngineError
 
     scenario = load_scenario('paper_single')
     with pytest.raises(EngineError) as stop:

@@ -11,7 +11,8 @@ import yaml
 
 from formation_agent.core.kinds import Geometry
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch import RobotOptions, RunError
+from formation_sim.runtime.launch import RobotOptions
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.orchestrate import FormationRun
 
 TURTLEBOT3 = RobotOptions(

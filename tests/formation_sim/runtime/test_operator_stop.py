@@ -22,10 +22,11 @@ from pathlib import Path
 import pytest
 from std_srvs.srv import Trigger
 
-from formation_agent.ros.process import EXIT_STOPPED
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import STOP_SERVICE
 from formation_sim.runtime.operator_stop import CALLER_LOOK, CALLER_WAIT, OperatorStop
-from formation_sim.runtime.run_book import OperatorStopError, failure_extra
+from formation_sim.runtime.run_book import failure_extra
+from formation_sim.runtime.errors import OperatorStopError
 
 BOUND = 1.0  # [s] issue 27: every robot's zero within this long of the call
 TEST_POSE_TIMEOUT = 2.0  # as tests/formation_sim/runtime/test_orchestrate.py: a loaded machine
@@ -222,7 +223,7 @@ def _assert_stopped_by_the_operator(result, *, asked_by: str, called_at: float, 
     `formation analyze` agreeing: the latencies per robot."""
     from formation_sim.cli import main
 
-    assert result.exit_status == EXIT_STOPPED == 5, result.message
+    assert result.exit_status == ExitCode.STOPPED == 5, result.message
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'stopped_by_operator' and result.failure == failure, failure
@@ -373,7 +374,7 @@ def test_a_call_before_step_0_stops_the_run_before_it_starts(tmp_path, capsys):
         'command (4 robots)'
     )
     (result,) = results
-    assert result.exit_status == EXIT_STOPPED, result.message
+    assert result.exit_status == ExitCode.STOPPED, result.message
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'stopped_by_operator' and failure['step'] is None, failure
@@ -419,7 +420,7 @@ def test_a_lock_step_exact_run_is_stopped_too(tmp_path, stepping_run, long_run_s
         operator.close()
     assert answer.success and answer.message.startswith('stopping the run at t='), answer.message
     assert answer.message.endswith(': the final Step is out, every agent stops and leaves')
-    assert result.exit_status == EXIT_STOPPED, result.message
+    assert result.exit_status == ExitCode.STOPPED, result.message
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'stopped_by_operator' and failure['asked_by'] == [f'/{_Operator.NAME}']

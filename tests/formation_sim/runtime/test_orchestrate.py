@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.cli import main
 from formation_sim.model.scenario import load_scenario
 
@@ -296,7 +297,7 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_gets_its_zero_from_t
 
     from formation_sim.bag.io import decode, read_bag
     from formation_sim.runtime.launch import RobotOptions
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(
         'robots_square',
@@ -325,7 +326,7 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_gets_its_zero_from_t
     os.kill(victim.pid, signal.SIGKILL)
     worker.join(timeout=120.0)
     (result,) = results
-    assert result.exit_status == EXIT_LOST, result.message
+    assert result.exit_status == ExitCode.LOST, result.message
     failure = json.loads(result.summary.read_text())['extra']['failure']
     assert (
         failure['kind'] == 'agent_lost'
@@ -374,7 +375,7 @@ def test_an_external_robot_killed_mid_run_is_the_first_cause_and_the_other_robot
 
     from formation_sim.runtime.fleet import RobotFleet
     from formation_sim.runtime.launch import RobotOptions
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     domain = 190
     fleet = RobotFleet(
@@ -414,7 +415,7 @@ def test_an_external_robot_killed_mid_run_is_the_first_cause_and_the_other_robot
         os.kill(victim.pid, signal.SIGKILL)
         worker.join(timeout=150.0)
         (result,) = results
-        assert result.exit_status == EXIT_LOST, result.message
+        assert result.exit_status == ExitCode.LOST, result.message
         assert result.message.startswith('robot 2 lost at t='), result.message
         assert 'while the other robots still published' in result.message, result.message
         failure = json.loads(result.summary.read_text())['extra']['failure']
@@ -446,7 +447,7 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
     from formation_sim.bag.io import decode, read_bag
     from formation_sim.runtime.fleet import RobotFleet
     from formation_sim.runtime.launch import RobotOptions
-    from formation_sim.runtime.orchestrate import EXIT_REFUSED, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     domain = 46
     square = load_scenario('robots_square')
@@ -477,7 +478,7 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
         fleet.stop()
         worker.join(timeout=60.0)
     assert statuses == [0], fleet.died
-    assert result.exit_status == EXIT_REFUSED, result.message
+    assert result.exit_status == ExitCode.REFUSED, result.message
     # Edge (1,2): x_1 − x_2 − d_12 = (−1.5 − 1.015 + 1, 0.0075), 1.52 m; edge (4,1): 1.49 m.
     assert (
         'edge (1,2): the measured ‖x_1 − x_2 − d_12‖ = 1.52 m is '
@@ -532,7 +533,7 @@ def test_a_run_that_times_out_names_the_children_still_running_and_their_stacks_
     running for its threads' stacks before it stops them: the log says where each one was.  A
     child still starting (a loaded machine: no stack handler yet) is named so, and never said to
     have stacks it did not write; then a longer timeout gives the simulator time to start."""
-    from formation_sim.runtime.orchestrate import EXIT_FAILED, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     for attempt, timeout in enumerate((4.0, 20.0, 60.0)):
         run = FormationRun(
@@ -543,7 +544,7 @@ def test_a_run_that_times_out_names_the_children_still_running_and_their_stacks_
             timeout=timeout,
         )
         result = run.run()
-        assert result.exit_status == EXIT_FAILED
+        assert result.exit_status == ExitCode.FAILED
         assert f'timed out after {timeout} s; still running: ' in result.message, result.message
         for child in run._children:
             if f'{child.name} (stacks in {child.log})' in result.message:

@@ -20,16 +20,15 @@ from geometry_msgs.msg import Pose, PoseArray
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
 
-from formation_sim.bag.io import (
-    BagWriter,
+from formation_sim.bag.io import BagWriter, decode, read_bag
+from formation_sim.bag.errors import (
     BagError,
     BagReadError,
+    BagRecoveryError,
     TopicSpecError,
     UnknownMessageTypeError,
-    decode,
-    read_bag,
 )
-from formation_sim.bag.recovery import BagRecoveryError, reindex
+from formation_sim.bag.recovery import reindex
 from formation_sim.runtime.recorder import parse_topic_spec
 from formation_sim.runtime.sim_node import RECORDER_LAG
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.sim.engine import simulate
 from formation_sim.model.scenario import load_scenario
 
@@ -371,7 +372,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario, shm_files
 ):
     from formation_sim.runtime.fastdds_shm import held_files
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
@@ -381,7 +382,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     held = shm_files(held_files(victim.pid))
     os.kill(victim.pid, signal.SIGKILL)
     result = stepping.result(timeout=120.0)
-    assert result.exit_status == EXIT_LOST == 3
+    assert result.exit_status == ExitCode.LOST == 3
     assert held.paths and not held.left(), held.left()
     assert f'agent_2 (pid {victim.pid}) killed by SIGKILL' in result.message
     assert 'agent 2 lost at t=' in result.message and 'no sign of life' in result.message
@@ -434,7 +435,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(
     tmp_path, ros_env, stepping_run, long_run_scenario
 ):
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
     from formation_sim.bag.io import read_bag
 
     run = FormationRun(
@@ -445,7 +446,7 @@ def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(
     recorder = next(child for child in run._children if child.name == 'recorder')
     os.kill(recorder.pid, signal.SIGKILL)
     result = stepping.result(timeout=120.0)
-    assert result.exit_status == EXIT_LOST
+    assert result.exit_status == ExitCode.LOST
     assert f'recorder (pid {recorder.pid}) killed by SIGKILL' in result.message
     assert result.message.count(f'recorder (pid {recorder.pid})') == 1, result.message  # said once
     assert 'its bag was recovered' in result.message
@@ -486,7 +487,7 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
     outside the domain's range; a live participant of another domain and a dead port of nobody
     in the run keep theirs."""
     from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     def family(path: str) -> set[Path]:
         name = Path(path).name.removeprefix('sem.').removesuffix('_mutex').removesuffix('_el')
@@ -521,7 +522,7 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
         for child in children:
             os.kill(child.pid, signal.SIGKILL)
         result = stepping.result(timeout=120.0)
-        assert result.exit_status == EXIT_LOST, result.message
+        assert result.exit_status == ExitCode.LOST, result.message
         assert all(child.process.returncode == -signal.SIGKILL for child in run._children)
         ports = {Path(path).name for path in held if 'fastrtps_port' in path}
         assert any(
@@ -554,7 +555,7 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
     orchestrator sends SIGCONT with SIGINT) it closes its bag, and summary.json says, per topic,
     what the run published and the bag lacks."""
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     run = FormationRun(
         long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0
@@ -567,7 +568,7 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(recorder.pid, signal.SIGCONT)
-    assert result.exit_status == EXIT_LOST, result.message
+    assert result.exit_status == ExitCode.LOST, result.message
     assert 'the recorder lost at t=' in result.message and 'no sign of life for 1.0 s' in result.message
     summary = json.loads(result.summary.read_text())
     failure = summary['extra']['failure']
@@ -599,7 +600,7 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(
     """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
     with the failure, the last sim time and step of the simulator's progress, every process's
     exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
-    from formation_sim.runtime.orchestrate import EXIT_LOST, FormationRun
+    from formation_sim.runtime.orchestrate import FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=63, progress=False, timeout=240.0)
@@ -608,7 +609,7 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(
     simulator = next(child for child in run._children if child.name == 'simulator')
     os.kill(simulator.pid, signal.SIGKILL)
     result = stepping.result(timeout=120.0)
-    assert result.exit_status == EXIT_LOST
+    assert result.exit_status == ExitCode.LOST
     assert result.message.startswith(f'simulator (pid {simulator.pid}) killed by SIGKILL; see ')
     assert result.summary is not None and result.bag is not None and not result.bag_recovered
     assert not _wait_until_gone(str(result.out_dir))

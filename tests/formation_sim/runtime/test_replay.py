@@ -15,7 +15,8 @@ import pytest
 
 from formation_sim.bag.io import BagWriter, read_bag
 from formation_sim.runtime.recorder import import_message_class
-from formation_sim.runtime.replay import BagPlayer, ReplayError, main_replay
+from formation_sim.runtime.replay import BagPlayer, main_replay
+from formation_sim.runtime.errors import ReplayError
 
 REPLAY_DOMAINS = {'synthetic': 171, 'distributed': 173, 'live': 66, 'elsewhere': 67}
 

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from formation_sim.runtime.results import EXIT_INTERRUPTED, annotate, phases
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.runtime.results import annotate, phases
 from formation_sim.runtime.supervise import Child
 
 
@@ -35,23 +36,25 @@ def test_a_child_that_stopped_the_run_is_its_first_cause_by_kind_and_agent(
 ):
     """formation run stops at once when a robot's or (on robots) an agent's process dies: the time
     keeper, stopped by the signal, says 'interrupted'; the summary names the child instead."""
-    data = {
-        'extra': {
-            'failure': {
-                'kind': 'interrupted',
-                'message': 'stopped by a signal (SIGINT/SIGTERM)',
-                'agents': [],
-                'detected_by': 'coordinator',
-            }
-        }
+    from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.summary import unstarted_summary
+
+    keeper_failure = {
+        'kind': 'interrupted',
+        'message': 'stopped by a signal (SIGINT/SIGTERM)',
+        'agents': [],
+        'detected_by': 'coordinator',
     }
+    data = unstarted_summary(
+        load_scenario('paper_single'), horizon=10.0, mode='robots', extra={'failure': keeper_failure}
+    )
     child = _child(
         name, returncode, tmp_path, error='the pose of robot 2 is 0.6 s old' if returncode > 0 else ''
     )
-    failure = annotate(data, child, EXIT_INTERRUPTED, '', launched=0.0)
+    failure = annotate(data, child, ExitCode.INTERRUPTED, '', launched=0.0)
     assert (failure['kind'], failure['agents']) == (kind, agents)
     assert failure['message'].startswith(f'{name} (pid {child.pid}) ') and failure['process']['name'] == name
-    assert failure['detected_by'] == 'coordinator, orchestrator'
+    assert failure['detected_by'] == 'coordinator, orchestrator' and data.failure is failure
 
 
 def test_the_commands_own_start_before_the_timeline_is_the_prepare_phase():
@@ -94,18 +97,19 @@ def test_the_time_keeper_gets_its_time_to_name_a_lost_child_itself(tmp_path, nam
 
 
 def test_a_time_keeper_that_failed_gives_its_status_or_the_lost_childs(tmp_path):
-    from formation_sim.runtime.results import EXIT_FAILED, EXIT_LOST, keeper_failed
+    from formation_sim.runtime.results import keeper_failed
 
     keeper = _child('coordinator', 4, tmp_path)
     status, message = keeper_failed(4, keeper, None)  # refused: the robots' start (nothing was sent)
     assert status == 4 and message == f'coordinator (pid {keeper.pid}) exited with status 4; see {keeper.log}'
     lost = _child('agent_2', 1, tmp_path, error='the pose of robot 2 is 0.6 s old')
     status, message = keeper_failed(130, keeper, lost)  # stopped with the rest: the lost child decides
-    assert status == EXIT_FAILED and message.startswith(
+    assert status == ExitCode.FAILED and message.startswith(
         f'agent_2 (pid {lost.pid}) exited with status 1: the pose of robot 2 is 0.6 s old; coordinator'
     )
     assert (
-        keeper_failed(-9, keeper, None)[0] == EXIT_LOST and keeper_failed(7, keeper, None)[0] == EXIT_FAILED
+        keeper_failed(-9, keeper, None)[0] == ExitCode.LOST
+        and keeper_failed(7, keeper, None)[0] == ExitCode.FAILED
     )
     # An operator's stop (/formation/stop) is the run's status whatever child went meanwhile.
     assert keeper_failed(5, keeper, lost)[0] == 5 and keeper_failed(5, keeper, None)[0] == 5
@@ -147,7 +151,7 @@ def test_a_killed_simulators_failure_is_at_the_latest_step_and_time_the_orchestr
 
     def failure(progress_line: str, bag_dir: Path) -> dict:
         keeper = _killed_keeper()
-        data = summary_of_what_is_known(
+        data, note = summary_of_what_is_known(
             keeper,
             scenario=scenario,
             horizon=10.0,
@@ -158,9 +162,11 @@ def test_a_killed_simulators_failure_is_at_the_latest_step_and_time_the_orchestr
             last_progress=progress_line,
             children=[keeper],
             launched=0.0,
-            notes=[],
         )
-        return data['extra']['failure']
+        # A bag of Steps only: nothing to rebuild the run from, and the note says why.
+        assert not data.started and (note is None) == (not (bag_dir / 'metadata.yaml').is_file())
+        assert note is None or note.startswith('the bag could not be read back: ')
+        return data.extra['failure']
 
     # The last progress line (a second old) said step 4; the bag holds Steps up to 23 at t = 0.23.
     got = failure('t=0.000001 horizon=10 events=7 steps=4 wall=1.0s', bag)

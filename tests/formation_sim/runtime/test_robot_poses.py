@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from formation_sim.runtime.robot_poses import EARLY_POSES, TRAJECTORY_TOPICS, RobotPoses
-from formation_sim.runtime.run_book import CoordinatorError
+from formation_sim.runtime.errors import CoordinatorError
 from formation_sim.sim.robots import POSES_AFTER_END
 
 EPOCH = 1_700_000_000.0

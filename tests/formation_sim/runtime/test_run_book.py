@@ -8,14 +8,13 @@ import pytest
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.run_book import (
+from formation_sim.runtime.run_book import RecorderBook, RunBook
+from formation_sim.runtime.errors import (
     AgentLostError,
     ConnectivityLostError,
     CoordinatorError,
-    RecorderBook,
     RecorderLostError,
     RobotLostError,
-    RunBook,
 )
 
 
@@ -203,7 +202,8 @@ def test_saturation_in_the_summary_adds_up_the_agents_reports():
 
 
 def test_a_robot_silent_while_the_others_publish_is_lost_and_a_coordinator_that_slept_loses_none():
-    from formation_sim.runtime.run_book import ALL_SILENT_AFTER, PoseWatch, RobotLostError
+    from formation_sim.runtime.run_book import ALL_SILENT_AFTER, PoseWatch
+    from formation_sim.runtime.errors import RobotLostError
 
     watch = PoseWatch([1, 2, 3, 4], silence=0.5)
     assert watch.silent(100.0) == []  # nothing heard yet (discovery)
@@ -260,7 +260,7 @@ def _failure(error: BaseException, **overrides) -> dict:
 
 
 def test_a_failure_names_its_kind_agents_and_time_and_an_edge_its_length_and_a_start_its_breaches():
-    from formation_sim.runtime.run_book import InitialConditionError
+    from formation_sim.runtime.errors import InitialConditionError
 
     lost = _failure(AgentLostError('agent 2 lost', agents=[2]))
     assert lost == {

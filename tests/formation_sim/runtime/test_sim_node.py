@@ -109,7 +109,7 @@ def test_malformed_statuses_and_reports_are_refused_and_counted(simulator):
 
 def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_agents(simulator):
     from formation_msgs_py.lockstep import Status
-    from formation_sim.runtime.sim_node import ConnectivityLostError
+    from formation_sim.runtime.errors import ConnectivityLostError
 
     node = simulator()
     scenario = node.scenario
@@ -141,7 +141,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
 
 
 def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator):
-    from formation_sim.runtime.sim_node import AgentLostError
+    from formation_sim.runtime.errors import AgentLostError
 
     node = simulator()
     node._sampler.event()

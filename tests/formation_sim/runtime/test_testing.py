@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from formation_sim.runtime.replay import ReplayError
+from formation_sim.runtime.errors import ReplayError
 from formation_sim.runtime.testing import BagReplay, bag_counts
 
 DOMAIN_ID = 164  # the replays' domain; the recording run picks a free one of its own

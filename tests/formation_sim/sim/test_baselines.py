@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from formation_sim.model import theory
-from formation_sim.sim.baselines import BaselineError, simulate_continuous
+from formation_sim.sim.baselines import simulate_continuous
+from formation_sim.sim.errors import BaselineError
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
 

@@ -18,7 +18,8 @@ import pytest
 
 from formation_sim.model import theory
 from formation_sim.model.scenario import load_scenario
-from formation_sim.sim.engine import EngineError, FloorEdges, simulate
+from formation_sim.sim.engine import FloorEdges, simulate
+from formation_sim.sim.errors import EngineError
 
 UNITS = (-40, -20, 0, 20, 40)
 REL = 1e-9

@@ -16,7 +16,8 @@ from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
 from formation_sim.model.speed_choice import RobotLimits
-from formation_sim.sim.engine import EngineError, simulate
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError
 from formation_sim.sim.largest_command import choose_time_warp
 
 WARP = TimeWarp(paper_starts=(0.0, 0.3, 1.0, 2.5), rates=(0.1, 0.37, 1.0, 2.0))

@@ -18,7 +18,6 @@ from formation_sim.sim.robots import (
     Limits,
     PoseNoise,
     PoseTrack,
-    RobotError,
     RobotSample,
     UnicycleRobot,
     axle_position,
@@ -31,6 +30,7 @@ from formation_sim.sim.robots import (
     sample_times,
     trajectory_samples,
 )
+from formation_sim.sim.errors import RobotError
 
 
 def _unicycle_ode(v: float, w: float):

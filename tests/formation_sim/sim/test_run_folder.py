@@ -11,7 +11,6 @@ import pytest
 
 from formation_sim.sim.run_folder import (
     RUN_ENTRIES,
-    RunFolderError,
     check_out_dir,
     check_report_dir,
     claim_out_dir,
@@ -19,6 +18,7 @@ from formation_sim.sim.run_folder import (
     folder_name,
     new_run_folder,
 )
+from formation_sim.sim.errors import RunFolderError
 
 
 def _make_run(folder, *names):

@@ -15,12 +15,12 @@ import pytest
 
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
-from formation_sim.sim.engine import EngineError, simulate
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError, TrajectoryError
 from formation_sim.sim.samples import (
     INCOMPLETE_DIR,
     TRAJECTORY_DIR,
     EdgeLengths,
-    TrajectoryError,
     edge_maxima,
     header_shape,
     load_trajectory,
@@ -224,15 +224,28 @@ def test_a_summary_with_non_finite_values_is_written_as_strict_json_naming_each(
     compliant: nan') after NaN poses; every such value is null now, and named with what it was."""
     import json
 
-    from formation_sim.sim.summary import write_summary_file
+    from formation_sim.sim.summary import RunSummary, write_summary_file
 
-    summary = {
-        'schema': 'formation-summary/1',
-        'max_edge_length': float('nan'),
-        'edges': [{'max_length': 2.0}, {'max_length': np.float64('inf')}],
-        'final_positions': {'1': (1.0, -np.inf)},
-        'extra': {'failure': None},
-    }
+    run = dict(scenario='s', dynamics='single', mode='distributed', horizon=1.0, n_agents=1, dimension=2)
+    summary = RunSummary(
+        **run,
+        delta=4.0,
+        wall_time=0.5,
+        extra={'failure': None},
+        trigger_times={'1': [0.0]},
+        event_counts={'1': 1},
+        total_events=1,
+        min_inter_event_time={'1': None},
+        messages_sent=0,
+        sensing_calls=0,
+        edges=[{'max_length': 2.0}, {'max_length': np.float64('inf')}],
+        max_edge_length=float('nan'),
+        final_formation_error=0.0,
+        final_positions={'1': (1.0, -np.inf)},
+        final_velocities=None,
+        theorem_constants={},
+        xi_check={},
+    )
     path = write_summary_file(summary, tmp_path / 'summary.json')
     text = path.read_text()
     data = json.loads(text, parse_constant=lambda name: pytest.fail(f'{name} in summary.json'))
@@ -247,5 +260,7 @@ def test_a_summary_with_non_finite_values_is_written_as_strict_json_naming_each(
         },
     }
     # A finite summary is written as it is, with no such entry.
-    write_summary_file({'a': 1.5, 'extra': {}}, tmp_path / 'clean.json')
-    assert json.loads((tmp_path / 'clean.json').read_text()) == {'a': 1.5, 'extra': {}}
+    clean = RunSummary(**run, delta=1.5, wall_time=None, extra={})
+    write_summary_file(clean, tmp_path / 'clean.json')
+    assert json.loads((tmp_path / 'clean.json').read_text()) == clean.to_dict()
+    assert clean.to_dict()['delta'] == 1.5 and 'non_finite' not in clean.extra

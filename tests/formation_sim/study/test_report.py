@@ -6,7 +6,8 @@ import pytest
 
 from formation_sim.study.case import run_case
 from formation_sim.study.report import audit_table, periodic_savings, write_report
-from formation_sim.study.spec import StudyError, build_study
+from formation_sim.study.spec import build_study
+from formation_sim.study.errors import StudyError
 from formation_sim.study.store import StudyFolder
 
 

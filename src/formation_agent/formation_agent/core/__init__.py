@@ -23,9 +23,8 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'eta': ('ALGORITHM_GAINS', 'AgentError', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
+        'eta': ('ALGORITHM_GAINS', 'Eta1Agent', 'Eta2Agent', 'TriggerOutput', 'make_agent'),
         'crossing': (
-            'CrossingError',
             'CrossingSearch',
             'DEFAULT_TOLERANCE',
             'ErrorModel',
@@ -36,7 +35,6 @@ __all__ = lazy_exports(
         'tension': ('omega', 'omega_prime', 'omega_second'),
         'closed_form': ('advance_double',),
         'speed_scale': (
-            'ScaleError',
             'Threshold',
             'check_speed_scale',
             'check_threshold_floor',
@@ -44,9 +42,10 @@ __all__ = lazy_exports(
             'eta2_gains',
         ),
         'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
-        'pose_sensing': ('PoseBook', 'PoseError'),
+        'pose_sensing': ('PoseBook',),
         'velocity_reference': ('VelocityReference',),
         'commander': ('Limits', 'RobotCommander', 'SaturationLog'),
         'kinds': ('KIND_NAMES', 'RobotKind', 'register', 'robot_kind'),
+        'errors': ('AgentError', 'CrossingError', 'PoseError', 'ScaleError'),
     },
 )

@@ -16,11 +16,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
+
+Floats = npt.NDArray[np.float64]
 
 
-def one_minus_exp(z):
+def one_minus_exp(z: npt.ArrayLike) -> Floats:
     """1 - e^{-z}, accurate for small z (scalar or array)."""
-    return -np.expm1(-np.asarray(z, dtype=float))
+    out: Floats = -np.expm1(-np.asarray(z, dtype=float))
+    return out
 
 
 # Below this |z| the series replaces z + expm1(-z), which loses digits to cancellation.
@@ -39,10 +43,10 @@ def z_minus_one_plus_exp_float(z: float) -> float:
     return z * z * (c0 - z * (c1 - z * (c2 - z * (c3 - z * (c4 - z * (c5 - z * (c6 - z * (c7 - z * acc))))))))
 
 
-def z_minus_one_plus_exp(z):
+def z_minus_one_plus_exp(z: npt.ArrayLike) -> Floats:
     """z - 1 + e^{-z}, accurate for small z, where it behaves as z^2/2 (scalar or array)."""
     z = np.asarray(z, dtype=float)
-    out = z + np.expm1(-z)
+    out: Floats = z + np.expm1(-z)
     small = np.abs(z) < SERIES_LIMIT
     if small.any():
         zs = z[small]
@@ -54,7 +58,7 @@ def z_minus_one_plus_exp(z):
     return out
 
 
-def advance_double(x, q, u, k3: float, tau):
+def advance_double(x: Floats, q: Floats, u: Floats, k3: float, tau: npt.ArrayLike) -> tuple[Floats, Floats]:
     """State (x, q) after `tau` seconds of q' = u - k3 q (eqs. statexixjd, stateqiqj).
 
     `tau` may be a scalar or one value per row of x, q, u.

@@ -21,13 +21,18 @@ Limits (README, "Running on robots"): the theorems assume none, so every clip is
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, robot_kind
+from formation_agent.core.kinds import KIND_NAMES, Geometry, robot_kind
+from formation_agent.core.errors import KindError
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity, limit_world_velocity
 from formation_agent.core.velocity_reference import VelocityReference
 from formation_msgs_py.lockstep import SATURATION_LINEAR_ACCELERATION
+
+if TYPE_CHECKING:
+    from formation_agent.core.time_warp import TimeWarp
 
 __all__ = [
     'DRIVES',
@@ -59,7 +64,7 @@ class RobotCommander:
         limits: Limits,
         geometry: Geometry | None = None,
         k3: float | None = None,
-        time_warp=None,
+        time_warp: TimeWarp | None = None,
     ) -> None:
         """`time_warp` (ETA-1; `formation_agent.core.time_warp.TimeWarp`): the controls are the
         paper's u_p and the robot is sent κ(t) u_p at each command's real time t."""

@@ -15,13 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from formation_agent.core import crossing
 from formation_agent.core.closed_form import _C as _SERIES
 from formation_agent.core.closed_form import SERIES_LIMIT
-from formation_msgs_py.types import TriggerInfo
+from formation_msgs_py.types import SensedState, TriggerInfo
 
 ENVIRONMENT = 'FORMATION_PURE_PYTHON'
 """Set to 1 to force the pure-Python path."""
@@ -29,7 +31,7 @@ ENVIRONMENT = 'FORMATION_PURE_PYTHON'
 try:
     from formation_agent.core import _fastcore
 except ImportError:  # not built (no compiler at install, or a plain copy of the sources)
-    _fastcore = None
+    _fastcore = None  # type: ignore[assignment]  # the module or None: AVAILABLE says which
 
 AVAILABLE = _fastcore is not None
 """True when the compiled core was built and imports."""
@@ -104,34 +106,34 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def search_type():
+def search_type() -> type[crossing.CrossingSearch] | None:
     """The compiled twin of `crossing.CrossingSearch` for a plain-float agent (`_fastcore.Search`: the
     same constructor, attributes and floats, its state and the agent's packed rows held in C), or
     None for the pure-Python path."""
     return _fastcore.Search if _active else None
 
 
-def receiver():
+def receiver() -> Callable[[Any, TriggerInfo], bool] | None:
     """The compiled `receive(agent, info)` of a plain-float agent (True: taken; False: nothing changed,
     the agent's Python `receive` takes the message), or None for the pure-Python path."""
     return _fastcore.receive if _active else None
 
 
-def trigger():
+def trigger() -> Callable[[Any, float, SensedState], Any] | None:  # Any: eta's TriggerOutput or None
     """The compiled `trigger(agent, t, sensed)` of a plain-float agent without the safety layer (its
     TriggerOutput; None: nothing changed, the agent's Python `trigger` takes it), or None for the
     pure-Python path."""
     return _fastcore.trigger if _active else None
 
 
-def agenda():
+def agenda() -> type[_fastcore.Agenda] | None:
     """The compiled next-event queue of the in-process engine without a period (`_fastcore.Agenda`, the
     twin of formation_sim.sim.engine._Agenda's heap: the same order and times), or None for the
     pure-Python path."""
     return _fastcore.Agenda if _active else None
 
 
-def _raise(model, problem: tuple) -> None:
+def _raise(model: Any, problem: tuple[Any, ...]) -> None:  # model: the agent's error model
     """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]
     if what == 'range':

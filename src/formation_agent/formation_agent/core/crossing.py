@@ -54,13 +54,12 @@ very same steps as running to the end (`first_crossing`), so the answer is the s
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from collections.abc import Callable
+from typing import Protocol, cast
 
 import numpy as np
 
-
-class CrossingError(RuntimeError):
-    """The search could not proceed (non-finite error, or a step that does not advance)."""
+from formation_agent.core.errors import CrossingError
 
 
 # What a CrossingError means for a run, said by the engine and by an agent node alike.
@@ -161,7 +160,7 @@ class CrossingSearch:
     def run(self) -> float:
         """Search to the end; the crossing time, or inf if there is none up to `limit`."""
         self.advance(math.inf)
-        return self.result
+        return cast(float, self.result)  # set once the search reached inf
 
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
@@ -312,7 +311,9 @@ def first_crossing(
     ).run()
 
 
-def _root_in_bracket(f, a: float, fa: float, b: float, fb: float, *, max_iterations: int = 200) -> float:
+def _root_in_bracket(
+    f: Callable[[float], float], a: float, fa: float, b: float, fb: float, *, max_iterations: int = 200
+) -> float:
     """A root of f in [a, b], where fa = f(a) and fb = f(b) have opposite signs (fa > 0 > fb here).
 
     Regula falsi with the Illinois modification (the value kept at an end that survives twice in
@@ -348,7 +349,7 @@ def _root_in_bracket(f, a: float, fa: float, b: float, fb: float, *, max_iterati
     return a if abs(fa) <= abs(fb) else b
 
 
-def _vector_terms(model: ErrorModel):
+def _vector_terms(model: ErrorModel) -> Callable[[float], tuple[float, float]]:
     def terms(t: float) -> tuple[float, float]:
         e, e_rate = model.error_and_rate(t)
         return float(e @ e), float(e @ e_rate)
@@ -356,7 +357,7 @@ def _vector_terms(model: ErrorModel):
     return terms
 
 
-def _vector_norm(model: ErrorModel):
+def _vector_norm(model: ErrorModel) -> Callable[[float], float]:
     def norm(t: float) -> float:
         return float(np.linalg.norm(model.error(t)))
 

@@ -27,8 +27,9 @@ both paths against independent formulas.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -36,13 +37,13 @@ from formation_agent.core import compiled
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
-from formation_agent.core.neighbourhood import AgentError, Neighbourhood
+from formation_agent.core.neighbourhood import Neighbourhood
+from formation_agent.core.errors import AgentError, ScaleError
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
-    ScaleError,
     Threshold,
     eta1_gains,
     eta2_gains,
@@ -96,7 +97,13 @@ class _AgentHooks:
     """The triggering threshold at time t: α e^{-βt} (ETA-1), α_d e^{-β_d t} (ETA-2), each with
     its speed scale and floor (`eta1_gains`, `eta2_gains`)."""
 
-    def _update(self, y: list[tuple[float, ...]], length: list[float], extra) -> tuple[float, ...]:
+    # The vector path's error and bounds (p > 3), and the plain-float path's bounds: each of
+    # Eta1Agent and Eta2Agent defines them (declared here for the type checker only).
+    _vector_error_and_rate: Callable[[float], tuple[np.ndarray, np.ndarray]]
+    _vector_bounds: Callable[[float, float, float], tuple[float, float, float, float]]
+    _fast_bounds: Callable[[float, float], tuple[float, float, float, float]]
+
+    def _update(self, y: list[tuple[float, ...]], length: list[float], extra: Any) -> tuple[float, ...]:
         """At a triggering time, from the sensed relative states y_ij, their lengths and `extra`
         (ETA-2: the relative velocities; ETA-1: None): the new control (uxsingle) / (uxdouble)."""
         raise NotImplementedError
@@ -106,7 +113,9 @@ class _AgentHooks:
         and what moves it until the edge's next event)."""
         raise NotImplementedError
 
-    def _fast_probe(self, t: float, *, with_rate: bool = True) -> tuple:
+    def _fast_probe(
+        self, t: float, *, with_rate: bool = True
+    ) -> tuple[float, float, float, float, float, float]:
         """The measurement error e(t) and, `with_rate`, ė(t), padded to three components, on the
         plain-float hot path."""
         raise NotImplementedError
@@ -118,6 +127,14 @@ class _SafetyHooks:
 
     _safety: SafetyLayer | None = None
     _capped_search: CappedSearch | None = None
+    # The agent's own (`_EventTriggeredAgent`), declared here for the type checker only.
+    neighbour_ids: tuple[int, ...]
+    last_event: float
+    _edge_time: list[float]
+    _edge_y: list[tuple[float, ...]]
+    _offsets: list[tuple[float, ...]]
+    _edge_u: list[tuple[float, ...]]
+    _capacity: list[float]
 
     @property
     def safety(self) -> SafetyConfig | None:
@@ -142,7 +159,7 @@ class _SafetyHooks:
                 (self._edge_time[k], self._edge_y[k], self._offsets[k], self._edge_u[k], self._capacity[k])
                 for k in range(len(self.neighbour_ids))
             ]
-            cap = self._safety.safety_time(now=self.last_event, edges=edges)
+            cap = cast(SafetyLayer, self._safety).safety_time(now=self.last_event, edges=edges)  # it is on
             held = self._capped_search = CappedSearch(search, cap)
         return held
 
@@ -161,8 +178,12 @@ class _KnowledgeArrays:
 
     _everyone_heard = False
 
-    _mirror_key: tuple | None = None
-    _mirror: tuple = ()
+    _edge_time: list[float]
+    _edge_y: list[tuple[float, ...]]
+    _edge_u: list[tuple[float, ...]]
+
+    _mirror_key: tuple[int, int] | None = None
+    _mirror: tuple[np.ndarray, ...] = ()
 
     def _mirrors(self) -> tuple[np.ndarray, ...]:
         """(anchor times, y_ij at the anchors, the neighbours' controls[, q_ij at the anchors]), read-only."""
@@ -246,9 +267,9 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         self._u_offset = zero  # the error's offset, padded
         self._control_norm = 0.0  # ||offset||
         self._rows: list[tuple[float, ...]] = [()] * m  # one per edge, laid out by `_row`
-        self._probe_key: tuple | None = None
-        self._probe_value: tuple[float, ...] = ()
-        self._probe: object = None
+        self._probe_key: tuple[float, int, int] | None = None
+        self._probe_value: tuple[float, float, float, float, float, float] = ()  # type: ignore[assignment]  # read only once _probe_key is set
+        self._probe: Any = None  # the latest evaluation's per-edge values, laid out by each algorithm
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -298,8 +319,10 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         layer triggers compiled where the compiled core runs (`compiled.trigger`: the same updates,
         floats and output; sensing it does not take as it is, or refuses, comes here)."""
         fast = compiled.trigger() if self._fast and self._safety is None else None
-        if fast is not None and (out := fast(self, t, sensed)) is not None:
-            return out
+        if fast is not None:
+            out: TriggerOutput | None = fast(self, t, sensed)
+            if out is not None:
+                return out
         t = self._hood.time(t, 'trigger')
         if sensed.agent != self.agent_id:
             raise AgentError(f'agent {self.agent_id} was handed the sensing of agent {sensed.agent}')
@@ -363,14 +386,14 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
             for k, j in enumerate(self.neighbour_ids)
         )
 
-    def _info_velocity(self, k: int):
+    def _info_velocity(self, k: int) -> tuple[float, ...] | None:
         return None
 
     def _command(self, offset: tuple[float, ...]) -> tuple[float, ...]:
         """The command from the error's offset (ETA-2: the same; ETA-1: times κ)."""
         return offset
 
-    def _sensed_extra(self, sensed: SensedState):
+    def _sensed_extra(self, sensed: SensedState) -> object:
         return None
 
     # -- planning -----------------------------------------------------------------------------
@@ -389,7 +412,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
             return 0.0
         return self.trigger_search(limit).run()
 
-    def trigger_search(self, limit: float = math.inf) -> CrossingSearch:
+    def trigger_search(self, limit: float = math.inf) -> CrossingSearch | CappedSearch:
         """The certified search behind `next_trigger_time`, for callers that advance it in pieces.
 
         `advance(until)` learns only as much as needed (its `frontier` is a certified lower bound
@@ -436,7 +459,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
 
     _kind = 0  # 1: ETA-1, 2: ETA-2 (the compiled core's layout of `_row`)
 
-    def _search_type(self):
+    def _search_type(self) -> type[CrossingSearch] | None:
         """The compiled search (`_fastcore.Search`) for this agent (the plain-float path, p <= 3), or
         None: `CrossingSearch` then calls the methods below (formation_agent.core.compiled; the same
         floats)."""
@@ -487,7 +510,7 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         return self._probe_value
 
     @staticmethod
-    def _pad(values) -> tuple[float, ...]:
+    def _pad(values: Iterable[float]) -> tuple[float, ...]:
         values = tuple(values)
         return values + (0.0,) * (_FAST_DIMENSION - len(values))
 
@@ -577,7 +600,9 @@ class Eta1Agent(_EventTriggeredAgent):
         speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         return (self._edge_time[k], y0, y1, y2, v0, v1, v2, speed, self._capacity[k])
 
-    def _fast_probe(self, t: float, *, with_rate: bool = True):
+    def _fast_probe(
+        self, t: float, *, with_rate: bool = True
+    ) -> tuple[float, float, float, float, float, float]:
         """e(t) and, `with_rate`, ė(t), padded to three components (the formulas of
         _vector_error_and_rate, edge by edge; ω and dω/dr are eqs. fij, hij). With the rate it
         also keeps the radii and the span limit of _span_within_capacity, for _fast_bounds."""
@@ -690,7 +715,7 @@ class Eta2Agent(_EventTriggeredAgent):
         """q_i - q_j at each edge's anchor."""
         return self._mirrors()[3]
 
-    def _info_velocity(self, k: int):
+    def _info_velocity(self, k: int) -> tuple[float, ...] | None:
         return self._sensed_q[k]
 
     def _sensed_extra(self, sensed: SensedState) -> list[tuple[float, ...]]:
@@ -715,7 +740,7 @@ class Eta2Agent(_EventTriggeredAgent):
             self._cached_key, self._cached_state = key, (y, q, du)
         return self._cached_state
 
-    _cached_key = None
+    _cached_key: tuple[float, int, int] | None = None
 
     def _vector_error_and_rate(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         # E_i(t) = k1 e_i + k2 e_qi = sum_j ω_ij(t) (k1 y_ij + k2 q_ij)(t) + u^d_i  (eq. triggerdouble)
@@ -798,7 +823,9 @@ class Eta2Agent(_EventTriggeredAgent):
         ramp = z_minus_one_plus_exp_float(z) if abs(z) < _SERIES_LIMIT else z - decay  # = z + expm1(-z)
         return decay / k3, ramp / (k3 * k3), 1.0 - decay
 
-    def _fast_probe(self, t: float, *, with_rate: bool = True):
+    def _fast_probe(
+        self, t: float, *, with_rate: bool = True
+    ) -> tuple[float, float, float, float, float, float]:
         """E(t) and, `with_rate`, its rate, padded to three components: the closed form
         (statexixjd, stateqiqj) from each edge's anchor, then E_i and its rate (doteidouble,
         doteqi), edge by edge (the formulas of _state and _vector_error_and_rate). Edges anchored
@@ -904,7 +931,7 @@ def make_agent(
     if missing:
         raise AgentError(f'agent {agent_id}: {algorithm} needs the gains {missing}')
     kind = Eta1Agent if algorithm == 'eta1' else Eta2Agent
-    chosen = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
+    chosen: dict[str, Any] = {name: gains[name] for name in ALGORITHM_GAINS[algorithm]}
     chosen.update({name: gains.get(name, default) for name, default in SCALE_GAINS.items()})
     if safety is not None:
         if algorithm != 'eta1':
@@ -913,7 +940,7 @@ def make_agent(
     return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
 
 
-def _sum_of_squares(values) -> float:
+def _sum_of_squares(values: Iterable[float]) -> float:
     """v0² + v1² + ... left to right, as the compiled trigger adds them: not `sum()`, which from
     Python 3.12 on (ROS Jazzy's) compensates its rounding and would round differently."""
     total = 0.0
@@ -922,7 +949,14 @@ def _sum_of_squares(values) -> float:
     return total
 
 
-def _span_within_capacity(span, r, speed, capacity, agent_id, neighbour_ids) -> float:
+def _span_within_capacity(
+    span: float,
+    r: np.ndarray,
+    speed: np.ndarray,
+    capacity: np.ndarray,
+    agent_id: int,
+    neighbour_ids: Sequence[int],
+) -> float:
     """Shrink `span` so that every predicted edge uses at most `_GAP_FRACTION` of its gap."""
     gap = capacity - r
     if np.any(gap <= 0.0):

@@ -35,7 +35,7 @@ def _cross(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 
 
-def rotate(orientation: Sequence[float], vector: Sequence[float]) -> np.ndarray:
+def rotate(orientation: Sequence[float], vector: Sequence[float] | np.ndarray) -> np.ndarray:
     """R(q) v: `vector` (3,) from the body frame into the world frame, q = (x, y, z, w) unit."""
     r = [float(c) for c in orientation[:3]]
     w = float(orientation[3])
@@ -52,14 +52,18 @@ def yaw(orientation: Sequence[float]) -> float:
 
 
 def control_point(
-    position: Sequence[float], orientation: Sequence[float], offset: Sequence[float]
+    position: Sequence[float], orientation: Sequence[float], offset: Sequence[float] | np.ndarray
 ) -> np.ndarray:
     """The world position of the point `offset` (body frame, (3,)) of a robot at this pose."""
-    return np.asarray(position, dtype=float) + rotate(orientation, offset)
+    point: np.ndarray = np.asarray(position, dtype=float) + rotate(orientation, offset)
+    return point
 
 
 def control_point_velocity(
-    orientation: Sequence[float], linear: Sequence[float], angular: Sequence[float], offset: Sequence[float]
+    orientation: Sequence[float],
+    linear: Sequence[float],
+    angular: Sequence[float],
+    offset: Sequence[float] | np.ndarray,
 ) -> np.ndarray:
     """World velocity of the body point `offset` from the body-frame twist (REP 105 odometry):
     R (v + ω × offset)."""
@@ -67,7 +71,9 @@ def control_point_velocity(
     return rotate(orientation, [float(linear[k]) + spin[k] for k in range(3)])
 
 
-def unicycle_velocity(u: Sequence[float], heading: float, distance: float) -> tuple[float, float]:
+def unicycle_velocity(
+    u: Sequence[float] | np.ndarray, heading: float, distance: float
+) -> tuple[float, float]:
     """(v, ω) that move the control point at `distance` l ahead of the axle with velocity u (2,)."""
     c, s = math.cos(heading), math.sin(heading)
     ux, uy = float(u[0]), float(u[1])

@@ -52,14 +52,15 @@ class SaturationLog:
         return dict(self._records)
 
 
-def limit_world_velocity(u: Sequence[float], limits: Limits, log: SaturationLog) -> np.ndarray:
+def limit_world_velocity(u: Sequence[float] | np.ndarray, limits: Limits, log: SaturationLog) -> np.ndarray:
     """u scaled down to the speed limit (direction kept); a clip is noted in `log`."""
-    u = np.asarray(u, dtype=float)
-    speed = float(np.linalg.norm(u))
+    velocity = np.asarray(u, dtype=float)
+    speed = float(np.linalg.norm(velocity))
     if speed > limits.linear_speed:
         log.note(SATURATION_LINEAR_SPEED, speed, limits.linear_speed)
-        return u * (limits.linear_speed / speed)
-    return u
+        scaled: np.ndarray = velocity * (limits.linear_speed / speed)
+        return scaled
+    return velocity
 
 
 def limit_body_velocity(v: float, omega: float, limits: Limits, log: SaturationLog) -> tuple[float, float]:

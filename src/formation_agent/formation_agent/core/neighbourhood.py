@@ -13,15 +13,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
+from formation_agent.core.errors import AgentError
 from formation_agent.core.tension import edge_capacity
 from formation_msgs_py.types import TriggerInfo
-
-
-class AgentError(ValueError):
-    """Input the agent cannot accept: bad parameters, malformed or inconsistent information."""
 
 
 def positive(name: str, value: float) -> float:
@@ -68,7 +66,7 @@ class Neighbourhood:
         self.dimension = offsets.shape[1]
         self._capacity = self.capacity.tolist()
 
-    def vector(self, value, what: str) -> np.ndarray:
+    def vector(self, value: object, what: str) -> np.ndarray:
         """`value` (named `what`) as an array of p finite floats."""
         array = np.asarray(value, dtype=float)
         if array.shape != (self.dimension,):
@@ -79,7 +77,7 @@ class Neighbourhood:
             raise AgentError(f'agent {self.agent_id}: {what} is not finite: {array.tolist()}')
         return array
 
-    def floats(self, value, what: str, *args) -> tuple[float, ...]:
+    def floats(self, value: Any, what: str, *args: object) -> tuple[float, ...]:  # a message's: checked
         """`value` as a tuple of p finite floats (the checks of `vector`, without numpy).
 
         `what` names the value, as a format template filled with `args` only on error (this runs
@@ -93,7 +91,7 @@ class Neighbourhood:
             return floats
         return tuple(self.vector(value, what.format(*args)).tolist())  # raises the error naming the rule
 
-    def time(self, stamp: float, what: str, *args) -> float:
+    def time(self, stamp: float, what: str, *args: object) -> float:
         """`stamp` as a finite float (`what`, a template filled with `args`, names it on error)."""
         stamp = float(stamp)
         if not math.isfinite(stamp):

@@ -28,18 +28,17 @@ from the last accepted pose beyond what the robot's speed limit allows between t
 from __future__ import annotations
 
 import math
+from typing import cast
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from formation_agent.core.errors import PoseError
 from formation_agent.core.kinematics import control_point, control_point_velocity
-from formation_msgs_py.codec import MessageError, pose_values, twist_values
+from formation_msgs_py.codec import pose_values, twist_values
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import REJECT_FRAME, REJECT_FUTURE, REJECT_JUMP, REJECT_TIME_BACKWARDS
 from formation_msgs_py.types import RobotPose, SensedState
-
-
-class PoseError(ValueError):
-    """A pose the agent needs is missing, too old, or from the future: the agent must stop."""
 
 
 def stamp_refusal(*, age: float, timeout: float, future: float | None = None) -> str | None:
@@ -189,11 +188,13 @@ class PoseBook:
         return pose
 
     def _point(self, pose: RobotPose) -> np.ndarray:
-        return control_point(pose.position, pose.orientation, self.offset)[: self.dimension]
+        point: np.ndarray = control_point(pose.position, pose.orientation, self.offset)[: self.dimension]
+        return point
 
     def _velocity(self, robot: int, pose: RobotPose, t: float) -> np.ndarray:
         if pose.linear is not None:  # Odometry: the body twist, into the world frame
-            return control_point_velocity(pose.orientation, pose.linear, pose.angular, self.offset)[
+            angular = cast('tuple[float, float, float]', pose.angular)  # Odometry: both parts
+            return control_point_velocity(pose.orientation, pose.linear, angular, self.offset)[
                 : self.dimension
             ]
         previous = self._previous.get(robot)
@@ -202,7 +203,8 @@ class PoseBook:
                 f'agent {self.agent_id}: the velocity of robot {robot} needs two poses on '
                 f'{self.topic(robot)} (pose differences), one has arrived by t={t:.3f}: the agent stops'
             )
-        return (self._point(pose) - self._point(previous)) / (pose.stamp - previous.stamp)
+        rate: np.ndarray = (self._point(pose) - self._point(previous)) / (pose.stamp - previous.stamp)
+        return rate
 
     def sense(self, *, t: float, now: float, velocities: bool) -> SensedState:
         """What the agent senses at its trigger t (wall time `now`): x_i - x_j, and for ETA-2 q_i,

@@ -36,6 +36,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
+
+from formation_agent.core.errors import SafetyError
+
+if TYPE_CHECKING:
+    from formation_agent.core.crossing import CrossingSearch
 
 DEFAULT_GAMMA = 2.0  # [1/s]
 DEFAULT_MAX_SPEED = 0.5  # [m/s]
@@ -51,11 +57,7 @@ _FEASIBLE = 1e-12
 _ACTIVE = 1e-9
 
 
-class SafetyError(ValueError):
-    """A safety configuration or input outside its rules (the message names the rule and the value)."""
-
-
-def _number(name: str, value, *, positive: bool = True) -> float:
+def _number(name: str, value: Any, *, positive: bool = True) -> float:  # any value given: checked
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SafetyError(f'{name}: must be a number, got {value!r}')
     number = float(value)
@@ -101,7 +103,7 @@ class SafetyConfig:
         return {name: getattr(self, name) for name in SAFETY_KEYS}
 
     @classmethod
-    def from_mapping(cls, raw: Mapping) -> SafetyConfig:
+    def from_mapping(cls, raw: Mapping[str, Any]) -> SafetyConfig:
         if not isinstance(raw, Mapping):
             raise SafetyError(f'safety: expected a mapping, got {raw!r}')
         unknown = [key for key in raw if key not in SAFETY_KEYS]
@@ -117,8 +119,9 @@ class SafetyConfig:
 # -- the filter (S5) -----------------------------------------------------------------------------
 
 
-def _dot(a, b) -> float:
-    return a[0] * b[0] + a[1] * b[1]
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    product: float = a[0] * b[0] + a[1] * b[1]
+    return product
 
 
 def filter_command(
@@ -136,7 +139,7 @@ def filter_command(
     cap2 = max_speed * max_speed
     lines = [((a0, a1), b) for a0, a1, b in constraints if a0 != 0.0 or a1 != 0.0]
 
-    def feasible(v) -> bool:
+    def feasible(v: tuple[float, float]) -> bool:
         if v[0] * v[0] + v[1] * v[1] > cap2 * (1.0 + _FEASIBLE):
             return False
         return all(_dot(a, v) >= b - _FEASIBLE * (abs(b) + math.hypot(*a) * max_speed) for a, b in lines)
@@ -191,7 +194,9 @@ def first_zero(c0: float, c1: float, c2: float, after: float) -> float:
     return later[0]
 
 
-def worst_case_half(r0: tuple[float, float], v: tuple[float, float], config: SafetyConfig):
+def worst_case_half(
+    r0: tuple[float, float], v: tuple[float, float], config: SafetyConfig
+) -> tuple[float, float, float]:
     """(c0, c1, c2): a quadratic lower bound in τ of a_ij (S3) for a robot j seen at r0 = x_i - x_j
     while i holds v and j moves at any speed <= v̄ (docs/SAFETY.md, (S7)):
 
@@ -242,7 +247,15 @@ def courteous_zero(r0: tuple[float, float], v: tuple[float, float], config: Safe
     return low
 
 
-def exact_half(r: tuple[float, float], w: tuple[float, float], v: tuple[float, float], *, gamma, level, sign):
+def exact_half(
+    r: tuple[float, float],
+    w: tuple[float, float],
+    v: tuple[float, float],
+    *,
+    gamma: float,
+    level: float,
+    sign: float,
+) -> tuple[float, float, float]:
     """(c0, c1, c2) of a half along z(τ) = r + τ w exactly: sign = +1 is a_ij (S3) with z = r_ij and
     level = D²; sign = -1 is b_ij (S4) with z = y_ij and level = c_ij²."""
     c0 = sign * (2.0 * _dot(r, v) + 0.5 * gamma * (_dot(r, r) - level))
@@ -340,10 +353,14 @@ class SafetyLayer:
         return v
 
     def safety_time(
-        self, *, now: float, edges: Sequence[tuple[float, Sequence[float], Sequence[float], float]]
+        self,
+        *,
+        now: float,
+        edges: Sequence[tuple[float, Sequence[float], Sequence[float], Sequence[float], float]],
     ) -> float:
         """The first time any half (S3), (S4) could reach 0 (S6), or the heartbeat; `edges`: per
-        neighbour (anchor time s, y_ij(s), d_ij, its command u_j), with the agent's command held."""
+        neighbour (anchor time s, y_ij(s), d_ij, its command u_j, its capacity c_ij), with the agent's
+        command held."""
         cfg = self.config
         v = self._command
         t0 = self._trigger_time
@@ -370,7 +387,7 @@ class CappedSearch:
     its answer is min(first crossing, cap), found with the very steps of the search alone, so it
     does not depend on how far a caller advanced it. Same interface (frontier, advance, run)."""
 
-    def __init__(self, inner, cap: float) -> None:
+    def __init__(self, inner: CrossingSearch, cap: float) -> None:
         self.inner = inner
         self.cap = cap
         self.limit = inner.limit
@@ -399,4 +416,4 @@ class CappedSearch:
         return self.result
 
     def run(self) -> float:
-        return self.advance(math.inf)
+        return cast(float, self.advance(math.inf))  # settled once the search reached inf

@@ -23,8 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+
+from formation_agent.core.errors import ScaleError
 
 DEFAULT_SPEED_SCALE = 1.0
 DEFAULT_THRESHOLD_FLOOR = 0.0
@@ -35,11 +39,7 @@ bounds up to κ⁴ of the paper's; beyond a factor 10⁶ either way the scaled t
 would leave the range in which the run's floats resolve them (1e-6 turns 10 s into ~4 months)."""
 
 
-class ScaleError(ValueError):
-    """A speed scale or threshold floor outside its rule; the message names the rule and the value."""
-
-
-def check_speed_scale(value) -> float:
+def check_speed_scale(value: Any) -> float:  # any value given: checked here
     """κ as a float, or ScaleError naming the rule speed_scale and the value."""
     try:
         kappa = float(value)
@@ -56,7 +56,7 @@ def check_speed_scale(value) -> float:
     return kappa
 
 
-def check_threshold_floor(value) -> float:
+def check_threshold_floor(value: Any) -> float:  # any value given: checked here
     """c0 as a float, or ScaleError naming the rule threshold_floor and the value."""
     try:
         floor = float(value)
@@ -112,14 +112,14 @@ def damping(k3: float, speed_scale: float) -> float:
     return speed_scale * k3
 
 
-def initial_velocities(velocities, speed_scale: float) -> np.ndarray | None:
+def initial_velocities(velocities: npt.ArrayLike | None, speed_scale: float) -> np.ndarray | None:
     """The scaled run's q(0) = κ q_p(0) from the scenario's (paper) velocities; None stays None."""
     if velocities is None:
         return None
     return speed_scale * np.asarray(velocities, dtype=float)
 
 
-def paper_velocities(velocities, speed_scale: float):
+def paper_velocities(velocities: npt.ArrayLike | None, speed_scale: float) -> np.ndarray | None:
     """q_p = q / κ: a run's velocities in the paper's time (for V_d, ν_d and the proofs' bounds)."""
     if velocities is None:
         return None

@@ -7,28 +7,34 @@ an upper bound on r over an interval turn into an upper bound on each of them.
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 import numpy as np
+import numpy.typing as npt
+
+# An edge error length and a capacity: floats, or one per edge (arrays); the result is the same kind.
+Real = TypeVar('Real', float, npt.NDArray[np.float64])
 
 
-def omega(r, c):
+def omega(r: Real, c: Real) -> Real:
     """ω_ij = f_ij(r) = (2c - r) / (c - r)^2  (eq. fij; the weight in eq. uxsingle)."""
     gap = c - r
     return (2.0 * c - r) / (gap * gap)
 
 
-def omega_prime(r, c):
+def omega_prime(r: Real, c: Real) -> Real:
     """dω/dr = h_ij(r) = (3c - r) / (c - r)^3  (eq. hij)."""
     gap = c - r
     return (3.0 * c - r) / (gap * gap * gap)
 
 
-def omega_second(r, c):
+def omega_second(r: Real, c: Real) -> Real:
     """d²ω/dr² = (8c - 2r) / (c - r)^4  (not in the paper; bounds the second derivative of e_i)."""
     gap = c - r
     return (8.0 * c - 2.0 * r) / (gap * gap * gap * gap)
 
 
-def weight_gain(r, c):
+def weight_gain(r: Real, c: Real) -> Real:
     """g_ij(r) = 2c^2 / (c - r)^3 = ω + r dω/dr  (eq. gij).
 
     It bounds the derivative of y -> ω(||y||) y: ||D[ω y] v|| <= g_ij(||y||) ||v||.
@@ -37,11 +43,12 @@ def weight_gain(r, c):
     return 2.0 * c * c / (gap * gap * gap)
 
 
-def curvature_gain(r, c):
+def curvature_gain(r: Real, c: Real) -> Real:
     """r d²ω/dr² + 3 dω/dr: bounds the second derivative of y -> ω(||y||) y (per unit ||v||^2)."""
     return r * omega_second(r, c) + 3.0 * omega_prime(r, c)
 
 
-def edge_capacity(delta: float, offsets: np.ndarray) -> np.ndarray:
+def edge_capacity(delta: float, offsets: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """c_ij = Δ - ||d_ij|| for each row of `offsets`."""
-    return delta - np.linalg.norm(offsets, axis=-1)
+    capacity: npt.NDArray[np.float64] = delta - np.linalg.norm(offsets, axis=-1)
+    return capacity

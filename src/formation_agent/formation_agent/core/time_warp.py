@@ -22,9 +22,18 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
+from formation_agent.core.errors import WarpError
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from formation_agent.core.eta import Eta1Agent, TriggerOutput
+    from formation_msgs_py.types import SensedState, TriggerInfo
 
 MAX_PIECES = 100_000
 """A warp holds at most this many pieces (rule time_warp): it travels as one parameter to every
@@ -34,10 +43,6 @@ WARP_CAP = 1.0
 """The default cap κ_max on a chosen warp's rate: never faster than the paper's own time. By
 Theorem 1 (iii) an agent's inter-event times in s are >= ξ_i, so in real time they are >= ξ_i/κ_max:
 the events per real second of every agent stay within the κ = 1 run's bound, 1/ξ_i."""
-
-
-class WarpError(ValueError):
-    """A time warp outside its rule; the message names the rule time_warp and the value."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -119,7 +124,7 @@ class TimeWarp:
         return [value for pair in zip(self.paper_starts, self.rates) for value in pair]
 
     @classmethod
-    def from_parameter(cls, values) -> TimeWarp:
+    def from_parameter(cls, values: Iterable[float]) -> TimeWarp:
         """The warp of `to_parameter`'s list; WarpError naming the rule and the value."""
         values = list(values)
         if not values or len(values) % 2:
@@ -129,7 +134,7 @@ class TimeWarp:
             )
         return cls(paper_starts=tuple(values[0::2]), rates=tuple(values[1::2]))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, list[float]]:
         return {
             'paper_starts': list(self.paper_starts),
             'real_starts': list(self.real_starts),
@@ -137,7 +142,7 @@ class TimeWarp:
         }
 
 
-def _number(what: str, value) -> float:
+def _number(what: str, value: Any) -> float:  # any value given: checked here
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -158,7 +163,7 @@ class WarpedAgent:
     sends are the paper's u_p: a robot is sent κ(t) u_p (`RobotCommander`), neighbours predict in s.
     """
 
-    def __init__(self, core, warp: TimeWarp) -> None:
+    def __init__(self, core: Eta1Agent, warp: TimeWarp) -> None:
         self.core = core
         self.warp = warp
         self._known: dict[float, float] = {}  # real -> paper of the planned and the last trigger
@@ -166,10 +171,11 @@ class WarpedAgent:
 
     @property
     def ready(self) -> bool:
-        return self.core.ready
+        ready: bool = self.core.ready
+        return ready
 
     @property
-    def control(self):
+    def control(self) -> np.ndarray:
         return self.core.control
 
     def paper(self, t: float) -> float:
@@ -187,7 +193,7 @@ class WarpedAgent:
         last = self.core.safety_last_intervention
         return None if last is None else self.warp.real(last)
 
-    def trigger(self, t: float, sensed, **nearby):
+    def trigger(self, t: float, sensed: SensedState, **nearby: Any) -> TriggerOutput:
         """The core's trigger at s(t); `nearby` (the safety layer's other robots within R, positions
         relative to this one at that instant) passes on unchanged: every robot follows the same
         warp, so the team at real time t is the paper's team at s(t) and the layer's barriers hold
@@ -199,7 +205,7 @@ class WarpedAgent:
         infos = tuple(dataclasses.replace(info, stamp=t) for info in out.infos)
         return dataclasses.replace(out, time=t, infos=infos)
 
-    def receive(self, info) -> None:
+    def receive(self, info: TriggerInfo) -> None:
         """A neighbour's information, its real stamp mapped to s; a stamp at or after this agent's
         last trigger maps to no earlier s than that trigger's (order in real time is kept in s)."""
         s = self.paper(info.stamp)

@@ -13,7 +13,7 @@
   go (`PlantOutput`, `RobotOutput`); `inbox`: what it refuses to read; `faults`: injected
   faults (a test facility).
 - `process`: the executor a node process spins (`make_executor`), SIGINT/SIGTERM as a flag
-  (`StopSignals`), and exit statuses (`EXIT_BAD_INPUT`, `EXIT_PEER_LOST`).
+  (`StopSignals`); the exit statuses are `formation_msgs_py.exit_codes.ExitCode`.
 - `parameters`: every node's parameter table (`ParameterSpec`): descriptors for
   `ros2 param describe`, one error naming every bad parameter, the `--help` table;
   `kind_parameters`: the robot parameters every node declares alike (the kinds' shape parameters,
@@ -27,16 +27,11 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'node': ('AgentNodeError', 'FormationAgentNode', 'PeerLostError', 'PredictionError'),
+        'node': ('FormationAgentNode',),
         'main': ('main',),
         'config': ('AgentConfig', 'agent_help', 'read_config'),
-        'process': ('EXECUTORS', 'EXIT_BAD_INPUT', 'EXIT_PEER_LOST', 'StopSignals', 'make_executor'),
-        'parameters': (
-            'ParameterError',
-            'ParameterSpec',
-            'declare_parameters',
-            'parameter_help',
-            'read_parameters',
-        ),
+        'process': ('EXECUTORS', 'StopSignals', 'make_executor'),
+        'parameters': ('ParameterSpec', 'declare_parameters', 'parameter_help', 'read_parameters'),
+        'errors': ('AgentNodeError', 'ParameterError', 'PeerLostError', 'PredictionError'),
     },
 )

@@ -20,10 +20,10 @@ from formation_agent.core.safety import (
     DEFAULT_SENSING_RADIUS,
     DEFAULT_TURN,
     SafetyConfig,
-    SafetyError,
 )
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
-from formation_agent.core.time_warp import TimeWarp, WarpError
+from formation_agent.core.errors import SafetyError, WarpError
+from formation_agent.core.time_warp import TimeWarp
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     DOUBLE,
@@ -31,11 +31,11 @@ from formation_agent.ros.parameters import (
     INTEGER,
     INTEGER_ARRAY,
     STRING,
-    ParameterError,
     ParameterSpec,
     parameter_help,
     read_parameters,
 )
+from formation_agent.ros.errors import ParameterError
 from formation_msgs_py.topics import (
     WORLD_FRAME,
     agent_namespace,
@@ -43,7 +43,8 @@ from formation_msgs_py.topics import (
     robot_odom_topic,
     robot_pose_topic,
 )
-from formation_msgs_py.tags import KeyFileError, read_key
+from formation_msgs_py.errors import KeyFileError
+from formation_msgs_py.tags import read_key
 from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')

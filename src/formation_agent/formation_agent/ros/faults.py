@@ -13,9 +13,7 @@ import random
 import time
 from collections.abc import Callable
 
-
-class FaultInjectionError(ValueError):
-    """Fault-injection parameters out of range."""
+from formation_agent.ros.errors import FaultInjectionError
 
 
 class FaultInjection:

@@ -1,6 +1,6 @@
 """What an agent node refuses to read (README, "Reliability"; docs/MESSAGES.md, "Bad messages").
 
-A message that breaks its layout (`formation_msgs_py.codec.MessageError`) or cannot be true is
+A message that breaks its layout (`formation_msgs_py.errors.MessageError`) or cannot be true is
 dropped before the core sees it, logged (the first three of each reason, then every hundredth)
 and counted per reason (`formation_msgs_py.lockstep.REJECT_REASONS`) for the agent's report.
 
@@ -15,7 +15,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from formation_msgs_py.codec import MessageError, decode_trigger_info
+from formation_msgs_py.codec import decode_trigger_info
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import (
     REJECT_DIMENSION,
     REJECT_DUPLICATE,

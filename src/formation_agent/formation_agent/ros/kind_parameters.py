@@ -28,7 +28,7 @@ def shape_spec(parameter: ShapeParameter) -> ParameterSpec:
     return ParameterSpec(
         name=parameter.name,
         type=DOUBLE,
-        default=0.0 if own else float(parameter.default),
+        default=0.0 if parameter.default is None else float(parameter.default),
         low=0.0,
         low_open=parameter.positive and not own,
         high=math.inf,

@@ -32,28 +32,26 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
-from formation_agent.core.pose_sensing import PoseError
+from formation_agent.core.errors import PoseError
 from formation_agent.ros.config import AGENT_PARAMETERS, agent_help
-from formation_agent.ros.faults import FaultInjectionError
-from formation_agent.ros.node import (
-    DELIVERY_TIMEOUT,
-    NODE_NAME,
-    FormationAgentNode,
+from formation_agent.ros.errors import (
+    FaultInjectionError,
+    ParameterError,
     PeerLostError,
     PredictionError,
+    StaleStateError,
 )
-from formation_agent.ros.parameters import ParameterError, read_parameters
+from formation_agent.ros.node import DELIVERY_TIMEOUT, NODE_NAME, FormationAgentNode
+from formation_agent.ros.parameters import read_parameters
 from formation_agent.ros.process import (
     EXECUTORS,
-    EXIT_BAD_INPUT,
-    EXIT_PEER_LOST,
     StopSignals,
     exit_process,
     make_executor,
     release_ros,
     shutdown_guard,
 )
-from formation_agent.ros.staleness import StaleStateError
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import agent_namespace
 
 
@@ -186,10 +184,10 @@ def main(args: Sequence[str] | None = None) -> int:
             FaultInjectionError,
         ) as error:  # bad input: every problem named, nothing started
             print(f'formation_agent: {error}{_missing_id_hint(error, options)}', file=sys.stderr, flush=True)
-            status = EXIT_BAD_INPUT
+            status = ExitCode.BAD_INPUT
         except PeerLostError as error:
             print(f'formation_agent: {error}', file=sys.stderr, flush=True)
-            status, failure = EXIT_PEER_LOST, str(error)
+            status, failure = ExitCode.LOST, str(error)
         except (
             PoseError,
             StaleStateError,

@@ -43,28 +43,29 @@ from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
 
 from formation_agent.core.eta import make_agent
-from formation_agent.core.pose_sensing import PoseError
+from formation_agent.core.errors import PoseError
 from formation_agent.core.time_warp import WarpedAgent
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
 from formation_agent.ros.discovery import Discovery, SimulatorWatch
+from formation_agent.ros.errors import AgentNodeError, PeerLostError, PredictionError
 from formation_agent.ros.faults import FaultInjection, InjectedFaults
 from formation_agent.ros.inbox import STAMP_AHEAD_TOLERANCE, Rejections, read_info
 from formation_agent.ros.outbox import Outbox
-from formation_agent.ros.reporting import AgentCounts, PredictionError, agent_status
+from formation_agent.ros.reporting import AgentCounts, agent_status
 from formation_agent.ros.sensing import PoseSensing, ServiceSensing
 from formation_agent.ros.staleness import Staleness
 from formation_agent.ros.stepping import (
     STEP_REPEAT,
     STEP_TAKE,
-    AgentNodeError,
     Arrivals,
     StepGate,
     TriggerSchedule,
     refuse_lock_step,
 )
-from formation_msgs_py.codec import MessageError, check_array, decode_step, encode_trigger_info
-from formation_msgs_py.tags import Signer, TagError, Verifier
+from formation_msgs_py.codec import check_array, decode_step, encode_trigger_info
+from formation_msgs_py.errors import MessageError, TagError
+from formation_msgs_py.tags import Signer, Verifier
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
@@ -88,10 +89,6 @@ fastdds_profile.xml), and a recorder must get it before the writer is gone."""
 WRITER_LOOK_PERIOD = 0.2
 """Seconds between an agent's looks at whether its pose topics still have writers (sensing from
 poses): when a pose goes stale, its message says since when a topic has none (`Staleness`)."""
-
-
-class PeerLostError(RuntimeError):
-    """A peer the agent depends on (the simulator) stopped showing signs of life."""
 
 
 class _NodeTimers:

@@ -34,6 +34,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.parameter import Parameter
 
+from formation_agent.ros.errors import ParameterError
+
 BOOL = Parameter.Type.BOOL
 INTEGER = Parameter.Type.INTEGER
 DOUBLE = Parameter.Type.DOUBLE
@@ -55,14 +57,6 @@ _TYPE_NAMES = {
     STRING_ARRAY: 'string[]',
 }
 _QUOTE_LIMIT = 80  # characters of a bad value quoted in an error
-
-
-class ParameterError(ValueError):
-    """Parameters missing, of the wrong type, or out of range; the message lists every one."""
-
-    def __init__(self, node_name: str, problems: Sequence[str]) -> None:
-        self.problems = tuple(problems)
-        super().__init__(f'{node_name}: ' + '; '.join(self.problems))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -18,20 +18,6 @@ from typing import NoReturn
 
 from formation_msgs_py.middleware import EXECUTORS
 
-EXIT_BAD_INPUT = 2
-"""Exit status of a node refused its parameters (every problem named on stderr; nothing started)."""
-
-EXIT_PEER_LOST = 3
-"""Exit status of a node that left because a peer it depends on was lost."""
-
-EXIT_REFUSED = 4
-"""Exit status of a robot run's time keeper that refused to start: the robots' measured start
-breaks a hypothesis (no Step 0, no command was sent)."""
-
-EXIT_STOPPED = 5
-"""Exit status of a time keeper (and of `formation run`) whose run an operator stopped: a call of
-its emergency-stop service (`formation_msgs_py.topics.STOP_SERVICE`, `formation stop`)."""
-
 SHUTDOWN_BOUND = 10.0
 """How long a node process may take to destroy its nodes and shut rclpy down [s] before it leaves
 without them (`shutdown_guard`): every command has gone out by then, a process must still end."""

@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import math
 
-from formation_agent.core.crossing import PRECISION_HINT, CrossingError
-from formation_agent.ros.stepping import AgentNodeError
+from formation_agent.core.crossing import PRECISION_HINT
+from formation_agent.core.errors import CrossingError
+from formation_agent.ros.errors import AgentNodeError, PredictionError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
-
-
-class PredictionError(RuntimeError):
-    """The agent's certified search cannot resolve its next triggering time in double precision."""
 
 
 class AgentCounts:

@@ -27,7 +27,8 @@ from std_srvs.srv import Trigger
 
 from formation_agent.core.pose_sensing import PoseBook
 from formation_msgs_py.cdr import decode_odometry_cdr, decode_pose_stamped_cdr
-from formation_msgs_py.codec import MessageError, decode_sensed_state
+from formation_msgs_py.codec import decode_sensed_state
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.qos import ROBOT_POSE_QOS
 from formation_msgs_py.types import RobotPose, SensedState
 

@@ -21,11 +21,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 
-from formation_agent.core.pose_sensing import PoseBook, PoseError
-
-
-class StaleStateError(RuntimeError):
-    """The agent's state is older than its pose_timeout: it must not command from it, it stops."""
+from formation_agent.core.pose_sensing import PoseBook
+from formation_agent.core.errors import PoseError
+from formation_agent.ros.errors import StaleStateError
 
 
 OVERLOADED = 'an overloaded computer?'

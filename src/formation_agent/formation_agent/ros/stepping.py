@@ -22,12 +22,9 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
+from formation_agent.ros.errors import AgentNodeError
 from formation_msgs_py.lockstep import REJECT_STEP_ORDER, Step
 from formation_msgs_py.types import SensedState, TriggerInfo
-
-
-class AgentNodeError(ValueError):
-    """A violation of the lock-step protocol seen by an agent."""
 
 
 class Timers(Protocol):

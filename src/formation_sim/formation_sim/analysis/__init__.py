@@ -14,10 +14,11 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'load': ('AnalysisError', 'BagRun', 'load_bag_run', 'locate'),
+        'load': ('BagRun', 'load_bag_run', 'locate'),
         'checks': ('Check', 'Series', 'TheoryBounds', 'run_series', 'theorem_checks', 'theory_bounds'),
         'report': ('bag_summary', 'build_report', 'diff_summaries', 'write_report'),
-        'compare': ('CompareError', 'compare_runs', 'load_run'),
-        'markers': ('FormationMarkers', 'MarkerError', 'write_bag_with_markers'),
+        'compare': ('compare_runs', 'load_run'),
+        'markers': ('FormationMarkers', 'write_bag_with_markers'),
+        'errors': ('AnalysisError', 'CompareError', 'MarkerError'),
     },
 )

@@ -16,7 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from formation_msgs_py.codec import MessageError, decode_status
+from formation_msgs_py.codec import decode_status
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import DISCOVERY_STEP
 from formation_msgs_py.topics import STATUS_TOPIC
 from formation_sim.bag.io import decode

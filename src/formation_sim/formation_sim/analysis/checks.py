@@ -122,7 +122,7 @@ class TheoryBounds:
 
 
 def theory_bounds(scenario: Scenario) -> TheoryBounds:
-    """The proof constants as bounds; raises theory.TheoryError outside the theorems' hypotheses."""
+    """The proof constants as bounds; raises TheoryError outside the theorems' hypotheses."""
     constants = theory.theorem_constants(scenario)
     norms = {edge.pair: float(np.linalg.norm(edge.d)) for edge in scenario.edges}
     kappa = scenario.speed_scale

@@ -40,22 +40,25 @@ from typing import Any
 import numpy as np
 
 from formation_msgs_py.codec import (
-    MessageError,
     decode_agent_report,
     decode_status,
     decode_step,
     decode_trigger_info,
     decode_world_state,
 )
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
 from formation_msgs_py.topic_table import match_topic
 from formation_msgs_py.topics import ROBOTS_TOPIC, SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STEP_TOPIC
 from formation_agent.core.speed_scale import initial_velocities
+from formation_sim.analysis.errors import AnalysisError
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
-from formation_sim.bag.io import BagError, decode, read_bag
-from formation_sim.model.scenario import Scenario, ScenarioError, load_scenario
+from formation_sim.bag.io import decode, read_bag
+from formation_sim.bag.errors import BagError
+from formation_sim.model.scenario import Scenario, load_scenario
+from formation_sim.model.errors import ScenarioError
 from formation_agent.core.pose_sensing import pose_refusal
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_sim.sim.robots import (
@@ -72,10 +75,6 @@ SCENARIO_FILE = 'scenario.yaml'
 
 
 BAG_DIR = 'bag'
-
-
-class AnalysisError(ValueError):
-    """A bag or run folder that cannot be analysed; the message says what is missing or wrong."""
 
 
 @dataclass(frozen=True, kw_only=True)

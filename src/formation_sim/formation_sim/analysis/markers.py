@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from formation_sim.analysis.errors import MarkerError
 from formation_sim.model import theory
 
 if TYPE_CHECKING:
@@ -61,10 +62,6 @@ _AGENT_PALETTE: tuple[RGBA, ...] = (
 )
 _DESIRED_COLOUR: RGBA = (0.6, 0.6, 0.6, 0.45)
 _BROKEN_COLOUR: RGBA = (1.0, 0.0, 1.0, 1.0)
-
-
-class MarkerError(ValueError):
-    """A state that cannot be drawn (wrong shape, dimension above 3, non-finite values)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -173,7 +173,8 @@ def _summary_comparison(
     record: RunRecord, summary: dict, summary_path: Path, stop: dict[str, Any] | None
 ) -> dict[str, Any]:
     """The bag's summary against the run's summary.json; a run that stopped early takes its reason
-    from the file's extra.failure (into `stop`)."""
+    from the file's extra.failure (into `stop`). The file is read as it is, not as a `RunSummary`:
+    a damaged or foreign one is reported as differences, not refused."""
     file_summary = json.loads(Path(summary_path).read_text(encoding='utf-8'))
     failure = (file_summary.get('extra') or {}).get('failure')
     if stop is not None and isinstance(failure, dict):

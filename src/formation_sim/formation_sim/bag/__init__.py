@@ -6,16 +6,8 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'io': (
-            'BagError',
-            'BagMessage',
-            'BagReadError',
-            'BagWriter',
-            'UnknownMessageTypeError',
-            'decode',
-            'jazzy_typestore',
-            'read_bag',
-        ),
-        'recovery': ('BagRecoveryError', 'Recovery', 'reindex'),
+        'io': ('BagMessage', 'BagWriter', 'decode', 'jazzy_typestore', 'read_bag'),
+        'recovery': ('Recovery', 'reindex'),
+        'errors': ('BagError', 'BagReadError', 'BagRecoveryError', 'UnknownMessageTypeError'),
     },
 )

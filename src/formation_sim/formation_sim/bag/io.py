@@ -30,6 +30,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from formation_sim.bag.errors import BagError, BagReadError, TopicSpecError, UnknownMessageTypeError
 from formation_sim.sim.files import write_atomically
 
 if TYPE_CHECKING:
@@ -43,22 +44,6 @@ SERIALIZATION = 'cdr'
 METADATA_FILE = 'metadata.yaml'
 MCAP_RECORD = 'rosbag2'  # the MCAP metadata record that holds the bag information (rosbag2_storage_mcap)
 LIBRARY = 'formation_sim.bag'  # the MCAP header's library
-
-
-class BagError(Exception):
-    """A bag could not be written, read or recovered."""
-
-
-class BagReadError(BagError):
-    """A bag that cannot be read: no metadata.yaml (its recorder died), or a damaged or foreign file."""
-
-
-class UnknownMessageTypeError(BagError, ValueError):
-    """A message type is neither in the typestore nor importable."""
-
-
-class TopicSpecError(BagError, ValueError):
-    """A topic name or specification is malformed or inconsistent."""
 
 
 _JAZZY_TYPESTORE: Typestore | None = None

@@ -23,19 +23,15 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapFileWriter
 from rosbags.rosbag2 import Reader
 
+from formation_sim.bag.errors import BagRecoveryError
 from formation_sim.bag.io import (
     MCAP_RECORD,
-    BagError,
     TopicRecord,
     bag_information,
     mcap_bag_record,
     type_hash,
     write_bag_information,
 )
-
-
-class BagRecoveryError(BagError):
-    """`reindex` found nothing it could turn into a readable bag."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -7,15 +7,12 @@ bag differs from summary.json (the report says where), 2 the run cannot be analy
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import EXIT_BAD_INPUT, POSITIVE_INT, bounded_int, check_report_argument
-
-EXIT_OK = 0
-EXIT_FINDINGS = 1
-EXIT_UNREADABLE = EXIT_BAD_INPUT
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import POSITIVE_INT, bounded_int, check_report_argument
+from formation_sim.model.errors import TheoryError
 
 
 def register(subparsers) -> None:
@@ -71,13 +68,14 @@ def default_out_dir(location) -> Path:
 def _refuse_unstarted(summary: Path | None) -> None:
     """A run that never reached Step 0 (discovery failed, or the robots' measured start broke the
     initial condition): no trajectory to check; its summary.json says why."""
-    from formation_sim.analysis.load import AnalysisError
+    from formation_sim.analysis.errors import AnalysisError
+    from formation_sim.sim.summary import RunSummary
 
     if summary is None:
         return
     try:
-        extra = json.loads(summary.read_text(encoding='utf-8')).get('extra') or {}
-    except (OSError, ValueError, AttributeError):
+        extra = RunSummary.read(summary).extra
+    except (OSError, ValueError):
         return  # the bag is what is analysed: a damaged summary is reported as a difference
     if isinstance(extra, dict) and extra.get('started') is False:
         failure = extra.get('failure') or {}
@@ -89,38 +87,37 @@ def _refuse_unstarted(summary: Path | None) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.checks import run_series, theory_bounds
-    from formation_sim.analysis.load import AnalysisError
+    from formation_sim.analysis.errors import AnalysisError
     from formation_sim.analysis.report import build_report
-    from formation_sim.model import theory
     from formation_sim.progress import Progress
 
     show = not args.quiet
     if not check_report_argument('analyze', args.out):
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     try:
         location, bag_run = _load(args, show=show)
     except AnalysisError as error:
         print(f'formation analyze: error: {error}', file=sys.stderr)
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     record = bag_run.record
     out = args.out or default_out_dir(location)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         print(f'formation analyze: error: cannot create {out}: {error.strerror or error}', file=sys.stderr)
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     evaluating = Progress('evaluating ν and V', enabled=show)
     series = run_series(record, progress=evaluating)
     evaluating.close()
     try:
         bounds, bounds_error = theory_bounds(record.scenario), None
-    except theory.TheoryError as error:
+    except TheoryError as error:
         bounds, bounds_error = None, str(error)
     written = {} if args.no_figures else _write_figures(args, record, series, bounds, out, show=show)
     if args.markers:
         marked = _write_markers(location.bag, out, record.scenario, show=show)
         if marked is None:
-            return EXIT_UNREADABLE
+            return ExitCode.BAD_INPUT
         written.update(marked)
     report = build_report(
         bag_run,
@@ -135,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace, *, show: bool):
     """The run's location and its run rebuilt from the bag; AnalysisError when there is none."""
-    from formation_sim.analysis.load import AnalysisError, load_bag_run, locate
+    from formation_sim.analysis.load import load_bag_run, locate
+    from formation_sim.analysis.errors import AnalysisError
     from formation_sim.progress import Progress
 
     location = locate(args.run)
@@ -171,8 +169,9 @@ def _write_figures(
 def _write_markers(bag: Path, out: Path, scenario, *, show: bool) -> dict[str, str] | None:
     """OUT/bag_markers, a copy of the bag with /formation/markers: its entry for the report, or
     None (the error printed) when it cannot be written."""
-    from formation_sim.analysis.markers import MarkerError, write_bag_with_markers
-    from formation_sim.bag.io import BagError
+    from formation_sim.analysis.markers import write_bag_with_markers
+    from formation_sim.analysis.errors import MarkerError
+    from formation_sim.bag.errors import BagError
     from formation_sim.progress import Progress
 
     target = out / 'bag_markers'
@@ -214,7 +213,7 @@ def _conclude(args: argparse.Namespace, record, report: dict, *, out: Path, writ
             out=out,
             written=written,
         )
-    return EXIT_FINDINGS if failed or differs else EXIT_OK
+    return ExitCode.FAILED if failed or differs else ExitCode.OK
 
 
 def _print_findings(

@@ -13,21 +13,16 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
-from formation_sim.model.scenario import Scenario, ScenarioError, builtin_scenarios, load_scenario, short_repr
+from formation_sim.model.scenario import Scenario, builtin_scenarios, load_scenario, short_repr
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.validate import validate_scenario
-from formation_sim.sim.run_folder import RunFolderError, check_report_dir
+from formation_sim.sim.run_folder import check_report_dir
+from formation_sim.sim.errors import RunFolderError
 
 if TYPE_CHECKING:
     from rclpy.node import Node
-
-
-# Exit codes of every command (README, "Exit codes").
-EXIT_OK = 0
-EXIT_FAILED = 1  # the command ran and the answer is no (a run failed, a check does not hold)
-EXIT_BAD_INPUT = 2  # bad arguments or unreadable input: refused, nothing started, nothing changed
-# `formation run` also: 3 a process or agent lost, 4 the robots' start refused, 5 an operator stopped
-# the run (`formation stop`), 130 interrupted (formation_sim.runtime.results, formation_agent.ros.process)
 
 
 # --------------------------------------------------------------------------- argument values
@@ -92,7 +87,7 @@ def bounded_int(low: int, high: int) -> Callable[[str], float]:
 def refuse(command: str, error: Exception | str) -> int:
     """Print why the command refuses its input; the exit code of bad input (2)."""
     print(f'formation {command}: error: {error}', file=sys.stderr)
-    return EXIT_BAD_INPUT
+    return ExitCode.BAD_INPUT
 
 
 # --------------------------------------------------------------------------- scenarios and outputs
@@ -120,7 +115,8 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
         return scenario
     if separation == 0.0:
         return scenario.replace(safety=None)
-    from formation_agent.core.safety import SafetyConfig, SafetyError
+    from formation_agent.core.safety import SafetyConfig
+    from formation_agent.core.errors import SafetyError
 
     keys = {} if scenario.safety is None else scenario.safety.as_dict()
     try:
@@ -183,7 +179,8 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
 
 def _separation_problem(scenario: Scenario, separation: float) -> str | None:
     """Why the safety layer at `separation` cannot run `scenario` (its rules), or None."""
-    from formation_agent.core.safety import SafetyConfig, SafetyError
+    from formation_agent.core.errors import SafetyError
+    from formation_agent.core.safety import SafetyConfig
 
     keys = {} if scenario.safety is None else scenario.safety.as_dict()
     try:
@@ -370,7 +367,8 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch import ROBOT_MODELS, RunError
+    from formation_sim.runtime.launch import ROBOT_MODELS
+    from formation_sim.runtime.errors import RunError
 
     robots = None
     if args.backend != 'exact':

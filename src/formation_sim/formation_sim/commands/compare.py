@@ -10,14 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
-    NON_NEGATIVE,
-    check_report_argument,
-    refuse,
-)
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import NON_NEGATIVE, check_report_argument, refuse
 
 
 def register(subparsers) -> None:
@@ -68,17 +62,17 @@ def _default_out(a: Path, b: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.compare import (
-        CompareError,
         compare_runs,
         load_run,
         overlay_figures,
         within,
         write_comparison,
     )
+    from formation_sim.analysis.errors import CompareError
     from formation_sim.progress import Progress
 
     if not check_report_argument('compare', args.out):
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     show = not args.quiet
     try:
         runs = []
@@ -122,5 +116,5 @@ def run(args: argparse.Namespace) -> int:
             print(f'{title}: {out / name}')
     if not agree:
         print(f'formation compare: the runs differ by more than {args.tolerance}', file=sys.stderr)
-        return EXIT_FAILED
-    return EXIT_OK
+        return ExitCode.FAILED
+    return ExitCode.OK

@@ -74,9 +74,10 @@ def _echo(node, args: argparse.Namespace) -> int:
 
     from rclpy.executors import SingleThreadedExecutor
 
-    from formation_sim.bag.io import UnknownMessageTypeError
+    from formation_sim.bag.errors import UnknownMessageTypeError
     from formation_sim.runtime.recorder import import_message_class
-    from formation_sim.runtime.graph import InspectError, echo_qos, format_message, to_yaml, wait_for_topic
+    from formation_sim.runtime.graph import echo_qos, format_message, to_yaml, wait_for_topic
+    from formation_sim.runtime.errors import InspectError
 
     try:
         msgtype = wait_for_topic(node, args.topic, timeout=args.wait)

@@ -12,14 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from formation_sim.commands.common import (
-    EXIT_OK,
-    NON_NEGATIVE_INT,
-    POSITIVE,
-    POSITIVE_INT,
-    UNIT_FRACTION,
-    refuse,
-)
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, UNIT_FRACTION, refuse
 
 
 def register(subparsers) -> None:
@@ -72,8 +66,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.model.generate import GenerateError, random_scenario
-    from formation_sim.model.scenario import ScenarioError, dump_scenario_as, file_kind, scenario_from_text
+    from formation_sim.model.generate import random_scenario
+    from formation_sim.model.errors import GenerateError, ScenarioError
+    from formation_sim.model.scenario import dump_scenario_as, file_kind, scenario_from_text
     from formation_sim.sim.files import write_atomically
 
     out: Path = args.out
@@ -124,4 +119,4 @@ def run(args: argparse.Namespace) -> int:
         f'{out}: {scenario.name}, {scenario.n} agents, {len(scenario.edges)} edges, {scenario.dynamics} '
         f'integrators in {scenario.dimension}-D ({kind})'
     )
-    return EXIT_OK
+    return ExitCode.OK

@@ -14,8 +14,9 @@ import sys
 from formation_agent.core.kinds import KIND_NAMES, robot_kind
 from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
 from formation_sim.commands.common import POSITIVE, add_shape_arguments, refuse
-from formation_sim.model.scenario import Scenario, ScenarioError
-from formation_sim.model.speed_choice import OBSERVED_MARGIN, LimitsError, RobotLimits, SpeedScaleChoice
+from formation_sim.model.errors import LimitsError, ScenarioError
+from formation_sim.model.scenario import Scenario
+from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, SpeedScaleChoice
 
 
 def robot_limits(args: argparse.Namespace) -> RobotLimits:

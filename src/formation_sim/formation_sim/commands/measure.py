@@ -70,12 +70,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.model.scenario import (
-        ScenarioError,
-        dump_scenario,
-        load_scenario_data,
-        scenario_from_dict,
-    )
+    from formation_sim.model.scenario import dump_scenario, load_scenario_data, scenario_from_dict
+    from formation_sim.model.errors import ScenarioError
 
     if args.out.exists():
         return refuse(
@@ -128,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _team(data: Any) -> tuple[list[int], int, bool]:
     """The agent ids, the dimension p (from the edges' d_ij, else 2) and whether ETA-2."""
-    from formation_sim.model.scenario import ScenarioError
+    from formation_sim.model.errors import ScenarioError
 
     if not isinstance(data, Mapping) or not isinstance(data.get('agents'), Mapping) or not data['agents']:
         raise ScenarioError(
@@ -186,7 +182,7 @@ def _read_poses(args: argparse.Namespace, ids: list[int]) -> dict[int, tuple]:
     from rclpy.executors import SingleThreadedExecutor
 
     from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
-    from formation_msgs_py.codec import MessageError
+    from formation_msgs_py.errors import MessageError
     from formation_msgs_py.qos import ROBOT_POSE_QOS
     from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic
     from formation_sim.commands.common import inspection_node

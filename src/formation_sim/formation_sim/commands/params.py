@@ -12,8 +12,8 @@ import argparse
 import dataclasses
 import sys
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
-    EXIT_BAD_INPUT,
     add_plan_arguments,
     add_run_arguments,
     load_valid_scenario,
@@ -48,17 +48,19 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch import FASTDDS_PROFILE, RunError
+    from formation_sim.runtime.launch import FASTDDS_PROFILE
+    from formation_sim.runtime.errors import RunError
     from formation_sim.runtime.orchestrate import FormationRun
-    from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+    from formation_sim.sim.run_folder import claim_out_dir
+    from formation_sim.sim.errors import RunFolderError
 
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     from formation_sim.commands.limits import resolve_speed_scale
 
     if (resolved := resolve_speed_scale(scenario, args, 'params')) is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     scenario = resolved[0]  # the agents' parameter files carry κ
     try:
         plan = FormationRun(

@@ -11,9 +11,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
     DOMAIN_ID,
-    EXIT_BAD_INPUT,
     POSITIVE,
     add_robot_arguments,
     add_scenario_argument,
@@ -67,11 +67,11 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.runtime.fleet import RobotFleet
-    from formation_sim.runtime.launch import RunError
+    from formation_sim.runtime.errors import RunError
 
     scenario = load_valid_scenario(args.scenario, 'robots')
     if scenario is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     if args.model is None:
         from formation_sim.runtime.launch import ROBOT_MODELS
 

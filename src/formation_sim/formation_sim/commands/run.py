@@ -7,9 +7,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
     DOMAIN_ID,
-    EXIT_BAD_INPUT,
     POSITIVE,
     add_plan_arguments,
     add_run_arguments,
@@ -93,17 +93,18 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.orchestrate import FormationRun, RunError
+    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.errors import RunError
 
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     try:
         options = plan_options(args)
     except RunError as error:
         return refuse('run', error)
     if (safe := _safety(scenario, args, options)) is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     scenario, extra = safe
     if isinstance(resolved := _speed_scale(scenario, args, options), int):
         return resolved
@@ -174,7 +175,7 @@ def _speed_scale(scenario, args: argparse.Namespace, options: dict):
     warped_auto = args.speed_scale == AUTO and options['robots'] is not None and scenario.dynamics == 'single'
     if args.speed_scale != WARP and not warped_auto:
         resolved = resolve_speed_scale(scenario, args, 'run')
-        return EXIT_BAD_INPUT if resolved is None else resolved
+        return ExitCode.BAD_INPUT if resolved is None else resolved
     if options['robots'] is None:
         return refuse(
             'run',
@@ -182,7 +183,7 @@ def _speed_scale(scenario, args: argparse.Namespace, options: dict):
             'formation simulate --speed-scale warp runs it exactly)',
         )
     if (warped := resolve_time_warp(scenario, args, 'run', flag=args.speed_scale)) is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     scenario, warp, chosen = warped
     options['robots'] = dataclasses.replace(options['robots'], time_warp=tuple(warp.to_parameter()))
     return scenario, chosen
@@ -190,11 +191,11 @@ def _speed_scale(scenario, args: argparse.Namespace, options: dict):
 
 def _warn_saturation(result) -> None:
     """Robot runs: say whether the agents clipped commands to the robots' limits (the theorems assume not)."""
-    import json
+    from formation_sim.sim.summary import RunSummary
 
     if result.summary is None:
         return
-    saturation = json.loads(result.summary.read_text()).get('extra', {}).get('saturation')
+    saturation = RunSummary.read(result.summary).extra.get('saturation')
     if saturation and saturation.get('total'):
         kinds = ', '.join(
             f'{kind} {entry["count"]} (up to {entry["largest_requested"]:.3g} asked, '

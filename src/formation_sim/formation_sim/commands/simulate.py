@@ -7,10 +7,8 @@ import contextlib
 import sys
 from pathlib import Path
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
     NON_NEGATIVE,
     POSITIVE,
     add_run_arguments,
@@ -116,14 +114,15 @@ def sample_policy(args: argparse.Namespace, agents: int) -> tuple[str, float | N
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.analysis.plots import plot_run
-    from formation_sim.sim.engine import EngineError, check_sample_dt, simulate
-    from formation_sim.sim.run_folder import RunFolderError, claim_out_dir
+    from formation_sim.sim.engine import check_sample_dt, simulate
+    from formation_sim.sim.errors import EngineError, RunFolderError
+    from formation_sim.sim.run_folder import claim_out_dir
     from formation_sim.sim.samples import TRAJECTORY_DIR
     from formation_sim.sim.summary import write_summary
 
     scenario = load_valid_scenario(args.scenario, 'simulate', **scale_options(args))
     if scenario is None or (scenario := _with_safety(scenario, args)) is None:
-        return EXIT_BAD_INPUT
+        return ExitCode.BAD_INPUT
     if isinstance(resolved := _speed_scale(scenario, args), int):
         return resolved
     scenario, warp, auto_scale = resolved
@@ -172,10 +171,10 @@ def run(args: argparse.Namespace) -> int:
         figure = None if args.no_plot else plot_run(record, out)
     except OSError as error:
         print(f'\nformation simulate: error: cannot write the results: {error}', file=sys.stderr)
-        return EXIT_FAILED
+        return ExitCode.FAILED
     if args.quiet:
         print(out)
-        return EXIT_OK
+        return ExitCode.OK
     what = (
         f'continuous controller, {record.extra["rhs_evaluations"]} evaluations'
         if args.continuous
@@ -192,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
     print(f'trajectory: {record.samples.path or Path(out) / TRAJECTORY_DIR}/')
     if figure is not None:
         print(f'figure:     {figure}')
-    return EXIT_OK
+    return ExitCode.OK
 
 
 def _with_safety(scenario, args: argparse.Namespace):
@@ -209,18 +208,18 @@ def _speed_scale(scenario, args: argparse.Namespace):
     for --speed-scale auto, warp or K; the exit status after saying why not."""
     if args.speed_scale != WARP:
         resolved = resolve_speed_scale(scenario, args, 'simulate')
-        return EXIT_BAD_INPUT if resolved is None else (resolved[0], None, resolved[1])
+        return ExitCode.BAD_INPUT if resolved is None else (resolved[0], None, resolved[1])
     if args.continuous or args.period is not None:
         return refuse(
             'simulate', '--speed-scale warp: the event-triggered engine only (no --continuous, --period)'
         )
     warped = resolve_time_warp(scenario, args, 'simulate')
-    return EXIT_BAD_INPUT if warped is None else warped
+    return ExitCode.BAD_INPUT if warped is None else warped
 
 
 def _run_failed(error: Exception, out: Path) -> int:
     """A run that failed: the error said, its run folder emptied and removed; the exit status."""
-    from formation_sim.sim.engine import EngineError
+    from formation_sim.sim.errors import EngineError
     from formation_sim.sim.samples import discard_incomplete
 
     # ArithmeticError: a length or gain so far from 1 that the agents' arithmetic left the doubles;
@@ -236,4 +235,4 @@ def _run_failed(error: Exception, out: Path) -> int:
     discard_incomplete(out)  # a failed run's samples are no result
     with contextlib.suppress(OSError):
         out.rmdir()  # the run folder made for this run, empty again
-    return EXIT_FAILED
+    return ExitCode.FAILED

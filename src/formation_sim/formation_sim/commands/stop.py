@@ -18,13 +18,13 @@ import sys
 import time
 from pathlib import Path
 
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok
 from formation_msgs_py.topics import STOP_SERVICE
 
 # Its own light pieces, not `formation_sim.commands.common`'s (which loads scipy through the
 # scenario model: seconds on a loaded machine); `formation_sim.cli` builds its parser alone.  The
 # same rules and words as common's DOMAIN_ID and POSITIVE (tests/formation_sim/commands/test_stop.py).
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 # runtime.launch.FASTDDS_PROFILE, the run's Fast DDS settings, without importing the launch plan.
 FASTDDS_PROFILE = Path(__file__).resolve().parents[1] / 'runtime' / 'fastdds_profile.xml'
 
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
                 f'formation stop: error: ROS_DOMAIN_ID={text!r} is not a ROS domain id (give --domain-id N)',
                 file=sys.stderr,
             )
-            return EXIT_BAD_INPUT
+            return ExitCode.BAD_INPUT
         domain = int(text)
     _discovery_environment(network=args.network)
     try:
@@ -123,13 +123,13 @@ def run(args: argparse.Namespace) -> int:
             f'formation stop: no run answered on domain {domain} within {args.timeout:g} s ({why})',
             file=sys.stderr,
         )
-        return EXIT_FAILED
+        return ExitCode.FAILED
     success, message = answer
     print(
         f'formation stop: {"" if success else "refused: "}{message}',
         file=sys.stdout if success else sys.stderr,
     )
-    return EXIT_OK if success else EXIT_FAILED
+    return ExitCode.OK if success else ExitCode.FAILED
 
 
 def _discovery_environment(*, network: bool) -> None:

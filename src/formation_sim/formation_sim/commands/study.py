@@ -13,9 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from formation_sim.commands.common import EXIT_FAILED, EXIT_OK, POSITIVE_INT, refuse
-
-EXIT_INTERRUPTED = 130
+from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.commands.common import POSITIVE_INT, refuse
 
 
 def register(subparsers) -> None:
@@ -77,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
             'study', 'argument --workers: only for the LocalCluster; a --scheduler has its own workers'
         )
     from formation_sim.study.runner import run_study
-    from formation_sim.study.spec import StudyError, load_study
+    from formation_sim.study.spec import load_study
+    from formation_sim.study.errors import StudyError
 
     try:
         study = load_study(args.spec)
@@ -91,13 +91,13 @@ def run(args: argparse.Namespace) -> int:
     print(summary.format())
     print(f'rows: {args.out / "rows.csv"}')
     if summary.interrupted:
-        return EXIT_INTERRUPTED
-    return EXIT_OK if summary.complete and not summary.failed else EXIT_FAILED
+        return ExitCode.INTERRUPTED
+    return ExitCode.OK if summary.complete and not summary.failed else ExitCode.FAILED
 
 
 def _report(args: argparse.Namespace) -> int:
     from formation_sim.study.report import write_report
-    from formation_sim.study.spec import StudyError
+    from formation_sim.study.errors import StudyError
 
     if args.folder is None:
         return refuse('study', 'report: the study folder is required (formation study report DIR)')
@@ -106,4 +106,4 @@ def _report(args: argparse.Namespace) -> int:
     except StudyError as error:
         return refuse('study', error)
     print(f'report: {path}')
-    return EXIT_OK
+    return ExitCode.OK

@@ -13,10 +13,8 @@ import math
 import sys
 
 from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
     POSITIVE,
     add_safety_argument,
     add_scale_arguments,
@@ -25,9 +23,9 @@ from formation_sim.commands.common import (
     scale_options,
     with_min_separation,
 )
-from formation_sim.model.scenario import ScenarioError, load_scenario
+from formation_sim.model.scenario import load_scenario
+from formation_sim.model.errors import LimitsError, ScenarioError
 from formation_sim.model.speed_choice import (
-    LimitsError,
     RobotLimits,
     check_limits_apply,
     omega_at_formation,
@@ -35,9 +33,6 @@ from formation_sim.model.speed_choice import (
 )
 from formation_sim.model.validate import validate_scenario
 
-EXIT_VALID = EXIT_OK
-EXIT_INVALID = EXIT_FAILED
-EXIT_UNREADABLE = EXIT_BAD_INPUT
 DEFAULT_POSE_PERIOD = 0.01  # [s]: the simulated robots' 100 Hz
 
 
@@ -105,15 +100,15 @@ def run(args: argparse.Namespace) -> int:
         scenario = load_scenario(args.scenario).with_scale(**scale_options(args))
     except ScenarioError as error:
         print(f'formation validate: error: {error}', file=sys.stderr)
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     if (scenario := with_min_separation(scenario, args.min_separation, 'validate')) is None:
-        return EXIT_UNREADABLE
+        return ExitCode.BAD_INPUT
     report = validate_scenario(scenario)
     if report.ok and args.speed_scale == 'auto':
         from formation_sim.commands.limits import resolve_speed_scale
 
         if (resolved := resolve_speed_scale(scenario, args, 'validate')) is None:
-            return EXIT_BAD_INPUT
+            return ExitCode.BAD_INPUT
         scenario = resolved[0]
         report = validate_scenario(scenario)
     commands = floor = None
@@ -124,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
             commands = _commands(scenario, args)
         except LimitsError as error:
             print(f'formation validate: error: {error}', file=sys.stderr)
-            return EXIT_BAD_INPUT
+            return ExitCode.BAD_INPUT
     if report.ok and args.pose_noise is not None:
         floor = _noise_floor(scenario, args)
     if args.json:
@@ -144,8 +139,8 @@ def run(args: argparse.Namespace) -> int:
             if part is not None:
                 print('\n'.join(part['lines']))
     if not report.ok:
-        return EXIT_INVALID
-    return EXIT_INVALID if commands is not None and not commands['within'] else EXIT_VALID
+        return ExitCode.FAILED
+    return ExitCode.FAILED if commands is not None and not commands['within'] else ExitCode.OK
 
 
 def _commands(scenario, args: argparse.Namespace) -> dict:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from formation_sim.model import theory
+from formation_sim.model.errors import TheoryError
 from formation_sim.model.scenario import Scenario
 
 
@@ -75,9 +76,9 @@ class CommandBound:
 
 def command_bound(scenario: Scenario) -> CommandBound:
     """The proofs' bound on every agent's command at the scenario's speed scale κ; raises
-    theory.TheoryError outside the hypotheses, or with a threshold floor c0 > 0."""
+    TheoryError outside the hypotheses, or with a threshold floor c0 > 0."""
     if scenario.gains.threshold_floor > 0.0:
-        raise theory.TheoryError(
+        raise TheoryError(
             'the proofs bound the commands for the threshold α e^(-βt) of '
             f'(triggersingle)/(triggerdouble); with a floor c0 = {scenario.gains.threshold_floor:g} '
             'they bound neither ν nor the commands'

@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from formation_sim.model.errors import GainsError
+
 # z_i' = (C⊗I_p) z_i + (B⊗I_p) u_i for z_i = (y_i, q_i) (Section 4).
 C_MATRIX = np.array([[0.0, 1.0], [0.0, 0.0]])
 B_MATRIX = np.array([[0.0], [1.0]])
@@ -23,10 +25,6 @@ INSIDE, ROUNDING, OUTSIDE = 'inside', 'rounding', 'outside'
 # (riccatti)'s margin: its left side is 0 for P = riccati_solution(β1) (equality), so it is compared
 # with 0 up to this fraction of max(1, |P|): its rounding scales with β1 |P|², not with ulps of a bound.
 RICCATI_TOLERANCE = 1e-9
-
-
-class GainsError(ValueError):
-    """Gains outside what (riccatti) or Theorem 2 can take (the message names the rule and value)."""
 
 
 def against_bound(value: float, bound: float, *, strict: bool) -> str:

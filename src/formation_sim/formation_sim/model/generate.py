@@ -28,6 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from formation_sim.model import theory
+from formation_sim.model.errors import GenerateError
 from formation_sim.model.gains import beta_d_bound_corrected, beta_d_bound_paper, k3_upper_bound
 from formation_sim.model.scenario import DoubleGains, Edge, Scenario, SingleGains
 
@@ -35,10 +36,6 @@ REACH_FRACTION = 0.75  # ||d_ij|| <= 0.75 Δ, leaving at least Δ/4 for ||y_i - 
 BETA_FRACTION = 0.5  # β = β0 / 2
 BETA_D_FRACTION = 0.5  # β_d = half of min(printed, corrected) bound
 GRAPH_FAMILIES = ('geometric', 'star', 'path', 'cycle', 'complete')
-
-
-class GenerateError(ValueError):
-    """Parameters for which no scenario can be generated."""
 
 
 def _ball_volume(radius: float, dimension: int) -> float:

@@ -26,15 +26,16 @@ from collections.abc import Mapping
 import numpy as np
 import yaml
 
-from formation_agent.core.safety import SafetyConfig, SafetyError
+from formation_agent.core.safety import SafetyConfig
+from formation_agent.core.errors import SafetyError, ScaleError
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
-    ScaleError,
     check_speed_scale,
     check_threshold_floor,
 )
 from formation_msgs_py.types import MAX_AGENT_ID
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.gains import paper_k3, riccati_solution
 
 DYNAMICS = ('single', 'double')
@@ -58,10 +59,6 @@ MAX_FILE_BYTES = 4 * 1024 * 1024
 MAX_YAML_NODES = 300_000
 MAX_JSON_BYTES = 32 * 1024 * 1024
 JSON_SUFFIX = '.json'
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot be read or is structurally unsound; the message names key and value."""
 
 
 class _ShortRepr(reprlib.Repr):

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from formation_agent.core.tension import omega
+from formation_sim.model.errors import LimitsError
 
 OBSERVED_MARGIN = 1.25
 """The observed κ keeps the exact run's largest command this many times below each limit (its
@@ -54,10 +55,6 @@ NOISE_QUANTILE = 3.0
 """c0 = NOISE_QUANTILE times the per-axis standard deviation that a pose noise σ puts into e_i
 (E_i): a jump of ||e_i|| beyond it, the norm of p Gaussian components, has probability
 e^{-q²/2} = 1.1 % in the plane (q = 3) per trigger (`noise_floor`)."""
-
-
-class LimitsError(ValueError):
-    """Limits that cannot be met, or that no speed scale applies to (the message names the rule)."""
 
 
 @dataclass(frozen=True, kw_only=True)

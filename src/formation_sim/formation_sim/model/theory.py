@@ -37,6 +37,7 @@ from scipy.sparse.csgraph import connected_components
 import scipy.sparse.linalg as spla
 
 from formation_agent.core.tension import omega, omega_prime, weight_gain
+from formation_sim.model.errors import TheoryError
 from formation_sim.model.gains import (
     INSIDE,
     OUTSIDE,
@@ -57,10 +58,6 @@ DENSE_LIMIT = 400
 # (Theorem 2 (i)) give valid bounds; the midpoints are the documented defaults.
 DEFAULT_A = 0.5
 DEFAULT_B_FRACTION = 0.5
-
-
-class TheoryError(ValueError):
-    """A quantity requested outside the hypotheses it needs (the message names the rule and values)."""
 
 
 # --------------------------------------------------------------------------- graph

@@ -86,7 +86,7 @@ def _kernel(s, r1: float, r2: float):
 def floor_bounds(scenario) -> FloorBounds | None:
     """The floor's guarantees for `scenario` (None without a floor: the paper's theorems hold).
 
-    Raises theory.TheoryError outside the theorems' hypotheses (the floor changes none of them).
+    Raises TheoryError outside the theorems' hypotheses (the floor changes none of them).
     """
     c0 = scenario.gains.threshold_floor
     if c0 == 0.0:

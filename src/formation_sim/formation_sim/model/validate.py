@@ -56,6 +56,8 @@ import numpy as np
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
 from formation_sim.model import theory
+from formation_msgs_py.errors import FormationError
+from formation_sim.model.errors import TheoryError
 from formation_sim.model.gains import (
     OUTSIDE,
     ROUNDING,
@@ -84,7 +86,7 @@ LENGTH_MIN = 2.0**-250
 LENGTH_MAX = 2.0**250
 
 
-class ValidationError(ValueError):
+class ValidationError(FormationError, ValueError):
     """A scenario that breaks a hypothesis of the paper; `report` holds all findings."""
 
     def __init__(self, report: ValidationReport) -> None:
@@ -428,7 +430,7 @@ def _check_threshold_floor(scenario: Scenario, out: _Collector) -> None:
         return
     try:
         floor = floor_bounds(scenario)
-    except theory.TheoryError:
+    except TheoryError:
         return  # a hypothesis the rules above report
     if floor.theorem == 1 and not floor.proven:
         out.error(

@@ -22,13 +22,14 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'orchestrate': ('FormationRun', 'RunError', 'RunResult'),
+        'orchestrate': ('FormationRun', 'RunResult'),
         'launch': ('RobotOptions',),
         'time_keeper': ('TimeKeeperNode',),
         'coordinator': ('FormationCoordinatorNode',),
         'sim_node': ('FormationSimulatorNode', 'SimulatorError', 'agent_parameters'),
         'robot_node': ('SimulatedRobotNode',),
-        'recorder': ('RecorderError', 'RecorderNode'),
-        'replay': ('BagPlayer', 'ReplayError'),
+        'recorder': ('RecorderNode',),
+        'replay': ('BagPlayer',),
+        'errors': ('RecorderError', 'ReplayError', 'RunError'),
     },
 )

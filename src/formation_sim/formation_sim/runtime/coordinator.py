@@ -53,20 +53,12 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
-from formation_agent.ros.parameters import DOUBLE, STRING, ParameterError, ParameterSpec, parameter_help
-from formation_agent.ros.process import (
-    EXIT_BAD_INPUT,
-    EXIT_PEER_LOST,
-    EXIT_REFUSED,
-    EXIT_STOPPED,
-    StopSignals,
-    exit_process,
-    make_executor,
-    release_ros,
-    shutdown_guard,
-)
-from formation_msgs_py.codec import MessageError, check_array, decode_trigger_info, encode_step
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec, parameter_help
+from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
+from formation_msgs_py.codec import check_array, decode_trigger_info, encode_step
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
@@ -80,16 +72,18 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.model.measured_start import MeasuredStart, check_measured_start
 from formation_sim.model.scenario import Scenario
-from formation_sim.runtime.run_book import (
+from formation_sim.runtime.run_book import ids_text
+from formation_sim.runtime.errors import (
     AgentFailedError,
     AgentLostError,
     ConnectivityLostError,
     DiscoveryError,
+    ForeignWriterError,
     InitialConditionError,
+    KeeperFrozenError,
     OperatorStopError,
     RecorderLostError,
     RobotLostError,
-    ids_text,
 )
 from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS, RobotPoses, pose_rules
 from formation_sim.runtime.robot_stops import RobotStops
@@ -100,7 +94,6 @@ from formation_sim.runtime.run_end import (
     write_results,
     write_unstarted,
 )
-from formation_sim.runtime.intruders import ForeignWriterError, KeeperFrozenError
 from formation_sim.runtime.time_keeper import (
     blamed,
     graph_of,
@@ -113,16 +106,13 @@ from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
 from formation_agent.core.kinds.shape import declared
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
 
 COORDINATOR_FILE = (
     'coordinator.params.yaml'  # its parameters in a run folder (formation run, formation params)
 )
 TRAJECTORY_SOURCES = tuple(TRAJECTORY_TOPICS)  # which robot topic the formation is measured on
-
-EXIT_FAILED = 1
-EXIT_AGENT_LOST = EXIT_PEER_LOST  # 3
-EXIT_INTERRUPTED = 130
 
 # Poses are read as the recorder reads them, reliable and keeping all, so that summary.json and
 # `formation analyze` sample the same poses; volatile and without a liveliness lease, so that
@@ -567,10 +557,10 @@ def exit_status_of(node: TimeKeeperNode | None, error: Exception) -> int:
     operator's stop noted before a later error is still the operator's)."""
     first = None if node is None or node.failure_info is None else node.failure_info['kind']
     if first == OperatorStopError.kind or isinstance(error, OperatorStopError):
-        return EXIT_STOPPED
+        return ExitCode.STOPPED
     if isinstance(error, LOST_ERRORS):
-        return EXIT_AGENT_LOST
-    return EXIT_REFUSED if isinstance(error, InitialConditionError) else EXIT_FAILED
+        return ExitCode.LOST
+    return ExitCode.REFUSED if isinstance(error, InitialConditionError) else ExitCode.FAILED
 
 
 def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
@@ -604,7 +594,7 @@ def main(
                 node = node_class()
             except ParameterError as error:  # bad input: every problem named, nothing started
                 _tell(f'{node_class.COMMAND}: {error}')
-                status = EXIT_BAD_INPUT  # the shutdown guard's too
+                status = ExitCode.BAD_INPUT  # the shutdown guard's too
                 return status
             executor = make_executor(node.executor_kind)
             executor.add_node(node)
@@ -634,13 +624,13 @@ def main(
                     write_results(node)
                 except OSError as error:  # e.g. a full disk: the run itself went well
                     _tell(f'formation_sim: cannot write the results: {error}')
-                    status = EXIT_FAILED
+                    status = ExitCode.FAILED
         except (KeyboardInterrupt, ExternalShutdownException) as error:
-            status = EXIT_INTERRUPTED
+            status = ExitCode.INTERRUPTED
             _stop_and_write(node, executor, error)
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
-                status = EXIT_INTERRUPTED
+                status = ExitCode.INTERRUPTED
                 _stop_and_write(node, executor, KeyboardInterrupt())
                 return status
             error = error if node is None else blamed(node, error)  # its cause first (issue 28)

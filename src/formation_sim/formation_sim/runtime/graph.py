@@ -22,14 +22,10 @@ from typing import Any
 import numpy as np
 import yaml
 
-from formation_msgs_py.codec import (
-    MessageError,
-    decode_status,
-    decode_step,
-    decode_trigger_info,
-    decode_world_state,
-)
+from formation_msgs_py.codec import decode_status, decode_step, decode_trigger_info, decode_world_state
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.topics import STATE_TOPIC, STATUS_TOPIC, STEP_TOPIC
+from formation_sim.runtime.errors import InspectError
 from formation_sim.runtime.intruders import UNKNOWN_NODE  # an endpoint seen before its node's name
 
 TRIGGER_INFO_TOPIC = re.compile(r'^/agent_(\d+)/trigger_info/to_(\d+)$')
@@ -39,10 +35,6 @@ DECODERS: dict[str, tuple[str, Callable]] = {
     STATUS_TOPIC: ('Status', decode_status),
     STATE_TOPIC: ('WorldState', decode_world_state),
 }
-
-
-class InspectError(ValueError):
-    """A topic that does not exist or whose type cannot be imported."""
 
 
 # ------------------------------------------------------------------------------- plain values

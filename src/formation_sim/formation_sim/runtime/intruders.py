@@ -35,7 +35,13 @@ from formation_msgs_py.topics import (
     sense_service,
     trigger_info_topic,
 )
-from formation_sim.runtime.run_book import CoordinatorError
+from formation_sim.runtime.errors import (
+    CoordinatorError,
+    DuplicateAgentError,
+    ForeignInformationError,
+    ForeignWriterError,
+    KeeperFrozenError,
+)
 
 TOPICS_PER_LOOK = 32
 """Topics a keeper looks up in the graph per look (about one look a second): a graph query costs
@@ -116,36 +122,6 @@ class Intrusion:
             'topic': self.watched.topic,
             'writers': [{'node': w.node, 'gid': w.gid} for w in self.writers],
         }
-
-
-class ForeignWriterError(CoordinatorError):
-    """A node outside the run writes a topic that moves a robot or the world."""
-
-    kind = 'foreign_writer'
-
-    def __init__(self, message: str, *, nodes: list[str], agents: list[int]) -> None:
-        super().__init__(message)
-        self.nodes = nodes
-        self.agents = agents
-
-
-class DuplicateAgentError(ForeignWriterError):
-    """Two processes claim the same agent."""
-
-    kind = 'duplicate_agent'
-
-
-class ForeignInformationError(ForeignWriterError):
-    """On the wall clock the agents took more triggering information than they sent: forged
-    information, well formed and plausible, was taken as a neighbour's (no tag can tell it yet)."""
-
-    kind = 'foreign_information'
-
-
-class KeeperFrozenError(CoordinatorError):
-    """The time keeper itself was frozen or starved: what it then saw lost followed from that."""
-
-    kind = 'keeper_frozen'
 
 
 def intrusions(watched: Watched, writers: Iterable[Writer]) -> list[Intrusion]:

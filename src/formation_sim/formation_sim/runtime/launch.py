@@ -50,8 +50,10 @@ from formation_sim.model.scenario import Scenario, dump_scenario
 from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
 from formation_agent.core.kinds.shape import declared
 from formation_agent.core.limits import Limits as KindLimits
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.robot_poses import TRAJECTORY_TOPICS
-from formation_sim.sim.robots import ROBOT_MODELS, Limits, RobotError
+from formation_sim.sim.robots import ROBOT_MODELS, Limits
+from formation_sim.sim.errors import RobotError
 
 BACKENDS = KindNames(
     before=('exact',), after=('external',)
@@ -89,10 +91,6 @@ COMMANDS = {
     'formation_sim.runtime.recorder': 'formation_recorder',
     'formation_sim.runtime.robot_node': 'formation_robot',
 }
-
-
-class RunError(RuntimeError):
-    """The run could not be set up (bad arguments, no free ROS domain, existing output)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -15,7 +15,7 @@ terminal or machine that reaches the domain calls it (docs/EMERGENCY_STOP.md).  
 - the run then ends as any run stopped early (`coordinator.main`: the final reports, the samples
   up to the stop, summary.json), with `extra.failure.kind = stopped_by_operator` naming who asked
   when the graph tells (the nodes outside the run with a client of the service), and exit status
-  `formation_agent.ros.process.EXIT_STOPPED`.
+  `formation_msgs_py.exit_codes.ExitCode.STOPPED`.
 
 The answer says what happens; a later call answers that the run is already stopping.  Who asked is
 looked up after the stop went out, so that the lookup never delays it.
@@ -29,7 +29,7 @@ from rclpy.node import NodeNameNonExistentError
 from std_srvs.srv import Trigger
 
 from formation_msgs_py.topics import COORDINATOR_NODE, RECORDER_NODE, SIMULATOR_NODE, STOP_SERVICE
-from formation_sim.runtime.run_book import OperatorStopError
+from formation_sim.runtime.errors import OperatorStopError
 
 RUN_NODES = (SIMULATOR_NODE, COORDINATOR_NODE, RECORDER_NODE)  # a run's own nodes in the root namespace
 UNKNOWN_CALLER = 'an operator'

@@ -42,12 +42,10 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from formation_agent.ros.process import (
-    EXIT_REFUSED,  # 4: the robots' measured start broke a hypothesis, nothing was sent
-    EXIT_STOPPED,  # 5: an operator stopped the run (/formation/stop, formation stop)
-    SignalFlag,
-)
+from formation_agent.ros.process import SignalFlag
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import (
     AGENT_NODE,
     COORDINATOR_NODE,
@@ -58,22 +56,19 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
-from formation_sim.sim.run_folder import RunFolderError, check_out_dir, claim_out_dir
+from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
+from formation_sim.sim.errors import RunFolderError
 from formation_sim.runtime.launch import (
     BACKENDS,
     BAG_DIR,
     LOG_DIR,
     LaunchPlan,
     RobotOptions,
-    RunError,
     free_udp_port,
     reserve_domain,
 )
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.results import (
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    EXIT_LOST,
-    EXIT_OK,
     ChildExit,
     RunResult,
     annotate,
@@ -94,16 +89,13 @@ from formation_sim.runtime.results import (
 )
 from formation_sim.runtime.run_options import RunOptions
 from formation_sim.runtime.supervise import POLL_PERIOD, Child, Supervisor
-from formation_sim.sim.summary import SUMMARY_FILE
+from formation_sim.sim.summary import SUMMARY_FILE, RunSummary, run_failure
+
+if TYPE_CHECKING:
+    from formation_sim.analysis.accounting import RecordingCheck
 
 __all__ = [
     'BACKENDS',
-    'EXIT_FAILED',
-    'EXIT_INTERRUPTED',
-    'EXIT_LOST',
-    'EXIT_OK',
-    'EXIT_REFUSED',
-    'EXIT_STOPPED',
     'ChildExit',
     'FormationRun',
     'RobotOptions',
@@ -114,7 +106,7 @@ __all__ = [
 ]
 
 # What the last line of `formation run` says of a run that ended with these statuses besides 0.
-OUTCOMES = {EXIT_INTERRUPTED: 'stopped', EXIT_STOPPED: 'stopped by the operator'}
+OUTCOMES = {ExitCode.INTERRUPTED: 'stopped', ExitCode.STOPPED: 'stopped by the operator'}
 
 # Where the children's Fast DDS files are looked for while they live (a look at /dev/shm; their
 # memory maps only when it changed: supervise.Supervisor.note_shm_files), every this long [s].
@@ -241,16 +233,14 @@ class FormationRun:
                 self.marks['stopped'] = time.time()
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        notes: list[str] = []  # what the message adds after the failure
         recorder = next((c for c in self._children if c.name == 'recorder'), None)
-        recovered = recover_bag(bag, notes, recorder=recorder) if self.options.record else False
-        status, failure, run_phases = self._write_summary(
-            status, message, lost, domain_id=domain_id, notes=notes
-        )
-        if status == EXIT_OK and not summary.is_file():
-            status = EXIT_FAILED
+        recovered, recovery = recover_bag(bag, recorder=recorder) if self.options.record else (False, None)
+        status, failure, run_phases, notes = self._write_summary(status, message, lost, domain_id=domain_id)
+        notes = [note for note in (recovery, *notes) if note]  # what the message adds after the failure
+        if status == ExitCode.OK and not summary.is_file():
+            status = ExitCode.FAILED
             message = message or f'the {self.plan.keeper} exited without writing {summary}'
-        if failure is not None and status != EXIT_INTERRUPTED and failure['message'] not in message:
+        if failure is not None and status != ExitCode.INTERRUPTED and failure['message'] not in message:
             message = failure['message'] + (f'; {message}' if message else '')
         message = '; '.join([message, *notes] if message else notes)
         result = RunResult(
@@ -282,17 +272,18 @@ class FormationRun:
         return result
 
     def _write_summary(
-        self, status: int, message: str, lost: Child | None, *, domain_id: int, notes: list[str]
-    ) -> tuple[int, dict | None, dict[str, float]]:
+        self, status: int, message: str, lost: Child | None, *, domain_id: int
+    ) -> tuple[int, dict | None, dict[str, float], list[str]]:
         """summary.json as the run ended (the time keeper's, or what is known), with the failure, the
-        recording's check, the timeline and `summary_extra`: (exit status, extra.failure, phases);
-        what the message should add goes into `notes`."""
+        recording's check, the timeline and `summary_extra`: (exit status, extra.failure, phases,
+        what the message should add)."""
         summary = self.out_dir / SUMMARY_FILE
         bag = self.out_dir / BAG_DIR
-        data = read_summary(summary, notes)
+        data, note = read_summary(summary)
+        notes = [note] if note else []
         if data is None and 't=' in self.last_progress:  # it ran, and the time keeper left no summary
             keeper = next(c for c in self._children if c.name == self.plan.keeper)
-            data = summary_of_what_is_known(
+            data, note = summary_of_what_is_known(
                 keeper,
                 scenario=self.scenario,
                 horizon=self.options.horizon,
@@ -303,47 +294,47 @@ class FormationRun:
                 last_progress=self.last_progress,
                 children=self._children,
                 launched=self._started_at,
-                notes=notes,
             )
+            notes += [note] if note else []
         failure = None
         run_phases: dict[str, float] = {}
         if data is not None:
             failure = annotate(data, lost, status, message, launched=self._started_at)
-            check = self._check_recording(data, bag, notes)
+            check, note = self._check_recording(data, bag)
+            notes += [note] if note else []
             if check is not None and not check.complete:
                 if failure is None:
-                    failure = data['extra']['failure'] = {
-                        'kind': 'recording_incomplete',
-                        'message': check.describe_missing(),
-                        'agents': [],
-                        'time': data['extra'].get('reached_time'),
-                        'step': data['extra'].get('steps'),
-                        'detected_by': 'orchestrator',
-                    }
-                    status = EXIT_FAILED if status == EXIT_OK else status
-                elif status != EXIT_INTERRUPTED:
+                    failure = data.extra['failure'] = run_failure(
+                        'recording_incomplete',
+                        check.describe_missing(),
+                        agents=[],
+                        time=data.extra.get('reached_time'),
+                        step=data.extra.get('steps'),
+                        detected_by='orchestrator',
+                    )
+                    status = ExitCode.FAILED if status == ExitCode.OK else status
+                elif status != ExitCode.INTERRUPTED:
                     notes.append(check.describe_missing())
-            if check is not None and check.foreign and status != EXIT_INTERRUPTED:
+            if check is not None and check.foreign and status != ExitCode.INTERRUPTED:
                 notes.append(check.describe_foreign() + self._strangers(check.foreign, domain_id))
             self.marks['checked'] = time.time()
-            extra = data.setdefault('extra', {})
+            extra = data.extra
             extra['timeline'] = timeline(extra.get('timestamps') or {}, self.marks, started=self.marks['run'])
             extra['phases'] = run_phases = phases(extra['timeline'])
             _add_extra(extra, self.options.summary_extra)
-            from formation_sim.sim.summary import write_summary_file
-
             try:
-                write_summary_file(data, summary)
+                data.write(summary)
             except OSError as error:
                 summary.unlink(missing_ok=True)  # the time keeper's, without the failure: not to be believed
                 notes.append(f'summary.json could not be written: {error}')
-        return status, failure, run_phases
+        return status, failure, run_phases, notes
 
-    def _check_recording(self, data: dict, bag: Path, notes: list[str]):
-        """What the run published against what its bag holds (extra.recording); None without a bag."""
+    def _check_recording(self, data: RunSummary, bag: Path) -> tuple[RecordingCheck | None, str | None]:
+        """What the run published against what its bag holds (extra.recording), None without a bag;
+        and what the message says of it."""
         if not self.options.record:
-            return None
-        return check_recording(data, bag, self.plan.counted_topics(), notes)
+            return None, None
+        return check_recording(data, bag, self.plan.counted_topics())
 
     def _strangers(self, topics: dict[str, int], domain_id: int) -> str:
         """'; nodes outside the run wrote on them: …', as graph.json saw them."""
@@ -407,10 +398,10 @@ class FormationRun:
         next_snapshot = time.monotonic()  # the children's Fast DDS files, noted while they live
         while True:
             if self._interrupted.is_set():
-                return EXIT_INTERRUPTED, 'interrupted', lost
+                return ExitCode.INTERRUPTED, 'interrupted', lost
             now = time.monotonic()
             if deadline is not None and now > deadline:
-                return EXIT_FAILED, self._timed_out(), lost
+                return ExitCode.FAILED, self._timed_out(), lost
             if self.options.progress and self.last_progress != shown:
                 shown = self.last_progress
                 say(shown)
@@ -427,10 +418,10 @@ class FormationRun:
                     failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
                     after_end = '; '.join(note for note in (after_end, hung) if note)
                     if not failed:
-                        return EXIT_OK, after_end, lost
+                        return ExitCode.OK, after_end, lost
                     # The time keeper reached the end, but a process that should have left
                     # cleanly did not (an agent that stopped on an error near the horizon).
-                    return EXIT_FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
+                    return ExitCode.FAILED, '; '.join(child.describe() for child in failed), lost or failed[0]
                 return (*keeper_failed(code, keeper, lost), lost)
             if lost is None:
                 lost = first_lost(supervisor.children, keeper)

@@ -52,24 +52,21 @@ from formation_agent.ros.parameters import (
     DOUBLE,
     STRING,
     STRING_ARRAY,
-    ParameterError,
     ParameterSpec,
     parameter_help,
     read_parameters,
 )
 from formation_msgs_py.codec import check_array
+from formation_agent.ros.errors import ParameterError
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
-from formation_msgs_py.tags import TagError, run_tags
+from formation_msgs_py.errors import TagError
+from formation_msgs_py.tags import run_tags
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
-from formation_sim.bag.io import (
-    BagError,
-    BagWriter,
-    TopicSpecError,
-    UnknownMessageTypeError,
-    check_msgtype,
-    jazzy_typestore,
-)
+from formation_sim.bag.io import BagWriter, check_msgtype, jazzy_typestore
+from formation_sim.bag.errors import BagError, TopicSpecError, UnknownMessageTypeError
 from formation_sim.runtime.bag_qos import offered_qos
+from formation_sim.runtime.errors import RecorderError
 
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -179,10 +176,6 @@ RECORDER_PARAMETERS = (
         **_positive_seconds,
     ),
 )
-
-
-class RecorderError(BagError):
-    """The recorder could not be set up or could not write its bag."""
 
 
 def parse_topic_spec(spec: str) -> tuple[str, str]:
@@ -640,7 +633,6 @@ def main(args: Sequence[str] | None = None) -> int:
     from rclpy.task import Future
 
     from formation_agent.ros.process import (
-        EXIT_BAD_INPUT,
         SignalFlag,
         make_executor,
         release_ros,
@@ -682,7 +674,7 @@ def main(args: Sequence[str] | None = None) -> int:
     except (ParameterError, BagError) as error:
         if node is None:  # bad parameters, or a bag that exists already: nothing was recorded
             print(f'formation_recorder: {error}', file=sys.stderr, flush=True)
-            return EXIT_BAD_INPUT
+            return ExitCode.BAD_INPUT
         if node.failure is None:
             raise
     finally:
@@ -691,7 +683,7 @@ def main(args: Sequence[str] | None = None) -> int:
                 node.close()
         with shutdown_guard(
             'formation_recorder',
-            lambda: EXIT_BAD_INPUT if node is None else 1 if node.failure is not None else 0,
+            lambda: ExitCode.BAD_INPUT if node is None else 1 if node.failure is not None else 0,
             announce=node is not None,
         ):
             release_ros(executor, [] if node is None else [node])

@@ -42,8 +42,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from formation_msgs_py.topics import AGENT_NODE, RECORDER_NODE, SIMULATOR_NODE
-from formation_sim.bag.io import BagError, UnknownMessageTypeError, read_bag
+from formation_sim.bag.io import read_bag
+from formation_sim.bag.errors import BagError, UnknownMessageTypeError
 from formation_sim.runtime.bag_qos import replay_offer
+from formation_sim.runtime.errors import ReplayError
 from formation_sim.runtime.recorder import import_message_class
 
 if TYPE_CHECKING:
@@ -52,10 +54,6 @@ if TYPE_CHECKING:
 CLOCK_TOPIC = '/clock'
 RUN_NODES = (SIMULATOR_NODE, AGENT_NODE, RECORDER_NODE)  # the nodes of a formation run
 GRAPH_WAIT = 1.5  # seconds to discover a run already on the domain before publishing anything
-
-
-class ReplayError(ValueError):
-    """Bad replay arguments, an unreadable bag, or subscribers that never came."""
 
 
 @dataclass(kw_only=True)
@@ -84,7 +82,8 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
     """Topic -> (message type, the QoS profiles its publishers offered when recorded)."""
     from rosbags.rosbag2 import Reader
 
-    from formation_sim.bag.io import BagReadError, check_bag_information, damaged_bag_message
+    from formation_sim.bag.io import check_bag_information, damaged_bag_message
+    from formation_sim.bag.errors import BagReadError
 
     try:
         check_bag_information(bag)
@@ -247,7 +246,8 @@ def main_replay(
 
     Refused (ReplayError) on a domain where a formation run is live (see the module docstring).
     """
-    from formation_sim.runtime.orchestrate import RunError, reserve_domain
+    from formation_sim.runtime.orchestrate import reserve_domain
+    from formation_sim.runtime.errors import RunError
 
     bag = Path(bag)
     if not bag.exists():

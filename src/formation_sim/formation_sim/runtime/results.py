@@ -12,16 +12,14 @@ import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from formation_agent.ros.process import EXIT_REFUSED, EXIT_STOPPED
+from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.runtime.supervise import Child, describe_exit
+from formation_sim.sim.summary import RunSummary, run_failure, summary_of, unstarted_summary
 
-# Exit statuses of a run (and of `formation run`; 2 is bad input, refused before anything starts).
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_LOST = 3  # a process of the run died or an agent was lost
-# 4 (EXIT_REFUSED) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped the run (formation stop)
-EXIT_INTERRUPTED = 130
+if TYPE_CHECKING:
+    from formation_sim.analysis.accounting import RecordingCheck
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,9 +38,8 @@ class RunResult:
     out_dir: Path
     summary: Path | None  # DIR/summary.json: complete, or partial when extra.failure is set
     bag: Path | None  # DIR/bag, None if not recorded or not readable
-    # EXIT_OK 0; EXIT_FAILED 1; EXIT_LOST 3 a process or agent lost; 4 (EXIT_REFUSED,
-    # formation_agent.ros.process) the robots' start refused; 5 (EXIT_STOPPED) an operator stopped
-    # the run (/formation/stop); 130 interrupted
+    # an ExitCode (formation_msgs_py.exit_codes): OK, FAILED, LOST (a process or agent lost), REFUSED
+    # (the robots' start refused), STOPPED (an operator stopped the run: /formation/stop), INTERRUPTED
     exit_status: int
     domain_id: int
     wall_time: float
@@ -62,8 +59,8 @@ class RunResult:
 
 
 def lost_or_failed(child: Child) -> int:
-    """EXIT_FAILED for a child that left naming an error, EXIT_LOST for one that died or vanished."""
-    return EXIT_FAILED if child.failed_itself else EXIT_LOST
+    """ExitCode.FAILED for a child that left naming an error, ExitCode.LOST for one that died or vanished."""
+    return ExitCode.FAILED if child.failed_itself else ExitCode.LOST
 
 
 # How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
@@ -109,21 +106,22 @@ def keeper_failed(code: int, keeper: Child, lost: Child | None) -> tuple[int, st
     """The time keeper exited with `code`, not 0: the run's exit status and message.  A status
     that names the first cause (failed, lost, refused) is the run's; else the child seen `lost`
     decides, or how the keeper ended (killed by a signal: lost)."""
-    if code in (EXIT_FAILED, EXIT_LOST, EXIT_REFUSED, EXIT_STOPPED):
+    if code in (ExitCode.FAILED, ExitCode.LOST, ExitCode.REFUSED, ExitCode.STOPPED):
         status = code
     else:
-        status = lost_or_failed(lost) if lost is not None else EXIT_LOST if code < 0 else EXIT_FAILED
+        status = lost_or_failed(lost) if lost is not None else ExitCode.LOST if code < 0 else ExitCode.FAILED
     seen = '' if lost is None else f'{lost.describe()}; '
     return status, f'{seen}{keeper.name} (pid {keeper.pid}) {describe_exit(code)}; see {keeper.log}'
 
 
-def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
-    """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file."""
+def recover_bag(bag: Path, *, recorder: Child | None) -> tuple[bool, str | None]:
+    """A bag left unfinished (its recorder died, or could not write) is rebuilt from its MCAP file:
+    (whether it was, what the run's message says of it)."""
     if not bag.is_dir():
-        return False
+        return False, None
     if recorder is not None and recorder.process.returncode == 0 and (bag / 'metadata.yaml').is_file():
-        return False  # the recorder closed it and said so (it exits 0 only then)
-    from formation_sim.bag.io import BagError
+        return False, None  # the recorder closed it and said so (it exits 0 only then)
+    from formation_sim.bag.errors import BagError
     from formation_sim.bag.recovery import reindex
 
     died = recorder is not None and recorder.process.returncode not in (0, None)
@@ -131,12 +129,10 @@ def recover_bag(bag: Path, notes: list[str], *, recorder: Child | None) -> bool:
     try:
         recovery = reindex(bag)
     except (BagError, OSError) as error:
-        notes.append(f'{how} could not be recovered: {error}')
-        return False
+        return False, f'{how} could not be recovered: {error}'
     if recovery.healthy:
-        return False
-    notes.append(f'{how} was recovered ({recovery.message_count} messages kept)')
-    return True
+        return False, None
+    return True, f'{how} was recovered ({recovery.message_count} messages kept)'
 
 
 def timeline(keeper: dict[str, float], marks: dict[str, float], *, started: float) -> dict[str, float]:
@@ -173,14 +169,14 @@ def describe_phases(phases: dict[str, float]) -> str:
     return ', '.join(f'{phase} {seconds:.1f} s' for phase, seconds in phases.items())
 
 
-def read_summary(path: Path, notes: list[str]) -> dict | None:
+def read_summary(path: Path) -> tuple[RunSummary | None, str | None]:
+    """The time keeper's summary.json, or None (none, or unreadable: the note says why)."""
     if not path.is_file():
-        return None
+        return None, None
     try:
-        return json.loads(path.read_text(encoding='utf-8'))
+        return RunSummary.read(path), None
     except (OSError, ValueError) as error:
-        notes.append(f'{path} could not be read ({error}): replaced by what the run knows')
-        return None
+        return None, f'{path} could not be read ({error}): replaced by what the run knows'
 
 
 def process_info(child: Child, *, launched: float) -> dict:
@@ -207,49 +203,48 @@ def summary_of_what_is_known(
     last_progress: str,
     children: list[Child],
     launched: float,
-    notes: list[str],
-) -> dict:
+) -> tuple[RunSummary, str | None]:
     """summary.json when the time keeper left none (killed hard, or it could not write): the
     failure, the last run time and step of its progress, the processes, and the run as far as
-    the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one."""
-    from formation_sim.sim.summary import build_summary, unstarted_summary
-
+    the bag holds it (`formation_sim.analysis.load.load_bag_run`), or only the scenario without one;
+    and a note when the bag could not be read."""
     progress = {
         key: float(value)
         for key, value in re.findall(r'\b(t|events|steps|wall)=([0-9.eE+-]+)', last_progress)
     }
-    stopped_by_us = status == EXIT_INTERRUPTED or keeper.signal_used is not None
+    stopped_by_us = status == ExitCode.INTERRUPTED or keeper.signal_used is not None
     killed = keeper.process.returncode is None or keeper.process.returncode < 0
-    failure = {
-        'kind': 'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
-        'message': f'{keeper.name} (pid {keeper.pid}) {describe_exit(keeper.process.returncode)}',
-        'agents': [],
-        'time': progress.get('t'),  # its last progress line (once a second, 6 decimals)
-        'step': int(progress['steps']) if 'steps' in progress else None,
-        'wall_time': progress.get('wall'),
-        'detected_by': 'orchestrator',
-        'process': process_info(keeper, launched=launched),
-    }
-    data = None
+    failure = run_failure(
+        'interrupted' if stopped_by_us else 'process_lost' if killed else 'process_failed',
+        f'{keeper.name} (pid {keeper.pid}) {describe_exit(keeper.process.returncode)}',
+        agents=[],
+        time=progress.get('t'),  # its last progress line (once a second, 6 decimals)
+        step=int(progress['steps']) if 'steps' in progress else None,
+        wall_time=progress.get('wall'),
+        detected_by='orchestrator',
+        process=process_info(keeper, launched=launched),
+    )
+    data, note = None, None
     if (bag / 'metadata.yaml').is_file():
-        from formation_sim.analysis.load import AnalysisError, load_bag_run
+        from formation_sim.analysis.load import load_bag_run
+        from formation_sim.analysis.errors import AnalysisError
 
         try:
-            data = build_summary(load_bag_run(bag, run_dir=run_dir, scenario=scenario).record)
-            data['wall_time'] = None
+            data = summary_of(load_bag_run(bag, run_dir=run_dir, scenario=scenario).record)
+            data.wall_time = None
             source = f'orchestrator: the {keeper.name} left no summary; the run as far as its bag holds it'
         except (AnalysisError, ValueError) as error:
-            notes.append(f'the bag could not be read back: {error}')
-    _latest_known(failure, progress, bag, reached=(data or {}).get('extra', {}).get('reached_time'))
+            note = f'the bag could not be read back: {error}'
+    _latest_known(failure, progress, bag, reached=None if data is None else data.extra.get('reached_time'))
     if data is None:
         data = unstarted_summary(scenario, horizon=horizon, mode=mode, extra={})
         source = f'orchestrator: the {keeper.name} left no summary and there is no readable bag'
-    data['extra'].update(
+    data.extra.update(
         failure=failure,
         summary_source=source,
         processes={c.name: describe_exit(c.process.returncode) for c in children},
     )
-    return data
+    return data, note
 
 
 def _latest_known(failure: dict, progress: dict, bag: Path, *, reached: float | None) -> None:
@@ -278,9 +273,11 @@ def _latest_known(failure: dict, progress: dict, bag: Path, *, reached: float | 
 
 def _last_step(bag: Path) -> tuple[int, float] | None:
     """(index, time) of the last Step the bag holds, or None (no bag, no Step, unreadable)."""
-    from formation_msgs_py.codec import MessageError, decode_step
+    from formation_msgs_py.codec import decode_step
+    from formation_msgs_py.errors import MessageError
     from formation_msgs_py.topics import STEP_TOPIC
-    from formation_sim.bag.io import BagError, decode, read_bag
+    from formation_sim.bag.io import decode, read_bag
+    from formation_sim.bag.errors import BagError
 
     last = None
     try:
@@ -295,14 +292,16 @@ def _last_step(bag: Path) -> tuple[int, float] | None:
     return last
 
 
-def annotate(data: dict, lost: Child | None, status: int, message: str, *, launched: float) -> dict | None:
+def annotate(
+    data: RunSummary, lost: Child | None, status: int, message: str, *, launched: float
+) -> dict | None:
     """Add the orchestrator's view of a failure to the summary's extra.failure; return it."""
-    extra = data.setdefault('extra', {})
+    extra = data.extra
     failure = extra.get('failure')
-    if failure is None and status == EXIT_OK:
+    if failure is None and status == ExitCode.OK:
         return None
     if failure is None:  # the time keeper completed, but a child failed
-        failure = {'kind': 'process_failed', 'message': message, 'agents': [], 'detected_by': 'orchestrator'}
+        failure = run_failure('process_failed', message, agents=[], detected_by='orchestrator')
     if lost is not None:
         failure['process'] = process_info(lost, launched=launched)
         if failure['kind'] == 'interrupted':  # stopped by us because of that child: the first cause
@@ -335,8 +334,8 @@ def excused_after_end(failed: list[Child], summary: Path) -> tuple[list[Child], 
     past the end while the Step was on its way, the robot stopped by the agent's zero command) are
     no failure of the run.  The others, and a note naming the excused ones."""
     try:
-        after_end = json.loads(summary.read_text(encoding='utf-8')).get('extra', {}).get('after_end') or {}
-    except (OSError, ValueError, AttributeError):
+        after_end = RunSummary.read(summary).extra.get('after_end') or {}
+    except (OSError, ValueError):
         after_end = {}
     excused = [
         c for c in failed if c.name.startswith('agent_') and c.name.removeprefix('agent_') in after_end
@@ -376,25 +375,27 @@ def strangers(topics: dict[str, int], graph_file: Path, own_nodes: set[str], dom
     )
 
 
-def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
+def check_recording(
+    data: RunSummary, bag: Path, counted: set[str]
+) -> tuple[RecordingCheck | None, str | None]:
     """What the run published on the `counted` topics (those its nodes count: not a robot's poses,
-    nor the commands to it) against what its bag holds (extra.recording); None without a bag or
-    counts."""
-    published = data.get('extra', {}).get('published')
+    nor the commands to it) against what its bag holds (extra.recording), None without a bag or
+    counts; and what the run's message says of it (the bag not checked, messages uncounted)."""
+    published = data.extra.get('published')
     if not published or not (bag / 'metadata.yaml').is_file():
-        return None
+        return None, None
     from formation_sim.analysis.accounting import check_recording as check
 
     published = {topic: n for topic, n in published.items() if topic in counted}
     try:
         result = check(published, bag)
     except Exception as error:  # noqa: BLE001 - rosbags raises several unrelated types
-        notes.append(f'the bag could not be checked against what the run published: {error}')
-        return None
+        return None, f'the bag could not be checked against what the run published: {error}'
     foreign = {topic: n for topic, n in result.foreign.items() if topic in counted}
     # An agent that died sent no final report: what it published is uncounted, not foreign (on
     # its own topics, and on the shared ones, where its messages cannot be told from others').
-    missing = data['extra'].get('reports_missing') or []
+    missing = data.extra.get('reports_missing') or []
+    note = None
     if missing:
         own = tuple(f'/agent_{agent}/' for agent in missing)
         uncounted = {
@@ -403,12 +404,12 @@ def check_recording(data: dict, bag: Path, counted: set[str], notes: list[str]):
             if topic.startswith(own) or not topic.startswith('/agent_')
         }
         if uncounted:
-            notes.append(
+            note = (
                 f'{sum(uncounted.values())} messages in the bag are '
                 f'uncounted: agents {missing} sent no final report '
                 f'({", ".join(f"{topic} {n}" for topic, n in sorted(uncounted.items()))})'
             )
         foreign = {topic: n for topic, n in foreign.items() if topic not in uncounted}
     result = dataclasses.replace(result, foreign=foreign)
-    data['extra']['recording'] = result.to_dict()
-    return result
+    data.extra['recording'] = result.to_dict()
+    return result, note

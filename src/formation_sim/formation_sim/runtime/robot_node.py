@@ -62,21 +62,15 @@ from formation_agent.ros.parameters import (
     DOUBLE_ARRAY,
     INTEGER,
     STRING,
-    ParameterError,
     ParameterSpec,
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.process import (
-    EXIT_BAD_INPUT,
-    StopSignals,
-    exit_process,
-    make_executor,
-    release_ros,
-    shutdown_guard,
-)
+from formation_agent.ros.errors import ParameterError
+from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
-from formation_msgs_py.codec import MessageError
+from formation_msgs_py.errors import MessageError
+from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.qos import ROBOT_COMMAND_READER_QOS
 from formation_msgs_py.topics import (
     ROBOT_NODE,
@@ -88,15 +82,8 @@ from formation_msgs_py.topics import (
     robot_true_odom_topic,
 )
 from formation_msgs_py.types import MAX_AGENT_ID
-from formation_sim.sim.robots import (
-    ROBOT_MODELS,
-    Command,
-    Limits,
-    PoseNoise,
-    RobotError,
-    make_robot,
-    quaternion_from_yaw,
-)
+from formation_sim.sim.robots import ROBOT_MODELS, Command, Limits, PoseNoise, make_robot, quaternion_from_yaw
+from formation_sim.sim.errors import RobotError
 
 NODE_NAME = ROBOT_NODE
 
@@ -459,7 +446,7 @@ def main(args: Sequence[str] | None = None) -> int:
             status = 0
         except (ParameterError, RobotError) as error:  # bad input: every problem named, nothing started
             print(f'formation_robot: {error}', file=sys.stderr, flush=True)
-            status = EXIT_BAD_INPUT
+            status = ExitCode.BAD_INPUT
         except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
             if stop.received.is_set() or not rclpy.ok():
                 return 0

@@ -24,7 +24,8 @@ import numpy as np
 
 from formation_agent.core.pose_sensing import pose_refusal
 from formation_msgs_py.topics import robot_odom_topic, robot_pose_topic, robot_true_odom_topic
-from formation_sim.runtime.run_book import CoordinatorError, PoseWatch
+from formation_sim.runtime.run_book import PoseWatch
+from formation_sim.runtime.errors import CoordinatorError
 from formation_sim.sim.robots import PoseTrack, RobotSample, poses_for_end, sample_from_fields
 
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)

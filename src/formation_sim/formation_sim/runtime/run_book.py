@@ -24,97 +24,16 @@ from formation_msgs_py.tags import FOREIGN_REASONS
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 from formation_msgs_py.middleware import LIVELINESS_LEASE, LOST_GRACE
 from formation_msgs_py.topics import trigger_info_topic
-from formation_sim.sim.summary import lateness_extra, saturation_extra
-
-
-class CoordinatorError(RuntimeError):
-    """The distributed run cannot go on: a protocol violation, a stall, or a dead peer."""
-
-    kind = 'protocol'  # extra.failure.kind in summary.json
-
-
-class StallError(CoordinatorError):
-    """No step settled within the stall timeout."""
-
-    kind = 'stall'
-
-
-class DiscoveryError(CoordinatorError):
-    """The agents did not all connect within the discovery timeout."""
-
-    kind = 'discovery'
-
-
-class ConnectivityLostError(CoordinatorError):
-    """An edge of the graph reached the communication radius Δ in the true world."""
-
-    kind = 'connectivity_lost'
-
-    def __init__(self, message: str, *, time: float, edge: tuple[int, int], length: float) -> None:
-        super().__init__(message)
-        self.time = time
-        self.edge = edge
-        self.length = length
-
-
-class InitialConditionError(CoordinatorError):
-    """The robots' measured start breaks the initial condition (initial) on an edge: the run does
-    not start (no Step 0, no command)."""
-
-    kind = 'initial_condition'
-
-    def __init__(self, message: str, *, agents: list[int], breaches: list[dict]) -> None:
-        super().__init__(message)
-        self.agents = agents
-        self.breaches = breaches
-
-
-class RecorderLostError(CoordinatorError):
-    """A recorder stopped showing signs of life (or left) before the end of the run."""
-
-    kind = 'recorder_lost'
-
-
-class AgentLostError(CoordinatorError):
-    """One or more agents stopped showing signs of life (or left) before the end of the run."""
-
-    kind = 'agent_lost'
-
-    def __init__(self, message: str, *, agents: list[int]) -> None:
-        super().__init__(message)
-        self.agents = agents
-
-
-class RobotLostError(CoordinatorError):
-    """A robot's poses stopped coming (its process or driver died, froze, or lost the network)
-    while the other robots' still came: the run stops at once, every agent with it."""
-
-    kind = 'robot_lost'
-
-    def __init__(self, message: str, *, agents: list[int]) -> None:
-        super().__init__(message)
-        self.agents = agents
-
-
-class AgentFailedError(CoordinatorError):
-    """An agent stopped on an error it named (its final report's `failure`): the run stops at once."""
-
-    kind = 'agent_failed'
-
-    def __init__(self, message: str, *, agents: list[int]) -> None:
-        super().__init__(message)
-        self.agents = agents
-
-
-class OperatorStopError(CoordinatorError):
-    """An operator called the run's emergency stop (`topics.STOP_SERVICE`, `formation stop`): the
-    run ends at once, every robot sent a zero command (`operator_stop.OperatorStop`)."""
-
-    kind = 'stopped_by_operator'
-
-    def __init__(self, message: str, *, asked_by: list[str]) -> None:
-        super().__init__(message)
-        self.asked_by = asked_by
+from formation_sim.runtime.errors import (
+    AgentLostError,
+    ConnectivityLostError,
+    CoordinatorError,
+    InitialConditionError,
+    OperatorStopError,
+    RecorderLostError,
+    RobotLostError,
+)
+from formation_sim.sim.summary import lateness_extra, run_failure, saturation_extra
 
 
 def ids_text(agents: list[int], *, most: int = 20) -> str:
@@ -142,16 +61,16 @@ def failure_extra(
         kind = 'interrupted'
     else:
         kind = 'error'
-    info = {
-        'kind': kind,
-        'message': str(error)
+    info = run_failure(
+        kind,
+        str(error)
         or ('stopped by a signal (SIGINT/SIGTERM)' if kind == 'interrupted' else type(error).__name__),
-        'agents': list(getattr(error, 'agents', getattr(error, 'edge', []))),
-        'time': getattr(error, 'time', time),
-        'step': step,
-        'wall_time': wall_time,
-        'detected_by': detected_by,
-    }
+        agents=list(getattr(error, 'agents', getattr(error, 'edge', []))),
+        time=getattr(error, 'time', time),
+        step=step,
+        wall_time=wall_time,
+        detected_by=detected_by,
+    )
     if isinstance(error, ConnectivityLostError):
         info.update(edge=list(error.edge), length=error.length)
     if isinstance(error, InitialConditionError):

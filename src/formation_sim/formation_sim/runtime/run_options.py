@@ -22,11 +22,12 @@ from formation_sim.runtime.launch import (
     DOMAIN_RANGE,
     INJECT_KEYS,
     RobotOptions,
-    RunError,
     discovery_server_program,
     resolve_agents_per_process,
 )
-from formation_sim.sim.engine import EngineError, check_sample_dt
+from formation_sim.runtime.errors import RunError
+from formation_sim.sim.engine import check_sample_dt
+from formation_sim.sim.errors import EngineError
 
 CLOCKS = ('lockstep', 'realtime')
 

@@ -50,7 +50,6 @@ from std_srvs.srv import Trigger
 from formation_agent.ros.config import SAFETY_PARAMETERS
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
-    MessageError,
     check_array,
     decode_command,
     decode_trigger_info,
@@ -58,39 +57,21 @@ from formation_msgs_py.codec import (
     encode_step,
     sensing_refusal,
 )
+from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
 from formation_msgs_py.types import SensedState
-from formation_msgs_py.tags import TagError
 from formation_msgs_py.topic_table import EXACT, recorded_topics
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_sim.runtime import coordinator
-from formation_sim.runtime.coordinator import (  # noqa: F401 - the simulator's names since before the split
-    EXIT_AGENT_LOST,
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-)
 from formation_sim.runtime.run_end import GRAPH_FILE, write_results  # noqa: F401 - likewise
-from formation_sim.runtime.run_book import (  # noqa: F401 - likewise
-    AgentLostError,
-    ConnectivityLostError,
-    CoordinatorError,
-    DiscoveryError,
-    RecorderLostError,
-    StallError,
-)
+from formation_sim.runtime.errors import CoordinatorError, DuplicateAgentError, StallError
 from formation_sim.runtime.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
 from formation_sim.runtime.time_keeper import graph_of, run_extra, TIME_KEEPER_PARAMETERS, TimeKeeperNode
 from formation_sim.runtime.exact_world import ExactWorld
-from formation_sim.runtime.intruders import (
-    DuplicateAgentError,
-    SensingCalls,
-    Writer,
-    intrusions,
-    simulator_watched,
-)
+from formation_sim.runtime.intruders import SensingCalls, Writer, intrusions, simulator_watched
 from formation_sim.sim.engine import due_twice
 from formation_sim.sim.record import RunRecord
 

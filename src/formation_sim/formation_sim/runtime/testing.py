@@ -36,7 +36,8 @@ from pathlib import Path
 from typing import Any
 
 from formation_sim.bag.io import read_bag
-from formation_sim.runtime.replay import BagPlayer, ReplayError, ReplayResult, _bag_topics
+from formation_sim.runtime.replay import BagPlayer, ReplayResult, _bag_topics
+from formation_sim.runtime.errors import ReplayError
 
 SPIN_STEP = 0.05  # seconds one spin_once waits for work
 

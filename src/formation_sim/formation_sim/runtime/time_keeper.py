@@ -27,17 +27,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.parameters import (
-    DOUBLE,
-    INTEGER,
-    STRING,
-    ParameterError,
-    ParameterSpec,
-    read_parameters,
-)
+from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterSpec, read_parameters
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.process import EXECUTORS
 from formation_msgs_py.codec import (
-    MessageError,
     check_array,
     check_string,
     decode_agent_report,
@@ -45,20 +38,17 @@ from formation_msgs_py.codec import (
     encode_step,
     tag_array,
 )
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
-from formation_msgs_py.tags import KeyFileError, TagError, read_key, run_tags
+from formation_msgs_py.errors import KeyFileError, TagError
+from formation_msgs_py.tags import read_key, run_tags
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
-from formation_sim.model.scenario import Scenario, ScenarioError, dump_scenario_text, load_scenario
+from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
+from formation_sim.model.errors import ScenarioError
 from formation_sim.runtime.operator_stop import OperatorStop
-from formation_sim.runtime.run_book import (
-    add_what_followed,
-    failure_extra,
-    DiscoveryError,
-    RecorderBook,
-    RunBook,
-    ids_text,
-)
+from formation_sim.runtime.run_book import add_what_followed, failure_extra, RecorderBook, RunBook, ids_text
+from formation_sim.runtime.errors import DiscoveryError, ForeignWriterError
 from formation_sim.runtime.intruders import (
     TOPICS_PER_LOOK,
     foreign_information_error,
@@ -66,7 +56,6 @@ from formation_sim.runtime.intruders import (
     FreezeWatch,
     GraphWatch,
     Writer,
-    ForeignWriterError,
     protocol_watched,
     robot_watched,
     simulator_watched,

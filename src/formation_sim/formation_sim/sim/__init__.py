@@ -13,11 +13,12 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'world': ('World', 'WorldError'),
-        'engine': ('EngineError', 'simulate'),
+        'world': ('World',),
+        'engine': ('simulate',),
         'record': ('RunRecord',),
-        'samples': ('Samples', 'TrajectoryError', 'load_trajectory'),
+        'samples': ('Samples', 'load_trajectory'),
         'summary': ('build_summary', 'load_record', 'load_summary', 'write_summary'),
-        'baselines': ('BaselineError', 'simulate_continuous'),
+        'baselines': ('simulate_continuous',),
+        'errors': ('BaselineError', 'EngineError', 'TrajectoryError', 'WorldError'),
     },
 )

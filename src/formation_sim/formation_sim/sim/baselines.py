@@ -25,15 +25,12 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from formation_agent.core.speed_scale import eta2_gains, initial_velocities
-from formation_sim.sim.engine import EngineError, check_sample_dt
+from formation_sim.sim.engine import check_sample_dt
+from formation_sim.sim.errors import BaselineError, EngineError
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 
 METHOD = 'DOP853'  # 8th-order Runge-Kutta: tight tolerances at a moderate number of evaluations
-
-
-class BaselineError(ValueError):
-    """Bad arguments for a baseline run, or an integration that failed."""
 
 
 class _EdgeSums:

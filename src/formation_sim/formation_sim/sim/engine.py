@@ -20,21 +20,23 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from formation_agent.core import compiled
-from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingError, CrossingSearch
+from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingSearch
+from formation_agent.core.errors import CrossingError
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
 from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model import theory
+from formation_sim.sim.errors import EngineError
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
 from formation_sim.sim.world import World
 
-
-class EngineError(RuntimeError):
-    """The simulation could not go on (an agent rejected its input, a step did not advance)."""
+if TYPE_CHECKING:
+    from formation_agent.core import _fastcore
 
 
 # Numbers the sampling grid of one run may hold (positions, and velocities for double
@@ -539,7 +541,7 @@ class _Agenda:
     searches: dict[int, CrossingSearch] = field(default_factory=dict)
     planned_period: dict[int, float] = field(default_factory=dict)
     counter: int = 0
-    queue: object = None
+    queue: _fastcore.Agenda | None = None
 
     def __post_init__(self) -> None:
         # Without a period, where the compiled core runs, the queue is its compiled twin

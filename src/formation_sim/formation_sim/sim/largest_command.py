@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 
-from formation_sim.model import theory
 from formation_sim.model.command_bound import CommandBound, command_bound
+from formation_sim.model.errors import TheoryError
 from formation_sim.model.scenario import Scenario
 from formation_sim.model.speed_choice import (
     OBSERVED_MARGIN,
@@ -111,7 +111,7 @@ def largest_command(
     The theory's bound answers when it exists and is within the limits; else the exact run does."""
     try:
         bound = command_bound(scenario)
-    except theory.TheoryError:
+    except TheoryError:
         return measured_command(scenario, horizon=horizon), None
     within = bound.max_speed <= max_speed and (
         bound.max_acceleration is None or bound.max_acceleration <= max_acceleration
@@ -173,7 +173,7 @@ def choose_speed_scale(
     try:
         bound = command_bound(paper)
         theory_speeds: tuple[float, float | None] | str = (bound.max_speed, bound.max_acceleration)
-    except theory.TheoryError as error:
+    except TheoryError as error:
         theory_speeds = str(error)
     return scale_choice(
         limits=limits,
@@ -250,7 +250,7 @@ def choose_time_warp(
             cap=cap,
             window=window,
         )
-    except theory.TheoryError as error:
+    except TheoryError as error:
         missing = str(error)
     return WarpChoice(
         limits=limits,

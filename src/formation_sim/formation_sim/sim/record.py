@@ -9,24 +9,28 @@ for `formation simulate` and run folders read back, memory-mapped from the run's
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from formation_sim.sim.samples import Samples
+
+if TYPE_CHECKING:
+    from formation_sim.model.scenario import Scenario
 
 
 @dataclass(kw_only=True)
 class RunRecord:
     """Everything a run produced; the input of `formation_sim.sim.summary.write_summary`."""
 
-    scenario: object
+    scenario: Scenario
     horizon: float
     mode: str
     trigger_times: dict[int, list[float]]
     samples: Samples
     messages_sent: int
     sensing_calls: int
-    wall_time: float
+    wall_time: float | None  # None: not measured (a run rebuilt from its bag or its summary)
     extra: dict = field(default_factory=dict)
 
     @property

@@ -25,14 +25,12 @@ from functools import lru_cache, partial
 import numpy as np
 
 from formation_agent.core import kinematics
-from formation_agent.core.kinds import KIND_NAMES, Geometry, KindError, RobotKind, robot_kind
+from formation_agent.core.kinds import KIND_NAMES, Geometry, RobotKind, robot_kind
+from formation_agent.core.errors import KindError
 from formation_agent.core.limits import Limits as KindLimits
+from formation_sim.sim.errors import RobotError
 
 ROBOT_MODELS = KIND_NAMES  # the registered robot kinds, read at each use
-
-
-class RobotError(ValueError):
-    """A robot set up with impossible values (a limit <= 0, a pose of the wrong size)."""
 
 
 @dataclass(frozen=True, kw_only=True)

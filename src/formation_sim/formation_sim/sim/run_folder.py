@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from formation_msgs_py.tags import KEY_FILE
+from formation_sim.sim.errors import RunFolderError
 
 RUNS_ROOT = Path('runs')
 
@@ -50,10 +51,6 @@ RUN_ENTRIES = frozenset(
 _DERIVED_PREFIX = 'compare-'  # formation compare's default output: RUN_A/compare-<RUN_B>
 _SHOWN = 6  # entries named in a refusal
 _NAME_LIMIT = 64  # characters of a scenario name kept in a folder name
-
-
-class RunFolderError(ValueError):
-    """An output folder that cannot be used; the message names the folder and why."""
 
 
 def _is_run_entry(name: str) -> bool:

@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from formation_sim.sim.errors import TrajectoryError
+
 TRAJECTORY_DIR = 'trajectory'
 INCOMPLETE_DIR = 'trajectory.incomplete'
 LEGACY_TRAJECTORY_FILE = 'trajectory.npz'
@@ -57,11 +59,6 @@ _EDGE_BLOCK_VALUES = (
     1 << 15
 )  # edge components computed at a time (256 kB: they stay in the CPU's cache, 2-3x faster)
 _WRITE_BUFFER = 1 << 20
-
-
-class TrajectoryError(ValueError):
-    """A trajectory that cannot be read: incomplete, cut short, or inconsistent; the message says which file
-    and why."""
 
 
 # ------------------------------------------------------------------------------------- samples

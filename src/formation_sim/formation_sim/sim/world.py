@@ -12,10 +12,7 @@ import numpy as np
 from formation_agent.core import speed_scale
 from formation_agent.core.closed_form import advance_double
 from formation_msgs_py.types import SensedState
-
-
-class WorldError(ValueError):
-    """A request the world cannot honour (unknown agent, time going backwards, bad input)."""
+from formation_sim.sim.errors import WorldError
 
 
 class World:

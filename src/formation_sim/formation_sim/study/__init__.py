@@ -13,11 +13,12 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'spec': ('Case', 'Study', 'StudyError', 'build_study', 'load_study'),
+        'spec': ('Case', 'Study', 'build_study', 'load_study'),
         'case': ('COLUMNS', 'check_case', 'run_case', 'scenario_of'),
         'audit': ('EdgeWatch', 'theorem_audit'),
         'store': ('read_rows',),
         'runner': ('StudySummary', 'run_study'),
         'report': ('write_report',),
+        'errors': ('StudyError',),
     },
 )

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from formation_sim.sim.files import write_atomically
-from formation_sim.study.spec import StudyError
+from formation_sim.study.errors import StudyError
 from formation_sim.study.store import ROWS_FILE, read_rows
 
 GUARANTEES = (

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from formation_agent.core.kinds import Geometry, KindError, robot_kind
+from formation_agent.core.kinds import Geometry, robot_kind
+from formation_agent.core.errors import KindError
 from formation_agent.core.kinds.car import curvature, steer, steering_angle
 from formation_agent.core.kinematics import control_point_rate
 from formation_agent.core.commander import RobotCommander

@@ -17,8 +17,6 @@ from formation_agent.core.kinds.registry import (
     FOOTPRINT_RADIUS,
     KIND_NAMES,
     SEPARATION_MARGIN,
-    Geometry,
-    KindError,
     KindNames,
     RobotKind,
     control_point_separation,
@@ -27,7 +25,8 @@ from formation_agent.core.kinds.registry import (
     robot_kind,
     unregister,
 )
-from formation_agent.core.kinds.shape import ShapeError, ShapeParameter
+from formation_agent.core.errors import KindError, ShapeError
+from formation_agent.core.kinds.shape import Geometry, ShapeParameter
 from formation_agent.core.kinds.unicycle import Unicycle
 
 for _kind in (Holonomic(), Unicycle(), Car()):

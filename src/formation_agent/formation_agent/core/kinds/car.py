@@ -31,13 +31,17 @@ place, against φ_max) in the AgentReport (docs/MESSAGES.md).  The speed limits 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from formation_agent.core.kinematics import unicycle_velocity
-from formation_agent.core.kinds.registry import Geometry
-from formation_agent.core.kinds.shape import ShapeParameter
+
+from formation_agent.core.kinds.shape import Geometry, ShapeParameter
 from formation_agent.core.kinds.unicycle import Unicycle
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 from formation_msgs_py.lockstep import SATURATION_STEERING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 WHEELBASE = ShapeParameter(
     name='wheelbase',
@@ -106,7 +110,7 @@ class Car(Unicycle):
         return problems
 
     def command(
-        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+        self, u: np.ndarray, *, heading: float | None, geometry: Geometry, limits: Limits, log: SaturationLog
     ) -> tuple[float, ...]:
         if heading is None:
             raise ValueError('a car command needs the robot heading')
@@ -117,7 +121,9 @@ class Car(Unicycle):
             log.note(SATURATION_STEERING, steering_angle(v, omega, geometry.wheelbase), limits.steering_angle)
         return limit_body_velocity(*steered, limits, log)
 
-    def clip(self, linear, angular, *, geometry: Geometry, limits: Limits):
+    def clip(
+        self, linear: tuple[float, ...], angular: float, *, geometry: Geometry, limits: Limits
+    ) -> tuple[tuple[float, ...], float, bool]:
         """|v| clipped, then |ω| to min(max_angular_speed, |v| κ): the steering limit, as a car's base."""
         (v,), w, clipped = super().clip(linear, angular, geometry=geometry, limits=limits)
         turn = abs(v) * curvature(geometry, limits)

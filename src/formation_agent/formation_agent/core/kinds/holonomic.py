@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from formation_agent.core.kinds.registry import Geometry, RobotKind
+from formation_agent.core.kinds.registry import RobotKind
+from formation_agent.core.kinds.shape import Geometry
 from formation_agent.core.limits import Limits, SaturationLog, limit_world_velocity
 
 
@@ -29,11 +30,13 @@ class Holonomic(RobotKind):
     footprint_radius = 0.07
 
     def command(
-        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+        self, u: np.ndarray, *, heading: float | None, geometry: Geometry, limits: Limits, log: SaturationLog
     ) -> tuple[float, ...]:
         return tuple(float(c) for c in limit_world_velocity(u, limits, log))
 
-    def clip(self, linear, angular, *, geometry: Geometry, limits: Limits):
+    def clip(
+        self, linear: tuple[float, ...], angular: float, *, geometry: Geometry, limits: Limits
+    ) -> tuple[tuple[float, ...], float, bool]:
         """The speed scaled down to the limit keeping its direction, |ω| clipped."""
         velocity = np.array(linear, dtype=float)
         speed = float(np.linalg.norm(velocity))
@@ -43,10 +46,12 @@ class Holonomic(RobotKind):
         angular = max(-limits.angular_speed, min(limits.angular_speed, float(angular)))
         return tuple(velocity.tolist()), angular, clipped
 
-    def move(self, position, yaw, linear, angular, duration):
+    def move(
+        self, position: np.ndarray, yaw: float, linear: tuple[float, ...], angular: float, duration: float
+    ) -> tuple[np.ndarray, float]:
         return position + duration * np.array(linear), yaw + duration * angular
 
-    def body_twist(self, linear, angular, yaw):
+    def body_twist(self, linear: tuple[float, ...], angular: float, yaw: float) -> tuple[np.ndarray, float]:
         world = np.zeros(3)
         world[: len(linear)] = linear
         c, s = math.cos(yaw), math.sin(yaw)

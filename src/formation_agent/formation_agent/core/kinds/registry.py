@@ -29,16 +29,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from typing import overload
+
 import numpy as np
 
+from formation_agent.core.errors import KindError
 from formation_agent.core.kinds.shape import Geometry, ShapeParameter, declare, undeclare
 from formation_agent.core.limits import Limits, SaturationLog
 
 _KINDS: dict[str, RobotKind] = {}
-
-
-class KindError(ValueError):
-    """An unknown kind, a kind registered twice, or a robot its kind cannot be (named, with the rule)."""
 
 
 FOOTPRINT_RADIUS = ShapeParameter(
@@ -156,7 +155,8 @@ class RobotKind:
 
     def origin(self, point: np.ndarray, yaw: float, geometry: Geometry) -> np.ndarray:
         """The robot's own position (its pose) whose control point, heading `yaw`, is `point`."""
-        return point - self.world_offset(yaw, geometry, point.size)
+        origin: np.ndarray = point - self.world_offset(yaw, geometry, point.size)
+        return origin
 
 
 def register(kind: RobotKind) -> RobotKind:
@@ -228,7 +228,7 @@ def robot_kind(name: str) -> RobotKind:
         raise KindError(f'robot kind must be one of {tuple(_KINDS)}, got {name!r}') from None
 
 
-class KindNames(Sequence):
+class KindNames(Sequence[str]):
     """The registered kinds' names, read at every use, between fixed names `before` and `after`:
     a choice that never goes stale (argparse choices, a parameter's choices, a backend list)."""
 
@@ -238,7 +238,13 @@ class KindNames(Sequence):
     def _names(self) -> tuple[str, ...]:
         return (*self.before, *_KINDS, *self.after)
 
-    def __getitem__(self, index):
+    @overload
+    def __getitem__(self, index: int) -> str: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> tuple[str, ...]: ...
+
+    def __getitem__(self, index: int | slice) -> str | tuple[str, ...]:
         return self._names()[index]
 
     def __len__(self) -> int:
@@ -247,7 +253,7 @@ class KindNames(Sequence):
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Sequence) and not isinstance(other, str) and tuple(self) == tuple(other)
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]  # equal to tuples, so not hashable
 
     def __repr__(self) -> str:
         return repr(self._names())

@@ -20,15 +20,15 @@ declaring the same one: a second, different declaration under a name is refused 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from formation_agent.core.errors import ShapeError
 
 NODES = ('agent', 'coordinator', 'robot')
 """The nodes that may take a shape parameter: the agent (`formation_agent`), the coordinator of
 robot runs, the simulated robot (`formation_sim.runtime.robot_node`)."""
-
-
-class ShapeError(ValueError):
-    """A shape parameter declared twice differently, or a name no kind declares."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -118,6 +118,11 @@ class Geometry:
     equal when every value is."""
 
     __slots__ = ('_given',)
+    _given: dict[str, float]
+    if TYPE_CHECKING:  # for the type checker: the built-in kinds' shape parameters (any other: getattr)
+        control_point_distance: float
+        wheelbase: float
+        footprint_radius: float | None
 
     def __init__(self, **values: float) -> None:
         for name in values:
@@ -129,7 +134,7 @@ class Geometry:
             raise AttributeError(f'Geometry has no shape parameter {name!r} (declared: {tuple(_DECLARED)})')
         return self._given.get(name, _DECLARED[name].default)
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: object) -> None:
         raise AttributeError('a Geometry is immutable: use replace(...)')
 
     def given(self) -> dict[str, float]:
@@ -152,7 +157,7 @@ class Geometry:
     def __repr__(self) -> str:
         return 'Geometry(' + ', '.join(f'{name}={value!r}' for name, value in self._given.items()) + ')'
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple[Callable[[dict[str, float]], Geometry], tuple[dict[str, float]]]:
         return (_geometry, (self._given,))
 
 

@@ -20,7 +20,8 @@ import math
 import numpy as np
 
 from formation_agent.core.kinematics import unicycle_velocity
-from formation_agent.core.kinds.registry import Geometry, RobotKind
+from formation_agent.core.kinds.registry import RobotKind
+from formation_agent.core.kinds.shape import Geometry
 from formation_agent.core.kinds.shape import ShapeParameter
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 
@@ -46,7 +47,8 @@ def sinc(u: float) -> float:
     y = math.pi * u
     if not y:
         y = _EPS
-    return np.sin(y) / y
+    ratio: float = np.sin(y) / y
+    return ratio
 
 
 def arc(
@@ -66,14 +68,14 @@ class Unicycle(RobotKind):
     world_frame_command = False
     dimensions = (2,)
     steered = True
-    parameters = ('max_angular_speed',)  # its shape parameters: `shape`
+    parameters: tuple[str, ...] = ('max_angular_speed',)  # its shape parameters: `shape`
     params_file = 'turtlebot3.params.yaml'
     shape = (*RobotKind.shape, CONTROL_POINT_DISTANCE)
     # TurtleBot3 Burger: robot_radius 0.105 m in turtlebot3_navigation2's param/burger.yaml (the
     # example's limits 0.22 m/s, 2.84 rad/s are the Burger's); a Waffle takes 0.22 m.
     footprint_radius = 0.105
 
-    def placement_problems(self, *, dimension, geometry: Geometry) -> list[str]:
+    def placement_problems(self, *, dimension: int | None, geometry: Geometry) -> list[str]:
         problems = super().placement_problems(dimension=dimension, geometry=geometry)
         if not geometry.control_point_distance > 0.0:
             problems.append(
@@ -87,14 +89,16 @@ class Unicycle(RobotKind):
         return (float(geometry.control_point_distance), 0.0, 0.0)
 
     def command(
-        self, u, *, heading, geometry: Geometry, limits: Limits, log: SaturationLog
+        self, u: np.ndarray, *, heading: float | None, geometry: Geometry, limits: Limits, log: SaturationLog
     ) -> tuple[float, ...]:
         if heading is None:
             raise ValueError(f'a {self.name} command needs the robot heading')
         v, omega = unicycle_velocity(u, heading, geometry.control_point_distance)
         return limit_body_velocity(v, omega, limits, log)
 
-    def clip(self, linear, angular, *, geometry: Geometry, limits: Limits):
+    def clip(
+        self, linear: tuple[float, ...], angular: float, *, geometry: Geometry, limits: Limits
+    ) -> tuple[tuple[float, ...], float, bool]:
         """|v| and |ω| clipped each on its own."""
         v, w = float(linear[0]), float(angular)
         clipped = abs(v) > limits.linear_speed or abs(w) > limits.angular_speed
@@ -102,8 +106,10 @@ class Unicycle(RobotKind):
         w = max(-limits.angular_speed, min(limits.angular_speed, w))
         return (v,), w, clipped
 
-    def move(self, position, yaw, linear, angular, duration):
+    def move(
+        self, position: np.ndarray, yaw: float, linear: tuple[float, ...], angular: float, duration: float
+    ) -> tuple[np.ndarray, float]:
         return arc(position, yaw, linear[0], angular, duration)
 
-    def body_twist(self, linear, angular, yaw):
+    def body_twist(self, linear: tuple[float, ...], angular: float, yaw: float) -> tuple[np.ndarray, float]:
         return np.array([linear[0], 0.0, 0.0]), angular

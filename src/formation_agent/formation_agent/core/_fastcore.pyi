@@ -1,0 +1,37 @@
+# The compiled core's interface (_fastcore.c, docs/COMPILED_CORE.md), for the type checker: the C
+# extension has no Python source. formation_agent.core.compiled is its only user.
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+from formation_agent.core.crossing import CrossingSearch
+from formation_agent.core.eta import TriggerOutput
+from formation_msgs_py.types import SensedState, TriggerInfo
+
+def configure(
+    *,
+    growth: float,
+    max_steps: int,
+    rtol: float,
+    gap_fraction: float,
+    series_limit: float,
+    series: tuple[float, ...],
+    raiser: Callable[[Any, tuple[Any, ...]], None],
+    array: Callable[..., Any],
+    trigger_output: type,
+    trigger_info: type,
+    direct_output: bool,
+    direct_info: bool,
+) -> None: ...
+def receive(agent: Any, info: TriggerInfo, /) -> bool: ...
+def trigger(agent: Any, t: float, sensed: SensedState, /) -> TriggerOutput | None: ...
+
+# CrossingSearch's twin: the same constructor, attributes and methods (not a subclass at run time)
+class Search(CrossingSearch): ...
+
+class Agenda:
+    horizon: float
+    failed: object | None
+    def __init__(self, *, agent_ids: Iterable[int], horizon: float) -> None: ...
+    def plan(self, agents: Any, changed: Sequence[int], /) -> None: ...
+    def next_time(self) -> float: ...
+    def pop_due(self, t: float, /) -> list[int]: ...

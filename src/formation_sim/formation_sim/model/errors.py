@@ -1,0 +1,28 @@
+"""The errors of the problem model: scenarios, gains, theory, limits, generated teams (a
+scenario that breaks a hypothesis is `formation_sim.model.validate.ValidationError`, which
+holds its report). Each is a `FormationError`.
+"""
+
+from __future__ import annotations
+
+from formation_msgs_py.errors import FormationError
+
+
+class GainsError(FormationError, ValueError):
+    """Gains outside what (riccatti) or Theorem 2 can take (the message names the rule and value)."""
+
+
+class GenerateError(FormationError, ValueError):
+    """Parameters for which no scenario can be generated."""
+
+
+class ScenarioError(FormationError, ValueError):
+    """A scenario that cannot be read or is structurally unsound; the message names key and value."""
+
+
+class LimitsError(FormationError, ValueError):
+    """Limits that cannot be met, or that no speed scale applies to (the message names the rule)."""
+
+
+class TheoryError(FormationError, ValueError):
+    """A quantity requested outside the hypotheses it needs (the message names the rule and values)."""
