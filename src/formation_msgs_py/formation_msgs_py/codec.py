@@ -15,11 +15,11 @@ import functools
 import json
 import math
 from array import array
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from formation_msgs_py.errors import MessageError
+from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.lockstep import (
     REJECT_LENGTH,
     REJECT_NON_FINITE,
@@ -147,6 +147,25 @@ def tag_string(msg, signer: Signer | None, topic: str):
 def check_string(verifier: Verifier, topic: str, msg) -> None:
     if verifier.required:
         verifier.check_string(topic, getattr(msg, 'data', None) or '')
+
+
+def tag_refused(
+    verifier: Verifier,
+    topic: str,
+    msg,
+    reject: Callable[[str, str, str], None],
+    *,
+    check: Callable[[Verifier, str, object], None] = check_array,
+) -> bool:
+    """Whether `msg` lacks the run's valid tag for `topic` (`check`: check_array or check_string):
+    then `reject(topic, reason, text)` refuses and counts it (untagged and forged are foreign, a
+    replay apart); never without a key."""
+    try:
+        check(verifier, topic, msg)
+    except TagError as error:
+        reject(topic, error.reason, str(error))
+        return True
+    return False
 
 
 # --------------------------------------------------------------------------------------------

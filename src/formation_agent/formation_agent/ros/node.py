@@ -63,8 +63,8 @@ from formation_agent.ros.stepping import (
     TriggerSchedule,
     refuse_lock_step,
 )
-from formation_msgs_py.codec import check_array, decode_step, encode_trigger_info
-from formation_msgs_py.errors import MessageError, TagError
+from formation_msgs_py.codec import decode_step, encode_trigger_info, tag_refused
+from formation_msgs_py.errors import MessageError
 from formation_msgs_py.tags import Signer, Verifier
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
@@ -525,14 +525,9 @@ def _on_info(node: FormationAgentNode, msg, sender: int) -> None:
 
 
 def _tag_refused(node: FormationAgentNode, topic: str, msg) -> bool:
-    """Whether `msg` lacks the run's valid tag for `topic` (refused and counted: untagged and
-    forged are foreign, a replay apart); never without a key."""
-    try:
-        check_array(node.verifier, topic, msg)
-    except TagError as error:
-        node.reject(topic, error.reason, str(error))
-        return True
-    return False
+    """Whether `msg` lacks the run's valid tag for `topic` (`codec.tag_refused`: refused and
+    counted by the agent)."""
+    return tag_refused(node.verifier, topic, msg, node.reject)
 
 
 def _latest_stamp(node: FormationAgentNode) -> float:

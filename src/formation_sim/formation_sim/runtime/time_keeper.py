@@ -33,6 +33,7 @@ from formation_agent.ros.process import EXECUTORS
 from formation_msgs_py.codec import (
     check_array,
     check_string,
+    tag_refused as refused_tag,
     decode_agent_report,
     decode_status,
     encode_step,
@@ -41,7 +42,7 @@ from formation_msgs_py.codec import (
 from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
-from formation_msgs_py.errors import KeyFileError, TagError
+from formation_msgs_py.errors import KeyFileError
 from formation_msgs_py.tags import read_key, run_tags
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
@@ -615,14 +616,9 @@ def _tagged(node: TimeKeeperNode, topic: str, msg, then) -> None:
 
 
 def tag_refused(node: TimeKeeperNode, topic: str, msg, check) -> bool:
-    """Whether `msg` lacks the run's valid tag for `topic` (`check`: codec.check_array or
-    check_string); refused and counted (untagged and forged: foreign) by the keeper."""
-    try:
-        check(node.verifier, topic, msg)
-    except TagError as error:
-        node._reject(topic, error.reason, str(error))
-        return True
-    return False
+    """Whether `msg` lacks the run's valid tag for `topic` (`codec.tag_refused`, `check`:
+    codec.check_array or check_string): refused and counted by the keeper."""
+    return refused_tag(node.verifier, topic, msg, node._reject, check=check)
 
 
 def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
