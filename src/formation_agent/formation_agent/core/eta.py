@@ -5,7 +5,8 @@ triggering times it is handed what it senses and returns its new input and the t
 information for each neighbour; in between it is handed its neighbours' triggering information.
 From these it predicts every relative state in closed form (eqs. statexixj, statexixjd,
 stateqiqj) and finds its next triggering time as the first crossing of ||e_i(t)|| = α e^{-βt}
-(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`. With a speed
+(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`; the threshold is
+the agent's triggering rule (`trigger_rule`, formation_agent.core.trigger: that one by default). With a speed
 scale κ and a threshold floor c0 (`formation_agent.core.speed_scale`, docs/SPEED_SCALE.md) the
 agent runs in real time with the gains that module derives, against c0 + α e^{-κβt}.
 
