@@ -58,7 +58,7 @@ import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
-from formation_agent.core.trigger import DEFAULT_RULE
+from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, rule_factory
 from formation_sim.model import theory
 from formation_msgs_py.errors import FormationError
 from formation_sim.model.errors import TheoryError
@@ -263,7 +263,7 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
 
 def _check_trigger_rule(scenario: Scenario, out: _Collector) -> None:
     """A warning for a rule the theorems do not cover (formation_agent.core.trigger)."""
-    if scenario.trigger_rule != DEFAULT_RULE:
+    if rule_factory(scenario.trigger_rule) is not ExponentialRule:  # the scenario checked the name
         out.warning(
             'trigger_rule',
             'gains',
