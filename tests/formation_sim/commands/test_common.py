@@ -114,7 +114,42 @@ def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
     assert off.safety is None and extra['layer'] == 'off' and extra['origin_separation'] == 2 * 0.49 + 0.05
     err = capsys.readouterr().err
     assert 'warning: the safety layer is off' in err and 'must exceed the guard radius' in err
-    assert robot_safety(square, 0.9, _robots('unicycle')) is None  # 1.1 m between control points
+    assert (
+        robot_safety(square, 1.6, _robots('unicycle')) is None
+    )  # D_s = 1.8 m: ρ* = (1 + sqrt(1 + 1.8²·4)) / 2
     err = capsys.readouterr().err
-    assert 'start 0.992613 m apart, not more than the separation 1.1 m' in err
-    assert "the robots' origins 0.9 m apart, from --min-separation, are their control points 1.1 m" in err
+    assert 'must exceed the guard radius ρ* = (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = 2.36815 m' in err
+    assert "the robots' origins 1.6 m apart, from --min-separation, are their control points 1.8 m" in err
+
+
+def test_a_start_inside_the_margin_runs_and_only_overlapping_robots_are_refused(capsys):
+    """Issue 27 leftover 1: control points closer than D_s start in recovery (docs/SAFETY.md (S9)),
+    said on stderr; robots whose origins are no more than two footprints apart are refused, with
+    the pair, the distance and the rule."""
+    from formation_sim.commands.common import robot_safety
+    from formation_sim.model.scenario import load_scenario
+
+    square = load_scenario('robots_square')
+    safe, extra = robot_safety(square, 0.9, _robots('unicycle'))  # 1.1 m between control points
+    assert (
+        safe.safety.min_separation == pytest.approx(1.1)
+        and extra['control_point_separation'] == safe.safety.min_separation
+    )
+    err = capsys.readouterr().err
+    assert (
+        'start 0.992613 m apart, inside the separation 1.1 m: the safety layer moves every such pair' in err
+    )
+    near = square.positions.copy()
+    near[1] = near[0] + [
+        0.15,
+        0.2,
+    ]  # 0.25 m: more than 2r = 0.21 m for Burgers, less than 0.28 m for r = 0.14
+    close = square.replace(positions=near)
+    assert robot_safety(close, None, _robots('unicycle'))[0].safety is not None
+    capsys.readouterr()
+    assert robot_safety(close, None, _robots('unicycle', footprint_radius=0.14)) is None
+    err = capsys.readouterr().err
+    assert (
+        'formation run: error: robots overlap: agents 1 and 2 are set down with their origins 0.25 m apart, '
+        'not more than two footprints 2r = 0.28 m (unicycle, r = 0.14 m' in err
+    )

@@ -13,6 +13,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
 from formation_sim.model.scenario import Scenario, builtin_scenarios, load_scenario, short_repr
@@ -153,6 +155,9 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
         )
         return scenario, {'layer': 'off', 'source': f'{scenario.dynamics}, dimension {scenario.dimension}'}
     points = control_point_separation(origins, kind=kind, geometry=robots.geometry)
+    if (overlap := footprint_overlap(scenario, kind=kind, geometry=robots.geometry)) is not None:
+        refuse('run', overlap)
+        return None
     default = separation is None and scenario.safety is None
     if default and (problem := _separation_problem(scenario, points)) is not None:
         print(  # the default never refuses a run: it says why the layer stays off
@@ -174,7 +179,58 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
         f'their control points {points:g} m',
         file=sys.stderr,
     )
+    if (inside := inside_the_margin(safe)) is not None:
+        print(f'formation run: {inside}', file=sys.stderr)
     return safe, {'origin_separation': origins, 'control_point_separation': points, 'source': source}
+
+
+def _closest_pair(points: np.ndarray) -> tuple[int, int, float]:
+    """(row a, row b, distance) of the closest two of `points` (a < b)."""
+    best = (0, 1, math.inf)
+    for a in range(len(points)):
+        gaps = np.linalg.norm(points[a + 1 :] - points[a], axis=1)
+        if gaps.size and float(gaps.min()) < best[2]:
+            best = (a, a + 1 + int(np.argmin(gaps)), float(gaps.min()))
+    return best
+
+
+def footprint_overlap(scenario: Scenario, *, kind, geometry) -> str | None:
+    """Why robots of `kind` set down at the scenario's points (their control points) and headings (0
+    without any) would overlap, or None: two origins (their poses) no more than two footprints 2r
+    apart is a real error, not a start the safety layer can recover from (docs/SAFETY.md (S9))."""
+    if scenario.dimension != 2:
+        return None
+    yaws = scenario.headings if scenario.headings is not None else np.zeros(len(scenario.agent_ids))
+    origins = np.array(
+        [kind.origin(point, float(yaw), geometry) for point, yaw in zip(scenario.positions, yaws)]
+    )
+    a, b, gap = _closest_pair(origins)
+    footprint = kind.footprint(geometry)
+    if gap > 2.0 * footprint:
+        return None
+    ids = scenario.agent_ids
+    return (
+        f'robots overlap: agents {ids[a]} and {ids[b]} are set down with their origins {gap:.6g} m apart, '
+        f'not more than two footprints 2r = {2.0 * footprint:g} m ({kind.name}, r = {footprint:g} m; '
+        'docs/ROBOTS.md "Footprints"): move them apart'
+    )
+
+
+def inside_the_margin(scenario: Scenario) -> str | None:
+    """What the safety layer does first when two of the scenario's points start closer than its D
+    (they are moved apart, docs/SAFETY.md (S9)), or None."""
+    if scenario.safety is None or scenario.dimension != 2:
+        return None
+    a, b, gap = _closest_pair(np.asarray(scenario.positions))
+    separation = scenario.safety.min_separation
+    if gap >= separation:
+        return None
+    ids = scenario.agent_ids
+    return (
+        f'agents {ids[a]} and {ids[b]} start {gap:.6g} m apart, inside the separation {separation:g} m: '
+        'the safety layer moves every such pair apart first, its distance never decreasing until it '
+        'holds, then kept (docs/SAFETY.md, "A start inside the margin")'
+    )
 
 
 def _separation_problem(scenario: Scenario, separation: float) -> str | None:
