@@ -113,7 +113,11 @@ def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
     off, extra = robot_safety(square, None, cars)
     assert off.safety is None and extra['layer'] == 'off' and extra['origin_separation'] == 2 * 0.49 + 0.05
     err = capsys.readouterr().err
-    assert 'warning: the safety layer is off' in err and 'must exceed the guard radius' in err
+    assert 'warning: the safety layer is off' in err
+    assert (
+        "the formation itself puts agents 1 and 2 1 m apart, not more than the control points' "
+        'separation 1.69 m' in err
+    )
     assert (
         robot_safety(square, 1.6, _robots('unicycle')) is None
     )  # D_s = 1.8 m: ρ* = (1 + sqrt(1 + 1.8²·4)) / 2
@@ -153,3 +157,26 @@ def test_a_start_inside_the_margin_runs_and_only_overlapping_robots_are_refused(
         'formation run: error: robots overlap: agents 1 and 2 are set down with their origins 0.25 m apart, '
         'not more than two footprints 2r = 0.28 m (unicycle, r = 0.14 m' in err
     )
+
+
+def test_cars_take_the_default_on_a_formation_that_has_room_for_them(capsys):
+    """Issue 27 leftover 2: F1TENTH cars (r = 0.49 m, l = 0.33 m: D = 1.03 m, D_s = 1.69 m) on the
+    square scaled 3× (3 m sides): the default applies, its guard radius ρ* = (1 + sqrt(1 + 4 · 1.69²))
+    / 2 = 2.26241 m beyond the default R = 2 m, so R = ρ* + 2 v̄ · 1 s = 3.26241 m."""
+    from formation_sim.commands.common import robot_safety
+    from formation_sim.model.scenario import Edge, load_scenario
+
+    square = load_scenario('robots_square')
+    big = square.replace(
+        positions=3.0 * square.positions,
+        edges=tuple(Edge(i=e.i, j=e.j, d=3.0 * e.d) for e in square.edges),
+        delta=3.0 * square.delta,
+    )
+    cars = _robots('car', control_point_distance=0.33, wheelbase=0.33)
+    safe, extra = robot_safety(big, None, cars)
+    assert safe.safety.min_separation == pytest.approx(1.69)
+    assert safe.safety.sensing_radius == pytest.approx(3.26241, abs=1e-5)
+    assert extra['origin_separation'] == pytest.approx(1.03)
+    err = capsys.readouterr().err
+    assert 'the default sensing radius 2 m is within the guard radius ρ* = 2.262 m' in err
+    assert "keeps the robots' origins 1.03 m apart (car footprints (r = 0.49 m))" in err

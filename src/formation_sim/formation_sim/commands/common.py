@@ -11,6 +11,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,6 +25,7 @@ from formation_sim.sim.run_folder import check_report_dir
 from formation_sim.sim.errors import RunFolderError
 
 if TYPE_CHECKING:
+    from formation_agent.core.kinds.shape import Geometry
     from rclpy.node import Node
 
 
@@ -128,7 +130,9 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
         return None
 
 
-def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[Scenario, dict] | None:
+def robot_safety(
+    scenario: Scenario, separation: float | None, robots, command: str = 'run'
+) -> tuple[Scenario, dict] | None:
     """On a robot backend (`robots`: its RobotOptions): the scenario with the safety layer keeping
     the robots' origins D apart, so their control points D_s = D + c_i + c_j (docs/ROBOTS.md,
     "Footprints"), and what summary.json's extra.safety adds (D, D_s, where D came from); None
@@ -139,7 +143,7 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
     kind = robot_kind(robots.model)
     if separation == 0.0:
         note = {'layer': 'off', 'source': '--min-separation 0'}
-        print('formation run: the safety layer is off (--min-separation 0)', file=sys.stderr)
+        print(f'formation {command}: the safety layer is off (--min-separation 0)', file=sys.stderr)
         return scenario.replace(safety=None), note
     if separation is not None:
         origins, source = separation, '--min-separation'
@@ -150,37 +154,40 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
         origins, source = 2.0 * footprint + SEPARATION_MARGIN, f'{kind.name} footprints (r = {footprint:g} m)'
     else:
         print(
-            'formation run: the safety layer is off (ETA-1 in the plane only; docs/SAFETY.md)',
+            f'formation {command}: the safety layer is off (ETA-1 in the plane only; docs/SAFETY.md)',
             file=sys.stderr,
         )
         return scenario, {'layer': 'off', 'source': f'{scenario.dynamics}, dimension {scenario.dimension}'}
     points = control_point_separation(origins, kind=kind, geometry=robots.geometry)
     if (overlap := footprint_overlap(scenario, kind=kind, geometry=robots.geometry)) is not None:
-        refuse('run', overlap)
+        refuse(command, overlap)
         return None
-    default = separation is None and scenario.safety is None
-    if default and (problem := _separation_problem(scenario, points)) is not None:
-        print(  # the default never refuses a run: it says why the layer stays off
-            "formation run: warning: the safety layer is off: the default, the robots' origins "
-            f'{origins:g} m apart ({source}, control points {points:g} m), does not apply: {problem}; give '
-            '--min-separation D (or 0 to silence this)',
-            file=sys.stderr,
-        )
-        return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
-    if (safe := with_min_separation(scenario, points, 'run')) is None:
+    if separation is None and scenario.safety is None:
+        safe, problem = default_layer(scenario, points)
+        if safe is None:
+            print(  # the default never refuses a run: it says why the layer stays off
+                f"formation {command}: warning: the safety layer is off: the default, the robots' origins "
+                f'{origins:g} m apart ({source}, control points {points:g} m), does not apply: {problem}; '
+                'give --min-separation D (or 0 to silence this)',
+                file=sys.stderr,
+            )
+            return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
+        if problem is not None:  # applies, with the sensing radius it needs
+            print(f'formation {command}: {problem}', file=sys.stderr)
+    elif (safe := with_min_separation(scenario, points, command)) is None:
         print(
-            f"formation run: (the robots' origins {origins:g} m apart, from {source}, are their control "
-            f'points {points:g} m apart: D_s = D + c_i + c_j, docs/ROBOTS.md "Footprints")',
+            f"formation {command}: (the robots' origins {origins:g} m apart, from {source}, are their "
+            f'control points {points:g} m apart: D_s = D + c_i + c_j, docs/ROBOTS.md "Footprints")',
             file=sys.stderr,
         )
         return None
     print(
-        f"formation run: the safety layer keeps the robots' origins {origins:g} m apart ({source}): "
+        f"formation {command}: the safety layer keeps the robots' origins {origins:g} m apart ({source}): "
         f'their control points {points:g} m',
         file=sys.stderr,
     )
     if (inside := inside_the_margin(safe)) is not None:
-        print(f'formation run: {inside}', file=sys.stderr)
+        print(f'formation {command}: {inside}', file=sys.stderr)
     return safe, {'origin_separation': origins, 'control_point_separation': points, 'source': source}
 
 
@@ -233,17 +240,85 @@ def inside_the_margin(scenario: Scenario) -> str | None:
     )
 
 
-def _separation_problem(scenario: Scenario, separation: float) -> str | None:
-    """Why the safety layer at `separation` cannot run `scenario` (its rules), or None."""
-    from formation_agent.core.errors import SafetyError
-    from formation_agent.core.safety import SafetyConfig
+@dataclass(frozen=True)
+class RobotShape:
+    """What `robot_safety` reads of a run's robots (`RobotOptions` has both): their kind and shape."""
 
-    keys = {} if scenario.safety is None else scenario.safety.as_dict()
+    model: str
+    geometry: Geometry
+
+
+def backend_safety(scenario: Scenario, separation: float | None, robots, command: str):
+    """(the scenario with the safety layer as `command` runs it, summary.json's extra so far), or None
+    after saying why not: on robot backends (`robots`: their RobotOptions) the robots' origins kept
+    apart, by default their footprints (`robot_safety`); on the simulator (None) the points the
+    agents control, `--min-separation` alone (`formation run`, `formation params`, `formation validate`)."""
+    if robots is not None:
+        if (safe := robot_safety(scenario, separation, robots, command)) is None:
+            return None
+        return safe[0], {'safety': safe[1]}
+    scenario = with_min_separation(scenario, separation, command)
+    return None if scenario is None else (scenario, {})
+
+
+DEFAULT_HEARTBEAT = 1.0
+"""[s]: where the default separation's guard radius reaches the default sensing radius, the default
+takes R = ρ* + 2 v̄ · DEFAULT_HEARTBEAT (robots read every other robot's pose: R is how far an agent
+looks, not a sensor's range)."""
+
+
+def default_layer(scenario: Scenario, separation: float) -> tuple[Scenario | None, str | None]:
+    """The robot backends' default layer, control points `separation` (D_s) apart: (the scenario
+    with it, a note or None), or (None, why it cannot apply). Its rules: the formation itself keeps
+    every two agents more than D_s apart (else the layer would hold the team off its formation),
+    and the sensing radius exceeds the guard radius ρ*: the default R (2 m), raised to ρ* + 2 v̄ ·
+    1 s where ρ* reaches it (F1TENTH cars: D_s = 1.69 m, ρ* = 2.26 m, R = 3.26 m)."""
+    from formation_agent.core.errors import SafetyError
+    from formation_agent.core.safety import (
+        DEFAULT_GAMMA,
+        DEFAULT_MAX_SPEED,
+        DEFAULT_SENSING_RADIUS,
+        SafetyConfig,
+    )
+
+    shape = formation_shape(scenario)
+    a, b, gap = _closest_pair(shape[1])
+    if gap <= separation:
+        ids = shape[0]
+        return None, (
+            f'the formation itself puts agents {ids[a]} and {ids[b]} {gap:.6g} m apart, not more than the '
+            f"control points' separation {separation:g} m: the layer would hold the team off its formation"
+        )
+    v, g = DEFAULT_MAX_SPEED, DEFAULT_GAMMA
+    reach = (2.0 * v + math.sqrt(4.0 * v * v + g * g * separation * separation)) / g  # ρ* (SafetyConfig)
+    radius, note = DEFAULT_SENSING_RADIUS, None
+    if not radius > reach:
+        radius = reach + 2.0 * v * DEFAULT_HEARTBEAT
+        note = (
+            f'the default sensing radius {DEFAULT_SENSING_RADIUS:g} m is within the guard radius ρ* = '
+            f'{reach:.4g} m of these footprints: the agents take R = {radius:.4g} m (ρ* + 2 v̄ · 1 s; they '
+            "read every robot's pose)"
+        )
     try:
-        scenario.replace(safety=SafetyConfig(**{**keys, 'min_separation': separation}))
+        return scenario.replace(safety=SafetyConfig(min_separation=separation, sensing_radius=radius)), note
     except (ScenarioError, SafetyError) as error:
-        return str(error)
-    return None
+        return None, str(error)
+
+
+def formation_shape(scenario: Scenario) -> tuple[tuple[int, ...], np.ndarray]:
+    """(agent ids, their target positions): the formation the edges' d_ij define, agent ids[0] at
+    the origin, over the agents its graph reaches from it (d_ij = x_i - x_j at the formation)."""
+    first = scenario.agent_ids[0]
+    places = {first: np.zeros(scenario.dimension)}
+    queue = [first]
+    while queue:
+        i = queue.pop(0)
+        for j, d in sorted(scenario.neighbours(i).items()):
+            if j not in places:
+                places[j] = places[i] - np.asarray(d, dtype=float)
+                queue.append(j)
+    ids = tuple(sorted(places))
+    return ids, np.array([places[a] for a in ids])
 
 
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
