@@ -101,8 +101,10 @@ def test_a_given_separation_is_between_origins_and_zero_turns_the_layer_off(caps
 
 
 def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
-    """ETA-2 (the layer is ETA-1's), and F1TENTH cars (D_s = 1.69 m) on the 1 m square: the layer
-    stays off with a warning naming the rule; asked for explicitly, the same is refused."""
+    """ETA-2 (the layer is ETA-1's): off, said. F1TENTH cars (D_s = 1.69 m) on the 1 m square: the
+    formation has no room for their footprints, so the default keeps 0.9 of its closest pair between
+    control points and says so; cars whose control points reach too far for that: off with a warning
+    naming the rule. Asked for explicitly, a separation the layer cannot take is refused."""
     from formation_sim.commands.common import robot_safety
     from formation_sim.model.scenario import load_scenario
 
@@ -110,14 +112,19 @@ def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
     assert double.safety is None and extra == {'layer': 'off', 'source': 'double, dimension 2'}
     cars = _robots('car', control_point_distance=0.33, wheelbase=0.33)
     square = load_scenario('robots_square')
-    off, extra = robot_safety(square, None, cars)
-    assert off.safety is None and extra['layer'] == 'off' and extra['origin_separation'] == 2 * 0.49 + 0.05
+    fitted, extra = robot_safety(square, None, cars)  # D_s = 1.69 m does not fit the 1 m square
+    assert fitted.safety.min_separation == pytest.approx(0.9)  # 0.9 of the formation's 1 m
+    assert extra['origin_separation'] == pytest.approx(0.9 - 0.66) and 'fitted' in extra['source']
     err = capsys.readouterr().err
-    assert 'warning: the safety layer is off' in err
     assert (
-        "the formation itself puts agents 1 and 2 1 m apart, not more than the control points' "
-        'separation 1.69 m' in err
+        "the formation itself puts agents 1 and 2 1 m apart, not more than the control points' separation "
+        '1.69 m: the layer keeps them 0.9 m apart instead (0.9 of it), their origins 0.24 m: less than the '
+        "robots' footprints" in err
     )
+    long_cars = _robots('car', control_point_distance=0.5, wheelbase=0.33)  # 0.9 m leaves no room: off
+    off, extra = robot_safety(square, None, long_cars)
+    assert off.safety is None and extra['layer'] == 'off'
+    assert 'warning: the safety layer is off' in capsys.readouterr().err
     assert (
         robot_safety(square, 1.6, _robots('unicycle')) is None
     )  # D_s = 1.8 m: ρ* = (1 + sqrt(1 + 1.8²·4)) / 2

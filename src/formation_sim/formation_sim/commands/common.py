@@ -163,7 +163,7 @@ def robot_safety(
         refuse(command, overlap)
         return None
     if separation is None and scenario.safety is None:
-        safe, problem = default_layer(scenario, points)
+        safe, problem = default_layer(scenario, points, reach=points - origins)
         if safe is None:
             print(  # the default never refuses a run: it says why the layer stays off
                 f"formation {command}: warning: the safety layer is off: the default, the robots' origins "
@@ -172,8 +172,11 @@ def robot_safety(
                 file=sys.stderr,
             )
             return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
-        if problem is not None:  # applies, with the sensing radius it needs
+        if problem is not None:  # applies, with the sensing radius or the separation it needs
             print(f'formation {command}: {problem}', file=sys.stderr)
+            if safe.safety.min_separation != points:  # fitted to the formation
+                origins, points = safe.safety.min_separation - (points - origins), safe.safety.min_separation
+                source = f'{source}, fitted to the formation'
     elif (safe := with_min_separation(scenario, points, command)) is None:
         print(
             f"formation {command}: (the robots' origins {origins:g} m apart, from {source}, are their "
@@ -267,38 +270,53 @@ takes R = ρ* + 2 v̄ · DEFAULT_HEARTBEAT (robots read every other robot's pose
 looks, not a sensor's range)."""
 
 
-def default_layer(scenario: Scenario, separation: float) -> tuple[Scenario | None, str | None]:
-    """The robot backends' default layer, control points `separation` (D_s) apart: (the scenario
-    with it, a note or None), or (None, why it cannot apply). Its rules: the formation itself keeps
-    every two agents more than D_s apart (else the layer would hold the team off its formation),
-    and the sensing radius exceeds the guard radius ρ*: the default R (2 m), raised to ρ* + 2 v̄ ·
-    1 s where ρ* reaches it (F1TENTH cars: D_s = 1.69 m, ρ* = 2.26 m, R = 3.26 m)."""
+FORMATION_SHARE = 0.9
+"""Where the formation has no room for the default separation, the default keeps the control points
+this share of the formation's closest pair apart."""
+
+
+def default_layer(
+    scenario: Scenario, separation: float, *, reach: float
+) -> tuple[Scenario | None, str | None]:
+    """The robot backends' default layer, control points `separation` (D_s) apart (`reach`: c_i +
+    c_j, so origins D_s - reach): (the scenario with it, a note or None), or (None, why it cannot
+    apply). Its rules: the formation itself keeps every two agents more than D_s apart, else the
+    layer would hold the team off it: there D_s is FORMATION_SHARE of the formation's closest pair
+    instead (F1TENTH cars on the 1 m square: 0.9 m, origins 0.24 m apart: less than their
+    footprints, said), none if that leaves the origins no room; and the sensing radius exceeds the
+    guard radius ρ*: the default R (2 m), raised to ρ* + 2 v̄ · 1 s where ρ* reaches it (cars on a
+    formation with room: D_s = 1.69 m, ρ* = 2.26 m, R = 3.26 m)."""
     from formation_agent.core.errors import SafetyError
-    from formation_agent.core.safety import (
-        DEFAULT_GAMMA,
-        DEFAULT_MAX_SPEED,
-        DEFAULT_SENSING_RADIUS,
-        SafetyConfig,
-    )
+    from formation_agent.core.safety import DEFAULT_GAMMA, DEFAULT_MAX_SPEED, DEFAULT_SENSING_RADIUS
+    from formation_agent.core.safety import SafetyConfig
 
     shape = formation_shape(scenario)
     a, b, gap = _closest_pair(shape[1])
+    notes = []
     if gap <= separation:
-        ids = shape[0]
-        return None, (
+        ids, fitted = shape[0], FORMATION_SHARE * gap
+        where = (
             f'the formation itself puts agents {ids[a]} and {ids[b]} {gap:.6g} m apart, not more than the '
-            f"control points' separation {separation:g} m: the layer would hold the team off its formation"
+            f"control points' separation {separation:g} m"
+        )
+        if not fitted > reach:
+            return None, f'{where}, and {FORMATION_SHARE:g} of it leaves their origins no room'
+        separation = fitted
+        notes.append(
+            f'{where}: the layer keeps them {fitted:.4g} m apart instead ({FORMATION_SHARE:g} of it), their '
+            f"origins {fitted - reach:.4g} m: less than the robots' footprints (docs/SAFETY.md)"
         )
     v, g = DEFAULT_MAX_SPEED, DEFAULT_GAMMA
-    reach = (2.0 * v + math.sqrt(4.0 * v * v + g * g * separation * separation)) / g  # ρ* (SafetyConfig)
-    radius, note = DEFAULT_SENSING_RADIUS, None
-    if not radius > reach:
-        radius = reach + 2.0 * v * DEFAULT_HEARTBEAT
-        note = (
+    guard = (2.0 * v + math.sqrt(4.0 * v * v + g * g * separation * separation)) / g  # ρ* (SafetyConfig)
+    radius = DEFAULT_SENSING_RADIUS
+    if not radius > guard:
+        radius = guard + 2.0 * v * DEFAULT_HEARTBEAT
+        notes.append(
             f'the default sensing radius {DEFAULT_SENSING_RADIUS:g} m is within the guard radius ρ* = '
-            f'{reach:.4g} m of these footprints: the agents take R = {radius:.4g} m (ρ* + 2 v̄ · 1 s; they '
+            f'{guard:.4g} m of these footprints: the agents take R = {radius:.4g} m (ρ* + 2 v̄ · 1 s; they '
             "read every robot's pose)"
         )
+    note = '; '.join(notes) or None
     try:
         return scenario.replace(safety=SafetyConfig(min_separation=separation, sensing_radius=radius)), note
     except (ScenarioError, SafetyError) as error:
