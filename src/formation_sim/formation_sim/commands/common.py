@@ -174,8 +174,9 @@ def robot_safety(
             return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
         if problem is not None:  # applies, with the sensing radius or the separation it needs
             print(f'formation {command}: {problem}', file=sys.stderr)
-            if safe.safety.min_separation != points:  # fitted to the formation
-                origins, points = safe.safety.min_separation - (points - origins), safe.safety.min_separation
+            fitted = points if safe.safety is None else safe.safety.min_separation
+            if fitted != points:  # fitted to the formation
+                origins, points = fitted - (points - origins), fitted
                 source = f'{source}, fitted to the formation'
     elif (safe := with_min_separation(scenario, points, command)) is None:
         print(
@@ -260,8 +261,8 @@ def backend_safety(scenario: Scenario, separation: float | None, robots, command
         if (safe := robot_safety(scenario, separation, robots, command)) is None:
             return None
         return safe[0], {'safety': safe[1]}
-    scenario = with_min_separation(scenario, separation, command)
-    return None if scenario is None else (scenario, {})
+    chosen = with_min_separation(scenario, separation, command)
+    return None if chosen is None else (chosen, {})
 
 
 DEFAULT_HEARTBEAT = 1.0
