@@ -13,8 +13,11 @@ import pytest
 from formation_agent.core.eta import Eta1Agent, make_agent
 from formation_agent.core.errors import AgentError, SafetyError
 from formation_agent.core.safety import (
+    RECOVERY_EXIT,
+    RECOVERY_SPEED,
     CappedSearch,
     courteous_zero,
+    recovering_half,
     SafetyConfig,
     SafetyLayer,
     exact_half,
@@ -300,3 +303,60 @@ def test_a_trigger_refuses_nearby_robots_a_range_sensor_cannot_give(nearby, comp
     assert safe[1].last_trigger is None and safe[1].safety_interventions == 0
     edge = {3: (2.0, 0.0)}  # exactly at R: seen, as `World.nearby` sees it (||r||² <= R²)
     assert safe[1].trigger(0.0, sensed[1], nearby=edge).time == 0.0
+
+
+def _filter_alone(layer: SafetyLayer, nominal, nearby, t: float = 0.0):
+    return layer.filter(t=t, nominal=nominal, rel=[], y=[], capacity=[], nearby=nearby)
+
+
+@pytest.mark.parametrize('seed', range(20))
+def test_a_pair_inside_the_margin_is_moved_apart_and_its_half_holds_until_the_next_trigger(seed):
+    """(S9): whatever the nominal command, a robot set down closer than D to another moves away from
+    it at >= RECOVERY_SPEED v̄ along r̂, and the safety time keeps 2 r·v - σ >= 0 under every motion
+    of the other robot up to v̄ (sampled), with a next trigger strictly later."""
+    rng = np.random.default_rng(seed)
+    r = rng.normal(size=2)
+    r = tuple(r / np.linalg.norm(r) * rng.uniform(0.02, 0.99) * CONFIG.min_separation)
+    nominal = tuple(rng.normal(size=2) * 0.4)
+    layer = SafetyLayer(CONFIG, agent_id=1)
+    v = _filter_alone(layer, nominal, {2: r})
+    assert np.dot(r, v) / np.linalg.norm(r) >= RECOVERY_SPEED * CONFIG.max_speed * (1 - 1e-12)
+    assert math.hypot(*v) <= CONFIG.max_speed * (1 + 1e-12)
+    sigma = layer.recovering[('seen', 2)]
+    assert sigma == pytest.approx(np.linalg.norm(r) * RECOVERY_SPEED * CONFIG.max_speed)
+    until = layer.safety_time(now=0.0, edges=[])
+    assert until > 0.0
+    for _ in range(20):  # the other robot's motions: piecewise constant velocities up to v̄
+        steps = rng.normal(size=(50, 2))
+        steps *= CONFIG.max_speed * rng.uniform(0, 1, size=(50, 1)) / np.linalg.norm(steps, axis=1)[:, None]
+        tau = np.linspace(0.0, until, 51)[1:]
+        moved = np.cumsum(steps * (until / 50), axis=0)
+        rel = np.asarray(r) + tau[:, None] * np.asarray(v) - moved
+        assert np.all(2 * rel @ np.asarray(v) - sigma >= -1e-12)
+    c0, _, c2 = recovering_half(r, v, sigma, CONFIG.max_speed)  # starts at >= σ: twice the demand
+    assert c0 >= sigma * (1 - 1e-9) and c2 == 0.0
+
+
+def test_a_robot_boxed_in_by_two_recovering_pairs_holds_still_without_a_trigger_loop():
+    """The middle of three robots 0.1 m apart on a line cannot move away from both: the demand is
+    halved until none is asked, and it holds still (v = 0) with its next trigger at the heartbeat."""
+    layer = SafetyLayer(CONFIG, agent_id=2)
+    v = _filter_alone(layer, (0.3, 0.1), {1: (0.1, 0.0), 3: (-0.1, 0.0)})
+    assert v == (0.0, 0.0)
+    assert layer.recovering == {('seen', 1): 0.0, ('seen', 3): 0.0}
+    assert layer.safety_time(now=0.0, edges=[]) == CONFIG.heartbeat
+
+
+def test_recovery_ends_only_at_the_exit_margin():
+    """Hysteresis: a pair in recovery stays in it until a trigger finds it RECOVERY_EXIT · D apart; a
+    pair never inside the margin at 1.05 D is an ordinary pair."""
+    d = CONFIG.min_separation
+    layer = SafetyLayer(CONFIG, agent_id=1)
+    _filter_alone(layer, (0.0, 0.0), {2: (0.5 * d, 0.0)})
+    _filter_alone(layer, (0.0, 0.0), {2: (1.05 * d, 0.0)}, t=0.1)
+    assert ('seen', 2) in layer.recovering
+    _filter_alone(layer, (0.0, 0.0), {2: (RECOVERY_EXIT * d, 0.0)}, t=0.2)
+    assert layer.recovering == {}
+    fresh = SafetyLayer(CONFIG, agent_id=1)
+    assert _filter_alone(fresh, (0.0, 0.0), {2: (1.05 * d, 0.0)}) == (0.0, 0.0)
+    assert fresh.recovering == {}

@@ -101,8 +101,10 @@ def test_a_given_separation_is_between_origins_and_zero_turns_the_layer_off(caps
 
 
 def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
-    """ETA-2 (the layer is ETA-1's), and F1TENTH cars (D_s = 1.69 m) on the 1 m square: the layer
-    stays off with a warning naming the rule; asked for explicitly, the same is refused."""
+    """ETA-2 (the layer is ETA-1's): off, said. F1TENTH cars (D_s = 1.69 m) on the 1 m square: the
+    formation has no room for their footprints, so the default keeps 0.9 of its closest pair between
+    control points and says so; cars whose control points reach too far for that: off with a warning
+    naming the rule. Asked for explicitly, a separation the layer cannot take is refused."""
     from formation_sim.commands.common import robot_safety
     from formation_sim.model.scenario import load_scenario
 
@@ -110,11 +112,78 @@ def test_the_default_stays_off_where_it_cannot_apply_and_says_why(capsys):
     assert double.safety is None and extra == {'layer': 'off', 'source': 'double, dimension 2'}
     cars = _robots('car', control_point_distance=0.33, wheelbase=0.33)
     square = load_scenario('robots_square')
-    off, extra = robot_safety(square, None, cars)
-    assert off.safety is None and extra['layer'] == 'off' and extra['origin_separation'] == 2 * 0.49 + 0.05
+    fitted, extra = robot_safety(square, None, cars)  # D_s = 1.69 m does not fit the 1 m square
+    assert fitted.safety.min_separation == pytest.approx(0.9)  # 0.9 of the formation's 1 m
+    assert extra['origin_separation'] == pytest.approx(0.9 - 0.66) and 'fitted' in extra['source']
     err = capsys.readouterr().err
-    assert 'warning: the safety layer is off' in err and 'must exceed the guard radius' in err
-    assert robot_safety(square, 0.9, _robots('unicycle')) is None  # 1.1 m between control points
+    assert (
+        "the formation itself puts agents 1 and 2 1 m apart, not more than the control points' separation "
+        '1.69 m: the layer keeps them 0.9 m apart instead (0.9 of it), their origins 0.24 m: less than the '
+        "robots' footprints" in err
+    )
+    long_cars = _robots('car', control_point_distance=0.5, wheelbase=0.33)  # 0.9 m leaves no room: off
+    off, extra = robot_safety(square, None, long_cars)
+    assert off.safety is None and extra['layer'] == 'off'
+    assert 'warning: the safety layer is off' in capsys.readouterr().err
+    assert (
+        robot_safety(square, 1.6, _robots('unicycle')) is None
+    )  # D_s = 1.8 m: ρ* = (1 + sqrt(1 + 1.8²·4)) / 2
     err = capsys.readouterr().err
-    assert 'start 0.992613 m apart, not more than the separation 1.1 m' in err
-    assert "the robots' origins 0.9 m apart, from --min-separation, are their control points 1.1 m" in err
+    assert 'must exceed the guard radius ρ* = (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = 2.36815 m' in err
+    assert "the robots' origins 1.6 m apart, from --min-separation, are their control points 1.8 m" in err
+
+
+def test_a_start_inside_the_margin_runs_and_only_overlapping_robots_are_refused(capsys):
+    """Issue 27 leftover 1: control points closer than D_s start in recovery (docs/SAFETY.md (S9)),
+    said on stderr; robots whose origins are no more than two footprints apart are refused, with
+    the pair, the distance and the rule."""
+    from formation_sim.commands.common import robot_safety
+    from formation_sim.model.scenario import load_scenario
+
+    square = load_scenario('robots_square')
+    safe, extra = robot_safety(square, 0.9, _robots('unicycle'))  # 1.1 m between control points
+    assert (
+        safe.safety.min_separation == pytest.approx(1.1)
+        and extra['control_point_separation'] == safe.safety.min_separation
+    )
+    err = capsys.readouterr().err
+    assert (
+        'start 0.992613 m apart, inside the separation 1.1 m: the safety layer moves every such pair' in err
+    )
+    near = square.positions.copy()
+    near[1] = near[0] + [
+        0.15,
+        0.2,
+    ]  # 0.25 m: more than 2r = 0.21 m for Burgers, less than 0.28 m for r = 0.14
+    close = square.replace(positions=near)
+    assert robot_safety(close, None, _robots('unicycle'))[0].safety is not None
+    capsys.readouterr()
+    assert robot_safety(close, None, _robots('unicycle', footprint_radius=0.14)) is None
+    err = capsys.readouterr().err
+    assert (
+        'formation run: error: robots overlap: agents 1 and 2 are set down with their origins 0.25 m apart, '
+        'not more than two footprints 2r = 0.28 m (unicycle, r = 0.14 m' in err
+    )
+
+
+def test_cars_take_the_default_on_a_formation_that_has_room_for_them(capsys):
+    """Issue 27 leftover 2: F1TENTH cars (r = 0.49 m, l = 0.33 m: D = 1.03 m, D_s = 1.69 m) on the
+    square scaled 3× (3 m sides): the default applies, its guard radius ρ* = (1 + sqrt(1 + 4 · 1.69²))
+    / 2 = 2.26241 m beyond the default R = 2 m, so R = ρ* + 2 v̄ · 1 s = 3.26241 m."""
+    from formation_sim.commands.common import robot_safety
+    from formation_sim.model.scenario import Edge, load_scenario
+
+    square = load_scenario('robots_square')
+    big = square.replace(
+        positions=3.0 * square.positions,
+        edges=tuple(Edge(i=e.i, j=e.j, d=3.0 * e.d) for e in square.edges),
+        delta=3.0 * square.delta,
+    )
+    cars = _robots('car', control_point_distance=0.33, wheelbase=0.33)
+    safe, extra = robot_safety(big, None, cars)
+    assert safe.safety.min_separation == pytest.approx(1.69)
+    assert safe.safety.sensing_radius == pytest.approx(3.26241, abs=1e-5)
+    assert extra['origin_separation'] == pytest.approx(1.03)
+    err = capsys.readouterr().err
+    assert 'the default sensing radius 2 m is within the guard radius ρ* = 2.262 m' in err
+    assert "keeps the robots' origins 1.03 m apart (car footprints (r = 0.49 m))" in err

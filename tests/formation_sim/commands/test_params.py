@@ -226,3 +226,23 @@ def test_the_readmes_commands_run_a_formation_by_hand(tmp_path):
     reference = simulate(load_scenario('paper_single'), horizon=10.0)
     assert summary['trigger_times'] == {str(agent): times for agent, times in reference.trigger_times.items()}
     assert (tmp_path / 'by-hand' / 'bag' / 'metadata.yaml').is_file()
+
+
+def test_params_writes_the_safety_layer_formation_run_takes_on_robots(tmp_path, capsys):
+    """Issue 27 leftover 2: the agents' files carry the layer as `formation run` sets it on robots:
+    the Burgers' footprints by default (control points 0.46 m), --min-separation between origins,
+    0 for off."""
+
+    def agent_separation(*extra: str) -> float | None:
+        out = tmp_path / '-'.join(['u', *extra])
+        arguments = ['params', 'robots_square', '--backend', 'unicycle', '--no-record', '--out', str(out)]
+        assert main([*arguments, *extra]) == 0
+        agents = yaml.safe_load((out / 'agents.params.yaml').read_text())
+        return agents['/agent_1/formation_agent']['ros__parameters'].get('min_separation')
+
+    assert agent_separation() == pytest.approx(2 * 0.105 + 0.05 + 2 * 0.1)
+    assert (
+        "formation params: the safety layer keeps the robots' origins 0.26 m apart" in capsys.readouterr().err
+    )
+    assert agent_separation('--min-separation', '0.3') == pytest.approx(0.5)
+    assert agent_separation('--min-separation', '0') is None  # the agent's default: the layer off

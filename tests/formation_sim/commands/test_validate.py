@@ -874,3 +874,32 @@ def test_validate_reports_the_time_to_five_percent_with_the_warp_and_the_constan
     # ETA-2: no warp, and why
     main(['validate', 'paper_double', '--max-speed', '0.22'])
     assert 'time warp: none: time_warp: ETA-1 only' in capsys.readouterr().out
+
+
+def test_validate_robot_takes_the_origins_and_the_footprints_default(tmp_path, capsys):
+    """Issue 27 leftover 2: `--robot KIND` validates what `formation run --backend KIND` runs: D between
+    origins (control points D + 2l), by default the footprints 2r + 5 cm apart; a start inside the
+    margin is said and accepted, overlapping robots refused."""
+    from formation_sim.model.scenario import dump_scenario
+    from formation_sim.sim import safety_cases
+
+    path = tmp_path / 'random_100.yaml'  # issue 27's draw: agents 1 and 3 0.30508 m apart
+    dump_scenario(safety_cases.random_square(100, safety=None, side=2.2), path)
+    assert main(['validate', str(path), '--robot', 'unicycle', '--json']) == 0
+    captured = capsys.readouterr()
+    # Burgers: r = 0.105 m, l = 0.1 m: origins 2 · 0.105 + 0.05 = 0.26 m, control points 0.46 m
+    assert json.loads(captured.out)['safety']['min_separation'] == pytest.approx(0.46)
+    assert "keeps the robots' origins 0.26 m apart (unicycle footprints (r = 0.105 m))" in captured.err
+    assert 'agents 1 and 3 start 0.30508 m apart, inside the separation 0.46 m' in captured.err
+    assert main(['validate', str(path), '--robot', 'unicycle', '--min-separation', '0.25', '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['safety']['min_separation'] == pytest.approx(0.45)
+    assert main(['validate', str(path), '--robot', 'holonomic', '--min-separation', '0.25', '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['safety']['min_separation'] == pytest.approx(0.25)
+    assert main(['validate', str(path), '--json']) == 0  # no robots: no layer by default
+    assert 'safety' not in json.loads(capsys.readouterr().out)
+    code = main(['validate', str(path), '--robot', 'unicycle', '--footprint-radius', '0.16'])
+    assert code == 2
+    assert (
+        'robots overlap: agents 1 and 3 are set down with their origins 0.30508 m apart'
+        in capsys.readouterr().err
+    )

@@ -124,12 +124,17 @@ def test_the_scenario_key_round_trips_and_is_checked(tmp_path):
     assert load_scenario(tmp_path / 's.yaml') == scenario
     assert 'safety' not in scenario_to_dict(scenario.replace(safety=None))
     for change, message in (
-        ({'min_separation': 1.0}, 'safety.min_separation: agents 1 and 2 start 1 m apart, not more than'),
         ({'min_separation': 0.3, 'speed': 1}, "safety: unknown key 'speed'"),
         ({'min_separation': 0.3, 'gamma': 0}, 'safety.gamma: must be a finite number > 0, got 0'),
     ):
         with pytest.raises(ScenarioError, match=message):
             scenario_from_dict({**data, 'safety': change})
+    scenario_from_dict({**data, 'safety': {'min_separation': 1.0}})  # closer than D: recovers (S9)
+    one_point = {**data['agents'], 2: data['agents'][1]}
+    with pytest.raises(
+        ScenarioError, match=r'safety: agents 1 and 2 start at the same point \(0.0 m apart\)'
+    ):
+        scenario_from_dict({**data, 'agents': one_point})
     double = scenario_to_dict(load_scenario('paper_double'))
     with pytest.raises(ScenarioError, match="safety: the collision layer runs with dynamics 'single'"):
         scenario_from_dict({**double, 'safety': {'min_separation': 0.1}})
@@ -167,8 +172,11 @@ def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
     # (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = (1 + sqrt(1.25)) / 2; (R - ρ*) / (2 v̄) = 2 - ρ*
     assert data['safety']['guard_radius'] == pytest.approx(1.0590169943749475)
     assert data['safety']['heartbeat'] == pytest.approx(2.0 - 1.0590169943749475)
-    assert main(['validate', str(path), '--min-separation', '1.0']) == 2
-    assert 'safety.min_separation: agents 1 and 2 start 1 m apart' in capsys.readouterr().err
+    assert main(['validate', str(path), '--min-separation', '3.0']) == 2  # ρ* = (1 + sqrt(37)) / 2 > R = 2
+    assert (
+        'must exceed the guard radius ρ* = (2 v̄ + sqrt(4 v̄² + γ² D²)) / γ = 3.54138 m'
+        in capsys.readouterr().err
+    )
 
 
 def test_a_distributed_run_takes_the_layer_on_every_backend():
@@ -213,3 +221,43 @@ def test_the_builtin_robots_anywhere_is_its_seeded_draw_and_forms_with_the_defau
     assert safety_cases.closest_approach(times, x)[0] >= 0.46
     assert safety_cases.settling_time(scenario, times, x, 0.05) < builtin.horizon
     assert safety_cases.edge_maxima(scenario, x).max() < builtin.delta
+
+
+INSIDE = SafetyConfig(min_separation=0.45)  # D_s of two Burgers 0.26 m apart by their origins
+
+
+@pytest.mark.parametrize(
+    'scenario',
+    [
+        safety_cases.swap_two(safety=INSIDE, gap=0.2),  # head on, set down 0.2 m apart
+        safety_cases.line_three(safety=INSIDE, spacing=0.3),  # the middle one boxed in by both
+        safety_cases.random_square(100, safety=INSIDE, side=2.2),  # issue 27: agents 1, 3 0.305 m apart
+        safety_cases.random_square(101, safety=INSIDE, side=2.2),  # agents 2, 4 0.307 m apart
+    ],
+    ids=['head_on_0.2', 'line_0.3', 'random_100', 'random_101'],
+)
+def test_from_a_start_inside_the_margin_the_separation_grows_until_it_holds_then_is_never_lost(scenario):
+    """(S9): every pair set down closer than D moves apart monotonically (the samples hold every
+    event, between which motion is linear) until it is D apart, and from then on the exact closest
+    approach stays >= D; pairs set down farther never come within D; the edges stay within Δ and
+    the team forms (5 cm) within the horizon."""
+    record = simulate(scenario, sample_dt=0.01)
+    times, x = np.asarray(record.samples.times), np.asarray(record.samples.positions)
+    d = INSIDE.min_separation
+    inside = 0
+    for a in range(x.shape[1]):
+        for b in range(a + 1, x.shape[1]):
+            gap = np.linalg.norm(x[:, a] - x[:, b], axis=1)
+            if gap[0] < d:
+                inside += 1
+                k = int(np.argmax(gap >= d))
+                assert k > 0 and times[k] < 1.0, (a, b, times[k])  # recovered within a second
+                assert np.all(np.diff(gap[: k + 1]) >= 0.0), (a, b)
+                start = k
+            else:
+                start = 0
+            pair = x[start:, [a, b]]
+            assert safety_cases.closest_approach(times[start:], pair)[0] >= d, (a, b)
+    assert inside >= 1
+    assert safety_cases.edge_maxima(scenario, x).max() < scenario.delta
+    assert safety_cases.settling_time(scenario, times, x, 0.05) < scenario.horizon

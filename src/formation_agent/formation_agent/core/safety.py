@@ -56,6 +56,15 @@ _FEASIBLE = 1e-12
 # Relative slack under which a pair constraint counts as active at the filtered command.
 _ACTIVE = 1e-9
 
+RECOVERY_SPEED = 0.25
+"""(S9): a pair closer than D (set down inside the margin) is asked apart, each robot moving away from the
+other at >= this share of v̄ along x_i - x_j at its triggers (and >= half of it between them)."""
+RECOVERY_EXIT = 1.1
+"""(S9): a pair leaves recovery at a trigger that finds its robots at least RECOVERY_EXIT · D apart (a
+margin, so that the usual barrier starts from h >= 0.21 D², not from 0)."""
+RECOVERY_HALVINGS = 10
+"""(S9): a robot boxed in by recovering pairs halves their demand up to this many times, then holds still."""
+
 
 def _number(name: str, value: Any, *, positive: bool = True) -> float:  # any value given: checked
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -124,6 +133,22 @@ def _dot(a: Sequence[float], b: Sequence[float]) -> float:
     return product
 
 
+def _meets(
+    v: tuple[float, float], lines: Sequence[tuple[tuple[float, float], float]], max_speed: float
+) -> bool:
+    """Whether v meets every a·v >= b of `lines` and ||v|| <= v̄, within the relative slack _FEASIBLE."""
+    if v[0] * v[0] + v[1] * v[1] > max_speed * max_speed * (1.0 + _FEASIBLE):
+        return False
+    return all(_dot(a, v) >= b - _FEASIBLE * (abs(b) + math.hypot(*a) * max_speed) for a, b in lines)
+
+
+def meets(v: Sequence[float], constraints: Sequence[tuple[float, float, float]], max_speed: float) -> bool:
+    """Whether v meets every constraint (a_x, a_y, b_k) of `filter_command` and the speed bound: the
+    filter's own test (a filter with no feasible point answers v = 0, which then fails it)."""
+    lines = [((a0, a1), b) for a0, a1, b in constraints if a0 != 0.0 or a1 != 0.0]
+    return _meets((float(v[0]), float(v[1])), lines, max_speed)
+
+
 def filter_command(
     nominal: Sequence[float], constraints: Sequence[tuple[float, float, float]], max_speed: float
 ) -> tuple[float, float]:
@@ -140,9 +165,7 @@ def filter_command(
     lines = [((a0, a1), b) for a0, a1, b in constraints if a0 != 0.0 or a1 != 0.0]
 
     def feasible(v: tuple[float, float]) -> bool:
-        if v[0] * v[0] + v[1] * v[1] > cap2 * (1.0 + _FEASIBLE):
-            return False
-        return all(_dot(a, v) >= b - _FEASIBLE * (abs(b) + math.hypot(*a) * max_speed) for a, b in lines)
+        return _meets(v, lines, max_speed)
 
     candidates = [u]
     norm_u = math.hypot(*u)
@@ -247,6 +270,17 @@ def courteous_zero(r0: tuple[float, float], v: tuple[float, float], config: Safe
     return low
 
 
+def recovering_half(
+    r0: tuple[float, float], v: tuple[float, float], sigma: float, max_speed: float
+) -> tuple[float, float, float]:
+    """(c0, c1, c2): a linear lower bound in τ of a recovering pair's half 2 r_ij·v_i - σ (S9) for a
+    robot j seen at r0 while i holds v and j moves at any speed <= v̄: (S7) with γ = 0,
+
+        2 r(τ)·v - σ >= 2 r0·v - σ + τ [2||v||² - 2 v̄ ||v||]."""
+    vv = _dot(v, v)
+    return 2.0 * _dot(r0, v) - sigma, 2.0 * vv - 2.0 * max_speed * math.sqrt(vv), 0.0
+
+
 def exact_half(
     r: tuple[float, float],
     w: tuple[float, float],
@@ -273,7 +307,10 @@ class SafetyLayer:
     def __init__(self, config: SafetyConfig, *, agent_id: int) -> None:
         self.config = config
         self.agent_id = agent_id
-        self._seen: list[tuple[float, float]] = []  # x_i - x_j of the other robots seen at the trigger
+        self._seen: list[
+            tuple[int, tuple[float, float]]
+        ] = []  # (j, x_i - x_j) of the robots seen at the trigger
+        self._recovering: dict[tuple[str, int], float] = {}  # pairs in recovery (S9) -> σ
         self._trigger_time = 0.0
         self.interventions = 0  # triggers where the applied command differs from the nominal one
         self.last_intervention: float | None = None  # the time of the latest such trigger
@@ -320,31 +357,38 @@ class SafetyLayer:
         """The applied command at a trigger: the nominal one through (S5), with the tie-break.
 
         `rel`, `y`, `capacity`: each neighbour's r_ij, y_ij and c_ij; `nearby`: x_i - x_j of the
-        other robots within the sensing radius."""
+        other robots within the sensing radius. A pair closer than D (a start inside the margin)
+        is recovering (S9): its constraint asks the robots apart instead."""
         cfg = self.config
-        g4, dd = 0.25 * cfg.gamma, cfg.min_separation * cfg.min_separation
         pairs = [(float(r[0]), float(r[1])) for r in rel]
-        seen = [(float(r[0]), float(r[1])) for _, r in sorted((nearby or {}).items())]
-        constraints = []
-        for r in (*pairs, *seen):  # 2 r·v >= -(γ/4) h_ij
-            constraints.append((2.0 * r[0], 2.0 * r[1], -g4 * (_dot(r, r) - dd)))
+        seen_items = [(j, (float(r[0]), float(r[1]))) for j, r in sorted((nearby or {}).items())]
+        seen = [r for _, r in seen_items]
+        keys = [('edge', k) for k in range(len(pairs))] + [('seen', j) for j, _ in seen_items]
+        points = (*pairs, *seen)
+        recovering = self._recovering_pairs(keys, points)
+        g4 = 0.25 * cfg.gamma
+        edge_rows = []
         for row, c in zip(y, capacity):  # -2 y·v >= -(γ/4) h^e_ij
             z = (float(row[0]), float(row[1]))
-            constraints.append((-2.0 * z[0], -2.0 * z[1], -g4 * (c * c - _dot(z, z))))
+            edge_rows.append((-2.0 * z[0], -2.0 * z[1], -g4 * (c * c - _dot(z, z))))
         u = (float(nominal[0]), float(nominal[1]))
-        v = filter_command(u, constraints, cfg.max_speed)
+        v, constraints, scale = self._solve(u, points, recovering, edge_rows)
         # Tie-break: a pair constraint active at v may hold the robots where the nominal commands
         # cancel (head on, or a ring closing on its centre). Each robot then turns its nominal
         # command to its right, u' = u + λ ||u|| right(u), and filters again: the robots pass each
         # other on the right, a roundabout. Deterministic: fixed order, fixed share λ.
         blocked = any(
             a0 * v[0] + a1 * v[1] - b <= _ACTIVE * (abs(b) + math.hypot(a0, a1) * cfg.max_speed)
-            for a0, a1, b in constraints[: len(pairs) + len(seen)]
+            for a0, a1, b in constraints[: len(points)]
         )
         if blocked and cfg.turn > 0.0:
             lam = cfg.turn
-            v = filter_command((u[0] + lam * u[1], u[1] - lam * u[0]), constraints, cfg.max_speed)
-        self._seen = seen
+            v, constraints, scale = self._solve(
+                (u[0] + lam * u[1], u[1] - lam * u[0]), points, recovering, edge_rows
+            )
+        share = RECOVERY_SPEED * cfg.max_speed * scale
+        self._recovering = {keys[k]: math.hypot(*points[k]) * share for k in recovering}
+        self._seen = seen_items
         self._trigger_time = t
         self._command = v
         if v != u:
@@ -352,32 +396,97 @@ class SafetyLayer:
             self.last_intervention = t
         return v
 
+    def _recovering_pairs(
+        self, keys: Sequence[tuple[str, int]], points: Sequence[tuple[float, float]]
+    ) -> set[int]:
+        """The pairs (indices into `points`) in recovery at this trigger (S9): closer than D, or in
+        recovery at the previous trigger and not yet RECOVERY_EXIT D apart."""
+        dd = self.config.min_separation * self.config.min_separation
+        exit2 = dd * RECOVERY_EXIT * RECOVERY_EXIT
+        return {
+            k
+            for k, (key, r) in enumerate(zip(keys, points))
+            if _dot(r, r) <= dd or (key in self._recovering and _dot(r, r) < exit2)
+        }
+
+    def _solve(
+        self,
+        u: tuple[float, float],
+        points: Sequence[tuple[float, float]],
+        recovering: set[int],
+        edge_rows: list[tuple[float, float, float]],
+    ) -> tuple[tuple[float, float], list[tuple[float, float, float]], float]:
+        """(v, the constraints it meets, the recovery demand's scale): (S5) with every pair's
+        constraint, a recovering pair's asking r̂_ij·v >= scale · RECOVERY_SPEED · v̄ (S9). Boxed in
+        (no v meets them all) the demand is halved, RECOVERY_HALVINGS times at most; then the robot
+        holds still (scale 0: v = 0 meets every constraint then)."""
+        cfg = self.config
+        g4, dd = 0.25 * cfg.gamma, cfg.min_separation * cfg.min_separation
+        scale = 1.0
+        for _ in range(RECOVERY_HALVINGS + 1):
+            share = RECOVERY_SPEED * cfg.max_speed * scale
+            constraints = []
+            for k, r in enumerate(points):  # 2 r·v >= -(γ/4) h_ij, or 2 r·v >= 2 ||r|| share (S9)
+                bound = 2.0 * math.hypot(*r) * share if k in recovering else -g4 * (_dot(r, r) - dd)
+                constraints.append((2.0 * r[0], 2.0 * r[1], bound))
+            constraints.extend(edge_rows)
+            v = filter_command(u, constraints, cfg.max_speed)
+            if not recovering or meets(v, constraints, cfg.max_speed):
+                return v, constraints, scale
+            scale *= 0.5
+        constraints = [
+            (2.0 * r[0], 2.0 * r[1], 0.0 if k in recovering else -g4 * (_dot(r, r) - dd))
+            for k, r in enumerate(points)
+        ]
+        return (0.0, 0.0), [*constraints, *edge_rows], 0.0
+
     def safety_time(
         self,
         *,
         now: float,
         edges: Sequence[tuple[float, Sequence[float], Sequence[float], Sequence[float], float]],
     ) -> float:
-        """The first time any half (S3), (S4) could reach 0 (S6), or the heartbeat; `edges`: per
-        neighbour (anchor time s, y_ij(s), d_ij, its command u_j, its capacity c_ij), with the agent's
-        command held."""
+        """The first time any half (S3), (S4) or a recovering pair's (S9) could reach 0 (S6), or the
+        heartbeat; `edges`: per neighbour (anchor time s, y_ij(s), d_ij, its command u_j, its
+        capacity c_ij), with the agent's command held."""
         cfg = self.config
         v = self._command
         t0 = self._trigger_time
         best = t0 + cfg.heartbeat
-        for r in self._seen:  # (S7) and (S7'), each a valid bound: the later one
-            zero = max(first_zero(*worst_case_half(r, v, cfg), max(now - t0, 0.0)), courteous_zero(r, v, cfg))
+        for j, r in self._seen:  # (S7) and (S7'), each a valid bound: the later one; (S9) recovering
+            sigma = self._recovering.get(('seen', j))
+            if sigma is None:
+                zero = max(
+                    first_zero(*worst_case_half(r, v, cfg), max(now - t0, 0.0)), courteous_zero(r, v, cfg)
+                )
+            elif sigma > 0.0:
+                zero = first_zero(*recovering_half(r, v, sigma, cfg.max_speed), max(now - t0, 0.0))
+            else:  # holding still: its own part of dh/dt is 0 until it triggers again
+                continue
             best = min(best, t0 + zero)
         dd = cfg.min_separation * cfg.min_separation
-        for s, y, d, u_j, c in edges:
+        for k, (s, y, d, u_j, c) in enumerate(edges):
             w = (v[0] - u_j[0], v[1] - u_j[1])
             z = (y[0], y[1])
             r = (z[0] + d[0], z[1] + d[1])
             after = max(now - s, 0.0)
-            collide = first_zero(*exact_half(r, w, v, gamma=cfg.gamma, level=dd, sign=1.0), after)
+            sigma = self._recovering.get(('edge', k))
+            if sigma is None:
+                collide = first_zero(*exact_half(r, w, v, gamma=cfg.gamma, level=dd, sign=1.0), after)
+            elif sigma > 0.0:  # 2 r(τ)·v - σ, r(τ) = r + τ w exactly (S9)
+                c0, c1, _ = exact_half(r, w, v, gamma=0.0, level=0.0, sign=1.0)
+                collide = first_zero(c0 - sigma, c1, 0.0, after)
+            else:
+                collide = math.inf
             stretch = first_zero(*exact_half(z, w, v, gamma=cfg.gamma, level=c * c, sign=-1.0), after)
             best = min(best, s + collide, s + stretch)
         return best
+
+    @property
+    def recovering(self) -> dict[tuple[str, int], float]:
+        """The pairs in recovery at the latest trigger (S9): ('edge', k) for the k-th neighbour,
+        ('seen', j) for robot j, each with its σ (0: holding still, boxed in)."""
+        return dict(self._recovering)
 
     _command: tuple[float, float] = (0.0, 0.0)
 

@@ -11,7 +11,10 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
@@ -22,6 +25,7 @@ from formation_sim.sim.run_folder import check_report_dir
 from formation_sim.sim.errors import RunFolderError
 
 if TYPE_CHECKING:
+    from formation_agent.core.kinds.shape import Geometry
     from rclpy.node import Node
 
 
@@ -126,7 +130,9 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
         return None
 
 
-def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[Scenario, dict] | None:
+def robot_safety(
+    scenario: Scenario, separation: float | None, robots, command: str = 'run'
+) -> tuple[Scenario, dict] | None:
     """On a robot backend (`robots`: its RobotOptions): the scenario with the safety layer keeping
     the robots' origins D apart, so their control points D_s = D + c_i + c_j (docs/ROBOTS.md,
     "Footprints"), and what summary.json's extra.safety adds (D, D_s, where D came from); None
@@ -137,7 +143,7 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
     kind = robot_kind(robots.model)
     if separation == 0.0:
         note = {'layer': 'off', 'source': '--min-separation 0'}
-        print('formation run: the safety layer is off (--min-separation 0)', file=sys.stderr)
+        print(f'formation {command}: the safety layer is off (--min-separation 0)', file=sys.stderr)
         return scenario.replace(safety=None), note
     if separation is not None:
         origins, source = separation, '--min-separation'
@@ -148,46 +154,190 @@ def robot_safety(scenario: Scenario, separation: float | None, robots) -> tuple[
         origins, source = 2.0 * footprint + SEPARATION_MARGIN, f'{kind.name} footprints (r = {footprint:g} m)'
     else:
         print(
-            'formation run: the safety layer is off (ETA-1 in the plane only; docs/SAFETY.md)',
+            f'formation {command}: the safety layer is off (ETA-1 in the plane only; docs/SAFETY.md)',
             file=sys.stderr,
         )
         return scenario, {'layer': 'off', 'source': f'{scenario.dynamics}, dimension {scenario.dimension}'}
     points = control_point_separation(origins, kind=kind, geometry=robots.geometry)
-    default = separation is None and scenario.safety is None
-    if default and (problem := _separation_problem(scenario, points)) is not None:
-        print(  # the default never refuses a run: it says why the layer stays off
-            "formation run: warning: the safety layer is off: the default, the robots' origins "
-            f'{origins:g} m apart ({source}, control points {points:g} m), does not apply: {problem}; give '
-            '--min-separation D (or 0 to silence this)',
-            file=sys.stderr,
-        )
-        return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
-    if (safe := with_min_separation(scenario, points, 'run')) is None:
+    if (overlap := footprint_overlap(scenario, kind=kind, geometry=robots.geometry)) is not None:
+        refuse(command, overlap)
+        return None
+    if separation is None and scenario.safety is None:
+        safe, problem = default_layer(scenario, points, reach=points - origins)
+        if safe is None:
+            print(  # the default never refuses a run: it says why the layer stays off
+                f"formation {command}: warning: the safety layer is off: the default, the robots' origins "
+                f'{origins:g} m apart ({source}, control points {points:g} m), does not apply: {problem}; '
+                'give --min-separation D (or 0 to silence this)',
+                file=sys.stderr,
+            )
+            return scenario, {'layer': 'off', 'source': source, 'origin_separation': origins, 'why': problem}
+        if problem is not None:  # applies, with the sensing radius or the separation it needs
+            print(f'formation {command}: {problem}', file=sys.stderr)
+            fitted = points if safe.safety is None else safe.safety.min_separation
+            if fitted != points:  # fitted to the formation
+                origins, points = fitted - (points - origins), fitted
+                source = f'{source}, fitted to the formation'
+    elif (safe := with_min_separation(scenario, points, command)) is None:
         print(
-            f"formation run: (the robots' origins {origins:g} m apart, from {source}, are their control "
-            f'points {points:g} m apart: D_s = D + c_i + c_j, docs/ROBOTS.md "Footprints")',
+            f"formation {command}: (the robots' origins {origins:g} m apart, from {source}, are their "
+            f'control points {points:g} m apart: D_s = D + c_i + c_j, docs/ROBOTS.md "Footprints")',
             file=sys.stderr,
         )
         return None
     print(
-        f"formation run: the safety layer keeps the robots' origins {origins:g} m apart ({source}): "
+        f"formation {command}: the safety layer keeps the robots' origins {origins:g} m apart ({source}): "
         f'their control points {points:g} m',
         file=sys.stderr,
     )
+    if (inside := inside_the_margin(safe)) is not None:
+        print(f'formation {command}: {inside}', file=sys.stderr)
     return safe, {'origin_separation': origins, 'control_point_separation': points, 'source': source}
 
 
-def _separation_problem(scenario: Scenario, separation: float) -> str | None:
-    """Why the safety layer at `separation` cannot run `scenario` (its rules), or None."""
+def _closest_pair(points: np.ndarray) -> tuple[int, int, float]:
+    """(row a, row b, distance) of the closest two of `points` (a < b)."""
+    best = (0, 1, math.inf)
+    for a in range(len(points)):
+        gaps = np.linalg.norm(points[a + 1 :] - points[a], axis=1)
+        if gaps.size and float(gaps.min()) < best[2]:
+            best = (a, a + 1 + int(np.argmin(gaps)), float(gaps.min()))
+    return best
+
+
+def footprint_overlap(scenario: Scenario, *, kind, geometry) -> str | None:
+    """Why robots of `kind` set down at the scenario's points (their control points) and headings (0
+    without any) would overlap, or None: two origins (their poses) no more than two footprints 2r
+    apart is a real error, not a start the safety layer can recover from (docs/SAFETY.md (S9))."""
+    if scenario.dimension != 2:
+        return None
+    yaws = scenario.headings if scenario.headings is not None else np.zeros(len(scenario.agent_ids))
+    origins = np.array(
+        [kind.origin(point, float(yaw), geometry) for point, yaw in zip(scenario.positions, yaws)]
+    )
+    a, b, gap = _closest_pair(origins)
+    footprint = kind.footprint(geometry)
+    if gap > 2.0 * footprint:
+        return None
+    ids = scenario.agent_ids
+    return (
+        f'robots overlap: agents {ids[a]} and {ids[b]} are set down with their origins {gap:.6g} m apart, '
+        f'not more than two footprints 2r = {2.0 * footprint:g} m ({kind.name}, r = {footprint:g} m; '
+        'docs/ROBOTS.md "Footprints"): move them apart'
+    )
+
+
+def inside_the_margin(scenario: Scenario) -> str | None:
+    """What the safety layer does first when two of the scenario's points start closer than its D
+    (they are moved apart, docs/SAFETY.md (S9)), or None."""
+    if scenario.safety is None or scenario.dimension != 2:
+        return None
+    a, b, gap = _closest_pair(np.asarray(scenario.positions))
+    separation = scenario.safety.min_separation
+    if gap >= separation:
+        return None
+    ids = scenario.agent_ids
+    return (
+        f'agents {ids[a]} and {ids[b]} start {gap:.6g} m apart, inside the separation {separation:g} m: '
+        'the safety layer moves every such pair apart first, its distance never decreasing until it '
+        'holds, then kept (docs/SAFETY.md, "A start inside the margin")'
+    )
+
+
+@dataclass(frozen=True)
+class RobotShape:
+    """What `robot_safety` reads of a run's robots (`RobotOptions` has both): their kind and shape."""
+
+    model: str
+    geometry: Geometry
+
+
+def backend_safety(scenario: Scenario, separation: float | None, robots, command: str):
+    """(the scenario with the safety layer as `command` runs it, summary.json's extra so far), or None
+    after saying why not: on robot backends (`robots`: their RobotOptions) the robots' origins kept
+    apart, by default their footprints (`robot_safety`); on the simulator (None) the points the
+    agents control, `--min-separation` alone (`formation run`, `formation params`, `formation validate`)."""
+    if robots is not None:
+        if (safe := robot_safety(scenario, separation, robots, command)) is None:
+            return None
+        return safe[0], {'safety': safe[1]}
+    chosen = with_min_separation(scenario, separation, command)
+    return None if chosen is None else (chosen, {})
+
+
+DEFAULT_HEARTBEAT = 1.0
+"""[s]: where the default separation's guard radius reaches the default sensing radius, the default
+takes R = ρ* + 2 v̄ · DEFAULT_HEARTBEAT (robots read every other robot's pose: R is how far an agent
+looks, not a sensor's range)."""
+
+
+FORMATION_SHARE = 0.9
+"""Where the formation has no room for the default separation, the default keeps the control points
+this share of the formation's closest pair apart."""
+
+
+def default_layer(
+    scenario: Scenario, separation: float, *, reach: float
+) -> tuple[Scenario | None, str | None]:
+    """The robot backends' default layer, control points `separation` (D_s) apart (`reach`: c_i +
+    c_j, so origins D_s - reach): (the scenario with it, a note or None), or (None, why it cannot
+    apply). Its rules: the formation itself keeps every two agents more than D_s apart, else the
+    layer would hold the team off it: there D_s is FORMATION_SHARE of the formation's closest pair
+    instead (F1TENTH cars on the 1 m square: 0.9 m, origins 0.24 m apart: less than their
+    footprints, said), none if that leaves the origins no room; and the sensing radius exceeds the
+    guard radius ρ*: the default R (2 m), raised to ρ* + 2 v̄ · 1 s where ρ* reaches it (cars on a
+    formation with room: D_s = 1.69 m, ρ* = 2.26 m, R = 3.26 m)."""
     from formation_agent.core.errors import SafetyError
+    from formation_agent.core.safety import DEFAULT_GAMMA, DEFAULT_MAX_SPEED, DEFAULT_SENSING_RADIUS
     from formation_agent.core.safety import SafetyConfig
 
-    keys = {} if scenario.safety is None else scenario.safety.as_dict()
+    shape = formation_shape(scenario)
+    a, b, gap = _closest_pair(shape[1])
+    notes = []
+    if gap <= separation:
+        ids, fitted = shape[0], FORMATION_SHARE * gap
+        where = (
+            f'the formation itself puts agents {ids[a]} and {ids[b]} {gap:.6g} m apart, not more than the '
+            f"control points' separation {separation:g} m"
+        )
+        if not fitted > reach:
+            return None, f'{where}, and {FORMATION_SHARE:g} of it leaves their origins no room'
+        separation = fitted
+        notes.append(
+            f'{where}: the layer keeps them {fitted:.4g} m apart instead ({FORMATION_SHARE:g} of it), their '
+            f"origins {fitted - reach:.4g} m: less than the robots' footprints (docs/SAFETY.md)"
+        )
+    v, g = DEFAULT_MAX_SPEED, DEFAULT_GAMMA
+    guard = (2.0 * v + math.sqrt(4.0 * v * v + g * g * separation * separation)) / g  # ρ* (SafetyConfig)
+    radius = DEFAULT_SENSING_RADIUS
+    if not radius > guard:
+        radius = guard + 2.0 * v * DEFAULT_HEARTBEAT
+        notes.append(
+            f'the default sensing radius {DEFAULT_SENSING_RADIUS:g} m is within the guard radius ρ* = '
+            f'{guard:.4g} m of these footprints: the agents take R = {radius:.4g} m (ρ* + 2 v̄ · 1 s; they '
+            "read every robot's pose)"
+        )
+    note = '; '.join(notes) or None
     try:
-        scenario.replace(safety=SafetyConfig(**{**keys, 'min_separation': separation}))
+        return scenario.replace(safety=SafetyConfig(min_separation=separation, sensing_radius=radius)), note
     except (ScenarioError, SafetyError) as error:
-        return str(error)
-    return None
+        return None, str(error)
+
+
+def formation_shape(scenario: Scenario) -> tuple[tuple[int, ...], np.ndarray]:
+    """(agent ids, their target positions): the formation the edges' d_ij define, agent ids[0] at
+    the origin, over the agents its graph reaches from it (d_ij = x_i - x_j at the formation)."""
+    first = scenario.agent_ids[0]
+    places = {first: np.zeros(scenario.dimension)}
+    queue = [first]
+    while queue:
+        i = queue.pop(0)
+        for j, d in sorted(scenario.neighbours(i).items()):
+            if j not in places:
+                places[j] = places[i] - np.asarray(d, dtype=float)
+                queue.append(j)
+    ids = tuple(sorted(places))
+    return ids, np.array([places[a] for a in ids])
 
 
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:

@@ -16,6 +16,8 @@ from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
+    add_safety_argument,
+    backend_safety,
     load_valid_scenario,
     scale_options,
     plan_options,
@@ -44,6 +46,7 @@ def register(subparsers) -> None:
     )
     add_run_arguments(parser, kind='params')
     add_plan_arguments(parser)
+    add_safety_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -57,15 +60,21 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:
         return ExitCode.BAD_INPUT
+    try:
+        options = plan_options(args)
+    except RunError as error:
+        return refuse('params', error)
+    # The safety layer as formation run takes it: on robots the origins apart, the footprints' default.
+    if (safe := backend_safety(scenario, args.min_separation, options['robots'], 'params')) is None:
+        return ExitCode.BAD_INPUT
+    scenario = safe[0]
     from formation_sim.commands.limits import resolve_speed_scale
 
     if (resolved := resolve_speed_scale(scenario, args, 'params')) is None:
         return ExitCode.BAD_INPUT
     scenario = resolved[0]  # the agents' parameter files carry κ
     try:
-        plan = FormationRun(
-            scenario, **plan_options(args)
-        ).plan  # every argument checked, nothing touched yet
+        plan = FormationRun(scenario, **options).plan  # every argument checked, nothing touched yet
         out = claim_out_dir(args.out, scenario_name=scenario.name, kind='params', force=args.force)
     except (RunError, RunFolderError) as error:
         return refuse('params', error)

@@ -18,8 +18,7 @@ from formation_sim.commands.common import (
     scale_options,
     plan_options,
     refuse,
-    robot_safety,
-    with_min_separation,
+    backend_safety,
 )
 from formation_sim.commands.limits import (
     AUTO,
@@ -103,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         options = plan_options(args)
     except RunError as error:
         return refuse('run', error)
-    if (safe := _safety(scenario, args, options)) is None:
+    if (safe := backend_safety(scenario, args.min_separation, options['robots'], 'run')) is None:
         return ExitCode.BAD_INPUT
     scenario, extra = safe
     if isinstance(resolved := _speed_scale(scenario, args, options), int):
@@ -151,18 +150,6 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet and result.message:  # otherwise the run's last progress line said it already
         print(f'formation run: {"" if not result.ok else "warning: "}{result.message}', file=sys.stderr)
     return result.exit_status
-
-
-def _safety(scenario, args: argparse.Namespace, options: dict):
-    """(the scenario with the safety layer as asked, summary.json's extra so far), or None after
-    saying why not: on robot backends the robots' origins are kept apart, by default their
-    footprints (`robot_safety`), on the simulator the points the agents control."""
-    if options['robots'] is not None:
-        if (safe := robot_safety(scenario, args.min_separation, options['robots'])) is None:
-            return None
-        return safe[0], {'safety': safe[1]}
-    scenario = with_min_separation(scenario, args.min_separation, 'run')
-    return None if scenario is None else (scenario, {})
 
 
 def _speed_scale(scenario, args: argparse.Namespace, options: dict):

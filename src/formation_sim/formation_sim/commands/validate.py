@@ -12,6 +12,7 @@ import json
 import math
 import sys
 
+from formation_agent.core.kinds import FOOTPRINT_RADIUS, KindNames
 from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
 from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
@@ -20,8 +21,10 @@ from formation_sim.commands.common import (
     add_scale_arguments,
     add_scenario_argument,
     add_shape_arguments,
+    backend_safety,
+    RobotShape,
     scale_options,
-    with_min_separation,
+    shape_geometry,
 )
 from formation_sim.model.scenario import load_scenario
 from formation_sim.model.errors import LimitsError, ScenarioError
@@ -64,7 +67,18 @@ def register(subparsers) -> None:
         metavar='W',
         help='unicycles: their turn-rate limit [rad/s]',
     )
-    add_shape_arguments(parser, (CONTROL_POINT_DISTANCE,))
+    add_shape_arguments(parser, (CONTROL_POINT_DISTANCE, FOOTPRINT_RADIUS))
+    parser.add_argument(
+        '--robot',
+        choices=KindNames(),
+        default=None,
+        metavar='KIND',
+        help=(
+            'the robots the scenario is for, as `formation run --backend KIND` takes them: --min-separation '
+            "D between their origins (their control points D + c_i + c_j), and without it or the scenario's "
+            "safety: the kind's footprints 2r + 0.05 m apart (docs/SAFETY.md); overlapping robots refused"
+        ),
+    )
     parser.add_argument(
         '--max-acceleration',
         type=POSITIVE,
@@ -101,8 +115,13 @@ def run(args: argparse.Namespace) -> int:
     except ScenarioError as error:
         print(f'formation validate: error: {error}', file=sys.stderr)
         return ExitCode.BAD_INPUT
-    if (scenario := with_min_separation(scenario, args.min_separation, 'validate')) is None:
+    robots = None
+    if args.robot is not None:
+        shape = shape_geometry(args, (CONTROL_POINT_DISTANCE, FOOTPRINT_RADIUS))
+        robots = RobotShape(model=args.robot, geometry=shape)
+    if (safe := backend_safety(scenario, args.min_separation, robots, 'validate')) is None:
         return ExitCode.BAD_INPUT
+    scenario = safe[0]
     report = validate_scenario(scenario)
     if report.ok and args.speed_scale == 'auto':
         from formation_sim.commands.limits import resolve_speed_scale

@@ -508,7 +508,8 @@ class Scenario:
 
 
 def _check_safety(safety, *, dynamics: str, ids: tuple[int, ...], positions: np.ndarray) -> None:
-    """The safety layer's rules on the scenario: ETA-1, the plane, every pair apart by more than D."""
+    """The safety layer's rules on the scenario: ETA-1, the plane, no two agents at one point (a pair
+    closer than D starts in recovery, docs/SAFETY.md (S9))."""
     if not isinstance(safety, SafetyConfig):
         raise ScenarioError(f'safety: expected a SafetyConfig, got {short_repr(safety)}')
     if dynamics != 'single':
@@ -523,11 +524,12 @@ def _check_safety(safety, *, dynamics: str, ids: tuple[int, ...], positions: np.
 
     gaps, rows = cKDTree(positions).query(positions, k=2)
     a = int(np.argmin(gaps[:, 1]))
-    a, b, gap = min(a, int(rows[a, 1])), max(a, int(rows[a, 1])), float(gaps[a, 1])
-    if not gap > safety.min_separation:
+    other = int(rows[a, 1]) if int(rows[a, 1]) != a else int(rows[a, 0])  # two at one point: either order
+    a, b, gap = min(a, other), max(a, other), float(gaps[a, 1])
+    if not gap > 0.0:  # closer than D is a start inside the margin, which the layer recovers from (S9)
         raise ScenarioError(
-            f'safety.min_separation: agents {ids[a]} and {ids[b]} start {gap:.6g} '
-            f'm apart, not more than the separation {safety.min_separation!r} m (h_ij(0) > 0, (S1))'
+            f'safety: agents {ids[a]} and {ids[b]} start at the same point ({gap!r} m apart): the layer '
+            'moves a pair apart along x_i - x_j, which two robots at one point do not have (S9)'
         )
 
 

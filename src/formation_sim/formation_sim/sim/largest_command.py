@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from formation_sim.model.command_bound import CommandBound, command_bound
-from formation_sim.model.errors import TheoryError
+from formation_sim.model.errors import LimitsError, TheoryError
 from formation_sim.model.scenario import Scenario
 from formation_sim.model.speed_choice import (
     OBSERVED_MARGIN,
@@ -206,10 +206,26 @@ def command_steps(scenario: Scenario, *, horizon: float) -> tuple[np.ndarray, np
             note(last, world)
         seen['t'], seen['world'] = t, world
 
-    record = simulate(scenario, horizon=horizon, sample_dt=None, on_event=on_event)
+    jam = None if scenario.safety is None else JAM_EVENTS_PER_AGENT * len(scenario.agent_ids)
+
+    def watch(t: float, events: int) -> None:  # the engine reports every 1000 steps
+        if jam is not None and events > jam:
+            raise LimitsError(
+                f'the exact run the speed is chosen from triggers {events} times by t = {t:.4g} s of the '
+                f"paper's time (more than {JAM_EVENTS_PER_AGENT} per agent): the safety layer's robots "
+                'jam, three or more blocking each other (docs/SAFETY.md, "Stress sweep"); nothing was run: '
+                'place them otherwise, or choose another --min-separation'
+            )
+
+    record = simulate(scenario, horizon=horizon, sample_dt=None, on_event=on_event, progress=watch)
     note(seen['t'], seen['world'])  # the controls set at the last event
     return np.asarray(times), np.asarray(largest), record
 
+
+JAM_EVENTS_PER_AGENT = 5000
+"""With the safety layer, an exact run that triggers more than this many times per agent is a jam
+(docs/SAFETY.md, "Stress sweep": the intervals shrink with h): the speed's choice refuses it rather
+than run on for minutes (random_square(204, side=2.2) at D = 0.45 m: 4000 events by 13.6 s)."""
 
 LAYER_ROUNDING = 1.0 + 1e-9
 """The safety layer's cap κ <= L / (v̄ × this): its filter's ||v|| <= v̄ holds up to rounding."""

@@ -42,11 +42,11 @@ def _scenario(name, positions, targets, pairs, *, safety, horizon):
     )
 
 
-def swap_two(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenario:
-    """Two robots 1 m apart that must trade places, head on."""
+def swap_two(*, safety: SafetyConfig | None, horizon: float = 30.0, gap: float = 1.0) -> Scenario:
+    """Two robots `gap` apart (1 m) that must trade places 1 m apart, head on."""
     return _scenario(
         'swap_two',
-        [[0.0, 0.0], [1.0, 0.0]],
+        [[0.0, 0.0], [gap, 0.0]],
         [[1.0, 0.0], [0.0, 0.0]],
         [(1, 2)],
         safety=safety,
@@ -66,10 +66,12 @@ def swap_square(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenar
     )
 
 
-def line_three(*, safety: SafetyConfig | None, horizon: float = 30.0) -> Scenario:
-    """Three robots on a line, 0.5 m apart, whose outer two must trade places past the middle one."""
-    line = [[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]]
-    return _scenario('line_three', line, line[::-1], [(1, 2), (2, 3)], safety=safety, horizon=horizon)
+def line_three(*, safety: SafetyConfig | None, horizon: float = 30.0, spacing: float = 0.5) -> Scenario:
+    """Three robots on a line, `spacing` apart (0.5 m), whose outer two must trade places past the
+    middle one, to a line 0.5 m apart."""
+    line = [[0.0, 0.0], [spacing, 0.0], [2.0 * spacing, 0.0]]
+    targets = [[1.0, 0.0], [0.5, 0.0], [0.0, 0.0]]
+    return _scenario('line_three', line, targets, [(1, 2), (2, 3)], safety=safety, horizon=horizon)
 
 
 def random_square(
