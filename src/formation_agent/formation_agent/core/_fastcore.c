@@ -1453,6 +1453,7 @@ typedef struct {
     PyObject *failed; /* the agent whose search raised in next_time, or None */
     double first_span; /* eta._FIRST_SPAN: plan makes the searches of `plain` agents itself; NaN: it calls trigger_search */
     PyObject *plain;   /* a tuple of the agent types whose trigger_search plan may make in C, or NULL */
+    PyObject *rule;    /* the rule type (trigger.ExponentialRule) of the thresholds it may make them for */
 } AgendaObject;
 
 static PyTypeObject AgendaType;
@@ -1510,11 +1511,11 @@ static Entry heap_pop(AgendaObject *self) { /* heapq.heappop (size > 0) */
 }
 
 static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static char *names[] = {"agent_ids", "horizon", "first_span", "plain", NULL};
-    PyObject *agent_ids = NULL, *plain = NULL;
+    static char *names[] = {"agent_ids", "horizon", "first_span", "plain", "rule", NULL};
+    PyObject *agent_ids = NULL, *plain = NULL, *rule = NULL;
     double horizon = NAN, first_span = NAN;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|$OddO!", names, &agent_ids, &horizon, &first_span,
-                                     &PyTuple_Type, &plain))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|$OddO!O!", names, &agent_ids, &horizon, &first_span,
+                                     &PyTuple_Type, &plain, &PyType_Type, &rule))
         return NULL;
     if (agent_ids == NULL || isnan(horizon)) {
         PyErr_SetString(PyExc_TypeError, "Agenda() takes the keyword arguments agent_ids and horizon");
@@ -1533,6 +1534,7 @@ static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
     self->horizon = horizon;
     self->first_span = first_span;
     self->plain = Py_XNewRef(plain);
+    self->rule = Py_XNewRef(rule);
     self->failed = Py_NewRef(Py_None);
     self->ids = PyList_AsTuple(ids);
     Py_DECREF(ids);
@@ -1571,6 +1573,7 @@ static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
     Py_VISIT(self->slots);
     Py_VISIT(self->failed);
     Py_VISIT(self->plain);
+    Py_VISIT(self->rule);
     return 0;
 }
 
@@ -1581,6 +1584,7 @@ static int agenda_clear(AgendaObject *self) {
     Py_CLEAR(self->slots);
     Py_CLEAR(self->failed);
     Py_CLEAR(self->plain);
+    Py_CLEAR(self->rule);
     return 0;
 }
 
@@ -1596,7 +1600,8 @@ static void agenda_dealloc(AgendaObject *self) {
 static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* method and attribute names */
 
 /* _EventTriggeredAgent.trigger_search(horizon) of a plain agent (an exact type of self->plain) without
- * the safety layer, where it needs no check that may fail: the agent has triggered and heard every
+ * the safety layer, triggering on `rule` (the exponential threshold, the one the C search knows), where it
+ * needs no check that may fail: the agent has triggered and heard every
  * neighbour, and its search is either none (a new _fastcore.Search, made as the method makes it) or a
  * _fastcore.Search of this limit (kept). A new reference; Py_None (a new reference) where the method
  * must decide; NULL on error. */
@@ -1604,7 +1609,7 @@ static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
     int plain = 0;
     for (Py_ssize_t i = 0; self->plain != NULL && i < PyTuple_GET_SIZE(self->plain); i++)
         plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
-    if (!plain || isnan(self->first_span))
+    if (!plain || isnan(self->first_span) || self->rule == NULL)
         return Py_NewRef(Py_None);
     PyObject *fast = PyObject_GetAttr(agent, NAMES[N_FAST]), *safety = NULL, *last_trigger = NULL, *heard = NULL,
              *search = NULL, *out = NULL;
@@ -1625,6 +1630,11 @@ static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
     }
     double start, alpha, beta, floor_, tolerance, interval = 0.0;
     PyObject *threshold = PyObject_GetAttr(agent, NAMES[N_THRESHOLD]), *gap = NULL;
+    if (threshold != NULL && (PyObject *)Py_TYPE(threshold) != self->rule) { /* another rule: the method */
+        Py_DECREF(threshold);
+        out = Py_NewRef(Py_None);
+        goto done;
+    }
     int ok = threshold != NULL && get_double(agent, N_LAST_EVENT, &start) == 0 &&
              get_double(threshold, N_ALPHA, &alpha) == 0 && get_double(threshold, N_BETA, &beta) == 0 &&
              get_double(threshold, N_FLOOR, &floor_) == 0 && get_double(agent, N_TOLERANCE, &tolerance) == 0 &&

@@ -36,6 +36,7 @@ from formation_agent.core.eta import (
     make_agent,
 )
 from formation_agent.core.time_warp import TimeWarp
+from formation_agent.core.trigger import ExponentialRule
 from formation_msgs_py.types import TriggerInfo
 from formation_sim.model import theory
 from formation_sim.sim.errors import EngineError
@@ -87,6 +88,7 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE
         gains=gains,
         tolerance=tolerance,
         safety=scenario.safety,
+        trigger_rule=scenario.trigger_rule,
     )
 
 
@@ -603,13 +605,15 @@ class _Agenda:
     def __post_init__(self) -> None:
         # Without a period, where the compiled core runs, the queue is its compiled twin
         # (`_fastcore.Agenda`: this heap, its serials and searches in C; the same order and times).
-        # It makes the searches of Eta1Agent/Eta2Agent as their trigger_search does (_FIRST_SPAN).
+        # It makes the searches of Eta1Agent/Eta2Agent on the exponential rule as their trigger_search
+        # does (_FIRST_SPAN); any other rule's search is the method's.
         if self.period is None and self.agent_ids and (queue := compiled.agenda()) is not None:
             self.queue = queue(
                 agent_ids=self.agent_ids,
                 horizon=self.horizon,
                 first_span=_FIRST_SPAN,
                 plain=(Eta1Agent, Eta2Agent),
+                rule=ExponentialRule,
             )
 
     def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
