@@ -535,6 +535,8 @@ enum {
     N_SENDER, N_RECEIVER, N_STAMP, N_CONTROL, N_REL_POSITION, N_REL_VELOCITY,
     /* trigger: the agent's and the SensedState's */
     N_AGENT, N_NEIGHBOUR_IDS, N_REL_POSITIONS, N_REL_VELOCITIES, N_SPEED_SCALE, N_SENSED_Q, N_OFFSET, N_INTERVAL,
+    /* the engine's team (Team, Agenda's planning): the agent's and its threshold's */
+    N_SAFETY, N_EVERYONE_HEARD, N_THRESHOLD, N_ALPHA, N_BETA, N_FLOOR, N_TOLERANCE, N_RECEIVE,
     N_NAMES
 };
 static const char *NAME_TEXT[N_NAMES] = {
@@ -544,6 +546,7 @@ static const char *NAME_TEXT[N_NAMES] = {
     "last_event", "_search", "result",
     "sender", "receiver", "stamp", "control", "rel_position", "rel_velocity",
     "agent", "neighbour_ids", "rel_positions", "rel_velocities", "speed_scale", "_sensed_q", "_offset", "_interval",
+    "_safety", "_everyone_heard", "_threshold", "alpha", "beta", "floor", "tolerance", "receive",
 };
 static PyObject *NAMES[N_NAMES];
 static PyObject *RAISER = NULL; /* compiled._raise(model, problem): raises the Python path's error */
@@ -1448,6 +1451,9 @@ typedef struct {
     long long *serial;   /* per agent: the serial of its live entry */
     long long counter;
     PyObject *failed; /* the agent whose search raised in next_time, or None */
+    double first_span; /* eta._FIRST_SPAN: plan makes the searches of `plain` agents itself; NaN: it calls trigger_search */
+    PyObject *plain;   /* a tuple of the agent types whose trigger_search plan may make in C, or NULL */
+    PyObject *rule;    /* the rule type (trigger.ExponentialRule) of the thresholds it may make them for */
 } AgendaObject;
 
 static PyTypeObject AgendaType;
@@ -1505,11 +1511,16 @@ static Entry heap_pop(AgendaObject *self) { /* heapq.heappop (size > 0) */
 }
 
 static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static char *names[] = {"agent_ids", "horizon", NULL};
-    PyObject *agent_ids;
-    double horizon;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$Od", names, &agent_ids, &horizon))
+    static char *names[] = {"agent_ids", "horizon", "first_span", "plain", "rule", NULL};
+    PyObject *agent_ids = NULL, *plain = NULL, *rule = NULL;
+    double horizon = NAN, first_span = NAN;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "|$OddO!O!", names, &agent_ids, &horizon, &first_span,
+                                     &PyTuple_Type, &plain, &PyType_Type, &rule))
         return NULL;
+    if (agent_ids == NULL || isnan(horizon)) {
+        PyErr_SetString(PyExc_TypeError, "Agenda() takes the keyword arguments agent_ids and horizon");
+        return NULL;
+    }
     PyObject *ids = PySequence_List(agent_ids);
     if (ids == NULL || PyList_Sort(ids) < 0) {
         Py_XDECREF(ids);
@@ -1521,6 +1532,9 @@ static PyObject *agenda_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
         return NULL;
     }
     self->horizon = horizon;
+    self->first_span = first_span;
+    self->plain = Py_XNewRef(plain);
+    self->rule = Py_XNewRef(rule);
     self->failed = Py_NewRef(Py_None);
     self->ids = PyList_AsTuple(ids);
     Py_DECREF(ids);
@@ -1558,6 +1572,8 @@ static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
     Py_VISIT(self->ids);
     Py_VISIT(self->slots);
     Py_VISIT(self->failed);
+    Py_VISIT(self->plain);
+    Py_VISIT(self->rule);
     return 0;
 }
 
@@ -1567,6 +1583,8 @@ static int agenda_clear(AgendaObject *self) {
     Py_CLEAR(self->ids);
     Py_CLEAR(self->slots);
     Py_CLEAR(self->failed);
+    Py_CLEAR(self->plain);
+    Py_CLEAR(self->rule);
     return 0;
 }
 
@@ -1580,6 +1598,80 @@ static void agenda_dealloc(AgendaObject *self) {
 }
 
 static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* method and attribute names */
+
+/* _EventTriggeredAgent.trigger_search(horizon) of a plain agent (an exact type of self->plain) without
+ * the safety layer, triggering on `rule` (the exponential threshold, the one the C search knows), where it
+ * needs no check that may fail: the agent has triggered and heard every
+ * neighbour, and its search is either none (a new _fastcore.Search, made as the method makes it) or a
+ * _fastcore.Search of this limit (kept). A new reference; Py_None (a new reference) where the method
+ * must decide; NULL on error. */
+static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
+    int plain = 0;
+    for (Py_ssize_t i = 0; self->plain != NULL && i < PyTuple_GET_SIZE(self->plain); i++)
+        plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
+    if (!plain || isnan(self->first_span) || self->rule == NULL)
+        return Py_NewRef(Py_None);
+    PyObject *fast = PyObject_GetAttr(agent, NAMES[N_FAST]), *safety = NULL, *last_trigger = NULL, *heard = NULL,
+             *search = NULL, *out = NULL;
+    if (fast == NULL || (safety = PyObject_GetAttr(agent, NAMES[N_SAFETY])) == NULL ||
+        (last_trigger = PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) == NULL ||
+        (heard = PyObject_GetAttr(agent, NAMES[N_EVERYONE_HEARD])) == NULL ||
+        (search = PyObject_GetAttr(agent, NAMES[N_SEARCH])) == NULL)
+        goto done;
+    if (fast != Py_True || safety != Py_None || last_trigger == Py_None || heard != Py_True) {
+        out = Py_NewRef(Py_None);
+        goto done;
+    }
+    if (search != Py_None) { /* kept when it has this limit; else the method decides */
+        out = Py_IS_TYPE(search, &SearchType) && ((SearchObject *)search)->s.limit == self->horizon
+                  ? Py_NewRef(search)
+                  : Py_NewRef(Py_None);
+        goto done;
+    }
+    double start, alpha, beta, floor_, tolerance, interval = 0.0;
+    PyObject *threshold = PyObject_GetAttr(agent, NAMES[N_THRESHOLD]), *gap = NULL;
+    if (threshold != NULL && (PyObject *)Py_TYPE(threshold) != self->rule) { /* another rule: the method */
+        Py_DECREF(threshold);
+        out = Py_NewRef(Py_None);
+        goto done;
+    }
+    int ok = threshold != NULL && get_double(agent, N_LAST_EVENT, &start) == 0 &&
+             get_double(threshold, N_ALPHA, &alpha) == 0 && get_double(threshold, N_BETA, &beta) == 0 &&
+             get_double(threshold, N_FLOOR, &floor_) == 0 && get_double(agent, N_TOLERANCE, &tolerance) == 0 &&
+             (gap = PyObject_GetAttr(agent, NAMES[N_INTERVAL])) != NULL;
+    if (ok && PyObject_IsTrue(gap)) { /* self._interval or 0.0 */
+        interval = PyFloat_AsDouble(gap);
+        ok = !(interval == -1.0 && PyErr_Occurred());
+    }
+    Py_XDECREF(threshold);
+    Py_XDECREF(gap);
+    if (!ok)
+        goto done;
+    SearchObject *made = (SearchObject *)SearchType.tp_alloc(&SearchType, 0);
+    if (made == NULL)
+        goto done;
+    /* search_new's fields: at the start, no result, no step, the first span, no last step. */
+    made->model = Py_NewRef(agent);
+    made->start = start;
+    made->s = (Search){.alpha = alpha, .beta = beta, .floor = floor_, .limit = self->horizon, .tolerance = tolerance};
+    made->st.frontier = start;
+    made->st.span = py_max(interval, self->first_span); /* max(self._interval or 0.0, _FIRST_SPAN) */
+    made->st.cover_end = -INFINITY;
+    made->st.bound_e = NAN;
+    made->st.bound_curv = NAN;
+    if (PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
+        Py_DECREF(made);
+        goto done;
+    }
+    out = (PyObject *)made;
+done:
+    Py_XDECREF(fast);
+    Py_XDECREF(safety);
+    Py_XDECREF(last_trigger);
+    Py_XDECREF(heard);
+    Py_XDECREF(search);
+    return out;
+}
 
 /* plan(agents, changed): _Agenda.plan without a period; `changed` the agents to plan anew, sorted. */
 static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
@@ -1603,7 +1695,11 @@ static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
         self->counter += 1;
         self->serial[k] = self->counter;
         /* Searched lazily (next_time): only as far as the team's next event needs. */
-        PyObject *search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+        PyObject *search = plain_search(self, agent);
+        if (search == Py_None) {
+            Py_DECREF(search);
+            search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+        }
         double frontier;
         if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
             frontier = ((SearchObject *)search)->st.frontier;
@@ -1739,6 +1835,391 @@ static PyTypeObject AgendaType = {
     .tp_methods = agenda_methods,
 };
 
+/* ---- Team: the engine's triggers and deliveries at one event time (formation_sim.sim.engine) ----- */
+
+/* A message on its way: TriggerInfo(sender, receiver, stamp, control, rel_position, rel_velocity), its
+ * receiver's edge (the sender's slot there) instead of the receiver's lookup. */
+typedef struct {
+    Py_ssize_t sender, receiver, k;
+    double stamp, rel[3], control[3], velocity[3];
+} Pending;
+
+typedef struct {
+    PyObject_HEAD
+    Py_ssize_t n, p;
+    PyObject *agents;     /* a tuple, in the world's order */
+    PyObject *ids;        /* their ids, a tuple */
+    PyObject *index;      /* id -> position */
+    PyObject *set_control; /* World.set_control: raises the world's error on a command that is not finite */
+    Py_ssize_t *start;    /* start[a] .. start[a + 1]: agent a's edges in `neighbour` and `back` */
+    Py_ssize_t *neighbour; /* the neighbour's position, in the agent's neighbour order */
+    Py_ssize_t *back;     /* the agent's slot among the neighbour's edges */
+    Pending *pending;
+    Py_ssize_t size, capacity;
+} TeamObject;
+
+static PyTypeObject TeamType;
+
+static Py_ssize_t team_position(TeamObject *self, PyObject *id) {
+    PyObject *k = PyDict_GetItemWithError(self->index, id);
+    if (k == NULL) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_KeyError, "Team: unknown agent %R", id);
+        return -1;
+    }
+    return PyLong_AsSsize_t(k);
+}
+
+static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static char *names[] = {"agents", "ids", "neighbours", "back", "dimension", "set_control", NULL};
+    PyObject *agents, *ids, *neighbours, *back, *set_control;
+    Py_ssize_t p;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$O!O!O!O!nO", names, &PyTuple_Type, &agents, &PyTuple_Type,
+                                     &ids, &PyTuple_Type, &neighbours, &PyTuple_Type, &back, &p, &set_control))
+        return NULL;
+    Py_ssize_t n = PyTuple_GET_SIZE(agents);
+    if (PyTuple_GET_SIZE(ids) != n || PyTuple_GET_SIZE(neighbours) != n || PyTuple_GET_SIZE(back) != n || p < 1 ||
+        p > 3) {
+        PyErr_SetString(PyExc_ValueError, "Team: agents, ids, neighbours and back of one length, 1 <= dimension <= 3");
+        return NULL;
+    }
+    TeamObject *self = (TeamObject *)type->tp_alloc(type, 0);
+    if (self == NULL)
+        return NULL;
+    self->n = n;
+    self->p = p;
+    self->agents = Py_NewRef(agents);
+    self->ids = Py_NewRef(ids);
+    self->set_control = Py_NewRef(set_control);
+    self->index = PyDict_New();
+    self->start = PyMem_Calloc((size_t)n + 1, sizeof(Py_ssize_t));
+    if (self->index == NULL || self->start == NULL)
+        goto fail;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *k = PyLong_FromSsize_t(a);
+        if (k == NULL || PyDict_SetItem(self->index, PyTuple_GET_ITEM(ids, a), k) < 0) {
+            Py_XDECREF(k);
+            goto fail;
+        }
+        Py_DECREF(k);
+        PyObject *row = PyTuple_GET_ITEM(neighbours, a), *slots = PyTuple_GET_ITEM(back, a);
+        if (!PyTuple_Check(row) || !PyTuple_Check(slots) || PyTuple_GET_SIZE(row) != PyTuple_GET_SIZE(slots)) {
+            PyErr_SetString(PyExc_ValueError, "Team: neighbours and back must be tuples of one length per agent");
+            goto fail;
+        }
+        self->start[a + 1] = self->start[a] + PyTuple_GET_SIZE(row);
+    }
+    Py_ssize_t edges = self->start[n] > 0 ? self->start[n] : 1;
+    self->neighbour = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
+    self->back = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
+    if (self->neighbour == NULL || self->back == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *row = PyTuple_GET_ITEM(neighbours, a), *slots = PyTuple_GET_ITEM(back, a);
+        for (Py_ssize_t k = 0; k < PyTuple_GET_SIZE(row); k++) {
+            Py_ssize_t b = PyLong_AsSsize_t(PyTuple_GET_ITEM(row, k));
+            Py_ssize_t slot = PyLong_AsSsize_t(PyTuple_GET_ITEM(slots, k));
+            if (PyErr_Occurred())
+                goto fail;
+            if (b < 0 || b >= n || slot < 0) {
+                PyErr_Format(PyExc_ValueError, "Team: agent %zd's neighbour %zd (slot %zd) out of range", a, b, slot);
+                goto fail;
+            }
+            self->neighbour[self->start[a] + k] = b;
+            self->back[self->start[a] + k] = slot;
+        }
+    }
+    return (PyObject *)self;
+fail:
+    Py_DECREF(self);
+    return NULL;
+}
+
+static int team_traverse(TeamObject *self, visitproc visit, void *arg) {
+    Py_VISIT(self->agents);
+    Py_VISIT(self->ids);
+    Py_VISIT(self->index);
+    Py_VISIT(self->set_control);
+    return 0;
+}
+
+static int team_clear(TeamObject *self) {
+    Py_CLEAR(self->agents);
+    Py_CLEAR(self->ids);
+    Py_CLEAR(self->index);
+    Py_CLEAR(self->set_control);
+    return 0;
+}
+
+static void team_dealloc(TeamObject *self) {
+    PyObject_GC_UnTrack(self);
+    team_clear(self);
+    PyMem_Free(self->start);
+    PyMem_Free(self->neighbour);
+    PyMem_Free(self->back);
+    PyMem_Free(self->pending);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* An (n, p) C-contiguous float64 array's buffer (writable when asked); -1 with an error otherwise. */
+static int team_buffer(TeamObject *self, PyObject *array, int writable, Py_buffer *view) {
+    if (PyObject_GetBuffer(array, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0)) < 0)
+        return -1;
+    if (view->ndim != 2 || view->itemsize != 8 || strcmp(view->format, "d") != 0 || view->shape[0] != self->n ||
+        view->shape[1] != self->p) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_ValueError, "Team: the world's arrays must be (%zd, %zd) float64", self->n, self->p);
+        return -1;
+    }
+    return 0;
+}
+
+/* What world.sense(agent, neighbour_ids) hands a trigger, read from the world's arrays and checked as
+ * read_sensing checks a SensedState (x_i - x_j, q_i - q_j: numpy's subtraction is this one). 0: the
+ * Python path decides (an agent not on the plain path, with the safety layer, or sensing it refuses). */
+static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double t, const double *x, const double *q,
+                        Held *h, Sensing *in) {
+    long kind, p, fast;
+    if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p != self->p || (kind != 1 && kind != 2) || (kind == 2) != (q != NULL) || !isfinite(t))
+        return 0;
+    in->kind = (int)kind;
+    in->p = p;
+    in->t = t;
+    PyObject *safety = hold(h, PyObject_GetAttr(agent, NAMES[N_SAFETY]));
+    PyObject *last_trigger = safety ? hold(h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    PyObject *offsets = last_trigger ? hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3])) : NULL;
+    PyObject *capacity = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    double last;
+    if (safety != Py_None || (last_trigger != Py_None && (!plain_double(last_trigger, &last) || t < last)))
+        return 0;
+    in->m = self->start[a + 1] - self->start[a];
+    if (in->m > MAX_EDGES || !PyList_CheckExact(offsets) || !PyList_CheckExact(capacity) ||
+        PyList_GET_SIZE(offsets) != in->m || PyList_GET_SIZE(capacity) != in->m)
+        return 0;
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        Py_ssize_t b = self->neighbour[self->start[a] + k];
+        double d[3], c, sum = 0.0;
+        for (Py_ssize_t i = 0; i < 3; i++) {
+            in->rel[k][i] = i < p ? x[a * p + i] - x[b * p + i] : 0.0;
+            in->extra[k][i] = i < p && q != NULL ? q[a * p + i] - q[b * p + i] : 0.0;
+            in->y[k][i] = 0.0;
+            if (!isfinite(in->rel[k][i]) || !isfinite(in->extra[k][i]))
+                return 0;
+        }
+        if (read_floats(PyList_GET_ITEM(offsets, k), d, 3, "_offsets3") < 0)
+            return -1;
+        if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
+            return 0;
+        for (Py_ssize_t i = 0; i < p; i++) {
+            in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
+            sum += in->y[k][i] * in->y[k][i];
+        }
+        in->length[k] = sqrt(sum);
+        if (in->length[k] >= c)
+            return 0; /* out of its range: the Python path raises */
+    }
+    return 1;
+}
+
+static int team_queue(TeamObject *self, Pending msg) {
+    if (self->size == self->capacity) {
+        Py_ssize_t capacity = self->capacity ? 2 * self->capacity : 256;
+        Pending *grown = PyMem_Realloc(self->pending, sizeof(Pending) * (size_t)capacity);
+        if (grown == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        self->pending = grown;
+        self->capacity = capacity;
+    }
+    self->pending[self->size++] = msg;
+    return 0;
+}
+
+/* One agent's trigger at t from the world's arrays: _EventTriggeredAgent.trigger (take_sensing,
+ * after_trigger: the same updates and floats), the command written into u (World.set_control), and
+ * its triggering information queued for deliver. 1 done, 0 left to the Python path, -1 error. */
+static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, double t, const double *x,
+                            const double *q, double *u, Sensing *in) {
+    PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
+    Held h = {.n = 0};
+    double control[3], offset[3];
+    int status = team_sensing(self, agent, a, t, x, q, &h, in);
+    if (status == 1 && (take_sensing(agent, &h, in, control, offset) < 0 || after_trigger(agent, &h, t_obj) < 0))
+        status = -1;
+    release(&h);
+    if (status != 1)
+        return status;
+    int finite = 1;
+    for (Py_ssize_t i = 0; i < in->p; i++)
+        finite &= isfinite(control[i]) != 0;
+    if (!finite) { /* the world refuses it, in its words */
+        PyObject *command = PyObject_GetAttr(agent, NAMES[N_CONTROL]);
+        PyObject *out = command ? PyObject_CallFunctionObjArgs(self->set_control, PyTuple_GET_ITEM(self->ids, a),
+                                                               command, NULL)
+                                : NULL;
+        Py_XDECREF(command);
+        if (out != NULL) {
+            Py_DECREF(out);
+            PyErr_SetString(PyExc_RuntimeError, "World.set_control took a command that is not finite");
+        }
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < in->p; i++)
+        u[a * in->p + i] = control[i];
+    for (Py_ssize_t k = 0; k < in->m; k++) {
+        Pending msg = {.sender = a, .receiver = self->neighbour[self->start[a] + k],
+                       .k = self->back[self->start[a] + k], .stamp = t};
+        for (Py_ssize_t i = 0; i < 3; i++) {
+            msg.rel[i] = in->rel[k][i];
+            msg.control[i] = control[i];
+            msg.velocity[i] = in->extra[k][i];
+        }
+        if (team_queue(self, msg) < 0)
+            return -1;
+    }
+    return 1;
+}
+
+/* trigger(due, start, t, x, q, u): the agents due[start:] trigger at t in turn, as the engine's
+ * _trigger_and_deliver lets them (sense, trigger, set_control), until one the compiled path does not
+ * take: its position in `due` (len(due): all done), for the Python path. */
+static PyObject *team_trigger(TeamObject *self, PyObject *args) {
+    PyObject *due, *t_obj, *x_obj, *q_obj, *u_obj;
+    Py_ssize_t first;
+    if (!PyArg_ParseTuple(args, "O!nO!OOO", &PyList_Type, &due, &first, &PyFloat_Type, &t_obj, &x_obj, &q_obj,
+                          &u_obj))
+        return NULL;
+    Py_buffer xv, qv, uv;
+    if (team_buffer(self, x_obj, 0, &xv) < 0)
+        return NULL;
+    if (q_obj != Py_None && team_buffer(self, q_obj, 0, &qv) < 0) {
+        PyBuffer_Release(&xv);
+        return NULL;
+    }
+    if (team_buffer(self, u_obj, 1, &uv) < 0) {
+        PyBuffer_Release(&xv);
+        if (q_obj != Py_None)
+            PyBuffer_Release(&qv);
+        return NULL;
+    }
+    Sensing *in = PyMem_Malloc(sizeof(Sensing));
+    double t = PyFloat_AS_DOUBLE(t_obj);
+    Py_ssize_t pos = first, count = PyList_GET_SIZE(due);
+    int status = in == NULL ? (PyErr_NoMemory(), -1) : 1;
+    for (; status == 1 && pos < count; pos++) {
+        Py_ssize_t a = team_position(self, PyList_GET_ITEM(due, pos));
+        status = a < 0 ? -1
+                       : team_trigger_one(self, a, t_obj, t, xv.buf, q_obj == Py_None ? NULL : qv.buf, uv.buf, in);
+        if (status != 1)
+            break;
+    }
+    PyMem_Free(in);
+    PyBuffer_Release(&xv);
+    PyBuffer_Release(&uv);
+    if (q_obj != Py_None)
+        PyBuffer_Release(&qv);
+    if (status < 0)
+        return NULL;
+    return PyLong_FromSsize_t(pos);
+}
+
+/* A queued message as the TriggerInfo the trigger would have sent (for the Python receive). */
+static PyObject *team_info(TeamObject *self, const Pending *msg, int kind) {
+    PyObject *stamp = PyFloat_FromDouble(msg->stamp), *control = floats_tuple(msg->control, self->p);
+    PyObject *rel = floats_tuple(msg->rel, self->p);
+    PyObject *velocity = kind == 1 ? Py_NewRef(Py_None) : floats_tuple(msg->velocity, self->p);
+    PyObject *info = NULL;
+    if (stamp != NULL && control != NULL && rel != NULL && velocity != NULL) {
+        PyObject *args[6] = {PyTuple_GET_ITEM(self->ids, msg->sender), PyTuple_GET_ITEM(self->ids, msg->receiver),
+                             stamp, control, rel, velocity};
+        info = make_record(TRIGGER_INFO, DIRECT_INFO, INFO_NAMES, args);
+    }
+    Py_XDECREF(stamp);
+    Py_XDECREF(control);
+    Py_XDECREF(rel);
+    Py_XDECREF(velocity);
+    return info;
+}
+
+/* One queued message taken by its receiver: read_message's checks, take_message, after_message; a
+ * message they do not take goes, as a TriggerInfo, to the receiver's receive (which raises its error). */
+static int team_deliver_one(TeamObject *self, const Pending *pending) {
+    PyObject *agent = PyTuple_GET_ITEM(self->agents, pending->receiver);
+    Held h = {.n = 0};
+    long kind, p, fast;
+    int status = -1;
+    if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    Message msg = {.k = pending->k, .p = p, .kind = (int)kind, .stamp = pending->stamp};
+    memcpy(msg.rel, pending->rel, sizeof msg.rel);
+    memcpy(msg.control, pending->control, sizeof msg.control);
+    memcpy(msg.velocity, pending->velocity, sizeof msg.velocity);
+    int plain = fast && p == self->p && (kind == 1 || kind == 2);
+    PyObject *edge_time = plain ? hold(&h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
+    PyObject *last_trigger = edge_time ? hold(&h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    if (plain && last_trigger == NULL)
+        goto done;
+    double edge, last;
+    plain = plain && PyList_CheckExact(edge_time) && msg.k < PyList_GET_SIZE(edge_time) &&
+            plain_double(PyList_GET_ITEM(edge_time, msg.k), &edge) && msg.stamp >= edge &&
+            (last_trigger == Py_None || (plain_double(last_trigger, &last) && msg.stamp >= last));
+    if (plain) {
+        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 0;
+    } else {
+        PyObject *info = hold(&h, team_info(self, pending, (int)kind));
+        PyObject *out = info ? PyObject_CallMethodOneArg(agent, NAMES[N_RECEIVE], info) : NULL;
+        status = out == NULL ? -1 : 0;
+        Py_XDECREF(out);
+    }
+done:
+    release(&h);
+    return status;
+}
+
+/* deliver(): every queued message reaches its receiver, in the order sent; their ids, in that order. */
+static PyObject *team_deliver(TeamObject *self, PyObject *unused) {
+    (void)unused;
+    PyObject *receivers = PyList_New(self->size);
+    for (Py_ssize_t i = 0; receivers != NULL && i < self->size; i++) {
+        PyList_SET_ITEM(receivers, i, Py_NewRef(PyTuple_GET_ITEM(self->ids, self->pending[i].receiver)));
+        if (team_deliver_one(self, &self->pending[i]) < 0)
+            Py_CLEAR(receivers);
+    }
+    self->size = 0; /* delivered, or the run ends with the error */
+    return receivers;
+}
+
+static PyMethodDef team_methods[] = {
+    {"trigger", (PyCFunction)team_trigger, METH_VARARGS,
+     "trigger(due, start, t, x, q, u): due[start:] trigger at t from the world's arrays until one the compiled "
+     "path does not take; its position (len(due): all)."},
+    {"deliver", (PyCFunction)team_deliver, METH_NOARGS,
+     "deliver(): the queued triggering information reaches its receivers; their ids, in the order sent."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject TeamType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "formation_agent.core._fastcore.Team",
+    .tp_doc = "Team(*, agents, ids, neighbours, back, dimension, set_control): the engine's triggers and "
+              "deliveries at an event time (formation_sim.sim.engine._trigger_and_deliver), compiled.",
+    .tp_basicsize = sizeof(TeamObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = team_new,
+    .tp_dealloc = (destructor)team_dealloc,
+    .tp_traverse = (traverseproc)team_traverse,
+    .tp_clear = (inquiry)team_clear,
+    .tp_methods = team_methods,
+};
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
@@ -1763,7 +2244,7 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
         if (NAMES[i] == NULL)
             return NULL;
     }
-    if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0)
+    if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0 || PyType_Ready(&TeamType) < 0)
         return NULL;
     TRIGGER_SEARCH = PyUnicode_InternFromString("trigger_search");
     ADVANCE = PyUnicode_InternFromString("advance");
@@ -1774,7 +2255,8 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
     if (m == NULL)
         return NULL;
     if (PyModule_AddObjectRef(m, "Search", (PyObject *)&SearchType) < 0 ||
-        PyModule_AddObjectRef(m, "Agenda", (PyObject *)&AgendaType) < 0) {
+        PyModule_AddObjectRef(m, "Agenda", (PyObject *)&AgendaType) < 0 ||
+        PyModule_AddObjectRef(m, "Team", (PyObject *)&TeamType) < 0) {
         Py_DECREF(m);
         return NULL;
     }

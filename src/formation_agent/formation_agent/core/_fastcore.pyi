@@ -31,7 +31,29 @@ class Search(CrossingSearch): ...
 class Agenda:
     horizon: float
     failed: object | None
-    def __init__(self, *, agent_ids: Iterable[int], horizon: float) -> None: ...
+    def __init__(
+        self,
+        *,
+        agent_ids: Iterable[int],
+        horizon: float,
+        first_span: float = ...,
+        plain: tuple[type, ...] = ...,
+        rule: type = ...,
+    ) -> None: ...
     def plan(self, agents: Any, changed: Sequence[int], /) -> None: ...
     def next_time(self) -> float: ...
     def pop_due(self, t: float, /) -> list[int]: ...
+
+class Team:
+    def __init__(
+        self,
+        *,
+        agents: tuple[Any, ...],
+        ids: tuple[int, ...],
+        neighbours: tuple[tuple[int, ...], ...],
+        back: tuple[tuple[int, ...], ...],
+        dimension: int,
+        set_control: Callable[[int, Any], None],
+    ) -> None: ...
+    def trigger(self, due: list[int], start: int, t: float, x: Any, q: Any, u: Any, /) -> int: ...
+    def deliver(self) -> list[int]: ...

@@ -136,6 +136,14 @@ def agenda() -> type[_fastcore.Agenda] | None:
     return _fastcore.Agenda if _active else None
 
 
+def team() -> type[_fastcore.Team] | None:
+    """The compiled triggers and deliveries of the in-process engine at an event time (`_fastcore.Team`:
+    sensing from the world's arrays, each due agent's trigger, its command into the world, the
+    triggering information delivered; the agents' updates and floats those of `trigger` and `receive`,
+    formation_sim.sim.engine._trigger_and_deliver), or None for the pure-Python path."""
+    return _fastcore.Team if _active else None
+
+
 def _raise(model: Any, problem: tuple[Any, ...]) -> None:  # model: the agent's error model
     """The error the pure-Python path raises at this point, in its words (the compiled core calls it)."""
     what = problem[0]

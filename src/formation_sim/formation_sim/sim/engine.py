@@ -27,8 +27,17 @@ import numpy as np
 from formation_agent.core import compiled
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, PRECISION_HINT, CrossingSearch
 from formation_agent.core.errors import CrossingError
-from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS, Eta1Agent, Eta2Agent, make_agent
+from formation_agent.core.eta import (
+    _FIRST_SPAN,
+    ALGORITHM_GAINS,
+    SCALE_GAINS,
+    Eta1Agent,
+    Eta2Agent,
+    make_agent,
+)
 from formation_agent.core.time_warp import TimeWarp
+from formation_agent.core.trigger import ExponentialRule
+from formation_msgs_py.types import TriggerInfo
 from formation_sim.model import theory
 from formation_sim.sim.errors import EngineError
 from formation_sim.sim.record import RunRecord
@@ -278,10 +287,9 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
     t = 35.245 → 34.364 (threshold 1.19e-14 < 8 × 1.52e-15 on edge (2, 3)), paper_double at
     t = 34.898 → 34.241 (1.35e-14 < 8 × 1.75e-15).
     """
-    x = world.positions
+    x, q, _ = world.arrays()  # the world's own arrays (read, not copied: this runs at every event)
     ulp_y = float(np.spacing(max(float(np.abs(x).max()), edges.offset)))
     c = edges.capacity
-    q = world.velocities
     if q is None:
         step = theory.rounding_step(c, c, ulp_y)
     else:
@@ -463,15 +471,16 @@ def _run(
     sampler.event(force=True)  # t = 0
     some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
     floor_edges = FloorEdges.of(scenario)
+    team = _team(agents, world) if period is None else None
     while True:
         sampler.event(due=due)
         if period is None and (problem := rounding_floor(some_agent, world, floor_edges)) is not None:
             raise EngineError(problem)
         if on_event is not None:
             on_event(t, world, due)
-        outbox = _trigger_and_deliver(agents, world, due, t, trigger_times)
-        messages += len(outbox)
-        agenda.plan(agents, set(due).union(info.receiver for info in outbox), due, t)
+        receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
+        messages += len(receivers)
+        agenda.plan(agents, set(due).union(receivers), due, t)
         t_next = agenda.next_time()
         if t_next == t and period is None:
             # News at this instant put an agent on its threshold already (it would have crossed
@@ -499,29 +508,78 @@ def _run(
     return messages
 
 
+def _team(agents: dict, world: World) -> _fastcore.Team | None:
+    """The compiled step of `_trigger_and_deliver` over this team (`compiled.team`), or None (the
+    pure-Python path, p > 3, or a neighbour that does not list the agent back): the agents in the
+    world's order, each one's neighbours by their position there and its slot among their edges."""
+    team_type = compiled.team()
+    ids = world.agent_ids
+    if team_type is None or world.dimension > 3:
+        return None
+    position = {i: k for k, i in enumerate(ids)}
+    ordered = tuple(agents[i] for i in ids)
+    if any(i not in agents[j].neighbour_ids for i, agent in zip(ids, ordered) for j in agent.neighbour_ids):
+        return None
+    return team_type(
+        agents=ordered,
+        ids=ids,
+        neighbours=tuple(tuple(position[j] for j in agent.neighbour_ids) for agent in ordered),
+        back=tuple(
+            tuple(agents[j].neighbour_ids.index(i) for j in agent.neighbour_ids)
+            for i, agent in zip(ids, ordered)
+        ),
+        dimension=world.dimension,
+        set_control=world.set_control,
+    )
+
+
 def _trigger_and_deliver(
-    agents: dict, world: World, due: list[int], t: float, trigger_times: dict[int, list[float]]
-) -> list:
+    agents: dict,
+    world: World,
+    due: list[int],
+    t: float,
+    trigger_times: dict[int, list[float]],
+    *,
+    team: _fastcore.Team | None = None,
+) -> list[int]:
     """Every due agent triggers at `t` (it senses, and its new control acts on the world), then
-    their triggering information reaches its receivers; the messages, in the order sent."""
-    outbox = []
-    for i in due:
-        agent = agents[i]
-        try:
-            sensed = world.sense(i, agent.neighbour_ids)
-            if agent.safety is None:
-                out = agent.trigger(t, sensed)
-            else:  # the other robots its range sensor sees (docs/SAFETY.md)
-                nearby = world.nearby(i, agent.safety.sensing_radius, exclude=agent.neighbour_ids)
-                out = agent.trigger(t, sensed, nearby=nearby)
-        except ValueError as err:
-            raise EngineError(f'at t={t!r}: {err}') from err
-        world.set_control(i, out.control)
-        trigger_times[i].append(t)
-        outbox.extend(out.infos)
+    their triggering information reaches its receivers; the receivers of the messages, in the order
+    sent. With the compiled `team`, the agents it takes trigger there from the world's arrays and
+    their messages are delivered there (the same updates and floats); any other goes the Python way."""
+    outbox: list[TriggerInfo] = []
+    start = 0
+    while start < len(due):
+        stop = start if team is None else team.trigger(due, start, t, *world.arrays())
+        for i in due[start:stop]:
+            trigger_times[i].append(t)
+        if stop < len(due):
+            outbox.extend(_trigger_one(agents[due[stop]], world, t, trigger_times))
+        start = stop + 1
+    receivers = [] if team is None else team.deliver()
     for info in outbox:
         agents[info.receiver].receive(info)
-    return outbox
+        receivers.append(info.receiver)
+    return receivers
+
+
+def _trigger_one(
+    agent, world: World, t: float, trigger_times: dict[int, list[float]]
+) -> tuple[TriggerInfo, ...]:
+    """One agent's trigger at `t` the Python way (it senses, its new control acts on the world); its
+    messages."""
+    i = agent.agent_id
+    try:
+        sensed = world.sense(i, agent.neighbour_ids)
+        if agent.safety is None:
+            out = agent.trigger(t, sensed)
+        else:  # the other robots its range sensor sees (docs/SAFETY.md)
+            nearby = world.nearby(i, agent.safety.sensing_radius, exclude=agent.neighbour_ids)
+            out = agent.trigger(t, sensed, nearby=nearby)
+    except ValueError as err:
+        raise EngineError(f'at t={t!r}: {err}') from err
+    world.set_control(i, out.control)
+    trigger_times[i].append(t)
+    return out.infos
 
 
 @dataclass(kw_only=True)
@@ -547,8 +605,16 @@ class _Agenda:
     def __post_init__(self) -> None:
         # Without a period, where the compiled core runs, the queue is its compiled twin
         # (`_fastcore.Agenda`: this heap, its serials and searches in C; the same order and times).
+        # It makes the searches of Eta1Agent/Eta2Agent on the exponential rule as their trigger_search
+        # does (_FIRST_SPAN); any other rule's search is the method's.
         if self.period is None and self.agent_ids and (queue := compiled.agenda()) is not None:
-            self.queue = queue(agent_ids=self.agent_ids, horizon=self.horizon)
+            self.queue = queue(
+                agent_ids=self.agent_ids,
+                horizon=self.horizon,
+                first_span=_FIRST_SPAN,
+                plain=(Eta1Agent, Eta2Agent),
+                rule=ExponentialRule,
+            )
 
     def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
         """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""

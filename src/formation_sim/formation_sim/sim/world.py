@@ -75,6 +75,11 @@ class World:
         """The positions of the agents at these rows (a copy of those rows only)."""
         return self._x[rows]
 
+    def arrays(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """The world's own (positions, velocities, commands), not copies: the compiled engine step
+        (`_fastcore.Team`) senses from them and writes the commands of the agents it triggers."""
+        return self._x, self._q, self._u
+
     @property
     def controls(self) -> np.ndarray:
         return self._u.copy()
