@@ -52,9 +52,9 @@ def test_every_exit_status_of_the_enum_is_in_the_table_with_the_modules_that_ret
     assert sorted(table) == [0, 1, 2, 3, 4, 5, 130] == [int(code) for code in ExitCode]
     for code in ExitCode:
         assert table[code][:2] == (code.name, code.meaning), code
-    # A module that returns a status is named in its row: the agent's command and the time keeper.
+    # A module that returns a status is named in its row: the agent's command and the time keepers' process.
     assert '`formation_agent.ros.main`' in table[ExitCode.LOST][2]
-    assert '`formation_sim.runtime.nodes.coordinator`' in table[ExitCode.REFUSED][2]
+    assert '`formation_sim.runtime.nodes.keeper_main`' in table[ExitCode.REFUSED][2]
     assert '`formation_sim.commands.study`' in table[ExitCode.INTERRUPTED][2]
 
 

@@ -51,7 +51,7 @@ def _start(node, epoch: float) -> None:
     """The run as if Step 0 had gone out at `epoch`."""
     from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
 
-    node._started = node._created
+    node.marks.started = node.marks.created
     node._epoch = epoch
     node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=epoch)
 
@@ -280,7 +280,7 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
 
 def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
-    from formation_sim.runtime.nodes.coordinator import _stop_and_write
+    from formation_sim.runtime.nodes.keeper_main import stop_and_write
     from formation_sim.runtime.errors import DiscoveryError
 
     node = _running(coordinator)
@@ -291,7 +291,7 @@ def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summar
     time.sleep(0.02)  # the discovery timeout passes (not a synchronisation: the timeout is the input)
     with pytest.raises(DiscoveryError) as caught:
         node._tick()
-    _stop_and_write(node, None, caught.value)
+    stop_and_write(node, None, caught.value)
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary['mode'] == 'robots' and summary['extra']['started'] is False
     failure = summary['extra']['failure']
@@ -499,7 +499,7 @@ def test_any_value_on_any_topic_the_coordinator_reads_is_taken_or_refused_never_
     from hypothesis import strategies as st
 
     from formation_msgs_py.lockstep import REJECT_REASONS
-    from formation_sim.runtime.nodes.coordinator import NAMED_ERRORS
+    from formation_sim.runtime.nodes.keeper_main import NAMED_ERRORS
 
     node = _running(coordinator)
     floats = st.one_of(
@@ -583,7 +583,7 @@ def test_an_outside_node_on_a_robots_command_topic_stops_the_run_and_is_named(ro
     from geometry_msgs.msg import Twist
 
     from formation_msgs_py.qos import ROBOT_COMMAND_QOS
-    from formation_sim.runtime.nodes.coordinator import _stop_and_write
+    from formation_sim.runtime.nodes.keeper_main import stop_and_write
     from formation_sim.runtime.errors import ForeignWriterError
     from formation_sim.runtime.nodes.time_keeper import look_at_graph
 
@@ -606,7 +606,7 @@ def test_an_outside_node_on_a_robots_command_topic_stops_the_run_and_is_named(ro
         r'\(/agent_2/robot/cmd_vel\): the run stops',
         message,
     ), message
-    _stop_and_write(node, None, caught.value)
+    stop_and_write(node, None, caught.value)
     summary = json.loads((tmp_path / 'summary.json').read_text())
     failure = summary['extra']['failure']
     assert failure['kind'] == 'foreign_writer' and failure['agents'] == [2] and failure['message'] == message

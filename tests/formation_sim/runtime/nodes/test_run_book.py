@@ -300,3 +300,25 @@ def test_the_agents_that_stopped_after_the_first_cause_follow_it_in_its_message(
     add_what_followed(signal, {1: 'stopped by a signal'})  # the signal stopped them all: nothing follows
     assert 'followed' not in signal and signal['message'] == 'stopped by a signal (SIGINT/SIGTERM)'
     add_what_followed(None, {1: 'why'})  # no failure: nothing to add to
+
+
+def test_run_marks_say_when_the_run_reached_each_mark_on_a_clock_they_are_given():
+    from formation_sim.runtime.nodes.run_book import RunMarks
+
+    marks = RunMarks(created=100.0)  # monotonic seconds; the book reads no clock
+    assert marks.discovery_wall_time == 0.0 and marks.since_start(104.0) == 4.0  # not started: from creation
+    marks.mark('agents_announced', 101.0, once=True)
+    marks.mark('agents_announced', 101.5, once=True)  # a later announcement round: the first counts
+    marks.mark('node_up', 100.25)
+    assert marks.timestamps(offset=1000.0) == {
+        'node_created': 1100.0,
+        'agents_announced': 1101.0,
+        'node_up': 1100.25,
+    }  # no step0, no final_step: a run that did not start
+    marks.start(102.0)
+    marks.finish(110.0)
+    marks.finish(111.0)  # the final Step goes out once: the first time stands
+    assert (marks.started, marks.finished_at, marks.discovery_wall_time) == (102.0, 110.0, 2.0)
+    assert marks.since_start(112.5) == 10.5
+    stamps = marks.timestamps(offset=-100.0)
+    assert (stamps['step0'], stamps['final_step'], stamps['node_created']) == (2.0, 10.0, 0.0)

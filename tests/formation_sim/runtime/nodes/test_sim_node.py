@@ -133,7 +133,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     assert (error.time, error.edge, error.length) == (1.25, (2, 3), scenario.delta)
     assert 'edge (2, 3) reached the communication radius at t=1.25' in str(error)
     assert "agents [3] are still waiting for a neighbour's triggering information" in str(error)
-    node._started = node._created
+    node.marks.started = node.marks.created
     node.step = None
     node.fail(error)
     assert node.failure_info['kind'] == 'connectivity_lost'

@@ -23,8 +23,8 @@ robots"), and the coordinator only keeps the run's time and books (`run_book.Run
 
 Opening, watching and ending the run is `time_keeper.TimeKeeperNode`'s life cycle, which the
 simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares with its exact world
-and the agents' sensing services; this module adds the robots' world, and `main()` of both time
-keepers, which ends the run through `run_end` (final reports, delivery, the agents stopped
+and the agents' sensing services; this module adds the robots' world (`keeper_main.main`, shared
+by both time keepers, ends the run through `run_end`: final reports, delivery, the agents stopped
 early, summary.json and graph.json).  Exit status: 0 done, 1 failed, 3 an agent or the recorder
 lost, 4 the robots' measured start breaks the initial condition (no Step 0, no command), 5 an operator
 stopped the run (the emergency stop `/formation/stop`: `operator_stop`), 130 interrupted.
@@ -32,70 +32,37 @@ stopped the run (the emergency stop `/formation/stop`: `operator_stop`), 130 int
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import json
 import math
-import sys
 import time
-import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
-import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
-from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
-from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec, parameter_help
-from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
+from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import check_array, decode_trigger_info, encode_step
 from formation_msgs_py.errors import MessageError
 from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
-from formation_msgs_py.topics import (
-    COORDINATOR_NODE,
-    ROBOTS_TOPIC,
-    STOP_SERVICE,
-    WORLD_FRAME,
-    trigger_info_topic,
-)
+from formation_msgs_py.topics import COORDINATOR_NODE, ROBOTS_TOPIC, WORLD_FRAME, trigger_info_topic
 from formation_sim.model.measured_start import MeasuredStart, check_measured_start
 from formation_sim.model.scenario import Scenario
 from formation_sim.runtime.nodes.run_book import ids_text
-from formation_sim.runtime.errors import (
-    AgentFailedError,
-    AgentLostError,
-    ConnectivityLostError,
-    DiscoveryError,
-    ForeignWriterError,
-    InitialConditionError,
-    KeeperFrozenError,
-    OperatorStopError,
-    RecorderLostError,
-    RobotLostError,
-)
+from formation_sim.runtime.errors import AgentFailedError, InitialConditionError
 from formation_sim.runtime.contract import COORDINATOR_FILE, TRAJECTORY_TOPICS
 from formation_sim.runtime.nodes.robot_poses import RobotPoses, pose_rules
+from formation_sim.runtime.nodes import keeper_main
 from formation_sim.runtime.nodes.robot_stops import RobotStops
-from formation_sim.runtime.nodes.run_end import (
-    collect_final_reports,
-    stop_agents,
-    wait_for_delivery,
-    write_results,
-    write_unstarted,
-)
 from formation_sim.runtime.nodes.time_keeper import (
-    blamed,
     graph_of,
     run_extra,
     tag_refused,
@@ -106,7 +73,6 @@ from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import Samples
 from formation_agent.core.kinds import Geometry, KindNames, robot_kind
 from formation_agent.core.kinds.shape import declared
-from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
 
 TRAJECTORY_SOURCES = tuple(TRAJECTORY_TOPICS)  # which robot topic the formation is measured on
@@ -217,6 +183,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
     triggering times, and samples the formation from them."""
 
     serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+    batched_spin = True  # many poses: 0.1 s of events per look at its stop signals (issue 19)
     watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
 
     PARAMETERS = COORDINATOR_PARAMETERS
@@ -358,7 +325,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         agent, largest = start.largest
         return f'measured start within {largest:.3g} m of the scenario (agent {agent}); '
 
-    def _world_extra(self) -> dict:
+    def world_extra(self) -> dict:
         extra = {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
         return {**extra, **self.robot_stops.extra()}
 
@@ -415,7 +382,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         )
 
     def _end_at_horizon(self) -> None:
-        self._finished_at = time.monotonic()
+        self.marks.finish(time.monotonic())
         self.step = Step(
             index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
         )
@@ -430,7 +397,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         if self.step is None:
             return 0.0
         if self.finished:
-            return getattr(self, '_reached', self.horizon)
+            return self.horizon if self._reached is None else self._reached
         return min(self.horizon, max(0.0, time.time() - self._epoch))
 
     def after_final_step(self, executor) -> None:
@@ -468,7 +435,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             samples=Samples(times=times, positions=positions, velocities=velocities if self.double else None),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=sum(map(len, trigger_times.values())),
-            wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
+            wall_time=self.marks.since_start(self.marks.finished_at or time.monotonic()),
             extra={
                 **run_extra(self, end),
                 **self.book.lateness(trigger_times),
@@ -511,142 +478,9 @@ class FormationCoordinatorNode(TimeKeeperNode):
             )
 
 
-# What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
-LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
-NAMED_ERRORS = (
-    *LOST_ERRORS,
-    AgentFailedError,
-    ConnectivityLostError,
-    DiscoveryError,
-    InitialConditionError,
-    ForeignWriterError,
-    KeeperFrozenError,
-    OperatorStopError,
-)
-
-
-def exit_status_of(node: TimeKeeperNode | None, error: Exception) -> int:
-    """The time keeper's exit status for a run that stopped on `error`: its first cause decides (an
-    operator's stop noted before a later error is still the operator's)."""
-    first = None if node is None or node.failure_info is None else node.failure_info['kind']
-    if first == OperatorStopError.kind or isinstance(error, OperatorStopError):
-        return ExitCode.STOPPED
-    if isinstance(error, LOST_ERRORS):
-        return ExitCode.LOST
-    return ExitCode.REFUSED if isinstance(error, InitialConditionError) else ExitCode.FAILED
-
-
-def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
-    return argparse.ArgumentParser(
-        prog=node_class.COMMAND,
-        description=node_class.DESCRIPTION,
-        epilog=parameter_help(node_class.PARAMETERS)
-        + f'\n\nExample: {node_class.COMMAND} --ros-args --params-file DIR/{node_class.PARAMS_FILE} '
-        '(formation params SCENARIO --out DIR writes it)\n'
-        'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
-        "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition "
-        f'(nothing was sent); 5 an operator stopped the run ({STOP_SERVICE}, formation stop); '
-        '130 interrupted.',
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-
-
-def main(
-    args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode] = FormationCoordinatorNode
-) -> int:
-    """Run one coordinator (or simulator, `node_class`) node until the run ends; its exit status."""
-    argv = list(args if args is not None else sys.argv)
-    _parser(node_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    executor = None
-    status = 0
-    with StopSignals() as stop:
-        try:
-            try:
-                node = node_class()
-            except ParameterError as error:  # bad input: every problem named, nothing started
-                _tell(f'{node_class.COMMAND}: {error}')
-                status = ExitCode.BAD_INPUT  # the shutdown guard's too
-                return status
-            executor = make_executor(node.executor_kind)
-            executor.add_node(node)
-            # A coordinator dispatches 0.1 s of events per look at its stop signals and its end (a
-            # failure raises from its callback): a spin_once per pose cost it more (issue 19). The
-            # simulator takes one event per look, its failure flag checked after each.
-            batched, never = isinstance(node, FormationCoordinatorNode), Future()
-            while not node.finished:
-                if batched:
-                    executor.spin_until_future_complete(never, timeout_sec=0.1)
-                else:
-                    executor.spin_once(timeout_sec=0.1)
-                stop.check()
-                if node.failure is not None:
-                    raise node.failure
-            if node.failure is not None:  # it sent its final Step at once
-                raise node.failure
-            collect_final_reports(node, executor)
-            node.mark('final_reports')
-            node.after_final_step(executor)
-            wait_for_delivery(node, executor)
-            node.mark('delivered')
-            if node.progress_period > 0.0:
-                node._print_progress()
-            if node.out_dir:
-                try:
-                    write_results(node)
-                except OSError as error:  # e.g. a full disk: the run itself went well
-                    _tell(f'formation_sim: cannot write the results: {error}')
-                    status = ExitCode.FAILED
-        except (KeyboardInterrupt, ExternalShutdownException) as error:
-            status = ExitCode.INTERRUPTED
-            _stop_and_write(node, executor, error)
-        except Exception as error:  # noqa: BLE001 - named on the first line, traced below for the log
-            if stop.received.is_set() or not rclpy.ok():  # stopped on purpose while it failed
-                status = ExitCode.INTERRUPTED
-                _stop_and_write(node, executor, KeyboardInterrupt())
-                return status
-            error = error if node is None else blamed(node, error)  # its cause first (issue 28)
-            _tell(f'formation_sim: {error}')
-            if not isinstance(error, NAMED_ERRORS):
-                with contextlib.suppress(OSError):
-                    traceback.print_exc(file=sys.stderr)
-            status = exit_status_of(node, error)
-            _stop_and_write(node, executor, error)
-        finally:
-            with shutdown_guard(node_class.COMMAND, lambda: status, announce=node is not None):
-                release_ros(executor, [] if node is None else [node])
-                executor = None  # its C++ teardown, under the guard
-    return status
-
-
-def _stop_and_write(node: TimeKeeperNode | None, executor, error: BaseException) -> None:
-    """A run stopped early after step 0 (a failure, SIGINT/SIGTERM): a final Step at the instant
-    it stopped, the samples up to it and the agents' final reports, as at the horizon, so that the
-    bag ends where the summary does; then the summary of what happened, and why it stopped."""
-    if node is None:
-        return
-    node.fail(error)
-    if executor is not None:
-        try:
-            stop_agents(node, executor)
-        except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-            _tell(f'formation_sim: could not stop the agents: {problem}')
-        node.note_what_followed()
-        if node.failure_info is not None and 'followed' in node.failure_info:
-            _tell(f'formation_sim: {node.failure_info["message"]}')
-    if not node.out_dir:
-        return
-    try:
-        write_results(node) if node.step is not None else write_unstarted(node)
-    except Exception as problem:  # noqa: BLE001 - the original failure is what matters
-        _tell(f'formation_sim: could not write the partial results: {problem}')
-
-
-def _tell(line: str) -> None:
-    """A line on stderr (the run's log), if it can still be written (the disk may be full)."""
-    with contextlib.suppress(OSError):
-        print(line, file=sys.stderr, flush=True)
+def main(args: Sequence[str] | None = None) -> int:
+    """The coordinator until its run ends (`keeper_main.main`); its exit status."""
+    return keeper_main.main(args, node_class=FormationCoordinatorNode)
 
 
 def entry_point() -> NoReturn:

@@ -12,7 +12,7 @@ terminal or machine that reaches the domain calls it (docs/EMERGENCY_STOP.md).  
   agent is slow;
 - before step 0, no Step 0 ever goes (`TimeKeeperNode._start` looks): no robot moves; the robots
   are sent a zero all the same;
-- the run then ends as any run stopped early (`coordinator.main`: the final reports, the samples
+- the run then ends as any run stopped early (`keeper_main.main`: the final reports, the samples
   up to the stop, summary.json), with `extra.failure.kind = stopped_by_operator` naming who asked
   when the graph tells (the nodes outside the run with a client of the service), and exit status
   `formation_msgs_py.exit_codes.ExitCode.STOPPED`.

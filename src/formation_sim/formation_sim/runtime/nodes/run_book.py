@@ -414,6 +414,51 @@ class RunBook:
         return lateness_extra({i: book.planned for i, book in self.agents.items()}, trigger_times)
 
 
+class RunMarks:
+    """When a time keeper reached each mark of its run, on the monotonic clock (summary.json's
+    extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
+    agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
+    final_reports (every agent's final report in, or the wait for them over), delivered (what
+    the keeper published acknowledged).  Every time is given: the book reads no clock."""
+
+    def __init__(self, *, created: float) -> None:
+        self.created = created
+        self.started: float | None = None  # step 0 went out
+        self.finished_at: float | None = None  # the final Step went out
+        self._marks: dict[str, float] = {'node_created': created}
+
+    def mark(self, name: str, now: float, *, once: bool = False) -> None:
+        """The run reached `name` at `now` (`once`: only the first time counts)."""
+        if not (once and name in self._marks):
+            self._marks[name] = now
+
+    def start(self, now: float) -> None:
+        """Step 0 went out at `now`."""
+        self.started = self._marks['step0'] = now
+
+    def finish(self, now: float) -> None:
+        """The final Step went out at `now` (the first time only)."""
+        if self.finished_at is None:
+            self.finished_at = now
+
+    def since_start(self, now: float) -> float:
+        """Wall time from step 0 (before it: from the node's creation) to `now`."""
+        return now - (self.created if self.started is None else self.started)
+
+    @property
+    def discovery_wall_time(self) -> float:
+        """From the node's creation to step 0 (0 for a run that did not start)."""
+        return 0.0 if self.started is None else self.started - self.created
+
+    def timestamps(self, *, offset: float) -> dict[str, float]:
+        """Every mark reached, final_step included once sent, plus `offset` (time.time() minus
+        time.monotonic(): Unix times)."""
+        marks = dict(self._marks)
+        if self.finished_at is not None:
+            marks['final_step'] = self.finished_at
+        return {name: at + offset for name, at in marks.items()}
+
+
 class RecorderBook:
     """What the coordinator knows of the recorders (the run's extra subscribers): whether their
     heartbeat writers are alive, and the latest step each has written (lock-step flow control).

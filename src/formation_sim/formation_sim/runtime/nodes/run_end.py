@@ -1,4 +1,4 @@
-"""The end of a run, driven by `coordinator.main` once the time keeper's callbacks are done with it.
+"""The end of a run, driven by `keeper_main.main` once the time keeper's callbacks are done with it.
 
 At the horizon: the agents' final reports, then every reader's acknowledgement of what the node
 published, then the results on disk (summary.json, graph.json).  A run that stops early (a fault,

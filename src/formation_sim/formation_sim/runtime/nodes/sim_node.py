@@ -63,7 +63,7 @@ from formation_msgs_py.types import SensedState
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_sim.model.scenario import Scenario
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
-from formation_sim.runtime.nodes import coordinator
+from formation_sim.runtime.nodes import keeper_main
 from formation_sim.runtime.contract import SIMULATOR_FILE
 from formation_sim.runtime.nodes.run_end import write_results  # noqa: F401 - likewise
 from formation_sim.runtime.errors import CoordinatorError, DuplicateAgentError, StallError
@@ -127,6 +127,7 @@ class FormationSimulatorNode(TimeKeeperNode):
     """World, sensing services and lock-step clock of a distributed formation run."""
 
     serves_sensing = True
+    batched_spin = False  # one event per look: lock-step settles a step in the callback that completes it
     watched_writer = 'command'
 
     def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
@@ -187,7 +188,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         self.calls = SensingCalls(self.agents)  # which calls were triggers, which foreign (issue 28)
         self._info_subs = _trigger_readers(self) if self.realtime else {}
         self._due: set[int] = set()
-        self._last_advance = self._created
+        self._last_advance = self.marks.created
 
     def _watch_agents(self) -> dict:
         """One command reader per agent: it applies the agent's commands, and its writer's DDS
@@ -266,7 +267,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             self._sampler.grid_until(t)
         else:  # the horizon (the wall time is never past it)
             self.exact.advance(self.horizon)
-            self._finished_at = time.monotonic()
+            self.marks.finish(time.monotonic())
             self.graph = graph_of(self)
             self.step = Step(
                 index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
@@ -363,7 +364,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         self.steps += 1
         if t_next > self.horizon:
             self.exact.advance(self.horizon)
-            self._finished_at = time.monotonic()
+            self.marks.finish(time.monotonic())
             self.graph = graph_of(self)
             self.finished = True
             self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
@@ -406,7 +407,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             samples=self._sampler.samples(),
             messages_sent=sum(self.book.information_sent(i) for i in self.agents),
             sensing_calls=self.sensing_calls,
-            wall_time=(self._finished_at or time.monotonic()) - (self._started or self._created),
+            wall_time=self.marks.since_start(self.marks.finished_at or time.monotonic()),
             extra={
                 **run_extra(self, self.world.time),
                 **self.calls.extra(),
@@ -496,7 +497,8 @@ def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return coordinator.main(args, node_class=FormationSimulatorNode)
+    """The simulator until its run ends (`keeper_main.main`); its exit status."""
+    return keeper_main.main(args, node_class=FormationSimulatorNode)
 
 
 def entry_point() -> NoReturn:

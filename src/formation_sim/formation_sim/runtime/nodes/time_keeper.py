@@ -10,7 +10,7 @@ and holds the run's life cycle (docs/MESSAGES.md):
 - **the run**: the agents' Status and reports go into `run_book.RunBook`; agents and recorders are
   watched (DDS liveliness, `RunBook` and `run_book.RecorderBook` say when one is lost);
 - **its end**: at the horizon (the world's), or early (`fail` notes why, `end_now` sends the agents
-  home); `coordinator.main` then drives `run_end` (final reports, delivery, summary.json).
+  home); `keeper_main.main` then drives `run_end` (final reports, delivery, summary.json).
 
 A world supplies the hooks of the last section of the class.
 """
@@ -53,6 +53,7 @@ from formation_sim.runtime.nodes.run_book import (
     failure_extra,
     RecorderBook,
     RunBook,
+    RunMarks,
     ids_text,
 )
 from formation_sim.runtime.errors import DiscoveryError, ForeignWriterError
@@ -178,6 +179,7 @@ class WorldHooks:
         bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
     )
     watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
+    batched_spin: bool  # `keeper_main.main` spins 0.1 s of events per look (else one event per look)
 
     def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario, each broken one named."""
@@ -205,7 +207,7 @@ class WorldHooks:
         was sent yet); else a note for the progress line ('' or ending in '; ')."""
         return ''
 
-    def _world_extra(self) -> dict:
+    def world_extra(self) -> dict:
         """summary.json's `extra` of the world, also for a run that did not start."""
         return {}
 
@@ -295,12 +297,11 @@ class TimeKeeperNode(WorldHooks, Node):
         self.step: Step | None = None
         self.finished = False
         self.failure: Exception | None = None
+        self._reached: float | None = None  # the run's time at its final Step, once sent
         self.steps = 0
-        self._created = time.monotonic()
-        self._started: float | None = None
-        self._last_progress = self._created
+        self.marks = RunMarks(created=time.monotonic())
+        self._last_progress = self.marks.created
         self._epoch = 0.0
-        self._finished_at: float | None = None
         self.graph: dict = {}
         self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
         # Agents that stopped on an error after the final Step at the horizon went out (a pose gone
@@ -312,8 +313,8 @@ class TimeKeeperNode(WorldHooks, Node):
         self._timer = self.create_timer(TICK_PERIOD, self._tick)
         watch_intruders(self)
         self.operator_stop = OperatorStop(self)  # /formation/stop, the run's emergency stop
-        self._marks: dict[str, float] = {'node_created': self._created, 'node_up': time.monotonic()}
-        self._next_discovery_progress = self._created + DISCOVERY_PROGRESS_AFTER
+        self.marks.mark('node_up', time.monotonic())
+        self._next_discovery_progress = self.marks.created + DISCOVERY_PROGRESS_AFTER
 
     # -- the run's life cycle: discovery, step 0, the run, its end ------------------------------
 
@@ -337,7 +338,7 @@ class TimeKeeperNode(WorldHooks, Node):
         is missing."""
         if self.book.all_ready() and self._connected():  # (cheap while agents are missing)
             self._start()
-        elif now - self._created > self.discovery_timeout:
+        elif now - self.marks.created > self.discovery_timeout:
             raise DiscoveryError(
                 f'discovery did not complete within {self.discovery_timeout} s; still missing: '
                 + '; '.join(discovery_gaps(self))
@@ -345,7 +346,7 @@ class TimeKeeperNode(WorldHooks, Node):
         elif self.progress_period > 0.0 and now >= self._next_discovery_progress:
             self._next_discovery_progress = now + self.progress_period
             self._say(
-                f'progress discovery {now - self._created:.0f} s: waiting for '
+                f'progress discovery {now - self.marks.created:.0f} s: waiting for '
                 + '; '.join(discovery_gaps(self))
             )
 
@@ -354,9 +355,9 @@ class TimeKeeperNode(WorldHooks, Node):
         now = time.monotonic()
         self.book.note_announcement(status)
         if self.book.all_announced():
-            self._marks.setdefault('agents_announced', now)
+            self.marks.mark('agents_announced', now, once=True)
         if self.book.all_ready():
-            self._marks.setdefault('agents_ready', now)
+            self.marks.mark('agents_ready', now, once=True)
             if self._connected():
                 self._start()
 
@@ -367,10 +368,10 @@ class TimeKeeperNode(WorldHooks, Node):
         if self.operator_stop.requested:  # an operator stopped the run before it started: no Step 0
             return
         note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
-        self._started = self._marks['step0'] = time.monotonic()
+        self.marks.start(time.monotonic())
         if self.progress_period > 0.0:
             self._say(
-                f'progress discovery done in {self._started - self._created:.1f} s; '
+                f'progress discovery done in {self.marks.discovery_wall_time:.1f} s; '
                 f'{note}t=0 ({self.clock_mode})'
             )
         look_at_graph(self, everything=True)  # no step 0 with two processes claiming an agent
@@ -385,8 +386,7 @@ class TimeKeeperNode(WorldHooks, Node):
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
         self._reached = self.reached_time
-        if self._finished_at is None:
-            self._finished_at = time.monotonic()
+        self.marks.finish(time.monotonic())
         if not self.graph and not self.realtime:  # the graph now, before the final Step sends agents home
             self.graph = graph_of(self)
         self.finished = True
@@ -405,7 +405,7 @@ class TimeKeeperNode(WorldHooks, Node):
                 interrupted=isinstance(error, (KeyboardInterrupt, ExternalShutdownException)),
                 time=self.reached_time,
                 step=None if self.step is None else self.step.index,
-                wall_time=time.monotonic() - (self._started or self._created),  # since t = 0 began
+                wall_time=self.marks.since_start(time.monotonic()),  # since t = 0 began
                 detected_by=self.get_name().removeprefix('formation_'),
             )
 
@@ -525,7 +525,7 @@ class TimeKeeperNode(WorldHooks, Node):
             print(
                 f'progress t={self.reached_time:.6f} horizon={self.horizon:g} '
                 f'events={events} steps={self.steps} '
-                f'wall={time.monotonic() - (self._started or self._created):.1f}s',
+                f'wall={self.marks.since_start(time.monotonic()):.1f}s',
                 flush=True,
             )
         except OSError:  # nobody reads any more (the orchestrator died): carry on without progress
@@ -533,7 +533,7 @@ class TimeKeeperNode(WorldHooks, Node):
 
     def mark(self, name: str) -> None:
         """Note the time the run reached `name` (extra.timestamps)."""
-        self._marks[name] = time.monotonic()
+        self.marks.mark(name, time.monotonic())
 
     def delivery_publishers(self, *, with_steps: bool) -> list:
         """The writers whose readers must acknowledge everything before the node goes: the tools'
@@ -703,29 +703,16 @@ def discovery_gaps(node: TimeKeeperNode) -> list[str]:
     return gaps + node._world_gaps()
 
 
-def run_timestamps(node: TimeKeeperNode) -> dict[str, float]:
-    """When the time keeper `node` reached each mark of the run, as Unix times (summary.json
-    extra.timestamps): node_created, node_up (its endpoints exist), agents_announced (every
-    agent's first discovery Status), agents_ready (every agent connected), step0, final_step,
-    final_reports (every agent's final report in, or the wait for them over), delivered (what
-    this node published acknowledged)."""
-    marks = dict(node._marks)
-    if node._finished_at is not None:
-        marks['final_step'] = node._finished_at
-    offset = time.time() - time.monotonic()
-    return {name: at + offset for name, at in marks.items()}
-
-
 def run_extra(node: TimeKeeperNode, reached: float) -> dict:
     """summary.json's `extra` common to every coordinator: clock, steps, failure, messages."""
     return {
         'clock': node.clock_mode,
         'steps': node.steps,
-        'discovery_wall_time': (node._started or node._created) - node._created,
-        'timestamps': run_timestamps(node),
+        'discovery_wall_time': node.marks.discovery_wall_time,
+        'timestamps': node.marks.timestamps(offset=time.time() - time.monotonic()),
         'reached_time': reached,
         'failure': node.failure_info,
-        **node._world_extra(),
+        **node.world_extra(),
         **node.graph_watch.extra(),
         **(
             {'after_end': {str(i): why for i, why in sorted(node.after_end.items())}}
