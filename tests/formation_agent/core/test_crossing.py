@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from formation_agent.core.crossing import first_crossing
+from formation_agent.core.trigger import ExponentialRule
 
 
 class Bump:
@@ -49,7 +50,7 @@ def test_narrow_early_spike_is_found_before_the_late_crossing():
     # A spike of width 1e-4 s at t = 1 that pokes 1e-3 above the threshold, then a slow ramp that
     # crosses near t = 10: a 0.01 s grid would step over the spike.
     model = Bump(height=1.001, centre=1.0, width=1e-4, ramp=0.1)
-    t = first_crossing(model, start=0.0, alpha=1.1, beta=0.0, limit=100.0)
+    t = first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.1, beta=0.0), limit=100.0)
     reference = _crossings_by_bisection(model, 1.1, 0.0, 0.99, 1.01)
     assert abs(t - reference[0]) < 1e-7
     assert t < 1.0
@@ -59,13 +60,16 @@ def test_narrow_early_spike_is_found_before_the_late_crossing():
 def test_near_touch_below_threshold_does_not_trigger():
     # The bump reaches 1 - 1e-9 of the threshold and falls back: no crossing until the ramp's.
     model = Bump(height=1.0 - 1e-9, centre=1.0, width=1e-3, ramp=0.0)
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=5.0) == math.inf
+    assert (
+        first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=5.0)
+        == math.inf
+    )
 
 
 def test_exact_touch_triggers_at_the_touch():
     # Touching the threshold exactly (within the tolerance) counts as reaching it.
     model = Bump(height=1.0, centre=2.0, width=1e-2, ramp=0.0)
-    t = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=5.0)
+    t = first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=5.0)
     assert abs(t - 2.0) < 1e-5
 
 
@@ -74,19 +78,27 @@ def test_decaying_threshold_meets_a_constant_error():
     model = Bump(height=0.0, centre=0.0, width=1.0, ramp=0.0)
     model.a = 0.5
     model.w = 1e100  # the bump is flat: e(t) = 0.5
-    t = first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0)
+    t = first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=1.0), limit=10.0)
     assert t == pytest.approx(math.log(2.0), rel=1e-14)
 
 
 def test_limit_bounds_the_search():
     model = Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1)
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=5.0) == math.inf
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=20.0) == pytest.approx(10.0, rel=1e-14)
+    assert (
+        first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=5.0)
+        == math.inf
+    )
+    assert first_crossing(
+        model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=20.0
+    ) == pytest.approx(10.0, rel=1e-14)
 
 
 def test_already_above_threshold_is_due_at_start():
     model = Bump(height=0.0, centre=0.0, width=1.0, ramp=1.0)
-    assert first_crossing(model, start=3.0, alpha=1.0, beta=0.0, limit=20.0) == 3.0
+    assert (
+        first_crossing(model, start=3.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=20.0)
+        == 3.0
+    )
 
 
 @pytest.mark.parametrize('pieces', [1, 3, 17, 200])
@@ -96,8 +108,12 @@ def test_search_advanced_in_pieces_gives_the_same_float(pieces):
     from formation_agent.core.crossing import CrossingSearch
 
     model = Bump(height=1.001, centre=1.0, width=1e-4, ramp=0.1)
-    whole = first_crossing(model, start=0.0, alpha=1.1, beta=0.0, limit=100.0)
-    search = CrossingSearch(model, start=0.0, alpha=1.1, beta=0.0, limit=100.0)
+    whole = first_crossing(
+        model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.1, beta=0.0), limit=100.0
+    )
+    search = CrossingSearch(
+        model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.1, beta=0.0), limit=100.0
+    )
     frontiers = [search.frontier]
     for until in np.linspace(0.0, 1.0, pieces):
         if search.advance(float(until)) is not None:
@@ -113,7 +129,10 @@ def test_search_reports_no_crossing_up_to_its_limit():
     from formation_agent.core.crossing import CrossingSearch
 
     search = CrossingSearch(
-        Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1), start=0.0, alpha=1.0, beta=0.0, limit=5.0
+        Bump(height=0.0, centre=0.0, width=1.0, ramp=0.1),
+        start=0.0,
+        rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0),
+        limit=5.0,
     )
     assert search.advance(2.0) is None
     assert search.frontier > 2.0
@@ -187,7 +206,9 @@ def test_polishing_bracket_with_three_roots_gives_the_first():
     model = ThreeRoots(tau=tau, margin0=5e-13)
     assert [model._p(k * tau) for k in (1, 2, 3)] == pytest.approx([0.0] * 3, abs=1e-14)
     assert model._p(0.0) == 1.0 and model._p(2.5 * tau) > 0.0 and model._p(5 * tau) == pytest.approx(-1.0)
-    t = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0, tolerance=1e-12)
+    t = first_crossing(
+        model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=1.0, tolerance=1e-12
+    )
     # The margin is evaluated to ~1e-16 absolute and falls at 3.5e-10 per second at τ: the
     # crossing is resolvable to ~3e-7 s.
     assert abs(t - tau) < 1e-3 * tau
@@ -200,8 +221,8 @@ def test_search_past_the_tolerance_advanced_in_pieces_gives_the_same_float(piece
     from formation_agent.core.crossing import CrossingSearch
 
     model = ThreeRoots(tau=1e-3, margin0=5e-13)
-    whole = first_crossing(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0)
-    search = CrossingSearch(model, start=0.0, alpha=1.0, beta=0.0, limit=1.0)
+    whole = first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=1.0)
+    search = CrossingSearch(model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=0.0), limit=1.0)
     for until in np.linspace(0.0, 1e-3, pieces):
         if search.advance(float(until)) is not None:
             break
@@ -214,7 +235,7 @@ def test_search_past_the_tolerance_advanced_in_pieces_gives_the_same_float(piece
 def test_floored_threshold_meets_a_constant_error_where_the_formula_says():
     # |e| = 0.5, threshold 0.2 + e^{-t}: the crossing is at t = ln(1/0.3), late in the decay.
     model = Bump(height=0.5, centre=0.0, width=1e100, ramp=0.0)
-    t = first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0, floor=0.2)
+    t = first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.2, alpha=1.0, beta=1.0), limit=10.0)
     assert t == pytest.approx(math.log(1.0 / 0.3), rel=1e-13)
 
 
@@ -222,10 +243,13 @@ def test_an_error_below_the_floor_never_crosses_however_late():
     # The paper's threshold vanishes and any constant error crosses it; the floor keeps 0.5 < 0.5001
     # below it for ever, also where e^{βt} overflows a double (t >> 709/β).
     model = Bump(height=0.5, centre=0.0, width=1e100, ramp=0.0)
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=1e4, floor=0.5001) == math.inf
-    assert first_crossing(model, start=0.0, alpha=1.0, beta=1.0, limit=10.0) == pytest.approx(
-        math.log(2.0), rel=1e-14
+    assert (
+        first_crossing(model, start=0.0, rule=ExponentialRule(floor=0.5001, alpha=1.0, beta=1.0), limit=1e4)
+        == math.inf
     )
+    assert first_crossing(
+        model, start=0.0, rule=ExponentialRule(floor=0.0, alpha=1.0, beta=1.0), limit=10.0
+    ) == pytest.approx(math.log(2.0), rel=1e-14)
 
 
 @pytest.mark.parametrize('floor', [0.05, 0.4, 1.0])
@@ -234,7 +258,9 @@ def test_with_a_floor_the_narrow_spike_is_still_found_first(floor):
     alpha, beta = 1.0, 0.5
     level = floor + alpha * math.exp(-beta * 1.0)
     model = Bump(height=level * 1.001, centre=1.0, width=1e-4, ramp=0.01)
-    t = first_crossing(model, start=0.0, alpha=alpha, beta=beta, limit=100.0, floor=floor)
+    t = first_crossing(
+        model, start=0.0, rule=ExponentialRule(floor=floor, alpha=alpha, beta=beta), limit=100.0
+    )
     grid = np.linspace(0.99, 1.01, 2_000_001)
     z = (grid - model.c) / model.w
     margin = floor + alpha * np.exp(-beta * grid) - np.abs(model.a * np.exp(-z * z) + model.b * grid)

@@ -47,6 +47,8 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         'speed_scale': 1.0,
         'threshold_floor': 0.0,
     }  # the paper's
+    # c0 + α e^{-κβt}, the paper's triggering rule (formation_agent.core.trigger)
+    assert node.config.trigger_rule == 'exponential'
 
 
 @pytest.mark.parametrize(
@@ -71,6 +73,9 @@ def test_good_parameters_give_the_agent_its_neighbours(ros):
         ({'speed_scale': 0.0}, "parameter 'speed_scale' (double)"),
         ({'speed_scale': float('nan')}, "parameter 'speed_scale' (double)"),
         ({'threshold_floor': float('nan')}, "parameter 'threshold_floor' (double) must be >= 0, got nan"),
+        ({'trigger_rule': 'cubic'}, "trigger_rule: must be one of ['exponential'"),
+        ({'trigger_rule': 'cubic'}, "or an import path package.module:Class, got 'cubic'"),
+        ({'trigger_rule': 'no_such_module:Rule'}, "trigger_rule: cannot import 'no_such_module'"),
     ],
 )
 def test_bad_parameters_are_rejected_with_the_rule_broken(ros, changes, complaint):

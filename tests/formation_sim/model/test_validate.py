@@ -589,3 +589,27 @@ def test_a_strict_bound_met_up_to_rounding_is_accepted_and_beyond_it_refused(pap
         theory.theorem_constants(accepted)
     refused = scenario_from_dict(paper_scenario_dict('single', beta=beta0 * (1.0 + 1e-9)))
     assert [f.rule for f in validate_scenario(refused).errors] == ['beta']
+
+
+def test_a_triggering_rule_the_theorems_do_not_cover_is_a_warning_and_the_paper_rule_none(monkeypatch):
+    import sys
+    from pathlib import Path
+
+    from formation_agent.core.trigger import unregister_rule
+
+    toy = Path(__file__).resolve().parents[2] / 'formation_agent' / 'core'  # toy_trigger_rule.py
+    monkeypatch.syspath_prepend(str(toy))
+    monkeypatch.delitem(sys.modules, 'toy_trigger_rule', raising=False)
+    base = load_scenario('paper_single')
+    try:
+        report = validate_scenario(base.replace(trigger_rule='toy_trigger_rule:Polynomial'))
+    finally:
+        for name in ('polynomial', 'exponential_again', 'toy_trigger_rule:Polynomial'):
+            unregister_rule(name)
+    assert ('trigger_rule', 'gains') in rules(report.warnings)
+    warning = next(w for w in report.warnings if w.rule == 'trigger_rule')
+    assert "trigger_rule 'toy_trigger_rule:Polynomial': Theorems 1 and 2 are proven for" in warning.message
+    assert 'trigger_rule' not in {w.rule for w in validate_scenario(base).warnings}
+    # The package's own exponential rule by its import path is the paper's rule: no warning.
+    same = base.replace(trigger_rule='formation_agent.core.trigger:ExponentialRule')
+    assert 'trigger_rule' not in {w.rule for w in validate_scenario(same).warnings}

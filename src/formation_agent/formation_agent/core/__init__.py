@@ -5,7 +5,9 @@
   ((statexixj), (statexixjd), (stateqiqj)) and find the next triggering time.
 - `neighbourhood`: an agent's edges (d_ij, Δ - ||d_ij||, Assumption 1) and the checks of what it is
   handed (`AgentError`).
-- `crossing`: the certified search for the first t with ||e_i(t)|| = c0 + α e^{-βt}.
+- `crossing`: the certified search for the first t with ||e_i(t)|| = θ(t), the threshold of a
+  triggering rule; `trigger`: the rules (`TriggerRule`; the paper's c0 + α e^{-βt},
+  `ExponentialRule`), registered by name.
 - `speed_scale`: the speed scale κ and the threshold floor c0: the real-time gains of the agents,
   the exact world and a robot's velocity reference, derived in one place (docs/SPEED_SCALE.md).
 - `tension`: ω_ij and its derivatives (the edge-tension weights); `closed_form`: the ETA-2
@@ -32,15 +34,17 @@ __all__ = lazy_exports(
             'PRECISION_HINT',
             'first_crossing',
         ),
+        'trigger': (
+            'DEFAULT_RULE',
+            'ExponentialRule',
+            'TriggerRule',
+            'make_rule',
+            'register_rule',
+            'rule_names',
+        ),
         'tension': ('omega', 'omega_prime', 'omega_second'),
         'closed_form': ('advance_double',),
-        'speed_scale': (
-            'Threshold',
-            'check_speed_scale',
-            'check_threshold_floor',
-            'eta1_gains',
-            'eta2_gains',
-        ),
+        'speed_scale': ('check_speed_scale', 'check_threshold_floor', 'eta1_gains', 'eta2_gains'),
         'kinematics': ('control_point', 'control_point_velocity', 'rotate', 'unicycle_velocity', 'yaw'),
         'pose_sensing': ('PoseBook',),
         'velocity_reference': ('VelocityReference',),

@@ -23,6 +23,7 @@ import numpy as np
 from formation_agent.core import crossing
 from formation_agent.core.closed_form import _C as _SERIES
 from formation_agent.core.closed_form import SERIES_LIMIT
+from formation_agent.core.trigger import ExponentialRule
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 ENVIRONMENT = 'FORMATION_PURE_PYTHON'
@@ -106,11 +107,13 @@ def implementation() -> str:
     return 'compiled' if _active else 'python'
 
 
-def search_type() -> type[crossing.CrossingSearch] | None:
-    """The compiled twin of `crossing.CrossingSearch` for a plain-float agent (`_fastcore.Search`: the
-    same constructor, attributes and floats, its state and the agent's packed rows held in C), or
-    None for the pure-Python path."""
-    return _fastcore.Search if _active else None
+def search_type(rule: object) -> Callable[..., crossing.CrossingSearch] | None:
+    """The compiled twin of `crossing.CrossingSearch` for a plain-float agent triggering on `rule`
+    (`_fastcore.Search`: the same floats, its state and the agent's packed rows held in C; it takes
+    the exponential rule's floor, alpha and beta in place of the rule), or None for the pure-Python
+    path: where the core was not built or is switched off, and for every rule but the exponential
+    one (`trigger.ExponentialRule`, the only threshold written in C)."""
+    return _fastcore.Search if _active and type(rule) is ExponentialRule else None
 
 
 def receiver() -> Callable[[Any, TriggerInfo], bool] | None:

@@ -1,17 +1,18 @@
-"""Certified search for the first time ||e(t)|| reaches the threshold θ(t) = c0 + α e^{-βt}.
+"""Certified search for the first time ||e(t)|| reaches a triggering rule's threshold θ(t).
 
-Step 4 of ETA-1 (step 5 of ETA-2) asks for the *smallest* solution of ||e_i(t)|| = α e^{-βt}.
-Between events e_i(t) is a closed-form function of t, so instead of sampling it on a grid (which
-can step over an early crossing) we walk forward in steps that are proven crossing-free:
+Step 4 of ETA-1 (step 5 of ETA-2) asks for the *smallest* solution of ||e_i(t)|| = α e^{-βt}
+(eqs. triggersingle, triggerdouble); the threshold is a `TriggerRule` (formation_agent.core.trigger:
+the paper's c0 + α e^{-βt}, `ExponentialRule`, or another). Between events e_i(t) is a closed-form
+function of t, so instead of sampling it on a grid (which can step over an early crossing) we walk
+forward in steps that are proven crossing-free:
 
-With S = 1/θ(a) and r(t) = θ(t)/θ(a) = w + (1 - w) e^{-β(t-a)}, w = c0 S (the floor's share
-of the threshold at a; w = 0 for the paper's threshold, c0 = 0, where S = e^{βa}/α), the
-normalised margin φ(t) = r(t)² - S²||e(t)||² is positive exactly while ||e(t)|| < θ(t). On t >= a,
-0 < r <= 1, |r'| <= (1-w)β and r'' >= 0, so (r²)' lies in [-2β, 0] and (r²)'' in [0, 4β²]. Given
-bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|| on [a, a+H]:
+With S = 1/θ(a) and r(t) = θ(t)/θ(a) (the rule's `scale` and `ratio`), the normalised margin
+φ(t) = r(t)² - S²||e(t)||² is positive exactly while ||e(t)|| < θ(t). What the rule promises on
+t >= a (trigger.py): (r²)'' in [0, K], |(r²)'| <= G (for the exponential rule G = 2β, K = 4β²).
+Given bounds E >= ||e||, E1 >= ||ė||, E2 >= ||ë|| on [a, a+H]:
 
     φ''(t) >= -M,  M = 2 S² (E1² + E E2)       so  φ(a+h) >= φ(a) + φ'(a) h - M h²/2,
-    |φ'(t)| <= L,  L = 2β + 2 S² E E1           so  φ(a+h) >= φ(a) - L h.
+    |φ'(t)| <= L,  L = G + 2 S² E E1            so  φ(a+h) >= φ(a) - L h.
 
 The largest h keeping either lower bound positive is crossing-free. Near a simple root the
 quadratic bound makes the steps converge quadratically (a certified Newton iteration); near a
@@ -21,11 +22,11 @@ only Lipschitz (ETA-2 when a relative position passes through its desired value)
 The last step. At a step point a with φ(a) <= `tolerance` the search tries to finish:
 
 * φ(a) <= 0: a is the first crossing (no crossing in [start, a), the threshold reached at a).
-* φ'(a) >= 0: a touch within the tolerance (||e(a)|| >= (1 - tolerance)^{1/2} α e^{-βa} while
+* φ'(a) >= 0: a touch within the tolerance (||e(a)|| >= (1 - tolerance)^{1/2} θ(a) while
   the margin does not fall); it counts as reached, and a is returned.
 * Otherwise the bracket [a, b], b = a + 2φ(a)/|φ'(a)|, is used only once it is proven to hold
-  exactly one root: with the same bounds over [a, b], φ'' <= K = 4β² + 2 S² E E2, and if
-  K (b - a) <= |φ'(a)|/2 then φ' <= φ'(a)/2 < 0 on [a, b] and φ(b) <= φ(a) - 3/4 |φ'(a)| (b - a)
+  exactly one root: with the same bounds over [a, b], φ'' <= K' = K + 2 S² E E2, and if
+  K' (b - a) <= |φ'(a)|/2 then φ' <= φ'(a)/2 < 0 on [a, b] and φ(b) <= φ(a) - 3/4 |φ'(a)| (b - a)
   < 0. So φ has exactly one root in (a, b), the first crossing, which Illinois regula falsi
   (in plain Python: the agents need no scipy, which halves an agent process's start-up) refines
   to 4 ulps. Should the computed margin at b still be >= 0, rounding hides a sign change that
@@ -60,6 +61,7 @@ from typing import Protocol, cast
 import numpy as np
 
 from formation_agent.core.errors import CrossingError
+from formation_agent.core.trigger import TriggerRule
 
 
 # What a CrossingError means for a run, said by the engine and by an agent node alike.
@@ -95,13 +97,13 @@ class ErrorModel(Protocol):
 _GROWTH = 4.0
 # A search gives up (CrossingError) after this many certified steps.
 MAX_STEPS = 200_000
-# The relative margin 1 - ||e||²/(α e^{-βt})² at which the search starts to finish (its default).
+# The relative margin 1 - ||e||²/θ(t)² at which the search starts to finish (its default).
 DEFAULT_TOLERANCE = 1e-12
 _RTOL = 4.0 * 2.0**-52  # 4 ulps relative
 
 
 class CrossingSearch:
-    """The certified search for the smallest t >= start with ||e(t)|| >= c0 + α e^{-βt}, resumable.
+    """The certified search for the smallest t >= start with ||e(t)|| >= θ(t) of `rule`, resumable.
 
     `frontier` is the next point the search will examine; no crossing lies in [start, frontier).
     `result` is None until the search is done, then the crossing time (inf: none up to `limit`).
@@ -112,13 +114,11 @@ class CrossingSearch:
         '_norm',
         '_span',
         '_terms',
-        'alpha',
-        'beta',
-        'floor',
         'frontier',
         'limit',
         'model',
         'result',
+        'rule',
         'start',
         'steps',
         'tolerance',
@@ -129,18 +129,14 @@ class CrossingSearch:
         model: ErrorModel,
         *,
         start: float,
-        alpha: float,
-        beta: float,
+        rule: TriggerRule,
         limit: float,
         tolerance: float = DEFAULT_TOLERANCE,
         initial_step: float = 1e-3,
-        floor: float = 0.0,
     ) -> None:
         self.model = model
         self.start = float(start)
-        self.alpha = float(alpha)
-        self.beta = float(beta)
-        self.floor = float(floor)  # c0 >= 0 of the threshold c0 + α e^{-βt}
+        self.rule = rule  # the threshold θ(t) and its bounds (formation_agent.core.trigger)
         self.limit = float(limit)
         self.tolerance = float(tolerance)
         self.frontier = self.start
@@ -165,8 +161,9 @@ class CrossingSearch:
     def advance(self, until: float) -> float | None:
         """Take certified steps while the frontier is <= `until`; `result` (None: not done yet)."""
         a = self.frontier
-        beta, alpha, tolerance, floor = self.beta, self.alpha, self.tolerance, self.floor
+        tolerance = self.tolerance
         terms, bounds = self._terms, self.model.bounds
+        rule_scale, rule_terms = self.rule.scale, self.rule.margin_terms
         span = self._span
         cover_end, bound_e, bound_curv = self._cover
         while self.result is None and a <= until:
@@ -177,13 +174,11 @@ class CrossingSearch:
                 raise steps_error(a)
             self.steps += 1
             size_sq, size_rate = terms(a)
-            if floor == 0.0:  # S = 1/θ(a), written out as in _scale (this is the hot loop)
-                scale = math.exp(beta * a) / alpha
-            else:
-                scale = 1.0 / (floor + alpha * math.exp(-beta * a))
+            scale = rule_scale(a)  # S = 1/θ(a)
+            ratio_rate, slope = rule_terms(a, scale)  # (r²)'(a) and G >= |(r²)'| on t >= a
             s2 = scale * scale
             phi = 1.0 - s2 * size_sq
-            phi_rate = -2.0 * beta * (1.0 - floor * scale) - 2.0 * s2 * size_rate  # (r²)'(a) = -2β(1-w)
+            phi_rate = ratio_rate - 2.0 * s2 * size_rate
             if not (math.isfinite(phi) and math.isfinite(phi_rate)):
                 raise finite_error(a, size_sq, size_rate)
             size = math.sqrt(size_sq)
@@ -194,7 +189,7 @@ class CrossingSearch:
                     break
             span_eff, bound_e, bound_rate, bound_curv = bounds(a, span, size)
             cover_end = a + span_eff
-            lipschitz = 2.0 * beta + 2.0 * s2 * bound_e * bound_rate
+            lipschitz = slope + 2.0 * s2 * bound_e * bound_rate
             step = phi / lipschitz if lipschitz > 0.0 else math.inf
             curvature = 2.0 * s2 * (bound_rate * bound_rate + bound_e * bound_curv)
             if curvature < math.inf:  # finite (a NaN bound never certifies a longer step)
@@ -235,10 +230,8 @@ class CrossingSearch:
         """
         if phi <= 0.0 or phi_rate >= 0.0:
             return a
-        beta = self.beta
-        scale = self._scale(a)
-        share = self.floor * scale  # w: r(t) = w + (1 - w) e^{-β(t-a)}
-        fade = 1.0 - share
+        rule = self.rule
+        scale = rule.scale(a)
         margin_a = 1.0 - scale * size  # r(a) = 1
         if margin_a <= 0.0:
             return a  # φ(a) > 0 in squares, but the margin itself rounds to <= 0: already there
@@ -248,27 +241,20 @@ class CrossingSearch:
             span, bound_e, _, bound_curv = self.model.bounds(a, b - a, size)
             if a + span < b:
                 return a if stuck else None
-        # φ'' <= (r²)'' + 2 S² E E2 <= 4β² + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so
+        # φ'' <= (r²)'' + 2 S² E E2 <= K + 2 S² E E2 on [a, b]: φ' stays below φ'(a)/2 < 0, so
         # [a, b] holds one root.
-        curvature = 4.0 * beta * beta + 2.0 * scale * scale * bound_e * bound_curv
+        curvature = rule.curvature(a, scale) + 2.0 * scale * scale * bound_e * bound_curv
         if not curvature * (b - a) <= -0.5 * phi_rate:  # also False for a NaN or infinite bound
             return a if stuck else None
-        norm = self._norm
+        norm, ratio = self._norm, rule.ratio
 
         def margin(t: float) -> float:
-            return share + fade * math.exp(-beta * (t - a)) - scale * norm(t)  # r(t) - S ||e(t)||
+            return ratio(t, a, scale) - scale * norm(t)  # r(t) - S ||e(t)||
 
         margin_b = margin(b)
         if margin_b >= 0.0:
             return a  # the root proven to lie in (a, b) is below the rounding of the margin
         return _root_in_bracket(margin, a, margin_a, b, margin_b)
-
-    def _scale(self, a: float) -> float:
-        """S = 1/θ(a): e^{βa}/α for the paper's threshold (c0 = 0, as before the floor existed),
-        1/(c0 + α e^{-βa}) with a floor, which stays finite however late a is."""
-        if self.floor == 0.0:
-            return math.exp(self.beta * a) / self.alpha
-        return 1.0 / (self.floor + self.alpha * math.exp(-self.beta * a))
 
 
 def steps_error(a: float) -> CrossingError:
@@ -287,27 +273,18 @@ def first_crossing(
     model: ErrorModel,
     *,
     start: float,
-    alpha: float,
-    beta: float,
+    rule: TriggerRule,
     limit: float,
     tolerance: float = DEFAULT_TOLERANCE,
     initial_step: float = 1e-3,
-    floor: float = 0.0,
 ) -> float:
-    """Smallest t >= start with ||e(t)|| >= c0 + α e^{-βt} (c0 = `floor`); inf if there is none up to `limit`.
+    """Smallest t >= start with ||e(t)|| >= θ(t) of `rule`; inf if there is none up to `limit`.
 
     `tolerance` is the relative margin 1 - ||e||² / θ(t)² below which a point counts as
     reached; the result is then refined to double precision by bracketing.
     """
     return CrossingSearch(
-        model,
-        start=start,
-        alpha=alpha,
-        beta=beta,
-        limit=limit,
-        tolerance=tolerance,
-        initial_step=initial_step,
-        floor=floor,
+        model, start=start, rule=rule, limit=limit, tolerance=tolerance, initial_step=initial_step
     ).run()
 
 

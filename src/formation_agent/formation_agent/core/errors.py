@@ -37,3 +37,7 @@ class ScaleError(FormationError, ValueError):
 
 class WarpError(FormationError, ValueError):
     """A time warp outside its rule; the message names the rule time_warp and the value."""
+
+
+class RuleError(FormationError, ValueError):
+    """An unknown triggering rule, one registered twice, or numbers its family refuses (rule trigger_rule)."""

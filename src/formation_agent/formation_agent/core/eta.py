@@ -5,7 +5,8 @@ triggering times it is handed what it senses and returns its new input and the t
 information for each neighbour; in between it is handed its neighbours' triggering information.
 From these it predicts every relative state in closed form (eqs. statexixj, statexixjd,
 stateqiqj) and finds its next triggering time as the first crossing of ||e_i(t)|| = α e^{-βt}
-(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`. With a speed
+(resp. ||E_i(t)|| = α_d e^{-β_d t}), certified by `formation_agent.core.crossing`; the threshold is
+the agent's triggering rule (`trigger_rule`, formation_agent.core.trigger: that one by default). With a speed
 scale κ and a threshold floor c0 (`formation_agent.core.speed_scale`, docs/SPEED_SCALE.md) the
 agent runs in real time with the gains that module derives, against c0 + α e^{-κβt}.
 
@@ -38,16 +39,16 @@ from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
 from formation_agent.core.neighbourhood import Neighbourhood
-from formation_agent.core.errors import AgentError, ScaleError
+from formation_agent.core.errors import AgentError, RuleError, ScaleError
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
-    Threshold,
     eta1_gains,
     eta2_gains,
 )
+from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, TriggerRule
 from formation_agent.core.tension import curvature_gain, omega, omega_prime, omega_second, weight_gain
 from formation_msgs_py.types import SensedState, TriggerInfo
 
@@ -93,9 +94,10 @@ class _AgentHooks:
     """What ETA-1 and ETA-2 each supply to `_EventTriggeredAgent` (Eta1Agent, Eta2Agent): the
     base class calls these and never defines them."""
 
-    _threshold: Callable[[float], float]
-    """The triggering threshold at time t: α e^{-βt} (ETA-1), α_d e^{-β_d t} (ETA-2), each with
-    its speed scale and floor (`eta1_gains`, `eta2_gains`)."""
+    _threshold: TriggerRule
+    """The triggering threshold θ(t) and its bounds: α e^{-βt} (ETA-1), α_d e^{-β_d t} (ETA-2) by
+    default, each with its speed scale and floor (`eta1_gains`, `eta2_gains`; the agent's
+    `trigger_rule` picks another family, formation_agent.core.trigger)."""
 
     # The vector path's error and bounds (p > 3), and the plain-float path's bounds: each of
     # Eta1Agent and Eta2Agent defines them (declared here for the type checker only).
@@ -431,39 +433,33 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
             if not self._heard_all():
                 missing = [j for j, heard in zip(self.neighbour_ids, self._heard) if not heard]
                 raise AgentError(f'agent {self.agent_id} has not heard from neighbours {missing} yet')
-            threshold = self._threshold
             # The first trial span only sets how fast the certified steps grow, never what they
             # certify; the agent's own last inter-event time is its natural scale. It depends on
             # the knowledge alone, so a robot and the simulator take the same steps.
-            search = (self._search_type() or CrossingSearch)(
+            search = _new_search(
                 self,
+                fast=self._fast,
                 start=self.last_event,
-                alpha=threshold.alpha,
-                beta=threshold.beta,
-                floor=threshold.floor,
                 limit=limit,
-                tolerance=self.tolerance,
                 initial_step=max(self._interval or 0.0, _FIRST_SPAN),
             )
             self._search = search
         return search if self._safety is None else self._capped(search)
 
-    _threshold: Threshold
-
     def threshold(self, t: float) -> float:
         """α e^{-βt} (eq. triggersingle) or α_d e^{-β_d t} (eq. triggerdouble) at real time t, with
-        the floor c0 and the rates times κ (ETA-2: times κ², the units of the agent's error)."""
+        the floor c0 and the rates times κ (ETA-2: times κ², the units of the agent's error); or the
+        agent's other `trigger_rule`."""
         return self._threshold(t)
+
+    @property
+    def trigger_rule(self) -> TriggerRule:
+        """The threshold θ(t) the agent triggers on, in real time (formation_agent.core.trigger)."""
+        return self._threshold
 
     # ErrorModel interface (formation_agent.core.crossing) -------------------------------------------
 
     _kind = 0  # 1: ETA-1, 2: ETA-2 (the compiled core's layout of `_row`)
-
-    def _search_type(self) -> type[CrossingSearch] | None:
-        """The compiled search (`_fastcore.Search`) for this agent (the plain-float path, p <= 3), or
-        None: `CrossingSearch` then calls the methods below (formation_agent.core.compiled; the same
-        floats)."""
-        return compiled.search_type() if self._fast else None
 
     def error(self, t: float) -> np.ndarray:
         """The predicted triggering error e_i(t) (ETA-1) or E_i(t) (ETA-2), valid until the next event."""
@@ -533,6 +529,7 @@ class Eta1Agent(_EventTriggeredAgent):
         speed_scale: float = DEFAULT_SPEED_SCALE,
         threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
         safety: SafetyConfig | None = None,
+        trigger_rule: str = DEFAULT_RULE,
     ) -> None:
         super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
         if safety is not None:  # collision avoidance with connectivity (docs/SAFETY.md)
@@ -545,9 +542,13 @@ class Eta1Agent(_EventTriggeredAgent):
         self.beta = _positive('beta', beta)
         try:
             self.speed_scale, self._threshold = eta1_gains(
-                alpha=self.alpha, beta=self.beta, speed_scale=speed_scale, threshold_floor=threshold_floor
+                alpha=self.alpha,
+                beta=self.beta,
+                speed_scale=speed_scale,
+                threshold_floor=threshold_floor,
+                trigger_rule=trigger_rule,
             )
-        except ScaleError as error:
+        except (ScaleError, RuleError) as error:
             raise AgentError(f'agent {agent_id}: {error}') from None
 
     def _update(self, y: list[tuple[float, ...]], length: list[float], extra: None) -> tuple[float, ...]:
@@ -682,6 +683,7 @@ class Eta2Agent(_EventTriggeredAgent):
         tolerance: float = DEFAULT_TOLERANCE,
         speed_scale: float = DEFAULT_SPEED_SCALE,
         threshold_floor: float = DEFAULT_THRESHOLD_FLOOR,
+        trigger_rule: str = DEFAULT_RULE,
     ) -> None:
         super().__init__(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance)
         self.alpha_d = _positive('alpha_d', alpha_d)
@@ -695,9 +697,10 @@ class Eta2Agent(_EventTriggeredAgent):
                 beta_d=self.beta_d,
                 speed_scale=speed_scale,
                 threshold_floor=threshold_floor,
+                trigger_rule=trigger_rule,
                 **paper,
             )
-        except ScaleError as error:
+        except (ScaleError, RuleError) as error:
             raise AgentError(f'agent {agent_id}: {error}') from None
         self.speed_scale = float(speed_scale)
         self._edge_q = [(0.0,) * max(self.dimension, _FAST_DIMENSION)] * len(self.neighbour_ids)
@@ -921,10 +924,12 @@ def make_agent(
     gains: Mapping[str, float],
     tolerance: float = DEFAULT_TOLERANCE,
     safety: SafetyConfig | None = None,
+    trigger_rule: str = DEFAULT_RULE,
 ) -> Eta1Agent | Eta2Agent:
     """The agent of `algorithm` ('eta1' or 'eta2') with `gains` by name (extra names are ignored;
     speed_scale and threshold_floor are optional, SCALE_GAINS); `safety`: the collision layer
-    (ETA-1 only, docs/SAFETY.md)."""
+    (ETA-1 only, docs/SAFETY.md); `trigger_rule`: the threshold's family by name
+    (formation_agent.core.trigger)."""
     if algorithm not in ALGORITHM_GAINS:
         raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
     missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
@@ -937,7 +942,39 @@ def make_agent(
         if algorithm != 'eta1':
             raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
         chosen['safety'] = safety
-    return kind(agent_id=agent_id, neighbours=neighbours, delta=delta, tolerance=tolerance, **chosen)
+    return kind(
+        agent_id=agent_id,
+        neighbours=neighbours,
+        delta=delta,
+        tolerance=tolerance,
+        trigger_rule=trigger_rule,
+        **chosen,
+    )
+
+
+def _new_search(
+    agent: _EventTriggeredAgent, *, fast: bool, start: float, limit: float, initial_step: float
+) -> CrossingSearch:
+    """The agent's search from `start`: compiled (`_fastcore.Search`) for the plain-float path (`fast`,
+    p <= 3) and the exponential rule only (`compiled.search_type`), else `CrossingSearch`, which calls
+    the agent's ErrorModel methods and its rule's (the same floats)."""
+    rule = agent.trigger_rule
+    search_type = compiled.search_type(rule) if fast else None
+    if search_type is None:
+        return CrossingSearch(
+            agent, start=start, rule=rule, limit=limit, tolerance=agent.tolerance, initial_step=initial_step
+        )
+    exponential = cast(ExponentialRule, rule)  # search_type knows no other
+    return search_type(
+        agent,
+        start=start,
+        alpha=exponential.alpha,
+        beta=exponential.beta,
+        floor=exponential.floor,
+        limit=limit,
+        tolerance=agent.tolerance,
+        initial_step=initial_step,
+    )
 
 
 def _sum_of_squares(values: Iterable[float]) -> float:

@@ -13,7 +13,8 @@ same, every triggering time is divided by κ (κ < 1: slower). With x(t) = x_p(�
   q_p(0): the scaled run starts at κ q(0) (`initial_velocities`).
 
 Threshold floor c0 >= 0: the mixed threshold c0 + α e^{-βt} (Seyboth, Dimarogonas, Johansson,
-Automatica 2013), in the units of the paper's e_i / E_i; with κ, c0 + α e^{-κβt}.
+Automatica 2013), in the units of the paper's e_i / E_i; with κ, c0 + α e^{-κβt}. Another triggering
+rule (formation_agent.core.trigger) is scaled the same way: built from (s c0, s α, κβ).
 
 κ = 1 and c0 = 0 are the paper's: every product with 1.0 and every sum with 0.0 is exact, so
 they reproduce its event chains bit for bit.
@@ -22,13 +23,13 @@ they reproduce its event chains bit for bit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from formation_agent.core.errors import ScaleError
+from formation_agent.core.trigger import DEFAULT_RULE, TriggerRule, make_rule
 
 DEFAULT_SPEED_SCALE = 1.0
 DEFAULT_THRESHOLD_FLOOR = 0.0
@@ -67,25 +68,14 @@ def check_threshold_floor(value: Any) -> float:  # any value given: checked here
     return floor
 
 
-@dataclass(frozen=True, kw_only=True, slots=True)
-class Threshold:
-    """floor + alpha e^{-beta t}, t in real seconds, in the units of the agent's error."""
-
-    floor: float
-    alpha: float
-    beta: float
-
-    def __call__(self, t: float) -> float:
-        return self.floor + self.alpha * math.exp(-self.beta * t)  # + 0.0 is exact: the paper's
-
-
 def eta1_gains(
-    *, alpha: float, beta: float, speed_scale: float, threshold_floor: float
-) -> tuple[float, Threshold]:
-    """(command gain, threshold) of ETA-1 at κ: u_i = κ u_p,i, ||e_i|| reaches c0 + α e^{-κβt}."""
+    *, alpha: float, beta: float, speed_scale: float, threshold_floor: float, trigger_rule: str = DEFAULT_RULE
+) -> tuple[float, TriggerRule]:
+    """(command gain, threshold) of ETA-1 at κ: u_i = κ u_p,i, ||e_i|| reaches θ(κt; c0, α, β) of the
+    rule `trigger_rule` (the paper's: c0 + α e^{-κβt}; formation_agent.core.trigger)."""
     kappa = check_speed_scale(speed_scale)
     floor = check_threshold_floor(threshold_floor)
-    return kappa, Threshold(floor=floor, alpha=alpha, beta=kappa * beta)
+    return kappa, make_rule(trigger_rule, floor=floor, alpha=alpha, beta=kappa * beta)
 
 
 def eta2_gains(
@@ -97,14 +87,16 @@ def eta2_gains(
     k3: float,
     speed_scale: float,
     threshold_floor: float,
-) -> tuple[tuple[float, float, float], Threshold]:
-    """((K1, K2, K3), threshold) of ETA-2 at κ: (κ²k1, κk2, κk3), and κ²(c0 + α_d e^{-κβ_d t})
-    on K1 e_i + K2 e_qi = κ² E_i (the paper's E_i of (triggerdouble))."""
+    trigger_rule: str = DEFAULT_RULE,
+) -> tuple[tuple[float, float, float], TriggerRule]:
+    """((K1, K2, K3), threshold) of ETA-2 at κ: (κ²k1, κk2, κk3), and κ² θ(κt; c0, α_d, β_d) of the
+    rule `trigger_rule` (the paper's: κ²(c0 + α_d e^{-κβ_d t})) on K1 e_i + K2 e_qi = κ² E_i (the
+    paper's E_i of (triggerdouble))."""
     kappa = check_speed_scale(speed_scale)
     floor = check_threshold_floor(threshold_floor)
     square = kappa * kappa
     gains = (square * k1, kappa * k2, damping(k3, kappa))
-    return gains, Threshold(floor=square * floor, alpha=square * alpha_d, beta=kappa * beta_d)
+    return gains, make_rule(trigger_rule, floor=square * floor, alpha=square * alpha_d, beta=kappa * beta_d)
 
 
 def damping(k3: float, speed_scale: float) -> float:

@@ -22,8 +22,9 @@ from formation_agent.core.safety import (
     SafetyConfig,
 )
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
-from formation_agent.core.errors import SafetyError, WarpError
+from formation_agent.core.errors import RuleError, SafetyError, WarpError
 from formation_agent.core.time_warp import TimeWarp
+from formation_agent.core.trigger import DEFAULT_RULE, rule_factory
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     DOUBLE,
@@ -113,6 +114,14 @@ _FORMATION = (
         '(docs/SPEED_SCALE.md); 0: the paper',
         default=SCALE_GAINS['threshold_floor'],
         low=0.0,
+    ),
+    _spec(
+        'trigger_rule',
+        STRING,
+        'the triggering rule, the family of thresholds θ(t; c0, α, β) the error is held below '
+        '(formation_agent.core.trigger): a registered name or an import path package.module:Class; '
+        f'{DEFAULT_RULE}: c0 + α e^{{-κβt}}, the paper',
+        default=DEFAULT_RULE,
     ),
     # The safety layer (docs/SAFETY.md): the scenario's safety: keys, written by `formation run`.
     _spec(
@@ -335,6 +344,7 @@ class AgentConfig:
     inject_jitter_ms: float
     inject_seed: int
     time_warp: TimeWarp | None = None
+    trigger_rule: str = DEFAULT_RULE  # the threshold's family (formation_agent.core.trigger)
     safety: SafetyConfig | None = None  # the safety layer (min_separation > 0), docs/SAFETY.md
     other_robot_ids: tuple[int, ...] = ()  # the safety layer on robots: the others' pose topics
     key: bytes | None = field(default=None, repr=False)  # the run's key (key_file), never printed
@@ -415,6 +425,7 @@ def read_config(node) -> AgentConfig:
                 'inject_delay_ms',
                 'inject_jitter_ms',
                 'inject_seed',
+                'trigger_rule',
             )
         },
     )
@@ -448,6 +459,11 @@ def _rules(node, values: dict) -> list[str]:
         )
     if have('time_warp') and values['time_warp']:
         problems += _warp_problems(values)
+    if have('trigger_rule'):
+        try:
+            rule_factory(values['trigger_rule'])
+        except RuleError as error:
+            problems.append(str(error))
     if have('min_separation', *SAFETY_PARAMETERS.values()) and values['min_separation'] > 0.0:
         problems += _safety_problems(values)
     if have('key_file') and values['key_file']:

@@ -114,6 +114,7 @@ def _make_core(config):
         algorithm=config.algorithm,
         gains=config.gains,
         safety=config.safety,
+        trigger_rule=config.trigger_rule,
     )
     return core if config.time_warp is None else WarpedAgent(core, config.time_warp)
 

@@ -27,7 +27,8 @@ import numpy as np
 import yaml
 
 from formation_agent.core.safety import SafetyConfig
-from formation_agent.core.errors import SafetyError, ScaleError
+from formation_agent.core.trigger import DEFAULT_RULE, rule_factory
+from formation_agent.core.errors import RuleError, SafetyError, ScaleError
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
@@ -328,9 +329,14 @@ class Scenario:
     horizon: float
     headings: np.ndarray | None = None  # (n,) [rad]: simulated robots' headings at t = 0, or None
     safety: SafetyConfig | None = None  # collision avoidance with connectivity (docs/SAFETY.md), or None
+    trigger_rule: str = DEFAULT_RULE  # the threshold's family by name (formation_agent.core.trigger)
 
     def __post_init__(self) -> None:
         _name(self.name)
+        try:
+            rule_factory(self.trigger_rule)  # a registered name, or an import path that resolves
+        except RuleError as error:
+            raise ScenarioError(str(error)) from None
         if self.dynamics not in DYNAMICS:
             raise ScenarioError(f"dynamics: must be 'single' or 'double', got {short_repr(self.dynamics)}")
         delta = _finite_float(self.delta, 'communication_radius')
@@ -435,6 +441,7 @@ class Scenario:
                 )
             )
             and self.safety == other.safety
+            and self.trigger_rule == other.trigger_rule
         )
 
     __hash__ = None
@@ -598,7 +605,7 @@ def _positive(value: Any, where: str, what: str) -> float:
 def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
     """Build a scenario from the YAML schema (docs/SCENARIOS.md); `name` is used if data has none."""
     data = _mapping(data, 'scenario')
-    _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name', 'safety'))
+    _check_keys(data, 'scenario', required=_TOP_REQUIRED, optional=('name', 'safety', 'trigger_rule'))
     scenario_name = _name(data.get('name', name if name is not None else 'scenario'))
 
     dynamics = data['dynamics']
@@ -639,6 +646,7 @@ def scenario_from_dict(data: Any, *, name: str | None = None) -> Scenario:
         horizon=horizon,
         headings=np.array([headings[a] for a in ids]) if headings else None,
         safety=safety,
+        trigger_rule=data.get('trigger_rule', DEFAULT_RULE),
     )
 
 
@@ -800,6 +808,8 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
     }
     if scenario.safety is not None:  # written only when on: older readers keep working
         data['safety'] = scenario.safety.as_dict()
+    if scenario.trigger_rule != DEFAULT_RULE:  # likewise: written only when not the paper's
+        data['trigger_rule'] = scenario.trigger_rule
     return data
 
 

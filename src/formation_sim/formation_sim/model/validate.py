@@ -35,6 +35,9 @@ threshold_floor  c0 > 0 (docs/SPEED_SCALE.md): ETA-1 c0 < β0 min(Δ-||d_ij||) s
               ETA-2 the ultimate ball 2 sqrt(n c0²/(8 β1 γ λmin(P))) within min(Δ-||d_ij||)  error,
               and 2 sqrt(sup V_d/λmin(P)) below it, without which connectivity is only      warning
               checked on runs (formation_sim.model.threshold_floor)
+trigger_rule  another rule than the exponential one (formation_agent.core.trigger): the   warning
+              run is certified against it, but Theorems 1 and 2 are proven for c0 + α e^{-βt}
+              only, so none of their guarantees (and none of the checks above) covers it
 parameters    Δ, the horizon, the agents' gains and every d_ij are 0 or normal doubles     error
               (|x| >= 2.2e-308): agents receive them as ROS parameters, and rcl's parameter
               file parser reads a subnormal number as text (the agent then cannot start)
@@ -55,6 +58,7 @@ import numpy as np
 
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
+from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, rule_factory
 from formation_sim.model import theory
 from formation_msgs_py.errors import FormationError
 from formation_sim.model.errors import TheoryError
@@ -252,8 +256,22 @@ def validate_scenario(scenario: Scenario) -> ValidationReport:
     _check_speed_scale(scenario, out, beta0)
     if report.ok:
         _check_threshold_floor(scenario, out)
+    _check_trigger_rule(scenario, out)
     _check_parameters(scenario, out)
     return report
+
+
+def _check_trigger_rule(scenario: Scenario, out: _Collector) -> None:
+    """A warning for a rule the theorems do not cover (formation_agent.core.trigger)."""
+    if rule_factory(scenario.trigger_rule) is not ExponentialRule:  # the scenario checked the name
+        out.warning(
+            'trigger_rule',
+            'gains',
+            f'trigger_rule {scenario.trigger_rule!r}: Theorems 1 and 2 are proven for the threshold '
+            f'c0 + alpha e^(-beta t) ({DEFAULT_RULE!r}) only; the run is certified against this rule, '
+            'but no guarantee of the theorems, nor any check above, covers it',
+            trigger_rule=scenario.trigger_rule,
+        )
 
 
 def _check_graph(scenario: Scenario, out: _Collector) -> bool:

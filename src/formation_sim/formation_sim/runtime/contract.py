@@ -83,6 +83,7 @@ def agent_parameters(
         # κ and c0 (docs/SPEED_SCALE.md): the agent derives its real-time gains from them
         'speed_scale': float(gains.speed_scale),
         'threshold_floor': float(gains.threshold_floor),
+        'trigger_rule': scenario.trigger_rule,  # the threshold's family (formation_agent.core.trigger)
     }
     if scenario.safety is not None:  # the safety layer's keys (docs/SAFETY.md), as the agent names them
         params.update({name: float(getattr(scenario.safety, key)) for key, name in SAFETY_PARAMETERS.items()})

@@ -79,6 +79,7 @@ def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE
         gains=gains,
         tolerance=tolerance,
         safety=scenario.safety,
+        trigger_rule=scenario.trigger_rule,
     )
 
 

@@ -331,10 +331,8 @@ def test_a_robot_moves_under_its_last_command_for_its_timeout_at_most_however_la
         exact.advance(moved)
         # The clocks stand still between ticks: the robot moved under its command for `moved` s, to the
         # wall clock's resolution as a float (2.4e-7 s at 1.7e9 s, so 1e-7 m at 0.3 m/s).
-        assert np.allclose(robot.robot.position, exact.position, rtol=0, atol=1e-6), (
-            robot.robot.position,
-            exact,
-        )
+        close = np.allclose(robot.robot.position, exact.position, rtol=0, atol=1e-6)
+        assert close, (robot.robot.position, exact)
         stopped = moved < sum(gaps)
         assert robot.robot.command.is_zero == stopped and robot.timeouts == int(stopped)
     finally:
