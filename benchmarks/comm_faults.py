@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from formation_sim.sim.engine import simulate
-from formation_sim.runtime.orchestrate import FormationRun
+from formation_sim.runtime.launch.orchestrate import FormationRun
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.summary import build_summary
 

@@ -58,9 +58,9 @@ TICKS = os.sysconf('SC_CLK_TCK')
 
 KINDS = (  # (marker in the command line, kind)
     ('formation_agent.ros.main', 'agents'),
-    ('formation_sim.runtime.robot_node', 'robots'),
-    ('formation_sim.runtime.coordinator', 'coordinator'),
-    ('formation_sim.runtime.recorder', 'recorder'),
+    ('formation_sim.runtime.nodes.robot_node', 'robots'),
+    ('formation_sim.runtime.nodes.coordinator', 'coordinator'),
+    ('formation_sim.runtime.nodes.recorder', 'recorder'),
 )
 
 _PROFILE_HOOK = """

@@ -1,4 +1,4 @@
-"""Distributed runs (`formation_sim.runtime.orchestrate.FormationRun`) measured from outside.
+"""Distributed runs (`formation_sim.runtime.launch.orchestrate.FormationRun`) measured from outside.
 
 `measure_run` runs one scenario in lock-step and reports: events and steps per wall second while
 stepping (t = 0 to the horizon), start-up time (spawn and discovery: the simulator's
@@ -18,9 +18,9 @@ from collections import Counter
 from pathlib import Path
 
 ROLES = (
-    ('formation_sim.runtime.sim_node', 'simulator'),
+    ('formation_sim.runtime.nodes.sim_node', 'simulator'),
     ('formation_agent.ros.main', 'agents'),
-    ('formation_sim.runtime.recorder', 'recorder'),
+    ('formation_sim.runtime.nodes.recorder', 'recorder'),
     ('fast-discovery-server', 'discovery_server'),
     ('formation_sim.cli', 'command'),
     ('from formation_sim.cli import main', 'command'),
@@ -129,7 +129,7 @@ def measure_run(
     timeout: float = 600.0,
 ) -> dict:
     """One lock-step run; the measurements described in the module docstring."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     watch = _MemoryWatch()
     watch.start()

@@ -16,7 +16,7 @@ and noise-free pose (`/agent_<i>/robot/true_odom`).  Once the run has driven the
   to the run).
 
 Columns: the time from the fault to the last robot's last zero command (a robot whose agent was
-killed gets its zero from the coordinator, `formation_sim.runtime.robot_stops`), the largest
+killed gets its zero from the coordinator, `formation_sim.runtime.nodes.robot_stops`), the largest
 distance a robot's control point... (its pose) travelled after the fault, the exit status and the message of
 `formation run`, the time it took to exit after the fault, and whether `formation analyze` found
 the bag to agree with summary.json.  A `robot_stop` row also says what the frozen robot did once
@@ -253,7 +253,7 @@ def measure(backend: str, fault: str, *, domain_id: int, folder: Path, horizon: 
         robot_params = str((fleet_out if backend == 'external' else out) / 'robots.params.yaml')
         fault_at = time.monotonic()
         if fault in ('robot_kill', 'robot_stop', 'pose_cut'):
-            victim = _one(('formation_sim.runtime.robot_node', '--robots', robot_params, str(VICTIM)))
+            victim = _one(('formation_sim.runtime.nodes.robot_node', '--robots', robot_params, str(VICTIM)))
             os.kill(victim, {'robot_kill': signal.SIGKILL}.get(fault, signal.SIGSTOP))
             if fault == 'robot_stop':
                 time.sleep(2.0)

@@ -29,7 +29,7 @@ sys.path.insert(0, str(HERE))
 from cases import build_scenario  # noqa: E402 - benchmarks/ put on sys.path first
 from engine_baseline import PACKAGES, materialise  # noqa: E402 - benchmarks/ put on sys.path first
 
-from formation_sim.runtime.launch import resolve_agents_per_process  # noqa: E402 - after the path is set up
+from formation_sim.runtime.launch.plan import resolve_agents_per_process  # noqa: E402 - after the path is set up
 
 # The code before the start-up work of issue 14 (main when it began).
 BASELINE_REV = 'f87c698'

@@ -31,10 +31,10 @@ machines](SEPARATE_MACHINES.md)).
 def sections() -> list[tuple[str, str, object]]:
     """(heading, what it is, specs) per node command."""
     from formation_agent.ros.config import AGENT_PARAMETERS, GAIN_PARAMETERS
-    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS
-    from formation_sim.runtime.recorder import RECORDER_PARAMETERS
-    from formation_sim.runtime.robot_node import SPECS as ROBOT_PARAMETERS
-    from formation_sim.runtime.sim_node import SIMULATOR_PARAMETERS
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.nodes.recorder import RECORDER_PARAMETERS
+    from formation_sim.runtime.nodes.robot_node import SPECS as ROBOT_PARAMETERS
+    from formation_sim.runtime.nodes.sim_node import SIMULATOR_PARAMETERS
 
     return [
         (
@@ -47,24 +47,24 @@ def sections() -> list[tuple[str, str, object]]:
         ),
         (
             '`formation_sim`: node `/formation_simulator`',
-            'The simulator of the exact backend (`formation_sim.runtime.sim_node`), in '
+            'The simulator of the exact backend (`formation_sim.runtime.nodes.sim_node`), in '
             '`simulator.params.yaml`.',
             SIMULATOR_PARAMETERS,
         ),
         (
             '`formation_coordinator`: node `/formation_coordinator`',
-            'The time keeper of robot runs (`formation_sim.runtime.coordinator`), in '
+            'The time keeper of robot runs (`formation_sim.runtime.nodes.coordinator`), in '
             '`coordinator.params.yaml`.',
             COORDINATOR_PARAMETERS,
         ),
         (
             '`formation_recorder`: node `/formation_recorder`',
-            'The recorder (`formation_sim.runtime.recorder`), in `recorder.params.yaml`.',
+            'The recorder (`formation_sim.runtime.nodes.recorder`), in `recorder.params.yaml`.',
             RECORDER_PARAMETERS,
         ),
         (
             '`formation_robot`: node `/agent_<i>/simulated_robot`',
-            'A simulated robot (`formation_sim.runtime.robot_node`), in `robots.params.yaml` keyed '
+            'A simulated robot (`formation_sim.runtime.nodes.robot_node`), in `robots.params.yaml` keyed '
             'by node name.',
             ROBOT_PARAMETERS,
         ),

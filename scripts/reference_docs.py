@@ -5,7 +5,7 @@ up to date (a test runs it, as for docs/PARAMETERS.md).
 - EXIT_CODES.md: every member of `formation_msgs_py.exit_codes.ExitCode` with what it means and the
   modules that return it (every `ExitCode.<NAME>` under src), one row per status.
 - TOPICS.md: the processes of a run and the topics between them, from the topic lists the
-  recorder is given (`sim_node.formation_topics`, `coordinator.robot_run_topics`) and the topic
+  recorder is given (`contract.formation_topics`, `contract.robot_run_topics`) and the topic
   table they are drawn from (`formation_msgs_py.topic_table`).
 
     python scripts/reference_docs.py            # rewrite both
@@ -148,8 +148,8 @@ def _whole_table() -> list[str]:
 
 def render_topics() -> str:
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.coordinator import robot_run_topics
-    from formation_sim.runtime.sim_node import formation_topics
+    from formation_sim.runtime.contract import robot_run_topics
+    from formation_sim.runtime.contract import formation_topics
 
     exact = formation_topics(load_scenario('paper_single'))
     robots = robot_run_topics(
@@ -160,8 +160,8 @@ def render_topics() -> str:
             '# Processes and topics',
             '',
             'Generated from the code by `python scripts/reference_docs.py` (a test checks that it is up',
-            'to date): the topics are the lists a run gives its recorder (`formation_sim.runtime.sim_node.',
-            'formation_topics`, `formation_sim.runtime.coordinator.robot_run_topics`), both drawn from',
+            'to date): the topics are the lists a run gives its recorder (`formation_sim.runtime.contract.',
+            'formation_topics`, `formation_sim.runtime.contract.robot_run_topics`), both drawn from',
             '[the topic table](#the-topic-table); every agent `i` lives in the namespace `/agent_<i>`. Each',
             'process is its own OS process (agents may share one: `--agents-per-process`), all in one',
             'private ROS domain. Message layouts and QoS: [MESSAGES.md](MESSAGES.md); the protocol:',

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Run a formation scenario as ROS 2 processes and print where the results are.
 
-Copy and adapt: everything is the public API of formation_sim.runtime.orchestrate.
+Copy and adapt: everything is the public API of formation_sim.runtime.launch.orchestrate.
 
     python scripts/run_formation.py                     # paper_single up to t = 10, into a new runs/ folder
     python scripts/run_formation.py paper_double --horizon 5 --out runs/double [--force]
@@ -10,7 +10,7 @@ Copy and adapt: everything is the public API of formation_sim.runtime.orchestrat
 import argparse
 import sys
 
-from formation_sim.runtime.orchestrate import FormationRun
+from formation_sim.runtime.launch.orchestrate import FormationRun
 from formation_sim.runtime.errors import RunError
 
 

@@ -126,7 +126,7 @@ def test_colcon_install_is_what_python_imports(colcon_install: Path) -> None:
             sys.executable,
             '-c',
             'import formation_msgs_py.types, formation_agent.core.closed_form, '
-            'formation_sim.runtime.recorder as r;'
+            'formation_sim.runtime.nodes.recorder as r;'
             'print(r.__file__)',
         ],
         env=install_env(colcon_install),

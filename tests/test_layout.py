@@ -4,6 +4,9 @@
 - formation_sim's layers: model < sim < bag < analysis < study < runtime < commands < cli; a module
   imports only from its own layer or those before it (function-level imports included).
 - formation_agent.core never imports formation_agent.ros.
+- formation_sim.runtime by role: nothing under runtime.launch (the parent) imports runtime.nodes
+  (the node programs) or the other way round; both agree through runtime.contract, which imports
+  neither, and the tools (runtime.tools) may use both.
 - No import cycle among the project's modules.
 - Everything but the ROS shells imports with rclpy and the ROS message packages unavailable.
 - Every name a package face exports (`__all__`) resolves.
@@ -86,7 +89,7 @@ def test_the_module_list_is_complete() -> None:
     assert {
         'formation_agent.core.eta',
         'formation_sim.model.scenario',
-        'formation_sim.runtime.sim_node',
+        'formation_sim.runtime.nodes.sim_node',
     } <= set(MODULES)
     assert all(GRAPH[name] for name in ('formation_sim.sim.engine', 'formation_agent.ros.node'))
 
@@ -142,10 +145,58 @@ def test_no_import_cycle() -> None:
 def test_the_rule_catches_an_upward_import(tmp_path) -> None:
     # The checks above must be able to fail: an analysis module importing the runtime is found.
     probe = tmp_path / 'probe.py'
-    probe.write_text('def f():\n    from formation_sim.runtime.orchestrate import FormationRun\n')
+    probe.write_text('def f():\n    from formation_sim.runtime.launch.orchestrate import FormationRun\n')
     targets = _imports('formation_sim.analysis.probe', probe)
-    assert targets == {'formation_sim.runtime.orchestrate'}
-    assert _sim_layer('formation_sim.runtime.orchestrate') > _sim_layer('formation_sim.analysis.probe')
+    assert targets == {'formation_sim.runtime.launch.orchestrate'}
+    assert _sim_layer('formation_sim.runtime.launch.orchestrate') > _sim_layer('formation_sim.analysis.probe')
+
+
+ROLES = ('nodes', 'launch', 'tools')
+# role -> the roles it must not import: the parent starts node programs by their module names and
+# agrees with them through runtime.contract; the node programs know nothing of who started them.
+ROLE_BARRIERS = {'launch': ('nodes', 'tools'), 'nodes': ('launch', 'tools'), '': ROLES}
+
+
+def _role(name: str) -> str | None:
+    """'nodes', 'launch' or 'tools' for a module of that folder of formation_sim.runtime, '' for
+    one beside them (contract, errors, testing), None outside the runtime."""
+    parts = name.split('.')
+    if parts[:2] != ['formation_sim', 'runtime'] or len(parts) < 3:
+        return None
+    return parts[2] if parts[2] in ROLES else ''
+
+
+def _role_breaches(graph: dict[str, set[str]]) -> list[str]:
+    return [
+        f'{a} ({_role(a) or "runtime"}) -> {b} ({_role(b)})'
+        for a, targets in graph.items()
+        if _role(a) is not None and a != 'formation_sim.runtime.testing'  # a test helper: replays bags
+        for b in targets
+        if _role(b) in ROLE_BARRIERS.get(_role(a) or '', ())
+    ]
+
+
+def test_each_runtime_role_folder_holds_only_its_role() -> None:
+    assert {'formation_sim.runtime.launch.plan', 'formation_sim.runtime.nodes.sim_node'} <= set(MODULES)
+    assert all(_role(name) is not None for name in MODULES if name.startswith('formation_sim.runtime.'))
+    breaches = _role_breaches(GRAPH)
+    assert not breaches, 'import what both sides need from formation_sim.runtime.contract:\n' + '\n'.join(
+        breaches
+    )
+
+
+def test_the_role_rule_catches_the_launch_side_importing_a_node(tmp_path) -> None:
+    # As launch.py did before the split: a node module imported inside a function is found.
+    probe = tmp_path / 'probe.py'
+    probe.write_text('def f():\n    from formation_sim.runtime.nodes.sim_node import SIMULATOR_PARAMETERS\n')
+    graph = {'formation_sim.runtime.launch.probe': _imports('formation_sim.runtime.launch.probe', probe)}
+    assert _role_breaches(graph) == [
+        'formation_sim.runtime.launch.probe (launch) -> formation_sim.runtime.nodes.sim_node (nodes)'
+    ]
+    graph = {'formation_sim.runtime.contract': {'formation_sim.runtime.launch.plan'}}
+    assert _role_breaches(graph) == [
+        'formation_sim.runtime.contract (runtime) -> formation_sim.runtime.launch.plan (launch)'
+    ]
 
 
 ROS_FREE = sorted(name for name in MODULES if not name.startswith(ROS_MODULES))
@@ -180,10 +231,11 @@ def test_ros_free_modules_import_without_rclpy() -> None:
 # books are tested, and read by tools, on machines without ROS; the orchestrators start and watch
 # node processes and load no ROS themselves (an rclpy process costs ~65 MB and 0.3-0.6 s).
 ROS_FREE_IN_ROS_LAYERS = (
-    'formation_sim.runtime.run_book',
+    'formation_sim.runtime.nodes.run_book',
     'formation_agent.ros.process',
-    'formation_sim.runtime.orchestrate',
-    'formation_sim.runtime.fleet',
+    'formation_sim.runtime.launch.orchestrate',
+    'formation_sim.runtime.launch.fleet',
+    'formation_sim.runtime.contract',
 )
 
 

@@ -12,7 +12,7 @@ setup(
     python_requires='>=3.11',
     # Namespace search: a subpackage is shipped whether or not it has an __init__.py.
     packages=find_namespace_packages(include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']),
-    package_data={package_name: ['model/scenarios/*.yaml', 'runtime/fastdds_profile.xml']},
+    package_data={package_name: ['model/scenarios/*.yaml', 'runtime/launch/fastdds_profile.xml']},
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
@@ -27,10 +27,10 @@ setup(
     entry_points={
         'console_scripts': [
             'formation = formation_sim.cli:main',
-            'formation_sim = formation_sim.runtime.sim_node:entry_point',
-            'formation_recorder = formation_sim.runtime.recorder:entry_point',
-            'formation_robot = formation_sim.runtime.robot_node:entry_point',
-            'formation_coordinator = formation_sim.runtime.coordinator:entry_point',
+            'formation_sim = formation_sim.runtime.nodes.sim_node:entry_point',
+            'formation_recorder = formation_sim.runtime.nodes.recorder:entry_point',
+            'formation_robot = formation_sim.runtime.nodes.robot_node:entry_point',
+            'formation_coordinator = formation_sim.runtime.nodes.coordinator:entry_point',
         ]
     },
 )

@@ -50,7 +50,7 @@ def test_the_tagged_topics_are_the_protocols_own():
 
 
 def _run_topics(scenario):
-    from formation_sim.runtime.sim_node import formation_topics
+    from formation_sim.runtime.contract import formation_topics
 
     return formation_topics(scenario)
 
@@ -73,7 +73,7 @@ def test_the_exact_backends_recorder_list_is_the_tables_exact_rows():
 
 def test_a_robot_runs_recorder_list_follows_its_pose_topics():
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.coordinator import robot_run_topics
+    from formation_sim.runtime.contract import robot_run_topics
 
     scenario = load_scenario('robots_square')
     for simulated, pose_type, truth, robot_topics in (
@@ -94,7 +94,7 @@ def test_a_robot_runs_recorder_list_follows_its_pose_topics():
 
 def test_the_launch_plan_counts_the_counted_rows(tmp_path):
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.launch import LaunchPlan, RobotOptions
+    from formation_sim.runtime.launch.plan import LaunchPlan, RobotOptions
 
     for name, backend, robots in (
         ('paper_single', 'exact', None),

@@ -168,7 +168,7 @@ class _ShmFiles:
         self._inodes = {path: _inode(path) for path in self.paths}
 
     def left(self) -> list[str]:
-        from formation_sim.runtime.fastdds_shm import in_use
+        from formation_sim.runtime.launch.fastdds_shm import in_use
 
         return sorted(
             path
@@ -309,7 +309,7 @@ class DistributedRun:
 def distributed_single_run(tmp_path_factory) -> DistributedRun:
     """paper_single, horizon 2, run once per session (per xdist worker) as ROS processes in domain
     DISTRIBUTED_DOMAIN."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.sim.summary import write_summary
 
     scenario = load_scenario('paper_single')

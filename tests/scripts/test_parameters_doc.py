@@ -19,10 +19,10 @@ DOMAIN_ID = 48
 
 def _specs(command: str):
     from formation_agent.ros.config import AGENT_PARAMETERS, GAIN_PARAMETERS
-    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS
-    from formation_sim.runtime.recorder import RECORDER_PARAMETERS
-    from formation_sim.runtime.robot_node import SPECS
-    from formation_sim.runtime.sim_node import SIMULATOR_PARAMETERS
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.nodes.recorder import RECORDER_PARAMETERS
+    from formation_sim.runtime.nodes.robot_node import SPECS
+    from formation_sim.runtime.nodes.sim_node import SIMULATOR_PARAMETERS
 
     return {
         'formation_agent': (*AGENT_PARAMETERS, *GAIN_PARAMETERS['eta1'], *GAIN_PARAMETERS['eta2']),
@@ -93,10 +93,10 @@ def _command(name: str) -> list[str]:
         return [str(script)]
     module = {
         'formation_agent': 'formation_agent.ros.main',
-        'formation_sim': 'formation_sim.runtime.sim_node',
-        'formation_coordinator': 'formation_sim.runtime.coordinator',
-        'formation_recorder': 'formation_sim.runtime.recorder',
-        'formation_robot': 'formation_sim.runtime.robot_node',
+        'formation_sim': 'formation_sim.runtime.nodes.sim_node',
+        'formation_coordinator': 'formation_sim.runtime.nodes.coordinator',
+        'formation_recorder': 'formation_sim.runtime.nodes.recorder',
+        'formation_robot': 'formation_sim.runtime.nodes.robot_node',
     }[name]
     return [sys.executable, '-m', module]
 
@@ -160,7 +160,7 @@ def test_the_parameter_services_describe_each_parameter(tmp_path):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter_client import AsyncParameterClient
 
-    from formation_sim.runtime.recorder import RECORDER_PARAMETERS
+    from formation_sim.runtime.nodes.recorder import RECORDER_PARAMETERS
 
     recorder = subprocess.Popen(
         [*_command('formation_recorder'), '--ros-args', '-p', f'output:={tmp_path / "bag"}'],

@@ -52,9 +52,9 @@ def test_every_exit_status_of_the_enum_is_in_the_table_with_the_modules_that_ret
     assert sorted(table) == [0, 1, 2, 3, 4, 5, 130] == [int(code) for code in ExitCode]
     for code in ExitCode:
         assert table[code][:2] == (code.name, code.meaning), code
-    # A module that returns a status is named in its row: the agent's command and the time keeper.
+    # A module that returns a status is named in its row: the agent's command and the time keepers' process.
     assert '`formation_agent.ros.main`' in table[ExitCode.LOST][2]
-    assert '`formation_sim.runtime.coordinator`' in table[ExitCode.REFUSED][2]
+    assert '`formation_sim.runtime.nodes.keeper_main`' in table[ExitCode.REFUSED][2]
     assert '`formation_sim.commands.study`' in table[ExitCode.INTERRUPTED][2]
 
 
@@ -78,8 +78,8 @@ def test_no_module_spells_an_exit_status_of_its_own():
 
 def test_every_recorded_topic_is_on_the_topics_page():
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.coordinator import robot_run_topics
-    from formation_sim.runtime.sim_node import formation_topics
+    from formation_sim.runtime.contract import robot_run_topics
+    from formation_sim.runtime.contract import formation_topics
 
     page = (DOCS / 'TOPICS.md').read_text()
     listed = formation_topics(load_scenario('paper_single')) + robot_run_topics(

@@ -22,7 +22,7 @@ class _Recorded:
         _Recorded.calls.append((scenario, options))
 
     def run(self):
-        from formation_sim.runtime.orchestrate import RunResult
+        from formation_sim.runtime.launch.orchestrate import RunResult
 
         return RunResult(
             out_dir=Path('runs/x'), summary=None, bag=None, exit_status=0, domain_id=100, wall_time=0.0
@@ -30,7 +30,7 @@ class _Recorded:
 
 
 def _run_script(monkeypatch, *arguments):
-    from formation_sim.runtime import orchestrate
+    from formation_sim.runtime.launch import orchestrate
 
     monkeypatch.setattr(orchestrate, 'FormationRun', _Recorded)
     monkeypatch.setattr(sys, 'argv', [str(SCRIPT), *arguments])

@@ -10,7 +10,7 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
 # The leases and graces every node of a run agrees on live in the ROS-free middleware module, so
-# that a ROS-free book (formation_sim.runtime.run_book) can use them; re-exported here.
+# that a ROS-free book (formation_sim.runtime.nodes.run_book) can use them; re-exported here.
 from formation_msgs_py.middleware import KEEPER_LEASE_GRACE, LIVELINESS_LEASE, LOST_GRACE  # noqa: F401 - re-exported
 
 # Every message of the protocol matters, and a reader that matches a writer late must still get
@@ -96,7 +96,7 @@ ROBOT_COMMAND_QOS = QoSProfile(
     liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE),
 )
 
-# A simulated robot's command reader (`formation_sim.runtime.robot_node`): a robot acts on the
+# A simulated robot's command reader (`formation_sim.runtime.nodes.robot_node`): a robot acts on the
 # newest command only, so it keeps only the newest; after a freeze it takes the zero alone
 # (measured: only the zero after SIGCONT, where keep-last 10 took 9 stale commands first).
 ROBOT_COMMAND_READER_QOS = QoSProfile(

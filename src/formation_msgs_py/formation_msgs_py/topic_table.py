@@ -6,9 +6,9 @@ they publish on it (summary.json `extra.published`, checked against the bag), wh
 carry the run's tag (docs/HOSTILE_TRAFFIC.md, "Tags"), and who writes and reads it.  What is
 derived from it, and tested to agree (tests/formation_msgs_py/test_topic_table.py):
 
-- the recorder's lists: `formation_sim.runtime.sim_node.formation_topics` (exact backend),
-  `formation_sim.runtime.coordinator.robot_run_topics` (robots);
-- the launch plan's counting (`formation_sim.runtime.launch.LaunchPlan.counted_topics`);
+- the recorder's lists: `formation_sim.runtime.contract.formation_topics` (exact backend),
+  `formation_sim.runtime.contract.robot_run_topics` (robots);
+- the launch plan's counting (`formation_sim.runtime.launch.plan.LaunchPlan.counted_topics`);
 - the analysis' dispatch (`formation_sim.analysis.load`: one handler per recorded row);
 - docs/TOPICS.md's table (`scripts/reference_docs.py`) and the topics of docs/MESSAGES.md.
 

@@ -30,7 +30,7 @@ __all__ = lazy_exports(
         'sim.summary': ('load_record', 'load_summary', 'write_summary'),
         'bag.io': ('read_bag',),
         'analysis.load': ('load_bag_run',),
-        'runtime.orchestrate': ('FormationRun', 'RunResult'),
+        'runtime.launch.orchestrate': ('FormationRun', 'RunResult'),
         'model.errors': ('ScenarioError',),
     },
 )

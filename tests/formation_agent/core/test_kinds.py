@@ -84,9 +84,10 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     from formation_agent.ros.config import AGENT_PARAMETERS, _kind_problems
     from formation_sim.cli import build_parser
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS, robot_run_topics
-    from formation_sim.runtime.launch import BACKENDS, RobotOptions
-    from formation_sim.runtime.robot_node import SPECS as ROBOT_SPECS
+    from formation_sim.runtime.contract import robot_run_topics
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.launch.plan import BACKENDS, RobotOptions
+    from formation_sim.runtime.nodes.robot_node import SPECS as ROBOT_SPECS
     from formation_sim.sim.robots import Command, Limits as BaseLimits, make_robot
 
     # The command line: a backend, and what external robots or a fleet are.
@@ -145,8 +146,8 @@ def _its_shape_parameter_is_everywhere(parser, scenario):
     files a run writes and the tables of the nodes it names (not the coordinator's)."""
     from formation_agent.ros.config import AGENT_PARAMETERS
     from formation_sim.commands.common import plan_options
-    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS
-    from formation_sim.runtime.robot_node import SPECS as ROBOT_SPECS
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.nodes.robot_node import SPECS as ROBOT_SPECS
 
     args = parser.parse_args(['run', 'robots_square', '--backend', 'sluggish', '--hull-width', '0.4'])
     robots = plan_options(args)['robots']

@@ -12,8 +12,8 @@ from formation_agent.ros.kind_parameters import LIMITS, SpecTable, limit_spec, s
 
 def _tables() -> dict:
     from formation_agent.ros.config import AGENT_PARAMETERS
-    from formation_sim.runtime.coordinator import COORDINATOR_PARAMETERS
-    from formation_sim.runtime.robot_node import SPECS
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
+    from formation_sim.runtime.nodes.robot_node import SPECS
 
     return {'agent': AGENT_PARAMETERS, 'coordinator': COORDINATOR_PARAMETERS, 'robot': SPECS}
 

@@ -622,7 +622,7 @@ def test_an_interrupted_distributed_run_agrees_with_its_bag(
     import threading
 
     from formation_sim.cli import main
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))

@@ -48,7 +48,7 @@ def test_other_scenarios_keep_their_warnings_without_the_note(
 
 
 def _robots(model: str, **shape):
-    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     return RobotOptions.of(model=model, **shape)
 

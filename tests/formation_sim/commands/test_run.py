@@ -79,7 +79,7 @@ def _listing(folder):
 def test_the_api_refuses_a_bad_request_before_touching_the_earlier_run(tmp_path, monkeypatch, force):
     import subprocess
 
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
     earlier = _earlier_run(tmp_path / 'run')
@@ -182,7 +182,7 @@ def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(
 ):
     import subprocess
 
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.model.validate import ValidationError
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
@@ -230,7 +230,7 @@ def test_formation_run_process_on_an_invalid_scenario_exits_non_zero_and_leaves_
 
 
 def test_fault_injection_requests_are_checked_before_anything_starts(tmp_path):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     with pytest.raises(RunError, match='loss needs the wall clock'):
         FormationRun('paper_single', out_dir=tmp_path / 'a', inject={'loss': 0.1})
@@ -244,7 +244,7 @@ def test_fault_injection_requests_are_checked_before_anything_starts(tmp_path):
 
 
 def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
     local = FormationRun('paper_single', out_dir=tmp_path / 'a')._environment(70, 4)
@@ -259,7 +259,7 @@ def test_discovery_is_limited_to_this_machine_unless_asked(tmp_path, monkeypatch
 
 
 def test_network_flag_reaches_the_run(tmp_path, monkeypatch):
-    from formation_sim.runtime import orchestrate
+    from formation_sim.runtime.launch import orchestrate
 
     seen = {}
 
@@ -403,7 +403,7 @@ def test_a_robot_run_beyond_the_limits_is_refused_naming_the_limit_the_value_and
 def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the_limits_runs(
     tmp_path, capsys, monkeypatch
 ):
-    from formation_sim.runtime import orchestrate
+    from formation_sim.runtime.launch import orchestrate
 
     started = []
 
@@ -431,7 +431,7 @@ def test_allow_saturation_turns_the_refusal_into_a_warning_and_a_team_within_the
 
 
 def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tmp_path, capsys, monkeypatch):
-    from formation_sim.runtime import orchestrate
+    from formation_sim.runtime.launch import orchestrate
 
     seen = {}
 
@@ -467,7 +467,7 @@ def test_speed_scale_auto_runs_the_chosen_kappa_and_records_it_in_the_summary(tm
 
 
 def test_holonomic_robots_are_not_held_to_a_turn_rate(tmp_path, capsys, monkeypatch):
-    from formation_sim.runtime import orchestrate
+    from formation_sim.runtime.launch import orchestrate
 
     started = []
 
@@ -523,7 +523,7 @@ def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path,
 
     from formation_sim.model.scenario import load_scenario
     from formation_sim.model.speed_choice import RobotLimits
-    from formation_sim.runtime import launch, orchestrate
+    from formation_sim.runtime.launch import orchestrate, plan as launch
     from formation_sim.sim.largest_command import choose_time_warp
 
     seen = {}

@@ -1,6 +1,6 @@
 """Tests of `formation stop` (formation_sim.commands.stop): its refusals, its light start, and the
 "no run answered" error on a domain where no run is (ROS domain 57).  A run stopped by it:
-tests/formation_sim/runtime/test_operator_stop.py."""
+tests/formation_sim/runtime/nodes/test_operator_stop.py."""
 
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ def _formation(*arguments: str, env: dict | None = None, code: str | None = None
 
 
 def test_it_discovers_with_the_runs_fast_dds_settings():
-    from formation_sim.runtime.launch import FASTDDS_PROFILE
+    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
 
     assert stop.FASTDDS_PROFILE == FASTDDS_PROFILE and FASTDDS_PROFILE.is_file()
 

@@ -299,7 +299,7 @@ def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper
     subnormal value, which validate refuses, indeed does not survive it."""
     import struct
 
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     data = paper_scenario_dict(dynamics)
     data['edges'][0]['d'] = [float(AWKWARD_NORMAL[0]), float(AWKWARD_NORMAL[1])]
@@ -316,7 +316,7 @@ def test_agent_parameters_survive_the_parameter_file_bit_for_bit(tmp_path, paper
     path = run.plan.write_inputs()['agents']
     read = _read_with_rcl(path, scenario.agent_ids)
 
-    from formation_sim.runtime.sim_node import agent_parameters
+    from formation_sim.runtime.contract import agent_parameters
 
     def bits(value):
         return struct.pack('<d', value) if isinstance(value, float) else value

@@ -32,7 +32,7 @@ def test_agents_on_one_path_equal_the_engine_on_the_other(
 ):
     if not compiled.AVAILABLE:
         pytest.skip('compiled core not built')
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = _scenario(name)
     previous = compiled.use_compiled(not agents_compiled)

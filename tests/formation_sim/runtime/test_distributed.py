@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch import LOG_DIR
+from formation_sim.runtime.launch.plan import LOG_DIR
 from formation_sim.sim.engine import simulate
 
 # Each run starts 4-5 ROS processes: one run at a time on this suite's worker.
@@ -23,7 +23,7 @@ TOLERANCE = 1e-9
 
 
 def _run(scenario, tmp_path: Path, *, domain_id: int, horizon: float, **options):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     run = FormationRun(
         scenario,
@@ -85,7 +85,7 @@ def test_lockstep_run_reproduces_the_in_process_engine(
 
     # The bag: every topic of the run, one TriggerInfo per trigger and neighbour, stamped with
     # the sender's triggering times.
-    from formation_sim.runtime.sim_node import formation_topics
+    from formation_sim.runtime.contract import formation_topics
 
     counts, stamps = bag_trigger_stamps(result.bag)
     assert set(counts) == {topic for topic, _ in formation_topics(scenario)}
@@ -170,7 +170,7 @@ def test_agents_packed_in_one_process_give_the_same_run(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_a_run_discovering_through_a_discovery_server_equals_the_engine(tmp_path):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_scenario('paper_single')
     horizon = 3.0
@@ -226,7 +226,7 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.timeout(300)
 def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, stepping_run, long_run_scenario):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     run = FormationRun(
         long_run_scenario, out_dir=tmp_path / 'run', domain_id=113, progress=False, timeout=240.0
@@ -249,8 +249,8 @@ def test_interrupt_stops_every_child_and_leaves_a_readable_bag(tmp_path, steppin
 def test_a_dead_agent_ends_the_run_and_its_peers(tmp_path, stepping_run, long_run_scenario, shm_files):
     import signal
 
-    from formation_sim.runtime.fastdds_shm import held_files
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.fastdds_shm import held_files
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     run = FormationRun(
         long_run_scenario,
@@ -329,8 +329,8 @@ _DEAF_EXEC = (
 def test_children_killed_hard_leave_no_shared_memory_files(
     tmp_path, stepping_run, long_run_scenario, shm_files
 ):
-    from formation_sim.runtime.fastdds_shm import held_files
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.fastdds_shm import held_files
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     # No grace period: every child still alive right after SIGINT is killed by SIGTERM or SIGKILL.
     # The simulator blocks SIGINT and SIGTERM (a mask exec keeps): it neither stops nor ends the

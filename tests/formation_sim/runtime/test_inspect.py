@@ -1,4 +1,4 @@
-"""formation_sim.runtime.graph, `formation topics` and `formation echo`: inspection without ros2cli."""
+"""formation_sim.runtime.tools.graph, `formation topics` and `formation echo`: inspection without ros2cli."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import yaml
 from formation_msgs_py.codec import encode_status, encode_step, encode_trigger_info, encode_world_state
 from formation_msgs_py.lockstep import Status, Step, WorldState
 from formation_msgs_py.types import TriggerInfo
-from formation_sim.runtime.graph import TopicInfo, format_message, format_topics
+from formation_sim.runtime.tools.graph import TopicInfo, format_message, format_topics
 
 INSPECT_DOMAIN = 172
 ARRAY = 'std_msgs/msg/Float64MultiArray'

@@ -150,7 +150,7 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     from formation_msgs_py.codec import encode_trigger_info, tag_array
     from formation_msgs_py.tags import KEY_FILE, Signer, read_key
     from formation_msgs_py.types import TriggerInfo
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     domain_id = 70
     scenario = load_scenario('paper_single')
@@ -245,7 +245,7 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
     from formation_msgs_py.tags import Signer, new_key
     from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
     from formation_msgs_py.types import TriggerInfo
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     domain_id = 73
     scenario = load_scenario('paper_single')
@@ -315,7 +315,7 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
     from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.topics import trigger_info_topic
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     domain_id = 60
     scenario = load_scenario('paper_single')
@@ -371,8 +371,8 @@ def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_p
 def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_until_then(
     tmp_path, ros_env, bag_trigger_stamps, stepping_run, long_run_scenario, shm_files
 ):
-    from formation_sim.runtime.fastdds_shm import held_files
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.fastdds_shm import held_files
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=71, progress=False, timeout=240.0)
@@ -409,7 +409,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
     # failing step, each exactly once and in order — but for what the killed agent had not yet
     # handed to the recorder: lock-step keeps the recorder within RECORDER_LAG steps, and a
     # process killed hard delivers nothing more, so its messages of those last steps may be gone.
-    from formation_sim.runtime.sim_node import RECORDER_LAG
+    from formation_sim.runtime.nodes.sim_node import RECORDER_LAG
 
     assert result.bag is not None and not result.bag_recovered
     counts, stamps = bag_trigger_stamps(result.bag)
@@ -435,7 +435,7 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(
     tmp_path, ros_env, stepping_run, long_run_scenario
 ):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.bag.io import read_bag
 
     run = FormationRun(
@@ -486,8 +486,8 @@ def test_children_killed_hard_leave_none_of_their_shared_memory_files_and_no_oth
     children held goes whole (file, semaphore, lock file), including the machine-wide ports 70xx
     outside the domain's range; a live participant of another domain and a dead port of nobody
     in the run keep theirs."""
-    from formation_sim.runtime.fastdds_shm import SHM_DIR, held_files
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.fastdds_shm import SHM_DIR, held_files
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     def family(path: str) -> set[Path]:
         name = Path(path).name.removeprefix('sem.').removesuffix('_mutex').removesuffix('_el')
@@ -555,7 +555,7 @@ def test_a_frozen_recorder_stops_the_run_and_the_bag_is_checked_against_what_was
     writer's liveliness lapse and stops the run (exit 3); once the recorder runs again (the
     orchestrator sends SIGCONT with SIGINT) it closes its bag, and summary.json says, per topic,
     what the run published and the bag lacks."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     run = FormationRun(
         long_run_scenario, out_dir=tmp_path / 'run', domain_id=61, progress=False, timeout=240.0
@@ -600,7 +600,7 @@ def test_a_simulator_killed_hard_still_leaves_a_summary_of_what_is_known(
     """SIGKILL leaves the simulator no time to write summary.json: the orchestrator writes it,
     with the failure, the last sim time and step of the simulator's progress, every process's
     exit, and the run as far as the (finalised) bag holds it, which is the engine's run so far."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_scenario(long_run_scenario)
     run = FormationRun(scenario, out_dir=tmp_path / 'run', domain_id=63, progress=False, timeout=240.0)
@@ -761,7 +761,7 @@ def test_formation_run_killed_hard_takes_its_children_with_it(tmp_path, ros_env,
 def test_injected_loss_and_delay_happen_and_are_counted(tmp_path, ros_env):
     """A test facility, not a result (the experiment's numbers are in the README). On the wall
     clock the outcome may vary: a run either reaches the horizon or stops with the reason."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_scenario(GENTLE)
     run = FormationRun(
@@ -796,7 +796,7 @@ def test_injected_loss_and_delay_happen_and_are_counted(tmp_path, ros_env):
 
 @pytest.mark.timeout(300)
 def test_two_runs_side_by_side_on_different_domains_do_not_see_each_other(tmp_path, ros_env):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_scenario('paper_single')
     reference = simulate(scenario, horizon=1.0)
@@ -912,7 +912,7 @@ def test_agents_on_separate_hosts_discover_each_other_over_udp_and_match_the_eng
 ):
     """Simulator and recorder on one host, each agent on its own; DDS over UDPv4 only (no shared
     memory), discovery by multicast on the hosts' subnet."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     place = {'simulator': 'h0', 'recorder': 'h0', 'agent_1': 'h1', 'agent_2': 'h2', 'agent_3': 'h3'}
     scenario = load_scenario('paper_single')

@@ -93,7 +93,7 @@ def test_a_wall_clock_run_with_the_safety_layer_keeps_the_robots_apart(tmp_path)
     all the same: the closest approach of the recorded true states stays >= D (the diagonal swap,
     where without the layer all four meet at the centre)."""
     scenario = safety_cases.swap_square(safety=SafetyConfig(min_separation=D), horizon=6.0)
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     result = FormationRun(
         scenario,
@@ -125,7 +125,7 @@ def test_holonomic_robots_with_the_safety_layer_keep_apart_sensing_the_others_fr
     """Robot backend: each agent reads every robot's pose topic and hands the core the others
     within R (sensing: poses, other_robot_ids); the robots' recorded poses never come closer than
     D (the diagonal swap, where without the layer all four meet at the centre)."""
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = safety_cases.swap_square(safety=SafetyConfig(min_separation=D), horizon=6.0)
     result = FormationRun(
@@ -176,7 +176,7 @@ def test_unicycles_under_the_time_warp_keep_their_origins_d_apart(tmp_path):
 
 
 def test_the_agents_parameters_carry_the_layer_and_read_back_into_its_config(tmp_path: Path):
-    from formation_sim.runtime.sim_node import agent_parameters
+    from formation_sim.runtime.contract import agent_parameters
 
     config = SafetyConfig(min_separation=D, sensing_radius=2.5, gamma=3.0, max_speed=0.4, turn=0.5)
     scenario = safety_cases.swap_square(safety=config)

@@ -22,7 +22,7 @@ def recorded_run(tmp_path_factory) -> Path:
     """A short distributed run of the paper's example, recorded (about 5 s)."""
     import os
 
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     folder = tmp_path_factory.mktemp('recorded') / 'run'
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

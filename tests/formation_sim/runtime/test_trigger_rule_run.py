@@ -23,7 +23,7 @@ RULE = 'toy_trigger_rule:Polynomial'
 
 @pytest.mark.timeout(300)
 def test_a_toy_rule_runs_lockstep_in_every_agent_process_and_equals_the_engine(tmp_path, monkeypatch):
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     # The rule's module is importable here and in every child (they inherit this environment).
     monkeypatch.syspath_prepend(str(TOY_FOLDER))

@@ -182,7 +182,7 @@ def test_validate_min_separation_prints_the_layers_radii(tmp_path, capsys):
 def test_a_distributed_run_takes_the_layer_on_every_backend():
     """Wired into the agents on the simulator and on robots (tests/formation_sim/runtime/
     test_safety_run.py); the scenario's own rules still refuse what the layer cannot run."""
-    from formation_sim.runtime.run_options import RunOptions
+    from formation_sim.runtime.launch.run_options import RunOptions
 
     safe = safety_cases.swap_two(safety=SAFETY)
     assert RunOptions().check(safe).backend == 'exact'

@@ -18,7 +18,7 @@ limit, and the agent stops safely.  Poses in another frame than the world frame,
 the one already held, are refused on arrival and counted (`add`).
 
 The rules a pose must meet to be used are this module's functions, shared by every reader of
-poses (issue 28): the agents' `PoseBook` and the coordinator's `formation_sim.runtime.robot_poses`.
+poses (issue 28): the agents' `PoseBook` and the coordinator's `formation_sim.runtime.nodes.robot_poses`.
 `stamp_refusal` (too old, or stamped ahead of the reader's clock) and `pose_refusal` (finite
 values and a unit quaternion as `formation_msgs_py.codec.pose_values` checks them, not stamped
 before the last pose accepted from the robot, not stamped ahead beyond a tolerance, and no jump

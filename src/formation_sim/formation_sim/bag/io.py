@@ -13,7 +13,7 @@
   type (REP 2011); `qos_profile_dict` a QoS profile as rosbag2 Jazzy writes it.
 
 Recovering a bag whose recorder died: `formation_sim.bag.recovery`. The recording node:
-`formation_sim.runtime.recorder`.
+`formation_sim.runtime.nodes.recorder`.
 """
 
 from __future__ import annotations

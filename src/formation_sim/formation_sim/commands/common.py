@@ -469,7 +469,7 @@ def paper_example_note(name: str, rules: list[str]) -> str | None:
 def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     """What decides a distributed run's processes and their parameters (`formation run`, `formation
     params`)."""
-    from formation_sim.runtime.launch import BACKENDS, ROBOT_MODELS
+    from formation_sim.runtime.launch.plan import BACKENDS, ROBOT_MODELS
 
     parser.add_argument(
         '--backend',
@@ -517,7 +517,7 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch import ROBOT_MODELS
+    from formation_sim.runtime.launch.plan import ROBOT_MODELS
     from formation_sim.runtime.errors import RunError
 
     robots = None
@@ -543,8 +543,8 @@ def plan_options(args: argparse.Namespace) -> dict:
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, model_flag: str) -> None:
-    """The options of simulated or external robots (`formation_sim.runtime.launch.RobotOptions`)."""
-    from formation_sim.runtime.launch import ROBOT_MODELS, RobotOptions
+    """The options of simulated or external robots (`formation_sim.runtime.launch.plan.RobotOptions`)."""
+    from formation_sim.runtime.launch.plan import ROBOT_MODELS, RobotOptions
 
     defaults = RobotOptions()
     group = parser.add_argument_group(f'robots (backends {", ".join(ROBOT_MODELS)}, external)')
@@ -617,7 +617,7 @@ def shape_geometry(args: argparse.Namespace, parameters=None):
 
 def _add_robot_interface(group, defaults) -> None:
     """How agents and robots talk: the command rate, the poses the agents read, the world frame."""
-    from formation_sim.runtime.launch import POSE_TYPES
+    from formation_sim.runtime.launch.plan import POSE_TYPES
 
     group.add_argument(
         '--command-rate',
@@ -649,7 +649,7 @@ def _add_robot_interface(group, defaults) -> None:
 def _add_simulated_robots(group, defaults) -> None:
     """What only simulated robots take: noise, latency, seed, rate, heading, packing
     (flag, type, default, metavar, help)."""
-    from formation_sim.runtime.launch import ROBOTS_PER_PROCESS
+    from formation_sim.runtime.launch.plan import ROBOTS_PER_PROCESS
 
     for flag, kind, default, metavar, text in (
         ('--pose-noise', NON_NEGATIVE, 0.0, 'SIGMA', 'simulated robots: σ of the position noise [m]'),
@@ -685,7 +685,7 @@ def _add_simulated_robots(group, defaults) -> None:
 
 def robot_options(args: argparse.Namespace, model: str):
     """The `RobotOptions` of the parsed robot arguments."""
-    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     return RobotOptions(
         model=model,

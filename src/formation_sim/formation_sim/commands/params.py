@@ -1,6 +1,6 @@
 """`formation params SCENARIO --out DIR`: the parameter files `formation run` would write, without a run.
 
-The same launch plan as `formation run` (`formation_sim.runtime.launch.LaunchPlan.write_inputs`,
+The same launch plan as `formation run` (`formation_sim.runtime.launch.plan.LaunchPlan.write_inputs`,
 the one place they are built) writes the scenario and every node's parameter file into DIR, and
 prints the command that starts each process by hand (`ProcessSpec.command`): for agents on
 separate machines, robots, or a node to inspect with `ros2 param describe`.
@@ -51,9 +51,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch import FASTDDS_PROFILE
+    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
     from formation_sim.runtime.errors import RunError
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.sim.run_folder import claim_out_dir
     from formation_sim.sim.errors import RunFolderError
 

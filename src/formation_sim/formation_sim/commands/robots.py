@@ -66,14 +66,14 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.fleet import RobotFleet
+    from formation_sim.runtime.launch.fleet import RobotFleet
     from formation_sim.runtime.errors import RunError
 
     scenario = load_valid_scenario(args.scenario, 'robots')
     if scenario is None:
         return ExitCode.BAD_INPUT
     if args.model is None:
-        from formation_sim.runtime.launch import ROBOT_MODELS
+        from formation_sim.runtime.launch.plan import ROBOT_MODELS
 
         return refuse('robots', f'--model {"|".join(ROBOT_MODELS)} is required')
     try:

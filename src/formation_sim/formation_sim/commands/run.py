@@ -92,7 +92,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.orchestrate import FormationRun
+    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.runtime.errors import RunError
 
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))

@@ -1,7 +1,7 @@
 """`formation stop [--domain-id N] [--timeout S]`: the emergency stop of a run, from any terminal.
 
 It calls the run's `/formation/stop` service (std_srvs/srv/Trigger, served by the run's time keeper:
-`formation_sim.runtime.operator_stop`) once, waits at most --timeout for the answer and prints it.
+`formation_sim.runtime.nodes.operator_stop`) once, waits at most --timeout for the answer and prints it.
 Exit 0 when a run acknowledged; 1 when no run answered on the domain within the timeout (or a run
 refused); 2 bad input.  rclpy is imported only once the arguments are good, and nothing of the
 scenario model: the command starts fast (`formation_sim.cli` builds its parser alone, `cli.ALONE`).
@@ -25,8 +25,8 @@ from formation_msgs_py.topics import STOP_SERVICE
 # Its own light pieces, not `formation_sim.commands.common`'s (which loads scipy through the
 # scenario model: seconds on a loaded machine); `formation_sim.cli` builds its parser alone.  The
 # same rules and words as common's DOMAIN_ID and POSITIVE (tests/formation_sim/commands/test_stop.py).
-# runtime.launch.FASTDDS_PROFILE, the run's Fast DDS settings, without importing the launch plan.
-FASTDDS_PROFILE = Path(__file__).resolve().parents[1] / 'runtime' / 'fastdds_profile.xml'
+# runtime.launch.plan.FASTDDS_PROFILE, the run's Fast DDS settings, without importing the launch plan.
+FASTDDS_PROFILE = Path(__file__).resolve().parents[1] / 'runtime' / 'launch' / 'fastdds_profile.xml'
 
 DEFAULT_TIMEOUT = 5.0  # [s] discovery of the run's time keeper on one machine takes well under a second
 DISCOVERY_LOOK = 0.01  # [s] how often it looks whether the stop service is reachable yet
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _discovery_environment(*, network: bool) -> None:
-    """As a run's processes discover (`runtime.launch.child_environment`): Fast DDS with the run's
+    """As a run's processes discover (`runtime.launch.plan.child_environment`): Fast DDS with the run's
     settings (announcements every 0.1 s at first: a loaded machine's participants find each other
     sooner), and this machine only unless `network` or the environment's own range."""
     os.environ['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.graph import discover_topics, format_topics
+    from formation_sim.runtime.tools.graph import discover_topics, format_topics
 
     try:
         with inspection_node('topics', args.domain_id) as node:

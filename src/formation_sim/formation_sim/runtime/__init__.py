@@ -1,20 +1,18 @@
-"""The distributed runtime (rclpy, Fast DDS): processes, and what starts and watches them.
+"""The distributed runtime (rclpy, Fast DDS), in three roles (docs/DESIGN.md, "Packages and layers").
 
-- `orchestrate`: `FormationRun` starts a run in a private ROS domain, watches it and stops it by
-  PID; its pieces: `launch` (the backend's plan: inputs, processes, environment, ROS domain),
-  `supervise` (the children, stopped by PID, their Fast DDS files removed by `fastdds_shm`), `results`.
-- `time_keeper`: the base of the time keepers (opens, watches and ends a run, whatever its world);
-  `run_book`: its books (statuses, reports, lock-step settlement, lost agents and recorders);
-  `run_end`: the end of a run (final reports, delivery, summary.json and graph.json).
-- `coordinator`: the coordinator node = the time keeper of a robot run (the robots are the world),
-  and `main()` of both time keepers.
-- `sim_node`: the simulator node = the time keeper plus the exact world, the sensing services and
-  the lock-step clock (backend `exact`).
-- `robot_node`: a simulated kinematic robot (backends `holonomic`, `unicycle`).
-- `recorder`: the recorder node (raw subscriptions into a rosbag2 bag).
-- `replay`: bags published again; `graph`: topics and messages of a live ROS graph.
-- `fastdds_shm`: the Fast DDS shared-memory files a process holds, and removing those the dead
-  left; `fastdds_profile.xml`: the Fast DDS settings of every process a run starts.
+- `nodes`: the node programs, each run in a child process: the time keepers (`time_keeper` with
+  its books `run_book` and its end `run_end`; `sim_node` of the `exact` backend with `exact_world`
+  and `sim_view`; `coordinator` of robot runs with `robot_poses` and `robot_stops`), the simulated
+  robot `robot_node`, the `recorder` (with `bag_qos`), `operator_stop` and `intruders`.
+- `launch`: what the parent does: `orchestrate` (`FormationRun` starts a run in a private ROS
+  domain, watches it and stops it by PID), `plan` (the backend's launch plan: inputs, processes,
+  environment, ROS domain), `run_options`, `supervise` (the children, their Fast DDS files removed
+  by `fastdds_shm`), `results`, `fleet` (simulated robots on their own); `fastdds_profile.xml`: the
+  Fast DDS settings of every process a run starts.
+- `tools`: live tools: `replay` (bags published again), `graph` (topics and messages of a live graph).
+- `contract`: what both sides agree on (parameter-file names, an agent's parameters, the topics
+  per backend); nothing under `launch` imports `nodes` (tests/test_layout.py).
+- `errors`: every way a run stops early; `testing`: a bag replayed in a test.
 """
 
 from formation_msgs_py._lazy import lazy_exports
@@ -22,14 +20,15 @@ from formation_msgs_py._lazy import lazy_exports
 __all__ = lazy_exports(
     globals(),
     {
-        'orchestrate': ('FormationRun', 'RunResult'),
-        'launch': ('RobotOptions',),
-        'time_keeper': ('TimeKeeperNode',),
-        'coordinator': ('FormationCoordinatorNode',),
-        'sim_node': ('FormationSimulatorNode', 'SimulatorError', 'agent_parameters'),
-        'robot_node': ('SimulatedRobotNode',),
-        'recorder': ('RecorderNode',),
-        'replay': ('BagPlayer',),
+        'launch.orchestrate': ('FormationRun', 'RunResult'),
+        'launch.plan': ('RobotOptions',),
+        'nodes.time_keeper': ('TimeKeeperNode',),
+        'nodes.coordinator': ('FormationCoordinatorNode',),
+        'nodes.sim_node': ('FormationSimulatorNode', 'SimulatorError'),
+        'contract': ('agent_parameters',),
+        'nodes.robot_node': ('SimulatedRobotNode',),
+        'nodes.recorder': ('RecorderNode',),
+        'tools.replay': ('BagPlayer',),
         'errors': ('RecorderError', 'ReplayError', 'RunError'),
     },
 )

@@ -12,7 +12,7 @@ with BagReplay('runs/demo/bag') as replay:                 # a free ROS domain, 
 assert len(steps) == result.per_topic['/formation/step']
 ```
 
-The replay is `formation replay`'s (`formation_sim.runtime.replay.BagPlayer`): every message
+The replay is `formation replay`'s (`formation_sim.runtime.tools.replay.BagPlayer`): every message
 republished byte for byte, with the QoS its publishers offered when it was recorded, keep-all,
 reliable readers miss nothing. `play` publishes from a thread of its own while this thread spins
 the nodes (rclpy's `SingleThreadedExecutor`, one `spin_once` at a time), and returns when every
@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from formation_sim.bag.io import read_bag
-from formation_sim.runtime.replay import BagPlayer, ReplayResult, _bag_topics
+from formation_sim.runtime.tools.replay import BagPlayer, ReplayResult, _bag_topics
 from formation_sim.runtime.errors import ReplayError
 
 SPIN_STEP = 0.05  # seconds one spin_once waits for work
@@ -81,7 +81,7 @@ class BagReplay:
         import rclpy
         from rclpy.node import Node
 
-        from formation_sim.runtime.launch import reserve_domain
+        from formation_sim.runtime.launch.plan import reserve_domain
 
         os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
         try:
@@ -106,9 +106,9 @@ class BagReplay:
     def collect(self, topic: str, *, raw: bool = False) -> list:
         """A list that fills with `topic`'s messages as they arrive (typed; CDR bytes if `raw`),
         subscribed with the QoS the bag's publishers offered."""
-        from formation_sim.runtime.bag_qos import replay_offer
-        from formation_sim.runtime.recorder import import_message_class
-        from formation_sim.runtime.replay import replay_qos
+        from formation_sim.runtime.nodes.bag_qos import replay_offer
+        from formation_sim.runtime.nodes.recorder import import_message_class
+        from formation_sim.runtime.tools.replay import replay_qos
 
         if self._own is None:
             raise ReplayError('collect() inside the `with BagReplay(...)` block only')

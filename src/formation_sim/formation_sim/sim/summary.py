@@ -293,8 +293,8 @@ def run_failure(
     kind: str, message: str, *, agents: Iterable[int], detected_by: str, **details: object
 ) -> Json:
     """summary.json's `extra.failure` (the module docstring gives its kinds), built here for every
-    way a run stops early — by the time keeper (`formation_sim.runtime.run_book.failure_extra`) and
-    by the orchestrator (`formation_sim.runtime.results`: a time keeper that left no summary, a
+    way a run stops early — by the time keeper (`formation_sim.runtime.nodes.run_book.failure_extra`) and
+    by the orchestrator (`formation_sim.runtime.launch.results`: a time keeper that left no summary, a
     process that failed, a recording left incomplete). Its keys in one order: kind, message,
     agents, then `time`, `step` and `wall_time` when the caller knows them, detected_by, then the
     other `details` as given (an edge's length, the process, who asked for a stop)."""

@@ -10,7 +10,7 @@ offers shape parameters is generated from the declarations (docs/DESIGN.md, "Rob
 - the nodes' parameter tables (`formation_agent.ros.kind_parameters.shape_specs`), each node
   taking the parameters whose `nodes` name it;
 - the `formation` command's flags (`formation_sim.commands.common.add_shape_arguments`) and
-  `formation_sim.runtime.launch.RobotOptions.geometry`.
+  `formation_sim.runtime.launch.plan.RobotOptions.geometry`.
 
 So adding a shape parameter is one `ShapeParameter` in its kind's module and its name in that
 kind's `shape`.  Two kinds may share a parameter (the car takes the unicycle's l) only by
@@ -28,7 +28,7 @@ from formation_agent.core.errors import ShapeError
 
 NODES = ('agent', 'coordinator', 'robot')
 """The nodes that may take a shape parameter: the agent (`formation_agent`), the coordinator of
-robot runs, the simulated robot (`formation_sim.runtime.robot_node`)."""
+robot runs, the simulated robot (`formation_sim.runtime.nodes.robot_node`)."""
 
 
 @dataclass(frozen=True, kw_only=True)

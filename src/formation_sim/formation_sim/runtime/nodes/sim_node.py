@@ -1,0 +1,512 @@
+"""The simulator node of the `exact` backend: the time keeper plus the physical world.
+
+A `time_keeper.TimeKeeperNode` (discovery, Step, liveliness, Status and reports, failures; the
+books in `run_book`, summary.json through `run_end`), as the coordinator is, that holds the exact
+`World`, serves every agent's sensing service `/agent_<i>/sense`, applies the commands agents
+publish, and publishes what tools want to see (`sim_view.SimulatorView`): `/clock` (rounded to ns,
+for tools only), the exact state `/formation/state` and `/formation/ground_truth` at a sample
+period (pure evaluations, the world itself only advances from event to event), and
+`/formation/sensing_log`.
+
+Lock-step protocol (docs/MESSAGES.md): after discovery the simulator publishes Step 0 at t = 0;
+every agent due at a step senses, commands, broadcasts and reports a Status; agents that receive
+triggering information report again.  A step is settled when every due agent has reported its
+trigger, every command sent has been applied and every triggering-information message sent has
+been received (cumulative counters, so equality cannot be transient).  Then the world advances to
+the smallest next time reported (the exact float, carried by the next Step) and the agents that
+reported exactly that time trigger.
+
+Wall-clock mode (`clock_mode:=realtime`, as on robots): Step 0 carries the wall-clock epoch of
+t = 0 and agents keep their own timers.  The world then advances to the wall-clock time of each
+sensing request and each command as it arrives (still only event to event), and the run reports
+how late every trigger was against the time its agent had planned.
+
+Faults (README, "Reliability"): an agent whose command writer loses DDS liveliness (its process
+died, or the network no longer reaches it) is declared lost after `LIVELINESS_LEASE` +
+`LOST_GRACE` s, and so is a recorder whose heartbeat writer does (frozen, it acknowledges
+nothing); the run then stops.  Lock-step waits for a recorder that falls more than
+`RECORDER_LAG` steps behind.  Whenever a run stops early, after step 0 (an agent lost, a protocol
+violation, a stall, SIGINT/SIGTERM), the simulator ends it as at the horizon (a final Step, the
+samples, the final reports) and writes summary.json with what happened up to then and
+`extra.failure` saying what went wrong, where and when.  Exit status: 0 done, 1 failed, 3 an
+agent or the recorder lost, 5 an operator stopped the run (`/formation/stop`, `operator_stop`), 130
+interrupted.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import NoReturn
+
+import numpy as np
+from geometry_msgs.msg import Accel, Twist
+from rclpy.event_handler import SubscriptionEventCallbacks
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from formation_agent.ros.process import exit_process
+from formation_msgs_py.codec import (
+    check_array,
+    decode_command,
+    decode_trigger_info,
+    encode_sensed_state,
+    encode_step,
+    sensing_refusal,
+)
+from formation_msgs_py.errors import MessageError, TagError
+from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
+from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.types import SensedState
+from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
+from formation_sim.model.scenario import Scenario
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
+from formation_sim.runtime.nodes import keeper_main
+from formation_sim.runtime.contract import SIMULATOR_FILE
+from formation_sim.runtime.nodes.run_end import write_results  # noqa: F401 - likewise
+from formation_sim.runtime.errors import CoordinatorError, DuplicateAgentError, StallError
+from formation_sim.runtime.nodes.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
+from formation_sim.runtime.nodes.time_keeper import (
+    graph_of,
+    run_extra,
+    TIME_KEEPER_PARAMETERS,
+    TimeKeeperNode,
+)
+from formation_sim.runtime.nodes.exact_world import ExactWorld
+from formation_sim.runtime.nodes.intruders import SensingCalls, Writer, intrusions, simulator_watched
+from formation_sim.sim.engine import due_twice
+from formation_sim.sim.record import RunRecord
+
+CLOCK_MODES = ('lockstep', 'realtime')
+SimulatorError = CoordinatorError
+
+SIMULATOR_PARAMETERS = (
+    *TIME_KEEPER_PARAMETERS,
+    ParameterSpec(
+        name='clock_mode',
+        type=STRING,
+        default='lockstep',
+        choices=CLOCK_MODES,
+        description='lockstep: sim time from event to event, exact; realtime: the wall clock, as on robots',
+    ),
+    ParameterSpec(
+        name='viz_period',
+        type=DOUBLE,
+        default=0.04,
+        low=0.0,
+        high=math.inf,
+        high_open=True,
+        description='/clock, ground truth and markers at most every this much sim time [s] (0: every sample)',
+    ),
+    ParameterSpec(
+        name='stall_timeout',
+        type=DOUBLE,
+        default=60.0,
+        low=0.0,
+        low_open=True,
+        description=(
+            'a lock-step step not settled after this many seconds '
+            "ends the run, naming every agent's last Status"
+        ),
+    ),
+)
+"""The simulator's parameters (`formation_sim --help`; docs/PARAMETERS.md)."""
+
+RECORDER_LAG = 2
+"""Steps the lock-step may run ahead of what a recorder has written (its heartbeat says which step).
+
+Lock-step at full speed outruns a recorder (one Python process taking every message): on a loaded
+2-core machine 3 runs of 4 lost hundreds of view and Status messages, the writers' keep-last
+histories turning over before the recorder had them.  Held within a few steps of it, what is
+outstanding stays far below the writers' depths (24 runs of 24 complete since, views kept deeper)."""
+
+
+class FormationSimulatorNode(TimeKeeperNode):
+    """World, sensing services and lock-step clock of a distributed formation run."""
+
+    serves_sensing = True
+    batched_spin = False  # one event per look: lock-step settles a step in the callback that completes it
+    watched_writer = 'command'
+
+    def __init__(self, *, scenario: Scenario | None = None, parameter_overrides=None, context=None) -> None:
+        super().__init__(
+            scenario=scenario,
+            parameter_overrides=parameter_overrides,
+            context=context,
+            node_name=SIMULATOR_NODE,
+        )
+
+    PARAMETERS = SIMULATOR_PARAMETERS
+    COMMAND = 'formation_sim'
+    PARAMS_FILE = SIMULATOR_FILE
+    DESCRIPTION = (
+        'The simulator of a formation run (formation run, '
+        "backend exact): the exact world, every agent's sensing "
+        'service, the lock-step clock (or the wall clock), the '
+        "tools' topics; writes summary.json and graph.json "
+        'into out_dir.'
+    )
+
+    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+        return []
+
+    def _clock_mode(self, values: dict) -> str:
+        self.viz_period = values['viz_period']
+        self.stall_timeout = values['stall_timeout']
+        return values['clock_mode']
+
+    def _setup_world(self) -> None:
+        """The exact world, its sampler and the tools' view of it."""
+        scenario = self.scenario
+        # Moved and sampled as the engine does it, stopped where the engine stops.
+        self.exact = ExactWorld(scenario, sample_period=self.sample_period, on_sample=self._on_sample)
+        self.world, self._sampler = self.exact.world, self.exact.sampler
+        self.view = view = SimulatorView(
+            self,
+            scenario=scenario,
+            velocities=self.world.velocities,
+            viz_period=self.viz_period,
+            publish=self._publish,
+        )
+        self._tool_publishers = [
+            view.state_pub,
+            view.truth_pub,
+            view.log_pub,
+            view.clock_pub,
+            self._scenario_pub,
+            view.markers_pub,
+        ]
+        self._services = [
+            self.create_service(
+                Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent)
+            )
+            for i in self.agents
+        ]
+        self.sensing_calls = 0
+        self.calls = SensingCalls(self.agents)  # which calls were triggers, which foreign (issue 28)
+        self._info_subs = _trigger_readers(self) if self.realtime else {}
+        self._due: set[int] = set()
+        self._last_advance = self.marks.created
+
+    def _watch_agents(self) -> dict:
+        """One command reader per agent: it applies the agent's commands, and its writer's DDS
+        liveliness is the agent's sign of life."""
+        command_type = Accel if self.double else Twist
+        return {
+            i: self.create_subscription(
+                command_type,
+                command_topic(i, double=self.double),
+                lambda msg, agent=i: self._on_command(msg, agent),
+                READER_QOS,
+                event_callbacks=SubscriptionEventCallbacks(
+                    liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
+                ),
+            )
+            for i in self.agents
+        }
+
+    def _world_gaps(self) -> list[str]:
+        return []
+
+    @property
+    def reached_time(self) -> float:
+        return self.world.time
+
+    # -- start ----------------------------------------------------------------------------------
+
+    def _begin(self) -> None:
+        self._sampler.event()
+        if self.realtime:
+            self.destroy_timer(self._timer)  # samples and the horizon need a finer tick
+            self._timer = self.create_timer(min(0.1, self.sample_period or 0.1), self._tick)
+            self._epoch = time.time()
+            self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
+            self._due = set(self.agents)
+            self._publish(self._step_pub, encode_step(self.step))
+            self.publish_samples()
+            return
+        self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
+
+    def _running_tick(self) -> None:
+        if self.realtime:
+            self._realtime_tick()
+        elif time.monotonic() - self._last_advance > self.stall_timeout:
+            raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
+
+    def _describe_wait(self) -> str:
+        recorders = (
+            f'recorders at steps {self.recorders.recorded_steps or "none yet"} '
+            f'(RECORDER_LAG {RECORDER_LAG}); '
+            if self.extra_subscribers
+            else ''
+        )
+        return (
+            f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}'
+            + self.book.waiting_description()
+        )
+
+    # -- wall clock -----------------------------------------------------------------------------
+
+    def _wall_time(self) -> float:
+        """Sim time now on the wall clock, never before the world's time nor after the horizon."""
+        return min(self.horizon, max(self.world.time, time.time() - self._epoch))
+
+    def _realtime_event(self) -> float:
+        """Advance the world to now (an event: a sensing or a command arrives)."""
+        t = self._wall_time()
+        self.exact.advance(t)
+        self.publish_samples()
+        self.steps += 1
+        return t
+
+    def _realtime_tick(self) -> None:
+        t = self._wall_time()
+        if t < self.horizon:
+            self._sampler.grid_until(t)
+        else:  # the horizon (the wall time is never past it)
+            self.exact.advance(self.horizon)
+            self.marks.finish(time.monotonic())
+            self.graph = graph_of(self)
+            self.step = Step(
+                index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
+            )
+            self._publish(self._step_pub, encode_step(self.step))
+            self.finished = True
+        self.publish_samples()
+
+    def _sense_realtime(self, agent: int):
+        book = self.agents[agent]
+        if self.finished:  # asked after the horizon: the final state, not counted
+            return encode_sensed_state(sensed_state(self, agent))
+        t = self._realtime_event()
+        book.expected_triggers += 1  # a trigger may follow (its Status may come before its information)
+        self.calls.asked(agent, t)  # a trigger once the agent's information stamped t follows
+        self.view.log_sensing(agent, 0, t)
+        return encode_sensed_state(sensed_state(self, agent))
+
+    # -- lock-step ------------------------------------------------------------------------------
+
+    def _publish_step(self, step: Step) -> None:
+        self.step = step
+        self._due = set(step.due)
+        self.book.mark_due(step.due, step.time)
+        self._last_advance = time.monotonic()
+        self._publish(self._step_pub, encode_step(step))
+
+    def _after_status(self) -> None:
+        self._advance_if_settled()
+
+    def _on_command(self, msg, agent: int) -> None:
+        book = self.agents[agent]
+        if self.finished:
+            # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
+            # sensing was answered before a stop still completes (its information is out, and in
+            # the bag): counted, its command acting from the last instant on moves nothing.
+            due = not self.realtime and agent in self._due and book.sensed_at_step == self.step.index
+            if due and book.commands_received < book.expected_triggers:
+                book.commands_received += 1
+            return
+        if self.realtime and self.step is not None:
+            control = decode_command(msg, self.scenario.dimension)
+            self._realtime_event()  # the command acts from its arrival on
+            self.world.set_control(agent, control)
+            book.commands_received += 1
+            return
+        if self.step is None or agent not in self._due or book.commands_received >= book.expected_triggers:
+            raise SimulatorError(
+                f'agent {agent} sent a command outside its triggering time '
+                f'(step {None if self.step is None else self.step.index}, due {sorted(self._due)})'
+            )
+        # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
+        self.world.set_control(agent, decode_command(msg, self.scenario.dimension))
+        book.commands_received += 1
+        # The tools' samples up to this step go out now, while the agents plan (the simulator
+        # would otherwise keep a sensing request of the step waiting).
+        self.publish_samples()
+        self._advance_if_settled()
+
+    def _on_sense(self, agent: int):
+        book = self.agents[agent]
+        if self.finished:  # asked after the end: the final state, not counted
+            return encode_sensed_state(sensed_state(self, agent))
+        if self.realtime and self.step is not None:
+            return self._sense_realtime(agent)
+        index = -1 if self.step is None else self.step.index
+        if self.step is None or agent not in self._due or book.sensed_at_step == index:
+            return _out_of_turn(self, agent, index)
+        book.sensed_at_step = index
+        self.sensing_calls += 1
+        sensed = sensed_state(self, agent)
+        self.view.log_sensing(agent, index, self.world.time)
+        return encode_sensed_state(sensed)
+
+    def _settled(self) -> bool:
+        return self.book.settled(self.step.index, self._due)
+
+    def _advance_if_settled(self) -> None:
+        if self.realtime or self.step is None or self.finished or not self._settled():
+            return
+        if self.recorders.behind(self.step.index, recorders=self.extra_subscribers, lag=RECORDER_LAG):
+            return  # lock-step waits: the recorder's next heartbeat comes back here
+        t = self.step.time
+        t_next, due = self.book.next_due(t)
+        if t_next == t:
+            # News at this instant put agents on their threshold already: they trigger at this
+            # very instant, in a further step (as the in-process engine does).
+            twice = [i for i in due if self.agents[i].trigger_times and self.agents[i].trigger_times[-1] == t]
+            if twice:
+                raise SimulatorError(due_twice(twice[0], self.exact.threshold_model, t))
+            self.steps += 1
+            self._publish_step(Step(index=self.step.index + 1, time=t, due=due))
+            return
+        self.steps += 1
+        if t_next > self.horizon:
+            self.exact.advance(self.horizon)
+            self.marks.finish(time.monotonic())
+            self.graph = graph_of(self)
+            self.finished = True
+            self._publish_step(Step(index=self.step.index + 1, time=self.horizon, flags=STEP_FLAG_FINAL))
+            self.publish_samples()
+            return
+        self.exact.advance(t_next)
+        if (problem := self.exact.floor_problem()) is not None:
+            raise SimulatorError(problem)
+        self._publish_step(Step(index=self.step.index + 1, time=t_next, due=due))
+
+    # -- samples (pure evaluations; they never move the world) --------------------------------
+
+    def _on_sample(self, t: float, x: np.ndarray, q: np.ndarray | None) -> None:
+        """Each sample: every edge checked against Δ (ConnectivityLostError)."""
+        self.book.check_connectivity(t, x)
+
+    def publish_samples(self) -> None:
+        """For tools: the samples not yet published (`SimulatorView.publish_samples`)."""
+        self.view.publish_samples(self._sampler, finished=self.finished)
+
+    def flush(self) -> None:
+        self.publish_samples()
+
+    def after_final_step(self, executor) -> None:
+        """The world stopped with the final Step: nothing more to wait for."""
+
+    # -- results --------------------------------------------------------------------------------
+
+    def record(self) -> RunRecord:
+        """The run as a `RunRecord` (the same schema as the in-process engine's)."""
+        return RunRecord(
+            scenario=self.scenario,
+            horizon=self.horizon,
+            mode='distributed',
+            # A trigger counts once its command has acted on the world (a run stopped early may
+            # have sensed for a trigger that never completed).
+            trigger_times={
+                i: list(book.trigger_times[: book.commands_received]) for i, book in self.agents.items()
+            },
+            samples=self._sampler.samples(),
+            messages_sent=sum(self.book.information_sent(i) for i in self.agents),
+            sensing_calls=self.sensing_calls,
+            wall_time=self.marks.since_start(self.marks.finished_at or time.monotonic()),
+            extra={
+                **run_extra(self, self.world.time),
+                **self.calls.extra(),
+                **(
+                    self.book.lateness({i: book.trigger_times for i, book in self.agents.items()})
+                    if self.realtime
+                    else {}
+                ),
+            },
+        )
+
+
+def sensed_state(node: FormationSimulatorNode, agent: int) -> SensedState:
+    """What `agent` senses now: its neighbours' relative states, and with the safety layer the
+    other robots within its sensing radius, the very floats the engine hands
+    `trigger(nearby=...)` (`World.nearby`, docs/SAFETY.md)."""
+    neighbours = node.agents[agent].neighbours
+    sensed = node.world.sense(agent, neighbours)
+    safety = node.scenario.safety
+    if safety is None:
+        return sensed
+    return replace(sensed, nearby=node.world.nearby(agent, safety.sensing_radius, exclude=neighbours))
+
+
+def _trigger_readers(node: FormationSimulatorNode) -> dict:
+    """Wall clock: per agent, a reader of its triggering information to its first neighbour,
+    whose stamps say which sensing calls were its triggers (`SensingCalls`)."""
+    return {
+        i: node.create_subscription(
+            Float64MultiArray,
+            trigger_info_topic(i, min(book.neighbours)),
+            lambda msg, agent=i: _on_trigger_info(node, msg, agent),
+            READER_QOS,
+        )
+        for i, book in node.agents.items()
+    }
+
+
+def _on_trigger_info(node: FormationSimulatorNode, msg, agent: int) -> None:
+    """Agent `agent`'s triggering information: the sensing call answered at its stamp was its
+    trigger (a message that is not its layout, or not its own, or without the run's valid tag,
+    changes nothing: agent j refuses and counts it)."""
+    try:
+        check_array(node.verifier, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg)
+    except TagError:
+        return
+    try:
+        info = decode_trigger_info(msg)
+    except MessageError:
+        return  # the agents refuse and count it; the run's triggers are the agents' own stamps
+    if info.sender == agent and node.calls.triggered(agent, info.stamp):
+        node.agents[agent].trigger_times.append(info.stamp)
+        node.sensing_calls += 1
+
+
+def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
+    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
+    `agent`'s own is a protocol violation that ends the run; but any node can call the service
+    (std_srvs/Trigger names no caller), so the graph is asked first: with a stranger calling it,
+    the call is refused (or, at the agent's own step, answered again with the same state) and
+    counted as foreign, the stranger named; two processes claiming the agent end the run."""
+    due = agent in node._due
+    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node._due)})'
+    (watched,) = [w for w in simulator_watched(node.scenario) if w.mangled and w.agent == agent]
+    writers = [
+        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
+        for i in node.get_publishers_info_by_topic(watched.topic, no_mangle=True)
+    ]
+    found = {i.kind: i for i in intrusions(watched, writers)}
+    if 'duplicate' in found:
+        duplicate = found['duplicate']
+        node.failure = DuplicateAgentError(
+            duplicate.text(), nodes=[w.node for w in duplicate.writers], agents=[agent]
+        )
+        return sensing_refusal(str(node.failure))
+    if 'stranger' not in found:
+        node.failure = SimulatorError(reason)
+        return sensing_refusal(reason)
+    node.calls.foreign_call(agent)
+    if node.calls.foreign[agent] <= 3:
+        node.get_logger().warning(
+            f'{found["stranger"].text()}: a call out of turn ({reason}) counted as foreign'
+        )
+    if due and node.step is not None and node.agents[agent].sensed_at_step == index:
+        return encode_sensed_state(sensed_state(node, agent))  # the same again
+    return sensing_refusal(f'{reason}: refused')
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """The simulator until its run ends (`keeper_main.main`); its exit status."""
+    return keeper_main.main(args, node_class=FormationSimulatorNode)
+
+
+def entry_point() -> NoReturn:
+    """The `formation_sim` console script: `main()`, then `exit_process` (a plain entry point's
+    `sys.exit(main())` would run the interpreter's finalization and C++ static destructors after
+    rclpy's shutdown)."""
+    exit_process(main())
+
+
+if __name__ == '__main__':
+    entry_point()
