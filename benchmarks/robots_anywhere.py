@@ -206,7 +206,7 @@ def table_row(scenario, kind: str, layer: bool) -> dict:
     from formation_sim.commands.common import robot_safety
     from formation_sim.model.speed_choice import RobotLimits
     from formation_sim.model.validate import validate_scenario
-    from formation_sim.runtime.launch import RobotOptions
+    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.sim.engine import simulate
     from formation_sim.sim.largest_command import choose_time_warp
 
