@@ -179,8 +179,8 @@ def load_times(sizes: list[int], *, repeats: int = 3) -> list[dict]:
     """Median seconds of `load_scenario` for random teams as YAML and as JSON (the same team)."""
     from cases import build_scenario, random
 
-    from formation_sim.model.scenario import dump_scenario, load_scenario
     from formation_sim.model.errors import ScenarioError
+    from formation_sim.model.scenario import dump_scenario, load_scenario
 
     rows = []
     with tempfile.TemporaryDirectory(prefix='bench_load_') as tmp:

@@ -19,9 +19,9 @@ import sys
 import time
 from pathlib import Path
 
-from formation_sim.sim.engine import simulate
-from formation_sim.runtime.launch.orchestrate import FormationRun
 from formation_sim.model.scenario import load_scenario
+from formation_sim.runtime.launch.orchestrate import FormationRun
+from formation_sim.sim.engine import simulate
 from formation_sim.sim.summary import build_summary
 
 SCENARIO = Path(__file__).with_name('gentle_square.yaml')

@@ -65,6 +65,7 @@ def main() -> int:
     rev, case = sys.argv[1], json.loads(sys.argv[2])
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from cases import build_scenario
+
     from formation_sim.model.scenario import dump_scenario_text
 
     scenario_text = dump_scenario_text(build_scenario(case))

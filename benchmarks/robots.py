@@ -24,8 +24,8 @@ from comm_faults import median_of, result_row  # benchmarks/ is on the path of a
 
 from formation_sim.analysis.compare import RunData, compare_trajectories
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.runtime.launch.orchestrate import FormationRun
+from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.samples import load_trajectory
 from formation_sim.sim.summary import build_summary

@@ -36,8 +36,8 @@ from formation_sim.analysis.checks import run_series
 from formation_sim.commands.limits import resolve_speed_scale
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.speed_choice import scenario_noise_floor, settling_time
-from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.runtime.launch.orchestrate import FormationRun
+from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.summary import load_record
 

@@ -234,9 +234,9 @@ def naive_cases(quick: bool) -> list[dict]:
 
 def run_naive(case: dict, dt_step: float = 1e-4) -> dict:
     import numpy as np
+    from naive import simulate_fixed_step
 
     from formation_sim.sim.engine import simulate
-    from naive import simulate_fixed_step
 
     scenario = build_scenario(case)
     exact = simulate(scenario, horizon=case['horizon'], sample_dt=None, sample_events=False)

@@ -148,8 +148,7 @@ def _whole_table() -> list[str]:
 
 def render_topics() -> str:
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.contract import robot_run_topics
-    from formation_sim.runtime.contract import formation_topics
+    from formation_sim.runtime.contract import formation_topics, robot_run_topics
 
     exact = formation_topics(load_scenario('paper_single'))
     robots = robot_run_topics(

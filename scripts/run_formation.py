@@ -10,8 +10,8 @@ Copy and adapt: everything is the public API of formation_sim.runtime.launch.orc
 import argparse
 import sys
 
-from formation_sim.runtime.launch.orchestrate import FormationRun
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.orchestrate import FormationRun
 
 
 def main() -> int:

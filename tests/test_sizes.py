@@ -15,7 +15,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-
 SRC = Path(__file__).resolve().parents[1] / 'src'
 PACKAGES = ('formation_msgs_py', 'formation_agent', 'formation_sim')
 LIMITS = {'class': 300, 'function': 80}

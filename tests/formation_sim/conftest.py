@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.record import RunRecord
-from formation_sim.model.scenario import load_scenario
 
 # Session fixtures run once per xdist worker: each worker needs its own domain (gw0 -> 180, ...).
 DISTRIBUTED_DOMAIN = 180 + int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0').removeprefix('gw') or 0)

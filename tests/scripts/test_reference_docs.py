@@ -78,8 +78,7 @@ def test_no_module_spells_an_exit_status_of_its_own():
 
 def test_every_recorded_topic_is_on_the_topics_page():
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.contract import robot_run_topics
-    from formation_sim.runtime.contract import formation_topics
+    from formation_sim.runtime.contract import formation_topics, robot_run_topics
 
     page = (DOCS / 'TOPICS.md').read_text()
     listed = formation_topics(load_scenario('paper_single')) + robot_run_topics(

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 STEP_FLAG_FINAL = 1
 """Step flag: the run is over (the horizon is reached); agents leave."""
 

@@ -14,8 +14,8 @@ from formation_agent.core.commander import (
     limit_body_velocity,
     limit_world_velocity,
 )
-from formation_agent.core.kinematics import control_point_rate
 from formation_agent.core.kinds import Geometry
+from formation_agent.core.kinematics import control_point_rate
 from formation_msgs_py.lockstep import Saturation
 
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.eta import Eta1Agent, Eta2Agent
 from formation_agent.core.errors import AgentError
+from formation_agent.core.eta import Eta1Agent, Eta2Agent
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 D12 = np.array([0.0, -2.0])

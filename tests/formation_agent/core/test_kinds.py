@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from formation_agent.core.commander import RobotCommander
+from formation_agent.core.errors import KindError, ShapeError
 from formation_agent.core.kinds import (
     KIND_NAMES,
     SEPARATION_MARGIN,
@@ -20,7 +21,6 @@ from formation_agent.core.kinds import (
     robot_kind,
     unregister,
 )
-from formation_agent.core.errors import KindError, ShapeError
 from formation_agent.core.kinds.shape import ShapeParameter, declared
 from formation_agent.core.limits import Limits, SaturationLog
 
@@ -85,10 +85,11 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     from formation_sim.cli import build_parser
     from formation_sim.model.scenario import load_scenario
     from formation_sim.runtime.contract import robot_run_topics
-    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
     from formation_sim.runtime.launch.plan import BACKENDS, RobotOptions
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
     from formation_sim.runtime.nodes.robot_node import SPECS as ROBOT_SPECS
-    from formation_sim.sim.robots import Command, Limits as BaseLimits, make_robot
+    from formation_sim.sim.robots import Command, make_robot
+    from formation_sim.sim.robots import Limits as BaseLimits
 
     # The command line: a backend, and what external robots or a fleet are.
     parser = build_parser()

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.errors import AgentError, AgentError as EtaAgentError
+from formation_agent.core.errors import AgentError
+from formation_agent.core.errors import AgentError as EtaAgentError
 from formation_agent.core.neighbourhood import Neighbourhood, positive
 from formation_msgs_py.types import TriggerInfo
 

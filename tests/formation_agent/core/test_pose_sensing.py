@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.pose_sensing import PoseBook
 from formation_agent.core.errors import PoseError
+from formation_agent.core.pose_sensing import PoseBook
 from formation_msgs_py.types import RobotPose
 
 NOW = 1_700_000_000.0  # wall time of the trigger

@@ -10,19 +10,19 @@ import math
 import numpy as np
 import pytest
 
-from formation_agent.core.eta import Eta1Agent, make_agent
 from formation_agent.core.errors import AgentError, SafetyError
+from formation_agent.core.eta import Eta1Agent, make_agent
 from formation_agent.core.safety import (
     RECOVERY_EXIT,
     RECOVERY_SPEED,
     CappedSearch,
-    courteous_zero,
-    recovering_half,
     SafetyConfig,
     SafetyLayer,
+    courteous_zero,
     exact_half,
     filter_command,
     first_zero,
+    recovering_half,
     worst_case_half,
 )
 from formation_msgs_py.types import SensedState

@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from formation_agent.core.eta import Eta1Agent, Eta2Agent
 from formation_agent.core.errors import AgentError, ScaleError
+from formation_agent.core.eta import Eta1Agent, Eta2Agent
 from formation_agent.core.speed_scale import check_speed_scale, check_threshold_floor
 
 

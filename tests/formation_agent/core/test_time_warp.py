@@ -8,8 +8,8 @@ import random
 
 import pytest
 
-from formation_agent.core.time_warp import MAX_PIECES, TimeWarp
 from formation_agent.core.errors import WarpError
+from formation_agent.core.time_warp import MAX_PIECES, TimeWarp
 
 WARP = TimeWarp(paper_starts=(0.0, 0.3, 1.0), rates=(0.1, 0.4, 1.0))
 

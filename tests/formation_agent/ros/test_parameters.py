@@ -64,8 +64,8 @@ def test_good_parameters_are_read_with_their_defaults(ros):
 
 
 def test_every_problem_is_named_in_one_error(ros):
-    from formation_agent.ros.parameters import declare_parameters
     from formation_agent.ros.errors import ParameterError
+    from formation_agent.ros.parameters import declare_parameters
 
     node = _node(ros, delta=0.0, loss=1.5, offsets=[1.0, 11.0], robot='tank')
     try:
@@ -84,8 +84,8 @@ def test_every_problem_is_named_in_one_error(ros):
 
 
 def test_a_value_of_the_wrong_type_is_named(ros):
-    from formation_agent.ros.parameters import declare_parameters
     from formation_agent.ros.errors import ParameterError
+    from formation_agent.ros.parameters import declare_parameters
 
     node = _node(ros, agent_id=1, delta='4.0')
     try:

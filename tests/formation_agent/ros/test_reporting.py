@@ -7,8 +7,8 @@ import math
 import pytest
 
 from formation_agent.core.errors import CrossingError
-from formation_agent.ros.reporting import AgentCounts, agent_status
 from formation_agent.ros.errors import AgentNodeError, PredictionError
+from formation_agent.ros.reporting import AgentCounts, agent_status
 from formation_agent.ros.stepping import TriggerSchedule
 from formation_msgs_py.codec import decode_agent_report, decode_status, encode_agent_report, encode_status
 from formation_msgs_py.lockstep import DISCOVERY_STEP

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from formation_agent.core.pose_sensing import PoseBook
 from formation_agent.core.errors import PoseError
-from formation_agent.ros.staleness import CommandGuard, Staleness, WriterWatch, explained
+from formation_agent.core.pose_sensing import PoseBook
 from formation_agent.ros.errors import StaleStateError
+from formation_agent.ros.staleness import CommandGuard, Staleness, WriterWatch, explained
 from formation_agent.ros.stepping import TriggerSchedule
 from formation_msgs_py.types import RobotPose
 

@@ -8,9 +8,9 @@ import math
 
 import pytest
 
+from formation_agent.ros.errors import AgentNodeError
 from formation_agent.ros.reporting import AgentCounts
 from formation_agent.ros.stepping import Arrivals, TriggerSchedule, rebased
-from formation_agent.ros.errors import AgentNodeError
 from formation_msgs_py.lockstep import Step
 from formation_msgs_py.types import SensedState, TriggerInfo
 

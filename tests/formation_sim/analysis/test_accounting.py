@@ -56,10 +56,10 @@ def test_messages_beyond_what_the_run_published_are_foreign(tmp_path, paper_sing
 
 def test_the_agents_discovery_announcements_are_not_counted(tmp_path):
     from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.codec import encode_status
     from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
-    from std_msgs.msg import Float64MultiArray
 
     def status(step: int) -> bytes:
         return serialize_message(

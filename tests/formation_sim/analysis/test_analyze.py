@@ -11,13 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from formation_sim.model import theory
 from formation_sim.analysis.checks import run_series, theorem_checks, theory_bounds
-from formation_sim.analysis.load import load_bag_run, locate
 from formation_sim.analysis.errors import AnalysisError
+from formation_sim.analysis.load import load_bag_run, locate
 from formation_sim.analysis.report import bag_summary, diff_summaries
-from formation_sim.sim.engine import simulate
+from formation_sim.model import theory
 from formation_sim.model.scenario import dump_scenario, load_scenario
+from formation_sim.sim.engine import simulate
 from formation_sim.sim.summary import build_summary, write_summary
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
+from formation_sim.analysis.errors import MarkerError
 from formation_sim.analysis.markers import (
     LINE_LIST,
     LINE_STRIP,
@@ -21,9 +22,8 @@ from formation_sim.analysis.markers import (
     edge_colour,
     write_bag_with_markers,
 )
-from formation_sim.analysis.errors import MarkerError
-from formation_sim.bag.io import decode, read_bag
 from formation_sim.bag.errors import BagError
+from formation_sim.bag.io import decode, read_bag
 from formation_sim.model.scenario import load_scenario
 
 

@@ -11,8 +11,8 @@ from mcap.reader import make_reader
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader
 
-from formation_sim.bag.io import BagWriter, read_bag, type_hash
 from formation_sim.bag.errors import TopicSpecError
+from formation_sim.bag.io import BagWriter, read_bag, type_hash
 
 SCENARIO, SCENARIO_TYPE = '/formation/scenario', 'std_msgs/msg/String'
 STEP, STEP_TYPE = '/formation/step', 'std_msgs/msg/Float64MultiArray'

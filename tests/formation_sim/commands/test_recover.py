@@ -10,9 +10,9 @@ import textwrap
 
 import pytest
 
-from formation_sim.cli import main
-from formation_sim.bag.io import read_bag
 from formation_sim.bag.errors import BagReadError
+from formation_sim.bag.io import read_bag
+from formation_sim.cli import main
 
 # A recorder's writer that flushes twice, then dies by SIGKILL with messages still in memory.
 KILLED = textwrap.dedent("""

@@ -10,7 +10,6 @@ import pytest
 from formation_sim.cli import main
 from formation_sim.runtime.errors import RunError
 
-
 BAD_RUN_ARGUMENTS = [
     # (arguments, what the refusal says): each refused while parsing, before anything starts
     (
@@ -182,8 +181,8 @@ def test_formation_run_api_refuses_an_invalid_scenario_before_anything_starts(
 ):
     import subprocess
 
-    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.model.validate import ValidationError
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     monkeypatch.setattr(subprocess, 'Popen', _NoProcesses)
     _NoProcesses.started = []
@@ -288,8 +287,8 @@ def test_force_replaces_an_earlier_run_and_the_largest_agent_ids_run(
 
     import yaml
 
-    from formation_sim.sim.engine import simulate
     from formation_sim.model.scenario import load_scenario
+    from formation_sim.sim.engine import simulate
 
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
     out = tmp_path / 'run'
@@ -523,7 +522,8 @@ def test_speed_scale_warp_hands_the_observed_warp_to_the_robots_agents(tmp_path,
 
     from formation_sim.model.scenario import load_scenario
     from formation_sim.model.speed_choice import RobotLimits
-    from formation_sim.runtime.launch import orchestrate, plan as launch
+    from formation_sim.runtime.launch import orchestrate
+    from formation_sim.runtime.launch import plan as launch
     from formation_sim.sim.largest_command import choose_time_warp
 
     seen = {}

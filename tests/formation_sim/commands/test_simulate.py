@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from matplotlib.collections import LineCollection, PathCollection
 
-from formation_sim.sim.baselines import simulate_continuous
-from formation_sim.cli import main
-from formation_sim.sim.engine import simulate
 from formation_sim.analysis.plots import FIGURE_FILE, run_figure
+from formation_sim.cli import main
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.baselines import simulate_continuous
+from formation_sim.sim.engine import simulate
 from formation_sim.sim.samples import load_trajectory
 
 

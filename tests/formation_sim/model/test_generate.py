@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from formation_sim.model import gains, theory
-from formation_sim.model.generate import random_scenario
 from formation_sim.model.errors import GenerateError
+from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import scenario_from_dict, scenario_to_dict
 from formation_sim.model.validate import validate_scenario
 

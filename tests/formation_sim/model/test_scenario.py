@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import copy
-from decimal import Decimal, getcontext
 import math
+from decimal import Decimal, getcontext
 
 import numpy as np
 import pytest
 from scipy.linalg import solve_continuous_are
 
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.scenario import (
     DoubleGains,
     Edge,
@@ -21,9 +22,7 @@ from formation_sim.model.scenario import (
     scenario_from_dict,
     scenario_to_dict,
 )
-from formation_sim.model.errors import ScenarioError
 from formation_sim.model.validate import require_valid
-
 
 # --------------------------------------------------------------------------- the paper's examples
 

@@ -10,6 +10,7 @@ import pytest
 
 from formation_agent.core.eta import Eta1Agent
 from formation_msgs_py.types import SensedState, TriggerInfo
+from formation_sim.model.errors import LimitsError
 from formation_sim.model.scenario import load_scenario
 from formation_sim.model.speed_choice import (
     NOISE_QUANTILE,
@@ -21,7 +22,6 @@ from formation_sim.model.speed_choice import (
     scenario_noise_floor,
     settling_time,
 )
-from formation_sim.model.errors import LimitsError
 
 
 def _choice(limits, *, observed=(2.0, None), theory=(8.0, None), dynamics='single', settle=3.0, margin=1.25):

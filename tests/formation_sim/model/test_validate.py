@@ -10,7 +10,6 @@ import pytest
 from formation_sim.model.scenario import DoubleGains, Edge, SingleGains, load_scenario, scenario_from_dict
 from formation_sim.model.validate import ValidationError, require_valid, validate_scenario
 
-
 # k3 = 0.6 (k4 ≈ 0.99), β_d = 0.1: below both the printed and the corrected bound.
 BELOW_BOTH_BOUNDS = {'beta_d': 0.1}
 

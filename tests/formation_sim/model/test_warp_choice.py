@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from formation_agent.core.time_warp import TimeWarp
-from formation_sim.model.speed_choice import RobotLimits, Settling
 from formation_sim.model.errors import LimitsError
+from formation_sim.model.speed_choice import RobotLimits, Settling
 from formation_sim.model.warp_choice import WarpChoice, guaranteed_warp, observed_warp, warp_limit
 
 LIMITS = RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1)

@@ -52,8 +52,8 @@ def test_a_robot_run_inspected_from_outside_completes_and_its_agents_answer_para
     from rclpy.qos import QoSProfile
     from std_msgs.msg import Float64MultiArray
 
-    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     run = FormationRun(
         'robots_square',

@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 
 from formation_msgs_py.exit_codes import ExitCode
-from formation_sim.sim.engine import simulate
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.engine import simulate
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group('formation_distributed')]
 
@@ -146,9 +146,9 @@ def test_bad_messages_mid_run_are_rejected_counted_and_change_nothing(tmp_path, 
     in-process engine, and summary.json counts each rejection under its reason."""
     from std_msgs.msg import Float64MultiArray
 
-    from formation_msgs_py.topics import trigger_info_topic
     from formation_msgs_py.codec import encode_trigger_info, tag_array
     from formation_msgs_py.tags import KEY_FILE, Signer, read_key
+    from formation_msgs_py.topics import trigger_info_topic
     from formation_msgs_py.types import TriggerInfo
     from formation_sim.runtime.launch.orchestrate import FormationRun
 
@@ -435,8 +435,8 @@ def test_an_agent_killed_mid_run_is_reported_and_the_bag_holds_every_message_unt
 def test_a_recorder_killed_mid_run_stops_the_run_and_its_bag_is_recovered(
     tmp_path, ros_env, stepping_run, long_run_scenario
 ):
-    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.bag.io import read_bag
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     run = FormationRun(
         long_run_scenario, out_dir=tmp_path / 'run', domain_id=72, progress=False, timeout=240.0

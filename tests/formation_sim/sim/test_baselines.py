@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from formation_sim.model import theory
-from formation_sim.sim.baselines import simulate_continuous
-from formation_sim.sim.errors import BaselineError
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.baselines import simulate_continuous
+from formation_sim.sim.errors import BaselineError
 
 
 def _controls(scenario, x, q=None):

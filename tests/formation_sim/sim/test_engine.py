@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from formation_sim.model import theory
-from formation_sim.sim.engine import simulate
-from formation_sim.sim.errors import EngineError
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
+from formation_sim.sim.engine import simulate
+from formation_sim.sim.errors import EngineError
 
 REL = 1e-9
 

@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
+from formation_sim.model.errors import ScenarioError
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
-from formation_sim.model.errors import ScenarioError
 from formation_sim.sim.engine import simulate
 
 KAPPAS = (0.1, 0.37, 3.0)

@@ -12,6 +12,7 @@ from scipy.integrate import solve_ivp
 
 from formation_agent.core import kinematics
 from formation_agent.core.kinds import Geometry
+from formation_sim.sim.errors import RobotError
 from formation_sim.sim.robots import (
     Command,
     HolonomicRobot,
@@ -30,7 +31,6 @@ from formation_sim.sim.robots import (
     sample_times,
     trajectory_samples,
 )
-from formation_sim.sim.errors import RobotError
 
 
 def _unicycle_ode(v: float, w: float):

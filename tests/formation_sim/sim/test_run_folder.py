@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from formation_sim.sim.errors import RunFolderError
 from formation_sim.sim.run_folder import (
     RUN_ENTRIES,
     check_out_dir,
@@ -18,7 +19,6 @@ from formation_sim.sim.run_folder import (
     folder_name,
     new_run_folder,
 )
-from formation_sim.sim.errors import RunFolderError
 
 
 def _make_run(folder, *names):

@@ -14,8 +14,8 @@ import pytest
 
 from formation_agent.core.safety import SafetyConfig
 from formation_sim.cli import main
-from formation_sim.model.scenario import dump_scenario, load_scenario, scenario_from_dict, scenario_to_dict
 from formation_sim.model.errors import ScenarioError
+from formation_sim.model.scenario import dump_scenario, load_scenario, scenario_from_dict, scenario_to_dict
 from formation_sim.sim import safety_cases
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.errors import EngineError

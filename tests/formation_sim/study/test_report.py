@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from formation_sim.study.case import run_case
+from formation_sim.study.errors import StudyError
 from formation_sim.study.report import audit_table, periodic_savings, write_report
 from formation_sim.study.spec import build_study
-from formation_sim.study.errors import StudyError
 from formation_sim.study.store import StudyFolder
 
 

@@ -18,9 +18,9 @@ import pytest
 import yaml
 
 from formation_sim.study.case import TIMING_COLUMNS, run_case
+from formation_sim.study.errors import StudyError
 from formation_sim.study.runner import run_study
 from formation_sim.study.spec import build_study, load_study
-from formation_sim.study.errors import StudyError
 from formation_sim.study.store import ROWS_FILE, read_rows
 
 BIN = Path(sys.executable).parent

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from formation_sim.study.spec import PARAMETERS, build_study, load_study
 from formation_sim.study.errors import StudyError
+from formation_sim.study.spec import PARAMETERS, build_study, load_study
 
 
 def _spec(*blocks, **top):

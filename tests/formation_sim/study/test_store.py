@@ -7,8 +7,8 @@ import json
 import pytest
 
 from formation_sim.study.case import COLUMNS, run_case
-from formation_sim.study.spec import build_study
 from formation_sim.study.errors import StudyError
+from formation_sim.study.spec import build_study
 from formation_sim.study.store import ROWS_FILE, STUDY_FILE, StudyFolder, read_rows
 
 

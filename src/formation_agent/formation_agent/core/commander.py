@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from formation_agent.core.kinds import KIND_NAMES, Geometry, robot_kind
 from formation_agent.core.errors import KindError
+from formation_agent.core.kinds import KIND_NAMES, Geometry, robot_kind
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity, limit_world_velocity
 from formation_agent.core.velocity_reference import VelocityReference
 from formation_msgs_py.lockstep import SATURATION_LINEAR_ACCELERATION

@@ -63,7 +63,6 @@ import numpy as np
 from formation_agent.core.errors import CrossingError
 from formation_agent.core.trigger import TriggerRule
 
-
 # What a CrossingError means for a run, said by the engine and by an agent node alike.
 PRECISION_HINT = (
     'the rounded prediction no longer resolves its threshold '

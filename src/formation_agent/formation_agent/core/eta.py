@@ -38,8 +38,8 @@ from formation_agent.core import compiled
 from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
-from formation_agent.core.neighbourhood import Neighbourhood
 from formation_agent.core.errors import AgentError, RuleError, ScaleError
+from formation_agent.core.neighbourhood import Neighbourhood
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
@@ -48,10 +48,9 @@ from formation_agent.core.speed_scale import (
     eta1_gains,
     eta2_gains,
 )
-from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, TriggerRule
 from formation_agent.core.tension import curvature_gain, omega, omega_prime, omega_second, weight_gain
+from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, TriggerRule
 from formation_msgs_py.types import SensedState, TriggerInfo
-
 
 # Agents of this dimension or less evaluate their prediction in plain floats.
 _FAST_DIMENSION = 3

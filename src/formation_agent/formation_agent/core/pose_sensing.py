@@ -28,8 +28,8 @@ from the last accepted pose beyond what the robot's speed limit allows between t
 from __future__ import annotations
 
 import math
-from typing import cast
 from collections.abc import Callable, Sequence
+from typing import cast
 
 import numpy as np
 

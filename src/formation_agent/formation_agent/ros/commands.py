@@ -24,11 +24,11 @@ from collections.abc import Callable
 
 from geometry_msgs.msg import Accel, Twist
 
-from formation_agent.core.speed_scale import damping
 from formation_agent.core.commander import RobotCommander
+from formation_agent.core.errors import PoseError
 from formation_agent.core.kinds import RobotKind
 from formation_agent.core.kinematics import yaw
-from formation_agent.core.errors import PoseError
+from formation_agent.core.speed_scale import damping
 from formation_agent.ros.errors import StaleStateError
 from formation_msgs_py.cdr import pack_body_velocity, pack_world_velocity
 from formation_msgs_py.codec import encode_acceleration_command, encode_velocity_command

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from formation_agent.core.commander import Limits
+from formation_agent.core.errors import RuleError, SafetyError, WarpError
 from formation_agent.core.eta import SCALE_GAINS
 from formation_agent.core.kinds import KindNames, robot_kind
 from formation_agent.core.kinds.shape import Geometry, declared
@@ -22,9 +23,9 @@ from formation_agent.core.safety import (
     SafetyConfig,
 )
 from formation_agent.core.speed_scale import SPEED_SCALE_LIMITS
-from formation_agent.core.errors import RuleError, SafetyError, WarpError
 from formation_agent.core.time_warp import TimeWarp
 from formation_agent.core.trigger import DEFAULT_RULE, rule_factory
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     DOUBLE,
@@ -36,7 +37,8 @@ from formation_agent.ros.parameters import (
     parameter_help,
     read_parameters,
 )
-from formation_agent.ros.errors import ParameterError
+from formation_msgs_py.errors import KeyFileError
+from formation_msgs_py.tags import read_key
 from formation_msgs_py.topics import (
     WORLD_FRAME,
     agent_namespace,
@@ -44,8 +46,6 @@ from formation_msgs_py.topics import (
     robot_odom_topic,
     robot_pose_topic,
 )
-from formation_msgs_py.errors import KeyFileError
-from formation_msgs_py.tags import read_key
 from formation_msgs_py.types import MAX_AGENT_ID
 
 SENSING_SOURCES = ('service', 'poses')

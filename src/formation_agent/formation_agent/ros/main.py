@@ -54,7 +54,6 @@ from formation_agent.ros.process import (
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import agent_namespace
 
-
 SPIN_PERIOD = 0.1
 """Seconds of events the process's loop dispatches, at most, between its looks at the stop signals
 (SIGINT/SIGTERM are acted on within it) and at failures raised outside the executor's reach."""

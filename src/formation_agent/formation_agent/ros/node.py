@@ -42,8 +42,8 @@ from rclpy.parameter import Parameter
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
 
-from formation_agent.core.eta import make_agent
 from formation_agent.core.errors import PoseError
+from formation_agent.core.eta import make_agent
 from formation_agent.core.time_warp import WarpedAgent
 from formation_agent.ros.commands import PlantOutput, RobotOutput
 from formation_agent.ros.config import read_config
@@ -65,9 +65,9 @@ from formation_agent.ros.stepping import (
 )
 from formation_msgs_py.codec import decode_step, encode_trigger_info, tag_refused
 from formation_msgs_py.errors import MessageError
-from formation_msgs_py.tags import Signer, Verifier
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.tags import Signer, Verifier
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
 
 __all__ = [

@@ -21,10 +21,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 
-from formation_agent.core.pose_sensing import PoseBook
 from formation_agent.core.errors import PoseError
+from formation_agent.core.pose_sensing import PoseBook
 from formation_agent.ros.errors import StaleStateError
-
 
 OVERLOADED = 'an overloaded computer?'
 NOT_PUBLISHING = 'its writer stalled or was stopped, or its messages are lost?'

@@ -17,9 +17,9 @@ import numpy as np
 
 from formation_agent.core.speed_scale import paper_velocities, real_duration, real_rate
 from formation_sim.model import theory
+from formation_sim.model.scenario import Scenario
 from formation_sim.model.threshold_floor import FloorBounds, floor_bounds
 from formation_sim.sim.record import RunRecord
-from formation_sim.model.scenario import Scenario
 
 ProgressCallback = Callable[[int, int | None], None]
 

@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 
 from formation_sim.analysis.errors import AnalysisError, CompareError
-from formation_sim.analysis.load import load_bag_run, locate
-from formation_sim.analysis.report import bag_summary, json_safe
 from formation_sim.analysis.figures import pyplot
+from formation_sim.analysis.load import load_bag_run, locate
 from formation_sim.analysis.markers import agent_colour
-from formation_sim.sim.samples import LEGACY_TRAJECTORY_FILE, load_trajectory
+from formation_sim.analysis.report import bag_summary, json_safe
 from formation_sim.sim.errors import TrajectoryError
+from formation_sim.sim.samples import LEGACY_TRAJECTORY_FILE, load_trajectory
 from formation_sim.sim.summary import load_summary
 
 

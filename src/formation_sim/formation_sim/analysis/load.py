@@ -39,6 +39,9 @@ from typing import Any
 
 import numpy as np
 
+from formation_agent.core.pose_sensing import pose_refusal
+from formation_agent.core.speed_scale import initial_velocities
+from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.codec import (
     decode_agent_report,
     decode_status,
@@ -50,17 +53,13 @@ from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME
 from formation_msgs_py.topic_table import match_topic
 from formation_msgs_py.topics import ROBOTS_TOPIC, SCENARIO_TOPIC, SENSING_LOG_TOPIC, STATE_TOPIC, STEP_TOPIC
-from formation_agent.core.speed_scale import initial_velocities
-from formation_sim.analysis.errors import AnalysisError
-from formation_sim.sim.record import RunRecord
-from formation_sim.sim.samples import Samples
 from formation_sim.analysis.checks import Check, ProgressCallback
-from formation_sim.bag.io import decode, read_bag
+from formation_sim.analysis.errors import AnalysisError
 from formation_sim.bag.errors import BagError
-from formation_sim.model.scenario import Scenario, load_scenario
+from formation_sim.bag.io import decode, read_bag
 from formation_sim.model.errors import ScenarioError
-from formation_agent.core.pose_sensing import pose_refusal
-from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
+from formation_sim.model.scenario import Scenario, load_scenario
+from formation_sim.sim.record import RunRecord
 from formation_sim.sim.robots import (
     PoseTrack,
     poses_for_end,
@@ -68,8 +67,8 @@ from formation_sim.sim.robots import (
     sample_times,
     trajectory_samples,
 )
+from formation_sim.sim.samples import Samples
 from formation_sim.sim.summary import SUMMARY_FILE, lateness_extra, saturation_extra
-
 
 SCENARIO_FILE = 'scenario.yaml'
 

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from formation_msgs_py.topics import STEP_TOPIC
-from formation_sim.sim.record import RunRecord
 from formation_sim.analysis.checks import (
     Series,
     TheoryBounds,
@@ -25,8 +24,8 @@ from formation_sim.analysis.checks import (
     theorem_checks,
 )
 from formation_sim.analysis.load import BagRun
+from formation_sim.sim.record import RunRecord
 from formation_sim.sim.summary import build_summary
-
 
 # summary.json keys a bag cannot give back: wall-clock measurements of the live run. Besides
 # these, `extra` holds implementation-specific details (summary.py); those of its keys the bag

@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.data_stream import ReadDataStream
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import CRCValidationError, breakup_chunk
 from mcap.writer import CompressionType

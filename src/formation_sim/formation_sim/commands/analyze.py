@@ -132,8 +132,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace, *, show: bool):
     """The run's location and its run rebuilt from the bag; AnalysisError when there is none."""
-    from formation_sim.analysis.load import load_bag_run, locate
     from formation_sim.analysis.errors import AnalysisError
+    from formation_sim.analysis.load import load_bag_run, locate
     from formation_sim.progress import Progress
 
     location = locate(args.run)
@@ -169,8 +169,8 @@ def _write_figures(
 def _write_markers(bag: Path, out: Path, scenario, *, show: bool) -> dict[str, str] | None:
     """OUT/bag_markers, a copy of the bag with /formation/markers: its entry for the report, or
     None (the error printed) when it cannot be written."""
-    from formation_sim.analysis.markers import write_bag_with_markers
     from formation_sim.analysis.errors import MarkerError
+    from formation_sim.analysis.markers import write_bag_with_markers
     from formation_sim.bag.errors import BagError
     from formation_sim.progress import Progress
 

@@ -10,23 +10,24 @@ import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, EXECUTORS, domain_id_ok
-from formation_sim.model.scenario import Scenario, builtin_scenarios, load_scenario, short_repr
 from formation_sim.model.errors import ScenarioError
+from formation_sim.model.scenario import Scenario, builtin_scenarios, load_scenario, short_repr
 from formation_sim.model.validate import validate_scenario
-from formation_sim.sim.run_folder import check_report_dir
 from formation_sim.sim.errors import RunFolderError
+from formation_sim.sim.run_folder import check_report_dir
 
 if TYPE_CHECKING:
-    from formation_agent.core.kinds.shape import Geometry
     from rclpy.node import Node
+
+    from formation_agent.core.kinds.shape import Geometry
 
 
 # --------------------------------------------------------------------------- argument values
@@ -119,8 +120,8 @@ def with_min_separation(scenario: Scenario, separation: float | None, command: s
         return scenario
     if separation == 0.0:
         return scenario.replace(safety=None)
-    from formation_agent.core.safety import SafetyConfig
     from formation_agent.core.errors import SafetyError
+    from formation_agent.core.safety import SafetyConfig
 
     keys = {} if scenario.safety is None else scenario.safety.as_dict()
     try:
@@ -288,8 +289,12 @@ def default_layer(
     guard radius ρ*: the default R (2 m), raised to ρ* + 2 v̄ · 1 s where ρ* reaches it (cars on a
     formation with room: D_s = 1.69 m, ρ* = 2.26 m, R = 3.26 m)."""
     from formation_agent.core.errors import SafetyError
-    from formation_agent.core.safety import DEFAULT_GAMMA, DEFAULT_MAX_SPEED, DEFAULT_SENSING_RADIUS
-    from formation_agent.core.safety import SafetyConfig
+    from formation_agent.core.safety import (
+        DEFAULT_GAMMA,
+        DEFAULT_MAX_SPEED,
+        DEFAULT_SENSING_RADIUS,
+        SafetyConfig,
+    )
 
     shape = formation_shape(scenario)
     a, b, gap = _closest_pair(shape[1])
@@ -517,8 +522,8 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
-    from formation_sim.runtime.launch.plan import ROBOT_MODELS
     from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.plan import ROBOT_MODELS
 
     robots = None
     if args.backend != 'exact':

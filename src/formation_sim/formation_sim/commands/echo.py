@@ -75,9 +75,9 @@ def _echo(node, args: argparse.Namespace) -> int:
     from rclpy.executors import SingleThreadedExecutor
 
     from formation_sim.bag.errors import UnknownMessageTypeError
+    from formation_sim.runtime.errors import InspectError
     from formation_sim.runtime.nodes.recorder import import_message_class
     from formation_sim.runtime.tools.graph import echo_qos, format_message, to_yaml, wait_for_topic
-    from formation_sim.runtime.errors import InspectError
 
     try:
         msgtype = wait_for_topic(node, args.topic, timeout=args.wait)

@@ -66,8 +66,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.model.generate import random_scenario
     from formation_sim.model.errors import GenerateError, ScenarioError
+    from formation_sim.model.generate import random_scenario
     from formation_sim.model.scenario import dump_scenario_as, file_kind, scenario_from_text
     from formation_sim.sim.files import write_atomically
 

@@ -70,8 +70,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.model.scenario import dump_scenario, load_scenario_data, scenario_from_dict
     from formation_sim.model.errors import ScenarioError
+    from formation_sim.model.scenario import dump_scenario, load_scenario_data, scenario_from_dict
 
     if args.out.exists():
         return refuse(

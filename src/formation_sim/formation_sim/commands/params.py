@@ -19,9 +19,9 @@ from formation_sim.commands.common import (
     add_safety_argument,
     backend_safety,
     load_valid_scenario,
-    scale_options,
     plan_options,
     refuse,
+    scale_options,
 )
 
 
@@ -51,11 +51,11 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
     from formation_sim.runtime.errors import RunError
     from formation_sim.runtime.launch.orchestrate import FormationRun
-    from formation_sim.sim.run_folder import claim_out_dir
+    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
     from formation_sim.sim.errors import RunFolderError
+    from formation_sim.sim.run_folder import claim_out_dir
 
     scenario = load_valid_scenario(args.scenario, 'params', **scale_options(args))
     if scenario is None:

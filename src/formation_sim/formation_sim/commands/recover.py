@@ -25,8 +25,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.bag.recovery import reindex
     from formation_sim.bag.errors import BagRecoveryError
+    from formation_sim.bag.recovery import reindex
 
     bag: Path = args.bag
     if not bag.is_dir():

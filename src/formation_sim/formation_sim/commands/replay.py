@@ -71,8 +71,8 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from formation_sim.progress import Progress
-    from formation_sim.runtime.tools.replay import main_replay
     from formation_sim.runtime.errors import ReplayError
+    from formation_sim.runtime.tools.replay import main_replay
 
     rate = 0.0 if args.as_fast_as_possible else args.rate
     progress = Progress(f'replaying {args.bag}', enabled=not args.quiet)

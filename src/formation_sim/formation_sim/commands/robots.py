@@ -66,8 +66,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch.fleet import RobotFleet
     from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.fleet import RobotFleet
 
     scenario = load_valid_scenario(args.scenario, 'robots')
     if scenario is None:

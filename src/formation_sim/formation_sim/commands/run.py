@@ -14,11 +14,11 @@ from formation_sim.commands.common import (
     add_plan_arguments,
     add_run_arguments,
     add_safety_argument,
+    backend_safety,
     load_valid_scenario,
-    scale_options,
     plan_options,
     refuse,
-    backend_safety,
+    scale_options,
 )
 from formation_sim.commands.limits import (
     AUTO,
@@ -92,8 +92,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     scenario = load_valid_scenario(args.scenario, 'run', **scale_options(args))
     if scenario is None:

@@ -14,12 +14,11 @@ from formation_sim.commands.common import (
     add_run_arguments,
     add_safety_argument,
     load_valid_scenario,
-    scale_options,
     refuse,
+    scale_options,
     with_min_separation,
 )
 from formation_sim.commands.limits import WARP, add_limit_arguments, resolve_speed_scale, resolve_time_warp
-
 
 DEFAULT_SAMPLE_DT = 0.01
 SAMPLE_POLICIES = ('auto', 'events', 'grid', 'none')

@@ -75,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
         return refuse(
             'study', 'argument --workers: only for the LocalCluster; a --scheduler has its own workers'
         )
+    from formation_sim.study.errors import StudyError
     from formation_sim.study.runner import run_study
     from formation_sim.study.spec import load_study
-    from formation_sim.study.errors import StudyError
 
     try:
         study = load_study(args.spec)
@@ -96,8 +96,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from formation_sim.study.report import write_report
     from formation_sim.study.errors import StudyError
+    from formation_sim.study.report import write_report
 
     if args.folder is None:
         return refuse('study', 'report: the study folder is required (formation study report DIR)')

@@ -17,17 +17,17 @@ from formation_agent.core.kinds.unicycle import CONTROL_POINT_DISTANCE
 from formation_msgs_py.exit_codes import ExitCode
 from formation_sim.commands.common import (
     POSITIVE,
+    RobotShape,
     add_safety_argument,
     add_scale_arguments,
     add_scenario_argument,
     add_shape_arguments,
     backend_safety,
-    RobotShape,
     scale_options,
     shape_geometry,
 )
-from formation_sim.model.scenario import load_scenario
 from formation_sim.model.errors import LimitsError, ScenarioError
+from formation_sim.model.scenario import load_scenario
 from formation_sim.model.speed_choice import (
     RobotLimits,
     check_limits_apply,

@@ -12,29 +12,29 @@ JSON (`.json`), which the json module parses ~100x faster than PyYAML and which 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from importlib import resources
 import json
 import math
 import numbers
-from pathlib import Path
 import re
 import reprlib
-from typing import Any
 from collections.abc import Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 
-from formation_agent.core.safety import SafetyConfig
-from formation_agent.core.trigger import DEFAULT_RULE, rule_factory
 from formation_agent.core.errors import RuleError, SafetyError, ScaleError
+from formation_agent.core.safety import SafetyConfig
 from formation_agent.core.speed_scale import (
     DEFAULT_SPEED_SCALE,
     DEFAULT_THRESHOLD_FLOOR,
     check_speed_scale,
     check_threshold_floor,
 )
+from formation_agent.core.trigger import DEFAULT_RULE, rule_factory
 from formation_msgs_py.types import MAX_AGENT_ID
 from formation_sim.model.errors import ScenarioError
 from formation_sim.model.gains import paper_k3, riccati_solution

@@ -27,14 +27,14 @@ analysis and the summary convert); with a threshold floor c0 > 0 the guarantees 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
 
 from formation_agent.core.tension import omega, omega_prime, weight_gain
 from formation_sim.model.errors import TheoryError

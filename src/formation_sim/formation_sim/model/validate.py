@@ -48,10 +48,10 @@ every edge and the Riccati solution.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
 import math
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -59,8 +59,8 @@ import numpy as np
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, MAX_STEPS
 from formation_agent.core.eta import ALGORITHM_GAINS, SCALE_GAINS
 from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, rule_factory
-from formation_sim.model import theory
 from formation_msgs_py.errors import FormationError
+from formation_sim.model import theory
 from formation_sim.model.errors import TheoryError
 from formation_sim.model.gains import (
     OUTSIDE,

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from formation_agent.core.time_warp import WARP_CAP, TimeWarp
-from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, Settling, check_limits_apply
 from formation_sim.model.errors import LimitsError
+from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, Settling, check_limits_apply
 
 WARP_WINDOW = 0.5
 """The real duration of one piece of a chosen warp [s]."""

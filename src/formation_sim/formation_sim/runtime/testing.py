@@ -36,8 +36,8 @@ from pathlib import Path
 from typing import Any
 
 from formation_sim.bag.io import read_bag
-from formation_sim.runtime.tools.replay import BagPlayer, ReplayResult, _bag_topics
 from formation_sim.runtime.errors import ReplayError
+from formation_sim.runtime.tools.replay import BagPlayer, ReplayResult, _bag_topics
 
 SPIN_STEP = 0.05  # seconds one spin_once waits for work
 

@@ -25,8 +25,8 @@ from functools import lru_cache, partial
 import numpy as np
 
 from formation_agent.core import kinematics
-from formation_agent.core.kinds import KIND_NAMES, Geometry, RobotKind, robot_kind
 from formation_agent.core.errors import KindError
+from formation_agent.core.kinds import KIND_NAMES, Geometry, RobotKind, robot_kind
 from formation_agent.core.limits import Limits as KindLimits
 from formation_sim.sim.errors import RobotError
 

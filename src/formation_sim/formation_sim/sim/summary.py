@@ -62,12 +62,12 @@ import numpy as np
 
 from formation_agent.core.speed_scale import real_duration
 from formation_sim.model import theory
-from formation_sim.model.threshold_floor import floor_bounds
 from formation_sim.model.scenario import load_scenario
+from formation_sim.model.threshold_floor import floor_bounds
+from formation_sim.sim.errors import SummaryError, TrajectoryError
 from formation_sim.sim.files import write_atomically
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import edge_maxima, load_trajectory, write_trajectory
-from formation_sim.sim.errors import SummaryError, TrajectoryError
 
 if TYPE_CHECKING:
     from collections.abc import Iterable

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from formation_sim.study.case import check_case, failed_row, run_case
-from formation_sim.study.spec import Study
 from formation_sim.study.errors import StudyError
+from formation_sim.study.spec import Study
 from formation_sim.study.store import StudyFolder
 
 MAX_LISTED = 5  # invalid cases named in the error before "and N more"

@@ -42,7 +42,6 @@ from formation_sim.model.generate import GRAPH_FAMILIES
 from formation_sim.model.scenario import short_repr
 from formation_sim.study.errors import StudyError
 
-
 ALGORITHMS = ('eta1', 'eta2')  # ETA-1: single integrators (Theorem 1); ETA-2: double (Theorem 2)
 SAMPLINGS = ('event', 'periodic', 'continuous')
 
@@ -59,8 +58,8 @@ def _is_num(v: Any) -> bool:
 
 def _scale_ok(name: str, value: Any) -> bool:
     """κ or c0 within formation_agent.core.speed_scale's rules (the scenario's own check)."""
-    from formation_agent.core.speed_scale import check_speed_scale, check_threshold_floor
     from formation_agent.core.errors import ScaleError
+    from formation_agent.core.speed_scale import check_speed_scale, check_threshold_floor
 
     if not _is_num(value):
         return False

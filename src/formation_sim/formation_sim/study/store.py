@@ -19,8 +19,8 @@ from typing import Any
 
 from formation_sim.sim.files import write_atomically
 from formation_sim.study.case import COLUMNS
-from formation_sim.study.spec import PARAMETERS, Study
 from formation_sim.study.errors import StudyError
+from formation_sim.study.spec import PARAMETERS, Study
 
 ROWS_FILE = 'rows.csv'
 STUDY_FILE = 'study.json'

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from formation_agent.core.kinds import Geometry, robot_kind
+from formation_agent.core.commander import RobotCommander
 from formation_agent.core.errors import KindError
+from formation_agent.core.kinds import Geometry, robot_kind
 from formation_agent.core.kinds.car import curvature, steer, steering_angle
 from formation_agent.core.kinematics import control_point_rate
-from formation_agent.core.commander import RobotCommander
 from formation_agent.core.limits import Limits, SaturationLog
 from formation_msgs_py.lockstep import SATURATION_KINDS
 
@@ -122,7 +122,8 @@ def _bicycle(v: float, phi: float, wheelbase: float):
 
 @pytest.mark.parametrize(('v', 'phi', 'duration'), [(0.5, 0.42, 3.0), (-0.3, -0.2, 4.0), (0.2, 1e-10, 2.0)])
 def test_the_car_drives_the_bicycles_exact_arc_under_a_held_speed_and_steering(v, phi, duration):
-    from formation_sim.sim.robots import Command, Limits as BaseLimits, make_robot
+    from formation_sim.sim.robots import Command, make_robot
+    from formation_sim.sim.robots import Limits as BaseLimits
 
     robot = make_robot(
         'car',

@@ -230,8 +230,8 @@ def test_a_holonomic_team_forms_its_square_and_stops_and_says_where_it_saturated
 
 @pytest.mark.timeout(300)
 def test_external_robots_started_apart_are_driven_like_real_ones(tmp_path, capsys):
-    from formation_sim.runtime.launch.plan import RobotOptions, with_our_packages
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions, with_our_packages
 
     domain = 165
     env = with_our_packages(
@@ -296,8 +296,8 @@ def test_an_agent_killed_mid_run_ends_the_run_and_its_robot_gets_its_zero_from_t
     import threading
 
     from formation_sim.bag.io import decode, read_bag
-    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     run = FormationRun(
         'robots_square',
@@ -374,8 +374,8 @@ def test_an_external_robot_killed_mid_run_is_the_first_cause_and_the_other_robot
     import threading
 
     from formation_sim.runtime.launch.fleet import RobotFleet
-    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     domain = 190
     fleet = RobotFleet(
@@ -446,8 +446,8 @@ def test_external_robots_whose_measured_start_breaks_the_initial_condition_are_r
 
     from formation_sim.bag.io import decode, read_bag
     from formation_sim.runtime.launch.fleet import RobotFleet
-    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     domain = 46
     square = load_scenario('robots_square')
@@ -577,8 +577,8 @@ runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)
 def test_a_run_whose_processes_hang_in_their_ros_teardown_after_its_end_is_done_and_says_so(tmp_path):
     """The simulator (the time keeper) and agent 2 each block in rclpy's destroy_node after a
     complete run, the GIL held, and are cut short (exit 1): the run is done, and names them."""
-    from formation_sim.runtime.launch.orchestrate import FormationRun
     from formation_sim.model.scenario import load_scenario
+    from formation_sim.runtime.launch.orchestrate import FormationRun
 
     hangs = ('simulator', 'agent_2')
     run = FormationRun(

@@ -11,9 +11,9 @@ import yaml
 
 from formation_agent.core.kinds import Geometry
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.launch.orchestrate import FormationRun
+from formation_sim.runtime.launch.plan import RobotOptions
 
 TURTLEBOT3 = RobotOptions(
     model='unicycle',

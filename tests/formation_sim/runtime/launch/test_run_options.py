@@ -7,8 +7,8 @@ import dataclasses
 import pytest
 
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.plan import RobotOptions
 from formation_sim.runtime.launch.run_options import RunOptions
 
 

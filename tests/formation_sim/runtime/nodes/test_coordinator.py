@@ -280,8 +280,8 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
 
 
 def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summary(coordinator, tmp_path):
-    from formation_sim.runtime.nodes.keeper_main import stop_and_write
     from formation_sim.runtime.errors import DiscoveryError
+    from formation_sim.runtime.nodes.keeper_main import stop_and_write
 
     node = _running(coordinator)
     node.end_now()
@@ -583,8 +583,8 @@ def test_an_outside_node_on_a_robots_command_topic_stops_the_run_and_is_named(ro
     from geometry_msgs.msg import Twist
 
     from formation_msgs_py.qos import ROBOT_COMMAND_QOS
-    from formation_sim.runtime.nodes.keeper_main import stop_and_write
     from formation_sim.runtime.errors import ForeignWriterError
+    from formation_sim.runtime.nodes.keeper_main import stop_and_write
     from formation_sim.runtime.nodes.time_keeper import look_at_graph
 
     node = _running(coordinator, out_dir=str(tmp_path))

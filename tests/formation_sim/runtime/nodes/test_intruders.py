@@ -6,6 +6,12 @@ from __future__ import annotations
 import pytest
 
 from formation_sim.model.scenario import load_scenario
+from formation_sim.runtime.errors import (
+    DuplicateAgentError,
+    ForeignWriterError,
+    KeeperFrozenError,
+    RobotLostError,
+)
 from formation_sim.runtime.nodes.intruders import (
     FreezeWatch,
     GraphWatch,
@@ -15,12 +21,6 @@ from formation_sim.runtime.nodes.intruders import (
     protocol_watched,
     robot_watched,
     simulator_watched,
-)
-from formation_sim.runtime.errors import (
-    DuplicateAgentError,
-    ForeignWriterError,
-    KeeperFrozenError,
-    RobotLostError,
 )
 
 AGENT_2 = Writer(node='/agent_2/formation_agent', gid='01')
@@ -217,8 +217,8 @@ def _status(agent, *, sent, received):
 def test_more_information_taken_than_sent_is_foreign_and_its_writer_named():
     """The finding: a forged but plausible TriggerInfo "from agent 2" on the wall clock gave agent
     1 813 events instead of ~81, and the run said done."""
-    from formation_sim.runtime.nodes.intruders import foreign_information_error, information_excess
     from formation_sim.runtime.errors import ForeignInformationError
+    from formation_sim.runtime.nodes.intruders import foreign_information_error, information_excess
 
     honest = [_status(1, sent=10, received=12), _status(2, sent=12, received=10), None]
     assert information_excess(honest, slack=4) is None

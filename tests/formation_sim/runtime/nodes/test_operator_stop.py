@@ -24,9 +24,9 @@ from std_srvs.srv import Trigger
 
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.topics import STOP_SERVICE
+from formation_sim.runtime.errors import OperatorStopError
 from formation_sim.runtime.nodes.operator_stop import CALLER_LOOK, CALLER_WAIT, OperatorStop
 from formation_sim.runtime.nodes.run_book import failure_extra
-from formation_sim.runtime.errors import OperatorStopError
 
 BOUND = 1.0  # [s] issue 27: every robot's zero within this long of the call
 TEST_POSE_TIMEOUT = 2.0  # as tests/formation_sim/runtime/launch/test_orchestrate.py: a loaded machine
@@ -203,8 +203,8 @@ def _zero_ends(bag: Path, agents) -> dict[int, float]:
 
 
 def _robot_run(tmp_path: Path, *, model: str, domain: int, backend: str | None = None):
-    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.launch.orchestrate import FormationRun
+    from formation_sim.runtime.launch.plan import RobotOptions
 
     return FormationRun(
         'robots_square',

@@ -20,7 +20,6 @@ from geometry_msgs.msg import Pose, PoseArray
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray
 
-from formation_sim.bag.io import BagWriter, decode, read_bag
 from formation_sim.bag.errors import (
     BagError,
     BagReadError,
@@ -28,6 +27,7 @@ from formation_sim.bag.errors import (
     TopicSpecError,
     UnknownMessageTypeError,
 )
+from formation_sim.bag.io import BagWriter, decode, read_bag
 from formation_sim.bag.recovery import reindex
 from formation_sim.runtime.nodes.recorder import parse_topic_spec
 from formation_sim.runtime.nodes.sim_node import RECORDER_LAG

@@ -302,9 +302,9 @@ def test_a_robot_moves_under_its_last_command_for_its_timeout_at_most_however_la
     """A base's watchdog stops it `command_timeout` after its last command, wherever its ticks fall:
     a robot frozen 2 s (SIGSTOP) found, at its first tick after SIGCONT, that it had gone on under
     its last command for the whole freeze (0.60 m at 0.3 m/s, measured), then stopped."""
+    from formation_agent.core.kinds import Geometry
     from formation_sim.runtime.nodes import robot_node
     from formation_sim.sim.robots import Command, Limits, make_robot
-    from formation_agent.core.kinds import Geometry
 
     clocks = _Clocks()
     monkeypatch.setattr(robot_node, 'time', clocks)

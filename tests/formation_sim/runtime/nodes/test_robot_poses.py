@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from formation_sim.runtime.contract import TRAJECTORY_TOPICS
-from formation_sim.runtime.nodes.robot_poses import EARLY_POSES, RobotPoses
 from formation_sim.runtime.errors import CoordinatorError
+from formation_sim.runtime.nodes.robot_poses import EARLY_POSES, RobotPoses
 from formation_sim.sim.robots import POSES_AFTER_END
 
 EPOCH = 1_700_000_000.0

@@ -3,12 +3,10 @@ recorder stops the run, which recorder heartbeats count, and the summary's satur
 
 from __future__ import annotations
 
-
 import pytest
 
 from formation_msgs_py.lockstep import DISCOVERY_STEP, Status
 from formation_sim.model.scenario import load_scenario
-from formation_sim.runtime.nodes.run_book import RecorderBook, RunBook
 from formation_sim.runtime.errors import (
     AgentLostError,
     ConnectivityLostError,
@@ -16,6 +14,7 @@ from formation_sim.runtime.errors import (
     RecorderLostError,
     RobotLostError,
 )
+from formation_sim.runtime.nodes.run_book import RecorderBook, RunBook
 
 
 def _status(agent: int, **fields) -> Status:
@@ -202,8 +201,8 @@ def test_saturation_in_the_summary_adds_up_the_agents_reports():
 
 
 def test_a_robot_silent_while_the_others_publish_is_lost_and_a_coordinator_that_slept_loses_none():
-    from formation_sim.runtime.nodes.run_book import ALL_SILENT_AFTER, PoseWatch
     from formation_sim.runtime.errors import RobotLostError
+    from formation_sim.runtime.nodes.run_book import ALL_SILENT_AFTER, PoseWatch
 
     watch = PoseWatch([1, 2, 3, 4], silence=0.5)
     assert watch.silent(100.0) == []  # nothing heard yet (discovery)

@@ -3,7 +3,6 @@ and what a run that stops early reports (no other process is started)."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from formation_msgs_py.codec import decode_world_state
+from formation_msgs_py.qos import PROTOCOL_QOS, SIMULATOR_QOS
 from formation_sim.model.scenario import load_scenario
 from formation_sim.runtime.nodes.exact_world import ExactWorld
-from formation_msgs_py.qos import PROTOCOL_QOS, SIMULATOR_QOS
 from formation_sim.runtime.nodes.sim_view import VIEW_HISTORY_BYTES, SimulatorView, view_qos
 
 

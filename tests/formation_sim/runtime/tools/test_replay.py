@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from formation_sim.bag.io import BagWriter, read_bag
+from formation_sim.runtime.errors import ReplayError
 from formation_sim.runtime.nodes.recorder import import_message_class
 from formation_sim.runtime.tools.replay import BagPlayer, main_replay
-from formation_sim.runtime.errors import ReplayError
 
 REPLAY_DOMAINS = {'synthetic': 171, 'distributed': 173, 'live': 66, 'elsewhere': 67}
 

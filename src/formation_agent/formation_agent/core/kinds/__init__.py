@@ -11,6 +11,7 @@ footprint radius; `control_point_separation` and `default_min_separation` turn f
 separation between control points the safety layer keeps (docs/ROBOTS.md, "Footprints").
 """
 
+from formation_agent.core.errors import KindError, ShapeError
 from formation_agent.core.kinds.car import Car
 from formation_agent.core.kinds.holonomic import Holonomic
 from formation_agent.core.kinds.registry import (
@@ -25,7 +26,6 @@ from formation_agent.core.kinds.registry import (
     robot_kind,
     unregister,
 )
-from formation_agent.core.errors import KindError, ShapeError
 from formation_agent.core.kinds.shape import Geometry, ShapeParameter
 from formation_agent.core.kinds.unicycle import Unicycle
 

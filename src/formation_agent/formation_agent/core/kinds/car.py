@@ -33,10 +33,9 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from formation_agent.core.kinematics import unicycle_velocity
-
 from formation_agent.core.kinds.shape import Geometry, ShapeParameter
 from formation_agent.core.kinds.unicycle import Unicycle
+from formation_agent.core.kinematics import unicycle_velocity
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 from formation_msgs_py.lockstep import SATURATION_STEERING
 

@@ -19,10 +19,9 @@ import math
 
 import numpy as np
 
-from formation_agent.core.kinematics import unicycle_velocity
 from formation_agent.core.kinds.registry import RobotKind
-from formation_agent.core.kinds.shape import Geometry
-from formation_agent.core.kinds.shape import ShapeParameter
+from formation_agent.core.kinds.shape import Geometry, ShapeParameter
+from formation_agent.core.kinematics import unicycle_velocity
 from formation_agent.core.limits import Limits, SaturationLog, limit_body_velocity
 
 CONTROL_POINT_DISTANCE = ShapeParameter(

@@ -30,11 +30,11 @@ from pathlib import Path
 from formation_agent.ros.process import SignalFlag
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, DOMAIN_ID_MAX, domain_id_ok
 from formation_sim.model.scenario import Scenario, load_scenario
-from formation_sim.runtime.launch.plan import LOG_DIR, LaunchPlan, RobotOptions
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.plan import LOG_DIR, LaunchPlan, RobotOptions
 from formation_sim.runtime.launch.supervise import POLL_PERIOD, Supervisor
-from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
 from formation_sim.sim.errors import RunFolderError
+from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
 
 
 class RobotFleet:

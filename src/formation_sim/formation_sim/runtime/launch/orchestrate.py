@@ -56,8 +56,7 @@ from formation_msgs_py.topics import (
 )
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
-from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
-from formation_sim.sim.errors import RunFolderError
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.launch.plan import (
     BACKENDS,
     BAG_DIR,
@@ -67,19 +66,18 @@ from formation_sim.runtime.launch.plan import (
     free_udp_port,
     reserve_domain,
 )
-from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.launch.results import (
     ChildExit,
     RunResult,
     annotate,
     check_recording,
-    lost_or_failed,
     describe_phases,
     detection_time,
     excused_after_end,
     excused_teardown,
     first_lost,
     keeper_failed,
+    lost_or_failed,
     phases,
     read_summary,
     recover_bag,
@@ -89,6 +87,8 @@ from formation_sim.runtime.launch.results import (
 )
 from formation_sim.runtime.launch.run_options import RunOptions
 from formation_sim.runtime.launch.supervise import POLL_PERIOD, Child, Supervisor
+from formation_sim.sim.errors import RunFolderError
+from formation_sim.sim.run_folder import check_out_dir, claim_out_dir
 from formation_sim.sim.summary import SUMMARY_FILE, RunSummary, run_failure
 
 if TYPE_CHECKING:

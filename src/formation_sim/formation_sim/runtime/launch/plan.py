@@ -36,6 +36,9 @@ from pathlib import Path
 
 import yaml
 
+from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
+from formation_agent.core.kinds.shape import declared
+from formation_agent.core.limits import Limits as KindLimits
 from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
 from formation_msgs_py.tags import KEY_FILE, new_key, write_key
 from formation_msgs_py.topics import (
@@ -47,10 +50,6 @@ from formation_msgs_py.topics import (
     robot_command_topic,
 )
 from formation_sim.model.scenario import Scenario, dump_scenario
-from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
-from formation_agent.core.kinds.shape import declared
-from formation_agent.core.limits import Limits as KindLimits
-from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.contract import (
     COORDINATOR_FILE,
     SIMULATOR_FILE,
@@ -59,8 +58,9 @@ from formation_sim.runtime.contract import (
     formation_topics,
     robot_run_topics,
 )
-from formation_sim.sim.robots import ROBOT_MODELS, Limits
+from formation_sim.runtime.errors import RunError
 from formation_sim.sim.errors import RobotError
+from formation_sim.sim.robots import ROBOT_MODELS, Limits
 
 BACKENDS = KindNames(
     before=('exact',), after=('external',)

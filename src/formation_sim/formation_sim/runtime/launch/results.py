@@ -226,8 +226,8 @@ def summary_of_what_is_known(
     )
     data, note = None, None
     if (bag / 'metadata.yaml').is_file():
-        from formation_sim.analysis.load import load_bag_run
         from formation_sim.analysis.errors import AnalysisError
+        from formation_sim.analysis.load import load_bag_run
 
         try:
             data = summary_of(load_bag_run(bag, run_dir=run_dir, scenario=scenario).record)
@@ -276,8 +276,8 @@ def _last_step(bag: Path) -> tuple[int, float] | None:
     from formation_msgs_py.codec import decode_step
     from formation_msgs_py.errors import MessageError
     from formation_msgs_py.topics import STEP_TOPIC
-    from formation_sim.bag.io import decode, read_bag
     from formation_sim.bag.errors import BagError
+    from formation_sim.bag.io import decode, read_bag
 
     last = None
     try:

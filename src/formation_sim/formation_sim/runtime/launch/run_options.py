@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
 from formation_sim.model.scenario import Scenario
+from formation_sim.runtime.errors import RunError
 from formation_sim.runtime.launch.plan import (
     BACKENDS,
     DISCOVERY_MODES,
@@ -25,7 +26,6 @@ from formation_sim.runtime.launch.plan import (
     discovery_server_program,
     resolve_agents_per_process,
 )
-from formation_sim.runtime.errors import RunError
 from formation_sim.sim.engine import check_sample_dt
 from formation_sim.sim.errors import EngineError
 

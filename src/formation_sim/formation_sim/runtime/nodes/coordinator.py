@@ -45,35 +45,35 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
 
+from formation_agent.core.kinds import Geometry, KindNames, robot_kind
+from formation_agent.core.kinds.shape import declared
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_agent.ros.process import exit_process
+from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.codec import check_array, decode_trigger_info, encode_step
 from formation_msgs_py.errors import MessageError
-from formation_msgs_py.cdr import odometry_fields, pose_stamped_fields
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
 from formation_msgs_py.topics import COORDINATOR_NODE, ROBOTS_TOPIC, WORLD_FRAME, trigger_info_topic
 from formation_sim.model.measured_start import MeasuredStart, check_measured_start
 from formation_sim.model.scenario import Scenario
-from formation_sim.runtime.nodes.run_book import ids_text
-from formation_sim.runtime.errors import AgentFailedError, InitialConditionError
 from formation_sim.runtime.contract import COORDINATOR_FILE, TRAJECTORY_TOPICS
-from formation_sim.runtime.nodes.robot_poses import RobotPoses, pose_rules
+from formation_sim.runtime.errors import AgentFailedError, InitialConditionError
 from formation_sim.runtime.nodes import keeper_main
+from formation_sim.runtime.nodes.robot_poses import RobotPoses, pose_rules
 from formation_sim.runtime.nodes.robot_stops import RobotStops
+from formation_sim.runtime.nodes.run_book import ids_text
 from formation_sim.runtime.nodes.time_keeper import (
+    TIME_KEEPER_PARAMETERS,
+    TimeKeeperNode,
     graph_of,
     run_extra,
     tag_refused,
-    TIME_KEEPER_PARAMETERS,
-    TimeKeeperNode,
 )
 from formation_sim.sim.record import RunRecord
-from formation_sim.sim.samples import Samples
-from formation_agent.core.kinds import Geometry, KindNames, robot_kind
-from formation_agent.core.kinds.shape import declared
 from formation_sim.sim.robots import POSES_AFTER_END, ROBOT_MODELS, sample_times, trajectory_samples
+from formation_sim.sim.samples import Samples
 
 TRAJECTORY_SOURCES = tuple(TRAJECTORY_TOPICS)  # which robot topic the formation is measured on
 

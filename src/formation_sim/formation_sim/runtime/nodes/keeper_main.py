@@ -50,7 +50,6 @@ from formation_sim.runtime.nodes.run_end import (
 )
 from formation_sim.runtime.nodes.time_keeper import TimeKeeperNode, blamed
 
-
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
 LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
 NAMED_ERRORS = (

@@ -48,6 +48,10 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 from typing import TYPE_CHECKING, Any, NoReturn
 
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.parameters import (
     DOUBLE,
     STRING,
@@ -57,19 +61,15 @@ from formation_agent.ros.parameters import (
     read_parameters,
 )
 from formation_msgs_py.codec import check_array
-from formation_agent.ros.errors import ParameterError
+from formation_msgs_py.errors import TagError
 from formation_msgs_py.exit_codes import ExitCode
 from formation_msgs_py.lockstep import STEP_FLAG_REALTIME
-from formation_msgs_py.errors import TagError
 from formation_msgs_py.tags import run_tags
 from formation_msgs_py.topics import RECORDER_NODE, RECORDER_TOPIC, STEP_TOPIC
-from formation_sim.bag.io import BagWriter, check_msgtype, jazzy_typestore
 from formation_sim.bag.errors import BagError, TopicSpecError, UnknownMessageTypeError
-from formation_sim.runtime.nodes.bag_qos import offered_qos
+from formation_sim.bag.io import BagWriter, check_msgtype, jazzy_typestore
 from formation_sim.runtime.errors import RecorderError
-
-from rclpy.node import Node
-from rclpy.parameter import Parameter
+from formation_sim.runtime.nodes.bag_qos import offered_qos
 
 if TYPE_CHECKING:
     from rclpy.executors import Executor

@@ -53,8 +53,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
-from formation_agent.ros.commands import command_message
 from formation_agent.core.kinds.shape import Geometry, declared
+from formation_agent.ros.commands import command_message
+from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.kind_parameters import SpecTable, limit_spec, shape_specs
 from formation_agent.ros.parameters import (
     BOOL,
@@ -66,7 +67,6 @@ from formation_agent.ros.parameters import (
     declare_parameters,
     parameter_help,
 )
-from formation_agent.ros.errors import ParameterError
 from formation_agent.ros.process import StopSignals, exit_process, make_executor, release_ros, shutdown_guard
 from formation_msgs_py.cdr import OdometryWriter, pack_pose_stamped, twist_fields, twist_stamped_fields
 from formation_msgs_py.errors import MessageError
@@ -82,8 +82,8 @@ from formation_msgs_py.topics import (
     robot_true_odom_topic,
 )
 from formation_msgs_py.types import MAX_AGENT_ID
-from formation_sim.sim.robots import ROBOT_MODELS, Command, Limits, PoseNoise, make_robot, quaternion_from_yaw
 from formation_sim.sim.errors import RobotError
+from formation_sim.sim.robots import ROBOT_MODELS, Command, Limits, PoseNoise, make_robot, quaternion_from_yaw
 
 NODE_NAME = ROBOT_NODE
 

@@ -15,16 +15,15 @@ never used for a connectivity verdict and never a sign of the robot's life.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Iterable
-
-import math
 
 import numpy as np
 
 from formation_agent.core.pose_sensing import pose_refusal
-from formation_sim.runtime.nodes.run_book import PoseWatch
 from formation_sim.runtime.errors import CoordinatorError
+from formation_sim.runtime.nodes.run_book import PoseWatch
 from formation_sim.sim.robots import PoseTrack, RobotSample, poses_for_end, sample_from_fields
 
 EARLY_POSES = 50  # poses kept per robot from before t = 0 (the first sample needs the last of them)

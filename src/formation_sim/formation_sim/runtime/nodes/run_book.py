@@ -19,10 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from formation_msgs_py.tags import FOREIGN_REASONS
-
 from formation_msgs_py.lockstep import DISCOVERY_STEP, AgentReport, Status
 from formation_msgs_py.middleware import LIVELINESS_LEASE, LOST_GRACE
+from formation_msgs_py.tags import FOREIGN_REASONS
 from formation_msgs_py.topics import trigger_info_topic
 from formation_sim.runtime.errors import (
     AgentLostError,

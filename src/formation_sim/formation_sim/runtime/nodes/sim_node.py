@@ -47,6 +47,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
+from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     check_array,
@@ -59,23 +60,22 @@ from formation_msgs_py.codec import (
 from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
-from formation_msgs_py.types import SensedState
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
+from formation_msgs_py.types import SensedState
 from formation_sim.model.scenario import Scenario
-from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
-from formation_sim.runtime.nodes import keeper_main
 from formation_sim.runtime.contract import SIMULATOR_FILE
-from formation_sim.runtime.nodes.run_end import write_results  # noqa: F401 - likewise
 from formation_sim.runtime.errors import CoordinatorError, DuplicateAgentError, StallError
-from formation_sim.runtime.nodes.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
-from formation_sim.runtime.nodes.time_keeper import (
-    graph_of,
-    run_extra,
-    TIME_KEEPER_PARAMETERS,
-    TimeKeeperNode,
-)
+from formation_sim.runtime.nodes import keeper_main
 from formation_sim.runtime.nodes.exact_world import ExactWorld
 from formation_sim.runtime.nodes.intruders import SensingCalls, Writer, intrusions, simulator_watched
+from formation_sim.runtime.nodes.run_end import write_results  # noqa: F401 - likewise
+from formation_sim.runtime.nodes.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
+from formation_sim.runtime.nodes.time_keeper import (
+    TIME_KEEPER_PARAMETERS,
+    TimeKeeperNode,
+    graph_of,
+    run_extra,
+)
 from formation_sim.sim.engine import due_twice
 from formation_sim.sim.record import RunRecord
 

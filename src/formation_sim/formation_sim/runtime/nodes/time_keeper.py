@@ -27,46 +27,45 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
-from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterSpec, read_parameters
 from formation_agent.ros.errors import ParameterError
+from formation_agent.ros.parameters import DOUBLE, INTEGER, STRING, ParameterSpec, read_parameters
 from formation_agent.ros.process import EXECUTORS
 from formation_msgs_py.codec import (
     check_array,
     check_string,
-    tag_refused as refused_tag,
     decode_agent_report,
     decode_status,
     encode_step,
     tag_array,
 )
-from formation_msgs_py.errors import MessageError
+from formation_msgs_py.codec import tag_refused as refused_tag
+from formation_msgs_py.errors import KeyFileError, MessageError
 from formation_msgs_py.lockstep import DISCOVERY_STEP, STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS, SIMULATOR_QOS
-from formation_msgs_py.errors import KeyFileError
 from formation_msgs_py.tags import read_key, run_tags
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
-from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.model.errors import ScenarioError
-from formation_sim.runtime.nodes.operator_stop import OperatorStop
-from formation_sim.runtime.nodes.run_book import (
-    add_what_followed,
-    failure_extra,
-    RecorderBook,
-    RunBook,
-    RunMarks,
-    ids_text,
-)
+from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
 from formation_sim.runtime.errors import DiscoveryError, ForeignWriterError
 from formation_sim.runtime.nodes.intruders import (
     TOPICS_PER_LOOK,
-    foreign_information_error,
-    information_excess,
     FreezeWatch,
     GraphWatch,
     Writer,
+    foreign_information_error,
+    information_excess,
     protocol_watched,
     robot_watched,
     simulator_watched,
+)
+from formation_sim.runtime.nodes.operator_stop import OperatorStop
+from formation_sim.runtime.nodes.run_book import (
+    RecorderBook,
+    RunBook,
+    RunMarks,
+    add_what_followed,
+    failure_extra,
+    ids_text,
 )
 from formation_sim.sim.engine import safety_extra
 from formation_sim.sim.record import RunRecord

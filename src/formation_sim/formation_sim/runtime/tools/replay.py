@@ -38,14 +38,13 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 from formation_msgs_py.topics import AGENT_NODE, RECORDER_NODE, SIMULATOR_NODE
-from formation_sim.bag.io import read_bag
 from formation_sim.bag.errors import BagError, UnknownMessageTypeError
-from formation_sim.runtime.nodes.bag_qos import replay_offer
+from formation_sim.bag.io import read_bag
 from formation_sim.runtime.errors import ReplayError
+from formation_sim.runtime.nodes.bag_qos import replay_offer
 from formation_sim.runtime.nodes.recorder import import_message_class
 
 if TYPE_CHECKING:
@@ -82,8 +81,8 @@ def _bag_topics(bag: Path) -> dict[str, tuple[str, list]]:
     """Topic -> (message type, the QoS profiles its publishers offered when recorded)."""
     from rosbags.rosbag2 import Reader
 
-    from formation_sim.bag.io import check_bag_information, damaged_bag_message
     from formation_sim.bag.errors import BagReadError
+    from formation_sim.bag.io import check_bag_information, damaged_bag_message
 
     try:
         check_bag_information(bag)
@@ -246,8 +245,8 @@ def main_replay(
 
     Refused (ReplayError) on a domain where a formation run is live (see the module docstring).
     """
-    from formation_sim.runtime.launch.orchestrate import reserve_domain
     from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.orchestrate import reserve_domain
 
     bag = Path(bag)
     if not bag.exists():
