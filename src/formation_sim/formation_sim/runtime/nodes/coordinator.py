@@ -209,7 +209,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             context=context,
         )
 
-    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+    def world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""
         problems = []
         model = values.get('robot')
@@ -246,7 +246,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             **pose_rules(self.parameter_values),  # the poses refused (formation analyze refuses them too)
         }
         self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
-        self._tool_publishers.append(self._robots_pub)
+        self.tool_publishers.append(self._robots_pub)
         topic = TRAJECTORY_TOPICS[self.trajectory_source]
         kind, self._pose_fields = (
             (PoseStamped, pose_stamped_fields)
@@ -290,7 +290,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
             for i, book in self.agents.items()
         }
 
-    def _world_gaps(self) -> list[str]:
+    def world_gaps(self) -> list[str]:
         topic = f'robot/{self.trajectory_source}'
         # The coordinator reads reliable, as the recorder does, so that both see every pose.
         missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
@@ -337,7 +337,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self._publish(self._robots_pub, String(data=json.dumps(self.robots, separators=(',', ':'))))
         self._epoch = time.time()
         self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
-        self._publish(self._step_pub, encode_step(self.step))
+        self._publish(self.step_pub, encode_step(self.step))
         # Each robot was heard (discovery waited for its first pose).
         self.poses.begin(epoch=self._epoch, now=time.monotonic())
         # The final Step at the horizon on the dot, not at the next tick: an agent whose last
@@ -386,7 +386,7 @@ class FormationCoordinatorNode(TimeKeeperNode):
         self.step = Step(
             index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
         )
-        self._publish(self._step_pub, encode_step(self.step))  # first: the robots stop now
+        self._publish(self.step_pub, encode_step(self.step))  # first: the robots stop now
         self.finished = True
         self._reached = self.horizon
         self.graph = graph_of(self)  # the agents are still there: they leave after their final reports
@@ -448,12 +448,12 @@ class FormationCoordinatorNode(TimeKeeperNode):
         try:
             info = decode_trigger_info(msg)
         except MessageError as error:
-            self._reject(
+            self.reject(
                 trigger_info_topic(agent, min(self.agents[agent].neighbours)), error.reason, str(error)
             )
             return
         if info.sender != agent:
-            self._reject(
+            self.reject(
                 trigger_info_topic(agent, info.receiver),
                 'sender',
                 f'information from agent {info.sender} on the topic of agent {agent}',
@@ -468,10 +468,10 @@ class FormationCoordinatorNode(TimeKeeperNode):
         try:
             fields = self._pose_fields(data)
         except MessageError as error:
-            self._reject(self._pose_subs[agent].topic_name, error.reason, str(error))
+            self.reject(self._pose_subs[agent].topic_name, error.reason, str(error))
             return
         if (refusal := self.poses.refusal(agent, fields, wall=time.time())) is not None:  # the agents' rules
-            self._reject(self._pose_subs[agent].topic_name, *refusal)
+            self.reject(self._pose_subs[agent].topic_name, *refusal)
         else:  # before t = 0 (no epoch yet): kept, the last few, for the first sample
             self.poses.note(
                 agent, fields, epoch=None if self.step is None else self._epoch, now=time.monotonic()

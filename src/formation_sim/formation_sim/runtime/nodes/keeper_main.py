@@ -129,7 +129,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode])
             wait_for_delivery(node, executor)
             node.mark('delivered')
             if node.progress_period > 0.0:
-                node._print_progress()
+                node.print_progress()
             if node.out_dir:
                 try:
                     write_results(node)

@@ -149,7 +149,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         'into out_dir.'
     )
 
-    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+    def world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         return []
 
     def _clock_mode(self, values: dict) -> str:
@@ -170,12 +170,12 @@ class FormationSimulatorNode(TimeKeeperNode):
             viz_period=self.viz_period,
             publish=self._publish,
         )
-        self._tool_publishers = [
+        self.tool_publishers = [
             view.state_pub,
             view.truth_pub,
             view.log_pub,
             view.clock_pub,
-            self._scenario_pub,
+            self.scenario_pub,
             view.markers_pub,
         ]
         self._services = [
@@ -187,7 +187,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         self.sensing_calls = 0
         self.calls = SensingCalls(self.agents)  # which calls were triggers, which foreign (issue 28)
         self._info_subs = _trigger_readers(self) if self.realtime else {}
-        self._due: set[int] = set()
+        self.due_agents: set[int] = set()
         self._last_advance = self.marks.created
 
     def _watch_agents(self) -> dict:
@@ -207,7 +207,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             for i in self.agents
         }
 
-    def _world_gaps(self) -> list[str]:
+    def world_gaps(self) -> list[str]:
         return []
 
     @property
@@ -223,8 +223,8 @@ class FormationSimulatorNode(TimeKeeperNode):
             self._timer = self.create_timer(min(0.1, self.sample_period or 0.1), self._tick)
             self._epoch = time.time()
             self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
-            self._due = set(self.agents)
-            self._publish(self._step_pub, encode_step(self.step))
+            self.due_agents = set(self.agents)
+            self._publish(self.step_pub, encode_step(self.step))
             self.publish_samples()
             return
         self._publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.agents))))  # t^i_1 = 0
@@ -243,7 +243,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             else ''
         )
         return (
-            f'step {self.step.index} (t={self.step.time!r}, due {sorted(self._due)}); {recorders}'
+            f'step {self.step.index} (t={self.step.time!r}, due {sorted(self.due_agents)}); {recorders}'
             + self.book.waiting_description()
         )
 
@@ -272,7 +272,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             self.step = Step(
                 index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
             )
-            self._publish(self._step_pub, encode_step(self.step))
+            self._publish(self.step_pub, encode_step(self.step))
             self.finished = True
         self.publish_samples()
 
@@ -290,10 +290,10 @@ class FormationSimulatorNode(TimeKeeperNode):
 
     def _publish_step(self, step: Step) -> None:
         self.step = step
-        self._due = set(step.due)
+        self.due_agents = set(step.due)
         self.book.mark_due(step.due, step.time)
         self._last_advance = time.monotonic()
-        self._publish(self._step_pub, encode_step(step))
+        self._publish(self.step_pub, encode_step(step))
 
     def _after_status(self) -> None:
         self._advance_if_settled()
@@ -304,7 +304,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
             # sensing was answered before a stop still completes (its information is out, and in
             # the bag): counted, its command acting from the last instant on moves nothing.
-            due = not self.realtime and agent in self._due and book.sensed_at_step == self.step.index
+            due = not self.realtime and agent in self.due_agents and book.sensed_at_step == self.step.index
             if due and book.commands_received < book.expected_triggers:
                 book.commands_received += 1
             return
@@ -314,10 +314,14 @@ class FormationSimulatorNode(TimeKeeperNode):
             self.world.set_control(agent, control)
             book.commands_received += 1
             return
-        if self.step is None or agent not in self._due or book.commands_received >= book.expected_triggers:
+        if (
+            self.step is None
+            or agent not in self.due_agents
+            or book.commands_received >= book.expected_triggers
+        ):
             raise SimulatorError(
                 f'agent {agent} sent a command outside its triggering time '
-                f'(step {None if self.step is None else self.step.index}, due {sorted(self._due)})'
+                f'(step {None if self.step is None else self.step.index}, due {sorted(self.due_agents)})'
             )
         # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
         self.world.set_control(agent, decode_command(msg, self.scenario.dimension))
@@ -334,7 +338,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         if self.realtime and self.step is not None:
             return self._sense_realtime(agent)
         index = -1 if self.step is None else self.step.index
-        if self.step is None or agent not in self._due or book.sensed_at_step == index:
+        if self.step is None or agent not in self.due_agents or book.sensed_at_step == index:
             return _out_of_turn(self, agent, index)
         book.sensed_at_step = index
         self.sensing_calls += 1
@@ -343,7 +347,7 @@ class FormationSimulatorNode(TimeKeeperNode):
         return encode_sensed_state(sensed)
 
     def _settled(self) -> bool:
-        return self.book.settled(self.step.index, self._due)
+        return self.book.settled(self.step.index, self.due_agents)
 
     def _advance_if_settled(self) -> None:
         if self.realtime or self.step is None or self.finished or not self._settled():
@@ -469,8 +473,8 @@ def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
     (std_srvs/Trigger names no caller), so the graph is asked first: with a stranger calling it,
     the call is refused (or, at the agent's own step, answered again with the same state) and
     counted as foreign, the stranger named; two processes claiming the agent end the run."""
-    due = agent in node._due
-    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node._due)})'
+    due = agent in node.due_agents
+    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node.due_agents)})'
     (watched,) = [w for w in simulator_watched(node.scenario) if w.mangled and w.agent == agent]
     writers = [
         Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())

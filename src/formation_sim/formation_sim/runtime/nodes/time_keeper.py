@@ -180,7 +180,7 @@ class WorldHooks:
     watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
     batched_spin: bool  # `keeper_main.main` spins 0.1 s of events per look (else one event per look)
 
-    def _world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+    def world_problems(self, values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario, each broken one named."""
         raise NotImplementedError
 
@@ -189,7 +189,7 @@ class WorldHooks:
         raise NotImplementedError
 
     def _setup_world(self) -> None:
-        """The world's publishers (the tools' among `_tool_publishers`) and subscriptions."""
+        """The world's publishers (the tools' among `tool_publishers`) and subscriptions."""
         raise NotImplementedError
 
     def _watch_agents(self) -> dict:
@@ -197,7 +197,7 @@ class WorldHooks:
         (its liveliness events go to `_on_agent_liveliness`)."""
         raise NotImplementedError
 
-    def _world_gaps(self) -> list[str]:
+    def world_gaps(self) -> list[str]:
         """What discovery still waits for in the world."""
         raise NotImplementedError
 
@@ -275,15 +275,17 @@ class TimeKeeperNode(WorldHooks, Node):
         self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
         self.agents = self.book.agents
 
-        self._step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
+        self.step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
         # For tools: the scenario once (so a bag is self-contained).
-        self._scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
-        self._tool_publishers = [self._scenario_pub]
-        self._status_sub, self._report_sub = _agent_readers(self)
+        self.scenario_pub = self.create_publisher(String, SCENARIO_TOPIC, SIMULATOR_QOS)
+        self.tool_publishers = [self.scenario_pub]
+        self.status_sub, self.report_sub = agent_readers(
+            self, on_status=self._on_status, on_report=self._on_report
+        )
         # The recorders' heartbeat writers (one per extra subscriber): their liveliness says the
         # recorder still takes and acknowledges what the run publishes.  A frozen recorder lets
         # every reliable keep-last writer of the run overwrite what it did not acknowledge.
-        self._recorder_sub = self.create_subscription(
+        self.recorder_sub = self.create_subscription(
             String,
             RECORDER_TOPIC,
             self._on_recorder,
@@ -308,9 +310,9 @@ class TimeKeeperNode(WorldHooks, Node):
         self.after_end: dict[int, str] = {}
         self._setup_world()
         # One writer per agent whose DDS liveliness is the agent's sign of life.
-        self._agent_writers = self._watch_agents()
+        self.agent_writers = self._watch_agents()
         self._timer = self.create_timer(TICK_PERIOD, self._tick)
-        watch_intruders(self)
+        self.graph_watch, self.freeze, self._graph_timer = watch_intruders(self)
         self.operator_stop = OperatorStop(self)  # /formation/stop, the run's emergency stop
         self.marks.mark('node_up', time.monotonic())
         self._next_discovery_progress = self.marks.created + DISCOVERY_PROGRESS_AFTER
@@ -330,7 +332,7 @@ class TimeKeeperNode(WorldHooks, Node):
         self._running_tick()
         if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
             self._last_progress = now
-            self._print_progress()
+            self.print_progress()
 
     def _discovery_tick(self, now: float) -> None:
         """Before step 0: start once connected, give up after the discovery timeout, else say what
@@ -375,7 +377,7 @@ class TimeKeeperNode(WorldHooks, Node):
             )
         look_at_graph(self, everything=True)  # no step 0 with two processes claiming an agent
         self._publish(
-            self._scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
+            self.scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
         )
         self._begin()
 
@@ -390,7 +392,7 @@ class TimeKeeperNode(WorldHooks, Node):
             self.graph = graph_of(self)
         self.finished = True
         self._publish(
-            self._step_pub,
+            self.step_pub,
             encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)),
         )
         if not self.graph:  # on the wall clock, the final Step first: agents leave after their reports
@@ -416,7 +418,7 @@ class TimeKeeperNode(WorldHooks, Node):
     # -- the agents' messages -------------------------------------------------------------------
 
     def _publish(self, publisher, msg) -> None:
-        msg = tag_array(msg, self.signer, STEP_TOPIC) if publisher is self._step_pub else msg
+        msg = tag_array(msg, self.signer, STEP_TOPIC) if publisher is self.step_pub else msg
         publisher.publish(msg)
         self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
 
@@ -424,7 +426,7 @@ class TimeKeeperNode(WorldHooks, Node):
         try:
             status = decode_status(msg)
         except MessageError as error:  # not from a working agent: the stall timeout covers the rest
-            self._reject(STATUS_TOPIC, error.reason, str(error))
+            self.reject(STATUS_TOPIC, error.reason, str(error))
             return
         self.book.accept_status(status)
         if self.step is None and status.step_index == DISCOVERY_STEP:
@@ -439,10 +441,10 @@ class TimeKeeperNode(WorldHooks, Node):
         try:
             report = decode_agent_report(msg)
         except MessageError as error:
-            self._reject(REPORT_TOPIC, error.reason, str(error))
+            self.reject(REPORT_TOPIC, error.reason, str(error))
             return
         if (refusal := self.book.accept_report(report)) is not None:
-            self._reject(REPORT_TOPIC, 'field', refusal)
+            self.reject(REPORT_TOPIC, 'field', refusal)
             return
         if report.final and self.step is not None and (report.failure or not self.finished):
             if not self.finished:  # no failure named: it left on a final Step from elsewhere
@@ -454,7 +456,7 @@ class TimeKeeperNode(WorldHooks, Node):
         """An agent's final report says it stopped on an error before the end of the run (the
         world decides what follows; lock-step: its liveliness or the stall timeout)."""
 
-    def _reject(self, topic: str, reason: str, detail: str) -> None:
+    def reject(self, topic: str, reason: str, detail: str) -> None:
         count = self.book.count_rejection(reason)
         if count <= 3 or count % 100 == 0:
             self.get_logger().warning(f'rejected a message on {topic} ({reason}, {count} so far): {detail}')
@@ -491,7 +493,7 @@ class TimeKeeperNode(WorldHooks, Node):
     def _on_recorder(self, msg: String) -> None:
         """A recorder's heartbeat: the latest step it has written (lock-step flow control)."""
         if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
-            self._reject(RECORDER_TOPIC, 'field', refusal)
+            self.reject(RECORDER_TOPIC, 'field', refusal)
             return
         self._after_status()
 
@@ -518,7 +520,7 @@ class TimeKeeperNode(WorldHooks, Node):
         with contextlib.suppress(OSError):  # nobody reads any more (the orchestrator died)
             print(line, flush=True)
 
-    def _print_progress(self) -> None:
+    def print_progress(self) -> None:
         events = sum(len(book.trigger_times) for book in self.agents.values())
         try:
             print(
@@ -537,15 +539,18 @@ class TimeKeeperNode(WorldHooks, Node):
     def delivery_publishers(self, *, with_steps: bool) -> list:
         """The writers whose readers must acknowledge everything before the node goes: the tools'
         topics and, `with_steps`, the Steps."""
-        return [self._step_pub, *self._tool_publishers] if with_steps else list(self._tool_publishers)
+        return [self.step_pub, *self.tool_publishers] if with_steps else list(self.tool_publishers)
 
 
-def watch_intruders(node: TimeKeeperNode) -> None:
-    """Strangers and duplicates in the graph (`graph_watch`, looked at every GRAPH_LOOK_PERIOD),
-    and the keeper's own freezes (`freeze`, ticked by its tick): issue 28."""
-    node.graph_watch = GraphWatch(watched_topics(node))
-    node.freeze = FreezeWatch(period=TICK_PERIOD)
-    node._graph_timer = node.create_timer(GRAPH_LOOK_PERIOD, lambda: look_at_graph(node))
+def watch_intruders(node: TimeKeeperNode) -> tuple:
+    """Strangers and duplicates in the graph (a `GraphWatch`, looked at every GRAPH_LOOK_PERIOD by
+    the timer returned), and the keeper's own freezes (a `FreezeWatch`, ticked by its tick): issue
+    28; (the graph watch, the freeze watch, the timer)."""
+    return (
+        GraphWatch(watched_topics(node)),
+        FreezeWatch(period=TICK_PERIOD),
+        node.create_timer(GRAPH_LOOK_PERIOD, lambda: look_at_graph(node)),
+    )
 
 
 def watched_topics(node: TimeKeeperNode) -> list:
@@ -598,18 +603,18 @@ def blamed(node: TimeKeeperNode, error: BaseException) -> BaseException:
     return error
 
 
-def _agent_readers(node: TimeKeeperNode) -> tuple:
-    """The keeper's readers of the agents' Statuses and reports: what comes without the run's
-    valid tag is refused first (`tag_refused`)."""
+def agent_readers(node: TimeKeeperNode, *, on_status, on_report) -> tuple:
+    """The keeper's readers of the agents' Statuses (to `on_status`) and reports (to `on_report`):
+    what comes without the run's valid tag is refused first (`tag_refused`)."""
     return (
         node.create_subscription(
             Float64MultiArray,
             STATUS_TOPIC,
-            lambda msg: _tagged(node, STATUS_TOPIC, msg, node._on_status),
+            lambda msg: _tagged(node, STATUS_TOPIC, msg, on_status),
             READER_QOS,
         ),
         node.create_subscription(
-            String, REPORT_TOPIC, lambda msg: _tagged(node, REPORT_TOPIC, msg, node._on_report), READER_QOS
+            String, REPORT_TOPIC, lambda msg: _tagged(node, REPORT_TOPIC, msg, on_report), READER_QOS
         ),
     )
 
@@ -623,7 +628,7 @@ def _tagged(node: TimeKeeperNode, topic: str, msg, then) -> None:
 def tag_refused(node: TimeKeeperNode, topic: str, msg, check) -> bool:
     """Whether `msg` lacks the run's valid tag for `topic` (`codec.tag_refused`, `check`:
     codec.check_array or check_string): refused and counted by the keeper."""
-    return refused_tag(node.verifier, topic, msg, node._reject, check=check)
+    return refused_tag(node.verifier, topic, msg, node.reject, check=check)
 
 
 def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
@@ -647,7 +652,7 @@ def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tupl
             problems.append(
                 f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}'
             )
-        problems += node._world_problems(values, scenario)
+        problems += node.world_problems(values, scenario)
     if problems:
         name = node.get_fully_qualified_name()
         node.destroy_node()  # nothing of it outlives the refusal
@@ -684,13 +689,13 @@ def discovery_gaps(node: TimeKeeperNode) -> list[str]:
         if have < want:
             gaps.append(f'{what} {have}/{want}')
 
-    count(f'{STEP_TOPIC} readers', node._step_pub.get_subscription_count(), n + extra + node.step_listeners)
-    for pub in node._tool_publishers:
+    count(f'{STEP_TOPIC} readers', node.step_pub.get_subscription_count(), n + extra + node.step_listeners)
+    for pub in node.tool_publishers:
         count(f'{pub.topic_name} readers', pub.get_subscription_count(), extra)
-    count(f'{STATUS_TOPIC} writers', node._status_sub.get_publisher_count(), n)
-    count(f'{REPORT_TOPIC} writers', node._report_sub.get_publisher_count(), n)
-    count(f'{RECORDER_TOPIC} writers (recorders)', node._recorder_sub.get_publisher_count(), extra)
-    unmatched = [i for i, sub in node._agent_writers.items() if sub.get_publisher_count() < 1]
+    count(f'{STATUS_TOPIC} writers', node.status_sub.get_publisher_count(), n)
+    count(f'{REPORT_TOPIC} writers', node.report_sub.get_publisher_count(), n)
+    count(f'{RECORDER_TOPIC} writers (recorders)', node.recorder_sub.get_publisher_count(), extra)
+    unmatched = [i for i, sub in node.agent_writers.items() if sub.get_publisher_count() < 1]
     expired = [i for i, book in node.agents.items() if book.lost is not None]
     for what, agents in (
         (f'agents whose {node.watched_writer} writer is not matched', unmatched),
@@ -699,7 +704,7 @@ def discovery_gaps(node: TimeKeeperNode) -> list[str]:
     ):
         if agents:
             gaps.append(f'{what}: {ids_text(agents)}')
-    return gaps + node._world_gaps()
+    return gaps + node.world_gaps()
 
 
 def run_extra(node: TimeKeeperNode, reached: float) -> dict:
