@@ -129,3 +129,23 @@ def test_the_speed_scale_and_the_threshold_floor_are_parameters_that_keep_old_ke
         build_study(_spec({'n': 4, 'speed_scale': 0}))
     with pytest.raises(StudyError, match=r'cases\[0\].threshold_floor: must be a number >= 0'):
         build_study(_spec({'n': 4, 'threshold_floor': -1.0}))
+
+
+def test_until_error_and_the_beta_d_bound_are_parameters_that_keep_old_keys():
+    plain = build_study(_spec({'n': 4}, {'n': 4, 'algorithm': 'eta2', 'beta_d': 0.5}))
+    more = build_study(
+        _spec(
+            {'n': 4, 'until_error': [None, 0.01]},
+            {'n': 4, 'algorithm': 'eta2', 'beta_d': 0.5, 'beta_d_bound': ['printed', 'corrected']},
+        )
+    )
+    assert len(more.cases) == 4
+    assert more.cases[0].key == plain.cases[0].key and more.cases[2].key == plain.cases[1].key
+    assert len({c.key for c in more.cases}) == 4
+    assert more.cases[1].params['until_error'] == 0.01 and more.cases[3].params['beta_d_bound'] == 'corrected'
+    assert more.cases[0].params['beta_d_bound'] is None  # ETA-1: no β_d, no bound
+    with pytest.raises(StudyError, match=r'cases\[0\].until_error: must be a number in \(0, 1\).*got 1.0'):
+        build_study(_spec({'n': 4, 'until_error': 1.0}))
+    bound = r"cases\[0\].beta_d_bound: must be one of printed, corrected.*'λmax'"
+    with pytest.raises(StudyError, match=bound):
+        build_study(_spec({'n': 4, 'algorithm': 'eta2', 'beta_d_bound': 'λmax'}))

@@ -12,7 +12,9 @@ between two events: between events the motion is closed form and the error could
 but the audit's guarantees are checked at events, and a stop at the first event at or after the true
 crossing is deterministic (the same floats in, the same event out) and costs O(edges) per event. So a
 run with `until_error` ends at the first event time t > 0 with error(t) < until_error * error(0),
-after the first crossing by at most one inter-event time of the team.
+after the first crossing by at most one inter-event time of the team; the agents due at that event
+do not trigger (a run to a horizon that is an event time triggers them there), and neither do those
+at a rounding floor stop.
 """
 
 from __future__ import annotations
