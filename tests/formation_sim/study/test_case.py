@@ -134,3 +134,39 @@ def test_a_case_at_a_speed_scale_runs_the_same_events_in_scaled_time():
     assert b['status'] == 'ok' and b['total_events'] == a['total_events']
     assert b['min_inter_event_time'] == pytest.approx(2.0 * a['min_inter_event_time'], rel=1e-9)
     assert b['conn_violations'] == b['conv_violations'] == b['zeno_violations'] == 0
+
+
+def test_beta_d_drawn_as_a_fraction_of_the_corrected_bound():
+    block = {'n': 6, 'algorithm': 'eta2', 'graph': 'path', 'beta1': 0.4, 'beta_d': 0.7}
+    printed, corrected = _cases(block, {**block, 'beta_d_bound': 'corrected'})
+    a, b = scenario_of(printed), scenario_of(corrected)
+    constants = theory.theorem_constants(b)
+    assert b.gains.beta_d == pytest.approx(0.7 * constants.beta_d_bound_corrected, rel=1e-12)
+    assert a.gains.beta_d == pytest.approx(0.7 * constants.beta_d_bound_paper, rel=1e-12)
+    # The same team and gains but β_d: P (so both bounds) does not depend on β_d.
+    assert np.array_equal(a.gains.P, b.gains.P) and a.gains.k3 == b.gains.k3
+    assert np.array_equal(a.positions, b.positions)
+    assert b.gains.beta_d < constants.beta_d_bound_corrected < a.gains.beta_d  # here corrected < printed
+    row = run_case(corrected)
+    assert row['status'] == 'ok' and row['rate'] == b.gains.beta_d and row['beta_d_bound'] == 'corrected'
+    assert row['conv_checks'] > 0 and row['conv_violations'] == 0  # Theorem 2 (ii) checked: below the bound
+
+
+def test_until_error_runs_a_case_to_its_first_event_below_the_fraction():
+    (case,) = _cases({'n': 5, 'graph': 'cycle', 'slack': 0.3, 'horizon': 60.0, 'until_error': 0.01})
+    row = run_case(case)
+    assert row['status'] == 'ok' and row['stop'] == 'error_reached' and row['stop_time'] < 60.0
+    scenario = scenario_of(case)
+    heads, tails, d = scenario.edge_indices()
+    x = scenario.positions
+    initial = np.linalg.norm(x[heads] - x[tails] - d, axis=1).max()
+    assert row['initial_formation_error'] == pytest.approx(initial, rel=1e-15)
+    assert row['final_formation_error'] < 0.01 * row['initial_formation_error']
+    # The run without the stop has the same events before the stop time, and one at it (the stop
+    # comes before that event's agents trigger).
+    full = simulate(scenario, horizon=row['stop_time'], sample_dt=0.0)
+    times = [t for chain in full.trigger_times.values() for t in chain]
+    assert sum(t < row['stop_time'] for t in times) == row['total_events'] and max(times) == row['stop_time']
+    assert row['conv_checks'] > 0 and row['conv_violations'] == 0
+    (plain,) = _cases({'n': 5, 'graph': 'cycle', 'slack': 0.3, 'horizon': 1.0})
+    assert run_case(plain)['stop'] is None

@@ -114,6 +114,11 @@ def test_shipped_studies_expand(tmp_path):
     assert {p['algorithm'] for p in params} == {'eta1', 'eta2'}
     assert min(p['n'] for p in params) == 2 and max(p['n'] for p in params) >= 95
     assert {p['p'] for p in params} == {1, 2, 3}
+    # To convergence (issue 31): every run to 1 % of its initial error (or the rounding floor), and
+    # at least 500 ETA-2 teams with β_d a fraction of the corrected bound, so below it.
+    assert {p['until_error'] for p in params} == {0.01}
+    corrected = [p for p in params if p['beta_d_bound'] == 'corrected']
+    assert len(corrected) >= 500 and all(0 < p['beta_d'] < 1 for p in corrected)
     (tmp_path / 'bad.yaml').write_text('name: x\ncases: [{n: 3, p: 0}]\n')
     with pytest.raises(StudyError, match=r'bad.yaml: cases\[0\].p: must be an integer in \[1, 10\]'):
         load_study(tmp_path / 'bad.yaml')
@@ -129,3 +134,23 @@ def test_the_speed_scale_and_the_threshold_floor_are_parameters_that_keep_old_ke
         build_study(_spec({'n': 4, 'speed_scale': 0}))
     with pytest.raises(StudyError, match=r'cases\[0\].threshold_floor: must be a number >= 0'):
         build_study(_spec({'n': 4, 'threshold_floor': -1.0}))
+
+
+def test_until_error_and_the_beta_d_bound_are_parameters_that_keep_old_keys():
+    plain = build_study(_spec({'n': 4}, {'n': 4, 'algorithm': 'eta2', 'beta_d': 0.5}))
+    more = build_study(
+        _spec(
+            {'n': 4, 'until_error': [None, 0.01]},
+            {'n': 4, 'algorithm': 'eta2', 'beta_d': 0.5, 'beta_d_bound': ['printed', 'corrected']},
+        )
+    )
+    assert len(more.cases) == 4
+    assert more.cases[0].key == plain.cases[0].key and more.cases[2].key == plain.cases[1].key
+    assert len({c.key for c in more.cases}) == 4
+    assert more.cases[1].params['until_error'] == 0.01 and more.cases[3].params['beta_d_bound'] == 'corrected'
+    assert more.cases[0].params['beta_d_bound'] is None  # ETA-1: no β_d, no bound
+    with pytest.raises(StudyError, match=r'cases\[0\].until_error: must be a number in \(0, 1\).*got 1.0'):
+        build_study(_spec({'n': 4, 'until_error': 1.0}))
+    bound = r"cases\[0\].beta_d_bound: must be one of printed, corrected.*'λmax'"
+    with pytest.raises(StudyError, match=bound):
+        build_study(_spec({'n': 4, 'algorithm': 'eta2', 'beta_d_bound': 'λmax'}))

@@ -42,6 +42,7 @@ from formation_sim.model import theory
 from formation_sim.sim.errors import EngineError
 from formation_sim.sim.record import RunRecord
 from formation_sim.sim.samples import EdgeLengths, Samples, TrajectoryWriter
+from formation_sim.sim.stop import RunStop
 from formation_sim.sim.world import World
 
 if TYPE_CHECKING:
@@ -352,6 +353,8 @@ def simulate(
     progress: Callable[[float, int], None] | None = None,
     on_event: Callable[[float, World, list[int]], None] | None = None,
     time_warp: TimeWarp | None = None,
+    until_error: float | None = None,
+    stop_at_floor: bool = False,
 ) -> RunRecord:
     """Run ETA-1/ETA-2 (or periodic sampling with `period`) exactly up to `horizon`.
 
@@ -366,6 +369,10 @@ def simulate(
     single integrators is still the exact maximum. Samples are kept in memory (O(samples x agents)),
     or, with `trajectory_dir` (a run folder), written into its `trajectory/` as they are produced
     (memory O(agents + samples)) and memory-mapped in the record (`formation_sim.sim.samples`).
+
+    `until_error` (0 < f < 1) ends the run at its first event t > 0 with formation error < f × the initial,
+    `stop_at_floor` on the rounding floor instead of an EngineError; either sets the record's horizon to
+    the run's end and `extra['stop']` (horizon, error_reached or rounding_floor: `formation_sim.sim.stop`).
     """
     horizon = float(scenario.horizon if horizon is None else horizon)
     if not (math.isfinite(horizon) and horizon > 0.0):
@@ -375,16 +382,10 @@ def simulate(
     clock = None if time_warp is None else _WarpClock.of(time_warp, scenario, horizon=horizon, period=period)
     started = time.perf_counter()
     world = World.from_scenario(scenario)
+    stop = RunStop.of(scenario, world, horizon=horizon, until_error=until_error, at_floor=stop_at_floor)
     agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
-    writer = None
-    if trajectory_dir is not None:
-        writer = TrajectoryWriter(
-            trajectory_dir,
-            agent_ids=scenario.agent_ids,
-            dimension=scenario.dimension,
-            velocities=scenario.dynamics == 'double',
-        )
+    writer = None if trajectory_dir is None else _writer(trajectory_dir, scenario)
     watch = None if sample_events else EdgeLengths(scenario)
     sampler = Sampler(world, sample_dt, events=sample_events, writer=writer, watch=watch, clock=clock)
     try:
@@ -398,15 +399,17 @@ def simulate(
             period=period,
             progress=progress,
             on_event=on_event,
+            stop=stop,
         )
     except BaseException:
         if writer is not None:
             writer.abandon()  # what was written stays, named trajectory.incomplete
         raise
     wall_time = time.perf_counter() - started
+    asked = until_error is not None or stop_at_floor  # else no extra['stop']
     return RunRecord(
         scenario=scenario,
-        horizon=horizon,
+        horizon=horizon if stop.time is None else stop.time,  # the horizon unless a stop came first
         mode='in_process' if period is None else 'periodic',
         trigger_times=trigger_times,
         samples=sampler.samples(),
@@ -415,11 +418,28 @@ def simulate(
         wall_time=wall_time,
         extra={
             'samples': 'events' if sample_events else 'grid' if sample_dt else 'none',
-            **({'period': period} if period is not None else {}),
-            **({'safety': _safety_extra(scenario, agents, clock)} if scenario.safety is not None else {}),
-            **({} if clock is None else {'time_warp': clock.warp.to_dict()}),
+            **_run_extra(scenario, agents, clock=clock, period=period, stop=stop if asked else None),
         },
     )
+
+
+def _writer(trajectory_dir: str | Path, scenario) -> TrajectoryWriter:
+    return TrajectoryWriter(
+        trajectory_dir,
+        agent_ids=scenario.agent_ids,
+        dimension=scenario.dimension,
+        velocities=scenario.dynamics == 'double',
+    )
+
+
+def _run_extra(scenario, agents: dict, *, clock, period: float | None, stop: RunStop | None) -> dict:
+    """The record's extra after its samples' kind: the period, the safety layer, the warp, the stop."""
+    return {
+        **({'period': period} if period is not None else {}),
+        **({'safety': _safety_extra(scenario, agents, clock)} if scenario.safety is not None else {}),
+        **({} if clock is None else {'time_warp': clock.warp.to_dict()}),
+        **({'stop': stop.extra()} if stop is not None else {}),
+    }
 
 
 def _safety_extra(scenario, agents: dict, clock) -> dict:
@@ -457,6 +477,7 @@ def _run(
     period,
     progress,
     on_event,
+    stop: RunStop,
 ) -> int:
     """The event loop of `simulate`; fills `trigger_times` and the sampler, returns the messages sent.
     With the sampler's warp clock it runs in the paper's time and labels the triggering times in real time."""
@@ -474,8 +495,14 @@ def _run(
     team = _team(agents, world) if period is None else None
     while True:
         sampler.event(due=due)
+        real_t = t if clock is None else clock.real(t)
         if period is None and (problem := rounding_floor(some_agent, world, floor_edges)) is not None:
-            raise EngineError(problem)
+            if not stop.at_floor:
+                raise EngineError(problem)
+            stop.end('rounding_floor', real_t, problem, world=world)
+        if stop.reason is not None or stop.error_reached(world, t, real_t):
+            sampler.event(force=True)
+            break
         if on_event is not None:
             on_event(t, world, due)
         receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
@@ -498,6 +525,7 @@ def _run(
             sampler.grid_until(horizon)
             world.advance(horizon)
             sampler.event(force=True)
+            stop.at_horizon(world)
             break
         sampler.grid_until(t_next)
         world.advance(t_next)

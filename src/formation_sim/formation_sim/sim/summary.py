@@ -21,6 +21,9 @@ keys):
   a threshold floor; ξ in seconds (ξ_i / κ)
 - `wall_time`: seconds the run took
 - `extra`: implementation-specific details (e.g. the distributed run's domain id)
+- `extra.stop`: engine runs with `until_error` or `stop_at_floor` (formation_sim.sim.stop): {reason
+  (horizon, error_reached, rounding_floor), time (= `horizon`, the run's end), horizon (asked for),
+  until_error, initial_error, error, message}
 - `extra.failure`: distributed runs: null if the run reached the horizon; else {kind, message,
   agents, time, step, wall_time, detected_by[, process][, followed]} — what stopped it first
   (`followed`: agent -> the error of each agent that then stopped on its own) (kind: agent_lost,

@@ -19,6 +19,7 @@ import time
 import traceback
 from typing import Any
 
+from formation_sim.model.gains import beta_d_bound_corrected
 from formation_sim.model.generate import random_scenario
 from formation_sim.study.spec import PARAMETERS, Case
 
@@ -35,6 +36,9 @@ RUN_COLUMNS = (
     'min_inter_event_time',
     'final_formation_error',
     'max_edge_length',
+    'stop',
+    'stop_time',
+    'initial_formation_error',
 )
 AUDIT_COLUMNS = (
     'conn_checks',
@@ -83,6 +87,9 @@ def scenario_of(case: Case):
         name=f'case-{case.key}',
         **options,
     )
+    if p['beta_d_bound'] == 'corrected' and p['beta_d'] is not None:  # of (2-k4)/λmax(P), not the printed
+        rate = p['beta_d'] * beta_d_bound_corrected(scenario.gains)
+        scenario = scenario.replace(gains=dataclasses.replace(scenario.gains, beta_d=rate))
     if p['speed_scale'] == 1.0 and p['threshold_floor'] == 0.0:
         return scenario
     gains = dataclasses.replace(
@@ -131,7 +138,14 @@ def _simulate(case: Case, scenario, watch):
         return simulate_continuous(scenario, horizon=p['horizon'], sample_dt=p['horizon'] / 100.0)
     if p['sampling'] == 'periodic':
         return simulate(scenario, horizon=p['horizon'], sample_dt=0.0, period=p['period'])
-    return simulate(scenario, horizon=p['horizon'], sample_dt=0.0, on_event=watch.on_event)
+    return simulate(
+        scenario,
+        horizon=p['horizon'],
+        sample_dt=0.0,
+        on_event=watch.on_event,
+        until_error=p['until_error'],
+        stop_at_floor=p['until_error'] is not None,
+    )
 
 
 def _run_numbers(case: Case, scenario) -> dict[str, Any]:
@@ -154,6 +168,11 @@ def _run_numbers(case: Case, scenario) -> dict[str, Any]:
         'final_formation_error': summary['final_formation_error'],
         'max_edge_length': summary['max_edge_length'],
     }
+    stop = record.extra.get('stop')
+    if stop is not None:  # until_error: which stop ended the run (formation_sim.sim.stop)
+        numbers.update(
+            stop=stop['reason'], stop_time=stop['time'], initial_formation_error=stop['initial_error']
+        )
     if event:
         watch.finish(record.horizon)
         numbers.update(watch.result())

@@ -44,6 +44,7 @@ from formation_sim.study.errors import StudyError
 
 ALGORITHMS = ('eta1', 'eta2')  # ETA-1: single integrators (Theorem 1); ETA-2: double (Theorem 2)
 SAMPLINGS = ('event', 'periodic', 'continuous')
+BETA_D_BOUNDS = ('printed', 'corrected')  # what β_d is a fraction of (docs/THEOREM2.md)
 
 
 def _is_int(v: Any) -> bool:
@@ -114,12 +115,24 @@ PARAMETERS: dict[str, Parameter] = {
     ),
     'beta_d': Parameter(
         None,
-        'a number in (0, 1): β_d as a fraction of the printed bound (2-k4)ρ2(P) (ETA-2; default half '
+        'a number in (0, 1): β_d as a fraction of the bound named by beta_d_bound (ETA-2; default half '
         'the smaller bound)',
         lambda v: _is_num(v) and 0 < v < 1,
     ),
+    'beta_d_bound': Parameter(
+        'printed',
+        f'one of {", ".join(BETA_D_BOUNDS)}: the bound β_d is a fraction of, the printed (2-k4)ρ2(P) or '
+        'the corrected (2-k4)/λmax(P) of docs/THEOREM2.md (ETA-2)',
+        lambda v: v in BETA_D_BOUNDS,
+    ),
     'max_speed': Parameter(1.0, 'a number >= 0 (bound on |q_i(0)|, ETA-2)', lambda v: _is_num(v) and v >= 0),
     'horizon': Parameter(5.0, 'a number > 0 [s]', lambda v: _is_num(v) and v > 0),
+    'until_error': Parameter(
+        None,
+        'a number in (0, 1): end an event run at its first event whose formation error is below this '
+        'fraction of the initial one, or on the rounding floor (the horizon stays the upper bound)',
+        lambda v: _is_num(v) and 0 < v < 1,
+    ),
     'speed_scale': Parameter(
         1.0,
         "a number > 0 (the speed scale κ; docs/SPEED_SCALE.md; 1 is the paper's)",
@@ -131,11 +144,11 @@ PARAMETERS: dict[str, Parameter] = {
         lambda v: _scale_ok('threshold_floor', v),
     ),
 }
-# Parameters added after studies were run: at their default they stay out of a case's key, so the
-# cases (and study folders) of earlier SPECs keep their keys.
-LATE_PARAMETERS = ('speed_scale', 'threshold_floor')
+# Parameters added after studies were run: at their default (or None, where they do not apply) they
+# stay out of a case's key, so the cases (and study folders) of earlier SPECs keep their keys.
+LATE_PARAMETERS = ('speed_scale', 'threshold_floor', 'until_error', 'beta_d_bound')
 INTEGERS = ('n', 'p', 'seed')
-ETA2_ONLY = ('beta1', 'k3', 'beta_d', 'max_speed')
+ETA2_ONLY = ('beta1', 'k3', 'beta_d', 'beta_d_bound', 'max_speed')
 DISTRIBUTIONS = ('uniform', 'log_uniform', 'integers', 'log_integers', 'choice')
 TOP_KEYS = ('name', 'seed', 'defaults', 'cases')
 
@@ -282,7 +295,11 @@ def _block_cases(
 def case_key(params: dict[str, Any]) -> str:
     """16 hex digits of the SHA-256 of the parameters' canonical JSON (LATE_PARAMETERS at their
     default left out)."""
-    keyed = {k: v for k, v in params.items() if not (k in LATE_PARAMETERS and v == PARAMETERS[k].default)}
+    keyed = {
+        k: v
+        for k, v in params.items()
+        if not (k in LATE_PARAMETERS and (v is None or v == PARAMETERS[k].default))
+    }
     text = json.dumps(keyed, sort_keys=True, allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

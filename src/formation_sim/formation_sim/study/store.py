@@ -25,7 +25,9 @@ from formation_sim.study.spec import PARAMETERS, Study
 ROWS_FILE = 'rows.csv'
 STUDY_FILE = 'study.json'
 SCHEMA = 'formation-study/1'
-STRING_COLUMNS = frozenset({'key', 'algorithm', 'sampling', 'graph', 'status', 'error', 'worker'})
+STRING_COLUMNS = frozenset(
+    {'key', 'algorithm', 'sampling', 'graph', 'status', 'error', 'worker', 'beta_d_bound', 'stop'}
+)
 
 
 def _cell(value: Any) -> str:
