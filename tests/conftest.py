@@ -89,17 +89,25 @@ def pytest_collection_modifyitems(items):
 
 @pytest.fixture(scope='module')
 def ros(request, tmp_path_factory):
-    """An rclpy context on the test module's own `DOMAIN_ID`, discovery limited to this machine."""
+    """An rclpy context on the test module's own `DOMAIN_ID`, discovery limited to this machine; an id
+    `formation run` may pick is held against runs of other tests (`testing.hold_domain`)."""
     import rclpy
+
+    from formation_sim.runtime.launch.plan import DOMAIN_RANGE
+    from formation_sim.runtime.testing import hold_domain
 
     os.environ.setdefault('ROS_LOG_DIR', str(tmp_path_factory.mktemp('ros_log')))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=request.module.DOMAIN_ID)
-    try:
-        yield context
-    finally:
-        rclpy.shutdown(context=context)
+    domain = request.module.DOMAIN_ID
+    with contextlib.ExitStack() as held:
+        if DOMAIN_RANGE[0] <= domain <= DOMAIN_RANGE[1]:  # a run picking a free domain skips it
+            held.enter_context(hold_domain(domain))
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        try:
+            yield context
+        finally:
+            rclpy.shutdown(context=context)
 
 
 @pytest.fixture(autouse=True)

@@ -7,6 +7,7 @@ The first test is the example of docs/REPLAY_IN_TESTS.md (included from here, be
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -90,3 +91,23 @@ def test_bad_rates_and_topics_are_named(recorded_run):
         replay.collect('/formation/step')
     with replay, pytest.raises(ReplayError, match=r"no topic '/nowhere' in the bag"):
         replay.collect('/nowhere')
+
+
+def test_a_held_domain_is_refused_to_a_run_and_waited_for_by_another_holder():
+    from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.plan import reserve_domain
+    from formation_sim.runtime.testing import hold_domain
+
+    with hold_domain(199) as domain:
+        assert domain == 199
+        held = 'ROS domain 199 is held by another formation run'
+        with pytest.raises(RunError, match=held), reserve_domain(199):
+            pass
+        began = time.monotonic()
+        with pytest.raises(RunError, match='held by another formation run'), hold_domain(199, timeout=0.3):
+            pass
+        assert time.monotonic() - began >= 0.3  # it waited for the holder
+    with reserve_domain(199) as domain:  # released
+        assert domain == 199
+    with pytest.raises(RunError, match='domain id must lie in'), hold_domain(300):
+        pass

@@ -23,6 +23,10 @@ The domain is chosen free and locked as `formation run` does (`launch.reserve_do
 with `domain_id=`; discovery stays on this machine (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`
 unless the environment says otherwise). Nothing here runs at import: rclpy is imported when a
 replay is entered.
+
+A test that uses a ROS domain of its own without a run or a replay holds it with
+`with hold_domain(152):` (the same lock, waiting while a run has it), so that no run of another
+test that picks a free domain joins it.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import math
 import os
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +45,32 @@ from formation_sim.runtime.errors import ReplayError
 from formation_sim.runtime.tools.replay import BagPlayer, ReplayResult, _bag_topics
 
 SPIN_STEP = 0.05  # seconds one spin_once waits for work
+
+
+@contextlib.contextmanager
+def hold_domain(domain_id: int, *, timeout: float = 300.0) -> Iterator[int]:
+    """Hold ROS domain `domain_id` with the lock `formation run` takes (`launch.reserve_domain`),
+    waiting up to `timeout` s while a run holds it (then `RunError`, as for a bad id). For a test
+    that uses a domain without a run or a replay: a run that picks a free domain skips it meanwhile
+    (once, a run picked the domain a recorder test used raw, and the recorder took its Steps)."""
+    from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.plan import domain_id_ok, reserve_domain
+
+    deadline = time.monotonic() + timeout
+    while True:
+        held = reserve_domain(domain_id)
+        try:
+            domain = held.__enter__()
+        except RunError:
+            if not domain_id_ok(domain_id) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+            continue
+        break
+    try:
+        yield domain
+    finally:
+        held.__exit__(None, None, None)
 
 
 class BagReplay:

@@ -357,14 +357,17 @@ def ros_domain(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, domain_id: int):
         'ROS_LOG_DIR': str(tmp_path / 'ros_log'),
         'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp',
     }
+    from formation_sim.runtime.testing import hold_domain
+
     for key, value in env.items():
         monkeypatch.setenv(key, value)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    try:
-        yield context
-    finally:
-        rclpy.try_shutdown(context=context)
+    with hold_domain(domain_id):  # no run of another test picks it meanwhile
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain_id)
+        try:
+            yield context
+        finally:
+            rclpy.try_shutdown(context=context)
 
 
 @contextlib.contextmanager
