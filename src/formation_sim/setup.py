@@ -12,7 +12,7 @@ setup(
     python_requires='>=3.11',
     # Namespace search: a subpackage is shipped whether or not it has an __init__.py.
     packages=find_namespace_packages(include=[package_name, f'{package_name}.*'], exclude=['*.__pycache__']),
-    package_data={package_name: ['model/scenarios/*.yaml', 'runtime/launch/fastdds_profile.xml']},
+    package_data={package_name: ['model/scenarios/*.yaml']},
     # What ament expects of an ament_python package: the index marker and package.xml in share/.
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),

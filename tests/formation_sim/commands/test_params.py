@@ -168,8 +168,9 @@ def test_the_readmes_commands_run_a_formation_by_hand(tmp_path):
     """Each command as the README writes it (its folder moved under tmp_path), in its own process;
     the lock-step run they make is the in-process engine's, triggering time for triggering time."""
     from formation_agent.ros.process import teardown_status
+    from formation_msgs_py.middleware import FASTDDS_PROFILE
     from formation_sim.model.scenario import load_scenario
-    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE, with_our_packages
+    from formation_sim.runtime.launch.plan import with_our_packages
     from formation_sim.sim.engine import simulate
 
     commands = [command.replace('runs/by-hand', str(tmp_path / 'by-hand')) for command in _readme_commands()]

@@ -54,12 +54,6 @@ def _formation(*arguments: str, env: dict | None = None, code: str | None = None
     )
 
 
-def test_it_discovers_with_the_runs_fast_dds_settings():
-    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
-
-    assert stop.FASTDDS_PROFILE == FASTDDS_PROFILE and FASTDDS_PROFILE.is_file()
-
-
 def test_it_starts_without_the_scenario_model_and_refuses_bad_input_before_rclpy():
     """An emergency stop must not wait for scipy (seconds on a loaded machine): the command's
     parser is built alone, and a bad domain is refused before rclpy is loaded."""

@@ -52,6 +52,7 @@ from formation_agent.ros.process import (
     shutdown_guard,
 )
 from formation_msgs_py.exit_codes import ExitCode
+from formation_msgs_py.middleware import use_our_fastdds_profile
 from formation_msgs_py.topics import agent_namespace
 
 SPIN_PERIOD = 0.1
@@ -145,6 +146,7 @@ def main(args: Sequence[str] | None = None) -> int:
     argv = list(args if args is not None else sys.argv)
     # --help and bad options end here, before ROS starts (exit 0 / 2, no traceback).
     options = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    use_our_fastdds_profile()  # before the participant: a stopped robot's zero is repaired in 0.1 s
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[FormationAgentNode] = []
     executor = None

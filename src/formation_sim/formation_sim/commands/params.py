@@ -51,9 +51,9 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from formation_msgs_py.middleware import FASTDDS_PROFILE
     from formation_sim.runtime.errors import RunError
     from formation_sim.runtime.launch.orchestrate import FormationRun
-    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE
     from formation_sim.sim.errors import RunFolderError
     from formation_sim.sim.run_folder import claim_out_dir
 

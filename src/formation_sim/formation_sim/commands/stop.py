@@ -16,17 +16,14 @@ import re
 import socket
 import sys
 import time
-from pathlib import Path
 
 from formation_msgs_py.exit_codes import ExitCode
-from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok
+from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, use_our_fastdds_profile
 from formation_msgs_py.topics import STOP_SERVICE
 
 # Its own light pieces, not `formation_sim.commands.common`'s (which loads scipy through the
 # scenario model: seconds on a loaded machine); `formation_sim.cli` builds its parser alone.  The
 # same rules and words as common's DOMAIN_ID and POSITIVE (tests/formation_sim/commands/test_stop.py).
-# runtime.launch.plan.FASTDDS_PROFILE, the run's Fast DDS settings, without importing the launch plan.
-FASTDDS_PROFILE = Path(__file__).resolve().parents[1] / 'runtime' / 'launch' / 'fastdds_profile.xml'
 
 DEFAULT_TIMEOUT = 5.0  # [s] discovery of the run's time keeper on one machine takes well under a second
 DISCOVERY_LOOK = 0.01  # [s] how often it looks whether the stop service is reachable yet
@@ -137,7 +134,7 @@ def _discovery_environment(*, network: bool) -> None:
     settings (announcements every 0.1 s at first: a loaded machine's participants find each other
     sooner), and this machine only unless `network` or the environment's own range."""
     os.environ['RMW_IMPLEMENTATION'] = 'rmw_fastrtps_cpp'
-    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
+    use_our_fastdds_profile()  # a user's own file wins
     if network:
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SUBNET'
     else:

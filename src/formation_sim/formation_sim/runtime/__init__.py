@@ -7,8 +7,8 @@
 - `launch`: what the parent does: `orchestrate` (`FormationRun` starts a run in a private ROS
   domain, watches it and stops it by PID), `plan` (the backend's launch plan: inputs, processes,
   environment, ROS domain), `run_options`, `supervise` (the children, their Fast DDS files removed
-  by `fastdds_shm`), `results`, `fleet` (simulated robots on their own); `fastdds_profile.xml`: the
-  Fast DDS settings of every process a run starts.
+  by `fastdds_shm`), `results`, `fleet` (simulated robots on their own); the Fast DDS settings
+  of every process a run starts are formation_msgs_py's (`middleware.FASTDDS_PROFILE`).
 - `tools`: live tools: `replay` (bags published again), `graph` (topics and messages of a live graph).
 - `contract`: what both sides agree on (parameter-file names, an agent's parameters, the topics
   per backend); nothing under `launch` imports `nodes` (tests/test_layout.py).

@@ -360,7 +360,8 @@ def test_simulated_robots_start_at_the_scenarios_headings_unless_one_is_given(tm
 
 
 def test_a_childs_environment_is_the_runs_whatever_this_process_had(tmp_path):
-    from formation_sim.runtime.launch.plan import FASTDDS_PROFILE, child_environment
+    from formation_msgs_py.middleware import FASTDDS_PROFILE
+    from formation_sim.runtime.launch.plan import child_environment
 
     mine = {
         'ROS_DOMAIN_ID': '7',

@@ -39,7 +39,13 @@ import yaml
 from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
 from formation_agent.core.kinds.shape import declared
 from formation_agent.core.limits import Limits as KindLimits
-from formation_msgs_py.middleware import DOMAIN_ID_MAX, domain_id_ok, domain_ports, participant0_ports
+from formation_msgs_py.middleware import (
+    DOMAIN_ID_MAX,
+    domain_id_ok,
+    domain_ports,
+    participant0_ports,
+    use_our_fastdds_profile,
+)
 from formation_msgs_py.tags import KEY_FILE, new_key, write_key
 from formation_msgs_py.topics import (
     AGENT_NODE,
@@ -87,7 +93,6 @@ ROBOTS_FILE = 'robots.params.yaml'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
-FASTDDS_PROFILE = Path(__file__).with_name('fastdds_profile.xml')  # the children's Fast DDS settings
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
 RECORDER_DRAIN_QUIET = 0.1  # [s] the run's recorder closes its bag once nothing came for this long
 # The console script of each node module (setup.py of formation_agent and formation_sim).
@@ -650,7 +655,7 @@ def child_environment(
     # numpy's OpenBLAS starts a thread per core at import, which costs every child ~0.1 s of
     # CPU while all of them start at once; no node does linear algebra worth a thread.
     env.setdefault('OPENBLAS_NUM_THREADS', '1')
-    env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))  # a user's own file wins
+    use_our_fastdds_profile(env)  # a user's own file wins
     env.update(extra_env)
     return with_our_packages(env)
 
