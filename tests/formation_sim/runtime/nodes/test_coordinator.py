@@ -198,7 +198,10 @@ def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_i
     node = _running(coordinator, pose_silence=5.0)
     with pytest.raises(
         AgentFailedError,
-        match=r'^agent 1 stopped at t=\d+\.\d+ \(step 0\): the pose of robot 1 is 0\.51 s old; the run stops$',
+        match=(
+            r'^agent 1 stopped at t=\d+\.\d+ \(step 0\): the pose of robot 1 is 0\.51 s old; '
+            r'the run stops$'
+        ),
     ):
         node._on_report(_report(1, 'the pose of robot 1 is 0.51 s old'))
     node = _running(coordinator, pose_silence=5.0)
