@@ -736,3 +736,26 @@ def test_with_the_runs_key_triggering_information_without_its_tag_is_no_trigger(
     node.world._on_info(signed, 2)
     assert node.agents[2].trigger_times == [0.35]
     assert node.rejected == {'untagged': 1, 'forged': 1}
+
+
+def test_what_formation_robots_says_is_what_formation_analyze_reads_back() -> None:
+    """/formation/robots (`robots_description`, from the coordinator's parameters) read back as
+    `formation analyze` reads it: the kind, the topic measured, the control point ahead of the
+    robot's origin (a holonomic robot's is its origin) and the sample grid."""
+    from pathlib import Path
+
+    from formation_sim.analysis.load import _robots_description
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS, robots_description
+
+    defaults = {spec.name: spec.default for spec in COORDINATOR_PARAMETERS}
+    for model, offset in (('unicycle', 0.2), ('holonomic', 0.0)):
+        values = {
+            **defaults,
+            'robot': model,
+            'control_point_distance': 0.2,
+            'robot_trajectory': 'odom',
+            'sample_period': 0.05,
+        }
+        sent = json.loads(json.dumps(robots_description(values)))  # as the topic carries it
+        assert _robots_description(Path('run.bag'), sent) == (model, 'odom', offset, 0.05)
+        assert sent['max_linear_speed'] is None  # the default inf: no limit (JSON has no inf)
