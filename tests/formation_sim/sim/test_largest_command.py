@@ -77,10 +77,11 @@ def test_the_observed_kappa_keeps_the_exact_runs_largest_command_by_the_margin_b
 
 
 def test_a_jam_of_the_safety_layer_is_refused_not_run_for_minutes(monkeypatch):
-    """Issue 27: random_square(204) of the 2.2 m square, agents 2, 3 and 4 jam D apart from t ~ 8 s
-    (each blocked by the other two; the intervals shrink with h): the warp's exact run stops at the
-    cap with a LimitsError naming it (lowered here to 500 per agent to keep the test short); placement
-    100, which forms, is chosen under the same cap."""
+    """Issue 27: random_square(204) of the 2.2 m square with the tie-break's former turn λ = 1, agents
+    2, 3 and 4 jam D apart from t ~ 8 s (each blocked by the other two; the intervals shrink with h;
+    today's λ = 1.5 resolves it): the warp's exact run stops at the cap with a LimitsError naming it
+    (lowered here to 500 per agent to keep the test short); placement 100, which forms, is chosen
+    under the same cap."""
     from formation_agent.core.safety import SafetyConfig
     from formation_sim.model.errors import LimitsError
     from formation_sim.model.speed_choice import RobotLimits
@@ -89,7 +90,9 @@ def test_a_jam_of_the_safety_layer_is_refused_not_run_for_minutes(monkeypatch):
     monkeypatch.setattr(largest_command, 'JAM_EVENTS_PER_AGENT', 500)
     limits = RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1)
     layer = SafetyConfig(min_separation=0.45)
-    jammed = safety_cases.random_square(204, safety=layer, side=2.2, horizon=90.0)
+    jammed = safety_cases.random_square(
+        204, safety=SafetyConfig(min_separation=0.45, turn=1.0), side=2.2, horizon=90.0
+    )
     with pytest.raises(
         LimitsError, match=r'triggers \d+ times by t = .* \(more than 500 per agent\): the safety'
     ):

@@ -117,7 +117,7 @@ def test_the_scenario_key_round_trips_and_is_checked(tmp_path):
         'sensing_radius': 2.0,
         'gamma': 3.0,
         'max_speed': 0.5,
-        'turn': 1.0,
+        'turn': 1.5,
     }
     assert scenario_from_dict(data) == scenario
     dump_scenario(scenario, tmp_path / 's.yaml')

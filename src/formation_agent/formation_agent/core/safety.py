@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 DEFAULT_GAMMA = 2.0  # [1/s]
 DEFAULT_MAX_SPEED = 0.5  # [m/s]
 DEFAULT_SENSING_RADIUS = 2.0  # [m]
-DEFAULT_TURN = 1.0  # λ: the tie-break turns the nominal command by atan(λ) to the right
+DEFAULT_TURN = 1.5  # λ: the tie-break turns the nominal command by atan(λ) = 56.3° to the right (SAFETY.md)
 
 SAFETY_KEYS = ('min_separation', 'sensing_radius', 'gamma', 'max_speed', 'turn')
 """The scenario's `safety` keys (min_separation required)."""
