@@ -272,16 +272,18 @@ def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, ag
     the final Step, then leaves with exit 0 and a final report without failure.  Issue 28: it stops
     its robot at the horizon on its own clock, before its poses go stale."""
     horizon = 1.5
-    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon)
+    # pose_timeout 2 s (it had 0.5 s: a bench starved that long before the horizon on a loaded
+    # machine made the agent's pose stale within the run, a failure).
+    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon, pose_timeout=STALE_TIMEOUT)
     rig.spin_until(lambda: time.time() >= rig.epoch + horizon, timeout=10.0, what='the horizon')
     rig.silent.update({1, 2})  # both robots stopped at the end of the run
     zero = (0.0,) * 6
     rig.spin_until(
         lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
     )
-    rig.spin_for(0.7)
-    # Its pose is stale now (pose_timeout 0.5 s from the last one, published up to a tick before the horizon).
-    assert time.time() > rig.last_pose_at[1] + 0.5
+    rig.spin_for(STALE_TIMEOUT + 0.2)
+    # Its pose is stale now (pose_timeout from the last one, published up to a tick before the horizon).
+    assert time.time() > rig.last_pose_at[1] + STALE_TIMEOUT
     assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
     rig.finish()
     assert rig.wait_for_exit(agent) == 0
