@@ -1036,10 +1036,11 @@ def _trigger_infos(messages: dict[str, list]):
     ]
 
 
-def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None:
-    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run time)."""
+def _assert_received_soon_after_their_trigger(messages: dict[str, list], *, within: float = 0.5) -> None:
+    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run
+    time): within `within` seconds."""
     lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
-    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+    assert lags and min(lags) >= 0 and max(lags) < within * 1e9, (min(lags), max(lags))
 
 
 def _epoch(messages: dict[str, list]) -> float:
@@ -1090,7 +1091,10 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
     horizon = 3.0
     scenario = Path(__file__).parents[4] / 'benchmarks' / 'gentle_square.yaml'
     messages = _run_with_bag(tmp_path, scenario, 45, horizon=horizon, clock='realtime')
-    _assert_received_soon_after_their_trigger(messages)
+    # Within 1.5 s (0.5 s for the robots' run below, which runs alone): this run shares a loaded
+    # machine with other tests, where a recorder or an agent can be held up for more than 0.5 s; a
+    # bag stamped on sim time (0 until the final Step) still fails the lower bound.
+    _assert_received_soon_after_their_trigger(messages, within=1.5)
     assert max(info.stamp for _, info in _trigger_infos(messages)) > horizon / 2  # spread over the run
     final_stamp = messages[STEP][-1][0]
     assert final_stamp >= (horizon - 0.01) * 1e9  # the final Step goes out at the horizon on the wall clock
