@@ -11,7 +11,7 @@ import pytest
 
 from formation_agent.core.time_warp import TimeWarp
 from formation_sim.model.errors import LimitsError
-from formation_sim.model.speed_choice import RobotLimits, Settling
+from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, Settling
 from formation_sim.model.warp_choice import WarpChoice, guaranteed_warp, observed_warp, warp_limit
 
 LIMITS = RobotLimits(max_speed=0.22, max_angular_speed=2.84, control_point_distance=0.1)
@@ -113,12 +113,53 @@ def test_choice_maps_the_settling_time_and_compares_with_the_constant_kappa():
         margin=1.25,
         cap=1.0,
         window=0.5,
+        event_rate=40.0,
     )
     assert choice.settle_time(warp) == pytest.approx(11.0)  # 1 / 0.1 + (2 - 1) / 1
     data = choice.to_dict()
     assert data['observed']['settle_time'] == pytest.approx(11.0)
     assert data['guaranteed'] is None and data['guaranteed_missing'] == 'outside the hypotheses'
+    assert data['event_rate'] == 40.0
     text = '\n'.join(choice.lines(constant=0.1))
+    assert '<= 40 events per agent per second' in text
     assert 'observed: 2 pieces, κ from 0.1 to 1; 5 % of the formation error after 11 s' in text
     assert 'the constant observed κ = 0.1: 5 % after 20 s' in text
     assert 'guaranteed: none: outside the hypotheses' in text
+
+
+def test_the_events_cap_keeps_every_window_of_real_time_within_its_count():
+    """A burst (the safety layer's triggers: 2000 events within 1 s of the paper's time, 3 agents)
+    slows the warp there: no piece (the warp's 0.5 s windows of real time from t = 0) holds more
+    than event_rate x agents x window of the exact run's events, counted at their real times."""
+    rng = np.random.default_rng(7)
+    quiet = np.sort(rng.uniform(0.0, 20.0, 60))
+    burst = np.sort(rng.uniform(3.0, 4.0, 2000))
+    events = np.concatenate([quiet, burst, np.zeros(3)])  # the 3 agents' triggers at t = 0 too
+    limits = RobotLimits(max_speed=1.0)
+    plain = observed_warp(times=TIMES, largest=LARGEST, limits=limits, horizons=(20.0, 60.0))
+    capped = observed_warp(
+        times=TIMES,
+        largest=LARGEST,
+        limits=limits,
+        horizons=(20.0, 60.0),
+        events=events,
+        agents=3,
+        event_rate=40.0,
+    )
+    real = np.array([capped.real(float(s)) for s in events])
+    counts = np.bincount(np.floor(real / 0.5).astype(int))
+    assert counts.max() <= 40.0 * 3 * 0.5 and counts.sum() == events.size
+    # The burst takes at least 2000 / (40 x 3) s of real time; without the cap far less.
+    assert capped.real(4.0) - capped.real(3.0) >= 2000 / 120 - 0.5
+    assert plain.real(4.0) - plain.real(3.0) < 2.0
+    # Every command stays within the limit as before (the cap only lowers κ).
+    for s in np.linspace(0.0, 19.9, 2001):
+        k = int(np.searchsorted(TIMES, s, side='right')) - 1
+        assert capped.paper_rate(float(s)) * LARGEST[k] <= 1.0 / OBSERVED_MARGIN * (1 + 1e-12)
+
+
+def test_the_events_cap_needs_room_for_an_event():
+    with pytest.raises(LimitsError, match="the events' cap must allow at least one event a piece, got 0.5"):
+        observed_warp(
+            times=TIMES, largest=LARGEST, limits=LIMITS, horizons=(20.0, 60.0), events=[0.0], event_rate=1.0
+        )

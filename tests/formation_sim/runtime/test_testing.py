@@ -111,3 +111,31 @@ def test_a_held_domain_is_refused_to_a_run_and_waited_for_by_another_holder():
         assert domain == 199
     with pytest.raises(RunError, match='domain id must lie in'), hold_domain(300):
         pass
+
+
+def test_a_waiting_holder_gets_the_domain_once_it_is_released():
+    """reserve_domain(wait=...) takes the domain as soon as its holder lets go, not before."""
+    import threading
+
+    from formation_sim.runtime.launch.plan import reserve_domain
+
+    taken, release = threading.Event(), threading.Event()
+
+    def holder():
+        with reserve_domain(198):
+            taken.set()
+            release.wait(30.0)
+
+    thread = threading.Thread(target=holder)
+    thread.start()
+    try:
+        assert taken.wait(30.0)
+        released_at = []
+        timer = threading.Timer(0.5, lambda: (released_at.append(time.monotonic()), release.set()))
+        timer.start()
+        with reserve_domain(198, wait=60.0) as domain:  # generous: a loaded machine is slow
+            got_at = time.monotonic()
+        assert domain == 198 and released_at and got_at >= released_at[0]
+    finally:
+        release.set()
+        thread.join(30.0)

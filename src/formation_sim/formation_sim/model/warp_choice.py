@@ -19,7 +19,10 @@ keeps every command within the speed limit L = min(V, W l) (a unicycle steered a
 
 Each piece lasts `window` seconds of real time (its paper length κ_m × window), so the warp
 follows the run as closely early on, when κ is small, as late. κ_max caps the events per real
-second (`formation_agent.core.time_warp.WARP_CAP`).
+second that ETA-1's own bound allows (`formation_agent.core.time_warp.WARP_CAP`); the observed
+warp also caps every piece at the events the exact run has on it: at most `event_rate` per agent
+per real second (WARP_EVENT_RATE), which the safety layer's triggers, not bounded by ETA-1's ξ_i,
+can otherwise exceed (docs/SPEED_SCALE.md, "The events' cap").
 """
 
 from __future__ import annotations
@@ -36,9 +39,18 @@ from formation_sim.model.speed_choice import OBSERVED_MARGIN, RobotLimits, Settl
 WARP_WINDOW = 0.5
 """The real duration of one piece of a chosen warp [s]."""
 
+WARP_EVENT_RATE = 40.0
+"""The most events per agent per real second an observed warp lets the team have on any piece
+[1/s].  With the safety layer a robot run of random_square(201) had 869 events in one second of
+the paper's time (the layer's triggers of robots in each other's way, milliseconds apart), ~350 per
+real second for 4 agents under the warp, and the loaded machine's robots' poses went stale
+(issue 27).  A run at κ = 1 without the layer stays far below (robots_lab: ~1 per agent per
+second)."""
+
 __all__ = [
     'OBSERVED_MARGIN',
     'WARP_CAP',
+    'WARP_EVENT_RATE',
     'WARP_WINDOW',
     'WarpChoice',
     'guaranteed_warp',
@@ -68,19 +80,28 @@ def warp_limit(limits: RobotLimits, dynamics: str, *, cap: float, window: float)
 
 
 def _pieces(
-    largest_on, *, limit: float, margin: float, cap: float, window: float, horizons: tuple[float, float]
+    largest_on,
+    *,
+    limit: float,
+    margin: float,
+    cap: float,
+    window: float,
+    horizons: tuple[float, float],
+    longest=None,
 ):
     """(starts, rates) from `largest_on(a, b)`, a bound on the commands over [a, b) of the paper's
-    time, until the paper time or the real time of `horizons` is reached."""
+    time, until the paper time or the real time of `horizons` is reached; `longest(s)` (if given):
+    the longest paper time from s that a piece may cover (the events' cap)."""
     paper_horizon, real_horizon = horizons
     starts: list[float] = []
     rates: list[float] = []
     s = t = 0.0
     while True:
-        kappa = _rate(largest_on(s, s), limit=limit, margin=margin, cap=cap)
+        rate_cap = cap if longest is None else min(cap, longest(s) / window)
+        kappa = _rate(largest_on(s, s), limit=limit, margin=margin, cap=rate_cap)
         # The largest over the piece can only lower κ, and a lower κ shortens the piece, over
-        # which the largest is no larger: one correction is enough.
-        kappa = _rate(largest_on(s, s + kappa * window), limit=limit, margin=margin, cap=cap)
+        # which the largest is no larger (nor are its events more): one correction is enough.
+        kappa = _rate(largest_on(s, s + kappa * window), limit=limit, margin=margin, cap=rate_cap)
         if not rates or kappa != rates[-1]:
             starts.append(s)
             rates.append(kappa)
@@ -102,11 +123,16 @@ def observed_warp(
     margin: float = OBSERVED_MARGIN,
     cap: float = WARP_CAP,
     window: float = WARP_WINDOW,
+    events=None,
+    agents: int = 1,
+    event_rate: float = WARP_EVENT_RATE,
 ) -> TimeWarp:
     """The warp from an exact κ = 1 run: `largest[k]` is the largest ||u_i|| in force from the
     paper time `times[k]` (increasing, times[0] = 0) to the next.  `horizons`: (the paper time the
     exact run covers, the real horizon of the warped run); beyond the last piece its rate holds, so
-    the exact run must cover the paper time the warped run reaches (κ_max times its horizon)."""
+    the exact run must cover the paper time the warped run reaches (κ_max times its horizon).
+    `events`: every trigger time of the run's `agents` agents (one per event); then no piece holds
+    more than `event_rate` × `agents` × `window` of them."""
     limit = warp_limit(limits, 'single', cap=cap, window=window)
     if not (math.isfinite(margin) and margin >= 1.0):
         raise LimitsError(f'margin: must be a finite number >= 1, got {margin!r}')
@@ -122,8 +148,40 @@ def observed_warp(
         last = max(int(np.searchsorted(times, b, side='left')), first + 1)
         return float(largest[first:last].max())
 
-    starts, rates = _pieces(largest_on, limit=limit, margin=margin, cap=cap, window=window, horizons=horizons)
+    starts, rates = _pieces(
+        largest_on,
+        limit=limit,
+        margin=margin,
+        cap=cap,
+        window=window,
+        horizons=horizons,
+        longest=None if events is None else _events_cap(events, per_piece=event_rate * agents * window),
+    )
     return TimeWarp(paper_starts=tuple(starts), rates=tuple(rates))
+
+
+def _events_cap(events, *, per_piece: float):
+    """`longest(s)`: the longest paper time [s, s + ℓ) holding at most `per_piece` of `events`
+    (inf when fewer remain); ℓ > 0 however dense they are (they are counted, not spaced)."""
+    if not (math.isfinite(per_piece) and per_piece >= 1.0):
+        raise LimitsError(
+            f"time_warp: the events' cap must allow at least one event a piece, got {per_piece!r}"
+        )
+    events = np.sort(np.asarray(events, dtype=float))
+    count = int(per_piece)
+
+    def longest(s: float) -> float:
+        # events[first:] are at or after s; [s, events[first + count]) holds count of them at most.
+        first = int(np.searchsorted(events, s, side='left'))
+        if first + count >= events.size:
+            return math.inf
+        end = float(events[first + count])
+        if end <= s:  # more than `count` at s itself (one instant's triggers): to the next instant
+            after = int(np.searchsorted(events, s, side='right'))
+            return float(events[after]) - s if after < events.size else math.inf
+        return end - s
+
+    return longest
 
 
 def guaranteed_warp(
@@ -161,6 +219,7 @@ class WarpChoice:
     margin: float
     cap: float
     window: float
+    event_rate: float  # the observed warp's events' cap, per agent per real second
 
     @property
     def warp(self) -> TimeWarp:
@@ -183,6 +242,7 @@ class WarpChoice:
             'margin': self.margin,
             'cap': self.cap,
             'window': self.window,
+            'event_rate': self.event_rate,
             'limits': self.limits.to_dict(),
             'observed': one(self.observed),
             'guaranteed': one(self.guaranteed),
@@ -194,8 +254,8 @@ class WarpChoice:
         """What validate prints; `constant`: today's constant κ, to compare the time to settle."""
         fraction = f'{100 * self.settling.fraction:g} %'
         lines = [
-            f'time warp κ(t) for these limits (pieces of {self.window:g} s, κ <= {self.cap:g}; '
-            f'docs/SPEED_SCALE.md, "A time warp"):'
+            f'time warp κ(t) for these limits (pieces of {self.window:g} s, κ <= {self.cap:g}, observed: '
+            f'<= {self.event_rate:g} events per agent per second; docs/SPEED_SCALE.md, "A time warp"):'
         ]
         for source, warp in (('guaranteed', self.guaranteed), ('observed', self.observed)):
             if warp is None:

@@ -53,24 +53,10 @@ def hold_domain(domain_id: int, *, timeout: float = 300.0) -> Iterator[int]:
     waiting up to `timeout` s while a run holds it (then `RunError`, as for a bad id). For a test
     that uses a domain without a run or a replay: a run that picks a free domain skips it meanwhile
     (once, a run picked the domain a recorder test used raw, and the recorder took its Steps)."""
-    from formation_sim.runtime.errors import RunError
-    from formation_sim.runtime.launch.plan import domain_id_ok, reserve_domain
+    from formation_sim.runtime.launch.plan import reserve_domain
 
-    deadline = time.monotonic() + timeout
-    while True:
-        held = reserve_domain(domain_id)
-        try:
-            domain = held.__enter__()
-        except RunError:
-            if not domain_id_ok(domain_id) or time.monotonic() > deadline:
-                raise
-            time.sleep(0.1)
-            continue
-        break
-    try:
+    with reserve_domain(domain_id, wait=timeout) as domain:
         yield domain
-    finally:
-        held.__exit__(None, None, None)
 
 
 class BagReplay:

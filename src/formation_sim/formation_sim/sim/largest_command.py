@@ -34,6 +34,7 @@ from formation_sim.model.speed_choice import (
 )
 from formation_sim.model.warp_choice import (
     WARP_CAP,
+    WARP_EVENT_RATE,
     WARP_WINDOW,
     WarpChoice,
     guaranteed_warp,
@@ -238,6 +239,7 @@ def choose_time_warp(
     margin: float = OBSERVED_MARGIN,
     cap: float = WARP_CAP,
     window: float = WARP_WINDOW,
+    event_rate: float = WARP_EVENT_RATE,
 ) -> WarpChoice:
     """The time warps for `limits` (`formation_sim.model.warp_choice`, ETA-1): the observed one from
     the exact run at κ = 1 to cap × the scenario's horizon (all the warped run can reach of the
@@ -252,7 +254,16 @@ def choose_time_warp(
     horizons = (cap * float(scenario.horizon), float(scenario.horizon))
     times, largest, record = command_steps(paper, horizon=horizons[0])
     observed = observed_warp(
-        times=times, largest=largest, limits=limits, horizons=horizons, margin=margin, cap=cap, window=window
+        times=times,
+        largest=largest,
+        limits=limits,
+        horizons=horizons,
+        margin=margin,
+        cap=cap,
+        window=window,
+        events=np.concatenate([np.asarray(when, dtype=float) for when in record.trigger_times.values()]),
+        agents=len(scenario.agent_ids),
+        event_rate=event_rate,
     )
     guaranteed, missing = None, None
     try:
@@ -277,4 +288,5 @@ def choose_time_warp(
         margin=margin,
         cap=cap,
         window=window,
+        event_rate=event_rate,
     )

@@ -30,6 +30,7 @@ import shlex
 import shutil
 import socket
 import sys
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -93,6 +94,7 @@ ROBOTS_FILE = 'robots.params.yaml'
 BAG_DIR = 'bag'
 LOG_DIR = 'logs'
 INJECT_KEYS = ('loss', 'delay_ms', 'jitter_ms', 'seed')
+DOMAIN_RETRY = 0.1  # [s] how often reserve_domain(wait=...) looks again
 AGENT_MODULE = 'formation_agent.ros.main'  # `python -m` it: the formation_agent command
 RECORDER_DRAIN_QUIET = 0.1  # [s] the run's recorder closes its bag once nothing came for this long
 # The console script of each node module (setup.py of formation_agent and formation_sim).
@@ -727,10 +729,13 @@ def _ports_free(domain_id: int) -> bool:
 
 
 @contextlib.contextmanager
-def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None) -> Iterator[int]:
+def reserve_domain(
+    domain_id: int | None = None, *, lock_dir: Path | None = None, wait: float = 0.0
+) -> Iterator[int]:
     """Hold a ROS domain id for the duration of the block (a lock file; the ports unused).
 
-    With `domain_id` the caller pins the id; it is still locked against other runs.
+    With `domain_id` the caller pins the id; it is still locked against other runs.  `wait`: how
+    long to go on trying while the id (or every id of the range) is held [s]; then `RunError`.
     """
     lock_dir = lock_dir or Path('/tmp/formation_domains')  # noqa: S108 - one folder for every run on the machine
     lock_dir.mkdir(parents=True, exist_ok=True)
@@ -743,21 +748,27 @@ def reserve_domain(domain_id: int | None = None, *, lock_dir: Path | None = None
         candidates = list(range(low, high + 1))
         start = random.randrange(len(candidates))
         candidates = candidates[start:] + candidates[:start]
-    for candidate in candidates:
-        handle = open(lock_dir / f'{candidate}.lock', 'w')  # noqa: SIM115 - held while running
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.close()
-            continue
-        if domain_id is None and not _ports_free(candidate):
-            handle.close()
-            continue
-        try:
-            yield candidate
-        finally:
-            handle.close()
-        return
+    deadline = time.monotonic() + wait
+    while True:
+        for candidate in candidates:
+            handle = open(lock_dir / f'{candidate}.lock', 'w')  # noqa: SIM115 - held while running
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                handle.close()
+                continue
+            if domain_id is None and not _ports_free(candidate):
+                handle.close()
+                continue
+            try:
+                yield candidate
+            finally:
+                handle.close()
+            return
+        if time.monotonic() >= deadline:
+            break
+        time.sleep(DOMAIN_RETRY)
+    waited = f' (waited {wait:g} s)' if wait > 0.0 else ''
     if domain_id is not None:
-        raise RunError(f'ROS domain {domain_id} is held by another formation run')
-    raise RunError(f'no free ROS domain in {low}-{high}')
+        raise RunError(f'ROS domain {domain_id} is held by another formation run{waited}')
+    raise RunError(f'no free ROS domain in {low}-{high}{waited}')
