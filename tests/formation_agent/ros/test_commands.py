@@ -131,6 +131,12 @@ def test_eta2_on_a_holonomic_robot_follows_its_velocity_reference_from_odometry(
     (a, qa), *later = samples
     for b, qb in later:
         assert np.allclose(qb - rest, (qa - rest) * math.exp(-k3 * (b - a)), rtol=0, atol=1e-9)
-    assert np.linalg.norm(qa - q1) < 0.01 * np.linalg.norm(rest - q1)  # it starts at the sensed velocity
+    # It starts at the sensed velocity: the first command is on the same curve from q1 at the trigger,
+    # qa - u^d/k3 = (q1 - u^d/k3) e^{-k3 Δ}, Δ its delay after the trigger.  Δ < 1 s: a loaded machine
+    # may hold the agent between sensing and sending (this said |qa - q1| < 1 % of |u^d/k3 - q1|,
+    # which left it 17 ms).
+    ratio = float(np.dot(qa - rest, q1 - rest) / np.dot(q1 - rest, q1 - rest))
+    assert np.allclose(qa - rest, ratio * (q1 - rest), rtol=0, atol=1e-9), (qa, q1, rest)
+    assert math.exp(-k3 * 1.0) < ratio <= 1.0 + 1e-12, -math.log(ratio) / k3
     assert samples[-1][0] - a > 0.2  # the reference did move over the commands compared
     assert [msg.twist.linear.x for _, msg in rig.commands[-1:]] == [0.0]

@@ -10,6 +10,7 @@ agent left.  Also: --help, and every missing parameter named at once.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -89,41 +90,60 @@ def test_a_stop_signal_stops_the_robot(bench, agent_process, signum):
     _assert_stopped(rig, agent, status=130, failure='stopped by a signal')
 
 
+# pose_timeout for the stale-pose tests: 2 s, not the 0.3 s they had, which left the agent 0.1 s
+# to see its pose stale ("is 0.3.. s old"), its timer no more than 0.1 s late ("ran 0.0..") and a
+# writer that left the graph seen within 0.3 s (it is looked for every 0.2 s): a loaded machine
+# can use that up.  The ages are read as numbers and checked with the bounds below.
+STALE_TIMEOUT = 2.0
+STALE_SEEN_WITHIN = 3.0  # the agent stops within 3 s of its pose going stale (0.02 s when idle)
+
+
+def _stale_own_pose(line: str, clause: str) -> float:
+    """The age the agent names in `line` for its own pose, which must say `clause` of its writer."""
+    match = re.fullmatch(
+        r'formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is (\d+\.\d+) s old '
+        rf'at t=\d+\.\d+ \(pose_timeout {STALE_TIMEOUT:g} s\); {clause}: the agent stops',
+        line,
+    )
+    assert match, line
+    age = float(match[1])
+    assert STALE_TIMEOUT < age < STALE_TIMEOUT + STALE_SEEN_WITHIN, line  # stale, and seen so
+    return age
+
+
 def test_a_stale_own_pose_stops_the_robot(bench, agent_process):
-    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=0.3)
+    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=STALE_TIMEOUT)
     rig.silent.add(1)
     assert rig.wait_for_exit(agent) == 1
-    line = _named(agent.stderr)
-    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), (
-        line
+    # Its writer is alive and its own timer ran less than half the timeout late: a dead feed, not
+    # an overloaded agent (staleness.diagnosis).
+    _stale_own_pose(
+        _named(agent.stderr),
+        r"its writer is alive and this agent's timer ran \d+\.\d+ s late "
+        r'\(its writer stalled or was stopped, or its messages are lost\?\)',
     )
-    assert "(pose_timeout 0.3 s); its writer is alive and this agent's timer ran 0.0" in line, line
-    assert line.endswith(': the agent stops') and 'Traceback' not in agent.stderr
-    _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is 0.3')
+    assert 'Traceback' not in agent.stderr
+    _assert_stopped(rig, agent, status=1, failure='the pose of robot 1 on /agent_1/robot/pose is ')
 
 
 def test_a_pose_whose_writer_left_the_graph_says_when(bench, agent_process):
     """A robot's driver that went away is told from a stalled one: its writer left the graph."""
-    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=0.3)
+    rig, agent = _run_until_commanding(bench, agent_process, pose_timeout=STALE_TIMEOUT)
     rig.silent.add(1)
     rig.node.destroy_publisher(rig._pose_pubs.pop(1))
     assert rig.wait_for_exit(agent) == 1
-    line = _named(agent.stderr)
-    assert line.startswith('formation_agent: agent 1: the pose of robot 1 on /agent_1/robot/pose is 0.3'), (
-        line
-    )
-    assert '(pose_timeout 0.3 s); its writer left the graph at t=' in line and line.endswith(
-        ': the agent stops'
-    ), line
+    _stale_own_pose(_named(agent.stderr), r'its writer left the graph at t=\d+\.\d+')
     _assert_stopped(rig, agent, status=1, failure='its writer left the graph at t=')
 
 
 def test_a_frozen_agent_sends_no_command_after_it_resumes(bench, agent_process):
-    """Issue 19: an agent stopped for 2 s (SIGSTOP, SIGCONT) resumes with its timers 2 s late and
-    every pose it holds 2 s old; whatever runs first, it sends only the zero command, and says why."""
+    """Issue 19: an agent stopped for 3 s (SIGSTOP, SIGCONT) resumes with its timers 3 s late and
+    every pose it holds 3 s old; whatever runs first, it sends only the zero command, and says why."""
     rig, agent = _run_until_commanding(bench, agent_process)
     agent.signal(signal.SIGSTOP)
-    rig.spin_for(0.2)  # what it sent before the stop has arrived
+    # What it sent before the stop has arrived: 1 s for that (it was 0.2 s, which a loaded machine
+    # could use up, and a command that came later counted as sent after the stop).
+    rig.spin_for(1.0)
     frozen = len(rig.commands)
     rig.spin_for(2.0)
     assert len(rig.commands) == frozen, 'a stopped process sends nothing'
@@ -252,16 +272,18 @@ def test_poses_that_stop_with_the_robots_at_the_horizon_are_no_failure(bench, ag
     the final Step, then leaves with exit 0 and a final report without failure.  Issue 28: it stops
     its robot at the horizon on its own clock, before its poses go stale."""
     horizon = 1.5
-    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon)
+    # pose_timeout 2 s (it had 0.5 s: a bench starved that long before the horizon on a loaded
+    # machine made the agent's pose stale within the run, a failure).
+    rig, agent = _run_until_commanding(bench, agent_process, horizon=horizon, pose_timeout=STALE_TIMEOUT)
     rig.spin_until(lambda: time.time() >= rig.epoch + horizon, timeout=10.0, what='the horizon')
     rig.silent.update({1, 2})  # both robots stopped at the end of the run
     zero = (0.0,) * 6
     rig.spin_until(
         lambda: _linear(rig.commands[-1][1]) == zero, timeout=10.0, what='the agent to stop its robot'
     )
-    rig.spin_for(0.7)
-    # Its pose is stale now (pose_timeout 0.5 s from the last one, published up to a tick before the horizon).
-    assert time.time() > rig.last_pose_at[1] + 0.5
+    rig.spin_for(STALE_TIMEOUT + 0.2)
+    # Its pose is stale now (pose_timeout from the last one, published up to a tick before the horizon).
+    assert time.time() > rig.last_pose_at[1] + STALE_TIMEOUT
     assert agent.process.poll() is None, agent.stderr  # no failure: it waits for the final Step
     rig.finish()
     assert rig.wait_for_exit(agent) == 0
@@ -273,18 +295,23 @@ def test_a_stale_neighbour_pose_at_a_trigger_stops_the_robot(bench, agent_proces
     """Robot 2 goes silent; agent 1 finds out at its next trigger (news from agent 2 brings it on)."""
     from formation_msgs_py.types import TriggerInfo
 
-    rig, agent = _run_until_commanding(bench, agent_process, alpha=0.01)
+    rig, agent = _run_until_commanding(bench, agent_process, alpha=0.01, pose_timeout=STALE_TIMEOUT)
     rig.silent.add(2)
-    rig.spin_for(0.7)  # robot 2's last pose is older than 0.5 s
+    rig.spin_for(STALE_TIMEOUT + 0.2)  # robot 2's last pose is older than the timeout
     # Agent 2 reports a trigger: agent 1 replans, and with α = 0.01 its next trigger is due at once.
     rig.send_info(TriggerInfo(sender=2, receiver=1, stamp=0.01, control=(0.3, 0.0), rel_position=(0.5, 0.3)))
     assert rig.wait_for_exit(agent) == 1
+    # Its own timer ran less than half the timeout late: a dead feed, not an overloaded agent (with
+    # the 0.5 s timeout it had, a timer 0.25 s late on a loaded machine read as an overloaded one).
     line = _named(agent.stderr)
-    assert line.startswith('formation_agent: agent 1: the pose of robot 2 on /agent_2/robot/pose is '), line
-    assert "(pose_timeout 0.5 s); its writer is alive and this agent's timer ran " in line, line
-    assert line.endswith('(its writer stalled or was stopped, or its messages are lost?): the agent stops'), (
-        line
+    match = re.fullmatch(
+        r'formation_agent: agent 1: the pose of robot 2 on /agent_2/robot/pose is (\d+\.\d+) s old '
+        rf"at t=\d+\.\d+ \(pose_timeout {STALE_TIMEOUT:g} s\); its writer is alive and this agent's "
+        r'timer ran \d+\.\d+ s late \(its writer stalled or was stopped, or its messages are lost\?\): '
+        r'the agent stops',
+        line,
     )
+    assert match and float(match[1]) > STALE_TIMEOUT, line
     _assert_stopped(rig, agent, status=1, failure='the pose of robot 2 on /agent_2/robot/pose is')
 
 

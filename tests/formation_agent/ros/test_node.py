@@ -251,6 +251,20 @@ def live_node(ros):
 
 
 @pytest.fixture
+def discovery_clock(monkeypatch):
+    """The clock by which an agent judges its simulator lost (formation_agent.ros.discovery's
+    time.monotonic), stopped: it moves only when the test moves it, so the time a loaded machine
+    takes between two lines of a test never counts against a grace of half a second."""
+    from types import SimpleNamespace
+
+    from formation_agent.ros import discovery
+
+    now = [1000.0]
+    monkeypatch.setattr(discovery, 'time', SimpleNamespace(monotonic=lambda: now[0]))
+    return now
+
+
+@pytest.fixture
 def fake_simulator():
     """A node in a participant of its own, as the simulator's own process would be."""
     import rclpy
@@ -435,7 +449,7 @@ def test_an_agent_whose_simulator_goes_away_leaves_with_peer_lost(ros, live_node
     ('flags', 'lease_lapsed', 'patience'), [(0, True, 3.0), (0, False, 0.5), ('realtime', True, 0.5)]
 )
 def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_lapsed(
-    live_node, flags, lease_lapsed, patience
+    live_node, discovery_clock, flags, lease_lapsed, patience
 ):
     """In lock-step nothing moves while the simulator is silent: an agent gives a lapsed lease
     KEEPER_LEASE_GRACE before it leaves (the simulator ends the run itself); a writer that left
@@ -453,10 +467,12 @@ def test_a_lock_step_agent_leaves_the_end_of_a_run_to_a_simulator_whose_lease_la
     node.simulator.on_liveliness(
         SimpleNamespace(alive_count=0, not_alive_count_change=1 if lease_lapsed else 0)
     )
+    # On the stopped clock (the wall clock left 0.05 s between these lines, which a loaded machine
+    # once could use up): patient for exactly `patience`, lost the moment after.
     lost = node.simulator.lost_at
-    node.simulator.lost_at = lost - (patience - 0.05)
+    discovery_clock[0] = lost + patience
     node.check()  # still patient
-    node.simulator.lost_at = lost - (patience + 0.05)
+    discovery_clock[0] = lost + patience + 0.001
     how = 'no sign of life for 1.0 s' if lease_lapsed else 'it left the graph'
     with pytest.raises(
         PeerLostError,
@@ -742,7 +758,7 @@ def test_a_wall_clock_agent_stops_at_the_horizon_on_its_own_clock_without_a_fina
 
 @pytest.mark.parametrize('wall_clock', [False, True])
 def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_of_life(
-    live_node, wall_clock
+    live_node, discovery_clock, wall_clock
 ):
     """The finding: a coordinator frozen 3 s gave the robots their zeros after 1.21-1.24 s (the
     bound is 1 s): the agents waited LOST_GRACE after the lease.  The robot stops at the lease now,
@@ -763,7 +779,7 @@ def test_a_wall_clock_agent_stops_its_robot_the_moment_the_keeper_shows_no_sign_
     assert not node.schedule.stopped
     node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=0, not_alive_count_change=1))
     assert node.schedule.stopped == wall_clock and node.output._stopped == wall_clock
-    node.check()  # within the grace: still there
+    node.check()  # within the grace (LOST_GRACE, 0.5 s, on the stopped discovery clock): still there
     # The keeper back within the grace: a wall-clock agent that stopped its robot for it leaves with
     # the cause named (it waited for a final Step that a test bench never sends: fresh-clone runs).
     node.end_watch.on_keeper_liveliness(SimpleNamespace(alive_count=1, not_alive_count_change=0))

@@ -143,23 +143,31 @@ with StopSignals():
 """
 
 
-def test_a_stuck_node_asked_for_its_stacks_writes_them_and_lives_on() -> None:
+def test_a_stuck_node_asked_for_its_stacks_writes_them_and_lives_on(tmp_path) -> None:
     import subprocess
     import time
 
     from formation_agent.ros.process import STACKS_SIGNAL
 
-    child = subprocess.Popen(
-        [sys.executable, '-c', _STUCK_NODE], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
+    log = tmp_path / 'stuck.err'
+    with open(log, 'w') as err:
+        child = subprocess.Popen(
+            [sys.executable, '-c', _STUCK_NODE], stdout=subprocess.PIPE, stderr=err, text=True
+        )
     try:
         assert child.stdout.readline().strip() == 'ready'
         os.kill(child.pid, STACKS_SIGNAL)
-        time.sleep(0.5)
+        # Until the stacks are written (it was a fixed 0.5 s, after which the child was killed: on a
+        # loaded machine the stacks could still be to come); 20 s for a loaded machine.
+        deadline = time.monotonic() + 20.0
+        while 'File "<string>"' not in log.read_text() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)  # the signal had its time to end the process, had it done so
         assert child.poll() is None, 'the signal ended the process'
     finally:
         child.terminate()  # SIGTERM: StopSignals takes it; the loop above does not look, so kill
         child.kill()
-        _, stderr = child.communicate(timeout=10)
+        child.communicate(timeout=10)
+    stderr = log.read_text()
     # Its main thread's stack, wherever the signal found it (still leaving print, or in the loop).
     assert 'most recent call first' in stderr and 'File "<string>"' in stderr, stderr

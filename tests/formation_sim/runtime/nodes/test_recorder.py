@@ -733,18 +733,22 @@ def test_the_heartbeat_names_the_watched_topics_until_their_first_message(
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
 
-        def beat_after(sent: float) -> dict:
+        def beat_once_recorded(count: int) -> dict:
+            """The first heartbeat of a flush that wrote `count` messages: the recorder has taken the
+            message sent last (the test once took the beat 0.5 s after sending, which a loaded
+            machine could reach before the message had come)."""
             deadline = time.monotonic() + 30
             while time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)
-                if beats and time.monotonic() > sent + 0.5:  # a flush after the message came
-                    return beats[-1]
-            pytest.fail(f'no heartbeat: {recorder_log(tmp_path)}')
+                done = [beat for beat in beats if beat['recorded'] >= count]
+                if done:
+                    return done[0]
+            pytest.fail(f'no heartbeat with {count} recorded: {beats[-3:]} {recorder_log(tmp_path)}')
 
         publishers[other].publish(Float64MultiArray(data=[1.0]))
-        assert beat_after(time.monotonic())['silent'] == [pose]
+        assert beat_once_recorded(1)['silent'] == [pose]  # a message on another topic is no sign
         publishers[pose].publish(Float64MultiArray(data=[2.0]))
-        assert beat_after(time.monotonic())['silent'] == []
+        assert beat_once_recorded(2)['silent'] == []
         process.send_signal(signal.SIGINT)
         finish(process, tmp_path)
         executor.remove_node(node)
@@ -1032,10 +1036,11 @@ def _trigger_infos(messages: dict[str, list]):
     ]
 
 
-def _assert_received_soon_after_their_trigger(messages: dict[str, list]) -> None:
-    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run time)."""
+def _assert_received_soon_after_their_trigger(messages: dict[str, list], *, within: float = 0.5) -> None:
+    """Wall clock: each triggering message is received after its trigger, and soon (bag time = run
+    time): within `within` seconds."""
     lags = [stamp - round(info.stamp * 1e9) for stamp, info in _trigger_infos(messages)]
-    assert lags and min(lags) >= 0 and max(lags) < 500_000_000, (min(lags), max(lags))
+    assert lags and min(lags) >= 0 and max(lags) < within * 1e9, (min(lags), max(lags))
 
 
 def _epoch(messages: dict[str, list]) -> float:
@@ -1086,7 +1091,10 @@ def test_a_real_time_bag_is_stamped_with_the_run_time_of_each_message(tmp_path: 
     horizon = 3.0
     scenario = Path(__file__).parents[4] / 'benchmarks' / 'gentle_square.yaml'
     messages = _run_with_bag(tmp_path, scenario, 45, horizon=horizon, clock='realtime')
-    _assert_received_soon_after_their_trigger(messages)
+    # Within 1.5 s (0.5 s for the robots' run below, which runs alone): this run shares a loaded
+    # machine with other tests, where a recorder or an agent can be held up for more than 0.5 s; a
+    # bag stamped on sim time (0 until the final Step) still fails the lower bound.
+    _assert_received_soon_after_their_trigger(messages, within=1.5)
     assert max(info.stamp for _, info in _trigger_infos(messages)) > horizon / 2  # spread over the run
     final_stamp = messages[STEP][-1][0]
     assert final_stamp >= (horizon - 0.01) * 1e9  # the final Step goes out at the horizon on the wall clock
