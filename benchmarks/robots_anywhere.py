@@ -131,6 +131,11 @@ KINDS = {
     ),
 }
 MAX_EVENTS = 20000  # a run that triggers more is reported as a jam, not run to its end
+SHORTEST_HOLD = 1e-9
+"""[s] Two samples closer than this are one instant up to rounding (an event and a grid point 1 ulp
+apart: 3e-16 s in the diagonal swap): their positions differ by rounding only, which divided by
+the interval read as commands of any speed (15 'saturated' holds of 0.76 m/s at v̄ = 0.5 m/s).
+No command is held over them."""
 CAR_STEERING = 0.42  # [rad] φ_max (car.params.yaml): |ω| <= |v| tan φ_max / L
 
 
@@ -165,7 +170,8 @@ def _headings(times, x, distance: float):
     """Each robot's heading at the samples (rows: times; θ(0) = 0) under its held command, the
     control point map's closed form; and (ψ at each hold's start, ψ at its end, ||u||) per hold."""
     dt = np.diff(times)[:, None]
-    u = np.diff(x, axis=0) / np.where(dt > 0, dt, 1.0)[:, :, None]  # the held commands (linear motion)
+    held = (dt > SHORTEST_HOLD)[:, :, None]
+    u = np.where(held, np.diff(x, axis=0) / np.where(held, dt[:, :, None], 1.0), 0.0)  # the held commands
     speed = np.linalg.norm(u, axis=2)
     phi = np.arctan2(u[..., 1], u[..., 0])
     theta = np.zeros((len(times), x.shape[1]))
@@ -240,7 +246,8 @@ def table_row(scenario, kind: str, layer: bool) -> dict:
     kappa = np.array([warp.paper_rate(float(t)) for t in times[:-1]])
     if kind == 'holonomic':  # origins = control points, linear between the samples: exact
         dt = np.diff(times)[:, None]
-        speed = np.linalg.norm(np.diff(x, axis=0), axis=2) / np.where(dt > 0, dt, 1.0)
+        held = dt > SHORTEST_HOLD
+        speed = np.where(held, np.linalg.norm(np.diff(x, axis=0), axis=2) / np.where(held, dt, 1.0), 0.0)
         saturated = _saturated(kind, limits, None, None, speed, kappa)
         closest = safety_cases.closest_approach(times, x)[0]
     else:  # origins sampled (0.01 s and every event)
