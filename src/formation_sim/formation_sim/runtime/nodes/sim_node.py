@@ -43,23 +43,26 @@ from typing import NoReturn
 
 import numpy as np
 from geometry_msgs.msg import Accel, Twist
+from rcl_interfaces.srv import SetParameters
 from rclpy.event_handler import SubscriptionEventCallbacks
 from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import Trigger
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     check_array,
+    check_sensing_request,
     decode_command,
     decode_trigger_info,
     encode_sensed_state,
     encode_step,
     sensing_refusal,
+    tag_sensing_answer,
 )
 from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.tags import agent_writer
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_msgs_py.types import SensedState
 from formation_sim.model.scenario import Scenario
@@ -179,10 +182,7 @@ class FormationSimulatorNode(TimeKeeperNode):
             view.markers_pub,
         ]
         self._services = [
-            self.create_service(
-                Trigger, sense_service(i), lambda request, response, agent=i: self._on_sense(agent)
-            )
-            for i in self.agents
+            self.create_service(SetParameters, sense_service(i), _answers(self, i)) for i in self.agents
         ]
         self.sensing_calls = 0
         self.calls = SensingCalls(self.agents)  # which calls were triggers, which foreign (issue 28)
@@ -467,20 +467,56 @@ def _on_trigger_info(node: FormationSimulatorNode, msg, agent: int) -> None:
         node.sensing_calls += 1
 
 
-def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
-    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
-    `agent`'s own is a protocol violation that ends the run; but any node can call the service
-    (std_srvs/Trigger names no caller), so the graph is asked first: with a stranger calling it,
-    the call is refused (or, at the agent's own step, answered again with the same state) and
-    counted as foreign, the stranger named; two processes claiming the agent end the run."""
-    due = agent in node.due_agents
-    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node.due_agents)})'
+def _answers(node: FormationSimulatorNode, agent: int):
+    """The callback of agent `agent`'s sensing service."""
+    return lambda request, response: _sense_call(node, agent, request)
+
+
+def _sense_call(node: FormationSimulatorNode, agent: int, request):
+    """A call of agent `agent`'s sensing service: with the run's key refused unless it carries
+    agent `agent`'s tag (`_untagged_call`), and answered with the simulator's tag."""
+    answer = _untagged_call(node, agent, request)
+    if answer is None:
+        answer = node._on_sense(agent)
+    return tag_sensing_answer(answer, node.signer, sense_service(agent))
+
+
+def _untagged_call(node: FormationSimulatorNode, agent: int, request):
+    """The refusal of a sensing call for `agent` without agent `agent`'s valid tag (the run's key
+    only; else None): counted as a foreign call and as a foreign message, the caller named from
+    the graph in the first warnings; never a trigger, and the run goes on."""
+    try:
+        check_sensing_request(node.verifier, sense_service(agent), request, caller=agent_writer(agent))
+    except TagError as error:
+        node.calls.foreign_call(agent)
+        detail = str(error)
+        if node.calls.foreign[agent] <= 3 and 'stranger' in (found := _callers(node, agent)):
+            detail = f'{found["stranger"].text()}: {detail}'
+        node.reject(sense_service(agent), error.reason, detail)
+        return sensing_refusal(f'{error}: refused')
+    return None
+
+
+def _callers(node: FormationSimulatorNode, agent: int) -> dict:
+    """What the graph says of the callers of `agent`'s sensing service (`intrusions` by kind)."""
     (watched,) = [w for w in simulator_watched(node.scenario) if w.mangled and w.agent == agent]
     writers = [
         Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
         for i in node.get_publishers_info_by_topic(watched.topic, no_mangle=True)
     ]
-    found = {i.kind: i for i in intrusions(watched, writers)}
+    return {i.kind: i for i in intrusions(watched, writers)}
+
+
+def _out_of_turn(node: FormationSimulatorNode, agent: int, index: int):
+    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
+    `agent`'s own is a protocol violation that ends the run; but without the run's key any node
+    can call the service (a request names no caller), so the graph is asked first: with a
+    stranger calling it, the call is refused (or, at the agent's own step, answered again with
+    the same state) and counted as foreign, the stranger named; two processes claiming the agent
+    end the run.  With the key a stranger's call never comes here (`_untagged_call`)."""
+    due = agent in node.due_agents
+    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(node.due_agents)})'
+    found = _callers(node, agent)
     if 'duplicate' in found:
         duplicate = found['duplicate']
         node.failure = DuplicateAgentError(
