@@ -315,6 +315,47 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
     assert "a message without the run's tag" in log and 'that is not the run key' in log
 
 
+def test_a_second_server_of_an_agents_sensing_service_stops_the_run_and_is_named(tmp_path, ros_env):
+    """Issue 28: a stranger serving /agent_2/sense with a plausible state.  Agent 2's client may
+    take its answer for the world's: the simulator's graph watch names the second server and
+    stops the run (an agent that took such an answer refuses it for its tag and stops too), so
+    the run cannot end done."""
+    from rcl_interfaces.srv import SetParameters
+
+    from formation_msgs_py.codec import encode_sensed_state
+    from formation_msgs_py.topics import sense_service
+    from formation_msgs_py.types import SensedState
+    from formation_sim.runtime.launch.orchestrate import FormationRun
+
+    scenario = load_scenario('paper_single')
+    run = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=2.0,
+        domain_id=83,
+        progress=False,
+        timeout=240.0,
+        step_listeners=1,
+    )
+    lie = SensedState(agent=2, stamp=0.0, rel_positions=dict.fromkeys(scenario.neighbours(2), (0.0, 0.0)))
+    with _outsider_with_run('rogue_server', 83, run) as outsider:
+        outsider.node.create_service(
+            SetParameters, sense_service(2), lambda request, response: encode_sensed_state(lie)
+        )
+        while outsider.worker.is_alive():
+            outsider.executor.spin_once(timeout_sec=0.05)
+    (result,) = outsider.results
+    assert not result.ok
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    print(failure['message'])
+    # Whichever comes first: the graph watch (foreign_writer), or agent 2 stopping on the answer
+    # without the simulator's tag (agent_failed); the server named either way.
+    assert failure['kind'] in ('foreign_writer', 'agent_failed'), failure
+    assert 'a node outside the run, /rogue_server (writer gid ' in failure['message'], failure
+    assert 'writes answers of /agent_2/sense (rr/agent_2/senseReply)' in failure['message'], failure
+
+
 @pytest.mark.timeout(300)
 def test_a_flood_of_junk_on_a_triggering_information_topic_does_not_starve_the_protocol(tmp_path, ros_env):
     """Thousands of malformed messages per second, with the protocol's own QoS, on the topic that
