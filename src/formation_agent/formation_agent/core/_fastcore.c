@@ -2220,6 +2220,235 @@ static PyTypeObject TeamType = {
     .tp_methods = team_methods,
 };
 
+/* ---- the world's closed-form step (formation_sim.sim.world.World._propagate) -------------- */
+
+#define N_WORLD_SERIES 14
+static double WORLD_SERIES[N_WORLD_SERIES]; /* closed_form._SERIES: 1/(k+2)!, k = 0..13 */
+static double WORLD_SERIES_LIMIT = NAN;
+static PyObject *NP_EXPM1 = NULL; /* numpy.expm1: the function closed_form.advance_double calls */
+
+/* configure_world(*, expm1, series, series_limit): what `advance` computes the factors with, from
+ * their one source (closed_form.py, numpy). */
+static PyObject *configure_world(PyObject *self, PyObject *args, PyObject *kwargs) {
+    (void)self;
+    static char *names[] = {"expm1", "series", "series_limit", NULL};
+    PyObject *expm1_, *coefficients;
+    double limit;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$OOd", names, &expm1_, &coefficients, &limit))
+        return NULL;
+    if (read_floats(coefficients, WORLD_SERIES, N_WORLD_SERIES, "series") < 0)
+        return NULL;
+    WORLD_SERIES_LIMIT = limit;
+    Py_XSETREF(NP_EXPM1, Py_NewRef(expm1_));
+    Py_RETURN_NONE;
+}
+
+/* A C-contiguous float64 buffer of `count` items (writable when asked); 0 without an error set where
+ * it is not one (the caller falls back to numpy), -1 on another error. */
+static int world_buffer(PyObject *array, Py_ssize_t count, int writable, Py_buffer *view) {
+    if (PyObject_GetBuffer(array, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0)) < 0) {
+        if (!PyErr_ExceptionMatches(PyExc_BufferError) && !PyErr_ExceptionMatches(PyExc_TypeError) &&
+            !PyErr_ExceptionMatches(PyExc_ValueError))
+            return -1;
+        PyErr_Clear();
+        return 0;
+    }
+    if (view->itemsize != 8 || view->format == NULL || strcmp(view->format, "d") != 0 ||
+        (count >= 0 && view->len != count * 8)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* numpy.expm1 of one float, as numpy computes it (its own loop may not be the C library's). */
+static int numpy_expm1(double v, double *out) {
+    PyObject *arg = PyFloat_FromDouble(v);
+    PyObject *value = arg ? PyObject_CallOneArg(NP_EXPM1, arg) : NULL;
+    Py_XDECREF(arg);
+    if (value == NULL)
+        return -1;
+    *out = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+/* advance(x, q, u, x_out, q_out, k3, tau): World._propagate's step by tau > 0, into x_out (q_out):
+ * x + tau * u (single integrators, q and q_out None), else closed_form.advance_double with a scalar
+ * tau (statexixjd, stateqiqj): z = k3 tau, a = -expm1(-z), b = z + expm1(-z) or its series below
+ * SERIES_LIMIT (z_minus_one_plus_exp), q' = (1 - a) q + (a / k3) u, x' = x + (a / k3) q + (b / k3^2) u,
+ * element by element in numpy's order. True when done; False, with nothing written, where an array is
+ * not a C-contiguous float64 one of x's size (numpy then does it). */
+static PyObject *world_advance(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *x_obj, *q_obj, *u_obj, *xo_obj, *qo_obj;
+    double k3, tau;
+    if (!PyArg_ParseTuple(args, "OOOOOdd", &x_obj, &q_obj, &u_obj, &xo_obj, &qo_obj, &k3, &tau))
+        return NULL;
+    int single = q_obj == Py_None;
+    if (single != (qo_obj == Py_None)) {
+        PyErr_SetString(PyExc_TypeError, "advance: q and q_out must both be arrays or both None");
+        return NULL;
+    }
+    if (!single && NP_EXPM1 == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure_world was not called");
+        return NULL;
+    }
+    Py_buffer views[5];
+    PyObject *objs[5] = {x_obj, u_obj, xo_obj, q_obj, qo_obj};
+    int writable[5] = {0, 0, 1, 0, 1}, taken = 0, status = 1;
+    for (; taken < (single ? 3 : 5); taken++) {
+        status = world_buffer(objs[taken], taken == 0 ? -1 : views[0].len / 8, writable[taken], &views[taken]);
+        if (status != 1)
+            break;
+    }
+    double a = 0.0, b = 0.0;
+    if (status == 1 && !single) {
+        double z = k3 * tau, em, acc = WORLD_SERIES[N_WORLD_SERIES - 1];
+        status = numpy_expm1(-z, &em) < 0 ? -1 : 1;
+        a = -em;       /* one_minus_exp */
+        b = z + em;    /* z_minus_one_plus_exp */
+        if (fabs(z) < WORLD_SERIES_LIMIT) {
+            for (int k = N_WORLD_SERIES - 2; k >= 0; k--)
+                acc = WORLD_SERIES[k] - z * acc;
+            b = z * z * acc;
+        }
+    }
+    if (status == 1) {
+        const double *x = views[0].buf, *u = views[1].buf;
+        double *xo = views[2].buf;
+        Py_ssize_t count = views[0].len / 8;
+        if (single) {
+            for (Py_ssize_t i = 0; i < count; i++)
+                xo[i] = x[i] + tau * u[i];
+        } else {
+            const double *q = views[3].buf;
+            double *qo = views[4].buf, keep = 1.0 - a, gain = a / k3, drive = b / (k3 * k3);
+            for (Py_ssize_t i = 0; i < count; i++) {
+                double qi = q[i];
+                xo[i] = x[i] + gain * qi + drive * u[i];
+                qo[i] = keep * qi + gain * u[i];
+            }
+        }
+    }
+    for (int i = 0; i < taken; i++)
+        PyBuffer_Release(&views[i]);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
+/* abs_max(array): float(numpy.abs(array).max()) of a non-empty C-contiguous float64 array (NaN if it
+ * holds one, as numpy's max); None where it is not one (numpy then does it). */
+static PyObject *abs_max(PyObject *self, PyObject *array) {
+    (void)self;
+    Py_buffer view;
+    int status = world_buffer(array, -1, 0, &view);
+    if (status <= 0)
+        return status < 0 ? NULL : Py_NewRef(Py_None);
+    const double *v = view.buf;
+    Py_ssize_t count = view.len / 8;
+    if (count == 0) {
+        PyBuffer_Release(&view);
+        Py_RETURN_NONE;
+    }
+    double top = fabs(v[0]);
+    for (Py_ssize_t i = 0; i < count && !isnan(top); i++) {
+        double a = fabs(v[i]);
+        if (isnan(a) || a > top)
+            top = a;
+    }
+    PyBuffer_Release(&view);
+    return PyFloat_FromDouble(top);
+}
+
+/* A C-contiguous buffer of 8-byte integers (numpy's intp/int64); 0 without an error set otherwise. */
+static int index_buffer(PyObject *array, Py_buffer *view) {
+    if (PyObject_GetBuffer(array, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = view->format;
+    if (view->itemsize != 8 || f == NULL || (strcmp(f, "l") != 0 && strcmp(f, "q") != 0)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges over the edges with
+ * an end at one of `rows` (x's agent rows; `incident[start[k]:start[k + 1]]` the edges of row k): each
+ * such edge's squared length ||x_head - x_tail||^2 summed as samples.squared_lengths sums it (left to right,
+ * p < 8), kept where it exceeds squared[edge] (numpy.maximum: a NaN stays). An edge met twice is taken
+ * twice, to the same float. True when done; False, with nothing written, where the compiled pass cannot
+ * take the arrays (numpy then does it). */
+static PyObject *watch_edges(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *x_obj, *rows, *objs[4], *sq_obj;
+    if (!PyArg_ParseTuple(args, "OO!OOOOO", &x_obj, &PyList_Type, &rows, &objs[0], &objs[1], &objs[2], &objs[3],
+                          &sq_obj))
+        return NULL;
+    Py_buffer xv, sv, iv[4];
+    int taken = 0, status = world_buffer(x_obj, -1, 0, &xv);
+    if (status != 1)
+        return status < 0 ? NULL : Py_NewRef(Py_False);
+    status = world_buffer(sq_obj, -1, 1, &sv);
+    if (status != 1) {
+        PyBuffer_Release(&xv);
+        return status < 0 ? NULL : Py_NewRef(Py_False);
+    }
+    for (; status == 1 && taken < 4; taken++)
+        if (!index_buffer(objs[taken], &iv[taken]))
+            status = 0;
+    if (status == 0)
+        taken--; /* the one that failed holds no buffer */
+    Py_ssize_t p = 0, n = 0, agents = 0, edges = sv.len / 8;
+    if (status == 1) {
+        agents = iv[0].len / 8 - 1;
+        p = xv.ndim == 2 ? xv.shape[1] : 0;
+        n = xv.ndim == 2 ? xv.shape[0] : 0;
+        status = p >= 1 && p < 8 && n == agents && iv[2].len / 8 == edges && iv[3].len / 8 == edges;
+    }
+    const double *x = xv.buf;
+    double *squared = sv.buf;
+    const long long *start = status ? iv[0].buf : NULL, *incident = status ? iv[1].buf : NULL,
+                    *heads = status ? iv[2].buf : NULL, *tails = status ? iv[3].buf : NULL;
+    /* checked before anything is written: every index in range */
+    for (Py_ssize_t r = 0; status == 1 && r < PyList_GET_SIZE(rows); r++) {
+        Py_ssize_t a = PyLong_AsSsize_t(PyList_GET_ITEM(rows, r));
+        if (a == -1 && PyErr_Occurred())
+            status = -1;
+        else if (a < 0 || a >= agents || start[a] < 0 || start[a] > start[a + 1] || start[a + 1] > iv[1].len / 8)
+            status = 0;
+        for (long long k = status == 1 ? start[a] : 0; status == 1 && k < start[a + 1]; k++) {
+            long long e = incident[k];
+            status = e >= 0 && e < edges && heads[e] >= 0 && heads[e] < n && tails[e] >= 0 && tails[e] < n;
+        }
+    }
+    for (Py_ssize_t r = 0; status == 1 && r < PyList_GET_SIZE(rows); r++) {
+        Py_ssize_t a = PyLong_AsSsize_t(PyList_GET_ITEM(rows, r));
+        for (long long k = start[a]; k < start[a + 1]; k++) {
+            long long e = incident[k];
+            const double *head = x + heads[e] * p, *tail = x + tails[e] * p;
+            double total = 0.0;
+            for (Py_ssize_t c = 0; c < p; c++) {
+                double d = head[c] - tail[c];
+                d *= d;
+                total = c == 0 ? d : total + d;
+            }
+            if (!isnan(squared[e]) && (isnan(total) || total > squared[e]))
+                squared[e] = total; /* numpy.maximum */
+        }
+    }
+    for (int i = 0; i < taken; i++)
+        PyBuffer_Release(&iv[i]);
+    PyBuffer_Release(&xv);
+    PyBuffer_Release(&sv);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
@@ -2230,6 +2459,15 @@ static PyMethodDef methods[] = {
     {"trigger", trigger, METH_VARARGS,
      "trigger(agent, t, sensed): the agent's trigger for a plain-float agent without the safety layer; its "
      "TriggerOutput, or None (nothing changed): the Python path takes it."},
+    {"configure_world", (PyCFunction)(void (*)(void))configure_world, METH_VARARGS | METH_KEYWORDS,
+     "configure_world(*, expm1, series, series_limit): numpy.expm1 and closed_form's series, for advance."},
+    {"advance", world_advance, METH_VARARGS,
+     "advance(x, q, u, x_out, q_out, k3, tau): the world's closed-form step by tau into x_out (q_out); False "
+     "where an array is not a C-contiguous float64 one (numpy then does it)."},
+    {"watch_edges", watch_edges, METH_VARARGS,
+     "watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges for the edges of "
+     "these agent rows; False where numpy must do it."},
+    {"abs_max", abs_max, METH_O, "abs_max(array): float(numpy.abs(array).max()); None where numpy must do it."},
     {NULL, NULL, 0, NULL},
 };
 
