@@ -1025,7 +1025,7 @@ static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) 
 }
 
 /* The agent's knowledge updated as the Python path updates it (the same floats). */
-static int take_message(PyObject *agent, Held *h, const Message *msg) {
+static int take_message(PyObject *agent, Held *h, const Message *msg, double *packed) {
     Py_ssize_t k = msg->k, p = msg->p;
     double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
     PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
@@ -1084,6 +1084,8 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
         row[10] = c;
         width = WIDTH2;
     }
+    if (packed != NULL) /* the team's copy of the row (Known) */
+        memcpy(packed, row, sizeof(double) * (size_t)width);
     return list_put(rows, k, floats_tuple(row, width));
 }
 
@@ -1140,7 +1142,7 @@ static PyObject *receive(PyObject *self, PyObject *args) {
     Message msg;
     int status = read_message(agent, info, &h, &msg);
     if (status == 1)
-        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+        status = take_message(agent, &h, &msg, NULL) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
     release(&h);
     if (status < 0)
         return NULL;
@@ -1257,7 +1259,8 @@ static int set_attr(PyObject *obj, int name, PyObject *value) { /* value: a new 
 
 
 /* The new input (_update, _command) and the knowledge after the trigger, as the Python path. */
-static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset) {
+static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset, double *packed,
+                        double *norm_out) {
     Py_ssize_t m = in->m, p = in->p;
     double total[3] = {0.0, 0.0, 0.0}, k1 = 0.0, k2 = 0.0;
     if (in->kind == 2 && (get_double(agent, N_K1, &k1) < 0 || get_double(agent, N_K2, &k2) < 0))
@@ -1324,12 +1327,17 @@ static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, 
             row[9] = control[2] - uj[2];
             row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
         }
-        PyObject *packed = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
-        if (packed == NULL)
+        Py_ssize_t width = in->kind == 1 ? WIDTH1 : WIDTH2;
+        if (packed != NULL) /* the team's copy of the rows (Known) */
+            memcpy(packed + k * width, row, sizeof(double) * (size_t)width);
+        PyObject *tuple = floats_tuple(row, width);
+        if (tuple == NULL)
             return -1;
-        PyList_SET_ITEM(rows, k, packed);
+        PyList_SET_ITEM(rows, k, tuple);
     }
     double norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
+    if (norm_out != NULL)
+        *norm_out = norm;
     PyObject *edge_time = PyList_New(m); /* [t] * m */
     for (Py_ssize_t k = 0; edge_time != NULL && k < m; k++) {
         PyObject *x = PyFloat_FromDouble(in->t);
@@ -1419,7 +1427,8 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     else if (status == 1) {
         double control[3], offset[3];
         PyObject *t = hold(&h, PyFloat_FromDouble(in->t));
-        if (t != NULL && take_sensing(agent, &h, in, control, offset) == 0 && after_trigger(agent, &h, t) == 0)
+        if (t != NULL && take_sensing(agent, &h, in, control, offset, NULL, NULL) == 0 &&
+            after_trigger(agent, &h, t) == 0)
             out = trigger_output(agent, &h, in, t, control);
     }
     release(&h);
@@ -1427,6 +1436,20 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     return out;
 }
 
+
+/* What the team knows an agent knows (Team: written where the team updates the agent): the model a
+ * search reads (read_model: kind, rows, _u_offset, _control_norm, k1..k3), valid while the agent's
+ * counters (triggers, infos_received) are those it was written at; a change the team did not make (the
+ * Python trigger or receive) moves a counter, and the agent's own attributes are read again. */
+typedef struct {
+    int valid, kind;
+    long triggers, infos;
+    Py_ssize_t m;
+    double *rows; /* m rows of WIDTH1 / WIDTH2 (room for WIDTH2) */
+    double u_off[3], control_norm, k1, k2, k3;
+} Known;
+
+static int known_model(PyObject *team, Py_ssize_t a, PyObject *agent, SearchObject *made);
 
 /* ---- Agenda: the engine's next-event queue (formation_sim.sim.engine._Agenda without a period) -- */
 
@@ -1454,6 +1477,9 @@ typedef struct {
     double first_span; /* eta._FIRST_SPAN: plan makes the searches of `plain` agents itself; NaN: it calls trigger_search */
     PyObject *plain;   /* a tuple of the agent types whose trigger_search plan may make in C, or NULL */
     PyObject *rule;    /* the rule type (trigger.ExponentialRule) of the thresholds it may make them for */
+    PyObject *team;    /* the engine's Team (link), whose copy of an agent's model a new search starts from */
+    Py_ssize_t *team_of; /* per agent (rank): its position in the team, or -1 */
+    long long from_team; /* the searches started from the team's copy */
 } AgendaObject;
 
 static PyTypeObject AgendaType;
@@ -1574,6 +1600,7 @@ static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
     Py_VISIT(self->failed);
     Py_VISIT(self->plain);
     Py_VISIT(self->rule);
+    Py_VISIT(self->team);
     return 0;
 }
 
@@ -1585,12 +1612,14 @@ static int agenda_clear(AgendaObject *self) {
     Py_CLEAR(self->failed);
     Py_CLEAR(self->plain);
     Py_CLEAR(self->rule);
+    Py_CLEAR(self->team);
     return 0;
 }
 
 static void agenda_dealloc(AgendaObject *self) {
     PyObject_GC_UnTrack(self);
     agenda_clear(self);
+    PyMem_Free(self->team_of);
     PyMem_Free(self->searches);
     PyMem_Free(self->serial);
     PyMem_Free(self->heap);
@@ -1605,7 +1634,7 @@ static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* me
  * neighbour, and its search is either none (a new _fastcore.Search, made as the method makes it) or a
  * _fastcore.Search of this limit (kept). A new reference; Py_None (a new reference) where the method
  * must decide; NULL on error. */
-static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
+static PyObject *plain_search(AgendaObject *self, PyObject *agent, Py_ssize_t rank) {
     int plain = 0;
     for (Py_ssize_t i = 0; self->plain != NULL && i < PyTuple_GET_SIZE(self->plain); i++)
         plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
@@ -1659,10 +1688,12 @@ static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
     made->st.cover_end = -INFINITY;
     made->st.bound_e = NAN;
     made->st.bound_curv = NAN;
-    if (PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
+    if ((self->team != NULL && known_model(self->team, self->team_of[rank], agent, made) < 0) ||
+        PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
         Py_DECREF(made);
         goto done;
     }
+    self->from_team += made->md.rows != NULL;
     out = (PyObject *)made;
 done:
     Py_XDECREF(fast);
@@ -1695,7 +1726,7 @@ static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
         self->counter += 1;
         self->serial[k] = self->counter;
         /* Searched lazily (next_time): only as far as the team's next event needs. */
-        PyObject *search = plain_search(self, agent);
+        PyObject *search = plain_search(self, agent, k);
         if (search == Py_None) {
             Py_DECREF(search);
             search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
@@ -1810,12 +1841,18 @@ static PyMemberDef agenda_members[] = {
     {"horizon", T_DOUBLE, offsetof(AgendaObject, horizon), READONLY, "no event is planned past it"},
     {"failed", T_OBJECT, offsetof(AgendaObject, failed), READONLY,
      "the agent whose search raised in next_time, or None"},
+    {"from_team", T_LONGLONG, offsetof(AgendaObject, from_team), READONLY,
+     "how many new searches started from the linked team's copy of their agent's model (link)"},
     {NULL, 0, 0, 0, NULL},
 };
+
+static PyObject *agenda_link(AgendaObject *self, PyObject *team);
 
 static PyMethodDef agenda_methods[] = {
     {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
      "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"link", (PyCFunction)agenda_link, METH_O,
+     "link(team): new searches of the team's agents start from the team's copy of their model (Team)."},
     {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},
     {"pop_due", (PyCFunction)agenda_pop_due, METH_O, "pop_due(t): the agents planned for exactly t, sorted."},
     {NULL, NULL, 0, NULL},
@@ -1856,6 +1893,8 @@ typedef struct {
     Py_ssize_t *back;     /* the agent's slot among the neighbour's edges */
     Pending *pending;
     Py_ssize_t size, capacity;
+    Known *known;        /* per agent: its model as the team last wrote it */
+    double *known_rows;  /* agent a's rows from start[a] * WIDTH2 */
 } TeamObject;
 
 static PyTypeObject TeamType;
@@ -1912,7 +1951,9 @@ static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     Py_ssize_t edges = self->start[n] > 0 ? self->start[n] : 1;
     self->neighbour = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
     self->back = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
-    if (self->neighbour == NULL || self->back == NULL) {
+    self->known = PyMem_Calloc((size_t)(n > 0 ? n : 1), sizeof(Known)); /* none valid */
+    self->known_rows = PyMem_Malloc(sizeof(double) * (size_t)edges * WIDTH2);
+    if (self->neighbour == NULL || self->back == NULL || self->known == NULL || self->known_rows == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
@@ -1960,6 +2001,8 @@ static void team_dealloc(TeamObject *self) {
     PyMem_Free(self->neighbour);
     PyMem_Free(self->back);
     PyMem_Free(self->pending);
+    PyMem_Free(self->known);
+    PyMem_Free(self->known_rows);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -2043,6 +2086,11 @@ static int team_queue(TeamObject *self, Pending msg) {
     return 0;
 }
 
+/* The agent's counters into kn (what a search compares with its own: search_model). */
+static int known_counters(PyObject *agent, Known *kn) {
+    return get_long(agent, N_TRIGGERS, &kn->triggers) < 0 || get_long(agent, N_INFOS, &kn->infos) < 0 ? -1 : 0;
+}
+
 /* One agent's trigger at t from the world's arrays: _EventTriggeredAgent.trigger (take_sensing,
  * after_trigger: the same updates and floats), the command written into u (World.set_control), and
  * its triggering information queued for deliver. 1 done, 0 left to the Python path, -1 error. */
@@ -2051,12 +2099,24 @@ static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, dou
     PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
     Held h = {.n = 0};
     double control[3], offset[3];
+    Known *kn = &self->known[a];
     int status = team_sensing(self, agent, a, t, x, q, &h, in);
-    if (status == 1 && (take_sensing(agent, &h, in, control, offset) < 0 || after_trigger(agent, &h, t_obj) < 0))
-        status = -1;
+    if (status == 1) {
+        kn->valid = 0;
+        kn->rows = self->known_rows + self->start[a] * WIDTH2;
+        if (take_sensing(agent, &h, in, control, offset, kn->rows, &kn->control_norm) < 0 ||
+            after_trigger(agent, &h, t_obj) < 0 || known_counters(agent, kn) < 0 ||
+            (in->kind == 2 && (get_double(agent, N_K1, &kn->k1) < 0 || get_double(agent, N_K2, &kn->k2) < 0 ||
+                               get_double(agent, N_K3, &kn->k3) < 0)))
+            status = -1;
+    }
     release(&h);
     if (status != 1)
         return status;
+    kn->kind = in->kind; /* the model a search reads now (read_model), as the trigger wrote it */
+    kn->m = in->m;
+    memcpy(kn->u_off, offset, sizeof kn->u_off);
+    kn->valid = 1;
     int finite = 1;
     for (Py_ssize_t i = 0; i < in->p; i++)
         finite &= isfinite(control[i]) != 0;
@@ -2172,9 +2232,24 @@ static int team_deliver_one(TeamObject *self, const Pending *pending) {
     plain = plain && PyList_CheckExact(edge_time) && msg.k < PyList_GET_SIZE(edge_time) &&
             plain_double(PyList_GET_ITEM(edge_time, msg.k), &edge) && msg.stamp >= edge &&
             (last_trigger == Py_None || (plain_double(last_trigger, &last) && msg.stamp >= last));
-    if (plain) {
-        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 0;
+    Known *kn = &self->known[pending->receiver];
+    if (plain) { /* the team's copy follows where it was the agent's knowledge before the message */
+        long triggers, infos;
+        int follow = kn->valid && kn->kind == msg.kind && msg.k < kn->m && get_long(agent, N_TRIGGERS, &triggers) == 0 &&
+                     get_long(agent, N_INFOS, &infos) == 0 && triggers == kn->triggers && infos == kn->infos;
+        if (PyErr_Occurred())
+            goto done;
+        kn->valid = 0;
+        status = take_message(agent, &h, &msg, follow ? kn->rows + msg.k * (kind == 1 ? WIDTH1 : WIDTH2) : NULL) < 0 ||
+                         after_message(agent, &h, msg.stamp) < 0
+                     ? -1
+                     : 0;
+        if (status == 0 && follow) {
+            kn->infos = infos + 1; /* after_message's count */
+            kn->valid = 1;
+        }
     } else {
+        kn->valid = 0;
         PyObject *info = hold(&h, team_info(self, pending, (int)kind));
         PyObject *out = info ? PyObject_CallMethodOneArg(agent, NAMES[N_RECEIVE], info) : NULL;
         status = out == NULL ? -1 : 0;
@@ -2196,6 +2271,67 @@ static PyObject *team_deliver(TeamObject *self, PyObject *unused) {
     }
     self->size = 0; /* delivered, or the run ends with the error */
     return receivers;
+}
+
+/* A new search of agent `a` (Agenda.plan) starts from the team's copy of its model where that is still
+ * the agent's knowledge (its counters those it was written at): what search_model would read from the
+ * agent's attributes, the same floats, without converting them. 0 (the search reads the agent itself
+ * where the copy is not valid), -1 on error. */
+static int known_model(PyObject *team_obj, Py_ssize_t a, PyObject *agent, SearchObject *made) {
+    TeamObject *team = (TeamObject *)team_obj;
+    if (a < 0 || a >= team->n || PyTuple_GET_ITEM(team->agents, a) != agent || !team->known[a].valid)
+        return 0;
+    Known *kn = &team->known[a];
+    long triggers, infos;
+    if (get_long(agent, N_TRIGGERS, &triggers) < 0 || get_long(agent, N_INFOS, &infos) < 0)
+        return -1;
+    if (triggers != kn->triggers || infos != kn->infos)
+        return 0;
+    Model *md = &made->md; /* laid out as read_model lays it out */
+    Py_ssize_t width = kn->kind == 1 ? WIDTH1 : WIDTH2, n = kn->m > 0 ? kn->m : 1;
+    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
+    if (md->rows == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    md->kind = kn->kind;
+    md->m = kn->m;
+    md->probe = md->rows + n * width;
+    md->speeds = md->probe + 4 * n;
+    memcpy(md->rows, kn->rows, sizeof(double) * (size_t)(kn->m * width));
+    memcpy(md->u_off, kn->u_off, sizeof md->u_off);
+    md->control_norm = kn->control_norm;
+    if (kn->kind == 2) {
+        md->k1 = kn->k1;
+        md->k2 = kn->k2;
+        md->k3 = kn->k3;
+    }
+    made->known_triggers = triggers;
+    made->known_infos = infos;
+    return 0;
+}
+
+/* Agenda.link(team): new searches of the team's agents start from the team's copy of their model. */
+static PyObject *agenda_link(AgendaObject *self, PyObject *team) {
+    if (!Py_IS_TYPE(team, &TeamType)) {
+        PyErr_Format(PyExc_TypeError, "Agenda.link takes a Team, got %R", team);
+        return NULL;
+    }
+    Py_ssize_t *team_of = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(self->n ? self->n : 1));
+    if (team_of == NULL)
+        return PyErr_NoMemory();
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *position = PyDict_GetItemWithError(((TeamObject *)team)->index, PyTuple_GET_ITEM(self->ids, k));
+        team_of[k] = position == NULL ? -1 : PyLong_AsSsize_t(position);
+        if (PyErr_Occurred()) {
+            PyMem_Free(team_of);
+            return NULL;
+        }
+    }
+    PyMem_Free(self->team_of);
+    self->team_of = team_of;
+    Py_XSETREF(self->team, Py_NewRef(team));
+    Py_RETURN_NONE;
 }
 
 static PyMethodDef team_methods[] = {

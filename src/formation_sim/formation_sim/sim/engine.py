@@ -495,6 +495,8 @@ def _run(
     some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
     floor_edges = FloorEdges.of(scenario)
     team = _team(agents, world) if period is None else None
+    if team is not None:
+        agenda.link(team)
     while True:
         sampler.event(due=due)
         real_t = t if clock is None else clock.real(t)
@@ -645,6 +647,13 @@ class _Agenda:
                 plain=(Eta1Agent, Eta2Agent),
                 rule=ExponentialRule,
             )
+
+    def link(self, team: _fastcore.Team) -> None:
+        """New searches of the team's agents start from the compiled team's copy of their knowledge
+        (`_fastcore.Agenda.link`: what the search would read from the agent, where the agent's counters
+        say it still is; the same floats)."""
+        if self.queue is not None:
+            self.queue.link(team)
 
     def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
         """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""
