@@ -939,6 +939,10 @@ static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
         }
         PyTuple_SET_ITEM(t, i, x);
     }
+    /* A tuple of floats cannot be part of a reference cycle: untracked now, as the garbage collector
+     * would untrack it at its first pass (_PyTuple_MaybeUntrack), so the knowledge an agent keeps
+     * between messages is not traversed, nor promoted to the old generations. */
+    PyObject_GC_UnTrack(t);
     return t;
 }
 
