@@ -173,3 +173,24 @@ def test_a_change_the_team_did_not_make_is_read_from_the_agent(on_path):
     on_path(False)
     agents[1]._search = None
     assert replanned == agents[1].next_trigger_time(100.0) != first  # the Python search of the new knowledge
+
+
+@pytest.mark.parametrize('name', ['paper_single', 'paper_double'])
+def test_a_message_after_a_trigger_the_team_did_not_make_uses_the_agents_own_command(on_path, name):
+    """The team delivers from its copy of the receiver's d_ij, capacity and command only while the
+    receiver's counters say the copy is its knowledge; after a trigger elsewhere (here `_trigger_one`,
+    the engine's Python step) it reads the agent: every row stays the agent's `_row` of its knowledge."""
+    on_path(True)
+    scenario, world, agents, team = _team_and_agents(name)
+    due = list(scenario.agent_ids)
+    times: dict[int, list[float]] = {i: [] for i in due}
+    team.trigger(due, 0, 0.0, *world.arrays())
+    team.deliver()
+    world.advance(1e-4)
+    engine._trigger_one(agents[1], world, 1e-4, times)  # agent 1's new command, not through the team
+    world.advance(2e-4)
+    assert team.trigger([2, 3], 0, 2e-4, *world.arrays()) == 2
+    assert sorted(team.deliver()) == [1, 1, 2, 3]
+    for agent in agents.values():
+        assert agent._rows == [agent._row(k) for k in range(len(agent.neighbour_ids))]
+    assert agents[1]._u[: scenario.dimension] == tuple(agents[1].control)

@@ -1029,20 +1029,27 @@ static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) 
 }
 
 /* The agent's knowledge updated as the Python path updates it (the same floats). */
-static int take_message(PyObject *agent, Held *h, const Message *msg, double *packed) {
+static int take_message(PyObject *agent, Held *h, const Message *msg, double *packed, const double *known_dc,
+                        const double *known_u) {
     Py_ssize_t k = msg->k, p = msg->p;
     double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
-    PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
-    PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
-    PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
-    if (capacity == NULL)
-        return -1;
-    PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
-    hold(h, offset);
-    hold(h, cap);
-    if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
-        read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
-        return -1;
+    if (known_dc != NULL) { /* the team's copy of the edge's d_ij, its capacity and the agent's command */
+        memcpy(d, known_dc, sizeof d);
+        c = known_dc[3];
+        memcpy(u, known_u, sizeof u);
+    } else {
+        PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
+        PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
+        PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+        if (capacity == NULL)
+            return -1;
+        PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
+        hold(h, offset);
+        hold(h, cap);
+        if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
+            read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
+            return -1;
+    }
     for (Py_ssize_t i = 0; i < p; i++) {
         y[i] = -msg->rel[i] - d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
         uj[i] = msg->control[i];
@@ -1146,7 +1153,7 @@ static PyObject *receive(PyObject *self, PyObject *args) {
     Message msg;
     int status = read_message(agent, info, &h, &msg);
     if (status == 1)
-        status = take_message(agent, &h, &msg, NULL) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+        status = take_message(agent, &h, &msg, NULL, NULL, NULL) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
     release(&h);
     if (status < 0)
         return NULL;
@@ -1451,6 +1458,8 @@ typedef struct {
     Py_ssize_t m;
     double *rows; /* m rows of WIDTH1 / WIDTH2 (room for WIDTH2) */
     double u_off[3], control_norm, k1, k2, k3;
+    double *dc;   /* per edge: d_ij (_offsets3[k]) and Δ - ||d_ij|| (_capacity[k]), as the trigger read them */
+    double u[3];  /* _u: the command, padded */
 } Known;
 
 static int known_model(PyObject *team, Py_ssize_t a, PyObject *agent, SearchObject *made);
@@ -1899,6 +1908,7 @@ typedef struct {
     Py_ssize_t size, capacity;
     Known *known;        /* per agent: its model as the team last wrote it */
     double *known_rows;  /* agent a's rows from start[a] * WIDTH2 */
+    double *known_dc;    /* agent a's d_ij and capacities from start[a] * 4 */
 } TeamObject;
 
 static PyTypeObject TeamType;
@@ -1957,7 +1967,9 @@ static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     self->back = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
     self->known = PyMem_Calloc((size_t)(n > 0 ? n : 1), sizeof(Known)); /* none valid */
     self->known_rows = PyMem_Malloc(sizeof(double) * (size_t)edges * WIDTH2);
-    if (self->neighbour == NULL || self->back == NULL || self->known == NULL || self->known_rows == NULL) {
+    self->known_dc = PyMem_Malloc(sizeof(double) * (size_t)edges * 4);
+    if (self->neighbour == NULL || self->back == NULL || self->known == NULL || self->known_rows == NULL ||
+        self->known_dc == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
@@ -2007,6 +2019,7 @@ static void team_dealloc(TeamObject *self) {
     PyMem_Free(self->pending);
     PyMem_Free(self->known);
     PyMem_Free(self->known_rows);
+    PyMem_Free(self->known_dc);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -2050,6 +2063,8 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
     if (in->m > MAX_EDGES || !PyList_CheckExact(offsets) || !PyList_CheckExact(capacity) ||
         PyList_GET_SIZE(offsets) != in->m || PyList_GET_SIZE(capacity) != in->m)
         return 0;
+    double *dc = self->known_dc + self->start[a] * 4; /* the team's copy (Known), valid again after the trigger */
+    self->known[a].valid = 0;
     for (Py_ssize_t k = 0; k < in->m; k++) {
         Py_ssize_t b = self->neighbour[self->start[a] + k];
         double d[3], c, sum = 0.0;
@@ -2064,6 +2079,8 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
             return -1;
         if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
             return 0;
+        memcpy(dc + 4 * k, d, sizeof d);
+        dc[4 * k + 3] = c;
         for (Py_ssize_t i = 0; i < p; i++) {
             in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
             sum += in->y[k][i] * in->y[k][i];
@@ -2120,6 +2137,8 @@ static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, dou
     kn->kind = in->kind; /* the model a search reads now (read_model), as the trigger wrote it */
     kn->m = in->m;
     memcpy(kn->u_off, offset, sizeof kn->u_off);
+    memcpy(kn->u, control, sizeof kn->u); /* _u: the command padded with zeros, as take_sensing wrote it */
+    kn->dc = self->known_dc + self->start[a] * 4;
     kn->valid = 1;
     int finite = 1;
     for (Py_ssize_t i = 0; i < in->p; i++)
@@ -2244,7 +2263,8 @@ static int team_deliver_one(TeamObject *self, const Pending *pending) {
         if (PyErr_Occurred())
             goto done;
         kn->valid = 0;
-        status = take_message(agent, &h, &msg, follow ? kn->rows + msg.k * (kind == 1 ? WIDTH1 : WIDTH2) : NULL) < 0 ||
+        status = take_message(agent, &h, &msg, follow ? kn->rows + msg.k * (kind == 1 ? WIDTH1 : WIDTH2) : NULL,
+                              follow ? kn->dc + 4 * msg.k : NULL, follow ? kn->u : NULL) < 0 ||
                          after_message(agent, &h, msg.stamp) < 0
                      ? -1
                      : 0;
