@@ -111,6 +111,21 @@ def test_a_rule_is_registered_once_under_its_name_and_refused_numbers_name_the_r
         make_rule('polynomial', floor=0.0, alpha=-1.0, beta=1.0)
 
 
+def test_a_rule_without_the_members_of_trigger_rule_is_refused_every_time():
+    lacking = type('Lacking', (), {'name': 'lacking', '__init__': lambda self, **numbers: None})
+    register_rule(lacking)
+    try:
+        for _ in range(2):  # the protocol check is remembered only for types that pass it
+            with pytest.raises(
+                RuleError, match=r"trigger_rule: 'lacking' built .*lacks the methods of TriggerRule"
+            ):
+                make_rule('lacking', floor=0.0, alpha=1.0, beta=1.0)
+    finally:
+        unregister_rule('lacking')
+    rule = make_rule(DEFAULT_RULE, floor=0.0, alpha=2.0, beta=0.5)
+    assert make_rule(DEFAULT_RULE, floor=0.0, alpha=2.0, beta=0.5) == rule
+
+
 def _single_error_ratios(scenario, record, threshold):
     """||e_i|| / θ at each agent's triggers after t = 0, and the largest between them, from the
     record's positions alone: e_i(t) = Σ_j ω_ij y_ij (t) − the same at agent i's last trigger,

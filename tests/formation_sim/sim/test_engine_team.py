@@ -9,9 +9,12 @@ error, and that arrays of another shape are refused by rule and value.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from formation_agent.core import compiled
+from formation_agent.core.trigger import ExponentialRule
+from formation_msgs_py.types import TriggerInfo
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim import engine
@@ -95,3 +98,99 @@ def test_the_team_refuses_arrays_of_another_shape_by_rule_and_value(on_path):
         team.trigger(list(scenario.agent_ids), 0, 0.0, x[:2], q, u)
     with pytest.raises(ValueError, match=r"the world's arrays must be \(3, 2\) float64"):
         team.trigger(list(scenario.agent_ids), 0, 0.0, x, q, u.astype('float32'))
+
+
+def _watch_plans(monkeypatch) -> tuple[list, list[int]]:
+    """The compiled queue of the next run, and how many new searches each of its plans made."""
+    queues: list = []
+    made: list[int] = []
+    link, plan = engine._Agenda.link, engine._Agenda.plan
+
+    def kept(self, team):
+        queues.append(self.queue)
+        link(self, team)
+
+    def counted(self, agents, changed, due, t):
+        before = {i: agents[i]._search for i in changed}
+        plan(self, agents, changed, due, t)
+        made.append(sum(agents[i]._search is not search for i, search in before.items()))
+
+    monkeypatch.setattr(engine._Agenda, 'link', kept)
+    monkeypatch.setattr(engine._Agenda, 'plan', counted)
+    return queues, made
+
+
+@pytest.mark.parametrize('dynamics', ['single', 'double'])
+def test_new_searches_start_from_the_teams_copy_and_give_the_python_chain(on_path, monkeypatch, dynamics):
+    scenario = random_scenario(n=12, seed=2, dynamics=dynamics)
+    horizon = 6.0 if dynamics == 'single' else 0.05
+    on_path(False)
+    pure = engine.simulate(scenario, horizon=horizon, sample_dt=None)
+    on_path(True)
+    queues, made = _watch_plans(monkeypatch)
+    fast = engine.simulate(scenario, horizon=horizon, sample_dt=None)
+    events = sum(map(len, pure.trigger_times.values()))
+    assert fast.trigger_times == pure.trigger_times and events > 100
+    # Each agent's first search (t = 0, before it had heard every neighbour) is trigger_search's; every
+    # later new one is made right after the team updated the agent, from the team's copy.
+    (queue,) = queues
+    assert made[0] == scenario.n and queue.from_team == sum(made) - scenario.n > events
+
+
+def test_a_change_the_team_did_not_make_is_read_from_the_agent(on_path):
+    """A message the Python receive takes (here a numpy vector, which the compiled receive leaves to it)
+    moves the agent's counter: its next search reads the agent, not the team's older copy."""
+    on_path(True)
+    scenario, world, agents, team = _team_and_agents('paper_single')
+    plain = (type(agents[1]),)
+    queue = compiled.agenda()(
+        agent_ids=scenario.agent_ids,
+        horizon=100.0,
+        first_span=engine._FIRST_SPAN,
+        plain=plain,
+        rule=ExponentialRule,
+    )
+    queue.link(team)
+    due = list(scenario.agent_ids)
+    team.trigger(due, 0, 0.0, *world.arrays())
+    team.deliver()
+    queue.plan(agents, due)  # the first searches: trigger_search's (no neighbour heard before t = 0)
+    assert queue.from_team == 0
+    world.advance(0.001)
+    team.trigger([1], 0, 0.001, *world.arrays())
+    changed = sorted({1, *team.deliver()})
+    queue.plan(agents, changed)
+    assert queue.from_team == len(changed) == 3  # the trigger's and the receivers' copies
+    first = agents[1]._search.run()
+    sender = agents[1].neighbour_ids[0]
+    rel = -np.asarray(agents[1]._edge_y[0][: scenario.dimension]) * 1.5  # a neighbour farther away
+    agents[1].receive(
+        TriggerInfo(sender=sender, receiver=1, stamp=0.002, control=(0.0, 0.0), rel_position=rel)
+    )
+    queue.plan(agents, [1])
+    assert queue.from_team == 3  # this search read the agent
+    replanned = agents[1]._search.run()
+    on_path(False)
+    agents[1]._search = None
+    assert replanned == agents[1].next_trigger_time(100.0) != first  # the Python search of the new knowledge
+
+
+@pytest.mark.parametrize('name', ['paper_single', 'paper_double'])
+def test_a_message_after_a_trigger_the_team_did_not_make_uses_the_agents_own_command(on_path, name):
+    """The team delivers from its copy of the receiver's d_ij, capacity and command only while the
+    receiver's counters say the copy is its knowledge; after a trigger elsewhere (here `_trigger_one`,
+    the engine's Python step) it reads the agent: every row stays the agent's `_row` of its knowledge."""
+    on_path(True)
+    scenario, world, agents, team = _team_and_agents(name)
+    due = list(scenario.agent_ids)
+    times: dict[int, list[float]] = {i: [] for i in due}
+    team.trigger(due, 0, 0.0, *world.arrays())
+    team.deliver()
+    world.advance(1e-4)
+    engine._trigger_one(agents[1], world, 1e-4, times)  # agent 1's new command, not through the team
+    world.advance(2e-4)
+    assert team.trigger([2, 3], 0, 2e-4, *world.arrays()) == 2
+    assert sorted(team.deliver()) == [1, 1, 2, 3]
+    for agent in agents.values():
+        assert agent._rows == [agent._row(k) for k in range(len(agent.neighbour_ids))]
+    assert agents[1]._u[: scenario.dimension] == tuple(agents[1].control)

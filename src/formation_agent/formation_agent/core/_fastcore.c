@@ -939,6 +939,10 @@ static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
         }
         PyTuple_SET_ITEM(t, i, x);
     }
+    /* A tuple of floats cannot be part of a reference cycle: untracked now, as the garbage collector
+     * would untrack it at its first pass (_PyTuple_MaybeUntrack), so the knowledge an agent keeps
+     * between messages is not traversed, nor promoted to the old generations. */
+    PyObject_GC_UnTrack(t);
     return t;
 }
 
@@ -1025,20 +1029,27 @@ static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) 
 }
 
 /* The agent's knowledge updated as the Python path updates it (the same floats). */
-static int take_message(PyObject *agent, Held *h, const Message *msg) {
+static int take_message(PyObject *agent, Held *h, const Message *msg, double *packed, const double *known_dc,
+                        const double *known_u) {
     Py_ssize_t k = msg->k, p = msg->p;
     double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
-    PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
-    PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
-    PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
-    if (capacity == NULL)
-        return -1;
-    PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
-    hold(h, offset);
-    hold(h, cap);
-    if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
-        read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
-        return -1;
+    if (known_dc != NULL) { /* the team's copy of the edge's d_ij, its capacity and the agent's command */
+        memcpy(d, known_dc, sizeof d);
+        c = known_dc[3];
+        memcpy(u, known_u, sizeof u);
+    } else {
+        PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
+        PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
+        PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+        if (capacity == NULL)
+            return -1;
+        PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
+        hold(h, offset);
+        hold(h, cap);
+        if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
+            read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
+            return -1;
+    }
     for (Py_ssize_t i = 0; i < p; i++) {
         y[i] = -msg->rel[i] - d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
         uj[i] = msg->control[i];
@@ -1084,6 +1095,8 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
         row[10] = c;
         width = WIDTH2;
     }
+    if (packed != NULL) /* the team's copy of the row (Known) */
+        memcpy(packed, row, sizeof(double) * (size_t)width);
     return list_put(rows, k, floats_tuple(row, width));
 }
 
@@ -1140,7 +1153,7 @@ static PyObject *receive(PyObject *self, PyObject *args) {
     Message msg;
     int status = read_message(agent, info, &h, &msg);
     if (status == 1)
-        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+        status = take_message(agent, &h, &msg, NULL, NULL, NULL) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
     release(&h);
     if (status < 0)
         return NULL;
@@ -1257,7 +1270,8 @@ static int set_attr(PyObject *obj, int name, PyObject *value) { /* value: a new 
 
 
 /* The new input (_update, _command) and the knowledge after the trigger, as the Python path. */
-static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset) {
+static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset, double *packed,
+                        double *norm_out) {
     Py_ssize_t m = in->m, p = in->p;
     double total[3] = {0.0, 0.0, 0.0}, k1 = 0.0, k2 = 0.0;
     if (in->kind == 2 && (get_double(agent, N_K1, &k1) < 0 || get_double(agent, N_K2, &k2) < 0))
@@ -1324,12 +1338,17 @@ static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, 
             row[9] = control[2] - uj[2];
             row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
         }
-        PyObject *packed = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
-        if (packed == NULL)
+        Py_ssize_t width = in->kind == 1 ? WIDTH1 : WIDTH2;
+        if (packed != NULL) /* the team's copy of the rows (Known) */
+            memcpy(packed + k * width, row, sizeof(double) * (size_t)width);
+        PyObject *tuple = floats_tuple(row, width);
+        if (tuple == NULL)
             return -1;
-        PyList_SET_ITEM(rows, k, packed);
+        PyList_SET_ITEM(rows, k, tuple);
     }
     double norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
+    if (norm_out != NULL)
+        *norm_out = norm;
     PyObject *edge_time = PyList_New(m); /* [t] * m */
     for (Py_ssize_t k = 0; edge_time != NULL && k < m; k++) {
         PyObject *x = PyFloat_FromDouble(in->t);
@@ -1419,7 +1438,8 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     else if (status == 1) {
         double control[3], offset[3];
         PyObject *t = hold(&h, PyFloat_FromDouble(in->t));
-        if (t != NULL && take_sensing(agent, &h, in, control, offset) == 0 && after_trigger(agent, &h, t) == 0)
+        if (t != NULL && take_sensing(agent, &h, in, control, offset, NULL, NULL) == 0 &&
+            after_trigger(agent, &h, t) == 0)
             out = trigger_output(agent, &h, in, t, control);
     }
     release(&h);
@@ -1427,6 +1447,22 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     return out;
 }
 
+
+/* What the team knows an agent knows (Team: written where the team updates the agent): the model a
+ * search reads (read_model: kind, rows, _u_offset, _control_norm, k1..k3), valid while the agent's
+ * counters (triggers, infos_received) are those it was written at; a change the team did not make (the
+ * Python trigger or receive) moves a counter, and the agent's own attributes are read again. */
+typedef struct {
+    int valid, kind;
+    long triggers, infos;
+    Py_ssize_t m;
+    double *rows; /* m rows of WIDTH1 / WIDTH2 (room for WIDTH2) */
+    double u_off[3], control_norm, k1, k2, k3;
+    double *dc;   /* per edge: d_ij (_offsets3[k]) and Δ - ||d_ij|| (_capacity[k]), as the trigger read them */
+    double u[3];  /* _u: the command, padded */
+} Known;
+
+static int known_model(PyObject *team, Py_ssize_t a, PyObject *agent, SearchObject *made);
 
 /* ---- Agenda: the engine's next-event queue (formation_sim.sim.engine._Agenda without a period) -- */
 
@@ -1454,6 +1490,9 @@ typedef struct {
     double first_span; /* eta._FIRST_SPAN: plan makes the searches of `plain` agents itself; NaN: it calls trigger_search */
     PyObject *plain;   /* a tuple of the agent types whose trigger_search plan may make in C, or NULL */
     PyObject *rule;    /* the rule type (trigger.ExponentialRule) of the thresholds it may make them for */
+    PyObject *team;    /* the engine's Team (link), whose copy of an agent's model a new search starts from */
+    Py_ssize_t *team_of; /* per agent (rank): its position in the team, or -1 */
+    long long from_team; /* the searches started from the team's copy */
 } AgendaObject;
 
 static PyTypeObject AgendaType;
@@ -1574,6 +1613,7 @@ static int agenda_traverse(AgendaObject *self, visitproc visit, void *arg) {
     Py_VISIT(self->failed);
     Py_VISIT(self->plain);
     Py_VISIT(self->rule);
+    Py_VISIT(self->team);
     return 0;
 }
 
@@ -1585,12 +1625,14 @@ static int agenda_clear(AgendaObject *self) {
     Py_CLEAR(self->failed);
     Py_CLEAR(self->plain);
     Py_CLEAR(self->rule);
+    Py_CLEAR(self->team);
     return 0;
 }
 
 static void agenda_dealloc(AgendaObject *self) {
     PyObject_GC_UnTrack(self);
     agenda_clear(self);
+    PyMem_Free(self->team_of);
     PyMem_Free(self->searches);
     PyMem_Free(self->serial);
     PyMem_Free(self->heap);
@@ -1605,7 +1647,7 @@ static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* me
  * neighbour, and its search is either none (a new _fastcore.Search, made as the method makes it) or a
  * _fastcore.Search of this limit (kept). A new reference; Py_None (a new reference) where the method
  * must decide; NULL on error. */
-static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
+static PyObject *plain_search(AgendaObject *self, PyObject *agent, Py_ssize_t rank) {
     int plain = 0;
     for (Py_ssize_t i = 0; self->plain != NULL && i < PyTuple_GET_SIZE(self->plain); i++)
         plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
@@ -1659,10 +1701,12 @@ static PyObject *plain_search(AgendaObject *self, PyObject *agent) {
     made->st.cover_end = -INFINITY;
     made->st.bound_e = NAN;
     made->st.bound_curv = NAN;
-    if (PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
+    if ((self->team != NULL && known_model(self->team, self->team_of[rank], agent, made) < 0) ||
+        PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
         Py_DECREF(made);
         goto done;
     }
+    self->from_team += made->md.rows != NULL;
     out = (PyObject *)made;
 done:
     Py_XDECREF(fast);
@@ -1695,7 +1739,7 @@ static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
         self->counter += 1;
         self->serial[k] = self->counter;
         /* Searched lazily (next_time): only as far as the team's next event needs. */
-        PyObject *search = plain_search(self, agent);
+        PyObject *search = plain_search(self, agent, k);
         if (search == Py_None) {
             Py_DECREF(search);
             search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
@@ -1810,12 +1854,18 @@ static PyMemberDef agenda_members[] = {
     {"horizon", T_DOUBLE, offsetof(AgendaObject, horizon), READONLY, "no event is planned past it"},
     {"failed", T_OBJECT, offsetof(AgendaObject, failed), READONLY,
      "the agent whose search raised in next_time, or None"},
+    {"from_team", T_LONGLONG, offsetof(AgendaObject, from_team), READONLY,
+     "how many new searches started from the linked team's copy of their agent's model (link)"},
     {NULL, 0, 0, 0, NULL},
 };
+
+static PyObject *agenda_link(AgendaObject *self, PyObject *team);
 
 static PyMethodDef agenda_methods[] = {
     {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
      "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"link", (PyCFunction)agenda_link, METH_O,
+     "link(team): new searches of the team's agents start from the team's copy of their model (Team)."},
     {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},
     {"pop_due", (PyCFunction)agenda_pop_due, METH_O, "pop_due(t): the agents planned for exactly t, sorted."},
     {NULL, NULL, 0, NULL},
@@ -1856,6 +1906,9 @@ typedef struct {
     Py_ssize_t *back;     /* the agent's slot among the neighbour's edges */
     Pending *pending;
     Py_ssize_t size, capacity;
+    Known *known;        /* per agent: its model as the team last wrote it */
+    double *known_rows;  /* agent a's rows from start[a] * WIDTH2 */
+    double *known_dc;    /* agent a's d_ij and capacities from start[a] * 4 */
 } TeamObject;
 
 static PyTypeObject TeamType;
@@ -1912,7 +1965,11 @@ static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     Py_ssize_t edges = self->start[n] > 0 ? self->start[n] : 1;
     self->neighbour = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
     self->back = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
-    if (self->neighbour == NULL || self->back == NULL) {
+    self->known = PyMem_Calloc((size_t)(n > 0 ? n : 1), sizeof(Known)); /* none valid */
+    self->known_rows = PyMem_Malloc(sizeof(double) * (size_t)edges * WIDTH2);
+    self->known_dc = PyMem_Malloc(sizeof(double) * (size_t)edges * 4);
+    if (self->neighbour == NULL || self->back == NULL || self->known == NULL || self->known_rows == NULL ||
+        self->known_dc == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
@@ -1960,6 +2017,9 @@ static void team_dealloc(TeamObject *self) {
     PyMem_Free(self->neighbour);
     PyMem_Free(self->back);
     PyMem_Free(self->pending);
+    PyMem_Free(self->known);
+    PyMem_Free(self->known_rows);
+    PyMem_Free(self->known_dc);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -2003,6 +2063,8 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
     if (in->m > MAX_EDGES || !PyList_CheckExact(offsets) || !PyList_CheckExact(capacity) ||
         PyList_GET_SIZE(offsets) != in->m || PyList_GET_SIZE(capacity) != in->m)
         return 0;
+    double *dc = self->known_dc + self->start[a] * 4; /* the team's copy (Known), valid again after the trigger */
+    self->known[a].valid = 0;
     for (Py_ssize_t k = 0; k < in->m; k++) {
         Py_ssize_t b = self->neighbour[self->start[a] + k];
         double d[3], c, sum = 0.0;
@@ -2017,6 +2079,8 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
             return -1;
         if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
             return 0;
+        memcpy(dc + 4 * k, d, sizeof d);
+        dc[4 * k + 3] = c;
         for (Py_ssize_t i = 0; i < p; i++) {
             in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
             sum += in->y[k][i] * in->y[k][i];
@@ -2043,6 +2107,11 @@ static int team_queue(TeamObject *self, Pending msg) {
     return 0;
 }
 
+/* The agent's counters into kn (what a search compares with its own: search_model). */
+static int known_counters(PyObject *agent, Known *kn) {
+    return get_long(agent, N_TRIGGERS, &kn->triggers) < 0 || get_long(agent, N_INFOS, &kn->infos) < 0 ? -1 : 0;
+}
+
 /* One agent's trigger at t from the world's arrays: _EventTriggeredAgent.trigger (take_sensing,
  * after_trigger: the same updates and floats), the command written into u (World.set_control), and
  * its triggering information queued for deliver. 1 done, 0 left to the Python path, -1 error. */
@@ -2051,12 +2120,26 @@ static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, dou
     PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
     Held h = {.n = 0};
     double control[3], offset[3];
+    Known *kn = &self->known[a];
     int status = team_sensing(self, agent, a, t, x, q, &h, in);
-    if (status == 1 && (take_sensing(agent, &h, in, control, offset) < 0 || after_trigger(agent, &h, t_obj) < 0))
-        status = -1;
+    if (status == 1) {
+        kn->valid = 0;
+        kn->rows = self->known_rows + self->start[a] * WIDTH2;
+        if (take_sensing(agent, &h, in, control, offset, kn->rows, &kn->control_norm) < 0 ||
+            after_trigger(agent, &h, t_obj) < 0 || known_counters(agent, kn) < 0 ||
+            (in->kind == 2 && (get_double(agent, N_K1, &kn->k1) < 0 || get_double(agent, N_K2, &kn->k2) < 0 ||
+                               get_double(agent, N_K3, &kn->k3) < 0)))
+            status = -1;
+    }
     release(&h);
     if (status != 1)
         return status;
+    kn->kind = in->kind; /* the model a search reads now (read_model), as the trigger wrote it */
+    kn->m = in->m;
+    memcpy(kn->u_off, offset, sizeof kn->u_off);
+    memcpy(kn->u, control, sizeof kn->u); /* _u: the command padded with zeros, as take_sensing wrote it */
+    kn->dc = self->known_dc + self->start[a] * 4;
+    kn->valid = 1;
     int finite = 1;
     for (Py_ssize_t i = 0; i < in->p; i++)
         finite &= isfinite(control[i]) != 0;
@@ -2172,9 +2255,25 @@ static int team_deliver_one(TeamObject *self, const Pending *pending) {
     plain = plain && PyList_CheckExact(edge_time) && msg.k < PyList_GET_SIZE(edge_time) &&
             plain_double(PyList_GET_ITEM(edge_time, msg.k), &edge) && msg.stamp >= edge &&
             (last_trigger == Py_None || (plain_double(last_trigger, &last) && msg.stamp >= last));
-    if (plain) {
-        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 0;
+    Known *kn = &self->known[pending->receiver];
+    if (plain) { /* the team's copy follows where it was the agent's knowledge before the message */
+        long triggers, infos;
+        int follow = kn->valid && kn->kind == msg.kind && msg.k < kn->m && get_long(agent, N_TRIGGERS, &triggers) == 0 &&
+                     get_long(agent, N_INFOS, &infos) == 0 && triggers == kn->triggers && infos == kn->infos;
+        if (PyErr_Occurred())
+            goto done;
+        kn->valid = 0;
+        status = take_message(agent, &h, &msg, follow ? kn->rows + msg.k * (kind == 1 ? WIDTH1 : WIDTH2) : NULL,
+                              follow ? kn->dc + 4 * msg.k : NULL, follow ? kn->u : NULL) < 0 ||
+                         after_message(agent, &h, msg.stamp) < 0
+                     ? -1
+                     : 0;
+        if (status == 0 && follow) {
+            kn->infos = infos + 1; /* after_message's count */
+            kn->valid = 1;
+        }
     } else {
+        kn->valid = 0;
         PyObject *info = hold(&h, team_info(self, pending, (int)kind));
         PyObject *out = info ? PyObject_CallMethodOneArg(agent, NAMES[N_RECEIVE], info) : NULL;
         status = out == NULL ? -1 : 0;
@@ -2196,6 +2295,67 @@ static PyObject *team_deliver(TeamObject *self, PyObject *unused) {
     }
     self->size = 0; /* delivered, or the run ends with the error */
     return receivers;
+}
+
+/* A new search of agent `a` (Agenda.plan) starts from the team's copy of its model where that is still
+ * the agent's knowledge (its counters those it was written at): what search_model would read from the
+ * agent's attributes, the same floats, without converting them. 0 (the search reads the agent itself
+ * where the copy is not valid), -1 on error. */
+static int known_model(PyObject *team_obj, Py_ssize_t a, PyObject *agent, SearchObject *made) {
+    TeamObject *team = (TeamObject *)team_obj;
+    if (a < 0 || a >= team->n || PyTuple_GET_ITEM(team->agents, a) != agent || !team->known[a].valid)
+        return 0;
+    Known *kn = &team->known[a];
+    long triggers, infos;
+    if (get_long(agent, N_TRIGGERS, &triggers) < 0 || get_long(agent, N_INFOS, &infos) < 0)
+        return -1;
+    if (triggers != kn->triggers || infos != kn->infos)
+        return 0;
+    Model *md = &made->md; /* laid out as read_model lays it out */
+    Py_ssize_t width = kn->kind == 1 ? WIDTH1 : WIDTH2, n = kn->m > 0 ? kn->m : 1;
+    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
+    if (md->rows == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    md->kind = kn->kind;
+    md->m = kn->m;
+    md->probe = md->rows + n * width;
+    md->speeds = md->probe + 4 * n;
+    memcpy(md->rows, kn->rows, sizeof(double) * (size_t)(kn->m * width));
+    memcpy(md->u_off, kn->u_off, sizeof md->u_off);
+    md->control_norm = kn->control_norm;
+    if (kn->kind == 2) {
+        md->k1 = kn->k1;
+        md->k2 = kn->k2;
+        md->k3 = kn->k3;
+    }
+    made->known_triggers = triggers;
+    made->known_infos = infos;
+    return 0;
+}
+
+/* Agenda.link(team): new searches of the team's agents start from the team's copy of their model. */
+static PyObject *agenda_link(AgendaObject *self, PyObject *team) {
+    if (!Py_IS_TYPE(team, &TeamType)) {
+        PyErr_Format(PyExc_TypeError, "Agenda.link takes a Team, got %R", team);
+        return NULL;
+    }
+    Py_ssize_t *team_of = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(self->n ? self->n : 1));
+    if (team_of == NULL)
+        return PyErr_NoMemory();
+    for (Py_ssize_t k = 0; k < self->n; k++) {
+        PyObject *position = PyDict_GetItemWithError(((TeamObject *)team)->index, PyTuple_GET_ITEM(self->ids, k));
+        team_of[k] = position == NULL ? -1 : PyLong_AsSsize_t(position);
+        if (PyErr_Occurred()) {
+            PyMem_Free(team_of);
+            return NULL;
+        }
+    }
+    PyMem_Free(self->team_of);
+    self->team_of = team_of;
+    Py_XSETREF(self->team, Py_NewRef(team));
+    Py_RETURN_NONE;
 }
 
 static PyMethodDef team_methods[] = {
@@ -2220,6 +2380,235 @@ static PyTypeObject TeamType = {
     .tp_methods = team_methods,
 };
 
+/* ---- the world's closed-form step (formation_sim.sim.world.World._propagate) -------------- */
+
+#define N_WORLD_SERIES 14
+static double WORLD_SERIES[N_WORLD_SERIES]; /* closed_form._SERIES: 1/(k+2)!, k = 0..13 */
+static double WORLD_SERIES_LIMIT = NAN;
+static PyObject *NP_EXPM1 = NULL; /* numpy.expm1: the function closed_form.advance_double calls */
+
+/* configure_world(*, expm1, series, series_limit): what `advance` computes the factors with, from
+ * their one source (closed_form.py, numpy). */
+static PyObject *configure_world(PyObject *self, PyObject *args, PyObject *kwargs) {
+    (void)self;
+    static char *names[] = {"expm1", "series", "series_limit", NULL};
+    PyObject *expm1_, *coefficients;
+    double limit;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$OOd", names, &expm1_, &coefficients, &limit))
+        return NULL;
+    if (read_floats(coefficients, WORLD_SERIES, N_WORLD_SERIES, "series") < 0)
+        return NULL;
+    WORLD_SERIES_LIMIT = limit;
+    Py_XSETREF(NP_EXPM1, Py_NewRef(expm1_));
+    Py_RETURN_NONE;
+}
+
+/* A C-contiguous float64 buffer of `count` items (writable when asked); 0 without an error set where
+ * it is not one (the caller falls back to numpy), -1 on another error. */
+static int world_buffer(PyObject *array, Py_ssize_t count, int writable, Py_buffer *view) {
+    if (PyObject_GetBuffer(array, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0)) < 0) {
+        if (!PyErr_ExceptionMatches(PyExc_BufferError) && !PyErr_ExceptionMatches(PyExc_TypeError) &&
+            !PyErr_ExceptionMatches(PyExc_ValueError))
+            return -1;
+        PyErr_Clear();
+        return 0;
+    }
+    if (view->itemsize != 8 || view->format == NULL || strcmp(view->format, "d") != 0 ||
+        (count >= 0 && view->len != count * 8)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* numpy.expm1 of one float, as numpy computes it (its own loop may not be the C library's). */
+static int numpy_expm1(double v, double *out) {
+    PyObject *arg = PyFloat_FromDouble(v);
+    PyObject *value = arg ? PyObject_CallOneArg(NP_EXPM1, arg) : NULL;
+    Py_XDECREF(arg);
+    if (value == NULL)
+        return -1;
+    *out = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+/* advance(x, q, u, x_out, q_out, k3, tau): World._propagate's step by tau > 0, into x_out (q_out):
+ * x + tau * u (single integrators, q and q_out None), else closed_form.advance_double with a scalar
+ * tau (statexixjd, stateqiqj): z = k3 tau, a = -expm1(-z), b = z + expm1(-z) or its series below
+ * SERIES_LIMIT (z_minus_one_plus_exp), q' = (1 - a) q + (a / k3) u, x' = x + (a / k3) q + (b / k3^2) u,
+ * element by element in numpy's order. True when done; False, with nothing written, where an array is
+ * not a C-contiguous float64 one of x's size (numpy then does it). */
+static PyObject *world_advance(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *x_obj, *q_obj, *u_obj, *xo_obj, *qo_obj;
+    double k3, tau;
+    if (!PyArg_ParseTuple(args, "OOOOOdd", &x_obj, &q_obj, &u_obj, &xo_obj, &qo_obj, &k3, &tau))
+        return NULL;
+    int single = q_obj == Py_None;
+    if (single != (qo_obj == Py_None)) {
+        PyErr_SetString(PyExc_TypeError, "advance: q and q_out must both be arrays or both None");
+        return NULL;
+    }
+    if (!single && NP_EXPM1 == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "_fastcore.configure_world was not called");
+        return NULL;
+    }
+    Py_buffer views[5];
+    PyObject *objs[5] = {x_obj, u_obj, xo_obj, q_obj, qo_obj};
+    int writable[5] = {0, 0, 1, 0, 1}, taken = 0, status = 1;
+    for (; taken < (single ? 3 : 5); taken++) {
+        status = world_buffer(objs[taken], taken == 0 ? -1 : views[0].len / 8, writable[taken], &views[taken]);
+        if (status != 1)
+            break;
+    }
+    double a = 0.0, b = 0.0;
+    if (status == 1 && !single) {
+        double z = k3 * tau, em, acc = WORLD_SERIES[N_WORLD_SERIES - 1];
+        status = numpy_expm1(-z, &em) < 0 ? -1 : 1;
+        a = -em;       /* one_minus_exp */
+        b = z + em;    /* z_minus_one_plus_exp */
+        if (fabs(z) < WORLD_SERIES_LIMIT) {
+            for (int k = N_WORLD_SERIES - 2; k >= 0; k--)
+                acc = WORLD_SERIES[k] - z * acc;
+            b = z * z * acc;
+        }
+    }
+    if (status == 1) {
+        const double *x = views[0].buf, *u = views[1].buf;
+        double *xo = views[2].buf;
+        Py_ssize_t count = views[0].len / 8;
+        if (single) {
+            for (Py_ssize_t i = 0; i < count; i++)
+                xo[i] = x[i] + tau * u[i];
+        } else {
+            const double *q = views[3].buf;
+            double *qo = views[4].buf, keep = 1.0 - a, gain = a / k3, drive = b / (k3 * k3);
+            for (Py_ssize_t i = 0; i < count; i++) {
+                double qi = q[i];
+                xo[i] = x[i] + gain * qi + drive * u[i];
+                qo[i] = keep * qi + gain * u[i];
+            }
+        }
+    }
+    for (int i = 0; i < taken; i++)
+        PyBuffer_Release(&views[i]);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
+/* abs_max(array): float(numpy.abs(array).max()) of a non-empty C-contiguous float64 array (NaN if it
+ * holds one, as numpy's max); None where it is not one (numpy then does it). */
+static PyObject *abs_max(PyObject *self, PyObject *array) {
+    (void)self;
+    Py_buffer view;
+    int status = world_buffer(array, -1, 0, &view);
+    if (status <= 0)
+        return status < 0 ? NULL : Py_NewRef(Py_None);
+    const double *v = view.buf;
+    Py_ssize_t count = view.len / 8;
+    if (count == 0) {
+        PyBuffer_Release(&view);
+        Py_RETURN_NONE;
+    }
+    double top = fabs(v[0]);
+    for (Py_ssize_t i = 0; i < count && !isnan(top); i++) {
+        double a = fabs(v[i]);
+        if (isnan(a) || a > top)
+            top = a;
+    }
+    PyBuffer_Release(&view);
+    return PyFloat_FromDouble(top);
+}
+
+/* A C-contiguous buffer of 8-byte integers (numpy's intp/int64); 0 without an error set otherwise. */
+static int index_buffer(PyObject *array, Py_buffer *view) {
+    if (PyObject_GetBuffer(array, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = view->format;
+    if (view->itemsize != 8 || f == NULL || (strcmp(f, "l") != 0 && strcmp(f, "q") != 0)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges over the edges with
+ * an end at one of `rows` (x's agent rows; `incident[start[k]:start[k + 1]]` the edges of row k): each
+ * such edge's squared length ||x_head - x_tail||^2 summed as samples.squared_lengths sums it (left to right,
+ * p < 8), kept where it exceeds squared[edge] (numpy.maximum: a NaN stays). An edge met twice is taken
+ * twice, to the same float. True when done; False, with nothing written, where the compiled pass cannot
+ * take the arrays (numpy then does it). */
+static PyObject *watch_edges(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *x_obj, *rows, *objs[4], *sq_obj;
+    if (!PyArg_ParseTuple(args, "OO!OOOOO", &x_obj, &PyList_Type, &rows, &objs[0], &objs[1], &objs[2], &objs[3],
+                          &sq_obj))
+        return NULL;
+    Py_buffer xv, sv, iv[4];
+    int taken = 0, status = world_buffer(x_obj, -1, 0, &xv);
+    if (status != 1)
+        return status < 0 ? NULL : Py_NewRef(Py_False);
+    status = world_buffer(sq_obj, -1, 1, &sv);
+    if (status != 1) {
+        PyBuffer_Release(&xv);
+        return status < 0 ? NULL : Py_NewRef(Py_False);
+    }
+    for (; status == 1 && taken < 4; taken++)
+        if (!index_buffer(objs[taken], &iv[taken]))
+            status = 0;
+    if (status == 0)
+        taken--; /* the one that failed holds no buffer */
+    Py_ssize_t p = 0, n = 0, agents = 0, edges = sv.len / 8;
+    if (status == 1) {
+        agents = iv[0].len / 8 - 1;
+        p = xv.ndim == 2 ? xv.shape[1] : 0;
+        n = xv.ndim == 2 ? xv.shape[0] : 0;
+        status = p >= 1 && p < 8 && n == agents && iv[2].len / 8 == edges && iv[3].len / 8 == edges;
+    }
+    const double *x = xv.buf;
+    double *squared = sv.buf;
+    const long long *start = status ? iv[0].buf : NULL, *incident = status ? iv[1].buf : NULL,
+                    *heads = status ? iv[2].buf : NULL, *tails = status ? iv[3].buf : NULL;
+    /* checked before anything is written: every index in range */
+    for (Py_ssize_t r = 0; status == 1 && r < PyList_GET_SIZE(rows); r++) {
+        Py_ssize_t a = PyLong_AsSsize_t(PyList_GET_ITEM(rows, r));
+        if (a == -1 && PyErr_Occurred())
+            status = -1;
+        else if (a < 0 || a >= agents || start[a] < 0 || start[a] > start[a + 1] || start[a + 1] > iv[1].len / 8)
+            status = 0;
+        for (long long k = status == 1 ? start[a] : 0; status == 1 && k < start[a + 1]; k++) {
+            long long e = incident[k];
+            status = e >= 0 && e < edges && heads[e] >= 0 && heads[e] < n && tails[e] >= 0 && tails[e] < n;
+        }
+    }
+    for (Py_ssize_t r = 0; status == 1 && r < PyList_GET_SIZE(rows); r++) {
+        Py_ssize_t a = PyLong_AsSsize_t(PyList_GET_ITEM(rows, r));
+        for (long long k = start[a]; k < start[a + 1]; k++) {
+            long long e = incident[k];
+            const double *head = x + heads[e] * p, *tail = x + tails[e] * p;
+            double total = 0.0;
+            for (Py_ssize_t c = 0; c < p; c++) {
+                double d = head[c] - tail[c];
+                d *= d;
+                total = c == 0 ? d : total + d;
+            }
+            if (!isnan(squared[e]) && (isnan(total) || total > squared[e]))
+                squared[e] = total; /* numpy.maximum */
+        }
+    }
+    for (int i = 0; i < taken; i++)
+        PyBuffer_Release(&iv[i]);
+    PyBuffer_Release(&xv);
+    PyBuffer_Release(&sv);
+    if (status < 0)
+        return NULL;
+    return PyBool_FromLong(status);
+}
+
 static PyMethodDef methods[] = {
     {"configure", (PyCFunction)(void (*)(void))configure, METH_VARARGS | METH_KEYWORDS,
      "configure(*, growth, max_steps, rtol, gap_fraction, series_limit, series, raiser): the search's "
@@ -2230,6 +2619,15 @@ static PyMethodDef methods[] = {
     {"trigger", trigger, METH_VARARGS,
      "trigger(agent, t, sensed): the agent's trigger for a plain-float agent without the safety layer; its "
      "TriggerOutput, or None (nothing changed): the Python path takes it."},
+    {"configure_world", (PyCFunction)(void (*)(void))configure_world, METH_VARARGS | METH_KEYWORDS,
+     "configure_world(*, expm1, series, series_limit): numpy.expm1 and closed_form's series, for advance."},
+    {"advance", world_advance, METH_VARARGS,
+     "advance(x, q, u, x_out, q_out, k3, tau): the world's closed-form step by tau into x_out (q_out); False "
+     "where an array is not a C-contiguous float64 one (numpy then does it)."},
+    {"watch_edges", watch_edges, METH_VARARGS,
+     "watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges for the edges of "
+     "these agent rows; False where numpy must do it."},
+    {"abs_max", abs_max, METH_O, "abs_max(array): float(numpy.abs(array).max()); None where numpy must do it."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from formation_agent.core import crossing
 from formation_agent.core.closed_form import _C as _SERIES
+from formation_agent.core.closed_form import _SERIES as _WORLD_SERIES
 from formation_agent.core.closed_form import SERIES_LIMIT
 from formation_agent.core.trigger import ExponentialRule
 from formation_msgs_py.types import SensedState, TriggerInfo
@@ -46,6 +47,9 @@ def _forced_pure() -> bool:
 
 
 _active = AVAILABLE and not _forced_pure()
+
+if _fastcore is not None:  # the world's step computes its factors as closed_form.advance_double does
+    _fastcore.configure_world(expm1=np.expm1, series=_WORLD_SERIES, series_limit=SERIES_LIMIT)
 
 
 def configure(*, gap_fraction: float, trigger_output: type) -> None:
@@ -142,6 +146,27 @@ def team() -> type[_fastcore.Team] | None:
     triggering information delivered; the agents' updates and floats those of `trigger` and `receive`,
     formation_sim.sim.engine._trigger_and_deliver), or None for the pure-Python path."""
     return _fastcore.Team if _active else None
+
+
+def world_step() -> Callable[..., bool] | None:
+    """The compiled step of the in-process world (`_fastcore.advance(x, q, u, x_out, q_out, k3, tau)`:
+    formation_sim.sim.world.World's closed form, single or double integrators with a scalar tau, the
+    same floats as numpy's `x + tau * u` and `closed_form.advance_double`, written into x_out, q_out;
+    False where an array is not a C-contiguous float64 one), or None for the pure-Python path."""
+    return _fastcore.advance if _active else None
+
+
+def edge_watch() -> Callable[..., bool] | None:
+    """The compiled `EdgeLengths.add_edges` over the edges of some agent rows (`_fastcore.watch_edges(x,
+    rows, start, incident, heads, tails, squared)`, formation_sim.sim.samples: the same floats; False
+    where it cannot take the arrays), or None for the pure-Python path."""
+    return _fastcore.watch_edges if _active else None
+
+
+def abs_max() -> Callable[[Any], float | None] | None:
+    """The compiled `float(numpy.abs(array).max())` (`_fastcore.abs_max`: None where the array is not a
+    non-empty C-contiguous float64 one), or None for the pure-Python path."""
+    return _fastcore.abs_max if _active else None
 
 
 def _raise(model: Any, problem: tuple[Any, ...]) -> None:  # model: the agent's error model

@@ -145,9 +145,16 @@ def make_rule(name: str, *, floor: float, alpha: float, beta: float) -> TriggerR
         raise RuleError(
             f'trigger_rule: {name!r} refused floor={floor!r}, alpha={alpha!r}, beta={beta!r}: {error}'
         ) from None
-    if not isinstance(rule, TriggerRule):
-        raise RuleError(f'trigger_rule: {name!r} built {rule!r}, which lacks the methods of TriggerRule')
+    if type(rule) not in _CONFORMING:
+        if not isinstance(rule, TriggerRule):
+            raise RuleError(f'trigger_rule: {name!r} built {rule!r}, which lacks the methods of TriggerRule')
+        _CONFORMING.add(type(rule))
     return rule
+
+
+_CONFORMING: set[type] = set()
+"""The rule types whose instances were found to have every member of TriggerRule: a protocol's
+isinstance costs ~80 µs on Python 3.11, once per agent otherwise (a thousand agents: 0.08 s of a run)."""
 
 
 @register_rule

@@ -145,12 +145,7 @@ class Sampler:
         """The world's present state as a sample (with event samples, or `force`); `due`: the agents
         about to trigger now, whose edges the watch measures."""
         if self.watch is not None and due:
-            edges = self.watch.edges_of([self.world.index(agent) for agent in due])
-            self.watch.add_edges(
-                edges,
-                self.world.positions_of(self.watch.heads[edges]),
-                self.world.positions_of(self.watch.tails[edges]),
-            )
+            self.watch.add_rows([self.world.index(agent) for agent in due], self.world.arrays()[0])
         now = self.world.time if self.clock is None else self.clock.real(self.world.time)
         if not (self.events or force) or (self.times and self.times[-1] == now):
             return
@@ -289,12 +284,12 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
     t = 34.898 → 34.241 (1.35e-14 < 8 × 1.75e-15).
     """
     x, q, _ = world.arrays()  # the world's own arrays (read, not copied: this runs at every event)
-    ulp_y = float(np.spacing(max(float(np.abs(x).max()), edges.offset)))
+    ulp_y = float(np.spacing(max(_abs_max(x), edges.offset)))
     c = edges.capacity
     if q is None:
         step = theory.rounding_step(c, c, ulp_y)
     else:
-        ulp_q = float(np.spacing(np.abs(q).max()))
+        ulp_q = float(np.spacing(_abs_max(q)))
         step = theory.rounding_step(c, c, ulp_y, k1=agent.k1, k2=agent.k2, ulp_q=ulp_q)
     floor = ROUNDING_FLOOR_ULPS * step
     t = world.time
@@ -309,6 +304,13 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
         f'({how} at the formation, on edge ({i}, {j})); from here on rounding, not the dynamics, decides '
         'the events; shorten the horizon or lower beta'
     )
+
+
+def _abs_max(array: np.ndarray) -> float:
+    """float(np.abs(array).max()), compiled where the compiled core runs (one pass, no temporary)."""
+    fast = compiled.abs_max()
+    top = None if fast is None else fast(array)
+    return float(np.abs(array).max()) if top is None else top
 
 
 def due_twice(agent_id: int, threshold_model, t: float) -> str:
@@ -493,6 +495,8 @@ def _run(
     some_agent = agents[scenario.agent_ids[0]]  # the threshold is the same for every agent
     floor_edges = FloorEdges.of(scenario)
     team = _team(agents, world) if period is None else None
+    if team is not None:
+        agenda.link(team)
     while True:
         sampler.event(due=due)
         real_t = t if clock is None else clock.real(t)
@@ -643,6 +647,13 @@ class _Agenda:
                 plain=(Eta1Agent, Eta2Agent),
                 rule=ExponentialRule,
             )
+
+    def link(self, team: _fastcore.Team) -> None:
+        """New searches of the team's agents start from the compiled team's copy of their knowledge
+        (`_fastcore.Agenda.link`: what the search would read from the agent, where the agent's counters
+        say it still is; the same floats)."""
+        if self.queue is not None:
+            self.queue.link(team)
 
     def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
         """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""

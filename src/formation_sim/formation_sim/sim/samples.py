@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formation_agent.core import compiled
 from formation_sim.sim.errors import TrajectoryError
 
 TRAJECTORY_DIR = 'trajectory'
@@ -157,6 +158,8 @@ class EdgeLengths:
         self.heads, self.tails, _ = scenario.edge_indices()
         self.squared = np.zeros(len(self.heads))
         self._incident: list[np.ndarray] | None = None
+        # (start, incident, heads, tails) as int64: incident[start[k]:start[k + 1]] the edges of agent row k
+        self._csr: tuple[np.ndarray, ...] | None = None
         self._n = scenario.n
 
     def add_states(self, positions: np.ndarray) -> None:
@@ -178,6 +181,23 @@ class EdgeLengths:
             bounds = np.searchsorted(ends[order], np.arange(self._n + 1))
             self._incident = [edges[order[bounds[k] : bounds[k + 1]]] for k in range(self._n)]
         return np.unique(np.concatenate([self._incident[k] for k in rows]))
+
+    def add_rows(self, rows: list[int], positions: np.ndarray) -> None:
+        """The edges with an end at one of these agent rows, from the state `positions` ((n, p)): as
+        `add_edges(edges_of(rows), ...)`, in one compiled pass where the compiled core runs (the same
+        floats: the squared lengths summed as `squared_lengths` sums them, kept by numpy.maximum's rule)."""
+        fast = compiled.edge_watch()
+        if fast is not None:
+            if self._csr is None:
+                ends = np.concatenate([self.heads, self.tails])
+                order = np.argsort(ends, kind='stable')
+                incident = np.concatenate([np.arange(len(self.heads))] * 2)[order].astype(np.int64)
+                start = np.searchsorted(ends[order], np.arange(self._n + 1)).astype(np.int64)
+                self._csr = (start, incident, self.heads.astype(np.int64), self.tails.astype(np.int64))
+            if fast(positions, list(rows), *self._csr, self.squared):
+                return
+        edges = self.edges_of(rows)
+        self.add_edges(edges, positions[self.heads[edges]], positions[self.tails[edges]])
 
     def add_edges(self, edges: np.ndarray, head_positions: np.ndarray, tail_positions: np.ndarray) -> None:
         """The given edges, with their heads' and tails' positions (each (len(edges), p))."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from formation_agent.core import speed_scale
+from formation_agent.core import compiled, speed_scale
 from formation_agent.core.closed_form import advance_double
 from formation_msgs_py.types import SensedState
 from formation_sim.sim.errors import WorldError
@@ -107,6 +107,12 @@ class World:
             raise WorldError(f'cannot go back in time from {self.time!r} to {t!r}')
         if tau == 0.0:
             return self._x.copy(), None if self._q is None else self._q.copy()
+        step = compiled.world_step()
+        if step is not None:  # the same floats in one compiled pass (docs/COMPILED_CORE.md)
+            x = np.empty_like(self._x)
+            q = None if self._q is None else np.empty_like(self._q)
+            if step(self._x, self._q, self._u, x, q, self.damping or 0.0, tau):
+                return x, q
         if self._q is None:
             return self._x + tau * self._u, None
         return advance_double(self._x, self._q, self._u, self.damping, tau)
