@@ -219,7 +219,7 @@ def test_a_sensing_call_out_of_turn_from_outside_is_refused_counted_and_its_call
         refusal = node.world.sensing.on_sense(2)
         assert refusal.success is False and refusal.message.endswith(': refused')
         assert node.failure is None and node.world.sensing.calls.foreign == {1: 0, 2: 1, 3: 0}
-        node.world.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
+        node.world.pacing.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
         sense = node.world.sensing.on_sense
         first = decode_sensed_state(sense(2))  # the stranger's call, or agent 2's: one answer
         again = decode_sensed_state(sense(2))  # the other one: the same state again

@@ -8,7 +8,7 @@ see (`sim_view.SimulatorView`): `/clock` (rounded to ns, for tools only), the ex
 `/formation/state` and `/formation/ground_truth` at a sample period (pure evaluations, the world
 itself only advances from event to event), and `/formation/sensing_log`.
 
-Lock-step protocol (docs/MESSAGES.md): after discovery the simulator publishes Step 0 at t = 0;
+Lock-step protocol (docs/MESSAGES.md; `LockStep`): after discovery the simulator publishes Step 0 at t = 0;
 every agent due at a step senses, commands, broadcasts and reports a Status; agents that receive
 triggering information report again.  A step is settled when every due agent has reported its
 trigger, every command sent has been applied and every triggering-information message sent has
@@ -16,7 +16,7 @@ been received (cumulative counters, so equality cannot be transient).  Then the 
 the smallest next time reported (the exact float, carried by the next Step) and the agents that
 reported exactly that time trigger.
 
-Wall-clock mode (`clock_mode:=realtime`, as on robots): Step 0 carries the wall-clock epoch of
+Wall-clock mode (`clock_mode:=realtime`, as on robots; `WallClock`): Step 0 carries the wall-clock epoch of
 t = 0 and agents keep their own timers.  The world then advances to the wall-clock time of each
 sensing request and each command as it arrives (still only event to event), and the run reports
 how late every trigger was against the time its agent had planned.
@@ -125,7 +125,8 @@ outstanding stays far below the writers' depths (24 runs of 24 complete since, v
 
 class SimulatorWorld:
     """The exact world of a distributed run (a `world.World`): the exact integration, every
-    agent's sensing service, the lock-step clock (or the wall clock), the tools' view."""
+    agent's sensing service, the tools' view; paced by its clock (`pacing`): the lock-step
+    (`LockStep`) or the wall clock (`WallClock`)."""
 
     PARAMETERS: Sequence[ParameterSpec] = SIMULATOR_PARAMETERS
     COMMAND = 'formation_sim'
@@ -151,11 +152,10 @@ class SimulatorWorld:
         return values['clock_mode']
 
     def __init__(self, keeper: TimeKeeperNode) -> None:
-        """The exact world, its sampler and the tools' view of it, held by `keeper`."""
+        """The exact world, its sampler, the tools' view of it and its clock, held by `keeper`."""
         self.keeper = keeper
         scenario = keeper.scenario
         self.viz_period = keeper.parameter_values['viz_period']
-        self.stall_timeout = keeper.parameter_values['stall_timeout']
         # Moved and sampled as the engine does it, stopped where the engine stops.
         self.exact = ExactWorld(scenario, sample_period=keeper.sample_period, on_sample=self.on_sample)
         self.sampler = self.exact.sampler
@@ -174,9 +174,9 @@ class SimulatorWorld:
             keeper.scenario_pub,
             view.markers_pub,
         ]
-        self.due_agents: set[int] = set()
+        self.due_agents: set[int] = set()  # the agents due at the step (wall clock: all of them)
         self.sensing = Sensing(self)
-        self._last_advance = keeper.marks.created
+        self.pacing: LockStep | WallClock = WallClock(self) if keeper.realtime else LockStep(self)
 
     def watch_agents(self) -> dict:
         """One command reader per agent: it applies the agent's commands, and its writer's DDS
@@ -219,155 +219,34 @@ class SimulatorWorld:
     def reached_time(self) -> float:
         return self.exact.world.time
 
-    # -- start ----------------------------------------------------------------------------------
-
     def begin(self) -> None:
-        keeper = self.keeper
         self.sampler.event()
-        if keeper.realtime:
-            keeper.retick(min(0.1, keeper.sample_period or 0.1))  # samples, the horizon: finer
-            keeper.epoch = time.time()
-            keeper.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=keeper.epoch)
-            self.due_agents = set(keeper.agents)
-            keeper.publish(keeper.step_pub, encode_step(keeper.step))
-            self.publish_samples()
-            return
-        self.publish_step(Step(index=0, time=0.0, due=tuple(sorted(keeper.agents))))  # t^i_1 = 0
+        self.pacing.begin()
 
     def tick(self) -> None:
-        if self.keeper.realtime:
-            self._realtime_tick()
-        elif time.monotonic() - self._last_advance > self.stall_timeout:
-            raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
-
-    def _describe_wait(self) -> str:
-        keeper = self.keeper
-        step = keeper.step
-        recorders = (
-            f'recorders at steps {keeper.recorders.recorded_steps or "none yet"} '
-            f'(RECORDER_LAG {RECORDER_LAG}); '
-            if keeper.extra_subscribers
-            else ''
-        )
-        return (
-            f'step {step.index} (t={step.time!r}, due {sorted(self.due_agents)}); {recorders}'
-            + keeper.book.waiting_description()
-        )
-
-    # -- wall clock -----------------------------------------------------------------------------
-
-    def _wall_time(self) -> float:
-        """Sim time now on the wall clock, never before the world's time nor after the horizon."""
-        return min(self.keeper.horizon, max(self.exact.world.time, time.time() - self.keeper.epoch))
-
-    def realtime_event(self) -> float:
-        """Advance the world to now (an event: a sensing or a command arrives)."""
-        t = self._wall_time()
-        self.exact.advance(t)
-        self.publish_samples()
-        self.keeper.steps += 1
-        return t
-
-    def _realtime_tick(self) -> None:
-        keeper = self.keeper
-        t = self._wall_time()
-        if t < keeper.horizon:
-            self.sampler.grid_until(t)
-        else:  # the horizon (the wall time is never past it)
-            self.exact.advance(keeper.horizon)
-            keeper.marks.finish(time.monotonic())
-            keeper.graph = graph_of(self.keeper)
-            keeper.step = Step(
-                index=1, time=keeper.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=keeper.epoch
-            )
-            keeper.publish(keeper.step_pub, encode_step(keeper.step))
-            keeper.finished = True
-        self.publish_samples()
-
-    # -- lock-step ------------------------------------------------------------------------------
-
-    def publish_step(self, step: Step) -> None:
-        keeper = self.keeper
-        keeper.step = step
-        self.due_agents = set(step.due)
-        keeper.book.mark_due(step.due, step.time)
-        self._last_advance = time.monotonic()
-        keeper.publish(keeper.step_pub, encode_step(step))
+        self.pacing.tick()
 
     def after_status(self) -> None:
-        self._advance_if_settled()
+        self.pacing.after_status()
 
     def _on_command(self, msg, agent: int) -> None:
         keeper = self.keeper
-        book, step = keeper.agents[agent], keeper.step
         if keeper.finished:
-            # The run is over (or stopped): the world no longer moves.  A lock-step trigger whose
-            # sensing was answered before a stop still completes (its information is out, and in
-            # the bag): counted, its command acting from the last instant on moves nothing.
-            due = (
-                not keeper.realtime and agent in self.due_agents and book.sensed_at_step == keeper.step.index
-            )
-            if due and book.commands_received < book.expected_triggers:
-                book.commands_received += 1
+            # The run is over (or stopped): the world no longer moves (a lock-step trigger whose
+            # sensing was answered before a stop still completes: `LockStep.command_after_end`).
+            self.pacing.command_after_end(agent)
             return
-        if keeper.realtime and keeper.step is not None:
-            control = decode_command(msg, keeper.scenario.dimension)
-            self.realtime_event()  # the command acts from its arrival on
-            self.exact.world.set_control(agent, control)
-            book.commands_received += 1
-            return
-        if (
-            keeper.step is None
-            or agent not in self.due_agents
-            or book.commands_received >= book.expected_triggers
-        ):
-            raise SimulatorError(
-                f'agent {agent} sent a command outside its triggering time '
-                f'(step {None if step is None else step.index}, due {sorted(self.due_agents)})'
-            )
-        # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
-        self.exact.world.set_control(agent, decode_command(msg, keeper.scenario.dimension))
-        book.commands_received += 1
-        # The tools' samples up to this step go out now, while the agents plan (the simulator
-        # would otherwise keep a sensing request of the step waiting).
-        self.publish_samples()
-        self._advance_if_settled()
+        if keeper.step is None:
+            raise self.command_refused(agent)
+        self.pacing.command(msg, agent)
 
-    def _settled(self) -> bool:
-        return self.keeper.book.settled(self.keeper.step.index, self.due_agents)
-
-    def _advance_if_settled(self) -> None:
-        keeper = self.keeper
-        if keeper.realtime or keeper.step is None or keeper.finished or not self._settled():
-            return
-        if keeper.recorders.behind(keeper.step.index, recorders=keeper.extra_subscribers, lag=RECORDER_LAG):
-            return  # lock-step waits: the recorder's next heartbeat comes back here
-        t = keeper.step.time
-        t_next, due = keeper.book.next_due(t)
-        if t_next == t:
-            # News at this instant put agents on their threshold already: they trigger at this
-            # very instant, in a further step (as the in-process engine does).
-            twice = [
-                i for i in due if keeper.agents[i].trigger_times and keeper.agents[i].trigger_times[-1] == t
-            ]
-            if twice:
-                raise SimulatorError(due_twice(twice[0], self.exact.threshold_model, t))
-            keeper.steps += 1
-            self.publish_step(Step(index=keeper.step.index + 1, time=t, due=due))
-            return
-        keeper.steps += 1
-        if t_next > keeper.horizon:
-            self.exact.advance(keeper.horizon)
-            keeper.marks.finish(time.monotonic())
-            keeper.graph = graph_of(self.keeper)
-            keeper.finished = True
-            self.publish_step(Step(index=keeper.step.index + 1, time=keeper.horizon, flags=STEP_FLAG_FINAL))
-            self.publish_samples()
-            return
-        self.exact.advance(t_next)
-        if (problem := self.exact.floor_problem()) is not None:
-            raise SimulatorError(problem)
-        self.publish_step(Step(index=keeper.step.index + 1, time=t_next, due=due))
+    def command_refused(self, agent: int) -> SimulatorError:
+        """Agent `agent`'s command came outside its triggering time: the protocol is broken."""
+        step = self.keeper.step
+        return SimulatorError(
+            f'agent {agent} sent a command outside its triggering time '
+            f'(step {None if step is None else step.index}, due {sorted(self.due_agents)})'
+        )
 
     # -- samples (pure evaluations; they never move the world) --------------------------------
 
@@ -415,11 +294,194 @@ class SimulatorWorld:
         )
 
 
+class LockStep:
+    """The lock-step clock of the exact world `world` (the module's "Lock-step protocol"): a
+    step settled, the world advances to the next time reported and the next Step goes out; an
+    agent senses at its turn only; a step not settled within `stall_timeout` s ends the run."""
+
+    def __init__(self, world: SimulatorWorld) -> None:
+        self.world = world
+        self.keeper = world.keeper
+        self.stall_timeout = self.keeper.parameter_values['stall_timeout']
+        self._last_advance = self.keeper.marks.created
+
+    def begin(self) -> None:
+        self.publish_step(Step(index=0, time=0.0, due=tuple(sorted(self.keeper.agents))))  # t^i_1 = 0
+
+    def tick(self) -> None:
+        if time.monotonic() - self._last_advance > self.stall_timeout:
+            raise StallError(f'no progress for {self.stall_timeout} s at {self._describe_wait()}')
+
+    def _describe_wait(self) -> str:
+        keeper = self.keeper
+        step = keeper.step
+        recorders = (
+            f'recorders at steps {keeper.recorders.recorded_steps or "none yet"} '
+            f'(RECORDER_LAG {RECORDER_LAG}); '
+            if keeper.extra_subscribers
+            else ''
+        )
+        return (
+            f'step {step.index} (t={step.time!r}, due {sorted(self.world.due_agents)}); {recorders}'
+            + keeper.book.waiting_description()
+        )
+
+    def publish_step(self, step: Step) -> None:
+        keeper = self.keeper
+        keeper.step = step
+        self.world.due_agents = set(step.due)
+        keeper.book.mark_due(step.due, step.time)
+        self._last_advance = time.monotonic()
+        keeper.publish(keeper.step_pub, encode_step(step))
+
+    def after_status(self) -> None:
+        self._advance_if_settled()
+
+    def sense(self, agent: int):
+        """Agent `agent`'s sensing call in a step: answered once, at its turn."""
+        world, keeper = self.world, self.keeper
+        book, index = keeper.agents[agent], keeper.step.index
+        if agent not in world.due_agents or book.sensed_at_step == index:
+            return _out_of_turn(world, agent, index)
+        book.sensed_at_step = index
+        world.sensing.sensing_calls += 1
+        sensed = sensed_state(world, agent)
+        world.view.log_sensing(agent, index, world.exact.world.time)
+        return encode_sensed_state(sensed)
+
+    def command(self, msg, agent: int) -> None:
+        """Agent `agent`'s command at its trigger: it acts from the step's time on."""
+        world, keeper = self.world, self.keeper
+        book = keeper.agents[agent]
+        if agent not in world.due_agents or book.commands_received >= book.expected_triggers:
+            raise world.command_refused(agent)
+        # u_i (single) or u^d_i (double): the world closes q' = u^d_i - k3 q_i itself (uxdouble).
+        world.exact.world.set_control(agent, decode_command(msg, keeper.scenario.dimension))
+        book.commands_received += 1
+        # The tools' samples up to this step go out now, while the agents plan (the simulator
+        # would otherwise keep a sensing request of the step waiting).
+        world.publish_samples()
+        self._advance_if_settled()
+
+    def command_after_end(self, agent: int) -> None:
+        """A trigger whose sensing was answered before a stop still completes (its information is
+        out, and in the bag): counted, its command acting from the last instant on moves nothing."""
+        book, step = self.keeper.agents[agent], self.keeper.step
+        due = agent in self.world.due_agents and book.sensed_at_step == step.index
+        if due and book.commands_received < book.expected_triggers:
+            book.commands_received += 1
+
+    def _advance_if_settled(self) -> None:
+        world, keeper = self.world, self.keeper
+        if keeper.step is None or keeper.finished:
+            return
+        if not keeper.book.settled(keeper.step.index, world.due_agents):
+            return
+        if keeper.recorders.behind(keeper.step.index, recorders=keeper.extra_subscribers, lag=RECORDER_LAG):
+            return  # lock-step waits: the recorder's next heartbeat comes back here
+        t = keeper.step.time
+        t_next, due = keeper.book.next_due(t)
+        if t_next == t:
+            # News at this instant put agents on their threshold already: they trigger at this
+            # very instant, in a further step (as the in-process engine does).
+            twice = [
+                i for i in due if keeper.agents[i].trigger_times and keeper.agents[i].trigger_times[-1] == t
+            ]
+            if twice:
+                raise SimulatorError(due_twice(twice[0], world.exact.threshold_model, t))
+            keeper.steps += 1
+            self.publish_step(Step(index=keeper.step.index + 1, time=t, due=due))
+            return
+        keeper.steps += 1
+        if t_next > keeper.horizon:
+            world.exact.advance(keeper.horizon)
+            keeper.marks.finish(time.monotonic())
+            keeper.graph = graph_of(keeper)
+            keeper.finished = True
+            self.publish_step(Step(index=keeper.step.index + 1, time=keeper.horizon, flags=STEP_FLAG_FINAL))
+            world.publish_samples()
+            return
+        world.exact.advance(t_next)
+        if (problem := world.exact.floor_problem()) is not None:
+            raise SimulatorError(problem)
+        self.publish_step(Step(index=keeper.step.index + 1, time=t_next, due=due))
+
+
+class WallClock:
+    """The wall clock of the exact world `world` (clock_mode realtime, as on robots, the module's
+    "Wall-clock mode"): Step 0 carries the epoch of t = 0, the world advances to the wall-clock
+    time of each sensing call and command as it arrives, the final Step goes at the horizon."""
+
+    def __init__(self, world: SimulatorWorld) -> None:
+        self.world = world
+        self.keeper = world.keeper
+
+    def begin(self) -> None:
+        world, keeper = self.world, self.keeper
+        keeper.retick(min(0.1, keeper.sample_period or 0.1))  # samples, the horizon: finer
+        keeper.epoch = time.time()
+        keeper.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=keeper.epoch)
+        world.due_agents = set(keeper.agents)
+        keeper.publish(keeper.step_pub, encode_step(keeper.step))
+        world.publish_samples()
+
+    def _now(self) -> float:
+        """Sim time now on the wall clock, never before the world's time nor after the horizon."""
+        return min(self.keeper.horizon, max(self.world.exact.world.time, time.time() - self.keeper.epoch))
+
+    def event(self) -> float:
+        """Advance the world to now (an event: a sensing or a command arrives)."""
+        t = self._now()
+        self.world.exact.advance(t)
+        self.world.publish_samples()
+        self.keeper.steps += 1
+        return t
+
+    def tick(self) -> None:
+        world, keeper = self.world, self.keeper
+        t = self._now()
+        if t < keeper.horizon:
+            world.sampler.grid_until(t)
+        else:  # the horizon (the wall time is never past it)
+            world.exact.advance(keeper.horizon)
+            keeper.marks.finish(time.monotonic())
+            keeper.graph = graph_of(keeper)
+            keeper.step = Step(
+                index=1, time=keeper.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=keeper.epoch
+            )
+            keeper.publish(keeper.step_pub, encode_step(keeper.step))
+            keeper.finished = True
+        world.publish_samples()
+
+    def after_status(self) -> None:
+        """The wall clock waits for no step to settle."""
+
+    def sense(self, agent: int):
+        """Agent `agent`'s sensing call, answered at the wall-clock time it arrives."""
+        world = self.world
+        t = self.event()
+        # A trigger may follow (its Status may come before its information).
+        self.keeper.agents[agent].expected_triggers += 1
+        world.sensing.calls.asked(agent, t)  # a trigger once the agent's information stamped t follows
+        world.view.log_sensing(agent, 0, t)
+        return encode_sensed_state(sensed_state(world, agent))
+
+    def command(self, msg, agent: int) -> None:
+        """Agent `agent`'s command: it acts from its arrival on."""
+        control = decode_command(msg, self.keeper.scenario.dimension)
+        self.event()
+        self.world.exact.world.set_control(agent, control)
+        self.keeper.agents[agent].commands_received += 1
+
+    def command_after_end(self, agent: int) -> None:
+        """After the horizon the world no longer moves: nothing counts."""
+
+
 class Sensing:
     """Every agent's sensing service `/agent_<i>/sense` on the exact world `world`: the state it
-    senses (`sensed_state`), at its turn (lock-step) or as the call arrives (wall clock: the
-    agents' triggering information says which calls were triggers); a call out of turn refused
-    (`_out_of_turn`)."""
+    senses (`sensed_state`), at its turn (`LockStep.sense`) or as the call arrives
+    (`WallClock.sense`: the agents' triggering information says which calls were triggers); a
+    call out of turn refused (`_out_of_turn`)."""
 
     def __init__(self, world: SimulatorWorld) -> None:
         keeper = world.keeper
@@ -436,30 +498,11 @@ class Sensing:
 
     def on_sense(self, agent: int):
         world, keeper = self.world, self.world.keeper
-        book = keeper.agents[agent]
         if keeper.finished:  # asked after the end: the final state, not counted
             return encode_sensed_state(sensed_state(world, agent))
-        if keeper.realtime and keeper.step is not None:
-            return self._sense_realtime(agent)
-        index = -1 if keeper.step is None else keeper.step.index
-        if keeper.step is None or agent not in world.due_agents or book.sensed_at_step == index:
-            return _out_of_turn(world, agent, index)
-        book.sensed_at_step = index
-        self.sensing_calls += 1
-        sensed = sensed_state(world, agent)
-        world.view.log_sensing(agent, index, world.exact.world.time)
-        return encode_sensed_state(sensed)
-
-    def _sense_realtime(self, agent: int):
-        world = self.world
-        book = world.keeper.agents[agent]
-        if world.keeper.finished:  # asked after the horizon: the final state, not counted
-            return encode_sensed_state(sensed_state(world, agent))
-        t = world.realtime_event()
-        book.expected_triggers += 1  # a trigger may follow (its Status may come before its information)
-        self.calls.asked(agent, t)  # a trigger once the agent's information stamped t follows
-        world.view.log_sensing(agent, 0, t)
-        return encode_sensed_state(sensed_state(world, agent))
+        if keeper.step is None:  # before step 0: nobody's turn
+            return _out_of_turn(world, agent, -1)
+        return world.pacing.sense(agent)
 
 
 def sensed_state(world: SimulatorWorld, agent: int) -> SensedState:
