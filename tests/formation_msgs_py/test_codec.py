@@ -177,7 +177,7 @@ def test_sensed_state_round_trips_bit_for_bit_over_cdr(double):
     if not double:
         state = SensedState(agent=state.agent, stamp=state.stamp, rel_positions=state.rel_positions)
     response = through_wire(encode_sensed_state(state))
-    assert response.success
+    assert response.results[0].successful
     back = decode_sensed_state(response)
     assert back == state
     for j, vector in state.rel_positions.items():
@@ -192,15 +192,16 @@ def test_sensed_state_round_trips_bit_for_bit_over_cdr(double):
 def test_sensed_state_json_is_compact_and_versioned():
     import json
 
-    text = encode_sensed_state(double_state()).message
+    text = encode_sensed_state(double_state()).results[0].reason
     assert ' ' not in text
     assert json.loads(text)['version'] == LAYOUT_VERSION
 
 
 def _response(text: str, success: bool = True):
-    from std_srvs.srv import Trigger
+    from rcl_interfaces.msg import SetParametersResult
+    from rcl_interfaces.srv import SetParameters
 
-    return Trigger.Response(success=success, message=text)
+    return SetParameters.Response(results=[SetParametersResult(successful=success, reason=text)])
 
 
 @pytest.mark.parametrize(
@@ -268,7 +269,7 @@ def test_nearby_robots_round_trip_bit_for_bit_and_stay_absent_without_the_layer(
     assert decode_sensed_state(encode_sensed_state(empty)).nearby == {}
     # Without the layer the answer is the earlier layout, key for key: older agents read it.
     off = SensedState(agent=2, stamp=0.0, rel_positions={1: (1.0, 0.0)})
-    assert 'nearby' not in encode_sensed_state(off).message
+    assert 'nearby' not in encode_sensed_state(off).results[0].reason
     assert decode_sensed_state(encode_sensed_state(off)).nearby is None
 
 
@@ -627,3 +628,67 @@ def test_robot_commands_carry_their_frame_and_values_bit_for_bit():
     assert (body.linear.x, body.linear.y, body.angular.z, body.angular.x) == (0.22, 0.0, -2.84, 0.0)
     with pytest.raises(MessageError, match=r'body velocity\[1\] must be finite, got nan'):
         encode_body_velocity(0.0, math.nan)
+
+
+# -- the sensing request's and answer's tags (issue 28) ---------------------------------------------
+
+
+def test_a_sensing_request_carries_its_callers_tag_over_the_wire_and_only_it_passes():
+    from formation_msgs_py.codec import check_sensing_request, sensing_request
+    from formation_msgs_py.errors import TagError
+    from formation_msgs_py.lockstep import FORGED, REPLAYED, UNTAGGED
+    from formation_msgs_py.tags import Signer, Verifier
+
+    key, service = bytes(range(32)), '/agent_2/sense'
+    verifier = Verifier(key)
+    agent_2 = Signer(key, writer='agent_2')
+    first = through_wire(sensing_request(agent_2, service))
+    check_sensing_request(verifier, service, first, caller='agent_2')
+    refused = {
+        UNTAGGED: through_wire(sensing_request(None, service)),  # ros2 service call, a stranger
+        FORGED: through_wire(sensing_request(Signer(bytes(32), writer='agent_2'), service)),  # another key
+        REPLAYED: first,  # the agent's own request again
+    }
+    for reason, request in refused.items():
+        with pytest.raises(TagError) as caught:
+            check_sensing_request(verifier, service, request, caller='agent_2')
+        assert caught.value.reason == reason
+    other = sensing_request(Signer(key, writer='agent_3'), service)  # a node of the run, not agent 2
+    with pytest.raises(TagError, match="only 'agent_2'"):
+        check_sensing_request(verifier, service, other, caller='agent_2')
+    mangled = sensing_request(agent_2, service)
+    mangled.parameters[0].name = 'other'  # something that is not the tag parameter
+    with pytest.raises(TagError, match='is not tag1:'):
+        check_sensing_request(verifier, service, mangled, caller='agent_2')
+    assert verifier.refused == {UNTAGGED: 1, FORGED: 3, REPLAYED: 1}
+    check_sensing_request(Verifier(None), service, sensing_request(None, service), caller='agent_2')  # no key
+
+
+def test_a_tagged_sensing_answer_decodes_as_the_untagged_one_and_its_tag_is_checked():
+    from formation_msgs_py.codec import check_sensing_answer, tag_sensing_answer
+    from formation_msgs_py.errors import TagError
+    from formation_msgs_py.tags import Signer, Verifier
+
+    key, service, state = bytes(range(32)), '/agent_2/sense', double_state()
+    answer = through_wire(tag_sensing_answer(encode_sensed_state(state), Signer(key, writer='sim'), service))
+    verifier = Verifier(key)
+    check_sensing_answer(verifier, service, answer)
+    assert decode_sensed_state(answer) == state
+    with pytest.raises(TagError, match='without the run'):
+        check_sensing_answer(verifier, service, encode_sensed_state(state))  # another server's answer
+    changed = tag_sensing_answer(encode_sensed_state(state), Signer(key, writer='sim'), service)
+    changed.results[0].reason = changed.results[0].reason.replace('"agent":', '"agent": ')
+    with pytest.raises(TagError, match='not the run key'):
+        check_sensing_answer(verifier, service, changed)
+    refusal = tag_sensing_answer(sensing_refusal('not due'), Signer(key, writer='sim'), service)
+    with pytest.raises(MessageError, match=r'^sensing refused: not due$'):
+        decode_sensed_state(refusal)
+
+
+@pytest.mark.parametrize('results', [0, 2])
+def test_a_sensing_answer_must_hold_one_result(results):
+    from rcl_interfaces.srv import SetParameters
+
+    response = SetParameters.Response(results=encode_sensed_state(double_state()).results * results)
+    with pytest.raises(MessageError, match=f'holds one rcl_interfaces/SetParametersResult, got {results}'):
+        decode_sensed_state(response)

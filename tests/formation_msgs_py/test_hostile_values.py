@@ -218,10 +218,54 @@ _IDS = st.one_of(st.integers(-3, 9).map(str), st.sampled_from(['01', ' 2', '2147
 )
 def test_a_sensed_state_with_nearby_robots_decodes_or_is_refused_with_a_reason(text):
     # The simulator's sensing answer, the safety layer's nearby robots included (docs/SAFETY.md).
-    state = _decodes_or_refuses(decode_sensed_state, SimpleNamespace(success=True, message=text))
+    state = _decodes_or_refuses(
+        decode_sensed_state, SimpleNamespace(results=[SimpleNamespace(successful=True, reason=text)])
+    )
     if state is not None and state.nearby is not None:
         assert state.agent not in state.nearby and not set(state.nearby) & set(state.rel_positions)
         assert len({len(v) for v in (*state.nearby.values(), *state.rel_positions.values())}) <= 1
+
+
+_TEXT = st.one_of(
+    st.text(max_size=120), st.sampled_from(['tag', 'tag1:agent_2:1:' + '0' * 64, 'tag1:::', ''])
+)
+
+
+@EXAMPLES
+@given(
+    st.lists(
+        st.tuples(_TEXT, st.integers(0, 9), _TEXT, st.one_of(FLOATS, st.integers(-(2**63), 2**63 - 1))),
+        max_size=4,
+    )
+)
+def test_any_sensing_request_is_taken_only_with_the_callers_tag_and_else_refused_with_a_reason(parameters):
+    """What `ros2 service call /agent_2/sense rcl_interfaces/srv/SetParameters` can send: any
+    parameters of any type.  With the run's key it is refused with TagError (untagged, forged;
+    foreign) and nothing else escapes; none of these is agent 2's tag."""
+    from rcl_interfaces.msg import Parameter, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    from formation_msgs_py.codec import check_sensing_request
+    from formation_msgs_py.errors import TagError
+    from formation_msgs_py.lockstep import FOREIGN_REASONS
+    from formation_msgs_py.tags import Verifier
+
+    request = SetParameters.Request(
+        parameters=[
+            Parameter(
+                name=name,
+                value=ParameterValue(type=kind, string_value=text, double_value=number, integer_value=0),
+            )
+            if isinstance(number, float)
+            else Parameter(
+                name=name, value=ParameterValue(type=kind, string_value=text, integer_value=number)
+            )
+            for name, kind, text, number in parameters
+        ]
+    )
+    with pytest.raises(TagError) as refused:
+        check_sensing_request(Verifier(bytes(32)), '/agent_2/sense', request, caller='agent_2')
+    assert refused.value.reason in FOREIGN_REASONS
 
 
 # -- robot poses and commands as CDR bytes -----------------------------------------------------

@@ -170,3 +170,13 @@ def test_a_tagged_report_decodes_as_the_untagged_one():
     with pytest.raises(TagError) as caught:
         check_string(Verifier(KEY), '/formation/status', tagged)  # another topic's tag
     assert caught.value.reason == FORGED
+
+
+def test_a_reader_that_names_the_writer_refuses_the_runs_tag_from_another():
+    key = bytes(range(32))
+    verifier = Verifier(key)
+    own, other = Signer(key, writer='agent_2'), Signer(key, writer='agent_3')
+    verifier.check('/agent_2/sense', b'sense', own.tag('/agent_2/sense', b'sense'), writer='agent_2')
+    with pytest.raises(TagError, match="from 'agent_3', where only 'agent_2' may write") as caught:
+        verifier.check('/agent_2/sense', b'sense', other.tag('/agent_2/sense', b'sense'), writer='agent_2')
+    assert caught.value.reason == FORGED and verifier.refused[FORGED] == 1

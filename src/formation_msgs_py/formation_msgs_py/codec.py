@@ -1,6 +1,6 @@
 """Versioned encodings of the formation messages over standard Jazzy interface types.
 
-Only standard types are used (std_msgs/Float64MultiArray, std_srvs/Trigger, geometry_msgs), so
+Only standard types are used (std_msgs/Float64MultiArray, rcl_interfaces/SetParameters, geometry_msgs), so
 any Jazzy installation can echo and record the traffic without building anything.  The layout of
 every array is documented in docs/MESSAGES.md; the labels of `layout.dim` name the fields so that
 `ros2 topic echo` is readable.  Floats travel as IEEE float64 (arrays) or as Python's shortest
@@ -238,7 +238,76 @@ def decode_trigger_info(msg) -> TriggerInfo:
 
 
 # --------------------------------------------------------------------------------------------
-# SensedState  <->  std_srvs/Trigger response (success, message = compact JSON)
+# Sensing: rcl_interfaces/srv/SetParameters, a standard service type whose request can carry the
+# run's tag (std_srvs/Trigger's request is empty; a type of our own would need rosidl, which the
+# PyPI wheels lack).  Request: no parameter (no key), or one string parameter `tag`; response: one
+# SetParametersResult (successful, reason = the SensedState as compact JSON, or why it was
+# refused), with a key the simulator's tag as the reason's last line.
+
+SENSE_TAG_PARAMETER = 'tag'
+_SENSE_PAYLOAD = b'sense'  # the request's MAC covers the service's name, the caller and its sequence
+
+
+def sense_reply_topic(service: str) -> str:
+    """The name a sensing answer's tag is made for: its service's, as DDS names its replies."""
+    return f'{service}/reply'
+
+
+def sensing_request(signer: Signer | None, service: str):
+    """An agent's request to `service`: tagged by `signer` (None: untagged)."""
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    if signer is None:
+        return SetParameters.Request()
+    value = ParameterValue(
+        type=ParameterType.PARAMETER_STRING, string_value=signer.tag(service, _SENSE_PAYLOAD)
+    )
+    return SetParameters.Request(parameters=[Parameter(name=SENSE_TAG_PARAMETER, value=value)])
+
+
+def _request_tag(request) -> str | None:
+    """The tag a sensing request carries (None: no parameter; '' if it carries something else,
+    which no tag parses as)."""
+    from rcl_interfaces.msg import ParameterType
+
+    parameters = list(getattr(request, 'parameters', None) or ())
+    if not parameters:
+        return None
+    (first, *rest) = parameters
+    if rest or first.name != SENSE_TAG_PARAMETER or first.value.type != ParameterType.PARAMETER_STRING:
+        return ''
+    return first.value.string_value
+
+
+def check_sensing_request(verifier: Verifier, service: str, request, *, caller: str) -> None:
+    """TagError (counted by `verifier`) unless `request` carries the run's tag for `service` from
+    `caller` (only agent i asks for agent i's state); nothing without a key."""
+    if verifier.required:
+        verifier.check(service, _SENSE_PAYLOAD, _request_tag(request), writer=caller)
+
+
+def tag_sensing_answer(response, signer: Signer | None, service: str):
+    """`response` with the simulator's tag as its reason's last line (None: untouched)."""
+    if signer is not None and len(response.results) == 1:
+        result = response.results[0]
+        result.reason = signer.tag_string(sense_reply_topic(service), result.reason)
+    return response
+
+
+def check_sensing_answer(verifier: Verifier, service: str, response) -> None:
+    """TagError (counted by `verifier`) unless the answer carries the run's tag (a second server of
+    `service`, or a copy, answered); nothing without a key."""
+    if verifier.required:
+        results = list(getattr(response, 'results', None) or ())
+        verifier.check_string(sense_reply_topic(service), results[0].reason if len(results) == 1 else '')
+
+
+def _sensing_response(successful: bool, text: str):
+    from rcl_interfaces.msg import SetParametersResult
+    from rcl_interfaces.srv import SetParameters
+
+    return SetParameters.Response(results=[SetParametersResult(successful=successful, reason=text)])
 
 
 def _vector_json(name: str, values: Sequence[float]) -> list[float]:
@@ -248,9 +317,7 @@ def _vector_json(name: str, values: Sequence[float]) -> list[float]:
 
 
 def encode_sensed_state(state: SensedState):
-    """std_srvs/Trigger.Response with success=True and the state as compact JSON."""
-    from std_srvs.srv import Trigger
-
+    """The sensing answer: successful, the state as compact JSON."""
     body: dict = {
         'version': LAYOUT_VERSION,
         'agent': int(state.agent),
@@ -278,14 +345,12 @@ def encode_sensed_state(state: SensedState):
         }
     # repr floats: json writes the shortest string that reads back to the same double.
     text = json.dumps(body, separators=(',', ':'), allow_nan=False)
-    return Trigger.Response(success=True, message=text)
+    return _sensing_response(True, text)
 
 
 def sensing_refusal(reason: str):
-    """std_srvs/Trigger.Response telling the agent why it cannot sense."""
-    from std_srvs.srv import Trigger
-
-    return Trigger.Response(success=False, message=reason)
+    """The sensing answer telling the agent why it cannot sense."""
+    return _sensing_response(False, reason)
 
 
 def _json_number(name: str, value) -> float:
@@ -326,15 +391,23 @@ def _json_vectors(name: str, table, p: int | None) -> dict[int, tuple[float, ...
 
 
 def decode_sensed_state(response) -> SensedState:
-    """SensedState from a std_srvs/Trigger response; MessageError if refused or malformed."""
-    if not response.success:
-        raise MessageError(f'sensing refused: {response.message}')
+    """SensedState from a sensing answer (its tag line, if any, dropped: `check_sensing_answer`
+    checks it); MessageError if refused or malformed."""
+    results = getattr(response, 'results', None)
+    if results is None or len(results) != 1:
+        raise MessageError(
+            f'a sensing answer holds one rcl_interfaces/SetParametersResult, got '
+            f'{"none" if results is None else len(results)}'
+        )
+    text = split_text(results[0].reason)[0]
+    if not results[0].successful:
+        raise MessageError(f'sensing refused: {text}')
     try:
-        body = json.loads(response.message)
+        body = json.loads(text)
     except json.JSONDecodeError as error:
-        raise MessageError(f'sensed state is not JSON ({error}): {response.message[:80]!r}') from None
+        raise MessageError(f'sensed state is not JSON ({error}): {text[:80]!r}') from None
     if not isinstance(body, dict):
-        raise MessageError(f'sensed state must be a JSON object, got {response.message[:80]!r}')
+        raise MessageError(f'sensed state must be a JSON object, got {text[:80]!r}')
     if body.get('version') != LAYOUT_VERSION:
         raise MessageError(
             f'sensed state: version {body.get("version")!r} is not supported (expected {LAYOUT_VERSION})'

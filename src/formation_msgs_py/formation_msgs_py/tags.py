@@ -145,6 +145,11 @@ class Signer:
         return f'{text}\n{self.tag(topic, text.encode())}'
 
 
+def agent_writer(agent_id: int) -> str:
+    """The writer name in agent `agent_id`'s tags."""
+    return f'agent_{agent_id}'
+
+
 def run_tags(key_file: str, *, writer: str) -> tuple[Signer | None, Verifier]:
     """A node's signer (None without a key) and verifier, from its `key_file` parameter ('': none)."""
     key = read_key(key_file) if key_file else None
@@ -169,11 +174,13 @@ class Verifier:
     def foreign(self) -> int:
         return sum(self.refused[reason] for reason in FOREIGN_REASONS)
 
-    def check(self, topic: str, payload: bytes, tag: str | None) -> None:
+    def check(self, topic: str, payload: bytes, tag: str | None, *, writer: str | None = None) -> None:
+        """TagError (counted) unless `tag` is the key's for `topic` and `payload`, from `writer`
+        when one is named (a sensing request: only agent i may ask for agent i's state)."""
         if self._key is None:
             return
         try:
-            self._check(topic, payload, tag)
+            self._check(topic, payload, tag, writer)
         except TagError as error:
             self.refused[error.reason] += 1
             raise
@@ -188,13 +195,17 @@ class Verifier:
         self.check(topic, body.encode(), tag)
         return body
 
-    def _check(self, topic: str, payload: bytes, tag: str | None) -> None:
+    def _check(self, topic: str, payload: bytes, tag: str | None, only: str | None) -> None:
         if tag is None:
             raise TagError(f"{topic}: a message without the run's tag", reason=UNTAGGED)
         writer, sequence, digest = parse_tag(tag)
         expected = mac(self._key, topic=topic, writer=writer, sequence=sequence, payload=payload)
         if not hmac.compare_digest(expected, digest):
             raise TagError(f"{topic}: a tag from {writer!r} that is not the run key's", reason=FORGED)
+        if only is not None and writer != only:
+            raise TagError(
+                f'{topic}: a tag of the run from {writer!r}, where only {only!r} may write', reason=FORGED
+            )
         last = self._last.get((topic, writer), 0)
         if sequence <= last:
             raise TagError(

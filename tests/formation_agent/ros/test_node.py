@@ -488,9 +488,9 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
     ros, live_node, fake_simulator
 ):
     from geometry_msgs.msg import Twist
+    from rcl_interfaces.srv import SetParameters
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray, String
-    from std_srvs.srv import Trigger
 
     from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
     from formation_msgs_py.topics import REPORT_TOPIC, STATUS_TOPIC, STEP_TOPIC
@@ -520,7 +520,7 @@ def test_an_agent_in_discovery_names_each_endpoint_it_waits_for_until_the_simula
             ('/agent_1/cmd_vel', Twist),
         ):
             simulator.create_subscription(kind, topic, lambda msg: None, READER_QOS)
-        simulator.create_service(Trigger, '/agent_1/sense', lambda request, response: response)
+        simulator.create_service(SetParameters, '/agent_1/sense', lambda request, response: response)
         deadline = time.monotonic() + 20.0
         while len(node.discovery_gaps()) > 7 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)

@@ -233,17 +233,18 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
 ):
     """Issue 28 item 2.  An outsider without the run's key sends mid-run a well-formed, plausible
     TriggerInfo from agent 2 to agent 1 (stamped at the latest Step's time: the layout and
-    plausibility checks take it), the same under another run's key, and a Step that is the run's
-    next one, marked final (agents stop on any final Step they take).  Each is refused by its tag
-    before the algorithm sees it: the lock-step run equals the in-process engine bit for bit, and
-    summary.json counts them as foreign."""
+    plausibility checks take it), the same under another run's key, a Step that is the run's
+    next one, marked final (agents stop on any final Step they take), and a call of agent 2's
+    sensing service.  Each is refused by its tag before the algorithm sees it: the lock-step run
+    equals the in-process engine bit for bit, and summary.json counts them as foreign."""
+    from rcl_interfaces.srv import SetParameters
     from std_msgs.msg import Float64MultiArray
 
     from formation_msgs_py.codec import decode_step, encode_step, encode_trigger_info, tag_array
     from formation_msgs_py.lockstep import STEP_FLAG_FINAL, Step
     from formation_msgs_py.qos import PROTOCOL_QOS, READER_QOS
     from formation_msgs_py.tags import Signer, new_key
-    from formation_msgs_py.topics import STEP_TOPIC, trigger_info_topic
+    from formation_msgs_py.topics import STEP_TOPIC, sense_service, trigger_info_topic
     from formation_msgs_py.types import TriggerInfo
     from formation_sim.runtime.launch.orchestrate import FormationRun
 
@@ -269,9 +270,11 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
             Float64MultiArray, STEP_TOPIC, lambda msg: steps.append(decode_step(msg)), READER_QOS
         )
         step_writer = outsider.node.create_publisher(Float64MultiArray, STEP_TOPIC, PROTOCOL_QOS)
+        sense = outsider.node.create_client(SetParameters, sense_service(2))
         while outsider.worker.is_alive():
             outsider.executor.spin_once(timeout_sec=0.05)
             agents_hear_it = step_writer.get_subscription_count() >= len(scenario.agent_ids)
+            agents_hear_it = agents_hear_it and sense.service_is_ready()
             if not injected and agents_hear_it and steps and steps[-1].index >= inject_at:
                 last = steps[-1]
                 info = encode_trigger_info(
@@ -286,6 +289,9 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
                     index=last.index + 1, time=last.time, flags=STEP_FLAG_FINAL, epoch=last.epoch, due=()
                 )
                 step_writer.publish(encode_step(final))  # untagged
+                answer = sense.call_async(
+                    SetParameters.Request()
+                )  # untagged, as `ros2 service call` sends it
                 injected = True
     (result,) = outsider.results
     assert injected, f'the run ended before step {inject_at}'
@@ -297,13 +303,57 @@ def test_forged_plausible_messages_without_the_runs_tag_change_nothing_and_are_c
     assert summary['messages_sent'] == reference.messages_sent
     n = len(scenario.agent_ids)
     rejected = summary['extra']['rejected_messages']
-    assert rejected['by_reason'] == {'untagged': 1 + n, 'forged': 1}, rejected
+    assert rejected['by_reason'] == {'untagged': 2 + n, 'forged': 1}, rejected
     assert rejected['by_agent']['1'] == {'untagged': 2, 'forged': 1}
     assert all(rejected['by_agent'][str(i)] == {'untagged': 1} for i in scenario.agent_ids if i != 1)
-    assert summary['extra']['foreign_messages'] == n + 2
+    assert rejected['simulator'] == {'untagged': 1}  # the sensing call
+    assert summary['extra']['foreign_sensing_calls'] == {'2': 1}
+    assert answer.done() and not answer.result().results[0].successful
+    assert summary['extra']['foreign_messages'] == n + 3
     assert summary['extra']['failure'] is None
     log = (result.out_dir / 'logs' / 'agent_1.log').read_text()
     assert "a message without the run's tag" in log and 'that is not the run key' in log
+
+
+def test_a_second_server_of_an_agents_sensing_service_stops_the_run_and_is_named(tmp_path, ros_env):
+    """Issue 28: a stranger serving /agent_2/sense with a plausible state.  Agent 2's client may
+    take its answer for the world's: the simulator's graph watch names the second server and
+    stops the run (an agent that took such an answer refuses it for its tag and stops too), so
+    the run cannot end done."""
+    from rcl_interfaces.srv import SetParameters
+
+    from formation_msgs_py.codec import encode_sensed_state
+    from formation_msgs_py.topics import sense_service
+    from formation_msgs_py.types import SensedState
+    from formation_sim.runtime.launch.orchestrate import FormationRun
+
+    scenario = load_scenario('paper_single')
+    run = FormationRun(
+        scenario,
+        out_dir=tmp_path / 'run',
+        horizon=2.0,
+        domain_id=83,
+        progress=False,
+        timeout=240.0,
+        step_listeners=1,
+    )
+    lie = SensedState(agent=2, stamp=0.0, rel_positions=dict.fromkeys(scenario.neighbours(2), (0.0, 0.0)))
+    with _outsider_with_run('rogue_server', 83, run) as outsider:
+        outsider.node.create_service(
+            SetParameters, sense_service(2), lambda request, response: encode_sensed_state(lie)
+        )
+        while outsider.worker.is_alive():
+            outsider.executor.spin_once(timeout_sec=0.05)
+    (result,) = outsider.results
+    assert not result.ok
+    summary = json.loads(result.summary.read_text())
+    failure = summary['extra']['failure']
+    print(failure['message'])
+    # Whichever comes first: the graph watch (foreign_writer), or agent 2 stopping on the answer
+    # without the simulator's tag (agent_failed); the server named either way.
+    assert failure['kind'] in ('foreign_writer', 'agent_failed'), failure
+    assert 'a node outside the run, /rogue_server (writer gid ' in failure['message'], failure
+    assert 'writes answers of /agent_2/sense (rr/agent_2/senseReply)' in failure['message'], failure
 
 
 @pytest.mark.timeout(300)

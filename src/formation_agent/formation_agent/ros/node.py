@@ -67,7 +67,7 @@ from formation_msgs_py.codec import decode_step, encode_trigger_info, tag_refuse
 from formation_msgs_py.errors import MessageError
 from formation_msgs_py.lockstep import AgentReport, Step
 from formation_msgs_py.qos import READER_QOS
-from formation_msgs_py.tags import Signer, Verifier
+from formation_msgs_py.tags import Signer, Verifier, agent_writer
 from formation_msgs_py.topics import AGENT_NODE, STEP_TOPIC, trigger_info_topic
 
 __all__ = [
@@ -515,7 +515,7 @@ def _next_step(node: FormationAgentNode, msg: Float64MultiArray) -> Step | None:
 def _tags(config) -> tuple[Signer | None, Verifier]:
     """With the run's key, what the agent sends is tagged and what it reads without a valid tag
     is refused before the algorithm sees it (`_tag_refused`)."""
-    signer = Signer(config.key, writer=f'agent_{config.agent_id}') if config.key else None
+    signer = Signer(config.key, writer=agent_writer(config.agent_id)) if config.key else None
     return signer, Verifier(config.key)
 
 

@@ -1,7 +1,8 @@
 """Where an agent node senses, at its triggering times only (parameter `sensing`).
 
-- `ServiceSensing` ('service'): its sensing service `/agent_<i>/sense` (std_srvs/Trigger), served
-  by the simulator from the exact world (docs/MESSAGES.md, "SensedState").
+- `ServiceSensing` ('service'): its sensing service `/agent_<i>/sense` (rcl_interfaces/SetParameters:
+  its request carries the run's tag), served by the simulator from the exact world
+  (docs/MESSAGES.md, "SensedState").
 - `PoseSensing` ('poses'): the latest poses of its own robot and its neighbours' on their pose
   topics (PoseStamped or Odometry), through `formation_agent.core.pose_sensing.PoseBook`; the
   trigger time is the wall-clock time since the run's epoch, when the poses are read.  Poses
@@ -20,15 +21,20 @@ from collections.abc import Callable
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
+from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
-from std_srvs.srv import Trigger
 
 from formation_agent.core.pose_sensing import PoseBook
 from formation_msgs_py.cdr import decode_odometry_cdr, decode_pose_stamped_cdr
-from formation_msgs_py.codec import decode_sensed_state
-from formation_msgs_py.errors import MessageError
+from formation_msgs_py.codec import (
+    check_sensing_answer,
+    decode_sensed_state,
+    sense_reply_topic,
+    sensing_request,
+)
+from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.qos import ROBOT_POSE_QOS
 from formation_msgs_py.types import RobotPose, SensedState
 
@@ -42,11 +48,14 @@ endpoint of the ROS graph it knows (1000 agents: ~20 000), where a match count i
 
 
 class ServiceSensing:
-    """The simulator's sensing service: one request per trigger, answered asynchronously."""
+    """The simulator's sensing service: one request per trigger, answered asynchronously.  With the
+    run's key the request carries the agent's tag and an answer without the simulator's is refused
+    (docs/HOSTILE_TRAFFIC.md, "Tags")."""
 
     def __init__(self, node) -> None:
-        self._client = node.create_client(Trigger, 'sense')
+        self._client = node.create_client(SetParameters, 'sense')
         self._name = node.resolve_service_name('sense')
+        self._signer, self._verifier, self._reject = node.signer, node.verifier, node.reject
         self._found = False  # once there, the service stays (a simulator lost is seen by its liveliness)
         self._next_look = 0.0
         self._wait = SERVICE_LOOKS[0]
@@ -66,8 +75,19 @@ class ServiceSensing:
         """Wall clock from `epoch` on (the simulator stamps its answers itself)."""
 
     def request(self, on_sensed: Callable[[SensedGetter], None]) -> None:
-        future = self._client.call_async(Trigger.Request())
-        future.add_done_callback(lambda done: on_sensed(lambda: decode_sensed_state(done.result())))
+        future = self._client.call_async(sensing_request(self._signer, self._name))
+        future.add_done_callback(lambda done: on_sensed(lambda: self._answer(done.result())))
+
+    def _answer(self, response) -> SensedState:
+        """The state in `response`; TagError (refused, counted, and the agent stops on it) for an
+        answer without the simulator's tag: another server of the service answered first, and
+        the client has taken it in place of the simulator's."""
+        try:
+            check_sensing_answer(self._verifier, self._name, response)
+        except TagError as error:
+            self._reject(sense_reply_topic(self._name), error.reason, str(error))
+            raise
+        return decode_sensed_state(response)
 
     def close(self) -> None:
         """Nothing of its own to destroy (its client is the node's)."""

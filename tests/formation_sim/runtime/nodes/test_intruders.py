@@ -260,3 +260,19 @@ def test_one_process_on_several_topics_is_named_once_with_every_topic():
         'two processes claim agent 2: /agent_2/formation_agent (writer gid 01) and /agent_2/formation_agent '
         f'(writer gid aa) both write {topics}: the run stops'
     )
+
+
+def test_a_second_server_of_an_agents_sensing_service_is_fatal_and_named():
+    """A stranger serving /agent_2/sense: agent 2's client may take its answer for the world's
+    (an agent with the run's key refuses it and stops; one without would use it)."""
+    (watched,) = [
+        w for w in simulator_watched(load_scenario('paper_single')) if w.topic == 'rr/agent_2/senseReply'
+    ]
+    simulator = Writer(node='/formation_simulator', gid='05')
+    assert intrusions(watched, [simulator]) == []
+    (found,) = intrusions(watched, [simulator, ROGUE])
+    assert found.fatal
+    assert found.text() == (
+        'a node outside the run, /rogue (writer gid 0f), writes answers of /agent_2/sense '
+        '(rr/agent_2/senseReply)'
+    )

@@ -1166,3 +1166,57 @@ def test_a_step_without_the_runs_tag_is_no_clock_for_the_bag():
     assert _untagged_step(node, signed)  # the same Step again: a replay
     node._verifier = Verifier(None)
     assert not _untagged_step(node, encode_step(step))
+
+
+# -- RunBag: what goes into the bag (ROS-free) -----------------------------------------------------
+
+
+def _run_bag(output, *, clock_topic='/formation/step', warned=None):
+    from formation_sim.runtime.nodes.recorder import RunBag
+
+    bag = RunBag(
+        str(output),
+        clock_topic=clock_topic,
+        warn=(warned if warned is not None else []).append,
+        offered=lambda name: [],
+        now_ns=lambda: 7,
+    )
+    bag.bag.add_topic('/formation/state', 'std_msgs/msg/Float64MultiArray')
+    return bag
+
+
+def test_what_comes_before_the_first_step_waits_and_is_stamped_with_its_time(tmp_path: Path) -> None:
+    from formation_msgs_py.codec import encode_step
+    from formation_msgs_py.lockstep import Step
+
+    warned: list[str] = []
+    run_bag = _run_bag(tmp_path / 'bag', warned=warned)
+    early = serialize_message(Float64MultiArray(data=[1.0]))
+    run_bag.take('/formation/state', early)
+    assert run_bag.bag.message_count == 0  # held: the run's time is not known yet
+    assert run_bag.clock.on_step(list(encode_step(Step(index=0, time=2.5)).data))
+    run_bag.take('/formation/state', serialize_message(Float64MultiArray(data=[2.0])))
+    run_bag.close()
+    stamps = [(m.timestamp_ns, list(decode(m.rawdata, m.msgtype).data)) for m in read_bag(tmp_path / 'bag')]
+    assert stamps == [(2_500_000_000, [1.0]), (2_500_000_000, [2.0])]  # the early one first
+    assert run_bag.failure is None and run_bag.unwritable == 0
+    assert warned == ['/formation/state: no publisher in the ROS graph yet: its offered QoS is not recorded']
+
+
+def test_a_bag_that_cannot_be_written_stops_the_recording_and_says_how_to_recover(small_disk) -> None:
+    run_bag = _run_bag(small_disk(1) / 'bag', clock_topic='')  # no clock topic: the node clock's stamp
+    payload = serialize_message(Float64MultiArray(data=[0.5] * 8192))  # 64 KiB a message
+    for _ in range(64):  # 4 MiB into 1 MiB
+        run_bag.take('/formation/state', payload)
+        if not run_bag.flush():
+            break
+    assert run_bag.failure is not None
+    text = str(run_bag.failure)
+    assert text.startswith(f'cannot write the bag {run_bag.bag.path}: ')
+    assert text.endswith(
+        f'recording stopped, {run_bag.flushed_count} messages are in the file '
+        '(formation recover BAG rebuilds it, once there is space)'
+    )
+    run_bag.take('/formation/state', payload)  # ignored from now on
+    assert not run_bag.flush()
+    run_bag.close()  # says nothing more: the file stays as the last flush left it

@@ -189,12 +189,12 @@ def _rogue_client(ros, node, agent):
     import time
 
     import rclpy
-    from std_srvs.srv import Trigger
+    from rcl_interfaces.srv import SetParameters
 
     from formation_msgs_py.topics import sense_service
 
     rogue = rclpy.create_node('curious', namespace='/outside', context=ros)
-    rogue.create_client(Trigger, sense_service(agent))
+    rogue.create_client(SetParameters, sense_service(agent))
     deadline = time.monotonic() + 10.0
     topic = f'rq{sense_service(agent)}Request'
     while not node.get_publishers_info_by_topic(topic, no_mangle=True) and time.monotonic() < deadline:
@@ -211,13 +211,14 @@ def test_a_sensing_call_out_of_turn_from_outside_is_refused_counted_and_its_call
     from formation_msgs_py.lockstep import Step
 
     alone = simulator()
-    assert alone.world.sensing.on_sense(2).success is False
+    assert alone.world.sensing.on_sense(2).results[0].successful is False
     assert str(alone.failure) == 'agent 2 is not due to sense at step -1 (due: [])'
     node = simulator()
     rogue = _rogue_client(ros, node, 2)
     try:
         refusal = node.world.sensing.on_sense(2)
-        assert refusal.success is False and refusal.message.endswith(': refused')
+        (result,) = refusal.results
+        assert result.successful is False and result.reason.endswith(': refused')
         assert node.failure is None and node.world.sensing.calls.foreign == {1: 0, 2: 1, 3: 0}
         node.world.pacing.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
         sense = node.world.sensing.on_sense
@@ -228,6 +229,49 @@ def test_a_sensing_call_out_of_turn_from_outside_is_refused_counted_and_its_call
     assert again == first and node.failure is None
     assert node.world.sensing.sensing_calls == 1 and node.world.sensing.calls.foreign[2] == 2
     assert node.world.sensing.calls.extra() == {'foreign_sensing_calls': {'2': 2}}
+
+
+def test_with_the_runs_key_a_sensing_call_without_the_agents_tag_is_refused_and_the_run_goes_on(
+    ros, tmp_path
+):
+    """Issue 28 item 2: the sensing request carries the caller's tag.  A call without it (ros2
+    service call, a stranger) or with another agent's is refused before the world is read,
+    counted as a foreign call and a foreign message, never a trigger and never agent 2's fault;
+    agent 2's own call is answered, with the simulator's tag."""
+    from rclpy.parameter import Parameter
+
+    from formation_msgs_py.codec import check_sensing_answer, decode_sensed_state, sensing_request
+    from formation_msgs_py.lockstep import Step
+    from formation_msgs_py.tags import Signer, Verifier, new_key, split_text, write_key
+    from formation_msgs_py.topics import sense_service
+    from formation_sim.runtime.nodes.sim_node import FormationSimulatorNode, _sense_call
+    from formation_sim.runtime.nodes.time_keeper import message_counts
+
+    key, service = new_key(), sense_service(2)
+    node = FormationSimulatorNode(
+        scenario=load_scenario('paper_single'),
+        context=ros,
+        parameter_overrides=[Parameter('key_file', value=str(write_key(tmp_path / 'run.key', key)))],
+    )
+    try:
+        node.world.pacing.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
+        strangers = [
+            sensing_request(None, service),
+            sensing_request(Signer(new_key(), writer='agent_2'), service),
+            sensing_request(Signer(key, writer='agent_3'), service),
+        ]
+        refusals = [_sense_call(node.world, 2, request).results[0] for request in strangers]
+        assert [r.successful for r in refusals] == [False] * 3
+        assert split_text(refusals[0].reason)[0] == f"{service}: a message without the run's tag: refused"
+        answer = _sense_call(node.world, 2, sensing_request(Signer(key, writer='agent_2'), service))
+        check_sensing_answer(Verifier(key), service, answer)  # the agent's check passes
+        assert decode_sensed_state(answer).agent == 2
+        assert node.failure is None and node.world.sensing.sensing_calls == 1
+        assert node.world.sensing.calls.extra() == {'foreign_sensing_calls': {'2': 3}}
+        assert node.rejected == {'untagged': 1, 'forged': 2}
+        assert message_counts(node)['foreign_messages'] == 3
+    finally:
+        node.destroy_node()
 
 
 def test_wall_clock_sensing_calls_are_triggers_only_when_the_agents_information_follows(simulator, ros):

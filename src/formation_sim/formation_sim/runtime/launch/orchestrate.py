@@ -222,8 +222,15 @@ class FormationRun:
                 env=self._environment(domain_id),
                 launch_prefix=self.options.launch_prefix,
             )
+            watch = RunWatch(
+                supervisor=self._supervisor,
+                plan=self.plan,
+                options=self.options,
+                marks=self.marks,
+                interrupted=self._interrupted,
+            )
             try:
-                status, message, lost = self._launch_and_watch(paths)
+                status, message, lost = watch.until_end(paths)
             finally:
                 self.removed_shm_files = self._supervisor.stop(
                     self.options.stop_timeouts,
@@ -351,9 +358,28 @@ class FormationRun:
         """Stop the run as Ctrl-C would (for callers on another thread)."""
         self._interrupted.set()
 
-    def _start_children(self, paths: dict[str, Path]) -> Child:
+
+class RunWatch:
+    """A run's processes, started in the plan's order and watched until the time keeper leaves:
+    its exit status, a child lost, the timeout (the children's stacks asked for first) and Ctrl-C
+    (`interrupted`).  `marks`: the orchestrator's marks, to which it adds when the children were
+    spawned and when the keeper exited."""
+
+    def __init__(
+        self,
+        *,
+        supervisor: Supervisor,
+        plan: LaunchPlan,
+        options: RunOptions,
+        marks: dict[str, float],
+        interrupted: SignalFlag,
+    ) -> None:
+        self.supervisor, self.plan, self.options = supervisor, plan, options
+        self.marks, self._interrupted = marks, interrupted
+
+    def start(self, paths: dict[str, Path]) -> Child:
         """Every process of the plan, in its order; the time keeper's child."""
-        supervisor = self._supervisor
+        supervisor = self.supervisor
         keeper = None
         for spec in self.plan.processes(paths):
             child = supervisor.start(spec)
@@ -374,13 +400,15 @@ class FormationRun:
                 f'ROS domain {supervisor.env["ROS_DOMAIN_ID"]}: {self.plan.keeper}, {groups} agent '
                 f'process(es){robots_text}{recorder}{server} started; waiting for discovery'
             )
+        if keeper is None:  # LaunchPlan.processes always starts one
+            raise RunError(f'the launch plan started no time keeper: {[c.name for c in supervisor.children]}')
         return keeper
 
-    def _timed_out(self) -> str:
+    def timed_out(self) -> str:
         """The timeout's message, once the children still running wrote their stacks to their logs
         (where each was stuck), before they are stopped."""
-        running = [c for c in self._supervisor.children if c.alive() and c.name != 'discovery_server']
-        asked = self._supervisor.ask_for_stacks()
+        running = [c for c in self.supervisor.children if c.alive() and c.name != 'discovery_server']
+        asked = self.supervisor.ask_for_stacks()
         if not running:
             return f'timed out after {self.options.timeout} s'
         return f'timed out after {self.options.timeout} s; still running: ' + ', '.join(
@@ -388,10 +416,10 @@ class FormationRun:
             for c in running
         )
 
-    def _launch_and_watch(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:
+    def until_end(self, paths: dict[str, Path]) -> tuple[int, str, Child | None]:
         """Start the children and watch them: (exit status, message, the child that was lost)."""
-        supervisor = self._supervisor
-        keeper = self._start_children(paths)
+        supervisor = self.supervisor
+        keeper = self.start(paths)
         deadline = None if self.options.timeout is None else time.monotonic() + self.options.timeout
         shown = ''
         lost: Child | None = None
@@ -401,9 +429,9 @@ class FormationRun:
                 return ExitCode.INTERRUPTED, 'interrupted', lost
             now = time.monotonic()
             if deadline is not None and now > deadline:
-                return ExitCode.FAILED, self._timed_out(), lost
-            if self.options.progress and self.last_progress != shown:
-                shown = self.last_progress
+                return ExitCode.FAILED, self.timed_out(), lost
+            if self.options.progress and supervisor.last_progress != shown:
+                shown = supervisor.last_progress
                 say(shown)
             supervisor.note_exits(now)
             if now >= next_snapshot:
@@ -415,7 +443,7 @@ class FormationRun:
                 if code == 0 or keeper.left_with() == 0:  # its ROS teardown may hang after the end
                     failed = supervisor.wait_for_expected(self.options.stop_timeouts[0], besides=keeper)
                     failed, hung = excused_teardown(failed + ([keeper] if code else []))
-                    failed, after_end = excused_after_end(failed, self.out_dir / SUMMARY_FILE)
+                    failed, after_end = excused_after_end(failed, self.plan.out_dir / SUMMARY_FILE)
                     after_end = '; '.join(note for note in (after_end, hung) if note)
                     if not failed:
                         return ExitCode.OK, after_end, lost

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from formation_msgs_py.middleware import LIVELINESS_LEASE, LOST_GRACE
 from formation_msgs_py.topics import (
     AGENT_NODE,
+    SIMULATOR_NODE,
     STEP_TOPIC,
     agent_namespace,
     command_topic,
@@ -282,7 +283,8 @@ def robot_watched(scenario, *, keeper: str) -> list[Watched]:
 
 def simulator_watched(scenario) -> list[Watched]:
     """The simulator's plant and sensing: agent i's command to the plant (fatal: a stranger moves
-    the exact world) and its sensing requests (a stranger reads; named)."""
+    the exact world), its sensing requests (a stranger reads; named) and the service's answers
+    (the simulator's: another server may answer agent i in the world's place; fatal, named)."""
     double = scenario.dynamics == 'double'
     watched = []
     for i in scenario.agent_ids:
@@ -302,6 +304,16 @@ def simulator_watched(scenario) -> list[Watched]:
                 what=f'sensing requests to {sense_service(i)}',
                 allowed=own,
                 agent=i,
+                mangled=True,
+            )
+        )
+        # A second server of the service: agent i's client may take its answer for the world's.
+        watched.append(
+            Watched(
+                topic=f'rr{sense_service(i)}Reply',
+                what=f'answers of {sense_service(i)}',
+                allowed=frozenset({f'/{SIMULATOR_NODE}'}),
+                fatal=True,
                 mangled=True,
             )
         )

@@ -310,6 +310,123 @@ def _requested_topics(values: dict) -> tuple[list[tuple[str, str]], list[str]]:
     return requested, problems
 
 
+class RunBag:
+    """What goes into the bag, stamped with the run's time (`RunClock`), ROS-free: the node hands
+    it each message's CDR bytes (`take`).  With a clock topic, what comes before the first Step
+    waits (up to EARLY_WINDOW s) and is written once a Step says when the run began.  A bag that
+    cannot be written (a full disk) stops the recording (`failure`); a message whose stamp no bag
+    holds is counted (`unwritable`), not recorded.  `offered(name)`: the QoS the publishers of a
+    topic offer, recorded before its first message; `now_ns()`: the stamp without a clock topic.
+    """
+
+    def __init__(
+        self,
+        output: str,
+        *,
+        clock_topic: str,
+        warn: Callable[[str], None],
+        offered: Callable[[str], list],
+        now_ns: Callable[[], int],
+    ) -> None:
+        self.clock = RunClock()
+        self._clock_topic = clock_topic
+        self._warn, self._offered, self._now_ns = warn, offered, now_ns
+        self._early: deque[tuple[int, str, bytes]] = (
+            deque()
+        )  # (received, topic, rawdata) before the first Step
+        self.unwritable = 0  # messages the bag could not stamp (not recorded; a warning names the first)
+        self.flushed_count = 0  # messages in the file for sure (as of the last flush)
+        self.failure: RecorderError | None = None  # the bag could not be written
+        self.bag = BagWriter(output)
+        self.bag.open()
+        self.bag.set_custom_data(
+            'formation_timestamps',
+            f'run time: sim time of {clock_topic} (lock-step), receive time since its epoch (wall clock)'
+            if clock_topic
+            else 'node clock',
+        )
+
+    def take(self, name: str, rawdata: bytes) -> None:
+        """A message of `name` received now: written, or held until the first Step."""
+        if self.failure is not None:
+            return
+        if self._clock_topic and not self.clock.started:
+            self._early.append((self.clock.received_ns(), name, bytes(rawdata)))
+            self.write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
+        else:
+            self.write_early()  # the first Step has come: what waited goes first
+            self._write(name, self.clock.stamp_ns() if self._clock_topic else self._now_ns(), rawdata)
+
+    def flush(self) -> bool:
+        """Write what waited too long for the first Step and flush the file; False once it cannot."""
+        self.write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
+        if self.failure is not None:
+            return False
+        try:
+            self.bag.flush()
+        except OSError as error:
+            self._fail(error)
+            return False
+        self.flushed_count = self.bag.message_count
+        return True
+
+    def _fail(self, error: OSError) -> None:
+        """The bag cannot be written (a full disk): stop recording; `main` leaves with the error."""
+        self.failure = RecorderError(
+            f'cannot write the bag {self.bag.path}: {error}; recording stopped, {self.flushed_count} '
+            'messages are in the file (formation recover BAG rebuilds it, once there is space)'
+        )
+
+    def _write(self, name: str, stamp_ns: int, rawdata: bytes) -> None:
+        if self.failure is not None:
+            return
+        try:
+            if not self.bag.has_channel(name):
+                self._offer(name)
+            self.bag.write(name, stamp_ns, rawdata)
+        except OSError as error:
+            self._fail(error)
+        except BagError as error:  # a stamp no bag holds (RunClock refuses the Steps that would)
+            self.unwritable += 1
+            if self.unwritable <= 3:
+                self._warn(f'{name}: a message not recorded: {error}')
+
+    def write_early(self, *, before: int | None = None) -> None:
+        """Write the messages that came before the first Step (those received before `before`
+        only), stamped as the clock now can (0 until a Step says when the run began)."""
+        while self._early and (before is None or self._early[0][0] < before):
+            received, name, rawdata = self._early.popleft()
+            self._write(name, self.clock.stamp_ns(received) if self.clock.started else 0, rawdata)
+
+    def _offer(self, name: str) -> None:
+        """Record the QoS the publishers of `name` offer (before its first message is written)."""
+        profiles = self._offered(name)
+        if not profiles:
+            self._warn(f'{name}: no publisher in the ROS graph yet: its offered QoS is not recorded')
+        self.bag.set_offered_qos(name, profiles)
+
+    def close(self) -> None:
+        """Finalize the bag (MCAP summary and ``metadata.yaml``), unless it could not be written.
+
+        Raises:
+            RecorderError: finalizing failed (a full disk); the MCAP file is then cut short and
+                has no ``metadata.yaml`` (`formation_sim.bag.recovery.reindex` rebuilds it).
+
+        """
+        self.write_early()
+        if self.failure is not None:
+            return  # writing more would fail again: the file stays as the last flush left it
+        for name in self.bag.topics:
+            if not self.bag.has_channel(name):  # no message came: its publishers as they are now
+                with contextlib.suppress(Exception):  # the node's context may be gone already
+                    self.bag.set_offered_qos(name, self._offered(name))
+        try:
+            self.bag.close()
+        except OSError as error:
+            self._fail(error)
+            raise self.failure from None
+
+
 class RecorderNode(Node):
     """Record topics into a bag, stamped with the run's time (`RunClock`).
 
@@ -351,27 +468,19 @@ class RecorderNode(Node):
         self._qos = QoSProfile(
             history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE
         )
-        self.clock = RunClock()
-        self._early: deque[tuple[int, str, bytes]] = (
-            deque()
-        )  # (received, topic, rawdata) before the first Step
         self.received_count = 0  # messages taken from all subscriptions, recorded or not
-        self.unwritable = 0  # messages the bag could not stamp (not recorded; a warning names the first)
-        self.flushed_count = 0  # messages in the file for sure (as of the last flush)
-        self.failure: RecorderError | None = None  # the bag could not be written
         self._bad_clock_warned = False
         self._subscriptions_by_topic: dict[str, Any] = {}
         self._skipped: set[str] = set()
 
-        self.bag = BagWriter(output)
-        self.bag.open()
-        self.bag.set_custom_data(
-            'formation_timestamps',
-            f'run time: sim time of {self._clock_topic} (lock-step), '
-            'receive time since its epoch (wall clock)'
-            if self._clock_topic
-            else 'node clock',
+        self.run_bag = RunBag(
+            output,
+            clock_topic=self._clock_topic,
+            warn=self.get_logger().warning,
+            offered=lambda name: offered_qos(self, name),
+            now_ns=lambda: self.get_clock().now().nanoseconds,
         )
+        self.bag, self.clock = self.run_bag.bag, self.run_bag.clock
         try:
             for name, msgtype in requested:
                 self._record(name, msgtype)
@@ -400,24 +509,14 @@ class RecorderNode(Node):
         """Messages written to the bag so far."""
         return self.bag.message_count
 
-    def _fail(self, error: OSError) -> None:
-        """The bag cannot be written (a full disk): stop recording; `main` leaves with the error."""
-        self.failure = RecorderError(
-            f'cannot write the bag {self.bag.path}: {error}; recording stopped, {self.flushed_count} '
-            'messages are in the file (formation recover BAG rebuilds it, once there is space)'
-        )
+    @property
+    def failure(self) -> RecorderError | None:
+        """The bag could not be written (None: it could)."""
+        return self.run_bag.failure
 
     def _flush(self) -> None:
-        self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
-        if self.failure is not None:
-            return
-        try:
-            self.bag.flush()
-        except OSError as error:
-            self._fail(error)
-            return
-        self.flushed_count = self.bag.message_count
-        self._beat()
+        if self.run_bag.flush():
+            self._beat()
 
     def _beat(self) -> None:
         if self._heartbeat is not None:
@@ -466,49 +565,14 @@ class RecorderNode(Node):
             self._silent.discard(name)
             if is_clock:
                 self._on_step(rawdata)
-            if record and self.failure is None:
-                if self._clock_topic and not self.clock.started:
-                    self._early.append((self.clock.received_ns(), name, bytes(rawdata)))
-                    self._write_early(before=self.clock.received_ns() - round(EARLY_WINDOW * _NS_PER_S))
-                else:
-                    self._write_early()  # the first Step has come: what waited goes first
-                    self._write(name, self._timestamp_ns(), rawdata)
+            if record:
+                self.run_bag.take(name, rawdata)
             if is_clock and self.failure is None:
                 self._beat()  # a run paces its steps on this (the simulator's flow control)
 
         self._subscriptions_by_topic[name] = self.create_subscription(
             message_class, name, on_message, self._qos, raw=True
         )
-
-    def _write(self, name: str, stamp_ns: int, rawdata: bytes) -> None:
-        if self.failure is not None:
-            return
-        try:
-            if not self.bag.has_channel(name):
-                self._offer(name)
-            self.bag.write(name, stamp_ns, rawdata)
-        except OSError as error:
-            self._fail(error)
-        except BagError as error:  # a stamp no bag holds (RunClock refuses the Steps that would)
-            self.unwritable += 1
-            if self.unwritable <= 3:
-                self.get_logger().warning(f'{name}: a message not recorded: {error}')
-
-    def _write_early(self, *, before: int | None = None) -> None:
-        """Write the messages that came before the first Step (those received before `before`
-        only), stamped as the clock now can (0 until a Step says when the run began)."""
-        while self._early and (before is None or self._early[0][0] < before):
-            received, name, rawdata = self._early.popleft()
-            self._write(name, self.clock.stamp_ns(received) if self.clock.started else 0, rawdata)
-
-    def _offer(self, name: str) -> None:
-        """Record the QoS the publishers of `name` offer (before its first message is written)."""
-        profiles = offered_qos(self, name)
-        if not profiles:
-            self.get_logger().warning(
-                f'{name}: no publisher in the ROS graph yet: its offered QoS is not recorded'
-            )
-        self.bag.set_offered_qos(name, profiles)
 
     def _on_step(self, rawdata: bytes) -> None:
         from rclpy.serialization import deserialize_message
@@ -523,11 +587,6 @@ class RecorderNode(Node):
                 f'(and a wall-clock epoch) in [0, {MAX_BAG_TIME:.4g}) s, what a bag can stamp;'
                 ' keeping the previous time'
             )
-
-    def _timestamp_ns(self) -> int:
-        if not self._clock_topic:
-            return self.get_clock().now().nanoseconds
-        return self.clock.stamp_ns()
 
     def stop_timers(self) -> None:
         """Stop discovery and periodic flushing (before draining and closing)."""
@@ -590,26 +649,9 @@ class RecorderNode(Node):
         return drained
 
     def close(self) -> None:
-        """Finalize the bag (MCAP summary and ``metadata.yaml``), unless it could not be written.
-
-        Raises:
-            RecorderError: finalizing failed (a full disk); the MCAP file is then cut short and
-                has no ``metadata.yaml`` (`formation_sim.bag.recovery.reindex` rebuilds it).
-
-        """
+        """Stop the timers and finalize the bag (`RunBag.close`; RecorderError on a full disk)."""
         self.stop_timers()
-        self._write_early()
-        if self.failure is not None:
-            return  # writing more would fail again: the file stays as the last flush left it
-        for name in self.bag.topics:
-            if not self.bag.has_channel(name):  # no message came: its publishers as they are now
-                with contextlib.suppress(Exception):  # the node's context may be gone already
-                    self.bag.set_offered_qos(name, offered_qos(self, name))
-        try:
-            self.bag.close()
-        except OSError as error:
-            self._fail(error)
-            raise self.failure from None
+        self.run_bag.close()
 
 
 def _parser() -> argparse.ArgumentParser:

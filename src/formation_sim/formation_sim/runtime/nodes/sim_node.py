@@ -43,23 +43,26 @@ from typing import NoReturn
 
 import numpy as np
 from geometry_msgs.msg import Accel, Twist
+from rcl_interfaces.srv import SetParameters
 from rclpy.event_handler import SubscriptionEventCallbacks
 from std_msgs.msg import Float64MultiArray
-from std_srvs.srv import Trigger
 
 from formation_agent.ros.parameters import DOUBLE, STRING, ParameterSpec
 from formation_agent.ros.process import exit_process
 from formation_msgs_py.codec import (
     check_array,
+    check_sensing_request,
     decode_command,
     decode_trigger_info,
     encode_sensed_state,
     encode_step,
     sensing_refusal,
+    tag_sensing_answer,
 )
 from formation_msgs_py.errors import MessageError, TagError
 from formation_msgs_py.lockstep import STEP_FLAG_FINAL, STEP_FLAG_REALTIME, Step
 from formation_msgs_py.qos import READER_QOS
+from formation_msgs_py.tags import agent_writer
 from formation_msgs_py.topics import SIMULATOR_NODE, command_topic, sense_service, trigger_info_topic
 from formation_msgs_py.types import SensedState
 from formation_sim.model.scenario import Scenario
@@ -489,10 +492,7 @@ class Sensing:
         self.sensing_calls = 0  # the calls answered for a trigger
         self.calls = SensingCalls(keeper.agents)  # which calls were triggers, which foreign (issue 28)
         self._services = [
-            keeper.create_service(
-                Trigger, sense_service(i), lambda request, response, agent=i: self.on_sense(agent)
-            )
-            for i in keeper.agents
+            keeper.create_service(SetParameters, sense_service(i), _answers(world, i)) for i in keeper.agents
         ]
         self._info_subs = _trigger_readers(world) if keeper.realtime else {}
 
@@ -550,20 +550,57 @@ def _on_trigger_info(world: SimulatorWorld, msg, agent: int) -> None:
         world.sensing.sensing_calls += 1
 
 
-def _out_of_turn(world: SimulatorWorld, agent: int, index: int):
-    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
-    `agent`'s own is a protocol violation that ends the run; but any node can call the service
-    (std_srvs/Trigger names no caller), so the graph is asked first: with a stranger calling it,
-    the call is refused (or, at the agent's own step, answered again with the same state) and
-    counted as foreign, the stranger named; two processes claiming the agent end the run."""
-    due = agent in world.due_agents
-    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(world.due_agents)})'
+def _answers(world: SimulatorWorld, agent: int):
+    """The callback of agent `agent`'s sensing service."""
+    return lambda request, response: _sense_call(world, agent, request)
+
+
+def _sense_call(world: SimulatorWorld, agent: int, request):
+    """A call of agent `agent`'s sensing service: with the run's key refused unless it carries
+    agent `agent`'s tag (`_untagged_call`), and answered with the simulator's tag."""
+    answer = _untagged_call(world, agent, request)
+    if answer is None:
+        answer = world.sensing.on_sense(agent)
+    return tag_sensing_answer(answer, world.keeper.signer, sense_service(agent))
+
+
+def _untagged_call(world: SimulatorWorld, agent: int, request):
+    """The refusal of a sensing call for `agent` without agent `agent`'s valid tag (the run's key
+    only; else None): counted as a foreign call and as a foreign message, the caller named from
+    the graph in the first warnings; never a trigger, and the run goes on."""
+    keeper, calls = world.keeper, world.sensing.calls
+    try:
+        check_sensing_request(keeper.verifier, sense_service(agent), request, caller=agent_writer(agent))
+    except TagError as error:
+        calls.foreign_call(agent)
+        detail = str(error)
+        if calls.foreign[agent] <= 3 and 'stranger' in (found := _callers(world, agent)):
+            detail = f'{found["stranger"].text()}: {detail}'
+        keeper.reject(sense_service(agent), error.reason, detail)
+        return sensing_refusal(f'{error}: refused')
+    return None
+
+
+def _callers(world: SimulatorWorld, agent: int) -> dict:
+    """What the graph says of the callers of `agent`'s sensing service (`intrusions` by kind)."""
     (watched,) = [w for w in simulator_watched(world.keeper.scenario) if w.mangled and w.agent == agent]
     writers = [
         Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
         for i in world.keeper.get_publishers_info_by_topic(watched.topic, no_mangle=True)
     ]
-    found = {i.kind: i for i in intrusions(watched, writers)}
+    return {i.kind: i for i in intrusions(watched, writers)}
+
+
+def _out_of_turn(world: SimulatorWorld, agent: int, index: int):
+    """Lock-step: a sensing call for `agent` that is not its turn (`index`: the step).  Agent
+    `agent`'s own is a protocol violation that ends the run; but without the run's key any node
+    can call the service (a request names no caller), so the graph is asked first: with a
+    stranger calling it, the call is refused (or, at the agent's own step, answered again with
+    the same state) and counted as foreign, the stranger named; two processes claiming the agent
+    end the run.  With the key a stranger's call never comes here (`_untagged_call`)."""
+    due = agent in world.due_agents
+    reason = f'agent {agent} is not due to sense at step {index} (due: {sorted(world.due_agents)})'
+    found = _callers(world, agent)
     if 'duplicate' in found:
         duplicate = found['duplicate']
         world.keeper.failure = DuplicateAgentError(

@@ -46,7 +46,7 @@ from formation_msgs_py.tags import read_key, run_tags
 from formation_msgs_py.topics import RECORDER_TOPIC, REPORT_TOPIC, SCENARIO_TOPIC, STATUS_TOPIC, STEP_TOPIC
 from formation_sim.model.errors import ScenarioError
 from formation_sim.model.scenario import Scenario, dump_scenario_text, load_scenario
-from formation_sim.runtime.errors import DiscoveryError, ForeignWriterError
+from formation_sim.runtime.errors import DiscoveryError, ForeignWriterError, KeeperFrozenError
 from formation_sim.runtime.nodes.intruders import (
     TOPICS_PER_LOOK,
     FreezeWatch,
@@ -502,13 +502,7 @@ def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
         if not everything and time.monotonic() > until:
             break  # a graph of thousands of endpoints answers slower: the rest at the next look
         (watched,) = watch.due(1)
-        infos = node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
-        writers = [
-            Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
-            for i in infos
-        ]
-        for intrusion in watch.note(watched, writers, now=time.monotonic()):
-            node.get_logger().warning(intrusion.text())
+        _look_at(node, watched)
     if (error := watch.error()) is not None:
         raise error
     if node.realtime and node.step is not None:  # lock-step: RunBook.settled counts them exactly
@@ -517,10 +511,28 @@ def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
             raise foreign_information_error(*excess, watch)
 
 
+def _look_at(node: TimeKeeperNode, watched) -> None:
+    """The writers of `watched.topic` in the graph now, noted by the node's watch (each new
+    intrusion logged)."""
+    infos = node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
+    writers = [
+        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
+        for i in infos
+    ]
+    for intrusion in node.graph_watch.note(watched, writers, now=time.monotonic()):
+        node.get_logger().warning(intrusion.text())
+
+
 def blamed(node: TimeKeeperNode, error: BaseException) -> BaseException:
     """`error` with its cause named first (issue 28): the keeper's own freeze (a KeeperFrozenError),
-    else the strangers seen in the graph before it."""
+    else the strangers in the graph, every watched topic looked at once more (up to LOOK_ALL_MOST):
+    a stranger the slices had not reached yet is named too (a second server of agent 2's sensing
+    that answered at step 41 was not, and the failure named only the answer's missing tag)."""
     error = node.freeze.blame(error, time.monotonic(), who=node.get_name().removeprefix('formation_'))
+    if not isinstance(error, KeeperFrozenError):
+        with contextlib.suppress(Exception):  # a graph no longer there names nobody more
+            for watched in list(node.graph_watch.watched)[:LOOK_ALL_MOST]:
+                _look_at(node, watched)
     if node.graph_watch.found and not isinstance(error, ForeignWriterError) and error.args:
         error.args = (node.graph_watch.blame(str(error)), *error.args[1:])
     return error
