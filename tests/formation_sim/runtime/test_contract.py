@@ -74,14 +74,15 @@ def _written(tmp_path, backend: str, file: str) -> dict:
 
 
 def test_the_keepers_parameter_file_is_the_one_its_node_reads(tmp_path) -> None:
-    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS, FormationCoordinatorNode
-    from formation_sim.runtime.nodes.sim_node import SIMULATOR_PARAMETERS, FormationSimulatorNode
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS, RobotWorld
+    from formation_sim.runtime.nodes.sim_node import SIMULATOR_PARAMETERS, SimulatorWorld
 
-    for backend, file, node, node_name, table in (
-        ('exact', SIMULATOR_FILE, FormationSimulatorNode, SIMULATOR_NODE, SIMULATOR_PARAMETERS),
-        ('holonomic', COORDINATOR_FILE, FormationCoordinatorNode, COORDINATOR_NODE, COORDINATOR_PARAMETERS),
+    for backend, file, world, node_name, table in (
+        ('exact', SIMULATOR_FILE, SimulatorWorld, SIMULATOR_NODE, SIMULATOR_PARAMETERS),
+        ('holonomic', COORDINATOR_FILE, RobotWorld, COORDINATOR_NODE, COORDINATOR_PARAMETERS),
     ):
-        assert file == node.PARAMS_FILE  # `formation params` and the node's --help name this file
+        assert file == world.PARAMS_FILE  # `formation params` and the node's --help name this file
+        assert node_name == world.NODE_NAME and table is world.PARAMETERS  # the node the file is for
         written = _written(tmp_path, backend, file)
         assert list(written) == [f'/{node_name}'], backend
         names = set(written[f'/{node_name}']['ros__parameters'])

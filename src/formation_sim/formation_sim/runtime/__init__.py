@@ -1,8 +1,9 @@
 """The distributed runtime (rclpy, Fast DDS), in three roles (docs/DESIGN.md, "Packages and layers").
 
-- `nodes`: the node programs, each run in a child process: the time keepers (`time_keeper` with
-  its books `run_book` and its end `run_end`; `sim_node` of the `exact` backend with `exact_world`
-  and `sim_view`; `coordinator` of robot runs with `robot_poses` and `robot_stops`), the simulated
+- `nodes`: the node programs, each run in a child process: the time keeper (`time_keeper` with
+  its books `run_book` and its end `run_end`) holding a `world.World`: `sim_node`'s exact world of
+  the `exact` backend with `exact_world` and `sim_view`, or `coordinator`'s robots with
+  `robot_poses` and `robot_stops`; the simulated
   robot `robot_node`, the `recorder` (with `bag_qos`), `operator_stop` and `intruders`.
 - `launch`: what the parent does: `orchestrate` (`FormationRun` starts a run in a private ROS
   domain, watches it and stops it by PID), `plan` (the backend's launch plan: inputs, processes,
@@ -23,8 +24,9 @@ __all__ = lazy_exports(
         'launch.orchestrate': ('FormationRun', 'RunResult'),
         'launch.plan': ('RobotOptions',),
         'nodes.time_keeper': ('TimeKeeperNode',),
-        'nodes.coordinator': ('FormationCoordinatorNode',),
-        'nodes.sim_node': ('FormationSimulatorNode', 'SimulatorError'),
+        'nodes.world': ('World',),
+        'nodes.coordinator': ('FormationCoordinatorNode', 'RobotWorld'),
+        'nodes.sim_node': ('FormationSimulatorNode', 'SimulatorError', 'SimulatorWorld'),
         'contract': ('agent_parameters',),
         'nodes.robot_node': ('SimulatedRobotNode',),
         'nodes.recorder': ('RecorderNode',),

@@ -52,7 +52,7 @@ def _start(node, epoch: float) -> None:
     from formation_msgs_py.lockstep import STEP_FLAG_REALTIME, Step
 
     node.marks.started = node.marks.created
-    node._epoch = epoch
+    node.epoch = epoch
     node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=epoch)
 
 
@@ -105,24 +105,24 @@ def test_an_edge_at_delta_in_the_robots_poses_stops_the_run(coordinator):
     _start(node, time.time() - 0.5)
     scenario = node.scenario
     for agent in scenario.agent_ids:
-        node._on_pose(_raw(_odometry(agent, 0.4, epoch=node._epoch)), agent)
-    node._running_tick()  # the poses above: every edge shorter than Δ = 2
-    far = _odometry(3, 0.45, epoch=node._epoch)
+        node.world._on_pose(_raw(_odometry(agent, 0.4, epoch=node.epoch)), agent)
+    node.world.tick()  # the poses above: every edge shorter than Δ = 2
+    far = _odometry(3, 0.45, epoch=node.epoch)
     far.pose.pose.position.x = 3.0  # robot 3's control point more than 2 m from its neighbours
-    node._on_pose(_raw(far), 3)
+    node.world._on_pose(_raw(far), 3)
     with pytest.raises(
         ConnectivityLostError, match=r'edge \(2, 3\) reached the communication radius at t=\d+\.\d+'
     ):
-        node._running_tick()
+        node.world.tick()
 
 
 def test_a_pose_that_is_not_its_message_is_rejected_and_counted_not_sampled(coordinator):
     node = coordinator()
     _start(node, time.time() - 0.5)
-    good = _raw(_odometry(1, 0.4, epoch=node._epoch))
-    node._on_pose(good[:40], 1)  # cut short: no Odometry
-    node._on_pose(good, 1)
-    assert node.rejected == {'length': 1} and len(node.poses.samples[1]) == 1
+    good = _raw(_odometry(1, 0.4, epoch=node.epoch))
+    node.world._on_pose(good[:40], 1)  # cut short: no Odometry
+    node.world._on_pose(good, 1)
+    assert node.rejected == {'length': 1} and len(node.world.poses.samples[1]) == 1
 
 
 def test_nan_ahead_and_jumping_poses_are_refused_counted_and_never_checked_or_sampled(coordinator):
@@ -132,31 +132,33 @@ def test_nan_ahead_and_jumping_poses_are_refused_counted_and_never_checked_or_sa
 
     node = _running(coordinator, max_linear_speed=0.5)
     for _ in range(5):
-        nan = _odometry(2, 0.52, epoch=node._epoch)
+        nan = _odometry(2, 0.52, epoch=node.epoch)
         nan.pose.pose.position.x = math.nan
-        node._on_pose(_raw(nan), 2)
+        node.world._on_pose(_raw(nan), 2)
     # 5 s ahead of the clock (the tolerance: 0.1 s; the issue's pose was 0.4 s ahead, which a loaded
     # CI machine's delay between the run's start above and this line once used up), 3 m off.
-    ahead = _odometry(3, time.time() - node._epoch + 5.0, epoch=node._epoch)
+    ahead = _odometry(3, time.time() - node.epoch + 5.0, epoch=node.epoch)
     ahead.pose.pose.position.x = 3.0
-    node._on_pose(_raw(ahead), 3)
-    jump = _odometry(4, 0.51, epoch=node._epoch)  # 2 m in 10 ms: beyond 0.5 m/s
+    node.world._on_pose(_raw(ahead), 3)
+    jump = _odometry(4, 0.51, epoch=node.epoch)  # 2 m in 10 ms: beyond 0.5 m/s
     jump.pose.pose.position.x += 2.0
-    node._on_pose(_raw(jump), 4)
+    node.world._on_pose(_raw(jump), 4)
     assert node.rejected == {'non_finite': 5, 'future': 1, 'jump': 1}
-    assert node.poses.refused == node.rejected
-    latest = node.poses.latest_positions()
-    assert np.isfinite(latest).all() and all(len(samples) == 1 for samples in node.poses.samples.values())
-    node._running_tick()  # every edge as the real poses have it: shorter than Δ, no failure
+    assert node.world.poses.refused == node.rejected
+    latest = node.world.poses.latest_positions()
+    assert np.isfinite(latest).all() and all(
+        len(samples) == 1 for samples in node.world.poses.samples.values()
+    )
+    node.world.tick()  # every edge as the real poses have it: shorter than Δ, no failure
     # NaN poses do not blind the edge check: with no speed limit, a real pose 3 m off stops the run.
     free = _running(coordinator)
     for _ in range(5):
-        free._on_pose(_raw(nan), 2)
-    far = _odometry(3, 0.53, epoch=free._epoch)
+        free.world._on_pose(_raw(nan), 2)
+    far = _odometry(3, 0.53, epoch=free.epoch)
     far.pose.pose.position.x = 3.0
-    free._on_pose(_raw(far), 3)
+    free.world._on_pose(_raw(far), 3)
     with pytest.raises(ConnectivityLostError, match=r'edge \(\d, 3\) reached the communication radius'):
-        free._running_tick()
+        free.world.tick()
 
 
 def _report(agent: int, failure: str | None):
@@ -171,7 +173,7 @@ def _running(coordinator, **parameters):
     node = coordinator(**parameters)
     _start(node, time.time() - 0.5)
     for agent in node.scenario.agent_ids:
-        node._on_pose(_raw(_odometry(agent, 0.5, epoch=node._epoch)), agent)
+        node.world._on_pose(_raw(_odometry(agent, 0.5, epoch=node.epoch)), agent)
     return node
 
 
@@ -180,8 +182,8 @@ def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator)
 
     # A silence of 5 s: a loaded machine may take a good part of a second between two lines here.
     node = _running(coordinator, pose_silence=5.0)
-    node._running_tick()  # every robot heard: the run goes on
-    node.poses.watch.heard[2] -= 6.0  # robot 2's latest pose came 6 s before the others'
+    node.world.tick()  # every robot heard: the run goes on
+    node.world.poses.watch.heard[2] -= 6.0  # robot 2's latest pose came 6 s before the others'
     with pytest.raises(
         RobotLostError,
         match=(
@@ -189,7 +191,7 @@ def test_a_robot_whose_poses_stop_ends_the_run_at_once_and_is_named(coordinator)
             r'on /agent_2/robot/true_odom for more than 5(\.0)? s'
         ),
     ):
-        node._running_tick()
+        node.world.tick()
 
 
 def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_is_named_first(coordinator):
@@ -205,7 +207,7 @@ def test_an_agent_that_names_its_error_ends_the_run_at_once_and_a_silent_robot_i
     ):
         node._on_report(_report(1, 'the pose of robot 1 is 0.51 s old'))
     node = _running(coordinator, pose_silence=5.0)
-    node.poses.watch.heard[2] -= 3.0  # more than half the silence: robot 2's poses stopped first
+    node.world.poses.watch.heard[2] -= 3.0  # more than half the silence: robot 2's poses stopped first
     with pytest.raises(RobotLostError, match=r'^robot 2 lost at t=\d+\.\d+'):
         node._on_report(_report(1, 'the pose of robot 2 is 0.51 s old'))
     node.book.accept_report(decode_report(_report(3, 'the pose of robot 2 is 0.52 s old')))
@@ -253,7 +255,7 @@ def test_an_agent_whose_pose_went_stale_after_the_final_step_at_the_horizon_is_n
     from formation_sim.sim.summary import unstarted_summary
 
     node = _running(coordinator, horizon=0.5)
-    node._end_at_horizon()  # the robots stop publishing here, the final Step goes out
+    node.world._end_at_horizon()  # the robots stop publishing here, the final Step goes out
     node._on_report(
         _report(
             2,
@@ -336,7 +338,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
             f'/agent_{agent}/robot/true_odom',
             'nav_msgs/msg/Odometry',
             _odometry(agent, -0.013),
-            lambda m, a=agent: node._on_pose(_raw(m), a),
+            lambda m, a=agent: node.world._on_pose(_raw(m), a),
         )
     _start(node, EPOCH)
     arrive('/formation/step', 'std_msgs/msg/Float64MultiArray', encode_step(node.step))
@@ -348,7 +350,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
     arrive(
         '/formation/robots',
         'std_msgs/msg/String',
-        String(data=json.dumps(node.robots, separators=(',', ':'))),
+        String(data=json.dumps(node.world.robots, separators=(',', ':'))),
     )
     triggers = {
         1: [0.0, 0.31, 0.72],
@@ -363,7 +365,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
                 f'/agent_{agent}/robot/true_odom',
                 'nav_msgs/msg/Odometry',
                 _odometry(agent, t),
-                lambda m, a=agent: node._on_pose(_raw(m), a),
+                lambda m, a=agent: node.world._on_pose(_raw(m), a),
             )
         if k == 50:  # issue 28: a NaN pose and one stamped ahead of every clock, both refused by both
             nan, ahead = _odometry(2, t + 0.001), _odometry(3, time.time() + 5.0 - EPOCH)
@@ -373,7 +375,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
                     f'/agent_{agent}/robot/true_odom',
                     'nav_msgs/msg/Odometry',
                     forged,
-                    lambda m, a=agent: node._on_pose(_raw(m), a),
+                    lambda m, a=agent: node.world._on_pose(_raw(m), a),
                 )
         for agent, times in triggers.items():
             for number, stamp in enumerate(times, start=1):
@@ -391,7 +393,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
                             f'/agent_{agent}/trigger_info/to_{j}',
                             'std_msgs/msg/Float64MultiArray',
                             encode_trigger_info(info),
-                            (lambda m, a=agent: node._on_info(m, a)) if watched else None,
+                            (lambda m, a=agent: node.world._on_info(m, a)) if watched else None,
                         )
                     status = Status(
                         agent=agent,
@@ -410,7 +412,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
                         encode_status(status),
                         node._on_status,
                     )
-    node._end_at_horizon()
+    node.world._end_at_horizon()
     arrive(
         '/formation/step',
         'std_msgs/msg/Float64MultiArray',
@@ -429,7 +431,7 @@ def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coord
             Twist(angular=Vector3(z=0.3 if agent == 4 else 0.0)),
         )
 
-    record = node.record()
+    record = node.world.record()
     assert record.mode == 'robots' and record.trigger_times == {
         1: [0.0, 0.31, 0.72],
         2: [0.0, 0.5],
@@ -530,7 +532,7 @@ def test_any_value_on_any_topic_the_coordinator_reads_is_taken_or_refused_never_
             st.one_of(st.just(3), floats),
         ),
     )
-    good = _raw(_odometry(1, 0.5, epoch=node._epoch))
+    good = _raw(_odometry(1, 0.5, epoch=node.epoch))
     poses = st.one_of(
         st.binary(max_size=120),
         st.tuples(st.integers(0, len(good) - 8), floats).map(
@@ -555,15 +557,15 @@ def test_any_value_on_any_topic_the_coordinator_reads_is_taken_or_refused_never_
                 elif kind == 'report':
                     node._on_report(SimpleNamespace(data=value))
                 elif kind == 'info':
-                    node._on_info(SimpleNamespace(data=value), agent)
+                    node.world._on_info(SimpleNamespace(data=value), agent)
                 elif kind == 'recorder':
                     node._on_recorder(SimpleNamespace(data=value))
                 else:
-                    node._on_pose(value, agent)
+                    node.world._on_pose(value, agent)
             except NAMED_ERRORS:
                 pass
         assert set(node.rejected) <= set(REJECT_REASONS)
-        for samples in node.poses.samples.values():
+        for samples in node.world.poses.samples.values():
             assert all(np.isfinite(s.position).all() and math.isfinite(s.time) for s in samples)
 
     feed()
@@ -690,9 +692,9 @@ def test_a_coordinator_frozen_past_the_lease_names_its_freeze_not_the_robots(coo
     now = time.monotonic()
     node.freeze.tick(now - 3.1)  # its last tick before the freeze
     for agent in node.scenario.agent_ids:
-        node.poses.watch.heard[agent] -= 3.0  # every robot's latest pose taken before the freeze
+        node.world.poses.watch.heard[agent] -= 3.0  # every robot's latest pose taken before the freeze
     with pytest.raises(RobotLostError) as caught:
-        node._check_robots()
+        node.world._check_robots()
     error = blamed(node, caught.value)
     assert isinstance(error, KeeperFrozenError) and error.kind == 'keeper_frozen'
     assert str(error).startswith('the coordinator itself was stopped or starved for 3.0')
@@ -737,6 +739,29 @@ def test_with_the_runs_key_triggering_information_without_its_tag_is_no_trigger(
         assert _tag_refused_info(node, msg, 2)
     signed = tag_array(info(0.35), Signer(key, writer='agent_2'), topic)
     assert not _tag_refused_info(node, signed, 2)
-    node._on_info(signed, 2)
+    node.world._on_info(signed, 2)
     assert node.agents[2].trigger_times == [0.35]
     assert node.rejected == {'untagged': 1, 'forged': 1}
+
+
+def test_what_formation_robots_says_is_what_formation_analyze_reads_back() -> None:
+    """/formation/robots (`robots_description`, from the coordinator's parameters) read back as
+    `formation analyze` reads it: the kind, the topic measured, the control point ahead of the
+    robot's origin (a holonomic robot's is its origin) and the sample grid."""
+    from pathlib import Path
+
+    from formation_sim.analysis.load import _robots_description
+    from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS, robots_description
+
+    defaults = {spec.name: spec.default for spec in COORDINATOR_PARAMETERS}
+    for model, offset in (('unicycle', 0.2), ('holonomic', 0.0)):
+        values = {
+            **defaults,
+            'robot': model,
+            'control_point_distance': 0.2,
+            'robot_trajectory': 'odom',
+            'sample_period': 0.05,
+        }
+        sent = json.loads(json.dumps(robots_description(values)))  # as the topic carries it
+        assert _robots_description(Path('run.bag'), sent) == (model, 'odom', offset, 0.05)
+        assert sent['max_linear_speed'] is None  # the default inf: no limit (JSON has no inf)

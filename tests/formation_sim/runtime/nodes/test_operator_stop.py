@@ -49,6 +49,7 @@ class _Keeper:
         self.calls: list[str] = []
         self.graph = graph or {}
         self.service = None
+        self.world = self  # the world it holds: its robots' zeros recorded here
 
     def create_service(self, kind, name: str, callback):
         self.service = (kind, name, callback)

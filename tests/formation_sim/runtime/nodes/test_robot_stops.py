@@ -102,6 +102,7 @@ class _Run:
     def __init__(self, clock: _Clock, reports: dict[int, float | None]) -> None:
         self.clock, self.began, self.reports = clock, clock.now, reports
         self.stopped: list[tuple[float, list[int]]] = []
+        self.world = self  # the world it holds: its robots stopped here
 
     def unreported(self) -> list[int]:
         return [k for k, at in self.reports.items() if at is None or self.began + at > self.clock.now]

@@ -113,7 +113,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     node = simulator()
     scenario = node.scenario
     x = np.array(scenario.positions, dtype=float)
-    node._on_sample(0.0, x, None)  # the initial state: every edge shorter than Δ
+    node.world.on_sample(0.0, x, None)  # the initial state: every edge shorter than Δ
     node.agents[3].status = Status(
         agent=3,
         step_index=4,
@@ -127,7 +127,7 @@ def test_an_edge_reaching_delta_stops_the_run_with_the_edge_time_and_waiting_age
     k2, k3 = scenario.index(2), scenario.index(3)
     x[k3] = x[k2] - np.array([0.0, scenario.delta])  # edge (2, 3) exactly at Δ (not < Δ), the others short
     with pytest.raises(ConnectivityLostError) as caught:
-        node._on_sample(1.25, x, None)
+        node.world.on_sample(1.25, x, None)
     error = caught.value
     assert (error.time, error.edge, error.length) == (1.25, (2, 3), scenario.delta)
     assert 'edge (2, 3) reached the communication radius at t=1.25' in str(error)
@@ -143,13 +143,13 @@ def test_a_run_stopped_early_counts_only_triggers_whose_command_acted(simulator)
     from formation_sim.runtime.errors import AgentLostError
 
     node = simulator()
-    node._sampler.event()
+    node.world.sampler.event()
     for book in node.agents.values():
         book.trigger_times = [0.0, 0.5]
         book.commands_received = 2
     node.agents[2].commands_received = 1  # sensed at 0.5, lost before its command
     node.fail(AgentLostError('agent 2 lost', agents=[2]))
-    record = node.record()
+    record = node.world.record()
     assert record.trigger_times == {1: [0.0, 0.5], 2: [0.0], 3: [0.0, 0.5]}
     assert record.extra['failure']['kind'] == 'agent_lost' and record.extra['failure']['agents'] == [2]
 
@@ -211,23 +211,24 @@ def test_a_sensing_call_out_of_turn_from_outside_is_refused_counted_and_its_call
     from formation_msgs_py.lockstep import Step
 
     alone = simulator()
-    assert alone._on_sense(2).results[0].successful is False
+    assert alone.world.sensing.on_sense(2).results[0].successful is False
     assert str(alone.failure) == 'agent 2 is not due to sense at step -1 (due: [])'
     node = simulator()
     rogue = _rogue_client(ros, node, 2)
     try:
-        refusal = node._on_sense(2)
+        refusal = node.world.sensing.on_sense(2)
         (result,) = refusal.results
         assert result.successful is False and result.reason.endswith(': refused')
-        assert node.failure is None and node.calls.foreign == {1: 0, 2: 1, 3: 0}
-        node._publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
-        first = decode_sensed_state(node._on_sense(2))  # the stranger's call, or agent 2's: one answer
-        again = decode_sensed_state(node._on_sense(2))  # the other one: the same state again
+        assert node.failure is None and node.world.sensing.calls.foreign == {1: 0, 2: 1, 3: 0}
+        node.world.pacing.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
+        sense = node.world.sensing.on_sense
+        first = decode_sensed_state(sense(2))  # the stranger's call, or agent 2's: one answer
+        again = decode_sensed_state(sense(2))  # the other one: the same state again
     finally:
         rogue.destroy_node()
     assert again == first and node.failure is None
-    assert node.sensing_calls == 1 and node.calls.foreign[2] == 2
-    assert node.calls.extra() == {'foreign_sensing_calls': {'2': 2}}
+    assert node.world.sensing.sensing_calls == 1 and node.world.sensing.calls.foreign[2] == 2
+    assert node.world.sensing.calls.extra() == {'foreign_sensing_calls': {'2': 2}}
 
 
 def test_with_the_runs_key_a_sensing_call_without_the_agents_tag_is_refused_and_the_run_goes_on(
@@ -253,20 +254,20 @@ def test_with_the_runs_key_a_sensing_call_without_the_agents_tag_is_refused_and_
         parameter_overrides=[Parameter('key_file', value=str(write_key(tmp_path / 'run.key', key)))],
     )
     try:
-        node._publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
+        node.world.pacing.publish_step(Step(index=0, time=0.0, due=(1, 2, 3)))
         strangers = [
             sensing_request(None, service),
             sensing_request(Signer(new_key(), writer='agent_2'), service),
             sensing_request(Signer(key, writer='agent_3'), service),
         ]
-        refusals = [_sense_call(node, 2, request).results[0] for request in strangers]
+        refusals = [_sense_call(node.world, 2, request).results[0] for request in strangers]
         assert [r.successful for r in refusals] == [False] * 3
         assert split_text(refusals[0].reason)[0] == f"{service}: a message without the run's tag: refused"
-        answer = _sense_call(node, 2, sensing_request(Signer(key, writer='agent_2'), service))
+        answer = _sense_call(node.world, 2, sensing_request(Signer(key, writer='agent_2'), service))
         check_sensing_answer(Verifier(key), service, answer)  # the agent's check passes
         assert decode_sensed_state(answer).agent == 2
-        assert node.failure is None and node.sensing_calls == 1
-        assert node.calls.extra() == {'foreign_sensing_calls': {'2': 3}}
+        assert node.failure is None and node.world.sensing.sensing_calls == 1
+        assert node.world.sensing.calls.extra() == {'foreign_sensing_calls': {'2': 3}}
         assert node.rejected == {'untagged': 1, 'forged': 2}
         assert message_counts(node)['foreign_messages'] == 3
     finally:
@@ -289,12 +290,16 @@ def test_wall_clock_sensing_calls_are_triggers_only_when_the_agents_information_
         context=ros,
     )
     try:
-        node._epoch = time.time()
-        node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=node._epoch)
-        stamps = [decode_sensed_state(node._on_sense(2)).stamp for _ in range(3)]  # 2 foreign, then its own
+        node.epoch = time.time()
+        node.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=node.epoch)
+        stamps = [
+            decode_sensed_state(node.world.sensing.on_sense(2)).stamp for _ in range(3)
+        ]  # 2 foreign, then its own
         info = TriggerInfo(sender=2, receiver=1, stamp=stamps[1], control=(0.0, 0.0), rel_position=(1.0, 1.0))
-        _on_trigger_info(node, encode_trigger_info(info), 2)
-        assert node.agents[2].trigger_times == [stamps[1]] and node.sensing_calls == 1
-        assert node.calls.extra() == {'foreign_sensing_calls': {'2': 2}}  # one before it, one never followed
+        _on_trigger_info(node.world, encode_trigger_info(info), 2)
+        assert node.agents[2].trigger_times == [stamps[1]] and node.world.sensing.sensing_calls == 1
+        assert node.world.sensing.calls.extra() == {
+            'foreign_sensing_calls': {'2': 2}
+        }  # one before it, one never followed
     finally:
         node.destroy_node()

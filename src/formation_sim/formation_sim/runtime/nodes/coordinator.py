@@ -22,12 +22,13 @@ robots"), and the coordinator only keeps the run's time and books (`run_book.Run
   lateness and the commands the agents' limits saturated.
 
 Opening, watching and ending the run is `time_keeper.TimeKeeperNode`'s life cycle, which the
-simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares with its exact world
-and the agents' sensing services; this module adds the robots' world (`keeper_main.main`, shared
-by both time keepers, ends the run through `run_end`: final reports, delivery, the agents stopped
-early, summary.json and graph.json).  Exit status: 0 done, 1 failed, 3 an agent or the recorder
-lost, 4 the robots' measured start breaks the initial condition (no Step 0, no command), 5 an operator
-stopped the run (the emergency stop `/formation/stop`: `operator_stop`), 130 interrupted.
+simulator of the `exact` backend (`sim_node.FormationSimulatorNode`) shares, holding the exact
+world (`sim_node.SimulatorWorld`); this module adds the robots' world, `RobotWorld` (a
+`world.World`; `keeper_main.main`, shared by both time keepers, ends the run through `run_end`:
+final reports, delivery, the agents stopped early, summary.json and graph.json).  Exit status:
+0 done, 1 failed, 3 an agent or the recorder lost, 4 the robots' measured start breaks the initial
+condition (no Step 0, no command), 5 an operator stopped the run (the emergency stop
+`/formation/stop`: `operator_stop`), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -173,43 +174,48 @@ def _geometry(values: dict) -> Geometry:
     return Geometry(**{p.name: values[p.name] for p in declared(node='coordinator')})
 
 
-def _tag_refused_info(node: FormationCoordinatorNode, msg, agent: int) -> bool:
+def robots_description(values: dict) -> dict:
+    """What /formation/robots tells the tools (and summary.json's `extra.robots`), from the
+    coordinator's parameters `values`: the backend, the robots' kind and control point, the topic
+    the formation is measured on, and the rules its poses are refused by."""
+    model = values['robot']
+    return {
+        'version': 1,
+        'backend': values['backend'],
+        'model': model,
+        # Where the scenario's point sits ahead of the robot's origin, by its kind (a holonomic robot: 0).
+        'control_point_distance': robot_kind(model).control_offset(_geometry(values))[0],
+        'trajectory': values['robot_trajectory'],
+        'sample_period': values['sample_period'],
+        'pose_silence': values['pose_silence'],  # poses silent this long at the end are not sampled past it
+        **pose_rules(values),  # the poses refused (formation analyze refuses them too)
+    }
+
+
+def _tag_refused_info(node: TimeKeeperNode, msg, agent: int) -> bool:
     """Whether agent `agent`'s triggering information lacks the run's valid tag (refused, counted)."""
     return tag_refused(node, trigger_info_topic(agent, min(node.agents[agent].neighbours)), msg, check_array)
 
 
-class FormationCoordinatorNode(TimeKeeperNode):
-    """The time keeper of a run whose world is the robots: it reads their poses and the agents'
-    triggering times, and samples the formation from them."""
+class RobotWorld:
+    """The robots of a run (a `world.World`): their poses, the agents' triggering times, the
+    formation sampled from them, the robots' zero commands."""
 
-    serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
-    batched_spin = True  # many poses: 0.1 s of events per look at its stop signals (issue 19)
-    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
-
-    PARAMETERS = COORDINATOR_PARAMETERS
+    PARAMETERS: Sequence[ParameterSpec] = COORDINATOR_PARAMETERS
     COMMAND = 'formation_coordinator'
     PARAMS_FILE = COORDINATOR_FILE
+    NODE_NAME = COORDINATOR_NODE
     DESCRIPTION = (
         'The time keeper of a robot run (formation run --backend <robot kind>|external): opens the run '
         'on the wall clock once every agent and robot is connected, watches it, stops it at the horizon '
         'or on a fault, and writes summary.json and graph.json into out_dir.'
     )
+    serves_sensing = False  # the coordinator serves no sensing: it learns triggers from the agents
+    batched_spin = True  # many poses: 0.1 s of events per look at its stop signals (issue 19)
+    watched_writer = 'triggering-information'  # the writer whose liveliness is an agent's sign of life
 
-    def __init__(
-        self,
-        *,
-        scenario: Scenario | None = None,
-        parameter_overrides: list[Parameter] | None = None,
-        context=None,
-    ) -> None:
-        super().__init__(
-            node_name=COORDINATOR_NODE,
-            scenario=scenario,
-            parameter_overrides=parameter_overrides,
-            context=context,
-        )
-
-    def world_problems(self, values: dict, scenario: Scenario) -> list[str]:
+    @staticmethod
+    def problems(values: dict, scenario: Scenario) -> list[str]:
         """The rules between the world's parameters and the scenario (robots)."""
         problems = []
         model = values.get('robot')
@@ -223,74 +229,64 @@ class FormationCoordinatorNode(TimeKeeperNode):
             )
         return problems
 
-    def _clock_mode(self, values: dict) -> str:
+    @staticmethod
+    def clock_mode_of(values: dict) -> str:
         return 'realtime'  # robots run on the wall clock
 
-    def _setup_world(self) -> None:
-        """The robots: which topic shows each where it is, and what its scenario position is."""
-        self.robot_model = self.parameter_values['robot']
-        self.geometry = _geometry(self.parameter_values)
-        self.trajectory_source = self.parameter_values['robot_trajectory']
-        self.backend = self.parameter_values['backend']
-        self.robots = {
-            'version': 1,
-            'backend': self.backend,
-            'model': self.robot_model,
-            # Where the scenario's point sits ahead of the robot's origin, by its kind (a holonomic robot: 0).
-            'control_point_distance': robot_kind(self.robot_model).control_offset(self.geometry)[0],
-            'trajectory': self.trajectory_source,
-            'sample_period': self.sample_period,
-            'pose_silence': self.parameter_values[
-                'pose_silence'
-            ],  # poses silent this long at the end are not sampled past it
-            **pose_rules(self.parameter_values),  # the poses refused (formation analyze refuses them too)
-        }
-        self._robots_pub = self.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
-        self.tool_publishers.append(self._robots_pub)
+    def __init__(self, keeper: TimeKeeperNode) -> None:
+        """The robots of `keeper`'s run: which topic shows each where it is, and what its scenario
+        position is."""
+        self.keeper = keeper
+        values = keeper.parameter_values
+        self.trajectory_source = values['robot_trajectory']
+        self.robots = robots_description(values)  # what /formation/robots tells the tools
+        self._robots_pub = keeper.create_publisher(String, ROBOTS_TOPIC, SIMULATOR_QOS)
+        keeper.tool_publishers.append(self._robots_pub)
         topic = TRAJECTORY_TOPICS[self.trajectory_source]
         kind, self._pose_fields = (
             (PoseStamped, pose_stamped_fields)
             if self.trajectory_source == 'pose'
             else (Odometry, odometry_fields)
         )
-        self.poses = RobotPoses.of_coordinator(self.scenario, self.parameter_values)
+        self.poses = RobotPoses.of_coordinator(keeper.scenario, keeper.parameter_values)
         # Raw: the poses' fields read from their bytes (formation_msgs_py.cdr), not through rclpy's
         # Python messages, which were most of the coordinator's CPU (400 Odometry a second for 4
         # robots); the same floats as `formation analyze` reads from the bag (sim.robots.sample_from_fields).
         self._pose_subs = {
-            i: self.create_subscription(
+            i: keeper.create_subscription(
                 kind, topic(i), lambda data, agent=i: self._on_pose(data, agent), POSE_READER_QOS, raw=True
             )
-            for i in self.scenario.agent_ids
+            for i in keeper.scenario.agent_ids
         }
-        self._info_stamps: dict[int, set[float]] = {i: set() for i in self.scenario.agent_ids}
+        self._info_stamps: dict[int, set[float]] = {i: set() for i in keeper.scenario.agent_ids}
         self._horizon_timer = None
         self.robot_stops = RobotStops(
-            self,
-            model=self.robot_model,
-            robots=self.scenario.agent_ids,
-            dimension=self.scenario.dimension,
-            world_frame=self.parameter_values['world_frame'],
+            keeper,
+            model=values['robot'],
+            robots=keeper.scenario.agent_ids,
+            dimension=keeper.scenario.dimension,
+            world_frame=keeper.parameter_values['world_frame'],
         )
         self.measured_start: MeasuredStart | None = None
 
-    def _watch_agents(self) -> dict:
+    def watch_agents(self) -> dict:
         """Each agent's triggering information to its first neighbour: its triggering times (one
         message per trigger and neighbour, stamped with the trigger's time) and its sign of life."""
+        keeper = self.keeper
         return {
-            i: self.create_subscription(
+            i: keeper.create_subscription(
                 Float64MultiArray,
                 trigger_info_topic(i, min(book.neighbours)),
-                lambda msg, agent=i: _tag_refused_info(self, msg, agent) or self._on_info(msg, agent),
+                lambda msg, agent=i: self._on_tagged_info(msg, agent),
                 READER_QOS,
                 event_callbacks=SubscriptionEventCallbacks(
-                    liveliness=lambda info, agent=i: self._on_agent_liveliness(agent, info)
+                    liveliness=lambda info, agent=i: keeper.on_agent_liveliness(agent, info)
                 ),
             )
-            for i, book in self.agents.items()
+            for i, book in keeper.agents.items()
         }
 
-    def world_gaps(self) -> list[str]:
+    def gaps(self) -> list[str]:
         topic = f'robot/{self.trajectory_source}'
         # The coordinator reads reliable, as the recorder does, so that both see every pose.
         missing = [i for i, sub in self._pose_subs.items() if sub.get_publisher_count() < 1]
@@ -304,20 +300,20 @@ class FormationCoordinatorNode(TimeKeeperNode):
         if silent:
             return [f'robots whose first {topic} message has not arrived: {ids_text(silent)}']
         # The recorder too, or its bag would lack a robot's pose before t = 0 (it matched late).
-        if len(self.recorders.silent) < self.extra_subscribers:
-            return [
-                f'a heartbeat from each recorder ({len(self.recorders.silent)} of {self.extra_subscribers})'
-            ]
-        unheard = sorted({name for topics in self.recorders.silent.values() for name in topics})
+        beats, recorders = self.keeper.recorders.silent, self.keeper.extra_subscribers
+        if len(beats) < recorders:
+            return [f'a heartbeat from each recorder ({len(beats)} of {recorders})']
+        unheard = sorted({name for topics in beats.values() for name in topics})
         return (
             [f'robot topics the recorder has had no message on yet: {", ".join(unheard)}'] if unheard else []
         )
 
-    def _check_start(self) -> str:
+    def check_start(self) -> str:
         """Before step 0: where the robots are (each one's latest pose, its control point) must meet
         the initial condition (initial) on every edge, or the run does not start: nothing was sent."""
-        latest = self.poses.start_positions(epoch=self._epoch)
-        self.measured_start = start = check_measured_start(self.scenario, latest)
+        keeper = self.keeper
+        latest = self.poses.start_positions(epoch=keeper.epoch)
+        self.measured_start = start = check_measured_start(keeper.scenario, latest)
         if not start.ok:
             first = start.breaches[0]
             breaches = [breach.to_dict() for breach in start.breaches]
@@ -325,40 +321,45 @@ class FormationCoordinatorNode(TimeKeeperNode):
         agent, largest = start.largest
         return f'measured start within {largest:.3g} m of the scenario (agent {agent}); '
 
-    def world_extra(self) -> dict:
+    def extra(self) -> dict:
         extra = {} if self.measured_start is None else {'measured_start': self.measured_start.to_dict()}
         return {**extra, **self.robot_stops.extra()}
 
-    def stop_unreported_robots(self) -> None:
-        self.robot_stops.stop(self.book.unreported(), why='no final report from their agents')
+    def stop_robots(self, *, why: str) -> list[int]:
+        """An operator's emergency stop: every robot its zero command now; the robots."""
+        return self.robot_stops.stop_all(why=why)
 
-    def _begin(self) -> None:
+    def stop_unreported_robots(self) -> None:
+        self.robot_stops.stop(self.keeper.book.unreported(), why='no final report from their agents')
+
+    def begin(self) -> None:
         """t = 0: the robots' run starts on the wall clock (Step 0 carries its epoch)."""
-        self._publish(self._robots_pub, String(data=json.dumps(self.robots, separators=(',', ':'))))
-        self._epoch = time.time()
-        self.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=self._epoch)
-        self._publish(self.step_pub, encode_step(self.step))
+        keeper = self.keeper
+        keeper.publish(self._robots_pub, String(data=json.dumps(self.robots, separators=(',', ':'))))
+        keeper.epoch = time.time()
+        keeper.step = Step(index=0, time=0.0, flags=STEP_FLAG_REALTIME, epoch=keeper.epoch)
+        keeper.publish(keeper.step_pub, encode_step(keeper.step))
         # Each robot was heard (discovery waited for its first pose).
-        self.poses.begin(epoch=self._epoch, now=time.monotonic())
+        self.poses.begin(epoch=keeper.epoch, now=time.monotonic())
         # The final Step at the horizon on the dot, not at the next tick: an agent whose last
         # trigger is due just before it must not wait for the run's end.
-        self._horizon_timer = self.create_timer(
-            max(self.horizon - (time.time() - self._epoch), 1e-3), self._at_horizon
+        self._horizon_timer = keeper.create_timer(
+            max(keeper.horizon - (time.time() - keeper.epoch), 1e-3), self._at_horizon
         )
 
     def _at_horizon(self) -> None:
         self._horizon_timer.cancel()
-        if not self.finished:
-            self._running_tick()
-            if not self.finished:  # the timer fired a hair early: the horizon is now
+        if not self.keeper.finished:
+            self.tick()
+            if not self.keeper.finished:  # the timer fired a hair early: the horizon is now
                 self._end_at_horizon()
 
-    def _running_tick(self) -> None:
+    def tick(self) -> None:
         t = self.reached_time
         self._check_robots()
         if (latest := self.poses.latest_positions()) is not None:
-            self.book.check_connectivity(t, latest)
-        if t >= self.horizon:
+            self.keeper.book.check_connectivity(t, latest)
+        if t >= self.keeper.horizon:
             self._end_at_horizon()
 
     def _check_robots(self, *, fraction: float = 1.0) -> None:
@@ -366,48 +367,52 @@ class FormationCoordinatorNode(TimeKeeperNode):
         silent = self.poses.watch.silent(time.monotonic(), fraction=fraction)
         if silent:
             raise self.poses.watch.error(
-                silent, now=time.monotonic(), where=self._where(), topics=self._pose_topics(silent)
+                silent, now=time.monotonic(), where=self.keeper.where(), topics=self._pose_topics(silent)
             )
 
     def _pose_topics(self, robots: list[int]) -> str:
         return ', '.join(TRAJECTORY_TOPICS[self.trajectory_source](i) for i in robots)
 
-    def _agent_failed(self, agent: int, failure: str) -> None:
+    def agent_failed(self, agent: int, failure: str) -> None:
         """An agent stopped on an error: the run stops at once.  The first cause is a robot whose
         poses stopped, if one has been silent for half the silence already (the agent's stale
         pose followed from it), else the agent's error."""
         self._check_robots(fraction=0.5)
         raise AgentFailedError(
-            f'agent {agent} stopped {self._where()}: {failure}; the run stops', agents=[agent]
+            f'agent {agent} stopped {self.keeper.where()}: {failure}; the run stops', agents=[agent]
         )
 
     def _end_at_horizon(self) -> None:
-        self.marks.finish(time.monotonic())
-        self.step = Step(
-            index=1, time=self.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=self._epoch
+        keeper = self.keeper
+        keeper.marks.finish(time.monotonic())
+        keeper.step = Step(
+            index=1, time=keeper.horizon, flags=STEP_FLAG_FINAL | STEP_FLAG_REALTIME, epoch=keeper.epoch
         )
-        self._publish(self.step_pub, encode_step(self.step))  # first: the robots stop now
-        self.finished = True
-        self._reached = self.horizon
-        self.graph = graph_of(self)  # the agents are still there: they leave after their final reports
+        keeper.publish(keeper.step_pub, encode_step(keeper.step))  # first: the robots stop now
+        keeper.finished = True
+        keeper.reached = keeper.horizon
+        keeper.graph = graph_of(
+            self.keeper
+        )  # the agents are still there: they leave after their final reports
 
     @property
     def reached_time(self) -> float:
         """Run time now: wall time since the epoch, never past the horizon (frozen once finished)."""
-        if self.step is None:
+        if self.keeper.step is None:
             return 0.0
-        if self.finished:
-            return self.horizon if self._reached is None else self._reached
-        return min(self.horizon, max(0.0, time.time() - self._epoch))
+        if self.keeper.finished:
+            return self.keeper.horizon if self.keeper.reached is None else self.keeper.reached
+        return min(self.keeper.horizon, max(0.0, time.time() - self.keeper.epoch))
 
     def after_final_step(self, executor) -> None:
         """Before the summary: the poses up to the horizon (each robot's first one past it)."""
+        keeper = self.keeper
         deadline = time.monotonic() + POSES_AFTER_END
         end = self.reached_time
         # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
         lost = (
-            self.failure_info['agents']
-            if self.failure_info and self.failure_info['kind'] == 'robot_lost'
+            keeper.failure_info['agents']
+            if keeper.failure_info and keeper.failure_info['kind'] == 'robot_lost'
             else []
         )
         waiting = self.poses.expected(lost=lost, now=time.monotonic())
@@ -417,43 +422,54 @@ class FormationCoordinatorNode(TimeKeeperNode):
     def flush(self) -> None:
         """The robots' world publishes nothing that could wait."""
 
+    def after_status(self) -> None:
+        """The wall clock needs nothing."""
+
     def record(self) -> RunRecord:
         """The run as the coordinator saw it (triggers from the agents' messages, formation from the
         poses)."""
+        keeper = self.keeper
         end = self.reached_time
         trigger_times = {
-            i: sorted(t for t in book.trigger_times if t <= end) for i, book in self.agents.items()
+            i: sorted(t for t in book.trigger_times if t <= end) for i, book in keeper.agents.items()
         }
-        times = sample_times(end, self.sample_period, [t for ts in trigger_times.values() for t in ts])
+        times = sample_times(end, keeper.sample_period, [t for ts in trigger_times.values() for t in ts])
         tracks = self.poses.tracks(end, source=self.trajectory_source)
-        positions, velocities = trajectory_samples(tracks, self.scenario.agent_ids, times)
+        positions, velocities = trajectory_samples(tracks, keeper.scenario.agent_ids, times)
         return RunRecord(
-            scenario=self.scenario,
-            horizon=self.horizon,
+            scenario=keeper.scenario,
+            horizon=keeper.horizon,
             mode='robots',
             trigger_times=trigger_times,
-            samples=Samples(times=times, positions=positions, velocities=velocities if self.double else None),
-            messages_sent=sum(self.book.information_sent(i) for i in self.agents),
+            samples=Samples(
+                times=times, positions=positions, velocities=velocities if keeper.double else None
+            ),
+            messages_sent=sum(keeper.book.information_sent(i) for i in keeper.agents),
             sensing_calls=sum(map(len, trigger_times.values())),
-            wall_time=self.marks.since_start(self.marks.finished_at or time.monotonic()),
+            wall_time=keeper.marks.since_start(keeper.marks.finished_at or time.monotonic()),
             extra={
-                **run_extra(self, end),
-                **self.book.lateness(trigger_times),
+                **run_extra(self.keeper, end),
+                **keeper.book.lateness(trigger_times),
                 'robots': self.robots,
-                'saturation': self.book.saturation(),
+                'saturation': keeper.book.saturation(),
             },
         )
+
+    def _on_tagged_info(self, msg: Float64MultiArray, agent: int) -> None:
+        """Agent `agent`'s triggering information, unless it lacks the run's valid tag."""
+        if not _tag_refused_info(self.keeper, msg, agent):
+            self._on_info(msg, agent)
 
     def _on_info(self, msg: Float64MultiArray, agent: int) -> None:
         try:
             info = decode_trigger_info(msg)
         except MessageError as error:
-            self.reject(
-                trigger_info_topic(agent, min(self.agents[agent].neighbours)), error.reason, str(error)
+            self.keeper.reject(
+                trigger_info_topic(agent, min(self.keeper.agents[agent].neighbours)), error.reason, str(error)
             )
             return
         if info.sender != agent:
-            self.reject(
+            self.keeper.reject(
                 trigger_info_topic(agent, info.receiver),
                 'sender',
                 f'information from agent {info.sender} on the topic of agent {agent}',
@@ -462,25 +478,46 @@ class FormationCoordinatorNode(TimeKeeperNode):
         stamps = self._info_stamps[agent]
         if info.stamp not in stamps:  # a copy replayed after a rematch (transient local) is no new trigger
             stamps.add(info.stamp)
-            self.agents[agent].trigger_times.append(info.stamp)
+            self.keeper.agents[agent].trigger_times.append(info.stamp)
 
     def _on_pose(self, data: bytes, agent: int) -> None:
         try:
             fields = self._pose_fields(data)
         except MessageError as error:
-            self.reject(self._pose_subs[agent].topic_name, error.reason, str(error))
+            self.keeper.reject(self._pose_subs[agent].topic_name, error.reason, str(error))
             return
         if (refusal := self.poses.refusal(agent, fields, wall=time.time())) is not None:  # the agents' rules
-            self.reject(self._pose_subs[agent].topic_name, *refusal)
+            self.keeper.reject(self._pose_subs[agent].topic_name, *refusal)
         else:  # before t = 0 (no epoch yet): kept, the last few, for the first sample
             self.poses.note(
-                agent, fields, epoch=None if self.step is None else self._epoch, now=time.monotonic()
+                agent,
+                fields,
+                epoch=None if self.keeper.step is None else self.keeper.epoch,
+                now=time.monotonic(),
             )
+
+
+class FormationCoordinatorNode(TimeKeeperNode):
+    """The coordinator: a time keeper holding the robots (`RobotWorld`, its `world`)."""
+
+    def __init__(
+        self,
+        *,
+        scenario: Scenario | None = None,
+        parameter_overrides: list[Parameter] | None = None,
+        context=None,
+    ) -> None:
+        super().__init__(
+            world_class=RobotWorld,
+            scenario=scenario,
+            parameter_overrides=parameter_overrides,
+            context=context,
+        )
 
 
 def main(args: Sequence[str] | None = None) -> int:
     """The coordinator until its run ends (`keeper_main.main`); its exit status."""
-    return keeper_main.main(args, node_class=FormationCoordinatorNode)
+    return keeper_main.main(args, world_class=RobotWorld)
 
 
 def entry_point() -> NoReturn:

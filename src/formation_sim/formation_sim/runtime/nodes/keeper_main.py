@@ -5,7 +5,7 @@ It reads the node's parameters (`--help` before ROS starts; bad ones: exit 2, no
 spins the node until its run ends, then ends the run through `run_end` (final reports, delivery,
 summary.json and graph.json); a run that stops early (a failure, SIGINT/SIGTERM) ends the same way
 after a final Step at the instant it stopped (`stop_and_write`).  How the node is spun is its own
-(`TimeKeeperNode.batched_spin`): the module asks no node for its type.  Exit status: 0 done, 1
+(`World.batched_spin`): the module asks no node for its type.  Exit status: 0 done, 1
 failed, 2 bad parameters, 3 an agent or the recorder lost, 4 the robots' measured start breaks the
 initial condition (no Step 0, no command), 5 an operator stopped the run (`operator_stop`), 130
 interrupted.
@@ -49,6 +49,7 @@ from formation_sim.runtime.nodes.run_end import (
     write_unstarted,
 )
 from formation_sim.runtime.nodes.time_keeper import TimeKeeperNode, blamed
+from formation_sim.runtime.nodes.world import World
 
 # What ends a run with exit status 3 (a peer lost), and the errors a run names in full (no traceback).
 LOST_ERRORS = (AgentLostError, RecorderLostError, RobotLostError)
@@ -75,12 +76,12 @@ def exit_status_of(node: TimeKeeperNode | None, error: Exception) -> int:
     return ExitCode.REFUSED if isinstance(error, InitialConditionError) else ExitCode.FAILED
 
 
-def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
+def _parser(world_class: type[World]) -> argparse.ArgumentParser:
     return argparse.ArgumentParser(
-        prog=node_class.COMMAND,
-        description=node_class.DESCRIPTION,
-        epilog=parameter_help(node_class.PARAMETERS)
-        + f'\n\nExample: {node_class.COMMAND} --ros-args --params-file DIR/{node_class.PARAMS_FILE} '
+        prog=world_class.COMMAND,
+        description=world_class.DESCRIPTION,
+        epilog=parameter_help(world_class.PARAMETERS)
+        + f'\n\nExample: {world_class.COMMAND} --ros-args --params-file DIR/{world_class.PARAMS_FILE} '
         '(formation params SCENARIO --out DIR writes it)\n'
         'Exit status: 0 done; 1 the run failed; 2 bad parameters (every problem named, nothing started); '
         "3 an agent or the recorder was lost; 4 the robots' measured start breaks the initial condition "
@@ -90,11 +91,11 @@ def _parser(node_class: type[TimeKeeperNode]) -> argparse.ArgumentParser:
     )
 
 
-def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode]) -> int:
-    """Run one time keeper of class `node_class` (the coordinator's or the simulator's) until the
-    run ends; its exit status."""
+def main(args: Sequence[str] | None = None, *, world_class: type[World]) -> int:
+    """Run one time keeper holding a world of class `world_class` (the coordinator's robots or the
+    simulator's exact world) until the run ends; its exit status."""
     argv = list(args if args is not None else sys.argv)
-    _parser(node_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
+    _parser(world_class).parse_args(rclpy.utilities.remove_ros_args(argv)[1:])  # --help before ROS starts
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = None
@@ -102,9 +103,9 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode])
     with StopSignals() as stop:
         try:
             try:
-                node = node_class()
+                node = TimeKeeperNode(world_class=world_class)
             except ParameterError as error:  # bad input: every problem named, nothing started
-                _tell(f'{node_class.COMMAND}: {error}')
+                _tell(f'{world_class.COMMAND}: {error}')
                 status = ExitCode.BAD_INPUT  # the shutdown guard's too
                 return status
             executor = make_executor(node.executor_kind)
@@ -112,7 +113,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode])
             # A coordinator dispatches 0.1 s of events per look at its stop signals and its end (a
             # failure raises from its callback): a spin_once per pose cost it more (issue 19). The
             # simulator takes one event per look, its failure flag checked after each.
-            batched, never = node.batched_spin, Future()
+            batched, never = node.world.batched_spin, Future()
             while not node.finished:
                 if batched:
                     executor.spin_until_future_complete(never, timeout_sec=0.1)
@@ -125,7 +126,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode])
                 raise node.failure
             collect_final_reports(node, executor)
             node.mark('final_reports')
-            node.after_final_step(executor)
+            node.world.after_final_step(executor)
             wait_for_delivery(node, executor)
             node.mark('delivered')
             if node.progress_period > 0.0:
@@ -152,7 +153,7 @@ def main(args: Sequence[str] | None = None, *, node_class: type[TimeKeeperNode])
             status = exit_status_of(node, error)
             stop_and_write(node, executor, error)
         finally:
-            with shutdown_guard(node_class.COMMAND, lambda: status, announce=node is not None):
+            with shutdown_guard(world_class.COMMAND, lambda: status, announce=node is not None):
                 release_ros(executor, [] if node is None else [node])
                 executor = None  # its C++ teardown, under the guard
     return status

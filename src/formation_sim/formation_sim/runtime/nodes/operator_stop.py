@@ -63,13 +63,13 @@ class OperatorStop:
         if self.asked is not None:
             return True, f'the run is already stopping (asked by {self.asked["by"]} {self._when(self.asked)})'
         if node.finished:  # at its horizon, or stopped on a failure: the final Step is out already
-            robots = node.stop_robots(why='an operator asked to stop the run after its end')
+            robots = node.world.stop_robots(why='an operator asked to stop the run after its end')
             ended = f'the run already ended at t={node.reached_time!r} (its final Step is out)'
             return True, ended + _robots_text(robots, again=True)
         started = node.step is not None
         if started:
             node.end_now()  # the final Step first: the agents send their zero commands and leave
-        robots = node.stop_robots(why='an operator stopped the run')
+        robots = node.world.stop_robots(why='an operator stopped the run')
         self.asked = {
             'time': node.reached_time,
             'step': node.step.index if started else None,  # the step it stopped in (the final one is next)

@@ -38,14 +38,14 @@ def collect_final_reports(
     while not node.final_reports_in() and time.monotonic() < began + timeout_sec:
         executor.spin_once(timeout_sec=0.05)
         if time.monotonic() >= began + UNREPORTED_STOP_AFTER:
-            node.stop_unreported_robots()
-    node.stop_unreported_robots()
+            node.world.stop_unreported_robots()
+    node.world.stop_unreported_robots()
 
 
 def wait_for_delivery(node: TimeKeeperNode, executor, *, timeout_sec: float = DELIVERY_TIMEOUT) -> None:
     """What is left published, wait (bounded) until every reader acknowledged the Steps and the
     tools' topics."""
-    node.flush()
+    node.world.flush()
     _wait_acknowledged(
         executor, node.delivery_publishers(with_steps=True), recorders=node.recorders, timeout_sec=timeout_sec
     )
@@ -56,10 +56,10 @@ def stop_agents(node: TimeKeeperNode, executor) -> None:
     if node.step is None or not rclpy.ok():
         return
     node.end_now()
-    node.flush()
+    node.world.flush()
     collect_final_reports(node, executor)
     node.mark('final_reports')
-    node.after_final_step(executor)  # as at the horizon: the world up to where the run stopped
+    node.world.after_final_step(executor)  # as at the horizon: the world up to where the run stopped
     # A live agent's final report says it got the final Step; a dead agent (or robot) is still
     # matched as a reader until DDS drops it and would hold an acknowledgement wait up to its
     # timeout: the recorders' heartbeats say when they have the final Step, the tools' topics
@@ -107,7 +107,7 @@ def write_unstarted(node: TimeKeeperNode) -> None:
     timestamps (the start-up it spent)."""
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    mode = 'distributed' if node.serves_sensing else 'robots'
+    mode = 'distributed' if node.world.serves_sensing else 'robots'
     extra = {**run_extra(node, 0.0), 'started': False}
     write_summary_file(
         unstarted_summary(node.scenario, horizon=node.horizon, mode=mode, extra=extra), out / SUMMARY_FILE
@@ -118,5 +118,5 @@ def write_results(node: TimeKeeperNode) -> None:
     """summary.json (through formation_sim.sim.summary) and graph.json into the node's out_dir."""
     out = Path(node.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_summary(node.record(), out)
+    write_summary(node.world.record(), out)
     write_atomically(out / GRAPH_FILE, json.dumps(node.graph, indent=1, sort_keys=True) + '\n')

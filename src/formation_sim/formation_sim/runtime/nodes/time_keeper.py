@@ -1,8 +1,8 @@
 """The time keeper of a distributed run, whatever its world: `TimeKeeperNode`.
 
-It is the base of the coordinator of a robot run (`coordinator.FormationCoordinatorNode`: the
-robots are the world) and of the simulator (`sim_node.FormationSimulatorNode`: the exact world),
-and holds the run's life cycle (docs/MESSAGES.md):
+It holds a world (`world.World`): the robots of a robot run (`coordinator.RobotWorld`, the node
+`formation_coordinator`) or the exact world of the simulator (`sim_node.SimulatorWorld`, the node
+`formation_simulator`), and the run's life cycle (docs/MESSAGES.md):
 
 - **discovery**: Step 0 goes once every agent says it is ready and every endpoint of the node is
   matched (`extra_subscribers`, `step_listeners`, the world's own); a progress line says what is
@@ -12,7 +12,7 @@ and holds the run's life cycle (docs/MESSAGES.md):
 - **its end**: at the horizon (the world's), or early (`fail` notes why, `end_now` sends the agents
   home); `keeper_main.main` then drives `run_end` (final reports, delivery, summary.json).
 
-A world supplies the hooks of the last section of the class.
+What the keeper asks of its world, and when, is the table of `world`.
 """
 
 from __future__ import annotations
@@ -67,8 +67,8 @@ from formation_sim.runtime.nodes.run_book import (
     failure_extra,
     ids_text,
 )
+from formation_sim.runtime.nodes.world import World
 from formation_sim.sim.engine import safety_extra
-from formation_sim.sim.record import RunRecord
 
 GRAPH_LOOK_PERIOD = 1.0  # [s] between a keeper's looks at its run's writers (`intruders.GraphWatch`)
 TICK_PERIOD = 0.1  # [s] the keeper's tick: discovery, lost peers, the world's checks
@@ -165,98 +165,21 @@ TIME_KEEPER_PARAMETERS = (
 """What the coordinator and the simulator share."""
 
 
-class WorldHooks:
-    """What a world supplies to the time keeper (the coordinator's: the robots; the simulator's:
-    the exact one): the class attributes and methods each subclass of `TimeKeeperNode` sets or
-    overrides; those that raise NotImplementedError it must."""
-
-    PARAMETERS: tuple[ParameterSpec, ...]  # the node's parameters (--help, docs/PARAMETERS.md)
-    COMMAND: str  # its console script
-    PARAMS_FILE: str  # its parameters in a run folder
-    DESCRIPTION: str  # what --help says it is
-    serves_sensing: (
-        bool  # it serves the agents' sensing (knows when each is due), else learns triggers from them
-    )
-    watched_writer: str  # which writer of an agent `_watch_agents` reads (discovery names it)
-    batched_spin: bool  # `keeper_main.main` spins 0.1 s of events per look (else one event per look)
-
-    def world_problems(self, values: dict, scenario: Scenario) -> list[str]:
-        """The rules between the world's parameters and the scenario, each broken one named."""
-        raise NotImplementedError
-
-    def _clock_mode(self, values: dict) -> str:
-        """'lockstep' or 'realtime', from the parameters (read before anything is set up)."""
-        raise NotImplementedError
-
-    def _setup_world(self) -> None:
-        """The world's publishers (the tools' among `tool_publishers`) and subscriptions."""
-        raise NotImplementedError
-
-    def _watch_agents(self) -> dict:
-        """Per agent, a subscription whose writer's DDS liveliness is the agent's sign of life
-        (its liveliness events go to `_on_agent_liveliness`)."""
-        raise NotImplementedError
-
-    def world_gaps(self) -> list[str]:
-        """What discovery still waits for in the world."""
-        raise NotImplementedError
-
-    def _check_start(self) -> str:
-        """Before step 0, with everything connected: raise if the world breaks a hypothesis (nothing
-        was sent yet); else a note for the progress line ('' or ending in '; ')."""
-        return ''
-
-    def world_extra(self) -> dict:
-        """summary.json's `extra` of the world, also for a run that did not start."""
-        return {}
-
-    def _begin(self) -> None:
-        """t = 0: Step 0."""
-        raise NotImplementedError
-
-    robot_stops = None  # the robots' zero-command writers (`robot_stops.RobotStops`): the coordinator's
-
-    def stop_robots(self, *, why: str) -> list[int]:
-        """An operator's emergency stop: every robot its zero command now; the robots (the exact
-        world has none: it stops with the final Step)."""
-        return [] if self.robot_stops is None else self.robot_stops.stop_all(why=why)
-
-    def _running_tick(self) -> None:
-        """A tick of the running run: the world's checks, and the final Step at the horizon."""
-        raise NotImplementedError
-
-    @property
-    def reached_time(self) -> float:
-        """The run's time now."""
-        raise NotImplementedError
-
-    def after_final_step(self, executor) -> None:
-        """What the world still waits for after the final Step, before the summary."""
-        raise NotImplementedError
-
-    def flush(self) -> None:
-        """Anything still to publish before the node goes."""
-        raise NotImplementedError
-
-    def record(self) -> RunRecord:
-        """The run as a `RunRecord` (summary.json)."""
-        raise NotImplementedError
-
-
-class TimeKeeperNode(WorldHooks, Node):
+class TimeKeeperNode(Node):
     """The life cycle of a distributed run: discovery, step 0, the run watched, its end; the world
-    is a subclass's."""
+    is the object it holds (`self.world`, a `world.World` made from `world_class`)."""
 
     def __init__(
         self,
         *,
-        node_name: str,
+        world_class: type[World],
         scenario: Scenario | None = None,
         parameter_overrides: list[Parameter] | None = None,
         context=None,
     ) -> None:
+        node_name = world_class.NODE_NAME
         super().__init__(node_name, parameter_overrides=parameter_overrides or [], context=context)
-        values, scenario = _checked_parameters(self, scenario)
+        values, scenario = _checked_parameters(self, world_class, scenario)
         self.parameter_values = values
         self.signer, self.verifier = run_tags(values['key_file'], writer=node_name)  # the run's tag
         self.out_dir = values['out_dir']
@@ -267,12 +190,12 @@ class TimeKeeperNode(WorldHooks, Node):
         self.progress_period = values['progress_period']
         self.discovery_timeout = values['discovery_timeout']
         self.executor_kind = values['executor']
-        self.clock_mode = self._clock_mode(values)
+        self.clock_mode = world_class.clock_mode_of(values)
         self.realtime = self.clock_mode == 'realtime'
         self.scenario = scenario
         self.horizon = scenario.horizon if values['horizon'] <= 0.0 else values['horizon']
         self.double = scenario.dynamics == 'double'
-        self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=self.serves_sensing)
+        self.book = RunBook(scenario, realtime=self.realtime, serves_sensing=world_class.serves_sensing)
         self.agents = self.book.agents
 
         self.step_pub = self.create_publisher(Float64MultiArray, STEP_TOPIC, SIMULATOR_QOS)
@@ -298,19 +221,19 @@ class TimeKeeperNode(WorldHooks, Node):
         self.step: Step | None = None
         self.finished = False
         self.failure: Exception | None = None
-        self._reached: float | None = None  # the run's time at its final Step, once sent
+        self.reached: float | None = None  # the run's time at its final Step, once sent
         self.steps = 0
         self.marks = RunMarks(created=time.monotonic())
         self._last_progress = self.marks.created
-        self._epoch = 0.0
+        self.epoch = 0.0
         self.graph: dict = {}
         self.failure_info: dict | None = None  # extra.failure of summary.json once the run failed
         # Agents that stopped on an error after the final Step at the horizon went out (a pose gone
         # stale past the end while the Step was on its way): extra.after_end, not a failure.
         self.after_end: dict[int, str] = {}
-        self._setup_world()
+        self.world: World = world_class(self)  # its publishers (the tools' among `tool_publishers`), readers
         # One writer per agent whose DDS liveliness is the agent's sign of life.
-        self.agent_writers = self._watch_agents()
+        self.agent_writers = self.world.watch_agents()
         self._timer = self.create_timer(TICK_PERIOD, self._tick)
         self.graph_watch, self.freeze, self._graph_timer = watch_intruders(self)
         self.operator_stop = OperatorStop(self)  # /formation/stop, the run's emergency stop
@@ -329,7 +252,7 @@ class TimeKeeperNode(WorldHooks, Node):
             return
         if self.finished:
             return
-        self._running_tick()
+        self.world.tick()
         if self.progress_period > 0.0 and now - self._last_progress >= self.progress_period:
             self._last_progress = now
             self.print_progress()
@@ -368,7 +291,7 @@ class TimeKeeperNode(WorldHooks, Node):
     def _start(self) -> None:
         if self.operator_stop.requested:  # an operator stopped the run before it started: no Step 0
             return
-        note = self._check_start()  # raises before anything is sent when the world breaks a hypothesis
+        note = self.world.check_start()  # raises before anything is sent when the world breaks a hypothesis
         self.marks.start(time.monotonic())
         if self.progress_period > 0.0:
             self._say(
@@ -376,24 +299,24 @@ class TimeKeeperNode(WorldHooks, Node):
                 f'{note}t=0 ({self.clock_mode})'
             )
         look_at_graph(self, everything=True)  # no step 0 with two processes claiming an agent
-        self._publish(
+        self.publish(
             self.scenario_pub, String(data=dump_scenario_text(self.scenario.replace(horizon=self.horizon)))
         )
-        self._begin()
+        self.world.begin()
 
     def end_now(self) -> None:
         """The run stops early at this instant (after step 0): a final Step sends the agents home."""
         if self.finished:  # the final Step went out already (at once, when the run failed)
             return
         flags = STEP_FLAG_FINAL | (STEP_FLAG_REALTIME if self.realtime else 0)
-        self._reached = self.reached_time
+        self.reached = self.reached_time
         self.marks.finish(time.monotonic())
         if not self.graph and not self.realtime:  # the graph now, before the final Step sends agents home
             self.graph = graph_of(self)
         self.finished = True
-        self._publish(
+        self.publish(
             self.step_pub,
-            encode_step(Step(index=self.step.index + 1, time=self._reached, flags=flags, epoch=self._epoch)),
+            encode_step(Step(index=self.step.index + 1, time=self.reached, flags=flags, epoch=self.epoch)),
         )
         if not self.graph:  # on the wall clock, the final Step first: agents leave after their reports
             self.graph = graph_of(self)
@@ -417,7 +340,7 @@ class TimeKeeperNode(WorldHooks, Node):
 
     # -- the agents' messages -------------------------------------------------------------------
 
-    def _publish(self, publisher, msg) -> None:
+    def publish(self, publisher, msg) -> None:
         msg = tag_array(msg, self.signer, STEP_TOPIC) if publisher is self.step_pub else msg
         publisher.publish(msg)
         self.published[publisher.topic_name] = self.published.get(publisher.topic_name, 0) + 1
@@ -432,10 +355,7 @@ class TimeKeeperNode(WorldHooks, Node):
         if self.step is None and status.step_index == DISCOVERY_STEP:
             self._on_announcement(status)
             return
-        self._after_status()
-
-    def _after_status(self) -> None:
-        """Lock-step settles steps here; the wall clock needs nothing."""
+        self.world.after_status()
 
     def _on_report(self, msg: String) -> None:
         try:
@@ -448,13 +368,9 @@ class TimeKeeperNode(WorldHooks, Node):
             return
         if report.final and self.step is not None and (report.failure or not self.finished):
             if not self.finished:  # no failure named: it left on a final Step from elsewhere
-                self._agent_failed(report.agent, report.failure or EARLY_FINAL)
+                self.world.agent_failed(report.agent, report.failure or EARLY_FINAL)
             elif self.failure_info is None:  # after the run reached its end: no fault of the run
                 self.after_end[report.agent] = report.failure
-
-    def _agent_failed(self, agent: int, failure: str) -> None:
-        """An agent's final report says it stopped on an error before the end of the run (the
-        world decides what follows; lock-step: its liveliness or the stall timeout)."""
 
     def reject(self, topic: str, reason: str, detail: str) -> None:
         count = self.book.count_rejection(reason)
@@ -465,15 +381,12 @@ class TimeKeeperNode(WorldHooks, Node):
     def rejected(self) -> dict[str, int]:
         return self.book.rejected
 
-    def stop_unreported_robots(self) -> None:
-        """After the final Step: stop the robots of agents with no final report (robots only)."""
-
     def final_reports_in(self) -> bool:
         return self.book.final_reports_in()
 
     # -- watching peers: agents and recorders (the books say when one is lost) ------------------
 
-    def _on_agent_liveliness(self, agent: int, info) -> None:
+    def on_agent_liveliness(self, agent: int, info) -> None:
         self.book.note_liveliness(
             agent,
             alive_count=info.alive_count,
@@ -495,18 +408,28 @@ class TimeKeeperNode(WorldHooks, Node):
         if (refusal := self.recorders.accept_heartbeat(msg.data)) is not None:
             self.reject(RECORDER_TOPIC, 'field', refusal)
             return
-        self._after_status()
+        self.world.after_status()
 
     def _check_lost(self, now: float) -> None:
         """Stop the run once the recorder or an agent is lost (the books say when that is)."""
-        started, where = self.step is not None, self._where()
+        started, where = self.step is not None, self.where()
         error = self.recorders.lost_error(now, started=started, where=where) or self.book.lost_error(
             now, started=started, where=where
         )
         if error is not None:
             raise error
 
-    def _where(self) -> str:
+    @property
+    def reached_time(self) -> float:
+        """The run's time now (the world's)."""
+        return self.world.reached_time
+
+    def retick(self, period: float) -> None:
+        """The keeper's tick every `period` s from now on (a wall-clock simulator samples finer)."""
+        self.destroy_timer(self._timer)
+        self._timer = self.create_timer(period, self._tick)
+
+    def where(self) -> str:
         return (
             'during discovery'
             if self.step is None
@@ -559,7 +482,7 @@ def watched_topics(node: TimeKeeperNode) -> list:
     keeper = node.get_fully_qualified_name()
     world = (
         simulator_watched(node.scenario)
-        if node.serves_sensing
+        if node.world.serves_sensing
         else robot_watched(node.scenario, keeper=keeper)
     )
     return protocol_watched(node.scenario, keeper=keeper) + world
@@ -643,11 +566,15 @@ def tag_refused(node: TimeKeeperNode, topic: str, msg, check) -> bool:
     return refused_tag(node.verifier, topic, msg, node.reject, check=check)
 
 
-def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tuple[dict, Scenario]:
+def _checked_parameters(
+    node: TimeKeeperNode, world_class: type[World], scenario: Scenario | None
+) -> tuple[dict, Scenario]:
     """Every parameter of `node` read and every rule checked before anything is set up: one
     ParameterError names every problem (the command exits 2, nothing started, the node
     destroyed); else (the values, the scenario)."""
-    specs = [spec for spec in node.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)]
+    specs = [
+        spec for spec in world_class.PARAMETERS if not (spec.name == 'scenario' and scenario is not None)
+    ]
     values, problems = read_parameters(node, specs)
     if values.get('key_file'):
         try:
@@ -664,7 +591,7 @@ def _checked_parameters(node: TimeKeeperNode, scenario: Scenario | None) -> tupl
             problems.append(
                 f'distributed runs carry commands in geometry_msgs: p <= 3, got p = {scenario.dimension}'
             )
-        problems += node.world_problems(values, scenario)
+        problems += world_class.problems(values, scenario)
     if problems:
         name = node.get_fully_qualified_name()
         node.destroy_node()  # nothing of it outlives the refusal
@@ -710,13 +637,13 @@ def discovery_gaps(node: TimeKeeperNode) -> list[str]:
     unmatched = [i for i, sub in node.agent_writers.items() if sub.get_publisher_count() < 1]
     expired = [i for i, book in node.agents.items() if book.lost is not None]
     for what, agents in (
-        (f'agents whose {node.watched_writer} writer is not matched', unmatched),
+        (f'agents whose {node.world.watched_writer} writer is not matched', unmatched),
         ('agents whose liveliness lease expired', expired),
         ('agents not ready (their own endpoints unmatched)', node.book.not_ready()),
     ):
         if agents:
             gaps.append(f'{what}: {ids_text(agents)}')
-    return gaps + node.world_gaps()
+    return gaps + node.world.gaps()
 
 
 def run_extra(node: TimeKeeperNode, reached: float) -> dict:
@@ -728,7 +655,7 @@ def run_extra(node: TimeKeeperNode, reached: float) -> dict:
         'timestamps': node.marks.timestamps(offset=time.time() - time.monotonic()),
         'reached_time': reached,
         'failure': node.failure_info,
-        **node.world_extra(),
+        **node.world.extra(),
         **node.graph_watch.extra(),
         **(
             {'after_end': {str(i): why for i, why in sorted(node.after_end.items())}}
