@@ -25,13 +25,6 @@ from formation_sim.sim.world import World
 pytestmark = pytest.mark.skipif(not compiled.AVAILABLE, reason='compiled core not built')
 
 
-@pytest.fixture
-def on_path():
-    previous = compiled.active()
-    yield compiled.use_compiled
-    compiled.use_compiled(previous)
-
-
 def _count_python_triggers(monkeypatch) -> list[int]:
     calls: list[int] = []
     python_step = engine._trigger_one

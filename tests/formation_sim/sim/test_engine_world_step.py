@@ -23,13 +23,6 @@ from formation_sim.sim.world import World
 pytestmark = pytest.mark.skipif(not compiled.AVAILABLE, reason='compiled core not built')
 
 
-@pytest.fixture
-def on_path():
-    previous = compiled.active()
-    yield compiled.use_compiled
-    compiled.use_compiled(previous)
-
-
 def _bits(array: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array).view(np.int64)
 
