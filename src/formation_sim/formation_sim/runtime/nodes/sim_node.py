@@ -70,13 +70,14 @@ from formation_sim.runtime.contract import SIMULATOR_FILE
 from formation_sim.runtime.errors import CoordinatorError, DuplicateAgentError, StallError
 from formation_sim.runtime.nodes import keeper_main
 from formation_sim.runtime.nodes.exact_world import ExactWorld
-from formation_sim.runtime.nodes.intruders import SensingCalls, Writer, intrusions, simulator_watched
+from formation_sim.runtime.nodes.intruders import SensingCalls, intrusions, simulator_watched
 from formation_sim.runtime.nodes.run_end import write_results  # noqa: F401 - likewise
 from formation_sim.runtime.nodes.sim_view import SimulatorView, view_qos  # noqa: F401 - view_qos: docs/MESSAGES.md
 from formation_sim.runtime.nodes.time_keeper import (
     TIME_KEEPER_PARAMETERS,
     TimeKeeperNode,
     graph_of,
+    graph_writers,
     run_extra,
 )
 from formation_sim.sim.engine import due_twice
@@ -584,11 +585,7 @@ def _untagged_call(world: SimulatorWorld, agent: int, request):
 def _callers(world: SimulatorWorld, agent: int) -> dict:
     """What the graph says of the callers of `agent`'s sensing service (`intrusions` by kind)."""
     (watched,) = [w for w in simulator_watched(world.keeper.scenario) if w.mangled and w.agent == agent]
-    writers = [
-        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
-        for i in world.keeper.get_publishers_info_by_topic(watched.topic, no_mangle=True)
-    ]
-    return {i.kind: i for i in intrusions(watched, writers)}
+    return {i.kind: i for i in intrusions(watched, graph_writers(world.keeper, watched))}
 
 
 def _out_of_turn(world: SimulatorWorld, agent: int, index: int):

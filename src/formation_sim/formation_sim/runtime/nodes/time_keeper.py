@@ -511,14 +511,19 @@ def look_at_graph(node: TimeKeeperNode, *, everything: bool = False) -> None:
             raise foreign_information_error(*excess, watch)
 
 
+def graph_writers(node, watched) -> list[Writer]:
+    """The writers of `watched.topic` in `node`'s ROS graph now (a service's request or reply
+    topic looked up as is: `watched.mangled`)."""
+    return [
+        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
+        for i in node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
+    ]
+
+
 def _look_at(node: TimeKeeperNode, watched) -> None:
     """The writers of `watched.topic` in the graph now, noted by the node's watch (each new
     intrusion logged)."""
-    infos = node.get_publishers_info_by_topic(watched.topic, no_mangle=watched.mangled)
-    writers = [
-        Writer(node=f'{i.node_namespace.rstrip("/")}/{i.node_name}', gid=bytes(i.endpoint_gid).hex())
-        for i in infos
-    ]
+    writers = graph_writers(node, watched)
     for intrusion in node.graph_watch.note(watched, writers, now=time.monotonic()):
         node.get_logger().warning(intrusion.text())
 
