@@ -22,7 +22,10 @@ the origins o = x - l (cos θ, sin θ) are exact too. Columns: the smallest sepa
 origins (sampled at 0.01 s and at every event), the time to 5 cm and to 1 cm (the formation
 error of the control points, for good), events, saturated commands (held commands whose
 (v, ω) = (||u|| cos ψ, ||u|| sin ψ / l) exceeds the kind's limits at any instant of its hold,
-at κ = 1: the paper's time), and the exit status of `formation simulate` for the same scenario.
+at κ = 1: the paper's time), the exit status of `formation simulate` for the same scenario (`-`:
+the layer's robots jam at every tie-break turn tried) and the turn λ every agent took: as
+`formation run --speed-scale auto` does, a jam at the default turn is run again at the next one
+(docs/SAFETY.md, "Ties").
 
     .venv/bin/python benchmarks/robots_anywhere.py measure /tmp/runs/out_100 ...
     .venv/bin/python benchmarks/robots_anywhere.py table [--seeds 300-319] [--horizon 30]
@@ -130,7 +133,6 @@ KINDS = {
         3.0,
     ),
 }
-MAX_EVENTS = 20000  # a run that triggers more is reported as a jam, not run to its end
 SHORTEST_HOLD = 1e-9
 """[s] Two samples closer than this are one instant up to rounding (an event and a grid point 1 ulp
 apart: 3e-16 s in the diagonal swap): their positions differ by rounding only, which divided by
@@ -207,9 +209,11 @@ def _saturated(kind: str, limits: dict, start, end, speed, kappa) -> int:
 def table_row(scenario, kind: str, layer: bool) -> dict:
     """One row of the table: the engine's run with the kind's default layer (or none)."""
     import contextlib
+    import dataclasses
     import io
 
     from formation_sim.commands.common import robot_safety
+    from formation_sim.model.errors import JamError
     from formation_sim.model.speed_choice import RobotLimits
     from formation_sim.model.validate import validate_scenario
     from formation_sim.runtime.launch.plan import RobotOptions
@@ -232,17 +236,17 @@ def table_row(scenario, kind: str, layer: bool) -> dict:
     if not validate_scenario(scenario).ok:
         return {'exit': 1, 'why': "the theorems' hypotheses fail"}
 
-    def cap(t: float, events: int) -> None:  # a jam of three (docs/SAFETY.md) triggers without end
-        if events > MAX_EVENTS:
-            raise RuntimeError(f'jam: {events} events by t = {t:.1f} s (paper time)')
-
-    try:
-        record = simulate(scenario, sample_dt=0.01, progress=cap)  # the samples hold every event
-    except RuntimeError as error:
-        return {'exit': '-', 'why': str(error)}
+    try:  # as `formation run --speed-scale auto`: a jam at the default turn is run again at the next
+        choice = choose_time_warp(scenario, limits=RobotLimits(**limits))
+    except JamError as error:
+        turns = ', '.join(f'λ = {turn:g}: {events} events by t = {t:.1f} s' for turn, events, t in error.jams)
+        return {'exit': '-', 'why': f'jam ({turns}; paper time)'}
+    if choice.turn is not None:
+        scenario = scenario.replace(safety=dataclasses.replace(scenario.safety, turn=choice.turn))
+    record = simulate(scenario, sample_dt=0.01)  # the samples hold every event
     times, x = np.asarray(record.samples.times), np.asarray(record.samples.positions)
     distance = limits.get('control_point_distance', 0.0)
-    warp = choose_time_warp(scenario, limits=RobotLimits(**limits)).observed
+    warp = choice.observed
     kappa = np.array([warp.paper_rate(float(t)) for t in times[:-1]])
     if kind == 'holonomic':  # origins = control points, linear between the samples: exact
         dt = np.diff(times)[:, None]
@@ -268,26 +272,28 @@ def table_row(scenario, kind: str, layer: bool) -> dict:
         'to_1cm': warp.real(settle[0.01]) if math.isfinite(settle[0.01]) else math.inf,
         'events': record.total_events,
         'saturated': saturated,
+        'turn': scenario.safety.turn if scenario.safety is not None else None,
     }
 
 
 def _table(seeds, horizon: float) -> None:
     print(
         '| placement | kind | layer | exit | smallest separation [m] | to 5 cm [s] | to 1 cm [s] | events '
-        '| saturated |'
+        '| saturated | λ |'
     )
-    print('|---|---|---|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|---|---|')
     for name, scenario in _cases(seeds, horizon).items():
         for kind in KINDS:
             for layer in (False, True):
                 row = table_row(scenario, kind, layer)
                 state = 'on' if layer else 'off'
                 if 'why' in row:
-                    print(f'| {name} | {kind} | {state} | {row["exit"]} | {row["why"]} | | | | |')
+                    print(f'| {name} | {kind} | {state} | {row["exit"]} | {row["why"]} | | | | | |')
                     continue
                 print(
                     f'| {name} | {kind} | {state} | {row["exit"]} | {row["closest"]:.3f} | '
-                    f'{row["to_5cm"]:.1f} | {row["to_1cm"]:.1f} | {row["events"]} | {row["saturated"]} |',
+                    f'{row["to_5cm"]:.1f} | {row["to_1cm"]:.1f} | {row["events"]} | {row["saturated"]} | '
+                    f'{"" if row["turn"] is None else format(row["turn"], "g")} |',
                     flush=True,
                 )
 

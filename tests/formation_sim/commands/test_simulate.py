@@ -345,6 +345,38 @@ def test_speed_scale_auto_chooses_kappa_from_the_limits_and_records_it(tmp_path,
     )
 
 
+def test_a_warped_run_whose_robots_jam_at_the_default_turn_runs_every_agent_at_the_next(
+    tmp_path, capsys, monkeypatch
+):
+    """Issue 27: the stress sweep's team 19 jams at λ = 1.5 (docs/SAFETY.md, "Ties"): `simulate
+    --speed-scale warp` says so, runs at λ = 2, and records it; the run is the engine's at λ = 2 under
+    the same warp, event for event.  The jam cap is lowered to 500 per agent to keep the test short."""
+    import dataclasses
+
+    from formation_agent.core.time_warp import TimeWarp
+    from formation_sim.model.scenario import dump_scenario
+    from formation_sim.sim import largest_command, safety_cases
+
+    monkeypatch.setattr(largest_command, 'JAM_EVENTS_PER_AGENT', 500)
+    team = safety_cases.random_team(19)
+    dump_scenario(team, tmp_path / 'team19.yaml')
+    out = tmp_path / 'run'
+    arguments = ['simulate', str(tmp_path / 'team19.yaml'), '--speed-scale', 'warp', '--max-speed', '1']
+    assert main([*arguments, '--out', str(out), '--quiet', '--no-plot']) == 0
+    err = capsys.readouterr().err
+    assert "the safety layer's tie-break turn λ = 2 for every agent: the robots jam at λ = 1.5 (" in err
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['extra']['safety']['turn'] == 2.0
+    chosen = summary['extra']['speed_scale']['tie_break_turn']
+    assert chosen['turn'] == 2.0 and [jam['turn'] for jam in chosen['jams']] == [1.5]
+    assert chosen['jams'][0]['events'] > 500 * team.n
+    observed = summary['extra']['speed_scale']['observed']
+    warp = TimeWarp(paper_starts=tuple(observed['paper_starts']), rates=tuple(observed['rates']))
+    turned = team.replace(safety=dataclasses.replace(team.safety, turn=2.0))
+    record = simulate(turned, sample_dt=None, time_warp=warp)
+    assert summary['trigger_times'] == {str(k): v for k, v in record.trigger_times.items()}
+
+
 def test_speed_scale_warp_runs_the_observed_warp_and_records_it(tmp_path, capsys):
     import json
 

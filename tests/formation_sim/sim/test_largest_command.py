@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from formation_agent.core.tension import omega
+from formation_sim.model.errors import LimitsError
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim.engine import simulate
 from formation_sim.sim.largest_command import largest_command, measured_command
@@ -99,3 +100,54 @@ def test_a_jam_of_the_safety_layer_is_refused_not_run_for_minutes(monkeypatch):
         largest_command.choose_time_warp(jammed, limits=limits)
     forms = safety_cases.random_square(100, safety=layer, side=2.2, horizon=90.0)
     assert largest_command.choose_time_warp(forms, limits=limits).observed.max_rate <= 0.44 * (1 + 1e-9)
+
+
+def test_a_jam_at_the_default_turn_is_run_again_at_the_next_turn_for_every_agent(monkeypatch):
+    """Issue 27: the stress sweep's team 19 (docs/SAFETY.md) jams at the default tie-break turn
+    λ = 1.5 (three robots blocking each other: 25 004 events by t = 10.3 s) and forms at λ = 2 (308
+    events).  The warp's exact run tries 1.5, then 2: the choice carries λ = 2 and the jam met, and
+    the warp is the one of the λ = 2 run (its events, its settling), as an independent run at λ = 2
+    shows.  The jam cap is lowered to 500 per agent to keep the test short (λ = 2 stays below it)."""
+    import dataclasses
+
+    from formation_sim.model.speed_choice import RobotLimits
+    from formation_sim.sim import largest_command, safety_cases
+
+    monkeypatch.setattr(largest_command, 'JAM_EVENTS_PER_AGENT', 500)
+    limits = RobotLimits(max_speed=1.0, max_angular_speed=math.inf, control_point_distance=0.1)
+    team = safety_cases.random_team(19).replace(horizon=30.0)
+    assert team.safety.turn == 1.5
+    choice = largest_command.choose_time_warp(team, limits=limits)
+    assert choice.turn == 2.0
+    assert [turn for turn, _, _ in choice.jams] == [1.5]
+    assert choice.jams[0][1] > 500 * team.n
+    assert choice.to_dict()['tie_break_turn']['turn'] == 2.0
+    assert 'λ = 2 for every agent: the robots jam at λ = 1.5' in choice.turn_line()
+    turned = team.replace(safety=dataclasses.replace(team.safety, turn=2.0))
+    record = simulate(turned, horizon=choice.cap * team.horizon, sample_dt=None)
+    assert choice.settling.time == largest_command.settling(turned, record).time
+    # A scenario that names its own turn is run with it: one try, and its jam refused.
+    own = team.replace(safety=dataclasses.replace(team.safety, turn=1.0))
+    with pytest.raises(LimitsError, match=r'at the tie-break turn λ = 1 .*: nothing was run') as caught:
+        largest_command.choose_time_warp(own, limits=limits)
+    assert [turn for turn, _, _ in caught.value.jams] == [1.0]
+
+
+def test_a_team_that_jams_at_every_turn_is_refused_naming_each(monkeypatch):
+    """Team 19 jams at λ = 1.5 and at λ = 1.75 too (measured: 20 000 events by t = 10.2 s): with
+    those two as the turns to try, both are tried and the refusal names each, with its events and
+    time (the jam cap lowered to 500 per agent to keep the test short)."""
+    from formation_sim.model.speed_choice import RobotLimits
+    from formation_sim.sim import largest_command, safety_cases
+
+    monkeypatch.setattr(largest_command, 'JAM_EVENTS_PER_AGENT', 500)
+    monkeypatch.setattr(largest_command, 'TIE_BREAK_TURNS', (1.5, 1.75))
+    limits = RobotLimits(max_speed=1.0, max_angular_speed=math.inf, control_point_distance=0.1)
+    team = safety_cases.random_team(19).replace(horizon=30.0)
+    pattern = (
+        r'it jams at every tie-break turn tried: λ = 1.5 \(\d+ events by t = .*\), λ = 1.75 \(\d+ events'
+    )
+    with pytest.raises(LimitsError, match=pattern) as caught:
+        largest_command.choose_time_warp(team, limits=limits)
+    assert [turn for turn, _, _ in caught.value.jams] == [1.5, 1.75]
+    assert all(events > 500 * team.n for _, events, _ in caught.value.jams)

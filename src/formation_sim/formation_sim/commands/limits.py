@@ -8,6 +8,7 @@ Not a subcommand itself (`formation_sim.cli.COMMANDS` lists those).  The arithme
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 
@@ -231,6 +232,9 @@ def resolve_time_warp(scenario: Scenario, args: argparse.Namespace, command: str
         return None
     warp = choice.warp
     settle = choice.settle_time(warp)
+    if choice.turn is not None and scenario.safety is not None:  # a jam at the default turn: every agent's λ
+        scenario = scenario.replace(safety=dataclasses.replace(scenario.safety, turn=choice.turn))
+        print(f'formation {command}: {choice.turn_line()}', file=sys.stderr)
     print(
         f'formation {command}: --speed-scale {flag}: a time warp, κ(t) in {warp.pieces} pieces from '
         f'{warp.rates[0]:.4g} '

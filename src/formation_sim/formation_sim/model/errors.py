@@ -24,5 +24,15 @@ class LimitsError(FormationError, ValueError):
     """Limits that cannot be met, or that no speed scale applies to (the message names the rule)."""
 
 
+class JamError(LimitsError):
+    """With the safety layer, an exact run whose robots block each other and trigger without end
+    (docs/SAFETY.md, "Ties"): `jams` holds (the tie-break turn λ, the events, the paper's time) of
+    each run that jammed; the message names them."""
+
+    def __init__(self, message: str, *, jams: tuple[tuple[float, int, float], ...] = ()) -> None:
+        super().__init__(message)
+        self.jams = jams
+
+
 class TheoryError(FormationError, ValueError):
     """A quantity requested outside the hypotheses it needs (the message names the rule and values)."""

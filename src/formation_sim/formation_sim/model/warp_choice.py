@@ -220,6 +220,8 @@ class WarpChoice:
     cap: float
     window: float
     event_rate: float  # the observed warp's events' cap, per agent per real second
+    turn: float | None = None  # the safety layer's tie-break turn λ chosen when the default's robots jam
+    jams: tuple[tuple[float, int, float], ...] = ()  # (λ, events, paper time) of each turn that jammed
 
     @property
     def warp(self) -> TimeWarp:
@@ -248,7 +250,23 @@ class WarpChoice:
             'guaranteed': one(self.guaranteed),
             'guaranteed_missing': self.guaranteed_missing,
             'settle_fraction': self.settling.fraction,
+            'tie_break_turn': None
+            if self.turn is None
+            else {
+                'turn': self.turn,
+                'jams': [{'turn': turn, 'events': events, 'time': t} for turn, events, t in self.jams],
+            },
         }
+
+    def turn_line(self) -> str | None:
+        """The safety layer's tie-break turn chosen and why (None: the scenario's own)."""
+        if self.turn is None:
+            return None
+        jams = ', '.join(f'λ = {turn:g} ({events} events by t = {t:.4g} s)' for turn, events, t in self.jams)
+        return (
+            f"the safety layer's tie-break turn λ = {self.turn:g} for every agent: the robots jam at {jams} "
+            '(docs/SAFETY.md, "Ties")'
+        )
 
     def lines(self, *, constant: float | None = None) -> list[str]:
         """What validate prints; `constant`: today's constant κ, to compare the time to settle."""
@@ -272,5 +290,7 @@ class WarpChoice:
                 f'  the constant observed κ = {constant:.4g}: {fraction} after '
                 f'{self.settling.at(constant):.4g} s'
             )
+        if (turn := self.turn_line()) is not None:
+            lines.append(f'  {turn}')
         lines.append('  --speed-scale warp (and auto on robots, ETA-1) runs the observed warp')
         return lines
