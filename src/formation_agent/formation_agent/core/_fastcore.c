@@ -705,19 +705,29 @@ typedef struct {
     Search s;
     State st;
     double start;
+    PyObject *team;      /* the engine's Team whose ledger it was made from (Agenda.link), or NULL */
+    Py_ssize_t team_pos; /* its agent's position there */
 } SearchObject;
 
+/* The team's ledger of agent a, while the team owns the agent's knowledge (Team): its counters (1), or 0
+ * (the agent's attributes are its knowledge); ledger_model packs it as read_model packs the agent. */
+static int ledger_counters(PyObject *team, Py_ssize_t a, long *triggers, long *infos);
+static int ledger_model(PyObject *team, Py_ssize_t a, Model *md);
+
 /* The packed model, read again when the agent's knowledge changed since it was read (as the
- * Python path, which reads the agent's rows at every evaluation). */
+ * Python path, which reads the agent's rows at every evaluation): from the team's ledger while the team
+ * owns the agent's knowledge, else from the agent. */
 static int search_model(SearchObject *self) {
     long triggers, infos;
-    if (get_long(self->model, N_TRIGGERS, &triggers) < 0 || get_long(self->model, N_INFOS, &infos) < 0)
+    int owned = self->team != NULL && ledger_counters(self->team, self->team_pos, &triggers, &infos);
+    if (!owned &&
+        (get_long(self->model, N_TRIGGERS, &triggers) < 0 || get_long(self->model, N_INFOS, &infos) < 0))
         return -1;
     if (self->md.rows != NULL && triggers == self->known_triggers && infos == self->known_infos)
         return 0;
     PyMem_Free(self->md.rows);
     memset(&self->md, 0, sizeof self->md);
-    if (read_model(self->model, &self->md) < 0) {
+    if ((owned ? ledger_model(self->team, self->team_pos, &self->md) : read_model(self->model, &self->md)) < 0) {
         PyMem_Free(self->md.rows);
         self->md.rows = NULL;
         return -1;
@@ -755,11 +765,13 @@ static PyObject *search_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
 
 static int search_traverse(SearchObject *self, visitproc visit, void *arg) {
     Py_VISIT(self->model);
+    Py_VISIT(self->team);
     return 0;
 }
 
 static int search_clear(SearchObject *self) {
     Py_CLEAR(self->model);
+    Py_CLEAR(self->team);
     return 0;
 }
 
@@ -1029,27 +1041,20 @@ static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) 
 }
 
 /* The agent's knowledge updated as the Python path updates it (the same floats). */
-static int take_message(PyObject *agent, Held *h, const Message *msg, double *packed, const double *known_dc,
-                        const double *known_u) {
+static int take_message(PyObject *agent, Held *h, const Message *msg) {
     Py_ssize_t k = msg->k, p = msg->p;
     double d[3], y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, u[3], c;
-    if (known_dc != NULL) { /* the team's copy of the edge's d_ij, its capacity and the agent's command */
-        memcpy(d, known_dc, sizeof d);
-        c = known_dc[3];
-        memcpy(u, known_u, sizeof u);
-    } else {
-        PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
-        PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
-        PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
-        if (capacity == NULL)
-            return -1;
-        PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
-        hold(h, offset);
-        hold(h, cap);
-        if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
-            read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
-            return -1;
-    }
+    PyObject *offsets = hold(h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3]));
+    PyObject *own = offsets ? hold(h, PyObject_GetAttr(agent, NAMES[N_U])) : NULL;
+    PyObject *capacity = own ? hold(h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        return -1;
+    PyObject *offset = PySequence_GetItem(offsets, k), *cap = PySequence_GetItem(capacity, k);
+    hold(h, offset);
+    hold(h, cap);
+    if (offset == NULL || cap == NULL || read_floats(offset, d, 3, "_offsets3") < 0 ||
+        read_floats(own, u, 3, "_u") < 0 || (c = PyFloat_AsDouble(cap), c == -1.0 && PyErr_Occurred()))
+        return -1;
     for (Py_ssize_t i = 0; i < p; i++) {
         y[i] = -msg->rel[i] - d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
         uj[i] = msg->control[i];
@@ -1095,8 +1100,6 @@ static int take_message(PyObject *agent, Held *h, const Message *msg, double *pa
         row[10] = c;
         width = WIDTH2;
     }
-    if (packed != NULL) /* the team's copy of the row (Known) */
-        memcpy(packed, row, sizeof(double) * (size_t)width);
     return list_put(rows, k, floats_tuple(row, width));
 }
 
@@ -1153,7 +1156,7 @@ static PyObject *receive(PyObject *self, PyObject *args) {
     Message msg;
     int status = read_message(agent, info, &h, &msg);
     if (status == 1)
-        status = take_message(agent, &h, &msg, NULL, NULL, NULL) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
+        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 1;
     release(&h);
     if (status < 0)
         return NULL;
@@ -1270,8 +1273,7 @@ static int set_attr(PyObject *obj, int name, PyObject *value) { /* value: a new 
 
 
 /* The new input (_update, _command) and the knowledge after the trigger, as the Python path. */
-static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset, double *packed,
-                        double *norm_out) {
+static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, double *offset) {
     Py_ssize_t m = in->m, p = in->p;
     double total[3] = {0.0, 0.0, 0.0}, k1 = 0.0, k2 = 0.0;
     if (in->kind == 2 && (get_double(agent, N_K1, &k1) < 0 || get_double(agent, N_K2, &k2) < 0))
@@ -1338,17 +1340,12 @@ static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, 
             row[9] = control[2] - uj[2];
             row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
         }
-        Py_ssize_t width = in->kind == 1 ? WIDTH1 : WIDTH2;
-        if (packed != NULL) /* the team's copy of the rows (Known) */
-            memcpy(packed + k * width, row, sizeof(double) * (size_t)width);
-        PyObject *tuple = floats_tuple(row, width);
+        PyObject *tuple = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
         if (tuple == NULL)
             return -1;
         PyList_SET_ITEM(rows, k, tuple);
     }
     double norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
-    if (norm_out != NULL)
-        *norm_out = norm;
     PyObject *edge_time = PyList_New(m); /* [t] * m */
     for (Py_ssize_t k = 0; edge_time != NULL && k < m; k++) {
         PyObject *x = PyFloat_FromDouble(in->t);
@@ -1438,7 +1435,7 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
     else if (status == 1) {
         double control[3], offset[3];
         PyObject *t = hold(&h, PyFloat_FromDouble(in->t));
-        if (t != NULL && take_sensing(agent, &h, in, control, offset, NULL, NULL) == 0 &&
+        if (t != NULL && take_sensing(agent, &h, in, control, offset) == 0 &&
             after_trigger(agent, &h, t) == 0)
             out = trigger_output(agent, &h, in, t, control);
     }
@@ -1448,21 +1445,36 @@ static PyObject *trigger(PyObject *self, PyObject *args) {
 }
 
 
-/* What the team knows an agent knows (Team: written where the team updates the agent): the model a
- * search reads (read_model: kind, rows, _u_offset, _control_norm, k1..k3), valid while the agent's
- * counters (triggers, infos_received) are those it was written at; a change the team did not make (the
- * Python trigger or receive) moves a counter, and the agent's own attributes are read again. */
-typedef struct {
-    int valid, kind;
-    long triggers, infos;
-    Py_ssize_t m;
-    double *rows; /* m rows of WIDTH1 / WIDTH2 (room for WIDTH2) */
-    double u_off[3], control_norm, k1, k2, k3;
-    double *dc;   /* per edge: d_ij (_offsets3[k]) and Δ - ||d_ij|| (_capacity[k]), as the trigger read them */
-    double u[3];  /* _u: the command, padded */
-} Known;
+/* ---- the team's ledger: each agent's knowledge in C while the engine runs ---------------------- */
 
-static int known_model(PyObject *team, Py_ssize_t a, PyObject *agent, SearchObject *made);
+/* Edge k of an agent as its knowledge holds it (eta.py's lists, element k): _offsets3, _capacity (fixed),
+ * _heard, _edge_time, _edge_y, _edge_u, ETA-2's _edge_q and _sensed_q, and its packed row (_rows). */
+typedef struct {
+    double d[3], c;
+    double time, y[3], u[3], q[3], sensed_q[3];
+    double row[WIDTH2]; /* _row(k), laid out as WIDTH1 / WIDTH2 */
+    char heard, row_set; /* row_set 0: _rows[k] is () (no trigger and no message on the edge yet) */
+} Edge;
+
+/* An agent's knowledge as the team holds it (Team): what trigger and receive write of the agent (its
+ * edges in the team's Edge array), and what a search and the threshold read of it (fixed). While `own`, the
+ * ledger is the agent's knowledge and its Python attributes are as the team last wrote or read them;
+ * Team.release writes them (ledger_store) and hands the agent back. */
+typedef struct {
+    int eligible; /* -1 not looked at yet; 1 the team may own it (ledger_decide); 0 never (attributes path) */
+    int own;
+    int kind, triggered, has_interval, has_sensed, moved; /* moved: triggered since own (control, _offset) */
+    Py_ssize_t m, heard;
+    double kappa, k1, k2, k3, alpha, beta, floor_, tolerance; /* fixed: the gains, the threshold */
+    double last_trigger, last_event, interval, control_norm, u[3], u_off[3];
+    long triggers, infos;
+    PyObject *search; /* _search: a strong reference, NULL for None */
+} Ledger;
+
+/* The search Agenda.plan makes of team agent `a` from the ledger (a new reference), the one it keeps, or
+ * Py_None (a new reference: the agent's trigger_search decides; the team handed the agent back). */
+static PyObject *team_search(PyObject *team, Py_ssize_t a, PyObject *agent, double horizon, double first_span,
+                             long long *made);
 
 /* ---- Agenda: the engine's next-event queue (formation_sim.sim.engine._Agenda without a period) -- */
 
@@ -1648,6 +1660,9 @@ static PyObject *TRIGGER_SEARCH = NULL, *ADVANCE = NULL, *FRONTIER = NULL; /* me
  * _fastcore.Search of this limit (kept). A new reference; Py_None (a new reference) where the method
  * must decide; NULL on error. */
 static PyObject *plain_search(AgendaObject *self, PyObject *agent, Py_ssize_t rank) {
+    if (self->team != NULL && self->team_of[rank] >= 0 && !isnan(self->first_span))
+        return team_search(self->team, self->team_of[rank], agent, self->horizon, self->first_span,
+                           &self->from_team);
     int plain = 0;
     for (Py_ssize_t i = 0; self->plain != NULL && i < PyTuple_GET_SIZE(self->plain); i++)
         plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
@@ -1701,12 +1716,10 @@ static PyObject *plain_search(AgendaObject *self, PyObject *agent, Py_ssize_t ra
     made->st.cover_end = -INFINITY;
     made->st.bound_e = NAN;
     made->st.bound_curv = NAN;
-    if ((self->team != NULL && known_model(self->team, self->team_of[rank], agent, made) < 0) ||
-        PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
+    if (PyObject_SetAttr(agent, NAMES[N_SEARCH], (PyObject *)made) < 0) {
         Py_DECREF(made);
         goto done;
     }
-    self->from_team += made->md.rows != NULL;
     out = (PyObject *)made;
 done:
     Py_XDECREF(fast);
@@ -1855,7 +1868,7 @@ static PyMemberDef agenda_members[] = {
     {"failed", T_OBJECT, offsetof(AgendaObject, failed), READONLY,
      "the agent whose search raised in next_time, or None"},
     {"from_team", T_LONGLONG, offsetof(AgendaObject, from_team), READONLY,
-     "how many new searches started from the linked team's copy of their agent's model (link)"},
+     "how many new searches were made from the linked team's ledger of their agent's knowledge (link)"},
     {NULL, 0, 0, 0, NULL},
 };
 
@@ -1906,9 +1919,11 @@ typedef struct {
     Py_ssize_t *back;     /* the agent's slot among the neighbour's edges */
     Pending *pending;
     Py_ssize_t size, capacity;
-    Known *known;        /* per agent: its model as the team last wrote it */
-    double *known_rows;  /* agent a's rows from start[a] * WIDTH2 */
-    double *known_dc;    /* agent a's d_ij and capacities from start[a] * 4 */
+    PyObject *plain;     /* the agent types whose knowledge the team may hold (exact types), a tuple */
+    PyObject *rule;      /* the threshold type the compiled search knows (trigger.ExponentialRule) */
+    Ledger *ledger;      /* per agent: its knowledge, while the team owns it */
+    Edge *edges;         /* agent a's edges from start[a] */
+    long long loads, stores; /* ledgers read from and written to the agents' attributes */
 } TeamObject;
 
 static PyTypeObject TeamType;
@@ -1924,11 +1939,12 @@ static Py_ssize_t team_position(TeamObject *self, PyObject *id) {
 }
 
 static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static char *names[] = {"agents", "ids", "neighbours", "back", "dimension", "set_control", NULL};
-    PyObject *agents, *ids, *neighbours, *back, *set_control;
+    static char *names[] = {"agents", "ids", "neighbours", "back", "dimension", "set_control", "plain", "rule", NULL};
+    PyObject *agents, *ids, *neighbours, *back, *set_control, *plain, *rule;
     Py_ssize_t p;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$O!O!O!O!nO", names, &PyTuple_Type, &agents, &PyTuple_Type,
-                                     &ids, &PyTuple_Type, &neighbours, &PyTuple_Type, &back, &p, &set_control))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "$O!O!O!O!nOO!O!", names, &PyTuple_Type, &agents, &PyTuple_Type,
+                                     &ids, &PyTuple_Type, &neighbours, &PyTuple_Type, &back, &p, &set_control,
+                                     &PyTuple_Type, &plain, &PyType_Type, &rule))
         return NULL;
     Py_ssize_t n = PyTuple_GET_SIZE(agents);
     if (PyTuple_GET_SIZE(ids) != n || PyTuple_GET_SIZE(neighbours) != n || PyTuple_GET_SIZE(back) != n || p < 1 ||
@@ -1944,6 +1960,8 @@ static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     self->agents = Py_NewRef(agents);
     self->ids = Py_NewRef(ids);
     self->set_control = Py_NewRef(set_control);
+    self->plain = Py_NewRef(plain);
+    self->rule = Py_NewRef(rule);
     self->index = PyDict_New();
     self->start = PyMem_Calloc((size_t)n + 1, sizeof(Py_ssize_t));
     if (self->index == NULL || self->start == NULL)
@@ -1965,14 +1983,14 @@ static PyObject *team_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     Py_ssize_t edges = self->start[n] > 0 ? self->start[n] : 1;
     self->neighbour = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
     self->back = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)edges);
-    self->known = PyMem_Calloc((size_t)(n > 0 ? n : 1), sizeof(Known)); /* none valid */
-    self->known_rows = PyMem_Malloc(sizeof(double) * (size_t)edges * WIDTH2);
-    self->known_dc = PyMem_Malloc(sizeof(double) * (size_t)edges * 4);
-    if (self->neighbour == NULL || self->back == NULL || self->known == NULL || self->known_rows == NULL ||
-        self->known_dc == NULL) {
+    self->ledger = PyMem_Calloc((size_t)(n > 0 ? n : 1), sizeof(Ledger)); /* none owned */
+    self->edges = PyMem_Calloc((size_t)edges, sizeof(Edge));
+    if (self->neighbour == NULL || self->back == NULL || self->ledger == NULL || self->edges == NULL) {
         PyErr_NoMemory();
         goto fail;
     }
+    for (Py_ssize_t a = 0; a < n; a++)
+        self->ledger[a].eligible = -1;
     for (Py_ssize_t a = 0; a < n; a++) {
         PyObject *row = PyTuple_GET_ITEM(neighbours, a), *slots = PyTuple_GET_ITEM(back, a);
         for (Py_ssize_t k = 0; k < PyTuple_GET_SIZE(row); k++) {
@@ -1995,18 +2013,26 @@ fail:
 }
 
 static int team_traverse(TeamObject *self, visitproc visit, void *arg) {
+    for (Py_ssize_t a = 0; self->ledger != NULL && a < self->n; a++)
+        Py_VISIT(self->ledger[a].search);
     Py_VISIT(self->agents);
     Py_VISIT(self->ids);
     Py_VISIT(self->index);
     Py_VISIT(self->set_control);
+    Py_VISIT(self->plain);
+    Py_VISIT(self->rule);
     return 0;
 }
 
 static int team_clear(TeamObject *self) {
+    for (Py_ssize_t a = 0; self->ledger != NULL && a < self->n; a++)
+        Py_CLEAR(self->ledger[a].search);
     Py_CLEAR(self->agents);
     Py_CLEAR(self->ids);
     Py_CLEAR(self->index);
     Py_CLEAR(self->set_control);
+    Py_CLEAR(self->plain);
+    Py_CLEAR(self->rule);
     return 0;
 }
 
@@ -2017,9 +2043,8 @@ static void team_dealloc(TeamObject *self) {
     PyMem_Free(self->neighbour);
     PyMem_Free(self->back);
     PyMem_Free(self->pending);
-    PyMem_Free(self->known);
-    PyMem_Free(self->known_rows);
-    PyMem_Free(self->known_dc);
+    PyMem_Free(self->ledger);
+    PyMem_Free(self->edges);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -2063,8 +2088,6 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
     if (in->m > MAX_EDGES || !PyList_CheckExact(offsets) || !PyList_CheckExact(capacity) ||
         PyList_GET_SIZE(offsets) != in->m || PyList_GET_SIZE(capacity) != in->m)
         return 0;
-    double *dc = self->known_dc + self->start[a] * 4; /* the team's copy (Known), valid again after the trigger */
-    self->known[a].valid = 0;
     for (Py_ssize_t k = 0; k < in->m; k++) {
         Py_ssize_t b = self->neighbour[self->start[a] + k];
         double d[3], c, sum = 0.0;
@@ -2079,8 +2102,6 @@ static int team_sensing(TeamObject *self, PyObject *agent, Py_ssize_t a, double 
             return -1;
         if (!plain_double(PyList_GET_ITEM(capacity, k), &c))
             return 0;
-        memcpy(dc + 4 * k, d, sizeof d);
-        dc[4 * k + 3] = c;
         for (Py_ssize_t i = 0; i < p; i++) {
             in->y[k][i] = in->rel[k][i] - d[i]; /* y_ij = x_i - x_j - d_ij */
             sum += in->y[k][i] * in->y[k][i];
@@ -2107,47 +2128,432 @@ static int team_queue(TeamObject *self, Pending msg) {
     return 0;
 }
 
-/* The agent's counters into kn (what a search compares with its own: search_model). */
-static int known_counters(PyObject *agent, Known *kn) {
-    return get_long(agent, N_TRIGGERS, &kn->triggers) < 0 || get_long(agent, N_INFOS, &kn->infos) < 0 ? -1 : 0;
+/* Whether the team may hold agent a's knowledge (Ledger): an exact type of `plain` on the plain-float path,
+ * of the team's dimension, without the safety layer, triggering on `rule`, with at most MAX_EDGES edges; and
+ * what is fixed of it: d_ij, the capacities, the gains, the threshold's α, β, c0 and the tolerance. */
+static int ledger_decide(TeamObject *self, Py_ssize_t a, PyObject *agent) {
+    Ledger *L = &self->ledger[a];
+    Edge *E = self->edges + self->start[a];
+    Py_ssize_t m = self->start[a + 1] - self->start[a];
+    int plain = 0;
+    long kind, p, fast;
+    L->eligible = 0;
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(self->plain); i++)
+        plain |= (PyObject *)Py_TYPE(agent) == PyTuple_GET_ITEM(self->plain, i);
+    if (!plain || m > MAX_EDGES)
+        return 0;
+    if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
+        get_long(agent, N_FAST, &fast) < 0)
+        return -1;
+    if (!fast || p != self->p || (kind != 1 && kind != 2))
+        return 0;
+    Held h = {.n = 0};
+    int status = -1;
+    PyObject *safety = hold(&h, PyObject_GetAttr(agent, NAMES[N_SAFETY]));
+    PyObject *threshold = safety ? hold(&h, PyObject_GetAttr(agent, NAMES[N_THRESHOLD])) : NULL;
+    PyObject *offsets = threshold ? hold(&h, PyObject_GetAttr(agent, NAMES[N_OFFSETS3])) : NULL;
+    PyObject *capacity = offsets ? hold(&h, PyObject_GetAttr(agent, NAMES[N_CAPACITY])) : NULL;
+    if (capacity == NULL)
+        goto done;
+    status = 0;
+    if (safety != Py_None || (PyObject *)Py_TYPE(threshold) != self->rule || !PyList_CheckExact(offsets) ||
+        !PyList_CheckExact(capacity) || PyList_GET_SIZE(offsets) != m || PyList_GET_SIZE(capacity) != m)
+        goto done;
+    status = -1;
+    if (get_double(threshold, N_ALPHA, &L->alpha) < 0 || get_double(threshold, N_BETA, &L->beta) < 0 ||
+        get_double(threshold, N_FLOOR, &L->floor_) < 0 || get_double(agent, N_TOLERANCE, &L->tolerance) < 0 ||
+        (kind == 1 && get_double(agent, N_SPEED_SCALE, &L->kappa) < 0) ||
+        (kind == 2 && (get_double(agent, N_K1, &L->k1) < 0 || get_double(agent, N_K2, &L->k2) < 0 ||
+                       get_double(agent, N_K3, &L->k3) < 0)))
+        goto done;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        if (read_floats(PyList_GET_ITEM(offsets, k), E[k].d, 3, "_offsets3") < 0)
+            goto done;
+        E[k].c = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        if (E[k].c == -1.0 && PyErr_Occurred())
+            goto done;
+    }
+    L->kind = (int)kind;
+    L->m = m;
+    L->eligible = 1;
+    status = 0;
+done:
+    release(&h);
+    return status;
 }
 
-/* One agent's trigger at t from the world's arrays: _EventTriggeredAgent.trigger (take_sensing,
- * after_trigger: the same updates and floats), the command written into u (World.set_control), and
- * its triggering information queued for deliver. 1 done, 0 left to the Python path, -1 error. */
-static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, double t, const double *x,
-                            const double *q, double *u, Sensing *in) {
-    PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
-    Held h = {.n = 0};
-    double control[3], offset[3];
-    Known *kn = &self->known[a];
-    int status = team_sensing(self, agent, a, t, x, q, &h, in);
-    if (status == 1) {
-        kn->valid = 0;
-        kn->rows = self->known_rows + self->start[a] * WIDTH2;
-        if (take_sensing(agent, &h, in, control, offset, kn->rows, &kn->control_norm) < 0 ||
-            after_trigger(agent, &h, t_obj) < 0 || known_counters(agent, kn) < 0 ||
-            (in->kind == 2 && (get_double(agent, N_K1, &kn->k1) < 0 || get_double(agent, N_K2, &kn->k2) < 0 ||
-                               get_double(agent, N_K3, &kn->k3) < 0)))
-            status = -1;
+/* The agent's attribute `name`: a list of its m edges (a new reference held in h), or NULL with an error. */
+static PyObject *edge_list(Held *h, PyObject *agent, int name, Py_ssize_t m) {
+    PyObject *list = hold(h, PyObject_GetAttr(agent, NAMES[name]));
+    if (list != NULL && (!PyList_CheckExact(list) || PyList_GET_SIZE(list) != m)) {
+        PyErr_Format(PyExc_TypeError, "Team: the agent's %U is not a list of its %zd edges", NAMES[name], m);
+        return NULL;
     }
+    return list;
+}
+
+/* A float or None: *has says which. */
+static int optional_double(PyObject *value, int *has, double *out) {
+    *has = value != Py_None;
+    if (!*has)
+        return 0;
+    *out = PyFloat_AsDouble(value);
+    return *out == -1.0 && PyErr_Occurred() ? -1 : 0;
+}
+
+/* Agent a's ledger read from its attributes (its knowledge as the Python path or the last release left it);
+ * from now on the team owns it. */
+static int ledger_load(TeamObject *self, Py_ssize_t a) {
+    PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
+    Ledger *L = &self->ledger[a];
+    Edge *E = self->edges + self->start[a];
+    Py_ssize_t m = L->m, width = L->kind == 1 ? WIDTH1 : WIDTH2;
+    Held h = {.n = 0};
+    int status = -1;
+    PyObject *heard = edge_list(&h, agent, N_HEARD, m);
+    PyObject *times = heard ? edge_list(&h, agent, N_EDGE_TIME, m) : NULL;
+    PyObject *ys = times ? edge_list(&h, agent, N_EDGE_Y, m) : NULL;
+    PyObject *us = ys ? edge_list(&h, agent, N_EDGE_U, m) : NULL;
+    PyObject *rows = us ? edge_list(&h, agent, N_ROWS, m) : NULL;
+    PyObject *qs = rows != NULL && L->kind == 2 ? edge_list(&h, agent, N_EDGE_Q, m) : rows, *sensed = NULL;
+    if (qs == NULL)
+        goto done;
+    if (L->kind == 2 && PyObject_HasAttr(agent, NAMES[N_SENSED_Q]) && /* set by the agent's first trigger */
+        (sensed = edge_list(&h, agent, N_SENSED_Q, m)) == NULL)
+        goto done;
+    PyObject *own = hold(&h, PyObject_GetAttr(agent, NAMES[N_U]));
+    PyObject *offset = own ? hold(&h, PyObject_GetAttr(agent, NAMES[N_U_OFFSET])) : NULL;
+    PyObject *last_trigger = offset ? hold(&h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
+    PyObject *interval = last_trigger ? hold(&h, PyObject_GetAttr(agent, NAMES[N_INTERVAL])) : NULL;
+    PyObject *search = interval ? hold(&h, PyObject_GetAttr(agent, NAMES[N_SEARCH])) : NULL;
+    if (search == NULL || read_floats(own, L->u, 3, "_u") < 0 || read_floats(offset, L->u_off, 3, "_u_offset") < 0 ||
+        get_double(agent, N_CONTROL_NORM, &L->control_norm) < 0 || get_double(agent, N_LAST_EVENT, &L->last_event) < 0 ||
+        get_long(agent, N_TRIGGERS, &L->triggers) < 0 || get_long(agent, N_INFOS, &L->infos) < 0 ||
+        optional_double(last_trigger, &L->triggered, &L->last_trigger) < 0 ||
+        optional_double(interval, &L->has_interval, &L->interval) < 0)
+        goto done;
+    L->heard = 0;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        PyObject *row = PyList_GET_ITEM(rows, k);
+        int heard_k = PyObject_IsTrue(PyList_GET_ITEM(heard, k));
+        E[k].time = PyFloat_AsDouble(PyList_GET_ITEM(times, k));
+        memset(E[k].q, 0, sizeof E[k].q);
+        memset(E[k].sensed_q, 0, sizeof E[k].sensed_q);
+        if (heard_k < 0 || (E[k].time == -1.0 && PyErr_Occurred()) ||
+            read_floats(PyList_GET_ITEM(ys, k), E[k].y, 3, "_edge_y") < 0 ||
+            read_floats(PyList_GET_ITEM(us, k), E[k].u, 3, "_edge_u") < 0 ||
+            (L->kind == 2 && read_floats(PyList_GET_ITEM(qs, k), E[k].q, 3, "_edge_q") < 0) ||
+            (sensed != NULL && read_floats(PyList_GET_ITEM(sensed, k), E[k].sensed_q, self->p, "_sensed_q") < 0))
+            goto done;
+        E[k].heard = (char)heard_k;
+        L->heard += heard_k;
+        E[k].row_set = !(PyTuple_Check(row) && PyTuple_GET_SIZE(row) == 0);
+        if (E[k].row_set && read_floats(row, E[k].row, width, "_rows") < 0)
+            goto done;
+    }
+    Py_XSETREF(L->search, search == Py_None ? NULL : Py_NewRef(search));
+    L->has_sensed = sensed != NULL;
+    L->moved = 0;
+    L->own = 1;
+    self->loads++;
+    status = 0;
+done:
     release(&h);
-    if (status != 1)
-        return status;
-    kn->kind = in->kind; /* the model a search reads now (read_model), as the trigger wrote it */
-    kn->m = in->m;
-    memcpy(kn->u_off, offset, sizeof kn->u_off);
-    memcpy(kn->u, control, sizeof kn->u); /* _u: the command padded with zeros, as take_sensing wrote it */
-    kn->dc = self->known_dc + self->start[a] * 4;
-    kn->valid = 1;
+    return status;
+}
+
+/* list[k] = value (a new reference, stolen, into a new list); -1 where value is NULL. */
+static int list_fill(PyObject *list, Py_ssize_t k, PyObject *value) {
+    if (value == NULL)
+        return -1;
+    PyList_SET_ITEM(list, k, value);
+    return 0;
+}
+
+/* Agent a's attributes written from its ledger, as the Python path leaves them (the same floats), and the
+ * agent handed back: its attributes are its knowledge again (a change to them is read at the next load). */
+static int ledger_store(TeamObject *self, Py_ssize_t a) {
+    Ledger *L = &self->ledger[a];
+    if (!L->own)
+        return 0;
+    PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
+    Edge *E = self->edges + self->start[a];
+    Py_ssize_t m = L->m, p = self->p, width = L->kind == 1 ? WIDTH1 : WIDTH2;
+    int eta2 = L->kind == 2, sensed = eta2 && L->has_sensed;
+    PyObject *lists[7] = {PyList_New(m), PyList_New(m), PyList_New(m), PyList_New(m), PyList_New(m),
+                          eta2 ? PyList_New(m) : NULL, sensed ? PyList_New(m) : NULL};
+    static const int names[7] = {N_HEARD, N_EDGE_TIME, N_EDGE_Y, N_EDGE_U, N_ROWS, N_EDGE_Q, N_SENSED_Q};
+    int status = -1, count = sensed ? 7 : eta2 ? 6 : 5;
+    for (int i = 0; i < count; i++)
+        if (lists[i] == NULL)
+            goto done;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        if (list_fill(lists[0], k, PyBool_FromLong(E[k].heard)) < 0 ||
+            list_fill(lists[1], k, PyFloat_FromDouble(E[k].time)) < 0 ||
+            list_fill(lists[2], k, floats_tuple(E[k].y, 3)) < 0 || list_fill(lists[3], k, floats_tuple(E[k].u, 3)) < 0 ||
+            list_fill(lists[4], k, E[k].row_set ? floats_tuple(E[k].row, width) : PyTuple_New(0)) < 0 ||
+            (eta2 && list_fill(lists[5], k, floats_tuple(E[k].q, 3)) < 0) ||
+            (sensed && list_fill(lists[6], k, floats_tuple(E[k].sensed_q, p)) < 0))
+            goto done;
+    }
+    for (int i = 0; i < count; i++) {
+        PyObject *list = lists[i];
+        lists[i] = NULL;
+        if (set_attr(agent, names[i], list) < 0)
+            goto done;
+    }
+    if (L->moved) { /* trigger's np.array(control), np.array(offset) */
+        PyObject *command = floats_tuple(L->u, p), *own = floats_tuple(L->u_off, p);
+        int rc = command == NULL || own == NULL ||
+                 set_attr(agent, N_CONTROL, PyObject_CallOneArg(NP_ARRAY, command)) < 0 ||
+                 set_attr(agent, N_OFFSET, PyObject_CallOneArg(NP_ARRAY, own)) < 0;
+        Py_XDECREF(command);
+        Py_XDECREF(own);
+        if (rc)
+            goto done;
+    }
+    if (set_attr(agent, N_U, floats_tuple(L->u, 3)) < 0 || set_attr(agent, N_U_OFFSET, floats_tuple(L->u_off, 3)) < 0 ||
+        set_attr(agent, N_CONTROL_NORM, PyFloat_FromDouble(L->control_norm)) < 0 ||
+        set_attr(agent, N_LAST_TRIGGER, L->triggered ? PyFloat_FromDouble(L->last_trigger) : Py_NewRef(Py_None)) < 0 ||
+        set_attr(agent, N_LAST_EVENT, PyFloat_FromDouble(L->last_event)) < 0 ||
+        set_attr(agent, N_INTERVAL, L->has_interval ? PyFloat_FromDouble(L->interval) : Py_NewRef(Py_None)) < 0 ||
+        set_attr(agent, N_TRIGGERS, PyLong_FromLong(L->triggers)) < 0 ||
+        set_attr(agent, N_INFOS, PyLong_FromLong(L->infos)) < 0 ||
+        set_attr(agent, N_SEARCH, Py_NewRef(L->search != NULL ? L->search : Py_None)) < 0 ||
+        (L->heard == m && set_attr(agent, N_EVERYONE_HEARD, Py_NewRef(Py_True)) < 0))
+        goto done;
+    L->own = 0;
+    Py_CLEAR(L->search);
+    self->stores++;
+    status = 0;
+done:
+    for (int i = 0; i < 7; i++)
+        Py_XDECREF(lists[i]);
+    return status;
+}
+
+/* Agent a owned (its ledger loaded where it is not yet): 1; 0 where the team leaves it to its attributes. */
+static int ledger_owned(TeamObject *self, Py_ssize_t a) {
+    Ledger *L = &self->ledger[a];
+    if (L->eligible < 0 && ledger_decide(self, a, PyTuple_GET_ITEM(self->agents, a)) < 0)
+        return -1;
+    if (!L->eligible)
+        return 0;
+    return L->own || ledger_load(self, a) == 0 ? 1 : -1;
+}
+
+static int ledger_counters(PyObject *team, Py_ssize_t a, long *triggers, long *infos) {
+    TeamObject *self = (TeamObject *)team;
+    if (a < 0 || a >= self->n || !self->ledger[a].own)
+        return 0;
+    *triggers = self->ledger[a].triggers;
+    *infos = self->ledger[a].infos;
+    return 1;
+}
+
+/* The model a search reads (read_model's layout) from agent a's ledger: its packed rows, _u_offset,
+ * _control_norm, k1..k3 (every row is set: the agent has triggered). */
+static int ledger_model(PyObject *team, Py_ssize_t a, Model *md) {
+    TeamObject *self = (TeamObject *)team;
+    Ledger *L = &self->ledger[a];
+    Edge *E = self->edges + self->start[a];
+    Py_ssize_t width = L->kind == 1 ? WIDTH1 : WIDTH2, n = L->m > 0 ? L->m : 1;
+    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
+    if (md->rows == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    md->kind = L->kind;
+    md->m = L->m;
+    md->probe = md->rows + n * width;
+    md->speeds = md->probe + 4 * n;
+    for (Py_ssize_t k = 0; k < L->m; k++)
+        memcpy(md->rows + k * width, E[k].row, sizeof(double) * (size_t)width);
+    memcpy(md->u_off, L->u_off, sizeof md->u_off);
+    md->control_norm = L->control_norm;
+    if (L->kind == 2) {
+        md->k1 = L->k1;
+        md->k2 = L->k2;
+        md->k3 = L->k3;
+    }
+    return 0;
+}
+
+/* Agent a's trigger at t from the world's arrays on its ledger: what team_sensing, take_sensing and
+ * after_trigger do on its attributes (_EventTriggeredAgent.trigger: the same checks, updates and floats),
+ * the command into `control`. 1 done, 0 left to the Python path (a trigger back in time, a state that is not
+ * finite, an edge out of its range: nothing changed). */
+static int ledger_trigger(TeamObject *self, Py_ssize_t a, double t, const double *x, const double *q, Sensing *in,
+                          double *control) {
+    Ledger *L = &self->ledger[a];
+    Edge *E = self->edges + self->start[a];
+    Py_ssize_t m = L->m, p = self->p;
+    if ((L->kind == 2) != (q != NULL) || !isfinite(t) || (L->triggered && t < L->last_trigger))
+        return 0;
+    in->kind = L->kind;
+    in->p = p;
+    in->m = m;
+    in->t = t;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        Py_ssize_t b = self->neighbour[self->start[a] + k];
+        double sum = 0.0;
+        for (Py_ssize_t i = 0; i < 3; i++) {
+            in->rel[k][i] = i < p ? x[a * p + i] - x[b * p + i] : 0.0;
+            in->extra[k][i] = i < p && q != NULL ? q[a * p + i] - q[b * p + i] : 0.0;
+            in->y[k][i] = 0.0;
+            if (!isfinite(in->rel[k][i]) || !isfinite(in->extra[k][i]))
+                return 0;
+        }
+        for (Py_ssize_t i = 0; i < p; i++) {
+            in->y[k][i] = in->rel[k][i] - E[k].d[i]; /* y_ij = x_i - x_j - d_ij */
+            sum += in->y[k][i] * in->y[k][i];
+        }
+        in->length[k] = sqrt(sum);
+        if (in->length[k] >= E[k].c)
+            return 0; /* out of its range: the Python path raises */
+    }
+    double total[3] = {0.0, 0.0, 0.0}, offset[3];
+    for (Py_ssize_t k = 0; k < m; k++) { /* _weighted_sum */
+        double r = in->length[k], c = E[k].c;
+        double gap = c - r;
+        double w = (2.0 * c - r) / (gap * gap); /* ω_ij (fij) */
+        for (Py_ssize_t i = 0; i < p; i++)
+            total[i] += w * (L->kind == 1 ? in->y[k][i] : L->k1 * in->y[k][i] + L->k2 * in->extra[k][i]);
+    }
+    for (Py_ssize_t i = 0; i < 3; i++) {
+        offset[i] = i < p ? -total[i] : 0.0;                                  /* (uxsingle) / (uxdouble) */
+        control[i] = i < p && L->kind == 1 ? L->kappa * offset[i] : offset[i]; /* κ u_i (ETA-1) */
+    }
+    for (Py_ssize_t k = 0; k < m; k++) { /* [t] * m, the sensed y_ij (ETA-2: q_ij) and the rows (_row) */
+        double *row = E[k].row, *uj = E[k].u;
+        E[k].time = t;
+        memcpy(E[k].y, in->y[k], sizeof E[k].y);
+        row[0] = t;
+        row[1] = E[k].y[0];
+        row[2] = E[k].y[1];
+        row[3] = E[k].y[2];
+        if (L->kind == 1) { /* Eta1Agent._row */
+            double v0 = control[0] - uj[0], v1 = control[1] - uj[1], v2 = control[2] - uj[2];
+            row[4] = v0;
+            row[5] = v1;
+            row[6] = v2;
+            row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+            row[8] = E[k].c;
+        } else { /* Eta2Agent._update (_sensed_q, _edge_q), Eta2Agent._row */
+            memcpy(E[k].q, in->extra[k], sizeof E[k].q);
+            memcpy(E[k].sensed_q, in->extra[k], sizeof E[k].sensed_q);
+            row[4] = E[k].q[0];
+            row[5] = E[k].q[1];
+            row[6] = E[k].q[2];
+            row[7] = control[0] - uj[0];
+            row[8] = control[1] - uj[1];
+            row[9] = control[2] - uj[2];
+            row[10] = E[k].c;
+        }
+        E[k].row_set = 1;
+    }
+    memcpy(L->u, control, sizeof L->u);
+    memcpy(L->u_off, offset, sizeof L->u_off);
+    L->control_norm = sqrt(offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]);
+    if (L->triggered && t > L->last_trigger) {
+        L->interval = t - L->last_trigger;
+        L->has_interval = 1;
+    }
+    L->last_trigger = t;
+    L->triggered = 1;
+    if (t > L->last_event) /* max(self.last_event, t) */
+        L->last_event = t;
+    Py_CLEAR(L->search);
+    L->triggers += 1;
+    L->moved = 1;
+    L->has_sensed |= L->kind == 2;
+    return 1;
+}
+
+/* A queued message taken on its receiver's ledger: read_message's checks, take_message and after_message
+ * (_EventTriggeredAgent.receive: the same updates and floats). 1 taken, 0 left to the Python receive (a
+ * message back in time: nothing changed), -1 error. */
+static int ledger_receive(TeamObject *self, const Pending *msg) {
+    Ledger *L = &self->ledger[msg->receiver];
+    if (msg->k >= L->m)
+        return 0;
+    Edge *E = self->edges + self->start[msg->receiver] + msg->k;
+    Py_ssize_t p = self->p;
+    if (msg->stamp < E->time || (L->triggered && msg->stamp < L->last_trigger))
+        return 0; /* back in time: the Python path raises */
+    double y[3] = {0.0, 0.0, 0.0}, uj[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0}, *u = L->u, *row = E->row;
+    for (Py_ssize_t i = 0; i < p; i++) {
+        y[i] = -msg->rel[i] - E->d[i]; /* the message carries x_j - x_i; the edge state is x_i - x_j - d_ij */
+        uj[i] = msg->control[i];
+        q[i] = -msg->velocity[i];
+    }
+    if (L->kind == 2) /* Eta2Agent._receive_extra */
+        memcpy(E->q, q, sizeof E->q);
+    L->heard += !E->heard;
+    E->heard = 1;
+    E->time = msg->stamp;
+    memcpy(E->y, y, sizeof E->y);
+    memcpy(E->u, uj, sizeof E->u);
+    row[0] = msg->stamp;
+    row[1] = y[0];
+    row[2] = y[1];
+    row[3] = y[2];
+    if (L->kind == 1) { /* Eta1Agent._row */
+        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
+        row[4] = v0;
+        row[5] = v1;
+        row[6] = v2;
+        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+        row[8] = E->c;
+    } else { /* Eta2Agent._row */
+        row[4] = q[0];
+        row[5] = q[1];
+        row[6] = q[2];
+        row[7] = u[0] - uj[0];
+        row[8] = u[1] - uj[1];
+        row[9] = u[2] - uj[2];
+        row[10] = E->c;
+    }
+    E->row_set = 1;
+    L->infos += 1;
+    if (msg->stamp > L->last_event) /* max(self.last_event, stamp) */
+        L->last_event = msg->stamp;
+    if (L->search != NULL) { /* dropped unless already due at or before this time */
+        int done;
+        double due = INFINITY;
+        if (Py_IS_TYPE(L->search, &SearchType)) {
+            done = ((SearchObject *)L->search)->st.has_result;
+            due = ((SearchObject *)L->search)->st.result;
+        } else {
+            PyObject *result = PyObject_GetAttr(L->search, NAMES[N_RESULT]);
+            if (result == NULL)
+                return -1;
+            done = result != Py_None;
+            if (done)
+                due = PyFloat_AsDouble(result);
+            Py_DECREF(result);
+            if (PyErr_Occurred())
+                return -1;
+        }
+        if (!(done && due <= msg->stamp))
+            Py_CLEAR(L->search);
+    }
+    return 1;
+}
+
+/* The command into the world's u (World.set_control; one that is not finite is refused by the world, in its
+ * words) and the trigger's information queued for deliver. */
+static int team_send(TeamObject *self, Py_ssize_t a, const Sensing *in, const double *control, double *u) {
     int finite = 1;
     for (Py_ssize_t i = 0; i < in->p; i++)
         finite &= isfinite(control[i]) != 0;
-    if (!finite) { /* the world refuses it, in its words */
-        PyObject *command = PyObject_GetAttr(agent, NAMES[N_CONTROL]);
+    if (!finite) {
+        PyObject *values = floats_tuple(control, in->p);
+        PyObject *command = values ? PyObject_CallOneArg(NP_ARRAY, values) : NULL;
         PyObject *out = command ? PyObject_CallFunctionObjArgs(self->set_control, PyTuple_GET_ITEM(self->ids, a),
                                                                command, NULL)
                                 : NULL;
+        Py_XDECREF(values);
         Py_XDECREF(command);
         if (out != NULL) {
             Py_DECREF(out);
@@ -2159,7 +2565,7 @@ static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, dou
         u[a * in->p + i] = control[i];
     for (Py_ssize_t k = 0; k < in->m; k++) {
         Pending msg = {.sender = a, .receiver = self->neighbour[self->start[a] + k],
-                       .k = self->back[self->start[a] + k], .stamp = t};
+                       .k = self->back[self->start[a] + k], .stamp = in->t};
         for (Py_ssize_t i = 0; i < 3; i++) {
             msg.rel[i] = in->rel[k][i];
             msg.control[i] = control[i];
@@ -2169,6 +2575,28 @@ static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, dou
             return -1;
     }
     return 1;
+}
+
+/* One agent's trigger at t from the world's arrays: on its ledger where the team owns its knowledge, else on
+ * its attributes (team_sensing, take_sensing, after_trigger); then its command and messages (team_send). 1
+ * done, 0 left to the Python path (the agent handed back first), -1 error. */
+static int team_trigger_one(TeamObject *self, Py_ssize_t a, PyObject *t_obj, double t, const double *x,
+                            const double *q, double *u, Sensing *in) {
+    PyObject *agent = PyTuple_GET_ITEM(self->agents, a);
+    double control[3], offset[3];
+    int status = ledger_owned(self, a);
+    if (status == 1) {
+        status = ledger_trigger(self, a, t, x, q, in, control);
+        if (status == 0 && ledger_store(self, a) < 0)
+            return -1;
+    } else if (status == 0) {
+        Held h = {.n = 0};
+        status = team_sensing(self, agent, a, t, x, q, &h, in);
+        if (status == 1 && (take_sensing(agent, &h, in, control, offset) < 0 || after_trigger(agent, &h, t_obj) < 0))
+            status = -1;
+        release(&h);
+    }
+    return status == 1 ? team_send(self, a, in, control, u) : status;
 }
 
 /* trigger(due, start, t, x, q, u): the agents due[start:] trigger at t in turn, as the engine's
@@ -2232,13 +2660,24 @@ static PyObject *team_info(TeamObject *self, const Pending *msg, int kind) {
     return info;
 }
 
-/* One queued message taken by its receiver: read_message's checks, take_message, after_message; a
- * message they do not take goes, as a TriggerInfo, to the receiver's receive (which raises its error). */
+/* One queued message taken by its receiver: on its ledger where the team owns its knowledge, else on its
+ * attributes (read_message's checks, take_message, after_message); a message they do not take goes, as a
+ * TriggerInfo, to the receiver's receive (handed back first), which raises its error. */
 static int team_deliver_one(TeamObject *self, const Pending *pending) {
     PyObject *agent = PyTuple_GET_ITEM(self->agents, pending->receiver);
-    Held h = {.n = 0};
+    int owned = ledger_owned(self, pending->receiver), status;
     long kind, p, fast;
-    int status = -1;
+    if (owned < 0)
+        return -1;
+    if (owned) {
+        status = ledger_receive(self, pending);
+        if (status != 0)
+            return status < 0 ? -1 : 0;
+        if (ledger_store(self, pending->receiver) < 0)
+            return -1;
+    }
+    Held h = {.n = 0};
+    status = -1;
     if (get_long(agent, N_KIND, &kind) < 0 || get_long(agent, N_DIMENSION, &p) < 0 ||
         get_long(agent, N_FAST, &fast) < 0)
         return -1;
@@ -2246,7 +2685,7 @@ static int team_deliver_one(TeamObject *self, const Pending *pending) {
     memcpy(msg.rel, pending->rel, sizeof msg.rel);
     memcpy(msg.control, pending->control, sizeof msg.control);
     memcpy(msg.velocity, pending->velocity, sizeof msg.velocity);
-    int plain = fast && p == self->p && (kind == 1 || kind == 2);
+    int plain = !owned && fast && p == self->p && (kind == 1 || kind == 2);
     PyObject *edge_time = plain ? hold(&h, PyObject_GetAttr(agent, NAMES[N_EDGE_TIME])) : NULL;
     PyObject *last_trigger = edge_time ? hold(&h, PyObject_GetAttr(agent, NAMES[N_LAST_TRIGGER])) : NULL;
     if (plain && last_trigger == NULL)
@@ -2255,25 +2694,9 @@ static int team_deliver_one(TeamObject *self, const Pending *pending) {
     plain = plain && PyList_CheckExact(edge_time) && msg.k < PyList_GET_SIZE(edge_time) &&
             plain_double(PyList_GET_ITEM(edge_time, msg.k), &edge) && msg.stamp >= edge &&
             (last_trigger == Py_None || (plain_double(last_trigger, &last) && msg.stamp >= last));
-    Known *kn = &self->known[pending->receiver];
-    if (plain) { /* the team's copy follows where it was the agent's knowledge before the message */
-        long triggers, infos;
-        int follow = kn->valid && kn->kind == msg.kind && msg.k < kn->m && get_long(agent, N_TRIGGERS, &triggers) == 0 &&
-                     get_long(agent, N_INFOS, &infos) == 0 && triggers == kn->triggers && infos == kn->infos;
-        if (PyErr_Occurred())
-            goto done;
-        kn->valid = 0;
-        status = take_message(agent, &h, &msg, follow ? kn->rows + msg.k * (kind == 1 ? WIDTH1 : WIDTH2) : NULL,
-                              follow ? kn->dc + 4 * msg.k : NULL, follow ? kn->u : NULL) < 0 ||
-                         after_message(agent, &h, msg.stamp) < 0
-                     ? -1
-                     : 0;
-        if (status == 0 && follow) {
-            kn->infos = infos + 1; /* after_message's count */
-            kn->valid = 1;
-        }
+    if (plain) {
+        status = take_message(agent, &h, &msg) < 0 || after_message(agent, &h, msg.stamp) < 0 ? -1 : 0;
     } else {
-        kn->valid = 0;
         PyObject *info = hold(&h, team_info(self, pending, (int)kind));
         PyObject *out = info ? PyObject_CallMethodOneArg(agent, NAMES[N_RECEIVE], info) : NULL;
         status = out == NULL ? -1 : 0;
@@ -2297,42 +2720,57 @@ static PyObject *team_deliver(TeamObject *self, PyObject *unused) {
     return receivers;
 }
 
-/* A new search of agent `a` (Agenda.plan) starts from the team's copy of its model where that is still
- * the agent's knowledge (its counters those it was written at): what search_model would read from the
- * agent's attributes, the same floats, without converting them. 0 (the search reads the agent itself
- * where the copy is not valid), -1 on error. */
-static int known_model(PyObject *team_obj, Py_ssize_t a, PyObject *agent, SearchObject *made) {
-    TeamObject *team = (TeamObject *)team_obj;
-    if (a < 0 || a >= team->n || PyTuple_GET_ITEM(team->agents, a) != agent || !team->known[a].valid)
-        return 0;
-    Known *kn = &team->known[a];
-    long triggers, infos;
-    if (get_long(agent, N_TRIGGERS, &triggers) < 0 || get_long(agent, N_INFOS, &infos) < 0)
-        return -1;
-    if (triggers != kn->triggers || infos != kn->infos)
-        return 0;
-    Model *md = &made->md; /* laid out as read_model lays it out */
-    Py_ssize_t width = kn->kind == 1 ? WIDTH1 : WIDTH2, n = kn->m > 0 ? kn->m : 1;
-    md->rows = PyMem_Malloc(sizeof(double) * (size_t)(n * (width + 5)));
-    if (md->rows == NULL) {
-        PyErr_NoMemory();
-        return -1;
+static PyObject *team_search(PyObject *team, Py_ssize_t a, PyObject *agent, double horizon, double first_span,
+                             long long *made) {
+    TeamObject *self = (TeamObject *)team;
+    if (a < 0 || a >= self->n || PyTuple_GET_ITEM(self->agents, a) != agent)
+        return Py_NewRef(Py_None);
+    int owned = ledger_owned(self, a);
+    if (owned <= 0)
+        return owned < 0 ? NULL : Py_NewRef(Py_None);
+    Ledger *L = &self->ledger[a];
+    if (L->search != NULL && Py_IS_TYPE(L->search, &SearchType) && ((SearchObject *)L->search)->s.limit == horizon)
+        return Py_NewRef(L->search); /* trigger_search keeps the search of this limit */
+    if (L->search != NULL || !L->triggered || L->heard < L->m) /* the method decides, or raises its error */
+        return ledger_store(self, a) < 0 ? NULL : Py_NewRef(Py_None);
+    SearchObject *search = (SearchObject *)SearchType.tp_alloc(&SearchType, 0);
+    if (search == NULL)
+        return NULL;
+    /* search_new's fields: at the start (last_event), no result, no step, the first span
+     * max(self._interval or 0.0, _FIRST_SPAN), no last step; the model from the ledger. */
+    search->model = Py_NewRef(agent);
+    search->start = L->last_event;
+    search->s = (Search){.alpha = L->alpha, .beta = L->beta, .floor = L->floor_, .limit = horizon,
+                         .tolerance = L->tolerance};
+    search->st.frontier = L->last_event;
+    search->st.span = py_max(L->has_interval ? L->interval : 0.0, first_span);
+    search->st.cover_end = -INFINITY;
+    search->st.bound_e = NAN;
+    search->st.bound_curv = NAN;
+    if (ledger_model(team, a, &search->md) < 0) {
+        Py_DECREF(search);
+        return NULL;
     }
-    md->kind = kn->kind;
-    md->m = kn->m;
-    md->probe = md->rows + n * width;
-    md->speeds = md->probe + 4 * n;
-    memcpy(md->rows, kn->rows, sizeof(double) * (size_t)(kn->m * width));
-    memcpy(md->u_off, kn->u_off, sizeof md->u_off);
-    md->control_norm = kn->control_norm;
-    if (kn->kind == 2) {
-        md->k1 = kn->k1;
-        md->k2 = kn->k2;
-        md->k3 = kn->k3;
+    search->known_triggers = L->triggers;
+    search->known_infos = L->infos;
+    search->team = Py_NewRef(team);
+    search->team_pos = a;
+    L->search = Py_NewRef(search);
+    *made += 1;
+    return (PyObject *)search;
+}
+
+/* release(*ids): the agents' attributes written from the team's ledger (all agents without ids) and the
+ * agents handed back; the engine calls it before a Python method of an agent reads or changes its knowledge,
+ * and at the end of a run. */
+static PyObject *team_release(TeamObject *self, PyObject *args) {
+    Py_ssize_t count = PyTuple_GET_SIZE(args);
+    for (Py_ssize_t i = 0; i < (count > 0 ? count : self->n); i++) {
+        Py_ssize_t a = count > 0 ? team_position(self, PyTuple_GET_ITEM(args, i)) : i;
+        if (a < 0 || ledger_store(self, a) < 0)
+            return NULL;
     }
-    made->known_triggers = triggers;
-    made->known_infos = infos;
-    return 0;
+    Py_RETURN_NONE;
 }
 
 /* Agenda.link(team): new searches of the team's agents start from the team's copy of their model. */
@@ -2358,12 +2796,21 @@ static PyObject *agenda_link(AgendaObject *self, PyObject *team) {
     Py_RETURN_NONE;
 }
 
+static PyMemberDef team_members[] = {
+    {"loads", T_LONGLONG, offsetof(TeamObject, loads), READONLY, "ledgers read from the agents' attributes"},
+    {"stores", T_LONGLONG, offsetof(TeamObject, stores), READONLY, "ledgers written to the agents' attributes"},
+    {NULL, 0, 0, 0, NULL},
+};
+
 static PyMethodDef team_methods[] = {
     {"trigger", (PyCFunction)team_trigger, METH_VARARGS,
      "trigger(due, start, t, x, q, u): due[start:] trigger at t from the world's arrays until one the compiled "
      "path does not take; its position (len(due): all)."},
     {"deliver", (PyCFunction)team_deliver, METH_NOARGS,
      "deliver(): the queued triggering information reaches its receivers; their ids, in the order sent."},
+    {"release", (PyCFunction)team_release, METH_VARARGS,
+     "release(*ids): the agents' attributes written from the team's ledger of their knowledge (every agent "
+     "without ids), the agents handed back."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -2378,6 +2825,7 @@ static PyTypeObject TeamType = {
     .tp_traverse = (traverseproc)team_traverse,
     .tp_clear = (inquiry)team_clear,
     .tp_methods = team_methods,
+    .tp_members = team_members,
 };
 
 /* ---- the world's closed-form step (formation_sim.sim.world.World._propagate) -------------- */

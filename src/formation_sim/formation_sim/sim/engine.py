@@ -497,44 +497,48 @@ def _run(
     team = _team(agents, world) if period is None else None
     if team is not None:
         agenda.link(team)
-    while True:
-        sampler.event(due=due)
-        real_t = t if clock is None else clock.real(t)
-        if period is None and (problem := rounding_floor(some_agent, world, floor_edges)) is not None:
-            if not stop.at_floor:
-                raise EngineError(problem)
-            stop.end('rounding_floor', real_t, problem, world=world)
-        if stop.reason is not None or stop.error_reached(world, t, real_t):
-            sampler.event(force=True)
-            break
-        if on_event is not None:
-            on_event(t, world, due)
-        receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
-        messages += len(receivers)
-        agenda.plan(agents, set(due).union(receivers), due, t)
-        t_next = agenda.next_time()
-        if t_next == t and period is None:
-            # News at this instant put an agent on its threshold already (it would have crossed
-            # within rounding of its neighbour): it triggers at this very instant, in a further
-            # round. An agent due twice at one instant means the threshold is at rounding level.
+    try:
+        while True:
+            sampler.event(due=due)
+            real_t = t if clock is None else clock.real(t)
+            if period is None and (problem := rounding_floor(some_agent, world, floor_edges)) is not None:
+                if not stop.at_floor:
+                    raise EngineError(problem)
+                stop.end('rounding_floor', real_t, problem, world=world)
+            if stop.reason is not None or stop.error_reached(world, t, real_t):
+                sampler.event(force=True)
+                break
+            if on_event is not None:
+                on_event(t, world, due)
+            receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
+            messages += len(receivers)
+            agenda.plan(agents, set(due).union(receivers), due, t)
+            t_next = agenda.next_time()
+            if t_next == t and period is None:
+                # News at this instant put an agent on its threshold already (it would have crossed
+                # within rounding of its neighbour): it triggers at this very instant, in a further
+                # round. An agent due twice at one instant means the threshold is at rounding level.
+                due = agenda.pop_due(t)
+                twice = [i for i in due if trigger_times[i][-1] == t]
+                if twice:
+                    raise EngineError(due_twice(twice[0], some_agent, t))
+                continue
+            steps += 1
+            if progress is not None and steps % 1000 == 0:
+                progress(t, sum(map(len, trigger_times.values())))
+            if t_next > horizon:
+                sampler.grid_until(horizon)
+                world.advance(horizon)
+                sampler.event(force=True)
+                stop.at_horizon(world)
+                break
+            sampler.grid_until(t_next)
+            world.advance(t_next)
+            t = t_next
             due = agenda.pop_due(t)
-            twice = [i for i in due if trigger_times[i][-1] == t]
-            if twice:
-                raise EngineError(due_twice(twice[0], some_agent, t))
-            continue
-        steps += 1
-        if progress is not None and steps % 1000 == 0:
-            progress(t, sum(map(len, trigger_times.values())))
-        if t_next > horizon:
-            sampler.grid_until(horizon)
-            world.advance(horizon)
-            sampler.event(force=True)
-            stop.at_horizon(world)
-            break
-        sampler.grid_until(t_next)
-        world.advance(t_next)
-        t = t_next
-        due = agenda.pop_due(t)
+    finally:
+        if team is not None:  # the agents' attributes are their knowledge again (the team's ledger written)
+            team.release()
     if clock is not None:
         trigger_times.update(clock.relabel(trigger_times))
     return messages
@@ -553,6 +557,8 @@ def _team(agents: dict, world: World) -> _fastcore.Team | None:
     if any(i not in agents[j].neighbour_ids for i, agent in zip(ids, ordered) for j in agent.neighbour_ids):
         return None
     return team_type(
+        plain=(Eta1Agent, Eta2Agent),
+        rule=ExponentialRule,
         agents=ordered,
         ids=ids,
         neighbours=tuple(tuple(position[j] for j in agent.neighbour_ids) for agent in ordered),
@@ -589,6 +595,8 @@ def _trigger_and_deliver(
         start = stop + 1
     receivers = [] if team is None else team.deliver()
     for info in outbox:
+        if team is not None:
+            team.release(info.receiver)  # its attributes its knowledge, for its Python receive
         agents[info.receiver].receive(info)
         receivers.append(info.receiver)
     return receivers
