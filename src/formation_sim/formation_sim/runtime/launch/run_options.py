@@ -161,10 +161,10 @@ def _check_world(options: RunOptions, scenario: Scenario) -> tuple[str, str, Rob
             f'robots run on the wall clock: backend {backend!r} needs clock=realtime, got {clock!r}'
         )
     if robots is None:
-        if backend == 'external':
+        if not kind.simulated_robots:  # external: the run cannot tell what they are
             raise RunError("backend 'external' needs robots=RobotOptions(model=...): what the robots are")
         robots = RobotOptions(model=backend)
-    if backend not in ('external', robots.model):
+    if kind.simulated_robots and backend != robots.model:
         raise RunError(
             f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}'
         )
