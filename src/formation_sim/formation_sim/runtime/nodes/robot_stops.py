@@ -22,8 +22,9 @@ recorder): the coordinator waits for that after the final reports (`unacknowledg
 poses, `robots.POSES_AFTER_END` = 1 s.  A datagram lost on the way (a UDP receive buffer full on a
 loaded machine) is repaired only at the writer's next heartbeat (every 0.1 s,
 fastdds_profile.xml), so never once the coordinator has left: before this wait it left as soon
-as 0.4 ms after its last zero (a killed agent's test under load, 2026-12-06).  The bound is ten heartbeat periods; it is reached only by a reader that never answers
-(a robot that died: its reader stays matched until its participant's lease lapses).
+as 0.4 ms after its last zero (a killed agent's test under load, 2026-12-06).  The bound is ten
+heartbeat periods; it is reached only by a reader that never answers (a robot that died: its
+reader stays matched until its participant's lease lapses).
 """
 
 from __future__ import annotations
