@@ -85,7 +85,8 @@ def test_a_kind_defined_once_is_usable_everywhere(sluggish, tmp_path):
     from formation_sim.cli import build_parser
     from formation_sim.model.scenario import load_scenario
     from formation_sim.runtime.contract import robot_run_topics
-    from formation_sim.runtime.launch.plan import BACKENDS, RobotOptions
+    from formation_sim.runtime.launch.backends import BACKENDS
+    from formation_sim.runtime.launch.plan import RobotOptions
     from formation_sim.runtime.nodes.coordinator import COORDINATOR_PARAMETERS
     from formation_sim.runtime.nodes.robot_node import SPECS as ROBOT_SPECS
     from formation_sim.sim.robots import Command, make_robot

@@ -8,6 +8,8 @@ import functools
 import hashlib
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -261,3 +263,52 @@ def test_from_a_start_inside_the_margin_the_separation_grows_until_it_holds_then
     assert inside >= 1
     assert safety_cases.edge_maxima(scenario, x).max() < scenario.delta
     assert safety_cases.settling_time(scenario, times, x, 0.05) < scenario.horizon
+
+
+def _safety_cases(*arguments: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, '-m', 'formation_sim.sim.safety_cases', *arguments],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+def test_the_command_has_a_help_and_refuses_a_bad_seed_count_naming_the_rule_and_value():
+    """`python -m formation_sim.sim.safety_cases --help` printed a traceback (int('--help')): now
+    argparse's help, exit 0, nothing run; a count that is no integer >= 0 is refused by name, exit 2."""
+    shown = _safety_cases('--help')
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stdout.startswith('usage: python -m formation_sim.sim.safety_cases')
+    assert (
+        '--stress FIRST STOP' in shown.stdout and 'SEEDS' in shown.stdout and '| seed |' not in shown.stdout
+    )
+    for bad, complaint in (
+        ('x', "argument SEEDS: must be an integer >= 0, got 'x'"),
+        ('-3', 'argument SEEDS: must be an integer >= 0, got -3'),
+    ):
+        done = _safety_cases(bad)
+        assert done.returncode == 2 and complaint in done.stderr, done.stderr
+        assert 'Traceback' not in done.stderr and done.stdout == ''
+
+
+@pytest.mark.parametrize(
+    ('arguments', 'complaint'),
+    [
+        (['--stress', '5', '3'], 'argument --stress: FIRST must be < STOP, got FIRST 5 and STOP 3'),
+        (['--stress', '4', '4'], 'argument --stress: FIRST must be < STOP, got FIRST 4 and STOP 4'),
+        (['--stress', '1'], 'argument --stress: expected 2 arguments'),
+        (['--stress', '0', 'y'], "argument --stress: must be an integer >= 0, got 'y'"),
+        (
+            ['3', '--stress', '1', '2'],
+            'SEEDS and --stress exclude each other (the table or the sweep), got SEEDS 3',
+        ),
+    ],
+)
+def test_the_stress_sweep_refuses_a_bad_range_before_running_anything(capsys, arguments, complaint):
+    with pytest.raises(SystemExit) as exited:
+        safety_cases.main(arguments)
+    captured = capsys.readouterr()
+    assert exited.value.code == 2 and complaint in captured.err, captured.err
+    assert captured.out == ''  # no table, no sweep line

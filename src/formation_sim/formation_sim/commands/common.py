@@ -474,7 +474,8 @@ def paper_example_note(name: str, rules: list[str]) -> str | None:
 def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
     """What decides a distributed run's processes and their parameters (`formation run`, `formation
     params`)."""
-    from formation_sim.runtime.launch.plan import BACKENDS, ROBOT_MODELS
+    from formation_sim.runtime.launch.backends import BACKENDS
+    from formation_sim.runtime.launch.plan import ROBOT_MODELS
 
     parser.add_argument(
         '--backend',
@@ -523,11 +524,13 @@ def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
 def plan_options(args: argparse.Namespace) -> dict:
     """`FormationRun`'s arguments from `add_run_arguments` and `add_plan_arguments`' (RunError: refused)."""
     from formation_sim.runtime.errors import RunError
+    from formation_sim.runtime.launch.backends import EXTERNAL, backend_kind
     from formation_sim.runtime.launch.plan import ROBOT_MODELS
 
+    kind = backend_kind(args.backend)  # one of argparse's choices
     robots = None
-    if args.backend != 'exact':
-        if args.backend == 'external' and args.robot is None:
+    if kind.on_robots:
+        if kind is EXTERNAL and args.robot is None:
             raise RunError(f'--backend external needs --robot {"|".join(ROBOT_MODELS)} (what the robots are)')
         robots = robot_options(args, args.robot or args.backend)
     return {
@@ -537,7 +540,7 @@ def plan_options(args: argparse.Namespace) -> dict:
         'agents_per_process': args.agents_per_process,
         'record': not args.no_record,
         'sample_period': args.sample_dt,
-        'clock': 'realtime' if args.real_time or args.backend != 'exact' else 'lockstep',
+        'clock': 'realtime' if args.real_time else kind.default_clock,
         'executor': args.executor,
         'backend': args.backend,
         'robots': robots,

@@ -11,16 +11,18 @@ tolerance. `python -m formation_sim.sim.safety_cases` prints docs/SAFETY.md's ta
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 
 import numpy as np
 
 from formation_agent.core.safety import SafetyConfig
-from formation_sim.model.scenario import Edge, Scenario, SingleGains
+from formation_sim.model.scenario import Edge, Scenario, SingleGains, short_repr
 
 DELTA = 4.0
 GAINS = SingleGains(alpha=1.0, beta=0.3)  # β < β0 = ρ2(DD^T)/Δ0: 1/3 (path of 3) .. 2/3 (cycle of 4)
+TABLE_SEEDS = 20  # the placements of docs/SAFETY.md's table
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # 1 m square, corners 1-2-3-4
 
 
@@ -209,13 +211,71 @@ def stress(seeds) -> None:
         )
 
 
+def _seed_count(text: str) -> int:
+    """An integer >= 0 (argparse type: a value that breaks it is refused, exit 2)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'must be an integer >= 0, got {short_repr(text)}') from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must be an integer >= 0, got {value!r}')
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='python -m formation_sim.sim.safety_cases',
+        description=(
+            "Print docs/SAFETY.md's table of the safety layer on seeded random placements (4 robots in a "
+            '2.2 m square forming a 1 m square; D = 0.25 m, the layer off and on), or with --stress the '
+            'stress sweep over random teams.'
+        ),
+        epilog=(
+            'Examples: python -m formation_sim.sim.safety_cases 20 (the table, seeds 0-19); '
+            'python -m formation_sim.sim.safety_cases --stress 0 40 (the sweep, seeds 0-39). '
+            'Exit status: 0 printed; 2 bad arguments (nothing run).'
+        ),
+    )
+    parser.add_argument(
+        'seeds',
+        nargs='?',
+        type=_seed_count,
+        default=None,
+        metavar='SEEDS',
+        help=f'how many placements: seeds 0 .. SEEDS-1 (an integer >= 0; default: {TABLE_SEEDS})',
+    )
+    parser.add_argument(
+        '--stress',
+        nargs=2,
+        type=_seed_count,
+        metavar=('FIRST', 'STOP'),
+        help='print the stress sweep instead, a line per random team of seeds FIRST .. STOP-1 (FIRST < STOP)',
+    )
+    return parser
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Print the 20-placement table of docs/SAFETY.md (D = 0.25 m, the layer's defaults), or with
-    `--stress FIRST STOP` the stress sweep over those seeds."""
-    if argv and argv[0] == '--stress':
-        stress(range(int(argv[1]), int(argv[2])))
+    """Print the SEEDS-placement table of docs/SAFETY.md (D = 0.25 m, the layer's defaults;
+    `TABLE_SEEDS` by default), or with `--stress FIRST STOP` the stress sweep over those seeds.
+    Bad arguments: argparse's message naming the rule and the value, exit 2, nothing run."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.stress is None:
+        print_table(range(TABLE_SEEDS if args.seeds is None else args.seeds))
         return 0
-    seeds = range(int(argv[0]) if argv else 20)
+    first, stop = args.stress
+    if args.seeds is not None:
+        parser.error(
+            f'SEEDS and --stress exclude each other (the table or the sweep), got SEEDS {args.seeds}'
+        )
+    if not first < stop:
+        parser.error(f'argument --stress: FIRST must be < STOP, got FIRST {first} and STOP {stop}')
+    stress(range(first, stop))
+    return 0
+
+
+def print_table(seeds) -> None:
+    """docs/SAFETY.md's table, a row per `random_square` seed: the layer off and on."""
     safety = SafetyConfig(min_separation=0.25)
     print(
         '| seed | closest off [m] | closest on [m] | events off | events on | to 5 cm off [s] '
@@ -230,7 +290,6 @@ def main(argv: list[str] | None = None) -> int:
             f'{off["settle"]:.2f} | {on["settle"]:.2f} | {on["edge"]:.3f} | {on["least_gap"]:.4f} | '
             f'{on["last_intervention"]:.2f} |'
         )
-    return 0
 
 
 if __name__ == '__main__':

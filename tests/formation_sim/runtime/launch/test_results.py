@@ -90,9 +90,9 @@ def test_the_child_that_stops_the_run_is_the_first_besides_the_keeper_that_faile
     ],
 )
 def test_the_time_keeper_gets_its_time_to_name_a_lost_child_itself(tmp_path, name, returncode, backend, wait):
-    from formation_sim.runtime.launch import results
+    from formation_sim.runtime.launch import backends, results
 
-    expected = getattr(results, wait) if isinstance(wait, str) else wait
+    expected = getattr(backends, wait) if isinstance(wait, str) else wait
     assert results.detection_time(_child(name, returncode, tmp_path), backend=backend) == expected
 
 

@@ -309,6 +309,57 @@ def test_the_final_step_goes_out_once_and_a_discovery_that_fails_leaves_a_summar
     assert 'node_created' in summary['extra']['timestamps'] and 'step0' not in summary['extra']['timestamps']
 
 
+def test_the_graph_leaves_out_a_node_that_left_between_the_listing_and_the_look_at_it():
+    """A killed agent's test (1 run of 60 under load): agent 3, stopped by the orchestrator's
+    SIGINT, left between the keeper's listing of the graph and its look at agent 3's endpoints;
+    the error ('cannot get publisher names and types for nonexistent node') aborted the end of the
+    run, and robot 2 got no zero command.  No ROS: the graph is a stub."""
+    from rclpy.node import NodeNameNonExistentError
+
+    from formation_sim.runtime.nodes.time_keeper import graph_of
+
+    class _Graph:
+        def get_node_names_and_namespaces(self):
+            return [('formation_agent', '/agent_3'), ('formation_recorder', '/')]
+
+        def _look(self, name, namespace):
+            if namespace == '/agent_3':
+                raise NodeNameNonExistentError('cannot get publisher names and types for nonexistent node')
+            return [('/b', ['std_msgs/msg/String']), ('/a', ['std_msgs/msg/String'])]
+
+        get_publisher_names_and_types_by_node = get_subscriber_names_and_types_by_node = _look
+        get_service_names_and_types_by_node = get_client_names_and_types_by_node = _look
+
+    ends = ('publishers', 'subscriptions', 'services', 'clients')
+    assert graph_of(_Graph()) == {'/formation_recorder': {end: ['/a', '/b'] for end in ends}}
+
+
+def test_a_run_whose_orderly_end_fails_still_sends_every_robot_its_zero(
+    coordinator, tmp_path, monkeypatch, capsys
+):
+    """Whatever breaks the end of a run (the final reports never collected), every robot gets its
+    zero command from the coordinator and the summary is written all the same."""
+    from formation_sim.runtime.errors import AgentLostError
+    from formation_sim.runtime.nodes import keeper_main
+
+    def broken(node, executor):
+        raise RuntimeError('cannot get publisher names and types for nonexistent node')
+
+    class _Executor:  # the world's bounded wait spins it: time passes
+        def spin_once(self, *, timeout_sec: float) -> None:
+            time.sleep(timeout_sec)
+
+    monkeypatch.setattr(keeper_main, 'stop_agents', broken)
+    node = _running(coordinator, out_dir=str(tmp_path))
+    keeper_main.stop_and_write(node, _Executor(), AgentLostError('agent 2 lost', agents=[2]))
+    assert node.world.robot_stops.sent_all == [1, 2, 3, 4]
+    err = capsys.readouterr().err
+    assert 'formation_sim: could not stop the agents: cannot get publisher names' in err
+    assert 'could not stop the robots' not in err
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    assert summary['extra']['failure']['kind'] == 'agent_lost'
+
+
 def test_the_summary_is_what_analyze_reads_from_a_bag_of_the_same_messages(coordinator, tmp_path):
     from geometry_msgs.msg import Twist, Vector3
     from rclpy.serialization import serialize_message

@@ -16,9 +16,15 @@ class _Publisher:
     def __init__(self, message: type, topic: str, qos) -> None:
         self.message, self.topic, self.qos = message, topic, qos
         self.sent: list[bytes] = []
+        self.acked = 0  # how many of `sent` every reader has acknowledged
+        self.looks: list[float] = []  # the timeouts `wait_for_all_acked` was asked with [s]
 
     def publish(self, data: bytes) -> None:
         self.sent.append(data)
+
+    def wait_for_all_acked(self, timeout) -> bool:
+        self.looks.append(timeout.nanoseconds * 1e-9)
+        return self.acked == len(self.sent)
 
 
 class _Logger:
@@ -86,6 +92,39 @@ def test_an_operators_stop_sends_every_robot_its_zero_and_leaves_the_unreported_
     assert stops.stop([2], why='no final report from their agents') == [2]  # its agent did not report
     assert len(node.publishers['/agent_2/robot/cmd_vel'].sent) == 2 * ROBOT_COMMAND_QOS.depth
     assert stops.extra() == {'robots_stopped_here': [2]}
+
+
+def test_a_zero_sent_from_here_is_unacknowledged_until_every_reader_acknowledged_it():
+    """What the coordinator waits for before it leaves (`RobotWorld.after_final_step`): a zero
+    that a reader has not acknowledged is only repaired while the coordinator lives.  Nothing sent:
+    nothing to wait for, and no writer is asked (the end of a run without a stop from here is not
+    slower).  Each look is a look (no wait), and a robot acknowledged is not asked again until its
+    next zero."""
+    node = _Node()
+    stops = RobotStops(node, model='unicycle', robots=[1, 2, 3], dimension=2, world_frame='world')
+    writers = {i: node.publishers[f'/agent_{i}/robot/cmd_vel'] for i in (1, 2, 3)}
+    assert stops.unacknowledged() == [] and all(w.looks == [] for w in writers.values())
+
+    stops.stop([3, 2], why='no final report from their agents')
+    assert stops.unacknowledged() == [3, 2]  # in the order sent
+    writers[2].acked = len(writers[2].sent)
+    assert stops.unacknowledged() == [3]
+    assert stops.note_unacknowledged(within=1.0) == [3]  # the wait is over: logged, by robot and bound
+    assert node.logger.lines[-1] == (
+        'robots [3]: their zero command from the coordinator was not acknowledged by every reader within 1 s'
+    )
+    writers[3].acked = len(writers[3].sent)
+    assert stops.unacknowledged() == []
+    assert writers[1].looks == [] and writers[2].looks == [0.0, 0.0] and writers[3].looks == [0.0] * 4
+    assert stops.unacknowledged() == [] and writers[3].looks == [0.0] * 4  # acknowledged: not asked again
+    lines = len(node.logger.lines)
+    assert stops.note_unacknowledged(within=1.0) == [] and len(node.logger.lines) == lines  # nothing to say
+
+    stops.stop_all(why='an operator asked to stop the run after its end')  # every robot's zero again
+    assert stops.unacknowledged() == [1, 2, 3]
+    for writer in writers.values():
+        writer.acked = len(writer.sent)
+    assert stops.unacknowledged() == []
 
 
 class _Clock:

@@ -24,7 +24,7 @@ Fault policy (README, "Reliability"): a scenario that breaks the theorems' hypot
 nothing (`formation_sim.model.validate.ValidationError`).  A child that dies stops the run: the
 time keeper detects a lost agent or recorder itself within the DDS liveliness lease and stops
 with a partial summary; this process sees any child exit within `POLL_PERIOD`, gives the time
-keeper `LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
+keeper `backends.LOST_DETECTION` s to do so, then stops the rest (the recorder last).  The summary's
 `extra.failure` names what failed and when (this process writes the summary itself if the time
 keeper could not); a bag left unfinished is recovered (`formation_sim.bag.recovery.reindex`);
 and the bag is checked against what the run published (`formation_sim.analysis.accounting`): a
@@ -57,8 +57,8 @@ from formation_msgs_py.topics import (
 from formation_sim.model.scenario import Scenario, load_scenario
 from formation_sim.model.validate import require_valid
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.backends import BACKENDS, backend_kind
 from formation_sim.runtime.launch.plan import (
-    BACKENDS,
     BAG_DIR,
     LOG_DIR,
     LaunchPlan,
@@ -294,7 +294,7 @@ class FormationRun:
                 keeper,
                 scenario=self.scenario,
                 horizon=self.options.horizon,
-                mode='distributed' if self.options.backend == 'exact' else 'robots',
+                mode=backend_kind(self.options.backend).mode,
                 bag=bag,
                 run_dir=self.out_dir,
                 status=status,

@@ -10,6 +10,9 @@ A backend decides who keeps time and what the world is (README, "Running on robo
 - `external`: time kept by the coordinator; the world is whatever publishes the robots' poses
   (which the agents sense) and takes their commands; no extra process.
 
+What each kind of backend decides (its time keeper, files, mode, clock) is one table,
+`backends.BackendKind`, picked by the backend's name (`LaunchPlan.kind`).
+
 Every plan also starts one process per agent (or per `agents_per_process` agents) and, unless
 told not to, the recorder.  `LaunchPlan.write_inputs` writes what every process reads into the run
 folder (the scenario and one parameter file per kind of node, the only place they are built), so a
@@ -37,7 +40,7 @@ from pathlib import Path
 
 import yaml
 
-from formation_agent.core.kinds import Geometry, KindNames, default_min_separation, robot_kind
+from formation_agent.core.kinds import Geometry, default_min_separation, robot_kind
 from formation_agent.core.kinds.shape import declared
 from formation_agent.core.limits import Limits as KindLimits
 from formation_msgs_py.middleware import (
@@ -48,30 +51,19 @@ from formation_msgs_py.middleware import (
     use_our_fastdds_profile,
 )
 from formation_msgs_py.tags import KEY_FILE, new_key, write_key
-from formation_msgs_py.topics import (
-    AGENT_NODE,
-    COORDINATOR_NODE,
-    ROBOT_NODE,
-    SIMULATOR_NODE,
-    WORLD_FRAME,
-    robot_command_topic,
-)
+from formation_msgs_py.topics import AGENT_NODE, ROBOT_NODE, WORLD_FRAME, robot_command_topic
 from formation_sim.model.scenario import Scenario, dump_scenario
 from formation_sim.runtime.contract import (
-    COORDINATOR_FILE,
-    SIMULATOR_FILE,
     TRAJECTORY_TOPICS,
     agent_parameters,
     formation_topics,
     robot_run_topics,
 )
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.backends import BackendKind, backend_kind
 from formation_sim.sim.errors import RobotError
 from formation_sim.sim.robots import ROBOT_MODELS, Limits
 
-BACKENDS = KindNames(
-    before=('exact',), after=('external',)
-)  # a simulated robot backend per registered robot kind
 DISCOVERY_MODES = (
     'simple',
     'server',
@@ -344,12 +336,17 @@ class LaunchPlan:
     localhost_only: bool = True  # discovery and traffic stay on this machine
 
     @property
+    def kind(self) -> BackendKind:
+        """The kind of its backend (`backends`): its time keeper, files, mode, clock."""
+        return backend_kind(self.backend)
+
+    @property
     def keeper(self) -> str:
-        return 'simulator' if self.backend == 'exact' else 'coordinator'
+        return self.kind.keeper
 
     @property
     def simulated_robots(self) -> bool:
-        return self.backend in ROBOT_MODELS
+        return self.kind.simulated_robots
 
     def agent_groups(self) -> list[list[int]]:
         return _groups(list(self.scenario.agent_ids), self.agents_per_process)
@@ -365,7 +362,7 @@ class LaunchPlan:
     # -- inputs ------------------------------------------------------------------------------------
 
     def recorder_topics(self) -> list[tuple[str, str]]:
-        if self.backend == 'exact':
+        if not self.kind.on_robots:
             return formation_topics(self.scenario)
         return robot_run_topics(
             self.scenario,
@@ -433,7 +430,7 @@ class LaunchPlan:
         }
         paths['agents'] = out / AGENTS_FILE
         _write_yaml(paths['agents'], agents)
-        paths['keeper'] = out / (SIMULATOR_FILE if self.backend == 'exact' else COORDINATOR_FILE)
+        paths['keeper'] = out / self.kind.keeper_file
         _write_yaml(
             paths['keeper'],
             {self._keeper_node: {'ros__parameters': self.keeper_parameters(paths['scenario'])}},
@@ -448,9 +445,9 @@ class LaunchPlan:
                         # acknowledged by the recorder: they are in its readers already.
                         'drain_quiet': RECORDER_DRAIN_QUIET,
                         'key_file': str(self.key_file),  # Steps without the run's tag move no bag time
-                        **({'watched_topics': self.robot_pose_topics()} if self.backend != 'exact' else {}),
+                        **({'watched_topics': self.robot_pose_topics()} if self.kind.on_robots else {}),
                         # External robots publish on after the run: their poses must not hold the drain up.
-                        **({'endless_topics': self.endless_topics()} if self.backend == 'external' else {}),
+                        **({'endless_topics': self.endless_topics()} if self.kind.endless_poses else {}),
                     }
                 }
             }
@@ -554,7 +551,7 @@ class LaunchPlan:
 
     @property
     def _keeper_node(self) -> str:
-        return f'/{SIMULATOR_NODE}' if self.backend == 'exact' else f'/{COORDINATOR_NODE}'
+        return self.kind.keeper_node
 
     @property
     def key_file(self) -> Path:
@@ -576,7 +573,7 @@ class LaunchPlan:
             'discovery_timeout': max(120.0, float(len(self.scenario.agent_ids))),
             'key_file': str(self.key_file),
         }
-        if self.backend == 'exact':
+        if not self.kind.on_robots:
             params['clock_mode'] = self.clock
         else:
             params.update(
@@ -596,12 +593,7 @@ class LaunchPlan:
         return params
 
     def _keeper_args(self, paths: dict[str, Path]) -> tuple[str, ...]:
-        module = (
-            'formation_sim.runtime.nodes.sim_node'
-            if self.backend == 'exact'
-            else 'formation_sim.runtime.nodes.coordinator'
-        )
-        return ('-m', module, '--ros-args', '--params-file', str(paths['keeper']))
+        return ('-m', self.kind.keeper_module, '--ros-args', '--params-file', str(paths['keeper']))
 
     # -- environment -------------------------------------------------------------------------------
 

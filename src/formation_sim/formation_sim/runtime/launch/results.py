@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from formation_msgs_py.exit_codes import ExitCode
+from formation_sim.runtime.launch.backends import backend_kind
 from formation_sim.runtime.launch.supervise import Child, describe_exit
 from formation_sim.sim.summary import RunSummary, run_failure, summary_of, unstarted_summary
 
@@ -63,14 +64,6 @@ def lost_or_failed(child: Child) -> int:
     return ExitCode.FAILED if child.failed_itself else ExitCode.LOST
 
 
-# How long the time keeper may take to notice a lost agent by itself: the DDS liveliness lease, its
-# grace, one 0.1 s tick, and margin for a loaded machine (formation_msgs_py.qos.LIVELINESS_LEASE).
-LOST_DETECTION = 1.0 + 0.5 + 0.1 + 2.0
-# On robots, how long the coordinator may take to stop the run on an agent's final report that
-# names its error (it does so at once; margin for a loaded machine).
-AGENT_REPORT_DETECTION = 1.0
-
-
 def first_lost(children: list[Child], keeper: Child) -> Child | None:
     """The first child besides the time keeper `keeper` whose exit (seen) stops the run: one that
     failed, or one that should have run until stopped."""
@@ -91,15 +84,14 @@ def detection_time(lost: Child, *, backend: str) -> float:
 
     Not an agent (a robot, the recorder): 0, everything stops now.  An agent that named its
     error: the time keeper stops the run as soon as the agent's final report comes
-    (`AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
+    (`backends.AGENT_REPORT_DETECTION`), naming the first cause (a robot whose poses stopped).  An agent
     killed on a robot run: 0, robots must not wait for a liveliness lease (the message names
     the dead agent's process).  Lock-step (`backend` exact): the keeper sees the lease lapse
-    (`LOST_DETECTION`)."""
+    (`backends.LOST_DETECTION`).  Each kind of backend says its own (`backends.BackendKind`)."""
     if not lost.name.startswith('agent'):
         return 0.0
-    if lost.failed_itself:
-        return AGENT_REPORT_DETECTION if backend != 'exact' else LOST_DETECTION
-    return 0.0 if backend != 'exact' else LOST_DETECTION
+    kind = backend_kind(backend)
+    return kind.agent_failed_detection if lost.failed_itself else kind.agent_killed_detection
 
 
 def keeper_failed(code: int, keeper: Child, lost: Child | None) -> tuple[int, str]:

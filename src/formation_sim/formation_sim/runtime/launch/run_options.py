@@ -17,8 +17,8 @@ from collections.abc import Callable, Mapping, Sequence
 from formation_msgs_py.middleware import DEFAULT_EXECUTOR, EXECUTORS
 from formation_sim.model.scenario import Scenario
 from formation_sim.runtime.errors import RunError
+from formation_sim.runtime.launch.backends import BACKENDS, EXACT, backend_kind
 from formation_sim.runtime.launch.plan import (
-    BACKENDS,
     DISCOVERY_MODES,
     DOMAIN_RANGE,
     INJECT_KEYS,
@@ -128,7 +128,8 @@ def _check_numbers(options: RunOptions, scenario: Scenario, horizon: float) -> N
         check_sample_dt(options.sample_period, horizon=horizon, scenario=scenario)
     except EngineError as error:
         raise RunError(f'sample_period: {error}') from None
-    if options.backend != 'exact' and not options.sample_period:
+    # Any backend but the exact world (a name that is none is refused after, by `_check_world`).
+    if options.backend != EXACT.name and not options.sample_period:
         raise RunError(
             'sample_period must be > 0 on robots (the poses are sampled on its grid), '
             f'got {options.sample_period!r}'
@@ -143,27 +144,27 @@ def _check_numbers(options: RunOptions, scenario: Scenario, horizon: float) -> N
 def _check_world(options: RunOptions, scenario: Scenario) -> tuple[str, str, RobotOptions | None]:
     """The backend, its clock and its robots: (backend, clock, robots) completed."""
     backend, robots = options.backend, options.robots
-    if backend not in BACKENDS:
-        raise RunError(f'backend must be one of {BACKENDS}, got {backend!r}')
-    on_robots = backend != 'exact'
-    clock = options.clock if options.clock is not None else 'realtime' if on_robots else 'lockstep'
+    kind = backend_kind(backend)  # RunError: not one of BACKENDS
+    clock = options.clock if options.clock is not None else kind.default_clock
     if clock not in CLOCKS:
         raise RunError(
             f"clock must be 'lockstep' (sim time, exact) or 'realtime' (wall clock), got {clock!r}"
         )
-    if not on_robots:
+    if not kind.on_robots:
         if robots is not None:
-            raise RunError(f"robots are options of the robot backends {tuple(BACKENDS[1:])}, not of 'exact'")
+            raise RunError(
+                f'robots are options of the robot backends {tuple(BACKENDS[1:])}, not of {EXACT.name!r}'
+            )
         return backend, clock, None
-    if clock != 'realtime':
+    if clock not in kind.clocks:
         raise RunError(
             f'robots run on the wall clock: backend {backend!r} needs clock=realtime, got {clock!r}'
         )
     if robots is None:
-        if backend == 'external':
+        if not kind.simulated_robots:  # external: the run cannot tell what they are
             raise RunError("backend 'external' needs robots=RobotOptions(model=...): what the robots are")
         robots = RobotOptions(model=backend)
-    if backend not in ('external', robots.model):
+    if kind.simulated_robots and backend != robots.model:
         raise RunError(
             f'backend {backend!r} simulates {backend} robots, but robots.model is {robots.model!r}'
         )

@@ -391,9 +391,8 @@ class RobotWorld:
         keeper.publish(keeper.step_pub, encode_step(keeper.step))  # first: the robots stop now
         keeper.finished = True
         keeper.reached = keeper.horizon
-        keeper.graph = graph_of(
-            self.keeper
-        )  # the agents are still there: they leave after their final reports
+        # The graph now: the agents are still there (they leave after their final reports).
+        keeper.graph = graph_of(self.keeper)
 
     @property
     def reached_time(self) -> float:
@@ -405,19 +404,19 @@ class RobotWorld:
         return min(self.keeper.horizon, max(0.0, time.time() - self.keeper.epoch))
 
     def after_final_step(self, executor) -> None:
-        """Before the summary: the poses up to the horizon (each robot's first one past it)."""
+        """Before the summary: the poses up to the horizon (each robot's first one past it), and
+        the zero commands sent from here acknowledged (`robot_stops`), both within POSES_AFTER_END."""
         keeper = self.keeper
         deadline = time.monotonic() + POSES_AFTER_END
         end = self.reached_time
         # Not for a robot whose poses stopped (lost, or on their way to it): it sends no more.
-        lost = (
-            keeper.failure_info['agents']
-            if keeper.failure_info and keeper.failure_info['kind'] == 'robot_lost'
-            else []
-        )
+        failure = keeper.failure_info or {}
+        lost = failure['agents'] if failure.get('kind') == 'robot_lost' else []
         waiting = self.poses.expected(lost=lost, now=time.monotonic())
-        while time.monotonic() < deadline and self.poses.behind(waiting, end):
+        stops = self.robot_stops
+        while time.monotonic() < deadline and (self.poses.behind(waiting, end) or stops.unacknowledged()):
             executor.spin_once(timeout_sec=0.02)
+        stops.note_unacknowledged(within=POSES_AFTER_END)
 
     def flush(self) -> None:
         """The robots' world publishes nothing that could wait."""

@@ -171,6 +171,7 @@ def stop_and_write(node: TimeKeeperNode | None, executor, error: BaseException) 
             stop_agents(node, executor)
         except Exception as problem:  # noqa: BLE001 - the original failure is what matters
             _tell(f'formation_sim: could not stop the agents: {problem}')
+            stop_robots_all_the_same(node, executor)
         node.note_what_followed()
         if node.failure_info is not None and 'followed' in node.failure_info:
             _tell(f'formation_sim: {node.failure_info["message"]}')
@@ -180,6 +181,17 @@ def stop_and_write(node: TimeKeeperNode | None, executor, error: BaseException) 
         write_results(node) if node.step is not None else write_unstarted(node)
     except Exception as problem:  # noqa: BLE001 - the original failure is what matters
         _tell(f'formation_sim: could not write the partial results: {problem}')
+
+
+def stop_robots_all_the_same(node: TimeKeeperNode, executor) -> None:
+    """The orderly end failed (`stop_agents` raised, the final reports not collected): every robot
+    its zero command from here all the same, and the world's wait for it to be acknowledged
+    (`after_final_step`, bounded), so that no robot drives on after its run, whatever ended it."""
+    try:
+        node.world.stop_robots(why='the run could not be ended in order')
+        node.world.after_final_step(executor)
+    except Exception as problem:  # noqa: BLE001 - the original failure is what matters
+        _tell(f'formation_sim: could not stop the robots: {problem}')
 
 
 def _tell(line: str) -> None:

@@ -15,16 +15,30 @@ zero from here at once, beside the final Step (`stop_all`), so that a robot stop
 bound even when its agent is slow; a robot whose agent then sends no final report within
 `UNREPORTED_STOP_AFTER` gets its zero again as above (a slow agent may have sent one more
 command of its own before it took the final Step).
+
+A zero sent from here is resent until every reader acknowledged it (the robot's driver, the
+recorder): the coordinator waits for that after the final reports (`unacknowledged`, in
+`coordinator.RobotWorld.after_final_step`), within the bound of its wait for the robots' last
+poses, `robots.POSES_AFTER_END` = 1 s.  A datagram lost on the way (a UDP receive buffer full on a
+loaded machine) is repaired only at the writer's next heartbeat (every 0.1 s,
+fastdds_profile.xml), so never once the coordinator has left: before this wait it left as soon
+as 0.4 ms after its last zero (a killed agent's test under load, 2026-12-06).  The bound is ten
+heartbeat periods; it is reached only by a reader that never answers (a robot that died: its
+reader stays matched until its participant's lease lapses).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+from rclpy.duration import Duration
+
 from formation_agent.core.kinds import robot_kind
 from formation_agent.ros.commands import command_message, publish_zero
 from formation_msgs_py.qos import ROBOT_COMMAND_QOS
 from formation_msgs_py.topics import robot_command_topic
+
+NO_WAIT = Duration(seconds=0)  # `wait_for_all_acked` as a look: acknowledged now or not
 
 
 class RobotStops:
@@ -41,6 +55,7 @@ class RobotStops:
         }
         self.stopped: list[int] = []  # robots sent their zero from here, in order
         self.sent_all: list[int] = []  # every robot, once `stop_all` sent them their zero
+        self._acknowledged: set[int] = set()  # robots whose every reader has acknowledged their zeros
 
     def stop(self, robots: Sequence[int], *, why: str) -> list[int]:
         """Send each of `robots` not yet stopped from here its zero command; those it sent to."""
@@ -51,6 +66,7 @@ class RobotStops:
             )
         if new:
             self.stopped += new
+            self._acknowledged -= set(new)
             self._node.get_logger().warning(
                 f'robots {new}: {why}: the coordinator sent them the zero command'
             )
@@ -63,8 +79,29 @@ class RobotStops:
         for publisher in self._publishers.values():
             publish_zero(publisher, self._kind, dimension=self._dimension, world_frame=self._world_frame)
         self.sent_all = list(self._publishers)
+        self._acknowledged.clear()
         self._node.get_logger().warning(f'{why}: the coordinator sent every robot the zero command')
         return self.sent_all
+
+    def unacknowledged(self) -> list[int]:
+        """The robots sent a zero from here that some reader of theirs (the robot, the recorder)
+        has not acknowledged yet, in order: a look, no wait.  None sent: none."""
+        sent = dict.fromkeys([*self.sent_all, *self.stopped])
+        for i in sent:
+            if i not in self._acknowledged and self._publishers[i].wait_for_all_acked(NO_WAIT):
+                self._acknowledged.add(i)
+        return [i for i in sent if i not in self._acknowledged]
+
+    def note_unacknowledged(self, *, within: float) -> list[int]:
+        """After the wait for them (`within` s): the robots whose zero some reader has still not
+        acknowledged, logged (a reader gone: a robot that died); the robots."""
+        late = self.unacknowledged()
+        if late:
+            self._node.get_logger().warning(
+                f'robots {late}: their zero command from the coordinator was not acknowledged by every '
+                f'reader within {within:g} s'
+            )
+        return late
 
     def extra(self) -> dict:
         """summary.json's `extra.robots_stopped_here`: the robots stopped from here (none: absent)."""
