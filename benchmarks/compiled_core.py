@@ -12,7 +12,9 @@ them is no longer measured apart). Building the world and the agents is a fixed 
 "whole run / events" spreads over however many events the horizon holds; so each repeat also runs the
 team to T/2 and times the set-up alone (--no-marginal skips both): the marginal CPU per event
 (CPU(T) - CPU(T/2)) / (events(T) - events(T/2)) and the run without its set-up are reported beside
-the whole run / events. At the largest ETA-1 size the vectorised fixed-step simulation
+the whole run / events. Each timed piece starts after `gc.collect()` (untimed), so that a full
+collection of the garbage collector (~0.1 s at n = 1000) lands in a repeat by that repeat's own
+allocations, not by what the previous one left. At the largest ETA-1 size the vectorised fixed-step simulation
 (benchmarks/naive.py, dt = 1e-4) runs on the same scenario and horizon (skipped with --no-fixed-
 step). Last, the start-up time and peak memory of an agent process (`import
 formation_agent.ros.main` and one agent's first search, as `peak_rss.py` measures a process) with
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import gc
 import json
 import os
 import shutil
@@ -90,6 +93,7 @@ sys.path[:0] = [root + '/src/' + package for package in {packages!r}]
 
 def _run_engine(scenario, horizon: float, on: bool):
     compiled.use_compiled(on)
+    gc.collect()  # from a collected heap: a full collection lands in this run by its own allocations
     cpu, started = time.process_time(), time.perf_counter()
     record = simulate(scenario, horizon=horizon, sample_dt=None, sample_events=False)
     return time.perf_counter() - started, time.process_time() - cpu, record.trigger_times
@@ -99,6 +103,7 @@ def _setup_cpu(scenario, on: bool) -> float:
     """CPU seconds of what `simulate` does once per run before its first event: the world and the
     agents (`World.from_scenario`, `build_agent` for every agent), as `simulate` builds them."""
     compiled.use_compiled(on)
+    gc.collect()
     cpu = time.process_time()
     World.from_scenario(scenario)
     {i: build_agent(scenario, i) for i in scenario.agent_ids}
