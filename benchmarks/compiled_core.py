@@ -8,7 +8,13 @@ path and on the compiled one (`compiled.use_compiled`), alternating, `--repeats`
 n >= 10 000); the event chains must be equal float for float (the run stops otherwise). Reported: µs
 per event and per event × (1 + mean degree), median wall and CPU of the repeats, and the speed-up
 (since issue 31's second step the compiled searches run inside the compiled agenda, so the time in
-them is no longer measured apart). At the largest ETA-1 size the vectorised fixed-step simulation
+them is no longer measured apart). Building the world and the agents is a fixed cost of a run, which
+"whole run / events" spreads over however many events the horizon holds; so each repeat also runs the
+team to T/2 and times the set-up alone (--no-marginal skips both): the marginal CPU per event
+(CPU(T) - CPU(T/2)) / (events(T) - events(T/2)) and the run without its set-up are reported beside
+the whole run / events. Each timed piece starts after `gc.collect()` (untimed), so that a full
+collection of the garbage collector (~0.1 s at n = 1000) lands in a repeat by that repeat's own
+allocations, not by what the previous one left. At the largest ETA-1 size the vectorised fixed-step simulation
 (benchmarks/naive.py, dt = 1e-4) runs on the same scenario and horizon (skipped with --no-fixed-
 step). Last, the start-up time and peak memory of an agent process (`import
 formation_agent.ros.main` and one agent's first search, as `peak_rss.py` measures a process) with
@@ -21,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import gc
 import json
 import os
 import shutil
@@ -38,7 +45,8 @@ from cases import build_scenario, label, random  # noqa: E402 - benchmarks/ put 
 from engine_baseline import PACKAGES, materialise  # noqa: E402 - benchmarks/ put on sys.path first
 
 from formation_agent.core import compiled  # noqa: E402 - after the path is set up
-from formation_sim.sim.engine import simulate  # noqa: E402 - after the path is set up
+from formation_sim.sim.engine import build_agent, simulate  # noqa: E402 - after the path is set up
+from formation_sim.sim.world import World  # noqa: E402 - after the path is set up
 
 # main before the compiled core.
 BASELINE_REV = 'b089890'
@@ -85,18 +93,36 @@ sys.path[:0] = [root + '/src/' + package for package in {packages!r}]
 
 def _run_engine(scenario, horizon: float, on: bool):
     compiled.use_compiled(on)
+    gc.collect()  # from a collected heap: a full collection lands in this run by its own allocations
     cpu, started = time.process_time(), time.perf_counter()
     record = simulate(scenario, horizon=horizon, sample_dt=None, sample_events=False)
     return time.perf_counter() - started, time.process_time() - cpu, record.trigger_times
 
 
-def engine_case(dynamics: str, n: int, repeats: int, horizon: float) -> dict:
+def _setup_cpu(scenario, on: bool) -> float:
+    """CPU seconds of what `simulate` does once per run before its first event: the world and the
+    agents (`World.from_scenario`, `build_agent` for every agent), as `simulate` builds them."""
+    compiled.use_compiled(on)
+    gc.collect()
+    cpu = time.process_time()
+    World.from_scenario(scenario)
+    {i: build_agent(scenario, i) for i in scenario.agent_ids}
+    return time.process_time() - cpu
+
+
+def engine_case(dynamics: str, n: int, repeats: int, horizon: float, *, marginal: bool = True) -> dict:
+    """Both paths on one random team, alternating. With `marginal`, each repeat also runs the team to
+    horizon / 2 and times the set-up (world and agents) alone: the marginal CPU per event is
+    (CPU(T) - CPU(T/2)) / (events(T) - events(T/2)), the set-up's CPU is reported beside, and the run
+    without its set-up is (CPU(T) - set-up) / events(T); the whole run / events stays reported."""
     case = random(n, dynamics)
     scenario = build_scenario(case)
     degree = 2.0 * len(scenario.edges) / scenario.n
     walls = {False: [], True: []}
     cpus = {False: [], True: []}
-    chains = {}
+    setups = {False: [], True: []}
+    halves = {False: [], True: []}  # CPU of the same team run to horizon / 2 (the marginal cost)
+    chains, half_chains = {}, {}
     for _ in range(repeats):
         for on in (False, True):
             wall, cpu, times = _run_engine(scenario, horizon, on)
@@ -105,9 +131,14 @@ def engine_case(dynamics: str, n: int, repeats: int, horizon: float) -> dict:
             if on in chains and chains[on] != times:
                 raise SystemExit(f'{label(case)}: two runs of one path differ')
             chains[on] = times
-    if chains[False] != chains[True]:
+            if marginal:
+                _, half_cpu, half_chains[on] = _run_engine(scenario, horizon / 2.0, on)
+                halves[on].append(half_cpu)
+                setups[on].append(_setup_cpu(scenario, on))
+    if chains[False] != chains[True] or half_chains.get(False) != half_chains.get(True):
         raise SystemExit(f'{label(case)}: the compiled and the pure-Python event chains differ')
     events = sum(map(len, chains[True].values()))
+    half_events = sum(map(len, half_chains[True].values())) if marginal else 0
     out = {'case': label(case), 'n': n, 'dynamics': dynamics, 'horizon': horizon, 'degree': degree}
     out.update(events=events, bit_equal=True)
     for on, name in ((False, 'python'), (True, 'compiled')):
@@ -119,9 +150,24 @@ def engine_case(dynamics: str, n: int, repeats: int, horizon: float) -> dict:
             'cpu': statistics.median(cpus[on]),
             'us_per_event': wall / events * 1e6,
             'us_per_event_edge': wall / events / (1.0 + degree) * 1e6,
+            'cpu_us_per_event': statistics.median(cpus[on]) / events * 1e6,
         }
+        if marginal:
+            cpu_full, cpu_half = statistics.median(cpus[on]), statistics.median(halves[on])
+            setup = statistics.median(setups[on])
+            out[name].update(
+                half_cpus=halves[on],
+                setup_cpus=setups[on],
+                setup_cpu=setup,
+                run_us_per_event=(cpu_full - setup) / events * 1e6,
+                marginal_us_per_event=(cpu_full - cpu_half) / (events - half_events) * 1e6,
+            )
     out['speedup'] = out['python']['wall'] / out['compiled']['wall']
     out['speedup_cpu'] = out['python']['cpu'] / out['compiled']['cpu']
+    if marginal:
+        out['half_events'] = half_events
+        for key in ('run_us_per_event', 'marginal_us_per_event'):
+            out[f'speedup_{key}'] = out['python'][key] / out['compiled'][key]
     return out
 
 
@@ -201,6 +247,24 @@ def tables(result: dict) -> str:
             f'| {f["us_per_event_edge"]:.1f} | {c["speedup"]:.2f}× ({c["speedup_cpu"]:.2f}×) '
             f'| {p["cpu"] / c["events"] * 1e6:.0f} → {f["cpu"] / c["events"] * 1e6:.0f} | yes |'
         )
+    marginal = [c for c in result['engine'] if 'half_events' in c]
+    if marginal:
+        lines += [
+            '',
+            '| case | events T (T/2) | set-up CPU ms Python / compiled | whole run / events: CPU µs '
+            '(speed-up) | run without set-up / events | marginal (T − T/2) / events |',
+            '|---|---|---|---|---|---|',
+        ]
+    for c in marginal:
+        p, f = c['python'], c['compiled']
+        cells = [
+            f'{p[key]:.0f} → {f[key]:.0f} ({p[key] / f[key]:.1f}×)'
+            for key in ('cpu_us_per_event', 'run_us_per_event', 'marginal_us_per_event')
+        ]
+        lines.append(
+            f'| {c["case"]} | {c["events"]} ({c["half_events"]}) '
+            f'| {p["setup_cpu"] * 1e3:.0f} / {f["setup_cpu"] * 1e3:.0f} | ' + ' | '.join(cells) + ' |'
+        )
     if result.get('fixed_step'):
         s = result['fixed_step']
         lines += [
@@ -235,6 +299,11 @@ def main() -> int:
     parser.add_argument('--startup-only', action='store_true', help='the agent process only')
     parser.add_argument('--no-fixed-step', action='store_true', help='without the fixed-step comparison')
     parser.add_argument('--no-startup', action='store_true', help='without the agent process')
+    parser.add_argument(
+        '--no-marginal',
+        action='store_true',
+        help='without the half-horizon runs and the set-up timing (the marginal cost per event)',
+    )
     parser.add_argument('--baseline', default=BASELINE_REV, help='the revision compared with')
     args = parser.parse_args()
     if not compiled.AVAILABLE:
@@ -253,7 +322,7 @@ def main() -> int:
     for dynamics in ('single', 'double'):
         for n in args.sizes:
             repeats = 1 if n >= 10000 else args.repeats  # minutes per run at n = 10 000
-            case = engine_case(dynamics, n, repeats, HORIZONS[dynamics, n])
+            case = engine_case(dynamics, n, repeats, HORIZONS[dynamics, n], marginal=not args.no_marginal)
             result['engine'].append(case)
             out.write_text(json.dumps(result, indent=1))  # what is done so far, should a case not end
             print(json.dumps({k: v for k, v in case.items() if k not in ('python', 'compiled')}), flush=True)

@@ -33,6 +33,29 @@ def test_the_edges_keep_the_given_neighbour_order_and_their_capacities():
     assert hood.agent_id == 1 and hood.delta == 4.0
 
 
+@pytest.mark.parametrize('dimension', [1, 2, 3, 4])
+def test_offsets_and_capacities_are_the_floats_of_asarray_per_row_and_linalg_norm(dimension):
+    # The constructor builds the rows in one numpy call and ||d_ij|| with norm's own formula: the
+    # reference here is the former construction, np.asarray per row and np.linalg.norm.
+    rng = np.random.default_rng(dimension)
+    for trial in range(200):
+        m = int(rng.integers(1, 9))
+        scale = 10.0 ** rng.integers(-12, 12, size=(m, 1))
+        rows = rng.normal(size=(m, dimension)) * scale
+        delta = float(np.linalg.norm(rows, axis=-1).max()) * (1.0 + rng.random()) + 1e-300
+        kinds = (tuple, list, np.asarray, lambda r: [int(v) if v.is_integer() else v for v in r.tolist()])
+        neighbours = {j + 2: kinds[(trial + j) % 4](row) for j, row in enumerate(rows)}
+        if np.any(delta - np.linalg.norm(rows, axis=-1) <= 0.0):
+            continue
+        hood = Neighbourhood(agent_id=1, neighbours=neighbours, delta=delta)
+        expected = np.array([np.asarray(neighbours[j], dtype=float) for j in neighbours])
+        assert hood.offsets.dtype == expected.dtype and hood.offsets.shape == expected.shape
+        assert hood.offsets.tobytes() == expected.tobytes()
+        capacity = delta - np.linalg.norm(expected, axis=-1)
+        assert hood.capacity.tobytes() == capacity.tobytes()
+        assert hood._capacity == capacity.tolist()
+
+
 def test_the_error_is_the_agents_error():
     assert AgentError is EtaAgentError and issubclass(AgentError, ValueError)
 
@@ -48,6 +71,10 @@ def test_the_error_is_the_agents_error():
         ({'neighbours': {2: ()}}, r'vectors of one dimension p >= 1$'),
         ({'neighbours': {2: ('east', 1.0)}}, r'vectors of one dimension p >= 1$'),
         ({'neighbours': {2: (0.0, math.inf)}}, r'^agent 1: desired displacements are not finite$'),
+        ({'neighbours': {2: np.zeros(2), 3: np.zeros(3)}}, r'vectors of one dimension p >= 1$'),
+        ({'neighbours': {2: np.zeros((1, 2))}}, r'vectors of one dimension p >= 1$'),
+        ({'neighbours': {2: 1.0}}, r'vectors of one dimension p >= 1$'),
+        ({'neighbours': {2: np.array([0.0, np.nan])}}, r'^agent 1: desired displacements are not finite$'),
         (
             {'neighbours': {2: (0.0, 1.0), 5: (0.0, -4.0)}},
             r'^edge \(1,5\): \|\|d_ij\|\| = 4.0 is not below Δ = 4.0 \(Assumption 1\)$',

@@ -258,9 +258,10 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
         zero = (0.0,) * max(p, _FAST_DIMENSION)
-        self._offsets = [tuple(row) for row in offsets.tolist()]
-        self._offsets3 = [self._pad(row) for row in self._offsets]
-        self._capacity = self.capacity.tolist()
+        self._offsets = list(map(tuple, offsets.tolist()))
+        padding = (0.0,) * (_FAST_DIMENSION - p)  # `_pad`'s, once for every row
+        self._offsets3 = [row + padding for row in self._offsets]
+        self._capacity = list(hood._capacity)
         self._edge_time = [0.0] * m
         self._edge_y = [zero] * m
         self._edge_u = [zero] * m

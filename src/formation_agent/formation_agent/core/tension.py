@@ -49,6 +49,10 @@ def curvature_gain(r: Real, c: Real) -> Real:
 
 
 def edge_capacity(delta: float, offsets: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """c_ij = Δ - ||d_ij|| for each row of `offsets`."""
-    capacity: npt.NDArray[np.float64] = delta - np.linalg.norm(offsets, axis=-1)
+    """c_ij = Δ - ||d_ij|| for each row of `offsets` (real floats).
+
+    ||d_ij|| is `np.linalg.norm(offsets, axis=-1)`'s own formula for a real array, sqrt of the
+    add.reduce of the squares (the same floats, tests/formation_agent/core/test_neighbourhood.py), without
+    its argument handling: every agent's constructor calls this."""
+    capacity: npt.NDArray[np.float64] = delta - np.sqrt(np.add.reduce(offsets * offsets, axis=-1))
     return capacity
