@@ -1040,6 +1040,35 @@ static int read_message(PyObject *agent, PyObject *info, Held *h, Message *msg) 
     return 1;
 }
 
+/* The row of edge k (Eta1Agent._row, Eta2Agent._row), laid out as WIDTH1 / WIDTH2, from its anchor time, its
+ * edge state y (ETA-2: and q), the agent's command u, the neighbour's uj and the capacity c; returns the width.
+ * The one place the four paths that write a row (the attributes' and the ledger's trigger and receive) take
+ * it from, so their floats cannot part. */
+static Py_ssize_t fill_row(double *row, int kind, double anchor, const double *y, const double *q, const double *u,
+                           const double *uj, double c) {
+    row[0] = anchor;
+    row[1] = y[0];
+    row[2] = y[1];
+    row[3] = y[2];
+    if (kind == 1) { /* Eta1Agent._row */
+        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
+        row[4] = v0;
+        row[5] = v1;
+        row[6] = v2;
+        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+        row[8] = c;
+        return WIDTH1;
+    }
+    row[4] = q[0]; /* Eta2Agent._row */
+    row[5] = q[1];
+    row[6] = q[2];
+    row[7] = u[0] - uj[0];
+    row[8] = u[1] - uj[1];
+    row[9] = u[2] - uj[2];
+    row[10] = c;
+    return WIDTH2;
+}
+
 /* The agent's knowledge updated as the Python path updates it (the same floats). */
 static int take_message(PyObject *agent, Held *h, const Message *msg) {
     Py_ssize_t k = msg->k, p = msg->p;
@@ -1077,29 +1106,7 @@ static int take_message(PyObject *agent, Held *h, const Message *msg) {
         list_put(edge_u, k, floats_tuple(uj, 3)) < 0)
         return -1;
     double row[WIDTH2];
-    Py_ssize_t width;
-    row[0] = msg->stamp;
-    row[1] = y[0];
-    row[2] = y[1];
-    row[3] = y[2];
-    if (msg->kind == 1) { /* Eta1Agent._row */
-        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
-        row[4] = v0;
-        row[5] = v1;
-        row[6] = v2;
-        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
-        row[8] = c;
-        width = WIDTH1;
-    } else { /* Eta2Agent._row */
-        row[4] = q[0];
-        row[5] = q[1];
-        row[6] = q[2];
-        row[7] = u[0] - uj[0];
-        row[8] = u[1] - uj[1];
-        row[9] = u[2] - uj[2];
-        row[10] = c;
-        width = WIDTH2;
-    }
+    Py_ssize_t width = fill_row(row, msg->kind, msg->stamp, y, q, u, uj, c);
     return list_put(rows, k, floats_tuple(row, width));
 }
 
@@ -1319,28 +1326,9 @@ static int take_sensing(PyObject *agent, Held *h, Sensing *in, double *control, 
         double uj[3], row[WIDTH2], *y = in->y[k];
         if (read_floats(PyList_GET_ITEM(edge_u, k), uj, 3, "_edge_u") < 0)
             return -1;
-        row[0] = in->t;
-        row[1] = y[0];
-        row[2] = y[1];
-        row[3] = y[2];
-        if (in->kind == 1) { /* Eta1Agent._row */
-            double v0 = control[0] - uj[0], v1 = control[1] - uj[1], v2 = control[2] - uj[2];
-            row[4] = v0;
-            row[5] = v1;
-            row[6] = v2;
-            row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
-            row[8] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
-        } else { /* Eta2Agent._row */
-            const double *q = in->extra[k];
-            row[4] = q[0];
-            row[5] = q[1];
-            row[6] = q[2];
-            row[7] = control[0] - uj[0];
-            row[8] = control[1] - uj[1];
-            row[9] = control[2] - uj[2];
-            row[10] = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
-        }
-        PyObject *tuple = floats_tuple(row, in->kind == 1 ? WIDTH1 : WIDTH2);
+        double c = PyFloat_AsDouble(PyList_GET_ITEM(capacity, k));
+        Py_ssize_t width = fill_row(row, in->kind, in->t, y, in->extra[k], control, uj, c);
+        PyObject *tuple = floats_tuple(row, width);
         if (tuple == NULL)
             return -1;
         PyList_SET_ITEM(rows, k, tuple);
@@ -2428,28 +2416,11 @@ static int ledger_trigger(TeamObject *self, Py_ssize_t a, double t, const double
         double *row = E[k].row, *uj = E[k].u;
         E[k].time = t;
         memcpy(E[k].y, in->y[k], sizeof E[k].y);
-        row[0] = t;
-        row[1] = E[k].y[0];
-        row[2] = E[k].y[1];
-        row[3] = E[k].y[2];
-        if (L->kind == 1) { /* Eta1Agent._row */
-            double v0 = control[0] - uj[0], v1 = control[1] - uj[1], v2 = control[2] - uj[2];
-            row[4] = v0;
-            row[5] = v1;
-            row[6] = v2;
-            row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
-            row[8] = E[k].c;
-        } else { /* Eta2Agent._update (_sensed_q, _edge_q), Eta2Agent._row */
+        if (L->kind == 2) { /* Eta2Agent._update (_sensed_q, _edge_q) */
             memcpy(E[k].q, in->extra[k], sizeof E[k].q);
             memcpy(E[k].sensed_q, in->extra[k], sizeof E[k].sensed_q);
-            row[4] = E[k].q[0];
-            row[5] = E[k].q[1];
-            row[6] = E[k].q[2];
-            row[7] = control[0] - uj[0];
-            row[8] = control[1] - uj[1];
-            row[9] = control[2] - uj[2];
-            row[10] = E[k].c;
         }
+        fill_row(row, L->kind, t, E[k].y, E[k].q, control, uj, E[k].c);
         E[k].row_set = 1;
     }
     memcpy(L->u, control, sizeof L->u);
@@ -2494,26 +2465,7 @@ static int ledger_receive(TeamObject *self, const Pending *msg) {
     E->time = msg->stamp;
     memcpy(E->y, y, sizeof E->y);
     memcpy(E->u, uj, sizeof E->u);
-    row[0] = msg->stamp;
-    row[1] = y[0];
-    row[2] = y[1];
-    row[3] = y[2];
-    if (L->kind == 1) { /* Eta1Agent._row */
-        double v0 = u[0] - uj[0], v1 = u[1] - uj[1], v2 = u[2] - uj[2];
-        row[4] = v0;
-        row[5] = v1;
-        row[6] = v2;
-        row[7] = sqrt(v0 * v0 + v1 * v1 + v2 * v2);
-        row[8] = E->c;
-    } else { /* Eta2Agent._row */
-        row[4] = q[0];
-        row[5] = q[1];
-        row[6] = q[2];
-        row[7] = u[0] - uj[0];
-        row[8] = u[1] - uj[1];
-        row[9] = u[2] - uj[2];
-        row[10] = E->c;
-    }
+    fill_row(row, L->kind, msg->stamp, y, q, u, uj, E->c);
     E->row_set = 1;
     L->infos += 1;
     if (msg->stamp > L->last_event) /* max(self.last_event, stamp) */
