@@ -172,6 +172,39 @@ def test_series_at_t0_match_the_papers_formulas(paper_single_record):
     assert series.lyapunov[0] == pytest.approx(0.5 * float(np.sum((y - y.mean(axis=0)) ** 2)), rel=1e-12)
 
 
+@pytest.mark.parametrize('dynamics', ['single', 'double'])
+def test_series_takes_each_samples_own_float_across_chunks(dynamics, monkeypatch):
+    # run_series evaluates ν and V on (K, n, p) blocks; every sample must still get the float of
+    # its own 1-D sums (written out here), across a block boundary (a 3-sample block on 8 samples).
+    from formation_sim.analysis import checks
+    from formation_sim.model.generate import random_scenario
+
+    monkeypatch.setattr(checks, 'SERIES_CHUNK', 3)
+    scenario = random_scenario(n=17, seed=3, dimension=3, dynamics=dynamics, slack=0.3)
+    record = simulate(scenario, horizon=0.05)
+    series = run_series(record)
+    heads, tails, d = scenario.edge_indices()
+    capacity = scenario.delta - np.linalg.norm(d, axis=1)
+    tau = theory.formation_feasibility(scenario).tau
+    x, q = record.sample_positions, record.sample_velocities
+    assert len(record.sample_times) >= 8
+    for k in range(len(record.sample_times)):
+        l = np.linalg.norm(x[k][heads] - x[k][tails] - d, axis=1)
+        nu = float(np.sum(l * l / (capacity - l)))
+        y = x[k] - tau
+        dy = y - y.mean(axis=0)
+        if dynamics == 'single':
+            assert series.tension[k] == nu
+            assert series.lyapunov[k] == 0.5 * float(np.sum(dy * dy))
+            continue
+        P, qk = scenario.gains.P, q[k]
+        dq = qk - qk.mean(axis=0)
+        assert series.tension[k] == scenario.gains.k1 * nu + 0.5 * float(np.sum(qk * qk))
+        assert series.lyapunov[k] == 0.5 * float(
+            P[0, 0] * np.sum(dy * dy) + 2.0 * P[0, 1] * np.sum(dy * dq) + P[1, 1] * np.sum(dq * dq)
+        )
+
+
 def test_theorem_1_guarantees_hold_on_the_paper_run(paper_single_record):
     record = paper_single_record
     series = run_series(record)

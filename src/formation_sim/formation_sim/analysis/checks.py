@@ -59,6 +59,9 @@ class Series:
     lyapunov: np.ndarray  # (K,) V = ½ δᵀδ or V_d (double)
 
 
+SERIES_CHUNK = 4096  # samples evaluated at once by run_series (bounds its temporaries)
+
+
 def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -> Series:
     """The paper's quantities at every sample of `record` (a `BagRun` holds one: `bag_run.record`)."""
     if not isinstance(record, RunRecord):
@@ -78,14 +81,15 @@ def run_series(record: RunRecord, *, progress: ProgressCallback | None = None) -
     count = len(record.sample_times)
     tension = np.empty(count)
     lyapunov = np.empty(count)
-    for k in range(count):
+    for k in range(0, count, SERIES_CHUNK):  # (K, n, p) at a time: each sample's float as its own
+        part = slice(k, min(k + SERIES_CHUNK, count))
         if double:
-            tension[k] = theory.tension_double(scenario, x[k], q[k])
-            lyapunov[k] = theory.lyapunov_double(scenario, x[k], q[k], tau=tau)
+            tension[part] = theory.tensions_double(scenario, x[part], q[part])
+            lyapunov[part] = theory.lyapunovs_double(scenario, x[part], q[part], tau=tau)
         else:
-            tension[k] = theory.tension(scenario, x[k])
-            lyapunov[k] = theory.lyapunov(scenario, x[k], tau=tau)
-        if progress is not None and k % 5000 == 0:
+            tension[part] = theory.tensions(scenario, x[part])
+            lyapunov[part] = theory.lyapunovs(scenario, x[part], tau=tau)
+        if progress is not None:
             progress(k, count)
     if progress is not None:
         progress(count, count)

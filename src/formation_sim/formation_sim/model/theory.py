@@ -240,42 +240,76 @@ def rounding_step(capacity, slack, ulp_y, *, k1=1.0, k2=0.0, speed=0.0, ulp_q=0.
 # --------------------------------------------------------------------------- ν, V
 
 
+def tensions(scenario: Scenario, positions) -> np.ndarray:
+    """ν(Δ, y) at each of K samples (positions (K, n, p)): Σ_edges ||y_i-y_j||² / (Δ-||d_ij||-||y_i-y_j||),
+    inf where an edge leaves its range. Each sample's value is `tension`'s float for that sample."""
+    heads, tails, d = scenario.edge_indices()
+    x = np.asarray(positions, dtype=float)
+    l = np.linalg.norm(x[:, heads] - x[:, tails] - d, axis=2)
+    c = edge_capacities(scenario)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        terms = l * l / (c - l)
+    # one 1-D sum per sample: numpy's sum over axis 1 of a (K, m) array adds in another order (the
+    # last bit differs from the sample's own sum, which `tension` and the proofs' constants use)
+    values = np.fromiter((np.add.reduce(row) for row in terms), dtype=float, count=len(terms))
+    return np.where(np.any(l >= c, axis=1), math.inf, values)
+
+
 def tension(scenario: Scenario, positions) -> float:
     """ν(Δ, y) = ½ Σ_i Σ_{j∈N_i} ν_ij = Σ_edges ||y_i-y_j||² / (Δ-||d_ij||-||y_i-y_j||); inf outside."""
-    l = edge_errors(scenario, positions)
-    c = edge_capacities(scenario)
-    if np.any(l >= c):
-        return math.inf
-    return float(np.sum(l * l / (c - l)))
+    return float(tensions(scenario, np.asarray(positions, dtype=float)[None])[0])
+
+
+def tensions_double(scenario: Scenario, positions, velocities) -> np.ndarray:
+    """ν_d = k1 ν + ½ Σ ||q_i||² at each of K samples (positions, velocities (K, n, p))."""
+    q = np.asarray(velocities, dtype=float)
+    return scenario.gains.k1 * tensions(scenario, positions) + 0.5 * np.sum(q * q, axis=(1, 2))
 
 
 def tension_double(scenario: Scenario, positions, velocities) -> float:
     """ν_d = k1 ν + ½ Σ ||q_i||² (proof of Theorem 2 (i))."""
-    q = np.asarray(velocities, dtype=float)
-    return scenario.gains.k1 * tension(scenario, positions) + 0.5 * float(np.sum(q * q))
+    return float(tensions_double(scenario, *_one_sample(positions, velocities))[0])
 
 
-def _deviation(scenario: Scenario, positions, tau=None) -> np.ndarray:
+def _one_sample(*arrays) -> list[np.ndarray]:
+    return [np.asarray(a, dtype=float)[None] for a in arrays]
+
+
+def _deviations(scenario: Scenario, positions, tau=None) -> np.ndarray:
+    """δ = y - mean(y) at each sample, y_i = x_i - τ_i (positions (K, n, p))."""
     tau = formation_feasibility(scenario).tau if tau is None else np.asarray(tau, dtype=float)
     y = np.asarray(positions, dtype=float) - tau
-    return y - y.mean(axis=0)
+    return y - y.mean(axis=1, keepdims=True)
+
+
+def lyapunovs(scenario: Scenario, positions, *, tau=None) -> np.ndarray:
+    """V = ½ δ^T δ at each of K samples (positions (K, n, p)); each is `lyapunov`'s float."""
+    delta = _deviations(scenario, positions, tau)
+    return 0.5 * np.sum(delta * delta, axis=(1, 2))
 
 
 def lyapunov(scenario: Scenario, positions, *, tau=None) -> float:
     """V = ½ δ^T δ, δ = (K_n⊗I_p) y, y_i = x_i - τ_i (proof of Theorem 1 (ii)); any τ ∈ Φ gives the same V."""
-    delta = _deviation(scenario, positions, tau)
-    return 0.5 * float(np.sum(delta * delta))
+    return float(lyapunovs(scenario, *_one_sample(positions), tau=tau)[0])
+
+
+def lyapunovs_double(scenario: Scenario, positions, velocities, *, tau=None) -> np.ndarray:
+    """V_d = ½ z^T (K_n⊗P⊗I_p) z at each of K samples (positions, velocities (K, n, p))."""
+    dy = _deviations(scenario, positions, tau)
+    q = np.asarray(velocities, dtype=float)
+    dq = q - q.mean(axis=1, keepdims=True)
+    P = scenario.gains.P
+    axes = (1, 2)
+    return 0.5 * (
+        P[0, 0] * np.sum(dy * dy, axis=axes)
+        + 2.0 * P[0, 1] * np.sum(dy * dq, axis=axes)
+        + P[1, 1] * np.sum(dq * dq, axis=axes)
+    )
 
 
 def lyapunov_double(scenario: Scenario, positions, velocities, *, tau=None) -> float:
     """V_d = ½ z^T (K_n⊗P⊗I_p) z, z_i = (y_i, q_i) (proof of Theorem 2 (ii))."""
-    dy = _deviation(scenario, positions, tau)
-    q = np.asarray(velocities, dtype=float)
-    dq = q - q.mean(axis=0)
-    P = scenario.gains.P
-    return 0.5 * float(
-        P[0, 0] * np.sum(dy * dy) + 2.0 * P[0, 1] * np.sum(dy * dq) + P[1, 1] * np.sum(dq * dq)
-    )
+    return float(lyapunovs_double(scenario, *_one_sample(positions, velocities), tau=tau)[0])
 
 
 # --------------------------------------------------------------------------- proof constants

@@ -72,33 +72,29 @@ class EdgeWatch:
         self.bound = max(self.bound, length)
 
     def _relative(self, a, b, c, s: float) -> np.ndarray:
-        """x_i - x_j at s after the interval's start (relative state a, b and input c)."""
-        if self.k3 is None:
-            return a + s * c
+        """x_i - x_j at s after the interval's start (ETA-2: relative state a, b and input c)."""
+        assert self.k3 is not None  # only ETA-2's intervals are evaluated inside
         return advance_double(a, b, c, self.k3, s)[0]
 
     def _interval(self, t: float, controls: np.ndarray) -> None:
+        if self.k3 is None:  # single integrators: a length is convex in s, its largest value is at an
+            self.checks += len(self.heads)  # end, and both ends are checked at their events
+            return
         t0, x0, q0 = self._last
         h = t - t0
         a = x0[self.heads] - x0[self.tails]
         c = controls[self.heads] - controls[self.tails]
-        b = None if q0 is None else q0[self.heads] - q0[self.tails]
+        b = q0[self.heads] - q0[self.tails]
         f0 = np.linalg.norm(a, axis=1)
         f1 = np.linalg.norm(self._relative(a, b, c, h), axis=1)
         self.checks += f0.size
         curvature = self._curvature(b, c)
-        if curvature is None:
-            return  # single integrators: a length is convex in s, its largest value is at an end
         bound = np.maximum(f0, f1) + curvature * h * h / 8.0
         for k in np.flatnonzero(bound > self.largest + self.tolerance):
-            self._refine(
-                a[k], None if b is None else b[k], c[k], h, float(f0[k]), float(f1[k]), float(curvature[k])
-            )
+            self._refine(a[k], b[k], c[k], h, float(f0[k]), float(f1[k]), float(curvature[k]))
 
-    def _curvature(self, b, c) -> np.ndarray | None:
+    def _curvature(self, b, c) -> np.ndarray:
         """sup ||r''|| over an interval per edge, for ETA-2: ||c - k3 b|| (e^{-k3 s} <= 1)."""
-        if self.k3 is None:
-            return None
         return np.linalg.norm(c - self.k3 * b, axis=1)
 
     def _refine(self, a, b, c, h: float, f0: float, f1: float, curvature: float) -> None:
