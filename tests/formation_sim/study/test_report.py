@@ -6,7 +6,7 @@ import pytest
 
 from formation_sim.study.case import run_case
 from formation_sim.study.errors import StudyError
-from formation_sim.study.report import audit_table, periodic_savings, write_report
+from formation_sim.study.report import audit_table, periodic_savings, stops_table, write_report
 from formation_sim.study.spec import build_study
 from formation_sim.study.store import StudyFolder
 
@@ -74,3 +74,40 @@ def test_the_report_is_written_and_a_folder_without_rows_refused(folder, tmp_pat
     }
     with pytest.raises(StudyError, match='no rows.csv: not a study folder'):
         write_report(tmp_path / 'report')
+
+
+def test_runs_stopped_at_a_fraction_of_their_error_are_counted_by_how_they_ended(tmp_path):
+    study = build_study(
+        {
+            'name': 's',
+            'seed': 4,
+            'defaults': {'alpha': 10.0, 'until_error': 0.05},
+            'cases': [
+                {'n': 4, 'graph': 'star', 'algorithm': ['eta1', 'eta2'], 'horizon': 60.0},
+                {'n': 4, 'graph': 'cycle', 'algorithm': 'eta1', 'horizon': 0.05},
+            ],
+        }
+    )
+    store = StudyFolder(tmp_path, study)
+    store.open()
+    for case in study.cases:
+        store.append(run_case(case))
+    store.close()
+    rows = store.rows
+    reached = [r for r in rows if r['horizon'] == 60.0]
+    assert [r['stop'] for r in reached] == ['error_reached'] * 2  # both reach 5 % well before 60 s
+    assert all(r['final_formation_error'] <= 0.05 * r['initial_formation_error'] for r in reached)
+    table = {t['algorithm']: t for t in stops_table(rows)}
+    one = table['eta1']
+    assert one['runs'] == 2 and one['error_reached'] == 1 and one['horizon'] == 1
+    assert table['eta2'] == {
+        'algorithm': 'eta2',
+        'runs': 1,
+        'error_reached': 1,
+        'rounding_floor': 0,
+        'horizon': 0,
+        'stop_time_median': reached[1]['stop_time'],
+        'stop_time_max': reached[1]['stop_time'],
+    }
+    text = write_report(tmp_path, out=tmp_path / 'report').read_text()
+    assert '## How the runs ended' in text and '![stop_time_vs_rate.png](stop_time_vs_rate.png)' in text

@@ -7,11 +7,16 @@
 - saved_vs_periodic.png: for each team that also ran the periodic baseline, the events ETA saves
   against the periodic run with the fewest events whose final error is at most ETA's;
 - inter_event_vs_xi.png: each run's least inter-event time against its least ξ_i;
-- edge_vs_delta.png: each run's largest edge length (exact between events) over Δ, against n.
+- edge_vs_delta.png: each run's largest edge length (exact between events) over Δ, against n;
+- with runs that stop at a fraction of their initial error (`until_error`): how they ended
+  (`stops_table`: the target reached, the rounding floor, the horizon) and stop_time_vs_rate.png,
+  each run's time to its stop against its threshold's rate, beside the time ln(1/fraction)/rate in
+  which the threshold itself falls by that fraction.
 """
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -97,6 +102,26 @@ def runs_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 'wall_time': sum(r['wall_time'] or 0.0 for r in group),
             }
         )
+    return table
+
+
+STOPS = ('error_reached', 'rounding_floor', 'horizon')  # formation_sim.sim.stop's reasons
+
+
+def stops_table(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per algorithm, the event runs with a stop at a fraction of their error: how each ended, and
+    the median and largest time of its stop (empty when no row has such a stop)."""
+    table = []
+    for algorithm in ('eta1', 'eta2'):
+        mine = [r for r in rows if r['algorithm'] == algorithm and r['status'] == 'ok' and r.get('stop')]
+        if not mine:
+            continue
+        times = [r['stop_time'] for r in mine if r['stop_time'] is not None]
+        entry: dict[str, Any] = {'algorithm': algorithm, 'runs': len(mine)}
+        entry.update({reason: sum(1 for r in mine if r['stop'] == reason) for reason in STOPS})
+        entry['stop_time_median'] = float(np.median(times)) if times else None
+        entry['stop_time_max'] = max(times) if times else None
+        table.append(entry)
     return table
 
 
@@ -202,6 +227,31 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
         )
         ax.legend()
         save(fig, 'edge_vs_delta.png')
+
+    stopped = [r for r in event if r.get('stop') and r['stop_time'] and r['rate'] and r['until_error']]
+    if stopped:
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for reason, marker in zip(STOPS, ('o', 'x', 's'), strict=True):
+            chosen = [r for r in stopped if r['stop'] == reason]
+            if chosen:
+                ax.loglog(
+                    [r['rate'] for r in chosen],
+                    [r['stop_time'] for r in chosen],
+                    marker,
+                    ms=3,
+                    alpha=0.6,
+                    label=reason,
+                )
+        fraction = stopped[0]['until_error']
+        rates = np.array(sorted(r['rate'] for r in stopped))
+        ax.loglog(rates, math.log(1.0 / fraction) / rates, 'k--', lw=0.8, label='ln(1/fraction) / rate')
+        ax.set(
+            xlabel="threshold's rate (β or β_d) [1/s]",
+            ylabel='time of the stop [s]',
+            title=f'Time to {100 * fraction:g} % of the initial error',
+        )
+        ax.legend()
+        save(fig, 'stop_time_vs_rate.png')
     return names
 
 
@@ -244,6 +294,10 @@ def report_text(rows: list[dict[str, Any]], figures: list[str]) -> str:
         ),
         '',
     ]
+    stops = stops_table(rows)
+    if stops:
+        columns = ('algorithm', 'runs', *STOPS, 'stop_time_median', 'stop_time_max')
+        parts += ['## How the runs ended', '', markdown(columns, stops), '']
     if savings:
         values = np.array([s for _, s in savings])
         parts += [
