@@ -12,8 +12,10 @@ died every time it was tried (distributed's allowed-failures) becomes a failed r
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +28,7 @@ from formation_sim.study.spec import Study
 from formation_sim.study.store import StudyFolder
 
 MAX_LISTED = 5  # invalid cases named in the error before "and N more"
+CLOSE_TIMEOUT = 10.0  # s: the LocalCluster's close after the study (its workers idle, or ended)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -105,6 +108,18 @@ def _client(scheduler: str | None, workers: int | None):
     return Client(cluster), cluster
 
 
+def _end_workers(cluster) -> None:
+    """Interrupted: end the LocalCluster's own worker processes now. A worker inside a run finishes
+    the run before it closes (minutes, or hours at the horizon), so it is sent SIGTERM; the case in
+    progress has no row and runs again when the study is run again into the same folder."""
+    for nanny in list(cluster.workers.values()):
+        process = getattr(nanny, 'process', None)
+        pid = getattr(process, 'pid', None)
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGTERM)
+
+
 def _validate(client, cases) -> None:
     """Every case's team meets its theorem's hypotheses, or StudyError naming those that do not."""
     futures = client.map(check_case, cases, key=[f'check-{case.key}' for case in cases])
@@ -162,11 +177,13 @@ def run_study(
             _run(client, todo, folder, tally, say, on_row)
         except KeyboardInterrupt:
             interrupted = True
+            if cluster is not None:
+                _end_workers(cluster)
         finally:
             folder.close()
             client.close()
             if cluster is not None:
-                cluster.close()
+                cluster.close(timeout=CLOSE_TIMEOUT)
     rows = folder.rows
     return StudySummary(
         cases=len(study.cases),
