@@ -9,6 +9,7 @@ import pytest
 
 from formation_agent.core.errors import AgentError
 from formation_agent.core.eta import Eta1Agent, Eta2Agent
+from formation_agent.core.neighbourhood import Neighbourhood
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 D12 = np.array([0.0, -2.0])
@@ -192,6 +193,21 @@ def test_sensing_must_cover_exactly_the_neighbours():
 def test_bad_parameters_are_named(overrides, message):
     with pytest.raises(AgentError, match=message):
         _eta1(**overrides)
+
+
+def test_a_neighbourhood_built_already_must_be_the_agents_own():
+    hoods = Neighbourhood.team(neighbours={1: {2: D12, 3: D13}, 2: {1: D12}}, delta=4.0)
+    assert hoods is not None
+    agent = _eta1(neighbours=hoods[1])
+    assert agent.neighbour_ids == (2, 3) and agent._hood is hoods[1]
+    with pytest.raises(
+        AgentError, match=r"^agent 1: the neighbourhood given is agent 2's with Δ = 4.0, not Δ = 4.0$"
+    ):
+        _eta1(neighbours=hoods[2])
+    with pytest.raises(
+        AgentError, match=r"^agent 1: the neighbourhood given is agent 1's with Δ = 4.0, not Δ = 5.0$"
+    ):
+        _eta1(neighbours=hoods[1], delta=5.0)
 
 
 def test_eta2_information_without_relative_velocity_is_rejected():

@@ -39,7 +39,7 @@ from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
 from formation_agent.core.errors import AgentError, RuleError, ScaleError
-from formation_agent.core.neighbourhood import Neighbourhood
+from formation_agent.core.neighbourhood import PADDED, Neighbourhood
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
@@ -53,7 +53,7 @@ from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, TriggerR
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 # Agents of this dimension or less evaluate their prediction in plain floats.
-_FAST_DIMENSION = 3
+_FAST_DIMENSION = PADDED
 
 # First trial span of a search [s] before the agent has an inter-event time of its own, and its
 # least value (the search's former fixed choice).
@@ -231,12 +231,21 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         tolerance: float = DEFAULT_TOLERANCE,
     ) -> None:
-        # Who the neighbours are, d_ij and Δ - ||d_ij|| (checked), and the checks of every input.
-        hood = self._hood = Neighbourhood(agent_id=agent_id, neighbours=neighbours, delta=delta)
+        # Who the neighbours are, d_ij and Δ - ||d_ij|| (checked), and the checks of every input; or
+        # the agent's Neighbourhood built already (`Neighbourhood.team`: a whole team's at once).
+        if isinstance(neighbours, Neighbourhood):
+            hood = self._hood = neighbours
+            if hood.agent_id != agent_id or hood.delta != delta:
+                raise AgentError(
+                    f"agent {agent_id}: the neighbourhood given is agent {hood.agent_id}'s with Δ = "
+                    f'{hood.delta!r}, not Δ = {delta!r}'
+                )
+        else:
+            hood = self._hood = Neighbourhood(agent_id=agent_id, neighbours=neighbours, delta=delta)
         self.agent_id, self.delta, self.neighbour_ids = hood.agent_id, hood.delta, hood.ids
         offsets = self.offsets = hood.offsets  # d_ij, one row per neighbour
         self.capacity = hood.capacity  # Δ - ||d_ij||
@@ -258,9 +267,8 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
         zero = (0.0,) * max(p, _FAST_DIMENSION)
-        self._offsets = list(map(tuple, offsets.tolist()))
-        padding = (0.0,) * (_FAST_DIMENSION - p)  # `_pad`'s, once for every row
-        self._offsets3 = [row + padding for row in self._offsets]
+        self._offsets = list(hood.offset_rows)
+        self._offsets3 = list(hood.offset_rows3)  # padded as `_pad` pads
         self._capacity = list(hood._capacity)
         self._edge_time = [0.0] * m
         self._edge_y = [zero] * m
@@ -521,7 +529,7 @@ class Eta1Agent(_EventTriggeredAgent):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         alpha: float,
         beta: float,
@@ -673,7 +681,7 @@ class Eta2Agent(_EventTriggeredAgent):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         alpha_d: float,
         beta_d: float,
@@ -919,7 +927,7 @@ def make_agent(
     *,
     algorithm: str,
     agent_id: int,
-    neighbours: Mapping[int, object],
+    neighbours: Mapping[int, object] | Neighbourhood,
     delta: float,
     gains: Mapping[str, float],
     tolerance: float = DEFAULT_TOLERANCE,

@@ -35,6 +35,7 @@ from formation_agent.core.eta import (
     Eta2Agent,
     make_agent,
 )
+from formation_agent.core.neighbourhood import Neighbourhood
 from formation_agent.core.time_warp import TimeWarp
 from formation_agent.core.trigger import ExponentialRule
 from formation_msgs_py.types import TriggerInfo
@@ -77,20 +78,38 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
         )
 
 
-def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE) -> Eta1Agent | Eta2Agent:
-    """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
+def build_agent(
+    scenario,
+    agent_id: int,
+    *,
+    tolerance: float = DEFAULT_TOLERANCE,
+    neighbourhood: Neighbourhood | None = None,
+) -> Eta1Agent | Eta2Agent:
+    """The ROS-free agent object for `agent_id`, holding only what that agent knows; `neighbourhood`: its
+    neighbours and d_ij built already (`build_agents`), else from `scenario.neighbours(agent_id)`."""
     algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
     gains = {name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)}
     return make_agent(
         algorithm=algorithm,
         agent_id=agent_id,
-        neighbours=scenario.neighbours(agent_id),
+        neighbours=scenario.neighbours(agent_id) if neighbourhood is None else neighbourhood,
         delta=scenario.delta,
         gains=gains,
         tolerance=tolerance,
         safety=scenario.safety,
         trigger_rule=scenario.trigger_rule,
     )
+
+
+def build_agents(scenario, *, tolerance: float = DEFAULT_TOLERANCE) -> dict[int, Eta1Agent | Eta2Agent]:
+    """`build_agent` for every agent of the scenario, their neighbourhoods built for the whole team at once
+    (`Neighbourhood.team`: one numpy call for all d_ij, one for all capacities; the same floats, and the
+    same agents: a neighbourhood it would refuse is built by its agent, which raises the error)."""
+    ids = scenario.agent_ids
+    hoods = Neighbourhood.team(neighbours={i: scenario.neighbours(i) for i in ids}, delta=scenario.delta)
+    if hoods is None:
+        return {i: build_agent(scenario, i, tolerance=tolerance) for i in ids}
+    return {i: build_agent(scenario, i, tolerance=tolerance, neighbourhood=hoods[i]) for i in ids}
 
 
 class Sampler:
@@ -385,7 +404,7 @@ def simulate(
     started = time.perf_counter()
     world = World.from_scenario(scenario)
     stop = RunStop.of(scenario, world, horizon=horizon, until_error=until_error, at_floor=stop_at_floor)
-    agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
+    agents = build_agents(scenario, tolerance=tolerance)
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
     writer = None if trajectory_dir is None else _writer(trajectory_dir, scenario)
     watch = None if sample_events else EdgeLengths(scenario)
