@@ -22,7 +22,7 @@ from formation_msgs_py.types import TriggerInfo
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim import engine
-from formation_sim.sim.engine import build_agent
+from formation_sim.sim.engine import build_agent, build_agents
 from formation_sim.sim.errors import EngineError
 from formation_sim.sim.world import World
 
@@ -243,13 +243,13 @@ def _run_keeping_agents(monkeypatch, scenario, horizon, *, python_agent=None):
     """A run and its agents (`python_agent`: that one on the numpy path, which the team leaves to Python)."""
     agents = {}
 
-    def build(scenario, agent_id, **kwargs):
-        agent = agents[agent_id] = build_agent(scenario, agent_id, **kwargs)
-        if agent_id == python_agent:
-            agent._fast = False
-        return agent
+    def build(scenario, **kwargs):
+        agents.update(build_agents(scenario, **kwargs))
+        if python_agent is not None:
+            agents[python_agent]._fast = False
+        return agents
 
-    monkeypatch.setattr(engine, 'build_agent', build)
+    monkeypatch.setattr(engine, 'build_agents', build)
     return engine.simulate(scenario, horizon=horizon, sample_dt=None), agents
 
 

@@ -267,9 +267,10 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
         zero = (0.0,) * max(p, _FAST_DIMENSION)
-        self._offsets = list(hood.offset_rows)
-        self._offsets3 = list(hood.offset_rows3)  # padded as `_pad` pads
-        self._capacity = list(hood._capacity)
+        # The neighbourhood's lists (never changed, by either)
+        self._offsets = hood.offset_rows
+        self._offsets3 = hood.offset_rows3  # padded as `_pad` pads
+        self._capacity = hood._capacity
         self._edge_time = [0.0] * m
         self._edge_y = [zero] * m
         self._edge_u = [zero] * m
@@ -938,6 +939,49 @@ def make_agent(
     speed_scale and threshold_floor are optional, SCALE_GAINS); `safety`: the collision layer
     (ETA-1 only, docs/SAFETY.md); `trigger_rule`: the threshold's family by name
     (formation_agent.core.trigger)."""
+    kind, chosen = _kind_and_gains(algorithm=algorithm, agent_id=agent_id, gains=gains, safety=safety)
+    return kind(
+        agent_id=agent_id,
+        neighbours=neighbours,
+        delta=delta,
+        tolerance=tolerance,
+        trigger_rule=trigger_rule,
+        **chosen,
+    )
+
+
+def make_agents(
+    *,
+    algorithm: str,
+    neighbours: Mapping[int, Mapping[int, object] | Neighbourhood],
+    delta: float,
+    gains: Mapping[str, float],
+    tolerance: float = DEFAULT_TOLERANCE,
+    safety: SafetyConfig | None = None,
+    trigger_rule: str = DEFAULT_RULE,
+) -> dict[int, Eta1Agent | Eta2Agent]:
+    """`make_agent` for every agent of `neighbours` (agent id -> its neighbours, or its Neighbourhood
+    built already: `Neighbourhood.team`), in that order, the algorithm and gains chosen once: the same
+    agents, and the same error as `make_agent` raises for the first agent."""
+    agents: dict[int, Eta1Agent | Eta2Agent] = {}
+    for agent_id, hood in neighbours.items():
+        if not agents:
+            kind, chosen = _kind_and_gains(algorithm=algorithm, agent_id=agent_id, gains=gains, safety=safety)
+        agents[agent_id] = kind(
+            agent_id=agent_id,
+            neighbours=hood,
+            delta=delta,
+            tolerance=tolerance,
+            trigger_rule=trigger_rule,
+            **chosen,
+        )
+    return agents
+
+
+def _kind_and_gains(
+    *, algorithm: str, agent_id: int, gains: Mapping[str, float], safety: SafetyConfig | None
+) -> tuple[type[Eta1Agent] | type[Eta2Agent], dict[str, Any]]:
+    """`make_agent`'s agent type and its keyword arguments from `gains` (and `safety`), checked."""
     if algorithm not in ALGORITHM_GAINS:
         raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
     missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
@@ -950,14 +994,7 @@ def make_agent(
         if algorithm != 'eta1':
             raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
         chosen['safety'] = safety
-    return kind(
-        agent_id=agent_id,
-        neighbours=neighbours,
-        delta=delta,
-        tolerance=tolerance,
-        trigger_rule=trigger_rule,
-        **chosen,
-    )
+    return kind, chosen
 
 
 def _new_search(

@@ -34,6 +34,7 @@ from formation_agent.core.eta import (
     Eta1Agent,
     Eta2Agent,
     make_agent,
+    make_agents,
 )
 from formation_agent.core.neighbourhood import Neighbourhood
 from formation_agent.core.time_warp import TimeWarp
@@ -86,30 +87,39 @@ def build_agent(
     neighbourhood: Neighbourhood | None = None,
 ) -> Eta1Agent | Eta2Agent:
     """The ROS-free agent object for `agent_id`, holding only what that agent knows; `neighbourhood`: its
-    neighbours and d_ij built already (`build_agents`), else from `scenario.neighbours(agent_id)`."""
-    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
-    gains = {name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)}
+    neighbours and d_ij built already (`Neighbourhood.team`), else from `scenario.neighbours(agent_id)`."""
     return make_agent(
-        algorithm=algorithm,
         agent_id=agent_id,
         neighbours=scenario.neighbours(agent_id) if neighbourhood is None else neighbourhood,
-        delta=scenario.delta,
-        gains=gains,
         tolerance=tolerance,
-        safety=scenario.safety,
-        trigger_rule=scenario.trigger_rule,
+        **_agent_settings(scenario),
     )
 
 
 def build_agents(scenario, *, tolerance: float = DEFAULT_TOLERANCE) -> dict[int, Eta1Agent | Eta2Agent]:
     """`build_agent` for every agent of the scenario, their neighbourhoods built for the whole team at once
-    (`Neighbourhood.team`: one numpy call for all d_ij, one for all capacities; the same floats, and the
-    same agents: a neighbourhood it would refuse is built by its agent, which raises the error)."""
+    (`Neighbourhood.team`: one numpy call for all d_ij, one for all capacities; the same floats) and the
+    gains chosen once (`make_agents`): the same agents. A neighbourhood it would refuse is built by its
+    agent, which raises the error."""
     ids = scenario.agent_ids
     hoods = Neighbourhood.team(neighbours={i: scenario.neighbours(i) for i in ids}, delta=scenario.delta)
     if hoods is None:
         return {i: build_agent(scenario, i, tolerance=tolerance) for i in ids}
-    return {i: build_agent(scenario, i, tolerance=tolerance, neighbourhood=hoods[i]) for i in ids}
+    return make_agents(neighbours=hoods, tolerance=tolerance, **_agent_settings(scenario))
+
+
+def _agent_settings(scenario) -> dict:
+    """What every agent of the scenario is made with (`make_agent`), but its id and neighbours."""
+    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
+    return {
+        'algorithm': algorithm,
+        'delta': scenario.delta,
+        'gains': {
+            name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)
+        },
+        'safety': scenario.safety,
+        'trigger_rule': scenario.trigger_rule,
+    }
 
 
 class Sampler:
