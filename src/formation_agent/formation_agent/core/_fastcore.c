@@ -2780,6 +2780,84 @@ static PyTypeObject TeamType = {
     .tp_members = team_members,
 };
 
+/* team_edges(agents, ids): what the engine's _team hands Team for agents[a] (id ids[a]): (neighbours, back),
+ * per agent the positions of its neighbour_ids in `ids` and its slot among each neighbour's neighbour_ids (the
+ * first, as tuple.index finds it); None where a neighbour is not in `ids` or does not list the agent back. */
+static PyObject *team_edges(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agents, *ids;
+    if (!PyArg_ParseTuple(args, "O!O!", &PyTuple_Type, &agents, &PyTuple_Type, &ids))
+        return NULL;
+    Py_ssize_t n = PyTuple_GET_SIZE(agents);
+    if (PyTuple_GET_SIZE(ids) != n) {
+        PyErr_SetString(PyExc_ValueError, "team_edges: agents and ids of one length");
+        return NULL;
+    }
+    PyObject *index = PyDict_New(), *lists = PyTuple_New(n), *neighbours = PyTuple_New(n), *back = PyTuple_New(n);
+    PyObject *out = NULL;
+    if (index == NULL || lists == NULL || neighbours == NULL || back == NULL)
+        goto done;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *k = PyLong_FromSsize_t(a);
+        PyObject *own = k ? PyObject_GetAttr(PyTuple_GET_ITEM(agents, a), NAMES[N_NEIGHBOUR_IDS]) : NULL;
+        if (own == NULL || PyDict_SetItem(index, PyTuple_GET_ITEM(ids, a), k) < 0) {
+            Py_XDECREF(k);
+            Py_XDECREF(own);
+            goto done;
+        }
+        Py_DECREF(k);
+        PyTuple_SET_ITEM(lists, a, own);
+        if (!PyTuple_Check(own)) {
+            PyErr_Format(PyExc_TypeError, "team_edges: agent %R's neighbour_ids is not a tuple", PyTuple_GET_ITEM(ids, a));
+            goto done;
+        }
+    }
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *own = PyTuple_GET_ITEM(lists, a), *me = PyTuple_GET_ITEM(ids, a);
+        Py_ssize_t m = PyTuple_GET_SIZE(own);
+        PyObject *row = PyTuple_New(m), *slots = PyTuple_New(m);
+        if (row == NULL || slots == NULL) {
+            Py_XDECREF(row);
+            Py_XDECREF(slots);
+            goto done;
+        }
+        PyTuple_SET_ITEM(neighbours, a, row);
+        PyTuple_SET_ITEM(back, a, slots);
+        for (Py_ssize_t k = 0; k < m; k++) {
+            PyObject *position = PyDict_GetItemWithError(index, PyTuple_GET_ITEM(own, k));
+            if (position == NULL) {
+                out = PyErr_Occurred() ? NULL : Py_NewRef(Py_None); /* a stranger: the Python path */
+                goto done;
+            }
+            PyObject *theirs = PyTuple_GET_ITEM(lists, PyLong_AsSsize_t(position));
+            Py_ssize_t slot = -1;
+            for (Py_ssize_t l = 0; slot < 0 && l < PyTuple_GET_SIZE(theirs); l++) {
+                int same = PyObject_RichCompareBool(PyTuple_GET_ITEM(theirs, l), me, Py_EQ);
+                if (same < 0)
+                    goto done;
+                if (same)
+                    slot = l;
+            }
+            if (slot < 0) {
+                out = Py_NewRef(Py_None); /* not listed back: the Python path */
+                goto done;
+            }
+            PyObject *number = PyLong_FromSsize_t(slot);
+            if (number == NULL)
+                goto done;
+            PyTuple_SET_ITEM(row, k, Py_NewRef(position));
+            PyTuple_SET_ITEM(slots, k, number);
+        }
+    }
+    out = PyTuple_Pack(2, neighbours, back);
+done:
+    Py_XDECREF(index);
+    Py_XDECREF(lists);
+    Py_XDECREF(neighbours);
+    Py_XDECREF(back);
+    return out;
+}
+
 /* ---- the world's closed-form step (formation_sim.sim.world.World._propagate) -------------- */
 
 #define N_WORLD_SERIES 14
@@ -3028,6 +3106,9 @@ static PyMethodDef methods[] = {
      "watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges for the edges of "
      "these agent rows; False where numpy must do it."},
     {"abs_max", abs_max, METH_O, "abs_max(array): float(numpy.abs(array).max()); None where numpy must do it."},
+    {"team_edges", team_edges, METH_VARARGS,
+     "team_edges(agents, ids): (neighbours, back) for Team: each agent's neighbours by their position in ids "
+     "and its slot among each neighbour's neighbour_ids; None where a neighbour does not list it back."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -577,24 +577,21 @@ def _team(agents: dict, world: World) -> _fastcore.Team | None:
     """The compiled step of `_trigger_and_deliver` over this team (`compiled.team`), or None (the
     pure-Python path, p > 3, or a neighbour that does not list the agent back): the agents in the
     world's order, each one's neighbours by their position there and its slot among their edges."""
-    team_type = compiled.team()
+    team_type, team_edges = compiled.team(), compiled.team_edges()
     ids = world.agent_ids
-    if team_type is None or world.dimension > 3:
+    if team_type is None or team_edges is None or world.dimension > 3:
         return None
-    position = {i: k for k, i in enumerate(ids)}
     ordered = tuple(agents[i] for i in ids)
-    if any(i not in agents[j].neighbour_ids for i, agent in zip(ids, ordered) for j in agent.neighbour_ids):
+    edges = team_edges(ordered, ids)  # (neighbours by position, the agent's slot at each), compiled
+    if edges is None:
         return None
     return team_type(
         plain=(Eta1Agent, Eta2Agent),
         rule=ExponentialRule,
         agents=ordered,
         ids=ids,
-        neighbours=tuple(tuple(position[j] for j in agent.neighbour_ids) for agent in ordered),
-        back=tuple(
-            tuple(agents[j].neighbour_ids.index(i) for j in agent.neighbour_ids)
-            for i, agent in zip(ids, ordered)
-        ),
+        neighbours=edges[0],
+        back=edges[1],
         dimension=world.dimension,
         set_control=world.set_control,
     )
