@@ -1718,6 +1718,38 @@ done:
     return out;
 }
 
+/* Agent `id` (rank k) planned anew: a new search, queued lazily (next_time searches only as far as the team's
+ * next event needs). */
+static int plan_one(AgendaObject *self, PyObject *agents, PyObject *id, Py_ssize_t k, PyObject *horizon) {
+    PyObject *agent = PyDict_GetItemWithError(agents, id);
+    if (agent == NULL) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
+        return -1;
+    }
+    self->counter += 1;
+    self->serial[k] = self->counter;
+    PyObject *search = plain_search(self, agent, k);
+    if (search == Py_None) {
+        Py_DECREF(search);
+        search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+    }
+    double frontier;
+    if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
+        frontier = ((SearchObject *)search)->st.frontier;
+    } else if (search != NULL) {
+        PyObject *value = PyObject_GetAttr(search, FRONTIER);
+        frontier = value ? PyFloat_AsDouble(value) : -1.0;
+        Py_XDECREF(value);
+        if (PyErr_Occurred())
+            Py_CLEAR(search);
+    }
+    if (search == NULL)
+        return -1;
+    Py_XSETREF(self->searches[k], search);
+    return heap_push(self, (Entry){frontier, 0, k, self->counter});
+}
+
 /* plan(agents, changed): _Agenda.plan without a period; `changed` the agents to plan anew, sorted. */
 static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
     PyObject *agents, *changed;
@@ -1729,43 +1761,73 @@ static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
     for (Py_ssize_t c = 0; c < PyList_GET_SIZE(changed); c++) {
         PyObject *id = PyList_GET_ITEM(changed, c);
         PyObject *rank = PyDict_GetItemWithError(self->slots, id);
-        PyObject *agent = rank ? PyDict_GetItemWithError(agents, id) : NULL;
-        if (agent == NULL) {
+        Py_ssize_t k = rank ? PyLong_AsSsize_t(rank) : -1;
+        if (rank == NULL) {
             if (!PyErr_Occurred())
                 PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
             Py_DECREF(horizon);
             return NULL;
         }
-        Py_ssize_t k = PyLong_AsSsize_t(rank);
-        self->counter += 1;
-        self->serial[k] = self->counter;
-        /* Searched lazily (next_time): only as far as the team's next event needs. */
-        PyObject *search = plain_search(self, agent, k);
-        if (search == Py_None) {
-            Py_DECREF(search);
-            search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
-        }
-        double frontier;
-        if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
-            frontier = ((SearchObject *)search)->st.frontier;
-        } else if (search != NULL) {
-            PyObject *value = PyObject_GetAttr(search, FRONTIER);
-            frontier = value ? PyFloat_AsDouble(value) : -1.0;
-            Py_XDECREF(value);
-            if (PyErr_Occurred())
-                Py_CLEAR(search);
-        }
-        if (search == NULL) {
-            Py_DECREF(horizon);
-            return NULL;
-        }
-        Py_XSETREF(self->searches[k], search);
-        if (heap_push(self, (Entry){frontier, 0, k, self->counter}) < 0) {
+        if (plan_one(self, agents, id, k, horizon) < 0) {
             Py_DECREF(horizon);
             return NULL;
         }
     }
     Py_DECREF(horizon);
+    Py_RETURN_NONE;
+}
+
+static int rank_less(const void *a, const void *b) {
+    Py_ssize_t x = *(const Py_ssize_t *)a, y = *(const Py_ssize_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* plan_union(agents, due, receivers): plan(agents, sorted(set(due).union(receivers))), the engine's _run after
+ * an event time, the union and its order taken in C: the ranks are the positions among the sorted ids, so
+ * sorting them sorts the ids. An id it does not know goes to plan's lookup, which raises its error. */
+static PyObject *agenda_plan_union(AgendaObject *self, PyObject *args) {
+    PyObject *agents, *due, *receivers;
+    if (!PyArg_ParseTuple(args, "O!O!O!", &PyDict_Type, &agents, &PyList_Type, &due, &PyList_Type, &receivers))
+        return NULL;
+    Py_ssize_t count = PyList_GET_SIZE(due) + PyList_GET_SIZE(receivers);
+    Py_ssize_t *ranks = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(count > 0 ? count : 1));
+    if (ranks == NULL)
+        return PyErr_NoMemory();
+    for (Py_ssize_t c = 0; c < count; c++) {
+        PyObject *id = c < PyList_GET_SIZE(due) ? PyList_GET_ITEM(due, c)
+                                                : PyList_GET_ITEM(receivers, c - PyList_GET_SIZE(due));
+        PyObject *rank = PyDict_GetItemWithError(self->slots, id);
+        if (rank == NULL) { /* a stranger (or an error): the Python union and plan's lookup */
+            PyMem_Free(ranks);
+            if (PyErr_Occurred())
+                return NULL;
+            PyObject *changed = PySet_New(due), *sorted = NULL, *out = NULL;
+            int added = changed == NULL ? -1 : 0;
+            for (Py_ssize_t r = 0; added == 0 && r < PyList_GET_SIZE(receivers); r++)
+                added = PySet_Add(changed, PyList_GET_ITEM(receivers, r));
+            if (added == 0 && (sorted = PySequence_List(changed)) != NULL && PyList_Sort(sorted) == 0) {
+                PyObject *inner = PyTuple_Pack(2, agents, sorted);
+                out = inner ? agenda_plan(self, inner) : NULL;
+                Py_XDECREF(inner);
+            }
+            Py_XDECREF(changed);
+            Py_XDECREF(sorted);
+            return out;
+        }
+        ranks[c] = PyLong_AsSsize_t(rank);
+    }
+    qsort(ranks, (size_t)count, sizeof(Py_ssize_t), rank_less);
+    PyObject *horizon = PyFloat_FromDouble(self->horizon);
+    int status = horizon == NULL ? -1 : 0;
+    for (Py_ssize_t c = 0; status == 0 && c < count; c++) {
+        if (c > 0 && ranks[c] == ranks[c - 1])
+            continue; /* the set's one copy */
+        status = plan_one(self, agents, PyTuple_GET_ITEM(self->ids, ranks[c]), ranks[c], horizon);
+    }
+    Py_XDECREF(horizon);
+    PyMem_Free(ranks);
+    if (status < 0)
+        return NULL;
     Py_RETURN_NONE;
 }
 
@@ -1865,6 +1927,8 @@ static PyObject *agenda_link(AgendaObject *self, PyObject *team);
 static PyMethodDef agenda_methods[] = {
     {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
      "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"plan_union", (PyCFunction)agenda_plan_union, METH_VARARGS,
+     "plan_union(agents, due, receivers): plan(agents, sorted(set(due).union(receivers)))."},
     {"link", (PyCFunction)agenda_link, METH_O,
      "link(team): new searches of the team's agents start from the team's copy of their model (Team)."},
     {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},

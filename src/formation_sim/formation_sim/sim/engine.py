@@ -273,6 +273,7 @@ class FloorEdges:
     capacity: float
     pair: tuple[int, int]
     offset: float
+    _factors: dict = field(default_factory=dict, compare=False, repr=False)  # by (k1, k2): rounding_factors
 
     @classmethod
     def of(cls, scenario) -> FloorEdges:
@@ -280,6 +281,19 @@ class FloorEdges:
         k = int(np.argmin(capacities))
         _, _, d = scenario.edge_indices()
         return cls(capacity=float(capacities[k]), pair=scenario.edges[k].pair, offset=float(np.abs(d).max()))
+
+    def factors(self, gains: tuple[float, float] | None) -> tuple:
+        """`theory.rounding_factors` at the formation of the least-capacity edge (y_ij = 0: slack = c), for
+        ETA-1 (`gains` None) or ETA-2's (k1, k2); made once per run and gains."""
+        found = self._factors.get(gains)
+        if found is None:
+            c = self.capacity
+            found = self._factors[gains] = (
+                theory.rounding_factors(c, c)
+                if gains is None
+                else theory.rounding_factors(c, c, k1=gains[0], k2=gains[1])
+            )
+        return found
 
 
 def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
@@ -313,13 +327,12 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
     t = 34.898 → 34.241 (1.35e-14 < 8 × 1.75e-15).
     """
     x, q, _ = world.arrays()  # the world's own arrays (read, not copied: this runs at every event)
-    ulp_y = float(np.spacing(max(_abs_max(x), edges.offset)))
-    c = edges.capacity
-    if q is None:
-        step = theory.rounding_step(c, c, ulp_y)
+    ulp_y = _spacing(max(_abs_max(x), edges.offset))
+    if q is None:  # theory.rounding_step(c, c, ulp_y), its factors made once (edges.factors)
+        step = theory.rounding_step_of(edges.factors(None), ulp_y)
     else:
-        ulp_q = float(np.spacing(_abs_max(q)))
-        step = theory.rounding_step(c, c, ulp_y, k1=agent.k1, k2=agent.k2, ulp_q=ulp_q)
+        ulp_q = _spacing(_abs_max(q))
+        step = theory.rounding_step_of(edges.factors((agent.k1, agent.k2)), ulp_y, ulp_q=ulp_q)
     floor = ROUNDING_FLOOR_ULPS * step
     t = world.time
     threshold = agent.threshold(t)
@@ -333,6 +346,12 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
         f'({how} at the formation, on edge ({i}, {j})); from here on rounding, not the dynamics, decides '
         'the events; shorten the horizon or lower beta'
     )
+
+
+def _spacing(value: float) -> float:
+    """float(np.spacing(value)) for a value >= 0 or NaN: math.ulp where they agree (finite, below the
+    largest double, whose spacing numpy calls inf), without numpy's call."""
+    return math.ulp(value) if value < 1e300 else float(np.spacing(value))
 
 
 def _abs_max(array: np.ndarray) -> float:
@@ -541,7 +560,7 @@ def _run(
                 on_event(t, world, due)
             receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
             messages += len(receivers)
-            agenda.plan(agents, set(due).union(receivers), due, t)
+            agenda.plan(agents, due, receivers, t)
             t_next = agenda.next_time()
             if t_next == t and period is None:
                 # News at this instant put an agent on its threshold already (it would have crossed
@@ -689,12 +708,13 @@ class _Agenda:
         if self.queue is not None:
             self.queue.link(team)
 
-    def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
-        """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""
+    def plan(self, agents: dict, due: list[int], receivers: list[int], t: float) -> None:
+        """Plan anew every agent whose information changed at `t`: the `due` ones triggered, the `receivers`
+        were sent their triggering information (the compiled queue takes the union and its order in C)."""
         if self.queue is not None:
-            self.queue.plan(agents, sorted(changed))
+            self.queue.plan_union(agents, due, receivers)
             return
-        for i in sorted(changed):
+        for i in sorted(set(due).union(receivers)):
             self.counter += 1
             self.serial[i] = self.counter
             if self.period is None:
