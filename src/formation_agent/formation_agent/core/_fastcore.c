@@ -939,12 +939,21 @@ static int plain_double(PyObject *value, double *out) {
     return 1;
 }
 
+static PyObject *ZERO = NULL; /* the float +0.0, shared (as the Python path shares its padding's 0.0) */
+
+/* A float object of v: the shared +0.0, or a new one. */
+static inline PyObject *float_object(double v) {
+    if (v == 0.0 && !signbit(v))
+        return Py_NewRef(ZERO);
+    return PyFloat_FromDouble(v);
+}
+
 static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
     PyObject *t = PyTuple_New(n);
     if (t == NULL)
         return NULL;
     for (Py_ssize_t i = 0; i < n; i++) {
-        PyObject *x = PyFloat_FromDouble(v[i]);
+        PyObject *x = float_object(v[i]);
         if (x == NULL) {
             Py_DECREF(t);
             return NULL;
@@ -2322,6 +2331,26 @@ static int list_fill(PyObject *list, Py_ssize_t k, PyObject *value) {
     return 0;
 }
 
+/* An edge's row as a tuple (_row(k)), its anchor, y_ij (and ETA-2's q_ij) the very float objects of the edge's
+ * time, y and q where they are the same floats (as _row takes them from _edge_time, _edge_y, _edge_q). */
+static PyObject *row_tuple(const double *row, Py_ssize_t width, PyObject *time, PyObject *y, PyObject *q) {
+    PyObject *t = PyTuple_New(width);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < width; i++) {
+        PyObject *same = i == 0 ? time : i <= 3 ? PyTuple_GET_ITEM(y, i - 1) : i <= 6 && q ? PyTuple_GET_ITEM(q, i - 4) : NULL;
+        double v = same ? PyFloat_AS_DOUBLE(same) : 0.0;
+        PyObject *x = same && memcmp(&v, row + i, sizeof v) == 0 ? Py_NewRef(same) : float_object(row[i]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, x);
+    }
+    PyObject_GC_UnTrack(t); /* floats only: as floats_tuple */
+    return t;
+}
+
 /* Agent a's attributes written from its ledger, as the Python path leaves them (the same floats), and the
  * agent handed back: its attributes are its knowledge again (a change to them is read at the next load). */
 static int ledger_store(TeamObject *self, Py_ssize_t a) {
@@ -2340,11 +2369,13 @@ static int ledger_store(TeamObject *self, Py_ssize_t a) {
         if (lists[i] == NULL)
             goto done;
     for (Py_ssize_t k = 0; k < m; k++) {
-        if (list_fill(lists[0], k, PyBool_FromLong(E[k].heard)) < 0 ||
-            list_fill(lists[1], k, PyFloat_FromDouble(E[k].time)) < 0 ||
+        if (list_fill(lists[0], k, PyBool_FromLong(E[k].heard)) < 0 || list_fill(lists[1], k, float_object(E[k].time)) < 0 ||
             list_fill(lists[2], k, floats_tuple(E[k].y, 3)) < 0 || list_fill(lists[3], k, floats_tuple(E[k].u, 3)) < 0 ||
-            list_fill(lists[4], k, E[k].row_set ? floats_tuple(E[k].row, width) : PyTuple_New(0)) < 0 ||
             (eta2 && list_fill(lists[5], k, floats_tuple(E[k].q, 3)) < 0) ||
+            list_fill(lists[4], k,
+                      E[k].row_set ? row_tuple(E[k].row, width, PyList_GET_ITEM(lists[1], k),
+                                               PyList_GET_ITEM(lists[2], k), eta2 ? PyList_GET_ITEM(lists[5], k) : NULL)
+                                   : PyTuple_New(0)) < 0 ||
             (sensed && list_fill(lists[6], k, floats_tuple(E[k].sensed_q, p)) < 0))
             goto done;
     }
@@ -3188,6 +3219,8 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
             return NULL;
     }
     if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0 || PyType_Ready(&TeamType) < 0)
+        return NULL;
+    if (ZERO == NULL && (ZERO = PyFloat_FromDouble(0.0)) == NULL)
         return NULL;
     TRIGGER_SEARCH = PyUnicode_InternFromString("trigger_search");
     ADVANCE = PyUnicode_InternFromString("advance");
