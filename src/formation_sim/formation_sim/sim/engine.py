@@ -174,7 +174,7 @@ class Sampler:
         """The world's present state as a sample (with event samples, or `force`); `due`: the agents
         about to trigger now, whose edges the watch measures."""
         if self.watch is not None and due:
-            self.watch.add_rows([self.world.index(agent) for agent in due], self.world.arrays()[0])
+            self.watch.add_rows(self.world.rows(due), self.world.arrays()[0])
         now = self.world.time if self.clock is None else self.clock.real(self.world.time)
         if not (self.events or force) or (self.times and self.times[-1] == now):
             return
