@@ -45,7 +45,7 @@ from cases import build_scenario, label, random  # noqa: E402 - benchmarks/ put 
 from engine_baseline import PACKAGES, materialise  # noqa: E402 - benchmarks/ put on sys.path first
 
 from formation_agent.core import compiled  # noqa: E402 - after the path is set up
-from formation_sim.sim.engine import build_agent, simulate  # noqa: E402 - after the path is set up
+from formation_sim.sim.engine import build_agents, simulate  # noqa: E402 - after the path is set up
 from formation_sim.sim.world import World  # noqa: E402 - after the path is set up
 
 # main before the compiled core.
@@ -101,12 +101,12 @@ def _run_engine(scenario, horizon: float, on: bool):
 
 def _setup_cpu(scenario, on: bool) -> float:
     """CPU seconds of what `simulate` does once per run before its first event: the world and the
-    agents (`World.from_scenario`, `build_agent` for every agent), as `simulate` builds them."""
+    agents (`World.from_scenario`, `build_agents`), as `simulate` builds them."""
     compiled.use_compiled(on)
     gc.collect()
     cpu = time.process_time()
     World.from_scenario(scenario)
-    {i: build_agent(scenario, i) for i in scenario.agent_ids}
+    build_agents(scenario)
     return time.process_time() - cpu
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from formation_agent.core.errors import AgentError
-from formation_agent.core.eta import Eta1Agent, Eta2Agent
+from formation_agent.core.eta import Eta1Agent, Eta2Agent, make_agent, make_agents
+from formation_agent.core.neighbourhood import Neighbourhood
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 D12 = np.array([0.0, -2.0])
@@ -192,6 +193,38 @@ def test_sensing_must_cover_exactly_the_neighbours():
 def test_bad_parameters_are_named(overrides, message):
     with pytest.raises(AgentError, match=message):
         _eta1(**overrides)
+
+
+def test_a_neighbourhood_built_already_must_be_the_agents_own():
+    hoods = Neighbourhood.team(neighbours={1: {2: D12, 3: D13}, 2: {1: D12}}, delta=4.0)
+    assert hoods is not None
+    agent = _eta1(neighbours=hoods[1])
+    assert agent.neighbour_ids == (2, 3) and agent._hood is hoods[1]
+    with pytest.raises(
+        AgentError, match=r"^agent 1: the neighbourhood given is agent 2's with Δ = 4.0, not Δ = 4.0$"
+    ):
+        _eta1(neighbours=hoods[2])
+    with pytest.raises(
+        AgentError, match=r"^agent 1: the neighbourhood given is agent 1's with Δ = 4.0, not Δ = 5.0$"
+    ):
+        _eta1(neighbours=hoods[1], delta=5.0)
+
+
+def test_make_agents_makes_each_agent_as_make_agent_does_and_raises_its_error():
+    table = {1: {2: D12, 3: D13}, 2: {1: D12}, 3: {1: D13}}
+    gains = {'alpha_d': 1.0, 'beta_d': 0.1, 'k1': 1.0, 'k2': 2.0, 'k3': 0.5, 'speed_scale': 2.0}
+    agents = make_agents(
+        algorithm='eta2', neighbours=table, delta=4.0, gains=gains, trigger_rule='exponential'
+    )
+    assert list(agents) == [1, 2, 3]
+    for i, agent in agents.items():
+        alone = make_agent(algorithm='eta2', agent_id=i, neighbours=table[i], delta=4.0, gains=gains)
+        assert type(agent) is Eta2Agent and agent.neighbour_ids == alone.neighbour_ids
+        assert (agent.k1, agent.k2, agent.k3, agent.speed_scale) == (alone.k1, alone.k2, alone.k3, 2.0)
+        assert agent.trigger_rule == alone.trigger_rule and agent.capacity.tolist() == alone.capacity.tolist()
+    with pytest.raises(AgentError, match=r"^agent 2: eta1 needs the gains \['beta'\]$"):
+        make_agents(algorithm='eta1', neighbours={2: table[2], 1: table[1]}, delta=4.0, gains={'alpha': 1.0})
+    assert make_agents(algorithm='eta1', neighbours={}, delta=4.0, gains={}) == {}
 
 
 def test_eta2_information_without_relative_velocity_is_rejected():

@@ -56,6 +56,77 @@ def test_offsets_and_capacities_are_the_floats_of_asarray_per_row_and_linalg_nor
         assert hood._capacity == capacity.tolist()
 
 
+def _same_hood(team: Neighbourhood, alone: Neighbourhood) -> None:
+    """Everything a Neighbourhood holds, byte for byte (floats by their bits, -0.0 and 0.0 apart)."""
+    assert (team.agent_id, team.delta, team.ids, team.dimension) == (
+        alone.agent_id,
+        alone.delta,
+        alone.ids,
+        alone.dimension,
+    )
+    assert type(team.agent_id) is type(alone.agent_id) is int and type(team.delta) is float
+    for mine, theirs in ((team.offsets, alone.offsets), (team.capacity, alone.capacity)):
+        assert mine.dtype == theirs.dtype and mine.shape == theirs.shape and mine.flags.c_contiguous
+        assert mine.tobytes() == theirs.tobytes()
+    for mine, theirs in (
+        (team._capacity, alone._capacity),
+        (team.offset_rows, alone.offset_rows),
+        (team.offset_rows3, alone.offset_rows3),
+    ):
+        assert np.array(mine).tobytes() == np.array(theirs).tobytes() and list(map(type, mine)) == list(
+            map(type, theirs)
+        )
+    assert team.slot == alone.slot and team._ids == alone._ids
+
+
+@pytest.mark.parametrize('dimension', [1, 2, 3, 4])
+def test_a_teams_neighbourhoods_at_once_are_each_agents_own(dimension):
+    # Neighbourhood.team: all d_ij in one np.array and all capacities in one call, sliced per agent; the
+    # reference is the constructor per agent (itself checked against asarray and linalg.norm above).
+    rng = np.random.default_rng(10 + dimension)
+    for trial in range(60):
+        n = int(rng.integers(1, 40))
+        kinds = (tuple, list, np.asarray, lambda r: [int(v) if v.is_integer() else v for v in r.tolist()])
+        team, scale = {}, 10.0 ** float(rng.integers(-12, 12))
+        for i in range(n):
+            others = [j for j in range(n + 5) if j != i]
+            chosen = rng.choice(others, size=int(rng.integers(1, min(9, len(others) + 1))), replace=False)
+            rows = (
+                rng.normal(size=(len(chosen), dimension))
+                * scale
+                * 10.0 ** rng.integers(-3, 1, size=(len(chosen), 1))
+            )
+            rows[rng.random(size=rows.shape) < 0.05] = -0.0
+            team[i] = {int(j): kinds[(trial + k) % 4](row) for k, (j, row) in enumerate(zip(chosen, rows))}
+        delta = scale * 20.0 * (1.0 + rng.random())
+        hoods = Neighbourhood.team(neighbours=team, delta=delta)
+        assert hoods is not None and list(hoods) == list(team)
+        for i, table in team.items():
+            _same_hood(hoods[i], Neighbourhood(agent_id=i, neighbours=table, delta=delta))
+
+
+@pytest.mark.parametrize(
+    'bad',
+    [
+        {'neighbours': {}},
+        {'neighbours': {1: (0.0, 1.0)}},
+        {'delta': 0.0},
+        {'delta': math.nan},
+        {'neighbours': {2: (0.0, 1.0), 3: (1.0,)}},
+        {'neighbours': {2: ()}},
+        {'neighbours': {2: ('east', 1.0)}},
+        {'neighbours': {2: (0.0, math.inf)}},
+        {'neighbours': {2: (0.0, 1.0), 5: (0.0, -4.0)}},
+        {'neighbours': {np.int64(2): (0.0, 1.0)}},
+    ],
+)
+def test_a_team_with_a_neighbourhood_the_constructor_refuses_or_changes_is_left_to_it(bad):
+    # None: the engine then builds each agent alone, and the constructor raises its error naming the rule
+    # (or, for an id that is not an int, makes an int of it).
+    team = {0: {1: (1.0, 0.0)}, 1: bad.get('neighbours', {0: (-1.0, 0.0)})}
+    assert Neighbourhood.team(neighbours=team, delta=bad.get('delta', 4.0)) is None
+
+
 def test_the_error_is_the_agents_error():
     assert AgentError is EtaAgentError and issubclass(AgentError, ValueError)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -140,6 +141,24 @@ def test_rounding_step_is_the_error_moved_by_one_ulp_of_the_relative_states(k1, 
             c * s, sigma * s, ulp_y * s, k1=k1 * s if k2 else k1, k2=k2 * s, speed=speed * s, ulp_q=ulp_q * s
         )
         assert np.array_equal(scaled, step * (s if k2 else 1.0))
+
+
+def test_rounding_step_is_the_floats_of_its_formula_written_out():
+    # rounding_step goes through rounding_factors (which the engine's rounding floor makes once per run):
+    # the same floats as the one expression it was, k1 * (2 r² / σ) * ulp_y + ..., bit for bit.
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        c, slack = 10.0 ** rng.uniform(-8, 8), 10.0 ** rng.uniform(-8, 8)
+        k1, speed = 10.0 ** rng.uniform(-4, 4), float(rng.choice([0.0, 10.0 ** rng.uniform(-6, 6)]))
+        k2 = float(rng.choice([0.0, -1.0, 10.0 ** rng.uniform(-4, 4)]))
+        ulp_y, ulp_q = math.ulp(10.0 ** rng.uniform(-10, 10)), math.ulp(10.0 ** rng.uniform(-10, 10))
+        ratio = c / slack
+        expected = k1 * (2.0 * ratio * ratio / slack) * ulp_y
+        if k2 > 0.0:
+            expected = expected + k2 * ((2.0 * ratio + 1.0) / (slack * slack)) * (speed * ulp_y)
+            expected = expected + k2 * ((ratio + 1.0) / slack) * ulp_q
+        step = theory.rounding_step(c, slack, ulp_y, k1=k1, k2=k2, speed=speed, ulp_q=ulp_q)
+        assert struct.pack('<d', step) == struct.pack('<d', expected)
 
 
 def test_omega_is_the_gradient_weight_of_the_tension():

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from formation_agent.core.errors import AgentError
 from formation_sim.model import theory
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
@@ -381,3 +382,67 @@ def test_a_search_rounding_stalls_is_an_engine_error_naming_the_agent(tight_edge
         EngineError, match=r'agent 2: no convergence after 200000 certified steps .*\[precision\]'
     ):
         simulate(tight_edge('paper_single', 1e-12), horizon=1e-20, sample_dt=None)
+
+
+def _agent_bits(agent) -> dict:
+    """Everything an agent holds after its construction, floats by their bytes (its neighbourhood's and its
+    rule's fields included)."""
+    out = {}
+    for name, value in vars(agent).items():
+        if name == '_hood':
+            value = dict(sorted(vars(value).items()))  # its attributes whatever order they were set in
+        elif name == '_threshold':
+            value = (type(value), repr(value))
+        out[name] = value
+    return {name: _bytes(value) for name, value in out.items()}
+
+
+def _bytes(value):
+    if isinstance(value, np.ndarray):
+        return ('array', value.dtype.str, value.shape, value.flags.writeable, value.tobytes())
+    if isinstance(value, float):
+        return ('float', np.float64(value).tobytes())
+    if isinstance(value, (list, tuple)):
+        return (type(value).__name__, [_bytes(v) for v in value])
+    if isinstance(value, dict):
+        return ('dict', [(k, _bytes(v)) for k, v in value.items()])
+    if isinstance(value, set):
+        return ('set', sorted(value))
+    return (type(value).__name__, value)
+
+
+@pytest.mark.parametrize(
+    'scenario',
+    [
+        load_scenario('paper_single'),
+        load_scenario('paper_double'),
+        random_scenario(n=40, seed=3, dynamics='single', dimension=3),
+        random_scenario(n=30, seed=4, dynamics='double', dimension=1),
+    ],
+    ids=['paper_single', 'paper_double', 'random ETA-1 3-D', 'random ETA-2 1-D'],
+)
+def test_the_team_built_at_once_is_the_agents_built_one_by_one(scenario):
+    # build_agents (simulate's): the neighbourhoods of the whole team in one numpy call; every attribute of
+    # every agent (d_ij, capacities, their tuples, the rule, the zeros) the same bytes as build_agent's.
+    from formation_sim.sim.engine import build_agent, build_agents
+
+    team = build_agents(scenario)
+    assert list(team) == list(scenario.agent_ids)
+    for i, agent in team.items():
+        alone = build_agent(scenario, i)
+        assert type(agent) is type(alone)
+        assert _agent_bits(agent) == _agent_bits(alone)
+
+
+def test_a_team_whose_neighbourhood_an_agent_refuses_raises_that_agents_error(monkeypatch):
+    # One agent's d_ij not below Δ: the team is built one by one, and the agent raises its own error.
+    from formation_sim.sim import engine
+
+    scenario = load_scenario('paper_single')
+    table = {i: scenario.neighbours(i) for i in scenario.agent_ids}
+    last = scenario.agent_ids[-1]
+    j = next(iter(table[last]))
+    table[last][j] = np.array([scenario.delta, 0.0])
+    monkeypatch.setattr(type(scenario), 'neighbours', lambda self, i: table[i])
+    with pytest.raises(AgentError, match=rf'^edge \({last},{j}\): .* is not below Δ = .* \(Assumption 1\)$'):
+        engine.build_agents(scenario)

@@ -12,6 +12,7 @@ recomputed here on the run's own samples, it stops paper_single in units of 2^40
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -124,3 +125,14 @@ def _check_the_formation_step_is_the_states(scenario, world):
         edges.capacity, edges.capacity, ulp_y, k1=gains.k1, k2=gains.k2, ulp_q=ulp_q
     )
     assert float(at_states.max()) == pytest.approx(at_formation, rel=REL)
+
+
+def test_the_floors_spacing_is_numpys_for_every_value_it_meets():
+    # rounding_floor takes ulps of max |x| (>= 0, or NaN) with math.ulp where it agrees with np.spacing.
+    from formation_sim.sim.engine import _spacing
+
+    rng = np.random.default_rng(2)
+    values = [0.0, 5e-324, 2.2e-308, 1.0, 1e300, 1.5e300, 1.7976931348623157e308, math.inf, math.nan]
+    values += list(10.0 ** rng.uniform(-320, 308, size=2000))
+    for value in values:
+        assert np.float64(_spacing(value)).tobytes() == np.float64(np.spacing(value)).tobytes(), value

@@ -22,7 +22,7 @@ from formation_msgs_py.types import TriggerInfo
 from formation_sim.model.generate import random_scenario
 from formation_sim.model.scenario import load_scenario
 from formation_sim.sim import engine
-from formation_sim.sim.engine import build_agent
+from formation_sim.sim.engine import build_agent, build_agents
 from formation_sim.sim.errors import EngineError
 from formation_sim.sim.world import World
 
@@ -243,13 +243,13 @@ def _run_keeping_agents(monkeypatch, scenario, horizon, *, python_agent=None):
     """A run and its agents (`python_agent`: that one on the numpy path, which the team leaves to Python)."""
     agents = {}
 
-    def build(scenario, agent_id, **kwargs):
-        agent = agents[agent_id] = build_agent(scenario, agent_id, **kwargs)
-        if agent_id == python_agent:
-            agent._fast = False
-        return agent
+    def build(scenario, **kwargs):
+        agents.update(build_agents(scenario, **kwargs))
+        if python_agent is not None:
+            agents[python_agent]._fast = False
+        return agents
 
-    monkeypatch.setattr(engine, 'build_agent', build)
+    monkeypatch.setattr(engine, 'build_agents', build)
     return engine.simulate(scenario, horizon=horizon, sample_dt=None), agents
 
 
@@ -306,3 +306,42 @@ def test_an_agent_on_the_python_path_among_the_teams_gives_the_pure_python_run(
     assert team.loads > 2 * scenario.n  # agent 3's receivers handed back and read again, event after event
     for i in scenario.agent_ids:
         assert _knowledge(fast_agents[i]) == _knowledge(pure_agents[i]), f'agent {i}'
+
+
+def _python_edges(agents: dict, ids: tuple) -> tuple | None:
+    """The team's edges as `engine._team` computed them before `_fastcore.team_edges` (the reference)."""
+    position = {i: k for k, i in enumerate(ids)}
+    if any(i not in agents[j].neighbour_ids for i in ids for j in agents[i].neighbour_ids):
+        return None
+    neighbours = tuple(tuple(position[j] for j in agents[i].neighbour_ids) for i in ids)
+    back = tuple(tuple(agents[j].neighbour_ids.index(i) for j in agents[i].neighbour_ids) for i in ids)
+    return neighbours, back
+
+
+class _Listed:
+    def __init__(self, neighbour_ids: tuple) -> None:
+        self.neighbour_ids = neighbour_ids
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_the_teams_edges_are_those_of_the_python_construction(seed):
+    rng = np.random.default_rng(seed)
+    scenario = random_scenario(n=int(rng.integers(2, 60)), seed=seed, dynamics=('single', 'double')[seed % 2])
+    agents = build_agents(scenario)
+    ids = tuple(int(i) for i in rng.permutation(scenario.agent_ids))  # any order of the world
+    edges = compiled._fastcore.team_edges(tuple(agents[i] for i in ids), ids)
+    assert edges is not None and edges == _python_edges(agents, ids)
+    # An agent listed twice (its first slot is taken, as tuple.index finds it); a neighbour that does not
+    # list the agent back (None, as before); a stranger (None: the Python construction raised KeyError).
+    listed = {1: _Listed((2, 3)), 2: _Listed((1, 3)), 3: _Listed((2, 1, 1))}
+    found = compiled._fastcore.team_edges(tuple(listed.values()), tuple(listed))
+    assert (
+        found
+        == _python_edges(listed, tuple(listed))
+        == (((1, 2), (0, 2), (1, 0, 0)), ((0, 1), (0, 0), (1, 1, 1)))
+    )
+    unlisted = {**listed, 2: _Listed((3,))}  # 1 lists 2, which does not list 1
+    assert _python_edges(unlisted, tuple(unlisted)) is None
+    assert compiled._fastcore.team_edges(tuple(unlisted.values()), tuple(unlisted)) is None
+    stranger = {**listed, 1: _Listed((2, 4))}
+    assert compiled._fastcore.team_edges(tuple(stranger.values()), tuple(stranger)) is None

@@ -17,6 +17,7 @@ from formation_agent.core import _fastcore, compiled
 from formation_agent.core.closed_form import SERIES_LIMIT
 from formation_sim.model.generate import random_scenario
 from formation_sim.sim import engine, world
+from formation_sim.sim.errors import WorldError
 from formation_sim.sim.samples import EdgeLengths
 from formation_sim.sim.world import World
 
@@ -134,3 +135,13 @@ def test_the_edge_watch_refuses_what_it_cannot_take(on_path) -> None:
     assert (watch.squared == 0.0).all()
     with pytest.raises(IndexError):  # numpy's path then raises its error for the unknown row
         watch.add_rows([scenario.n], x)
+
+
+def test_the_rows_of_agents_are_their_indices_and_a_stranger_is_named():
+    world = World(agent_ids=(7, 3, 5), positions=np.zeros((3, 2)))
+    assert world.rows([5, 7, 5]) == [world.index(5), world.index(7), world.index(5)] == [2, 0, 2]
+    assert world.rows(()) == []
+    with pytest.raises(WorldError, match=r'^unknown agent 4; agents are \[7, 3, 5\]$'):
+        world.rows([3, 4])
+    with pytest.raises(WorldError, match=r'^unknown agent 4; agents are \[7, 3, 5\]$'):
+        world.index(4)

@@ -939,12 +939,21 @@ static int plain_double(PyObject *value, double *out) {
     return 1;
 }
 
+static PyObject *ZERO = NULL; /* the float +0.0, shared (as the Python path shares its padding's 0.0) */
+
+/* A float object of v: the shared +0.0, or a new one. */
+static inline PyObject *float_object(double v) {
+    if (v == 0.0 && !signbit(v))
+        return Py_NewRef(ZERO);
+    return PyFloat_FromDouble(v);
+}
+
 static PyObject *floats_tuple(const double *v, Py_ssize_t n) {
     PyObject *t = PyTuple_New(n);
     if (t == NULL)
         return NULL;
     for (Py_ssize_t i = 0; i < n; i++) {
-        PyObject *x = PyFloat_FromDouble(v[i]);
+        PyObject *x = float_object(v[i]);
         if (x == NULL) {
             Py_DECREF(t);
             return NULL;
@@ -1718,6 +1727,38 @@ done:
     return out;
 }
 
+/* Agent `id` (rank k) planned anew: a new search, queued lazily (next_time searches only as far as the team's
+ * next event needs). */
+static int plan_one(AgendaObject *self, PyObject *agents, PyObject *id, Py_ssize_t k, PyObject *horizon) {
+    PyObject *agent = PyDict_GetItemWithError(agents, id);
+    if (agent == NULL) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
+        return -1;
+    }
+    self->counter += 1;
+    self->serial[k] = self->counter;
+    PyObject *search = plain_search(self, agent, k);
+    if (search == Py_None) {
+        Py_DECREF(search);
+        search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
+    }
+    double frontier;
+    if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
+        frontier = ((SearchObject *)search)->st.frontier;
+    } else if (search != NULL) {
+        PyObject *value = PyObject_GetAttr(search, FRONTIER);
+        frontier = value ? PyFloat_AsDouble(value) : -1.0;
+        Py_XDECREF(value);
+        if (PyErr_Occurred())
+            Py_CLEAR(search);
+    }
+    if (search == NULL)
+        return -1;
+    Py_XSETREF(self->searches[k], search);
+    return heap_push(self, (Entry){frontier, 0, k, self->counter});
+}
+
 /* plan(agents, changed): _Agenda.plan without a period; `changed` the agents to plan anew, sorted. */
 static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
     PyObject *agents, *changed;
@@ -1729,43 +1770,73 @@ static PyObject *agenda_plan(AgendaObject *self, PyObject *args) {
     for (Py_ssize_t c = 0; c < PyList_GET_SIZE(changed); c++) {
         PyObject *id = PyList_GET_ITEM(changed, c);
         PyObject *rank = PyDict_GetItemWithError(self->slots, id);
-        PyObject *agent = rank ? PyDict_GetItemWithError(agents, id) : NULL;
-        if (agent == NULL) {
+        Py_ssize_t k = rank ? PyLong_AsSsize_t(rank) : -1;
+        if (rank == NULL) {
             if (!PyErr_Occurred())
                 PyErr_Format(PyExc_KeyError, "Agenda.plan: unknown agent %R", id);
             Py_DECREF(horizon);
             return NULL;
         }
-        Py_ssize_t k = PyLong_AsSsize_t(rank);
-        self->counter += 1;
-        self->serial[k] = self->counter;
-        /* Searched lazily (next_time): only as far as the team's next event needs. */
-        PyObject *search = plain_search(self, agent, k);
-        if (search == Py_None) {
-            Py_DECREF(search);
-            search = PyObject_CallMethodOneArg(agent, TRIGGER_SEARCH, horizon);
-        }
-        double frontier;
-        if (search != NULL && Py_IS_TYPE(search, &SearchType)) {
-            frontier = ((SearchObject *)search)->st.frontier;
-        } else if (search != NULL) {
-            PyObject *value = PyObject_GetAttr(search, FRONTIER);
-            frontier = value ? PyFloat_AsDouble(value) : -1.0;
-            Py_XDECREF(value);
-            if (PyErr_Occurred())
-                Py_CLEAR(search);
-        }
-        if (search == NULL) {
-            Py_DECREF(horizon);
-            return NULL;
-        }
-        Py_XSETREF(self->searches[k], search);
-        if (heap_push(self, (Entry){frontier, 0, k, self->counter}) < 0) {
+        if (plan_one(self, agents, id, k, horizon) < 0) {
             Py_DECREF(horizon);
             return NULL;
         }
     }
     Py_DECREF(horizon);
+    Py_RETURN_NONE;
+}
+
+static int rank_less(const void *a, const void *b) {
+    Py_ssize_t x = *(const Py_ssize_t *)a, y = *(const Py_ssize_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* plan_union(agents, due, receivers): plan(agents, sorted(set(due).union(receivers))), the engine's _run after
+ * an event time, the union and its order taken in C: the ranks are the positions among the sorted ids, so
+ * sorting them sorts the ids. An id it does not know goes to plan's lookup, which raises its error. */
+static PyObject *agenda_plan_union(AgendaObject *self, PyObject *args) {
+    PyObject *agents, *due, *receivers;
+    if (!PyArg_ParseTuple(args, "O!O!O!", &PyDict_Type, &agents, &PyList_Type, &due, &PyList_Type, &receivers))
+        return NULL;
+    Py_ssize_t count = PyList_GET_SIZE(due) + PyList_GET_SIZE(receivers);
+    Py_ssize_t *ranks = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(count > 0 ? count : 1));
+    if (ranks == NULL)
+        return PyErr_NoMemory();
+    for (Py_ssize_t c = 0; c < count; c++) {
+        PyObject *id = c < PyList_GET_SIZE(due) ? PyList_GET_ITEM(due, c)
+                                                : PyList_GET_ITEM(receivers, c - PyList_GET_SIZE(due));
+        PyObject *rank = PyDict_GetItemWithError(self->slots, id);
+        if (rank == NULL) { /* a stranger (or an error): the Python union and plan's lookup */
+            PyMem_Free(ranks);
+            if (PyErr_Occurred())
+                return NULL;
+            PyObject *changed = PySet_New(due), *sorted = NULL, *out = NULL;
+            int added = changed == NULL ? -1 : 0;
+            for (Py_ssize_t r = 0; added == 0 && r < PyList_GET_SIZE(receivers); r++)
+                added = PySet_Add(changed, PyList_GET_ITEM(receivers, r));
+            if (added == 0 && (sorted = PySequence_List(changed)) != NULL && PyList_Sort(sorted) == 0) {
+                PyObject *inner = PyTuple_Pack(2, agents, sorted);
+                out = inner ? agenda_plan(self, inner) : NULL;
+                Py_XDECREF(inner);
+            }
+            Py_XDECREF(changed);
+            Py_XDECREF(sorted);
+            return out;
+        }
+        ranks[c] = PyLong_AsSsize_t(rank);
+    }
+    qsort(ranks, (size_t)count, sizeof(Py_ssize_t), rank_less);
+    PyObject *horizon = PyFloat_FromDouble(self->horizon);
+    int status = horizon == NULL ? -1 : 0;
+    for (Py_ssize_t c = 0; status == 0 && c < count; c++) {
+        if (c > 0 && ranks[c] == ranks[c - 1])
+            continue; /* the set's one copy */
+        status = plan_one(self, agents, PyTuple_GET_ITEM(self->ids, ranks[c]), ranks[c], horizon);
+    }
+    Py_XDECREF(horizon);
+    PyMem_Free(ranks);
+    if (status < 0)
+        return NULL;
     Py_RETURN_NONE;
 }
 
@@ -1865,6 +1936,8 @@ static PyObject *agenda_link(AgendaObject *self, PyObject *team);
 static PyMethodDef agenda_methods[] = {
     {"plan", (PyCFunction)agenda_plan, METH_VARARGS,
      "plan(agents, changed): a new search for each agent of `changed` (sorted), queued lazily."},
+    {"plan_union", (PyCFunction)agenda_plan_union, METH_VARARGS,
+     "plan_union(agents, due, receivers): plan(agents, sorted(set(due).union(receivers)))."},
     {"link", (PyCFunction)agenda_link, METH_O,
      "link(team): new searches of the team's agents start from the team's copy of their model (Team)."},
     {"next_time", (PyCFunction)agenda_next_time, METH_NOARGS, "next_time(): the team's earliest planned time."},
@@ -2258,6 +2331,26 @@ static int list_fill(PyObject *list, Py_ssize_t k, PyObject *value) {
     return 0;
 }
 
+/* An edge's row as a tuple (_row(k)), its anchor, y_ij (and ETA-2's q_ij) the very float objects of the edge's
+ * time, y and q where they are the same floats (as _row takes them from _edge_time, _edge_y, _edge_q). */
+static PyObject *row_tuple(const double *row, Py_ssize_t width, PyObject *time, PyObject *y, PyObject *q) {
+    PyObject *t = PyTuple_New(width);
+    if (t == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < width; i++) {
+        PyObject *same = i == 0 ? time : i <= 3 ? PyTuple_GET_ITEM(y, i - 1) : i <= 6 && q ? PyTuple_GET_ITEM(q, i - 4) : NULL;
+        double v = same ? PyFloat_AS_DOUBLE(same) : 0.0;
+        PyObject *x = same && memcmp(&v, row + i, sizeof v) == 0 ? Py_NewRef(same) : float_object(row[i]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, x);
+    }
+    PyObject_GC_UnTrack(t); /* floats only: as floats_tuple */
+    return t;
+}
+
 /* Agent a's attributes written from its ledger, as the Python path leaves them (the same floats), and the
  * agent handed back: its attributes are its knowledge again (a change to them is read at the next load). */
 static int ledger_store(TeamObject *self, Py_ssize_t a) {
@@ -2276,11 +2369,13 @@ static int ledger_store(TeamObject *self, Py_ssize_t a) {
         if (lists[i] == NULL)
             goto done;
     for (Py_ssize_t k = 0; k < m; k++) {
-        if (list_fill(lists[0], k, PyBool_FromLong(E[k].heard)) < 0 ||
-            list_fill(lists[1], k, PyFloat_FromDouble(E[k].time)) < 0 ||
+        if (list_fill(lists[0], k, PyBool_FromLong(E[k].heard)) < 0 || list_fill(lists[1], k, float_object(E[k].time)) < 0 ||
             list_fill(lists[2], k, floats_tuple(E[k].y, 3)) < 0 || list_fill(lists[3], k, floats_tuple(E[k].u, 3)) < 0 ||
-            list_fill(lists[4], k, E[k].row_set ? floats_tuple(E[k].row, width) : PyTuple_New(0)) < 0 ||
             (eta2 && list_fill(lists[5], k, floats_tuple(E[k].q, 3)) < 0) ||
+            list_fill(lists[4], k,
+                      E[k].row_set ? row_tuple(E[k].row, width, PyList_GET_ITEM(lists[1], k),
+                                               PyList_GET_ITEM(lists[2], k), eta2 ? PyList_GET_ITEM(lists[5], k) : NULL)
+                                   : PyTuple_New(0)) < 0 ||
             (sensed && list_fill(lists[6], k, floats_tuple(E[k].sensed_q, p)) < 0))
             goto done;
     }
@@ -2780,6 +2875,84 @@ static PyTypeObject TeamType = {
     .tp_members = team_members,
 };
 
+/* team_edges(agents, ids): what the engine's _team hands Team for agents[a] (id ids[a]): (neighbours, back),
+ * per agent the positions of its neighbour_ids in `ids` and its slot among each neighbour's neighbour_ids (the
+ * first, as tuple.index finds it); None where a neighbour is not in `ids` or does not list the agent back. */
+static PyObject *team_edges(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *agents, *ids;
+    if (!PyArg_ParseTuple(args, "O!O!", &PyTuple_Type, &agents, &PyTuple_Type, &ids))
+        return NULL;
+    Py_ssize_t n = PyTuple_GET_SIZE(agents);
+    if (PyTuple_GET_SIZE(ids) != n) {
+        PyErr_SetString(PyExc_ValueError, "team_edges: agents and ids of one length");
+        return NULL;
+    }
+    PyObject *index = PyDict_New(), *lists = PyTuple_New(n), *neighbours = PyTuple_New(n), *back = PyTuple_New(n);
+    PyObject *out = NULL;
+    if (index == NULL || lists == NULL || neighbours == NULL || back == NULL)
+        goto done;
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *k = PyLong_FromSsize_t(a);
+        PyObject *own = k ? PyObject_GetAttr(PyTuple_GET_ITEM(agents, a), NAMES[N_NEIGHBOUR_IDS]) : NULL;
+        if (own == NULL || PyDict_SetItem(index, PyTuple_GET_ITEM(ids, a), k) < 0) {
+            Py_XDECREF(k);
+            Py_XDECREF(own);
+            goto done;
+        }
+        Py_DECREF(k);
+        PyTuple_SET_ITEM(lists, a, own);
+        if (!PyTuple_Check(own)) {
+            PyErr_Format(PyExc_TypeError, "team_edges: agent %R's neighbour_ids is not a tuple", PyTuple_GET_ITEM(ids, a));
+            goto done;
+        }
+    }
+    for (Py_ssize_t a = 0; a < n; a++) {
+        PyObject *own = PyTuple_GET_ITEM(lists, a), *me = PyTuple_GET_ITEM(ids, a);
+        Py_ssize_t m = PyTuple_GET_SIZE(own);
+        PyObject *row = PyTuple_New(m), *slots = PyTuple_New(m);
+        if (row == NULL || slots == NULL) {
+            Py_XDECREF(row);
+            Py_XDECREF(slots);
+            goto done;
+        }
+        PyTuple_SET_ITEM(neighbours, a, row);
+        PyTuple_SET_ITEM(back, a, slots);
+        for (Py_ssize_t k = 0; k < m; k++) {
+            PyObject *position = PyDict_GetItemWithError(index, PyTuple_GET_ITEM(own, k));
+            if (position == NULL) {
+                out = PyErr_Occurred() ? NULL : Py_NewRef(Py_None); /* a stranger: the Python path */
+                goto done;
+            }
+            PyObject *theirs = PyTuple_GET_ITEM(lists, PyLong_AsSsize_t(position));
+            Py_ssize_t slot = -1;
+            for (Py_ssize_t l = 0; slot < 0 && l < PyTuple_GET_SIZE(theirs); l++) {
+                int same = PyObject_RichCompareBool(PyTuple_GET_ITEM(theirs, l), me, Py_EQ);
+                if (same < 0)
+                    goto done;
+                if (same)
+                    slot = l;
+            }
+            if (slot < 0) {
+                out = Py_NewRef(Py_None); /* not listed back: the Python path */
+                goto done;
+            }
+            PyObject *number = PyLong_FromSsize_t(slot);
+            if (number == NULL)
+                goto done;
+            PyTuple_SET_ITEM(row, k, Py_NewRef(position));
+            PyTuple_SET_ITEM(slots, k, number);
+        }
+    }
+    out = PyTuple_Pack(2, neighbours, back);
+done:
+    Py_XDECREF(index);
+    Py_XDECREF(lists);
+    Py_XDECREF(neighbours);
+    Py_XDECREF(back);
+    return out;
+}
+
 /* ---- the world's closed-form step (formation_sim.sim.world.World._propagate) -------------- */
 
 #define N_WORLD_SERIES 14
@@ -3028,6 +3201,9 @@ static PyMethodDef methods[] = {
      "watch_edges(x, rows, start, incident, heads, tails, squared): EdgeLengths.add_edges for the edges of "
      "these agent rows; False where numpy must do it."},
     {"abs_max", abs_max, METH_O, "abs_max(array): float(numpy.abs(array).max()); None where numpy must do it."},
+    {"team_edges", team_edges, METH_VARARGS,
+     "team_edges(agents, ids): (neighbours, back) for Team: each agent's neighbours by their position in ids "
+     "and its slot among each neighbour's neighbour_ids; None where a neighbour does not list it back."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -3043,6 +3219,8 @@ PyMODINIT_FUNC PyInit__fastcore(void) {
             return NULL;
     }
     if (PyType_Ready(&SearchType) < 0 || PyType_Ready(&AgendaType) < 0 || PyType_Ready(&TeamType) < 0)
+        return NULL;
+    if (ZERO == NULL && (ZERO = PyFloat_FromDouble(0.0)) == NULL)
         return NULL;
     TRIGGER_SEARCH = PyUnicode_InternFromString("trigger_search");
     ADVANCE = PyUnicode_InternFromString("advance");

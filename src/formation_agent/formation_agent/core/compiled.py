@@ -148,6 +148,14 @@ def team() -> type[_fastcore.Team] | None:
     return _fastcore.Team if _active else None
 
 
+def team_edges() -> Callable[[tuple[Any, ...], tuple[int, ...]], tuple[Any, Any] | None] | None:
+    """The compiled `(neighbours, back)` of a `team()` over agents in the order of ids
+    (`_fastcore.team_edges(agents, ids)`: each agent's neighbours by their position in ids and its slot among
+    each neighbour's `neighbour_ids`; None where a neighbour does not list it back), or None for the
+    pure-Python path."""
+    return _fastcore.team_edges if _active else None
+
+
 def world_step() -> Callable[..., bool] | None:
     """The compiled step of the in-process world (`_fastcore.advance(x, q, u, x_out, q_out, k3, tau)`:
     formation_sim.sim.world.World's closed form, single or double integrators with a scalar tau, the

@@ -39,7 +39,7 @@ from formation_agent.core.closed_form import SERIES_LIMIT as _SERIES_LIMIT
 from formation_agent.core.closed_form import advance_double, one_minus_exp, z_minus_one_plus_exp_float
 from formation_agent.core.crossing import DEFAULT_TOLERANCE, CrossingSearch
 from formation_agent.core.errors import AgentError, RuleError, ScaleError
-from formation_agent.core.neighbourhood import Neighbourhood
+from formation_agent.core.neighbourhood import PADDED, Neighbourhood
 from formation_agent.core.neighbourhood import positive as _positive
 from formation_agent.core.safety import CappedSearch, SafetyConfig, SafetyLayer
 from formation_agent.core.speed_scale import (
@@ -53,7 +53,7 @@ from formation_agent.core.trigger import DEFAULT_RULE, ExponentialRule, TriggerR
 from formation_msgs_py.types import SensedState, TriggerInfo
 
 # Agents of this dimension or less evaluate their prediction in plain floats.
-_FAST_DIMENSION = 3
+_FAST_DIMENSION = PADDED
 
 # First trial span of a search [s] before the agent has an inter-event time of its own, and its
 # least value (the search's former fixed choice).
@@ -231,12 +231,21 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         tolerance: float = DEFAULT_TOLERANCE,
     ) -> None:
-        # Who the neighbours are, d_ij and Δ - ||d_ij|| (checked), and the checks of every input.
-        hood = self._hood = Neighbourhood(agent_id=agent_id, neighbours=neighbours, delta=delta)
+        # Who the neighbours are, d_ij and Δ - ||d_ij|| (checked), and the checks of every input; or
+        # the agent's Neighbourhood built already (`Neighbourhood.team`: a whole team's at once).
+        if isinstance(neighbours, Neighbourhood):
+            hood = self._hood = neighbours
+            if hood.agent_id != agent_id or hood.delta != delta:
+                raise AgentError(
+                    f"agent {agent_id}: the neighbourhood given is agent {hood.agent_id}'s with Δ = "
+                    f'{hood.delta!r}, not Δ = {delta!r}'
+                )
+        else:
+            hood = self._hood = Neighbourhood(agent_id=agent_id, neighbours=neighbours, delta=delta)
         self.agent_id, self.delta, self.neighbour_ids = hood.agent_id, hood.delta, hood.ids
         offsets = self.offsets = hood.offsets  # d_ij, one row per neighbour
         self.capacity = hood.capacity  # Δ - ||d_ij||
@@ -258,10 +267,10 @@ class _EventTriggeredAgent(_AgentHooks, _SafetyHooks, _KnowledgeArrays):
         # per-edge values of the latest evaluation, which `bounds` at the same time reuses.
         self._fast = p <= _FAST_DIMENSION
         zero = (0.0,) * max(p, _FAST_DIMENSION)
-        self._offsets = list(map(tuple, offsets.tolist()))
-        padding = (0.0,) * (_FAST_DIMENSION - p)  # `_pad`'s, once for every row
-        self._offsets3 = [row + padding for row in self._offsets]
-        self._capacity = list(hood._capacity)
+        # The neighbourhood's lists (never changed, by either)
+        self._offsets = hood.offset_rows
+        self._offsets3 = hood.offset_rows3  # padded as `_pad` pads
+        self._capacity = hood._capacity
         self._edge_time = [0.0] * m
         self._edge_y = [zero] * m
         self._edge_u = [zero] * m
@@ -521,7 +530,7 @@ class Eta1Agent(_EventTriggeredAgent):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         alpha: float,
         beta: float,
@@ -673,7 +682,7 @@ class Eta2Agent(_EventTriggeredAgent):
         self,
         *,
         agent_id: int,
-        neighbours: Mapping[int, object],
+        neighbours: Mapping[int, object] | Neighbourhood,
         delta: float,
         alpha_d: float,
         beta_d: float,
@@ -919,7 +928,7 @@ def make_agent(
     *,
     algorithm: str,
     agent_id: int,
-    neighbours: Mapping[int, object],
+    neighbours: Mapping[int, object] | Neighbourhood,
     delta: float,
     gains: Mapping[str, float],
     tolerance: float = DEFAULT_TOLERANCE,
@@ -930,6 +939,49 @@ def make_agent(
     speed_scale and threshold_floor are optional, SCALE_GAINS); `safety`: the collision layer
     (ETA-1 only, docs/SAFETY.md); `trigger_rule`: the threshold's family by name
     (formation_agent.core.trigger)."""
+    kind, chosen = _kind_and_gains(algorithm=algorithm, agent_id=agent_id, gains=gains, safety=safety)
+    return kind(
+        agent_id=agent_id,
+        neighbours=neighbours,
+        delta=delta,
+        tolerance=tolerance,
+        trigger_rule=trigger_rule,
+        **chosen,
+    )
+
+
+def make_agents(
+    *,
+    algorithm: str,
+    neighbours: Mapping[int, Mapping[int, object] | Neighbourhood],
+    delta: float,
+    gains: Mapping[str, float],
+    tolerance: float = DEFAULT_TOLERANCE,
+    safety: SafetyConfig | None = None,
+    trigger_rule: str = DEFAULT_RULE,
+) -> dict[int, Eta1Agent | Eta2Agent]:
+    """`make_agent` for every agent of `neighbours` (agent id -> its neighbours, or its Neighbourhood
+    built already: `Neighbourhood.team`), in that order, the algorithm and gains chosen once: the same
+    agents, and the same error as `make_agent` raises for the first agent."""
+    agents: dict[int, Eta1Agent | Eta2Agent] = {}
+    for agent_id, hood in neighbours.items():
+        if not agents:
+            kind, chosen = _kind_and_gains(algorithm=algorithm, agent_id=agent_id, gains=gains, safety=safety)
+        agents[agent_id] = kind(
+            agent_id=agent_id,
+            neighbours=hood,
+            delta=delta,
+            tolerance=tolerance,
+            trigger_rule=trigger_rule,
+            **chosen,
+        )
+    return agents
+
+
+def _kind_and_gains(
+    *, algorithm: str, agent_id: int, gains: Mapping[str, float], safety: SafetyConfig | None
+) -> tuple[type[Eta1Agent] | type[Eta2Agent], dict[str, Any]]:
+    """`make_agent`'s agent type and its keyword arguments from `gains` (and `safety`), checked."""
     if algorithm not in ALGORITHM_GAINS:
         raise AgentError(f'algorithm must be one of {sorted(ALGORITHM_GAINS)}, got {algorithm!r}')
     missing = [name for name in ALGORITHM_GAINS[algorithm] if name not in gains]
@@ -942,14 +994,7 @@ def make_agent(
         if algorithm != 'eta1':
             raise AgentError(f'agent {agent_id}: the safety layer runs with eta1 only, got {algorithm!r}')
         chosen['safety'] = safety
-    return kind(
-        agent_id=agent_id,
-        neighbours=neighbours,
-        delta=delta,
-        tolerance=tolerance,
-        trigger_rule=trigger_rule,
-        **chosen,
-    )
+    return kind, chosen
 
 
 def _new_search(

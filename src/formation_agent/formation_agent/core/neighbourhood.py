@@ -11,6 +11,8 @@ addressed to it by one of them, sensed edges within their capacity.  Each refusa
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -20,6 +22,9 @@ import numpy as np
 from formation_agent.core.errors import AgentError
 from formation_agent.core.tension import edge_capacity
 from formation_msgs_py.types import TriggerInfo
+
+PADDED = 3
+"""The plain-float path's vectors have three components (`offset_rows3`: d_ij padded with zeros)."""
 
 
 def positive(name: str, value: float) -> float:
@@ -43,8 +48,6 @@ class Neighbourhood:
         self.agent_id = int(agent_id)
         self.delta = positive('delta (communication radius Δ)', delta)
         self.ids = tuple(map(int, neighbours))
-        self.slot = {j: k for k, j in enumerate(self.ids)}  # neighbour -> its row
-        self._ids = set(self.ids)
         try:  # one numpy call for all rows (built once per agent: a 1000-agent team builds 1000)
             offsets = np.array([neighbours[j] for j in self.ids], dtype=float)
         except (TypeError, ValueError):  # not numbers, or vectors of different lengths
@@ -65,6 +68,66 @@ class Neighbourhood:
                     f'Δ = {self.delta!r} (Assumption 1)'
                 )
         self.dimension = offsets.shape[1]
+        # d_ij as tuples of floats, and padded with zeros to three components (the plain-float path's)
+        self.offset_rows = list(map(tuple, offsets.tolist()))
+        padding = (0.0,) * (PADDED - self.dimension)
+        self.offset_rows3 = [row + padding for row in self.offset_rows]
+
+    @classmethod
+    def team(
+        cls, *, neighbours: Mapping[int, Mapping[int, object]], delta: float
+    ) -> dict[int, Neighbourhood] | None:
+        """Every agent's neighbourhood of a team at once (`neighbours`: agent i -> its j -> d_ij), the
+        same as one `Neighbourhood(agent_id=i, ...)` per agent: the d_ij of all agents in one `np.array`,
+        their capacities in one `edge_capacity` (a row's reduction does not depend on the rows around
+        it), each agent's `offsets` and `capacity` a view of its slice of the team's arrays (the same
+        bytes as the constructor's: tests/formation_agent/core/test_neighbourhood.py). None where one of
+        them would be refused (no neighbour, a self-loop, Δ not a positive number, vectors of different
+        lengths, not finite or not below Δ) or an id is not an int: built one by one, that agent raises
+        its error naming the rule (or makes ints of its ids)."""
+        try:
+            delta = positive('delta', delta)
+        except (AgentError, TypeError, ValueError):
+            return None
+        ids = {}
+        for i, table in neighbours.items():
+            if not table or i in table:
+                return None
+            ids[i] = tuple(table)
+        kinds = {type(i) for i in neighbours} | set(map(type, itertools.chain.from_iterable(ids.values())))
+        if kinds != {int}:
+            return None
+        try:
+            offsets = np.array([d for table in neighbours.values() for d in table.values()], dtype=float)
+        except (TypeError, ValueError):
+            return None
+        if offsets.ndim != 2 or offsets.shape[1] < 1 or not np.isfinite(offsets).all():
+            return None
+        capacity = edge_capacity(delta, offsets)
+        if not (capacity > 0.0).all():
+            return None
+        p = offsets.shape[1]
+        columns = offsets.T.tolist()  # the rows' tuples from p lists (not one list per row)
+        rows, rows3 = list(zip(*columns)), list(zip(*columns, *[[0.0] * len(offsets)] * (PADDED - p)))
+        capacities, hoods, start = capacity.tolist(), {}, 0
+        for i, own in ids.items():
+            end = start + len(own)
+            hood = hoods[i] = cls.__new__(cls)
+            hood.agent_id, hood.delta, hood.ids, hood.dimension = i, delta, own, p
+            hood.offsets, hood.capacity = offsets[start:end], capacity[start:end]  # views of the team's
+            hood._capacity, hood.offset_rows = capacities[start:end], rows[start:end]
+            hood.offset_rows3 = rows3[start:end]
+            start = end
+        return hoods
+
+    @functools.cached_property
+    def slot(self) -> dict[int, int]:
+        """neighbour -> its row (made when first read: the compiled engine never reads it)."""
+        return {j: k for k, j in enumerate(self.ids)}
+
+    @functools.cached_property
+    def _ids(self) -> set[int]:
+        return set(self.ids)
 
     def vector(self, value: object, what: str) -> np.ndarray:
         """`value` (named `what`) as an array of p finite floats."""

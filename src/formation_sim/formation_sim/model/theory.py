@@ -229,11 +229,28 @@ def rounding_step(capacity, slack, ulp_y, *, k1=1.0, k2=0.0, speed=0.0, ulp_q=0.
     The one place of this formula: the `precision` rule of `formation_sim.model.validate` (at
     t = 0) and the engine's rounding floor (`formation_sim.sim.engine.rounding_floor`, at every event).
     """
+    return rounding_step_of(rounding_factors(capacity, slack, k1=k1, k2=k2), ulp_y, speed=speed, ulp_q=ulp_q)
+
+
+def rounding_factors(capacity, slack, *, k1=1.0, k2=0.0) -> tuple:
+    """`rounding_step`'s factors of the ulps, which the states do not change: (k1 g, k2 h', k2 f) with
+    g = 2c²/σ³, h' = (2c + σ)/σ³ (h_ij(σ) without its ||q_ij||), f = (c + σ)/σ²; the last two None
+    where k2 <= 0 (ETA-1). Computed once for a fixed edge (the engine's rounding floor, at every event)."""
     ratio = capacity / slack
-    step = k1 * (2.0 * ratio * ratio / slack) * ulp_y
+    gain = k1 * (2.0 * ratio * ratio / slack)
     if k2 > 0.0:
-        step = step + k2 * ((2.0 * ratio + 1.0) / (slack * slack)) * (speed * ulp_y)
-        step = step + k2 * ((ratio + 1.0) / slack) * ulp_q
+        return gain, k2 * ((2.0 * ratio + 1.0) / (slack * slack)), k2 * ((ratio + 1.0) / slack)
+    return gain, None, None
+
+
+def rounding_step_of(factors: tuple, ulp_y, *, speed=0.0, ulp_q=0.0):
+    """`rounding_step` from its `rounding_factors`: the same operations in the same order (a * b * c is
+    (a * b) * c), so the same floats."""
+    gain, speed_gain, q_gain = factors
+    step = gain * ulp_y
+    if speed_gain is not None:
+        step = step + speed_gain * (speed * ulp_y)
+        step = step + q_gain * ulp_q
     return step
 
 

@@ -34,7 +34,9 @@ from formation_agent.core.eta import (
     Eta1Agent,
     Eta2Agent,
     make_agent,
+    make_agents,
 )
+from formation_agent.core.neighbourhood import Neighbourhood
 from formation_agent.core.time_warp import TimeWarp
 from formation_agent.core.trigger import ExponentialRule
 from formation_msgs_py.types import TriggerInfo
@@ -77,20 +79,47 @@ def check_sample_dt(sample_dt: float | None, *, horizon: float, scenario) -> Non
         )
 
 
-def build_agent(scenario, agent_id: int, *, tolerance: float = DEFAULT_TOLERANCE) -> Eta1Agent | Eta2Agent:
-    """The ROS-free agent object for `agent_id`, holding only what that agent knows."""
-    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
-    gains = {name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)}
+def build_agent(
+    scenario,
+    agent_id: int,
+    *,
+    tolerance: float = DEFAULT_TOLERANCE,
+    neighbourhood: Neighbourhood | None = None,
+) -> Eta1Agent | Eta2Agent:
+    """The ROS-free agent object for `agent_id`, holding only what that agent knows; `neighbourhood`: its
+    neighbours and d_ij built already (`Neighbourhood.team`), else from `scenario.neighbours(agent_id)`."""
     return make_agent(
-        algorithm=algorithm,
         agent_id=agent_id,
-        neighbours=scenario.neighbours(agent_id),
-        delta=scenario.delta,
-        gains=gains,
+        neighbours=scenario.neighbours(agent_id) if neighbourhood is None else neighbourhood,
         tolerance=tolerance,
-        safety=scenario.safety,
-        trigger_rule=scenario.trigger_rule,
+        **_agent_settings(scenario),
     )
+
+
+def build_agents(scenario, *, tolerance: float = DEFAULT_TOLERANCE) -> dict[int, Eta1Agent | Eta2Agent]:
+    """`build_agent` for every agent of the scenario, their neighbourhoods built for the whole team at once
+    (`Neighbourhood.team`: one numpy call for all d_ij, one for all capacities; the same floats) and the
+    gains chosen once (`make_agents`): the same agents. A neighbourhood it would refuse is built by its
+    agent, which raises the error."""
+    ids = scenario.agent_ids
+    hoods = Neighbourhood.team(neighbours={i: scenario.neighbours(i) for i in ids}, delta=scenario.delta)
+    if hoods is None:
+        return {i: build_agent(scenario, i, tolerance=tolerance) for i in ids}
+    return make_agents(neighbours=hoods, tolerance=tolerance, **_agent_settings(scenario))
+
+
+def _agent_settings(scenario) -> dict:
+    """What every agent of the scenario is made with (`make_agent`), but its id and neighbours."""
+    algorithm = 'eta1' if scenario.dynamics == 'single' else 'eta2'
+    return {
+        'algorithm': algorithm,
+        'delta': scenario.delta,
+        'gains': {
+            name: getattr(scenario.gains, name) for name in (*ALGORITHM_GAINS[algorithm], *SCALE_GAINS)
+        },
+        'safety': scenario.safety,
+        'trigger_rule': scenario.trigger_rule,
+    }
 
 
 class Sampler:
@@ -145,7 +174,7 @@ class Sampler:
         """The world's present state as a sample (with event samples, or `force`); `due`: the agents
         about to trigger now, whose edges the watch measures."""
         if self.watch is not None and due:
-            self.watch.add_rows([self.world.index(agent) for agent in due], self.world.arrays()[0])
+            self.watch.add_rows(self.world.rows(due), self.world.arrays()[0])
         now = self.world.time if self.clock is None else self.clock.real(self.world.time)
         if not (self.events or force) or (self.times and self.times[-1] == now):
             return
@@ -244,6 +273,7 @@ class FloorEdges:
     capacity: float
     pair: tuple[int, int]
     offset: float
+    _factors: dict = field(default_factory=dict, compare=False, repr=False)  # by (k1, k2): rounding_factors
 
     @classmethod
     def of(cls, scenario) -> FloorEdges:
@@ -251,6 +281,19 @@ class FloorEdges:
         k = int(np.argmin(capacities))
         _, _, d = scenario.edge_indices()
         return cls(capacity=float(capacities[k]), pair=scenario.edges[k].pair, offset=float(np.abs(d).max()))
+
+    def factors(self, gains: tuple[float, float] | None) -> tuple:
+        """`theory.rounding_factors` at the formation of the least-capacity edge (y_ij = 0: slack = c), for
+        ETA-1 (`gains` None) or ETA-2's (k1, k2); made once per run and gains."""
+        found = self._factors.get(gains)
+        if found is None:
+            c = self.capacity
+            found = self._factors[gains] = (
+                theory.rounding_factors(c, c)
+                if gains is None
+                else theory.rounding_factors(c, c, k1=gains[0], k2=gains[1])
+            )
+        return found
 
 
 def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
@@ -284,13 +327,12 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
     t = 34.898 → 34.241 (1.35e-14 < 8 × 1.75e-15).
     """
     x, q, _ = world.arrays()  # the world's own arrays (read, not copied: this runs at every event)
-    ulp_y = float(np.spacing(max(_abs_max(x), edges.offset)))
-    c = edges.capacity
-    if q is None:
-        step = theory.rounding_step(c, c, ulp_y)
+    ulp_y = _spacing(max(_abs_max(x), edges.offset))
+    if q is None:  # theory.rounding_step(c, c, ulp_y), its factors made once (edges.factors)
+        step = theory.rounding_step_of(edges.factors(None), ulp_y)
     else:
-        ulp_q = float(np.spacing(_abs_max(q)))
-        step = theory.rounding_step(c, c, ulp_y, k1=agent.k1, k2=agent.k2, ulp_q=ulp_q)
+        ulp_q = _spacing(_abs_max(q))
+        step = theory.rounding_step_of(edges.factors((agent.k1, agent.k2)), ulp_y, ulp_q=ulp_q)
     floor = ROUNDING_FLOOR_ULPS * step
     t = world.time
     threshold = agent.threshold(t)
@@ -304,6 +346,12 @@ def rounding_floor(agent, world: World, edges: FloorEdges) -> str | None:
         f'({how} at the formation, on edge ({i}, {j})); from here on rounding, not the dynamics, decides '
         'the events; shorten the horizon or lower beta'
     )
+
+
+def _spacing(value: float) -> float:
+    """float(np.spacing(value)) for a value >= 0 or NaN: math.ulp where they agree (finite, below the
+    largest double, whose spacing numpy calls inf), without numpy's call."""
+    return math.ulp(value) if value < 1e300 else float(np.spacing(value))
 
 
 def _abs_max(array: np.ndarray) -> float:
@@ -385,7 +433,7 @@ def simulate(
     started = time.perf_counter()
     world = World.from_scenario(scenario)
     stop = RunStop.of(scenario, world, horizon=horizon, until_error=until_error, at_floor=stop_at_floor)
-    agents = {i: build_agent(scenario, i, tolerance=tolerance) for i in scenario.agent_ids}
+    agents = build_agents(scenario, tolerance=tolerance)
     trigger_times: dict[int, list[float]] = {i: [] for i in scenario.agent_ids}
     writer = None if trajectory_dir is None else _writer(trajectory_dir, scenario)
     watch = None if sample_events else EdgeLengths(scenario)
@@ -512,7 +560,7 @@ def _run(
                 on_event(t, world, due)
             receivers = _trigger_and_deliver(agents, world, due, t, trigger_times, team=team)
             messages += len(receivers)
-            agenda.plan(agents, set(due).union(receivers), due, t)
+            agenda.plan(agents, due, receivers, t)
             t_next = agenda.next_time()
             if t_next == t and period is None:
                 # News at this instant put an agent on its threshold already (it would have crossed
@@ -548,24 +596,21 @@ def _team(agents: dict, world: World) -> _fastcore.Team | None:
     """The compiled step of `_trigger_and_deliver` over this team (`compiled.team`), or None (the
     pure-Python path, p > 3, or a neighbour that does not list the agent back): the agents in the
     world's order, each one's neighbours by their position there and its slot among their edges."""
-    team_type = compiled.team()
+    team_type, team_edges = compiled.team(), compiled.team_edges()
     ids = world.agent_ids
-    if team_type is None or world.dimension > 3:
+    if team_type is None or team_edges is None or world.dimension > 3:
         return None
-    position = {i: k for k, i in enumerate(ids)}
     ordered = tuple(agents[i] for i in ids)
-    if any(i not in agents[j].neighbour_ids for i, agent in zip(ids, ordered) for j in agent.neighbour_ids):
+    edges = team_edges(ordered, ids)  # (neighbours by position, the agent's slot at each), compiled
+    if edges is None:
         return None
     return team_type(
         plain=(Eta1Agent, Eta2Agent),
         rule=ExponentialRule,
         agents=ordered,
         ids=ids,
-        neighbours=tuple(tuple(position[j] for j in agent.neighbour_ids) for agent in ordered),
-        back=tuple(
-            tuple(agents[j].neighbour_ids.index(i) for j in agent.neighbour_ids)
-            for i, agent in zip(ids, ordered)
-        ),
+        neighbours=edges[0],
+        back=edges[1],
         dimension=world.dimension,
         set_control=world.set_control,
     )
@@ -663,12 +708,13 @@ class _Agenda:
         if self.queue is not None:
             self.queue.link(team)
 
-    def plan(self, agents: dict, changed: set[int], due: list[int], t: float) -> None:
-        """Plan anew every agent whose information `changed` at `t` (the `due` ones triggered)."""
+    def plan(self, agents: dict, due: list[int], receivers: list[int], t: float) -> None:
+        """Plan anew every agent whose information changed at `t`: the `due` ones triggered, the `receivers`
+        were sent their triggering information (the compiled queue takes the union and its order in C)."""
         if self.queue is not None:
-            self.queue.plan(agents, sorted(changed))
+            self.queue.plan_union(agents, due, receivers)
             return
-        for i in sorted(changed):
+        for i in sorted(set(due).union(receivers)):
             self.counter += 1
             self.serial[i] = self.counter
             if self.period is None:

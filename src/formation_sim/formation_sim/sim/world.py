@@ -90,6 +90,13 @@ class World:
         except KeyError:
             raise WorldError(f'unknown agent {agent}; agents are {list(self.agent_ids)}') from None
 
+    def rows(self, agents) -> list[int]:
+        """`index` of each of these agents (one lookup each: the sampler's edge watch at every event)."""
+        try:
+            return [self._index[agent] for agent in agents]
+        except KeyError as error:
+            raise WorldError(f'unknown agent {error.args[0]}; agents are {list(self.agent_ids)}') from None
+
     def set_control(self, agent: int, control) -> None:
         """Command of `agent` from now on: u_i (single) or the piecewise-constant u^d_i (double)."""
         value = np.asarray(control, dtype=float)
