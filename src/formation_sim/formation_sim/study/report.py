@@ -230,29 +230,34 @@ def _figures(rows: list[dict[str, Any]], out: Path) -> list[str]:
 
     stopped = [r for r in event if r.get('stop') and r['stop_time'] and r['rate'] and r['until_error']]
     if stopped:
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for reason, marker in zip(STOPS, ('o', 'x', 's'), strict=True):
-            chosen = [r for r in stopped if r['stop'] == reason]
-            if chosen:
-                ax.loglog(
-                    [r['rate'] for r in chosen],
-                    [r['stop_time'] for r in chosen],
-                    marker,
-                    ms=3,
-                    alpha=0.6,
-                    label=reason,
-                )
-        fraction = stopped[0]['until_error']
-        rates = np.array(sorted(r['rate'] for r in stopped))
-        ax.loglog(rates, math.log(1.0 / fraction) / rates, 'k--', lw=0.8, label='ln(1/fraction) / rate')
-        ax.set(
-            xlabel="threshold's rate (β or β_d) [1/s]",
-            ylabel='time of the stop [s]',
-            title=f'Time to {100 * fraction:g} % of the initial error',
-        )
-        ax.legend()
-        save(fig, 'stop_time_vs_rate.png')
+        save(_stop_time_figure(plt, stopped), 'stop_time_vs_rate.png')
     return names
+
+
+def _stop_time_figure(plt, stopped: list[dict[str, Any]]):
+    """Each run's time of its stop against its threshold's rate, beside ln(1/fraction)/rate."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for reason, marker in zip(STOPS, ('o', 'x', 's'), strict=True):
+        chosen = [r for r in stopped if r['stop'] == reason]
+        if chosen:
+            ax.loglog(
+                [r['rate'] for r in chosen],
+                [r['stop_time'] for r in chosen],
+                marker,
+                ms=3,
+                alpha=0.6,
+                label=reason,
+            )
+    fraction = stopped[0]['until_error']
+    rates = np.array(sorted(r['rate'] for r in stopped))
+    ax.loglog(rates, math.log(1.0 / fraction) / rates, 'k--', lw=0.8, label='ln(1/fraction) / rate')
+    ax.set(
+        xlabel="threshold's rate (β or β_d) [1/s]",
+        ylabel='time of the stop [s]',
+        title=f'Time to {100 * fraction:g} % of the initial error',
+    )
+    ax.legend()
+    return fig
 
 
 def report_text(rows: list[dict[str, Any]], figures: list[str]) -> str:
