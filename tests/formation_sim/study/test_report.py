@@ -25,12 +25,17 @@ def folder(tmp_path_factory):
         }
     )
     path = tmp_path_factory.mktemp('study')
+    return path, _run_into(path, study)
+
+
+def _run_into(path, study) -> list[dict]:
+    """Every case of `study` run here, its rows written to the study folder `path` (and returned)."""
     store = StudyFolder(path, study)
     store.open()
     for case in study.cases:
         store.append(run_case(case))
     store.close()
-    return path, store.rows
+    return store.rows
 
 
 def test_the_audit_table_adds_up_the_rows(folder):
@@ -88,12 +93,7 @@ def test_runs_stopped_at_a_fraction_of_their_error_are_counted_by_how_they_ended
             ],
         }
     )
-    store = StudyFolder(tmp_path, study)
-    store.open()
-    for case in study.cases:
-        store.append(run_case(case))
-    store.close()
-    rows = store.rows
+    rows = _run_into(tmp_path, study)
     reached = [r for r in rows if r['horizon'] == 60.0]
     assert [r['stop'] for r in reached] == ['error_reached'] * 2  # both reach 5 % well before 60 s
     assert all(r['final_formation_error'] <= 0.05 * r['initial_formation_error'] for r in reached)
